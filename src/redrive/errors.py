@@ -1,0 +1,64 @@
+"""The redrive exception hierarchy.
+
+Every error redrive raises on purpose derives from :class:`RedriveError`.  Third-party errors are
+translated at the boundary (``raise LogError(msg) from err``).  Messages say *what* went wrong,
+*where* (file, topic, offset, frame index) and *what to do*.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "AlgorithmError",
+    "ConfigError",
+    "LogError",
+    "LogTruncatedError",
+    "PluginError",
+    "RedriveError",
+    "SimulationError",
+    "TransportError",
+    "UnsupportedMessageError",
+]
+
+
+class RedriveError(Exception):
+    """Root of every error redrive raises on purpose."""
+
+
+class LogError(RedriveError):
+    """A log (bag, MCAP, KITTI folder) cannot be opened or read."""
+
+
+class LogTruncatedError(LogError):
+    """A log ends or breaks in the middle; everything before the damage was delivered.
+
+    Attributes:
+        messages_read: how many messages were yielded before the damage was hit.
+    """
+
+    def __init__(self, msg: str, *, messages_read: int = 0) -> None:
+        super().__init__(msg)
+        self.messages_read = messages_read
+
+
+class UnsupportedMessageError(RedriveError):
+    """A message type has no decoder, or a message cannot be decoded into the data model."""
+
+
+class ConfigError(RedriveError):
+    """A user configuration (TOML file, CLI argument) is invalid."""
+
+
+class PluginError(RedriveError):
+    """An algorithm or metric plugin cannot be found, loaded or registered."""
+
+
+class AlgorithmError(RedriveError):
+    """A user algorithm violated its contract (wrong output type, missing input)."""
+
+
+class TransportError(RedriveError):
+    """The shared-memory transport failed (segment missing, version mismatch, torn slot)."""
+
+
+class SimulationError(RedriveError):
+    """The synthetic world or a sensor model was configured or driven inconsistently."""

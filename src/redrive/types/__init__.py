@@ -1,0 +1,48 @@
+"""The redrive data model (layer L0: numpy and the standard library only).
+
+Every type is a frozen, slotted, keyword-only dataclass; arrays are checked for shape and dtype
+and made read-only in ``__post_init__``.  Change a value with :func:`dataclasses.replace`.
+"""
+
+from __future__ import annotations
+
+from redrive.types.enums import (
+    LightState,
+    Lighting,
+    ObjectClass,
+    RoadCondition,
+    SensorType,
+    Weather,
+)
+from redrive.types.environment import EnvironmentData, TrafficData, TrafficLight
+from redrive.types.frame import Frame, SensorData, SensorPayload
+from redrive.types.objects import Box3D, DetectedObject
+from redrive.types.sensors import IMAGE_ENCODINGS, GnssFix, Image, Imu, PointCloud
+from redrive.types.transforms import Transform
+from redrive.types.vehicle import ControlCommands, PlannedPath, VehicleState
+
+__all__ = [
+    "IMAGE_ENCODINGS",
+    "Box3D",
+    "ControlCommands",
+    "DetectedObject",
+    "EnvironmentData",
+    "Frame",
+    "GnssFix",
+    "Image",
+    "Imu",
+    "LightState",
+    "Lighting",
+    "ObjectClass",
+    "PlannedPath",
+    "PointCloud",
+    "RoadCondition",
+    "SensorData",
+    "SensorPayload",
+    "SensorType",
+    "TrafficData",
+    "TrafficLight",
+    "Transform",
+    "VehicleState",
+    "Weather",
+]

@@ -1,0 +1,56 @@
+"""Helpers that check and freeze the arrays of the data model (numpy + stdlib only)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+__all__ = ["frozen_array", "frozen_vector"]
+
+
+def frozen_array(
+    value: Any,
+    *,
+    name: str,
+    dtype: npt.DTypeLike | Sequence[npt.DTypeLike],
+    shape: tuple[int | None, ...],
+    copy: bool = False,
+) -> npt.NDArray[Any]:
+    """Return ``value`` as a read-only array of the given dtype(s) and shape.
+
+    ``shape`` uses ``None`` for a free dimension.  ``dtype`` may be a sequence of accepted dtypes;
+    an array of another dtype is rejected rather than silently cast (so a float64 cloud never
+    hides in a float32 field).  Plain Python sequences are converted to the first dtype.
+    """
+    accepted = [np.dtype(d) for d in (dtype if isinstance(dtype, (list, tuple)) else [dtype])]
+    if isinstance(value, np.ndarray):
+        arr = value
+        if arr.dtype not in accepted:
+            names = ", ".join(str(d) for d in accepted)
+            msg = f"{name}: dtype {arr.dtype} is not accepted (expected {names})"
+            raise ValueError(msg)
+        if copy:
+            arr = arr.copy()
+    else:
+        arr = np.array(value, dtype=accepted[0])
+    if arr.ndim != len(shape) or any(
+        want is not None and have != want for have, want in zip(arr.shape, shape, strict=True)
+    ):
+        want_s = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
+        msg = f"{name}: shape {arr.shape} does not match {want_s}"
+        raise ValueError(msg)
+    if arr.flags.writeable:
+        # Freeze a view, never the caller's own array object.
+        arr = arr.view()
+        arr.flags.writeable = False
+    return arr
+
+
+def frozen_vector(value: Any, *, name: str, size: int) -> npt.NDArray[np.float64]:
+    """A read-only float64 vector of ``size`` elements (positions, velocities, quaternions)."""
+    if isinstance(value, np.ndarray) and value.dtype != np.float64:
+        value = value.astype(np.float64)
+    return frozen_array(value, name=name, dtype=np.float64, shape=(size,))

@@ -1,0 +1,101 @@
+"""Timestamped sensor samples and the synchronised frame."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+
+from redrive.types.enums import SensorType
+from redrive.types.environment import EnvironmentData, TrafficData
+from redrive.types.objects import DetectedObject
+from redrive.types.sensors import GnssFix, Image, Imu, PointCloud
+from redrive.types.vehicle import VehicleState
+
+__all__ = ["Frame", "SensorData", "SensorPayload"]
+
+SensorPayload = PointCloud | Image | Imu | GnssFix | VehicleState
+
+_PAYLOADS: Mapping[SensorType, tuple[type, ...]] = MappingProxyType(
+    {
+        SensorType.LIDAR: (PointCloud,),
+        SensorType.LIDAR_2D: (PointCloud,),
+        SensorType.RADAR: (PointCloud,),
+        SensorType.CAMERA: (Image,),
+        SensorType.IMU: (Imu,),
+        SensorType.GNSS: (GnssFix,),
+        SensorType.ODOMETRY: (VehicleState,),
+    }
+)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SensorData:
+    """One sample of one sensor.
+
+    Attributes:
+        sensor_id: the name of the sensor in this log (``lidar_top``, ``cam_front`` …).
+        sensor_type: what kind of sensor; fixes which payload ``data`` may hold.
+        stamp_ns: acquisition time (the message header stamp), int ns.
+        frame_id: the sensor's coordinate frame.
+        frame_rate_hz: nominal rate; 0.0 when unknown.
+        resolution: (width, height) for cameras, (columns, rows) for organised clouds, else None.
+        sensor_location: (x, y, z) metres of the sensor in base_link; zeros when unknown.
+        data: the payload.
+    """
+
+    sensor_id: str
+    sensor_type: SensorType
+    stamp_ns: int
+    frame_id: str = ""
+    frame_rate_hz: float = 0.0
+    resolution: tuple[int, int] | None = None
+    sensor_location: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    data: SensorPayload
+
+    def __post_init__(self) -> None:
+        allowed = _PAYLOADS[self.sensor_type]
+        if not isinstance(self.data, allowed):
+            names = ", ".join(t.__name__ for t in allowed)
+            msg = (
+                f"SensorData {self.sensor_id!r}: a {self.sensor_type.name} sensor carries "
+                f"{names}, got {type(self.data).__name__}"
+            )
+            raise ValueError(msg)
+        object.__setattr__(self, "stamp_ns", int(self.stamp_ns))
+        if len(self.sensor_location) != 3:
+            msg = f"SensorData.sensor_location must be (x, y, z), got {self.sensor_location!r}"
+            raise ValueError(msg)
+        loc = tuple(float(v) for v in self.sensor_location)
+        object.__setattr__(self, "sensor_location", loc)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Frame:
+    """One synchronised tick of the log, driven by one sensor.
+
+    Attributes:
+        stamp_ns: the driving sensor's stamp.
+        index: 0-based position of this frame in the run.
+        sensors: sensor_id → the nearest sample of that sensor within the tolerance.
+        vehicle_state: ego state interpolated to ``stamp_ns``; None when the log has none.
+        ground_truth: objects (in base_link when a transform was known, else in their own
+            frame) or None when the log carries no ground truth.
+    """
+
+    stamp_ns: int
+    index: int
+    sensors: Mapping[str, SensorData] = field(default_factory=dict)
+    vehicle_state: VehicleState | None = None
+    environment: EnvironmentData = field(default_factory=EnvironmentData)
+    traffic: TrafficData = field(default_factory=TrafficData)
+    ground_truth: tuple[DetectedObject, ...] | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "stamp_ns", int(self.stamp_ns))
+        if self.index < 0:
+            msg = f"Frame.index must be >= 0, got {self.index}"
+            raise ValueError(msg)
+        object.__setattr__(self, "sensors", MappingProxyType(dict(self.sensors)))
+        if self.ground_truth is not None:
+            object.__setattr__(self, "ground_truth", tuple(self.ground_truth))

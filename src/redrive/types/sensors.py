@@ -1,0 +1,149 @@
+"""Sensor payloads: point clouds, images, IMU samples, GNSS fixes."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from redrive.types._arrays import frozen_array, frozen_vector
+
+__all__ = ["IMAGE_ENCODINGS", "GnssFix", "Image", "Imu", "PointCloud"]
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class PointCloud:
+    """A LiDAR sweep (or a 2D scan with z = 0) as one array per field.
+
+    Attributes:
+        xyz: float32 (N, 3), metres, in the frame of the sensor that recorded it.
+        channels: per-point fields, each an array of shape (N,): ``intensity``, ``ring``,
+            ``t_offset_ns`` … in whatever dtype the source used.  Never a structured array.
+    """
+
+    xyz: npt.NDArray[np.float32]
+    channels: Mapping[str, npt.NDArray[Any]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        xyz = frozen_array(self.xyz, name="PointCloud.xyz", dtype=np.float32, shape=(None, 3))
+        object.__setattr__(self, "xyz", xyz)
+        n = xyz.shape[0]
+        checked: dict[str, npt.NDArray[Any]] = {}
+        for key, values in self.channels.items():
+            if not isinstance(values, np.ndarray):
+                values = np.asarray(values)
+            if values.dtype.fields is not None:
+                msg = f"PointCloud.channels[{key!r}]: structured arrays are not allowed"
+                raise ValueError(msg)
+            checked[key] = frozen_array(
+                values, name=f"PointCloud.channels[{key!r}]", dtype=values.dtype, shape=(n,)
+            )
+        object.__setattr__(self, "channels", MappingProxyType(checked))
+
+    def __len__(self) -> int:
+        return int(self.xyz.shape[0])
+
+    @property
+    def num_points(self) -> int:
+        return int(self.xyz.shape[0])
+
+
+#: Image encodings the data model knows, with (dtype, channels).
+IMAGE_ENCODINGS: Mapping[str, tuple[type[np.generic], int]] = MappingProxyType(
+    {
+        "rgb8": (np.uint8, 3),
+        "bgr8": (np.uint8, 3),
+        "rgba8": (np.uint8, 4),
+        "bgra8": (np.uint8, 4),
+        "mono8": (np.uint8, 1),
+        "mono16": (np.uint16, 1),
+        "16UC1": (np.uint16, 1),
+        "32FC1": (np.float32, 1),
+    }
+)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Image:
+    """A camera image.
+
+    Attributes:
+        pixels: (H, W) for one channel or (H, W, C); dtype follows ``encoding``
+            (uint8 for rgb8/bgr8/rgba8/bgra8/mono8, uint16 for mono16/16UC1, float32 for 32FC1).
+        encoding: a ROS ``sensor_msgs/Image`` encoding name, see :data:`IMAGE_ENCODINGS`.
+    """
+
+    pixels: npt.NDArray[Any]
+    encoding: str
+
+    def __post_init__(self) -> None:
+        if self.encoding not in IMAGE_ENCODINGS:
+            msg = f"Image.encoding {self.encoding!r} is not one of {sorted(IMAGE_ENCODINGS)}"
+            raise ValueError(msg)
+        dtype, channels = IMAGE_ENCODINGS[self.encoding]
+        shape: tuple[int | None, ...] = (None, None) if channels == 1 else (None, None, channels)
+        pixels = frozen_array(self.pixels, name="Image.pixels", dtype=dtype, shape=shape)
+        object.__setattr__(self, "pixels", pixels)
+
+    @property
+    def height(self) -> int:
+        return int(self.pixels.shape[0])
+
+    @property
+    def width(self) -> int:
+        return int(self.pixels.shape[1])
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Imu:
+    """One IMU sample in the IMU's frame.
+
+    Attributes:
+        linear_acceleration: (3,) m/s².
+        angular_velocity: (3,) rad/s.
+        orientation: (4,) quaternion x, y, z, w; all-NaN when the IMU gives no orientation.
+    """
+
+    linear_acceleration: npt.NDArray[np.float64]
+    angular_velocity: npt.NDArray[np.float64]
+    orientation: npt.NDArray[np.float64] = field(
+        default_factory=lambda: np.full(4, np.nan, dtype=np.float64)
+    )
+
+    def __post_init__(self) -> None:
+        for name, size in (("linear_acceleration", 3), ("angular_velocity", 3), ("orientation", 4)):
+            vec = frozen_vector(getattr(self, name), name=f"Imu.{name}", size=size)
+            object.__setattr__(self, name, vec)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class GnssFix:
+    """A satellite navigation fix (WGS 84).
+
+    Attributes:
+        latitude_deg, longitude_deg: degrees, positive north / east.
+        altitude_m: metres above the WGS 84 ellipsoid.
+        position_covariance_m2: (3, 3) ENU covariance, m²; NaN where unknown.
+        status: ROS ``NavSatStatus`` value (-1 no fix, 0 fix, 1 SBAS, 2 GBAS).
+    """
+
+    latitude_deg: float
+    longitude_deg: float
+    altitude_m: float
+    position_covariance_m2: npt.NDArray[np.float64] = field(
+        default_factory=lambda: np.full((3, 3), np.nan, dtype=np.float64)
+    )
+    status: int = 0
+
+    def __post_init__(self) -> None:
+        cov = frozen_array(
+            self.position_covariance_m2,
+            name="GnssFix.position_covariance_m2",
+            dtype=np.float64,
+            shape=(3, 3),
+        )
+        object.__setattr__(self, "position_covariance_m2", cov)
