@@ -1,0 +1,124 @@
+"""Tests for redrive.geometry.boxes and projection."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import numpy.typing as npt
+from hypothesis import given
+from hypothesis import strategies as st
+
+from redrive.geometry.boxes import box_corners, points_in_box, transform_box, transform_object
+from redrive.geometry.projection import project_points
+from redrive.geometry.quaternion import rotation_matrix_from_quaternion
+from redrive.geometry.se3 import (
+    invert,
+    normalize_angle,
+    rotation_matrix_from_yaw,
+    se3_from_rotation_translation,
+    transform_points,
+)
+from redrive.types import Box3D, DetectedObject, ObjectClass
+
+finite = st.floats(min_value=-50.0, max_value=50.0, allow_nan=False)
+sizes = st.floats(min_value=0.1, max_value=20.0, allow_nan=False)
+yaws = st.floats(min_value=-4.0, max_value=4.0, allow_nan=False)
+
+
+@st.composite
+def boxes(draw: st.DrawFn) -> Box3D:
+    return Box3D(
+        center=np.array([draw(finite) for _ in range(3)]),
+        size=np.array([draw(sizes) for _ in range(3)]),
+        yaw_rad=draw(yaws),
+    )
+
+
+@st.composite
+def planar_poses(draw: st.DrawFn) -> npt.NDArray[np.float64]:
+    """Poses that keep +z up (yaw only): boxes stay exactly upright."""
+    return se3_from_rotation_translation(
+        rotation_matrix_from_yaw(draw(yaws)), [draw(finite) for _ in range(3)]
+    )
+
+
+@given(boxes(), planar_poses())
+def test_transform_box_inverse_is_identity(
+    box: Box3D, dst_from_src: npt.NDArray[np.float64]
+) -> None:
+    back = transform_box(invert(dst_from_src), transform_box(dst_from_src, box))
+    np.testing.assert_allclose(back.center, box.center, atol=1e-9)
+    np.testing.assert_array_equal(back.size, box.size)
+    assert abs(normalize_angle(back.yaw_rad - box.yaw_rad)) < 1e-9
+
+
+@given(boxes(), planar_poses())
+def test_corners_move_with_the_box(box: Box3D, dst_from_src: npt.NDArray[np.float64]) -> None:
+    moved = box_corners(transform_box(dst_from_src, box))
+    np.testing.assert_allclose(moved, transform_points(dst_from_src, box_corners(box)), atol=1e-9)
+
+
+@given(boxes(), planar_poses())
+def test_membership_is_frame_independent(box: Box3D, dst_from_src: npt.NDArray[np.float64]) -> None:
+    rng = np.random.default_rng(0)
+    pts = box.center + rng.uniform(-1.0, 1.0, size=(200, 3)) * box.size
+    inside = points_in_box(pts, box)
+    moved = points_in_box(transform_points(dst_from_src, pts), transform_box(dst_from_src, box))
+    # Points right on a face may flip by rounding; none of the random ones is that close.
+    assert np.array_equal(inside, moved)
+
+
+def test_corners_and_membership_of_a_known_box() -> None:
+    box = Box3D(
+        center=np.array([10.0, 0.0, 1.0]), size=np.array([4.0, 2.0, 1.5]), yaw_rad=math.pi / 2
+    )
+    corners = box_corners(box)
+    assert corners.shape == (8, 3)
+    np.testing.assert_allclose(corners[0], [9.0, 2.0, 0.25], atol=1e-12)  # front-left bottom
+    np.testing.assert_allclose(corners[6], [11.0, -2.0, 1.75], atol=1e-12)  # rear-right top
+    assert points_in_box(corners, box, margin_m=1e-9).all()  # faces count, up to rounding
+    pts = np.array([[10.0, 1.9, 1.0], [11.1, 0.0, 1.0], [10.0, 0.0, 1.8], [10.0, 0.0, 1.0]])
+    assert points_in_box(pts, box).tolist() == [True, False, False, True]
+    assert points_in_box(pts, box, margin_m=0.2).tolist() == [True, True, True, True]
+    assert points_in_box(pts.astype(np.float32), box).dtype == np.bool_
+
+
+def test_tilted_transform_keeps_box_upright() -> None:
+    # camera-like frame (z forward, x right, y down) → lidar-like frame (x forward, z up)
+    lidar_from_cam = se3_from_rotation_translation(
+        np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]), [0.3, 0.0, -0.1]
+    )
+    # in the camera frame, heading is about -y (up); yaw there is about +z (optical axis)
+    box = Box3D(center=np.array([1.0, 0.5, 10.0]), size=np.array([4.0, 2.0, 1.5]), yaw_rad=0.0)
+    out = transform_box(lidar_from_cam, box)
+    np.testing.assert_allclose(out.center, [10.3, -1.0, -0.6], atol=1e-12)
+    assert abs(normalize_angle(out.yaw_rad - (-math.pi / 2))) < 1e-12
+
+
+def test_transform_object_rotates_velocity() -> None:
+    obj = DetectedObject(
+        object_id=3,
+        object_class=ObjectClass.VEHICLE,
+        box=Box3D(center=np.array([1.0, 0.0, 0.0]), size=np.array([1.0, 1.0, 1.0]), yaw_rad=0.1),
+        velocity=np.array([1.0, 0.0, 0.0]),
+        orientation=np.array([0.1, 0.0, 0.0]),
+    )
+    pose = se3_from_rotation_translation(rotation_matrix_from_yaw(math.pi / 2), [0.0, 0.0, 2.0])
+    out = transform_object(pose, obj)
+    np.testing.assert_allclose(out.box.center, [0.0, 1.0, 2.0], atol=1e-12)
+    np.testing.assert_allclose(out.velocity, [0.0, 1.0, 0.0], atol=1e-12)
+    assert abs(out.box.yaw_rad - (0.1 + math.pi / 2)) < 1e-12
+    assert abs(out.orientation[0] - (0.1 + math.pi / 2)) < 1e-12
+    assert out.object_id == 3
+
+
+def test_project_points() -> None:
+    intrinsics = np.array([[100.0, 0.0, 50.0], [0.0, 100.0, 40.0], [0.0, 0.0, 1.0]])
+    pts = np.array([[0.0, 0.0, 2.0], [1.0, -1.0, 2.0], [0.0, 0.0, -1.0]])
+    uv, depth = project_points(intrinsics, pts)
+    np.testing.assert_allclose(uv[:2], [[50.0, 40.0], [100.0, -10.0]])
+    assert np.isnan(uv[2]).all()
+    np.testing.assert_allclose(depth, [2.0, 2.0, -1.0])
+    q = rotation_matrix_from_quaternion([0.0, 0.0, 0.0, 1.0])
+    assert np.array_equal(q, np.eye(3))
