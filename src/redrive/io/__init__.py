@@ -1,0 +1,15 @@
+"""Log I/O (layer L2): readers for ROS 1 bags, ROS 2 bags, MCAP and KITTI; decoders to the data
+model; the Sensor Dispatcher that assembles frames; the MCAP writer.
+
+>>> from redrive.io import open_log
+>>> with open_log("drive.bag") as log:                      # doctest: +SKIP
+...     for message in log.messages(topics=["/velodyne_points"]):
+...         ...
+"""
+
+from __future__ import annotations
+
+from redrive.io.base import Encoding, LogMessage, LogReader, TopicInfo
+from redrive.io.open import detect_format, open_log
+
+__all__ = ["Encoding", "LogMessage", "LogReader", "TopicInfo", "detect_format", "open_log"]

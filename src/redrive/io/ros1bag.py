@@ -1,0 +1,554 @@
+"""ROS 1 bags (format 2.0): indexed reading through ``rosbags``, sequential salvage when the index
+is missing.
+
+An intact bag is opened with ``rosbags.rosbag1.Reader``, which reads the connection and chunk
+index at the end of the file; messages are then read chunk by chunk from that index, so a time
+range seeks straight to the first chunk that holds it and a topic filter never decompresses a
+chunk that holds none of its messages.
+
+A bag whose index is missing or unreadable — a recording that was killed, a copy that was cut
+short — is read *sequentially* from the start instead (what ``rosbag reindex`` does), and every
+message before the damage is delivered.  rosbags offers no such salvage, which is why the
+record walking below exists.  It relies on rosbags 0.11's reader internals (``chunks``,
+``indexes``, decompressors), pinned in ``pyproject.toml``.
+"""
+
+from __future__ import annotations
+
+import bz2
+import heapq
+import logging
+import struct
+from bisect import bisect_left
+from collections.abc import Callable, Collection, Iterator, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import BinaryIO, Self
+
+import lz4.frame
+from rosbags.rosbag1 import Reader as RosbagsReader
+from rosbags.rosbag1 import ReaderError as RosbagsReaderError
+from rosbags.rosbag1.reader import normalize as normalize_msgtype
+
+from redrive.errors import LogError, LogTruncatedError
+from redrive.io._deserialize import Deserializer
+from redrive.io.base import LogMessage, TopicInfo
+from redrive.io.typestore import typestore_for
+
+__all__ = ["Ros1BagReader"]
+
+logger = logging.getLogger(__name__)
+
+_OP_MSGDATA = 0x02
+_OP_CHUNK = 0x05
+_OP_CONNECTION = 0x07
+_MAGIC = b"#ROSBAG V2.0\n"
+_U32 = struct.Struct("<I")
+_TIME = struct.Struct("<II")
+
+_DECOMPRESSORS: Mapping[str, Callable[[bytes], bytes]] = {
+    "none": lambda data: data,
+    "bz2": bz2.decompress,
+    "lz4": lz4.frame.decompress,
+}
+
+
+def _decompress_prefix(compression: str, data: bytes) -> bytes:
+    """Decompress as much of a cut-off chunk as its bytes allow."""
+    if compression == "none":
+        return data
+    if compression == "bz2":
+        return bz2.BZ2Decompressor().decompress(data)
+    if compression == "lz4":
+        out: bytes = lz4.frame.LZ4FrameDecompressor().decompress(data)
+        return out
+    raise KeyError(compression)
+
+
+class _DamageError(Exception):
+    """Internal: the bytes at ``offset`` are not a valid record."""
+
+    def __init__(self, offset: int, reason: str) -> None:
+        super().__init__(f"byte {offset}: {reason}")
+        self.offset = offset
+        self.reason = reason
+
+
+def _parse_header(buf: bytes | memoryview, pos: int, end: int) -> tuple[dict[str, bytes], int]:
+    """Parse one record header at ``pos``; returns its fields and the position after it."""
+    if pos + 4 > end:
+        raise _DamageError(pos, "record header length is cut off")
+    (size,) = _U32.unpack_from(buf, pos)
+    pos += 4
+    stop = pos + size
+    if stop > end:
+        raise _DamageError(pos - 4, f"record header of {size} bytes runs past the end")
+    fields: dict[str, bytes] = {}
+    while pos < stop:
+        if pos + 4 > stop:
+            raise _DamageError(pos, "header field length is cut off")
+        (flen,) = _U32.unpack_from(buf, pos)
+        pos += 4
+        field = bytes(buf[pos : pos + flen])
+        pos += flen
+        key, sep, value = field.partition(b"=")
+        if not sep or pos > stop:
+            raise _DamageError(pos, "header field is malformed")
+        fields[key.decode("ascii", "replace")] = value
+    return fields, stop
+
+
+def _data_span(buf: bytes | memoryview, pos: int, end: int) -> tuple[int, int]:
+    """(start, stop) of the data block that follows a header at ``pos``."""
+    if pos + 4 > end:
+        raise _DamageError(pos, "record data length is cut off")
+    (size,) = _U32.unpack_from(buf, pos)
+    if pos + 4 + size > end:
+        raise _DamageError(pos, f"record data of {size} bytes runs past the end")
+    return pos + 4, pos + 4 + size
+
+
+def _op(fields: Mapping[str, bytes], offset: int) -> int:
+    value = fields.get("op")
+    if value is None or len(value) != 1:
+        raise _DamageError(offset, "record has no op field")
+    return value[0]
+
+
+def _time_ns(value: bytes) -> int:
+    secs, nsecs = _TIME.unpack(value)
+    return int(secs) * 1_000_000_000 + int(nsecs)
+
+
+@dataclass(slots=True)
+class _Conn:
+    id: int
+    topic: str
+    msgtype: str
+    msgdef: str
+    count: int = 0
+    size_bytes: int = 0
+
+
+@dataclass(slots=True)
+class _ChunkSpan:
+    """Where a chunk's compressed bytes are, for the sequential (salvage) path."""
+
+    pos: int
+    datapos: int
+    datasize: int
+    compression: str
+    start_ns: int = 0
+    end_ns: int = 0
+    damaged: str | None = None
+    cut: bool = False  # the file ends inside this chunk: only a prefix of it is readable
+
+
+class Ros1BagReader:
+    """A ROS 1 bag (plain, bz2 or lz4 chunks).
+
+    Args:
+        path: the ``.bag`` file.
+        strict: when True (default) damage met while reading (a corrupt chunk, a cut-off end)
+            raises :class:`~redrive.errors.LogTruncatedError` after every message before it was
+            yielded; when False it is logged as a warning and reading goes on with the next
+            readable chunk.
+
+    Attributes:
+        damage: a description of the damage found while opening (None for an intact bag).
+        indexed: False when the bag had to be read sequentially.
+    """
+
+    format = "ros1"
+
+    def __init__(self, path: Path, *, strict: bool = True) -> None:
+        self.path = Path(path)
+        self.strict = strict
+        self.damage: str | None = None
+        self.indexed = True
+        self._conns: dict[int, _Conn] = {}
+        self._rosbags: RosbagsReader | None = None
+        self._spans: list[_ChunkSpan] = []
+        self._tail_damage: str | None = None
+        self._file_size = 0
+        self._open()
+        definitions = {c.msgtype: ("msg", c.msgdef) for c in self._conns.values()}
+        self._typestore, self._bad_definitions = typestore_for(1, definitions)
+        self._deserializer = Deserializer(self.path, ros1=self._typestore, cdr=None)
+        self._topics = self._summarise()
+
+    # -- opening -------------------------------------------------------------------------------
+
+    def _open(self) -> None:
+        try:
+            self._file_size = self.path.stat().st_size
+        except OSError as err:
+            msg = f"{self.path}: cannot open ({err.strerror}); check the path and permissions"
+            raise LogError(msg) from err
+        if self._file_size == 0:
+            msg = f"{self.path}: the file is empty (0 bytes); it holds no ROS 1 bag"
+            raise LogError(msg)
+        with self.path.open("rb") as fh:
+            if fh.read(len(_MAGIC)) != _MAGIC:
+                msg = (
+                    f"{self.path}: not a ROS 1 bag (no '#ROSBAG V2.0' magic at the start); "
+                    "only bag format 2.0 is supported"
+                )
+                raise LogError(msg)
+        reader = RosbagsReader(self.path)
+        try:
+            reader.open()
+        except (RosbagsReaderError, OSError, ValueError, AssertionError, struct.error) as err:
+            self.indexed = False
+            self._scan_open(str(err))
+            return
+        self._rosbags = reader
+        if not reader.connections and self._file_size > 4096:
+            # An index that lists nothing in a non-trivial file: trust the records instead.
+            reader.close()
+            self._rosbags = None
+            self.indexed = False
+            self._scan_open("the index lists no chunks")
+            return
+        for conn in reader.connections:
+            self._conns[conn.id] = _Conn(
+                id=conn.id,
+                topic=conn.topic,
+                msgtype=conn.msgtype,
+                msgdef=conn.msgdef.data,
+                count=conn.msgcount,
+            )
+
+    def _scan_open(self, why: str) -> None:
+        logger.warning(
+            "%s: the bag index is unreadable (%s); reading the bag sequentially — messages after "
+            "any damage are lost (the file itself is not changed)",
+            self.path,
+            why,
+        )
+        self._walk()
+        lost = [s for s in self._spans if s.damaged is not None]
+        parts = [f"no usable index ({why})"]
+        if self._tail_damage is not None:
+            parts.append(self._tail_damage)
+        parts += [f"the chunk at byte {s.pos} {s.damaged}" for s in lost]
+        self.damage = "; ".join(parts)
+
+    # -- summary -------------------------------------------------------------------------------
+
+    def _summarise(self) -> dict[str, TopicInfo]:
+        by_topic: dict[str, list[_Conn]] = {}
+        for conn in self._conns.values():
+            by_topic.setdefault(conn.topic, []).append(conn)
+        out: dict[str, TopicInfo] = {}
+        for topic, conns in sorted(by_topic.items()):
+            msgtype = conns[0].msgtype
+            if len({c.msgtype for c in conns}) > 1:
+                logger.warning(
+                    "%s: topic %s has several types; using %s", self.path, topic, msgtype
+                )
+            out[topic] = TopicInfo(
+                topic=topic,
+                msgtype=msgtype,
+                count=sum(c.count for c in conns),
+                size_bytes=sum(c.size_bytes for c in conns) if not self.indexed else -1,
+                encoding="ros1",
+                has_definition=msgtype in self._typestore.fielddefs,
+            )
+        return out
+
+    @property
+    def topics(self) -> Mapping[str, TopicInfo]:
+        return self._topics
+
+    @property
+    def message_count(self) -> int:
+        return sum(t.count for t in self._topics.values())
+
+    @property
+    def start_ns(self) -> int:
+        if self._rosbags is not None:
+            return int(self._rosbags.start_time) if self.message_count else 0
+        return min((s.start_ns for s in self._spans), default=0)
+
+    @property
+    def end_ns(self) -> int:
+        if self._rosbags is not None:
+            return max(int(self._rosbags.end_time) - 1, 0) if self.message_count else 0
+        return max((s.end_ns for s in self._spans), default=0)
+
+    # -- reading -------------------------------------------------------------------------------
+
+    def messages(
+        self,
+        *,
+        topics: Collection[str] | None = None,
+        start_ns: int | None = None,
+        stop_ns: int | None = None,
+    ) -> Iterator[LogMessage]:
+        conns = self._conns
+        source = (
+            self._indexed_messages(topics=topics, start_ns=start_ns, stop_ns=stop_ns)
+            if self._rosbags is not None
+            else self._scan(topics=topics, start_ns=start_ns, stop_ns=stop_ns)
+        )
+        for conn_id, time_ns, data in source:
+            conn = conns[conn_id]
+            yield LogMessage(
+                topic=conn.topic,
+                msgtype=conn.msgtype,
+                log_time_ns=time_ns,
+                encoding="ros1",
+                raw=data,
+            )
+
+    def _selected_ids(self, topics: Collection[str] | None) -> set[int]:
+        if topics is None:
+            return set(self._conns)
+        wanted = set(topics)
+        return {c.id for c in self._conns.values() if c.topic in wanted}
+
+    def _indexed_messages(
+        self, *, topics: Collection[str] | None, start_ns: int | None, stop_ns: int | None
+    ) -> Iterator[tuple[int, int, memoryview]]:
+        reader = self._rosbags
+        assert reader is not None
+        assert reader.bio is not None
+        bio = reader.bio
+        streams = []
+        for conn_id in sorted(self._selected_ids(topics)):
+            index = reader.indexes.get(conn_id, [])
+            first = 0 if start_ns is None else bisect_left([e.time for e in index], start_ns)
+            streams.append((e.time, e.chunk_pos, e.offset, conn_id) for e in index[first:])
+        current_pos = -1
+        chunk: memoryview = memoryview(b"")
+        bad_chunk = -1
+        yielded = 0
+        for time_ns, chunk_pos, offset, conn_id in heapq.merge(*streams):
+            if stop_ns is not None and time_ns >= stop_ns:
+                return
+            if chunk_pos == bad_chunk:
+                continue
+            if chunk_pos != current_pos:
+                header = reader.chunks[chunk_pos]
+                try:
+                    bio.seek(header.datapos)
+                    compressed = bio.read(header.datasize)
+                    if len(compressed) != header.datasize:
+                        msg = "the chunk is cut off"
+                        raise ValueError(msg)
+                    chunk = memoryview(header.decompressor(compressed))
+                except (OSError, ValueError, RuntimeError, EOFError) as err:
+                    self._chunk_damage(chunk_pos, err, yielded)
+                    bad_chunk = chunk_pos
+                    continue
+                current_pos = chunk_pos
+            try:
+                data = self._message_at(chunk, offset)
+            except _DamageError as err:
+                self._chunk_damage(chunk_pos, err, yielded)
+                bad_chunk = chunk_pos
+                continue
+            yielded += 1
+            yield conn_id, time_ns, data
+
+    def _chunk_damage(self, chunk_pos: int, err: Exception, yielded: int) -> None:
+        lost = {
+            self._conns[c].topic: n
+            for c, n in _chunk_counts(self._rosbags, chunk_pos).items()
+            if c in self._conns
+        }
+        text = (
+            f"the chunk at byte {chunk_pos} is damaged ({err}); it held {sum(lost.values())} "
+            f"messages ({', '.join(f'{t}: {n}' for t, n in sorted(lost.items()))})"
+        )
+        if self.strict:
+            msg = (
+                f"{self.path}: {text}; {yielded} messages were read before it. Open the log with "
+                "strict=False (CLI: --skip-damaged) to read past it."
+            )
+            raise LogTruncatedError(msg, messages_read=yielded)
+        logger.warning("%s: %s; skipping it", self.path, text)
+
+    @staticmethod
+    def _message_at(chunk: memoryview, offset: int) -> memoryview:
+        end = len(chunk)
+        pos = offset
+        while True:
+            fields, pos = _parse_header(chunk, pos, end)
+            start, stop = _data_span(chunk, pos, end)
+            op = _op(fields, offset)
+            if op == _OP_MSGDATA:
+                return chunk[start:stop]
+            if op != _OP_CONNECTION:
+                raise _DamageError(offset, f"expected a message record, found op {op:#x}")
+            pos = stop
+
+    def _scan(
+        self, *, topics: Collection[str] | None, start_ns: int | None, stop_ns: int | None
+    ) -> Iterator[tuple[int, int, memoryview]]:
+        """Read the chunks found by the sequential walk at open (the salvage path)."""
+        wanted = self._selected_ids(topics)
+        yielded = 0
+        with self.path.open("rb") as fh:
+            for span in self._spans:
+                if span.damaged is not None:
+                    self._salvage_damage(f"the chunk at byte {span.pos} {span.damaged}", yielded)
+                    continue
+                if start_ns is not None and span.end_ns < start_ns:
+                    continue
+                if stop_ns is not None and span.start_ns >= stop_ns:
+                    return
+                for item in self._chunk_records(fh, span, wanted, first=False):
+                    if (start_ns is None or item[1] >= start_ns) and (
+                        stop_ns is None or item[1] < stop_ns
+                    ):
+                        yielded += 1
+                        yield item
+        if self._tail_damage is not None:
+            self._salvage_damage(self._tail_damage, yielded)
+
+    def _salvage_damage(self, text: str, yielded: int) -> None:
+        if self.strict:
+            msg = (
+                f"{self.path}: {text}; {yielded} messages were read before it. Open the log "
+                "with strict=False (CLI: --skip-damaged) to read what is readable."
+            )
+            raise LogTruncatedError(msg, messages_read=yielded)
+
+    def _walk(self) -> None:
+        """Walk every record from the start: connections, chunk spans, counts, damage."""
+        pos = len(_MAGIC)
+        with self.path.open("rb") as fh:
+            while pos < self._file_size:
+                try:
+                    fh.seek(pos)
+                    head = fh.read(min(self._file_size - pos, 1 << 16))
+                    fields, hstop = _parse_header(head, 0, len(head))
+                    op = _op(fields, pos)
+                    if hstop + 4 > len(head):
+                        raise _DamageError(pos, "record data length is cut off")
+                    (dsize,) = _U32.unpack_from(head, hstop)
+                    cut = pos + hstop + 4 + dsize > self._file_size
+                    if cut and op == _OP_CHUNK:
+                        # The last chunk was cut off: salvage the messages its first bytes hold.
+                        self._salvage_cut_chunk(fh, fields, pos, pos + hstop + 4)
+                    if cut:
+                        raise _DamageError(pos, f"a record of {dsize} bytes runs past the end")
+                except _DamageError as err:
+                    self._tail_damage = (
+                        f"the bag is cut off or damaged at byte {pos} of {self._file_size} "
+                        f"({err.reason}); the {self._file_size - pos} bytes from there on are lost"
+                    )
+                    logger.warning("%s: %s", self.path, self._tail_damage)
+                    return
+                datapos = pos + hstop + 4
+                if op == _OP_CHUNK:
+                    compression = fields.get("compression", b"none").decode("ascii", "replace")
+                    span = _ChunkSpan(pos, datapos, dsize, compression)
+                    times = [t for _, t, _ in self._chunk_records(fh, span, None, first=True)]
+                    if times:
+                        span.start_ns, span.end_ns = min(times), max(times)
+                    self._spans.append(span)
+                elif op == _OP_CONNECTION:
+                    fh.seek(datapos)
+                    self._add_connection(fields, fh.read(dsize), pos)
+                pos = datapos + dsize
+
+    def _salvage_cut_chunk(
+        self, fh: BinaryIO, fields: Mapping[str, bytes], pos: int, datapos: int
+    ) -> None:
+        compression = fields.get("compression", b"none").decode("ascii", "replace")
+        span = _ChunkSpan(pos, datapos, self._file_size - datapos, compression, cut=True)
+        times = [t for _, t, _ in self._chunk_records(fh, span, None, first=True)]
+        if times:
+            span.start_ns, span.end_ns = min(times), max(times)
+            self._spans.append(span)
+
+    def _chunk_records(
+        self,
+        fh: BinaryIO,
+        span: _ChunkSpan,
+        wanted: set[int] | None,
+        *,
+        first: bool,
+    ) -> Iterator[tuple[int, int, memoryview]]:
+        fh.seek(span.datapos)
+        try:
+            if span.cut:
+                chunk = memoryview(_decompress_prefix(span.compression, fh.read(span.datasize)))
+            else:
+                decompress = _DECOMPRESSORS[span.compression]
+                chunk = memoryview(decompress(fh.read(span.datasize)))
+        except KeyError:
+            span.damaged = f"uses an unknown compression {span.compression!r}"
+            return
+        except (OSError, ValueError, RuntimeError, EOFError) as err:
+            span.damaged = f"does not decompress ({err})"
+            logger.warning("%s: the chunk at byte %d %s", self.path, span.pos, span.damaged)
+            return
+        pos, end = 0, len(chunk)
+        while pos < end:
+            try:
+                fields, hstop = _parse_header(chunk, pos, end)
+                start, stop = _data_span(chunk, hstop, end)
+                op = _op(fields, pos)
+                if op == _OP_CONNECTION and first:
+                    self._add_connection(fields, bytes(chunk[start:stop]), span.pos)
+                elif op == _OP_MSGDATA:
+                    conn_id = _U32.unpack(fields["conn"])[0]
+                    time_ns = _time_ns(fields["time"])
+                    if first and conn_id in self._conns:
+                        conn = self._conns[conn_id]
+                        conn.count += 1
+                        conn.size_bytes += stop - start
+                    if conn_id in self._conns and (wanted is None or conn_id in wanted):
+                        yield conn_id, time_ns, chunk[start:stop]
+            except (_DamageError, KeyError, struct.error) as err:
+                if first and not span.cut:
+                    span.damaged = f"holds a damaged record at offset {pos} ({err})"
+                    logger.warning("%s: the chunk at byte %d %s", self.path, span.pos, span.damaged)
+                return
+            pos = stop
+
+    def _add_connection(self, fields: Mapping[str, bytes], data: bytes, offset: int) -> None:
+        try:
+            conn_id = _U32.unpack(fields["conn"])[0]
+            topic = fields["topic"].decode()
+            conn_fields, _ = _parse_header(_U32.pack(len(data)) + data, 0, len(data) + 4)
+            msgtype = normalize_msgtype(conn_fields["type"].decode())
+            msgdef = conn_fields.get("message_definition", b"").decode()
+        except (KeyError, UnicodeDecodeError, _DamageError, struct.error) as err:
+            raise _DamageError(offset, f"connection record is malformed ({err})") from err
+        if conn_id not in self._conns:
+            self._conns[conn_id] = _Conn(id=conn_id, topic=topic, msgtype=msgtype, msgdef=msgdef)
+
+    # -- deserialising -------------------------------------------------------------------------
+
+    def deserialize(self, message: LogMessage) -> object:
+        return self._deserializer(message)
+
+    def close(self) -> None:
+        if self._rosbags is not None and self._rosbags.bio is not None:
+            self._rosbags.close()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+
+def _chunk_counts(reader: RosbagsReader | None, chunk_pos: int) -> dict[int, int]:
+    if reader is None:
+        return {}
+    for info in reader.chunk_infos:
+        if info.pos == chunk_pos:
+            return dict(info.connection_counts)
+    return {}
