@@ -19,7 +19,7 @@ from redrive.types import (
     VehicleState,
 )
 
-__all__ = ["DecodedKind", "Decoded", "DecodedValue", "Decoder", "Deserialize"]
+__all__ = ["Decoded", "DecodedKind", "DecodedValue", "Decoder", "Deserialize"]
 
 #: What a decoder may produce.
 DecodedValue = (

@@ -1,0 +1,1 @@
+"""Geometry (layer L1): rotations, rigid transforms, boxes.  numpy + redrive.types/errors only."""

@@ -1,0 +1,61 @@
+"""Decoders: serialised ROS messages → redrive data-model values.
+
+``decode(message, reader.deserialize)`` decodes one :class:`~redrive.io.base.LogMessage` with the
+decoder registered for its type (:data:`DEFAULT_DECODERS`); :class:`MessageDecoder` does the same
+for a stream and never raises for a topic it cannot decode.  Nothing registers itself on import:
+custom registries are built with :func:`build_registry`, which refuses duplicate types.
+"""
+
+from __future__ import annotations
+
+from redrive.io.decoders.base import Decoded, DecodedKind, DecodedValue, Decoder, Deserialize
+from redrive.io.decoders.image import CompressedImageDecoder, ImageDecoder
+from redrive.io.decoders.motion import OdometryDecoder, PoseDecoder, TwistDecoder
+from redrive.io.decoders.objects import (
+    Detection3DArrayDecoder,
+    MarkerArrayDecoder,
+    ObjectArrayDecoder,
+    object_class_from_text,
+)
+from redrive.io.decoders.pointcloud2 import PointCloud2Decoder, read_cloud_layout
+from redrive.io.decoders.registry import (
+    DEFAULT_DECODERS,
+    MessageDecoder,
+    TopicDecoder,
+    build_registry,
+    decode,
+    decoder_for,
+    normalize_msgtype,
+)
+from redrive.io.decoders.sensors import ImuDecoder, LaserScanDecoder, NavSatFixDecoder
+from redrive.io.decoders.tf import TFMessageDecoder
+
+__all__ = [
+    "DEFAULT_DECODERS",
+    "CompressedImageDecoder",
+    "Decoded",
+    "DecodedKind",
+    "DecodedValue",
+    "Decoder",
+    "Deserialize",
+    "Detection3DArrayDecoder",
+    "ImageDecoder",
+    "ImuDecoder",
+    "LaserScanDecoder",
+    "MarkerArrayDecoder",
+    "MessageDecoder",
+    "NavSatFixDecoder",
+    "ObjectArrayDecoder",
+    "OdometryDecoder",
+    "PointCloud2Decoder",
+    "PoseDecoder",
+    "TFMessageDecoder",
+    "TopicDecoder",
+    "TwistDecoder",
+    "build_registry",
+    "decode",
+    "decoder_for",
+    "normalize_msgtype",
+    "object_class_from_text",
+    "read_cloud_layout",
+]

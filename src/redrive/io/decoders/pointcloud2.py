@@ -1,0 +1,314 @@
+"""``sensor_msgs/msg/PointCloud2`` → :class:`~redrive.types.PointCloud`, without deserialising.
+
+The fast path reads only the small message header (stamp, frame, shape, fields, flags) straight
+from the serialised bytes — ROS 1, or ROS 2 CDR in either byte order — builds a numpy structured
+dtype from the ``PointField`` list and views the point data in place:
+
+* channels are zero-copy strided views into the message bytes when those bytes are immutable
+  (``bytes``); a reader's reusable buffer is copied once first;
+* ``xyz`` is copied once into a float32 (N, 3) C-contiguous array (float64 or integer x/y/z are
+  cast);
+* ``is_bigendian`` clouds are byte-swapped to native order (channels are then copies);
+* nothing is dropped: N = width × height whatever ``is_dense`` says, NaN points stay NaN;
+* a field with ``count`` k > 1 becomes k channels ``name_0`` … ``name_{k-1}``; ``count`` 0 is read
+  as 1 (some drivers write 0 for scalars).
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from redrive.io.base import LogMessage
+from redrive.io.decoders._common import raw_is_immutable, unsupported
+from redrive.io.decoders.base import Decoded, DecodedKind, Deserialize
+from redrive.types import PointCloud, SensorType
+
+__all__ = ["CloudField", "CloudLayout", "PointCloud2Decoder", "read_cloud_layout"]
+
+#: PointField datatype constant → numpy type code (without byte order).
+POINTFIELD_DTYPES: dict[int, str] = {
+    1: "i1",  # INT8
+    2: "u1",  # UINT8
+    3: "i2",  # INT16
+    4: "u2",  # UINT16
+    5: "i4",  # INT32
+    6: "u4",  # UINT32
+    7: "f4",  # FLOAT32
+    8: "f8",  # FLOAT64
+}
+
+
+@dataclass(frozen=True, slots=True)
+class CloudField:
+    """One ``sensor_msgs/PointField``: name, byte offset in the point, datatype, count."""
+
+    name: str
+    offset: int
+    datatype: int
+    count: int
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class CloudLayout:
+    """The header of a serialised PointCloud2 and where its point bytes lie.
+
+    Attributes:
+        stamp_ns: header stamp, int ns (0 when unset).
+        data_offset, data_size_bytes: the ``data`` array inside the serialised message.
+    """
+
+    stamp_ns: int
+    frame_id: str
+    height: int
+    width: int
+    fields: tuple[CloudField, ...]
+    is_bigendian: bool
+    point_step: int
+    row_step: int
+    data_offset: int
+    data_size_bytes: int
+    is_dense: bool
+
+
+class _Cursor:
+    """Reads primitives from serialised bytes; CDR aligns relative to after the 4-byte header."""
+
+    __slots__ = ("buf", "cdr", "order", "pos", "u32")
+
+    def __init__(self, buf: memoryview, *, cdr: bool, big_endian: bool) -> None:
+        self.buf = buf
+        self.cdr = cdr
+        self.order = ">" if big_endian else "<"
+        self.u32 = struct.Struct(self.order + "I")
+        self.pos = 4 if cdr else 0
+
+    def _align(self, size: int) -> None:
+        if self.cdr:
+            rel = self.pos - 4
+            self.pos += -rel % size
+
+    def uint32(self) -> int:
+        self._align(4)
+        (value,) = self.u32.unpack_from(self.buf, self.pos)
+        self.pos += 4
+        return int(value)
+
+    def int32(self) -> int:
+        value = self.uint32()
+        return value - (1 << 32) if value >= 1 << 31 else value
+
+    def uint8(self) -> int:
+        value = self.buf[self.pos]
+        self.pos += 1
+        return int(value)
+
+    def string(self) -> str:
+        size = self.uint32()
+        end = self.pos + size
+        if end > len(self.buf):
+            raise IndexError(end)
+        text = bytes(self.buf[self.pos : end])
+        self.pos = end
+        if self.cdr and text.endswith(b"\x00"):
+            text = text[:-1]
+        return text.decode("utf-8", errors="replace")
+
+
+def read_cloud_layout(raw: bytes | memoryview, encoding: str) -> CloudLayout:
+    """Parse the header of a serialised PointCloud2 (``encoding`` ``ros1`` or ``cdr``).
+
+    Raises:
+        ValueError: the bytes are truncated or use an unsupported CDR representation.
+    """
+    buf = memoryview(raw).cast("B")
+    if encoding == "cdr":
+        if len(buf) < 4 or buf[0] != 0 or buf[1] not in (0, 1):
+            head = bytes(buf[:4]).hex()
+            msg = f"CDR encapsulation header {head!r} is not plain CDR (00 00 / 00 01)"
+            raise ValueError(msg)
+        cur = _Cursor(buf, cdr=True, big_endian=buf[1] == 0)
+    elif encoding == "ros1":
+        cur = _Cursor(buf, cdr=False, big_endian=False)
+    else:
+        msg = f"encoding {encoding!r} is not ros1 or cdr"
+        raise ValueError(msg)
+    try:
+        if not cur.cdr:
+            cur.uint32()  # seq
+        sec = cur.int32() if cur.cdr else cur.uint32()
+        nanosec = cur.uint32()
+        frame_id = cur.string()
+        height = cur.uint32()
+        width = cur.uint32()
+        fields = []
+        for _ in range(cur.uint32()):
+            name = cur.string()
+            offset = cur.uint32()
+            datatype = cur.uint8()
+            count = cur.uint32()
+            fields.append(CloudField(name, offset, datatype, count))
+        is_bigendian = cur.uint8() != 0
+        point_step = cur.uint32()
+        row_step = cur.uint32()
+        data_size = cur.uint32()
+        data_offset = cur.pos
+        cur.pos += data_size
+        is_dense = cur.uint8() != 0 if cur.pos < len(buf) else False
+    except (struct.error, IndexError) as err:
+        msg = f"serialised PointCloud2 is truncated ({len(buf)} bytes)"
+        raise ValueError(msg) from err
+    if data_offset + data_size > len(buf):
+        msg = f"data array of {data_size} bytes overruns the {len(buf)}-byte message"
+        raise ValueError(msg)
+    return CloudLayout(
+        stamp_ns=sec * 1_000_000_000 + nanosec,
+        frame_id=frame_id,
+        height=height,
+        width=width,
+        fields=tuple(fields),
+        is_bigendian=is_bigendian,
+        point_step=point_step,
+        row_step=row_step,
+        data_offset=data_offset,
+        data_size_bytes=data_size,
+        is_dense=is_dense,
+    )
+
+
+def _point_dtype(layout: CloudLayout) -> np.dtype[Any]:
+    """A structured dtype of itemsize ``point_step`` with one scalar member per channel."""
+    order = ">" if layout.is_bigendian else "<"
+    names: list[str] = []
+    formats: list[str] = []
+    offsets: list[int] = []
+    for field in layout.fields:
+        code = POINTFIELD_DTYPES.get(field.datatype)
+        if code is None:
+            msg = f"field {field.name!r} has unknown PointField datatype {field.datatype}"
+            raise ValueError(msg)
+        count = max(field.count, 1)
+        size = int(code[1])
+        if field.offset + size * count > layout.point_step:
+            msg = (
+                f"field {field.name!r} (offset {field.offset}, {count} × {code}) does not fit "
+                f"in point_step {layout.point_step}"
+            )
+            raise ValueError(msg)
+        if count > 1 and field.name in ("x", "y", "z"):
+            msg = f"coordinate field {field.name!r} has count {count}; it must be a scalar"
+            raise ValueError(msg)
+        sub = [field.name] if count == 1 else [f"{field.name}_{i}" for i in range(count)]
+        for i, name in enumerate(sub):
+            if not name or name in names:
+                msg = f"field name {name!r} is empty or repeated"
+                raise ValueError(msg)
+            names.append(name)
+            formats.append(order + code)
+            offsets.append(field.offset + i * size)
+    return np.dtype(
+        {"names": names, "formats": formats, "offsets": offsets, "itemsize": layout.point_step}
+    )
+
+
+def _points_view(
+    buf: bytes | memoryview, layout: CloudLayout, dtype: np.dtype[Any], data_offset: int
+) -> npt.NDArray[Any]:
+    """The points as a flat structured array; a view unless rows carry padding."""
+    n = layout.width * layout.height
+    if n == 0:
+        return np.zeros(0, dtype=dtype)
+    row_bytes = layout.width * layout.point_step
+    if layout.row_step < row_bytes and layout.height > 1:
+        msg = f"row_step {layout.row_step} is smaller than width × point_step = {row_bytes}"
+        raise ValueError(msg)
+    needed = layout.row_step * (layout.height - 1) + row_bytes
+    if layout.data_size_bytes < needed:
+        msg = (
+            f"data holds {layout.data_size_bytes} bytes, but {layout.height} × {layout.width} "
+            f"points of {layout.point_step} bytes (row_step {layout.row_step}) need {needed}"
+        )
+        raise ValueError(msg)
+    if layout.height == 1 or layout.row_step == row_bytes:
+        return np.ndarray(
+            shape=(n,), dtype=dtype, buffer=buf, offset=data_offset, strides=(layout.point_step,)
+        )
+    grid = np.ndarray(
+        shape=(layout.height, layout.width),
+        dtype=dtype,
+        buffer=buf,
+        offset=data_offset,
+        strides=(layout.row_step, layout.point_step),
+    )
+    return grid.reshape(n)  # padded rows: one copy
+
+
+def _xyz(points: npt.NDArray[Any], dtype: np.dtype[Any]) -> npt.NDArray[np.float32]:
+    """x, y, z copied once into a float32 (N, 3) C-contiguous array (cast when not float32)."""
+    fields = dtype.fields
+    assert fields is not None
+    (tx, ox), (ty, oy), (tz, oz) = ((fields[a][0], int(fields[a][1])) for a in "xyz")
+    if tx == ty == tz == np.dtype(np.float32) and oy == ox + 4 and oz == ox + 8:
+        packed = np.dtype(
+            {"names": ["xyz"], "formats": [("=f4", 3)], "offsets": [ox], "itemsize": dtype.itemsize}
+        )
+        return np.ascontiguousarray(points.view(packed)["xyz"])
+    xyz = np.empty((points.shape[0], 3), dtype=np.float32)
+    with np.errstate(over="ignore", invalid="ignore"):
+        for i, axis in enumerate("xyz"):
+            xyz[:, i] = points[axis]
+    return xyz
+
+
+class PointCloud2Decoder:
+    """``sensor_msgs/msg/PointCloud2`` → PointCloud (any field layout, both encodings)."""
+
+    name = "pointcloud2"
+    msgtypes: tuple[str, ...] = ("sensor_msgs/msg/PointCloud2",)
+    kind = DecodedKind.SENSOR
+    sensor_type: SensorType | None = SensorType.LIDAR
+
+    def decode(self, message: LogMessage, deserialize: Deserialize) -> Decoded:
+        del deserialize  # the fast path never deserialises
+        try:
+            layout = read_cloud_layout(message.raw, message.encoding)
+            dtype = _point_dtype(layout)
+        except ValueError as err:
+            raise unsupported(message, f"PointCloud2 cannot be read: {err}", _TODO) from err
+        missing = [a for a in "xyz" if dtype.fields is None or a not in dtype.fields]
+        if missing:
+            have = ", ".join(f.name for f in layout.fields) or "none"
+            raise unsupported(
+                message,
+                f"PointCloud2 has no {'/'.join(missing)} field (fields: {have})",
+                "redrive needs x, y, z; decode this topic with a custom decoder or skip it",
+            )
+        buf: bytes | memoryview = message.raw
+        data_offset = layout.data_offset
+        if not raw_is_immutable(message):
+            end = data_offset + layout.data_size_bytes
+            buf = bytes(memoryview(message.raw).cast("B")[data_offset:end])
+            data_offset = 0
+        try:
+            points = _points_view(buf, layout, dtype, data_offset)
+        except ValueError as err:
+            raise unsupported(message, f"PointCloud2 cannot be read: {err}", _TODO) from err
+        xyz = _xyz(points, dtype)
+        channels: dict[str, npt.NDArray[Any]] = {}
+        for name in dtype.names or ():
+            if name in ("x", "y", "z"):
+                continue
+            values = points[name]
+            if not values.dtype.isnative:
+                values = values.astype(values.dtype.newbyteorder("="))
+            channels[name] = values
+        stamp_ns = layout.stamp_ns or message.log_time_ns
+        cloud = PointCloud(xyz=xyz, channels=channels)
+        return Decoded(stamp_ns=stamp_ns, frame_id=layout.frame_id, value=cloud)
+
+
+_TODO = "check the publisher's PointField list, or report the bag to the redrive developers"
