@@ -24,7 +24,7 @@ from collections.abc import Callable, Collection, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import BinaryIO, Self
+from typing import Any, BinaryIO, Self
 
 import lz4.frame
 from rosbags.rosbag1 import Reader as RosbagsReader
@@ -320,7 +320,7 @@ class Ros1BagReader:
         for conn_id in sorted(self._selected_ids(topics)):
             index = reader.indexes.get(conn_id, [])
             first = 0 if start_ns is None else bisect_left([e.time for e in index], start_ns)
-            streams.append((e.time, e.chunk_pos, e.offset, conn_id) for e in index[first:])
+            streams.append(_entries(index, first, conn_id))
         current_pos = -1
         chunk: memoryview = memoryview(b"")
         bad_chunk = -1
@@ -543,6 +543,12 @@ class Ros1BagReader:
         tb: TracebackType | None,
     ) -> None:
         self.close()
+
+
+def _entries(index: list[Any], first: int, conn_id: int) -> Iterator[tuple[int, int, int, int]]:
+    """(time, chunk position, offset in chunk, connection id) of one connection's index."""
+    for entry in index[first:]:
+        yield entry.time, entry.chunk_pos, entry.offset, conn_id
 
 
 def _chunk_counts(reader: RosbagsReader | None, chunk_pos: int) -> dict[int, int]:

@@ -1,0 +1,1 @@
+"""The ``redrive`` command line (layer L6)."""

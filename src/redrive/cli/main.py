@@ -1,0 +1,64 @@
+"""``redrive`` — entry point; each subcommand lives in its own module with a ``register``."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+from collections.abc import Sequence
+
+from redrive import __version__
+from redrive.errors import RedriveError
+
+__all__ = ["main"]
+
+#: subcommand modules under redrive.cli, in --help order; each has register(subparsers).
+_COMMANDS = ("info", "convert", "bench")
+
+_EPILOG = """\
+examples:
+  redrive info drive.bag                 topics, counts, rates, decoders of a log
+  redrive convert drive.bag drive.mcap   any log (KITTI too) to MCAP or a ROS 1 bag
+  redrive bench read drive.bag           decoding speed against a raw read
+
+Logs: ROS 1 .bag, ROS 2 bag directories (sqlite3/mcap), .mcap, KITTI object folders.
+"""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="redrive",
+        description="Re-drive autonomous-driving algorithms on recorded sensor logs.",
+        epilog=_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=f"redrive {__version__}")
+    parser.add_argument(
+        "-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)"
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in _COMMANDS:
+        module = importlib.import_module(f"redrive.cli.{name}")
+        module.register(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the CLI; returns the process exit status (0 ok, 1 a redrive error, 2 bad usage)."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    level = logging.WARNING - 10 * min(int(args.verbose), 2)
+    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
+    if not getattr(args, "command", None):
+        parser.print_help()
+        return 2
+    try:
+        status: int = args.func(args)
+    except RedriveError as err:
+        print(f"redrive: error: {err}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("redrive: interrupted", file=sys.stderr)
+        return 130
+    return status

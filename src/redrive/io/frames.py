@@ -1,0 +1,269 @@
+"""The Sensor Dispatcher for replay: a log becomes a stream of synchronised :class:`Frame`s.
+
+Every sample of the *driver* sensor makes one frame.  Each other sensor contributes the sample
+whose header stamp is nearest the driver's, if it is within the tolerance; the ego state is
+interpolated to the driver's stamp; ground truth is the nearest objects message within the
+tolerance.  Reading is streaming: only a window of ``tolerance + lookahead`` around the frame being
+assembled is held, whatever the log's length.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections import deque
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+from redrive.errors import ConfigError, UnsupportedMessageError
+from redrive.io.base import LogMessage, LogReader
+from redrive.io.decoders import decode, decoder_for
+from redrive.io.decoders.base import Decoded
+from redrive.io.sensor_map import SensorMap, SensorMapOverrides, infer_sensor_map
+from redrive.types import (
+    DetectedObject,
+    Frame,
+    Image,
+    SensorData,
+    Transform,
+    VehicleState,
+)
+
+__all__ = ["FrameAssembler", "interpolate_state", "iter_frames"]
+
+logger = logging.getLogger(__name__)
+
+_DEFAULT_LOOKAHEAD_NS = 200_000_000
+_STATE_WINDOW_NS = 2_000_000_000
+
+
+@dataclass(frozen=True, slots=True)
+class _Sample:
+    stamp_ns: int
+    decoded: Decoded
+
+
+def interpolate_state(before: VehicleState, after: VehicleState, stamp_ns: int) -> VehicleState:
+    """Linear in position, velocity and acceleration; shortest-arc in heading."""
+    span = after.stamp_ns - before.stamp_ns
+    a = 0.0 if span <= 0 else (stamp_ns - before.stamp_ns) / span
+    dh = math.remainder(after.heading_rad - before.heading_rad, math.tau)
+    return VehicleState(
+        stamp_ns=stamp_ns,
+        frame_id=before.frame_id,
+        position=before.position + a * (after.position - before.position),
+        velocity=before.velocity + a * (after.velocity - before.velocity),
+        acceleration=before.acceleration + a * (after.acceleration - before.acceleration),
+        heading_rad=math.remainder(before.heading_rad + a * dh, math.tau),
+        yaw_rate_rad_s=before.yaw_rate_rad_s + a * (after.yaw_rate_rad_s - before.yaw_rate_rad_s),
+    )
+
+
+class FrameAssembler:
+    """Turn a log into frames.
+
+    Args:
+        log: an open log.
+        sensor_map: which topic is which sensor; inferred from the log when None.
+        overrides: what a sensor map file says (used only when ``sensor_map`` is None).
+        lookahead_ns: how long after a driver sample to keep reading for the other sensors'
+            samples (covers recorder latency: log time later than the header stamp).
+
+    Raises:
+        ConfigError: the log has no sensor to drive frames.
+    """
+
+    def __init__(
+        self,
+        log: LogReader,
+        *,
+        sensor_map: SensorMap | None = None,
+        overrides: SensorMapOverrides | None = None,
+        lookahead_ns: int = _DEFAULT_LOOKAHEAD_NS,
+    ) -> None:
+        self.log = log
+        self.sensor_map = sensor_map or infer_sensor_map(
+            log.topics, duration_ns=log.end_ns - log.start_ns, overrides=overrides
+        )
+        if self.sensor_map.driver is None:
+            msg = (
+                f"{log.path}: no sensor to drive frames (no LiDAR, camera or radar topic with a "
+                "decoder); name one with `driver` in a sensor map file"
+            )
+            raise ConfigError(msg)
+        self.lookahead_ns = lookahead_ns
+        self.undecodable: dict[str, int] = {}
+        self._warned: set[str] = set()
+
+    def frames(self, *, start_ns: int | None = None, stop_ns: int | None = None) -> Iterator[Frame]:
+        """Frames in order, from driver samples with log time in ``[start_ns, stop_ns)``."""
+        smap = self.sensor_map
+        driver = smap.sensor(smap.driver or "")
+        by_topic = smap.by_topic()
+        tol = smap.tolerance_ns
+        buffers: dict[str, deque[_Sample]] = {s.sensor_id: deque() for s in smap.sensors}
+        states: deque[VehicleState] = deque()
+        objects: deque[_Sample] = deque()
+        static_tf: dict[tuple[str, str], Transform] = {}
+        pending: deque[_Sample] = deque()
+        index = 0
+        read_from = None if start_ns is None else start_ns - tol - self.lookahead_ns
+        for message in self.log.messages(topics=smap.topics(), start_ns=read_from):
+            decoded = self._decode(message)
+            if decoded is None:
+                continue
+            now = message.log_time_ns
+            spec = by_topic.get(message.topic)
+            if spec is not None:
+                sample = _Sample(decoded.stamp_ns, decoded)
+                buffers[spec.sensor_id].append(sample)
+                if spec.sensor_id == driver.sensor_id:
+                    if start_ns is not None and now < start_ns:
+                        pass
+                    elif stop_ns is not None and now >= stop_ns:
+                        break
+                    else:
+                        pending.append(sample)
+            elif message.topic == smap.vehicle_state_topic and isinstance(
+                decoded.value, VehicleState
+            ):
+                states.append(decoded.value)
+            elif message.topic == smap.ground_truth_topic:
+                objects.append(_Sample(decoded.stamp_ns, decoded))
+            elif message.topic in smap.tf_topics and isinstance(decoded.value, tuple):
+                for tf in decoded.value:
+                    if isinstance(tf, Transform) and tf.stamp_ns == 0:
+                        static_tf[(tf.parent_frame, tf.child_frame)] = tf
+            while pending and now - pending[0].stamp_ns > tol + self.lookahead_ns:
+                yield self._assemble(
+                    pending.popleft(),
+                    index=index,
+                    buffers=buffers,
+                    states=states,
+                    objects=objects,
+                    static_tf=static_tf,
+                )
+                index += 1
+            horizon = (pending[0].stamp_ns if pending else now) - tol - self.lookahead_ns
+            for buf in buffers.values():
+                while len(buf) > 1 and buf[0].stamp_ns < horizon:
+                    buf.popleft()
+            while len(objects) > 1 and objects[0].stamp_ns < horizon:
+                objects.popleft()
+            while len(states) > 2 and states[1].stamp_ns < horizon - _STATE_WINDOW_NS:
+                states.popleft()
+        while pending:
+            yield self._assemble(
+                pending.popleft(),
+                index=index,
+                buffers=buffers,
+                states=states,
+                objects=objects,
+                static_tf=static_tf,
+            )
+            index += 1
+
+    def _decode(self, message: LogMessage) -> Decoded | None:
+        if decoder_for(message.msgtype) is None and message.encoding != "native":
+            return None
+        try:
+            return decode(message, self.log.deserialize)
+        except UnsupportedMessageError as err:
+            self.undecodable[message.topic] = self.undecodable.get(message.topic, 0) + 1
+            if message.topic not in self._warned:
+                self._warned.add(message.topic)
+                logger.warning("%s (further failures on this topic are counted, not logged)", err)
+            return None
+
+    def _assemble(
+        self,
+        driver: _Sample,
+        *,
+        index: int,
+        buffers: dict[str, deque[_Sample]],
+        states: deque[VehicleState],
+        objects: deque[_Sample],
+        static_tf: dict[tuple[str, str], Transform],
+    ) -> Frame:
+        smap = self.sensor_map
+        t = driver.stamp_ns
+        tol = smap.tolerance_ns
+        sensors: dict[str, SensorData] = {}
+        for spec in smap.sensors:
+            sample = (
+                driver
+                if spec.sensor_id == smap.driver
+                else _nearest(buffers[spec.sensor_id], t, tol)
+            )
+            if sample is None:
+                continue
+            value = sample.decoded.value
+            location = spec.location
+            if location is None and ("base_link", sample.decoded.frame_id) in static_tf:
+                xyz = static_tf[("base_link", sample.decoded.frame_id)].translation
+                location = (float(xyz[0]), float(xyz[1]), float(xyz[2]))
+            resolution = (value.width, value.height) if isinstance(value, Image) else None
+            try:
+                sensors[spec.sensor_id] = SensorData(
+                    sensor_id=spec.sensor_id,
+                    sensor_type=spec.sensor_type,
+                    stamp_ns=sample.stamp_ns,
+                    frame_id=sample.decoded.frame_id,
+                    frame_rate_hz=spec.rate_hz,
+                    resolution=resolution,
+                    sensor_location=location or (0.0, 0.0, 0.0),
+                    data=value,  # type: ignore[arg-type]
+                )
+            except ValueError as err:
+                logger.debug("sensor %s: %s", spec.sensor_id, err)
+        gt_sample = _nearest(objects, t, tol)
+        ground_truth: tuple[DetectedObject, ...] | None = None
+        if gt_sample is not None and isinstance(gt_sample.decoded.value, tuple):
+            ground_truth = tuple(
+                o for o in gt_sample.decoded.value if isinstance(o, DetectedObject)
+            )
+        elif smap.ground_truth_topic is not None:
+            ground_truth = ()
+        return Frame(
+            stamp_ns=t,
+            index=index,
+            sensors=sensors,
+            vehicle_state=_state_at(states, t, tol),
+            ground_truth=ground_truth,
+        )
+
+
+def _nearest(buf: deque[_Sample], stamp_ns: int, tolerance_ns: int) -> _Sample | None:
+    best: _Sample | None = None
+    best_dt = tolerance_ns + 1
+    for sample in buf:
+        dt = abs(sample.stamp_ns - stamp_ns)
+        if dt < best_dt:
+            best, best_dt = sample, dt
+    return best
+
+
+def _state_at(states: deque[VehicleState], stamp_ns: int, tolerance_ns: int) -> VehicleState | None:
+    before = after = None
+    for state in states:
+        if state.stamp_ns <= stamp_ns:
+            before = state
+        elif after is None:
+            after = state
+    if before is not None and after is not None:
+        return interpolate_state(before, after, stamp_ns)
+    near = before or after
+    if near is not None and abs(near.stamp_ns - stamp_ns) <= tolerance_ns:
+        return near
+    return None
+
+
+def iter_frames(
+    log: LogReader,
+    *,
+    overrides: SensorMapOverrides | None = None,
+    start_ns: int | None = None,
+    stop_ns: int | None = None,
+) -> Iterator[Frame]:
+    """Shorthand: ``FrameAssembler(log, overrides=...).frames(start_ns=..., stop_ns=...)``."""
+    return FrameAssembler(log, overrides=overrides).frames(start_ns=start_ns, stop_ns=stop_ns)
