@@ -1,0 +1,325 @@
+"""PointCloud2 fast path: exact against rosbags' full deserialisation on random layouts."""
+
+from __future__ import annotations
+
+import struct
+from typing import Any
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from redrive.errors import UnsupportedMessageError
+from redrive.io.base import LogMessage
+from redrive.io.decoders import PointCloud2Decoder, read_cloud_layout
+from tests.io._decoder_helpers import deserializer, header, log_message
+
+TYPE = "sensor_msgs/msg/PointCloud2"
+CODES = {1: "b", 2: "B", 3: "h", 4: "H", 5: "i", 6: "I", 7: "f", 8: "d"}
+NUMPY = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
+
+
+def _no_deserialize(message: LogMessage) -> object:
+    raise AssertionError("the PointCloud2 fast path must not deserialise")
+
+
+def _field(name: str, offset: int, datatype: int, count: int = 1) -> dict[str, Any]:
+    return {"name": name, "offset": offset, "datatype": datatype, "count": count}
+
+
+def _cloud_message(
+    ros_version: int,
+    *,
+    fields: list[dict[str, Any]],
+    data: bytes,
+    width: int,
+    height: int = 1,
+    point_step: int,
+    row_step: int | None = None,
+    is_bigendian: bool = False,
+    little_endian: bool = True,
+    stamp_ns: int = 1_600_000_000_123_456_789,
+    raw_wrapper: Any = bytes,
+) -> LogMessage:
+    msg = log_message(
+        ros_version,  # type: ignore[arg-type]
+        TYPE,
+        little_endian=little_endian,
+        header=header(ros_version, stamp_ns, "lidar_top"),  # type: ignore[arg-type]
+        height=height,
+        width=width,
+        fields=fields,
+        is_bigendian=is_bigendian,
+        point_step=point_step,
+        row_step=width * point_step if row_step is None else row_step,
+        data=np.frombuffer(data, dtype=np.uint8),
+        is_dense=False,
+    )
+    if raw_wrapper is bytes:
+        return msg
+    return LogMessage(
+        topic=msg.topic,
+        msgtype=msg.msgtype,
+        log_time_ns=msg.log_time_ns,
+        encoding=msg.encoding,
+        raw=raw_wrapper(msg.raw),
+    )
+
+
+def _reference(message: LogMessage) -> tuple[np.ndarray, dict[str, np.ndarray], Any]:
+    """Per-point struct.unpack over rosbags' fully deserialised message."""
+    msg: Any = deserializer()(message)
+    data = bytes(msg.data)
+    order = ">" if msg.is_bigendian else "<"
+    columns: dict[str, list[Any]] = {}
+    kinds: dict[str, int] = {}
+    for f in msg.fields:
+        count = max(int(f.count), 1)
+        size = struct.calcsize(CODES[f.datatype])
+        for i in range(count):
+            name = f.name if count == 1 else f"{f.name}_{i}"
+            kinds[name] = f.datatype
+            columns[name] = [
+                struct.unpack_from(
+                    order + CODES[f.datatype],
+                    data,
+                    r * msg.row_step + c * msg.point_step + f.offset + i * size,
+                )[0]
+                for r in range(msg.height)
+                for c in range(msg.width)
+            ]
+    n = msg.width * msg.height
+    with np.errstate(over="ignore", invalid="ignore"):
+        xyz = np.zeros((n, 3), dtype=np.float32)
+        for j, axis in enumerate("xyz"):
+            xyz[:, j] = np.array(columns[axis], dtype=NUMPY[kinds[axis]]).astype(np.float32)
+    channels = {
+        k: np.array(v, dtype=NUMPY[kinds[k]])
+        for k, v in columns.items()
+        if k not in ("x", "y", "z")
+    }
+    return xyz, channels, msg
+
+
+@st.composite
+def cloud_layouts(draw: st.DrawFn) -> dict[str, Any]:
+    specs: list[tuple[str, int, int]] = [
+        (axis, draw(st.sampled_from([7, 7, 8, 1, 2, 3, 4, 5, 6])), 1) for axis in "xyz"
+    ]
+    extra = draw(
+        st.lists(
+            st.sampled_from(["intensity", "ring", "t", "rgb", "label"]), max_size=4, unique=True
+        )
+    )
+    for name in extra:
+        specs.append((name, draw(st.integers(1, 8)), draw(st.sampled_from([1, 1, 1, 0, 2, 3]))))
+    specs = draw(st.permutations(specs))
+    fields, offset = [], 0
+    for name, datatype, count in specs:
+        offset += draw(st.integers(0, 3))
+        fields.append(_field(name, offset, datatype, count))
+        offset += int(NUMPY[datatype][1]) * max(count, 1)
+    point_step = offset + draw(st.integers(0, 5))
+    width = draw(st.integers(0, 7))
+    height = draw(st.integers(1, 3))
+    row_pad = draw(st.sampled_from([0, 0, 0, 1, 3, 8]))
+    row_step = width * point_step + row_pad
+    size = row_step * height
+    data = bytearray(draw(st.binary(min_size=size, max_size=size)))
+    big = draw(st.booleans())
+    nan_rows = draw(st.lists(st.integers(0, max(width * height - 1, 0)), max_size=3))
+    for p in nan_rows if width else []:
+        r, c = divmod(p, width)
+        for f in fields:
+            if f["datatype"] in (7, 8):
+                code = (">" if big else "<") + CODES[f["datatype"]]
+                struct.pack_into(
+                    code, data, r * row_step + c * point_step + f["offset"], float("nan")
+                )
+    return {
+        "fields": fields,
+        "data": bytes(data),
+        "width": width,
+        "height": height,
+        "point_step": point_step,
+        "row_step": row_step,
+        "is_bigendian": big,
+        "ros_version": draw(st.sampled_from([1, 2])),
+        "little_endian": draw(st.booleans()),
+    }
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(layout=cloud_layouts())
+def test_random_layouts_match_full_deserialisation(layout: dict[str, Any]) -> None:
+    ros_version = layout.pop("ros_version")
+    message = _cloud_message(ros_version, **layout)
+    expected_xyz, expected_channels, msg = _reference(message)
+    decoded = PointCloud2Decoder().decode(message, _no_deserialize)
+    cloud = decoded.value
+    assert decoded.frame_id == "lidar_top"
+    assert decoded.stamp_ns == 1_600_000_000_123_456_789
+    assert cloud.xyz.dtype == np.float32
+    assert cloud.xyz.flags.c_contiguous
+    np.testing.assert_array_equal(cloud.xyz, expected_xyz)
+    assert set(cloud.channels) == set(expected_channels)
+    for name, values in expected_channels.items():
+        got = cloud.channels[name]
+        assert got.dtype == values.dtype.newbyteorder("="), name
+        assert got.dtype.isnative
+        np.testing.assert_array_equal(got, values, err_msg=name)
+    layout_read = read_cloud_layout(message.raw, message.encoding)
+    assert (layout_read.width, layout_read.height) == (msg.width, msg.height)
+    assert layout_read.point_step == msg.point_step
+    assert layout_read.row_step == msg.row_step
+    assert layout_read.is_bigendian == bool(msg.is_bigendian)
+
+
+@pytest.mark.parametrize("ros_version", [1, 2])
+def test_zero_copy_channels_and_single_xyz_copy(ros_version: int) -> None:
+    n = 1000
+    points = np.zeros(
+        n,
+        dtype=[
+            ("x", "<f4"),
+            ("y", "<f4"),
+            ("z", "<f4"),
+            ("pad", "<f4"),
+            ("intensity", "<f4"),
+            ("ring", "<u2"),
+            ("pad2", "V2"),
+        ],
+    )
+    points["x"] = np.arange(n)
+    points["y"] = -np.arange(n)
+    points["z"] = 0.5
+    points["intensity"] = np.arange(n) * 2
+    points["ring"] = np.arange(n) % 64
+    fields = [
+        _field("x", 0, 7),
+        _field("y", 4, 7),
+        _field("z", 8, 7),
+        _field("intensity", 16, 7),
+        _field("ring", 20, 4),
+    ]
+    message = _cloud_message(
+        ros_version, fields=fields, data=points.tobytes(), width=n, point_step=24
+    )
+    cloud = PointCloud2Decoder().decode(message, _no_deserialize).value
+    raw_array = np.frombuffer(message.raw, dtype=np.uint8)
+    assert np.shares_memory(cloud.channels["intensity"], raw_array)
+    assert np.shares_memory(cloud.channels["ring"], raw_array)
+    assert not np.shares_memory(cloud.xyz, raw_array)
+    np.testing.assert_array_equal(cloud.xyz[:, 0], np.arange(n, dtype=np.float32))
+    np.testing.assert_array_equal(cloud.channels["ring"], np.arange(n) % 64)
+    assert not cloud.channels["intensity"].flags.writeable
+
+
+def test_mutable_reader_buffer_is_copied() -> None:
+    data = np.array([(1.0, 2.0, 3.0, 7.0)], dtype="<f4").tobytes()
+    fields = [_field("x", 0, 7), _field("y", 4, 7), _field("z", 8, 7), _field("intensity", 12, 7)]
+    message = _cloud_message(
+        2,
+        fields=fields,
+        data=data,
+        width=1,
+        point_step=16,
+        raw_wrapper=lambda b: memoryview(bytearray(b)),
+    )
+    cloud = PointCloud2Decoder().decode(message, _no_deserialize).value
+    assert isinstance(message.raw, memoryview)
+    message.raw[:] = b"\xff" * len(message.raw)  # the reader reuses its buffer
+    assert cloud.channels["intensity"][0] == 7.0
+    np.testing.assert_array_equal(cloud.xyz, [[1.0, 2.0, 3.0]])
+
+
+def test_big_endian_cdr_and_big_endian_points() -> None:
+    data = np.array(
+        [(1.5, -2.5, 3.25, 9)], dtype=[("x", ">f8"), ("y", ">f8"), ("z", ">f8"), ("ring", ">u2")]
+    ).tobytes()
+    fields = [_field("x", 0, 8), _field("y", 8, 8), _field("z", 16, 8), _field("ring", 24, 4)]
+    message = _cloud_message(
+        2, fields=fields, data=data, width=1, point_step=26, is_bigendian=True, little_endian=False
+    )
+    assert bytes(message.raw[:4]) == b"\x00\x00\x00\x00"
+    cloud = PointCloud2Decoder().decode(message, _no_deserialize).value
+    np.testing.assert_array_equal(cloud.xyz, np.array([[1.5, -2.5, 3.25]], dtype=np.float32))
+    assert cloud.channels["ring"].dtype == np.dtype("=u2")
+    assert int(cloud.channels["ring"][0]) == 9
+
+
+def test_organised_cloud_with_nans_keeps_every_point() -> None:
+    grid = np.full((4, 5, 3), np.nan, dtype="<f4")
+    grid[1, 2] = (1.0, 2.0, 3.0)
+    fields = [_field("x", 0, 7), _field("y", 4, 7), _field("z", 8, 7)]
+    message = _cloud_message(
+        1, fields=fields, data=grid.tobytes(), width=5, height=4, point_step=12
+    )
+    cloud = PointCloud2Decoder().decode(message, _no_deserialize).value
+    assert cloud.num_points == 20
+    assert np.isnan(cloud.xyz).all(axis=1).sum() == 19
+    np.testing.assert_array_equal(cloud.xyz[7], [1.0, 2.0, 3.0])
+
+
+def test_count_field_is_expanded() -> None:
+    data = struct.pack("<fff3B", 1.0, 2.0, 3.0, 10, 20, 30)
+    fields = [_field("x", 0, 7), _field("y", 4, 7), _field("z", 8, 7), _field("rgb", 12, 2, 3)]
+    message = _cloud_message(2, fields=fields, data=data, width=1, point_step=15)
+    cloud = PointCloud2Decoder().decode(message, _no_deserialize).value
+    assert [int(cloud.channels[f"rgb_{i}"][0]) for i in range(3)] == [10, 20, 30]
+
+
+@pytest.mark.parametrize(
+    ("fields", "point_step", "data", "match"),
+    [
+        ([_field("x", 0, 7), _field("y", 4, 7)], 8, b"\0" * 8, "no z field"),
+        ([_field("x", 0, 7), _field("y", 4, 7), _field("z", 8, 9)], 12, b"\0" * 12, "datatype 9"),
+        (
+            [_field("x", 0, 7), _field("y", 4, 7), _field("z", 8, 7)],
+            12,
+            b"\0" * 11,
+            "data holds 11 bytes",
+        ),
+        ([_field("x", 0, 7, 2), _field("y", 8, 7), _field("z", 12, 7)], 16, b"\0" * 16, "count 2"),
+        ([_field("x", 0, 7), _field("y", 4, 7), _field("z", 8, 8)], 12, b"\0" * 12, "does not fit"),
+        (
+            [_field("x", 0, 7), _field("y", 4, 7), _field("z", 8, 7), _field("y", 8, 7)],
+            12,
+            b"\0" * 12,
+            "repeated",
+        ),
+    ],
+)
+def test_bad_layouts_are_rejected_clearly(
+    fields: list[dict[str, Any]], point_step: int, data: bytes, match: str
+) -> None:
+    message = _cloud_message(1, fields=fields, data=data, width=1, point_step=point_step)
+    with pytest.raises(UnsupportedMessageError, match=match) as info:
+        PointCloud2Decoder().decode(message, _no_deserialize)
+    assert "'/topic'" in str(info.value)
+
+
+def test_truncated_and_non_cdr_bytes_are_rejected() -> None:
+    fields = [_field("x", 0, 7), _field("y", 4, 7), _field("z", 8, 7)]
+    message = _cloud_message(2, fields=fields, data=b"\0" * 12, width=1, point_step=12)
+    cut = LogMessage(topic="/c", msgtype=TYPE, log_time_ns=0, encoding="cdr", raw=message.raw[:30])
+    with pytest.raises(UnsupportedMessageError, match=r"truncated|overruns"):
+        PointCloud2Decoder().decode(cut, _no_deserialize)
+    xcdr = LogMessage(
+        topic="/c",
+        msgtype=TYPE,
+        log_time_ns=0,
+        encoding="cdr",
+        raw=b"\x00\x07\x00\x00" + bytes(message.raw[4:]),
+    )
+    with pytest.raises(UnsupportedMessageError, match="not plain CDR"):
+        PointCloud2Decoder().decode(xcdr, _no_deserialize)
+
+
+def test_zero_stamp_falls_back_to_log_time() -> None:
+    fields = [_field("x", 0, 7), _field("y", 4, 7), _field("z", 8, 7)]
+    message = _cloud_message(2, fields=fields, data=b"", width=0, point_step=12, stamp_ns=0)
+    decoded = PointCloud2Decoder().decode(message, _no_deserialize)
+    assert decoded.stamp_ns == message.log_time_ns
+    assert decoded.value.num_points == 0
