@@ -1,0 +1,54 @@
+# redrive — the two commands a new user runs.  Works on a fresh Debian machine with Python 3.11
+# (as root it installs the Debian packages it needs when they are missing).
+SHELL := /bin/bash
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV := .venv
+BIN := $(VENV)/bin
+DEMO_DIR := .demo
+SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+
+.PHONY: demo test lint venv clean bench-read
+
+# Debian's python3 ships without venv/ensurepip: install python3-venv when it is missing.
+$(BIN)/python:
+	@if ! $(PYTHON) -c "import venv, ensurepip" >/dev/null 2>&1; then \
+	  echo "installing python3-venv (Debian)"; \
+	  $(SUDO) apt-get update -qq && $(SUDO) apt-get install -y -qq python3-venv python3-pip; \
+	fi
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+
+$(VENV)/.installed: $(BIN)/python pyproject.toml
+	$(BIN)/pip install -q -e .
+	@touch $@
+
+$(VENV)/.installed-test: $(VENV)/.installed pyproject.toml
+	$(BIN)/pip install -q -e '.[test]'
+	@touch $@
+
+venv: $(VENV)/.installed
+
+## demo: create .venv, install redrive, make a small multi-sensor log and show what redrive sees
+demo: $(VENV)/.installed
+	@mkdir -p $(DEMO_DIR)
+	$(BIN)/python -m redrive.cli.demo_log $(DEMO_DIR)/demo.bag
+	$(BIN)/redrive info $(DEMO_DIR)/demo.bag
+	$(BIN)/redrive convert $(DEMO_DIR)/demo.bag $(DEMO_DIR)/demo.mcap
+	$(BIN)/redrive info $(DEMO_DIR)/demo.mcap
+
+## lint: ruff, mypy --strict on src/, import-linter (the layers of DESIGN.md)
+lint: $(VENV)/.installed-test
+	$(BIN)/ruff check src tests
+	$(BIN)/ruff format --check src tests
+	$(BIN)/mypy
+	$(BIN)/lint-imports
+
+## test: install test needs, lint, run the whole suite (slow/soak tests run as benchmarks)
+test: lint
+	$(BIN)/pytest -q -m "not slow" -p no:cacheprovider
+
+bench-read: $(VENV)/.installed
+	$(BIN)/redrive bench read --help
+
+clean:
+	rm -rf $(VENV) $(DEMO_DIR) .mypy_cache .ruff_cache .pytest_cache
