@@ -183,8 +183,8 @@ class McapFileReader:
         if self._summary is not None and self._summary.chunk_indexes:
             source = self._reader.iter_messages(
                 topics=None if wanted is None else sorted(wanted),
-                start_time=start_ns,
-                end_time=stop_ns,
+                starting_at=start_ns,
+                ending_before=stop_ns,
                 log_time_order=True,
             )
         else:
