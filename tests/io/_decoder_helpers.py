@@ -83,9 +83,14 @@ def header(ros_version: RosVersion, stamp_ns: int, frame_id: str) -> dict[str, A
 
 
 def serialize(
-    ros_version: RosVersion, msg: Any, typename: str, *, little_endian: bool = True
+    ros_version: RosVersion,
+    msg: Any,
+    typename: str,
+    *,
+    little_endian: bool = True,
+    ts: Typestore | None = None,
 ) -> bytes:
-    ts = store(ros_version)
+    ts = ts or store(ros_version)
     if ros_version == 1:
         return bytes(ts.serialize_ros1(msg, typename))
     return bytes(ts.serialize_cdr(msg, typename, little_endian=little_endian))
@@ -98,11 +103,13 @@ def log_message(
     topic: str = "/topic",
     log_time_ns: int = 1_700_000_000_000_000_000,
     little_endian: bool = True,
+    ts: Typestore | None = None,
     **values: Any,
 ) -> LogMessage:
     """A LogMessage holding a real serialised ``typename`` message built from ``values``."""
-    msg = make(store(ros_version), typename, **values)
-    raw = serialize(ros_version, msg, typename, little_endian=little_endian)
+    ts = ts or store(ros_version)
+    msg = make(ts, typename, **values)
+    raw = serialize(ros_version, msg, typename, little_endian=little_endian, ts=ts)
     return LogMessage(
         topic=topic,
         msgtype=typename,

@@ -43,10 +43,10 @@ def _cloud_message(
     raw_wrapper: Any = bytes,
 ) -> LogMessage:
     msg = log_message(
-        ros_version,  # type: ignore[arg-type]
+        ros_version,
         TYPE,
         little_endian=little_endian,
-        header=header(ros_version, stamp_ns, "lidar_top"),  # type: ignore[arg-type]
+        header=header(ros_version, stamp_ns, "lidar_top"),
         height=height,
         width=width,
         fields=fields,
