@@ -47,8 +47,14 @@ Layout = Literal["velodyne", "xyzi"]
 #: point layout name → (PointField list as (name, offset, datatype, count), point_step).
 LAYOUTS: dict[str, tuple[tuple[tuple[str, int, int, int], ...], int]] = {
     "velodyne": (
-        (("x", 0, 7, 1), ("y", 4, 7, 1), ("z", 8, 7, 1), ("intensity", 12, 7, 1)) +
-        (("ring", 16, 4, 1), ("time", 24, 8, 1)),
+        (
+            ("x", 0, 7, 1),
+            ("y", 4, 7, 1),
+            ("z", 8, 7, 1),
+            ("intensity", 12, 7, 1),
+            ("ring", 16, 4, 1),
+            ("time", 24, 8, 1),
+        ),
         32,
     ),
     "xyzi": ((("x", 0, 7, 1), ("y", 4, 7, 1), ("z", 8, 7, 1), ("intensity", 12, 7, 1)), 16),
@@ -180,13 +186,20 @@ def write_synthetic_bag(
     def message(index: int, stamp_ns: int) -> bytes:
         sec, nanosec = divmod(stamp_ns, 1_000_000_000)
         header = cls["std_msgs/msg/Header"](
-            seq=index, stamp=cls["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec),
+            seq=index,
+            stamp=cls["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec),
             frame_id=_FRAME_ID,
         )
         cloud = cls[_MSGTYPE](
-            header=header, height=1, width=points, fields=point_fields, is_bigendian=False,
-            point_step=step, row_step=step * points,
-            data=maker.sweep().view(np.uint8), is_dense=True,
+            header=header,
+            height=1,
+            width=points,
+            fields=point_fields,
+            is_bigendian=False,
+            point_step=step,
+            row_step=step * points,
+            data=maker.sweep().view(np.uint8),
+            is_dense=True,
         )
         return bytes(typestore.serialize_ros1(cloud, _MSGTYPE))
 
