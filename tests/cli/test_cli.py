@@ -1,0 +1,72 @@
+"""The CLI as a user runs it: `redrive info`, `python -m redrive`, --help texts."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from redrive.cli.demo_log import write_demo_bag
+from redrive.cli.main import main
+
+
+def test_info_json_on_a_real_bag(shared_data: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bag = shared_data / "rosbag1_real/robot_localization_test1_husky.bag"
+    assert main(["info", str(bag), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["format"] == "ros1"
+    assert info["messages"] == 16806
+    topics = {t["topic"]: t for t in info["topics"]}
+    assert topics["/imu/data"]["count"] == 11865
+    assert topics["/imu/data"]["decoder"] == "imu"
+    assert topics["/fix"]["type"] == "sensor_msgs/msg/NavSatFix"
+    assert topics["/husky_velocity_controller/odom"]["maps_to"] == "vehicle state"
+    assert 390 < info["duration_s"] < 400  # "395 s"
+    assert 25 < topics["/imu/data"]["rate_hz"] < 35
+
+
+def test_info_table_on_kitti(shared_data: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["info", str(shared_data / "kitti_object")]) == 0
+    out = capsys.readouterr().out
+    assert "kitti" in out
+    assert "driver" in out
+
+
+def test_info_reports_damage_and_exit_status(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bag = write_demo_bag(tmp_path / "demo.bag", duration_s=1.0)
+    cut = tmp_path / "cut.bag"
+    cut.write_bytes(bag.read_bytes()[: bag.stat().st_size // 2])
+    assert main(["info", str(cut), "--json"]) == 1
+    info = json.loads(capsys.readouterr().out)
+    assert "cut off" in info["damage"]
+    assert 0 < info["messages"]
+
+
+def test_bad_input_is_a_clear_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "empty.bag").write_bytes(b"")
+    assert main(["info", str(tmp_path / "empty.bag")]) == 1
+    err = capsys.readouterr().err
+    assert "redrive: error:" in err
+    assert "empty.bag" in err
+    assert "Traceback" not in err
+
+
+def test_python_dash_m_and_help_texts() -> None:
+    out = subprocess.run(
+        [sys.executable, "-m", "redrive", "--help"], capture_output=True, text=True, check=True
+    ).stdout
+    assert "info" in out
+    assert "convert" in out
+    for command in ("info", "convert"):
+        text = subprocess.run(
+            [sys.executable, "-m", "redrive", command, "--help"],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout
+        assert "examples:" in text

@@ -1,0 +1,107 @@
+"""The Sensor Dispatcher: frames from real and written logs; the sensor map file."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from redrive.cli.demo_log import write_demo_bag
+from redrive.errors import ConfigError
+from redrive.io import open_log
+from redrive.io.frames import FrameAssembler, interpolate_state
+from redrive.io.sensor_map import infer_sensor_map, load_sensor_map_overrides
+from redrive.types import Image, PointCloud, SensorType, VehicleState
+
+
+def test_frames_from_the_real_kitti_bag(shared_data: Path) -> None:
+    bag = shared_data / "rosbag1_recorded_here/kitti_3frames_rosbag_record_lz4.bag"
+    with open_log(bag) as log:
+        frames = list(FrameAssembler(log).frames())
+    assert [f.index for f in frames] == [0, 1, 2]
+    lidar = "kitti_velo_pointcloud"
+    assert [f.sensors[lidar].data.num_points for f in frames  # type: ignore[union-attr]
+            ] == [115384, 120268, 126891]  # fmt: skip
+    first = frames[0]
+    cam = first.sensors["kitti_camera_color_left_image_raw"]
+    assert cam.sensor_type is SensorType.CAMERA
+    assert isinstance(cam.data, Image)
+    assert cam.resolution == (1224, 370)
+    # The camera sample attached is the one nearest the LiDAR stamp (within 50 ms).
+    assert abs(cam.stamp_ns - first.stamp_ns) <= 50_000_000
+    # The same picture through Image and CompressedImage (PNG): identical pixels.
+    png = first.sensors["kitti_camera_color_left_image_raw_compressed"].data
+    assert isinstance(png, Image)
+    assert np.array_equal(png.pixels, cam.data.pixels)
+
+
+def test_frames_from_the_kitti_folder_carry_ground_truth(shared_data: Path) -> None:
+    with open_log(shared_data / "kitti_object") as log:
+        frames = list(FrameAssembler(log).frames())
+    assert len(frames) == 3
+    assert frames[0].ground_truth is not None
+    assert len(frames[0].ground_truth) == 1  # one pedestrian
+    assert len(frames[1].ground_truth or ()) == 3  # truck, car, cyclist (DontCare skipped)
+
+
+def test_vehicle_state_is_interpolated_to_the_lidar_stamp(tmp_path: Path) -> None:
+    bag = write_demo_bag(tmp_path / "demo.bag", duration_s=2.0)
+    with open_log(bag) as log:
+        assembler = FrameAssembler(log)
+        assert assembler.sensor_map.driver == "velodyne_points"
+        assert assembler.sensor_map.vehicle_state_topic == "/odom"
+        frames = list(assembler.frames())
+    assert len(frames) == 20
+    for frame in frames:
+        state = frame.vehicle_state
+        assert state is not None
+        t_s = (frame.stamp_ns - 1_700_000_000_000_000_000) / 1e9
+        assert state.position[0] == pytest.approx(5.0 * t_s, abs=1e-9)  # 5 m/s straight
+        assert set(frame.sensors) == {"velodyne_points", "imu_data", "gnss_fix"}
+        assert isinstance(frame.sensors["velodyne_points"].data, PointCloud)
+
+
+def test_time_range_of_frames(tmp_path: Path) -> None:
+    bag = write_demo_bag(tmp_path / "demo.bag", duration_s=2.0)
+    with open_log(bag) as log:
+        start = log.start_ns + 500_000_000
+        stop = log.start_ns + 1_000_000_000
+        frames = list(FrameAssembler(log).frames(start_ns=start, stop_ns=stop))
+    assert len(frames) == 5
+    assert frames[0].index == 0
+
+
+def test_interpolate_state_takes_the_short_way_round() -> None:
+    a = VehicleState(stamp_ns=0, heading_rad=np.pi - 0.1, position=[0.0, 0.0, 0.0])
+    b = VehicleState(stamp_ns=100, heading_rad=-np.pi + 0.1, position=[10.0, 0.0, 0.0])
+    mid = interpolate_state(a, b, 50)
+    assert abs(abs(mid.heading_rad) - np.pi) < 1e-9
+    assert mid.position[0] == pytest.approx(5.0)
+
+
+def test_sensor_map_file_overrides_and_errors(tmp_path: Path) -> None:
+    bag = write_demo_bag(tmp_path / "demo.bag", duration_s=0.5)
+    good = tmp_path / "map.toml"
+    good.write_text(
+        'driver = "top"\ntolerance_ms = 20\nignore = ["/gnss/fix"]\n'
+        '[sensors.top]\ntopic = "/velodyne_points"\nlocation = [1.0, 0.0, 1.8]\n'
+    )
+    with open_log(bag) as log:
+        smap = infer_sensor_map(
+            log.topics, duration_ns=log.end_ns - log.start_ns,
+            overrides=load_sensor_map_overrides(good),
+        )  # fmt: skip
+        assert smap.driver == "top"
+        assert smap.tolerance_ns == 20_000_000
+        assert smap.sensor("top").location == (1.0, 0.0, 1.8)
+        assert "/gnss/fix" not in {s.topic for s in smap.sensors}
+        frame = next(iter(FrameAssembler(log, sensor_map=smap).frames()))
+        assert frame.sensors["top"].sensor_location == (1.0, 0.0, 1.8)
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[sensors.top]\ntopic = "/nope"\n')
+    with open_log(bag) as log, pytest.raises(ConfigError, match="/nope"):
+        infer_sensor_map(log.topics, duration_ns=1, overrides=load_sensor_map_overrides(bad))
+    bad.write_text("drivr = 'x'\n")
+    with pytest.raises(ConfigError, match="unknown key"):
+        load_sensor_map_overrides(bad)
