@@ -10,12 +10,17 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from redrive.geometry.quaternion import rotation_matrix_from_quaternion, yaw_from_quaternion
+from redrive.geometry.quaternion import (
+    euler_from_quaternion,
+    rotation_matrix_from_quaternion,
+    yaw_from_quaternion,
+)
 from redrive.geometry.se3 import (
     compose,
     invert,
     matrix_from_transform,
     normalize_angle,
+    quaternion_from_euler,
     quaternion_from_rotation_matrix,
     quaternion_from_yaw,
     rotation_matrix_from_yaw,
@@ -142,3 +147,11 @@ def test_bad_shapes_are_rejected() -> None:
     with pytest.raises(ValueError, match=r"\(N, 3\)"):
         transform_points(np.eye(4), np.zeros((4, 4)))
     assert np.array_equal(compose(), np.eye(4))
+
+
+@given(st.floats(-3.1, 3.1), st.floats(-1.5, 1.5), st.floats(-3.1, 3.1))
+def test_euler_round_trip(roll_rad: float, pitch_rad: float, yaw_rad: float) -> None:
+    got = euler_from_quaternion(quaternion_from_euler(roll_rad, pitch_rad, yaw_rad))
+    np.testing.assert_allclose(got, (roll_rad, pitch_rad, yaw_rad), atol=1e-7)
+    q = quaternion_from_euler(0.0, 0.0, yaw_rad)
+    np.testing.assert_allclose(q, quaternion_from_yaw(yaw_rad), atol=1e-15)

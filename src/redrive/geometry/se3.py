@@ -22,6 +22,7 @@ __all__ = [
     "invert",
     "matrix_from_transform",
     "normalize_angle",
+    "quaternion_from_euler",
     "quaternion_from_rotation_matrix",
     "quaternion_from_yaw",
     "rotation_matrix_from_yaw",
@@ -170,6 +171,24 @@ def quaternion_from_yaw(yaw_rad: float) -> Matrix:
     """The quaternion (x, y, z, w) of a rotation by ``yaw_rad`` about +z."""
     half = 0.5 * yaw_rad
     return np.array([0.0, 0.0, math.sin(half), math.cos(half)])
+
+
+def quaternion_from_euler(roll_rad: float, pitch_rad: float, yaw_rad: float) -> Matrix:
+    """The quaternion (x, y, z, w) of intrinsic z-y'-x'' (yaw, then pitch, then roll) angles.
+
+    The inverse of :func:`redrive.geometry.quaternion.euler_from_quaternion`.
+    """
+    cr, sr = math.cos(0.5 * roll_rad), math.sin(0.5 * roll_rad)
+    cp, sp = math.cos(0.5 * pitch_rad), math.sin(0.5 * pitch_rad)
+    cy, sy = math.cos(0.5 * yaw_rad), math.sin(0.5 * yaw_rad)
+    return np.array(
+        [
+            sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy,
+            cr * cp * cy + sr * sp * sy,
+        ]
+    )
 
 
 def rotation_matrix_from_yaw(yaw_rad: float) -> Matrix:

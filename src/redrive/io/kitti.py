@@ -254,7 +254,7 @@ class KittiReader:
         return Decoded(stamp_ns=stamp_ns, frame_id=frame_id, value=value)
 
     def _load_tf(self, stem: str, stamp_ns: int) -> Decoded:
-        return self._decoded(stamp_ns, "", self.calibration(stem).transforms(stamp_ns=stamp_ns))
+        return self._decoded(stamp_ns, "", self.calibration(stem).transforms())
 
     def _load_velodyne(self, stem: str, stamp_ns: int) -> Decoded:
         path = self.root / "velodyne" / f"{stem}.bin"

@@ -111,7 +111,10 @@ class KittiCalibration:
         return centre
 
     def transforms(self, *, stamp_ns: int = 0) -> tuple[Transform, ...]:
-        """The chain as ``parent_from_child`` transforms (rotations re-orthonormalised)."""
+        """The chain as ``parent_from_child`` transforms (rotations re-orthonormalised).
+
+        ``stamp_ns`` 0 (the default) marks them static, as the tf_static decoder does.
+        """
         out: list[Transform] = []
         if self.velodyne_from_imu is not None:
             out.append(

@@ -1,0 +1,302 @@
+"""Record to MCAP with ROS 2 CDR messages of standard types (the native redrive format).
+
+The file uses profile ``ros2``, message encoding ``cdr`` and schemas in ``ros2msg`` encoding with
+the full concatenated definition (the type, then ``MSG: pkg/Type`` sections for every nested
+type), so Foxglove, Lichtblick and ``ros2 bag`` open it.
+
+Writes are atomic: everything goes to a hidden temporary file in the target directory, which is
+renamed over ``path`` only when the writer closes normally; an exception inside the ``with``
+block (or :meth:`McapWriter.abort`) removes it, so no half-written file is ever left.
+
+>>> with McapWriter("run.mcap") as out:                              # doctest: +SKIP
+...     out.write("/lidar", stamp_ns, cloud, frame_id="velodyne")
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import tempfile
+from collections.abc import Mapping
+from pathlib import Path
+from types import MappingProxyType, TracebackType
+from typing import IO, Literal, Self
+
+from mcap.writer import CompressionType
+from mcap.writer import Writer as _McapWriter
+from rosbags.typesys.store import Typestore
+
+from redrive.errors import LogError, UnsupportedMessageError
+from redrive.io.decoders.base import Decoded
+from redrive.io.ros_encode import encode_value
+from redrive.io.typestore import typestore_for
+from redrive.types import Frame, VehicleState
+
+__all__ = ["Compression", "McapWriter"]
+
+logger = logging.getLogger(__name__)
+
+Compression = Literal["zstd", "lz4", "none"]
+_COMPRESSION: Mapping[str, CompressionType] = MappingProxyType(
+    {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
+)
+
+# rosbag2's QoS for latched topics (transient local), so `ros2 bag play` re-latches /tf_static.
+_LATCHED_QOS = """- history: 3
+  depth: 0
+  reliability: 1
+  durability: 1
+  deadline:
+    sec: 2147483647
+    nsec: 4294967295
+  lifespan:
+    sec: 2147483647
+    nsec: 4294967295
+  liveliness: 1
+  liveliness_lease_duration:
+    sec: 2147483647
+    nsec: 4294967295
+  avoid_ros_namespace_conventions: false
+"""
+
+
+class McapWriter:
+    """An MCAP file being written (a context manager; see the module text).
+
+    Args:
+        path: the ``.mcap`` file to create (replaced on success if it exists).
+        compression: chunk compression, ``zstd`` (default), ``lz4`` or ``none``.
+        typestore: the ROS 2 store whose definitions become the schemas; default
+            ``typestore_for(2)`` (Humble + the types redrive ships).  Types registered on it later
+            are picked up when first written.
+        chunk_size_bytes: uncompressed bytes per chunk.
+
+    Raises:
+        LogError: the directory cannot be written.
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        *,
+        compression: Compression = "zstd",
+        typestore: Typestore | None = None,
+        chunk_size_bytes: int = 4 * 1024 * 1024,
+    ) -> None:
+        if compression not in _COMPRESSION:
+            msg = f"compression must be one of {sorted(_COMPRESSION)}, got {compression!r}"
+            raise ValueError(msg)
+        self.path = Path(path)
+        self.typestore = typestore if typestore is not None else typestore_for(2)[0]
+        self.message_count = 0
+        try:
+            fd, tmp = tempfile.mkstemp(
+                dir=self.path.parent, prefix=f".{self.path.name}.", suffix=".part"
+            )
+        except OSError as err:
+            msg = f"{self.path}: cannot create a file in {self.path.parent} ({err.strerror}); check the directory exists and is writable"
+            raise LogError(msg) from err
+        self._tmp_path = Path(tmp)
+        os.chmod(self._tmp_path, 0o644)  # mkstemp makes it 0600; a recording is a normal file
+        self._fh: IO[bytes] | None = os.fdopen(fd, "wb")
+        self._writer = _McapWriter(
+            self._fh, chunk_size=chunk_size_bytes, compression=_COMPRESSION[compression]
+        )
+        self._writer.start(profile="ros2", library="redrive")
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, tuple[str, int]] = {}
+        self._sequences: dict[int, int] = {}
+
+    # -- schemas and channels ------------------------------------------------------------------
+
+    def _schema_id(self, msgtype: str) -> int:
+        schema_id = self._schemas.get(msgtype)
+        if schema_id is None:
+            if msgtype not in self.typestore.fielddefs:
+                msg = (
+                    f"{self.path}: no definition of {msgtype} is known, so no schema can be "
+                    "written; register it on the writer's typestore first"
+                )
+                raise UnsupportedMessageError(msg)
+            text, _ = self.typestore.generate_msgdef(msgtype, ros_version=2)
+            schema_id = self._writer.register_schema(
+                name=msgtype, encoding="ros2msg", data=text.encode("utf-8")
+            )
+            self._schemas[msgtype] = schema_id
+        return schema_id
+
+    def _channel_id(self, topic: str, msgtype: str) -> int:
+        known = self._channels.get(topic)
+        if known is not None:
+            if known[0] != msgtype:
+                msg = (
+                    f"{self.path}: topic {topic} already carries {known[0]}, cannot also write "
+                    f"{msgtype} on it; use another topic name"
+                )
+                raise LogError(msg)
+            return known[1]
+        metadata = {"offered_qos_profiles": _LATCHED_QOS if topic.endswith("tf_static") else ""}
+        channel_id = self._writer.register_channel(
+            topic=topic,
+            message_encoding="cdr",
+            schema_id=self._schema_id(msgtype),
+            metadata=metadata,
+        )
+        self._channels[topic] = (msgtype, channel_id)
+        self._sequences[channel_id] = 0
+        return channel_id
+
+    @property
+    def topics(self) -> Mapping[str, str]:
+        """topic → msgtype of every channel written so far."""
+        return MappingProxyType({t: m for t, (m, _) in self._channels.items()})
+
+    # -- writing -------------------------------------------------------------------------------
+
+    def _check_open(self) -> None:
+        if self._fh is None:
+            msg = f"{self.path}: the writer is closed"
+            raise LogError(msg)
+
+    def write_raw(
+        self,
+        topic: str,
+        msgtype: str,
+        log_time_ns: int,
+        cdr_bytes: bytes | memoryview,
+        *,
+        publish_time_ns: int | None = None,
+    ) -> None:
+        """Write one already-serialised ROS 2 CDR message of type ``msgtype`` (``pkg/msg/Type``)."""
+        self._check_open()
+        channel_id = self._channel_id(topic, msgtype)
+        sequence = self._sequences[channel_id]
+        self._sequences[channel_id] = sequence + 1
+        self._writer.add_message(
+            channel_id=channel_id,
+            log_time=int(log_time_ns),
+            data=bytes(cdr_bytes),
+            publish_time=int(log_time_ns if publish_time_ns is None else publish_time_ns),
+            sequence=sequence,
+        )
+        self.message_count += 1
+
+    def write(
+        self,
+        topic: str,
+        log_time_ns: int,
+        value: object,
+        *,
+        frame_id: str | None = None,
+        stamp_ns: int | None = None,
+    ) -> None:
+        """Serialise a data-model value as its standard ROS 2 message and write it.
+
+        Args:
+            value: PointCloud, Image, Imu, GnssFix, VehicleState, tuple[Transform],
+                tuple[DetectedObject] (see :mod:`redrive.io.ros_encode`), or a
+                :class:`~redrive.io.decoders.base.Decoded` holding one (its frame and stamp are
+                then the defaults).
+            frame_id: header frame; default the Decoded's / VehicleState's frame, else "".
+            stamp_ns: header stamp; default the Decoded's / VehicleState's stamp, else
+                ``log_time_ns``.
+
+        Raises:
+            UnsupportedMessageError: the value has no standard message.
+        """
+        if isinstance(value, Decoded):
+            frame_id = value.frame_id if frame_id is None else frame_id
+            stamp_ns = value.stamp_ns if stamp_ns is None else stamp_ns
+            value = value.value
+        if isinstance(value, VehicleState):
+            frame_id = value.frame_id if frame_id is None else frame_id
+            stamp_ns = value.stamp_ns if stamp_ns is None else stamp_ns
+        msgtype, message = encode_value(
+            value,
+            self.typestore,
+            frame_id="" if frame_id is None else frame_id,
+            stamp_ns=log_time_ns if stamp_ns is None else stamp_ns,
+        )
+        self.write_raw(topic, msgtype, log_time_ns, self.typestore.serialize_cdr(message, msgtype))
+
+    def write_frame(
+        self,
+        frame: Frame,
+        *,
+        topics: Mapping[str, str] | None = None,
+        ground_truth_frame: str = "base_link",
+    ) -> None:
+        """Write the samples of a :class:`~redrive.types.Frame`.
+
+        Every sensor goes to ``topics[sensor_id]`` (default ``/<sensor_id>``) at its own stamp
+        (log time = header stamp) in its ``frame_id``; the vehicle state to
+        ``topics["vehicle_state"]`` (default ``/odom``); ground truth to
+        ``topics["ground_truth"]`` (default ``/ground_truth``) at the frame stamp, in
+        ``ground_truth_frame``.
+        """
+        names = topics or {}
+        for sensor_id, sample in sorted(frame.sensors.items()):
+            self.write(
+                names.get(sensor_id, f"/{sensor_id}"),
+                sample.stamp_ns,
+                sample.data,
+                frame_id=sample.frame_id,
+                stamp_ns=sample.stamp_ns,
+            )
+        if frame.vehicle_state is not None:
+            state = frame.vehicle_state
+            self.write(names.get("vehicle_state", "/odom"), state.stamp_ns, state)
+        if frame.ground_truth is not None:
+            self.write(
+                names.get("ground_truth", "/ground_truth"),
+                frame.stamp_ns,
+                frame.ground_truth,
+                frame_id=ground_truth_frame,
+                stamp_ns=frame.stamp_ns,
+            )
+
+    # -- finishing -----------------------------------------------------------------------------
+
+    def close(self) -> None:
+        """Finish the file (summary, indexes) and move it into place.  Idempotent."""
+        if self._fh is None:
+            return
+        fh, self._fh = self._fh, None
+        try:
+            self._writer.finish()  # type: ignore[no-untyped-call]
+            fh.flush()
+            os.fsync(fh.fileno())
+            fh.close()
+            os.replace(self._tmp_path, self.path)
+        except BaseException:
+            fh.close()
+            self._tmp_path.unlink(missing_ok=True)
+            raise
+        logger.debug("%s: %d messages written", self.path, self.message_count)
+
+    def abort(self) -> None:
+        """Drop the file being written (nothing appears at ``path``).  Idempotent."""
+        if self._fh is None:
+            return
+        fh, self._fh = self._fh, None
+        fh.close()
+        self._tmp_path.unlink(missing_ok=True)
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+
+    def __del__(self) -> None:
+        # A writer dropped without close() leaves no temporary file behind.
+        if getattr(self, "_fh", None) is not None:
+            self.abort()
