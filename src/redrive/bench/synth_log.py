@@ -174,6 +174,9 @@ def write_synthetic_bag(
     if layout not in LAYOUTS:
         msg = f"unknown point layout {layout!r}; use one of {', '.join(LAYOUTS)}"
         raise LogError(msg)
+    if path.exists():
+        msg = f"{path}: cannot create the bag (it exists already); remove it or choose another path"
+        raise LogError(msg)
     typestore = get_typestore(Stores.ROS1_NOETIC)
     cls: Any = typestore.types
     fields, step = LAYOUTS[layout]
@@ -205,11 +208,11 @@ def write_synthetic_bag(
 
     first = message(0, _START_NS)
     count = max(1, round(size_bytes / len(first)))
-    writer = Writer(path)
-    if compression != "none":
-        writer.set_compression(Writer.CompressionFormat[compression.upper()])
     payload = 0
     try:
+        writer = Writer(path)
+        if compression != "none":
+            writer.set_compression(Writer.CompressionFormat[compression.upper()])
         writer.open()
     except (WriterError, OSError) as err:
         msg = f"{path}: cannot create the bag ({err}); remove it or choose another path"
