@@ -176,4 +176,8 @@ class TransformBuffer:
         common_from_dst = np.eye(4)
         for child in dst_chain[: dst_chain.index(common)]:
             common_from_dst = self._parent_from_child(child, stamp_ns) @ common_from_dst
-        return np.asarray(np.linalg.inv(common_from_dst) @ common_from_src, dtype=np.float64)
+        dst_from_common = np.eye(4)
+        rotation_t = common_from_dst[:3, :3].T
+        dst_from_common[:3, :3] = rotation_t
+        dst_from_common[:3, 3] = -rotation_t @ common_from_dst[:3, 3]
+        return dst_from_common @ common_from_src

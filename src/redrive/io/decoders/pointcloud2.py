@@ -16,6 +16,7 @@ dtype from the ``PointField`` list and views the point data in place:
 
 from __future__ import annotations
 
+import functools
 import struct
 from dataclasses import dataclass
 from typing import Any
@@ -182,21 +183,28 @@ def read_cloud_layout(raw: bytes | memoryview, encoding: str) -> CloudLayout:
 
 def _point_dtype(layout: CloudLayout) -> np.dtype[Any]:
     """A structured dtype of itemsize ``point_step`` with one scalar member per channel."""
-    order = ">" if layout.is_bigendian else "<"
+    return _cached_point_dtype(layout.fields, layout.is_bigendian, layout.point_step)
+
+
+@functools.lru_cache(maxsize=64)
+def _cached_point_dtype(
+    fields: tuple[CloudField, ...], is_bigendian: bool, point_step: int
+) -> np.dtype[Any]:
+    order = ">" if is_bigendian else "<"
     names: list[str] = []
     formats: list[str] = []
     offsets: list[int] = []
-    for field in layout.fields:
+    for field in fields:
         code = POINTFIELD_DTYPES.get(field.datatype)
         if code is None:
             msg = f"field {field.name!r} has unknown PointField datatype {field.datatype}"
             raise ValueError(msg)
         count = max(field.count, 1)
         size = int(code[1])
-        if field.offset + size * count > layout.point_step:
+        if field.offset + size * count > point_step:
             msg = (
                 f"field {field.name!r} (offset {field.offset}, {count} × {code}) does not fit "
-                f"in point_step {layout.point_step}"
+                f"in point_step {point_step}"
             )
             raise ValueError(msg)
         if count > 1 and field.name in ("x", "y", "z"):
@@ -211,7 +219,7 @@ def _point_dtype(layout: CloudLayout) -> np.dtype[Any]:
             formats.append(order + code)
             offsets.append(field.offset + i * size)
     return np.dtype(
-        {"names": names, "formats": formats, "offsets": offsets, "itemsize": layout.point_step}
+        {"names": names, "formats": formats, "offsets": offsets, "itemsize": point_step}
     )
 
 
@@ -253,10 +261,13 @@ def _xyz(points: npt.NDArray[Any], dtype: np.dtype[Any]) -> npt.NDArray[np.float
     assert fields is not None
     (tx, ox), (ty, oy), (tz, oz) = ((fields[a][0], int(fields[a][1])) for a in "xyz")
     if tx == ty == tz == np.dtype(np.float32) and oy == ox + 4 and oz == ox + 8:
+        # Copy the 12 bytes as opaque records (a plain memcpy each, fast even when unaligned),
+        # then reinterpret them as three native float32.
         packed = np.dtype(
-            {"names": ["xyz"], "formats": [("=f4", 3)], "offsets": [ox], "itemsize": dtype.itemsize}
+            {"names": ["xyz"], "formats": ["V12"], "offsets": [ox], "itemsize": dtype.itemsize}
         )
-        return np.ascontiguousarray(points.view(packed)["xyz"])
+        records = points.view(packed)["xyz"].copy()
+        return records.view(np.float32).reshape(points.shape[0], 3)
     xyz = np.empty((points.shape[0], 3), dtype=np.float32)
     with np.errstate(over="ignore", invalid="ignore"):
         for i, axis in enumerate("xyz"):
