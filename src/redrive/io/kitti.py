@@ -14,8 +14,9 @@ stamp.  Every frame yields, in this order and with that stamp:
 =================  ====================================  =========================================
 topic              msgtype                               payload (:class:`Decoded` value)
 =================  ====================================  =========================================
-``/tf_static``     ``tf2_msgs/msg/TFMessage``            the calibration chain (frames differ in
-                                                         calibration, so it is sent every frame)
+``/tf_static``     ``tf2_msgs/msg/TFMessage``            the calibration chain, rooted at
+                                                         ``velodyne``, transforms static (stamp 0);
+                                                         sent every frame (calibrations differ)
 ``/kitti/velodyne``  ``sensor_msgs/msg/PointCloud2``     PointCloud, channel ``intensity``, frame
                                                          ``velodyne``
 ``/kitti/image_2``   ``sensor_msgs/msg/Image``           Image rgb8, frame ``cam2``
@@ -254,7 +255,7 @@ class KittiReader:
         return Decoded(stamp_ns=stamp_ns, frame_id=frame_id, value=value)
 
     def _load_tf(self, stem: str, stamp_ns: int) -> Decoded:
-        return self._decoded(stamp_ns, "", self.calibration(stem).transforms())
+        return self._decoded(stamp_ns, "velodyne", self.calibration(stem).transforms())
 
     def _load_velodyne(self, stem: str, stamp_ns: int) -> Decoded:
         path = self.root / "velodyne" / f"{stem}.bin"
