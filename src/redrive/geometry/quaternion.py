@@ -51,9 +51,11 @@ def rotation_matrix_from_quaternion(q_xyzw: npt.ArrayLike) -> npt.NDArray[np.flo
 def euler_from_quaternion(q_xyzw: npt.ArrayLike) -> tuple[float, float, float]:
     """``(roll_rad, pitch_rad, yaw_rad)`` of the intrinsic z-y'-x'' (yaw, pitch, roll) sequence."""
     x, y, z, w = quaternion_normalized(q_xyzw)
-    roll_rad = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
     sin_pitch = max(-1.0, min(1.0, 2 * (w * y - z * x)))
     pitch_rad = math.asin(sin_pitch)
+    if abs(sin_pitch) > 1.0 - 1e-10:  # gimbal lock: only yaw - roll is defined; roll := 0
+        return 0.0, pitch_rad, math.atan2(2 * (w * z - x * y), 1 - 2 * (x * x + z * z))
+    roll_rad = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
     yaw_rad = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
     return roll_rad, pitch_rad, yaw_rad
 
