@@ -41,8 +41,8 @@ def _run(args: argparse.Namespace) -> int:
     ) as bar:
         task = bar.add_task("convert", total=total)
 
-        def progress(done: int) -> None:
-            bar.update(task, completed=done)
+        def progress(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=max(total, done))
 
         stats = convert_log(
             args.input,
@@ -53,7 +53,14 @@ def _run(args: argparse.Namespace) -> int:
             progress=progress,
             strict=not args.skip_damaged,
         )
-    print(f"wrote {args.output}: {stats}")
+    print(
+        f"wrote {stats.output_path} ({stats.output_format}): {stats.messages_written} messages "
+        f"on {len(stats.topics)} topics"
+    )
+    for topic, why in stats.skipped_topics.items():
+        print(f"  left out {topic}: {why}")
+    if stats.messages_skipped:
+        print(f"  {stats.messages_skipped} messages did not convert (see the warnings above)")
     return 0
 
 

@@ -20,6 +20,16 @@ class Deserializer:
         self.ros1 = ros1
         self.cdr = cdr
 
+    @property
+    def typestores(self) -> dict[str, Typestore]:
+        """Encoding (``ros1`` / ``cdr``) → the typestore its bytes are read with."""
+        out: dict[str, Typestore] = {}
+        if self.ros1 is not None:
+            out["ros1"] = self.ros1
+        if self.cdr is not None:
+            out["cdr"] = self.cdr
+        return out
+
     def knows(self, msgtype: str, encoding: str) -> bool:
         store = self.ros1 if encoding == "ros1" else self.cdr if encoding == "cdr" else None
         return store is not None and msgtype in store.fielddefs

@@ -228,6 +228,7 @@ def convert_log(
     stop_ns: int | None = None,
     progress: Progress | None = None,
     compression: str | None = None,
+    strict: bool = True,
 ) -> ConvertStats:
     """Convert a log (anything :func:`~redrive.io.open_log` opens) to ``.mcap`` or ``.bag``.
 
@@ -239,6 +240,8 @@ def convert_log(
         progress: called every 100 messages and at the end (see :data:`Progress`).
         compression: MCAP ``zstd`` (default) / ``lz4`` / ``none``; bag ``lz4`` (default) /
             ``bz2`` / ``none``.
+        strict: passed to :func:`~redrive.io.open_log`: when True, damage in the source stops
+            the conversion (no output is left behind); when False what is readable is converted.
 
     Raises:
         LogError: the source cannot be read, or the output cannot be written.
@@ -247,7 +250,7 @@ def convert_log(
     if out.suffix not in (".mcap", ".bag"):
         msg = f"{out}: the output must end in .mcap (MCAP, ROS 2) or .bag (ROS 1 bag)"
         raise LogError(msg)
-    with open_log(in_path) as reader:
+    with open_log(in_path, strict=strict) as reader:
         sources = _source_stores(reader)
         is2 = out.suffix == ".mcap"
         store = _destination_store(sources, ros_version=2 if is2 else 1)

@@ -15,6 +15,7 @@ from typing import IO, Any, Literal, Self
 from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader, make_reader
 from rosbags.rosbag1.reader import normalize as normalize_msgtype
+from rosbags.typesys.store import Typestore
 
 from redrive.errors import LogError, LogTruncatedError
 from redrive.io._deserialize import Deserializer
@@ -219,6 +220,11 @@ class McapFileReader:
         ):
             msg = f"{self.path}: {self.damage}; {count} messages were read before it"
             raise LogTruncatedError(msg, messages_read=count)
+
+    @property
+    def typestores(self) -> Mapping[str, Typestore]:
+        """Encoding → the rosbags typestore this log's messages are deserialised with."""
+        return self._deserializer.typestores
 
     def deserialize(self, message: LogMessage) -> object:
         return self._deserializer(message)

@@ -30,6 +30,7 @@ import lz4.frame
 from rosbags.rosbag1 import Reader as RosbagsReader
 from rosbags.rosbag1 import ReaderError as RosbagsReaderError
 from rosbags.rosbag1.reader import normalize as normalize_msgtype
+from rosbags.typesys.store import Typestore
 
 from redrive.errors import LogError, LogTruncatedError
 from redrive.io._deserialize import Deserializer
@@ -525,6 +526,11 @@ class Ros1BagReader:
             self._conns[conn_id] = _Conn(id=conn_id, topic=topic, msgtype=msgtype, msgdef=msgdef)
 
     # -- deserialising -------------------------------------------------------------------------
+
+    @property
+    def typestores(self) -> Mapping[str, Typestore]:
+        """Encoding → the rosbags typestore this log's messages are deserialised with."""
+        return self._deserializer.typestores
 
     def deserialize(self, message: LogMessage) -> object:
         return self._deserializer(message)

@@ -12,6 +12,7 @@ from typing import Self
 from rosbags.interfaces import Connection, MessageDefinitionFormat
 from rosbags.rosbag2 import Reader as RosbagsReader
 from rosbags.rosbag2 import ReaderError as RosbagsReaderError
+from rosbags.typesys.store import Typestore
 
 from redrive.errors import LogError, LogTruncatedError
 from redrive.io._deserialize import Deserializer
@@ -108,6 +109,11 @@ class Ros2BagReader:
             if self.strict:
                 raise LogTruncatedError(msg, messages_read=count) from err
             logger.warning("%s", msg)
+
+    @property
+    def typestores(self) -> Mapping[str, Typestore]:
+        """Encoding → the rosbags typestore this log's messages are deserialised with."""
+        return self._deserializer.typestores
 
     def deserialize(self, message: LogMessage) -> object:
         return self._deserializer(message)

@@ -9,9 +9,9 @@ on top.  Definitions embedded in a log always win over these.
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
 from functools import cache
 from importlib import resources
-from collections.abc import Mapping
 from typing import Any, Literal
 
 from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore

@@ -7,8 +7,8 @@ and made read-only in ``__post_init__``.  Change a value with :func:`dataclasses
 from __future__ import annotations
 
 from redrive.types.enums import (
-    LightState,
     Lighting,
+    LightState,
     ObjectClass,
     RoadCondition,
     SensorType,

@@ -25,7 +25,8 @@ def frozen_array(
     an array of another dtype is rejected rather than silently cast (so a float64 cloud never
     hides in a float32 field).  Plain Python sequences are converted to the first dtype.
     """
-    accepted = [np.dtype(d) for d in (dtype if isinstance(dtype, (list, tuple)) else [dtype])]
+    candidates: Sequence[Any] = dtype if isinstance(dtype, list | tuple) else [dtype]
+    accepted = [np.dtype(d) for d in candidates]
     if isinstance(value, np.ndarray):
         arr = value
         if arr.dtype not in accepted:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from redrive.types.enums import LightState, Lighting, RoadCondition, Weather
+from redrive.types.enums import Lighting, LightState, RoadCondition, Weather
 from redrive.types.objects import DetectedObject
 
 __all__ = ["EnvironmentData", "TrafficData", "TrafficLight"]

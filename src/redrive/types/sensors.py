@@ -33,9 +33,8 @@ class PointCloud:
         object.__setattr__(self, "xyz", xyz)
         n = xyz.shape[0]
         checked: dict[str, npt.NDArray[Any]] = {}
-        for key, values in self.channels.items():
-            if not isinstance(values, np.ndarray):
-                values = np.asarray(values)
+        for key, given in self.channels.items():
+            values = given if isinstance(given, np.ndarray) else np.asarray(given)
             if values.dtype.fields is not None:
                 msg = f"PointCloud.channels[{key!r}]: structured arrays are not allowed"
                 raise ValueError(msg)

@@ -35,7 +35,9 @@ class Transform:
 
     def __post_init__(self) -> None:
         object.__setattr__(
-            self, "translation", frozen_vector(self.translation, name="Transform.translation", size=3)
+            self,
+            "translation",
+            frozen_vector(self.translation, name="Transform.translation", size=3),
         )
         q = np.asarray(self.rotation, dtype=np.float64)
         norm = float(np.linalg.norm(q)) if q.shape == (4,) else 0.0
@@ -43,7 +45,11 @@ class Transform:
             msg = f"Transform.rotation must be a non-zero quaternion (x, y, z, w), got {q.tolist()}"
             raise ValueError(msg)
         q = q / norm
-        object.__setattr__(self, "rotation", frozen_array(q, name="Transform.rotation", dtype=np.float64, shape=(4,)))
+        object.__setattr__(
+            self,
+            "rotation",
+            frozen_array(q, name="Transform.rotation", dtype=np.float64, shape=(4,)),
+        )
         object.__setattr__(self, "stamp_ns", int(self.stamp_ns))
 
     @property

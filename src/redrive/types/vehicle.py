@@ -100,6 +100,8 @@ class ControlCommands:
                 raise ValueError(msg)
             object.__setattr__(self, name, value)
         if not math.isfinite(self.steering_angle_rad):
-            msg = f"ControlCommands.steering_angle_rad must be finite, got {self.steering_angle_rad}"
+            msg = (
+                f"ControlCommands.steering_angle_rad must be finite, got {self.steering_angle_rad}"
+            )
             raise ValueError(msg)
         object.__setattr__(self, "steering_angle_rad", float(self.steering_angle_rad))
