@@ -15,10 +15,11 @@ redrive's throughput over raw's, on the median of the repeats.
 from __future__ import annotations
 
 import json
+import os
 import statistics
 import subprocess
 import sys
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -27,9 +28,25 @@ from redrive.bench.passes import PassResult
 from redrive.errors import LogError
 from redrive.io import detect_format, open_log
 
-__all__ = ["POINTCLOUD2", "ReadBenchResult", "SideStats", "bench_read", "warm_page_cache"]
+__all__ = [
+    "POINTCLOUD2",
+    "TUNED_MALLOC_ENV",
+    "ReadBenchResult",
+    "SideStats",
+    "bench_read",
+    "warm_page_cache",
+]
 
 POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
+
+#: glibc settings that stop the allocator from returning every multi-MB message buffer to the
+#: kernel (and page-faulting it back in for the next message).  With the defaults, copying
+#: 3 MB messages out of a chunk — what ``rosbags`` does per message — is dominated by those page
+#: faults; with these the passes measure CPU work, not allocator churn.
+TUNED_MALLOC_ENV: Mapping[str, str] = {
+    "MALLOC_MMAP_THRESHOLD_": str(64 << 20),
+    "MALLOC_TRIM_THRESHOLD_": str(256 << 20),
+}
 
 #: the ratio redrive/raw we aim for (DESIGN: the decoder should come near the raw read).
 TARGET_RATIO = 0.8
@@ -87,6 +104,7 @@ class ReadBenchResult:
         topics: the PointCloud2 topics read.
         messages, payload_bytes, points: what one pass reads (identical for every pass).
         warmed: True when the page cache was warmed before the first pass.
+        pass_env: environment variables set for the passes (e.g. :data:`TUNED_MALLOC_ENV`).
         raw_passes, redrive_passes: every pass, in the order run.
     """
 
@@ -98,6 +116,7 @@ class ReadBenchResult:
     payload_bytes: int
     points: int
     warmed: bool
+    pass_env: Mapping[str, str]
     raw_passes: tuple[PassResult, ...]
     redrive_passes: tuple[PassResult, ...]
 
@@ -131,6 +150,7 @@ class ReadBenchResult:
             "points": self.points,
             "repeats": len(self.redrive_passes),
             "page_cache_warmed": self.warmed,
+            "pass_env": dict(self.pass_env),
             "raw": asdict(self.raw),
             "redrive": asdict(self.redrive),
             "ratio": self.ratio,
@@ -181,9 +201,10 @@ def _pointcloud_topics(path: Path, topics: Iterable[str] | None) -> tuple[str, .
         return chosen
 
 
-def _spawn(spec: dict[str, Any]) -> PassResult:
+def _spawn(spec: dict[str, Any], env: Mapping[str, str]) -> PassResult:
     cmd = [sys.executable, "-m", "redrive.bench.passes", json.dumps(spec)]
-    proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    full_env = {**os.environ, **env}
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=full_env, check=False)
     if proc.returncode != 0:
         tail = proc.stderr.strip().splitlines()[-5:]
         msg = f"the {spec['kind']} pass over {spec['path']} failed: " + " | ".join(tail)
@@ -197,6 +218,7 @@ def bench_read(
     topics: Iterable[str] | None = None,
     repeats: int = 3,
     warm: bool = True,
+    pass_env: Mapping[str, str] | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> ReadBenchResult:
     """Benchmark reading + decoding every PointCloud2 of ``path`` against a raw read.
@@ -206,6 +228,8 @@ def bench_read(
         topics: PointCloud2 topics to read; all of them when None.
         repeats: passes per side (each in a fresh process, raw and redrive alternating).
         warm: read the log once before measuring, so the page cache holds it.
+        pass_env: extra environment variables for every pass (both sides), e.g.
+            :data:`TUNED_MALLOC_ENV`.
         progress: called with a short text before each step.
 
     Raises:
@@ -222,6 +246,7 @@ def bench_read(
         raise LogError(msg)
     chosen = _pointcloud_topics(path, topics)
     note = progress or (lambda _text: None)
+    env = dict(pass_env or {})
     if warm:
         note("warming the page cache")
         warm_page_cache(path)
@@ -230,9 +255,9 @@ def bench_read(
     ours: list[PassResult] = []
     for i in range(repeats):
         note(f"repeat {i + 1}/{repeats}: raw")
-        raw.append(_spawn({**spec, "kind": "raw"}))
+        raw.append(_spawn({**spec, "kind": "raw"}, env))
         note(f"repeat {i + 1}/{repeats}: redrive")
-        ours.append(_spawn({**spec, "kind": "redrive"}))
+        ours.append(_spawn({**spec, "kind": "redrive"}, env))
     seen = {(p.messages, p.payload_bytes) for p in (*raw, *ours)}
     if len(seen) != 1:
         msg = (
@@ -249,6 +274,7 @@ def bench_read(
         payload_bytes=raw[0].payload_bytes,
         points=ours[0].points,
         warmed=warm,
+        pass_env=env,
         raw_passes=tuple(raw),
         redrive_passes=tuple(ours),
     )
