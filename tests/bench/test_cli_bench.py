@@ -52,3 +52,14 @@ def test_table_output(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> Non
     assert "raw (baseline)" in text
     assert "redrive (decode)" in text
     assert "ratio redrive/raw" in text
+
+
+def test_through_redrive_main(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from redrive.cli.main import main
+
+    out = tmp_path / "m.bag"
+    argv = ["bench", "read", "--synth", "0.0001", "--points", "500", "--repeat", "1", "--json"]
+    assert main([*argv, str(out)]) == 0
+    assert json.loads(capsys.readouterr().out)["points"] > 0
+    assert main(["bench", "read", str(tmp_path / "missing.bag")]) == 1
+    assert "no such file" in capsys.readouterr().err
