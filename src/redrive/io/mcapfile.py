@@ -9,16 +9,15 @@ from __future__ import annotations
 import logging
 from collections.abc import Collection, Iterator, Mapping
 from pathlib import Path
-from types import TracebackType
-from typing import IO, Any, Literal, Self
+from typing import IO, Any, Literal
 
 from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader, make_reader
 from rosbags.rosbag1.reader import normalize as normalize_msgtype
-from rosbags.typesys.store import Typestore
 
 from redrive.errors import LogError, LogTruncatedError
 from redrive.io._deserialize import Deserializer
+from redrive.io._reader_base import RosReaderBase
 from redrive.io.base import Encoding, LogMessage, TopicInfo
 from redrive.io.typestore import typestore_for
 
@@ -30,7 +29,7 @@ _MAGIC = b"\x89MCAP0\r\n"
 _ENCODINGS: Mapping[str, Encoding] = {"cdr": "cdr", "ros1": "ros1"}
 
 
-class McapFileReader:
+class McapFileReader(RosReaderBase):
     """A standalone ``.mcap`` file.
 
     Uses the summary section (indexes, statistics) when present; a file without one — cut off, or
@@ -157,14 +156,6 @@ class McapFileReader:
         return dict(sorted(out.items()))
 
     @property
-    def topics(self) -> Mapping[str, TopicInfo]:
-        return self._topics
-
-    @property
-    def message_count(self) -> int:
-        return sum(t.count for t in self._topics.values())
-
-    @property
     def start_ns(self) -> int:
         return self._start_ns
 
@@ -221,24 +212,5 @@ class McapFileReader:
             msg = f"{self.path}: {self.damage}; {count} messages were read before it"
             raise LogTruncatedError(msg, messages_read=count)
 
-    @property
-    def typestores(self) -> Mapping[str, Typestore]:
-        """Encoding → the rosbags typestore this log's messages are deserialised with."""
-        return self._deserializer.typestores
-
-    def deserialize(self, message: LogMessage) -> object:
-        return self._deserializer(message)
-
     def close(self) -> None:
         self._fh.close()
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()

@@ -23,17 +23,16 @@ from bisect import bisect_left
 from collections.abc import Callable, Collection, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from types import TracebackType
-from typing import Any, BinaryIO, Self
+from typing import Any, BinaryIO
 
 import lz4.frame
 from rosbags.rosbag1 import Reader as RosbagsReader
 from rosbags.rosbag1 import ReaderError as RosbagsReaderError
 from rosbags.rosbag1.reader import normalize as normalize_msgtype
-from rosbags.typesys.store import Typestore
 
 from redrive.errors import LogError, LogTruncatedError
 from redrive.io._deserialize import Deserializer
+from redrive.io._reader_base import RosReaderBase
 from redrive.io.base import LogMessage, TopicInfo
 from redrive.io.typestore import typestore_for
 
@@ -146,7 +145,7 @@ class _ChunkSpan:
     cut: bool = False  # the file ends inside this chunk: only a prefix of it is readable
 
 
-class Ros1BagReader:
+class Ros1BagReader(RosReaderBase):
     """A ROS 1 bag (plain, bz2 or lz4 chunks).
 
     Args:
@@ -258,14 +257,6 @@ class Ros1BagReader:
                 has_definition=msgtype in self._typestore.fielddefs,
             )
         return out
-
-    @property
-    def topics(self) -> Mapping[str, TopicInfo]:
-        return self._topics
-
-    @property
-    def message_count(self) -> int:
-        return sum(t.count for t in self._topics.values())
 
     @property
     def start_ns(self) -> int:
@@ -527,28 +518,9 @@ class Ros1BagReader:
 
     # -- deserialising -------------------------------------------------------------------------
 
-    @property
-    def typestores(self) -> Mapping[str, Typestore]:
-        """Encoding → the rosbags typestore this log's messages are deserialised with."""
-        return self._deserializer.typestores
-
-    def deserialize(self, message: LogMessage) -> object:
-        return self._deserializer(message)
-
     def close(self) -> None:
         if self._rosbags is not None and self._rosbags.bio is not None:
             self._rosbags.close()
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
 
 def _entries(index: list[Any], first: int, conn_id: int) -> Iterator[tuple[int, int, int, int]]:

@@ -4,18 +4,16 @@ from __future__ import annotations
 
 import logging
 import sqlite3
-from collections.abc import Collection, Iterator, Mapping
+from collections.abc import Collection, Iterator
 from pathlib import Path
-from types import TracebackType
-from typing import Self
 
 from rosbags.interfaces import Connection, MessageDefinitionFormat
 from rosbags.rosbag2 import Reader as RosbagsReader
 from rosbags.rosbag2 import ReaderError as RosbagsReaderError
-from rosbags.typesys.store import Typestore
 
 from redrive.errors import LogError, LogTruncatedError
 from redrive.io._deserialize import Deserializer
+from redrive.io._reader_base import RosReaderBase
 from redrive.io.base import LogMessage, TopicInfo
 from redrive.io.typestore import typestore_for
 
@@ -24,7 +22,7 @@ __all__ = ["Ros2BagReader"]
 logger = logging.getLogger(__name__)
 
 
-class Ros2BagReader:
+class Ros2BagReader(RosReaderBase):
     """A rosbag2 directory.  Message bytes are CDR; definitions come from the bag when it embeds
     them (newer bags do), else from ROS 2 Humble plus the packages redrive ships.
     """
@@ -67,14 +65,6 @@ class Ros2BagReader:
         return dict(sorted(out.items()))
 
     @property
-    def topics(self) -> Mapping[str, TopicInfo]:
-        return self._topics
-
-    @property
-    def message_count(self) -> int:
-        return sum(t.count for t in self._topics.values())
-
-    @property
     def start_ns(self) -> int:
         return int(self._reader.start_time) if self.message_count else 0
 
@@ -110,28 +100,9 @@ class Ros2BagReader:
                 raise LogTruncatedError(msg, messages_read=count) from err
             logger.warning("%s", msg)
 
-    @property
-    def typestores(self) -> Mapping[str, Typestore]:
-        """Encoding → the rosbags typestore this log's messages are deserialised with."""
-        return self._deserializer.typestores
-
-    def deserialize(self, message: LogMessage) -> object:
-        return self._deserializer(message)
-
     def close(self) -> None:
         if self._reader is not None:
             self._reader.close()
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
 
 def _idl_body(data: str) -> str:

@@ -289,7 +289,7 @@ class PointCloud2Decoder:
             layout = read_cloud_layout(message.raw, message.encoding)
             dtype = _point_dtype(layout)
         except ValueError as err:
-            raise unsupported(message, f"PointCloud2 cannot be read: {err}", _TODO) from err
+            raise unsupported(message, f"PointCloud2 cannot be read: {err}", _WHAT_TO_DO) from err
         missing = [a for a in "xyz" if dtype.fields is None or a not in dtype.fields]
         if missing:
             have = ", ".join(f.name for f in layout.fields) or "none"
@@ -307,7 +307,7 @@ class PointCloud2Decoder:
         try:
             points = _points_view(buf, layout, dtype, data_offset)
         except ValueError as err:
-            raise unsupported(message, f"PointCloud2 cannot be read: {err}", _TODO) from err
+            raise unsupported(message, f"PointCloud2 cannot be read: {err}", _WHAT_TO_DO) from err
         xyz = _xyz(points, dtype)
         channels: dict[str, npt.NDArray[Any]] = {}
         for name in dtype.names or ():
@@ -322,4 +322,4 @@ class PointCloud2Decoder:
         return Decoded(stamp_ns=stamp_ns, frame_id=layout.frame_id, value=cloud)
 
 
-_TODO = "check the publisher's PointField list, or report the bag to the redrive developers"
+_WHAT_TO_DO = "check the publisher's PointField list, or report the bag to the redrive developers"
