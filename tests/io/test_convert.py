@@ -27,14 +27,6 @@ from redrive.types import DetectedObject, Image, PointCloud, Transform
 pytestmark = pytest.mark.shared_data
 
 
-@pytest.fixture(scope="module")
-def kitti_dir(shared_data: Path) -> Path:
-    path = shared_data / "kitti_object"
-    if not (path / "training" / "velodyne").is_dir():
-        pytest.skip("kitti_object is not in ../shared/data")
-    return path
-
-
 def _kitti_values(kitti_dir: Path) -> dict[tuple[str, int], Decoded]:
     with KittiReader(kitti_dir) as reader:
         return {

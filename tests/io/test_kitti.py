@@ -28,14 +28,6 @@ pytestmark = pytest.mark.shared_data
 
 
 @pytest.fixture(scope="module")
-def kitti_dir(shared_data: Path) -> Path:
-    path = shared_data / "kitti_object"
-    if not (path / "training" / "velodyne").is_dir():
-        pytest.skip("kitti_object is not in ../shared/data")
-    return path
-
-
-@pytest.fixture(scope="module")
 def frames(kitti_dir: Path) -> dict[tuple[str, int], Decoded]:
     """(topic, stamp_ns) → payload of every message."""
     with KittiReader(kitti_dir) as reader:

@@ -14,6 +14,7 @@ import math
 from collections import deque
 from collections.abc import Iterator
 from dataclasses import dataclass
+from functools import partial
 
 from redrive.errors import ConfigError, UnsupportedMessageError
 from redrive.io.base import LogMessage, LogReader
@@ -106,6 +107,9 @@ class FrameAssembler:
         objects: deque[_Sample] = deque()
         static_tf: dict[tuple[str, str], Transform] = {}
         pending: deque[_Sample] = deque()
+        assemble = partial(
+            self._assemble, buffers=buffers, states=states, objects=objects, static_tf=static_tf
+        )
         index = 0
         read_from = None if start_ns is None else start_ns - tol - self.lookahead_ns
         for message in self.log.messages(topics=smap.topics(), start_ns=read_from):
@@ -135,14 +139,7 @@ class FrameAssembler:
                     if isinstance(tf, Transform) and tf.stamp_ns == 0:
                         static_tf[(tf.parent_frame, tf.child_frame)] = tf
             while pending and now - pending[0].stamp_ns > tol + self.lookahead_ns:
-                yield self._assemble(
-                    pending.popleft(),
-                    index=index,
-                    buffers=buffers,
-                    states=states,
-                    objects=objects,
-                    static_tf=static_tf,
-                )
+                yield assemble(pending.popleft(), index=index)
                 index += 1
             horizon = (pending[0].stamp_ns if pending else now) - tol - self.lookahead_ns
             for buf in buffers.values():
@@ -153,14 +150,7 @@ class FrameAssembler:
             while len(states) > 2 and states[1].stamp_ns < horizon - _STATE_WINDOW_NS:
                 states.popleft()
         while pending:
-            yield self._assemble(
-                pending.popleft(),
-                index=index,
-                buffers=buffers,
-                states=states,
-                objects=objects,
-                static_tf=static_tf,
-            )
+            yield assemble(pending.popleft(), index=index)
             index += 1
 
     def _decode(self, message: LogMessage) -> Decoded | None:

@@ -37,9 +37,9 @@ def describe(message: LogMessage) -> str:
     )
 
 
-def unsupported(message: LogMessage, what: str, todo: str) -> UnsupportedMessageError:
+def unsupported(message: LogMessage, what: str, advice: str) -> UnsupportedMessageError:
     """An :class:`UnsupportedMessageError` saying what, where and what to do."""
-    return UnsupportedMessageError(f"{what} on {describe(message)}; {todo}")
+    return UnsupportedMessageError(f"{what} on {describe(message)}; {advice}")
 
 
 def raw_is_immutable(message: LogMessage) -> bool:
