@@ -57,6 +57,10 @@ class DetectedObject:
         velocity, acceleration: (3,) m/s and m/s² in the same frame.
         orientation: (3,) yaw, pitch, roll in radians.
         bbox_2d: optional (x, y, w, h) image box in pixels.
+        num_lidar_points: ground truth only: LiDAR returns on the object in this frame (nuScenes'
+            ``num_lidar_pts``; evaluation drops objects with none); ``None`` when unknown.
+        visible: ground truth only: whether any sensor could see the object (not fully occluded
+            or out of range); ``None`` when unknown.
     """
 
     object_id: int = -1
@@ -67,8 +71,13 @@ class DetectedObject:
     acceleration: npt.NDArray[np.float64] = field(default_factory=_zeros3)
     orientation: npt.NDArray[np.float64] = field(default_factory=_zeros3)
     bbox_2d: tuple[float, float, float, float] | None = None
+    num_lidar_points: int | None = None
+    visible: bool | None = None
 
     def __post_init__(self) -> None:
+        if self.num_lidar_points is not None and self.num_lidar_points < 0:
+            msg = f"DetectedObject.num_lidar_points must be ≥ 0, got {self.num_lidar_points}"
+            raise ValueError(msg)
         if not 0.0 <= self.confidence <= 1.0:
             msg = f"DetectedObject.confidence must lie in [0, 1], got {self.confidence}"
             raise ValueError(msg)
