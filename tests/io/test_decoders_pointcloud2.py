@@ -150,13 +150,19 @@ def cloud_layouts(draw: st.DrawFn) -> dict[str, Any]:
     }
 
 
+# One decoder across all examples: its layout cache sees hundreds of different field lists in a
+# row and must never hand one cloud's layout to another.
+_SHARED_DECODER = PointCloud2Decoder()
+
+
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(layout=cloud_layouts())
-def test_random_layouts_match_full_deserialisation(layout: dict[str, Any]) -> None:
+@given(layout=cloud_layouts(), shared=st.booleans())
+def test_random_layouts_match_full_deserialisation(layout: dict[str, Any], shared: bool) -> None:
     ros_version = layout.pop("ros_version")
     message = _cloud_message(ros_version, **layout)
     expected_xyz, expected_channels, msg = _reference(message)
-    decoded = PointCloud2Decoder().decode(message, _no_deserialize)
+    decoder = _SHARED_DECODER if shared else PointCloud2Decoder()
+    decoded = decoder.decode(message, _no_deserialize)
     cloud = decoded.value
     assert decoded.frame_id == "lidar_top"
     assert decoded.stamp_ns == 1_600_000_000_123_456_789
@@ -214,6 +220,36 @@ def test_zero_copy_channels_and_single_xyz_copy(ros_version: int) -> None:
     np.testing.assert_array_equal(cloud.xyz[:, 0], np.arange(n, dtype=np.float32))
     np.testing.assert_array_equal(cloud.channels["ring"], np.arange(n) % 64)
     assert not cloud.channels["intensity"].flags.writeable
+
+
+def test_layout_cache_sees_a_changed_layout_on_the_same_topic() -> None:
+    decoder = PointCloud2Decoder()
+    xyzi = np.array([(1.0, 2.0, 3.0, 7.0)], dtype="<f4").tobytes()
+    fields_i = [_field("x", 0, 7), _field("y", 4, 7), _field("z", 8, 7), _field("intensity", 12, 7)]
+    fields_r = [_field("x", 0, 7), _field("y", 4, 7), _field("z", 8, 7), _field("ring", 12, 6)]
+    for _ in range(3):
+        for fields, name in ((fields_i, "intensity"), (fields_r, "ring")):
+            message = _cloud_message(2, fields=fields, data=xyzi, width=1, point_step=16)
+            cloud = decoder.decode(message, _no_deserialize).value
+            assert set(cloud.channels) == {name}
+            np.testing.assert_array_equal(cloud.xyz, [[1.0, 2.0, 3.0]])
+    # the same layout with a longer frame id shifts every offset: still read right
+    message = log_message(
+        1,
+        TYPE,
+        header=header(1, 5, "a_much_longer_frame_id"),
+        height=1,
+        width=1,
+        fields=fields_i,
+        is_bigendian=False,
+        point_step=16,
+        row_step=16,
+        data=np.frombuffer(xyzi, dtype=np.uint8),
+        is_dense=True,
+    )
+    decoded = decoder.decode(message, _no_deserialize)
+    assert decoded.frame_id == "a_much_longer_frame_id"
+    assert decoded.value.channels["intensity"][0] == 7.0
 
 
 def test_mutable_reader_buffer_is_copied() -> None:

@@ -81,10 +81,15 @@ class McapFileReader(RosReaderBase):
             )
         else:
             self._scan(defs)
+        used = {
+            enc: {t for _, t, e in self._channels.values() if e == enc} for enc in ("ros1", "cdr")
+        }
         self._deserializer = Deserializer(
             self.path,
-            ros1=typestore_for(1, defs[1])[0] if defs[1] else None,
-            cdr=typestore_for(2, defs[2])[0] if defs[2] or not defs[1] else None,
+            ros1=typestore_for(1, defs[1], needed=used["ros1"])[0] if defs[1] else None,
+            cdr=(
+                typestore_for(2, defs[2], needed=used["cdr"])[0] if defs[2] or not defs[1] else None
+            ),
         )
         self._topics = self._summarise()
 

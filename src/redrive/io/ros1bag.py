@@ -18,6 +18,7 @@ from __future__ import annotations
 import bz2
 import heapq
 import logging
+import mmap
 import struct
 from bisect import bisect_left
 from collections.abc import Callable, Collection, Iterator, Mapping
@@ -28,6 +29,7 @@ from typing import Any, BinaryIO
 import lz4.frame
 from rosbags.rosbag1 import Reader as RosbagsReader
 from rosbags.rosbag1 import ReaderError as RosbagsReaderError
+from rosbags.rosbag1.reader import decompressors as rosbags_decompressors
 from rosbags.rosbag1.reader import normalize as normalize_msgtype
 
 from redrive.errors import LogError, LogTruncatedError
@@ -172,9 +174,12 @@ class Ros1BagReader(RosReaderBase):
         self._spans: list[_ChunkSpan] = []
         self._tail_damage: str | None = None
         self._file_size = 0
+        self._map: mmap.mmap | None = None
         self._open()
         definitions = {c.msgtype: ("msg", c.msgdef) for c in self._conns.values()}
-        self._typestore, self._bad_definitions = typestore_for(1, definitions)
+        self._typestore, self._bad_definitions = typestore_for(
+            1, definitions, needed={c.msgtype for c in self._conns.values()}
+        )
         self._deserializer = Deserializer(self.path, ros1=self._typestore, cdr=None)
         self._topics = self._summarise()
 
@@ -307,7 +312,6 @@ class Ros1BagReader(RosReaderBase):
         reader = self._rosbags
         assert reader is not None
         assert reader.bio is not None
-        bio = reader.bio
         streams = []
         for conn_id in sorted(self._selected_ids(topics)):
             index = reader.indexes.get(conn_id, [])
@@ -317,20 +321,19 @@ class Ros1BagReader(RosReaderBase):
         chunk: memoryview = memoryview(b"")
         bad_chunk = -1
         yielded = 0
+        mapped: tuple[int, int] | None = None  # page-aligned span of the map the last chunk used
         for time_ns, chunk_pos, offset, conn_id in heapq.merge(*streams):
             if stop_ns is not None and time_ns >= stop_ns:
                 return
             if chunk_pos == bad_chunk:
                 continue
             if chunk_pos != current_pos:
+                if mapped is not None:
+                    self._release(*mapped)
+                    mapped = None
                 header = reader.chunks[chunk_pos]
                 try:
-                    bio.seek(header.datapos)
-                    compressed = bio.read(header.datasize)
-                    if len(compressed) != header.datasize:
-                        msg = "the chunk is cut off"
-                        raise ValueError(msg)
-                    chunk = memoryview(header.decompressor(compressed))
+                    chunk, mapped = self._chunk_bytes(header)
                 except (OSError, ValueError, RuntimeError, EOFError) as err:
                     self._chunk_damage(chunk_pos, err, yielded)
                     bad_chunk = chunk_pos
@@ -344,6 +347,48 @@ class Ros1BagReader(RosReaderBase):
                 continue
             yielded += 1
             yield conn_id, time_ns, data
+        if mapped is not None:
+            self._release(*mapped)
+
+    def _chunk_bytes(self, header: Any) -> tuple[memoryview, tuple[int, int] | None]:
+        """The decompressed records of one chunk, and the map span they occupy (if mapped).
+
+        An uncompressed chunk is a slice of a read-only map of the file: messages are then
+        views of the page cache, with no copy at all.  A compressed chunk is read and
+        decompressed into a new ``bytes``.
+        """
+        end = header.datapos + header.datasize
+        if end > self._file_size:
+            msg = "the chunk is cut off"
+            raise ValueError(msg)
+        if header.decompressor is rosbags_decompressors["none"]:
+            view = self._file_map()
+            first_page = header.datapos - header.datapos % mmap.PAGESIZE
+            return view[header.datapos : end], (first_page, end - first_page)
+        bio = self._rosbags.bio if self._rosbags is not None else None
+        assert bio is not None
+        bio.seek(header.datapos)
+        compressed = bio.read(header.datasize)
+        if len(compressed) != header.datasize:
+            msg = "the chunk is cut off"
+            raise ValueError(msg)
+        return memoryview(header.decompressor(compressed)), None
+
+    def _file_map(self) -> memoryview:
+        if self._map is None:
+            with self.path.open("rb") as fh:
+                self._map = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
+        return memoryview(self._map)
+
+    def _release(self, start: int, length: int) -> None:
+        """Drop the pages of a chunk already read from this process's resident set.
+
+        The map is read-only and file-backed, so views still held by consumers stay valid: their
+        pages fault back in from the page cache when touched.  This keeps RSS bounded by one
+        chunk whatever the length of the log.
+        """
+        if self._map is not None and hasattr(mmap, "MADV_DONTNEED"):
+            self._map.madvise(mmap.MADV_DONTNEED, start, length)
 
     def _chunk_damage(self, chunk_pos: int, err: Exception, yielded: int) -> None:
         lost = {
@@ -521,6 +566,10 @@ class Ros1BagReader(RosReaderBase):
     def close(self) -> None:
         if self._rosbags is not None and self._rosbags.bio is not None:
             self._rosbags.close()
+        # The file map is not closed here: arrays decoded from its messages (numpy keeps a
+        # reference to the map, not a buffer export, so ``mmap.close`` would not refuse) may
+        # still view it.  Dropping our reference unmaps it once the last of them is gone.
+        self._map = None
 
 
 def _entries(index: list[Any], first: int, conn_id: int) -> Iterator[tuple[int, int, int, int]]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import mmap
 from typing import Any
 
 from redrive.errors import UnsupportedMessageError
@@ -45,13 +46,26 @@ def unsupported(message: LogMessage, what: str, advice: str) -> UnsupportedMessa
 def raw_is_immutable(message: LogMessage) -> bool:
     """True when ``message.raw`` cannot change later, so arrays may view it without a copy.
 
-    ``bytes`` and memoryviews of ``bytes`` are immutable; a view into a reader's reusable buffer
-    (bytearray, mmap) is not, and arrays built on it must be copied.
+    ``bytes``, memoryviews of ``bytes`` and read-only views of a read-only file map (the ROS 1
+    reader maps uncompressed chunks; the log is not written while it is read) are immutable; a
+    view into a reader's reusable buffer (bytearray, writable map) is not, and arrays built on it
+    must be copied.
     """
     raw = message.raw
     if isinstance(raw, bytes):
         return True
-    return isinstance(raw, memoryview) and raw.readonly and isinstance(raw.obj, bytes)
+    if not (isinstance(raw, memoryview) and raw.readonly):
+        return False
+    owner = raw.obj
+    return isinstance(owner, bytes) or (isinstance(owner, mmap.mmap) and _map_is_read_only(owner))
+
+
+def _map_is_read_only(owner: mmap.mmap) -> bool:
+    try:
+        with memoryview(owner) as probe:
+            return probe.readonly
+    except (ValueError, BufferError):
+        return False
 
 
 def vec3(value: Any) -> tuple[float, float, float]:

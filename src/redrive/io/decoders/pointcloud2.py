@@ -29,7 +29,13 @@ from redrive.io.decoders._common import raw_is_immutable, unsupported
 from redrive.io.decoders.base import Decoded, DecodedKind, Deserialize
 from redrive.types import PointCloud, SensorType
 
-__all__ = ["CloudField", "CloudLayout", "PointCloud2Decoder", "read_cloud_layout"]
+__all__ = [
+    "CloudField",
+    "CloudLayout",
+    "LayoutCache",
+    "PointCloud2Decoder",
+    "read_cloud_layout",
+]
 
 #: PointField datatype constant → numpy type code (without byte order).
 POINTFIELD_DTYPES: dict[int, str] = {
@@ -120,46 +126,92 @@ class _Cursor:
         return text.decode("utf-8", errors="replace")
 
 
-def read_cloud_layout(raw: bytes | memoryview, encoding: str) -> CloudLayout:
+_ROS1_HEAD = struct.Struct("<IIII")  # seq, sec, nanosec, frame_id length
+_CDR_HEAD = {False: struct.Struct("<iII"), True: struct.Struct(">iII")}  # sec, nanosec, len
+_U32 = {False: struct.Struct("<I"), True: struct.Struct(">I")}
+_U32_PAIR = {False: struct.Struct("<II"), True: struct.Struct(">II")}
+
+
+@dataclass(frozen=True, slots=True)
+class _FieldBlock:
+    """The bytes from ``fields`` to ``row_step`` of one cloud, and what they parse to."""
+
+    raw: bytes
+    fields: tuple[CloudField, ...]
+    is_bigendian: bool
+    point_step: int
+    row_step: int
+
+
+class LayoutCache:
+    """Remembers the field blocks of recent clouds so a stream of clouds is parsed once.
+
+    A sensor publishes the same ``fields`` / ``is_bigendian`` / ``point_step`` / ``row_step`` in
+    every message; on a hit only the stamp, frame, shape and data length are read.  The block is
+    compared byte for byte, so a changed layout is never missed.  At most ``size`` blocks are kept.
+    """
+
+    __slots__ = ("blocks", "size")
+
+    def __init__(self, size: int = 8) -> None:
+        self.size = size
+        self.blocks: list[_FieldBlock] = []
+
+    def find(self, buf: memoryview, pos: int) -> _FieldBlock | None:
+        for block in self.blocks:
+            if buf[pos : pos + len(block.raw)] == block.raw:
+                return block
+        return None
+
+    def add(self, block: _FieldBlock) -> None:
+        self.blocks.insert(0, block)
+        del self.blocks[self.size :]
+
+
+def read_cloud_layout(
+    raw: bytes | memoryview, encoding: str, *, cache: LayoutCache | None = None
+) -> CloudLayout:
     """Parse the header of a serialised PointCloud2 (``encoding`` ``ros1`` or ``cdr``).
+
+    ``cache`` (optional) skips parsing the field list when it is the same as a recent cloud's.
 
     Raises:
         ValueError: the bytes are truncated or use an unsupported CDR representation.
     """
     buf = memoryview(raw).cast("B")
-    if encoding == "cdr":
-        if len(buf) < 4 or buf[0] != 0 or buf[1] not in (0, 1):
-            head = bytes(buf[:4]).hex()
-            msg = f"CDR encapsulation header {head!r} is not plain CDR (00 00 / 00 01)"
-            raise ValueError(msg)
-        cur = _Cursor(buf, cdr=True, big_endian=buf[1] == 0)
-    elif encoding == "ros1":
-        cur = _Cursor(buf, cdr=False, big_endian=False)
-    else:
-        msg = f"encoding {encoding!r} is not ros1 or cdr"
-        raise ValueError(msg)
     try:
-        if not cur.cdr:
-            cur.uint32()  # seq
-        sec = cur.int32() if cur.cdr else cur.uint32()
-        nanosec = cur.uint32()
-        frame_id = cur.string()
-        height = cur.uint32()
-        width = cur.uint32()
-        fields = []
-        for _ in range(cur.uint32()):
-            name = cur.string()
-            offset = cur.uint32()
-            datatype = cur.uint8()
-            count = cur.uint32()
-            fields.append(CloudField(name, offset, datatype, count))
-        is_bigendian = cur.uint8() != 0
-        point_step = cur.uint32()
-        row_step = cur.uint32()
-        data_size = cur.uint32()
-        data_offset = cur.pos
-        cur.pos += data_size
-        is_dense = cur.uint8() != 0 if cur.pos < len(buf) else False
+        if encoding == "cdr":
+            if len(buf) < 4 or buf[0] != 0 or buf[1] not in (0, 1):
+                head = bytes(buf[:4]).hex()
+                msg = f"CDR encapsulation header {head!r} is not plain CDR (00 00 / 00 01)"
+                raise ValueError(msg)
+            cdr, big = True, buf[1] == 0
+            sec, nanosec, size = _CDR_HEAD[big].unpack_from(buf, 4)
+            text = bytes(buf[16 : 16 + size]).rstrip(b"\x00")
+            pos = 16 + size
+            pos += -(pos - 4) % 4
+        elif encoding == "ros1":
+            cdr, big = False, False
+            _seq, sec, nanosec, size = _ROS1_HEAD.unpack_from(buf, 0)
+            text = bytes(buf[16 : 16 + size])
+            pos = 16 + size
+        else:
+            msg = f"encoding {encoding!r} is not ros1 or cdr"
+            raise ValueError(msg)
+        if pos > len(buf):
+            raise IndexError(pos)
+        height, width = _U32_PAIR[big].unpack_from(buf, pos)
+        pos += 8
+        block = cache.find(buf, pos) if cache is not None else None
+        if block is None:
+            block = _parse_field_block(buf, pos, cdr=cdr, big_endian=big)
+            if cache is not None:
+                cache.add(block)
+        pos += len(block.raw)
+        (data_size,) = _U32[big].unpack_from(buf, pos)
+        data_offset = pos + 4
+        dense_at = data_offset + data_size
+        is_dense = buf[dense_at] != 0 if dense_at < len(buf) else False
     except (struct.error, IndexError) as err:
         msg = f"serialised PointCloud2 is truncated ({len(buf)} bytes)"
         raise ValueError(msg) from err
@@ -168,16 +220,39 @@ def read_cloud_layout(raw: bytes | memoryview, encoding: str) -> CloudLayout:
         raise ValueError(msg)
     return CloudLayout(
         stamp_ns=sec * 1_000_000_000 + nanosec,
-        frame_id=frame_id,
+        frame_id=text.decode("utf-8", errors="replace"),
         height=height,
         width=width,
+        fields=block.fields,
+        is_bigendian=block.is_bigendian,
+        point_step=block.point_step,
+        row_step=block.row_step,
+        data_offset=data_offset,
+        data_size_bytes=data_size,
+        is_dense=is_dense,
+    )
+
+
+def _parse_field_block(buf: memoryview, pos: int, *, cdr: bool, big_endian: bool) -> _FieldBlock:
+    """Parse ``fields`` … ``row_step`` starting at ``pos`` (4-aligned for CDR)."""
+    cur = _Cursor(buf, cdr=cdr, big_endian=big_endian)
+    cur.pos = pos
+    fields = []
+    for _ in range(cur.uint32()):
+        name = cur.string()
+        offset = cur.uint32()
+        datatype = cur.uint8()
+        count = cur.uint32()
+        fields.append(CloudField(name, offset, datatype, count))
+    is_bigendian = cur.uint8() != 0
+    point_step = cur.uint32()
+    row_step = cur.uint32()
+    return _FieldBlock(
+        raw=bytes(buf[pos : cur.pos]),
         fields=tuple(fields),
         is_bigendian=is_bigendian,
         point_step=point_step,
         row_step=row_step,
-        data_offset=data_offset,
-        data_size_bytes=data_size,
-        is_dense=is_dense,
     )
 
 
@@ -283,10 +358,13 @@ class PointCloud2Decoder:
     kind = DecodedKind.SENSOR
     sensor_type: SensorType | None = SensorType.LIDAR
 
+    def __init__(self) -> None:
+        self._layouts = LayoutCache()
+
     def decode(self, message: LogMessage, deserialize: Deserialize) -> Decoded:
         del deserialize  # the fast path never deserialises
         try:
-            layout = read_cloud_layout(message.raw, message.encoding)
+            layout = read_cloud_layout(message.raw, message.encoding, cache=self._layouts)
             dtype = _point_dtype(layout)
         except ValueError as err:
             raise unsupported(message, f"PointCloud2 cannot be read: {err}", _WHAT_TO_DO) from err
