@@ -1,0 +1,408 @@
+"""The deterministic driving world: roads, lights, agents, scenery and the ego, stepped in time.
+
+``World(scenario)`` builds everything from the scenario and one ``numpy.random.Generator`` seeded
+with ``scenario.seed`` (scenery first, then agents in file order), so the same seed gives the same
+states bit for bit.  Time is int nanoseconds since the epoch; physics runs at the scenario's
+``physics_dt_s``; :meth:`World.scene` is the :class:`~redrive.sim.scene.Scene` the sensors render.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from collections import deque
+
+import numpy as np
+import numpy.typing as npt
+
+from redrive.errors import SimulationError
+from redrive.sim.agents import IdmParams, LaneChange, LaneFollower, Obstacles, ParkedObject, Walker
+from redrive.sim.ego import BicycleModel, EgoDriver, EgoGeometry, pose_matrix
+from redrive.sim.lights import TrafficLights
+from redrive.sim.roads import RoadNetwork, RoadSegment, build_network, rasterize
+from redrive.sim.scenario import AgentSpec, Scenario
+from redrive.sim.scene import GroundMap, Scene, SceneObjects
+from redrive.types import ObjectClass, VehicleState
+
+__all__ = ["World"]
+
+EGO_ID = 0
+_SCENERY_ID0 = 100_000
+_HISTORY_S = 0.3
+_SIZES = {
+    "vehicle": (4.5, 1.85, 1.5),
+    "truck": (8.0, 2.5, 3.2),
+    "cyclist": (1.8, 0.6, 1.7),
+    "pedestrian": (0.5, 0.6, 1.75),
+    "parked": (4.5, 1.85, 1.5),
+    "parked_van": (5.5, 2.1, 2.5),
+}
+_CLASSES = {
+    "vehicle": ObjectClass.VEHICLE,
+    "truck": ObjectClass.TRUCK,
+    "cyclist": ObjectClass.BICYCLE,
+    "parked": ObjectClass.VEHICLE,
+    "parked_van": ObjectClass.VEHICLE,
+}
+_PALETTE = np.array(
+    [
+        [200, 30, 30],
+        [30, 60, 170],
+        [235, 235, 235],
+        [25, 25, 25],
+        [120, 120, 125],
+        [30, 120, 60],
+        [220, 180, 40],
+        [150, 90, 40],
+    ],
+    dtype=np.uint8,
+)
+
+
+class World:
+    """The synthetic world of one :class:`Scenario`; call :meth:`step` to advance it."""
+
+    def __init__(self, scenario: Scenario, *, ego_geometry: EgoGeometry | None = None) -> None:
+        self.scenario = scenario
+        self.network: RoadNetwork = build_network(scenario.road)
+        self.lights = TrafficLights(self.network.signals, scenario.lights)
+        self.ego_geometry = ego_geometry or EgoGeometry()
+        self._rng = np.random.default_rng(scenario.seed)
+        self._start_ns = int(scenario.start_stamp_ns)
+        self._time_ns = self._start_ns
+        self._dt_ns = round(scenario.physics_dt_s * 1e9)
+        self._ground: GroundMap | None = None
+        self._static = self._build_scenery()
+        self._followers: list[LaneFollower] = []
+        self._walkers: list[Walker] = []
+        self._triggers: list[tuple[Walker, float, float]] = []  # walker, s on ego route, distance
+        self._parked: list[ParkedObject] = []
+        spec = scenario.ego
+        route = self.network.routes[spec.route]
+        x, y, yaw = route.pose_at(spec.start_s_m)
+        speed = spec.set_speed_mps if spec.initial_speed_mps is None else spec.initial_speed_mps
+        self._ego = BicycleModel(self.ego_geometry, x_m=x, y_m=y, yaw_rad=yaw, speed_mps=speed)
+        idm = IdmParams(
+            desired_speed_mps=spec.set_speed_mps,
+            time_headway_s=spec.time_headway_s,
+            min_gap_m=spec.min_gap_m,
+            max_accel_mps2=spec.max_accel_mps2,
+            comfort_decel_mps2=spec.comfort_decel_mps2,
+        )
+        self._driver = EgoDriver(route, spec.start_s_m, idm=idm, ego_id=EGO_ID)
+        next_id = 1
+        for agent in scenario.agents:
+            next_id = self._add_agent(agent, next_id)
+        n_hist = math.ceil(_HISTORY_S / scenario.physics_dt_s) + 2
+        self._history: deque[tuple[int, float, float, float]] = deque(maxlen=n_hist)
+        self._record_pose()
+
+    # -- construction -------------------------------------------------------------------------
+    def _add_agent(self, spec: AgentSpec, next_id: int) -> int:
+        route = self.network.routes[spec.route]
+        size = spec.size_m or _SIZES[spec.kind]
+        shoulder = self.scenario.road.shoulder_m
+        for k in range(spec.count):
+            s = spec.start_s_m - k * spec.spacing_m
+            color = spec.color or self._pick_color()
+            if spec.kind == "pedestrian":
+                walk = self.scenario.road.sidewalk_width_m
+                d0 = spec.lateral_offset_m
+                if d0 is None:
+                    d0 = -(route.width_m / 2 + shoulder + walk / 2)
+                x0, y0, _ = route.pose_at(s, d0)
+                x1, y1, _ = route.pose_at(s, spec.to_offset_m or 0.0)
+                walker = Walker(
+                    next_id,
+                    start_xy=(x0, y0),
+                    end_xy=(x1, y1),
+                    speed_mps=spec.speed_mps,
+                    start_time_s=spec.start_time_s,
+                    size_lwh_m=size,
+                )
+                self._walkers.append(walker)
+                if spec.trigger_ego_distance_m is not None:
+                    s_ego, _ = self._driver.route.project(
+                        [[x0, y0]], s_min_m=0.0, s_max_m=self._driver.route.length_m
+                    )
+                    self._triggers.append((walker, float(s_ego[0]), spec.trigger_ego_distance_m))
+            elif spec.kind in ("parked", "parked_van"):
+                d = spec.lateral_offset_m
+                if d is None:
+                    d = -(route.width_m / 2 + shoulder / 2)
+                x, y, yaw = route.pose_at(s, d)
+                self._parked.append(
+                    ParkedObject(
+                        agent_id=next_id,
+                        object_class=_CLASSES[spec.kind],
+                        center_xy=(x, y),
+                        yaw_rad=yaw,
+                        size_lwh_m=size,
+                        color_rgb=color,
+                    )
+                )
+            else:
+                v0 = spec.desired_speed_mps
+                if v0 is None:
+                    v0 = spec.speed_mps
+                    if self.scenario.speed_jitter_mps > 0:
+                        v0 += float(self._rng.normal(0.0, self.scenario.speed_jitter_mps))
+                cyclist = spec.kind == "cyclist"
+                idm = IdmParams(
+                    desired_speed_mps=max(v0, 0.5), max_accel_mps2=1.0 if cyclist else 1.5
+                )
+                lane_change = None
+                if spec.lane_change_route is not None and spec.lane_change_time_s is not None:
+                    lane_change = LaneChange(
+                        target=self.network.routes[spec.lane_change_route],
+                        start_time_s=spec.lane_change_time_s,
+                        duration_s=spec.lane_change_duration_s,
+                    )
+                offset = spec.lateral_offset_m
+                if offset is None:
+                    offset = -0.9 if cyclist else 0.0
+                self._followers.append(
+                    LaneFollower(
+                        next_id,
+                        _CLASSES[spec.kind],
+                        route=route,
+                        s_m=s,
+                        speed_mps=spec.speed_mps,
+                        idm=idm,
+                        size_lwh_m=size,
+                        color_rgb=color,
+                        lateral_offset_m=offset,
+                        brake_time_s=spec.brake_time_s,
+                        brake_decel_mps2=spec.brake_decel_mps2,
+                        lane_change=lane_change,
+                    )
+                )
+            next_id += 1
+        return next_id
+
+    def _pick_color(self) -> tuple[int, int, int]:
+        r, g, b = (int(c) for c in _PALETTE[self._rng.integers(len(_PALETTE))])
+        return r, g, b
+
+    def _build_scenery(
+        self,
+    ) -> tuple[SceneObjects, list[tuple[float, float, float, float, float, float, float]]]:
+        """Buildings (urban) or walls (highway), poles and light posts as STATIC boxes."""
+        boxes: list[tuple[float, float, float, float, float, float, float]] = []  # x y z l w h yaw
+        looks: list[tuple[int, int, int, float]] = []
+        rng = self._rng
+        urban = self.network.intersection_half_m is not None
+        for seg in self.network.segments:
+            for side in (-1.0, 1.0):
+                edge = seg.right_edge_m if side < 0 else seg.left_edge_m
+                if self.scenario.scenery and urban:
+                    s = 5.0
+                    while s < seg.length_m - 22.0:
+                        length, depth = rng.uniform(10.0, 25.0), rng.uniform(8.0, 14.0)
+                        length = min(length, seg.length_m - 22.0 - s)
+                        height = rng.uniform(6.0, 20.0)
+                        d = edge + side * (seg.sidewalk_width_m + 1.0 + depth / 2)
+                        self._box(boxes, seg, s + length / 2, d, (length, depth, height))
+                        grey = int(rng.integers(90, 200))
+                        looks.append((grey, grey - 10, grey - 25, float(rng.uniform(0.2, 0.5))))
+                        s += length + rng.uniform(2.0, 8.0)
+                elif self.scenario.scenery:
+                    for s in np.arange(5.0, seg.length_m - 5.0, 10.0):
+                        d = edge + side * (seg.sidewalk_width_m + 0.5)
+                        self._box(boxes, seg, float(s), d, (10.0, 0.3, 3.5))
+                        looks.append((150, 150, 140, 0.35))
+                for s in np.arange(10.0, seg.length_m - 5.0, 30.0):
+                    self._box(boxes, seg, float(s), edge + side * 0.5, (0.25, 0.25, 7.0))
+                    looks.append((110, 110, 110, 0.6))
+        for sig in self.network.signals:
+            boxes.append((sig.position[0], sig.position[1], 2.6, 0.3, 0.3, 5.2, 0.0))
+            looks.append((60, 60, 60, 0.6))
+        arr = np.array(boxes, dtype=np.float64).reshape(-1, 7)
+        n = len(arr)
+        objects = SceneObjects(
+            object_ids=_SCENERY_ID0 + np.arange(n, dtype=np.int64),
+            classes=(ObjectClass.STATIC,) * n,
+            centers=arr[:, 0:3].copy(),
+            sizes=arr[:, 3:6].copy(),
+            yaws_rad=arr[:, 6].copy(),
+            velocities=np.zeros((n, 3)),
+            colors=np.array([lk[:3] for lk in looks], dtype=np.uint8).reshape(-1, 3),
+            reflectivity=np.array([lk[3] for lk in looks], dtype=np.float32),
+            is_ground_truth=np.zeros(n, dtype=bool),
+        )
+        return objects, boxes
+
+    @staticmethod
+    def _box(
+        boxes: list[tuple[float, float, float, float, float, float, float]],
+        seg: RoadSegment,
+        s_m: float,
+        d_m: float,
+        size: tuple[float, float, float],
+    ) -> None:
+        x, y, heading = seg.pose_at(s_m, d_m)
+        boxes.append((float(x), float(y), size[2] / 2, size[0], size[1], size[2], float(heading)))
+
+    # -- time ---------------------------------------------------------------------------------
+    @property
+    def time_ns(self) -> int:
+        """Current time, int ns since the epoch."""
+        return self._time_ns
+
+    @property
+    def time_s(self) -> float:
+        """Seconds since the start of the scenario."""
+        return (self._time_ns - self._start_ns) / 1e9
+
+    def step(self, dt_s: float) -> None:
+        """Advance by ``dt_s`` seconds (in physics steps; the last one may be shorter)."""
+        if not dt_s >= 0:
+            msg = f"World.step: dt_s must be ≥ 0, got {dt_s}"
+            raise SimulationError(msg)
+        self.step_to(self._time_ns + round(dt_s * 1e9))
+
+    def step_to(self, stamp_ns: int) -> None:
+        """Advance until ``time_ns == stamp_ns`` (which must not lie in the past)."""
+        if stamp_ns < self._time_ns:
+            msg = f"World.step_to: {stamp_ns} ns is before the current time {self._time_ns} ns; the world only moves forward"
+            raise SimulationError(msg)
+        while self._time_ns < stamp_ns:
+            self._substep(min(self._dt_ns, stamp_ns - self._time_ns))
+
+    def _substep(self, dt_ns: int) -> None:
+        t = self.time_s
+        dt_s = dt_ns / 1e9
+        obstacles = self._obstacles()
+        front = self._driver.s_m + self.ego_geometry.front_offset_m
+        for walker, s_cross, distance in self._triggers:
+            if s_cross - front <= distance:
+                walker.start(t)
+        for follower in self._followers:
+            follower.plan(t, obstacles, self.lights)
+        accel, steer = self._driver.control(self._ego, t, obstacles, self.lights)
+        for follower in self._followers:
+            follower.advance(dt_s)
+        self._ego.step(dt_s, accel_mps2=accel, steer_rad=steer)
+        self._time_ns += dt_ns
+        t_new = self.time_s
+        for walker in self._walkers:
+            walker.set_time(t_new)
+        self._followers = [f for f in self._followers if f.active]
+        self._record_pose()
+
+    def _record_pose(self) -> None:
+        self._history.append((self._time_ns, self._ego.x_m, self._ego.y_m, self._ego.yaw_rad))
+
+    # -- state --------------------------------------------------------------------------------
+    def _agents(self) -> list[LaneFollower | Walker | ParkedObject]:
+        return [*self._followers, *self._walkers, *self._parked]
+
+    def _obstacles(self) -> Obstacles:
+        g, ego = self.ego_geometry, self._ego
+        c, s = math.cos(ego.yaw_rad), math.sin(ego.yaw_rad)
+        ids, centers, lengths, widths, vels = [EGO_ID], [], [g.length_m], [g.width_m], []
+        centers.append((ego.x_m + g.center_offset_m * c, ego.y_m + g.center_offset_m * s))
+        vels.append((ego.speed_mps * c, ego.speed_mps * s))
+        for agent in self._agents():
+            ids.append(agent.agent_id)
+            lengths.append(agent.size_lwh_m[0])
+            widths.append(agent.size_lwh_m[1])
+            if isinstance(agent, ParkedObject):
+                centers.append(agent.center_xy)
+                vels.append((0.0, 0.0))
+            else:
+                x, y, _ = agent.pose()
+                centers.append((x, y))
+                vels.append(agent.velocity())
+        return Obstacles(
+            ids=np.array(ids, dtype=np.int64),
+            centers=np.array(centers, dtype=np.float64),
+            lengths=np.array(lengths, dtype=np.float64),
+            widths=np.array(widths, dtype=np.float64),
+            velocities=np.array(vels, dtype=np.float64),
+        )
+
+    def ego_state(self) -> VehicleState:
+        """The ego's true state (rear-axle centre, map frame) at :attr:`time_ns`."""
+        return self._ego.state(self._time_ns)
+
+    def map_from_base(self) -> npt.NDArray[np.float64]:
+        """The ego pose at :attr:`time_ns`, 4×4 float64."""
+        return self._ego.map_from_base()
+
+    def map_from_base_at(self, stamp_ns: int) -> npt.NDArray[np.float64]:
+        """The ego pose at ``stamp_ns`` within the last ~0.3 s (linear in x, y and yaw between
+        physics steps), for the ego-motion skew inside a LiDAR sweep."""
+        stamps = [h[0] for h in self._history]
+        if not stamps[0] <= stamp_ns <= stamps[-1]:
+            msg = (
+                f"World.map_from_base_at: {stamp_ns} ns is outside the pose history "
+                f"[{stamps[0]}, {stamps[-1]}] ns; ask for times within the last {_HISTORY_S} s"
+            )
+            raise SimulationError(msg)
+        i = min(bisect.bisect_left(stamps, stamp_ns), len(stamps) - 1)
+        t1, x1, y1, yaw1 = self._history[i]
+        if t1 == stamp_ns or i == 0:
+            return pose_matrix(x1, y1, yaw1)
+        t0, x0, y0, yaw0 = self._history[i - 1]
+        f = (stamp_ns - t0) / (t1 - t0)
+        dyaw = math.remainder(yaw1 - yaw0, 2.0 * math.pi)
+        return pose_matrix(x0 + f * (x1 - x0), y0 + f * (y1 - y0), yaw0 + f * dyaw)
+
+    @property
+    def ground(self) -> GroundMap:
+        """The ground raster (computed once, on first use)."""
+        if self._ground is None:
+            self._ground = rasterize(self.network)
+        return self._ground
+
+    def objects(self) -> SceneObjects:
+        """Agents and parked vehicles (ground truth) followed by the scenery, map frame."""
+        agents = self._agents()
+        n = len(agents)
+        centers, sizes, yaws, vels = (
+            np.zeros((n, 3)),
+            np.zeros((n, 3)),
+            np.zeros(n),
+            np.zeros((n, 3)),
+        )
+        for k, agent in enumerate(agents):
+            sizes[k] = agent.size_lwh_m
+            if isinstance(agent, ParkedObject):
+                x, y, yaw = agent.center_xy[0], agent.center_xy[1], agent.yaw_rad
+            else:
+                x, y, yaw = agent.pose()
+                vels[k, :2] = agent.velocity()
+            centers[k] = (x, y, agent.size_lwh_m[2] / 2)
+            yaws[k] = yaw
+        static = self._static[0]
+        return SceneObjects(
+            object_ids=np.concatenate(
+                [np.array([a.agent_id for a in agents], dtype=np.int64), static.object_ids]
+            ),
+            classes=tuple(a.object_class for a in agents) + static.classes,
+            centers=np.concatenate([centers, static.centers]),
+            sizes=np.concatenate([sizes, static.sizes]),
+            yaws_rad=np.concatenate([yaws, static.yaws_rad]),
+            velocities=np.concatenate([vels, static.velocities]),
+            colors=np.concatenate(
+                [
+                    np.array([a.color_rgb for a in agents], dtype=np.uint8).reshape(-1, 3),
+                    static.colors,
+                ]
+            ),
+            reflectivity=np.concatenate(
+                [np.array([a.reflectivity for a in agents], dtype=np.float32), static.reflectivity]
+            ),
+            is_ground_truth=np.concatenate([np.ones(n, dtype=bool), static.is_ground_truth]),
+        )
+
+    def scene(self) -> Scene:
+        """The world at :attr:`time_ns`, as the sensors see it (the ego's own box excluded)."""
+        return Scene(
+            stamp_ns=self._time_ns,
+            ground=self.ground,
+            objects=self.objects(),
+            traffic_lights=self.lights.states(self.time_s),
+            map_from_base=self.map_from_base(),
+        )
