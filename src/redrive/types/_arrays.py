@@ -25,21 +25,28 @@ def frozen_array(
     an array of another dtype is rejected rather than silently cast (so a float64 cloud never
     hides in a float32 field).  Plain Python sequences are converted to the first dtype.
     """
-    candidates: Sequence[Any] = dtype if isinstance(dtype, list | tuple) else [dtype]
-    accepted = [np.dtype(d) for d in candidates]
+    many = isinstance(dtype, list | tuple)
     if isinstance(value, np.ndarray):
         arr = value
-        if arr.dtype not in accepted:
-            names = ", ".join(str(d) for d in accepted)
+        # Compare against the given dtype(s) directly: this runs for every array of every
+        # decoded message, so no dtype objects are built on the way.
+        if not (any(arr.dtype == d for d in dtype) if many else arr.dtype == dtype):
+            candidates: Sequence[Any] = dtype if many else [dtype]
+            names = ", ".join(str(np.dtype(d)) for d in candidates)
             msg = f"{name}: dtype {arr.dtype} is not accepted (expected {names})"
             raise ValueError(msg)
         if copy:
             arr = arr.copy()
     else:
-        arr = np.array(value, dtype=accepted[0])
-    if arr.ndim != len(shape) or any(
-        want is not None and have != want for have, want in zip(arr.shape, shape, strict=True)
-    ):
+        arr = np.array(value, dtype=dtype[0] if many else dtype)
+    have_shape = arr.shape
+    ok = len(have_shape) == len(shape)
+    if ok:
+        for have, want in zip(have_shape, shape, strict=True):
+            if want is not None and have != want:
+                ok = False
+                break
+    if not ok:
         want_s = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
         msg = f"{name}: shape {arr.shape} does not match {want_s}"
         raise ValueError(msg)

@@ -360,12 +360,35 @@ class PointCloud2Decoder:
 
     def __init__(self) -> None:
         self._layouts = LayoutCache()
+        # id(fields tuple of a cached block) → (that tuple, its dtype); the tuple is kept so its
+        # id cannot be reused.  Hashing the field list per message costs more than the lookup.
+        self._dtypes: dict[int, tuple[tuple[CloudField, ...], bool, int, np.dtype[Any]]] = {}
+
+    def _dtype(self, layout: CloudLayout) -> np.dtype[Any]:
+        hit = self._dtypes.get(id(layout.fields))
+        if (
+            hit is not None
+            and hit[0] is layout.fields
+            and hit[1] == layout.is_bigendian
+            and hit[2] == layout.point_step
+        ):
+            return hit[3]
+        dtype = _point_dtype(layout)
+        if len(self._dtypes) > 64:
+            self._dtypes.clear()
+        self._dtypes[id(layout.fields)] = (
+            layout.fields,
+            layout.is_bigendian,
+            layout.point_step,
+            dtype,
+        )
+        return dtype
 
     def decode(self, message: LogMessage, deserialize: Deserialize) -> Decoded:
         del deserialize  # the fast path never deserialises
         try:
             layout = read_cloud_layout(message.raw, message.encoding, cache=self._layouts)
-            dtype = _point_dtype(layout)
+            dtype = self._dtype(layout)
         except ValueError as err:
             raise unsupported(message, f"PointCloud2 cannot be read: {err}", _WHAT_TO_DO) from err
         missing = [a for a in "xyz" if dtype.fields is None or a not in dtype.fields]
