@@ -1,0 +1,268 @@
+"""Simulated spinning (3D) and scanning (2D) LiDARs, ray cast against a :class:`Scene`.
+
+One sweep starts at ``scene.stamp_ns`` and lasts ``1 / rate_hz``.  The head turns clockwise seen
+from above (as Velodyne and Ouster units do), starting at ``start_azimuth_rad`` (the rear, by
+default: drivers cut the sweep behind the car); a 2D scanner sweeps its sector counter-clockwise
+from ``−fov/2`` to ``+fov/2`` like a ROS ``LaserScan``.  The sweep is split into azimuth slices;
+each slice is cast from the sensor pose at its own time (``map_from_base_at``), translation
+interpolated column by column, so a moving sensor skews the cloud exactly as a real one does.
+Points are expressed in the sensor frame *at their firing time* — what raw drivers output.
+
+The boxes stand still during the sweep (they are where ``scene`` puts them); the ground z = 0
+is intersected analytically.
+
+Per point: Gaussian range noise, dropout, intensity = 255 · reflectivity · cos(incidence)
+(objects' ``reflectivity``; the ground's from its :class:`~redrive.sim.scene.GroundLabel`),
+``ring`` (uint16, lowest beam 0) and ``t_offset_ns`` (uint32 from the sweep start).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from types import MappingProxyType
+
+import numpy as np
+import numpy.typing as npt
+
+from redrive.errors import SimulationError
+from redrive.sim.lidar_presets import LidarPreset, lidar_preset
+from redrive.sim.mesh import BoxMesh
+from redrive.sim.rig import SensorSpec
+from redrive.sim.scene import GroundLabel, Scene
+from redrive.types import PointCloud, SensorType
+from redrive.types._arrays import frozen_array
+
+__all__ = ["GROUND_REFLECTIVITY", "LidarModel", "LidarScan", "PoseAt"]
+
+#: Callable giving ``map_from_base`` (4×4) at a time in ns.
+PoseAt = Callable[[int], npt.ArrayLike]
+
+#: Reflectivity of the ground by label: paint bright, asphalt dark, grass in between.
+GROUND_REFLECTIVITY: Mapping[GroundLabel, float] = MappingProxyType(
+    {
+        GroundLabel.GRASS: 0.35,
+        GroundLabel.ROAD: 0.08,
+        GroundLabel.LANE_MARKING: 0.85,
+        GroundLabel.SIDEWALK: 0.25,
+        GroundLabel.STOP_LINE: 0.85,
+    }
+)
+_GROUND_LUT = np.zeros(256, dtype=np.float32)
+for _label, _refl in GROUND_REFLECTIVITY.items():
+    _GROUND_LUT[int(_label)] = _refl
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class LidarScan:
+    """One simulated sweep.
+
+    Attributes:
+        stamp_ns: start of the sweep (``t_offset_ns`` counts from here).
+        frame_id: the sensor frame the points are in.
+        cloud: xyz float32 (N, 3) metres in the sensor frame at each point's firing time;
+            channels ``intensity`` float32 (0–255), ``ring`` uint16, ``t_offset_ns`` uint32.
+        object_ids: (N,) int64: the object each point hit, −1 for the ground.
+        hits_per_object: object id → number of returns, for every object of the scene.
+    """
+
+    stamp_ns: int
+    frame_id: str
+    cloud: PointCloud
+    object_ids: npt.NDArray[np.int64]
+    hits_per_object: Mapping[int, int]
+
+    def __post_init__(self) -> None:
+        ids = frozen_array(
+            self.object_ids, name="LidarScan.object_ids", dtype=np.int64, shape=(len(self.cloud),)
+        )
+        object.__setattr__(self, "object_ids", ids)
+
+
+class LidarModel:
+    """A LiDAR of a given :class:`LidarPreset` mounted on the ego.
+
+    Args:
+        preset: the scan pattern (or its name).
+        base_from_sensor: 4×4 extrinsics (identity by default).
+        rate_hz: sweeps per second (rotation rate; a 2D scanner's scan rate).
+        range_std_m: 1-σ Gaussian range noise (default: the preset's accuracy).
+        dropout: probability that a return is lost.
+        num_slices: azimuth slices with their own pose (default: one per 10 columns).
+        start_azimuth_rad: azimuth of the first column of a spinning unit.
+        frame_id: frame id of the clouds.
+    """
+
+    def __init__(
+        self,
+        preset: LidarPreset | str,
+        *,
+        base_from_sensor: npt.ArrayLike | None = None,
+        rate_hz: float = 10.0,
+        range_std_m: float | None = None,
+        dropout: float = 0.0,
+        num_slices: int | None = None,
+        start_azimuth_rad: float = math.pi,
+        frame_id: str = "lidar",
+    ) -> None:
+        self.preset = lidar_preset(preset) if isinstance(preset, str) else preset
+        p = self.preset
+        if not rate_hz > 0:
+            msg = f"LidarModel({p.name}): rate_hz must be > 0, got {rate_hz}"
+            raise SimulationError(msg)
+        if not 0.0 <= dropout <= 1.0:
+            msg = f"LidarModel({p.name}): dropout must lie in [0, 1], got {dropout}"
+            raise SimulationError(msg)
+        self.base_from_sensor = (
+            np.eye(4) if base_from_sensor is None else np.asarray(base_from_sensor, np.float64)
+        )
+        self.rate_hz = float(rate_hz)
+        self.range_std_m = p.range_accuracy_m if range_std_m is None else float(range_std_m)
+        self.dropout = float(dropout)
+        self.frame_id = frame_id
+        self.period_ns = round(1e9 / rate_hz)
+        cols = p.columns
+        step = math.radians(p.azimuth_resolution_deg)
+        idx = np.arange(cols, dtype=np.float64)
+        if p.fov_deg >= 360.0:
+            azimuths = start_azimuth_rad - idx * step  # clockwise from above
+            col_t = idx * (self.period_ns / cols)
+        else:
+            azimuths = math.radians(-p.fov_deg / 2.0) + idx * step  # counter-clockwise sector
+            col_t = idx * (self.period_ns * math.radians(p.azimuth_resolution_deg) / (2 * math.pi))
+        self.col_offset_ns = np.round(col_t).astype(np.int64)
+        elev = p.elevations_rad()
+        ce, se = np.cos(elev), np.sin(elev)
+        ca, sa = np.cos(azimuths), np.sin(azimuths)
+        dirs = np.empty((cols, p.num_lasers, 3), dtype=np.float64)
+        dirs[..., 0] = ca[:, None] * ce[None, :]
+        dirs[..., 1] = sa[:, None] * ce[None, :]
+        dirs[..., 2] = se[None, :]
+        #: (C, L, 3) unit ray directions in the sensor frame, firing order.
+        self.directions = dirs
+        self.rings = p.rings()
+        self.num_slices = max(1, min(cols, num_slices if num_slices else max(1, cols // 10)))
+        span = col_t[-1] + (col_t[1] - col_t[0] if cols > 1 else 1.0)
+        self._slice_of_col = np.minimum(
+            (col_t / span * self.num_slices).astype(np.int64), self.num_slices - 1
+        )
+        self._slice_t = np.linspace(0.0, span, self.num_slices + 1)
+        frac = (col_t - self._slice_t[self._slice_of_col]) / (span / self.num_slices)
+        self._frac_of_col = frac
+
+    @classmethod
+    def from_spec(cls, spec: SensorSpec, *, num_slices: int | None = None) -> LidarModel:
+        """The model of a rig sensor of kind ``lidar`` or ``lidar_2d``."""
+        if spec.kind not in (SensorType.LIDAR, SensorType.LIDAR_2D) or spec.preset is None:
+            msg = f"sensor {spec.name!r} is a {spec.kind.value}, not a LiDAR"
+            raise SimulationError(msg)
+        return cls(
+            spec.preset,
+            base_from_sensor=spec.base_from_sensor(),
+            rate_hz=spec.rate_hz,
+            range_std_m=spec.noise.get("range_std_m"),
+            dropout=spec.noise.get("dropout", 0.0),
+            num_slices=num_slices,
+            frame_id=spec.name,
+        )
+
+    def _sensor_poses(
+        self, scene: Scene, map_from_base_at: PoseAt | None
+    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """Per column: rotation (C, 3, 3) map_from_sensor, sensor position (C, 3) in the map."""
+        cols = self.preset.columns
+        if map_from_base_at is None:
+            pose = scene.map_from_base @ self.base_from_sensor
+            return (
+                np.broadcast_to(pose[:3, :3], (cols, 3, 3)),
+                np.broadcast_to(pose[:3, 3], (cols, 3)),
+            )
+        poses = np.empty((self.num_slices + 1, 4, 4))
+        for b, t in enumerate(self._slice_t):
+            mat = np.asarray(map_from_base_at(scene.stamp_ns + round(t)), dtype=np.float64)
+            if mat.shape != (4, 4):
+                msg = f"map_from_base_at returned shape {mat.shape}, expected (4, 4)"
+                raise SimulationError(msg)
+            poses[b] = mat @ self.base_from_sensor
+        s = self._slice_of_col
+        f = self._frac_of_col[:, None]
+        pos = poses[s, :3, 3] * (1.0 - f) + poses[s + 1, :3, 3] * f
+        return poses[s, :3, :3], pos
+
+    def scan(
+        self,
+        scene: Scene,
+        rng: np.random.Generator,
+        *,
+        map_from_base_at: PoseAt | None = None,
+    ) -> LidarScan:
+        """Cast one sweep starting at ``scene.stamp_ns``.
+
+        Args:
+            scene: the world; its boxes are meshed anew for this sweep.
+            rng: the only source of randomness (noise, dropout).
+            map_from_base_at: ego pose at a time in ns (default: ``scene.map_from_base`` for
+                the whole sweep).
+        """
+        p = self.preset
+        rot, pos = self._sensor_poses(scene, map_from_base_at)
+        origin = pos[0].copy()
+        mesh = BoxMesh.from_objects(scene.objects, origin=origin)
+        dirs_map = np.matmul(self.directions, np.swapaxes(rot, 1, 2))  # (C, L, 3)
+        lasers = p.num_lasers
+        d = dirs_map.reshape(-1, 3)
+        o = np.repeat(pos - origin, lasers, axis=0)
+        oz = np.repeat(pos[:, 2], lasers)
+        dz = d[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t_ground = np.where((dz < 0.0) & (oz > 0.0), -oz / dz, np.inf)
+        limit = np.minimum(t_ground, p.max_range_m * 1.01).astype(np.float32)
+        dist, box, normal = mesh.intersect(
+            np.ascontiguousarray(o, np.float32), np.ascontiguousarray(d, np.float32), limit
+        )
+        hit_box = box >= 0
+        hit_ground = ~hit_box & (t_ground <= p.max_range_m)
+        rng_m = dist.astype(np.float64)
+        keep = (hit_box | hit_ground) & (rng_m >= p.min_range_m) & (rng_m <= p.max_range_m)
+        n_rays = keep.shape[0]
+        noise = rng.standard_normal(n_rays) * self.range_std_m if self.range_std_m > 0 else 0.0
+        if self.dropout > 0:
+            keep &= rng.random(n_rays) >= self.dropout
+        idx = np.flatnonzero(keep)
+        r = (rng_m + noise)[idx]
+        local = self.directions.reshape(-1, 3)[idx]
+        xyz = (local * r[:, None]).astype(np.float32)
+        # intensity: reflectivity × |cos(incidence)|
+        refl = np.empty(idx.shape[0], dtype=np.float32)
+        cos_i = np.empty(idx.shape[0], dtype=np.float32)
+        kb = hit_box[idx]
+        bi = box[idx][kb]
+        refl[kb] = scene.objects.reflectivity[bi]
+        ng = normal[idx][kb].astype(np.float64)
+        dk = d[idx][kb]
+        norm = np.linalg.norm(ng, axis=1)
+        cos_i[kb] = np.abs(np.einsum("ij,ij->i", ng, dk)) / np.maximum(norm, 1e-12)
+        kg = ~kb
+        gi = idx[kg]
+        ground_xy = pos[gi // lasers, :2] + d[gi, :2] * rng_m[gi, None]
+        refl[kg] = _GROUND_LUT[scene.ground.label_at(ground_xy)]
+        cos_i[kg] = np.abs(dz[gi])
+        intensity = np.clip(255.0 * refl * cos_i, 0.0, 255.0).astype(np.float32)
+        ring = np.tile(self.rings, p.columns)[idx]
+        t_off = np.repeat(self.col_offset_ns, lasers)[idx].astype(np.uint32)
+        ids_all = scene.objects.object_ids
+        point_ids = np.full(idx.shape[0], -1, dtype=np.int64)
+        point_ids[kb] = ids_all[bi]
+        counts = np.bincount(bi, minlength=len(ids_all))
+        hits = MappingProxyType({int(i): int(c) for i, c in zip(ids_all, counts, strict=True)})
+        cloud = PointCloud(
+            xyz=xyz, channels={"intensity": intensity, "ring": ring, "t_offset_ns": t_off}
+        )
+        return LidarScan(
+            stamp_ns=scene.stamp_ns,
+            frame_id=self.frame_id,
+            cloud=cloud,
+            object_ids=point_ids,
+            hits_per_object=hits,
+        )
