@@ -93,8 +93,7 @@ class World:
         next_id = 1
         for agent in scenario.agents:
             next_id = self._add_agent(agent, next_id)
-        n_hist = math.ceil(_HISTORY_S / scenario.physics_dt_s) + 2
-        self._history: deque[tuple[int, float, float, float]] = deque(maxlen=n_hist)
+        self._history: deque[tuple[int, float, float, float]] = deque()
         self._record_pose()
 
     # -- construction -------------------------------------------------------------------------
@@ -292,6 +291,9 @@ class World:
 
     def _record_pose(self) -> None:
         self._history.append((self._time_ns, self._ego.x_m, self._ego.y_m, self._ego.yaw_rad))
+        oldest_ns = self._time_ns - round(_HISTORY_S * 1e9)
+        while len(self._history) > 2 and self._history[1][0] <= oldest_ns:
+            self._history.popleft()
 
     # -- state --------------------------------------------------------------------------------
     def _agents(self) -> list[LaneFollower | Walker | ParkedObject]:
