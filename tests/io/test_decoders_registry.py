@@ -66,6 +66,7 @@ def test_default_registry_is_complete_and_consistent() -> None:
         "visualization_msgs/msg/MarkerArray",
         "vision_msgs/msg/Detection3DArray",
         "derived_object_msgs/msg/ObjectArray",
+        "redrive_msgs/msg/GroundTruthObjectArray",
     }
     assert set(DEFAULT_DECODERS) == expected
     for msgtype, decoder in DEFAULT_DECODERS.items():

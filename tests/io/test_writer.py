@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 from typing import Any
@@ -330,3 +331,32 @@ def test_write_raw_unknown_type(tmp_path: Path) -> None:
     with open_log(tmp_path / "r.mcap") as log:
         (message,) = log.messages()
         assert log.deserialize(message).data == "hi"  # type: ignore[attr-defined]
+
+
+def test_ground_truth_round_trip_with_velocity_points_and_visibility(tmp_path: Path) -> None:
+    """Ground truth (objects with LiDAR point counts / visibility) keeps every field, and an
+    independent ROS 2 reader parses the shipped GroundTruthObjectArray schema."""
+    objects = tuple(
+        dataclasses.replace(
+            obj, velocity=np.array([v, -1.5, 0.25]), num_lidar_points=n, visible=vis
+        )
+        for obj, v, n, vis in zip(_objects(), (7.0, 0.5), (312, None), (True, False), strict=True)
+    )
+    path = tmp_path / "gt.mcap"
+    with McapWriter(path) as out:
+        out.write("/ground_truth/objects", 9, objects, frame_id="base_link", stamp_ns=9)
+        assert out.topics["/ground_truth/objects"] == "redrive_msgs/msg/GroundTruthObjectArray"
+    got = _read_back(path)["/ground_truth/objects"]
+    assert got.frame_id == "base_link"
+    for g, w in zip(got.value, objects, strict=True):
+        assert (g.object_id, g.object_class) == (w.object_id, w.object_class)
+        assert (g.num_lidar_points, g.visible) == (w.num_lidar_points, w.visible)
+        np.testing.assert_array_equal(g.velocity, w.velocity)
+        np.testing.assert_array_equal(g.box.center, w.box.center)
+    decoder = pytest.importorskip("mcap_ros2.decoder")
+    with path.open("rb") as fh:
+        reader = make_reader(fh, decoder_factories=[decoder.DecoderFactory()])
+        (msg,) = [m for _, _, _, m in reader.iter_decoded_messages()]
+    assert list(msg.num_lidar_points) == [312, -1]
+    assert list(msg.visible) == [1, 0]
+    assert msg.velocities[0].x == 7.0

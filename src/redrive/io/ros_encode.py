@@ -20,6 +20,10 @@ tuple[DetectedObject,...]  ``vision_msgs/msg/Detection3DArray``  class name (``v
                                                               ``hypothesis.class_id``, confidence
                                                               as score, ``id = str(object_id)``;
                                                               velocity and bbox_2d are not carried
+ground truth (objects with  ``redrive_msgs/msg/                   the same Detection3Ds plus
+num_lidar_points or         GroundTruthObjectArray``          velocities, num_lidar_points and
+visible set)                                                  visible (shipped .msg, built of
+                                                              standard parts)
 =========================  =================================  ====================================
 """
 
@@ -65,6 +69,11 @@ _NAVSAT_COVARIANCE_KNOWN = 3
 _NAVSAT_SERVICE_GPS = 1
 
 
+def is_ground_truth(objects: tuple[DetectedObject, ...]) -> bool:
+    """Objects that carry ground-truth facts (LiDAR point counts, visibility)."""
+    return any(o.num_lidar_points is not None or o.visible is not None for o in objects)
+
+
 def msgtype_of(value: object) -> str:
     """The ROS 2 message type :func:`encode_value` writes for ``value``.
 
@@ -84,6 +93,8 @@ def msgtype_of(value: object) -> str:
     if isinstance(value, tuple) and all(isinstance(v, Transform) for v in value):
         return "tf2_msgs/msg/TFMessage"  # an empty tuple is an empty TFMessage
     if isinstance(value, tuple) and all(isinstance(v, DetectedObject) for v in value):
+        if is_ground_truth(value):
+            return "redrive_msgs/msg/GroundTruthObjectArray"
         return "vision_msgs/msg/Detection3DArray"
     msg = (
         f"a {type(value).__name__} has no standard ROS 2 message; write PointCloud, Image, Imu, "
@@ -267,34 +278,44 @@ def _tf(b: _Builder, transforms: tuple[Transform, ...], stamp_ns: int) -> Any:
     return b.new("tf2_msgs/msg/TFMessage", transforms=items)
 
 
+def _detection(b: _Builder, obj: DetectedObject, header: Any) -> Any:
+    q = quaternion_from_euler(float(obj.orientation[2]), float(obj.orientation[1]), obj.box.yaw_rad)
+    pose = b.pose(obj.box.center, q)
+    hypothesis = b.new(
+        "vision_msgs/msg/ObjectHypothesisWithPose",
+        hypothesis=b.new(
+            "vision_msgs/msg/ObjectHypothesis",
+            class_id=obj.object_class.value,
+            score=float(obj.confidence),
+        ),
+        pose=b.new("geometry_msgs/msg/PoseWithCovariance", pose=pose, covariance=np.zeros(36)),
+    )
+    return b.new(
+        "vision_msgs/msg/Detection3D",
+        header=header,
+        results=[hypothesis],
+        bbox=b.new("vision_msgs/msg/BoundingBox3D", center=pose, size=b.vector3(obj.box.size)),
+        id=str(obj.object_id),
+    )
+
+
 def _detections(b: _Builder, objects: tuple[DetectedObject, ...], header: Any) -> Any:
-    detections = []
-    for obj in objects:
-        q = quaternion_from_euler(
-            float(obj.orientation[2]), float(obj.orientation[1]), obj.box.yaw_rad
-        )
-        pose = b.pose(obj.box.center, q)
-        hypothesis = b.new(
-            "vision_msgs/msg/ObjectHypothesisWithPose",
-            hypothesis=b.new(
-                "vision_msgs/msg/ObjectHypothesis",
-                class_id=obj.object_class.value,
-                score=float(obj.confidence),
-            ),
-            pose=b.new("geometry_msgs/msg/PoseWithCovariance", pose=pose, covariance=np.zeros(36)),
-        )
-        detections.append(
-            b.new(
-                "vision_msgs/msg/Detection3D",
-                header=header,
-                results=[hypothesis],
-                bbox=b.new(
-                    "vision_msgs/msg/BoundingBox3D", center=pose, size=b.vector3(obj.box.size)
-                ),
-                id=str(obj.object_id),
-            )
-        )
+    detections = [_detection(b, obj, header) for obj in objects]
     return b.new("vision_msgs/msg/Detection3DArray", header=header, detections=detections)
+
+
+def _ground_truth(b: _Builder, objects: tuple[DetectedObject, ...], header: Any) -> Any:
+    return b.new(
+        "redrive_msgs/msg/GroundTruthObjectArray",
+        header=header,
+        detections=[_detection(b, obj, header) for obj in objects],
+        velocities=[b.vector3(obj.velocity) for obj in objects],
+        num_lidar_points=np.array(
+            [-1 if o.num_lidar_points is None else o.num_lidar_points for o in objects],
+            dtype=np.int32,
+        ),
+        visible=np.array([-1 if o.visible is None else int(o.visible) for o in objects], np.int8),
+    )
 
 
 def encode_value(
@@ -327,4 +348,6 @@ def encode_value(
     if isinstance(value, VehicleState):
         return msgtype, _odometry(b, value, header)
     assert isinstance(value, tuple)
+    if msgtype == "redrive_msgs/msg/GroundTruthObjectArray":
+        return msgtype, _ground_truth(b, value, header)
     return msgtype, _detections(b, value, header)

@@ -238,7 +238,7 @@ def infer_sensor_map(
                 driver = max(candidates, key=lambda s: (s.rate_hz, s.sensor_id)).sensor_id
                 break
     state_topic = ov.vehicle_state_topic or _busiest(vehicle_state, prefer="odom")
-    gt_topic = ov.ground_truth_topic or _busiest(objects, prefer="")
+    gt_topic = ov.ground_truth_topic or _busiest(objects, prefer="groundtruth")
     return SensorMap(
         sensors=tuple(sorted(specs.values(), key=lambda s: s.sensor_id)),
         driver=driver,

@@ -13,6 +13,7 @@ from redrive.io.decoders.image import CompressedImageDecoder, ImageDecoder
 from redrive.io.decoders.motion import OdometryDecoder, PoseDecoder, TwistDecoder
 from redrive.io.decoders.objects import (
     Detection3DArrayDecoder,
+    GroundTruthObjectArrayDecoder,
     MarkerArrayDecoder,
     ObjectArrayDecoder,
     object_class_from_text,
@@ -39,6 +40,7 @@ __all__ = [
     "Decoder",
     "Deserialize",
     "Detection3DArrayDecoder",
+    "GroundTruthObjectArrayDecoder",
     "ImageDecoder",
     "ImuDecoder",
     "LaserScanDecoder",

@@ -33,6 +33,7 @@ from redrive.types import Box3D, DetectedObject, ObjectClass, SensorType
 __all__ = [
     "DERIVED_OBJECT_CLASSES",
     "Detection3DArrayDecoder",
+    "GroundTruthObjectArrayDecoder",
     "MarkerArrayDecoder",
     "ObjectArrayDecoder",
     "object_class_from_text",
@@ -140,29 +141,70 @@ class Detection3DArrayDecoder:
 
     def decode(self, message: LogMessage, deserialize: Deserialize) -> Decoded:
         msg: Any = deserialize(message)
-        out: list[DetectedObject] = []
-        for det in msg.detections:
-            best_class, best_score = "", None
-            for result in det.results:
-                hyp = getattr(result, "hypothesis", None)
-                class_id, score = (
-                    (hyp.class_id, hyp.score) if hyp is not None else (result.id, result.score)
-                )
-                if best_score is None or float(score) > best_score:
-                    best_class, best_score = str(class_id), float(score)
-            bbox = det.bbox
-            center = getattr(bbox, "center", None) or bbox.origin
-            box, orientation = _box(message, center.position, center.orientation, vec3(bbox.size))
-            raw_id = getattr(det, "id", None)
-            if raw_id is None:
-                raw_id = getattr(det, "tracking_id", "")
+        out = [_from_detection(message, det) for det in msg.detections]
+        return Decoded(
+            stamp_ns=header_stamp_ns(msg.header, message),
+            frame_id=str(msg.header.frame_id),
+            value=tuple(out),
+        )
+
+
+def _from_detection(message: LogMessage, det: Any, **extra: Any) -> DetectedObject:
+    """One vision_msgs Detection3D (4.x or noetic layout) as a DetectedObject."""
+    best_class, best_score = "", None
+    for result in det.results:
+        hyp = getattr(result, "hypothesis", None)
+        class_id, score = (
+            (hyp.class_id, hyp.score) if hyp is not None else (result.id, result.score)
+        )
+        if best_score is None or float(score) > best_score:
+            best_class, best_score = str(class_id), float(score)
+    bbox = det.bbox
+    center = getattr(bbox, "center", None) or bbox.origin
+    box, orientation = _box(message, center.position, center.orientation, vec3(bbox.size))
+    raw_id = getattr(det, "id", None)
+    if raw_id is None:
+        raw_id = getattr(det, "tracking_id", "")
+    return DetectedObject(
+        object_id=object_id_from_text(str(raw_id)),
+        object_class=object_class_from_text(best_class),
+        confidence=1.0 if best_score is None else _confidence(best_score),
+        box=box,
+        orientation=orientation,
+        **extra,
+    )
+
+
+class GroundTruthObjectArrayDecoder:
+    """``redrive_msgs/msg/GroundTruthObjectArray`` → DetectedObjects with velocity, LiDAR point
+    counts and visibility (what ``redrive synth`` writes as ground truth)."""
+
+    name = "ground_truth_array"
+    msgtypes: tuple[str, ...] = ("redrive_msgs/msg/GroundTruthObjectArray",)
+    kind = DecodedKind.OBJECTS
+    sensor_type: SensorType | None = None
+
+    def decode(self, message: LogMessage, deserialize: Deserialize) -> Decoded:
+        msg: Any = deserialize(message)
+        n = len(msg.detections)
+        if not len(msg.velocities) == len(msg.num_lidar_points) == len(msg.visible) == n:
+            raise unsupported(
+                message,
+                f"GroundTruthObjectArray has {n} detections but {len(msg.velocities)} velocities, "
+                f"{len(msg.num_lidar_points)} point counts and {len(msg.visible)} visible flags",
+                "the arrays must be parallel; the writer of this log is broken",
+            )
+        out = []
+        for det, vel, points, visible in zip(
+            msg.detections, msg.velocities, msg.num_lidar_points, msg.visible, strict=True
+        ):
             out.append(
-                DetectedObject(
-                    object_id=object_id_from_text(str(raw_id)),
-                    object_class=object_class_from_text(best_class),
-                    confidence=1.0 if best_score is None else _confidence(best_score),
-                    box=box,
-                    orientation=orientation,
+                _from_detection(
+                    message,
+                    det,
+                    velocity=vec3(vel),
+                    num_lidar_points=None if points < 0 else int(points),
+                    visible=None if visible < 0 else bool(visible),
                 )
             )
         return Decoded(

@@ -14,6 +14,7 @@ from redrive.io.decoders.image import CompressedImageDecoder, ImageDecoder
 from redrive.io.decoders.motion import OdometryDecoder, PoseDecoder, TwistDecoder
 from redrive.io.decoders.objects import (
     Detection3DArrayDecoder,
+    GroundTruthObjectArrayDecoder,
     MarkerArrayDecoder,
     ObjectArrayDecoder,
 )
@@ -77,6 +78,7 @@ DEFAULT_DECODERS: Mapping[str, Decoder] = build_registry(
         MarkerArrayDecoder(),
         Detection3DArrayDecoder(),
         ObjectArrayDecoder(),
+        GroundTruthObjectArrayDecoder(),
     ]
 )
 
