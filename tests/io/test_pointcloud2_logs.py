@@ -55,7 +55,7 @@ class Case:
         return out
 
     def data(self) -> bytes:
-        height, width = self.points.shape
+        height = self.points.shape[0]
         rows = [self.points[r].tobytes() + b"\xee" * self.row_pad_bytes for r in range(height)]
         return b"".join(rows)
 
@@ -191,7 +191,7 @@ def test_unusual_layouts_in_real_logs_decode_exactly(tmp_path: Path, kind: str) 
                 assert got.dtype == values.dtype, (case.name, name)
                 np.testing.assert_array_equal(got, values, err_msg=f"{case.name}.{name}")
             seen[message.topic] = seen.get(message.topic, 0) + 1
-    assert seen == {topic: 2 for topic in by_topic}
+    assert seen == dict.fromkeys(by_topic, 2)
 
 
 def test_mapped_bag_messages_outlive_the_reader(tmp_path: Path) -> None:

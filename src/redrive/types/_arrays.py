@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -25,20 +25,21 @@ def frozen_array(
     an array of another dtype is rejected rather than silently cast (so a float64 cloud never
     hides in a float32 field).  Plain Python sequences are converted to the first dtype.
     """
-    many = isinstance(dtype, list | tuple)
+    # Compare against the given dtype(s) directly: this runs for every array of every decoded
+    # message, so no dtype objects are built on the way.
+    candidates: Sequence[Any] = (
+        cast("Sequence[Any]", dtype) if isinstance(dtype, list | tuple) else (dtype,)
+    )
     if isinstance(value, np.ndarray):
         arr = value
-        # Compare against the given dtype(s) directly: this runs for every array of every
-        # decoded message, so no dtype objects are built on the way.
-        if not (any(arr.dtype == d for d in dtype) if many else arr.dtype == dtype):
-            candidates: Sequence[Any] = dtype if many else [dtype]
+        if not any(arr.dtype == d for d in candidates):
             names = ", ".join(str(np.dtype(d)) for d in candidates)
             msg = f"{name}: dtype {arr.dtype} is not accepted (expected {names})"
             raise ValueError(msg)
         if copy:
             arr = arr.copy()
     else:
-        arr = np.array(value, dtype=dtype[0] if many else dtype)
+        arr = np.array(value, dtype=candidates[0])
     have_shape = arr.shape
     ok = len(have_shape) == len(shape)
     if ok:
