@@ -14,12 +14,13 @@ from redrive.errors import RedriveError
 __all__ = ["main"]
 
 #: subcommand modules under redrive.cli, in --help order; each has register(subparsers).
-_COMMANDS = ("info", "convert", "bench")
+_COMMANDS = ("info", "convert", "synth", "bench")
 
 _EPILOG = """\
 examples:
   redrive info drive.bag                 topics, counts, rates, decoders of a log
   redrive convert drive.bag drive.mcap   any log (KITTI too) to MCAP or a ROS 1 bag
+  redrive synth urban -o urban.mcap      simulate a driving scenario into a log
   redrive bench read drive.bag           decoding speed against a raw read
 
 Logs: ROS 1 .bag, ROS 2 bag directories (sqlite3/mcap), .mcap, KITTI object folders.
