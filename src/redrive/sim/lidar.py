@@ -139,6 +139,9 @@ class LidarModel:
         dirs[..., 0] = ca[:, None] * ce[None, :]
         dirs[..., 1] = sa[:, None] * ce[None, :]
         dirs[..., 2] = se[None, :]
+        self._azimuths = azimuths
+        self._cos_elev = ce
+        self._tan_elev = np.tan(elev)
         #: (C, L, 3) unit ray directions in the sensor frame, firing order.
         self.directions = dirs
         self.rings = p.rings()
@@ -190,6 +193,57 @@ class LidarModel:
         pos = poses[s, :3, 3] * (1.0 - f) + poses[s + 1, :3, 3] * f
         return poses[s, :3, :3], pos
 
+    def _may_hit_a_box(
+        self,
+        scene: Scene,
+        rot: npt.NDArray[np.float64],
+        pos: npt.NDArray[np.float64],
+        limit: npt.NDArray[np.float32],
+    ) -> npt.NDArray[np.bool_] | None:
+        """(C·L,) bool: rays that can reach a box before ``limit`` — a conservative cull.
+
+        Per slice, each box's azimuth interval and nearest horizontal distance are computed from
+        the slice's origin (grown by a margin covering the sensor's travel within a slice); a
+        ray needs Embree only if some box covers its column, is nearer than where the ray meets
+        the ground, and (for upward rays) is not already below the ray where the ray reaches it.  Only for an upright
+        sensor (azimuth of a ray = azimuth of its column); ``None`` means cast every ray.
+        """
+        objs = scene.objects
+        if len(objs) == 0 or rot[0, 2, 2] < 1.0 - 1e-9 or np.any(rot[:, 2, 2] < 1.0 - 1e-9):
+            return None
+        p = self.preset
+        cols, lasers = p.columns, p.num_lasers
+        starts = np.flatnonzero(np.r_[True, np.diff(self._slice_of_col) != 0])
+        step = np.linalg.norm(np.diff(pos[starts], axis=0), axis=1) if len(starts) > 1 else [0.0]
+        margin = 0.05 + float(np.max(step, initial=0.0))
+        origin = pos[starts, :2]  # (S, 2)
+        half_diag = 0.5 * np.hypot(objs.sizes[:, 0], objs.sizes[:, 1]) + margin  # (B,)
+        rel = objs.centers[None, :, :2] - origin[:, None, :]  # (S, B, 2)
+        dist_c = np.hypot(rel[..., 0], rel[..., 1])
+        r_min = np.maximum(dist_c - half_diag, 0.0)
+        az_c = np.arctan2(rel[..., 1], rel[..., 0])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            half_width = np.where(
+                dist_c > half_diag, np.arcsin(np.minimum(half_diag / dist_c, 1.0)), np.pi
+            )
+        top = objs.centers[:, 2] + 0.5 * objs.sizes[:, 2]  # (B,)
+        slice_of_col = np.searchsorted(starts, np.arange(cols), side="right") - 1
+        yaw = np.arctan2(rot[:, 1, 0], rot[:, 0, 0])  # sensor yaw per column
+        az_col = yaw + self._azimuths  # (C,)
+        diff = np.abs((az_col[:, None] - az_c[slice_of_col] + np.pi) % (2 * np.pi) - np.pi)
+        covers = diff <= half_width[slice_of_col] + 1e-3  # (C, B)
+        r_col = np.where(covers, r_min[slice_of_col], np.inf).min(axis=1)  # (C,)
+        top_col = np.where(covers, top[None, :], -np.inf).max(axis=1)
+        horiz = limit.reshape(cols, lasers) * self._cos_elev[None, :]
+        r_fin = np.where(np.isfinite(r_col), r_col, 0.0)
+        # an upward ray is lowest where it first reaches a box: it must not already be above all
+        rise = self._tan_elev[None, :] * r_fin[:, None] + pos[:, 2:3]
+        low_enough = (self._tan_elev <= 0.0)[None, :] | (rise <= top_col[:, None] + margin)
+        need = (horiz >= r_col[:, None]) & low_enough
+        need &= np.isfinite(r_col)[:, None]
+        flat: npt.NDArray[np.bool_] = need.reshape(-1)
+        return flat
+
     def scan(
         self,
         scene: Scene,
@@ -218,9 +272,21 @@ class LidarModel:
         with np.errstate(divide="ignore", invalid="ignore"):
             t_ground = np.where((dz < 0.0) & (oz > 0.0), -oz / dz, np.inf)
         limit = np.minimum(t_ground, p.max_range_m * 1.01).astype(np.float32)
-        dist, box, normal = mesh.intersect(
-            np.ascontiguousarray(o, np.float32), np.ascontiguousarray(d, np.float32), limit
-        )
+        cast = self._may_hit_a_box(scene, rot, pos, limit)
+        if cast is None:
+            dist, box, normal = mesh.intersect(
+                np.ascontiguousarray(o, np.float32), np.ascontiguousarray(d, np.float32), limit
+            )
+        else:
+            dist = limit.copy()
+            box = np.full(limit.shape[0], -1, dtype=np.int64)
+            normal = np.zeros((limit.shape[0], 3), dtype=np.float32)
+            sel = np.flatnonzero(cast)
+            dist[sel], box[sel], normal[sel] = mesh.intersect(
+                np.ascontiguousarray(o[sel], np.float32),
+                np.ascontiguousarray(d[sel], np.float32),
+                limit[sel],
+            )
         hit_box = box >= 0
         hit_ground = ~hit_box & (t_ground <= p.max_range_m)
         rng_m = dist.astype(np.float64)
