@@ -28,18 +28,17 @@ $(VENV)/.installed-test: $(VENV)/.installed pyproject.toml
 
 venv: $(VENV)/.installed
 
-## demo: create .venv, install redrive, make a small multi-sensor log and show what redrive sees
+## demo: create .venv, install redrive, simulate 20 s of the built-in `urban` scenario and show
+## what redrive sees in the log
 demo: $(VENV)/.installed
 	@mkdir -p $(DEMO_DIR)
-	$(BIN)/python -m redrive.cli.demo_log $(DEMO_DIR)/demo.bag
-	$(BIN)/redrive info $(DEMO_DIR)/demo.bag
-	$(BIN)/redrive convert $(DEMO_DIR)/demo.bag $(DEMO_DIR)/demo.mcap
-	$(BIN)/redrive info $(DEMO_DIR)/demo.mcap
+	$(BIN)/redrive synth urban --duration 20 -o $(DEMO_DIR)/urban.mcap
+	$(BIN)/redrive info $(DEMO_DIR)/urban.mcap
 
 ## lint: ruff, mypy --strict on src/, import-linter (the layers of DESIGN.md)
 lint: $(VENV)/.installed-test
-	$(BIN)/ruff check src tests
-	$(BIN)/ruff format --check src tests
+	$(BIN)/ruff check src tests benchmarks docs
+	$(BIN)/ruff format --check src tests benchmarks docs
 	$(BIN)/mypy
 	$(BIN)/lint-imports
 

@@ -1,4 +1,4 @@
-"""Write a small multi-sensor ROS 1 bag for ``make demo``: ``python -m redrive.cli.demo_log OUT``.
+"""Write a small multi-sensor ROS 1 bag (tests use it as a real bag written by rosbags): ``python -m redrive.cli.demo_log OUT``.
 
 The ego drives straight at 5 m/s for 5 s past one parked car.  A 16-beam LiDAR sees the ground and
 the car (analytic ray hits, no noise), the IMU and odometry follow the true motion and a GNSS fix
