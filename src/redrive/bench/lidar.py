@@ -9,7 +9,7 @@ baseline, when ``open3d`` is importable (it is never a dependency of redrive), i
 built once, single-threaded: a ceiling for "just cast the rays".  The ratio is redrive sweeps/s
 over Open3D sweeps/s.  Both run pinned to one CPU core (``sched_setaffinity``) so Embree's
 builder threads cannot borrow others.  The camera figure is frames/s of
-:meth:`redrive.sim.camera.CameraModel.render` at 1280 × 720 on the same scene.
+:meth:`redrive.sim.camera.CameraModel.render` at 1280 × 720 on the first scene of the run.
 """
 
 from __future__ import annotations
@@ -81,8 +81,13 @@ def bench_scene(
     ground = GroundMap(origin_xy=np.array([-100.0, -100.0]), resolution_m=0.5, labels=labels)
     # keep 10 m clear around the ego (at the origin): nothing may stand on the sensor
     along = rng.uniform(10.0, 80.0, num_boxes) * rng.choice([-1.0, 1.0], num_boxes)
-    lane = rng.choice([-5.25, -1.75, 1.75, 5.25], num_boxes)
     on_x = rng.random(num_boxes) < 0.6
+    # the ego drives along x in lane y = −1.75: no vehicle shares it (none may run into it)
+    lane = np.where(
+        on_x,
+        rng.choice([-5.25, 1.75, 5.25], num_boxes),
+        rng.choice([-5.25, -1.75, 1.75, 5.25], num_boxes),
+    )
     xy = np.where(on_x[:, None], np.c_[along, lane], np.c_[lane, along])
     forward = np.where(lane > 0, -1.0, 1.0)
     yaw = np.where(
@@ -170,9 +175,10 @@ def _open3d_rays(model: LidarModel, scene: Scene) -> npt.NDArray[np.float32]:
     return np.ascontiguousarray(np.c_[origins, dirs], dtype=np.float32)
 
 
-def _bench_open3d(
-    model: LidarModel, scene: Scene, *, repeats: int
-) -> tuple[str | None, float | None, str]:
+def _open3d_caster(
+    model: LidarModel, scene: Scene
+) -> tuple[str | None, Callable[[], object] | None, str]:
+    """(version, cast-one-sweep callable, note); the callable is None without open3d."""
     try:
         # imported by name: open3d is never a dependency, so it stays untyped (Any) here
         o3d: Any = importlib.import_module("open3d")
@@ -185,10 +191,8 @@ def _bench_open3d(
     )
     verts = np.r_[tris, ground].astype(np.float32)
     n = tris.shape[0]
-    faces = np.r_[
-        np.arange(n, dtype=np.uint32).reshape(-1, 3),
-        np.array([[n, n + 1, n + 2], [n, n + 2, n + 3]], np.uint32),
-    ]
+    quad = np.array([[n, n + 1, n + 2], [n, n + 2, n + 3]], np.uint32)
+    faces = np.r_[np.arange(n, dtype=np.uint32).reshape(-1, 3), quad]
     mesh = o3d.t.geometry.TriangleMesh()
     mesh.vertex.positions = o3d.core.Tensor(verts)
     mesh.triangle.indices = o3d.core.Tensor(faces)
@@ -196,13 +200,12 @@ def _bench_open3d(
     rc.add_triangles(mesh)
     rays = o3d.core.Tensor(_open3d_rays(model, scene))
     rc.cast_rays(rays, nthreads=1)  # builds the BVH lazily: not timed
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        rc.cast_rays(rays, nthreads=1)
-        times.append(time.perf_counter() - t0)
-    note = "static scene built once, cast_rays(nthreads=1), scene build not timed"
-    return str(o3d.__version__), 1.0 / statistics.median(times), note
+
+    def cast() -> object:
+        return rc.cast_rays(rays, nthreads=1)
+
+    note = "static scene built once, cast_rays(nthreads=1), timed alternately with redrive"
+    return str(o3d.__version__), cast, note
 
 
 def bench_lidar(
@@ -225,7 +228,7 @@ def bench_lidar(
         preset, base_from_sensor=lidar_spec.base_from_sensor(), rate_hz=lidar_spec.rate_hz
     )
     camera = CameraModel.from_spec(rig["camera_front"])
-    scene = bench_scene(rng, num_boxes=num_boxes)
+    scene = first = bench_scene(rng, num_boxes=num_boxes)
 
     def ego_pose(sweep: Scene) -> Callable[[int], npt.NDArray[np.float64]]:
         def pose_at(stamp_ns: int) -> npt.NDArray[np.float64]:
@@ -236,26 +239,32 @@ def bench_lidar(
         return pose_at
 
     with _one_core(one_core) as pinned:
-        say("LiDAR (redrive)")
+        version, o3d_cast, note = (None, None, "disabled (--no-open3d)")
+        if open3d:
+            say("Open3D scene")
+            version, o3d_cast, note = _open3d_caster(model, scene)
+        say("LiDAR")
         model.scan(scene, rng)  # warm-up
-        times, points = [], []
+        times, o3d_times, points = [], [], []
         for _ in range(scans):
+            # alternate the two sides so that both see the same machine load
             t0 = time.perf_counter()
             scene = _advance(scene, _SWEEP_NS)
             scan = model.scan(scene, rng, map_from_base_at=ego_pose(scene))
             times.append(time.perf_counter() - t0)
             points.append(len(scan.cloud))
+            if o3d_cast is not None:
+                t0 = time.perf_counter()
+                o3d_cast()
+                o3d_times.append(time.perf_counter() - t0)
         ours = 1.0 / statistics.median(times)
-        version, theirs, note = (None, None, "disabled (--no-open3d)")
-        if open3d:
-            say("LiDAR (Open3D)")
-            version, theirs, note = _bench_open3d(model, scene, repeats=max(scans // 2, 5))
+        theirs = 1.0 / statistics.median(o3d_times) if o3d_times else None
         say("camera")
-        camera.render(scene)
+        camera.render(first)
         cam_times = []
         for _ in range(camera_frames):
             t0 = time.perf_counter()
-            camera.render(scene)
+            camera.render(first)
             cam_times.append(time.perf_counter() - t0)
     intr = camera.intrinsics
     return LidarBenchResult(

@@ -89,7 +89,8 @@ class LidarModel:
         rate_hz: sweeps per second (rotation rate; a 2D scanner's scan rate).
         range_std_m: 1-σ Gaussian range noise (default: the preset's accuracy).
         dropout: probability that a return is lost.
-        num_slices: azimuth slices with their own pose (default: one per 10 columns).
+        num_slices: azimuth slices with their own pose (default: one per 20 columns, 4° for an
+            HDL-32E; translation is interpolated per column within a slice).
         start_azimuth_rad: azimuth of the first column of a spinning unit.
         frame_id: frame id of the clouds.
     """
@@ -139,13 +140,12 @@ class LidarModel:
         dirs[..., 0] = ca[:, None] * ce[None, :]
         dirs[..., 1] = sa[:, None] * ce[None, :]
         dirs[..., 2] = se[None, :]
-        self._azimuths = azimuths
-        self._cos_elev = ce
+        self._cos_elev32 = ce.astype(np.float32)
         self._tan_elev = np.tan(elev)
         #: (C, L, 3) unit ray directions in the sensor frame, firing order.
         self.directions = dirs
         self.rings = p.rings()
-        self.num_slices = max(1, min(cols, num_slices if num_slices else max(1, cols // 10)))
+        self.num_slices = max(1, min(cols, num_slices if num_slices else max(1, cols // 20)))
         span = col_t[-1] + (col_t[1] - col_t[0] if cols > 1 else 1.0)
         self._slice_of_col = np.minimum(
             (col_t / span * self.num_slices).astype(np.int64), self.num_slices - 1
@@ -153,6 +153,17 @@ class LidarModel:
         self._slice_t = np.linspace(0.0, span, self.num_slices + 1)
         frac = (col_t - self._slice_t[self._slice_of_col]) / (span / self.num_slices)
         self._frac_of_col = frac
+        self._slice_starts = np.flatnonzero(np.r_[True, np.diff(self._slice_of_col) != 0])
+        # azimuth span of each slice, relative to the sensor's x axis
+        first = azimuths[self._slice_starts]
+        last = azimuths[np.r_[self._slice_starts[1:] - 1, cols - 1]]
+        self._slice_mid_az = 0.5 * (first + last)
+        self._slice_half_az = 0.5 * np.abs(last - first) + step
+        self._dirs32 = np.ascontiguousarray(dirs.reshape(-1, 3), dtype=np.float32)
+        local32 = dirs.astype(np.float32)
+        self._local_xyz = (local32[..., 0], local32[..., 1], local32[..., 2])
+        self._ring_flat = np.tile(self.rings, cols)
+        self._t_off_flat = np.repeat(self.col_offset_ns, p.num_lasers).astype(np.uint32)
 
     @classmethod
     def from_spec(cls, spec: SensorSpec, *, num_slices: int | None = None) -> LidarModel:
@@ -173,15 +184,15 @@ class LidarModel:
     def _sensor_poses(
         self, scene: Scene, map_from_base_at: PoseAt | None
     ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-        """Per column: rotation (C, 3, 3) map_from_sensor, sensor position (C, 3) in the map."""
-        cols = self.preset.columns
+        """Per slice the rotation (S, 3, 3) map_from_sensor; per column the position (C, 3)."""
+        cols, slices = self.preset.columns, self.num_slices
         if map_from_base_at is None:
             pose = scene.map_from_base @ self.base_from_sensor
             return (
-                np.broadcast_to(pose[:3, :3], (cols, 3, 3)),
+                np.broadcast_to(pose[:3, :3], (slices, 3, 3)),
                 np.broadcast_to(pose[:3, 3], (cols, 3)),
             )
-        poses = np.empty((self.num_slices + 1, 4, 4))
+        poses = np.empty((slices + 1, 4, 4))
         for b, t in enumerate(self._slice_t):
             mat = np.asarray(map_from_base_at(scene.stamp_ns + round(t)), dtype=np.float64)
             if mat.shape != (4, 4):
@@ -191,7 +202,7 @@ class LidarModel:
         s = self._slice_of_col
         f = self._frac_of_col[:, None]
         pos = poses[s, :3, 3] * (1.0 - f) + poses[s + 1, :3, 3] * f
-        return poses[s, :3, :3], pos
+        return poses[:slices, :3, :3], pos
 
     def _may_hit_a_box(
         self,
@@ -200,25 +211,23 @@ class LidarModel:
         pos: npt.NDArray[np.float64],
         limit: npt.NDArray[np.float32],
     ) -> npt.NDArray[np.bool_] | None:
-        """(C·L,) bool: rays that can reach a box before ``limit`` — a conservative cull.
+        """(C, L) bool: rays that can reach a box before ``limit`` — a conservative cull.
 
-        Per slice, each box's azimuth interval and nearest horizontal distance are computed from
-        the slice's origin (grown by a margin covering the sensor's travel within a slice); a
-        ray needs Embree only if some box covers its column, is nearer than where the ray meets
-        the ground, and (for upward rays) is not already below the ray where the ray reaches it.  Only for an upright
-        sensor (azimuth of a ray = azimuth of its column); ``None`` means cast every ray.
+        Per slice, each box's azimuth interval (the angle its footprint's circumscribed circle
+        subtends) and nearest horizontal distance are computed from the slice's first origin,
+        grown by a margin covering the sensor's travel within the slice.  A ray needs Embree
+        only if some box overlaps its slice, is nearer than where the ray meets the ground, and
+        (for upward rays) is not already below the ray where the ray reaches it.  Only for an
+        upright sensor (a ray's azimuth is its column's); ``None`` means cast every ray.
         """
         objs = scene.objects
-        if len(objs) == 0 or rot[0, 2, 2] < 1.0 - 1e-9 or np.any(rot[:, 2, 2] < 1.0 - 1e-9):
+        if len(objs) == 0 or np.any(rot[:, 2, 2] < 1.0 - 1e-9):
             return None
-        p = self.preset
-        cols, lasers = p.columns, p.num_lasers
-        starts = np.flatnonzero(np.r_[True, np.diff(self._slice_of_col) != 0])
-        step = np.linalg.norm(np.diff(pos[starts], axis=0), axis=1) if len(starts) > 1 else [0.0]
+        starts = self._slice_starts
+        step = np.linalg.norm(np.diff(pos[np.r_[starts, -1]], axis=0), axis=1)
         margin = 0.05 + float(np.max(step, initial=0.0))
-        origin = pos[starts, :2]  # (S, 2)
+        rel = objs.centers[None, :, :2] - pos[starts, None, :2]  # (S, B, 2)
         half_diag = 0.5 * np.hypot(objs.sizes[:, 0], objs.sizes[:, 1]) + margin  # (B,)
-        rel = objs.centers[None, :, :2] - origin[:, None, :]  # (S, B, 2)
         dist_c = np.hypot(rel[..., 0], rel[..., 1])
         r_min = np.maximum(dist_c - half_diag, 0.0)
         az_c = np.arctan2(rel[..., 1], rel[..., 0])
@@ -226,23 +235,23 @@ class LidarModel:
             half_width = np.where(
                 dist_c > half_diag, np.arcsin(np.minimum(half_diag / dist_c, 1.0)), np.pi
             )
+        yaw = np.arctan2(rot[:, 1, 0], rot[:, 0, 0])  # (S,)
+        az_s = yaw + self._slice_mid_az  # centre of each slice's azimuth span, map frame
+        diff = np.abs((az_s[:, None] - az_c + np.pi) % (2.0 * np.pi) - np.pi)
+        covers = diff <= half_width + self._slice_half_az[:, None] + 1e-3  # (S, B)
+        r_slice = np.where(covers, r_min, np.inf).min(axis=1)  # (S,)
         top = objs.centers[:, 2] + 0.5 * objs.sizes[:, 2]  # (B,)
-        slice_of_col = np.searchsorted(starts, np.arange(cols), side="right") - 1
-        yaw = np.arctan2(rot[:, 1, 0], rot[:, 0, 0])  # sensor yaw per column
-        az_col = yaw + self._azimuths  # (C,)
-        diff = np.abs((az_col[:, None] - az_c[slice_of_col] + np.pi) % (2 * np.pi) - np.pi)
-        covers = diff <= half_width[slice_of_col] + 1e-3  # (C, B)
-        r_col = np.where(covers, r_min[slice_of_col], np.inf).min(axis=1)  # (C,)
-        top_col = np.where(covers, top[None, :], -np.inf).max(axis=1)
-        horiz = limit.reshape(cols, lasers) * self._cos_elev[None, :]
-        r_fin = np.where(np.isfinite(r_col), r_col, 0.0)
-        # an upward ray is lowest where it first reaches a box: it must not already be above all
-        rise = self._tan_elev[None, :] * r_fin[:, None] + pos[:, 2:3]
-        low_enough = (self._tan_elev <= 0.0)[None, :] | (rise <= top_col[:, None] + margin)
-        need = (horiz >= r_col[:, None]) & low_enough
-        need &= np.isfinite(r_col)[:, None]
-        flat: npt.NDArray[np.bool_] = need.reshape(-1)
-        return flat
+        top_slice = np.where(covers, top[None, :], -np.inf).max(axis=1)
+        r_col = r_slice[self._slice_of_col][:, None]  # (C, 1)
+        top_col = top_slice[self._slice_of_col][:, None]
+        horiz = limit * self._cos_elev32[None, :]
+        need: npt.NDArray[np.bool_] = horiz >= r_col  # False where no box (r = inf)
+        up = self._tan_elev > 0.0
+        if up.any():
+            r_fin = np.where(np.isfinite(r_col), r_col, 0.0)
+            rise = self._tan_elev[None, up] * r_fin + pos[:, 2:3]
+            need[:, up] &= rise <= top_col + margin
+        return need
 
     def scan(
         self,
@@ -263,60 +272,65 @@ class LidarModel:
         rot, pos = self._sensor_poses(scene, map_from_base_at)
         origin = pos[0].copy()
         mesh = BoxMesh.from_objects(scene.objects, origin=origin)
-        dirs_map = np.matmul(self.directions, np.swapaxes(rot, 1, 2))  # (C, L, 3)
-        lasers = p.num_lasers
-        d = dirs_map.reshape(-1, 3)
-        o = np.repeat(pos - origin, lasers, axis=0)
-        oz = np.repeat(pos[:, 2], lasers)
-        dz = d[:, 2]
+        # ray directions in the map frame, (C, L) per component, float32
+        r_col = rot[self._slice_of_col].astype(np.float32)  # (C, 3, 3)
+        lx, ly, lz = self._local_xyz
+        dx = r_col[:, 0, 0:1] * lx + r_col[:, 0, 1:2] * ly + r_col[:, 0, 2:3] * lz
+        dy = r_col[:, 1, 0:1] * lx + r_col[:, 1, 1:2] * ly + r_col[:, 1, 2:3] * lz
+        dz = r_col[:, 2, 0:1] * lx + r_col[:, 2, 1:2] * ly + r_col[:, 2, 2:3] * lz
+        oz = pos[:, 2:3].astype(np.float32)  # (C, 1)
         with np.errstate(divide="ignore", invalid="ignore"):
-            t_ground = np.where((dz < 0.0) & (oz > 0.0), -oz / dz, np.inf)
-        limit = np.minimum(t_ground, p.max_range_m * 1.01).astype(np.float32)
+            t_ground = np.where((dz < 0.0) & (oz > 0.0), -oz / dz, np.float32(np.inf))
+        limit = np.minimum(t_ground, np.float32(p.max_range_m * 1.01))
         cast = self._may_hit_a_box(scene, rot, pos, limit)
-        if cast is None:
-            dist, box, normal = mesh.intersect(
-                np.ascontiguousarray(o, np.float32), np.ascontiguousarray(d, np.float32), limit
-            )
-        else:
-            dist = limit.copy()
-            box = np.full(limit.shape[0], -1, dtype=np.int64)
-            normal = np.zeros((limit.shape[0], 3), dtype=np.float32)
-            sel = np.flatnonzero(cast)
-            dist[sel], box[sel], normal[sel] = mesh.intersect(
-                np.ascontiguousarray(o[sel], np.float32),
-                np.ascontiguousarray(d[sel], np.float32),
-                limit[sel],
-            )
+        sel = np.arange(dz.size) if cast is None else np.flatnonzero(cast)
+        dist = limit.reshape(-1).copy()
+        box = np.full(dz.size, -1, dtype=np.int64)
+        if sel.size:
+            dirs = np.empty((sel.size, 3), dtype=np.float32)
+            dirs[:, 0] = dx.reshape(-1)[sel]
+            dirs[:, 1] = dy.reshape(-1)[sel]
+            dirs[:, 2] = dz.reshape(-1)[sel]
+            orig = (pos - origin).astype(np.float32)[sel // p.num_lasers]
+            dist_sel, box_sel, normal_sel = mesh.intersect(orig, dirs, limit.reshape(-1)[sel])
+            dist[sel] = dist_sel
+            box[sel] = box_sel
         hit_box = box >= 0
-        hit_ground = ~hit_box & (t_ground <= p.max_range_m)
-        rng_m = dist.astype(np.float64)
-        keep = (hit_box | hit_ground) & (rng_m >= p.min_range_m) & (rng_m <= p.max_range_m)
-        n_rays = keep.shape[0]
-        noise = rng.standard_normal(n_rays) * self.range_std_m if self.range_std_m > 0 else 0.0
+        keep = hit_box | (t_ground.reshape(-1) <= p.max_range_m)
+        keep &= (dist >= p.min_range_m) & (dist <= p.max_range_m)
         if self.dropout > 0:
-            keep &= rng.random(n_rays) >= self.dropout
+            keep &= rng.random(keep.size) >= self.dropout
         idx = np.flatnonzero(keep)
-        r = (rng_m + noise)[idx]
-        local = self.directions.reshape(-1, 3)[idx]
-        xyz = (local * r[:, None]).astype(np.float32)
+        r = dist[idx]
+        if self.range_std_m > 0:
+            r = r + rng.standard_normal(idx.size, dtype=np.float32) * np.float32(self.range_std_m)
+        xyz = self._dirs32[idx] * r[:, None]
         # intensity: reflectivity × |cos(incidence)|
-        refl = np.empty(idx.shape[0], dtype=np.float32)
-        cos_i = np.empty(idx.shape[0], dtype=np.float32)
+        refl = np.empty(idx.size, dtype=np.float32)
+        cos_i = np.empty(idx.size, dtype=np.float32)
         kb = hit_box[idx]
-        bi = box[idx][kb]
+        bi = box[idx[kb]]
         refl[kb] = scene.objects.reflectivity[bi]
-        ng = normal[idx][kb].astype(np.float64)
-        dk = d[idx][kb]
-        norm = np.linalg.norm(ng, axis=1)
-        cos_i[kb] = np.abs(np.einsum("ij,ij->i", ng, dk)) / np.maximum(norm, 1e-12)
+        if sel.size and kb.any():
+            # normals of the box hits: find each kept box point in ``sel``
+            pos_in_sel = np.searchsorted(sel, idx[kb])
+            ng = normal_sel[pos_in_sel]
+            dk = np.stack(
+                [dx.reshape(-1)[idx[kb]], dy.reshape(-1)[idx[kb]], dz.reshape(-1)[idx[kb]]], axis=1
+            )
+            norm = np.linalg.norm(ng, axis=1)
+            cos_i[kb] = np.abs(np.einsum("ij,ij->i", ng, dk)) / np.maximum(norm, 1e-12)
         kg = ~kb
         gi = idx[kg]
-        ground_xy = pos[gi // lasers, :2] + d[gi, :2] * rng_m[gi, None]
+        col = gi // p.num_lasers
+        ground_xy = np.empty((gi.size, 2))
+        ground_xy[:, 0] = pos[col, 0] + dx.reshape(-1)[gi] * dist[gi]
+        ground_xy[:, 1] = pos[col, 1] + dy.reshape(-1)[gi] * dist[gi]
         refl[kg] = _GROUND_LUT[scene.ground.label_at(ground_xy)]
-        cos_i[kg] = np.abs(dz[gi])
-        intensity = np.clip(255.0 * refl * cos_i, 0.0, 255.0).astype(np.float32)
-        ring = np.tile(self.rings, p.columns)[idx]
-        t_off = np.repeat(self.col_offset_ns, lasers)[idx].astype(np.uint32)
+        cos_i[kg] = np.abs(dz.reshape(-1)[gi])
+        intensity = np.minimum(np.float32(255.0) * refl * cos_i, np.float32(255.0))
+        ring = self._ring_flat[idx]
+        t_off = self._t_off_flat[idx]
         ids_all = scene.objects.object_ids
         point_ids = np.full(idx.shape[0], -1, dtype=np.int64)
         point_ids[kb] = ids_all[bi]
