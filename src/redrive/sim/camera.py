@@ -114,6 +114,8 @@ class CameraModel:
         rays[..., 2] = 1.0
         #: (H, W, 3) optical-frame rays with z = 1 (so distance along a ray = depth).
         self.rays = rays
+        self._x = u.astype(np.float32)
+        self._y = v.astype(np.float32)
         self._ray_len = np.linalg.norm(rays, axis=2)
 
     @classmethod
@@ -142,19 +144,28 @@ class CameraModel:
         h, w = k.height, k.width
         rot = map_from_opt[:3, :3].astype(np.float32)
         cam = map_from_opt[:3, 3]
-        d = self.rays.reshape(-1, 3) @ rot.T  # (HW, 3) map-frame rays, optical z = 1
-        dz = d[:, 2]
-        # sky gradient by elevation
-        elev = np.clip(dz / self._ray_len.reshape(-1), 0.0, 1.0) ** 0.6
-        color = _SKY_HORIZON + elev[:, None] * (_SKY_ZENITH - _SKY_HORIZON)
+        # map-frame rays (optical z = 1) per component, from the pixel grid: R @ (x, y, 1)
+        x, y = self._x[None, :], self._y[:, None]
+        dx = (rot[0, 0] * x + rot[0, 1] * y + rot[0, 2]).reshape(-1)
+        dy = (rot[1, 0] * x + rot[1, 1] * y + rot[1, 2]).reshape(-1)
+        dz = (rot[2, 0] * x + rot[2, 1] * y + rot[2, 2]).reshape(-1)
+        ray_len = self._ray_len.reshape(-1)
+        color = np.empty((h * w, 3), dtype=np.float32)
         depth = np.full(h * w, np.inf, dtype=np.float32)
-        # ground
-        if cam[2] > 0:
-            g = np.flatnonzero(dz < -1e-6)
+        ground = (dz < -1e-6) if cam[2] > 0 else np.zeros(h * w, dtype=bool)
+        # sky: gradient by elevation
+        sky = np.flatnonzero(~ground)
+        elev = np.sqrt(np.clip(dz[sky] / ray_len[sky], 0.0, 1.0))
+        color[sky] = _SKY_HORIZON + elev[:, None] * (_SKY_ZENITH - _SKY_HORIZON)
+        # ground: ray / plane z = 0, label colour, haze with distance
+        g = np.flatnonzero(ground)
+        if g.size:
             t = (-cam[2] / dz[g]).astype(np.float32)
-            xy = cam[:2] + d[g, :2] * t[:, None]
+            xy = np.empty((g.size, 2))
+            xy[:, 0] = cam[0] + dx[g] * t
+            xy[:, 1] = cam[1] + dy[g] * t
             albedo = _GROUND_LUT[scene.ground.label_at(xy)]
-            fog = np.exp(-(t * self._ray_len.reshape(-1)[g]) / self.fog_distance_m)[:, None]
+            fog = np.exp(t * ray_len[g] * np.float32(-1.0 / self.fog_distance_m))[:, None]
             color[g] = albedo * fog + _SKY_HORIZON * (1.0 - fog)
             depth[g] = t
         owner = np.full((h, w), -1, dtype=np.int32)

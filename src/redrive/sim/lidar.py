@@ -277,7 +277,10 @@ class LidarModel:
         lx, ly, lz = self._local_xyz
         dx = r_col[:, 0, 0:1] * lx + r_col[:, 0, 1:2] * ly + r_col[:, 0, 2:3] * lz
         dy = r_col[:, 1, 0:1] * lx + r_col[:, 1, 1:2] * ly + r_col[:, 1, 2:3] * lz
-        dz = r_col[:, 2, 0:1] * lx + r_col[:, 2, 1:2] * ly + r_col[:, 2, 2:3] * lz
+        if np.all(rot[:, 2, :] == (0.0, 0.0, 1.0)):
+            dz = lz  # upright sensor (the usual mount): heights need no rotation
+        else:
+            dz = r_col[:, 2, 0:1] * lx + r_col[:, 2, 1:2] * ly + r_col[:, 2, 2:3] * lz
         oz = pos[:, 2:3].astype(np.float32)  # (C, 1)
         with np.errstate(divide="ignore", invalid="ignore"):
             t_ground = np.where((dz < 0.0) & (oz > 0.0), -oz / dz, np.float32(np.inf))
