@@ -240,3 +240,12 @@ def test_world_frame_offsets_keep_precision() -> None:
     pts = transform_points(compose(pose, _mount()), scan.cloud.xyz.astype(np.float64))
     assert _distance_to_box(pts[scan.object_ids == 1], boxes[0]).max() < 2e-3
     assert invert(pose).shape == (4, 4)
+
+
+def test_ground_label_lookup_matches_the_scene_contract() -> None:
+    from redrive.sim.lidar import _ground_labels
+
+    labels = np.random.default_rng(0).integers(0, 5, (7, 9)).astype(np.uint8)
+    ground = GroundMap(origin_xy=np.array([-3.0, 2.0]), resolution_m=0.5, labels=labels)
+    xy = np.random.default_rng(1).uniform(-6.0, 8.0, (5000, 2))
+    assert np.array_equal(_ground_labels(ground, xy[:, 0], xy[:, 1]), ground.label_at(xy))

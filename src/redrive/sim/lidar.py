@@ -30,7 +30,7 @@ from redrive.errors import SimulationError
 from redrive.sim.lidar_presets import LidarPreset, lidar_preset
 from redrive.sim.mesh import BoxMesh
 from redrive.sim.rig import SensorSpec
-from redrive.sim.scene import GroundLabel, Scene
+from redrive.sim.scene import GroundLabel, GroundMap, Scene
 from redrive.types import PointCloud, SensorType
 from redrive.types._arrays import frozen_array
 
@@ -52,6 +52,21 @@ GROUND_REFLECTIVITY: Mapping[GroundLabel, float] = MappingProxyType(
 _GROUND_LUT = np.zeros(256, dtype=np.float32)
 for _label, _refl in GROUND_REFLECTIVITY.items():
     _GROUND_LUT[int(_label)] = _refl
+
+
+def _ground_labels(
+    ground: GroundMap, x: npt.NDArray[np.float64], y: npt.NDArray[np.float64]
+) -> npt.NDArray[np.uint8]:
+    """:meth:`GroundMap.label_at` for points given as two 1-D arrays (no (N, 2) temporaries)."""
+    inv = 1.0 / ground.resolution_m
+    h, w = ground.labels.shape
+    col = np.floor((x - ground.origin_xy[0]) * inv).astype(np.int64)
+    row = np.floor((y - ground.origin_xy[1]) * inv).astype(np.int64)
+    inside = (col >= 0) & (col < w) & (row >= 0) & (row < h)
+    flat = np.where(inside, row * w + col, 0)
+    labels = np.take(ground.labels.reshape(-1), flat)
+    out: npt.NDArray[np.uint8] = np.where(inside, labels, np.uint8(GroundLabel.GRASS))
+    return out
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -159,7 +174,8 @@ class LidarModel:
         last = azimuths[np.r_[self._slice_starts[1:] - 1, cols - 1]]
         self._slice_mid_az = 0.5 * (first + last)
         self._slice_half_az = 0.5 * np.abs(last - first) + step
-        self._dirs32 = np.ascontiguousarray(dirs.reshape(-1, 3), dtype=np.float32)
+        flat32 = dirs.reshape(-1, 3).astype(np.float32)
+        self._dirs_flat = tuple(np.ascontiguousarray(flat32[:, a]) for a in range(3))
         local32 = dirs.astype(np.float32)
         self._local_xyz = (local32[..., 0], local32[..., 1], local32[..., 2])
         self._ring_flat = np.tile(self.rings, cols)
@@ -307,36 +323,40 @@ class LidarModel:
         r = dist[idx]
         if self.range_std_m > 0:
             r = r + rng.standard_normal(idx.size, dtype=np.float32) * np.float32(self.range_std_m)
-        xyz = self._dirs32[idx] * r[:, None]
+        xyz = np.empty((idx.size, 3), dtype=np.float32)
+        for axis in range(3):
+            np.multiply(np.take(self._dirs_flat[axis], idx), r, out=xyz[:, axis])
+        dxf, dyf, dzf = dx.reshape(-1), dy.reshape(-1), dz.reshape(-1)
         # intensity: reflectivity × |cos(incidence)|
         refl = np.empty(idx.size, dtype=np.float32)
         cos_i = np.empty(idx.size, dtype=np.float32)
-        kb = hit_box[idx]
-        bi = box[idx[kb]]
-        refl[kb] = scene.objects.reflectivity[bi]
-        if sel.size and kb.any():
-            # normals of the box hits: find each kept box point in ``sel``
-            pos_in_sel = np.searchsorted(sel, idx[kb])
-            ng = normal_sel[pos_in_sel]
-            dk = np.stack(
-                [dx.reshape(-1)[idx[kb]], dy.reshape(-1)[idx[kb]], dz.reshape(-1)[idx[kb]]], axis=1
-            )
-            norm = np.linalg.norm(ng, axis=1)
-            cos_i[kb] = np.abs(np.einsum("ij,ij->i", ng, dk)) / np.maximum(norm, 1e-12)
+        kb = np.take(hit_box, idx)
+        ib = idx[kb]
+        bi = np.take(box, ib)
+        refl[kb] = np.take(scene.objects.reflectivity, bi)
+        if ib.size:
+            # normals of the box hits: where each kept box point sits in ``sel``
+            where_in_sel = np.empty(dz.size, dtype=np.int64)
+            where_in_sel[sel] = np.arange(sel.size)
+            ng = normal_sel[np.take(where_in_sel, ib)].astype(np.float32)
+            nx, ny, nz = ng[:, 0], ng[:, 1], ng[:, 2]
+            dot = nx * np.take(dxf, ib) + ny * np.take(dyf, ib) + nz * np.take(dzf, ib)
+            norm = np.sqrt(nx * nx + ny * ny + nz * nz)
+            cos_i[kb] = np.abs(dot) / np.maximum(norm, np.float32(1e-12))
         kg = ~kb
         gi = idx[kg]
         col = gi // p.num_lasers
-        ground_xy = np.empty((gi.size, 2))
-        ground_xy[:, 0] = pos[col, 0] + dx.reshape(-1)[gi] * dist[gi]
-        ground_xy[:, 1] = pos[col, 1] + dy.reshape(-1)[gi] * dist[gi]
-        refl[kg] = _GROUND_LUT[scene.ground.label_at(ground_xy)]
-        cos_i[kg] = np.abs(dz.reshape(-1)[gi])
+        dist_g = np.take(dist, gi)
+        gx = np.take(pos[:, 0], col) + np.take(dxf, gi) * dist_g
+        gy = np.take(pos[:, 1], col) + np.take(dyf, gi) * dist_g
+        refl[kg] = _GROUND_LUT[_ground_labels(scene.ground, gx, gy)]
+        cos_i[kg] = np.abs(np.take(dzf, gi))
         intensity = np.minimum(np.float32(255.0) * refl * cos_i, np.float32(255.0))
-        ring = self._ring_flat[idx]
-        t_off = self._t_off_flat[idx]
+        ring = np.take(self._ring_flat, idx)
+        t_off = np.take(self._t_off_flat, idx)
         ids_all = scene.objects.object_ids
-        point_ids = np.full(idx.shape[0], -1, dtype=np.int64)
-        point_ids[kb] = ids_all[bi]
+        point_ids = np.full(idx.size, -1, dtype=np.int64)
+        point_ids[kb] = np.take(ids_all, bi)
         counts = np.bincount(bi, minlength=len(ids_all))
         hits = MappingProxyType({int(i): int(c) for i, c in zip(ids_all, counts, strict=True)})
         cloud = PointCloud(
