@@ -14,6 +14,8 @@ from redrive.types._arrays import frozen_array, frozen_vector
 
 __all__ = ["IMAGE_ENCODINGS", "GnssFix", "Image", "Imu", "PointCloud"]
 
+_F32 = np.dtype(np.float32)
+
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class PointCloud:
@@ -29,8 +31,18 @@ class PointCloud:
     channels: Mapping[str, npt.NDArray[Any]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        xyz = frozen_array(self.xyz, name="PointCloud.xyz", dtype=np.float32, shape=(None, 3))
-        object.__setattr__(self, "xyz", xyz)
+        xyz = self.xyz
+        if not (
+            type(xyz) is np.ndarray
+            and xyz.dtype == _F32
+            and xyz.ndim == 2
+            and xyz.shape[1] == 3
+            and not xyz.flags.writeable
+        ):
+            # Every decoded cloud passes here; the check above lets an already read-only float32
+            # (N, 3) array through without the general path's cost.
+            xyz = frozen_array(xyz, name="PointCloud.xyz", dtype=np.float32, shape=(None, 3))
+            object.__setattr__(self, "xyz", xyz)
         n = xyz.shape[0]
         checked: dict[str, npt.NDArray[Any]] = {}
         for key, given in self.channels.items():
@@ -38,9 +50,13 @@ class PointCloud:
             if values.dtype.fields is not None:
                 msg = f"PointCloud.channels[{key!r}]: structured arrays are not allowed"
                 raise ValueError(msg)
-            checked[key] = frozen_array(
-                values, name=f"PointCloud.channels[{key!r}]", dtype=values.dtype, shape=(n,)
-            )
+            if values.ndim != 1 or values.shape[0] != n:
+                msg = f"PointCloud.channels[{key!r}]: shape {values.shape} does not match ({n},)"
+                raise ValueError(msg)
+            if values.flags.writeable:
+                values = values.view()  # freeze a view, never the caller's array
+                values.flags.writeable = False
+            checked[key] = values
         object.__setattr__(self, "channels", MappingProxyType(checked))
 
     def __len__(self) -> int:

@@ -332,22 +332,32 @@ def _points_view(
 
 def _xyz(points: npt.NDArray[Any], dtype: np.dtype[Any]) -> npt.NDArray[np.float32]:
     """x, y, z copied once into a float32 (N, 3) C-contiguous array (cast when not float32)."""
+    packed = _packed_xyz(dtype)
+    if packed is not None:
+        # Copy the 12 bytes as opaque records (a plain memcpy each, fast even when unaligned),
+        # then reinterpret them as three native float32.
+        records = points.view(packed)["xyz"].copy()
+        xyz: npt.NDArray[np.float32] = records.view(np.float32).reshape(points.shape[0], 3)
+    else:
+        xyz = np.empty((points.shape[0], 3), dtype=np.float32)
+        with np.errstate(over="ignore", invalid="ignore"):
+            for i, axis in enumerate("xyz"):
+                xyz[:, i] = points[axis]
+    xyz.flags.writeable = False  # PointCloud takes it as it is
+    return xyz
+
+
+@functools.lru_cache(maxsize=64)
+def _packed_xyz(dtype: np.dtype[Any]) -> np.dtype[Any] | None:
+    """A one-member ``V12`` dtype over x, y, z when they are adjacent native float32, else None."""
     fields = dtype.fields
     assert fields is not None
     (tx, ox), (ty, oy), (tz, oz) = ((fields[a][0], int(fields[a][1])) for a in "xyz")
-    if tx == ty == tz == np.dtype(np.float32) and oy == ox + 4 and oz == ox + 8:
-        # Copy the 12 bytes as opaque records (a plain memcpy each, fast even when unaligned),
-        # then reinterpret them as three native float32.
-        packed = np.dtype(
-            {"names": ["xyz"], "formats": ["V12"], "offsets": [ox], "itemsize": dtype.itemsize}
-        )
-        records = points.view(packed)["xyz"].copy()
-        return records.view(np.float32).reshape(points.shape[0], 3)
-    xyz = np.empty((points.shape[0], 3), dtype=np.float32)
-    with np.errstate(over="ignore", invalid="ignore"):
-        for i, axis in enumerate("xyz"):
-            xyz[:, i] = points[axis]
-    return xyz
+    if not (tx == ty == tz == np.dtype(np.float32) and oy == ox + 4 and oz == ox + 8):
+        return None
+    return np.dtype(
+        {"names": ["xyz"], "formats": ["V12"], "offsets": [ox], "itemsize": dtype.itemsize}
+    )
 
 
 class PointCloud2Decoder:
