@@ -138,3 +138,22 @@ def test_bad_duration_is_refused(tmp_path: Path) -> None:
     with pytest.raises(SimulationError, match="duration"):
         synthesize(_small("urban"), tmp_path / "x.mcap", duration_s=0.0)
     assert not (tmp_path / "x.mcap").exists()
+
+
+def test_every_message_decodes_with_an_independent_ros2_reader(tmp_path: Path) -> None:
+    """mcap-ros2-support (what Foxglove-style tools use) parses every schema and message."""
+    decoder = pytest.importorskip("mcap_ros2.decoder")
+    from mcap.reader import make_reader
+
+    synthesize(_small("urban"), tmp_path / "u.mcap", duration_s=0.5)
+    counts: dict[str, int] = {}
+    with (tmp_path / "u.mcap").open("rb") as fh:
+        reader = make_reader(fh, decoder_factories=[decoder.DecoderFactory()])
+        for _, channel, _, msg in reader.iter_decoded_messages():
+            counts[channel.topic] = counts.get(channel.topic, 0) + 1
+            if channel.topic == "/ground_truth/objects":
+                assert len(msg.detections) == len(msg.num_lidar_points) == len(msg.visible)
+            if channel.topic == "/lidar_2d":
+                assert len(msg.ranges) == 1081  # UTM-30LX: 270° in 0.25° steps
+    assert counts["/lidar_top"] == 5
+    assert counts["/imu"] == 50
