@@ -23,6 +23,7 @@ from redrive.geometry.se3 import (
 from redrive.types import Box3D, DetectedObject
 
 __all__ = [
+    "BOX_CORNER_SIGNS",
     "box_corners",
     "points_in_box",
     "transform_box",
@@ -56,7 +57,7 @@ def transform_object(dst_from_src: npt.ArrayLike, obj: DetectedObject) -> Detect
 
 #: Corner signs (length, width, height) in :func:`box_corners` order: the bottom face
 #: front-left, rear-left, rear-right, front-right, then the top face in the same order.
-_CORNER_SIGNS = np.array(
+BOX_CORNER_SIGNS: npt.NDArray[np.float64] = np.array(
     [
         [1, 1, -1],
         [-1, 1, -1],
@@ -77,7 +78,7 @@ def box_corners(box: Box3D) -> npt.NDArray[np.float64]:
     Order: bottom face (z − h/2) front-left, rear-left, rear-right, front-right, then the top
     face (z + h/2) in the same order; "front" is +x of the box (its heading).
     """
-    local = _CORNER_SIGNS * (0.5 * box.size)
+    local = BOX_CORNER_SIGNS * (0.5 * box.size)
     out: npt.NDArray[np.float64] = local @ rotation_matrix_from_yaw(box.yaw_rad).T + box.center
     return out
 

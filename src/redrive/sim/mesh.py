@@ -13,26 +13,13 @@ import numpy as np
 import numpy.typing as npt
 from embreex import mesh_construction, rtcore_scene
 
+from redrive.geometry.boxes import BOX_CORNER_SIGNS
 from redrive.sim.scene import SceneObjects
 
 __all__ = ["TRIANGLES_PER_BOX", "BoxMesh", "box_triangles", "box_vertices"]
 
 TRIANGLES_PER_BOX = 12
 
-# Corner signs (length, width, height) — same order as redrive.geometry.box_corners.
-_SIGNS = np.array(
-    [
-        [1, 1, -1],
-        [-1, 1, -1],
-        [-1, -1, -1],
-        [1, -1, -1],
-        [1, 1, 1],
-        [-1, 1, 1],
-        [-1, -1, 1],
-        [1, -1, 1],
-    ],
-    dtype=np.float64,
-)
 # Two triangles per face, counter-clockwise seen from outside (normals point out).
 _FACES = np.array(
     [
@@ -53,7 +40,7 @@ def box_vertices(
     yaws_rad: npt.NDArray[np.float64],
 ) -> npt.NDArray[np.float64]:
     """(N, 8, 3) float64 corners of N boxes (order of :func:`redrive.geometry.box_corners`)."""
-    local = _SIGNS[None, :, :] * (0.5 * sizes)[:, None, :]
+    local = BOX_CORNER_SIGNS[None, :, :] * (0.5 * sizes)[:, None, :]
     c, s = np.cos(yaws_rad)[:, None], np.sin(yaws_rad)[:, None]
     out = np.empty_like(local)
     out[..., 0] = c * local[..., 0] - s * local[..., 1] + centers[:, None, 0]
