@@ -87,7 +87,7 @@ def _bev(frame: Frame, base_from_lidar: np.ndarray) -> Image.Image:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--at", type=float, default=18.5, help="seconds into the scenario")
+    parser.add_argument("--at", type=float, default=27.0, help="seconds into the scenario")
     parser.add_argument("--out", type=Path, default=HERE)
     args = parser.parse_args()
     scenario = load_scenario("urban")
