@@ -55,9 +55,9 @@ def _default_fielddefs(ros_version: Literal[1, 2]) -> Mapping[str, Any]:
 def _closure(typs: Mapping[str, Any], roots: Collection[str]) -> dict[str, Any]:
     """``roots`` and every type their fields name, transitively (those that ``typs`` knows)."""
     out: dict[str, Any] = {}
-    todo = [r for r in roots if r in typs]
-    while todo:
-        name = todo.pop()
+    pending = [r for r in roots if r in typs]
+    while pending:
+        name = pending.pop()
         if name in out:
             continue
         out[name] = typs[name]
@@ -69,7 +69,7 @@ def _closure(typs: Mapping[str, Any], roots: Collection[str]) -> dict[str, Any]:
             else:
                 continue
             if sub in typs and sub not in out:
-                todo.append(sub)
+                pending.append(sub)
     return out
 
 
