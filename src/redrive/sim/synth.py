@@ -173,6 +173,7 @@ class _Recorder:
         self.pending: dict[str, Scene] = {}  # lidar → scene at the start of its sweep
         self.last_camera: dict[str, CameraFrame] = {}
         self.prev_state: VehicleState | None = None
+        self._scene_now: Scene | None = None
 
     # -- static ---------------------------------------------------------------------------------
 
@@ -193,10 +194,10 @@ class _Recorder:
         kind = spec.kind
         rng = self.rngs[spec.name]
         if kind in (SensorType.LIDAR, SensorType.LIDAR_2D):
-            self.pending[spec.name] = self.world.scene()
+            self.pending[spec.name] = self._scene()
         elif kind is SensorType.CAMERA:
             camera = self.cameras[spec.name]
-            frame = camera.render(self.world.scene())
+            frame = camera.render(self._scene())
             self.last_camera[spec.name] = frame
             self.writer.write(
                 f"/{spec.name}/image_raw", stamp_ns, frame.image, frame_id=camera.frame_id
@@ -215,6 +216,13 @@ class _Recorder:
         else:  # pragma: no cover - the rig parser admits no other kind
             msg = f"sensor {spec.name!r}: kind {kind.value} cannot be simulated"
             raise SimulationError(msg)
+
+    def _scene(self) -> Scene:
+        """The world's scene at its current time, built once per instant (LiDARs and cameras
+        firing together share it)."""
+        if self._scene_now is None or self._scene_now.stamp_ns != self.world.time_ns:
+            self._scene_now = self.world.scene()
+        return self._scene_now
 
     def finish_sweep(self, spec: SensorSpec) -> None:
         """Cast a sweep whose period has elapsed (the pose history now covers all of it)."""
