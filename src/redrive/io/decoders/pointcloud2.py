@@ -105,10 +105,6 @@ class _Cursor:
         self.pos += 4
         return int(value)
 
-    def int32(self) -> int:
-        value = self.uint32()
-        return value - (1 << 32) if value >= 1 << 31 else value
-
     def uint8(self) -> int:
         value = self.buf[self.pos]
         self.pos += 1
