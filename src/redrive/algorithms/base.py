@@ -1,0 +1,345 @@
+"""The algorithm contract: one small base class a researcher subclasses.
+
+>>> class MyDetector(Algorithm):
+...     '''Finds nothing, quickly.'''
+...     role = Role.PERCEPTION
+...     inputs = (SensorType.LIDAR,)
+...     def step(self, frame, upstream):
+...         return []
+
+``role`` fixes the output type (PERCEPTION → a list of :class:`DetectedObject`, PLANNING → a
+:class:`PlannedPath`, CONTROL → :class:`ControlCommands`); ``inputs`` names what the algorithm
+reads from a frame and is checked against the log before a run starts.  The engine never calls
+``step`` directly: it calls :meth:`Algorithm.run_step`, which times the step, checks the output and
+records an exception instead of swallowing it.
+"""
+
+from __future__ import annotations
+
+import enum
+import time
+import traceback
+from abc import ABC, abstractmethod
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any, ClassVar
+
+from redrive.errors import AlgorithmError, ConfigError
+from redrive.types import (
+    ControlCommands,
+    DetectedObject,
+    Frame,
+    PlannedPath,
+    SensorData,
+    SensorType,
+)
+
+__all__ = [
+    "GROUND_TRUTH",
+    "VEHICLE_STATE",
+    "Algorithm",
+    "AlgorithmOutput",
+    "Input",
+    "Role",
+    "StageOutputs",
+    "StepError",
+    "StepResult",
+    "StepStatus",
+    "check_output",
+]
+
+#: an input meaning "the frame's ego state" (``Frame.vehicle_state``).
+VEHICLE_STATE = "vehicle_state"
+#: an input meaning "the frame's ground-truth objects" (``Frame.ground_truth``).
+GROUND_TRUTH = "ground_truth"
+
+#: what ``inputs`` may name: a sensor id of the log (``"lidar_top"``), any sensor of a type
+#: (``SensorType.LIDAR``), :data:`VEHICLE_STATE` or :data:`GROUND_TRUTH`.
+Input = str | SensorType
+
+AlgorithmOutput = tuple[DetectedObject, ...] | PlannedPath | ControlCommands
+
+
+class Role(enum.Enum):
+    """The Algorithm Role Descriptor: which stage an algorithm belongs to and what it returns."""
+
+    PERCEPTION = "perception"
+    PLANNING = "planning"
+    CONTROL = "control"
+
+    @property
+    def output_name(self) -> str:
+        return _OUTPUT_NAMES[self]
+
+
+_OUTPUT_NAMES = {
+    Role.PERCEPTION: "a list of DetectedObject",
+    Role.PLANNING: "a PlannedPath",
+    Role.CONTROL: "a ControlCommands",
+}
+
+
+def check_output(role: Role, value: object, *, where: str) -> AlgorithmOutput:
+    """``value`` as the output type of ``role``, or :class:`AlgorithmError` saying what came back.
+
+    PERCEPTION accepts any list or tuple of :class:`DetectedObject` and returns a tuple.
+    """
+    if role is Role.PERCEPTION:
+        if isinstance(value, list | tuple) and all(isinstance(o, DetectedObject) for o in value):
+            return tuple(value)
+    elif role is Role.PLANNING:
+        if isinstance(value, PlannedPath):
+            return value
+    elif isinstance(value, ControlCommands):
+        return value
+    got = type(value).__name__
+    if isinstance(value, list | tuple):
+        kinds = sorted({type(o).__name__ for o in value if not isinstance(o, DetectedObject)})
+        got = f"{got} holding {', '.join(kinds)}"
+    msg = f"{where}: a {role.name} algorithm must return {role.output_name}, got {got}"
+    raise AlgorithmError(msg)
+
+
+@dataclass(frozen=True, slots=True)
+class StageOutputs:
+    """What earlier stages produced for this frame, by algorithm name, in pipeline order.
+
+    Attributes:
+        outputs: algorithm name → its output for this frame (failed steps are absent).
+        roles: algorithm name → its role.
+    """
+
+    outputs: Mapping[str, AlgorithmOutput] = field(default_factory=dict)
+    roles: Mapping[str, Role] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "outputs", MappingProxyType(dict(self.outputs)))
+        object.__setattr__(self, "roles", MappingProxyType(dict(self.roles)))
+
+    def _latest(self, role: Role, name: str | None) -> AlgorithmOutput | None:
+        if name is not None:
+            if self.roles.get(name) not in (role, None):
+                msg = f"upstream {name!r} is a {self.roles[name].name} algorithm, not {role.name}"
+                raise AlgorithmError(msg)
+            return self.outputs.get(name)
+        found: AlgorithmOutput | None = None
+        for key, value in self.outputs.items():
+            if self.roles.get(key) is role:
+                found = value
+        return found
+
+    def objects(self, name: str | None = None) -> tuple[DetectedObject, ...] | None:
+        """The objects of perception algorithm ``name``, or of the last one that ran; None when
+        no perception output exists for this frame."""
+        value = self._latest(Role.PERCEPTION, name)
+        return value if isinstance(value, tuple) else None
+
+    def path(self, name: str | None = None) -> PlannedPath | None:
+        """The path of planning algorithm ``name``, or of the last one that ran."""
+        value = self._latest(Role.PLANNING, name)
+        return value if isinstance(value, PlannedPath) else None
+
+    def commands(self, name: str | None = None) -> ControlCommands | None:
+        """The commands of control algorithm ``name``, or of the last one that ran."""
+        value = self._latest(Role.CONTROL, name)
+        return value if isinstance(value, ControlCommands) else None
+
+    def merged(
+        self, more: Mapping[str, AlgorithmOutput], roles: Mapping[str, Role]
+    ) -> StageOutputs:
+        """These outputs followed by ``more`` (a later stage's)."""
+        return StageOutputs({**self.outputs, **more}, {**self.roles, **roles})
+
+
+class StepStatus(enum.Enum):
+    OK = "ok"
+    ERROR = "error"  # the step raised, or returned the wrong type
+    TIMEOUT = "timeout"  # the step ran past --step-timeout (its worker was restarted)
+    SKIPPED = "skipped"  # not run: a required upstream output or input was missing
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class StepError:
+    """Why a step failed: exception type, message and formatted traceback."""
+
+    type: str
+    message: str
+    traceback: str = ""
+
+    @classmethod
+    def from_exception(cls, err: BaseException) -> StepError:
+        tb = "".join(traceback.format_exception(type(err), err, err.__traceback__))
+        return cls(type=type(err).__name__, message=str(err), traceback=tb)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class StepResult:
+    """One algorithm on one frame.
+
+    Attributes:
+        status: what happened.
+        output: the checked output (None unless OK).
+        latency_ns: wall time of ``step``, int ns (monotonic clock).
+        cpu_ns: CPU time of the thread that ran ``step``, int ns.
+        error: set unless OK.
+    """
+
+    status: StepStatus
+    output: AlgorithmOutput | None = None
+    latency_ns: int = 0
+    cpu_ns: int = 0
+    error: StepError | None = None
+
+
+class Algorithm(ABC):
+    """Base of every perception, planning and control algorithm.
+
+    Subclasses set the class attributes and implement :meth:`step`; :meth:`setup` and
+    :meth:`reset` are optional.
+
+    Class attributes:
+        role: the stage kind, which fixes the output type.
+        inputs: what ``step`` reads from the frame (see :data:`Input`); checked before a run.
+        version: the algorithm's own version string, recorded in the run manifest.
+        defaults: default configuration; the run's config is laid over it and handed to
+            :meth:`setup`.
+    """
+
+    role: ClassVar[Role]
+    inputs: ClassVar[tuple[Input, ...]] = ()
+    version: ClassVar[str] = "0"
+    defaults: ClassVar[Mapping[str, Any]] = MappingProxyType({})
+
+    def __init__(self, *, name: str | None = None) -> None:
+        self.name = name or type(self).__name__
+        self.config: Mapping[str, Any] = MappingProxyType(dict(self.defaults))
+        self.bound_inputs: Mapping[Input, str] = MappingProxyType({})
+
+    # -- what a researcher writes -------------------------------------------------------------
+
+    def setup(self, config: Mapping[str, Any]) -> None:  # noqa: B027 - optional hook
+        """Called once per run with the algorithm's configuration (defaults + user's)."""
+
+    @abstractmethod
+    def step(self, frame: Frame, upstream: StageOutputs) -> Any:
+        """Process one frame; return the output of :attr:`role`."""
+
+    def reset(self) -> None:  # noqa: B027 - optional hook
+        """Forget all state (between runs, and after a worker restart)."""
+
+    # -- what the engine calls ----------------------------------------------------------------
+
+    def configure(self, config: Mapping[str, Any] | None = None) -> None:
+        """Lay ``config`` over :attr:`defaults`, refuse unknown keys, then :meth:`setup`."""
+        merged = dict(self.defaults)
+        user = dict(config or {})
+        if self.defaults:
+            unknown = sorted(set(user) - set(self.defaults))
+            if unknown:
+                msg = (
+                    f"algorithm {self.name!r}: unknown config key(s) {', '.join(unknown)}; "
+                    f"known: {', '.join(sorted(self.defaults))}"
+                )
+                raise ConfigError(msg)
+        merged.update(user)
+        self.config = MappingProxyType(merged)
+        self.setup(self.config)
+
+    def bind(self, sensors: Mapping[str, SensorType], *, extras: Iterable[str] = ()) -> None:
+        """Resolve :attr:`inputs` against a log's sensors before a run.
+
+        Args:
+            sensors: sensor id → type, for the log being replayed.
+            extras: which of :data:`VEHICLE_STATE` / :data:`GROUND_TRUTH` the log provides.
+
+        Raises:
+            ConfigError: an input is not in the log (the message lists what is).
+        """
+        have = set(extras)
+        bound: dict[Input, str] = {}
+        for wanted in self.inputs:
+            if isinstance(wanted, SensorType):
+                ids = sorted(s for s, t in sensors.items() if t is wanted)
+                chosen = self.config.get(f"{wanted.value}_sensor")
+                if isinstance(chosen, str) and chosen in ids:
+                    bound[wanted] = chosen
+                elif ids and chosen is None:
+                    bound[wanted] = ids[0]
+                else:
+                    missing = f"a {wanted.name} sensor" + (f" {chosen!r}" if chosen else "")
+                    self._missing(missing, sensors, have)
+            elif wanted in (VEHICLE_STATE, GROUND_TRUTH):
+                if wanted not in have:
+                    self._missing(wanted.replace("_", " "), sensors, have)
+                bound[wanted] = wanted
+            elif wanted in sensors:
+                bound[wanted] = wanted
+            else:
+                self._missing(f"sensor {wanted!r}", sensors, have)
+        self.bound_inputs = MappingProxyType(bound)
+
+    def _missing(self, what: str, sensors: Mapping[str, SensorType], have: set[str]) -> None:
+        listing = ", ".join(f"{s} ({t.name})" for s, t in sorted(sensors.items())) or "none"
+        extra = ", ".join(sorted(have)) or "no ego state or ground truth"
+        msg = (
+            f"algorithm {self.name!r} needs {what}, which this log does not have "
+            f"(sensors: {listing}; also {extra}); map a topic with a sensor map file or pick "
+            "another algorithm"
+        )
+        raise ConfigError(msg)
+
+    def sensor(self, frame: Frame, wanted: Input) -> SensorData:
+        """The sample of input ``wanted`` in ``frame`` (a sensor id or type from :attr:`inputs`).
+
+        Raises:
+            AlgorithmError: the frame has no sample of it (the sensor dropped out here).
+        """
+        sensor_id = self.bound_inputs.get(wanted)
+        if sensor_id is None and isinstance(wanted, str):
+            sensor_id = wanted
+        if sensor_id is None:
+            msg = f"algorithm {self.name!r}: {wanted!r} is not among its inputs"
+            raise AlgorithmError(msg)
+        data = frame.sensors.get(sensor_id)
+        if data is None:
+            msg = f"frame {frame.index} (stamp {frame.stamp_ns} ns) has no {sensor_id!r} sample"
+            raise AlgorithmError(msg)
+        return data
+
+    def run_step(self, frame: Frame, upstream: StageOutputs) -> StepResult:
+        """Time :meth:`step`, check its output, and turn an exception into a recorded error."""
+        cpu0 = time.thread_time_ns()
+        t0 = time.perf_counter_ns()
+        try:
+            value = self.step(frame, upstream)
+        except Exception as err:  # recorded, never swallowed: the engine stores it per frame
+            t1 = time.perf_counter_ns()
+            return StepResult(
+                status=StepStatus.ERROR,
+                latency_ns=t1 - t0,
+                cpu_ns=time.thread_time_ns() - cpu0,
+                error=StepError.from_exception(err),
+            )
+        t1 = time.perf_counter_ns()
+        cpu_ns = time.thread_time_ns() - cpu0
+        try:
+            output = check_output(self.role, value, where=f"{self.name} on frame {frame.index}")
+        except AlgorithmError as err:
+            return StepResult(
+                status=StepStatus.ERROR,
+                latency_ns=t1 - t0,
+                cpu_ns=cpu_ns,
+                error=StepError(type=type(err).__name__, message=str(err)),
+            )
+        return StepResult(status=StepStatus.OK, output=output, latency_ns=t1 - t0, cpu_ns=cpu_ns)
+
+    @classmethod
+    def describe(cls) -> str:
+        """The first paragraph of the class docstring."""
+        doc = (cls.__doc__ or "").strip()
+        return doc.split("\n\n", 1)[0].replace("\n", " ").strip()
+
+    @classmethod
+    def input_names(cls) -> Sequence[str]:
+        return [i.name.lower() if isinstance(i, SensorType) else i for i in cls.inputs]

@@ -1,0 +1,1 @@
+"""Reference algorithms: simple, documented baselines for each role."""

@@ -1,0 +1,1 @@
+"""Run configuration (L4): frozen dataclasses loaded from TOML."""
