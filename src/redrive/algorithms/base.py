@@ -117,6 +117,9 @@ class StageOutputs:
         object.__setattr__(self, "outputs", MappingProxyType(dict(self.outputs)))
         object.__setattr__(self, "roles", MappingProxyType(dict(self.roles)))
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        return StageOutputs, (dict(self.outputs), dict(self.roles))
+
     def _latest(self, role: Role, name: str | None) -> AlgorithmOutput | None:
         if name is not None:
             if self.roles.get(name) not in (role, None):

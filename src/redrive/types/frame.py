@@ -5,7 +5,9 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
+from typing import Any
 
+from redrive.types._pickle import reduce_dataclass
 from redrive.types.enums import SensorType
 from redrive.types.environment import EnvironmentData, TrafficData
 from redrive.types.objects import DetectedObject
@@ -99,3 +101,6 @@ class Frame:
         object.__setattr__(self, "sensors", MappingProxyType(dict(self.sensors)))
         if self.ground_truth is not None:
             object.__setattr__(self, "ground_truth", tuple(self.ground_truth))
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return reduce_dataclass(self)

@@ -11,6 +11,7 @@ import numpy as np
 import numpy.typing as npt
 
 from redrive.types._arrays import frozen_array, frozen_vector
+from redrive.types._pickle import reduce_dataclass
 
 __all__ = ["IMAGE_ENCODINGS", "GnssFix", "Image", "Imu", "PointCloud"]
 
@@ -65,6 +66,9 @@ class PointCloud:
     @property
     def num_points(self) -> int:
         return int(self.xyz.shape[0])
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return reduce_dataclass(self)
 
 
 #: Image encodings the data model knows, with (dtype, channels).
