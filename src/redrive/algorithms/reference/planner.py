@@ -1,0 +1,446 @@
+"""A reference planner: follow a route or the current lane with an IDM speed profile.
+
+:class:`IdmPlanner` plans ``horizon_s`` seconds ahead every frame, from the frame's ego state alone
+(no memory of earlier plans except where it was on the route):
+
+* **Where** — the path geometry (a polyline in base_link, the rear-axle centre at the origin). With
+  a ``route`` in the config (a list of [x, y] points in the frame of ``frame.vehicle_state``,
+  usually ``map``) the path is the part of the route ahead of the ego's projection onto it. Logs
+  carry no map, so without a route the planner assumes the lane is what the ego is doing: an arc of
+  constant curvature ``yaw_rate / speed`` (clamped to ``max_curvature_1pm``; straight below
+  ``min_turn_speed_mps``), at most half a turn long (a plan that goes farther continues straight;
+  the speed is not limited on curves — there is no lateral-acceleration limit).
+* **How fast** — the Intelligent Driver Model (Treiber, Hennecke & Helbing 2000)::
+
+      a = a_max · [1 − (v / v0)^δ − (s* / s)²],   s* = s0 + max(0, v·T + v·Δv / (2·√(a_max·b)))
+
+  integrated forward from the current speed with step ``dt_s`` (ballistic update, never
+  reversing). ``s`` is the gap from the ego's front bumper to the nearest obstacle in the path
+  corridor ahead; every obstacle is predicted at constant speed along the path, so a stopped one
+  ends the plan ``s0_m`` behind it. The end of a route is a stopped obstacle too. As a guard
+  against the discretisation, the plan never moves the bumper closer than ``s0_m`` to an obstacle
+  (and does not move at all while it is already closer).
+
+Obstacles are the objects of the last perception algorithm upstream (boxes in base_link of the
+frame). One is in the path when the lateral extent of its box (its corners projected onto the path)
+overlaps the corridor ``±corridor_half_width_m`` around the path and part of it is ahead of the
+front bumper within ``range_m`` of path. Its speed along the path is its velocity (taken as
+over-ground, in base_link axes) projected on the path tangent there, floored at 0 (oncoming
+traffic in the lane is planned for as stopped). When a perception algorithm ran but failed on this
+frame, planning blind is unsafe and the step raises :class:`AlgorithmError`; with no perception
+stage at all the road is planned as empty.
+
+Configuration (SI units):
+
+=======================  ========  ==========================================================
+key                      default   meaning
+=======================  ========  ==========================================================
+route                    None      [[x, y], …] metres in the ego state's frame; None: lane arc
+v0_mps                   13.9      IDM desired speed (50 km/h)
+T_s                      1.5       IDM time headway
+a_mps2                   1.5       IDM maximum acceleration
+b_mps2                   2.0       IDM comfortable deceleration
+s0_m                     2.0       IDM minimum gap (bumper to obstacle) at standstill
+delta                    4.0       IDM acceleration exponent
+horizon_s                6.0       plan length in time
+dt_s                     0.1       integration step = waypoint spacing in time
+max_decel_mps2           8.0       the plan's deceleration is clipped to this (physical limit)
+corridor_half_width_m    1.5       half width of the path corridor (ego half width + margin)
+range_m                  120.0     how far along the path obstacles are looked for
+ego_length_m             4.7       ego length, bumper to bumper
+rear_overhang_m          0.95      rear bumper to rear axle; front bumper = length − overhang
+max_curvature_1pm        0.2       lane-arc curvature limit (radius ≥ 5 m)
+min_turn_speed_mps       1.0       below this speed the lane arc is straight
+max_route_offset_m       10.0      farther from the route than this is an error
+perception               None      name of the perception algorithm to read; None: the last
+=======================  ========  ==========================================================
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Mapping
+from types import MappingProxyType
+from typing import Any, ClassVar
+
+import numpy as np
+import numpy.typing as npt
+
+from redrive.algorithms.base import VEHICLE_STATE, Algorithm, Input, Role, StageOutputs
+from redrive.errors import AlgorithmError, ConfigError
+from redrive.geometry.boxes import box_corners
+from redrive.types import DetectedObject, Frame, PlannedPath, VehicleState
+
+__all__ = ["IdmPlanner", "Polyline"]
+
+logger = logging.getLogger(__name__)
+
+F64 = npt.NDArray[np.float64]
+
+_ARC_SAMPLE_M = 0.5
+_ARC_SAGITTA_M = 1e-3
+_ROUTE_WINDOW_BACK_M = 10.0
+_ROUTE_WINDOW_AHEAD_M = 60.0
+
+
+class Polyline:
+    """A 2D polyline parametrised by arc length.
+
+    Attributes:
+        xy: (M, 2) float64 vertices, metres (consecutive duplicates removed; M ≥ 1).
+        s: (M,) float64 cumulative arc length at the vertices, metres, ``s[0] == 0``.
+    """
+
+    def __init__(self, xy: npt.ArrayLike) -> None:
+        pts = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        if len(pts) > 1:
+            keep = np.ones(len(pts), dtype=bool)
+            keep[1:] = np.hypot(*np.diff(pts, axis=0).T) > 1e-9
+            pts = pts[keep]
+        self.xy: F64 = pts
+        seg = np.hypot(*np.diff(pts, axis=0).T) if len(pts) > 1 else np.zeros(0)
+        self.s: F64 = np.concatenate([[0.0], np.cumsum(seg)])
+
+    @property
+    def length_m(self) -> float:
+        return float(self.s[-1])
+
+    def points_at(self, s_m: npt.ArrayLike) -> F64:
+        """(K, 2) points at arc lengths ``s_m`` (K,); beyond either end the end segment is
+        extended straight."""
+        s = np.asarray(s_m, dtype=np.float64).reshape(-1)
+        if len(self.xy) == 1:
+            return np.repeat(self.xy, len(s), axis=0)
+        out = np.column_stack(
+            [np.interp(s, self.s, self.xy[:, 0]), np.interp(s, self.s, self.xy[:, 1])]
+        )
+        for mask, i0, s_ref in (
+            (s > self.s[-1], len(self.xy) - 2, self.s[-1]),
+            (s < 0.0, 0, 0.0),
+        ):
+            if np.any(mask):
+                d = self.xy[i0 + 1] - self.xy[i0]
+                d = d / np.hypot(*d)
+                base = self.xy[-1] if s_ref > 0.0 else self.xy[0]
+                out[mask] = base + np.outer(s[mask] - s_ref, d)
+        return out
+
+    def tangents_at(self, s_m: npt.ArrayLike) -> F64:
+        """(K, 2) unit tangents of the segments holding arc lengths ``s_m``."""
+        s = np.asarray(s_m, dtype=np.float64).reshape(-1)
+        if len(self.xy) == 1:
+            return np.tile([1.0, 0.0], (len(s), 1))
+        i = np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, len(self.xy) - 2)
+        d = self.xy[i + 1] - self.xy[i]
+        out: F64 = d / np.hypot(d[:, 0], d[:, 1])[:, None]
+        return out
+
+    def project(
+        self, points: npt.ArrayLike, *, s_min_m: float = -math.inf, s_max_m: float = math.inf
+    ) -> tuple[F64, F64, F64]:
+        """Nearest points on the polyline (only segments overlapping [s_min_m, s_max_m]).
+
+        Returns:
+            s: (P,) arc length of the foot point, metres.
+            lateral: (P,) signed offset of the point from the polyline, metres, left positive.
+            dist: (P,) distance to the foot point, metres (≥ |lateral| at the ends).
+        """
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        if len(self.xy) == 1:
+            d = p - self.xy[0]
+            dist = np.hypot(d[:, 0], d[:, 1])
+            return np.zeros(len(p)), d[:, 1], dist
+        seg_ok = (self.s[1:] >= s_min_m) & (self.s[:-1] <= s_max_m)
+        if not np.any(seg_ok):
+            seg_ok[:] = True
+        idx = np.flatnonzero(seg_ok)
+        a = self.xy[idx]
+        ab = self.xy[idx + 1] - a
+        seg_len = np.hypot(ab[:, 0], ab[:, 1])
+        ap = p[:, None, :] - a[None, :, :]  # (P, S, 2)
+        t = np.clip((ap * ab[None]).sum(axis=2) / seg_len**2, 0.0, 1.0)
+        foot = a[None] + t[..., None] * ab[None]
+        d2 = ((p[:, None, :] - foot) ** 2).sum(axis=2)
+        j = np.argmin(d2, axis=1)
+        rows = np.arange(len(p))
+        tj = t[rows, j]
+        s = self.s[idx[j]] + tj * seg_len[j]
+        cross = ab[j, 0] * ap[rows, j, 1] - ab[j, 1] * ap[rows, j, 0]
+        lateral = cross / seg_len[j]
+        return s, lateral, np.sqrt(d2[rows, j])
+
+    def cut(self, s_start_m: float, s_end_m: float) -> Polyline:
+        """The part between two arc lengths (clipped to the polyline) as a new polyline."""
+        s0 = min(max(s_start_m, 0.0), self.length_m)
+        s1 = min(max(s_end_m, s0), self.length_m)
+        inner = (self.s > s0) & (self.s < s1)
+        ends = self.points_at([s0, s1])
+        return Polyline(np.vstack([ends[:1], self.xy[inner], ends[1:]]))
+
+
+def _positive(config: Mapping[str, Any], key: str, *, allow_zero: bool = False) -> float:
+    try:
+        value = float(config[key])
+    except (TypeError, ValueError) as err:
+        msg = f"IdmPlanner config {key!r} must be a number, got {config[key]!r}"
+        raise ConfigError(msg) from err
+    if not math.isfinite(value) or value < 0.0 or (value == 0.0 and not allow_zero):
+        need = "≥ 0" if allow_zero else "> 0"
+        msg = f"IdmPlanner config {key!r} must be finite and {need}, got {value}"
+        raise ConfigError(msg)
+    return value
+
+
+class IdmPlanner(Algorithm):
+    """Route or lane following with an IDM speed profile that stops for obstacles in the path.
+
+    Reads ``frame.vehicle_state`` and the objects of the last perception algorithm upstream;
+    returns a :class:`PlannedPath` in base_link of the frame: one waypoint per ``dt_s`` over
+    ``horizon_s`` (x, y, z metres of the rear-axle centre, z = 0; t_s from ``frame.stamp_ns``).
+    See the module docstring for the model and the configuration.
+    """
+
+    role: ClassVar[Role] = Role.PLANNING
+    inputs: ClassVar[tuple[Input, ...]] = (VEHICLE_STATE,)
+    version: ClassVar[str] = "1"
+    defaults: ClassVar[Mapping[str, Any]] = MappingProxyType(
+        {
+            "route": None,
+            "v0_mps": 13.9,
+            "T_s": 1.5,
+            "a_mps2": 1.5,
+            "b_mps2": 2.0,
+            "s0_m": 2.0,
+            "delta": 4.0,
+            "horizon_s": 6.0,
+            "dt_s": 0.1,
+            "max_decel_mps2": 8.0,
+            "corridor_half_width_m": 1.5,
+            "range_m": 120.0,
+            "ego_length_m": 4.7,
+            "rear_overhang_m": 0.95,
+            "max_curvature_1pm": 0.2,
+            "min_turn_speed_mps": 1.0,
+            "max_route_offset_m": 10.0,
+            "perception": None,
+        }
+    )
+
+    def __init__(self, *, name: str | None = None) -> None:
+        super().__init__(name=name)
+        self._route: Polyline | None = None
+        self._route_s_m: float | None = None
+        self.setup(self.config)
+
+    def setup(self, config: Mapping[str, Any]) -> None:
+        self.v0_mps = _positive(config, "v0_mps")
+        self.headway_s = _positive(config, "T_s", allow_zero=True)
+        self.a_mps2 = _positive(config, "a_mps2")
+        self.b_mps2 = _positive(config, "b_mps2")
+        self.s0_m = _positive(config, "s0_m", allow_zero=True)
+        self.delta = _positive(config, "delta")
+        self.horizon_s = _positive(config, "horizon_s")
+        self.dt_s = _positive(config, "dt_s")
+        if self.dt_s > self.horizon_s:
+            msg = f"IdmPlanner: dt_s ({self.dt_s}) must not exceed horizon_s ({self.horizon_s})"
+            raise ConfigError(msg)
+        self.max_decel_mps2 = _positive(config, "max_decel_mps2")
+        self.corridor_half_width_m = _positive(config, "corridor_half_width_m")
+        self.range_m = _positive(config, "range_m")
+        length_m = _positive(config, "ego_length_m")
+        overhang_m = _positive(config, "rear_overhang_m", allow_zero=True)
+        self.front_offset_m = length_m - overhang_m
+        self.max_curvature_1pm = _positive(config, "max_curvature_1pm", allow_zero=True)
+        self.min_turn_speed_mps = _positive(config, "min_turn_speed_mps", allow_zero=True)
+        self.max_route_offset_m = _positive(config, "max_route_offset_m")
+        perception = config.get("perception")
+        if perception is not None and not isinstance(perception, str):
+            msg = f"IdmPlanner config 'perception' must be an algorithm name or None, got {perception!r}"
+            raise ConfigError(msg)
+        self.perception: str | None = perception
+        self._route = self._parse_route(config.get("route"))
+        self._route_s_m = None
+
+    @staticmethod
+    def _parse_route(route: object) -> Polyline | None:
+        if route is None:
+            return None
+        try:
+            pts = np.asarray(route, dtype=np.float64)
+        except (TypeError, ValueError) as err:
+            msg = f"IdmPlanner config 'route' must be a list of [x, y] points, got {route!r:.80}"
+            raise ConfigError(msg) from err
+        if pts.ndim != 2 or pts.shape[1] != 2 or not np.all(np.isfinite(pts)):
+            msg = (
+                f"IdmPlanner config 'route' must be finite [x, y] points (shape (N, 2)), got "
+                f"shape {pts.shape}"
+            )
+            raise ConfigError(msg)
+        line = Polyline(pts)
+        if line.length_m <= 0.0:
+            msg = "IdmPlanner config 'route' needs at least two distinct points"
+            raise ConfigError(msg)
+        return line
+
+    def reset(self) -> None:
+        self._route_s_m = None
+
+    # -- the step -----------------------------------------------------------------------------
+
+    def step(self, frame: Frame, upstream: StageOutputs) -> PlannedPath:
+        state = frame.vehicle_state
+        if state is None:
+            msg = (
+                f"{self.name}: frame {frame.index} (stamp {frame.stamp_ns} ns) has no vehicle "
+                "state; the planner needs the ego pose and speed"
+            )
+            raise AlgorithmError(msg)
+        objects = self._objects(frame, upstream)
+        speed_mps = state.speed_mps
+        path, route_end_m = self._geometry(frame, state, speed_mps)
+        leaders_s, leaders_v = self._leaders(path, objects)
+        if route_end_m is not None:
+            leaders_s = np.append(leaders_s, route_end_m)
+            leaders_v = np.append(leaders_v, 0.0)
+        t_s, s_m = self._profile(speed_mps, leaders_s, leaders_v)
+        xy = path.points_at(s_m)
+        waypoints = np.column_stack([xy, np.zeros(len(t_s)), t_s])
+        return PlannedPath(stamp_ns=frame.stamp_ns, waypoints=waypoints, frame_id="base_link")
+
+    def _objects(self, frame: Frame, upstream: StageOutputs) -> tuple[DetectedObject, ...]:
+        objects = upstream.objects(self.perception)
+        if objects is not None:
+            return objects
+        if self.perception is not None or Role.PERCEPTION in upstream.roles.values():
+            which = repr(self.perception) if self.perception else "the perception stage"
+            msg = (
+                f"{self.name}: {which} produced no objects for frame {frame.index} (stamp "
+                f"{frame.stamp_ns} ns; its step failed); refusing to plan blind — fix the "
+                "perception error first"
+            )
+            raise AlgorithmError(msg)
+        return ()
+
+    def _geometry(
+        self, frame: Frame, state: VehicleState, speed_mps: float
+    ) -> tuple[Polyline, float | None]:
+        """The path ahead in base_link (starting at the ego or its projection on the route) and,
+        when the route ends within ``range_m``, the arc length of its end."""
+        if self._route is None:
+            kappa = 0.0
+            if speed_mps >= max(self.min_turn_speed_mps, 1e-6):
+                kappa = state.yaw_rate_rad_s / speed_mps
+                kappa = min(max(kappa, -self.max_curvature_1pm), self.max_curvature_1pm)
+            length_m = self.range_m
+            if abs(kappa) > 1e-9:
+                length_m = min(length_m, math.pi / abs(kappa))
+            step_m = _ARC_SAMPLE_M
+            if abs(kappa) > 1e-9:  # chord error (sagitta) ≤ 1 mm
+                step_m = min(step_m, math.sqrt(8.0 * _ARC_SAGITTA_M / abs(kappa)))
+            s = np.linspace(0.0, length_m, max(2, math.ceil(length_m / step_m) + 1))
+            if abs(kappa) > 1e-9:
+                xy = np.column_stack([np.sin(kappa * s) / kappa, (1.0 - np.cos(kappa * s)) / kappa])
+            else:
+                xy = np.column_stack([s, np.zeros_like(s)])
+            return Polyline(xy), None
+        route = self._route
+        origin = state.position[:2]
+        c, sn = math.cos(state.heading_rad), math.sin(state.heading_rad)
+        s_ego, dist = self._locate(origin)
+        if dist > self.max_route_offset_m:
+            msg = (
+                f"{self.name}: on frame {frame.index} the ego is {dist:.1f} m from the route "
+                f"(more than max_route_offset_m = {self.max_route_offset_m} m); check that the "
+                f"route is in the ego state's frame {state.frame_id!r}"
+            )
+            raise AlgorithmError(msg)
+        self._route_s_m = s_ego
+        ahead = route.cut(s_ego, s_ego + self.range_m)
+        d = ahead.xy - origin
+        base_xy = np.column_stack([c * d[:, 0] + sn * d[:, 1], -sn * d[:, 0] + c * d[:, 1]])
+        path = Polyline(base_xy)
+        end_m = path.length_m if route.length_m - s_ego < self.range_m else None
+        return path, end_m
+
+    def _locate(self, origin: F64) -> tuple[float, float]:
+        """Arc length of the ego on the route (near the last one when known) and its distance."""
+        route = self._route
+        assert route is not None
+        if self._route_s_m is not None:
+            s, _, dist = route.project(
+                origin,
+                s_min_m=self._route_s_m - _ROUTE_WINDOW_BACK_M,
+                s_max_m=self._route_s_m + _ROUTE_WINDOW_AHEAD_M,
+            )
+            if dist[0] <= self.max_route_offset_m:
+                return float(s[0]), float(dist[0])
+        s, _, dist = route.project(origin)
+        return float(s[0]), float(dist[0])
+
+    def _leaders(self, path: Polyline, objects: tuple[DetectedObject, ...]) -> tuple[F64, F64]:
+        """Arc lengths of the rears (metres) and speeds along the path (m/s) of the objects in
+        the corridor ahead of the front bumper."""
+        if not objects or path.length_m <= 0.0:
+            return np.zeros(0), np.zeros(0)
+        corners = np.concatenate([box_corners(o.box)[:4, :2] for o in objects])
+        s, lat, _ = path.project(corners)
+        s = s.reshape(-1, 4)
+        lat = lat.reshape(-1, 4)
+        s_lo, s_hi = s.min(axis=1), s.max(axis=1)
+        in_corridor = (lat.min(axis=1) < self.corridor_half_width_m) & (
+            lat.max(axis=1) > -self.corridor_half_width_m
+        )
+        ahead = (s_hi > self.front_offset_m) & (s_lo < min(path.length_m, self.range_m) - 1e-6)
+        keep = np.flatnonzero(in_corridor & ahead)
+        if len(keep) == 0:
+            return np.zeros(0), np.zeros(0)
+        centers = np.array([objects[i].box.center[:2] for i in keep])
+        s_c, _, _ = path.project(centers)
+        tangents = path.tangents_at(s_c)
+        vel = np.array([objects[i].velocity[:2] for i in keep])
+        speed = np.maximum((vel * tangents).sum(axis=1), 0.0)
+        logger.debug("%s: %d object(s) in the path corridor", self.name, len(keep))
+        return s_lo[keep], speed
+
+    def _idm(self, v: float, gap_m: float, v_lead: float) -> float:
+        free = 1.0 - (max(v, 0.0) / self.v0_mps) ** self.delta
+        interaction = 0.0
+        if math.isfinite(gap_m):
+            s_star = self.s0_m + max(
+                0.0,
+                v * self.headway_s
+                + v * (v - v_lead) / (2.0 * math.sqrt(self.a_mps2 * self.b_mps2)),
+            )
+            interaction = (s_star / max(gap_m, 1e-3)) ** 2
+        accel = float(self.a_mps2 * (free - interaction))
+        return min(max(accel, -self.max_decel_mps2), self.a_mps2)
+
+    def _profile(self, speed_mps: float, leaders_s: F64, leaders_v: F64) -> tuple[F64, F64]:
+        """Times (s) and arc lengths of the rear axle along the path (m) of the IDM plan."""
+        n = max(1, round(self.horizon_s / self.dt_s))
+        dt = self.dt_s
+        t_out = np.arange(n + 1, dtype=np.float64) * dt
+        s_out = np.zeros(n + 1)
+        s, v = 0.0, max(speed_mps, 0.0)
+        for k in range(n):
+            t = k * dt
+            gap, v_lead, j = math.inf, 0.0, -1
+            if len(leaders_s):
+                gaps = leaders_s + leaders_v * t - (s + self.front_offset_m)
+                j = int(np.argmin(gaps))
+                gap, v_lead = float(gaps[j]), float(leaders_v[j])
+            accel = self._idm(v, gap, v_lead)
+            if v + accel * dt < 0.0:  # stops within the step
+                s_new, v_new = s - v * v / (2.0 * accel), 0.0
+            else:
+                s_new, v_new = s + v * dt + 0.5 * accel * dt * dt, v + accel * dt
+            if j >= 0:  # never closer than s0 to any obstacle
+                limits = leaders_s + leaders_v * (t + dt) - self.front_offset_m - self.s0_m
+                jj = int(np.argmin(limits))
+                limit = max(float(limits[jj]), s)
+                if s_new > limit:
+                    s_new, v_new = limit, min(v_new, float(leaders_v[jj]))
+            s, v = s_new, v_new
+            s_out[k + 1] = s
+        return t_out, s_out
