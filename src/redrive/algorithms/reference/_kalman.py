@@ -1,0 +1,84 @@
+"""A planar constant-velocity Kalman filter, the motion model of the reference tracker.
+
+State ``x = (px, py, vx, vy)`` — metres and m/s in whatever fixed frame the caller tracks in —
+with covariance ``P`` (4×4).  The measurement is a position ``z = (px, py)`` with isotropic noise
+``R = σ_z² I``.  Process noise is the discrete white-noise-acceleration model: an unknown
+acceleration of standard deviation ``σ_a`` (m/s²), constant over a step, on each axis.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+__all__ = ["KalmanState", "initial_state", "mahalanobis_sq", "predict", "update"]
+
+Array = npt.NDArray[np.float64]
+
+#: measurement matrix: the position part of the state.
+_H: Array = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]])
+
+
+@dataclass(slots=True)
+class KalmanState:
+    """Mean ``x`` (4,) = px, py (m), vx, vy (m/s) and covariance ``p`` (4, 4); mutable."""
+
+    x: Array
+    p: Array
+
+
+def initial_state(
+    position_m: Array, *, position_std_m: float, velocity_std_mps: float
+) -> KalmanState:
+    """A track born at ``position_m`` (2,) with unknown velocity (mean zero, ``velocity_std_mps``)."""
+    x = np.array([position_m[0], position_m[1], 0.0, 0.0], dtype=np.float64)
+    p = np.diag([position_std_m**2] * 2 + [velocity_std_mps**2] * 2).astype(np.float64)
+    return KalmanState(x=x, p=p)
+
+
+def _transition(dt_s: float) -> Array:
+    f = np.eye(4)
+    f[0, 2] = f[1, 3] = dt_s
+    return f
+
+
+def _process_noise(dt_s: float, accel_std_mps2: float) -> Array:
+    q1 = np.array([[dt_s**4 / 4.0, dt_s**3 / 2.0], [dt_s**3 / 2.0, dt_s**2]], dtype=np.float64) * (
+        accel_std_mps2**2
+    )
+    q = np.zeros((4, 4))
+    q[np.ix_([0, 2], [0, 2])] = q1
+    q[np.ix_([1, 3], [1, 3])] = q1
+    return q
+
+
+def predict(state: KalmanState, dt_s: float, *, accel_std_mps2: float) -> None:
+    """Advance ``state`` by ``dt_s`` seconds in place (no-op for ``dt_s == 0``)."""
+    if dt_s == 0.0:
+        return
+    f = _transition(dt_s)
+    state.x = f @ state.x
+    state.p = f @ state.p @ f.T + _process_noise(dt_s, accel_std_mps2)
+
+
+def mahalanobis_sq(state: KalmanState, z_m: Array, *, meas_std_m: float) -> Array:
+    """Squared Mahalanobis distances (M,) of positions ``z_m`` (M, 2) from the predicted
+    measurement, under the innovation covariance ``S = H P Hᵀ + R``."""
+    s = state.p[:2, :2] + np.eye(2) * meas_std_m**2
+    d = z_m - state.x[:2]
+    out: Array = np.einsum("mi,ij,mj->m", d, np.linalg.inv(s), d)
+    return out
+
+
+def update(state: KalmanState, z_m: Array, *, meas_std_m: float) -> None:
+    """Correct ``state`` in place with the position measurement ``z_m`` (2,) (Joseph form, so
+    ``P`` stays symmetric positive definite)."""
+    r = np.eye(2) * meas_std_m**2
+    s = _H @ state.p @ _H.T + r
+    k = state.p @ _H.T @ np.linalg.inv(s)
+    state.x = state.x + k @ (z_m - _H @ state.x)
+    i_kh = np.eye(4) - k @ _H
+    p = i_kh @ state.p @ i_kh.T + k @ r @ k.T
+    state.p = 0.5 * (p + p.T)
