@@ -1,0 +1,245 @@
+"""A noisy oracle: ground truth made to look like a detector's output, for testing planners."""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+from collections.abc import Mapping
+from types import MappingProxyType
+from typing import Any, ClassVar, NoReturn
+
+import numpy as np
+
+from redrive.algorithms.base import GROUND_TRUTH, Algorithm, Role, StageOutputs
+from redrive.errors import AlgorithmError, ConfigError
+from redrive.geometry.se3 import normalize_angle
+from redrive.types import Box3D, DetectedObject, Frame, ObjectClass
+
+__all__ = ["CONFUSABLE_CLASSES", "FALSE_POSITIVE_SHAPES", "NoisyOracle"]
+
+logger = logging.getLogger(__name__)
+
+#: classes a confused label is drawn from (uniformly, never the true one).
+CONFUSABLE_CLASSES: tuple[ObjectClass, ...] = (
+    ObjectClass.VEHICLE,
+    ObjectClass.TRUCK,
+    ObjectClass.PEDESTRIAN,
+    ObjectClass.BICYCLE,
+    ObjectClass.MOTORCYCLE,
+)
+
+#: false positives: class → (probability, size l, w, h in metres).
+FALSE_POSITIVE_SHAPES: Mapping[ObjectClass, tuple[float, tuple[float, float, float]]] = (
+    MappingProxyType(
+        {
+            ObjectClass.VEHICLE: (0.6, (4.5, 1.9, 1.5)),
+            ObjectClass.PEDESTRIAN: (0.25, (0.6, 0.6, 1.75)),
+            ObjectClass.BICYCLE: (0.15, (1.8, 0.6, 1.6)),
+        }
+    )
+)
+
+#: false positives lie between this range and min(max_range_m, FALSE_POSITIVE_MAX_RANGE_M).
+FALSE_POSITIVE_MIN_RANGE_M = 3.0
+FALSE_POSITIVE_MAX_RANGE_M = 60.0
+
+
+class NoisyOracle(Algorithm):
+    """Ground-truth objects with detector-like noise, misses and false positives.
+
+    For each ground-truth object of the frame (``frame.ground_truth``, in base_link), in order:
+
+    * dropped when ``visible_only`` and it was not seen (``num_lidar_points == 0`` or
+      ``visible is False``; ``None`` counts as seen), or when its centre lies farther than
+      ``max_range_m`` (horizontal distance from the base_link origin; None = no limit);
+    * missed with probability ``miss_probability``;
+    * otherwise returned with Gaussian noise: ``center_std_m`` on each of x, y, z (m),
+      ``size_std_rel`` relative on each of l, w, h (``size · (1 + N(0, σ))``, floored at 10 %
+      of the true size), ``yaw_std_rad`` on the yaw (also in ``orientation[0]``) and
+      ``velocity_std_mps`` on vx and vy (m/s; vz and the acceleration are kept).  With
+      probability ``class_confusion_probability`` its class is replaced by another of
+      :data:`CONFUSABLE_CLASSES`, drawn uniformly.  Confidence is the ground truth's (1.0).
+      ``object_id`` is the ground-truth id when ``keep_ids`` (so it is a perfect tracker too),
+      else -1 (as from a detector without tracking: feed it to a tracker).  ``num_lidar_points``,
+      ``visible`` and ``bbox_2d`` are cleared: they are annotations, not detections.
+
+    False positives: a Poisson number with mean ``false_positive_rate`` per frame, each a box
+    of a class drawn from :data:`FALSE_POSITIVE_SHAPES` (vehicle 60 %, pedestrian 25 %,
+    bicycle 15 %) with that class's typical size (± ``size_std_rel``), standing on the ground
+    plane of base_link (centre z = h/2), at a range uniform in
+    [:data:`FALSE_POSITIVE_MIN_RANGE_M`, min(``max_range_m``, :data:`FALSE_POSITIVE_MAX_RANGE_M`)]
+    and a bearing uniform all around the ego, yaw uniform, velocity zero over ground (static
+    clutter, in the ground-truth velocity convention), confidence ``false_positive_confidence``,
+    id -1.
+
+    Determinism: the random generator of a frame is ``numpy.random.default_rng([seed,
+    frame.index])``, so the output depends only on the frame and the config — not on which
+    frames ran before — and pipelined, parallel or resumed runs give identical outputs.
+    Outputs: true detections in ground-truth order, then the false positives.
+    """
+
+    role = Role.PERCEPTION
+    inputs = (GROUND_TRUTH,)
+    version = "1"
+    defaults: ClassVar[Mapping[str, Any]] = MappingProxyType(
+        {
+            "seed": 0,
+            "center_std_m": 0.2,
+            "size_std_rel": 0.05,
+            "yaw_std_rad": 0.05,
+            "velocity_std_mps": 0.3,
+            "miss_probability": 0.05,
+            "false_positive_rate": 0.1,
+            "false_positive_confidence": 0.5,
+            "class_confusion_probability": 0.0,
+            "visible_only": True,
+            "max_range_m": None,
+            "keep_ids": True,
+        }
+    )
+
+    def __init__(self, *, name: str | None = None) -> None:
+        super().__init__(name=name)
+        self.setup(self.config)
+
+    def setup(self, config: Mapping[str, Any]) -> None:
+        seed = config["seed"]
+        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+            self._bad("seed", seed, "an integer ≥ 0")
+        self._seed = int(seed)
+        self._center_std = self._number(config, "center_std_m")
+        self._size_std = self._number(config, "size_std_rel")
+        self._yaw_std = self._number(config, "yaw_std_rad")
+        self._vel_std = self._number(config, "velocity_std_mps")
+        self._p_miss = self._number(config, "miss_probability", upper=1.0)
+        self._fp_rate = self._number(config, "false_positive_rate")
+        self._fp_conf = self._number(config, "false_positive_confidence", upper=1.0)
+        self._p_confuse = self._number(config, "class_confusion_probability", upper=1.0)
+        self._visible_only = bool(config["visible_only"])
+        self._keep_ids = bool(config["keep_ids"])
+        max_range = config["max_range_m"]
+        if max_range is None:
+            self._max_range_m = math.inf
+        else:
+            self._max_range_m = self._number(config, "max_range_m")
+            if self._max_range_m <= FALSE_POSITIVE_MIN_RANGE_M:
+                self._bad("max_range_m", max_range, f"None or > {FALSE_POSITIVE_MIN_RANGE_M} m")
+
+    def _bad(self, key: str, value: object, wanted: str) -> NoReturn:
+        msg = f"algorithm {self.name!r}: config {key} = {value!r}; expected {wanted}"
+        raise ConfigError(msg)
+
+    def _number(self, config: Mapping[str, Any], key: str, *, upper: float = math.inf) -> float:
+        value = config[key]
+        ok = not isinstance(value, bool) and isinstance(value, int | float)
+        if not ok or not 0.0 <= float(value) <= upper:
+            bounds = "≥ 0" if upper == math.inf else f"in [0, {upper}]"
+            self._bad(key, value, f"a number {bounds}")
+        return float(value)
+
+    # -- one frame ----------------------------------------------------------------------------
+
+    def step(self, frame: Frame, upstream: StageOutputs) -> list[DetectedObject]:
+        truth = frame.ground_truth
+        if truth is None:
+            msg = (
+                f"{self.name}: frame {frame.index} (stamp {frame.stamp_ns} ns) carries no "
+                "ground truth; the noisy oracle needs a log with ground-truth objects"
+            )
+            raise AlgorithmError(msg)
+        rng = np.random.default_rng([self._seed, frame.index])
+        kept = [o for o in truth if self._eligible(o)]
+        out = self._perturb(kept, rng)
+        out += self._false_positives(rng)
+        logger.debug(
+            "%s frame %d: %d ground-truth objects, %d eligible, %d returned",
+            self.name,
+            frame.index,
+            len(truth),
+            len(kept),
+            len(out),
+        )
+        return out
+
+    def _eligible(self, obj: DetectedObject) -> bool:
+        if self._visible_only and (obj.num_lidar_points == 0 or obj.visible is False):
+            return False
+        return float(np.hypot(obj.box.center[0], obj.box.center[1])) <= self._max_range_m
+
+    def _perturb(
+        self, objects: list[DetectedObject], rng: np.random.Generator
+    ) -> list[DetectedObject]:
+        n = len(objects)
+        # every draw is made for every object, in a fixed order, whatever the config
+        missed = rng.random(n) < self._p_miss
+        d_center = rng.normal(0.0, 1.0, (n, 3)) * self._center_std
+        d_size = rng.normal(0.0, 1.0, (n, 3)) * self._size_std
+        d_yaw = rng.normal(0.0, 1.0, n) * self._yaw_std
+        d_vel = rng.normal(0.0, 1.0, (n, 2)) * self._vel_std
+        confused = rng.random(n) < self._p_confuse
+        pick = rng.random(n)  # which other class, as a fraction of the choices
+        out = []
+        for i, obj in enumerate(objects):
+            if missed[i]:
+                continue
+            yaw = normalize_angle(obj.box.yaw_rad + float(d_yaw[i]))
+            size = np.maximum(obj.box.size * (1.0 + d_size[i]), 0.1 * obj.box.size)
+            velocity = obj.velocity.copy()
+            velocity[:2] += d_vel[i]
+            orientation = obj.orientation.copy()
+            orientation[0] = normalize_angle(float(orientation[0]) + float(d_yaw[i]))
+            cls = obj.object_class
+            if confused[i]:
+                choices = [c for c in CONFUSABLE_CLASSES if c is not cls]
+                cls = choices[min(int(pick[i] * len(choices)), len(choices) - 1)]
+            out.append(
+                dataclasses.replace(
+                    obj,
+                    object_id=obj.object_id if self._keep_ids else -1,
+                    object_class=cls,
+                    box=Box3D(center=obj.box.center + d_center[i], size=size, yaw_rad=yaw),
+                    velocity=velocity,
+                    orientation=orientation,
+                    bbox_2d=None,
+                    num_lidar_points=None,
+                    visible=None,
+                )
+            )
+        return out
+
+    def _false_positives(self, rng: np.random.Generator) -> list[DetectedObject]:
+        count = int(rng.poisson(self._fp_rate)) if self._fp_rate > 0 else 0
+        if count == 0:
+            return []
+        classes = list(FALSE_POSITIVE_SHAPES)
+        probs = np.array([FALSE_POSITIVE_SHAPES[c][0] for c in classes])
+        picks = rng.choice(len(classes), size=count, p=probs / probs.sum())
+        far_m = min(self._max_range_m, FALSE_POSITIVE_MAX_RANGE_M)
+        ranges_m = rng.uniform(FALSE_POSITIVE_MIN_RANGE_M, far_m, count)
+        bearings = rng.uniform(-math.pi, math.pi, count)
+        yaws = rng.uniform(-math.pi, math.pi, count)
+        d_size = rng.normal(0.0, 1.0, (count, 3)) * self._size_std
+        out = []
+        for k in range(count):
+            cls = classes[int(picks[k])]
+            typical = np.array(FALSE_POSITIVE_SHAPES[cls][1])
+            size = np.maximum(typical * (1.0 + d_size[k]), 0.1 * typical)
+            center = np.array(
+                [
+                    ranges_m[k] * math.cos(bearings[k]),
+                    ranges_m[k] * math.sin(bearings[k]),
+                    0.5 * size[2],
+                ]
+            )
+            yaw = float(yaws[k])
+            out.append(
+                DetectedObject(
+                    object_id=-1,
+                    object_class=cls,
+                    confidence=self._fp_conf,
+                    box=Box3D(center=center, size=size, yaw_rad=yaw),
+                    orientation=np.array([yaw, 0.0, 0.0]),
+                )
+            )
+        return out
