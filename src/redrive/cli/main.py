@@ -14,7 +14,7 @@ from redrive.errors import RedriveError
 __all__ = ["main"]
 
 #: subcommand modules under redrive.cli, in --help order; each has register(subparsers).
-_COMMANDS = ("info", "convert", "synth", "bench")
+_COMMANDS = ("info", "convert", "synth", "run", "bench")
 
 _EPILOG = """\
 examples:

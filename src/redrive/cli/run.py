@@ -1,0 +1,214 @@
+"""``redrive run LOG`` — replay a log through perception → planning → control into a run directory."""
+
+from __future__ import annotations
+
+import argparse
+import re
+import time
+from pathlib import Path
+from typing import Any
+
+__all__ = ["parse_frames", "register"]
+
+_EPILOG = """\
+examples:
+  redrive run drive.mcap                                  the reference pipeline
+  redrive run drive.bag --perception my_detector.py:MyDetector
+  redrive run drive.bag --perception mypkg.det:Det --planning idm-planner --control pure-pursuit-pid
+  redrive run drive.bag --pipeline pipeline.toml --frames 100:200 --out runs/try1
+  redrive run drive.bag --mode pipelined --step-timeout 2 --out runs/try2
+  redrive run drive.bag --out runs/try2 --resume           continue an interrupted run
+
+Plugins are entry-point names (`redrive algorithms` lists them), package.module:Class or
+path/to/file.py:Class.  With no --pipeline and no plugin flag the reference pipeline runs:
+cluster-detector → kalman-tracker → idm-planner → pure-pursuit-pid.  A step that raises is
+recorded for its frame and the run goes on (--fail-fast stops instead); Ctrl-C leaves a run
+directory that --resume continues.  `redrive export RUN --format xlsx` exports the results.
+"""
+
+_FRAMES = re.compile(r"^(\d*):(\d*)$")
+
+
+def parse_frames(text: str) -> tuple[int | None, int | None]:
+    """``A:B`` → (A, B) frame indices, ``A:`` / ``:B`` open-ended; a single ``N`` is ``N:N+1``."""
+    from redrive.errors import ConfigError
+
+    if text.isdigit():
+        return int(text), int(text) + 1
+    match = _FRAMES.match(text.strip())
+    if not match:
+        msg = f"--frames {text!r}: expected START:STOP frame indices (e.g. 100:200, 100:, :50)"
+        raise ConfigError(msg)
+    first = int(match[1]) if match[1] else None
+    stop = int(match[2]) if match[2] else None
+    if first is not None and stop is not None and stop <= first:
+        msg = f"--frames {text!r}: STOP must be greater than START"
+        raise ConfigError(msg)
+    return first, stop
+
+
+def _default_out(log: Path) -> Path:
+    stem = log.name.removesuffix(".bag").removesuffix(".mcap") or "run"
+    return Path("runs") / f"{stem}-{time.strftime('%Y%m%d-%H%M%S')}"
+
+
+def _print_report(report: Any, out: Path) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    console = Console()
+    table = Table(title=f"run {out}", title_justify="left")
+    table.add_column("algorithm")
+    table.add_column("stage")
+    for col in ("ok", "err", "t/o", "outputs", "mean ms", "p95 ms", "max ms"):
+        table.add_column(col, justify="right")
+    for a in report.algorithms:
+        table.add_row(
+            a.name,
+            a.stage,
+            str(a.ok),
+            str(a.error),
+            str(a.timeout),
+            str(a.outputs),
+            f"{a.latency_mean_ms:.2f}",
+            f"{a.latency_p95_ms:.2f}",
+            f"{a.latency_max_ms:.2f}",
+        )
+    console.print(table)
+    console.print(
+        f"{report.frames} frames in {report.wall_s:.1f} s: {report.frames_per_s:.1f} frames/s, "
+        f"{report.realtime_factor:.1f}x real time ({report.log_span_s:.1f} s of log)"
+        + (f", {report.late_frames} late" if report.late_frames else "")
+    )
+    for a in report.algorithms:
+        if a.first_error:
+            console.print(f"[yellow]{a.name}: first failure at {a.first_error}[/yellow]")
+    console.print(f"results: {out}  (manifest.json, *.parquet; `redrive export {out}`)")
+
+
+def _run(args: argparse.Namespace) -> int:
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
+
+    from redrive.config import load_pipeline, pipeline_from_plugins, reference_pipeline
+    from redrive.engine import RunRequest, run_log
+
+    if args.pipeline is not None:
+        if args.perception or args.planning or args.control:
+            print("redrive run: give either --pipeline or --perception/--planning/--control")
+            return 2
+        pipeline = load_pipeline(args.pipeline)
+    elif args.perception or args.planning or args.control:
+        pipeline = pipeline_from_plugins(
+            perception=args.perception or (),
+            planning=args.planning or (),
+            control=args.control or (),
+        )
+    else:
+        pipeline = reference_pipeline()
+    pipeline = pipeline.with_options(
+        mode=args.mode,
+        executor=args.executor,
+        seed=args.seed,
+        step_timeout_s=args.step_timeout,
+        fail_fast=True if args.fail_fast else None,
+    )
+    first, stop = parse_frames(args.frames) if args.frames else (None, None)
+    out = args.out or _default_out(args.log)
+    request = RunRequest(
+        log=args.log,
+        pipeline=pipeline,
+        out=out,
+        first_frame=first,
+        stop_frame=stop,
+        sensor_map=args.sensor_map,
+        rate=args.rate,
+        resume=args.resume,
+    )
+    progress_bar = Progress(
+        TextColumn(f"[bold]{args.log.name}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.fields[rate]}"),
+        transient=True,
+        disable=args.no_progress,
+    )
+    started = [0.0]
+    with progress_bar:
+        task = progress_bar.add_task("run", total=None, rate="")
+
+        def on_start(total: int | None) -> None:
+            started[0] = time.perf_counter()
+            progress_bar.update(task, total=total)
+
+        def on_progress(done: int) -> None:
+            elapsed = time.perf_counter() - started[0]
+            rate = f"{done / elapsed:.1f} frames/s" if elapsed > 0 else ""
+            progress_bar.update(task, completed=done, rate=rate)
+
+        report = run_log(request, on_start=on_start, progress=on_progress)
+    _print_report(report, out)
+    if report.status == "interrupted":
+        print(f"interrupted: continue with `redrive run {args.log} --out {out} --resume`")
+        return 130
+    if report.status == "failed" and report.failure is not None:
+        index, step = report.failure
+        print(
+            f"redrive: error: --fail-fast: {step.algorithm} {step.status} on frame {index}: "
+            f"{step.error_type}: {step.error_message}"
+        )
+        return 1
+    return 0
+
+
+def register(sub: Any) -> None:
+    parser = sub.add_parser(
+        "run",
+        help="replay a log through perception → planning → control",
+        description=(
+            "Replay a log (ROS 1/2 bag, MCAP, KITTI) frame by frame through a pipeline of "
+            "algorithms and store every output, latency and error in a run directory "
+            "(manifest.json + Parquet)."
+        ),
+        epilog=_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("log", type=Path, metavar="LOG", help="the log to replay")
+    parser.add_argument("--pipeline", type=Path, metavar="TOML", help="a pipeline file")
+    for role in ("perception", "planning", "control"):
+        parser.add_argument(
+            f"--{role}",
+            action="append",
+            metavar="PLUGIN",
+            help=f"a {role} algorithm (repeat for consecutive stages)",
+        )
+    parser.add_argument(
+        "--frames", metavar="A:B", help="frame indices to run, START:STOP (STOP excluded)"
+    )
+    parser.add_argument(
+        "-o", "--out", type=Path, metavar="DIR", help="run directory (default runs/LOG-TIME)"
+    )
+    parser.add_argument("--mode", choices=("sequential", "pipelined"), help="default sequential")
+    parser.add_argument(
+        "--executor",
+        choices=("threads", "processes"),
+        help="run algorithms in this process (threads, default) or in worker processes",
+    )
+    parser.add_argument(
+        "--step-timeout",
+        type=float,
+        metavar="S",
+        help="record steps longer than S seconds as timed out (runs algorithms in workers)",
+    )
+    parser.add_argument("--fail-fast", action="store_true", help="stop at the first failed step")
+    parser.add_argument(
+        "--rate", type=float, metavar="X", help="pace at X times real time (default: flat out)"
+    )
+    parser.add_argument("--seed", type=int, help="seed for algorithms that take one")
+    parser.add_argument(
+        "--resume", action="store_true", help="continue the interrupted run in --out"
+    )
+    parser.add_argument(
+        "--sensor-map", type=Path, metavar="TOML", help="which topic is which sensor"
+    )
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.set_defaults(func=_run)

@@ -1,0 +1,340 @@
+"""The Orchestration Engine: frames through the stage graph, sequentially or pipelined.
+
+- *sequential*: each frame goes through every stage before the next frame starts.
+- *pipelined*: one thread per stage and one reading the log, joined by short bounded queues, so
+  stage k works on frame t while stage k-1 works on frame t+1.  Each stage still sees frames in
+  order and the same upstream outputs, so the outputs are identical to a sequential run; the
+  stages overlap where their work releases the GIL (numpy, scipy, I/O) or runs in worker
+  processes (``executor="processes"``).
+
+Algorithms of one stage run side by side: in worker processes all are sent the frame before any
+answer is awaited; in-process, a stage with several algorithms runs them on a thread pool.
+
+Every step is recorded (output, latency, CPU time, error); an algorithm's exception never stops a
+run unless ``fail_fast`` is set.  Ctrl-C stops reading, lets nothing half-done be written, and
+closes the run directory as ``interrupted``: ``redrive run … --resume`` continues it.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from typing import Any
+
+from redrive.algorithms import StageOutputs, StepResult, StepStatus
+from redrive.config import PipelineConfig
+from redrive.engine.graph import LogInputs, PlannedAlgorithm, StageGraph
+from redrive.engine.modes import ModeHooks, PacedFrame, ReplayMode
+from redrive.engine.stats import RunReport, StatsCollector
+from redrive.engine.worker import AlgorithmRunner, InlineRunner, ProcessRunner
+from redrive.results import FrameRecord, StepRecord
+from redrive.types import Frame
+
+__all__ = ["Engine", "FrameSink"]
+
+logger = logging.getLogger(__name__)
+
+_POLL_S = 0.05
+_QUEUE_DEPTH = 2
+
+FrameSink = Callable[[FrameRecord], None]
+
+
+class _StopRequestedError(Exception):
+    """Internal: the run was asked to stop."""
+
+
+@dataclass(slots=True)
+class _Item:
+    paced: PacedFrame
+    upstream: StageOutputs = field(default_factory=StageOutputs)
+    steps: list[StepRecord] = field(default_factory=list)
+    failed: tuple[int, StepRecord] | None = None
+    t0_ns: int = 0
+
+
+class _Stage:
+    """One stage's runners and how they are driven."""
+
+    def __init__(self, name: str, planned: tuple[PlannedAlgorithm, ...], runners: list[Any]):
+        self.name = name
+        self.planned = planned
+        self.runners: list[AlgorithmRunner] = runners
+        self.roles = {p.name: p.role for p in planned}
+        self._inline = all(isinstance(r, InlineRunner) for r in runners)
+        self._pool = (
+            ThreadPoolExecutor(len(runners), thread_name_prefix=f"redrive-{name}")
+            if self._inline and len(runners) > 1
+            else None
+        )
+
+    def run(self, item: _Item) -> None:
+        frame = item.paced.frame
+        results: list[StepResult]
+        if self._pool is not None:
+            futures = [
+                self._pool.submit(_run_inline, r, frame, item.upstream) for r in self.runners
+            ]
+            results = [f.result() for f in futures]
+        else:
+            for runner in self.runners:
+                runner.submit(frame, item.upstream)
+            results = [runner.result() for runner in self.runners]
+        outputs = {}
+        for planned, result in zip(self.planned, results, strict=True):
+            record = _record(planned, result)
+            item.steps.append(record)
+            if result.status is StepStatus.OK and result.output is not None:
+                outputs[planned.name] = result.output
+            elif item.failed is None:
+                item.failed = (frame.index, record)
+        item.upstream = item.upstream.merged(outputs, self.roles)
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+        for runner in self.runners:
+            runner.close()
+
+
+def _run_inline(runner: AlgorithmRunner, frame: Frame, upstream: StageOutputs) -> StepResult:
+    runner.submit(frame, upstream)
+    return runner.result()
+
+
+def _record(planned: PlannedAlgorithm, result: StepResult) -> StepRecord:
+    error = result.error
+    return StepRecord(
+        algorithm=planned.name,
+        stage=planned.stage,
+        role=planned.role.value,
+        status=result.status.value,
+        latency_ns=result.latency_ns,
+        cpu_ns=result.cpu_ns,
+        output=result.output,
+        error_type=error.type if error else "",
+        error_message=error.message if error else "",
+        traceback=error.traceback if error else "",
+    )
+
+
+class Engine:
+    """Runs a :class:`StageGraph` over frames.
+
+    Args:
+        graph: the checked algorithms.
+        pipeline: mode, executor, timeout, fail-fast.
+        inputs: the log's inputs (worker processes bind their algorithms against them).
+        hooks: the Mode Manager's hooks (default: replay as fast as possible).
+    """
+
+    def __init__(
+        self,
+        graph: StageGraph,
+        pipeline: PipelineConfig,
+        *,
+        inputs: LogInputs,
+        hooks: ModeHooks | None = None,
+    ) -> None:
+        self.graph = graph
+        self.pipeline = pipeline
+        self.hooks: ModeHooks = hooks or ReplayMode()
+        use_processes = pipeline.executor == "processes" or pipeline.step_timeout_s is not None
+        inputs_dict = {
+            "sensors": dict(inputs.sensors),
+            "has_vehicle_state": inputs.has_vehicle_state,
+            "has_ground_truth": inputs.has_ground_truth,
+        }
+        self._stages: list[_Stage] = []
+        for name, planned in graph.stages:
+            runners: list[Any] = []
+            for p in planned:
+                if use_processes:
+                    runners.append(
+                        ProcessRunner(
+                            plugin=p.spec.plugin,
+                            name=p.name,
+                            config=p.config,
+                            inputs=inputs_dict,
+                            timeout_s=pipeline.step_timeout_s,
+                        )
+                    )
+                else:
+                    runners.append(InlineRunner(p.instance))
+            self._stages.append(_Stage(name, planned, runners))
+
+    def worker_pids(self) -> dict[str, int]:
+        """``stage/algorithm`` → pid of each live worker process."""
+        out = {}
+        for stage in self._stages:
+            for runner in stage.runners:
+                pid = runner.pid
+                if pid is not None:
+                    out[f"{stage.name}/{runner.name}"] = pid
+        return out
+
+    def close(self) -> None:
+        for stage in self._stages:
+            stage.close()
+
+    def run(
+        self,
+        frames: Iterable[Frame],
+        *,
+        sink: FrameSink,
+        skip: frozenset[int] = frozenset(),
+        progress: Callable[[int], None] | None = None,
+    ) -> RunReport:
+        """Process ``frames``; hand every finished frame's record to ``sink``, in order.
+
+        Args:
+            frames: the frames (from the log), in order.
+            sink: receives each finished frame (the results writer).
+            skip: frame indices already done (a resumed run); they are read and not processed.
+            progress: called with the number of frames finished so far.
+
+        Returns:
+            what happened; ``report.status`` is ``complete``, ``interrupted`` (Ctrl-C) or
+            ``failed`` (``fail_fast`` and a step failed — ``report.failure`` says which).
+        """
+        stats = StatsCollector([p for _, planned in self.graph.stages for p in planned])
+        todo = (f for f in frames if f.index not in skip)
+        paced = self.hooks.before_frame(todo)
+        done = 0
+
+        def finish(item: _Item) -> tuple[int, StepRecord] | None:
+            nonlocal done
+            frame = item.paced.frame
+            record = FrameRecord(
+                frame_index=frame.index,
+                stamp_ns=frame.stamp_ns,
+                steps=tuple(item.steps),
+                vehicle_state=frame.vehicle_state,
+                ground_truth=frame.ground_truth,
+                wall_ns=time.perf_counter_ns() - item.t0_ns,
+                late=item.paced.late,
+            )
+            sink(record)
+            stats.add(record)
+            self.hooks.after_frame(record)
+            done += 1
+            if progress is not None:
+                progress(done)
+            return item.failed if self.pipeline.fail_fast else None
+
+        t0 = time.perf_counter()
+        status = "complete"
+        try:
+            if self.pipeline.mode == "pipelined" and len(self._stages) > 1:
+                failure = self._pipelined(paced, finish)
+            else:
+                failure = self._sequential(paced, finish)
+        except KeyboardInterrupt:
+            status, failure = "interrupted", None
+        if failure is not None:
+            status = "failed"
+        late = getattr(self.hooks, "late_frames", 0)
+        return stats.report(
+            status=status, wall_s=time.perf_counter() - t0, late_frames=late, failure=failure
+        )
+
+    def _sequential(
+        self, paced: Iterator[PacedFrame], finish: Callable[[_Item], tuple[int, StepRecord] | None]
+    ) -> tuple[int, StepRecord] | None:
+        for pf in paced:
+            item = _Item(pf, t0_ns=time.perf_counter_ns())
+            for stage in self._stages:
+                stage.run(item)
+            failed = finish(item)
+            if failed is not None:
+                return failed
+        return None
+
+    def _pipelined(
+        self, paced: Iterator[PacedFrame], finish: Callable[[_Item], tuple[int, StepRecord] | None]
+    ) -> tuple[int, StepRecord] | None:
+        stop = threading.Event()
+        end = object()
+        queues: list[queue.Queue[Any]] = [
+            queue.Queue(maxsize=_QUEUE_DEPTH) for _ in range(len(self._stages) + 1)
+        ]
+        crashed: list[BaseException] = []
+
+        def put(q: queue.Queue[Any], value: Any) -> None:
+            while True:
+                if stop.is_set():
+                    raise _StopRequestedError
+                try:
+                    q.put(value, timeout=_POLL_S)
+                    return
+                except queue.Full:
+                    continue
+
+        def get(q: queue.Queue[Any]) -> Any:
+            while True:
+                if stop.is_set():
+                    raise _StopRequestedError
+                try:
+                    return q.get(timeout=_POLL_S)
+                except queue.Empty:
+                    continue
+
+        def feed() -> None:
+            try:
+                for pf in paced:
+                    put(queues[0], _Item(pf, t0_ns=time.perf_counter_ns()))
+                put(queues[0], end)
+            except _StopRequestedError:
+                pass
+            except BaseException as err:  # a log error: hand it to the main thread
+                crashed.append(err)
+                stop.set()
+
+        def work(k: int) -> None:
+            stage = self._stages[k]
+            try:
+                while True:
+                    item = get(queues[k])
+                    if item is end:
+                        put(queues[k + 1], end)
+                        return
+                    stage.run(item)
+                    put(queues[k + 1], item)
+            except _StopRequestedError:
+                pass
+            except BaseException as err:
+                crashed.append(err)
+                stop.set()
+
+        threads = [threading.Thread(target=feed, name="redrive-reader", daemon=True)]
+        threads += [
+            threading.Thread(target=work, args=(k,), name=f"redrive-{s.name}", daemon=True)
+            for k, s in enumerate(self._stages)
+        ]
+        for t in threads:
+            t.start()
+        try:
+            while True:
+                try:
+                    item = get(queues[-1])
+                except _StopRequestedError:
+                    break
+                if item is end:
+                    break
+                failed = finish(item)
+                if failed is not None:
+                    return failed
+        finally:
+            stop.set()
+            for t in threads:
+                t.join()
+            if hasattr(paced, "close"):
+                paced.close()
+        if crashed:
+            raise crashed[0]
+        return None

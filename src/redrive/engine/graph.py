@@ -1,0 +1,171 @@
+"""The stage graph: a pipeline's algorithms loaded, configured and checked against a log.
+
+Checks made before the first frame (each a :class:`~redrive.errors.ConfigError` or
+:class:`~redrive.errors.PluginError` that says what to change):
+
+- every plugin loads and is an :class:`Algorithm` with a role;
+- roles never go backwards: no planning stage before a perception stage, no control before
+  planning (a stage may mix roles only if they are equal);
+- every algorithm's declared ``inputs`` exist in the log (sensor ids or types, ego state,
+  ground truth).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import inspect
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from redrive.algorithms import GROUND_TRUTH, VEHICLE_STATE, Algorithm, Role
+from redrive.algorithms.discovery import load_algorithm_class
+from redrive.config import AlgorithmSpec, PipelineConfig
+from redrive.errors import ConfigError, PluginError
+from redrive.types import SensorType
+
+__all__ = ["LogInputs", "PlannedAlgorithm", "StageGraph", "build_graph", "config_hash"]
+
+_ROLE_ORDER = {Role.PERCEPTION: 0, Role.PLANNING: 1, Role.CONTROL: 2}
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class LogInputs:
+    """What a log can feed algorithms: sensor id → type, plus ego state / ground truth."""
+
+    sensors: Mapping[str, SensorType] = field(default_factory=dict)
+    has_vehicle_state: bool = False
+    has_ground_truth: bool = False
+
+    @property
+    def extras(self) -> tuple[str, ...]:
+        out = []
+        if self.has_vehicle_state:
+            out.append(VEHICLE_STATE)
+        if self.has_ground_truth:
+            out.append(GROUND_TRUTH)
+        return tuple(out)
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, Mapping):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if value is None or isinstance(value, bool | int | float | str):
+        return value
+    return repr(value)
+
+
+def config_hash(config: Mapping[str, Any]) -> str:
+    """sha256 of the canonical JSON of a configuration (sorted keys)."""
+    text = json.dumps(_jsonable(config), sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class PlannedAlgorithm:
+    """One algorithm of the graph: its spec, class, role and the config it runs with.
+
+    ``instance`` is the configured, bound algorithm of this process (used by in-process
+    execution; worker processes build their own from ``spec`` and ``config``).
+    """
+
+    spec: AlgorithmSpec
+    stage: str
+    cls: type[Algorithm]
+    config: Mapping[str, Any]
+    instance: Algorithm
+
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+    @property
+    def role(self) -> Role:
+        return self.cls.role
+
+    def manifest_entry(self) -> dict[str, Any]:
+        try:
+            source = inspect.getsourcefile(self.cls) or ""
+        except TypeError:
+            source = ""
+        return {
+            "name": self.name,
+            "stage": self.stage,
+            "role": self.role.value,
+            "plugin": self.spec.plugin,
+            "class": f"{self.cls.__module__}:{self.cls.__qualname__}",
+            "source": source,
+            "version": str(self.cls.version),
+            "inputs": list(self.cls.input_names()),
+            "config": _jsonable(self.config),
+            "config_hash": config_hash(self.config),
+        }
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class StageGraph:
+    """Stages in execution order, each a tuple of planned algorithms."""
+
+    stages: tuple[tuple[str, tuple[PlannedAlgorithm, ...]], ...]
+
+    @property
+    def algorithms(self) -> tuple[PlannedAlgorithm, ...]:
+        return tuple(a for _, algos in self.stages for a in algos)
+
+
+def instantiate(
+    cls: type[Algorithm], *, name: str, config: Mapping[str, Any], inputs: LogInputs
+) -> Algorithm:
+    """A configured algorithm bound to a log's inputs (what both the engine process and a worker
+    process do with a plugin)."""
+    algo = cls(name=name)
+    algo.configure(config)
+    algo.bind(inputs.sensors, extras=inputs.extras)
+    return algo
+
+
+def build_graph(pipeline: PipelineConfig, inputs: LogInputs) -> StageGraph:
+    """Load, configure and check every algorithm of ``pipeline`` against ``inputs``."""
+    stages: list[tuple[str, tuple[PlannedAlgorithm, ...]]] = []
+    last_role: Role | None = None
+    last_stage = ""
+    for stage in pipeline.stages:
+        planned: list[PlannedAlgorithm] = []
+        for spec in stage.algorithms:
+            cls = load_algorithm_class(spec.plugin)
+            role = getattr(cls, "role", None)
+            if not isinstance(role, Role):
+                msg = f"{spec.plugin}: {cls.__name__} sets no `role` (Role.PERCEPTION, …)"
+                raise PluginError(msg)
+            if last_role is not None and _ROLE_ORDER[role] < _ROLE_ORDER[last_role]:
+                msg = (
+                    f"stage {stage.name!r}: {spec.name} is a {role.name} algorithm after the "
+                    f"{last_role.name} stage {last_stage!r}; order stages perception → planning → "
+                    "control"
+                )
+                raise ConfigError(msg)
+            config = dict(spec.config)
+            if "seed" in cls.defaults and "seed" not in config:
+                config["seed"] = pipeline.seed
+            try:
+                algo = instantiate(cls, name=spec.name, config=config, inputs=inputs)
+            except ConfigError as err:
+                msg = f"stage {stage.name!r}, algorithm {spec.name!r} ({spec.plugin}): {err}"
+                raise ConfigError(msg) from err
+            planned.append(
+                PlannedAlgorithm(
+                    spec=spec, stage=stage.name, cls=cls, config=dict(algo.config), instance=algo
+                )
+            )
+        roles = {p.role for p in planned}
+        if len(roles) > 1:
+            names = ", ".join(f"{p.name} ({p.role.name})" for p in planned)
+            msg = f"stage {stage.name!r} mixes roles ({names}); put each role in its own stage"
+            raise ConfigError(msg)
+        last_role = planned[0].role
+        last_stage = stage.name
+        stages.append((stage.name, tuple(planned)))
+    return StageGraph(stages=tuple(stages))

@@ -1,0 +1,175 @@
+"""Open-loop re-simulation of a log: frames → stage graph → run directory.
+
+>>> report = run_log(RunRequest(log=Path("drive.bag"), pipeline=reference_pipeline(),
+...                             out=Path("runs/first")))          # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import logging
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from redrive.config import PipelineConfig
+from redrive.engine.core import Engine
+from redrive.engine.graph import LogInputs, StageGraph, build_graph
+from redrive.engine.modes import ReplayMode
+from redrive.engine.resources import ResourceSampler
+from redrive.engine.stats import RunReport
+from redrive.errors import ConfigError
+from redrive.io import LogReader, open_log
+from redrive.io.frames import FrameAssembler
+from redrive.io.sensor_map import load_sensor_map_overrides
+from redrive.results import RunWriter
+from redrive.types import Frame
+
+__all__ = ["RunRequest", "expected_frames", "log_fingerprint", "log_inputs", "run_log"]
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class RunRequest:
+    """One run.
+
+    Attributes:
+        log: the log to replay.
+        pipeline: what runs, and how.
+        out: the run directory.
+        first_frame, stop_frame: frame indices ``[first_frame, stop_frame)``; None for the ends.
+        sensor_map: a sensor map TOML (which topic is which sensor) or None to infer it.
+        rate: real-time factor to pace at, or None for as fast as possible.
+        resume: continue the (interrupted) run in ``out``.
+    """
+
+    log: Path
+    pipeline: PipelineConfig
+    out: Path
+    first_frame: int | None = None
+    stop_frame: int | None = None
+    sensor_map: Path | None = None
+    rate: float | None = None
+    resume: bool = False
+
+
+def log_fingerprint(path: Path) -> dict[str, Any]:
+    """Path, size and sha256 of a log file (or of every file of a log directory, in name order)."""
+    digest = hashlib.sha256()
+    files = [path] if path.is_file() else sorted(p for p in path.rglob("*") if p.is_file())
+    size = 0
+    for file in files:
+        if file is not path:
+            digest.update(file.relative_to(path).as_posix().encode() + b"\0")
+        with file.open("rb") as fh:
+            hashlib.file_digest(fh, lambda: digest)  # feeds the whole file into `digest`
+        size += file.stat().st_size
+    return {"path": str(path.resolve()), "size_bytes": size, "sha256": digest.hexdigest()}
+
+
+def log_inputs(assembler: FrameAssembler) -> LogInputs:
+    smap = assembler.sensor_map
+    return LogInputs(
+        sensors={s.sensor_id: s.sensor_type for s in smap.sensors},
+        has_vehicle_state=smap.vehicle_state_topic is not None,
+        has_ground_truth=smap.ground_truth_topic is not None,
+    )
+
+
+def expected_frames(log: LogReader, assembler: FrameAssembler) -> int | None:
+    """How many frames the log makes (messages on the driver topic)."""
+    smap = assembler.sensor_map
+    if smap.driver is None:
+        return None
+    info = log.topics.get(smap.sensor(smap.driver).topic)
+    return None if info is None else int(info.count)
+
+
+def _select(frames: Iterator[Frame], first: int | None, stop: int | None) -> Iterator[Frame]:
+    if first:
+        frames = itertools.dropwhile(lambda f: f.index < first, frames)
+    if stop is not None:
+        frames = itertools.takewhile(lambda f: f.index < stop, frames)
+    return frames
+
+
+def _manifest(
+    request: RunRequest, log: LogReader, graph: StageGraph, inputs: LogInputs
+) -> dict[str, Any]:
+    pipeline = request.pipeline
+    return {
+        "log": {**log_fingerprint(request.log), "format": log.format},
+        "sensors": {k: v.value for k, v in inputs.sensors.items()},
+        "seed": pipeline.seed,
+        "pipeline": {
+            "mode": pipeline.mode,
+            "executor": pipeline.executor,
+            "step_timeout_s": pipeline.step_timeout_s,
+            "fail_fast": pipeline.fail_fast,
+            "first_frame": request.first_frame,
+            "stop_frame": request.stop_frame,
+            "rate": request.rate,
+            "stages": [name for name, _ in graph.stages],
+        },
+        "algorithms": [p.manifest_entry() for p in graph.algorithms],
+    }
+
+
+def run_log(
+    request: RunRequest,
+    *,
+    on_start: Callable[[int | None], None] | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> RunReport:
+    """Replay ``request.log`` through the pipeline into ``request.out``.
+
+    Args:
+        on_start: called once the log is open, with the number of frames expected (or None).
+        progress: called with the number of frames finished so far.
+
+    Raises:
+        ConfigError, PluginError: the pipeline does not fit the log (checked before any frame).
+        LogError: the log cannot be read (frames before the damage are stored; the run directory
+            is closed as ``failed``).
+    """
+    overrides = load_sensor_map_overrides(request.sensor_map) if request.sensor_map else None
+    if request.first_frame is not None and request.first_frame < 0:
+        raise ConfigError(f"--frames: the first frame must be >= 0, got {request.first_frame}")
+    with open_log(request.log) as log:
+        assembler = FrameAssembler(log, overrides=overrides)
+        inputs = log_inputs(assembler)
+        graph = build_graph(request.pipeline, inputs)
+        writer = RunWriter(
+            request.out,
+            manifest=_manifest(request, log, graph, inputs),
+            resume=request.resume,
+        )
+        if on_start is not None:
+            total = expected_frames(log, assembler)
+            if total is not None:
+                stop = total if request.stop_frame is None else min(total, request.stop_frame)
+                total = max(0, stop - (request.first_frame or 0) - len(writer.done_frames))
+            on_start(total)
+        engine = Engine(graph, request.pipeline, inputs=inputs, hooks=ReplayMode(rate=request.rate))
+        sampler = ResourceSampler(engine.worker_pids).start()
+        frames = _select(assembler.frames(), request.first_frame, request.stop_frame)
+        try:
+            report = engine.run(
+                frames, sink=writer.write_frame, skip=writer.done_frames, progress=progress
+            )
+        except BaseException as err:
+            writer.write_resources(sampler.stop())
+            engine.close()
+            status = "interrupted" if isinstance(err, KeyboardInterrupt) else "failed"
+            writer.close(status=status, summary={"error": f"{type(err).__name__}: {err}"})
+            raise
+        writer.write_resources(sampler.stop())
+        engine.close()
+        summary = report.as_dict()
+        if assembler.undecodable:
+            summary["undecodable_messages"] = dict(assembler.undecodable)
+        writer.close(status=report.status, summary=summary)
+    return report

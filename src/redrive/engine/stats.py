@@ -1,0 +1,177 @@
+"""What a run did, counted as it goes: frames, rates, per-algorithm outcomes and latencies."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from redrive.engine.graph import PlannedAlgorithm
+from redrive.results import FrameRecord, StepRecord
+from redrive.types import ControlCommands, PlannedPath
+
+__all__ = ["AlgorithmStats", "RunReport", "StatsCollector"]
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class AlgorithmStats:
+    """One algorithm over a run.  Latencies in milliseconds of wall time per step."""
+
+    name: str
+    stage: str
+    role: str
+    ok: int
+    error: int
+    timeout: int
+    skipped: int
+    outputs: int  # objects (perception), paths (planning) or commands (control) produced
+    latency_mean_ms: float
+    latency_p50_ms: float
+    latency_p95_ms: float
+    latency_max_ms: float
+    cpu_mean_ms: float
+    first_error: str = ""
+
+    def as_dict(self) -> dict[str, Any]:
+        return {k: getattr(self, k) for k in self.__slots__}
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class RunReport:
+    """The outcome of :meth:`Engine.run`.
+
+    Attributes:
+        status: ``complete``, ``interrupted`` or ``failed``.
+        frames: frames processed in this invocation.
+        wall_s: wall time of the run.
+        log_span_s: log time covered by those frames (last stamp − first stamp + one period).
+        late_frames: frames released after their due time (real-time pacing only).
+        failure: (frame index, step) that stopped a ``fail_fast`` run.
+    """
+
+    status: str
+    frames: int
+    wall_s: float
+    log_span_s: float
+    late_frames: int
+    algorithms: tuple[AlgorithmStats, ...] = ()
+    failure: tuple[int, StepRecord] | None = field(default=None)
+
+    @property
+    def frames_per_s(self) -> float:
+        return self.frames / self.wall_s if self.wall_s > 0 else 0.0
+
+    @property
+    def realtime_factor(self) -> float:
+        """Log seconds processed per wall second (10 = ten times faster than real time)."""
+        return self.log_span_s / self.wall_s if self.wall_s > 0 else 0.0
+
+    def as_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "status": self.status,
+            "frames": self.frames,
+            "wall_s": round(self.wall_s, 3),
+            "frames_per_s": round(self.frames_per_s, 2),
+            "log_span_s": round(self.log_span_s, 3),
+            "realtime_factor": round(self.realtime_factor, 2),
+            "late_frames": self.late_frames,
+            "algorithms": [a.as_dict() for a in self.algorithms],
+        }
+        if self.failure is not None:
+            index, step = self.failure
+            out["failure"] = {
+                "frame_index": index,
+                "algorithm": step.algorithm,
+                "status": step.status,
+                "error_type": step.error_type,
+                "error_message": step.error_message,
+            }
+        return out
+
+
+def _count(output: object) -> int:
+    if isinstance(output, tuple):
+        return len(output)
+    return int(isinstance(output, PlannedPath | ControlCommands))
+
+
+class StatsCollector:
+    """Accumulates :class:`FrameRecord`s (cheaply: counters and latency lists)."""
+
+    def __init__(self, planned: Sequence[PlannedAlgorithm]) -> None:
+        self._planned = list(planned)
+        self._status: dict[str, dict[str, int]] = {p.name: {} for p in planned}
+        self._outputs: dict[str, int] = {p.name: 0 for p in planned}
+        self._latency: dict[str, list[int]] = {p.name: [] for p in planned}
+        self._cpu: dict[str, list[int]] = {p.name: [] for p in planned}
+        self._first_error: dict[str, str] = {}
+        self.frames = 0
+        self._first_stamp: int | None = None
+        self._last_stamp = 0
+
+    def add(self, record: FrameRecord) -> None:
+        self.frames += 1
+        if self._first_stamp is None:
+            self._first_stamp = record.stamp_ns
+        self._last_stamp = record.stamp_ns
+        for step in record.steps:
+            counts = self._status[step.algorithm]
+            counts[step.status] = counts.get(step.status, 0) + 1
+            if step.status == "ok":
+                self._outputs[step.algorithm] += _count(step.output)
+            elif step.algorithm not in self._first_error:
+                self._first_error[step.algorithm] = (
+                    f"frame {record.frame_index}: {step.error_type}: {step.error_message}"
+                )
+            if step.status != "skipped":
+                self._latency[step.algorithm].append(step.latency_ns)
+                self._cpu[step.algorithm].append(step.cpu_ns)
+
+    def report(
+        self,
+        *,
+        status: str,
+        wall_s: float,
+        late_frames: int,
+        failure: tuple[int, StepRecord] | None,
+    ) -> RunReport:
+        span_s = 0.0
+        if self._first_stamp is not None and self.frames > 0:
+            span = self._last_stamp - self._first_stamp
+            period = span / (self.frames - 1) if self.frames > 1 else 0.0
+            span_s = (span + period) / 1e9
+        algos = []
+        for p in self._planned:
+            lat = np.asarray(self._latency[p.name], dtype=np.float64) / 1e6
+            cpu = np.asarray(self._cpu[p.name], dtype=np.float64) / 1e6
+            counts = self._status[p.name]
+            q = np.percentile(lat, [50, 95]) if lat.size else np.zeros(2)
+            algos.append(
+                AlgorithmStats(
+                    name=p.name,
+                    stage=p.stage,
+                    role=p.role.value,
+                    ok=counts.get("ok", 0),
+                    error=counts.get("error", 0),
+                    timeout=counts.get("timeout", 0),
+                    skipped=counts.get("skipped", 0),
+                    outputs=self._outputs[p.name],
+                    latency_mean_ms=float(lat.mean()) if lat.size else 0.0,
+                    latency_p50_ms=float(q[0]),
+                    latency_p95_ms=float(q[1]),
+                    latency_max_ms=float(lat.max()) if lat.size else 0.0,
+                    cpu_mean_ms=float(cpu.mean()) if cpu.size else 0.0,
+                    first_error=self._first_error.get(p.name, ""),
+                )
+            )
+        return RunReport(
+            status=status,
+            frames=self.frames,
+            wall_s=wall_s,
+            log_span_s=span_s,
+            late_frames=late_frames,
+            algorithms=tuple(algos),
+            failure=failure,
+        )
