@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -106,9 +108,9 @@ def test_filters_invisible_and_far_objects() -> None:
     gt = truth(4)
     gt = (
         gt[0],
-        DetectedObject(**{**_fields(gt[1]), "num_lidar_points": 0}),
-        DetectedObject(**{**_fields(gt[2]), "visible": False}),
-        DetectedObject(**{**_fields(gt[3]), "num_lidar_points": None, "visible": None}),
+        dataclasses.replace(gt[1], num_lidar_points=0),
+        dataclasses.replace(gt[2], visible=False),
+        dataclasses.replace(gt[3], num_lidar_points=None, visible=None),
     )
     ids = [o.object_id for o in oracle(quiet=True).step(frame(0, gt), StageOutputs())]
     assert ids == [1, 4]
@@ -122,10 +124,6 @@ def test_filters_invisible_and_far_objects() -> None:
     assert out
     assert all(np.hypot(*o.box.center[:2]) <= 50.0 for o in out)
     assert len(out) == sum(np.hypot(*g.box.center[:2]) <= 50.0 for g in far)
-
-
-def _fields(obj: DetectedObject) -> dict[str, object]:
-    return {name: getattr(obj, name) for name in obj.__dataclass_fields__}
 
 
 def test_keep_ids_false_gives_unknown_ids() -> None:

@@ -8,6 +8,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
+import numpy.typing as npt
 import pytest
 
 from redrive.algorithms.base import Role, StageOutputs, StepStatus
@@ -53,7 +54,7 @@ def tracker(**config: object) -> KalmanTracker:
     return algo
 
 
-def nearest(tracks: Sequence[DetectedObject], xy: Sequence[float]) -> DetectedObject:
+def nearest(tracks: Sequence[DetectedObject], xy: npt.ArrayLike) -> DetectedObject:
     return min(tracks, key=lambda t: float(np.hypot(*(t.box.center[:2] - np.asarray(xy)))))
 
 
@@ -236,7 +237,7 @@ def test_deterministic_and_reset_clears_everything() -> None:
     a.reset()
     assert _run(a, 30, lambda i: scenes[i]) == first
     assert first
-    assert min(r[1] for r in first) == 1
+    assert min(int(str(r[1])) for r in first) == 1
 
 
 def test_missing_upstream_output_is_an_algorithm_error() -> None:
@@ -303,6 +304,7 @@ def test_oracle_into_tracker_on_a_synthetic_log(tmp_path: Path) -> None:
         assert f.ground_truth is not None
         detections = oracle.run_step(f, StageOutputs())
         assert detections.status is StepStatus.OK
+        assert isinstance(detections.output, tuple)
         tracks = algo.run_step(
             f, StageOutputs({"oracle": detections.output}, {"oracle": Role.PERCEPTION})
         )
