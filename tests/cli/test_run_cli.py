@@ -1,0 +1,171 @@
+"""``redrive run`` as a new user runs it: a plugin file outside the package, a real process,
+Ctrl-C and --resume."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from redrive.cli.demo_log import write_demo_bag
+from redrive.cli.main import main
+from redrive.cli.run import parse_frames
+from redrive.errors import ConfigError
+from redrive.results import open_run
+
+REDRIVE = [sys.executable, "-m", "redrive"]
+
+USER_PLUGIN = textwrap.dedent(
+    '''
+    """A researcher's own detector, in a file of its own."""
+    import time
+
+    import numpy as np
+
+    from redrive.algorithms import Algorithm, Role
+    from redrive.types import Box3D, DetectedObject, ObjectClass, SensorType
+
+
+    class TallThings(Algorithm):
+        """Boxes around LiDAR returns more than 1 m above the lowest one."""
+
+        role = Role.PERCEPTION
+        inputs = (SensorType.LIDAR,)
+        defaults = {"height_m": 1.0, "sleep_s": 0.0}
+
+        def step(self, frame, upstream):
+            time.sleep(self.config["sleep_s"])
+            xyz = self.sensor(frame, SensorType.LIDAR).data.xyz
+            tall = xyz[xyz[:, 2] > xyz[:, 2].min() + self.config["height_m"]]
+            if len(tall) == 0:
+                return []
+            lo, hi = tall.min(axis=0), tall.max(axis=0)
+            box = Box3D(center=(lo + hi) / 2, size=hi - lo)
+            return [DetectedObject(object_class=ObjectClass.VEHICLE, confidence=0.5, box=box)]
+    '''
+)
+
+
+@pytest.fixture(scope="module")
+def bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return write_demo_bag(tmp_path_factory.mktemp("run_cli") / "drive.bag")
+
+
+@pytest.fixture
+def user_dir(tmp_path: Path) -> Path:
+    (tmp_path / "tall.py").write_text(USER_PLUGIN)
+    return tmp_path
+
+
+def _env() -> dict[str, str]:
+    env = dict(os.environ)
+    env.pop("PYTHONPATH", None)  # the plugin is found by its path, not by sys.path
+    return env
+
+
+def test_a_user_file_runs_without_touching_redrive(bag: Path, user_dir: Path) -> None:
+    proc = subprocess.run(
+        [
+            *REDRIVE,
+            "run",
+            str(bag),
+            "--perception",
+            "tall.py:TallThings",
+            "-o",
+            "out",
+            "--no-progress",
+        ],
+        cwd=user_dir,
+        env=_env(),
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "50 frames" in proc.stdout
+    run = open_run(user_dir / "out")
+    assert run.manifest["status"] == "complete"
+    assert run.manifest["algorithms"][0]["source"] == str(user_dir / "tall.py")
+    det = run.table("detections")
+    assert det.num_rows > 0
+    assert set(det.column("algorithm").to_pylist()) == {"TallThings"}
+
+
+def test_ctrl_c_leaves_a_run_that_resume_completes(bag: Path, user_dir: Path) -> None:
+    pipeline = user_dir / "slow.toml"
+    pipeline.write_text(
+        '[[stage]]\nname = "p"\n[[stage.algorithm]]\nname = "tall"\n'
+        'plugin = "tall.py:TallThings"\nconfig = { sleep_s = 0.1 }\n'
+    )
+    cmd = [*REDRIVE, "run", str(bag), "--pipeline", "slow.toml", "-o", "out", "--no-progress"]
+    proc = subprocess.Popen(
+        cmd, cwd=user_dir, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    manifest = user_dir / "out" / "manifest.json"
+    deadline = time.monotonic() + 60
+    while not manifest.exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(2.0)  # ~20 frames in
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 130, stderr
+    assert "--resume" in stdout
+    first = json.loads(manifest.read_text())
+    assert first["status"] == "interrupted"
+    done = open_run(user_dir / "out").table("frames").column("frame_index").to_pylist()
+    assert 0 < len(done) < 50
+
+    resumed = subprocess.run(
+        [*cmd, "--resume"],
+        cwd=user_dir,
+        env=_env(),
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert resumed.returncode == 0, resumed.stderr
+    run = open_run(user_dir / "out")
+    assert run.manifest["status"] == "complete"
+    frames = run.table("frames").column("frame_index").to_pylist()
+    assert frames == list(range(50))  # each frame exactly once
+    assert len(run.manifest["resumes"]) == 1
+
+
+def test_frames_argument() -> None:
+    assert parse_frames("100:200") == (100, 200)
+    assert parse_frames("5:") == (5, None)
+    assert parse_frames(":7") == (None, 7)
+    assert parse_frames("3") == (3, 4)
+    with pytest.raises(ConfigError, match="START:STOP"):
+        parse_frames("a-b")
+    with pytest.raises(ConfigError, match="greater"):
+        parse_frames("9:3")
+
+
+def test_bad_plugin_is_a_clear_error(
+    bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    status = main(
+        [
+            "run",
+            str(bag),
+            "--perception",
+            str(tmp_path / "nope.py:X"),
+            "-o",
+            str(tmp_path / "out"),
+            "--no-progress",
+        ]
+    )
+    assert status == 1
+    err = capsys.readouterr().err
+    assert "nope.py" in err
+    assert not (tmp_path / "out").exists()
