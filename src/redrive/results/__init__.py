@@ -1,3 +1,63 @@
-"""The results store (L2): one run directory per run — manifest.json plus per-frame outputs as
-Parquet — read and written here so engine, evaluation and GUI share it without importing each
-other."""
+"""The results store (L2): one run directory per run, shared by engine, evaluation and GUI.
+
+The engine writes a run with :class:`RunWriter` (records of :mod:`redrive.results.records`);
+evaluation and the GUI read it with :func:`open_run`; :func:`export_run` turns it into Parquet,
+CSV or Excel files.  Nothing here imports the engine, the algorithms or the log readers.
+
+Layout of a run directory (columns: ``docs/results.md``)::
+
+    RUN/manifest.json              schema_version, redrive_version, created/finished (ISO UTC),
+                                   status (running | complete | interrupted | failed), host,
+                                   log, seed, pipeline, algorithms (from the engine),
+                                   frames_done, resumes, summary
+    RUN/frames/part-00000.parquet  one row per frame: frame_index, stamp_ns, wall_ns, late,
+                                   n_ground_truth
+    RUN/steps/part-…               one row per algorithm per frame: status, latency, errors
+    RUN/detections/part-…          one row per object a perception algorithm returned
+    RUN/ground_truth/part-…        one row per ground-truth object
+    RUN/ego/part-…                 one row per frame with an ego state
+    RUN/paths/part-…               one row per waypoint of a planned path
+    RUN/commands/part-…            one row per control command
+    RUN/resources/part-…           one row per process resource sample
+    RUN/.lock                      held by the writing process
+
+Each flush of the writer adds part N of every table that has rows, and always ``frames`` part
+N, written last; parts are written to ``*.tmp`` and renamed.  A part counts only when the
+``frames`` part of its number exists, so a killed writer leaves a readable run that
+``RunWriter(..., resume=True)`` continues.  Parquet files hold no wall-clock metadata: the same
+records give the same bytes.
+"""
+
+from __future__ import annotations
+
+from redrive.results.export import EXPORT_FORMATS, export_run
+from redrive.results.manifest import RESUME_KEYS, SCHEMA_VERSION
+from redrive.results.records import (
+    ROLES,
+    STATUSES,
+    FrameRecord,
+    ResourceSample,
+    StepOutput,
+    StepRecord,
+)
+from redrive.results.schema import SCHEMAS, TABLES
+from redrive.results.store import FINAL_STATUSES, Run, RunWriter, open_run
+
+__all__ = [
+    "EXPORT_FORMATS",
+    "FINAL_STATUSES",
+    "RESUME_KEYS",
+    "ROLES",
+    "SCHEMAS",
+    "SCHEMA_VERSION",
+    "STATUSES",
+    "TABLES",
+    "FrameRecord",
+    "ResourceSample",
+    "Run",
+    "RunWriter",
+    "StepOutput",
+    "StepRecord",
+    "export_run",
+    "open_run",
+]

@@ -1,0 +1,59 @@
+"""``redrive export RUN --format csv|xlsx|parquet`` — a run's tables as files for other tools."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+__all__ = ["register"]
+
+_EPILOG = """\
+examples:
+  redrive export runs/urban --format xlsx          one workbook in runs/urban/export/
+  redrive export runs/urban --format csv -o out/   one CSV per table plus summary.csv
+  redrive export runs/urban --format parquet       each table merged into one Parquet file
+
+Only tables with rows are written. In CSV and Excel, text cells that a spreadsheet would run as a
+formula (starting with = + - @, tab or CR) get a leading ' ; Excel cells are cut at 32,767
+characters and a table longer than 1,048,576 rows continues on sheets "name (2)", "name (3)" ….
+"""
+
+
+def _run(args: argparse.Namespace) -> int:
+    from redrive.results import export_run, open_run
+
+    run = open_run(args.run)
+    out = args.output if args.output is not None else run.path / "export"
+    for path in export_run(run, fmt=args.format, out=out):
+        print(path)
+    return 0
+
+
+def register(sub: Any) -> None:
+    from redrive.results import EXPORT_FORMATS
+
+    parser = sub.add_parser(
+        "export",
+        help="export a run's tables to CSV, Excel or merged Parquet files",
+        description=(
+            "Write the tables of a run directory (frames, steps, detections, ground truth, ego, "
+            "paths, commands, resources) and the per-algorithm summary as CSV files, one Excel "
+            "workbook (a summary sheet with the run's facts, then a sheet per table) or one "
+            "Parquet file per table. Prints the files written."
+        ),
+        epilog=_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("run", type=Path, help="a run directory (the --out of a run)")
+    parser.add_argument(
+        "--format", required=True, choices=EXPORT_FORMATS, help="the file format to write"
+    )
+    parser.add_argument(
+        "-o",
+        "--output",
+        type=Path,
+        default=None,
+        help="directory to write into (created; default: RUN/export/)",
+    )
+    parser.set_defaults(func=_run)

@@ -1,0 +1,158 @@
+"""What the engine hands the results store: one record per frame, one per algorithm step.
+
+These are plain frozen dataclasses of the data model's types; the store turns them into the
+tables of a run directory (see :mod:`redrive.results`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from redrive.types import ControlCommands, DetectedObject, PlannedPath, VehicleState
+
+__all__ = [
+    "ROLES",
+    "STATUSES",
+    "FrameRecord",
+    "ResourceSample",
+    "StepOutput",
+    "StepRecord",
+]
+
+#: the values of ``StepRecord.role`` (``redrive.algorithms.Role`` values).
+ROLES = ("perception", "planning", "control")
+#: the values of ``StepRecord.status`` (``redrive.algorithms.StepStatus`` values).
+STATUSES = ("ok", "error", "timeout", "skipped")
+
+StepOutput = tuple[DetectedObject, ...] | PlannedPath | ControlCommands
+
+_OUTPUT_TYPES: dict[str, type] = {
+    "perception": tuple,
+    "planning": PlannedPath,
+    "control": ControlCommands,
+}
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class StepRecord:
+    """One algorithm on one frame.
+
+    Attributes:
+        algorithm: the algorithm's unique name in the run.
+        stage: the name of the stage it ran in.
+        role: ``"perception"``, ``"planning"`` or ``"control"``; fixes the type of ``output``.
+        status: ``"ok"``, ``"error"``, ``"timeout"`` or ``"skipped"``.
+        latency_ns: wall time of the step, int ns.
+        cpu_ns: CPU time of the step, int ns.
+        output: objects (perception; a list is accepted and stored as a tuple), a
+            :class:`PlannedPath` (planning) or :class:`ControlCommands` (control); None when
+            the step produced nothing.
+        error_type, error_message, traceback: why the step failed; empty when it did not.
+    """
+
+    algorithm: str
+    stage: str
+    role: str
+    status: str
+    latency_ns: int = 0
+    cpu_ns: int = 0
+    output: StepOutput | None = None
+    error_type: str = ""
+    error_message: str = ""
+    traceback: str = ""
+
+    def __post_init__(self) -> None:
+        if self.role not in ROLES:
+            msg = f"StepRecord {self.algorithm!r}: role {self.role!r} is not one of {ROLES}"
+            raise ValueError(msg)
+        if self.status not in STATUSES:
+            msg = f"StepRecord {self.algorithm!r}: status {self.status!r} is not one of {STATUSES}"
+            raise ValueError(msg)
+        output = self.output
+        if isinstance(output, list):
+            output = tuple(output)
+            object.__setattr__(self, "output", output)
+        if output is not None:
+            want = _OUTPUT_TYPES[self.role]
+            ok = isinstance(output, want)
+            if ok and isinstance(output, tuple):
+                ok = all(isinstance(obj, DetectedObject) for obj in output)
+            if not ok:
+                msg = (
+                    f"StepRecord {self.algorithm!r}: a {self.role} step's output must be "
+                    f"{'a tuple of DetectedObject' if want is tuple else want.__name__}, "
+                    f"got {type(output).__name__}"
+                )
+                raise ValueError(msg)
+        object.__setattr__(self, "latency_ns", int(self.latency_ns))
+        object.__setattr__(self, "cpu_ns", int(self.cpu_ns))
+
+    @property
+    def n_outputs(self) -> int:
+        """Objects for perception; 1 for a path or commands; 0 when there is no output."""
+        if self.output is None:
+            return 0
+        if isinstance(self.output, tuple):
+            return len(self.output)
+        return 1
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class FrameRecord:
+    """Everything one frame produced.
+
+    Attributes:
+        frame_index: the frame's 0-based index in the log (``Frame.index``); unique in a run.
+        stamp_ns: the frame's stamp, int ns since the epoch.
+        steps: one record per algorithm that was scheduled on this frame.
+        vehicle_state: the frame's ego state (frame ``map``/``odom``), if the log has one.
+        ground_truth: the frame's ground-truth objects (``Frame.ground_truth``), None when the
+            log carries none (an empty tuple means "ground truth: nothing there").
+        wall_ns: wall time the engine spent on the whole frame, int ns.
+        late: real-time pacing only: the frame was processed after its due time.
+    """
+
+    frame_index: int
+    stamp_ns: int
+    steps: tuple[StepRecord, ...]
+    vehicle_state: VehicleState | None = None
+    ground_truth: tuple[DetectedObject, ...] | None = None
+    wall_ns: int = 0
+    late: bool = False
+
+    def __post_init__(self) -> None:
+        index = int(self.frame_index)
+        if index < 0:
+            msg = f"FrameRecord.frame_index must be >= 0, got {index}"
+            raise ValueError(msg)
+        object.__setattr__(self, "frame_index", index)
+        object.__setattr__(self, "stamp_ns", int(self.stamp_ns))
+        object.__setattr__(self, "wall_ns", int(self.wall_ns))
+        object.__setattr__(self, "late", bool(self.late))
+        steps = tuple(self.steps)
+        names = [s.algorithm for s in steps]
+        if len(set(names)) != len(names):
+            msg = f"FrameRecord {index}: an algorithm appears twice in steps ({names})"
+            raise ValueError(msg)
+        object.__setattr__(self, "steps", steps)
+        if self.ground_truth is not None:
+            object.__setattr__(self, "ground_truth", tuple(self.ground_truth))
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ResourceSample:
+    """One sample of a process's resource use.
+
+    Attributes:
+        t_ns: when it was taken, int ns since the epoch.
+        label: what the process is (``engine``, ``worker:detector`` …).
+        pid: its process id.
+        cpu_percent: CPU use since the previous sample, percent of one core.
+        rss_bytes: resident memory, bytes.
+    """
+
+    t_ns: int
+    label: str
+    pid: int
+    cpu_percent: float
+    rss_bytes: int

@@ -1,0 +1,512 @@
+"""Writing and reading a run directory (layout: see :mod:`redrive.results`).
+
+Crash safety: every part is written to a ``*.tmp`` file and renamed into place; within one flush
+the ``frames`` part is renamed last, so a part of any table counts only when the ``frames`` part of
+the same number exists.  A killed writer therefore leaves complete flushes plus, at most, orphan
+parts and temp files of the flush it was in: readers ignore them, a resume deletes them.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import re
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from types import MappingProxyType, TracebackType
+from typing import Any
+
+import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.parquet as pq
+
+from redrive.errors import ConfigError
+from redrive.results._buffers import TableBuffers
+from redrive.results.manifest import (
+    MANIFEST_NAME,
+    SCHEMA_VERSION,
+    STORE_KEYS,
+    host_info,
+    now_iso,
+    read_manifest,
+    redrive_version,
+    resume_mismatches,
+    write_json_atomic,
+)
+from redrive.results.readers import (
+    commands_by_frame,
+    ego_by_frame,
+    objects_by_frame,
+    paths_by_frame,
+)
+from redrive.results.records import FrameRecord, ResourceSample
+from redrive.results.schema import SCHEMAS, SORT_KEYS, TABLES
+from redrive.results.summary import summarize_steps
+from redrive.types import ControlCommands, DetectedObject, PlannedPath, VehicleState
+
+try:  # POSIX: an advisory lock keeps two writers out of one run directory
+    import fcntl
+except ImportError:  # pragma: no cover - Windows
+    fcntl = None  # type: ignore[assignment]
+
+__all__ = ["FINAL_STATUSES", "Run", "RunWriter", "open_run"]
+
+logger = logging.getLogger(__name__)
+
+#: the statuses :meth:`RunWriter.close` accepts.
+FINAL_STATUSES = ("complete", "interrupted", "failed")
+_PART_RE = re.compile(r"^part-(\d{5,})\.parquet$")
+_LOCK_NAME = ".lock"
+#: entries a directory may hold and still count as empty (what a writer leaves before its manifest)
+_IGNORABLE = {_LOCK_NAME, MANIFEST_NAME + ".tmp"}
+#: Parquet writer options: fixed, so equal tables give equal bytes.
+_PARQUET_OPTIONS: dict[str, Any] = {"compression": "zstd", "use_dictionary": True}
+
+
+def _part_name(number: int) -> str:
+    return f"part-{number:05d}.parquet"
+
+
+def _parts_on_disk(run_dir: Path, table: str) -> dict[int, Path]:
+    """Part number → path of the complete parts of ``table`` (temp files are not parts)."""
+    folder = run_dir / table
+    if not folder.is_dir():
+        return {}
+    out = {}
+    for entry in folder.iterdir():
+        m = _PART_RE.match(entry.name)
+        if m:
+            out[int(m.group(1))] = entry
+    return dict(sorted(out.items()))
+
+
+def _read_part(path: Path, schema: pa.Schema, columns: Sequence[str] | None = None) -> pa.Table:
+    try:
+        table = pq.read_table(path, columns=list(columns) if columns else None, schema=schema)
+    except (OSError, pa.ArrowException) as err:
+        msg = (
+            f"{path}: cannot read this part of the run ({err}); delete it and resume the run "
+            "(`--resume`) to redo its frames"
+        )
+        raise ConfigError(msg) from err
+    return table
+
+
+def _write_part(path: Path, table: pa.Table) -> None:
+    """Write ``table`` to ``path`` atomically (temp file, fsync, rename)."""
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "wb") as fh:
+        pq.write_table(table, fh, **_PARQUET_OPTIONS)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+
+
+class _DirLock:
+    """An exclusive advisory lock on ``RUN/.lock`` (released by close or process death)."""
+
+    def __init__(self, run_dir: Path) -> None:
+        self._fd: int | None = None
+        if fcntl is None:  # pragma: no cover
+            return
+        fd = os.open(run_dir / _LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as err:
+            os.close(fd)
+            msg = (
+                f"{run_dir}: another process is writing this run; wait for it to finish or "
+                "write to another --out"
+            )
+            raise ConfigError(msg) from err
+        self._fd = fd
+
+    def release(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)  # closing the descriptor drops the flock
+            self._fd = None
+
+
+def _is_empty_dir(path: Path) -> bool:
+    return all(entry.name in _IGNORABLE for entry in path.iterdir())
+
+
+class RunWriter:
+    """Writes one run directory: buffered frames → one Parquet part per table per flush.
+
+    Args:
+        run_dir: the run directory; created for a new run.
+        manifest: what the engine knows about the run (``log`` with its ``hash``, ``pipeline``,
+            ``algorithms`` with ``name``/``version``/``config_hash``, ``seed`` …); JSON-able.
+        resume: continue the run already in ``run_dir`` (its manifest must match ``manifest`` in
+            :data:`redrive.results.manifest.RESUME_KEYS`); a missing or empty directory starts
+            a new run.
+        flush_every: frames buffered before a flush writes them.
+
+    Raises:
+        ConfigError: ``run_dir`` is not empty and not a run (or is a run and ``resume`` is
+            False), the run to resume does not match, or another process is writing it.
+    """
+
+    def __init__(
+        self,
+        run_dir: str | Path,
+        *,
+        manifest: Mapping[str, Any],
+        resume: bool = False,
+        flush_every: int = 100,
+    ) -> None:
+        if flush_every < 1:
+            msg = f"RunWriter.flush_every must be >= 1, got {flush_every}"
+            raise ValueError(msg)
+        self.path = Path(run_dir)
+        self.flush_every = int(flush_every)
+        given = _jsonable(manifest)
+        reserved = sorted(set(given) & set(STORE_KEYS))
+        if reserved:
+            msg = f"RunWriter: the manifest must not set {reserved}; the store writes them"
+            raise ValueError(msg)
+        path = self.path
+        if path.exists() and not path.is_dir():
+            msg = f"{path} is a file, not a run directory; choose another --out"
+            raise ConfigError(msg)
+        is_run = (path / MANIFEST_NAME).is_file()
+        empty = not path.exists() or _is_empty_dir(path)
+        if not resume and is_run:
+            msg = f"{path} already holds a run; use --resume to continue it or choose another --out"
+            raise ConfigError(msg)
+        if not is_run and not empty:
+            msg = (
+                f"{path} is not empty and holds no redrive run; choose another --out "
+                "(an empty or new directory), or --resume an existing run directory"
+            )
+            raise ConfigError(msg)
+        path.mkdir(parents=True, exist_ok=True)
+        self._lock = _DirLock(path)
+        self._buffers = TableBuffers()
+        self._buffered: set[int] = set()
+        self._has_resources = False
+        self._done: set[int] = set()
+        self._next_part = 0
+        self._closed = False
+        try:
+            if is_run:
+                self._manifest = self._open_existing(given)
+            else:
+                self._manifest = self._start_new(given)
+        except BaseException:
+            self._lock.release()
+            raise
+
+    # -- opening -----------------------------------------------------------------------------
+
+    def _start_new(self, given: dict[str, Any]) -> dict[str, Any]:
+        manifest: dict[str, Any] = {
+            "schema_version": SCHEMA_VERSION,
+            "redrive_version": redrive_version(),
+            "created": now_iso(),
+            "finished": None,
+            "status": "running",
+            "host": host_info(),
+            **given,
+            "frames_done": 0,
+            "resumes": [],
+            "summary": {},
+        }
+        for name in TABLES:
+            (self.path / name).mkdir(exist_ok=True)
+        write_json_atomic(self.path / MANIFEST_NAME, manifest)
+        logger.info("new run in %s", self.path)
+        return manifest
+
+    def _open_existing(self, given: dict[str, Any]) -> dict[str, Any]:
+        manifest = read_manifest(self.path)
+        diffs = resume_mismatches(manifest, given)
+        if diffs:
+            msg = (
+                f"cannot resume {self.path}: it was run with other inputs ("
+                + "; ".join(diffs)
+                + "); resume with the same log, algorithms, configs and frame range, or write "
+                "to another --out"
+            )
+            raise ConfigError(msg)
+        committed = _parts_on_disk(self.path, "frames")
+        removed = 0
+        for name in TABLES:
+            folder = self.path / name
+            folder.mkdir(exist_ok=True)
+            for entry in folder.iterdir():
+                m = _PART_RE.match(entry.name)
+                orphan = m is not None and int(m.group(1)) not in committed
+                if entry.name.endswith(".tmp") or orphan:
+                    entry.unlink()
+                    removed += 1
+        for entry in self.path.glob("*.tmp"):
+            entry.unlink()
+            removed += 1
+        done: set[int] = set()
+        for part in committed.values():
+            col = _read_part(part, SCHEMAS["frames"], ["frame_index"]).column("frame_index")
+            done.update(col.to_pylist())
+        self._done = done
+        self._next_part = max(committed, default=-1) + 1
+        manifest.setdefault("resumes", []).append(
+            {
+                "at": now_iso(),
+                "previous_status": manifest.get("status"),
+                "frames_done": len(done),
+                "hostname": host_info()["hostname"],
+                "removed_incomplete_files": removed,
+            }
+        )
+        manifest["status"] = "running"
+        manifest["finished"] = None
+        manifest["frames_done"] = len(done)
+        write_json_atomic(self.path / MANIFEST_NAME, manifest)
+        logger.info(
+            "resuming %s: %d frames done, %d incomplete files removed",
+            self.path,
+            len(done),
+            removed,
+        )
+        return manifest
+
+    # -- writing -----------------------------------------------------------------------------
+
+    @property
+    def done_frames(self) -> frozenset[int]:
+        """Frame indices already committed to disk (buffered frames are not included)."""
+        return frozenset(self._done)
+
+    @property
+    def manifest(self) -> Mapping[str, Any]:
+        return MappingProxyType(self._manifest)
+
+    def _check_open(self) -> None:
+        if self._closed:
+            msg = f"RunWriter for {self.path} is closed"
+            raise ValueError(msg)
+
+    def write_frame(self, record: FrameRecord) -> None:
+        """Buffer one frame's record; flushes every ``flush_every`` frames.
+
+        Raises:
+            ValueError: the frame index was already written in this run.
+        """
+        self._check_open()
+        index = record.frame_index
+        if index in self._done or index in self._buffered:
+            msg = (
+                f"frame {index} was already written to {self.path}; skip the frames in "
+                "RunWriter.done_frames when resuming"
+            )
+            raise ValueError(msg)
+        self._buffers.add_frame(record)
+        self._buffered.add(index)
+        if self._buffers.n_frames >= self.flush_every:
+            self.flush()
+
+    def write_resources(self, samples: Sequence[ResourceSample]) -> None:
+        """Buffer resource samples; they are written with the next flush."""
+        self._check_open()
+        self._buffers.add_resources(samples)
+        self._has_resources = True
+
+    def flush(self) -> None:
+        """Write what is buffered as one new part per table (``frames`` last), then the manifest."""
+        self._check_open()
+        if not self._buffered and not self._has_resources:
+            return
+        tables = self._buffers.take()
+        number = self._next_part
+        for name, table in tables.items():  # SCHEMAS order: frames last
+            if table.num_rows == 0 and name != "frames":
+                continue
+            _write_part(self.path / name / _part_name(number), table)
+        self._next_part += 1
+        self._done |= self._buffered
+        logger.debug("%s: part %d, %d frames", self.path, number, len(self._buffered))
+        self._buffered = set()
+        self._has_resources = False
+        self._manifest["frames_done"] = len(self._done)
+        write_json_atomic(self.path / MANIFEST_NAME, self._manifest)
+
+    def close(self, *, status: str, summary: Mapping[str, Any] | None = None) -> None:
+        """Flush, then mark the run ``complete``, ``interrupted`` or ``failed``.
+
+        The manifest's ``summary`` holds ``frames``, ``late_frames`` and per-algorithm counts
+        and latencies computed from the stored tables, overlaid with ``summary``.  Closing a
+        closed writer does nothing.
+        """
+        if self._closed:
+            return
+        if status not in FINAL_STATUSES:
+            msg = f"RunWriter.close: status {status!r} is not one of {FINAL_STATUSES}"
+            raise ValueError(msg)
+        try:
+            self.flush()
+            computed = _computed_summary(Run(self.path, self._manifest))
+            self._manifest["summary"] = {**computed, **_jsonable(summary or {})}
+            self._manifest["status"] = status
+            self._manifest["finished"] = now_iso()
+            write_json_atomic(self.path / MANIFEST_NAME, self._manifest)
+        finally:
+            self._closed = True
+            self._lock.release()
+
+    def __enter__(self) -> RunWriter:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        if exc_type is None:
+            self.close(status="complete")
+            return
+        status = "interrupted" if issubclass(exc_type, KeyboardInterrupt) else "failed"
+        if status == "failed":
+            self._manifest["error"] = f"{exc_type.__name__}: {exc}"
+        try:
+            self.close(status=status)
+        except Exception:  # never hide the exception that ended the run
+            logger.exception("could not close the run in %s after %s", self.path, exc_type)
+
+
+def _jsonable(data: Mapping[str, Any]) -> dict[str, Any]:
+    """``data`` through JSON (tuples become lists), so it compares with a manifest read back."""
+    try:
+        out = json.loads(json.dumps(dict(data), allow_nan=False))
+    except (TypeError, ValueError) as err:
+        msg = f"run manifest/summary must be JSON-serialisable (no NaN): {err}"
+        raise ValueError(msg) from err
+    assert isinstance(out, dict)
+    return out
+
+
+def _computed_summary(run: Run) -> dict[str, Any]:
+    frames = run.table("frames")
+    late = int(pc.sum(frames.column("late")).as_py() or 0)
+    algorithms = run.summary().to_pylist()
+    return {"frames": frames.num_rows, "late_frames": late, "algorithms": algorithms}
+
+
+def open_run(run_dir: str | Path) -> Run:
+    """Open a run directory for reading.
+
+    Raises:
+        ConfigError: ``run_dir`` does not exist, is not a run, or its manifest is unreadable.
+    """
+    path = Path(run_dir)
+    if not path.is_dir():
+        msg = f"{path}: no such run directory (give the --out of a `redrive run`)"
+        raise ConfigError(msg)
+    return Run(path, read_manifest(path))
+
+
+class Run:
+    """A run directory, read side.  Reads the parts on disk at each call (a live run grows).
+
+    Attributes:
+        path: the run directory.
+        manifest: ``manifest.json`` as read by :func:`open_run`.
+    """
+
+    def __init__(self, path: Path, manifest: Mapping[str, Any]) -> None:
+        self.path = path
+        self.manifest: Mapping[str, Any] = MappingProxyType(dict(manifest))
+
+    def __repr__(self) -> str:
+        return f"Run({str(self.path)!r}, status={self.manifest.get('status')!r})"
+
+    def part_paths(self, name: str) -> list[Path]:
+        """The committed parts of table ``name``, in write order."""
+        _check_table(name)
+        committed = _parts_on_disk(self.path, "frames")
+        if name == "frames":
+            return list(committed.values())
+        return [p for n, p in _parts_on_disk(self.path, name).items() if n in committed]
+
+    def tables(self) -> tuple[str, ...]:
+        """The tables with at least one row, in :data:`~redrive.results.schema.TABLES` order."""
+        out = []
+        for name in TABLES:
+            for part in self.part_paths(name):
+                try:
+                    rows = pq.ParquetFile(part).metadata.num_rows
+                except (OSError, pa.ArrowException) as err:
+                    msg = f"{part}: cannot read this part of the run ({err})"
+                    raise ConfigError(msg) from err
+                if rows:
+                    out.append(name)
+                    break
+        return tuple(out)
+
+    def _raw(self, name: str) -> pa.Table:
+        schema = SCHEMAS[name]
+        parts = [_read_part(p, schema) for p in self.part_paths(name)]
+        return pa.concat_tables(parts) if parts else schema.empty_table()
+
+    def table(self, name: str) -> pa.Table:
+        """All parts of ``name`` concatenated, stably sorted by ``SORT_KEYS[name]``."""
+        _check_table(name)
+        table = self._raw(name)
+        return table.sort_by([(key, "ascending") for key in SORT_KEYS[name]])
+
+    def summary(self) -> pa.Table:
+        """Per algorithm, in pipeline order: frames, statuses, outputs, latency and CPU (ms).
+
+        See :func:`redrive.results.summary.summarize_steps` for the columns.
+        """
+        return summarize_steps(self._raw("steps"))
+
+    def _ok_frames(self, algorithm: str) -> list[int]:
+        steps = self._raw("steps")
+        mine = steps.filter(pc.equal(steps.column("algorithm"), algorithm))
+        if mine.num_rows == 0:
+            have = sorted(set(steps.column("algorithm").to_pylist()))
+            msg = f"{self.path}: no algorithm {algorithm!r} in this run (it has {have})"
+            raise ValueError(msg)
+        ok = mine.filter(pc.equal(mine.column("status"), "ok"))
+        return sorted(ok.column("frame_index").to_pylist())
+
+    def _of(self, name: str, algorithm: str) -> pa.Table:
+        table = self.table(name)
+        return table.filter(pc.equal(table.column("algorithm"), algorithm))
+
+    def detections(self, algorithm: str) -> dict[int, tuple[DetectedObject, ...]]:
+        """frame_index → objects ``algorithm`` returned, for every frame its step was ``ok``
+        (an empty tuple when it found nothing); frames where it failed are absent."""
+        frames = self._ok_frames(algorithm)
+        return objects_by_frame(self._of("detections", algorithm), frames=frames)
+
+    def ground_truth(self) -> dict[int, tuple[DetectedObject, ...]]:
+        """frame_index → ground-truth objects, for every frame that had ground truth."""
+        frames = self.table("frames")
+        has = frames.filter(pc.is_valid(frames.column("n_ground_truth")))
+        return objects_by_frame(
+            self.table("ground_truth"), frames=has.column("frame_index").to_pylist()
+        )
+
+    def paths(self, algorithm: str) -> dict[int, PlannedPath]:
+        """frame_index → the path ``algorithm`` planned (frames with a non-empty path)."""
+        self._ok_frames(algorithm)
+        return paths_by_frame(self._of("paths", algorithm))
+
+    def commands(self, algorithm: str) -> dict[int, ControlCommands]:
+        """frame_index → the commands ``algorithm`` gave."""
+        self._ok_frames(algorithm)
+        return commands_by_frame(self._of("commands", algorithm))
+
+    def ego(self) -> dict[int, VehicleState]:
+        """frame_index → the ego state of the frame (frame ``map``/``odom`` as recorded)."""
+        return ego_by_frame(self.table("ego"))
+
+
+def _check_table(name: str) -> None:
+    if name not in SCHEMAS:
+        msg = f"no table {name!r} in a run; tables are {', '.join(TABLES)}"
+        raise ValueError(msg)
