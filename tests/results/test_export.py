@@ -171,3 +171,11 @@ def test_cli_main_when_wired(run_dir: Path, tmp_path: Path) -> None:
     assert cli_main.main(["export", str(run_dir), "--format", "parquet", "-o", str(tmp_path)]) == 0
     assert (tmp_path / "frames.parquet").is_file()
     assert cli_main.main(["export", str(tmp_path / "nope"), "--format", "csv"]) == 1
+
+
+def test_excel_cells_without_nan() -> None:
+    import pyarrow as pa
+
+    col = pa.array([1.5, float("nan"), None, float("-inf")])
+    assert export_mod._excel_column(col) == [1.5, None, None, None]
+    assert export_mod._excel_column(pa.array(["-x", None, "ok"])) == ["'-x", None, "ok"]

@@ -19,16 +19,12 @@ class TableBuffers:
 
     def __init__(self) -> None:
         self._cols: dict[str, dict[str, list[Any]]] = {}
-        self.clear()
         self.n_frames = 0
+        self.clear()
 
     def clear(self) -> None:
         self._cols = {name: {c: [] for c in schema.names} for name, schema in SCHEMAS.items()}
         self.n_frames = 0
-
-    def __len__(self) -> int:
-        """Rows buffered over all tables."""
-        return sum(len(next(iter(cols.values()))) for cols in self._cols.values())
 
     # -- filling -----------------------------------------------------------------------------
 

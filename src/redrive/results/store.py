@@ -147,6 +147,10 @@ class RunWriter:
     Raises:
         ConfigError: ``run_dir`` is not empty and not a run (or is a run and ``resume`` is
             False), the run to resume does not match, or another process is writing it.
+
+    One thread writes; the writer holds ``RUN/.lock`` until :meth:`close`.  As a context
+    manager it closes with ``complete`` on a normal exit, ``interrupted`` on
+    KeyboardInterrupt and ``failed`` on any other exception (recorded in ``manifest["error"]``).
     """
 
     def __init__(
