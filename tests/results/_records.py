@@ -18,9 +18,9 @@ T0_NS = 1_700_000_000_123_456_789
 EVIL = '=HYPERLINK("http://x")'
 
 MANIFEST = {
-    "log": {"path": "/data/drive.mcap", "hash": "sha256:abc", "format": "mcap"},
+    "log": {"path": "/data/drive.mcap", "sha256": "abc", "format": "mcap"},
     "seed": 7,
-    "pipeline": {"mode": "replay", "frames": [0, None]},
+    "pipeline": {"mode": "replay", "first_frame": 0, "stop_frame": None, "stages": ["p", "c"]},
     "algorithms": [
         {"name": "det", "version": "1", "config_hash": "c1", "role": "perception"},
         {"name": "bad_det", "version": "1", "config_hash": "c2", "role": "perception"},

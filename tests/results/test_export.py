@@ -74,9 +74,13 @@ def test_xlsx_export(run_dir: Path, tmp_path: Path) -> None:
     assert path.name == "urban_run.xlsx"
     wb = openpyxl.load_workbook(path, read_only=True)
     assert wb.sheetnames == ["summary", *run.tables()]
-    facts = {r[0]: r[1] for r in wb["summary"].iter_rows(values_only=True) if r and r[0]}
+    facts = {
+        r[0]: _row(("k", "v"), r[:2])["v"] for r in wb["summary"].iter_rows(values_only=True) if r
+    }
     assert facts["status"] == "complete"
-    assert facts["log.hash"] == "sha256:abc"
+    assert facts["log.sha256"] == "abc"
+    assert facts["pipeline.stop_frame"] is None
+    assert facts["algorithms"].startswith('[{"name": "det"')
     assert facts["frames_done"] == 7
     assert facts["summary.late_frames"] == 1
     rows = list(wb["summary"].iter_rows(values_only=True))

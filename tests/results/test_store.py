@@ -189,14 +189,23 @@ def test_refuses_existing_run_without_resume(tmp_path: Path) -> None:
 def test_refuses_mismatching_resume(tmp_path: Path) -> None:
     write_run(tmp_path / "run", n=2)
     other = json.loads(json.dumps(MANIFEST))
-    other["log"]["hash"] = "sha256:def"
+    other["log"]["sha256"] = "def"
     other["algorithms"][0]["config_hash"] = "c9"
-    with pytest.raises(ConfigError, match=r"log\.hash: run has \"sha256:abc\", now \"sha256:def\""):
+    with pytest.raises(ConfigError, match=r"log\.sha256: run has \"abc\", now \"def\""):
         RunWriter(tmp_path / "run", manifest=other, resume=True)
+    for key, value in (("stop_frame", 100), ("first_frame", 5)):
+        ranged = json.loads(json.dumps(MANIFEST))
+        ranged["pipeline"][key] = value
+        with pytest.raises(ConfigError, match=f"pipeline.{key}: run has"):
+            RunWriter(tmp_path / "run", manifest=ranged, resume=True)
+    reconfigured = json.loads(json.dumps(MANIFEST))
+    reconfigured["algorithms"][2]["config_hash"] = "c9"
+    with pytest.raises(ConfigError, match="algorithms: run has"):
+        RunWriter(tmp_path / "run", manifest=reconfigured, resume=True)
     # a change outside RESUME_KEYS is fine (the log moved); tuples compare like lists
     moved = json.loads(json.dumps(MANIFEST))
     moved["log"]["path"] = "/elsewhere/drive.mcap"
-    moved["pipeline"]["frames"] = (0, None)
+    moved["pipeline"]["stages"] = ("p", "c")
     RunWriter(tmp_path / "run", manifest=moved, resume=True).close(status="complete")
 
 

@@ -50,7 +50,7 @@ STORE_KEYS = (
 )
 #: what must be equal for a run to be resumed: dotted paths into the manifest; for
 #: ``algorithms`` each entry's ``name``, ``version`` and ``config_hash`` are compared in order.
-RESUME_KEYS = ("log.hash", "algorithms", "pipeline.frames")
+RESUME_KEYS = ("log.sha256", "algorithms", "pipeline.first_frame", "pipeline.stop_frame")
 _ALGORITHM_KEYS = ("name", "version", "config_hash")
 
 

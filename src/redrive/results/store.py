@@ -137,8 +137,9 @@ class RunWriter:
 
     Args:
         run_dir: the run directory; created for a new run.
-        manifest: what the engine knows about the run (``log`` with its ``hash``, ``pipeline``,
-            ``algorithms`` with ``name``/``version``/``config_hash``, ``seed`` …); JSON-able.
+        manifest: what the engine knows about the run (``log`` with its ``sha256``, ``pipeline``
+            with ``first_frame``/``stop_frame``, ``algorithms`` with ``name``/``version``/
+            ``config_hash``, ``seed`` …); JSON-able.
         resume: continue the run already in ``run_dir`` (its manifest must match ``manifest`` in
             :data:`redrive.results.manifest.RESUME_KEYS`); a missing or empty directory starts
             a new run.
