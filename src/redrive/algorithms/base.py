@@ -73,6 +73,7 @@ class Role(enum.Enum):
         return _OUTPUT_NAMES[self]
 
 
+_PERCEPTION, _PLANNING = Role.PERCEPTION, Role.PLANNING
 _OUTPUT_NAMES = {
     Role.PERCEPTION: "a list of DetectedObject",
     Role.PLANNING: "a PlannedPath",
@@ -85,10 +86,10 @@ def check_output(role: Role, value: object, *, where: str) -> AlgorithmOutput:
 
     PERCEPTION accepts any list or tuple of :class:`DetectedObject` and returns a tuple.
     """
-    if role is Role.PERCEPTION:
+    if role is _PERCEPTION:
         if isinstance(value, list | tuple) and all(isinstance(o, DetectedObject) for o in value):
             return tuple(value)
-    elif role is Role.PLANNING:
+    elif role is _PLANNING:
         if isinstance(value, PlannedPath):
             return value
     elif isinstance(value, ControlCommands):
@@ -152,7 +153,10 @@ class StageOutputs:
         self, more: Mapping[str, AlgorithmOutput], roles: Mapping[str, Role]
     ) -> StageOutputs:
         """These outputs followed by ``more`` (a later stage's)."""
-        return StageOutputs({**self.outputs, **more}, {**self.roles, **roles})
+        out = object.__new__(StageOutputs)  # fresh dicts: no need to copy them again
+        object.__setattr__(out, "outputs", MappingProxyType({**self.outputs, **more}))
+        object.__setattr__(out, "roles", MappingProxyType({**self.roles, **roles}))
+        return out
 
 
 class StepStatus(enum.Enum):
@@ -160,6 +164,11 @@ class StepStatus(enum.Enum):
     ERROR = "error"  # the step raised, or returned the wrong type
     TIMEOUT = "timeout"  # the step ran past --step-timeout (its worker was restarted)
     SKIPPED = "skipped"  # not run: a required upstream output or input was missing
+
+
+# bound once: run_step is on the per-frame path (an enum member lookup is a descriptor call)
+_OK, _ERROR = StepStatus.OK, StepStatus.ERROR
+_thread_time_ns, _perf_counter_ns = time.thread_time_ns, time.perf_counter_ns
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -312,30 +321,30 @@ class Algorithm(ABC):
 
     def run_step(self, frame: Frame, upstream: StageOutputs) -> StepResult:
         """Time :meth:`step`, check its output, and turn an exception into a recorded error."""
-        cpu0 = time.thread_time_ns()
-        t0 = time.perf_counter_ns()
+        cpu0 = _thread_time_ns()
+        t0 = _perf_counter_ns()
         try:
             value = self.step(frame, upstream)
         except Exception as err:  # recorded, never swallowed: the engine stores it per frame
-            t1 = time.perf_counter_ns()
+            t1 = _perf_counter_ns()
             return StepResult(
-                status=StepStatus.ERROR,
+                status=_ERROR,
                 latency_ns=t1 - t0,
-                cpu_ns=time.thread_time_ns() - cpu0,
+                cpu_ns=_thread_time_ns() - cpu0,
                 error=StepError.from_exception(err),
             )
-        t1 = time.perf_counter_ns()
-        cpu_ns = time.thread_time_ns() - cpu0
+        t1 = _perf_counter_ns()
+        cpu_ns = _thread_time_ns() - cpu0
         try:
-            output = check_output(self.role, value, where=f"{self.name} on frame {frame.index}")
+            output = check_output(self.role, value, where=self.name)
         except AlgorithmError as err:
             return StepResult(
-                status=StepStatus.ERROR,
+                status=_ERROR,
                 latency_ns=t1 - t0,
                 cpu_ns=cpu_ns,
-                error=StepError(type=type(err).__name__, message=str(err)),
+                error=StepError(type=type(err).__name__, message=f"frame {frame.index}: {err}"),
             )
-        return StepResult(status=StepStatus.OK, output=output, latency_ns=t1 - t0, cpu_ns=cpu_ns)
+        return StepResult(status=_OK, output=output, latency_ns=t1 - t0, cpu_ns=cpu_ns)
 
     @classmethod
     def describe(cls) -> str:

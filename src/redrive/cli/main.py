@@ -14,13 +14,27 @@ from redrive.errors import RedriveError
 __all__ = ["main"]
 
 #: subcommand modules under redrive.cli, in --help order; each has register(subparsers).
-_COMMANDS = ("info", "convert", "synth", "run", "bench")
+_COMMANDS = (
+    "info",
+    "convert",
+    "synth",
+    "run",
+    "export",
+    "algorithms",
+    "new_algorithm",
+    "bench",
+)
 
 _EPILOG = """\
 examples:
   redrive info drive.bag                 topics, counts, rates, decoders of a log
   redrive convert drive.bag drive.mcap   any log (KITTI too) to MCAP or a ROS 1 bag
   redrive synth urban -o urban.mcap      simulate a driving scenario into a log
+  redrive run urban.mcap                 replay it through perception → planning → control
+  redrive run drive.bag --perception my_detector.py:MyDetector --out runs/mine
+  redrive export runs/mine --format xlsx results as Excel (or csv, parquet)
+  redrive algorithms                     the installed algorithms
+  redrive new-algorithm my_planner --role planning   a template to start from
   redrive bench read drive.bag           decoding speed against a raw read
 
 Logs: ROS 1 .bag, ROS 2 bag directories (sqlite3/mcap), .mcap, KITTI object folders.

@@ -26,12 +26,12 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
-from redrive.algorithms import StageOutputs, StepResult, StepStatus
+from redrive.algorithms import Algorithm, StageOutputs, StepResult, StepStatus
 from redrive.config import PipelineConfig
 from redrive.engine.graph import LogInputs, PlannedAlgorithm, StageGraph
 from redrive.engine.modes import ModeHooks, PacedFrame, ReplayMode
 from redrive.engine.stats import RunReport, StatsCollector
-from redrive.engine.worker import AlgorithmRunner, InlineRunner, ProcessRunner
+from redrive.engine.worker import AlgorithmRunner, InlineRunner, ProcessRunner, frame_for
 from redrive.results import FrameRecord, StepRecord
 from redrive.types import Frame
 
@@ -66,7 +66,12 @@ class _Stage:
         self.planned = planned
         self.runners: list[AlgorithmRunner] = runners
         self.roles = {p.name: p.role for p in planned}
+        self._role_values = [p.role.value for p in planned]
         self._inline = all(isinstance(r, InlineRunner) for r in runners)
+        self._single: tuple[Algorithm, frozenset[str]] | None = None
+        if self._inline and len(runners) == 1:
+            algo = planned[0].instance
+            self._single = (algo, frozenset(algo.bound_inputs.values()))
         self._pool = (
             ThreadPoolExecutor(len(runners), thread_name_prefix=f"redrive-{name}")
             if self._inline and len(runners) > 1
@@ -75,6 +80,20 @@ class _Stage:
 
     def run(self, item: _Item) -> None:
         frame = item.paced.frame
+        if self._single is not None:  # the common case, kept short: one algorithm in-process
+            algo, sensors = self._single
+            if not frame.sensors.keys() <= sensors:
+                frame = frame_for(frame, sensors)
+            result = algo.run_step(frame, item.upstream)
+            record = _record(self.planned[0], self._role_values[0], result)
+            item.steps.append(record)
+            if result.status is _OK and result.output is not None:
+                item.upstream = item.upstream.merged({algo.name: result.output}, self.roles)
+            else:
+                if item.failed is None:
+                    item.failed = (frame.index, record)
+                item.upstream = item.upstream.merged({}, self.roles)
+            return
         results: list[StepResult]
         if self._pool is not None:
             futures = [
@@ -86,10 +105,10 @@ class _Stage:
                 runner.submit(frame, item.upstream)
             results = [runner.result() for runner in self.runners]
         outputs = {}
-        for planned, result in zip(self.planned, results, strict=True):
-            record = _record(planned, result)
+        for planned, role, result in zip(self.planned, self._role_values, results, strict=True):
+            record = _record(planned, role, result)
             item.steps.append(record)
-            if result.status is StepStatus.OK and result.output is not None:
+            if result.status is _OK and result.output is not None:
                 outputs[planned.name] = result.output
             elif item.failed is None:
                 item.failed = (frame.index, record)
@@ -107,13 +126,17 @@ def _run_inline(runner: AlgorithmRunner, frame: Frame, upstream: StageOutputs) -
     return runner.result()
 
 
-def _record(planned: PlannedAlgorithm, result: StepResult) -> StepRecord:
+_OK = StepStatus.OK
+_STATUS_VALUES = {s: s.value for s in StepStatus}
+
+
+def _record(planned: PlannedAlgorithm, role: str, result: StepResult) -> StepRecord:
     error = result.error
     return StepRecord(
-        algorithm=planned.name,
+        algorithm=planned.spec.name,
         stage=planned.stage,
-        role=planned.role.value,
-        status=result.status.value,
+        role=role,
+        status=_STATUS_VALUES[result.status],
         latency_ns=result.latency_ns,
         cpu_ns=result.cpu_ns,
         output=result.output,

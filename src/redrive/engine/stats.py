@@ -10,7 +10,6 @@ import numpy as np
 
 from redrive.engine.graph import PlannedAlgorithm
 from redrive.results import FrameRecord, StepRecord
-from redrive.types import ControlCommands, PlannedPath
 
 __all__ = ["AlgorithmStats", "RunReport", "StatsCollector"]
 
@@ -91,18 +90,13 @@ class RunReport:
         return out
 
 
-def _count(output: object) -> int:
-    if isinstance(output, tuple):
-        return len(output)
-    return int(isinstance(output, PlannedPath | ControlCommands))
-
-
 class StatsCollector:
     """Accumulates :class:`FrameRecord`s (cheaply: counters and latency lists)."""
 
     def __init__(self, planned: Sequence[PlannedAlgorithm]) -> None:
         self._planned = list(planned)
         self._status: dict[str, dict[str, int]] = {p.name: {} for p in planned}
+        self._ok: dict[str, int] = {p.name: 0 for p in planned}
         self._outputs: dict[str, int] = {p.name: 0 for p in planned}
         self._latency: dict[str, list[int]] = {p.name: [] for p in planned}
         self._cpu: dict[str, list[int]] = {p.name: [] for p in planned}
@@ -117,17 +111,22 @@ class StatsCollector:
             self._first_stamp = record.stamp_ns
         self._last_stamp = record.stamp_ns
         for step in record.steps:
-            counts = self._status[step.algorithm]
-            counts[step.status] = counts.get(step.status, 0) + 1
-            if step.status == "ok":
-                self._outputs[step.algorithm] += _count(step.output)
-            elif step.algorithm not in self._first_error:
-                self._first_error[step.algorithm] = (
-                    f"frame {record.frame_index}: {step.error_type}: {step.error_message}"
-                )
-            if step.status != "skipped":
-                self._latency[step.algorithm].append(step.latency_ns)
-                self._cpu[step.algorithm].append(step.cpu_ns)
+            name, status = step.algorithm, step.status
+            if status == "ok":
+                self._ok[name] += 1
+                output = step.output
+                self._outputs[name] += len(output) if isinstance(output, tuple) else 1
+            else:
+                counts = self._status[name]
+                counts[status] = counts.get(status, 0) + 1
+                if name not in self._first_error:
+                    self._first_error[name] = (
+                        f"frame {record.frame_index}: {step.error_type}: {step.error_message}"
+                    )
+                if status == "skipped":
+                    continue
+            self._latency[name].append(step.latency_ns)
+            self._cpu[name].append(step.cpu_ns)
 
     def report(
         self,
@@ -153,7 +152,7 @@ class StatsCollector:
                     name=p.name,
                     stage=p.stage,
                     role=p.role.value,
-                    ok=counts.get("ok", 0),
+                    ok=self._ok[p.name],
                     error=counts.get("error", 0),
                     timeout=counts.get("timeout", 0),
                     skipped=counts.get("skipped", 0),

@@ -1,0 +1,264 @@
+"""``redrive bench engine``: the engine against a bare Python loop calling the same functions.
+
+Three stages (perception → planning → control) each do about ``work_ms`` of numpy work (an
+elementwise ``sin``/``sqrt`` over a float64 array sized on this machine so one call takes
+``work_ms``; numpy releases the GIL inside it) over frames already in memory.  Measured in the
+same run, interleaved:
+
+- *bare loop*: ``for frame in frames: a(); b(); c()`` — the best any orchestration can do on one
+  core;
+- *sequential* / *pipelined*: :class:`redrive.engine.Engine` with the same work wrapped as
+  algorithms, every step timed, checked and handed to the recording sink (kept in memory, as the
+  results writer's buffer does; ``writer=True`` adds the real Parquet writer);
+- *overhead*: the same with no-op stages: (engine − bare loop) / frames is the engine's own cost
+  per frame (timing, output checks, records).
+"""
+
+from __future__ import annotations
+
+import statistics
+import tempfile
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from redrive.algorithms import Algorithm, Role, StageOutputs
+from redrive.config import AlgorithmSpec, PipelineConfig, StageSpec
+from redrive.engine import Engine, LogInputs, build_graph
+from redrive.results import FrameRecord, RunWriter
+from redrive.types import ControlCommands, DetectedObject, Frame, PlannedPath
+
+__all__ = ["EngineBenchResult", "bench_engine", "calibrate_work"]
+
+_WORK: dict[str, Any] = {"a": np.zeros(1), "out": np.zeros(1)}
+_PATH = PlannedPath(stamp_ns=0, waypoints=np.zeros((1, 4)))
+_COMMANDS = ControlCommands()
+
+
+def _work() -> None:
+    a, out = _WORK["a"], _WORK["out"]
+    np.sin(a, out=out)
+    np.sqrt(out * out, out=out)
+
+
+def calibrate_work(work_ms: float) -> int:
+    """Size the work array so one :func:`_work` call takes about ``work_ms`` here."""
+    n = 50_000
+    for _ in range(6):
+        _WORK["a"] = np.linspace(0.0, 1.0, n)
+        _WORK["out"] = np.empty(n)
+        _work()
+        t0 = time.perf_counter()
+        reps = 20
+        for _ in range(reps):
+            _work()
+        per_call_ms = (time.perf_counter() - t0) / reps * 1e3
+        n = max(1000, int(n * work_ms / max(per_call_ms, 1e-6)))
+    _WORK["a"] = np.linspace(0.0, 1.0, n)
+    _WORK["out"] = np.empty(n)
+    return n
+
+
+class BusyPerception(Algorithm):
+    """~work_ms of numpy work; no objects."""
+
+    role = Role.PERCEPTION
+
+    def step(self, frame: Frame, upstream: StageOutputs) -> tuple[DetectedObject, ...]:
+        _work()
+        return ()
+
+
+class BusyPlanning(Algorithm):
+    """~work_ms of numpy work; a one-point path."""
+
+    role = Role.PLANNING
+
+    def step(self, frame: Frame, upstream: StageOutputs) -> PlannedPath:
+        _work()
+        return _PATH
+
+
+class BusyControl(Algorithm):
+    """~work_ms of numpy work; zero commands."""
+
+    role = Role.CONTROL
+
+    def step(self, frame: Frame, upstream: StageOutputs) -> ControlCommands:
+        _work()
+        return _COMMANDS
+
+
+class NoopPerception(Algorithm):
+    role = Role.PERCEPTION
+
+    def step(self, frame: Frame, upstream: StageOutputs) -> tuple[DetectedObject, ...]:
+        return ()
+
+
+class NoopPlanning(Algorithm):
+    role = Role.PLANNING
+
+    def step(self, frame: Frame, upstream: StageOutputs) -> PlannedPath:
+        return _PATH
+
+
+class NoopControl(Algorithm):
+    role = Role.CONTROL
+
+    def step(self, frame: Frame, upstream: StageOutputs) -> ControlCommands:
+        return _COMMANDS
+
+
+def _pipeline(kind: str, mode: str) -> PipelineConfig:
+    names = (
+        ("BusyPerception", "BusyPlanning", "BusyControl")
+        if kind == "busy"
+        else ("NoopPerception", "NoopPlanning", "NoopControl")
+    )
+    return PipelineConfig(
+        stages=tuple(
+            StageSpec(
+                name=f"s{i}",
+                algorithms=(AlgorithmSpec(name=f"a{i}", plugin=f"{__name__}:{cls}"),),
+            )
+            for i, cls in enumerate(names)
+        ),
+        mode=mode,  # type: ignore[arg-type]
+    )
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class EngineBenchResult:
+    """Medians over repeats; times in seconds per whole pass unless named per frame."""
+
+    frames: int
+    work_ms: float
+    work_elements: int
+    bare_s: float
+    sequential_s: float
+    pipelined_s: float
+    noop_bare_s: float
+    noop_engine_s: float
+    writer_s: float | None
+    passes: Mapping[str, list[float]] = field(default_factory=dict)
+
+    @property
+    def sequential_ratio(self) -> float:
+        """Throughput of the sequential engine over the bare loop's (target ≥ 0.95)."""
+        return self.bare_s / self.sequential_s
+
+    @property
+    def pipelined_ratio(self) -> float:
+        """Throughput of the pipelined engine over the bare loop's (target ≥ 1.5 on 2 cores)."""
+        return self.bare_s / self.pipelined_s
+
+    @property
+    def overhead_us_per_frame(self) -> float:
+        """The engine's own cost per frame with no-op stages (target ≤ 20 µs)."""
+        return (self.noop_engine_s - self.noop_bare_s) / self.frames * 1e6
+
+    @property
+    def writer_us_per_frame(self) -> float | None:
+        """The same with the Parquet results writer recording every frame."""
+        if self.writer_s is None:
+            return None
+        return (self.writer_s - self.noop_bare_s) / self.frames * 1e6
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "frames": self.frames,
+            "work_ms": self.work_ms,
+            "work_elements": self.work_elements,
+            "bare_s": self.bare_s,
+            "sequential_s": self.sequential_s,
+            "pipelined_s": self.pipelined_s,
+            "sequential_ratio": self.sequential_ratio,
+            "pipelined_ratio": self.pipelined_ratio,
+            "overhead_us_per_frame": self.overhead_us_per_frame,
+            "writer_us_per_frame": self.writer_us_per_frame,
+            "passes": dict(self.passes),
+        }
+
+
+def _bare(frames: list[Frame], fns: tuple[Callable[[], Any], ...]) -> float:
+    a, b, c = fns
+    t0 = time.perf_counter()
+    for _frame in frames:
+        a()
+        b()
+        c()
+    return time.perf_counter() - t0
+
+
+def _noop() -> None:
+    return None
+
+
+def _engine(frames: list[Frame], kind: str, mode: str, writer_dir: Path | None = None) -> float:
+    pipeline = _pipeline(kind, mode)
+    graph = build_graph(pipeline, LogInputs())
+    engine = Engine(graph, pipeline, inputs=LogInputs())
+    kept: list[FrameRecord] = []
+    writer = None
+    if writer_dir is not None:
+        writer = RunWriter(writer_dir, manifest={"bench": "engine"})
+        sink: Callable[[FrameRecord], None] = writer.write_frame
+    else:
+        sink = kept.append
+    t0 = time.perf_counter()
+    report = engine.run(frames, sink=sink)
+    if writer is not None:
+        writer.close(status="complete")
+    elapsed = time.perf_counter() - t0
+    engine.close()
+    if report.frames != len(frames):
+        msg = f"engine processed {report.frames} of {len(frames)} frames"
+        raise RuntimeError(msg)
+    return elapsed
+
+
+def bench_engine(
+    *,
+    frames: int = 500,
+    work_ms: float = 1.0,
+    repeats: int = 5,
+    writer: bool = True,
+    progress: Callable[[str], None] | None = None,
+) -> EngineBenchResult:
+    """Run every variant ``repeats`` times, interleaved, and keep the medians."""
+    elements = calibrate_work(work_ms)
+    data = [Frame(stamp_ns=i * 100_000_000, index=i) for i in range(frames)]
+    passes: dict[str, list[float]] = {
+        k: [] for k in ("bare", "sequential", "pipelined", "noop_bare", "noop_engine", "writer")
+    }
+    with tempfile.TemporaryDirectory(prefix="redrive-bench-engine-") as tmp:
+        for r in range(repeats):
+            if progress is not None:
+                progress(f"pass {r + 1}/{repeats}")
+            passes["bare"].append(_bare(data, (_work, _work, _work)))
+            passes["sequential"].append(_engine(data, "busy", "sequential"))
+            passes["pipelined"].append(_engine(data, "busy", "pipelined"))
+            passes["noop_bare"].append(_bare(data, (_noop, _noop, _noop)))
+            passes["noop_engine"].append(_engine(data, "noop", "sequential"))
+            if writer:
+                passes["writer"].append(
+                    _engine(data, "noop", "sequential", writer_dir=Path(tmp) / f"run{r}")
+                )
+    med = {k: statistics.median(v) for k, v in passes.items() if v}
+    return EngineBenchResult(
+        frames=frames,
+        work_ms=work_ms,
+        work_elements=elements,
+        bare_s=med["bare"],
+        sequential_s=med["sequential"],
+        pipelined_s=med["pipelined"],
+        noop_bare_s=med["noop_bare"],
+        noop_engine_s=med["noop_engine"],
+        writer_s=med.get("writer"),
+        passes=passes,
+    )
