@@ -19,11 +19,18 @@ from redrive.algorithms.base import (
     StepStatus,
     check_output,
 )
+from redrive.algorithms.discovery import (
+    AlgorithmInfo,
+    describe,
+    installed_algorithms,
+    load_algorithm_class,
+)
 
 __all__ = [
     "GROUND_TRUTH",
     "VEHICLE_STATE",
     "Algorithm",
+    "AlgorithmInfo",
     "AlgorithmOutput",
     "Input",
     "Role",
@@ -32,4 +39,7 @@ __all__ = [
     "StepResult",
     "StepStatus",
     "check_output",
+    "describe",
+    "installed_algorithms",
+    "load_algorithm_class",
 ]

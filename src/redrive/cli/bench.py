@@ -8,6 +8,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from redrive.cli.bench_engine import add_engine_parser
+
 __all__ = ["register"]
 
 _EPILOG = """\
@@ -321,3 +323,4 @@ def register(sub: Any) -> None:
     )
     read.set_defaults(func=_run_read)
     _add_lidar_parser(bench_sub)
+    add_engine_parser(bench_sub)

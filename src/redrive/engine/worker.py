@@ -55,6 +55,15 @@ def frame_for(frame: Frame, sensor_ids: frozenset[str]) -> Frame:
     return replace(frame, sensors={k: v for k, v in frame.sensors.items() if k in sensor_ids})
 
 
+def _plain(value: Any) -> Any:
+    """``value`` with read-only mappings as dicts (``MappingProxyType`` does not pickle)."""
+    if isinstance(value, Mapping):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return type(value)(_plain(v) for v in value)
+    return value
+
+
 class InlineRunner:
     """Runs the algorithm in the calling thread; ``submit`` does the work, ``result`` returns it."""
 
@@ -130,7 +139,7 @@ class ProcessRunner:
         timeout_s: float | None,
     ) -> None:
         self.name = name
-        self._init = {"plugin": plugin, "name": name, "config": dict(config), "inputs": inputs}
+        self._init = {"plugin": plugin, "name": name, "config": _plain(config), "inputs": inputs}
         self._timeout_s = timeout_s
         self._ctx = mp.get_context("spawn")
         self._proc: Any = None
@@ -185,9 +194,10 @@ class ProcessRunner:
             self._conn.close()
             self._conn = None
         if self._proc is not None:
-            if self._proc.is_alive():
-                self._proc.kill()
-            self._proc.join(5.0)
+            if self._proc.pid is not None:  # started
+                if self._proc.is_alive():
+                    self._proc.kill()
+                self._proc.join(5.0)
             self._proc = None
 
     def submit(self, frame: Frame, upstream: StageOutputs) -> None:

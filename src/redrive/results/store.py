@@ -12,6 +12,7 @@ import json
 import logging
 import os
 import re
+import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from types import MappingProxyType, TracebackType
@@ -144,6 +145,8 @@ class RunWriter:
             :data:`redrive.results.manifest.RESUME_KEYS`); a missing or empty directory starts
             a new run.
         flush_every: frames buffered before a flush writes them.
+        flush_interval_s: a flush also happens when this long has passed since the last one
+            (with at least one frame buffered), so a slow run loses little when killed.
 
     Raises:
         ConfigError: ``run_dir`` is not empty and not a run (or is a run and ``resume`` is
@@ -160,13 +163,16 @@ class RunWriter:
         *,
         manifest: Mapping[str, Any],
         resume: bool = False,
-        flush_every: int = 100,
+        flush_every: int = 1000,
+        flush_interval_s: float = 2.0,
     ) -> None:
         if flush_every < 1:
             msg = f"RunWriter.flush_every must be >= 1, got {flush_every}"
             raise ValueError(msg)
         self.path = Path(run_dir)
         self.flush_every = int(flush_every)
+        self.flush_interval_s = float(flush_interval_s)
+        self._last_flush = time.monotonic()
         given = _jsonable(manifest)
         reserved = sorted(set(given) & set(STORE_KEYS))
         if reserved:
@@ -309,7 +315,9 @@ class RunWriter:
             raise ValueError(msg)
         self._buffers.add_frame(record)
         self._buffered.add(index)
-        if self._buffers.n_frames >= self.flush_every:
+        if self._buffers.n_frames >= self.flush_every or (
+            time.monotonic() - self._last_flush >= self.flush_interval_s
+        ):
             self.flush()
 
     def write_resources(self, samples: Sequence[ResourceSample]) -> None:
@@ -323,6 +331,7 @@ class RunWriter:
         self._check_open()
         if not self._buffered and not self._has_resources:
             return
+        self._last_flush = time.monotonic()
         tables = self._buffers.take()
         number = self._next_part
         for name, table in tables.items():  # SCHEMAS order: frames last
