@@ -221,3 +221,19 @@ def test_resources_are_sampled(demo_bag: Path, tmp_path: Path) -> None:
     assert "engine" in labels
     assert {"stage0/centroid", "stage1/straight", "stage2/follow"} <= labels
     assert all(r["rss_bytes"] > 1_000_000 for r in res)
+
+
+def test_a_cut_off_log_keeps_the_frames_before_the_damage(demo_bag: Path, tmp_path: Path) -> None:
+    from redrive.errors import LogError
+
+    data = demo_bag.read_bytes()
+    cut = tmp_path / "cut.bag"
+    cut.write_bytes(data[: int(len(data) * 0.6)])
+    with pytest.raises(LogError):
+        run(cut, tmp_path / "run", pipeline(*STANDARD))
+    r = open_run(tmp_path / "run")
+    assert r.manifest["status"] == "failed"
+    assert "LogTruncatedError" in r.manifest["summary"]["error"]
+    frames = r.table("frames").column("frame_index").to_pylist()
+    assert 10 < len(frames) < 50
+    assert frames == list(range(len(frames)))
