@@ -67,6 +67,7 @@ class _Stage:
         self.runners: list[AlgorithmRunner] = runners
         self.roles = {p.name: p.role for p in planned}
         self._role_values = [p.role.value for p in planned]
+        self.last = False
         self._inline = all(isinstance(r, InlineRunner) for r in runners)
         self._single: tuple[Algorithm, frozenset[str]] | None = None
         if self._inline and len(runners) == 1:
@@ -87,12 +88,13 @@ class _Stage:
             result = algo.run_step(frame, item.upstream)
             record = _record(self.planned[0], self._role_values[0], result)
             item.steps.append(record)
-            if result.status is _OK and result.output is not None:
-                item.upstream = item.upstream.merged({algo.name: result.output}, self.roles)
-            else:
-                if item.failed is None:
-                    item.failed = (frame.index, record)
-                item.upstream = item.upstream.merged({}, self.roles)
+            output = result.output
+            ok = result.status is _OK and output is not None
+            if not ok and item.failed is None:
+                item.failed = (frame.index, record)
+            if not self.last:  # nobody reads the upstream after the last stage
+                more = {algo.name: output} if ok and output is not None else {}
+                item.upstream = item.upstream.merged(more, self.roles)
             return
         results: list[StepResult]
         if self._pool is not None:
@@ -190,6 +192,7 @@ class Engine:
                 else:
                     runners.append(InlineRunner(p.instance))
             self._stages.append(_Stage(name, planned, runners))
+        self._stages[-1].last = True
 
     def worker_pids(self) -> dict[str, int]:
         """``stage/algorithm`` → pid of each live worker process."""

@@ -62,13 +62,21 @@ class StepRecord:
     traceback: str = ""
 
     def __post_init__(self) -> None:
+        output = self.output
+        if (
+            type(output) is _OUTPUT_TYPES.get(self.role)
+            and self.status in STATUSES
+            and type(self.latency_ns) is int
+            and type(self.cpu_ns) is int
+            and (type(output) is not tuple or all(type(o) is DetectedObject for o in output))
+        ):
+            return  # the engine's records: already what they must be (the per-frame path)
         if self.role not in ROLES:
             msg = f"StepRecord {self.algorithm!r}: role {self.role!r} is not one of {ROLES}"
             raise ValueError(msg)
         if self.status not in STATUSES:
             msg = f"StepRecord {self.algorithm!r}: status {self.status!r} is not one of {STATUSES}"
             raise ValueError(msg)
-        output = self.output
         if isinstance(output, list):
             output = tuple(output)
             object.__setattr__(self, "output", output)
