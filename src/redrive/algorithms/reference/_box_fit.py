@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["BoxFit", "complete_boxes", "fit_boxes"]
+__all__ = ["BoxFit", "collinear_walls", "complete_boxes", "fit_boxes"]
 
 _F64 = npt.NDArray[np.float64]
 _I = npt.NDArray[np.intp]
@@ -177,8 +177,11 @@ def complete_boxes(
       object's back or front; the box turns by π/2 and its length grows to the prior length,
       away from the sensor;
     * **side view** — the seen short side is narrower than the prior width: the width grows to
-      the prior width, away from the sensor.  The length is left as seen (which end is hidden
-      cannot be told).
+      the prior width, away from the sensor;
+    * and, not an end view, the seen long side shorter than the prior length while it points
+      within 60° of the line of sight (a corner seen from behind, the far end hidden): the
+      length grows to the prior length, away from the sensor.  Across the line of sight the
+      hidden end cannot be told, and the length is left as seen.
 
     Returns centre (K, 2), length, width, yaw (-π/2, π/2], in the input's frame and units.
     """
@@ -194,8 +197,45 @@ def complete_boxes(
     grow_end = np.where(end_view, prior_length_m - width_m, 0.0)
     grow_side = np.where(side_view, prior_width_m - width_m, 0.0)
     center += sign * normal * (0.5 * (grow_end + grow_side))[:, None]
-    length = np.where(end_view, prior_length_m, length)
+    axis = np.stack([np.cos(yaw_rad), np.sin(yaw_rad)], axis=1)
+    along = np.sum(axis * away, axis=1)
+    distance = np.maximum(np.hypot(away[:, 0], away[:, 1]), 1e-9)
+    oblique = has & ~end_view & (length_m < prior_length_m) & (np.abs(along) >= 0.5 * distance)
+    grow_len = np.where(oblique, prior_length_m - length_m, 0.0)
+    center += np.where(along >= 0.0, 1.0, -1.0)[:, None] * axis * (0.5 * grow_len)[:, None]
+    length = np.where(end_view | oblique, prior_length_m, length)
     width = np.where(end_view, length_m, np.where(side_view, prior_width_m, width))
     turned = np.where(end_view, yaw + 0.5 * np.pi, yaw)
     turned = np.where(turned > 0.5 * np.pi, turned - np.pi, turned)
     return center, length, width, turned
+
+
+def collinear_walls(
+    center_xy: _F64,
+    yaw_rad: _F64,
+    candidate: npt.NDArray[np.bool_],
+    *,
+    max_angle_rad: float = np.deg2rad(3.0),
+    max_offset_m: float = 0.3,
+) -> npt.NDArray[np.bool_]:
+    """(K,) which candidate boxes lie on one line with another candidate: pieces of one wall.
+
+    A wall, fence or barrier seen past parked cars, poles and its own far end falls apart into
+    thin fragments that each look like a truck's flank; fragments of one wall share a line.  Two
+    candidates (the caller picks thin, tall boxes) are collinear when their directions differ by
+    less than ``max_angle_rad`` and each centre lies within ``max_offset_m`` of the other's line.
+    Pairwise over the candidates only (there are few).
+    """
+    idx = np.flatnonzero(candidate)
+    out = np.zeros(candidate.shape, dtype=bool)
+    if idx.size < 2:
+        return out
+    c, yaw = center_xy[idx], yaw_rad[idx]
+    diff = np.abs(np.mod(yaw[:, None] - yaw[None, :] + 0.5 * np.pi, np.pi) - 0.5 * np.pi)
+    normal = np.stack([-np.sin(yaw), np.cos(yaw)], axis=1)  # (C, 2)
+    rel = c[None, :, :] - c[:, None, :]  # (C, C, 2): j relative to i
+    offset = np.abs(np.sum(rel * normal[:, None, :], axis=2))  # j from i's line
+    pair = (diff < max_angle_rad) & (offset < max_offset_m) & (offset.T < max_offset_m)
+    np.fill_diagonal(pair, False)
+    out[idx] = pair.any(axis=1)
+    return out

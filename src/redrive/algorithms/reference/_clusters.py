@@ -35,14 +35,11 @@ class Clusters:
         index: (M,) indices into the caller's point arrays, grouped by cluster.
         starts: (K,) position in ``index`` where each cluster begins (increasing, first 0).
         counts: (K,) points per cluster (all within the caller's [min, max]).
-        tall: (K,) whether a cell of the cluster also holds a "tall" point (one of the caller's
-            points above the height band: the cluster is the lower part of a wall, a tree …).
     """
 
     index: npt.NDArray[np.intp]
     starts: npt.NDArray[np.intp]
     counts: npt.NDArray[np.intp]
-    tall: npt.NDArray[np.bool_]
 
 
 def cluster_points(
@@ -56,8 +53,12 @@ def cluster_points(
     tall_xy: tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]] | None = None,
 ) -> Clusters:
     """Group points (metres; all strictly within ±``half_extent_m`` in x and y) into BEV-connected clusters
-    of ``min_points`` … ``max_points`` points; ``tall_xy`` are the x, y of points that flag the
-    clusters whose cells they fall in (see :attr:`Clusters.tall`)."""
+    of ``min_points`` … ``max_points`` points.
+
+    ``tall_xy`` are the x, y of points above the caller's height band: a cluster with one of them
+    in its cells is the lower part of something taller (a façade, a tree, a lamp post) and is
+    dropped here, before any per-cluster work.
+    """
     n = int(np.ceil(2.0 * half_extent_m / cell_m))
     inv = np.float32(1.0 / cell_m)
     half = np.float32(0.5 * n * cell_m)
@@ -77,10 +78,12 @@ def cluster_points(
     counts = np.bincount(point_label, minlength=n_labels + 1)
     counts[0] = 0
     keep = (counts >= min_points) & (counts <= max_points)
+    if tall_xy is not None and tall_xy[0].size:
+        keep[labels.ravel()[cell_keys(*tall_xy)]] = False
     kept = np.flatnonzero(keep)
     if kept.size == 0:
         empty = np.zeros(0, dtype=np.intp)
-        return Clusters(index=empty, starts=empty, counts=empty, tall=np.zeros(0, dtype=bool))
+        return Clusters(index=empty, starts=empty, counts=empty)
     # Renumber the kept clusters 0..K-1 (K is small) and group their points with a radix sort.
     new_id = np.full(n_labels + 1, -1, dtype=np.int64)
     new_id[kept] = np.arange(kept.size)
@@ -90,7 +93,4 @@ def cluster_points(
     order = np.argsort(cid.astype(np.uint16 if kept.size <= 1 << 16 else np.uint32), kind="stable")
     kept_counts = counts[kept].astype(np.intp)
     starts = np.r_[0, np.cumsum(kept_counts)[:-1]].astype(np.intp)
-    flagged = np.zeros(n_labels + 1, dtype=bool)
-    if tall_xy is not None and tall_xy[0].size:
-        flagged[labels.ravel()[cell_keys(*tall_xy)]] = True
-    return Clusters(index=chosen[order], starts=starts, counts=kept_counts, tall=flagged[kept])
+    return Clusters(index=chosen[order], starts=starts, counts=kept_counts)

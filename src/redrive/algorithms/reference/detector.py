@@ -55,7 +55,7 @@ import numpy as np
 import numpy.typing as npt
 
 from redrive.algorithms.base import Algorithm, Input, Role, StageOutputs
-from redrive.algorithms.reference._box_fit import complete_boxes, fit_boxes
+from redrive.algorithms.reference._box_fit import collinear_walls, complete_boxes, fit_boxes
 from redrive.algorithms.reference._clusters import Clusters, cluster_points
 from redrive.algorithms.reference._ground import GroundGrid, cell_minima, ground_heights
 from redrive.errors import AlgorithmError, ConfigError
@@ -87,6 +87,8 @@ _DROP_RULES: Mapping[str, float] = MappingProxyType(
         "pole_max_width_m": 0.7,
         "pole_min_height_m": 2.4,
         "tall_band_m": 2.0,
+        "wall_max_width_m": 0.4,
+        "wall_min_height_m": 2.5,
     }
 )
 
@@ -300,11 +302,12 @@ class ClusterDetector(Algorithm):
         length, width = fit.length_m, fit.width_m
         drop = self._drop
         scenery = (
-            clusters.tall
-            | (length > drop["max_length_m"])
+            (length > drop["max_length_m"])
             | (height > drop["max_height_m"])
             | ((length < drop["pole_max_width_m"]) & (height > drop["pole_min_height_m"]))
         )
+        thin_tall = (width < drop["wall_max_width_m"]) & (height > drop["wall_min_height_m"])
+        scenery |= collinear_walls(fit.center_xy, fit.yaw_rad, thin_tall & ~scenery)
         b = self._bounds
         sizes = np.stack([length, width, height], axis=1)
         match = np.all(
