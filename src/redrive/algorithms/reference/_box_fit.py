@@ -235,7 +235,8 @@ def collinear_walls(
     normal = np.stack([-np.sin(yaw), np.cos(yaw)], axis=1)  # (C, 2)
     rel = c[None, :, :] - c[:, None, :]  # (C, C, 2): j relative to i
     offset = np.abs(np.sum(rel * normal[:, None, :], axis=2))  # j from i's line
-    pair = (diff < max_angle_rad) & (offset < max_offset_m) & (offset.T < max_offset_m)
+    near = offset < max_offset_m
+    pair = (diff < max_angle_rad) & near & near.T
     np.fill_diagonal(pair, False)
     out[idx] = pair.any(axis=1)
     return out

@@ -12,9 +12,9 @@ cell keys and :func:`numpy.minimum.reduceat`.
     ground rings are 10-20 m apart), the plane is used instead.
 ``"plane"``
     One plane for the whole sweep, fitted by RANSAC to the cell minima (deterministic: a fixed
-    seed) and refined by least squares on its inliers.  Cheaper to reason about, but a single
-    plane misses the curvature of real roads: on KITTI frame 000001 it leaves ground points of the
-    far road as obstacles (see the detector's module docstring for the numbers).
+    seed) and refined by least squares on its inliers.  Simpler, but one plane misses the
+    curvature of real roads; on the KITTI frames it leaks more ground into the obstacles (see
+    the detector's module docstring for the numbers).
 
 Both return the ground height per cell of the grid; points are classified by the caller.
 """
