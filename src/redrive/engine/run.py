@@ -10,7 +10,7 @@ import hashlib
 import itertools
 import logging
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -88,6 +88,19 @@ def expected_frames(log: LogReader, assembler: FrameAssembler) -> int | None:
     return None if info is None else int(info.count)
 
 
+def _reading_only_inputs(
+    log: LogReader, assembler: FrameAssembler, graph: StageGraph
+) -> FrameAssembler:
+    """An assembler that decodes only the sensors some algorithm declares (and the driver):
+    algorithms never see the others, so decoding them (camera images …) is wasted."""
+    smap = assembler.sensor_map
+    needed = {sid for p in graph.algorithms for sid in p.instance.bound_inputs.values()}
+    kept = tuple(s for s in smap.sensors if s.sensor_id in needed or s.sensor_id == smap.driver)
+    if len(kept) == len(smap.sensors):
+        return assembler
+    return FrameAssembler(log, sensor_map=replace(smap, sensors=kept))
+
+
 def _select(frames: Iterator[Frame], first: int | None, stop: int | None) -> Iterator[Frame]:
     if first:
         frames = itertools.dropwhile(lambda f: f.index < first, frames)
@@ -142,6 +155,7 @@ def run_log(
         assembler = FrameAssembler(log, overrides=overrides)
         inputs = log_inputs(assembler)
         graph = build_graph(request.pipeline, inputs)
+        assembler = _reading_only_inputs(log, assembler, graph)
         writer = RunWriter(
             request.out,
             manifest=_manifest(request, log, graph, inputs),
