@@ -127,3 +127,16 @@ class NeedsCamera(Algorithm):
 
     def step(self, frame: Frame, upstream: StageOutputs) -> list[DetectedObject]:
         return []
+
+
+class OnlyDeclared(Algorithm):
+    """Fails if the frame holds a sensor it did not declare."""
+
+    role = Role.PERCEPTION
+    inputs = (SensorType.LIDAR,)
+
+    def step(self, frame: Frame, upstream: StageOutputs) -> list[DetectedObject]:
+        extra = set(frame.sensors) - set(self.bound_inputs.values())
+        if extra:
+            raise AssertionError(f"undeclared sensors in the frame: {sorted(extra)}")
+        return []

@@ -237,3 +237,12 @@ def test_a_cut_off_log_keeps_the_frames_before_the_damage(demo_bag: Path, tmp_pa
     frames = r.table("frames").column("frame_index").to_pylist()
     assert 10 < len(frames) < 50
     assert frames == list(range(len(frames)))
+
+
+@pytest.mark.parametrize("executor", ["threads", "processes"])
+def test_algorithms_see_only_the_sensors_they_declare(
+    demo_bag: Path, tmp_path: Path, executor: str
+) -> None:
+    stages = ((("only", "OnlyDeclared"),), (("straight", "Straight"),))
+    report = run(demo_bag, tmp_path / "run", pipeline(*stages, executor=executor), stop_frame=5)
+    assert report.algorithms[0].ok == 5, report.algorithms[0].first_error
