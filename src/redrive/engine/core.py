@@ -23,7 +23,6 @@ import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
 from typing import Any
 
 from redrive.algorithms import Algorithm, StageOutputs, StepResult, StepStatus
@@ -49,13 +48,20 @@ class _StopRequestedError(Exception):
     """Internal: the run was asked to stop."""
 
 
-@dataclass(slots=True)
+_NO_UPSTREAM = StageOutputs()  # immutable: every frame starts from it
+
+
 class _Item:
-    paced: PacedFrame
-    upstream: StageOutputs = field(default_factory=StageOutputs)
-    steps: list[StepRecord] = field(default_factory=list)
-    failed: tuple[int, StepRecord] | None = None
-    t0_ns: int = 0
+    """A frame on its way through the stages."""
+
+    __slots__ = ("failed", "paced", "steps", "t0_ns", "upstream")
+
+    def __init__(self, paced: PacedFrame, *, t0_ns: int) -> None:
+        self.paced = paced
+        self.upstream = _NO_UPSTREAM
+        self.steps: list[StepRecord] = []
+        self.failed: tuple[int, StepRecord] | None = None
+        self.t0_ns = t0_ns
 
 
 class _Stage:
@@ -232,6 +238,7 @@ class Engine:
         todo = (f for f in frames if f.index not in skip)
         paced = self.hooks.before_frame(todo)
         done = 0
+        after_frame, fail_fast = self.hooks.after_frame, self.pipeline.fail_fast
 
         def finish(item: _Item) -> tuple[int, StepRecord] | None:
             nonlocal done
@@ -247,11 +254,11 @@ class Engine:
             )
             sink(record)
             stats.add(record)
-            self.hooks.after_frame(record)
+            after_frame(record)
             done += 1
             if progress is not None:
                 progress(done)
-            return item.failed if self.pipeline.fail_fast else None
+            return item.failed if fail_fast else None
 
         t0 = time.perf_counter()
         status = "complete"
