@@ -37,6 +37,7 @@ def test_rotation_matrix_is_orthonormal_and_matches_transform(q: list[float]) ->
 @given(q=quaternions)
 @example(q=[1.0, 0.0, 1.0, 0.0])  # gimbal lock, pitch -90°
 @example(q=[-0.2090, 0.6755, 0.2090, 0.6755])  # yaw 0.6 then pitch +90°: gimbal lock
+@example(q=[1.0, 0.0, 1.0, 1e-06])  # just off the lock: roll and yaw are ill-conditioned there
 def test_euler_angles_rebuild_the_rotation(q: list[float]) -> None:
     roll, pitch, yaw = euler_from_quaternion(q)
     cr, sr, cp, sp, cy, sy = (
@@ -50,7 +51,8 @@ def test_euler_angles_rebuild_the_rotation(q: list[float]) -> None:
     rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
     ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
     rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
-    np.testing.assert_allclose(rz @ ry @ rx, rotation_matrix_from_quaternion(q), atol=1e-6)
+    # 1e-5: within ~1e-10 of gimbal lock, atan2 of two near-zero terms leaves ~1e-6 in the matrix
+    np.testing.assert_allclose(rz @ ry @ rx, rotation_matrix_from_quaternion(q), atol=1e-5)
 
 
 @given(yaw=st.floats(-math.pi + 1e-6, math.pi))
