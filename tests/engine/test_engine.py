@@ -4,17 +4,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import pyarrow as pa
 import pytest
 
 from redrive.config import AlgorithmSpec, PipelineConfig, StageSpec
 from redrive.engine import RunReport, RunRequest, run_log
 from redrive.errors import ConfigError
 from redrive.results import open_run
+from tests.engine._runs import OUTPUT_TABLES, outputs
 
 P = "tests.engine.plugins:"
-TIMING = {"latency_ns", "cpu_ns", "wall_ns", "late"}
-OUTPUT_TABLES = ("frames", "steps", "detections", "paths", "commands", "ego", "ground_truth")
 
 
 def pipeline(*stages: tuple[tuple[str, str], ...], **options: object) -> PipelineConfig:
@@ -39,15 +37,6 @@ STANDARD = (
 
 def run(log: Path, out: Path, pipe: PipelineConfig, **kw: object) -> RunReport:
     return run_log(RunRequest(log=log, pipeline=pipe, out=out, **kw))  # type: ignore[arg-type]
-
-
-def outputs(run_dir: Path) -> dict[str, pa.Table]:
-    r = open_run(run_dir)
-    out = {}
-    for name in OUTPUT_TABLES:
-        table = r.table(name)
-        out[name] = table.drop_columns([c for c in table.column_names if c in TIMING])
-    return out
 
 
 def test_every_frame_goes_through_every_stage(demo_bag: Path, tmp_path: Path) -> None:

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import pyarrow as pa
 import pytest
 
 from redrive.config import reference_pipeline
@@ -13,24 +12,13 @@ from redrive.engine import RunRequest, run_log
 from redrive.results import open_run
 from redrive.sim.scenario import load_scenario
 from redrive.sim.synth import synthesize
-
-TIMING = {"latency_ns", "cpu_ns", "wall_ns", "late"}
-TABLES = ("frames", "steps", "detections", "paths", "commands", "ego", "ground_truth")
+from tests.engine._runs import OUTPUT_TABLES, outputs
 
 
 @pytest.fixture(scope="module")
 def cut_in(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("reference") / "cut_in.mcap"
     synthesize(load_scenario("cut_in"), out, duration_s=2.0)
-    return out
-
-
-def _outputs(run_dir: Path) -> dict[str, pa.Table]:
-    run = open_run(run_dir)
-    out = {}
-    for name in TABLES:
-        table = run.table(name)
-        out[name] = table.drop_columns([c for c in table.column_names if c in TIMING])
     return out
 
 
@@ -51,10 +39,10 @@ def test_reference_pipeline_runs_and_is_deterministic(cut_in: Path, tmp_path: Pa
     assert [a.ok for a in first.algorithms] == [20, 20, 20, 20]
     assert by_name["clusters"].outputs > 20  # it sees the cars around the ego
     assert by_name["tracker"].outputs > 0
-    reference = _outputs(tmp_path / "a")
+    reference = outputs(tmp_path / "a")
     for name in ("b", "pipelined", "processes"):
-        other = _outputs(tmp_path / name)
-        for table in TABLES:
+        other = outputs(tmp_path / name)
+        for table in OUTPUT_TABLES:
             assert reference[table].equals(other[table]), f"{name}: {table} differs"
     commands = open_run(tmp_path / "a").table("commands")
     assert commands.num_rows == 20
