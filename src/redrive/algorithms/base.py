@@ -247,7 +247,9 @@ class Algorithm(ABC):
         merged = dict(self.defaults)
         user = dict(config or {})
         if self.defaults:
-            unknown = sorted(set(user) - set(self.defaults))
+            # "<type>_sensor" (e.g. lidar_sensor) picks the sensor of a SensorType input
+            pickers = {f"{i.value}_sensor" for i in self.inputs if isinstance(i, SensorType)}
+            unknown = sorted(set(user) - set(self.defaults) - pickers)
             if unknown:
                 msg = (
                     f"algorithm {self.name!r}: unknown config key(s) {', '.join(unknown)}; "

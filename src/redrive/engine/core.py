@@ -364,8 +364,8 @@ class Engine:
                     return failed
         finally:
             stop.set()
-            for t in threads:
-                t.join()
+            for t in threads:  # a stage stuck in a step (no timeout set) is left behind: daemon
+                t.join(timeout=10.0)
             if hasattr(paced, "close"):
                 paced.close()
         if crashed:
