@@ -112,7 +112,13 @@ class FrameAssembler:
         )
         index = 0
         read_from = None if start_ns is None else start_ns - tol - self.lookahead_ns
-        for message in self.log.messages(topics=smap.topics(), start_ns=read_from):
+        # Only static transforms are used (sensor mounts): when the log has a static tf topic,
+        # its dynamic /tf (often 100 Hz+) is not read at all.
+        static_tf_topics = {t for t in smap.tf_topics if t.rstrip("/").endswith("tf_static")}
+        topics = [
+            t for t in smap.topics() if not static_tf_topics or t not in smap.tf_topics
+        ] + sorted(static_tf_topics)
+        for message in self.log.messages(topics=list(dict.fromkeys(topics)), start_ns=read_from):
             decoded = self._decode(message)
             if decoded is None:
                 continue
