@@ -235,3 +235,24 @@ def test_algorithms_see_only_the_sensors_they_declare(
     stages = ((("only", "OnlyDeclared"),), (("straight", "Straight"),))
     report = run(demo_bag, tmp_path / "run", pipeline(*stages, executor=executor), stop_frame=5)
     assert report.algorithms[0].ok == 5, report.algorithms[0].first_error
+
+
+def test_pipelined_runs_sample_cpu_per_stage_thread(demo_bag: Path, tmp_path: Path) -> None:
+    slow = PipelineConfig(
+        stages=(
+            StageSpec(
+                name="slow",
+                algorithms=(
+                    AlgorithmSpec(name="slow", plugin=P + "Slow", config={"sleep_s": 0.05}),
+                ),
+            ),
+            StageSpec(name="plan", algorithms=(AlgorithmSpec(name="s", plugin=P + "Straight"),)),
+        ),
+        mode="pipelined",
+    )
+    run(demo_bag, tmp_path / "run", slow, stop_frame=30)
+    res = open_run(tmp_path / "run").table("resources").to_pylist()
+    labels = {r["label"] for r in res}
+    assert {"engine", "thread:main", "thread:reader", "thread:slow", "thread:plan"} <= labels
+    sleeping = [r["cpu_percent"] for r in res if r["label"] == "thread:slow"]
+    assert max(sleeping) < 50  # it sleeps: little CPU

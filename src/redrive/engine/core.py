@@ -199,6 +199,12 @@ class Engine:
                     runners.append(InlineRunner(p.instance))
             self._stages.append(_Stage(name, planned, runners))
         self._stages[-1].last = True
+        self._threads: dict[str, int] = {"thread:main": threading.get_native_id()}
+
+    def thread_ids(self) -> dict[str, int]:
+        """``thread:NAME`` → native id of the engine's threads running now (``main``, and in
+        pipelined mode ``reader`` and one per stage), for per-thread CPU sampling."""
+        return dict(self._threads)
 
     def worker_pids(self) -> dict[str, int]:
         """``stage/algorithm`` → pid of each live worker process."""
@@ -318,6 +324,7 @@ class Engine:
                     continue
 
         def feed() -> None:
+            self._threads["thread:reader"] = threading.get_native_id()
             try:
                 for pf in paced:
                     put(queues[0], _Item(pf, t0_ns=time.perf_counter_ns()))
@@ -330,6 +337,7 @@ class Engine:
 
         def work(k: int) -> None:
             stage = self._stages[k]
+            self._threads[f"thread:{stage.name}"] = threading.get_native_id()
             try:
                 while True:
                     item = get(queues[k])
@@ -366,6 +374,8 @@ class Engine:
             stop.set()
             for t in threads:  # a stage stuck in a step (no timeout set) is left behind: daemon
                 t.join(timeout=10.0)
+            for name in [n for n in self._threads if n != "thread:main"]:
+                del self._threads[name]
             if hasattr(paced, "close"):
                 paced.close()
         if crashed:

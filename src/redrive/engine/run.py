@@ -168,7 +168,7 @@ def run_log(
                 total = max(0, stop - (request.first_frame or 0) - len(writer.done_frames))
             on_start(total)
         engine = Engine(graph, request.pipeline, inputs=inputs, hooks=ReplayMode(rate=request.rate))
-        sampler = ResourceSampler(engine.worker_pids).start()
+        sampler = ResourceSampler(engine.worker_pids, threads=engine.thread_ids).start()
         frames = _select(assembler.frames(), request.first_frame, request.stop_frame)
         try:
             report = engine.run(
