@@ -60,6 +60,11 @@ def frozen_array(
 
 def frozen_vector(value: Any, *, name: str, size: int) -> npt.NDArray[np.float64]:
     """A read-only float64 vector of ``size`` elements (positions, velocities, quaternions)."""
+    if type(value) is np.ndarray and value.dtype == np.float64 and value.shape == (size,):
+        if value.flags.writeable:  # the common case, kept short: it runs per object per message
+            value = value.view()
+            value.flags.writeable = False
+        return value
     if isinstance(value, np.ndarray) and value.dtype != np.float64:
         value = value.astype(np.float64)
     return frozen_array(value, name=name, dtype=np.float64, shape=(size,))
