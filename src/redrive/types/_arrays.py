@@ -64,7 +64,7 @@ def frozen_vector(value: Any, *, name: str, size: int) -> npt.NDArray[np.float64
         if value.flags.writeable:  # the common case, kept short: it runs per object per message
             value = value.view()
             value.flags.writeable = False
-        return value
+        return cast("npt.NDArray[np.float64]", value)
     if isinstance(value, np.ndarray) and value.dtype != np.float64:
         value = value.astype(np.float64)
     return frozen_array(value, name=name, dtype=np.float64, shape=(size,))

@@ -1,0 +1,29 @@
+"""The Evaluation Layer (L3): metrics over run directories, reports, A/B comparison, failure-frame
+bookmarks.
+
+>>> from redrive.evaluation import Metric, MetricResult, EvalData
+"""
+
+from __future__ import annotations
+
+from redrive.evaluation.base import (
+    NEEDS,
+    ROLES,
+    Bookmark,
+    EvalData,
+    Metric,
+    MetricResult,
+    Series,
+    params_hash,
+)
+
+__all__ = [
+    "NEEDS",
+    "ROLES",
+    "Bookmark",
+    "EvalData",
+    "Metric",
+    "MetricResult",
+    "Series",
+    "params_hash",
+]

@@ -1,0 +1,237 @@
+"""The metric contract: one small base class per metric, found like algorithms.
+
+A metric reads a run directory (through :class:`EvalData`, which caches what it loads) for one
+algorithm of the run (or for the run as a whole) and returns a :class:`MetricResult`: named
+aggregate values (the first is the headline), per-frame series, curves (precision/recall …) and
+failure-frame bookmarks.  Metrics are plugins of the ``redrive.metrics`` entry-point group; the
+run manifest records each metric's name, version and parameters so that numbers made under
+different definitions are never compared silently.
+
+>>> class MeanObjects(Metric):
+...     '''Mean number of objects per frame.'''
+...     name = "mean_objects"
+...     role = "perception"
+...     needs = frozenset({"detections"})
+...     unit = "objects"
+...     def evaluate(self, data):
+...         per = data.detections()
+...         counts = np.array([len(v) for v in per.values()], dtype=np.float64)
+...         frames = np.array(sorted(per), dtype=np.int64)
+...         return MetricResult(values={"mean": float(counts.mean()) if counts.size else 0.0},
+...                             per_frame={"objects": (frames, counts)})
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any, ClassVar, TypeVar, cast
+
+import numpy as np
+import numpy.typing as npt
+import pyarrow as pa
+
+from redrive.errors import ConfigError
+from redrive.results import Run
+from redrive.types import ControlCommands, DetectedObject, PlannedPath, VehicleState
+
+__all__ = [
+    "NEEDS",
+    "ROLES",
+    "Bookmark",
+    "EvalData",
+    "Metric",
+    "MetricResult",
+    "Series",
+    "params_hash",
+]
+
+_T = TypeVar("_T")
+
+#: what a metric may need from a run.
+NEEDS = frozenset({"ground_truth", "ego", "detections", "paths", "commands", "steps", "frames"})
+#: which algorithms a metric scores: those of a role, or the run as a whole ("run").
+ROLES = ("perception", "planning", "control", "run")
+
+#: a per-frame series: (frame indices int64 (N,), values float64 (N,)).
+Series = tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Bookmark:
+    """A frame worth looking at: a metric crossed a threshold there.
+
+    Attributes:
+        frame_index: the frame (``Frame.index``).
+        kind: what happened: ``missed_object``, ``collision``, ``low_ttc``, ``deadline_miss`` …
+        detail: one line for a human ("car 12.3 m ahead not detected").
+        severity: larger is worse (e.g. 1/distance, 1/TTC, ms over the deadline); used to rank.
+        metric, algorithm: filled in by the evaluator.
+    """
+
+    frame_index: int
+    kind: str
+    detail: str = ""
+    severity: float = 0.0
+    metric: str = ""
+    algorithm: str = ""
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class MetricResult:
+    """What a metric says about one algorithm (or the run).
+
+    Attributes:
+        values: named aggregates, the headline first (``{"mAP": 0.61, "NDS": 0.55, "AP/car/2.0": …}``);
+            NaN where a value is undefined (e.g. no ground truth of a class).
+        units: unit per value name when it differs from the metric's ``unit``.
+        per_frame: named per-frame series (frame indices, values).
+        curves: named curves (x, y), e.g. ``PR/car/2.0`` → (recall, precision).
+        bookmarks: failure frames.
+    """
+
+    values: Mapping[str, float]
+    units: Mapping[str, str] = field(default_factory=dict)
+    per_frame: Mapping[str, Series] = field(default_factory=dict)
+    curves: Mapping[str, tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]] = field(
+        default_factory=dict
+    )
+    bookmarks: Sequence[Bookmark] = ()
+
+    def __post_init__(self) -> None:
+        object.__setattr__(
+            self, "values", MappingProxyType({k: float(v) for k, v in self.values.items()})
+        )
+        object.__setattr__(self, "units", MappingProxyType(dict(self.units)))
+        per_frame = {}
+        for key, (frames, vals) in self.per_frame.items():
+            f = np.asarray(frames, dtype=np.int64)
+            v = np.asarray(vals, dtype=np.float64)
+            if f.shape != v.shape or f.ndim != 1:
+                msg = (
+                    f"MetricResult.per_frame[{key!r}]: frames {f.shape} and values {v.shape} differ"
+                )
+                raise ValueError(msg)
+            per_frame[key] = (f, v)
+        object.__setattr__(self, "per_frame", MappingProxyType(per_frame))
+        curves = {}
+        for key, (x, y) in self.curves.items():
+            cx, cy = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
+            if cx.shape != cy.shape or cx.ndim != 1:
+                msg = f"MetricResult.curves[{key!r}]: x {cx.shape} and y {cy.shape} differ"
+                raise ValueError(msg)
+            curves[key] = (cx, cy)
+        object.__setattr__(self, "curves", MappingProxyType(curves))
+        object.__setattr__(self, "bookmarks", tuple(self.bookmarks))
+
+    @property
+    def headline(self) -> str:
+        """The name of the main value (the first)."""
+        return next(iter(self.values), "")
+
+
+class EvalData:
+    """One run, seen for one algorithm, with every table loaded at most once.
+
+    Args:
+        run: the run directory (``redrive.results.open_run``).
+        algorithm: the algorithm scored ("" for run-level metrics).
+    """
+
+    def __init__(self, run: Run, algorithm: str = "") -> None:
+        self.run = run
+        self.algorithm = algorithm
+        self._cache: dict[str, Any] = {}
+
+    def _cached(self, key: str, load: Callable[[], _T]) -> _T:
+        if key not in self._cache:
+            self._cache[key] = load()
+        return cast("_T", self._cache[key])
+
+    @property
+    def frame_period_s(self) -> float:
+        """Median time between frames (the driving sensor's period), seconds; 0.0 if unknown."""
+        stamps = np.asarray(self.frames().column("stamp_ns").to_numpy(), dtype=np.int64)
+        if stamps.size < 2:
+            return 0.0
+        return float(np.median(np.diff(np.sort(stamps)))) / 1e9
+
+    def frames(self) -> pa.Table:
+        return self._cached("frames", lambda: self.run.table("frames"))
+
+    def steps(self) -> pa.Table:
+        return self._cached("steps", lambda: self.run.table("steps"))
+
+    def detections(self) -> dict[int, tuple[DetectedObject, ...]]:
+        """frame index → this algorithm's objects (frames where its step succeeded)."""
+        return self._cached("detections", lambda: self.run.detections(self.algorithm))
+
+    def ground_truth(self) -> dict[int, tuple[DetectedObject, ...]]:
+        return self._cached("ground_truth", self.run.ground_truth)
+
+    def ego(self) -> dict[int, VehicleState]:
+        return self._cached("ego", self.run.ego)
+
+    def paths(self) -> dict[int, PlannedPath]:
+        return self._cached("paths", lambda: self.run.paths(self.algorithm))
+
+    def commands(self) -> dict[int, ControlCommands]:
+        return self._cached("commands", lambda: self.run.commands(self.algorithm))
+
+
+def params_hash(params: Mapping[str, Any]) -> str:
+    text = json.dumps(params, sort_keys=True, separators=(",", ":"), default=repr)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+class Metric(ABC):
+    """Base of every metric.
+
+    Class attributes:
+        name: unique name (``nuscenes_detection``); the entry-point name should match it.
+        version: bump when the definition changes; stored with every value.
+        role: which algorithms it scores (:data:`ROLES`; ``run`` = the run as a whole).
+        needs: what it reads (:data:`NEEDS`); an algorithm whose run lacks it is skipped.
+        unit: unit of its values (per value in ``MetricResult.units`` when they differ).
+        higher_is_better: for A/B comparisons and report colouring.
+        defaults: parameters and their defaults; ``Metric(**params)`` overrides them.
+    """
+
+    name: ClassVar[str]
+    version: ClassVar[str] = "1"
+    role: ClassVar[str]
+    needs: ClassVar[frozenset[str]] = frozenset()
+    unit: ClassVar[str] = ""
+    higher_is_better: ClassVar[bool] = True
+    defaults: ClassVar[Mapping[str, Any]] = MappingProxyType({})
+
+    def __init__(self, **params: Any) -> None:
+        unknown = sorted(set(params) - set(self.defaults))
+        if unknown:
+            msg = (
+                f"metric {self.name!r}: unknown parameter(s) {', '.join(unknown)}; "
+                f"known: {', '.join(sorted(self.defaults)) or 'none'}"
+            )
+            raise ConfigError(msg)
+        self.params: Mapping[str, Any] = MappingProxyType({**self.defaults, **params})
+
+    @abstractmethod
+    def evaluate(self, data: EvalData) -> MetricResult:
+        """Score ``data.algorithm`` of ``data.run``."""
+
+    def describe(self) -> dict[str, Any]:
+        """What the manifest records: name, version, parameters and their hash."""
+        params = dict(self.params)
+        return {
+            "name": self.name,
+            "version": self.version,
+            "role": self.role,
+            "unit": self.unit,
+            "higher_is_better": self.higher_is_better,
+            "params": json.loads(json.dumps(params, default=repr)),
+            "params_hash": params_hash(params),
+        }
