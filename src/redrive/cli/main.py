@@ -20,6 +20,7 @@ _COMMANDS = (
     "synth",
     "run",
     "export",
+    "evaluate",
     "algorithms",
     "new_algorithm",
     "bench",

@@ -1,0 +1,104 @@
+"""``redrive evaluate RUN`` — score a run with every installed metric; store the results."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+__all__ = ["register"]
+
+_EPILOG = """\
+examples:
+  redrive evaluate runs/first                          every installed metric
+  redrive evaluate runs/first --metric nuscenes_detection --metric latency
+  redrive evaluate runs/first --algorithm clusters     only this algorithm (and run-level metrics)
+  redrive report runs/first                            then: HTML, XLSX and CSV report
+
+Metrics score the algorithms of their role (perception, planning, control) or the run as a
+whole (latency). Results go to RUN/metrics/*.parquet, failure frames to
+RUN/metrics/bookmarks.parquet, and the metric names, versions and parameters to the manifest.
+`redrive metrics` lists the installed metrics.
+"""
+
+
+def _fmt(value: float) -> str:
+    if math.isnan(value):
+        return "n/a"
+    return f"{value:.4g}"
+
+
+def _run(args: argparse.Namespace) -> int:
+    from rich.console import Console
+    from rich.table import Table
+
+    from redrive.evaluation.evaluator import evaluate_run, headline
+    from redrive.evaluation.registry import load_metric_class
+
+    metrics = [load_metric_class(name)() for name in args.metric] if args.metric else None
+    summary = evaluate_run(args.run, metrics=metrics, algorithms=args.algorithm)
+    console = Console(width=None if sys.stdout.isatty() else 120)
+    table = Table(title=f"evaluation of {args.run}", title_justify="left")
+    for col in ("algorithm", "metric", "headline", "value", "unit", "bookmarks"):
+        table.add_column(col, justify="right" if col in ("value", "bookmarks") else "left")
+    for s in summary.scored:
+        key, value, unit = headline(s)
+        table.add_row(
+            s.algorithm or "(run)", s.metric.name, key, _fmt(value), unit,
+            str(len(s.result.bookmarks)),
+        )  # fmt: skip
+    console.print(table)
+    for s in summary.skipped:
+        console.print(f"[yellow]skipped {s.metric} on {s.algorithm or 'the run'}: {s.reason}[/]")
+    console.print(
+        f"{len(summary.scored)} results, {summary.bookmarks} bookmarked frames → "
+        f"{summary.metrics_dir} (`redrive report {args.run}` for the HTML report)"
+    )
+    return 0
+
+
+def _list(args: argparse.Namespace) -> int:
+    from rich.console import Console
+    from rich.table import Table
+
+    from redrive.evaluation.registry import installed_metrics
+
+    table = Table(title="installed metrics (redrive.metrics)", title_justify="left")
+    for col in ("name", "role", "version", "unit", "better", "summary"):
+        table.add_column(col)
+    for name, cls in installed_metrics().items():
+        doc = (cls.__doc__ or "").strip().split("\n\n", 1)[0].replace("\n", " ")
+        better = "higher" if cls.higher_is_better else "lower"
+        table.add_row(name, cls.role, cls.version, cls.unit, better, doc)
+    Console(width=None if sys.stdout.isatty() else 140).print(table)
+    return 0
+
+
+def register(sub: Any) -> None:
+    parser = sub.add_parser(
+        "evaluate",
+        help="score a run with the installed metrics and store the results",
+        description=(
+            "Evaluate the outputs of a run against its ground truth (detection, tracking, "
+            "planning, control, latency metrics) and store values, per-frame series, curves and "
+            "failure-frame bookmarks in the run directory."
+        ),
+        epilog=_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("run", type=Path, metavar="RUN", help="a run directory")
+    parser.add_argument(
+        "--metric", action="append", metavar="NAME", help="a metric (repeat; default: all)"
+    )
+    parser.add_argument(
+        "--algorithm", action="append", metavar="NAME", help="an algorithm (repeat; default: all)"
+    )
+    parser.set_defaults(func=_run)
+    metrics = sub.add_parser(
+        "metrics",
+        help="list the installed metrics",
+        description="List the metrics of the redrive.metrics entry-point group.",
+    )
+    metrics.set_defaults(func=_list)
