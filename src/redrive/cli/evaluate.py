@@ -50,8 +50,9 @@ def _run(args: argparse.Namespace) -> int:
             str(len(s.result.bookmarks)),
         )  # fmt: skip
     console.print(table)
-    for s in summary.skipped:
-        console.print(f"[yellow]skipped {s.metric} on {s.algorithm or 'the run'}: {s.reason}[/]")
+    for skip in summary.skipped:
+        where = skip.algorithm or "the run"
+        console.print(f"[yellow]skipped {skip.metric} on {where}: {skip.reason}[/]")
     console.print(
         f"{len(summary.scored)} results, {summary.bookmarks} bookmarked frames → "
         f"{summary.metrics_dir} (`redrive report {args.run}` for the HTML report)"
