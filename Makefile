@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 DEMO_DIR := .demo
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: demo test lint venv clean bench-read
+.PHONY: demo test lint venv clean bench-read system-test-deps
 
 # Debian's python3 ships without venv/ensurepip: install python3-venv when it is missing.
 $(BIN)/python:
@@ -44,8 +44,15 @@ lint: $(VENV)/.installed-test
 	$(BIN)/mypy
 	$(BIN)/lint-imports
 
+# Debian packages the tests use: Chromium renders the HTML report (headless screenshot test).
+system-test-deps:
+	@if ! command -v chromium >/dev/null 2>&1; then \
+	  echo "installing chromium (Debian) for the HTML report test"; \
+	  $(SUDO) apt-get update -qq && $(SUDO) apt-get install -y -qq chromium; \
+	fi
+
 ## test: install test needs, lint, run the whole suite (slow/soak tests run as benchmarks)
-test: lint
+test: lint system-test-deps
 	$(BIN)/pytest -q -m "not slow" -p no:cacheprovider
 
 bench-read: $(VENV)/.installed
