@@ -261,7 +261,8 @@ class ClearMot(Metric):
     Values (headline first): ``MOTA``, ``MOTP`` (m, or ``1 − IoU``), ``IDF1``, ``IDP``, ``IDR``,
     ``num_switches``, ``num_fragmentations``, ``mostly_tracked``, ``mostly_lost`` (ground-truth
     tracks covered ≥ 80 % / ≤ 20 % of their frames), ``num_false_positives``, ``num_misses``,
-    ``num_objects`` (ground-truth boxes), ``num_predictions``, ``num_matches``, ``num_frames``.
+    ``num_objects`` (ground-truth boxes), ``num_predictions``, ``num_matches`` (motmetrics:
+    matched pairs that are not switches), ``num_frames``.
     ``MOTA`` is NaN without ground truth (its denominator), ``MOTP`` without matches, the
     identity metrics when both sides are empty.
 
