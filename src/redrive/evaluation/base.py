@@ -92,10 +92,13 @@ class MetricResult:
         per_frame: named per-frame series (frame indices, values).
         curves: named curves (x, y), e.g. ``PR/car/2.0`` → (recall, precision).
         bookmarks: failure frames.
+        higher_is_better: per value name, where it differs from the metric's
+            ``higher_is_better`` (e.g. ``{"MOTP": False, "num_switches": False}``).
     """
 
     values: Mapping[str, float]
     units: Mapping[str, str] = field(default_factory=dict)
+    higher_is_better: Mapping[str, bool] = field(default_factory=dict)
     per_frame: Mapping[str, Series] = field(default_factory=dict)
     curves: Mapping[str, tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]] = field(
         default_factory=dict
@@ -107,6 +110,7 @@ class MetricResult:
             self, "values", MappingProxyType({k: float(v) for k, v in self.values.items()})
         )
         object.__setattr__(self, "units", MappingProxyType(dict(self.units)))
+        object.__setattr__(self, "higher_is_better", MappingProxyType(dict(self.higher_is_better)))
         per_frame = {}
         for key, (frames, vals) in self.per_frame.items():
             f = np.asarray(frames, dtype=np.int64)
