@@ -139,7 +139,7 @@ def _tables(run: Run, scored: Sequence[Scored]) -> dict[str, pa.Table]:
                     key,
                     value,
                     res.units.get(key, m.unit),
-                    m.higher_is_better,
+                    res.higher_is_better.get(key, m.higher_is_better),
                 ),
                 strict=True,
             ):
