@@ -372,6 +372,14 @@ class ClearMot(Metric):
                     values[f"{key}/{cls}"] = v
                     if key in units:
                         units[f"{key}/{cls}"] = units[key]
+        lower = ("MOTP", "num_switches", "num_fragmentations", "mostly_lost")
+        lower += ("num_false_positives", "num_misses")
         return MetricResult(
-            values=values, units=units, per_frame=main.per_frame, bookmarks=main.bookmarks
+            values=values,
+            units=units,
+            per_frame=main.per_frame,
+            bookmarks=main.bookmarks,
+            higher_is_better={
+                k: False for k in values if k.split("/", 1)[0] in lower
+            },  # MOTP is a distance or 1 − IoU; the counts are errors
         )
