@@ -372,8 +372,8 @@ class ClearMot(Metric):
                     values[f"{key}/{cls}"] = v
                     if key in units:
                         units[f"{key}/{cls}"] = units[key]
-        lower = ("MOTP", "num_switches", "num_fragmentations", "mostly_lost")
-        lower += ("num_false_positives", "num_misses")
+        lower = {"MOTP", "num_switches", "num_fragmentations", "mostly_lost"}
+        lower |= {"num_false_positives", "num_misses"}
         return MetricResult(
             values=values,
             units=units,
