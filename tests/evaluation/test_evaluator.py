@@ -137,3 +137,19 @@ def test_cli_evaluate_with_a_module_metric(
     out = capsys.readouterr().out
     assert "object_count" in out
     assert "bookmarked" in out
+
+
+def test_metric_plugins_by_entry_point_or_module() -> None:
+    from redrive.errors import PluginError
+    from redrive.evaluation.registry import installed_metrics, load_metric_class
+
+    installed = installed_metrics()
+    assert {"clear_mot", "hota"} <= set(installed)
+    assert load_metric_class("hota") is installed["hota"]
+    assert load_metric_class("tests.evaluation.test_evaluator:ObjectCount") is ObjectCount
+    with pytest.raises(PluginError, match="no metric named 'nope'"):
+        load_metric_class("nope")
+    with pytest.raises(PluginError, match="not a redrive.evaluation.Metric"):
+        load_metric_class("tests.evaluation.test_evaluator:MANIFEST")
+    with pytest.raises(PluginError, match="cannot import"):
+        load_metric_class("no.such.module:X")
