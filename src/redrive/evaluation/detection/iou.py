@@ -60,8 +60,9 @@ def _inside(points: F64, corners: F64) -> npt.NDArray[np.bool_]:
     ly = np.einsum("nkd,nd->nk", d, ey)
     nx = np.einsum("nd,nd->n", ex, ex)[:, None]
     ny = np.einsum("nd,nd->n", ey, ey)[:, None]
-    tol_x = 1e-9 * (nx + 1.0)
-    tol_y = 1e-9 * (ny + 1.0)
+    # borders count as inside, to 1e-10 of the box's size (rounding of rotated corners is ~1e-16)
+    tol_x = 1e-10 * nx
+    tol_y = 1e-10 * ny
     return (lx >= -tol_x) & (lx <= nx + tol_x) & (ly >= -tol_y) & (ly <= ny + tol_y)
 
 
