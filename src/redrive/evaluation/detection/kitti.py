@@ -136,7 +136,9 @@ def _statistics(
     tp = np.zeros(n_f, np.int64)
     fn = np.zeros(n_f, np.int64)
     tp_scores: list[F64] = []
-    for g in range(gt_state.shape[1]):
+    n_g = gt_state.shape[1] if det_ok.shape[1] else 0  # no detections: nothing to assign
+    fn = np.sum(gt_state == 0, axis=1).astype(np.int64) if n_g == 0 else fn
+    for g in range(n_g):
         state = gt_state[:, g]
         cand = active & ~assigned & (overlap[:, :, g] > min_overlap)
         key = overlap[:, :, g] if compute_fp else score
