@@ -1,0 +1,337 @@
+"""``redrive report RUN``: an evaluated run as one self-contained HTML page, an Excel workbook and
+CSV files.
+
+The HTML page (``report.html``) needs no network and no JavaScript: CSS is inline and every plot
+is a PNG (matplotlib, Agg) inside a ``data:`` URI.  It shows the run's facts (log, hash,
+algorithms with versions and config hashes, status, frames, real-time factor), a headline table
+per algorithm, precision/recall curves (the ``PR/…`` curves of the evaluation), per-frame metric
+timelines, step-latency histograms, bird's-eye views of the worst frames (the frames of the
+most severe bookmarks; without bookmarks, the frames with most missed objects) with ground
+truth beside the detections, and the bookmarks.  Every string from the run is HTML-escaped.
+
+The workbook (``report.xlsx``, openpyxl write-only) has the sheets ``summary`` (run facts, then
+every value per algorithm and metric, the headline flagged), ``per_frame`` (one row per frame,
+one column per algorithm / metric / series), ``curves``, ``bookmarks`` and ``metrics`` (metric
+definitions: versions, parameters, their hash).  CSV files: ``values``, ``per_frame``,
+``curves``, ``bookmarks`` as stored.  Text cells that a spreadsheet would run as a formula get a
+leading ``'`` (:func:`redrive.results.export.neutralize_cell`).
+
+>>> files = write_report("runs/first")     # doctest: +SKIP
+>>> files.html                              # doctest: +SKIP
+PosixPath('runs/first/report/report.html')
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.csv as pacsv
+
+from redrive.evaluation import html as h
+from redrive.evaluation import plots
+from redrive.evaluation.store import Evaluation, read_evaluation
+from redrive.results import Run, open_run
+from redrive.results.export import EXCEL_MAX_CHARS, neutralize_cell
+
+__all__ = [
+    "DEFAULT_WORST",
+    "ReportFiles",
+    "load_evaluation",
+    "render_html",
+    "write_report",
+]
+
+logger = logging.getLogger(__name__)
+
+#: bird's-eye snapshots in a report unless told otherwise.
+DEFAULT_WORST = 6
+#: rows of the bookmarks table in the HTML page (all of them are in the XLSX and CSV).
+HTML_MAX_BOOKMARKS = 500
+_TRUNCATED = "…[truncated]"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ReportFiles:
+    """The files :func:`write_report` wrote."""
+
+    html: Path
+    xlsx: Path
+    csvs: tuple[Path, ...]
+
+    def paths(self) -> tuple[Path, ...]:
+        return (self.html, self.xlsx, *self.csvs)
+
+
+def load_evaluation(run: Run) -> Evaluation:
+    """The stored evaluation of ``run`` (``RUN/metrics/*.parquet`` and the manifest).
+
+    Raises:
+        ConfigError: the run has not been evaluated (run ``redrive evaluate RUN`` first).
+    """
+    return read_evaluation(run)
+
+
+# -- the HTML page -------------------------------------------------------------------------
+
+
+def _facts(run: Run, evaluation: Evaluation) -> list[tuple[str, Any]]:
+    m = run.manifest
+    log, summary = m.get("log") or {}, m.get("summary") or {}
+    frames = summary.get("frames", m.get("frames_done"))
+    return [
+        ("run", str(run.path)),
+        ("status", m.get("status", "")),
+        ("log", log.get("path", "")),
+        ("log sha256", log.get("sha256", "")),
+        ("log format", log.get("format", "")),
+        ("frames", frames),
+        ("late frames", summary.get("late_frames")),
+        ("real-time factor (× real time)", summary.get("realtime_factor")),
+        ("frames per second", summary.get("frames_per_s")),
+        ("log span (s)", summary.get("log_span_s")),
+        ("pipeline mode", (m.get("pipeline") or {}).get("mode", "")),
+        ("created", m.get("created", "")),
+        ("finished", m.get("finished", "")),
+        ("redrive version", m.get("redrive_version", "")),
+        ("evaluated", evaluation.evaluated),
+    ]
+
+
+def _shown(value: Any) -> str:
+    if value is None:
+        return "n/a"
+    return h.fmt_number(value) if isinstance(value, float) else str(value)
+
+
+def _algorithms_table(run: Run) -> h.Markup:
+    stats = {r["algorithm"]: r for r in run.summary().to_pylist()}
+    rows = []
+    for a in run.manifest.get("algorithms", ()):
+        s = stats.get(a.get("name"), {})
+        digest = str(a.get("config_hash", ""))
+        short = h.Markup(f'<span class="mono" title="{h.esc(digest)}">{h.esc(digest[:12])}</span>')
+        rows.append(
+            [a.get("name", ""), a.get("role", ""), a.get("stage", ""), a.get("plugin", ""),
+             a.get("version", ""), short,
+             *(_shown(s.get(k)) for k in ("ok", "error", "timeout", "skipped",
+                                          "latency_p50_ms", "latency_p95_ms"))]
+        )  # fmt: skip
+    head = ["algorithm", "role", "stage", "plugin", "version", "config hash", "ok", "error",
+            "timeout", "skipped", "latency p50 (ms)", "latency p95 (ms)"]  # fmt: skip
+    return h.table(head, rows, numeric=range(6, 12))
+
+
+def _headline_tables(run: Run, evaluation: Evaluation) -> list[h.Markup]:
+    v = evaluation.values
+    by_algo = plots.group_rows(v, ["algorithm"])
+    out = []
+    for algo in plots.algorithm_order(run, [k[0] for k in by_algo]):
+        rows = by_algo[(algo,)]
+        heads, every = [], []
+        seen: set[str] = set()
+        for i in rows:
+            r = {name: v.column(name)[int(i)].as_py() for name in v.column_names}
+            better = "higher ↑" if r["higher_is_better"] else "lower ↓"
+            line = [r["metric"], r["key"], h.fmt_number(r["value"]), r["unit"], better]
+            every.append(line)
+            if r["metric"] not in seen:
+                seen.add(r["metric"])
+                heads.append(line)
+        head = ["metric", "value name", "value", "unit", "better"]
+        out.append(h.Markup(f"<h3>{h.esc(algo or '(run as a whole)')}</h3>"))
+        out.append(h.table(head, heads, numeric=[2]))
+        out.append(h.details(f"all {len(every)} values", h.table(head, every, numeric=[2])))
+    return out
+
+
+def _metrics_table(evaluation: Evaluation) -> h.Markup:
+    rows = [
+        [m.get("name", ""), m.get("version", ""), m.get("role", ""), m.get("unit", ""),
+         "higher" if m.get("higher_is_better") else "lower",
+         json.dumps(m.get("params", {}), sort_keys=True), str(m.get("params_hash", ""))[:12],
+         ", ".join(a or "(run)" for a in m.get("algorithms", ()))]
+        for m in evaluation.metrics
+    ]  # fmt: skip
+    head = ["metric", "version", "role", "unit", "better", "parameters", "params hash", "scored"]
+    return h.table(head, rows)
+
+
+def _bookmarks_table(evaluation: Evaluation) -> h.Markup:
+    b = evaluation.bookmarks
+    rows = [
+        [r["frame_index"], r["kind"], r["metric"], r["algorithm"] or "(run)", r["detail"],
+         h.fmt_number(r["severity"], digits=3)]
+        for r in b.slice(0, HTML_MAX_BOOKMARKS).to_pylist()
+    ]  # fmt: skip
+    head = ["frame", "kind", "metric", "algorithm", "detail", "severity"]
+    note = (
+        h.paragraph(
+            f"first {HTML_MAX_BOOKMARKS} of {b.num_rows}; all in report.xlsx", class_="muted"
+        )
+        if b.num_rows > HTML_MAX_BOOKMARKS
+        else ""
+    )
+    return h.Markup(h.table(head, rows, numeric=[0, 5]) + note)
+
+
+def _grid(items: Sequence[h.Markup], empty: str) -> h.Markup:
+    if not items:
+        return h.paragraph(empty, class_="muted")
+    return h.Markup('<div class="grid">' + "".join(items) + "</div>")
+
+
+def render_html(run: Run, evaluation: Evaluation, *, worst: int = DEFAULT_WORST) -> str:
+    """The report page of ``run`` (see the module docstring)."""
+    facts = h.table(None, [(k, _shown(v)) for k, v in _facts(run, evaluation)])
+    snaps = plots.snapshot_figures(run, plots.worst_frames(run, evaluation, count=worst))
+    sections = [
+        h.section("run", "Run", facts, h.Markup("<h3>Algorithms</h3>"), _algorithms_table(run)),
+        h.section("headline", "Headline values", *_headline_tables(run, evaluation),
+                  h.details("metric definitions", _metrics_table(evaluation))),
+        h.section("pr", "Precision / recall", _grid(plots.pr_figures(evaluation), "no PR curves")),
+        h.section("timelines", "Per-frame metrics",
+                  _grid(plots.timeline_figures(evaluation), "no per-frame series")),
+        h.section("latency", "Latency", _grid(plots.latency_figures(run), "no steps")),
+        h.section("worst", "Worst frames (bird's-eye, base_link)",
+                  _grid(snaps, "no bookmarks and no missed objects")),
+        h.section("bookmarks", f"Bookmarks ({evaluation.bookmarks.num_rows})",
+                  _bookmarks_table(evaluation)),
+    ]  # fmt: skip
+    nav = [("run", "run"), ("headline", "headline"), ("pr", "PR curves"),
+           ("timelines", "per-frame"), ("latency", "latency"), ("worst", "worst frames"),
+           ("bookmarks", "bookmarks")]  # fmt: skip
+    title = f"redrive report: {run.path.resolve().name}"
+    log = (run.manifest.get("log") or {}).get("path", "")
+    return h.page(title=title, subtitle=f"log {log}", nav=nav, body=h.Markup("".join(sections)))
+
+
+# -- XLSX and CSV --------------------------------------------------------------------------
+
+
+def _cell(value: Any) -> Any:
+    """A value Excel takes: formula-like text quoted (``neutralize_cell``), text cut at
+    ``EXCEL_MAX_CHARS``, NaN and infinities empty."""
+    if isinstance(value, str):
+        text = neutralize_cell(value)
+        if len(text) > EXCEL_MAX_CHARS:
+            text = text[: EXCEL_MAX_CHARS - len(_TRUNCATED)] + _TRUNCATED
+        return text
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def _rows(table: pa.Table) -> Iterator[list[Any]]:
+    yield list(table.column_names)
+    for row in table.to_pylist():
+        yield list(row.values())
+
+
+def _wide_per_frame(evaluation: Evaluation, run: Run) -> Iterator[list[Any]]:
+    p = evaluation.per_frame
+    groups = plots.group_rows(p, ["algorithm", "metric", "series"])
+    order = plots.algorithm_order(run, [g[0] for g in groups])
+    keys = sorted(groups, key=lambda k: order.index(k[0]))
+    frames = np.unique(np.asarray(p.column("frame_index").to_numpy(), dtype=np.int64))
+    grid = np.full((frames.size, len(keys)), np.nan)
+    for j, key in enumerate(keys):
+        rows = groups[key]
+        grid[np.searchsorted(frames, plots.column_at(p, "frame_index", rows)), j] = plots.column_at(
+            p, "value", rows
+        )
+    yield ["frame_index", *(" / ".join(x or "(run)" for x in k) for k in keys)]
+    for i, frame in enumerate(frames.tolist()):
+        yield [frame, *grid[i].tolist()]
+
+
+def _write_xlsx(path: Path, run: Run, evaluation: Evaluation) -> None:
+    from openpyxl import Workbook
+
+    v = evaluation.values
+    first = {k: int(rows[0]) for k, rows in plots.group_rows(v, ["algorithm", "metric"]).items()}
+    headline = np.zeros(v.num_rows, dtype=bool)
+    headline[list(first.values())] = True
+    values = v.append_column("headline", pa.array(headline))
+    algos = [[a.get("name"), a.get("role"), a.get("version"), a.get("config_hash")]
+             for a in run.manifest.get("algorithms", ())]  # fmt: skip
+    metrics = [[m.get("name"), m.get("version"), m.get("role"), m.get("unit"),
+                m.get("higher_is_better"), json.dumps(m.get("params", {}), sort_keys=True),
+                m.get("params_hash"), ", ".join(m.get("algorithms", ()))]
+               for m in evaluation.metrics]  # fmt: skip
+    sheets: dict[str, Callable[[], Iterator[list[Any]]]] = {
+        "summary": lambda: iter(
+            [*([k, _shown(x) if x is None else x] for k, x in _facts(run, evaluation)), [],
+             ["algorithm", "role", "version", "config_hash"], *algos, [], *_rows(values)]
+        ),
+        "per_frame": lambda: _wide_per_frame(evaluation, run),
+        "curves": lambda: _rows(evaluation.curves),
+        "bookmarks": lambda: _rows(evaluation.bookmarks),
+        "metrics": lambda: iter([["metric", "version", "role", "unit", "higher_is_better",
+                                  "params", "params_hash", "algorithms"], *metrics]),
+    }  # fmt: skip
+    wb = Workbook(write_only=True)
+    for name, rows in sheets.items():
+        ws = wb.create_sheet(name)
+        for row in rows():
+            ws.append([_cell(x) for x in row])
+    _atomic(path, wb.save)
+
+
+def _neutralized(table: pa.Table) -> pa.Table:
+    """``table`` with formula-like strings quoted (``neutralize_cell`` on each distinct value)."""
+    for i, field in enumerate(table.schema):
+        if pa.types.is_string(field.type) and table.num_rows:
+            enc = table.column(i).combine_chunks().dictionary_encode()
+            safe = pa.array([neutralize_cell(s) for s in enc.dictionary.to_pylist()], pa.string())
+            col = pa.DictionaryArray.from_arrays(enc.indices, safe).cast(pa.string())
+            table = table.set_column(i, field, col)
+    return table
+
+
+def _write_csv(path: Path, table: pa.Table) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    pacsv.write_csv(table, tmp)
+    os.replace(tmp, path)
+
+
+def _atomic(path: Path, write: Callable[[Path], object]) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    write(tmp)
+    os.replace(tmp, path)
+
+
+def write_report(
+    run_dir: str | Path, *, out: str | Path | None = None, worst: int = DEFAULT_WORST
+) -> ReportFiles:
+    """Write ``report.html``, ``report.xlsx`` and ``values|per_frame|curves|bookmarks.csv`` of
+    the evaluated run ``run_dir`` into ``out`` (default ``RUN/report/``, created); ``worst``
+    bird's-eye snapshots.
+
+    Raises:
+        ConfigError: the run has not been evaluated (run ``redrive evaluate RUN`` first).
+    """
+    run = open_run(run_dir)
+    evaluation = load_evaluation(run)
+    folder = Path(out) if out is not None else run.path / "report"
+    folder.mkdir(parents=True, exist_ok=True)
+    page = render_html(run, evaluation, worst=worst)
+    html_path = folder / "report.html"
+    _atomic(html_path, lambda p: p.write_text(page, encoding="utf-8"))
+    xlsx_path = folder / "report.xlsx"
+    _write_xlsx(xlsx_path, run, evaluation)
+    csvs = []
+    for name in ("values", "per_frame", "curves", "bookmarks"):
+        path = folder / f"{name}.csv"
+        _write_csv(path, _neutralized(getattr(evaluation, name)))
+        csvs.append(path)
+    logger.info("report of %s: %s", run.path, folder)
+    return ReportFiles(html=html_path, xlsx=xlsx_path, csvs=tuple(csvs))
