@@ -1,0 +1,146 @@
+"""``redrive compare RUN_A RUN_B`` — A/B comparison of two evaluated runs of the same log."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+__all__ = ["register"]
+
+_EPILOG = """\
+examples:
+  redrive compare runs/a runs/b                         every metric both runs share
+  redrive compare runs/a runs/b --worst 20 --html ab.html
+  redrive compare runs/a runs/b --algorithm-a clusters --algorithm-b clusters_v2
+  redrive compare runs/a runs/b --json > ab.json
+
+Both runs must have replayed the same log (checked by its sha256) and been evaluated
+(`redrive evaluate RUN`). Δ = B − A; "better"/"worse" follow each value's direction. Metrics
+are compared only where name, version and parameters agree; the others are listed as not
+compared. Significance: a paired bootstrap over frames (the frames both runs have are resampled
+with replacement; 95 % CI of the mean per-frame difference). Aggregates such as mAP are not
+per-frame means: their note refers to the metric's per-frame series.
+"""
+
+
+def _fmt(value: float) -> str:
+    return "n/a" if math.isnan(value) else f"{value:.4g}"
+
+
+def _pct(value: float) -> str:
+    return "" if not math.isfinite(value) else f"{100.0 * value:+.1f}%"
+
+
+def _print(cmp: Any, *, worst: int) -> None:
+    from rich.console import Console
+    from rich.markup import escape
+    from rich.table import Table
+
+    console = Console(width=None if sys.stdout.isatty() else 140)
+    pairs = ", ".join(f"{a} ↔ {b}" if a != b else a for a, b in cmp.pairs if a or b)
+    console.print(f"A {cmp.run_a}\nB {cmp.run_b}\nlog sha256 {cmp.log_sha256}; paired {pairs}")
+    table = Table(title="values (Δ = B − A)", title_justify="left")
+    for col in ("metric", "algorithm", "value", "A", "B", "Δ", "Δ %", "B is", "95% CI of Δ/frame"):
+        table.add_column(col, justify="right" if col in ("A", "B", "Δ", "Δ %") else "left")
+    colour = {"better": "green", "worse": "red"}
+    for v in cmp.values:
+        algo = (
+            v.algorithm_a if v.algorithm_a == v.algorithm_b else f"{v.algorithm_a}→{v.algorithm_b}"
+        )
+        verdict = f"[{colour[v.verdict]}]{v.verdict}[/]" if v.verdict in colour else v.verdict
+        table.add_row(
+            escape(v.metric), escape(algo or "(run)"), escape(v.key), _fmt(v.a), _fmt(v.b),
+            _fmt(v.delta), _pct(v.relative_delta), verdict, escape(v.significance),
+        )  # fmt: skip
+    console.print(table)
+    series = Table(
+        title="per-frame series (paired bootstrap over frames, 95% CI)", title_justify="left"
+    )
+    for col in ("series", "better", "frames", "mean Δ/frame", "95% CI", "excludes 0"):
+        series.add_column(col)
+    for s in cmp.series:
+        b = s.bootstrap
+        better = {True: "higher", False: "lower", None: "—"}[s.higher_is_better]
+        ci = f"[{_fmt(b.ci_low)}, {_fmt(b.ci_high)}]"
+        mark = "[bold]yes[/]" if b.excludes_zero else "no"
+        series.add_row(escape(s.label), better, str(b.n_frames), _fmt(b.mean_delta), ci, mark)
+    console.print(series)
+    frames = Table(title=f"frames where B is most worse than A (top {worst})", title_justify="left")
+    for col in ("#", "frame", "stamp_ns", "score", "what differs", "new in B"):
+        frames.add_column(col, justify="right" if col in ("#", "frame", "score") else "left")
+    for i, w in enumerate(cmp.worst_frames(worst)):
+        frames.add_row(
+            str(i + 1), str(w.frame_index), str(w.stamp_ns), f"{w.score:.3g}",
+            escape("\n".join(w.differences)), escape("\n".join(w.new_bookmarks[:3])),
+        )  # fmt: skip
+    console.print(frames)
+    if not cmp.worst:
+        console.print("B is not worse than A on any frame of any per-frame series.")
+    for k in cmp.skipped:
+        where = (
+            k.algorithm_a if k.algorithm_a == k.algorithm_b else f"{k.algorithm_a}→{k.algorithm_b}"
+        )
+        console.print(
+            f"[yellow]not compared: {escape(k.metric)} [{escape(where)}]: {escape(k.reason)}[/]"
+        )
+
+
+def _run(args: argparse.Namespace) -> int:
+    from redrive.evaluation.compare import compare_runs
+
+    cmp = compare_runs(
+        args.run_a,
+        args.run_b,
+        algorithm_a=args.algorithm_a,
+        algorithm_b=args.algorithm_b,
+        bootstrap=args.bootstrap,
+        seed=args.seed,
+    )
+    if args.json:
+        print(cmp.to_json(worst=args.worst))
+    else:
+        _print(cmp, worst=args.worst)
+    if args.html is not None:
+        path = cmp.write_html(args.html, worst=args.worst)
+        print(f"HTML: {path}", file=sys.stderr if args.json else sys.stdout)
+    return 0
+
+
+def register(sub: Any) -> None:
+    parser = sub.add_parser(
+        "compare",
+        help="A/B comparison of two evaluated runs of the same log",
+        description=(
+            "Compare the evaluation of run B against run A: per-metric deltas with a significance "
+            "note (paired bootstrap over frames), per-frame deltas, and the frames where B is "
+            "most worse than A, as a table, JSON or a self-contained HTML file."
+        ),
+        epilog=_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("run_a", type=Path, metavar="RUN_A", help="the baseline run directory")
+    parser.add_argument("run_b", type=Path, metavar="RUN_B", help="the run compared against it")
+    parser.add_argument(
+        "--algorithm-a", metavar="X", default=None, help="compare only this algorithm of A"
+    )
+    parser.add_argument(
+        "--algorithm-b",
+        metavar="Y",
+        default=None,
+        help="… against this algorithm of B (default: the same name)",
+    )
+    parser.add_argument(
+        "--worst", type=int, default=10, metavar="N", help="frames listed (default 10)"
+    )
+    parser.add_argument(
+        "--html", type=Path, default=None, metavar="OUT.html", help="also write an HTML file"
+    )
+    parser.add_argument("--json", action="store_true", help="print JSON instead of tables")
+    parser.add_argument(
+        "--bootstrap", type=int, default=2000, metavar="N", help="bootstrap resamples (2000)"
+    )
+    parser.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
+    parser.set_defaults(func=_run)
