@@ -387,3 +387,45 @@ def test_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
         w.write_frame(frame(0, planning=False))
     with pytest.raises(ConfigError, match="has not been evaluated"):
         _cli(["compare", str(a), str(unevaluated)])
+
+
+DEMO_LOG = Path(__file__).resolve().parents[2] / ".demo" / "urban.mcap"
+_DETECTION_STAGE = """
+[[stage]]
+name = "detection"
+[[stage.algorithm]]
+name = "clusters"
+plugin = "cluster-detector"
+config = {config}
+"""
+
+
+@pytest.mark.skipif(
+    not DEMO_LOG.is_file(), reason="no demo log (make demo writes .demo/urban.mcap)"
+)
+def test_demo_runs_with_different_detector_parameters(tmp_path: Path) -> None:
+    """Two runs of the demo log; B's detector needs 5× the points and sees half as far: the
+    frames where B misses objects A finds are ranked first."""
+    nuscenes = pytest.importorskip("redrive.evaluation.detection.nuscenes")
+    from redrive.cli.main import main
+    from redrive.evaluation.evaluator import evaluate_run
+
+    runs = []
+    for name, config in (("a", "{}"), ("b", "{ min_points = 60, range_m = 40.0 }")):
+        toml = tmp_path / f"{name}.toml"
+        toml.write_text(_DETECTION_STAGE.format(config=config), encoding="utf-8")
+        out = tmp_path / name
+        argv = ["run", str(DEMO_LOG), "--pipeline", str(toml), "--frames", "80:100"]
+        assert main([*argv, "--out", str(out), "--no-progress"]) == 0
+        evaluate_run(out, metrics=[nuscenes.NuScenesDetection()])
+        runs.append(out)
+    cmp = compare_runs(*runs)
+    missed = next(s for s in cmp.series if s.series == "missed")
+    assert missed.bootstrap.n_frames == 20
+    more = set(missed.frames[missed.b > missed.a].tolist())  # B misses what A finds
+    assert more, "B's detector should miss objects A's finds"
+    ranked = [w.frame_index for w in cmp.worst_frames()]
+    assert more <= set(ranked)
+    top = cmp.worst_frames(1)[0]
+    assert any("/missed" in d and d.endswith("worse)") for d in top.differences)
+    assert missed.bootstrap.mean_delta > 0
