@@ -15,8 +15,9 @@ made (rear axle, x forward, y left), t_s seconds after ``stamp_ns``. Per frame w
   the axle) at each waypoint with ``t_s <= collision_horizon_s``, heading along the plan's motion,
   against every ground-truth object of the frame predicted at constant velocity (centre +
   velocity · t_s; velocity over ground in base_link axes; yaw kept). Oriented-rectangle overlap by
-  separating axes (touching counts). The first waypoint with a contact is classified as in
-  ``_get_collision_type`` of ``no_ego_at_fault_collisions.py``: plan speed ≤ 0.05 m/s → stopped
+  separating axes (touching counts). The first contact with each object is classified as in
+  ``_get_collision_type`` of ``no_ego_at_fault_collisions.py`` (nuPlan also classifies each
+  collided track once): plan speed ≤ 0.05 m/s → stopped
   ego (not at fault); object speed ≤ 0.05 m/s → stopped track (at fault); object centre more
   than 150° from the ego heading seen from the rear axle (``is_agent_behind``) → rear (not at
   fault); the ego's front edge touches the object → front (at fault); else lateral. nuPlan counts
@@ -34,9 +35,12 @@ made (rear axle, x forward, y left), t_s seconds after ``stamp_ns``. Per frame w
   with TTC < ``ttc_threshold_s`` (nuPlan's ``least_min_ttc`` = 0.95 s).
 * **Progress** (nuPlan ``ego_progress_along_expert_route.py``, on the logged path instead of
   map roadblocks): the logged ego path from the plan's stamp to ``stamp + T`` (T = the plan's
-  last time, or less when the log ends) is the route; the plan's position at T is projected onto
-  it: ``progress_m``; ``progress_ratio = clip(progress_m / max(logged_m, progress_threshold_m),
-  0, 1)`` (nuPlan's score, threshold 2 m from its config).
+  last time, at most ``progress_horizon_s`` = 3 s; frames whose log ends before ``stamp + T`` are
+  not scored) is the route; the plan's position at T is projected onto it: ``progress_m``; ``progress_ratio = clip(progress_m / logged_m, 0, 1)`` (nuPlan's
+  ``ego_expert_progress_along_route_ratio``). nuPlan divides by ``max(logged_m, 2 m)``
+  (``score_progress_threshold`` of its config) over a whole scenario; per frame, that would
+  score every plan 0 while the logged ego waits at a light, so frames where the logged ego moved
+  less than ``progress_threshold_m`` (2 m) get no ratio instead (``progress_m`` still counts).
 * **Comfort** of the plan's own kinematics (finite differences, see
   :func:`redrive.evaluation._kinematics.path_kinematics`) against nuPlan's
   ``ego_is_comfortable`` bounds (``nuplan/planning/script/config/common/simulation_metric/
@@ -45,8 +49,8 @@ made (rear axle, x forward, y left), t_s seconds after ``stamp_ns``. Per frame w
   nuPlan smooths the simulated states with a Savitzky-Golay filter (window 15, order 2) first;
   a plan is already a designed trajectory, so we do not.
 
-Bookmarks: ``collision`` (severity = relative speed at contact, m/s, nuPlan's collision-energy
-idea) and ``low_ttc`` (TTC < ``ttc_bookmark_s``; severity = 1/TTC, 1/s).
+Bookmarks: ``collision`` (severity = the largest relative speed at contact, m/s, of the at-fault
+contacts, or of all when none is at fault: nuPlan's collision-energy ``ego_delta_v`` idea) and ``low_ttc`` (TTC < ``ttc_bookmark_s``; severity = 1/TTC, 1/s).
 """
 
 from __future__ import annotations
@@ -149,6 +153,18 @@ class _Objects:
         )
 
 
+@dataclass(frozen=True, slots=True)
+class _Contact:
+    """The first contact of a plan with one object."""
+
+    t_s: float
+    object_id: int
+    object_class: str
+    kind: str  # nuPlan CollisionType, lower case: stopped_ego, stopped_track, active_rear …
+    at_fault: bool
+    relative_speed_mps: float
+
+
 @dataclass(slots=True)
 class _Series:
     frames: list[int] = field(default_factory=list)
@@ -241,7 +257,7 @@ class PlanningMetrics(Metric):
     Parameters (defaults): ``horizons_s`` (1, 2, 3); ``ego_length_m`` 4.7, ``ego_width_m`` 1.9,
     ``rear_overhang_m`` 0.95; ``collision_horizon_s`` 3.0; ``ttc_step_s`` 0.1,
     ``ttc_horizon_s`` 3.0, ``ttc_threshold_s`` 0.95, ``ttc_bookmark_s`` 1.5;
-    ``progress_threshold_m`` 2.0; the comfort bounds of :data:`COMFORT_BOUNDS`.
+    ``progress_horizon_s`` 3.0, ``progress_threshold_m`` 2.0; the comfort bounds of :data:`COMFORT_BOUNDS`.
 
     Values: ``ADE/3s`` (headline: the longest horizon), ``FDE/3s``, ``ADE/1s``, ``FDE/1s`` …,
     ``collision_rate``, ``at_fault_collision_rate``, ``collisions``, ``at_fault_collisions``,
@@ -271,6 +287,7 @@ class PlanningMetrics(Metric):
             "ttc_horizon_s": 3.0,
             "ttc_threshold_s": 0.95,
             "ttc_bookmark_s": 1.5,
+            "progress_horizon_s": 3.0,
             "progress_threshold_m": 2.0,
             **COMFORT_BOUNDS,
         }
@@ -309,50 +326,49 @@ class PlanningMetrics(Metric):
         fde = float(np.hypot(*(plan_end - base_from_map_xy(log_end, origin, heading)[0])))
         return ade, fde
 
-    def _collision(
-        self, path: PlannedPath, objs: _Objects
-    ) -> tuple[float, int, bool, float, str] | None:
-        """(contact time s, object id, at fault, relative speed m/s, collision type) of the first
-        contact along the plan, None if none."""
+    def _collisions(self, path: PlannedPath, objs: _Objects) -> list[_Contact]:
+        """The first contact of the plan with each object it touches, in time order."""
         kin = path_kinematics(path.waypoints)
         if kin is None or len(objs) == 0:
-            return None
+            return []
         sel = kin.t_s <= float(self.params["collision_horizon_s"]) + 1e-9
         t = kin.t_s[sel]
-        ego = _ego_corners(kin.xy[sel], kin.heading_rad[sel], self.params)
-        contact = rectangles_overlap(ego[:, None], objs.corners_at(t))  # (K, M)
-        rows = np.flatnonzero(contact.any(axis=1))
-        if rows.size == 0:
-            return None
-        k = int(rows[0])
-        hit = np.flatnonzero(contact[k])
-        ego_speed = float(kin.speed_mps[sel][k])
-        ego_vel = kin.velocity_xy[sel][k]
-        heading = float(kin.heading_rad[sel][k])
-        axle = kin.xy[sel][k]
-        front = shapely.LineString([ego[k, 0], ego[k, 3]])
-        best: tuple[float, int, bool, float, str] | None = None
-        for m in hit:
-            obj_corners = objs.corners_at(t[k : k + 1])[0, m]
-            centre = obj_corners.mean(axis=0)
-            to_obj = centre - axle
-            rel_angle = abs(math.remainder(math.atan2(to_obj[1], to_obj[0]) - heading, 2 * math.pi))
+        xy, heading_rad = kin.xy[sel], kin.heading_rad[sel]
+        speed, velocity = kin.speed_mps[sel], kin.velocity_xy[sel]
+        ego = _ego_corners(xy, heading_rad, self.params)
+        obj_corners = objs.corners_at(t)  # (K, M, 4, 2)
+        contact = rectangles_overlap(ego[:, None], obj_corners)  # (K, M)
+        found: list[_Contact] = []
+        for m in np.flatnonzero(contact.any(axis=0)):
+            k = int(np.argmax(contact[:, m]))
+            corners = obj_corners[k, m]
+            to_obj = corners.mean(axis=0) - xy[k]
+            rel_angle = abs(
+                math.remainder(math.atan2(to_obj[1], to_obj[0]) - float(heading_rad[k]), math.tau)
+            )
             obj_speed = float(np.hypot(*objs.velocity[m]))
-            if ego_speed <= COLLISION_STOPPED_SPEED_MPS:
+            front = shapely.LineString([ego[k, 0], ego[k, 3]])
+            if speed[k] <= COLLISION_STOPPED_SPEED_MPS:
                 kind, at_fault = "stopped_ego", False
             elif obj_speed <= COLLISION_STOPPED_SPEED_MPS:
                 kind, at_fault = "stopped_track", True
             elif rel_angle > BEHIND_ANGLE_RAD:
                 kind, at_fault = "active_rear", False
-            elif front.intersects(shapely.Polygon(obj_corners)):
+            elif front.intersects(shapely.Polygon(corners)):
                 kind, at_fault = "active_front", True
             else:
                 kind, at_fault = "active_lateral", False
-            rel_speed = float(np.hypot(*(ego_vel - objs.velocity[m])))
-            cand = (float(t[k]), int(objs.ids[m]), at_fault, rel_speed, kind)
-            if best is None or (at_fault, rel_speed) > (best[2], best[3]):
-                best = cand
-        return best
+            found.append(
+                _Contact(
+                    t_s=float(t[k]),
+                    object_id=int(objs.ids[m]),
+                    object_class=objs.classes[m],
+                    kind=kind,
+                    at_fault=at_fault,
+                    relative_speed_mps=float(np.hypot(*(velocity[k] - objs.velocity[m]))),
+                )
+            )
+        return sorted(found, key=lambda c: (c.t_s, c.object_id))
 
     def _progress(
         self, path: PlannedPath, ego_now: VehicleState, track: EgoTrack
@@ -360,8 +376,9 @@ class PlanningMetrics(Metric):
         wp = path.waypoints
         if wp.shape[0] == 0 or len(track) == 0:
             return math.nan, math.nan
-        end_ns = min(path.stamp_ns + round(float(wp[-1, 3]) * 1e9), int(track.stamps_ns[-1]))
-        if end_ns <= path.stamp_ns or not track.covers(path.stamp_ns):
+        t_end = min(float(wp[-1, 3]), float(self.params["progress_horizon_s"]))
+        end_ns = path.stamp_ns + round(t_end * 1e9)
+        if end_ns <= path.stamp_ns or not (track.covers(path.stamp_ns) and track.covers(end_ns)):
             return math.nan, math.nan
         route = base_from_map_xy(
             track.samples_between(path.stamp_ns, end_ns),
@@ -369,16 +386,14 @@ class PlanningMetrics(Metric):
             float(ego_now.heading_rad),
         )
         logged_m = float(np.hypot(*np.diff(route, axis=0).T).sum())
-        t_end = (end_ns - path.stamp_ns) / 1e9
         plan_end = np.array(
             [[np.interp(t_end, wp[:, 3], wp[:, 0]), np.interp(t_end, wp[:, 3], wp[:, 1])]]
         )
         arc, _, _ = project_on_polyline(plan_end, route)
         progress = float(arc[0])
-        ratio = min(
-            1.0, max(0.0, progress / max(logged_m, float(self.params["progress_threshold_m"])))
-        )
-        return progress, ratio
+        if logged_m < float(self.params["progress_threshold_m"]):
+            return progress, math.nan  # the logged ego (nearly) stood still: no ratio
+        return progress, min(1.0, max(0.0, progress / logged_m))
 
     # -- evaluate ----------------------------------------------------------------------------
 
@@ -424,8 +439,9 @@ class PlanningMetrics(Metric):
                     if not math.isnan(fde):
                         add(f"FDE/{h:g}s", frame, fde)
                 progress, ratio = self._progress(path, now, track)
-                if not math.isnan(ratio):
+                if not math.isnan(progress):
                     add("progress_m", frame, progress)
+                if not math.isnan(ratio):
                     add("progress_ratio", frame, ratio)
             kin = path_kinematics(path.waypoints)
             if kin is not None:
@@ -439,22 +455,29 @@ class PlanningMetrics(Metric):
                 add("comfortable", frame, float(ok))
             if frame in truth:
                 objs = _Objects.of(truth[frame])
-                hit = self._collision(path, objs)
-                add("collision", frame, float(hit is not None))
-                add("at_fault_collision", frame, float(hit is not None and hit[2]))
-                if hit is not None:
-                    t_hit, oid, fault, rel, kind = hit
-                    cls = objs.classes[int(np.flatnonzero(objs.ids == oid)[0])]
+                contacts = self._collisions(path, objs)
+                add("collision", frame, float(bool(contacts)))
+                add("at_fault_collision", frame, float(any(c.at_fault for c in contacts)))
+                if contacts:
+                    first = contacts[0]
+                    fault = [c for c in contacts if c.at_fault]
                     bookmarks.append(
                         Bookmark(
                             frame_index=frame,
                             kind="collision",
                             detail=(
-                                f"plan hits {cls} {oid} at t={t_hit:.2f} s ({kind}, "
-                                f"{'at fault' if fault else 'not at fault'}, "
-                                f"{rel:.1f} m/s relative)"
+                                f"plan hits {first.object_class} {first.object_id} at "
+                                f"t={first.t_s:.2f} s ({first.kind}, "
+                                f"{'at fault' if first.at_fault else 'not at fault'}, "
+                                f"{first.relative_speed_mps:.1f} m/s relative)"
+                                + (f"; {len(contacts)} objects hit" if len(contacts) > 1 else "")
+                                + (
+                                    f"; at fault with {fault[0].object_class} {fault[0].object_id}"
+                                    if fault and not first.at_fault
+                                    else ""
+                                )
                             ),
-                            severity=rel,
+                            severity=max(c.relative_speed_mps for c in (fault or contacts)),
                         )
                     )
                 speed = (
