@@ -187,7 +187,7 @@ def _draw_boxes(
                 closed=True,
                 fill=False,
                 edgecolor=color,
-                linewidth=1.6,
+                linewidth=2.0,
                 linestyle=style,
             )
         )
@@ -218,7 +218,7 @@ def birds_eye_png(
     paths = paths or {}
     everything = list(ground_truth) + [o for objs in detections.values() for o in objs]
     extent = _extent_m(everything)
-    fig = Figure(figsize=(5.5, 5.5), layout="constrained")
+    fig = Figure(figsize=(5.5, 6.0), layout="constrained")
     ax = fig.add_subplot()
     for r in np.arange(10.0, extent * 1.5, 10.0):
         ax.add_patch(Circle((0.0, 0.0), float(r), fill=False, color="#bbbbbb", linewidth=0.7))
@@ -241,7 +241,7 @@ def birds_eye_png(
     ax.set_ylabel("x (m, forward +)", fontsize=8)
     ax.tick_params(labelsize=7)
     ax.set_title(plain(title), fontsize=9)
-    ax.legend(fontsize=7, loc="upper right")
+    fig.legend(fontsize=7, loc="outside lower center", ncol=3, frameon=False)
     return _png(fig)
 
 
