@@ -40,13 +40,19 @@ def car(frame: int, x: float, y: float = 0.0, score: float = 1.0, yaw: float = 0
     return (frame, 0, x, y, 0.0, 4.0, 2.0, 1.5, yaw, score)
 
 
-def evaluate(gt: ObjectArrays, pred: ObjectArrays, frames: Sequence[int], **params: object) -> dict[str, float]:
-    return dict(KittiDetection(**params).evaluate_arrays(gt, pred, np.array(frames, np.int64)).values)
+def evaluate(
+    gt: ObjectArrays, pred: ObjectArrays, frames: Sequence[int], **params: object
+) -> dict[str, float]:
+    return dict(
+        KittiDetection(**params).evaluate_arrays(gt, pred, np.array(frames, np.int64)).values
+    )
 
 
 def test_get_thresholds_by_hand() -> None:
     # 4 GT, TP scores .9 .8 .7 .6: each step moves recall by 1/4 ≥ 1/40 → all four kept
-    np.testing.assert_array_equal(get_thresholds(np.array([0.6, 0.9, 0.7, 0.8]), 4), [0.9, 0.8, 0.7, 0.6])
+    np.testing.assert_array_equal(
+        get_thresholds(np.array([0.6, 0.9, 0.7, 0.8]), 4), [0.9, 0.8, 0.7, 0.6]
+    )
     # 80 GT, 80 TPs (recall (i+1)/80 after score i); the target recall starts at 0 and moves
     # 1/40 = 2/80 per kept score; score i is skipped when the next recall is nearer the target:
     # i=0: kept (target 0 → 2/80); i=1: |3/80 − 2/80| < |2/80 − 2/80|? no → kept (→ 4/80);
@@ -65,7 +71,14 @@ def test_r40_small_case_by_hand() -> None:
     # th .6: TP 3, FP 1 → P 3/4, R .75
     # running max from the right: P = [1, .75, .75, 0, …] → AP_R40 = (.75 + .75) / 40 = 0.0375
     gt = boxes([car(0, 10), car(0, 20), car(1, 10), car(1, 30)])
-    pred = boxes([car(0, 10, score=0.9), car(0, 20, score=0.7), car(1, 10, score=0.6), car(1, -30, score=0.8)])
+    pred = boxes(
+        [
+            car(0, 10, score=0.9),
+            car(0, 20, score=0.7),
+            car(1, 10, score=0.6),
+            car(1, -30, score=0.8),
+        ]
+    )
     v = evaluate(gt, pred, [0, 1])
     assert v["AP3D/car"] == pytest.approx(0.0375, abs=1e-12)
     assert v["APBEV/car"] == pytest.approx(0.0375, abs=1e-12)
@@ -106,7 +119,9 @@ def test_ignored_classes_and_empty() -> None:
     # a truck GT ignored for "car" (KITTI's Van rule): a car detection on it is neither TP nor FP
     gt = boxes([(0, 3, 10.0, 0.0, 0.0, 4.0, 2.0, 1.5, 0.0, 1.0), car(0, 30)])
     pred = boxes([car(0, 10, score=0.9), car(0, 30, score=0.8)])
-    res = KittiDetection(ignored_classes={"car": ["truck"]}).evaluate_arrays(gt, pred, np.array([0]))
+    res = KittiDetection(ignored_classes={"car": ["truck"]}).evaluate_arrays(
+        gt, pred, np.array([0])
+    )
     assert res.per_frame["tp"][1].tolist() == [1.0]
     assert res.per_frame["fp"][1].tolist() == [0.0]
     assert res.values["gt/car"] == 1.0
@@ -122,7 +137,9 @@ def test_ignored_classes_and_empty() -> None:
 def test_yaw_wrap_around_matches() -> None:
     eps = 1e-6
     gt = boxes([car(0, 10, yaw=math.pi - eps)])
-    res = KittiDetection().evaluate_arrays(gt, boxes([car(0, 10, score=0.9, yaw=-math.pi + eps)]), np.array([0]))
+    res = KittiDetection().evaluate_arrays(
+        gt, boxes([car(0, 10, score=0.9, yaw=-math.pi + eps)]), np.array([0])
+    )
     assert res.per_frame["tp"][1].tolist() == [1.0]
 
 
@@ -139,8 +156,8 @@ def test_azimuth_filter() -> None:
 
 
 def _iou(a: np.ndarray, b: np.ndarray, kind: str) -> float:
-    pa = shapely.polygons(bev_corners(a[None, 2:4], a[None, 5:7], a[None, 8]))[0]
-    pb = shapely.polygons(bev_corners(b[None, 2:4], b[None, 5:7], b[None, 8]))[0]
+    pa = shapely.polygons(bev_corners(a[None, [2, 3, 5, 6, 8]]))[0]
+    pb = shapely.polygons(bev_corners(b[None, [2, 3, 5, 6, 8]]))[0]
     inter = shapely.area(shapely.intersection(pa, pb))
     if kind == "bev":
         u = a[5] * a[6] + b[5] * b[6] - inter
@@ -152,7 +169,7 @@ def _iou(a: np.ndarray, b: np.ndarray, kind: str) -> float:
     return inc / (np.prod(a[5:8]) + np.prod(b[5:8]) - inc)
 
 
-def _compute_statistics(overlaps, ignored_gt, scores, min_overlap, thresh, compute_fp):  # type: ignore[no-untyped-def]
+def _compute_statistics(overlaps, ignored_gt, scores, *, min_overlap, thresh, compute_fp):  # type: ignore[no-untyped-def]
     det_size, gt_size = overlaps.shape
     assigned = [False] * det_size
     ignored_threshold = [compute_fp and scores[i] < thresh for i in range(det_size)]
@@ -184,7 +201,9 @@ def _compute_statistics(overlaps, ignored_gt, scores, min_overlap, thresh, compu
     return tp, fp, fn, thresholds
 
 
-def _oracle_ap(gt: np.ndarray, dt: np.ndarray, frames: list[int], cls: int, min_overlap: float, kind: str) -> float:
+def _oracle_ap(
+    gt: np.ndarray, dt: np.ndarray, *, frames: list[int], cls: int, min_overlap: float, kind: str
+) -> float:
     per = []
     num_gt = 0
     for f in frames:
@@ -196,13 +215,17 @@ def _oracle_ap(gt: np.ndarray, dt: np.ndarray, frames: list[int], cls: int, min_
         num_gt += len(g)
     ths = []
     for ov, ig, sc in per:
-        ths += _compute_statistics(ov, ig, sc, min_overlap, 0.0, False)[3]
+        ths += _compute_statistics(
+            ov, ig, sc, min_overlap=min_overlap, thresh=0.0, compute_fp=False
+        )[3]
     thresholds = get_thresholds(np.array(ths), num_gt) if ths else []
     prec = np.zeros(41)
     for i, t in enumerate(thresholds):
         tp = fp = fn = 0
         for ov, ig, sc in per:
-            a, b, c, _ = _compute_statistics(ov, ig, sc, min_overlap, t, True)
+            a, b, c, _ = _compute_statistics(
+                ov, ig, sc, min_overlap=min_overlap, thresh=t, compute_fp=True
+            )
             tp, fp, fn = tp + a, fp + b, fn + c
         prec[i] = tp / (tp + fp)
     for i in range(len(thresholds)):
@@ -217,7 +240,15 @@ def test_equals_kitti_port(seed: int) -> None:
     for f in range(6):
         for _ in range(int(rng.integers(3, 12))):
             c = int(rng.integers(0, 2))
-            g = [f, c, *rng.uniform(0, 40, 2), 0.0, *(rng.uniform(3.5, 4.5), rng.uniform(1.6, 2.0), 1.5), rng.uniform(-3.2, 3.2), 1.0]
+            g = [
+                f,
+                c,
+                *rng.uniform(0, 40, 2),
+                0.0,
+                *(rng.uniform(3.5, 4.5), rng.uniform(1.6, 2.0), 1.5),
+                rng.uniform(-3.2, 3.2),
+                1.0,
+            ]
             gts.append(g)
             if rng.random() < 0.85:
                 d = list(g)
@@ -228,12 +259,34 @@ def test_equals_kitti_port(seed: int) -> None:
                 d[9] = float(np.round(rng.uniform(0.05, 1), 2))
                 dts.append(d)
         for _ in range(int(rng.integers(0, 4))):
-            dts.append([f, int(rng.integers(0, 2)), *rng.uniform(0, 40, 2), 0.0, 4.0, 1.8, 1.5, 0.0, float(np.round(rng.uniform(0, 1), 2))])
+            dts.append(
+                [
+                    f,
+                    int(rng.integers(0, 2)),
+                    *rng.uniform(0, 40, 2),
+                    0.0,
+                    4.0,
+                    1.8,
+                    1.5,
+                    0.0,
+                    float(np.round(rng.uniform(0, 1), 2)),
+                ]
+            )
     g, d = np.array(gts), np.array(dts)
-    v = evaluate(boxes(gts), boxes(dts), range(6), min_overlap_3d={"car": 0.5, "pedestrian": 0.3, "cyclist": 0.5}, min_overlap_bev={"car": 0.6, "pedestrian": 0.4, "cyclist": 0.5})
+    v = evaluate(
+        boxes(gts),
+        boxes(dts),
+        range(6),
+        min_overlap_3d={"car": 0.5, "pedestrian": 0.3, "cyclist": 0.5},
+        min_overlap_bev={"car": 0.6, "pedestrian": 0.4, "cyclist": 0.5},
+    )
     for cls, name, ov3, ovb in ((0, "car", 0.5, 0.6), (1, "pedestrian", 0.3, 0.4)):
-        assert v[f"AP3D/{name}"] == pytest.approx(_oracle_ap(g, d, list(range(6)), cls, ov3, "3d"), abs=1e-9)
-        assert v[f"APBEV/{name}"] == pytest.approx(_oracle_ap(g, d, list(range(6)), cls, ovb, "bev"), abs=1e-9)
+        assert v[f"AP3D/{name}"] == pytest.approx(
+            _oracle_ap(g, d, frames=list(range(6)), cls=cls, min_overlap=ov3, kind="3d"), abs=1e-9
+        )
+        assert v[f"APBEV/{name}"] == pytest.approx(
+            _oracle_ap(g, d, frames=list(range(6)), cls=cls, min_overlap=ovb, kind="bev"), abs=1e-9
+        )
 
 
 # ------------------------------------------------------------------------------------------------
@@ -243,11 +296,28 @@ def test_equals_kitti_port(seed: int) -> None:
 @pytest.mark.shared_data
 def test_reference_detector_on_kitti(shared_data: Path, tmp_path: Path) -> None:
     out = tmp_path / "run"
-    assert main(["run", str(shared_data / "kitti_object"), "--perception", "cluster-detector", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "run",
+                str(shared_data / "kitti_object"),
+                "--perception",
+                "cluster-detector",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     data = EvalData(open_run(out), "cluster-detector")
     # KITTI's strict overlaps (car 0.7, pedestrian/cyclist 0.5) and trucks at 0.7, camera view
     strict = KittiDetection(
-        classes={"car": ["vehicle"], "pedestrian": ["pedestrian"], "cyclist": ["bicycle"], "truck": ["truck"]},
+        classes={
+            "car": ["vehicle"],
+            "pedestrian": ["pedestrian"],
+            "cyclist": ["bicycle"],
+            "truck": ["truck"],
+        },
         min_overlap_3d={"car": 0.7, "pedestrian": 0.5, "cyclist": 0.5, "truck": 0.7},
         min_overlap_bev={"car": 0.7, "pedestrian": 0.5, "cyclist": 0.5, "truck": 0.7},
         max_azimuth_deg=45,
@@ -264,7 +334,9 @@ def test_reference_detector_on_kitti(shared_data: Path, tmp_path: Path) -> None:
     assert v["mAP3D"] == 0.0
     assert v["mAPBEV"] == 0.0
     # KITTI's loose overlaps (car 0.5 BEV): the near car is found, the 9-point car is not
-    loose = KittiDetection(min_overlap_bev={"car": 0.5, "pedestrian": 0.25, "cyclist": 0.25}, max_azimuth_deg=45).evaluate(data)
+    loose = KittiDetection(
+        min_overlap_bev={"car": 0.5, "pedestrian": 0.25, "cyclist": 0.25}, max_azimuth_deg=45
+    ).evaluate(data)
     assert loose.values["recallBEV/car"] == 0.5
     nus = NuScenesDetection().evaluate(data).values
     assert nus["recall/pedestrian/2.0"] == 1.0

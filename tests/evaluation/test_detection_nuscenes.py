@@ -31,9 +31,7 @@ def boxes(rows: Sequence[Sequence[float]]) -> ObjectArrays:
     """rows: (frame, class index into CLASSES, x, y, yaw, score[, l, w, h, vx, vy, points])."""
     full = []
     for r in rows:
-        r = list(r)
-        r += [4.0, 2.0, 1.5, 0.0, 0.0, -1][len(r) - 6 :]
-        full.append(r)
+        full.append([*r, *[4.0, 2.0, 1.5, 0.0, 0.0, -1][len(r) - 6 :]])
     a = np.array(full, dtype=np.float64).reshape(-1, 12)
     codes = class_codes(CLASSES)
     return ObjectArrays.from_columns(
@@ -50,7 +48,11 @@ def boxes(rows: Sequence[Sequence[float]]) -> ObjectArrays:
 
 def run_eval(gt: ObjectArrays, pred: ObjectArrays, **kw: object) -> dict[str, float]:
     ev = evaluate_nuscenes(
-        gt, pred, class_map=NUSCENES_CLASSES, class_range_m=NUSCENES_CLASS_RANGE_M, **kw  # type: ignore[arg-type]
+        gt,
+        pred,
+        class_map=NUSCENES_CLASSES,
+        class_range_m=NUSCENES_CLASS_RANGE_M,
+        **kw,  # type: ignore[arg-type]
     )
     return ev.values
 
@@ -134,7 +136,9 @@ def test_small_curve_interpolation_and_clipping_by_hand() -> None:
             (3, 0, 10.0, 0.0, 0.0, 0.6),
         ]
     )
-    ev = evaluate_nuscenes(gt, pred, class_map=NUSCENES_CLASSES, class_range_m=NUSCENES_CLASS_RANGE_M)
+    ev = evaluate_nuscenes(
+        gt, pred, class_map=NUSCENES_CLASSES, class_range_m=NUSCENES_CLASS_RANGE_M
+    )
     md = ev.metric_data[("car", 2.0)]
     r = np.linspace(0, 1, 101)
     # np.interp on the 101 recalls: 1 up to r < 0.4; at r = 0.4 (a repeated recall) the later
@@ -154,17 +158,34 @@ def test_small_curve_interpolation_and_clipping_by_hand() -> None:
 def test_calc_ap_and_calc_tp_clipping() -> None:
     # precision 0.05 everywhere (below min_precision) → AP 0; 0.55 everywhere → (0.45)/0.9 = 0.5
     zeros = np.zeros(101)
-    md = MetricData(recall=np.linspace(0, 1, 101), precision=np.full(101, 0.05), confidence=zeros, errors={"trans_err": zeros})
+    md = MetricData(
+        recall=np.linspace(0, 1, 101),
+        precision=np.full(101, 0.05),
+        confidence=zeros,
+        errors={"trans_err": zeros},
+    )
     assert calc_ap(md, 0.1, 0.1) == 0.0
-    md = MetricData(recall=md.recall, precision=np.full(101, 0.55), confidence=zeros, errors={"trans_err": zeros})
+    md = MetricData(
+        recall=md.recall,
+        precision=np.full(101, 0.55),
+        confidence=zeros,
+        errors={"trans_err": zeros},
+    )
     assert calc_ap(md, 0.1, 0.1) == pytest.approx(0.5, abs=1e-12)
     # max recall below min_recall (confidence > 0 only up to bin 10) → TP error 1
     conf = np.where(np.arange(101) <= 10, 0.5, 0.0)
-    md = MetricData(recall=md.recall, precision=md.precision, confidence=conf, errors={"trans_err": zeros})
+    md = MetricData(
+        recall=md.recall, precision=md.precision, confidence=conf, errors={"trans_err": zeros}
+    )
     assert calc_tp(md, 0.1, "trans_err") == 1.0
     # errors 0..1 by bin, confidence to bin 20 → mean of bins 11..20 = 0.155
     conf = np.where(np.arange(101) <= 20, 0.5, 0.0)
-    md = MetricData(recall=md.recall, precision=md.precision, confidence=conf, errors={"trans_err": np.linspace(0, 1, 101)})
+    md = MetricData(
+        recall=md.recall,
+        precision=md.precision,
+        confidence=conf,
+        errors={"trans_err": np.linspace(0, 1, 101)},
+    )
     assert calc_tp(md, 0.1, "trans_err") == pytest.approx(0.155, abs=1e-12)
 
 
@@ -197,7 +218,9 @@ def test_yaw_wrap_around() -> None:
     # barrier-like classes have period π: a box turned by π − 0.02 is 0.02 off
     gt = boxes([(0, 0, 10.0, 0.0, 0.1, 1.0)])
     pred = boxes([(0, 0, 10.0, 0.0, 0.1 + math.pi - 0.02, 0.9)])
-    ev = evaluate_nuscenes(gt, pred, class_map={"vehicle": "barrier"}, class_range_m=NUSCENES_CLASS_RANGE_M)
+    ev = evaluate_nuscenes(
+        gt, pred, class_map={"vehicle": "barrier"}, class_range_m=NUSCENES_CLASS_RANGE_M
+    )
     assert ev.values["AOE/barrier"] == pytest.approx(0.02, abs=1e-12)
     assert math.isnan(ev.values["AVE/barrier"])  # devkit: no velocity error for barriers
 
@@ -223,7 +246,11 @@ def test_filtering_range_points_and_classes() -> None:
         ]
     )
     unknown = ObjectArrays.from_columns(
-        frame=[0], object_class=class_codes(["unknown"]), center=[[5.0, 0, 0]], size=[[1, 1, 1]], yaw_rad=[0]
+        frame=[0],
+        object_class=class_codes(["unknown"]),
+        center=[[5.0, 0, 0]],
+        size=[[1, 1, 1]],
+        yaw_rad=[0],
     )
     pred = boxes([(0, 0, 10.0, 0.0, 0.0, 0.8), (0, 0, 55.0, 0.0, 0.0, 0.9)])
     v = run_eval(gt, pred)
@@ -240,7 +267,9 @@ def test_filtering_range_points_and_classes() -> None:
 
 def test_distance_bands() -> None:
     # a car at 10 m found, a car at 30 m missed, a pedestrian at 50 m out of its 40 m range
-    gt = boxes([(0, 0, 10.0, 0.0, 0.0, 1.0), (0, 0, 30.0, 0.0, 0.0, 1.0), (0, 2, 50.0, 0.0, 0.0, 1.0)])
+    gt = boxes(
+        [(0, 0, 10.0, 0.0, 0.0, 1.0), (0, 0, 30.0, 0.0, 0.0, 1.0), (0, 2, 50.0, 0.0, 0.0, 1.0)]
+    )
     pred = boxes([(0, 0, 10.1, 0.0, 0.0, 0.7)])
     v = run_eval(gt, pred)
     assert v["AP/band_0_20/2.0"] == pytest.approx(1.0, abs=1e-12)
@@ -253,11 +282,19 @@ def test_distance_bands() -> None:
 # the devkit, ported (loops), as the oracle
 
 
-def _oracle_accumulate(gt: list[dict], pred: list[dict], npos: int, dist_th: float, period: float) -> dict:
+def _oracle_accumulate(
+    gt: list[dict], pred: list[dict], npos: int, dist_th: float, period: float
+) -> dict:
     pred_confs = [p["score"] for p in pred]
     sortind = [i for (v, i) in sorted((v, i) for (i, v) in enumerate(pred_confs))][::-1]
     tp, fp, conf = [], [], []
-    md: dict[str, list[float]] = {"trans_err": [], "vel_err": [], "scale_err": [], "orient_err": [], "conf": []}
+    md: dict[str, list[float]] = {
+        "trans_err": [],
+        "vel_err": [],
+        "scale_err": [],
+        "orient_err": [],
+        "conf": [],
+    }
     taken = set()
     for ind in sortind:
         p = pred[ind]
@@ -285,7 +322,11 @@ def _oracle_accumulate(gt: list[dict], pred: list[dict], npos: int, dist_th: flo
             tp.append(0), fp.append(1), conf.append(p["score"])
     nelem = 101
     if npos == 0 or not md["trans_err"]:
-        return {"precision": np.zeros(nelem), "confidence": np.zeros(nelem), **{k: np.ones(nelem) for k in md if k != "conf"}}
+        return {
+            "precision": np.zeros(nelem),
+            "confidence": np.zeros(nelem),
+            **{k: np.ones(nelem) for k in md if k != "conf"},
+        }
     tpc = np.cumsum(tp).astype(float)
     fpc = np.cumsum(fp).astype(float)
     confs = np.array(conf)
@@ -303,13 +344,25 @@ def _oracle_accumulate(gt: list[dict], pred: list[dict], npos: int, dist_th: flo
 
 def _oracle(gt_rows: list[tuple], pred_rows: list[tuple]) -> dict[str, float]:
     """devkit: filter, accumulate per class and threshold, calc_ap, calc_tp, mean_ap, tp_errors."""
+
     def conv(rows: list[tuple]) -> list[dict]:
         out = []
         for r in rows:
             name = NAMES[int(r[1])]
             if math.hypot(r[2], r[3]) < NUSCENES_CLASS_RANGE_M[name] and r[11] != 0:
-                out.append({"frame": r[0], "name": name, "xy": (r[2], r[3]), "yaw": r[4], "score": r[5], "size": np.array(r[6:9]), "v": (r[9], r[10])})
+                out.append(
+                    {
+                        "frame": r[0],
+                        "name": name,
+                        "xy": (r[2], r[3]),
+                        "yaw": r[4],
+                        "score": r[5],
+                        "size": np.array(r[6:9]),
+                        "v": (r[9], r[10]),
+                    }
+                )
         return out
+
     gts, preds = conv(gt_rows), conv(pred_rows)
     res: dict[str, float] = {}
     aps, tps = {}, {}
@@ -329,11 +382,19 @@ def _oracle(gt_rows: list[tuple], pred_rows: list[tuple]) -> dict[str, float]:
             if th == 2.0:
                 nz = np.nonzero(md["confidence"])[0]
                 last = nz[-1] if len(nz) else 0
-                tps[name] = {k: 1.0 if last < 11 else float(np.mean(md[k][11 : last + 1])) for k in ("trans_err", "scale_err", "orient_err", "vel_err")}
+                tps[name] = {
+                    k: 1.0 if last < 11 else float(np.mean(md[k][11 : last + 1]))
+                    for k in ("trans_err", "scale_err", "orient_err", "vel_err")
+                }
         aps[name] = float(np.mean(per))
     if aps:
         res["mAP"] = float(np.mean(list(aps.values())))
-        for k, short in (("trans_err", "mATE"), ("scale_err", "mASE"), ("orient_err", "mAOE"), ("vel_err", "mAVE")):
+        for k, short in (
+            ("trans_err", "mATE"),
+            ("scale_err", "mASE"),
+            ("orient_err", "mAOE"),
+            ("vel_err", "mAVE"),
+        ):
             res[short] = float(np.nanmean([tps[n][k] for n in tps]))
     return res
 
@@ -345,7 +406,16 @@ def _scene(seed: int) -> tuple[list[tuple], list[tuple]]:
     for f in range(int(rng.integers(1, 12))):
         frame_gt = []
         for _ in range(int(rng.integers(0, 8))):
-            g = (f, int(rng.integers(0, 3)), *rng.uniform(-45, 45, 2), rng.uniform(-4, 4), 1.0, *rng.uniform(0.3, 5, 3), *rng.uniform(-3, 3, 2), int(rng.choice([-1, 0, 5])))
+            g = (
+                f,
+                int(rng.integers(0, 3)),
+                *rng.uniform(-45, 45, 2),
+                rng.uniform(-4, 4),
+                1.0,
+                *rng.uniform(0.3, 5, 3),
+                *rng.uniform(-3, 3, 2),
+                int(rng.choice([-1, 0, 5])),
+            )
             frame_gt.append(g)
         gts += frame_gt
         for _ in range(int(rng.integers(0, 10))):
@@ -353,9 +423,32 @@ def _scene(seed: int) -> tuple[list[tuple], list[tuple]]:
             if frame_gt and rng.random() < 0.7:
                 g = frame_gt[int(rng.integers(len(frame_gt)))]
                 xy = np.array(g[2:4]) + rng.normal(0, rng.choice([0.2, 1.0]), 2)
-                preds.append((f, g[1], *xy, g[4] + rng.normal(0, 0.3), score, *(np.array(g[6:9]) * rng.uniform(0.8, 1.2, 3)), *(np.array(g[9:11]) + rng.normal(0, 1, 2)), -1))
+                preds.append(
+                    (
+                        f,
+                        g[1],
+                        *xy,
+                        g[4] + rng.normal(0, 0.3),
+                        score,
+                        *(np.array(g[6:9]) * rng.uniform(0.8, 1.2, 3)),
+                        *(np.array(g[9:11]) + rng.normal(0, 1, 2)),
+                        -1,
+                    )
+                )
             else:
-                preds.append((f, int(rng.integers(0, 3)), *rng.uniform(-45, 45, 2), rng.uniform(-4, 4), score, *rng.uniform(0.3, 5, 3), 0.0, 0.0, -1))
+                preds.append(
+                    (
+                        f,
+                        int(rng.integers(0, 3)),
+                        *rng.uniform(-45, 45, 2),
+                        rng.uniform(-4, 4),
+                        score,
+                        *rng.uniform(0.3, 5, 3),
+                        0.0,
+                        0.0,
+                        -1,
+                    )
+                )
     return gts, preds
 
 
@@ -373,11 +466,20 @@ def test_equals_devkit_port(seed: int) -> None:
 
 
 def _obj(cls: ObjectClass, x: float, y: float, conf: float = 1.0) -> DetectedObject:
-    return DetectedObject(object_class=cls, confidence=conf, box=Box3D(center=np.array([x, y, 0.8]), size=np.array([4.0, 2.0, 1.5])))
+    return DetectedObject(
+        object_class=cls,
+        confidence=conf,
+        box=Box3D(center=np.array([x, y, 0.8]), size=np.array([4.0, 2.0, 1.5])),
+    )
 
 
 def test_metric_on_a_run(tmp_path: Path) -> None:
-    manifest = {"log": {"path": "x", "sha256": "s", "format": "mcap"}, "seed": 0, "pipeline": {}, "algorithms": [{"name": "det", "version": "1", "config_hash": "c", "role": "perception"}]}
+    manifest = {
+        "log": {"path": "x", "sha256": "s", "format": "mcap"},
+        "seed": 0,
+        "pipeline": {},
+        "algorithms": [{"name": "det", "version": "1", "config_hash": "c", "role": "perception"}],
+    }
     truth = {
         0: (_obj(ObjectClass.VEHICLE, 10, 0), _obj(ObjectClass.PEDESTRIAN, 5, 2)),
         1: (_obj(ObjectClass.VEHICLE, 12, 0),),
@@ -390,8 +492,20 @@ def test_metric_on_a_run(tmp_path: Path) -> None:
     with RunWriter(tmp_path / "run", manifest=manifest) as writer:
         for i in range(3):
             status = "ok" if i < 2 else "error"  # frame 2: the detector failed → no detections
-            step = StepRecord(algorithm="det", stage="perception", role="perception", status=status, output=found.get(i, ()) if status == "ok" else None, error_type="" if status == "ok" else "E", error_message="")
-            writer.write_frame(FrameRecord(frame_index=i, stamp_ns=10**9 * (i + 1), steps=(step,), ground_truth=truth[i]))
+            step = StepRecord(
+                algorithm="det",
+                stage="perception",
+                role="perception",
+                status=status,
+                output=found.get(i, ()) if status == "ok" else None,
+                error_type="" if status == "ok" else "E",
+                error_message="",
+            )
+            writer.write_frame(
+                FrameRecord(
+                    frame_index=i, stamp_ns=10**9 * (i + 1), steps=(step,), ground_truth=truth[i]
+                )
+            )
     res = NuScenesDetection().evaluate(EvalData(open_run(tmp_path / "run"), "det"))
     assert res.headline == "mAP"
     assert res.values["frames"] == 3.0

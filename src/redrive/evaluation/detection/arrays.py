@@ -115,7 +115,8 @@ class ObjectArrays:
         oc = np.asarray(object_class, dtype=np.int64).reshape(n)
         order = np.argsort(f, kind="stable")
         if n and np.any(order != np.arange(n)):
-            f, oc, c, s, y, v, sc, npts = (a[order] for a in (f, oc, c, s, y, v, sc, npts))
+            f, oc, npts = f[order], oc[order], npts[order]
+            c, s, y, v, sc = c[order], s[order], y[order], v[order], sc[order]
         return cls(
             frame=f,
             object_class=oc,

@@ -10,8 +10,9 @@ mmdetection3d ``kitti_utils/rotate_iou.py``: ``quadrilateral_intersection``, ``s
 3D overlap follows KITTI's ``d3_box_overlap_kernel``: BEV intersection × overlap of the vertical
 extents, over the union of the volumes.
 
-Boxes are (x, y) centre, (length, width) and yaw about +z (counter-clockwise from +x), metres and
-radians, in one frame.
+Boxes are rows ``x, y, length, width, yaw`` (BEV, (N, 5)) or ``x, y, z, length, width, height,
+yaw`` (3D, (N, 7), z the centre): metres and radians (yaw about +z, counter-clockwise from +x), in
+one frame.
 """
 
 from __future__ import annotations
@@ -34,19 +35,23 @@ F64 = npt.NDArray[np.float64]
 _CHUNK = 200_000
 
 
-def bev_corners(center_xy: F64, length_width: F64, yaw_rad: F64) -> F64:
-    """(N, 4, 2) corners, counter-clockwise: front-left, rear-left, rear-right, front-right."""
-    c = np.asarray(center_xy, dtype=np.float64).reshape(-1, 2)
-    lw = np.asarray(length_width, dtype=np.float64).reshape(-1, 2)
-    yaw = np.asarray(yaw_rad, dtype=np.float64).reshape(-1)
-    hx, hy = lw[:, 0] / 2.0, lw[:, 1] / 2.0
+def bev_corners(boxes_bev: F64) -> F64:
+    """(N, 4, 2) corners of (N, 5) boxes ``x, y, length, width, yaw``, counter-clockwise:
+    front-left, rear-left, rear-right, front-right."""
+    b = np.asarray(boxes_bev, dtype=np.float64).reshape(-1, 5)
+    hx, hy = b[:, 2] / 2.0, b[:, 3] / 2.0
     local = np.stack(
-        [np.stack([hx, hy], -1), np.stack([-hx, hy], -1), np.stack([-hx, -hy], -1), np.stack([hx, -hy], -1)],
+        [
+            np.stack([hx, hy], -1),
+            np.stack([-hx, hy], -1),
+            np.stack([-hx, -hy], -1),
+            np.stack([hx, -hy], -1),
+        ],
         axis=1,
     )  # (N, 4, 2)
-    cos, sin = np.cos(yaw)[:, None], np.sin(yaw)[:, None]
-    x = local[..., 0] * cos - local[..., 1] * sin + c[:, None, 0]
-    y = local[..., 0] * sin + local[..., 1] * cos + c[:, None, 1]
+    cos, sin = np.cos(b[:, 4])[:, None], np.sin(b[:, 4])[:, None]
+    x = local[..., 0] * cos - local[..., 1] * sin + b[:, None, 0]
+    y = local[..., 0] * sin + local[..., 1] * cos + b[:, None, 1]
     return np.stack([x, y], axis=-1)
 
 
@@ -63,7 +68,8 @@ def _inside(points: F64, corners: F64) -> npt.NDArray[np.bool_]:
     # borders count as inside, to 1e-10 of the box's size (rounding of rotated corners is ~1e-16)
     tol_x = 1e-10 * nx
     tol_y = 1e-10 * ny
-    return (lx >= -tol_x) & (lx <= nx + tol_x) & (ly >= -tol_y) & (ly <= ny + tol_y)
+    inside = (lx >= -tol_x) & (lx <= nx + tol_x) & (ly >= -tol_y) & (ly <= ny + tol_y)
+    return np.asarray(inside, dtype=bool)
 
 
 def _area_pairs(a: F64, b: F64) -> F64:
@@ -117,30 +123,33 @@ def bev_intersection_area(corners_a: F64, corners_b: F64) -> F64:
     return out
 
 
-def bev_iou_pairs(xy_a: F64, lw_a: F64, yaw_a: F64, xy_b: F64, lw_b: F64, yaw_b: F64) -> F64:
-    """(N,) BEV IoU of the pairs (a[i], b[i]): intersection / (area_a + area_b − intersection);
-    0 where the union is 0 (KITTI ``rotate_iou_eval``, criterion −1)."""
-    inter = bev_intersection_area(bev_corners(xy_a, lw_a, yaw_a), bev_corners(xy_b, lw_b, yaw_b))
-    union = lw_a[:, 0] * lw_a[:, 1] + lw_b[:, 0] * lw_b[:, 1] - inter
+def bev_iou_pairs(boxes_a: F64, boxes_b: F64) -> F64:
+    """(N,) BEV IoU of the pairs (a[i], b[i]) of (N, 5) boxes ``x, y, length, width, yaw``:
+    intersection / (area_a + area_b − intersection); 0 where the union is 0 (KITTI
+    ``rotate_iou_eval``, criterion −1)."""
+    a = np.asarray(boxes_a, dtype=np.float64).reshape(-1, 5)
+    b = np.asarray(boxes_b, dtype=np.float64).reshape(-1, 5)
+    inter = bev_intersection_area(bev_corners(a), bev_corners(b))
+    union = a[:, 2] * a[:, 3] + b[:, 2] * b[:, 3] - inter
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(union > 0.0, inter / union, 0.0)
 
 
-def iou_3d_pairs(
-    center_a: F64, size_a: F64, yaw_a: F64, center_b: F64, size_b: F64, yaw_b: F64
-) -> F64:
-    """(N,) 3D IoU of the pairs (a[i], b[i]), boxes with yaw only: BEV intersection × overlap of
-    [z − h/2, z + h/2], over vol_a + vol_b − that (KITTI ``d3_box_overlap``, criterion −1); 0
-    where they do not overlap or the union is 0."""
+def iou_3d_pairs(boxes_a: F64, boxes_b: F64) -> F64:
+    """(N,) 3D IoU of the pairs (a[i], b[i]) of (N, 7) boxes ``x, y, z, length, width, height,
+    yaw`` (z the centre): BEV intersection × overlap of [z − h/2, z + h/2], over
+    vol_a + vol_b − that (KITTI ``d3_box_overlap``, criterion −1); 0 where they do not overlap or
+    the union is 0."""
+    a = np.asarray(boxes_a, dtype=np.float64).reshape(-1, 7)
+    b = np.asarray(boxes_b, dtype=np.float64).reshape(-1, 7)
     inter = bev_intersection_area(
-        bev_corners(center_a[:, :2], size_a[:, :2], yaw_a),
-        bev_corners(center_b[:, :2], size_b[:, :2], yaw_b),
+        bev_corners(a[:, [0, 1, 3, 4, 6]]), bev_corners(b[:, [0, 1, 3, 4, 6]])
     )
-    top = np.minimum(center_a[:, 2] + size_a[:, 2] / 2, center_b[:, 2] + size_b[:, 2] / 2)
-    bottom = np.maximum(center_a[:, 2] - size_a[:, 2] / 2, center_b[:, 2] - size_b[:, 2] / 2)
+    top = np.minimum(a[:, 2] + a[:, 5] / 2, b[:, 2] + b[:, 5] / 2)
+    bottom = np.maximum(a[:, 2] - a[:, 5] / 2, b[:, 2] - b[:, 5] / 2)
     iw = top - bottom
     inc = np.where((inter > 0.0) & (iw > 0.0), inter * iw, 0.0)
-    union = np.prod(size_a, axis=1) + np.prod(size_b, axis=1) - inc
+    union = np.prod(a[:, 3:6], axis=1) + np.prod(b[:, 3:6], axis=1) - inc
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where((inc > 0.0) & (union > 0.0), inc / union, 0.0)
 
@@ -150,17 +159,17 @@ def _pairs(n: int, m: int) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
     return i.reshape(-1), j.reshape(-1)
 
 
-def bev_iou_matrix(xy_a: F64, lw_a: F64, yaw_a: F64, xy_b: F64, lw_b: F64, yaw_b: F64) -> F64:
-    """(N, M) BEV IoU of every box of a (N) with every box of b (M) (:func:`bev_iou_pairs`)."""
-    i, j = _pairs(xy_a.shape[0], xy_b.shape[0])
-    iou = bev_iou_pairs(xy_a[i], lw_a[i], yaw_a[i], xy_b[j], lw_b[j], yaw_b[j])
-    return iou.reshape(xy_a.shape[0], xy_b.shape[0])
+def bev_iou_matrix(boxes_a: F64, boxes_b: F64) -> F64:
+    """(N, M) BEV IoU of every box of a (N, 5) with every box of b (M, 5) (:func:`bev_iou_pairs`)."""
+    a = np.asarray(boxes_a, dtype=np.float64).reshape(-1, 5)
+    b = np.asarray(boxes_b, dtype=np.float64).reshape(-1, 5)
+    i, j = _pairs(a.shape[0], b.shape[0])
+    return bev_iou_pairs(a[i], b[j]).reshape(a.shape[0], b.shape[0])
 
 
-def iou_3d_matrix(
-    center_a: F64, size_a: F64, yaw_a: F64, center_b: F64, size_b: F64, yaw_b: F64
-) -> F64:
-    """(N, M) 3D IoU of every box of a with every box of b (:func:`iou_3d_pairs`)."""
-    i, j = _pairs(center_a.shape[0], center_b.shape[0])
-    iou = iou_3d_pairs(center_a[i], size_a[i], yaw_a[i], center_b[j], size_b[j], yaw_b[j])
-    return iou.reshape(center_a.shape[0], center_b.shape[0])
+def iou_3d_matrix(boxes_a: F64, boxes_b: F64) -> F64:
+    """(N, M) 3D IoU of every box of a (N, 7) with every box of b (M, 7) (:func:`iou_3d_pairs`)."""
+    a = np.asarray(boxes_a, dtype=np.float64).reshape(-1, 7)
+    b = np.asarray(boxes_b, dtype=np.float64).reshape(-1, 7)
+    i, j = _pairs(a.shape[0], b.shape[0])
+    return iou_3d_pairs(a[i], b[j]).reshape(a.shape[0], b.shape[0])

@@ -94,16 +94,12 @@ def padded_overlaps(
     if f.size == 0:
         return out
     pi, gi = dp.index[f, d], gp.index[f, g]
+    p7 = np.c_[pred.center, pred.size, pred.yaw_rad]
+    g7 = np.c_[gt.center, gt.size, gt.yaw_rad]
     if kind == "bev":
-        iou = bev_iou_pairs(
-            pred.center[pi, :2], pred.size[pi, :2], pred.yaw_rad[pi],
-            gt.center[gi, :2], gt.size[gi, :2], gt.yaw_rad[gi],
-        )  # fmt: skip
+        iou = bev_iou_pairs(p7[pi][:, [0, 1, 3, 4, 6]], g7[gi][:, [0, 1, 3, 4, 6]])
     else:
-        iou = iou_3d_pairs(
-            pred.center[pi], pred.size[pi], pred.yaw_rad[pi],
-            gt.center[gi], gt.size[gi], gt.yaw_rad[gi],
-        )  # fmt: skip
+        iou = iou_3d_pairs(p7[pi], g7[gi])
     out[f, d, g] = iou
     return out
 
@@ -149,7 +145,9 @@ def _statistics(
         is_tp = found & (state == 0)
         tp += is_tp.astype(np.int64)
         tp_scores.append(score[rows[is_tp], j[is_tp]])
-    fp = (active & ~assigned).sum(axis=1).astype(np.int64) if compute_fp else np.zeros(n_f, np.int64)
+    fp = (
+        (active & ~assigned).sum(axis=1).astype(np.int64) if compute_fp else np.zeros(n_f, np.int64)
+    )
     scores = np.concatenate(tp_scores) if tp_scores else np.zeros(0)
     return tp, fp, fn, scores
 
@@ -302,7 +300,10 @@ class KittiDetection(Metric):
             state[np.isin(gt.object_class, class_codes(ignored.get(cls, ())))] = 1
             state[np.isin(gt.object_class, class_codes(members))] = 0
             det_ok = np.isin(pred.object_class, class_codes(members))
-            for label, kind, key in (("3D", "3d", "min_overlap_3d"), ("BEV", "bev", "min_overlap_bev")):
+            for label, kind, key in (
+                ("3D", "3d", "min_overlap_3d"),
+                ("BEV", "bev", "min_overlap_bev"),
+            ):
                 res = evaluate_kitti_class(
                     gt, pred, frames, gt_state=state, det_ok=det_ok,
                     min_overlap=float(p[key][cls]), kind=kind,

@@ -112,7 +112,12 @@ class NuScenesDetection(Metric):
         hit = np.bincount(slot[ev.gt_matched], minlength=n_f).astype(np.float64)
         tp = np.bincount(pslot[ev.pred_tp], minlength=n_f).astype(np.float64)
         fp = np.bincount(pslot[~ev.pred_tp], minlength=n_f).astype(np.float64)
-        per_frame = {"tp": (frames, tp), "fp": (frames, fp), "missed": (frames, gt_n - hit), "gt": (frames, gt_n)}
+        per_frame = {
+            "tp": (frames, tp),
+            "fp": (frames, fp),
+            "missed": (frames, gt_n - hit),
+            "gt": (frames, gt_n),
+        }
         rng_m = ev.gt.ego_distance_m
         missed = np.flatnonzero(~ev.gt_matched & (rng_m < float(p["bookmark_range_m"])))
         marks = [

@@ -66,8 +66,8 @@ TP_METRICS = ("trans_err", "scale_err", "orient_err", "vel_err")
 #: value-name prefix of each TP error (the devkit prints mATE, mASE, mAOE, mAVE).
 TP_SHORT = {"trans_err": "ATE", "scale_err": "ASE", "orient_err": "AOE", "vel_err": "AVE"}
 TP_UNITS = {"trans_err": "m", "scale_err": "1-IoU", "orient_err": "rad", "vel_err": "m/s"}
-#: padded distance tables are cut into chunks of about this many cells.
-_CHUNK_CELLS = 4_000_000
+#: padded distance tables are cut into chunks of about this many cells (cache-sized).
+_CHUNK_CELLS = 200_000
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -109,7 +109,8 @@ def cummean(x: F64) -> F64:
         return np.ones(len(x))
     sum_vals = np.nancumsum(x.astype(float))
     count_vals = np.cumsum(~nan)
-    return np.divide(sum_vals, count_vals, out=np.zeros_like(sum_vals), where=count_vals != 0)
+    out = np.divide(sum_vals, count_vals, out=np.zeros_like(sum_vals), where=count_vals != 0)
+    return np.asarray(out, dtype=np.float64)
 
 
 def calc_ap(md: MetricData, min_recall: float, min_precision: float) -> float:
@@ -140,6 +141,11 @@ def center_distance_matching(
 ) -> I64:
     """Greedy BEV centre-distance matching of one class, for every threshold.
 
+    Only ground truth nearer than the largest threshold can ever be matched, and the nearest
+    *free* ground truth is a match iff it is nearer than the threshold — so each detection keeps
+    its candidates within the largest threshold, sorted by (distance, ground-truth order), and
+    takes the first free one under the threshold: the devkit's choice (first of equal minima).
+
     Args:
         gt, pred: ground truth and predictions of one class (rows sorted by frame).
         order: processing order of ``pred`` rows (:func:`devkit_order`).
@@ -150,46 +156,72 @@ def center_distance_matching(
     """
     n_th, n_pred = len(dist_ths_m), len(pred)
     out = np.full((n_th, n_pred), -1, dtype=np.int64)
-    if n_pred == 0 or len(gt) == 0:
+    if n_pred == 0 or len(gt) == 0 or n_th == 0:
         return out
     frames = np.intersect1d(np.unique(pred.frame), np.unique(gt.frame))
     if frames.size == 0:
         return out
+    max_th = max(float(t) for t in dist_ths_m)
     rank = np.empty(n_pred, dtype=np.int64)
     rank[order] = np.arange(n_pred)
     pp = pad_by_frame(pred.frame, frames, order_key=rank)
     gp = pad_by_frame(gt.frame, frames)
-    n_f, width_p = pp.index.shape
-    width_g = gp.index.shape[1]
-    step = max(1, _CHUNK_CELLS // max(1, width_p * width_g))
+    # frames with the most detections first: the frames still busy at step k are a prefix
+    busy = np.argsort(-pp.valid.sum(axis=1), kind="stable")
+    pi, gi = pp.index[busy], gp.index[busy]
+    n_f, width_p = pi.shape
+    width_g = gi.shape[1]
     pxy, gxy = pred.center[:, :2], gt.center[:, :2]
+    # candidate (frame, det slot, gt slot) triples within the largest threshold
+    fs, ks, gs, ds = [], [], [], []
+    step = max(1, _CHUNK_CELLS // max(1, width_p * width_g))
     for start in range(0, n_f, step):
-        pi = pp.index[start : start + step]
-        gi = gp.index[start : start + step]
-        pv, gv = pi >= 0, gi >= 0
-        d = pxy[pi][:, :, None, :] - gxy[gi][:, None, :, :]
+        pc, gc = pi[start : start + step], gi[start : start + step]
+        d = pxy[pc][:, :, None, :] - gxy[gc][:, None, :, :]
         dist = np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1])
-        dist[~(pv[:, :, None] & gv[:, None, :])] = np.inf
-        rows = np.arange(pi.shape[0])
-        for t, th in enumerate(dist_ths_m):
-            taken = np.zeros(gi.shape, dtype=bool)
-            for k in range(width_p):
-                cand = np.where(taken, np.inf, dist[:, k, :])
-                j = np.argmin(cand, axis=1)
-                hit = cand[rows, j] < th
-                taken[rows[hit], j[hit]] = True
-                out[t, pi[hit, k]] = gi[hit, j[hit]]
+        near = (dist < max_th) & (pc >= 0)[:, :, None] & (gc >= 0)[:, None, :]
+        f, k, g = np.nonzero(near)
+        fs.append(f + start)
+        ks.append(k)
+        gs.append(g)
+        ds.append(dist[f, k, g])
+    f, k, g, dist_c = (np.concatenate(a) for a in (fs, ks, gs, ds))
+    if f.size == 0:
+        return out
+    srt = np.lexsort((g, dist_c, k, f))
+    f, k, g, dist_c = f[srt], k[srt], g[srt], dist_c[srt]
+    cell = f * width_p + k
+    first = np.r_[0, np.flatnonzero(np.diff(cell)) + 1]
+    pos = np.arange(cell.size) - np.repeat(first, np.diff(np.r_[first, cell.size]))
+    width_c = int(pos.max()) + 1
+    cand_g = np.zeros((n_f, width_p, width_c), dtype=np.int64)
+    cand_d = np.full((n_f, width_p, width_c), np.inf)
+    cand_g[f, k, pos] = g
+    cand_d[f, k, pos] = dist_c
+    busy_count = (pi >= 0).sum(axis=0)  # frames with a detection in slot k (a prefix)
+    for t, th in enumerate(dist_ths_m):
+        taken = np.zeros((n_f, width_g + 1), dtype=bool)
+        for slot in range(width_p):
+            n = int(busy_count[slot])
+            rows = np.arange(n)
+            cg, cd = cand_g[:n, slot], cand_d[:n, slot]
+            ok = (cd < th) & ~np.take_along_axis(taken[:n], cg, axis=1)
+            j = np.argmax(ok, axis=1)
+            hit = ok[rows, j]
+            rows_h, g_h = rows[hit], cg[rows[hit], j[hit]]
+            taken[rows_h, g_h] = True
+            out[t, pi[rows_h, slot]] = gi[rows_h, g_h]
     return out
 
 
 def _errors(
     gt: ObjectArrays, pred: ObjectArrays, gt_rows: I64, pred_rows: I64, class_name: str
 ) -> dict[str, F64]:
-    g, p = gt.subset(gt_rows), pred.subset(pred_rows)
-    d = p.center[:, :2] - g.center[:, :2]
-    dv = p.velocity[:, :2] - g.velocity[:, :2]
-    inter = np.prod(np.minimum(g.size, p.size), axis=1)
-    union = np.prod(g.size, axis=1) + np.prod(p.size, axis=1) - inter
+    d = pred.center[pred_rows, :2] - gt.center[gt_rows, :2]
+    dv = pred.velocity[pred_rows, :2] - gt.velocity[gt_rows, :2]
+    g_size, p_size = gt.size[gt_rows], pred.size[pred_rows]
+    inter = np.prod(np.minimum(g_size, p_size), axis=1)
+    union = np.prod(g_size, axis=1) + np.prod(p_size, axis=1) - inter
     with np.errstate(divide="ignore", invalid="ignore"):
         iou = np.where(union > 0, inter / union, 0.0)
     period = np.pi if class_name == "barrier" else 2 * np.pi
@@ -197,12 +229,18 @@ def _errors(
         "trans_err": np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]),
         "vel_err": np.sqrt(dv[:, 0] * dv[:, 0] + dv[:, 1] * dv[:, 1]),
         "scale_err": 1.0 - iou,
-        "orient_err": np.abs(angle_diff(g.yaw_rad, p.yaw_rad, period)),
+        "orient_err": np.abs(angle_diff(gt.yaw_rad[gt_rows], pred.yaw_rad[pred_rows], period)),
     }
 
 
 def accumulate(
-    gt: ObjectArrays, pred: ObjectArrays, *, matched: I64, order: I64, class_name: str
+    gt: ObjectArrays,
+    pred: ObjectArrays,
+    *,
+    matched: I64,
+    order: I64,
+    class_name: str,
+    with_errors: bool = True,
 ) -> MetricData:
     """Precision/recall and TP-error curves of one class at one threshold (devkit ``accumulate``).
 
@@ -210,6 +248,8 @@ def accumulate(
         gt, pred: that class's ground truth and predictions.
         matched: (P,) the ``gt`` row each prediction matched, −1 for none.
         order: processing order of the predictions (:func:`devkit_order`).
+        with_errors: compute the TP-error curves (only those at ``dist_th_tp`` are ever used);
+            without, ``errors`` is empty.
     """
     npos = len(gt)
     if npos == 0:
@@ -226,6 +266,8 @@ def accumulate(
     rec_interp = np.linspace(0, 1, NELEM)
     prec_i = np.interp(rec_interp, rec, prec, right=0)
     conf_i = np.interp(rec_interp, rec, conf, right=0)
+    if not with_errors:
+        return MetricData(recall=rec_interp, precision=prec_i, confidence=conf_i, errors={})
     pred_rows = order[is_tp]
     match_conf = pred.score[pred_rows]
     errs = _errors(gt, pred, matched[pred_rows], pred_rows, class_name)
@@ -282,9 +324,7 @@ class NuScenesEvaluation:
     metric_data: dict[tuple[str, float], MetricData] = field(default_factory=dict)
 
 
-def _labels(
-    boxes: ObjectArrays, class_map: Mapping[str, str], names: Sequence[str]
-) -> I64:
+def _labels(boxes: ObjectArrays, class_map: Mapping[str, str], names: Sequence[str]) -> I64:
     lut = np.full(len(CLASS_CODES), -1, dtype=np.int64)
     for value, name in class_map.items():
         lut[CLASS_CODES[ObjectClass(value)]] = names.index(name)
@@ -296,7 +336,8 @@ def _range_mask(
 ) -> B:
     """``filter_eval_boxes``: mapped class, ``ego_dist < class_range`` and not 0 LiDAR points."""
     rng = np.array([float(class_range_m.get(n, np.inf)) for n in names] + [-np.inf])
-    return (label >= 0) & (boxes.ego_distance_m < rng[label]) & (boxes.num_points != 0)
+    keep = (label >= 0) & (boxes.ego_distance_m < rng[label]) & (boxes.num_points != 0)
+    return np.asarray(keep, dtype=bool)
 
 
 def _class_aps(
@@ -307,13 +348,17 @@ def _class_aps(
     dist_ths_m: Sequence[float],
     min_recall: float,
     min_precision: float,
+    errors_at_m: float | None = None,
 ) -> tuple[dict[float, MetricData], dict[float, float], I64]:
     order = devkit_order(pred.score)
     matched = center_distance_matching(gt, pred, order=order, dist_ths_m=dist_ths_m)
     mds: dict[float, MetricData] = {}
     aps: dict[float, float] = {}
     for t, th in enumerate(dist_ths_m):
-        md = accumulate(gt, pred, matched=matched[t], order=order, class_name=class_name)
+        md = accumulate(
+            gt, pred, matched=matched[t], order=order, class_name=class_name,
+            with_errors=errors_at_m is not None and float(th) == float(errors_at_m),
+        )  # fmt: skip
         mds[float(th)] = md
         aps[float(th)] = calc_ap(md, min_recall, min_precision)
     return mds, aps, matched
@@ -387,8 +432,9 @@ def evaluate_nuscenes(
             continue
         g_c, p_c = gt_f.subset(g_rows), pred_f.subset(p_rows)
         mds, aps, matched = _class_aps(
-            g_c, p_c, name, dist_ths_m=ths, min_recall=min_recall, min_precision=min_precision
-        )
+            g_c, p_c, name, dist_ths_m=ths, min_recall=min_recall, min_precision=min_precision,
+            errors_at_m=dist_th_tp_m,
+        )  # fmt: skip
         for th in dist_ths_m:
             values[f"AP/{name}/{thr_name(th)}"] = aps[float(th)]
             md = mds[float(th)]
@@ -432,8 +478,16 @@ def evaluate_nuscenes(
             values[f"m{TP_SHORT[k]}"] = math.nan
     for k in TP_METRICS:
         units[f"m{TP_SHORT[k]}"] = TP_UNITS[k]
-    _bands(values, gt_f, pred_f, g_label, p_label, names, dist_ths_m, distance_bands_m,
-           min_recall=min_recall, min_precision=min_precision)
+    _bands(
+        values,
+        (gt_f, pred_f),
+        labels=(g_label, p_label),
+        names=names,
+        dist_ths_m=dist_ths_m,
+        bands=distance_bands_m,
+        min_recall=min_recall,
+        min_precision=min_precision,
+    )
     values["gt_objects"] = float(len(gt_f))
     values["detections"] = float(len(pred_f))
     units["gt_objects"] = units["detections"] = "objects"
@@ -454,17 +508,19 @@ def evaluate_nuscenes(
 
 def _bands(
     values: dict[str, float],
-    gt: ObjectArrays,
-    pred: ObjectArrays,
-    g_label: I64,
-    p_label: I64,
+    boxes: tuple[ObjectArrays, ObjectArrays],
+    *,
+    labels: tuple[I64, I64],
     names: Sequence[str],
     dist_ths_m: Sequence[float],
     bands: Sequence[tuple[float, float | None]],
-    *,
     min_recall: float,
     min_precision: float,
 ) -> None:
+    """``AP/<band>/<th>`` and ``mAP/<band>``: the evaluation redone on the boxes (ground truth
+    and predictions alike) whose ego distance lies in [lo, hi)."""
+    gt, pred = boxes
+    g_label, p_label = labels
     g_dist, p_dist = gt.ego_distance_m, pred.ego_distance_m
     for lo, hi in bands:
         top = math.inf if hi is None else float(hi)
@@ -491,4 +547,6 @@ def _bands(
             aps_t = per_th[float(t)]
             values[f"AP/{bname}/{thr_name(t)}"] = float(np.mean(aps_t)) if aps_t else math.nan
         means = [values[f"AP/{bname}/{thr_name(t)}"] for t in dist_ths_m]
-        values[f"mAP/{bname}"] = float(np.mean(means)) if not any(map(math.isnan, means)) else math.nan
+        values[f"mAP/{bname}"] = (
+            float(np.mean(means)) if not any(map(math.isnan, means)) else math.nan
+        )
