@@ -29,13 +29,17 @@ $(VENV)/.installed-test: $(VENV)/.installed pyproject.toml
 venv: $(VENV)/.installed
 
 ## demo: create .venv, install redrive, simulate 20 s of the built-in `urban` scenario, replay it
-## through the reference pipeline (LiDAR detector → tracker → IDM planner → pure pursuit) and
-## print the summary (frames, detections, latency per stage) and where the results are
+## through the reference pipeline (LiDAR detector → tracker → IDM planner → pure pursuit), print
+## the run summary (frames, detections, latency per stage), evaluate it against the ground truth
+## (detection, tracking, planning, control, latency) and write the HTML/Excel/CSV report
 demo: $(VENV)/.installed
 	@mkdir -p $(DEMO_DIR)
 	$(BIN)/redrive synth urban --duration 20 -o $(DEMO_DIR)/urban.mcap
 	rm -rf $(DEMO_DIR)/run
 	$(BIN)/redrive run $(DEMO_DIR)/urban.mcap --out $(DEMO_DIR)/run
+	$(BIN)/redrive evaluate $(DEMO_DIR)/run
+	$(BIN)/redrive report $(DEMO_DIR)/run
+	@echo "HTML report: $(DEMO_DIR)/run/report/report.html"
 
 ## lint: ruff, mypy --strict on src/, import-linter (the layers of DESIGN.md)
 lint: $(VENV)/.installed-test

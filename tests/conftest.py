@@ -29,3 +29,26 @@ def shared_data() -> Path:
     if SHARED_DATA is None:
         pytest.skip("../shared/data is not present")
     return SHARED_DATA
+
+
+@pytest.fixture(scope="session")
+def demo_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """10 s of the built-in ``urban`` scenario (seed 7, as ``make demo`` but shorter), made once per
+    test session with the real simulator and MCAP writer."""
+    from redrive.sim.scenario import load_scenario
+    from redrive.sim.synth import synthesize
+
+    out = tmp_path_factory.mktemp("demo") / "urban.mcap"
+    synthesize(load_scenario("urban"), out, duration_s=10.0, seed=7)
+    return out
+
+
+@pytest.fixture(scope="session")
+def demo_run(demo_log: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The reference pipeline (clusters → tracker → planner → controller) over :func:`demo_log`,
+    written as ``redrive run`` writes it."""
+    from redrive.cli.main import main
+
+    out = tmp_path_factory.mktemp("demo_run") / "run"
+    assert main(["run", str(demo_log), "--out", str(out), "--no-progress"]) == 0
+    return out

@@ -30,7 +30,6 @@ from redrive.types import (
 )
 
 ROOT = Path(__file__).resolve().parents[2]
-DEMO_LOG = ROOT / ".demo" / "urban.mcap"
 NAMES = {"perception": "lidar_blobs", "planning": "straight_planner", "control": "speed_keeper"}
 
 
@@ -144,9 +143,9 @@ def test_generated_code_passes_ruff(tmp_path: Path) -> None:
         assert done.returncode == 0, f"ruff {' '.join(argv)}:\n{done.stdout}{done.stderr}"
 
 
-def test_the_perception_template_finds_cars_in_a_synthetic_log(tmp_path: Path) -> None:
-    if not DEMO_LOG.is_file():
-        pytest.skip(f"{DEMO_LOG} is not there (make demo writes it)")
+def test_the_perception_template_finds_cars_in_a_synthetic_log(
+    tmp_path: Path, demo_log: Path
+) -> None:
     from redrive.io import open_log
     from redrive.io.frames import iter_frames
 
@@ -155,7 +154,7 @@ def test_the_perception_template_finds_cars_in_a_synthetic_log(tmp_path: Path) -
     algo.configure({})
     algo.bind({"lidar_top": SensorType.LIDAR})
     matched = total = 0
-    with open_log(DEMO_LOG) as log:
+    with open_log(demo_log) as log:
         for frame in itertools.islice(iter_frames(log), 0, 30, 10):
             result = algo.run_step(frame, StageOutputs())
             assert result.status is StepStatus.OK, result.error

@@ -389,7 +389,6 @@ def test_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
         _cli(["compare", str(a), str(unevaluated)])
 
 
-DEMO_LOG = Path(__file__).resolve().parents[2] / ".demo" / "urban.mcap"
 _DETECTION_STAGE = """
 [[stage]]
 name = "detection"
@@ -400,10 +399,7 @@ config = {config}
 """
 
 
-@pytest.mark.skipif(
-    not DEMO_LOG.is_file(), reason="no demo log (make demo writes .demo/urban.mcap)"
-)
-def test_demo_runs_with_different_detector_parameters(tmp_path: Path) -> None:
+def test_demo_runs_with_different_detector_parameters(tmp_path: Path, demo_log: Path) -> None:
     """Two runs of the demo log; B's detector needs 5× the points and sees half as far: the
     frames where B misses objects A finds are ranked first."""
     nuscenes = pytest.importorskip("redrive.evaluation.detection.nuscenes")
@@ -415,7 +411,7 @@ def test_demo_runs_with_different_detector_parameters(tmp_path: Path) -> None:
         toml = tmp_path / f"{name}.toml"
         toml.write_text(_DETECTION_STAGE.format(config=config), encoding="utf-8")
         out = tmp_path / name
-        argv = ["run", str(DEMO_LOG), "--pipeline", str(toml), "--frames", "80:100"]
+        argv = ["run", str(demo_log), "--pipeline", str(toml), "--frames", "80:100"]
         assert main([*argv, "--out", str(out), "--no-progress"]) == 0
         evaluate_run(out, metrics=[nuscenes.NuScenesDetection()])
         runs.append(out)

@@ -14,7 +14,6 @@ sin a = 0.1/√1.01 = 0.0995037, cos a = 1/√1.01 = 0.9950372:
 from __future__ import annotations
 
 import math
-import os
 from pathlib import Path
 
 import numpy as np
@@ -137,11 +136,7 @@ def test_a_single_frame_gives_nan_not_zero(tmp_path: Path) -> None:
     assert res.values["frames"] == 0
 
 
-DEMO_RUN = Path(os.environ.get("REDRIVE_DEMO_RUN", Path(__file__).parents[2] / ".demo" / "run"))
-
-
-@pytest.mark.skipif(not (DEMO_RUN / "manifest.json").exists(), reason="no demo run (make demo)")
-def test_demo_run_gives_finite_values() -> None:
-    res = ControlMetrics().evaluate(EvalData(open_run(DEMO_RUN), "controller"))
+def test_demo_run_gives_finite_values(demo_run: Path) -> None:
+    res = ControlMetrics().evaluate(EvalData(open_run(demo_run), "controller"))
     assert all(math.isfinite(v) for v in res.values.values()), dict(res.values)
     assert res.values["frames"] > 0

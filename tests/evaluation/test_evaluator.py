@@ -144,12 +144,48 @@ def test_metric_plugins_by_entry_point_or_module() -> None:
     from redrive.evaluation.registry import installed_metrics, load_metric_class
 
     installed = installed_metrics()
-    assert {"clear_mot", "hota"} <= set(installed)
+    assert {
+        "nuscenes_detection",
+        "kitti_detection",
+        "object_attributes",
+        "clear_mot",
+        "hota",
+        "planning",
+        "control",
+        "latency",
+    } <= set(installed)
+    for name, cls in installed.items():
+        assert cls.name == name  # the entry-point name is the metric's own
     assert load_metric_class("hota") is installed["hota"]
     assert load_metric_class("tests.evaluation.test_evaluator:ObjectCount") is ObjectCount
     with pytest.raises(PluginError, match="no metric named 'nope'"):
         load_metric_class("nope")
-    with pytest.raises(PluginError, match="not a redrive.evaluation.Metric"):
+    with pytest.raises(PluginError, match=r"not a redrive\.evaluation\.Metric"):
         load_metric_class("tests.evaluation.test_evaluator:MANIFEST")
     with pytest.raises(PluginError, match="cannot import"):
         load_metric_class("no.such.module:X")
+
+
+def test_metric_from_a_file(tmp_path: Path) -> None:
+    from redrive.errors import PluginError
+    from redrive.evaluation.registry import load_metric_class
+
+    source = tmp_path / "my_metrics.py"
+    source.write_text(
+        "from redrive.evaluation import Metric, MetricResult\n"
+        "class Frames(Metric):\n"
+        "    name = 'frames'\n"
+        "    role = 'run'\n"
+        "    def evaluate(self, data):\n"
+        "        return MetricResult(values={'n': data.frames().num_rows})\n",
+        encoding="utf-8",
+    )
+    cls = load_metric_class(f"{source}:Frames")
+    assert cls.name == "frames"
+    assert load_metric_class(f"{source}:Frames") is cls  # imported once
+    with pytest.raises(PluginError, match="no file"):
+        load_metric_class(f"{tmp_path / 'nope.py'}:Frames")
+    broken = tmp_path / "broken.py"
+    broken.write_text("raise RuntimeError('half-written')\n", encoding="utf-8")
+    with pytest.raises(PluginError, match="RuntimeError: half-written"):
+        load_metric_class(f"{broken}:X")

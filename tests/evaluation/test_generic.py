@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import os
 from pathlib import Path
 
 import numpy as np
@@ -191,12 +190,8 @@ def test_object_attributes(tmp_path: Path) -> None:
     assert matched.tolist() == [2.0, 0.0, 0.0]
 
 
-DEMO_RUN = Path(os.environ.get("REDRIVE_DEMO_RUN", Path(__file__).parents[2] / ".demo" / "run"))
-
-
-@pytest.mark.skipif(not (DEMO_RUN / "manifest.json").exists(), reason="no demo run (make demo)")
-def test_demo_run_gives_finite_values() -> None:
-    res = ObjectAttributes().evaluate(EvalData(open_run(DEMO_RUN), "tracker"))
+def test_demo_run_gives_finite_values(demo_run: Path) -> None:
+    res = ObjectAttributes().evaluate(EvalData(open_run(demo_run), "tracker"))
     keys = [
         "class_accuracy",
         "position_rmse_m",

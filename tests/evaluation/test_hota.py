@@ -18,9 +18,7 @@ from redrive.evaluation import EvalData
 from redrive.evaluation.hota import ALPHAS, Hota, hota_sequence
 from redrive.results import open_run
 from redrive.types import ObjectClass
-from tests.evaluation.test_tracking import Scene, demo_run, obj, write_run
-
-__all__ = ["demo_run"]  # the session fixture, shared with test_tracking
+from tests.evaluation.test_tracking import Scene, obj, write_run
 
 A50, A55 = 9, 10
 

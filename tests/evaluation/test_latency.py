@@ -22,7 +22,6 @@ det and det2 run side by side in stage ``perception``; plan's skipped step (999 
 from __future__ import annotations
 
 import math
-import os
 from pathlib import Path
 
 import pytest
@@ -175,11 +174,7 @@ def test_unknown_deadline_gives_nan_misses(tmp_path: Path) -> None:
     assert res.bookmarks == ()
 
 
-DEMO_RUN = Path(os.environ.get("REDRIVE_DEMO_RUN", Path(__file__).parents[2] / ".demo" / "run"))
-
-
-@pytest.mark.skipif(not (DEMO_RUN / "manifest.json").exists(), reason="no demo run (make demo)")
-def test_demo_run_gives_finite_values() -> None:
-    res = Latency().evaluate(EvalData(open_run(DEMO_RUN), ""))
+def test_demo_run_gives_finite_values(demo_run: Path) -> None:
+    res = Latency().evaluate(EvalData(open_run(demo_run), ""))
     assert all(math.isfinite(v) for v in res.values.values()), dict(res.values)
     assert res.values["deadline_ms"] == pytest.approx(100.0)  # 10 Hz LiDAR

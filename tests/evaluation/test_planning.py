@@ -7,7 +7,6 @@ The logged ego drives straight at 10 m/s with heading 0.5 rad from map (100, 50)
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Callable
 from pathlib import Path
 
@@ -281,12 +280,8 @@ def test_parameters_are_checked() -> None:
         PlanningMetrics(not_a_param=1)
 
 
-DEMO_RUN = Path(os.environ.get("REDRIVE_DEMO_RUN", Path(__file__).parents[2] / ".demo" / "run"))
-
-
-@pytest.mark.skipif(not (DEMO_RUN / "manifest.json").exists(), reason="no demo run (make demo)")
-def test_demo_run_gives_finite_values() -> None:
-    res = PlanningMetrics().evaluate(EvalData(open_run(DEMO_RUN), "planner"))
+def test_demo_run_gives_finite_values(demo_run: Path) -> None:
+    res = PlanningMetrics().evaluate(EvalData(open_run(demo_run), "planner"))
     finite = [k for k, v in res.values.items() if k not in ("min_ttc_s",)]
     assert all(math.isfinite(res.values[k]) for k in finite), dict(res.values)
     assert res.values["frames"] > 0

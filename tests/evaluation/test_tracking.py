@@ -30,7 +30,6 @@ MANIFEST = {
         {"name": "det", "version": "1", "config_hash": "c2", "role": "perception"},
     ],
 }
-DEMO = Path(__file__).resolve().parents[2] / ".demo"
 
 #: one frame of a scenario: (ground truth or None, tracker output or None = step failed).
 Scene = tuple[tuple[DetectedObject, ...] | None, tuple[DetectedObject, ...] | None]
@@ -339,21 +338,6 @@ def test_mota_identity_on_a_busy_scene(tmp_path: Path) -> None:
     assert v["num_switches"] >= 1  # track 101 becomes 111 at frame 16
     assert v["num_objects"] == 120
     assert 0.0 < v["MOTA"] < 1.0
-
-
-@pytest.fixture(scope="session")
-def demo_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The reference pipeline's run of the demo log (made here on 60 frames if absent)."""
-    if (DEMO / "run" / "manifest.json").is_file():
-        return DEMO / "run"
-    log = DEMO / "urban.mcap"
-    if not log.is_file():
-        pytest.skip("no demo run and no demo log (make demo)")
-    from redrive.cli.main import main
-
-    out = tmp_path_factory.mktemp("demo") / "run"
-    assert main(["run", str(log), "--frames", "0:60", "--out", str(out), "--no-progress"]) == 0
-    return out
 
 
 def test_real_run(demo_run: Path) -> None:

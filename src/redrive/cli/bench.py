@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from redrive.cli.bench_engine import add_engine_parser
+from redrive.cli.bench_eval import add_eval_parser
 
 __all__ = ["register"]
 
@@ -324,3 +325,4 @@ def register(sub: Any) -> None:
     read.set_defaults(func=_run_read)
     _add_lidar_parser(bench_sub)
     add_engine_parser(bench_sub)
+    add_eval_parser(bench_sub)

@@ -14,6 +14,7 @@ _EPILOG = """\
 examples:
   redrive evaluate runs/first                          every installed metric
   redrive evaluate runs/first --metric nuscenes_detection --metric latency
+  redrive evaluate runs/first --metric my_metrics.py:LaneOffset   a metric of your own
   redrive evaluate runs/first --algorithm clusters     only this algorithm (and run-level metrics)
   redrive report runs/first                            then: HTML, XLSX and CSV report
 
@@ -91,7 +92,11 @@ def register(sub: Any) -> None:
     )
     parser.add_argument("run", type=Path, metavar="RUN", help="a run directory")
     parser.add_argument(
-        "--metric", action="append", metavar="NAME", help="a metric (repeat; default: all)"
+        "--metric",
+        action="append",
+        metavar="NAME",
+        help="an installed metric, package.module:Class or file.py:Class (repeat; default: all "
+        "installed)",
     )
     parser.add_argument(
         "--algorithm", action="append", metavar="NAME", help="an algorithm (repeat; default: all)"

@@ -21,6 +21,8 @@ _COMMANDS = (
     "run",
     "export",
     "evaluate",
+    "report",
+    "compare",
     "algorithms",
     "new_algorithm",
     "bench",
@@ -34,6 +36,9 @@ examples:
   redrive run urban.mcap                 replay it through perception → planning → control
   redrive run drive.bag --perception my_detector.py:MyDetector --out runs/mine
   redrive export runs/mine --format xlsx results as Excel (or csv, parquet)
+  redrive evaluate runs/mine             detection, tracking, planning, control, latency metrics
+  redrive report runs/mine               self-contained HTML report, Excel workbook, CSV files
+  redrive compare runs/a runs/b          A/B: per-metric deltas, significance, worst frames
   redrive algorithms                     the installed algorithms
   redrive new-algorithm my_planner --role planning   a template to start from
   redrive bench read drive.bag           decoding speed against a raw read

@@ -74,9 +74,7 @@ def evaluate_run(
     """
     run = open_run(run_dir)
     chosen = list(metrics) if metrics is not None else default_metrics()
-    roles = {
-        str(a["name"]): str(a.get("role", "")) for a in run.manifest.get("algorithms", ())
-    }
+    roles = {str(a["name"]): str(a.get("role", "")) for a in run.manifest.get("algorithms", ())}
     if algorithms is not None:
         unknown = sorted(set(algorithms) - set(roles))
         if unknown:
@@ -88,7 +86,9 @@ def evaluate_run(
     scored: list[Scored] = []
     skipped: list[Skipped] = []
     for metric in chosen:
-        targets = [""] if metric.role == "run" else [a for a, r in roles.items() if r == metric.role]
+        targets = (
+            [""] if metric.role == "run" else [a for a, r in roles.items() if r == metric.role]
+        )
         for algo in targets:
             data = EvalData(run, algo)
             missing = next((why for n in sorted(metric.needs) if (why := _has(run, data, n))), None)
