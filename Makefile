@@ -48,15 +48,38 @@ lint: $(VENV)/.installed-test
 	$(BIN)/mypy
 	$(BIN)/lint-imports
 
-# Debian packages the tests use: Chromium renders the HTML report (headless screenshot test).
+# Debian's ROS 1 (ros_comm 1.15) for the live tests: a real roscore, and rospy publishers that run
+# under /usr/bin/python3 (rospy does not import under the venv's Python; see NOTES.md "ROS 1").
+ROS1_DEBS := ros-core python3-rospy python3-rosbag python3-rostopic python3-sensor-msgs \
+  python3-std-msgs python3-geometry-msgs python3-nav-msgs python3-visualization-msgs \
+  python3-tf2-msgs ros-sensor-msgs python3-numpy
+ROS1_PY_CHECK := import rospy, rosbag, rostopic, numpy, sensor_msgs.msg, std_msgs.msg, \
+  geometry_msgs.msg, nav_msgs.msg, visualization_msgs.msg, tf2_msgs.msg
+
+# Debian packages the tests use: Chromium renders the HTML report (headless screenshot test);
+# ROS 1 runs the live-mode tests; libatomic1 gives the transport its memory fence.  Installs only
+# what is missing, with one apt-get update.
 system-test-deps:
-	@if ! command -v chromium >/dev/null 2>&1; then \
-	  echo "installing chromium (Debian) for the HTML report test"; \
-	  $(SUDO) apt-get update -qq && $(SUDO) apt-get install -y -qq chromium; \
+	@debs=""; \
+	if ! command -v chromium >/dev/null 2>&1; then \
+	  echo "installing chromium (Debian) for the HTML report test"; debs="chromium"; \
+	fi; \
+	if [ ! -x /usr/bin/roscore ] || \
+	   ! /usr/bin/python3 -c "$(ROS1_PY_CHECK)" >/dev/null 2>&1; then \
+	  echo "installing ROS 1 (Debian: ros-core, rospy, message packages) for the live tests"; \
+	  debs="$$debs $(ROS1_DEBS)"; \
+	fi; \
+	if ! ldconfig -p | grep -q 'libatomic.so.1 '; then \
+	  echo "installing libatomic1 (Debian): the shared-memory transport's memory fence"; \
+	  debs="$$debs libatomic1"; \
+	fi; \
+	if [ -n "$$debs" ]; then \
+	  $(SUDO) apt-get update -qq && \
+	  $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$debs >/dev/null; \
 	fi
 
 ## test: install test needs, lint, run the whole suite (slow/soak tests run as benchmarks)
-test: lint system-test-deps
+test: system-test-deps lint
 	$(BIN)/pytest -q -m "not slow" -p no:cacheprovider
 
 bench-read: $(VENV)/.installed

@@ -1,0 +1,330 @@
+"""The shared-memory channel: round trips, policies, zero-copy views, faults, other interpreters."""
+
+from __future__ import annotations
+
+import os
+import signal
+import stat
+import subprocess
+import sys
+import time
+import uuid
+import zlib
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from redrive.errors import TransportError
+from redrive.transport import (
+    Policy,
+    ProducerGoneError,
+    Reader,
+    ReaderGoneError,
+    Writer,
+    remove_stale,
+    segment_path,
+    stale_segments,
+)
+from tests.transport._peer import payload
+
+SRC = Path(__file__).resolve().parents[2] / "src"
+PEER = Path(__file__).with_name("_peer.py")
+SYSTEM_PYTHON = Path("/usr/bin/python3")
+
+
+@pytest.fixture
+def name() -> Iterator[str]:
+    """A fresh stream name; no segment of it may be left behind."""
+    stream = f"test.{uuid.uuid4().hex[:12]}"
+    yield stream
+    assert not segment_path(stream).exists(), f"{segment_path(stream)} left behind"
+
+
+class Peer:
+    """A peer process (see _peer.py) with line-based stdin/stdout."""
+
+    def __init__(self, *args: str, python: str = sys.executable) -> None:
+        env = dict(os.environ, PYTHONPATH=f"{SRC}:{SRC.parent}")
+        self.proc = subprocess.Popen(
+            [python, str(PEER), *args],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=env,
+        )
+        self.expect("READY")
+
+    def expect(self, word: str) -> None:
+        assert self.proc.stdout is not None
+        line = self.proc.stdout.readline().strip()
+        if line != word:
+            err = (
+                self.proc.stderr.read() if self.proc.stderr and self.proc.poll() is not None else ""
+            )
+            pytest.fail(f"peer said {line!r}, expected {word!r}\n{err}")
+
+    def send(self, text: str = "") -> None:
+        assert self.proc.stdin is not None
+        self.proc.stdin.write(text + "\n")
+        self.proc.stdin.flush()
+
+    def lines(self) -> list[str]:
+        out, err = self.proc.communicate(timeout=60)
+        assert self.proc.returncode == 0, err
+        return out.splitlines()
+
+    def kill(self) -> None:
+        self.proc.send_signal(signal.SIGKILL)
+        self.proc.wait(timeout=10)
+        for f in (self.proc.stdin, self.proc.stdout, self.proc.stderr):
+            if f is not None:
+                f.close()
+
+
+# -- in one process ---------------------------------------------------------------------------
+
+
+def test_round_trip_copy_and_view(name: str) -> None:
+    with Writer(name, capacity_bytes=1 << 16, slots=4, policy=Policy.LOSSLESS) as w:
+        mode = stat.S_IMODE(os.stat(segment_path(name)).st_mode)
+        assert mode == 0o600
+        with Reader(name) as r:
+            assert r.read(timeout_s=0.01) is None
+            assert w.publish(b"first", stamp_ns=11, kind=3, meta=b"m") == 1
+            msg = r.read(timeout_s=1.0)
+            assert msg is not None
+            assert (msg.seq, msg.stamp_ns, msg.kind, msg.meta) == (1, 11, 3, b"m")
+            assert msg.payload.tobytes() == b"first"
+            with w.loan(4, stamp_ns=12) as buf:
+                buf[:] = np.frombuffer(b"abcd", np.uint8)
+            with r.view(timeout_s=1.0) as view:
+                assert view is not None
+                assert view.payload.tobytes() == b"abcd"
+                assert not view.payload.flags.writeable
+            with r.view(timeout_s=0.01) as none:
+                assert none is None
+            stats = w.stats()
+            assert stats.published == 2
+            assert stats.readers[0].delivered == 2
+            assert stats.readers[0].dropped == 0
+
+
+def test_a_pinned_view_is_never_overwritten(name: str) -> None:
+    """Keep-latest: the writer skips the slot a reader holds, however far it runs ahead."""
+    with Writer(name, capacity_bytes=64, slots=3, max_readers=1) as w, Reader(name) as r:
+        w.publish(np.full(64, 1, np.uint8))
+        with r.view(timeout_s=1.0) as held:
+            assert held is not None
+            for i in range(2, 50):
+                w.publish(np.full(64, i, np.uint8))
+            assert (held.payload == 1).all()  # still message 1
+        newest = r.read(timeout_s=1.0)
+        assert newest is not None
+        assert newest.seq == 49
+        assert newest.dropped_before == 47
+        assert int(newest.payload[0]) == 49
+
+
+def test_errors_say_what_to_do(name: str) -> None:
+    with pytest.raises(TransportError, match="slots ≥ max_readers"):
+        Writer(name, capacity_bytes=10, slots=2, max_readers=1)
+    with pytest.raises(TransportError, match="letters, digits"):
+        Writer("/velodyne_points", capacity_bytes=10)
+    with pytest.raises(ProducerGoneError, match="start its producer first"):
+        Reader(name, timeout_s=0.05)
+    with Writer(name, capacity_bytes=10) as w:
+        with pytest.raises(TransportError, match="already has a live writer"):
+            Writer(name, capacity_bytes=10)
+        with pytest.raises(TransportError, match="larger capacity_bytes"):
+            w.publish(b"x" * 11)
+        with pytest.raises(TransportError, match="cannot be read losslessly"):
+            Reader(name, policy=Policy.LOSSLESS)
+        with pytest.raises(RuntimeError), w.loan(5):
+            raise RuntimeError
+        assert w.seq == 0  # an abandoned loan publishes nothing
+
+
+def test_lossless_back_pressure_times_out_clearly(name: str) -> None:
+    with (
+        Writer(name, capacity_bytes=8, slots=3, max_readers=1, policy=Policy.LOSSLESS) as w,
+        Reader(name) as r,
+    ):
+        for _ in range(3):
+            w.publish(b"12345678")
+        start = time.monotonic()
+        with pytest.raises(TransportError, match="lossless reader has not read"):
+            w.publish(b"12345678", timeout_s=0.2)
+        assert time.monotonic() - start >= 0.2
+        assert [r.read(timeout_s=1.0).seq for _ in range(3)] == [1, 2, 3]  # type: ignore[union-attr]
+        assert w.publish(b"12345678", timeout_s=0.2) == 4
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    sizes=st.lists(st.integers(0, 5000), min_size=1, max_size=40),
+    reads=st.lists(st.booleans(), min_size=1, max_size=80),
+)
+def test_any_writes_and_reads_round_trip_and_drops_equal_gaps(
+    sizes: list[int], reads: list[bool]
+) -> None:
+    """Keep-latest, interleaved at random: every delivered message is byte-exact, sequence numbers
+    rise, and the drop counter equals the gaps the reader saw."""
+    stream = f"test.h{uuid.uuid4().hex[:10]}"
+    rng = np.random.default_rng(len(sizes))
+    sent: dict[int, bytes] = {}
+    seen: list[int] = []
+    with Writer(stream, capacity_bytes=5000, slots=4) as w, Reader(stream) as r:
+        pending = list(sizes)
+        for do_read in reads + [True] * 10:
+            if not do_read and pending:
+                data = rng.integers(0, 256, pending.pop(), dtype=np.uint8).tobytes()
+                sent[w.publish(data)] = data
+                continue
+            msg = r.read(timeout_s=0)
+            if msg is None:
+                continue
+            assert msg.payload.tobytes() == sent[msg.seq]
+            assert msg.seq - (seen[-1] if seen else 0) - 1 == msg.dropped_before
+            seen.append(msg.seq)
+        stats = r.stats().readers[0]
+        assert stats.delivered == len(seen)
+        last = seen[-1] if seen else 0
+        assert stats.dropped == last - len(seen)
+    assert not segment_path(stream).exists()
+
+
+# -- between processes -------------------------------------------------------------------------
+
+
+def _check_lines(lines: list[str], seed: int, count: int) -> None:
+    got = [tuple(int(v) for v in line.split()) for line in lines if line[0].isdigit()]
+    assert [s for s, _ in got] == list(range(1, count + 1))
+    for seq, crc in got:
+        assert crc == zlib.crc32(payload(seed, seq)), seq
+
+
+def test_lossless_between_processes_delivers_every_message(name: str) -> None:
+    writer = Peer("write", name, "300", "5", "LOSSLESS")
+    try:
+        reader = Peer("read", name, "300", "LOSSLESS")
+        writer.send()  # go
+        _check_lines(reader.lines(), seed=5, count=300)
+        writer.expect("DONE")
+        writer.send()
+        assert writer.proc.wait(timeout=10) == 0
+    finally:
+        if writer.proc.poll() is None:
+            writer.kill()
+
+
+def test_reader_here_writer_there_in_place_views(name: str) -> None:
+    writer = Peer("write", name, "200", "9", "LOSSLESS")
+    try:
+        with Reader(name) as r:
+            writer.send()
+            for seq in range(1, 201):
+                with r.view(timeout_s=10.0) as msg:
+                    assert msg is not None
+                    assert msg.seq == seq
+                    assert zlib.crc32(msg.payload) == zlib.crc32(payload(9, seq))
+            writer.expect("DONE")
+            writer.send()
+            assert writer.proc.wait(timeout=10) == 0
+            with pytest.raises(ProducerGoneError, match="is gone"):
+                r.read(timeout_s=1.0)
+    finally:
+        if writer.proc.poll() is None:
+            writer.kill()
+
+
+@pytest.mark.skipif(
+    not SYSTEM_PYTHON.is_file()
+    or subprocess.run([str(SYSTEM_PYTHON), "-c", "import numpy"], check=False).returncode != 0,
+    reason="/usr/bin/python3 with numpy is not here (make system-test-deps installs python3-numpy)",
+)
+def test_writer_under_the_system_python(name: str) -> None:
+    """The ROS scraper's side: a writer under Debian's /usr/bin/python3, the reader here."""
+    writer = Peer("write", name, "100", "3", "LOSSLESS", python=str(SYSTEM_PYTHON))
+    try:
+        with Reader(name) as r:
+            writer.send()
+            got = [r.read(timeout_s=10.0) for _ in range(100)]
+            for seq, msg in enumerate(got, start=1):
+                assert msg is not None
+                assert msg.seq == seq
+                assert msg.payload.tobytes() == payload(3, seq).tobytes()
+            writer.expect("DONE")
+            writer.send()
+            assert writer.proc.wait(timeout=10) == 0
+    finally:
+        if writer.proc.poll() is None:
+            writer.kill()
+
+
+def test_writer_killed_mid_write_never_yields_a_torn_message(name: str) -> None:
+    hang = Peer("hang", name)  # one message published, the second half-written in its slot
+    with Reader(name, policy=Policy.KEEP_LATEST) as r:
+        first = r.read(timeout_s=1.0)
+        assert first is not None
+        assert first.seq == 1
+        hang.kill()
+        start = time.monotonic()
+        with pytest.raises(ProducerGoneError, match="is gone"):
+            r.read(timeout_s=5.0)
+        assert time.monotonic() - start < 1.0  # noticed within the liveness check period
+        assert r.stats().readers[0].torn == 0
+    assert segment_path(name) in stale_segments()
+    assert remove_stale(name) == [segment_path(name)]
+
+
+def test_writer_restart_reattaches_the_reader(name: str) -> None:
+    first = Peer("write", name, "5", "1", "LOSSLESS")
+    with Reader(name) as r:
+        first.send()
+        assert [r.read(timeout_s=5.0).seq for _ in range(5)] == [1, 2, 3, 4, 5]  # type: ignore[union-attr]
+        first.kill()  # killed: its segment is stale
+        with pytest.raises(ProducerGoneError):
+            r.read(timeout_s=1.0)
+        second = Peer("write", name, "5", "2", "LOSSLESS")  # removes the stale segment
+        try:
+            second.send()
+            msgs = [r.read(timeout_s=5.0) for _ in range(5)]
+            assert [m.seq for m in msgs if m] == [1, 2, 3, 4, 5]
+            assert msgs[0] is not None
+            assert msgs[0].payload.tobytes() == payload(2, 1).tobytes()
+            second.expect("DONE")
+            second.send()
+            assert second.proc.wait(timeout=10) == 0
+        finally:
+            if second.proc.poll() is None:
+                second.kill()
+
+
+def test_reader_killed_keep_latest_writer_goes_on_and_a_new_reader_attaches(name: str) -> None:
+    with Writer(name, capacity_bytes=200_000, slots=4, max_readers=1) as w:
+        reader = Peer("read", name, "1000", "KEEP_LATEST")
+        w.publish(payload(0, 1))
+        reader.kill()
+        for seq in range(2, 30):  # the dead reader's pin and entry do not stop the writer
+            w.publish(payload(0, seq))
+        # its entry is free again (max_readers=1)
+        with Reader(name, timeout_s=2.0) as again:
+            msg = again.read(timeout_s=1.0)
+            assert msg is not None
+            assert msg.seq == 29
+
+
+def test_reader_killed_lossless_writer_fails_clearly(name: str) -> None:
+    with Writer(name, capacity_bytes=200_000, slots=3, max_readers=1, policy=Policy.LOSSLESS) as w:
+        reader = Peer("read", name, "1000", "LOSSLESS")
+        reader.kill()
+        for seq in range(1, 4):  # three slots fill without the reader
+            w.publish(payload(0, seq), timeout_s=5.0)
+        with pytest.raises(ReaderGoneError, match=r"lossless reader pid \d+ exited"):
+            w.publish(payload(0, 4), timeout_s=5.0)
+        assert w.publish(payload(0, 99), timeout_s=1.0) > 0  # no reader left: goes on
