@@ -16,6 +16,7 @@ __all__ = ["main"]
 #: subcommand modules under redrive.cli, in --help order; each has register(subparsers).
 _COMMANDS = (
     "info",
+    "topics",
     "convert",
     "synth",
     "run",
