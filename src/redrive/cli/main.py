@@ -17,6 +17,7 @@ __all__ = ["main"]
 _COMMANDS = (
     "info",
     "topics",
+    "live",
     "convert",
     "synth",
     "run",

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 from redrive.engine.core import Engine
 from redrive.engine.graph import LogInputs, StageGraph, build_graph
-from redrive.engine.modes import Mode, ModeHooks, ReplayMode, mode_hooks
-from redrive.engine.run import RunRequest, run_log
+from redrive.engine.modes import Mode, ModeHooks, RealtimeMode, ReplayMode, mode_hooks
+from redrive.engine.run import RunRequest, run_log, run_reader
 from redrive.engine.stats import AlgorithmStats, RunReport
 
 __all__ = [
@@ -19,6 +19,7 @@ __all__ = [
     "LogInputs",
     "Mode",
     "ModeHooks",
+    "RealtimeMode",
     "ReplayMode",
     "RunReport",
     "RunRequest",
@@ -26,4 +27,5 @@ __all__ = [
     "build_graph",
     "mode_hooks",
     "run_log",
+    "run_reader",
 ]

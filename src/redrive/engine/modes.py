@@ -5,14 +5,19 @@
   fast): a frame is released at ``start + (stamp - first stamp) / rate``; a frame that could only be
   released more than ``late_slack_s`` after that instant — because processing fell behind — is
   counted as *late*, and still processed (replay never drops frames silently).
-- ``REALTIME`` (live ROS topics) and ``CLOSED_LOOP`` (commands fed back into the simulator) use
-  the same two hooks — :meth:`ModeHooks.before_frame` to take or wait for the next frame and
-  :meth:`ModeHooks.after_frame` to act on the outputs — and arrive with the live sources.
+- ``REALTIME`` (live sources): frames are assembled as the data arrives, in a thread of their
+  own; whenever the pipeline is ready for a frame it gets the *newest* one, and the frames that
+  were replaced before it could take them are skipped and counted (``skipped_frames``) — an
+  algorithm slower than the sensor falls behind by at most one frame, never by a growing queue.
+- ``CLOSED_LOOP`` (commands fed back into the simulator) uses the same two hooks —
+  :meth:`ModeHooks.before_frame` to take or wait for the next frame and
+  :meth:`ModeHooks.after_frame` to act on the outputs — and is not built yet.
 """
 
 from __future__ import annotations
 
 import enum
+import threading
 import time
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
@@ -22,7 +27,7 @@ from redrive.errors import ConfigError
 from redrive.results import FrameRecord
 from redrive.types import Frame
 
-__all__ = ["Mode", "ModeHooks", "PacedFrame", "ReplayMode", "mode_hooks"]
+__all__ = ["Mode", "ModeHooks", "PacedFrame", "RealtimeMode", "ReplayMode", "mode_hooks"]
 
 
 class Mode(enum.Enum):
@@ -94,13 +99,73 @@ class ReplayMode:
         pass
 
 
+class RealtimeMode:
+    """Live frames: the newest assembled frame each time the pipeline is ready (see the module
+    text); ``received_frames`` were assembled, ``skipped_frames`` of them never processed."""
+
+    mode = Mode.REALTIME
+
+    def __init__(self) -> None:
+        self.received_frames = 0
+        self.skipped_frames = 0
+        self._cond = threading.Condition()
+        self._latest: Frame | None = None
+        self._done = False
+        self._error: BaseException | None = None
+        self._closing = False
+
+    def _pump(self, frames: Iterable[Frame]) -> None:
+        try:
+            for frame in frames:
+                with self._cond:
+                    if self._closing:
+                        return
+                    self.received_frames += 1
+                    if self._latest is not None:
+                        self.skipped_frames += 1
+                    self._latest = frame
+                    self._cond.notify()
+        except BaseException as err:  # handed to the engine's thread
+            with self._cond:
+                self._error = err
+        finally:
+            with self._cond:
+                self._done = True
+                self._cond.notify()
+
+    def before_frame(self, frames: Iterable[Frame]) -> Iterator[PacedFrame]:
+        pump = threading.Thread(
+            target=self._pump, args=(frames,), name="redrive-live-frames", daemon=True
+        )
+        pump.start()
+        try:
+            while True:
+                with self._cond:
+                    while self._latest is None and not self._done:
+                        self._cond.wait()
+                    frame, self._latest = self._latest, None
+                    if frame is None:
+                        if self._error is not None:
+                            raise self._error
+                        return
+                yield PacedFrame(frame, False)
+        finally:
+            with self._cond:
+                self._closing = True
+
+    def after_frame(self, record: FrameRecord) -> None:
+        pass
+
+
 def mode_hooks(mode: Mode | str, *, rate: float | None = None) -> ModeHooks:
     """The hooks of ``mode``."""
     mode = Mode(mode)
     if mode is Mode.REPLAY:
         return ReplayMode(rate=rate)
+    if mode is Mode.REALTIME:
+        return RealtimeMode()
     msg = (
-        f"mode {mode.value} needs live sources or a simulator in the loop, which this version "
-        "of redrive does not have yet; replay a log instead"
+        f"mode {mode.value} needs a simulator in the loop, which this version of redrive does "
+        "not have yet; replay a log, or run live sources in realtime mode"
     )
     raise ConfigError(msg)

@@ -17,7 +17,7 @@ from typing import Any
 from redrive.config import PipelineConfig
 from redrive.engine.core import Engine
 from redrive.engine.graph import LogInputs, StageGraph, build_graph
-from redrive.engine.modes import ReplayMode
+from redrive.engine.modes import ModeHooks, ReplayMode
 from redrive.engine.resources import ResourceSampler
 from redrive.engine.stats import RunReport
 from redrive.errors import ConfigError
@@ -27,7 +27,14 @@ from redrive.io.sensor_map import load_sensor_map_overrides
 from redrive.results import RunWriter
 from redrive.types import Frame
 
-__all__ = ["RunRequest", "expected_frames", "log_fingerprint", "log_inputs", "run_log"]
+__all__ = [
+    "RunRequest",
+    "expected_frames",
+    "log_fingerprint",
+    "log_inputs",
+    "run_log",
+    "run_reader",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -109,12 +116,9 @@ def _select(frames: Iterator[Frame], first: int | None, stop: int | None) -> Ite
     return frames
 
 
-def _manifest(
-    request: RunRequest, log: LogReader, graph: StageGraph, inputs: LogInputs
-) -> dict[str, Any]:
+def _manifest(request: RunRequest, graph: StageGraph, inputs: LogInputs) -> dict[str, Any]:
     pipeline = request.pipeline
     return {
-        "log": {**log_fingerprint(request.log), "format": log.format},
         "sensors": {k: v.value for k, v in inputs.sensors.items()},
         "seed": pipeline.seed,
         "pipeline": {
@@ -148,42 +152,68 @@ def run_log(
         LogError: the log cannot be read (frames before the damage are stored; the run directory
             is closed as ``failed``).
     """
-    overrides = load_sensor_map_overrides(request.sensor_map) if request.sensor_map else None
     if request.first_frame is not None and request.first_frame < 0:
         raise ConfigError(f"--frames: the first frame must be >= 0, got {request.first_frame}")
     with open_log(request.log) as log:
-        assembler = FrameAssembler(log, overrides=overrides)
-        inputs = log_inputs(assembler)
-        graph = build_graph(request.pipeline, inputs)
-        assembler = _reading_only_inputs(log, assembler, graph)
-        writer = RunWriter(
-            request.out,
-            manifest=_manifest(request, log, graph, inputs),
-            resume=request.resume,
+        return run_reader(
+            request,
+            log,
+            hooks=ReplayMode(rate=request.rate),
+            log_info={**log_fingerprint(request.log), "format": log.format},
+            on_start=on_start,
+            progress=progress,
         )
-        if on_start is not None:
-            total = expected_frames(log, assembler)
-            if total is not None:
-                stop = total if request.stop_frame is None else min(total, request.stop_frame)
-                total = max(0, stop - (request.first_frame or 0) - len(writer.done_frames))
-            on_start(total)
-        engine = Engine(graph, request.pipeline, inputs=inputs, hooks=ReplayMode(rate=request.rate))
-        sampler = ResourceSampler(engine.worker_pids, threads=engine.thread_ids).start()
-        frames = _select(assembler.frames(), request.first_frame, request.stop_frame)
-        try:
-            report = engine.run(
-                frames, sink=writer.write_frame, skip=writer.done_frames, progress=progress
-            )
-        except BaseException as err:
-            writer.write_resources(sampler.stop())
-            engine.close()
-            status = "interrupted" if isinstance(err, KeyboardInterrupt) else "failed"
-            writer.close(status=status, summary={"error": f"{type(err).__name__}: {err}"})
-            raise
+
+
+def run_reader(
+    request: RunRequest,
+    log: LogReader,
+    *,
+    hooks: ModeHooks,
+    log_info: dict[str, Any],
+    on_start: Callable[[int | None], None] | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> RunReport:
+    """Run the pipeline over the frames of an open ``log`` (a file, or a live session's streams)
+    released by ``hooks`` (the Mode Manager: replay pacing, real-time skipping …) into
+    ``request.out``; ``log_info`` is what the manifest says of the log."""
+    overrides = load_sensor_map_overrides(request.sensor_map) if request.sensor_map else None
+    assembler = FrameAssembler(log, overrides=overrides)
+    inputs = log_inputs(assembler)
+    graph = build_graph(request.pipeline, inputs)
+    assembler = _reading_only_inputs(log, assembler, graph)
+    manifest = _manifest(request, graph, inputs)
+    manifest["log"] = log_info
+    manifest["pipeline"]["mode_manager"] = hooks.mode.value
+    writer = RunWriter(request.out, manifest=manifest, resume=request.resume)
+    if on_start is not None:
+        total = expected_frames(log, assembler)
+        if total is not None and total > 0:
+            stop = total if request.stop_frame is None else min(total, request.stop_frame)
+            total = max(0, stop - (request.first_frame or 0) - len(writer.done_frames))
+        else:
+            total = None
+        on_start(total)
+    engine = Engine(graph, request.pipeline, inputs=inputs, hooks=hooks)
+    sampler = ResourceSampler(engine.worker_pids, threads=engine.thread_ids).start()
+    frames = _select(assembler.frames(), request.first_frame, request.stop_frame)
+    try:
+        report = engine.run(
+            frames, sink=writer.write_frame, skip=writer.done_frames, progress=progress
+        )
+    except BaseException as err:
         writer.write_resources(sampler.stop())
         engine.close()
-        summary = report.as_dict()
-        if assembler.undecodable:
-            summary["undecodable_messages"] = dict(assembler.undecodable)
-        writer.close(status=report.status, summary=summary)
+        status = "interrupted" if isinstance(err, KeyboardInterrupt) else "failed"
+        writer.close(status=status, summary={"error": f"{type(err).__name__}: {err}"})
+        raise
+    writer.write_resources(sampler.stop())
+    engine.close()
+    summary = report.as_dict()
+    if assembler.undecodable:
+        summary["undecodable_messages"] = dict(assembler.undecodable)
+    skipped = getattr(hooks, "skipped_frames", None)
+    if skipped is not None:
+        summary["skipped_frames"] = int(skipped)
+    writer.close(status=report.status, summary=summary)
     return report

@@ -13,7 +13,6 @@ from typing import IO, Any, Literal
 
 from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader, make_reader
-from rosbags.rosbag1.reader import normalize as normalize_msgtype
 
 from redrive.errors import LogError, LogTruncatedError
 from redrive.io._deserialize import Deserializer
@@ -24,6 +23,13 @@ from redrive.io.typestore import typestore_for
 __all__ = ["McapFileReader"]
 
 logger = logging.getLogger(__name__)
+
+
+def normalize_msgtype(name: str) -> str:
+    """``pkg/Type`` (ROS 1 schema names, as the MCAP ``ros1`` profile writes them) →
+    ``pkg/msg/Type``; ROS 2 names are returned as they are."""
+    parts = name.split("/")
+    return f"{parts[0]}/msg/{parts[1]}" if len(parts) == 2 else name
 
 _MAGIC = b"\x89MCAP0\r\n"
 _ENCODINGS: Mapping[str, Encoding] = {"cdr": "cdr", "ros1": "ros1"}

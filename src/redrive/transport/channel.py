@@ -817,6 +817,11 @@ class Reader:
             return ChannelStats(name=self.name, published=0, readers=())
         return _stats(self._seg, self.name)
 
+    def fileno(self) -> int:
+        """The reader's wake-up ``eventfd``: readable when a message may have arrived (for
+        ``select`` over several streams; a wake-up may be spurious — read with ``timeout_s=0``)."""
+        return self._fd
+
     def writer_alive(self) -> bool:
         return self._seg is not None and self._seg.owner_alive()
 

@@ -1,0 +1,174 @@
+"""``redrive live`` — run algorithms on live ROS 1 topics through shared memory, and record them."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+__all__ = ["register"]
+
+_EPILOG = """\
+examples:
+  redrive live --topics /velodyne_points --duration 60
+  redrive live --master http://127.0.0.1:11311 --topics /velodyne_points /camera/image_raw /imu \\
+      --perception cluster-detector --record drive.mcap --out runs/live1
+  redrive live --topics /points --pipeline pipeline.toml --frames 500
+
+One scraper process per topic subscribes with rospy (under /usr/bin/python3) and hands each
+message to this process through shared memory; frames are assembled as the data arrives (the
+highest-rate LiDAR drives them, or the sensor map's `driver`) and run through the pipeline in
+realtime mode: when an algorithm is slower than the sensor it gets the newest frame and the ones
+in between are skipped and counted. --record writes every message (lossless, in a thread of its
+own) to MCAP. Stops after --duration seconds, --frames frames, when every publisher's stream ends,
+or on Ctrl-C; the run directory is written as `redrive run` writes it.
+"""
+
+
+def _capacities(items: list[str] | None) -> dict[str, int]:
+    from redrive.errors import ConfigError
+
+    out = {}
+    for item in items or ():
+        topic, _, size = item.partition("=")
+        try:
+            out[topic] = int(float(size.rstrip("MmBb")) * (2**20 if size[-1:] in "Mm" else 1))
+        except ValueError as err:
+            msg = f"--capacity {item!r}: expected TOPIC=BYTES or TOPIC=NM (MiB)"
+            raise ConfigError(msg) from err
+    return out
+
+
+def _run(args: argparse.Namespace) -> int:
+    from rich.console import Console
+
+    from redrive.cli.run import _print_report
+    from redrive.config import load_pipeline, pipeline_from_plugins, reference_pipeline
+    from redrive.engine import RealtimeMode, RunRequest, run_reader
+    from redrive.live import default_master_uri
+    from redrive.live.dispatcher import LiveLog
+    from redrive.live.recorder import DataLogger
+    from redrive.live.session import LiveSession
+
+    if args.pipeline is not None:
+        pipeline = load_pipeline(args.pipeline)
+    elif args.perception or args.planning or args.control:
+        pipeline = pipeline_from_plugins(
+            perception=args.perception or (),
+            planning=args.planning or (),
+            control=args.control or (),
+        )
+    else:
+        pipeline = reference_pipeline()
+    master = args.master or default_master_uri()
+    out = args.out or Path("runs") / f"live-{time.strftime('%Y%m%d-%H%M%S')}"
+    console = Console(stderr=True)
+    stop = threading.Event()
+    previous = signal.signal(signal.SIGINT, lambda *_: stop.set())
+    recorder = None
+    log = None
+    with LiveSession.ros1(
+        args.topics,
+        master_uri=master,
+        capacity=_capacities(args.capacity),
+        wait_for_topics_s=args.wait,
+    ) as session:
+        try:
+            if args.record is not None:
+                recorder = DataLogger(session.specs, args.record)
+            log = LiveLog(session.specs, session.name, stop=stop)
+            if args.duration is not None:
+                timer = threading.Timer(args.duration, stop.set)
+                timer.daemon = True
+                timer.start()
+            console.print(
+                f"live: session {session.name}, {len(session.specs)} topic(s) from {master}; "
+                "receiving (Ctrl-C stops)",
+                highlight=False,
+            )
+            hooks = RealtimeMode()
+            request = RunRequest(
+                log=log.path,
+                pipeline=pipeline,
+                out=out,
+                stop_frame=args.frames,
+                sensor_map=args.sensor_map,
+            )
+            info = {
+                "path": str(log.path),
+                "format": "live",
+                "sha256": None,
+                "master_uri": master,
+                "topics": {s.topic: s.msgtype for s in session.specs},
+                "record": None if args.record is None else str(args.record),
+            }
+            report = run_reader(request, log, hooks=hooks, log_info=info)
+        finally:
+            stop.set()
+            signal.signal(signal.SIGINT, previous)
+            if log is not None:
+                log.close()
+    recorded = recorder.stop() if recorder is not None else None
+    _print_report(report, out)
+    console = Console(width=None if sys.stdout.isatty() else 120)
+    console.print(
+        f"frames: {hooks.received_frames} assembled, {hooks.skipped_frames} skipped "
+        "(pipeline slower than the sensor)"
+    )
+    assert log is not None
+    for topic in log.received:
+        console.print(
+            f"  {topic}: {log.received[topic]} received, {log.dropped[topic]} not seen by the "
+            "dispatcher" + (f", {recorder.recorded[topic]} recorded" if recorder else "")
+        )
+    if recorded is not None and recorder is not None:
+        console.print(f"recorded: {recorded}")
+        for err in recorder.errors[:5]:
+            console.print(f"[yellow]recording: {err}[/]")
+    return 0
+
+
+def register(sub: Any) -> None:
+    parser = sub.add_parser(
+        "live",
+        help="run algorithms on live ROS 1 topics (shared memory), optionally recording them",
+        description=(
+            "Subscribe to ROS 1 topics through scraper processes and shared memory, assemble "
+            "frames as the data arrives, run the pipeline on them in realtime mode into a run "
+            "directory, and record the topics to MCAP."
+        ),
+        epilog=_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument(
+        "--master", metavar="URI", help="ROS master (default $ROS_MASTER_URI or :11311)"
+    )
+    parser.add_argument("--topics", nargs="+", required=True, metavar="TOPIC")
+    parser.add_argument("--pipeline", type=Path, metavar="TOML", help="a pipeline file")
+    for role in ("perception", "planning", "control"):
+        parser.add_argument(
+            f"--{role}", action="append", metavar="PLUGIN", help=f"a {role} algorithm (repeat)"
+        )
+    parser.add_argument("--record", type=Path, metavar="OUT.mcap", help="record the topics")
+    parser.add_argument("--out", type=Path, metavar="DIR", help="run directory")
+    parser.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
+    parser.add_argument("--frames", type=int, metavar="N", help="stop after N frames")
+    parser.add_argument(
+        "--wait",
+        type=float,
+        default=10.0,
+        metavar="S",
+        help="wait up to S seconds for topics nobody publishes yet (default 10)",
+    )
+    parser.add_argument("--sensor-map", type=Path, metavar="TOML", help="which topic is which")
+    parser.add_argument(
+        "--capacity",
+        action="append",
+        metavar="TOPIC=SIZE",
+        help="largest message of a topic, bytes or NM (default: 32M clouds/images, 1M others)",
+    )
+    parser.set_defaults(func=_run)

@@ -1,0 +1,199 @@
+"""The Sensor Dispatcher for live data: shared-memory streams read as a log.
+
+:class:`LiveLog` implements :class:`redrive.io.LogReader` over the streams of a live session, so
+the replay path's :class:`~redrive.io.frames.FrameAssembler` (sensor map inference, nearest-stamp
+synchronisation, ego-state interpolation) assembles live frames unchanged. ``ros1`` streams yield
+the scraper's serialised bytes, decoded here with redrive's decoders and a ROS 1 Noetic typestore;
+``sensor`` streams yield already-typed samples (``native`` messages).
+
+Every stream is read as a *keep-latest observer*: the dispatcher never slows a source down; the
+messages it did not get are counted (:attr:`LiveLog.dropped`). Recording reads the same streams
+losslessly on its own (:mod:`redrive.live.recorder`).
+"""
+
+from __future__ import annotations
+
+import logging
+import select
+import threading
+import time
+from collections.abc import Collection, Iterator, Mapping, Sequence
+from pathlib import Path
+from types import MappingProxyType, TracebackType
+
+from redrive.errors import ConfigError, TransportError
+from redrive.io.base import LogMessage, TopicInfo
+from redrive.io.decoders.base import Decoded
+from redrive.io.typestore import typestore_for
+from redrive.live.streams import StreamSpec
+from redrive.transport import Policy, ProducerGoneError, Reader
+from redrive.transport.codec import KIND_ROS1, KIND_SENSOR, decode_sample
+
+__all__ = ["LiveLog"]
+
+logger = logging.getLogger(__name__)
+
+_POLL_S = 0.1
+
+
+class LiveLog:
+    """A live session's streams as a (never-ending) log.
+
+    Args:
+        specs: the session's streams.
+        session: the session name (shown as the log's path, ``live:<session>``).
+        stop: set it to end :meth:`messages`.
+        attach_timeout_s: how long to wait for each stream's writer.
+        duration_hint_s: the duration the sensor map infers rates over (live topics have no
+            counts yet: the map is inferred from types).
+
+    Raises:
+        ProducerGoneError: a stream has no writer within ``attach_timeout_s``.
+    """
+
+    format = "live"
+
+    def __init__(
+        self,
+        specs: Sequence[StreamSpec],
+        session: str,
+        *,
+        stop: threading.Event | None = None,
+        attach_timeout_s: float = 10.0,
+    ) -> None:
+        if not specs:
+            msg = "a live session needs at least one topic"
+            raise ConfigError(msg)
+        self.path = Path(f"live:{session}")
+        self.session = session
+        self.stop = stop or threading.Event()
+        self._specs = {s.topic: s for s in specs}
+        self._readers: dict[str, Reader] = {}
+        try:
+            for spec in specs:
+                self._readers[spec.topic] = Reader(
+                    spec.stream, timeout_s=attach_timeout_s, policy=Policy.KEEP_LATEST
+                )
+        except BaseException:
+            self.close()
+            raise
+        ros1_types = sorted({s.msgtype for s in specs if s.payload == "ros1"})
+        store = typestore_for(1, needed=ros1_types)[0] if ros1_types else None
+        from redrive.io._deserialize import Deserializer
+
+        self._deserializer = Deserializer(self.path, ros1=store, cdr=None)
+        self._topics = MappingProxyType(
+            {
+                s.topic: TopicInfo(
+                    topic=s.topic,
+                    msgtype=s.msgtype,
+                    count=0,
+                    encoding="ros1" if s.payload == "ros1" else "native",
+                )
+                for s in specs
+            }
+        )
+        self._start_ns = time.time_ns()
+        self.received: dict[str, int] = dict.fromkeys(self._specs, 0)
+        self.dropped: dict[str, int] = dict.fromkeys(self._specs, 0)
+        self.gone: set[str] = set()
+
+    # -- LogReader ---------------------------------------------------------------------------
+    @property
+    def topics(self) -> Mapping[str, TopicInfo]:
+        return self._topics
+
+    @property
+    def start_ns(self) -> int:
+        return self._start_ns
+
+    @property
+    def end_ns(self) -> int:
+        return max(self._start_ns + 1, time.time_ns())
+
+    @property
+    def message_count(self) -> int:
+        return sum(self.received.values())
+
+    def messages(
+        self,
+        *,
+        topics: Collection[str] | None = None,
+        start_ns: int | None = None,
+        stop_ns: int | None = None,
+    ) -> Iterator[LogMessage]:
+        """Messages as they arrive, until :attr:`stop` is set or every writer is gone.
+
+        ``log_time_ns`` is when the source published the message (wall clock); ``start_ns`` /
+        ``stop_ns`` are ignored (live data has no past).
+        """
+        del start_ns, stop_ns
+        wanted = {t: r for t, r in self._readers.items() if topics is None or t in topics}
+        unknown = set(topics or ()) - set(self._readers)
+        if unknown:
+            logger.debug("live log %s: no stream for %s", self.session, sorted(unknown))
+        fds = {r.fileno(): t for t, r in wanted.items()}
+        while not self.stop.is_set() and len(self.gone) < len(wanted):
+            ready, _, _ = select.select(list(fds), [], [], _POLL_S)
+            for fd in ready or list(fds):  # on a timeout, look at every stream (liveness)
+                topic = fds[fd]
+                if topic in self.gone:
+                    continue
+                yield from self._drain(topic, wanted[topic])
+
+    def _drain(self, topic: str, reader: Reader) -> Iterator[LogMessage]:
+        spec = self._specs[topic]
+        while True:
+            try:
+                msg = reader.read(timeout_s=0.0)
+            except ProducerGoneError as err:
+                if topic not in self.gone:
+                    logger.warning("live topic %s: %s", topic, err)
+                    self.gone.add(topic)
+                return
+            if msg is None:
+                return
+            self.received[topic] += 1
+            self.dropped[topic] += msg.dropped_before
+            if msg.kind == KIND_ROS1:
+                yield LogMessage(
+                    topic=topic,
+                    msgtype=spec.msgtype,
+                    log_time_ns=msg.publish_ns,
+                    encoding="ros1",
+                    raw=msg.payload.data,
+                )
+            elif msg.kind == KIND_SENSOR:
+                sample = decode_sample(msg.meta, msg.payload)
+                decoded = Decoded(
+                    stamp_ns=sample.stamp_ns, frame_id=sample.frame_id, value=sample.data
+                )
+                yield LogMessage(
+                    topic=topic,
+                    msgtype=spec.msgtype,
+                    log_time_ns=msg.publish_ns,
+                    encoding="native",
+                    payload=decoded,
+                )
+            else:
+                msg_text = f"live topic {topic}: message {msg.seq} has unknown kind {msg.kind}"
+                raise TransportError(msg_text)
+
+    def deserialize(self, message: LogMessage) -> object:
+        return self._deserializer(message)
+
+    def close(self) -> None:
+        for reader in self._readers.values():
+            reader.close()
+        self._readers.clear()
+
+    def __enter__(self) -> LiveLog:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()

@@ -1,0 +1,200 @@
+"""A live session: source processes feeding shared-memory streams, stopped together.
+
+>>> with LiveSession.ros1(["/velodyne_points"], master_uri="http://127.0.0.1:11311") as live:
+...     log = LiveLog(live.specs, live.name)            # doctest: +SKIP
+
+The ROS 1 scrapers run under ``/usr/bin/python3`` (Debian's rospy) as scripts with only
+redrive's own package on their path, one process per topic.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import shutil
+import signal
+import subprocess
+import tempfile
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from types import TracebackType
+
+from redrive.errors import ConfigError, TransportError
+from redrive.live.ros1 import list_topics
+from redrive.live.streams import StreamSpec, ros2_type, stream_name
+from redrive.transport import remove_stale
+
+__all__ = ["DEFAULT_CAPACITY", "ROS_PYTHON", "LiveSession", "default_session_name"]
+
+logger = logging.getLogger(__name__)
+
+ROS_PYTHON = Path("/usr/bin/python3")
+_SCRAPER = Path(__file__).with_name("ros1_scraper.py")
+
+#: the largest message a stream takes, by ROS 2 type (``--capacity`` overrides per topic):
+#: PointCloud2 fits a 128-beam sweep, Image a 4K rgb8 frame.
+DEFAULT_CAPACITY: Mapping[str, int] = {
+    "sensor_msgs/msg/PointCloud2": 32 << 20,
+    "sensor_msgs/msg/Image": 32 << 20,
+    "sensor_msgs/msg/CompressedImage": 16 << 20,
+    "sensor_msgs/msg/LaserScan": 1 << 20,
+}
+_OTHER_CAPACITY = 1 << 20
+
+
+def default_session_name() -> str:
+    return f"live-{os.getpid()}"
+
+
+class LiveSession:
+    """Source processes and the streams they write (see the module text). Use :meth:`ros1`."""
+
+    def __init__(
+        self, name: str, specs: Sequence[StreamSpec], processes: Sequence[subprocess.Popen[str]]
+    ) -> None:
+        self.name = name
+        self.specs = list(specs)
+        self.processes = list(processes)
+        self._shim: Path | None = None
+
+    @classmethod
+    def ros1(
+        cls,
+        topics: Sequence[str],
+        *,
+        master_uri: str,
+        name: str | None = None,
+        capacity: Mapping[str, int] | None = None,
+        slots: int = 6,
+        ready_timeout_s: float = 20.0,
+        wait_for_topics_s: float = 0.0,
+    ) -> LiveSession:
+        """Start one scraper per ROS 1 topic (types from the master, waiting up to
+        ``wait_for_topics_s`` for topics nobody publishes yet) and wait until each is subscribed.
+
+        Raises:
+            ConfigError: a topic is not on the master.
+            TransportError: rospy is not available, or a scraper failed to start.
+        """
+        if not ROS_PYTHON.is_file():
+            msg = (
+                f"{ROS_PYTHON} is missing: the ROS 1 scraper runs under Debian's python3 with rospy"
+            )
+            raise TransportError(msg)
+        name = name or default_session_name()
+        deadline = time.monotonic() + wait_for_topics_s
+        while True:
+            known = {t.name: t for t in list_topics(master_uri) if t.msg_type != "*"}
+            missing = [t for t in topics if t not in known]
+            if not missing or time.monotonic() >= deadline:
+                break
+            time.sleep(0.2)
+        if missing:
+            msg = (
+                f"not on the ROS master {master_uri}: {', '.join(missing)}; "
+                f"it has {', '.join(sorted(known)) or 'no topics'} (`redrive topics` lists them)"
+            )
+            raise ConfigError(msg)
+        specs = []
+        for topic in topics:
+            msgtype = ros2_type(known[topic].msg_type)
+            size = (capacity or {}).get(topic) or DEFAULT_CAPACITY.get(msgtype, _OTHER_CAPACITY)
+            specs.append(
+                StreamSpec(
+                    topic=topic,
+                    msgtype=msgtype,
+                    stream=stream_name(name, topic),
+                    payload="ros1",
+                    capacity_bytes=size,
+                )
+            )
+        session = cls(name, specs, [])
+        session._shim = Path(tempfile.mkdtemp(prefix="redrive-shim-"))
+        package = Path(__file__).resolve().parents[1]
+        (session._shim / "redrive").symlink_to(package, target_is_directory=True)
+        env = {k: v for k, v in os.environ.items() if k not in ("PYTHONHOME",)}
+        env["PYTHONPATH"] = str(session._shim)
+        env["ROS_MASTER_URI"] = master_uri
+        try:
+            for spec in specs:
+                argv = [
+                    str(ROS_PYTHON), str(_SCRAPER), "--topic", spec.topic, "--stream", spec.stream,
+                    "--capacity", str(spec.capacity_bytes), "--slots", str(slots),
+                ]  # fmt: skip
+                proc = subprocess.Popen(
+                    argv,
+                    env=env,
+                    stdout=subprocess.PIPE,
+                    stderr=subprocess.PIPE,
+                    text=True,
+                    start_new_session=True,
+                )
+                session.processes.append(proc)
+            deadline = time.monotonic() + ready_timeout_s
+            for spec, proc in zip(specs, session.processes, strict=True):
+                _wait_ready(proc, spec.topic, deadline)
+        except BaseException:
+            session.close()
+            raise
+        return session
+
+    def alive(self) -> bool:
+        return all(p.poll() is None for p in self.processes)
+
+    def close(self, *, timeout_s: float = 5.0) -> None:
+        """Stop every source (SIGTERM, then SIGKILL) and remove what a killed one left."""
+        for proc in self.processes:
+            if proc.poll() is None:
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(proc.pid, signal.SIGTERM)
+        deadline = time.monotonic() + timeout_s
+        for proc in self.processes:
+            try:
+                proc.wait(timeout=max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+            for stream in (proc.stdout, proc.stderr):
+                if stream is not None:
+                    stream.close()
+        for spec in self.specs:
+            remove_stale(spec.stream)
+        if self._shim is not None:
+            shutil.rmtree(self._shim, ignore_errors=True)
+            self._shim = None
+
+    def __enter__(self) -> LiveSession:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+
+def _wait_ready(proc: subprocess.Popen[str], topic: str, deadline: float) -> None:
+    import select
+
+    assert proc.stdout is not None
+    while True:
+        left = deadline - time.monotonic()
+        if left <= 0:
+            msg = f"the scraper of {topic} did not start within the timeout"
+            raise TransportError(msg)
+        ready, _, _ = select.select([proc.stdout], [], [], left)
+        if not ready:
+            continue
+        line = proc.stdout.readline()
+        if line.strip() == "READY":
+            return
+        if not line:
+            err = proc.stderr.read() if proc.stderr else ""
+            last = "\n".join(err.strip().splitlines()[-5:])
+            msg = f"the scraper of {topic} exited (status {proc.wait()}): {last}"
+            raise TransportError(msg)

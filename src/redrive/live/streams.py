@@ -1,0 +1,68 @@
+"""Which shared-memory stream carries which topic, in one live session.
+
+A live session has a name (``live-<pid>`` by default); each source topic goes through its own
+stream ``<session>.<topic>`` (``/velodyne_points`` → ``live-123.velodyne_points``). Whoever
+starts the sources (the engine, a test, the loss benchmark) knows the topics and their types and
+hands the list of :class:`StreamSpec` to the Sensor Dispatcher and the Data Logger.
+
+Two payload kinds travel (see :mod:`redrive.transport.codec`): ``ros1`` streams carry ROS 1
+messages as serialised bytes (the ROS scraper forwards what rospy received), ``sensor`` streams
+carry typed data-model samples (the replay and synthetic sources).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from typing import Literal
+
+__all__ = ["PAYLOAD_MSGTYPE", "StreamSpec", "ros1_type", "ros2_type", "stream_name"]
+
+_BAD = re.compile(r"[^A-Za-z0-9_.-]+")
+
+#: the ROS message type a typed sample stands for (what the sensor map infers sensors from).
+PAYLOAD_MSGTYPE = {
+    "PointCloud": "sensor_msgs/msg/PointCloud2",
+    "Image": "sensor_msgs/msg/Image",
+    "Imu": "sensor_msgs/msg/Imu",
+    "GnssFix": "sensor_msgs/msg/NavSatFix",
+    "VehicleState": "nav_msgs/msg/Odometry",
+}
+
+
+def stream_name(session: str, topic: str) -> str:
+    """``<session>.<topic without slashes>``: a name :class:`redrive.transport.Writer` takes."""
+    cleaned = _BAD.sub("_", topic.strip("/").replace("/", "."))
+    return f"{session}.{cleaned or 'root'}"
+
+
+def ros2_type(msgtype: str) -> str:
+    """``sensor_msgs/PointCloud2`` → ``sensor_msgs/msg/PointCloud2`` (unchanged if already so)."""
+    parts = msgtype.split("/")
+    return f"{parts[0]}/msg/{parts[1]}" if len(parts) == 2 else msgtype
+
+
+def ros1_type(msgtype: str) -> str:
+    """``sensor_msgs/msg/PointCloud2`` → ``sensor_msgs/PointCloud2``."""
+    parts = msgtype.split("/")
+    return f"{parts[0]}/{parts[2]}" if len(parts) == 3 else msgtype
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class StreamSpec:
+    """One topic of a live session.
+
+    Attributes:
+        topic: the source topic (``/velodyne_points``).
+        msgtype: its ROS 2 style type (``sensor_msgs/msg/PointCloud2``); for ``sensor`` streams
+            the type the sample stands for (:data:`PAYLOAD_MSGTYPE`).
+        stream: the shared-memory stream name (:func:`stream_name`).
+        payload: ``ros1`` (serialised ROS 1 bytes) or ``sensor`` (typed samples).
+        capacity_bytes: the largest message the stream takes.
+    """
+
+    topic: str
+    msgtype: str
+    stream: str
+    payload: Literal["ros1", "sensor"]
+    capacity_bytes: int
