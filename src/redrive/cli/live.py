@@ -106,7 +106,7 @@ def _run(args: argparse.Namespace) -> int:
                 "topics": {s.topic: s.msgtype for s in session.specs},
                 "record": None if args.record is None else str(args.record),
             }
-            report = run_reader(request, log, hooks=hooks, log_info=info)
+            report = run_reader(request, log, hooks=hooks, log_info=info, lookahead_ns=0)
         finally:
             stop.set()
             signal.signal(signal.SIGINT, previous)

@@ -96,7 +96,7 @@ def expected_frames(log: LogReader, assembler: FrameAssembler) -> int | None:
 
 
 def _reading_only_inputs(
-    log: LogReader, assembler: FrameAssembler, graph: StageGraph
+    log: LogReader, assembler: FrameAssembler, graph: StageGraph, *, lookahead_ns: int
 ) -> FrameAssembler:
     """An assembler that decodes only the sensors some algorithm declares (and the driver):
     algorithms never see the others, so decoding them (camera images …) is wasted."""
@@ -105,7 +105,7 @@ def _reading_only_inputs(
     kept = tuple(s for s in smap.sensors if s.sensor_id in needed or s.sensor_id == smap.driver)
     if len(kept) == len(smap.sensors):
         return assembler
-    return FrameAssembler(log, sensor_map=replace(smap, sensors=kept))
+    return FrameAssembler(log, sensor_map=replace(smap, sensors=kept), lookahead_ns=lookahead_ns)
 
 
 def _select(frames: Iterator[Frame], first: int | None, stop: int | None) -> Iterator[Frame]:
@@ -173,15 +173,20 @@ def run_reader(
     log_info: dict[str, Any],
     on_start: Callable[[int | None], None] | None = None,
     progress: Callable[[int], None] | None = None,
+    lookahead_ns: int | None = None,
 ) -> RunReport:
     """Run the pipeline over the frames of an open ``log`` (a file, or a live session's streams)
     released by ``hooks`` (the Mode Manager: replay pacing, real-time skipping …) into
-    ``request.out``; ``log_info`` is what the manifest says of the log."""
+    ``request.out``; ``log_info`` is what the manifest says of the log; ``lookahead_ns`` how long
+    the frame assembler waits past a driver sample for the other sensors (live: 0, a frame is
+    released once the tolerance has passed)."""
     overrides = load_sensor_map_overrides(request.sensor_map) if request.sensor_map else None
     assembler = FrameAssembler(log, overrides=overrides)
+    if lookahead_ns is not None:
+        assembler.lookahead_ns = lookahead_ns
     inputs = log_inputs(assembler)
     graph = build_graph(request.pipeline, inputs)
-    assembler = _reading_only_inputs(log, assembler, graph)
+    assembler = _reading_only_inputs(log, assembler, graph, lookahead_ns=assembler.lookahead_ns)
     manifest = _manifest(request, graph, inputs)
     manifest["log"] = log_info
     manifest["pipeline"]["mode_manager"] = hooks.mode.value
