@@ -1,0 +1,203 @@
+"""redrive bench transport: tiny runs of every installed side deliver exactly what was sent (every
+byte compared); the result types, targets and CLI. No timing is asserted."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import shutil
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from redrive.bench.transport import (
+    MIN_SIZE,
+    SIDES,
+    CellResult,
+    MemcpyResult,
+    RunResult,
+    SideSpec,
+    TransportBenchResult,
+    bench_memcpy,
+    bench_transport,
+    check_targets,
+    parse_size,
+    run_cell,
+    side_available,
+)
+from redrive.cli.bench_transport import add_transport_parser
+from redrive.errors import TransportError
+
+SIZE = 64 << 10
+IOX2_ROOT = Path("/tmp/iceoryx2")  # iceoryx2's default root for node and service files
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _no_iceoryx2_leftovers() -> Iterator[None]:
+    """iceoryx2 keeps a global management segment in /dev/shm (and /tmp/iceoryx2) after its last
+    node is gone; remove what these tests created when no iceoryx2 node is alive any more."""
+    shm = Path("/dev/shm")
+    before = set(shm.glob("iox2_*"))
+    root_existed = IOX2_ROOT.exists()
+    yield
+    if any((IOX2_ROOT / "nodes").glob("*")):
+        return  # someone's iceoryx2 node is alive: leave its files alone
+    for path in set(shm.glob("iox2_*")) - before:
+        path.unlink(missing_ok=True)
+    if not root_existed:
+        shutil.rmtree(IOX2_ROOT, ignore_errors=True)
+
+
+def _needs(side: str) -> None:
+    if not side_available(side):
+        pytest.skip(f"{SIDES[side].module} is not installed ({SIDES[side].package})")
+
+
+@pytest.mark.parametrize("side", list(SIDES))
+def test_every_byte_arrives(side: str) -> None:
+    _needs(side)
+    r = run_cell(side, SIZE, seconds=0.15, verify=True)
+    assert r.mode == "flat"
+    assert r.sent > 0
+    assert r.corrupt == 0  # every received payload equals the one sent, byte for byte
+    assert 0 < r.received <= r.sent
+    if not SIDES[side].lossy:
+        assert r.received == r.sent
+        assert r.out_of_order == 0
+    assert r.msgs_per_s > 0
+    assert r.gb_per_s == pytest.approx(r.msgs_per_s * SIZE / 1e9)
+    assert 0 < r.latency_p50_ms <= r.latency_p99_ms <= r.latency_max_ms
+
+
+def test_paced_run_measures_latency() -> None:
+    r = run_cell("pipe-pickle", 2 * MIN_SIZE, seconds=0.2, paced_hz=50.0, verify=True)
+    assert r.mode == "paced"
+    assert 8 <= r.sent <= 12  # 50 Hz for 0.2 s
+    assert r.received == r.sent
+    assert r.corrupt == 0
+    assert 0 < r.latency_p50_ms <= r.latency_p99_ms
+    assert json.loads(json.dumps(r.to_json()))["lost"] == 0
+
+
+def test_a_failing_side_reports_its_error() -> None:
+    _needs("redrive-copy")
+    with pytest.raises(TransportError, match="slots"):  # the writer refuses 2 slots
+        run_cell("redrive-copy", SIZE, seconds=0.1, slots=2)
+    with pytest.raises(TransportError, match="minimum"):
+        run_cell("pipe-pickle", 100, seconds=0.1)
+
+
+def test_missing_package_is_reported_not_run(monkeypatch: pytest.MonkeyPatch) -> None:
+    ghost = SideSpec(
+        name="ghost", label="ghost", module="redrive_no_such_module", package="ghost-pkg",
+        publisher_first=False, lossy=False, in_place=False,
+        make_sender=lambda cfg, shared: pytest.fail("must not run"),
+        make_receiver=lambda cfg, shared, tally: pytest.fail("must not run"),
+    )  # fmt: skip
+    monkeypatch.setitem(SIDES, "ghost", ghost)  # type: ignore[arg-type]
+    result = bench_transport([SIZE], sides=["ghost"], seconds=0.1, memcpy=False)
+    (cell,) = result.cells
+    assert cell.status == "not installed"
+    assert cell.flat is None
+    assert "ghost-pkg" in (cell.error or "")
+    assert json.loads(json.dumps(result.to_json()))["cells"][0]["status"] == "not installed"
+
+
+def test_memcpy_ceiling() -> None:
+    (m,) = bench_memcpy([SIZE], seconds=0.1, pool_bytes=8 << 20)
+    assert m.size_bytes == SIZE
+    assert m.hot_gb_per_s > 0
+    assert m.from_memory_gb_per_s > 0
+    assert m.pool_bytes >= 8 << 20
+
+
+def _run(side: str, size: int, gb_per_s: float, p99_ms: float = 1.0) -> CellResult:
+    def run(mode: str) -> RunResult:
+        return RunResult(
+            mode=mode, seconds=1.0, sent=10, received=10, corrupt=0, out_of_order=0,
+            msgs_per_s=gb_per_s * 1e9 / size, gb_per_s=gb_per_s, sent_per_s=10.0,
+            latency_p50_ms=p99_ms / 2, latency_p99_ms=p99_ms, latency_max_ms=p99_ms,
+        )  # fmt: skip
+
+    return CellResult(side=side, size_bytes=size, status="ok", flat=run("flat"), paced=run("paced"))
+
+
+def test_targets() -> None:
+    mib = 1 << 20
+    cells = (
+        _run("redrive-inplace", mib, 12.0),
+        _run("iceoryx2", mib, 10.0),
+        _run("redrive-inplace", 4 * mib, 9.0, p99_ms=3.0),
+        _run("iceoryx2", 4 * mib, 10.0),
+        _run("redrive-copy", 4 * mib, 5.0, p99_ms=1.5),
+        _run("pipe-pickle", 4 * mib, 0.4),
+        _run("redrive-copy", 16 * mib, 4.0),
+    )
+    result = TransportBenchResult(
+        sizes=(mib, 4 * mib, 16 * mib), seconds=1.0, paced_hz=100.0, slots=4, cells=cells,
+        memcpy=(MemcpyResult(size_bytes=16 * mib, hot_gb_per_s=14.0, from_memory_gb_per_s=7.0,
+                             pool_bytes=256 * mib),),
+        targets=(),
+    )  # fmt: skip
+    by = {(t.name.split(" at ")[0], t.side, t.size_bytes): t for t in check_targets(result)}
+    assert by["vs iceoryx2 in place", "redrive-inplace", mib].met is True
+    assert by["vs iceoryx2 in place", "redrive-inplace", 4 * mib].ratio == pytest.approx(0.9)
+    assert by["vs iceoryx2 in place", "redrive-inplace", 4 * mib].met is False
+    assert by["vs pipe + pickle", "redrive-copy", 4 * mib].met is True  # 12.5x
+    assert by["vs pipe + pickle", "redrive-inplace", 4 * mib].met is True  # 22.5x
+    assert by["vs memcpy from memory", "redrive-copy", 16 * mib].met is True  # 4 / 7
+    assert by["vs memcpy from memory", "redrive-inplace", 16 * mib].met is None  # did not run
+    assert by["paced p99", "redrive-copy", 4 * mib].met is True
+    assert by["paced p99", "redrive-inplace", 4 * mib].met is False
+
+
+def test_parse_size() -> None:
+    assert parse_size("64K") == 64 << 10
+    assert parse_size("64KiB") == 64 << 10
+    assert parse_size("4M") == 4 << 20
+    assert parse_size("1.5M") == 3 << 19
+    assert parse_size("4096") == 4096
+    with pytest.raises(TransportError, match="not a message size"):
+        parse_size("big")
+
+
+def test_cli(capsys: pytest.CaptureFixture[str]) -> None:
+    parser = argparse.ArgumentParser()
+    add_transport_parser(parser.add_subparsers())
+    argv = ["transport", "--sizes", "16K", "--seconds", "0.1", "--sides", "pipe-pickle"]
+    args = parser.parse_args([*argv, "--paced-hz", "50", "--json"])
+    assert args.func(args) == 0
+    out = json.loads(capsys.readouterr().out)
+    (cell,) = out["cells"]
+    assert cell["status"] == "ok"
+    assert cell["flat"]["corrupt"] == 0
+    assert cell["paced"]["lost"] == 0
+    assert out["memcpy"][0]["size_bytes"] == 16 << 10
+    args = parser.parse_args([*argv, "--no-paced", "--no-memcpy"])
+    assert args.func(args) == 0
+    text = capsys.readouterr().out
+    assert "pipe + pickle" in text
+    assert "16 KiB" in text
+
+
+def test_cli_rejects_unknown_side() -> None:
+    from redrive.errors import ConfigError
+
+    parser = argparse.ArgumentParser()
+    add_transport_parser(parser.add_subparsers())
+    args = parser.parse_args(["transport", "--sides", "carrier-pigeon"])
+    with pytest.raises(ConfigError, match="carrier-pigeon"):
+        args.func(args)
+
+
+def test_results_are_finite_or_null_in_json() -> None:
+    r = RunResult(
+        mode="flat", seconds=0.0, sent=0, received=0, corrupt=0, out_of_order=0,
+        msgs_per_s=math.nan, gb_per_s=math.nan, sent_per_s=math.nan, latency_p50_ms=math.nan,
+        latency_p99_ms=math.nan, latency_max_ms=math.nan,
+    )  # fmt: skip
+    out = json.loads(json.dumps(r.to_json(), allow_nan=False))
+    assert out["gb_per_s"] is None
+    assert out["lost"] == 0
