@@ -108,9 +108,18 @@ def test_round_trip_copy_and_view(name: str) -> None:
                 assert not view.payload.flags.writeable
             with r.view(timeout_s=0.01) as none:
                 assert none is None
+            buf = np.zeros(1 << 16, np.uint8)
+            w.publish(b"into")
+            into = r.read(timeout_s=1.0, out=buf)
+            assert into is not None
+            assert into.payload.tobytes() == b"into"
+            assert np.shares_memory(into.payload, buf)
+            w.publish(b"x")
+            with pytest.raises(TransportError, match="at least 1 bytes"):
+                r.read(timeout_s=1.0, out=np.zeros(0, np.uint8))
             stats = w.stats()
-            assert stats.published == 2
-            assert stats.readers[0].delivered == 2
+            assert stats.published == 4
+            assert stats.readers[0].delivered == 3
             assert stats.readers[0].dropped == 0
 
 

@@ -496,6 +496,9 @@ class _RedriveReceiver:
         self.tally = tally
         self.in_place = in_place
         self.reader = Reader(_segment_name(cfg), timeout_s=_CONNECT_TIMEOUT_S)
+        # copy-out into one reused buffer, as a consumer that keeps the data would do: a fresh
+        # array per message pays its page faults (p99 ≈ 6.5 ms for 4 MiB here) in the copy
+        self.out = np.empty(max(cfg.size_bytes, 1), np.uint8)
 
     def recv(self, timeout_s: float) -> bool:
         if self.in_place:
@@ -504,7 +507,7 @@ class _RedriveReceiver:
                     return False
                 self.tally.consume(msg.payload)
                 return True
-        got = self.reader.read(timeout_s=timeout_s)
+        got = self.reader.read(timeout_s=timeout_s, out=self.out)
         if got is None:
             return False
         self.tally.consume(got.payload)

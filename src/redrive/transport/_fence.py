@@ -18,8 +18,7 @@ the order the CPU receives.
 **Writer** (one process): ① ``seq_begin[s] = n`` (the slot is being written: ``seq_begin !=
 seq_end``), ② FENCE, ③ read the readers' pins — if one pins ``s``, put ``seq_begin`` back and
 take another slot, ④ payload and header, ⑤ FENCE (AArch64 only), ⑥ ``seq_end[s] = n``,
-⑦ ``order[n % N] = s``, ⑧ ``write_seq = n``, then an ``eventfd`` write to each reader (a
-system call: a full barrier on both architectures).
+⑦ ``order[n % N] = s``, ⑧ ``write_seq = n``, then the wake-ups below.
 
 **Reader**: ⓐ load ``write_seq``, ⓑ FENCE (AArch64 only: loads after it are not satisfied before
 it), ⓒ ``s = order[m % N]``, ⓓ ``pin = s``, ⓔ FENCE, ⓕ load ``seq_begin[s]``, ``seq_end[s]``:
@@ -43,6 +42,14 @@ the payload visible before ``seq_end``/``write_seq`` (release), ⓑ keeps the sl
 ``write_seq`` (acquire), ⓗ keeps the re-check after the payload reads (the seqlock's read-side
 barrier, as in the Linux kernel's ``read_seqcount_retry``). ``dmb ish`` (what the fence below
 emits there) orders all of them.
+
+**Wake-ups** follow the same pattern twice. A reader about to sleep stores its ``waiting`` flag,
+fences, and re-loads ``write_seq`` before blocking on its ``eventfd``; the writer, after ⑧,
+fences and signals only the readers whose flag it sees. One of the two loads sees the other
+side's store, so a reader never sleeps through a message while the writer skips the system call
+for readers that are busy. Lossless back-pressure mirrors it: the writer stores
+``writer_waiting``, fences and re-checks the readers' ``read_seq``; a lossless reader stores
+``read_seq``, fences and signals the writer only if it sees the flag.
 
 The fence is C11 ``atomic_thread_fence(memory_order_seq_cst)``, exported as a function by GCC's
 ``libatomic`` (``mfence``/``lock or`` on x86-64, ``dmb ish`` on AArch64), called through ctypes

@@ -70,6 +70,7 @@ from redrive.transport.segment import (
     R_START,
     R_STATE,
     R_TORN,
+    R_WAITING,
     READER_WORDS,
     S_BEGIN,
     S_END,
@@ -83,6 +84,7 @@ from redrive.transport.segment import (
     W_POLICY,
     W_PUBLISHED,
     W_WRITE_SEQ,
+    W_WRITER_WAITING,
     Layout,
     Segment,
     process_alive,
@@ -267,6 +269,7 @@ class Writer:
         self._reader_fd = [-1] * max_readers
         self._fd_lock = threading.Lock()
         self._space_fd = os.eventfd(0, os.EFD_NONBLOCK | os.EFD_CLOEXEC)
+        self._lru = list(range(slots))  # slots, least recently written first
         self._seq = 0
         self._loaned = False
         self._closed = False
@@ -312,22 +315,23 @@ class Writer:
 
     def _claim(self, deadline: float | None) -> int:
         """A slot to write message ``self._seq + 1`` into, marked as being written."""
-        w, lay, n = self._w, self._layout, self._layout.n_slots
+        w = self._w
         nxt = self._seq + 1
-        order = sorted(range(n), key=self._slot_seq.__getitem__)  # oldest first
         last_check = time.monotonic()
         while True:
             need_free = self._lossless_floor()
-            for slot in order:
+            readers = [b for b in self._readers if w[b + R_STATE] == 1]
+            pinned = {w[b + R_PIN] for b in readers}
+            for slot in self._lru:  # least recently written first
                 held = self._slot_seq[slot]
                 if need_free is not None and held > need_free:
-                    break  # older slots all taken by unread lossless messages
-                if any(w[base + R_PIN] == slot for base in self._live_readers()):
+                    break  # the newer slots all hold unread lossless messages too
+                if slot in pinned:
                     continue
                 base_w = self._slot_words[slot]
                 w[base_w + S_BEGIN] = nxt  # ① the slot is being written
                 fence()  # ②
-                if any(w[base + R_PIN] == slot for base in self._live_readers()):  # ③
+                if any(w[b + R_PIN] == slot for b in readers):  # ③
                     w[base_w + S_BEGIN] = held
                     continue
                 return slot
@@ -348,9 +352,11 @@ class Writer:
                 last_check = now
                 self._reap_dead_readers()
             wait = _CHECK_S if deadline is None else min(_CHECK_S, deadline - now)
-            if _wait_fd(self._space_fd, wait):
+            w[W_WRITER_WAITING] = 1
+            fence()  # the readers' read_seq stores are seen after this, or they see the flag
+            if self._lossless_floor() == need_free and _wait_fd(self._space_fd, wait):
                 _drain(self._space_fd)
-            _ = lay
+            w[W_WRITER_WAITING] = 0
 
     def _live_readers(self) -> list[int]:
         w = self._w
@@ -407,9 +413,12 @@ class Writer:
         w[W_HEARTBEAT] = now
         self._seq = seq
         self._slot_seq[slot] = seq
+        self._lru.remove(slot)
+        self._lru.append(slot)
+        fence()  # write_seq is seen by a reader before it sleeps, or its waiting flag is seen here
         with self._fd_lock:
             for base_r, fd in zip(self._readers, self._reader_fd, strict=True):
-                if fd >= 0 and w[base_r + R_STATE] == 1:
+                if fd >= 0 and w[base_r + R_WAITING]:
                     os.eventfd_write(fd, 1)
         return seq
 
@@ -711,8 +720,12 @@ class Reader:
             if deadline is not None and now >= deadline:
                 return -1, 0, 0
             wait = _CHECK_S if deadline is None else min(_CHECK_S, deadline - now)
-            if _wait_fd(self._fd, wait):
+            flag = self._base + R_WAITING
+            w[flag] = 1
+            fence()  # the writer sees the flag after this, or its write_seq is seen below
+            if w[W_WRITE_SEQ] == self._read_seq and _wait_fd(self._fd, wait):
                 _drain(self._fd)
+            w[flag] = 0
 
     def _message(
         self, slot: int, seq: int, dropped: int, payload: npt.NDArray[np.uint8]
@@ -755,13 +768,24 @@ class Reader:
         w[me + R_LAG_SUM] += lag
         w[me + R_LAG_MAX] = max(w[me + R_LAG_MAX], lag)
         if self.policy is Policy.LOSSLESS and self._space_fd >= 0:
-            os.eventfd_write(self._space_fd, 1)
+            fence()  # read_seq is seen by a writer before it sleeps, or its flag is seen here
+            if w[W_WRITER_WAITING]:
+                os.eventfd_write(self._space_fd, 1)
         return True
 
-    def read(self, timeout_s: float | None = None, *, latest: bool = False) -> Message | None:
+    def read(
+        self,
+        timeout_s: float | None = None,
+        *,
+        latest: bool = False,
+        out: npt.NDArray[np.uint8] | None = None,
+    ) -> Message | None:
         """The next message, copied out of shared memory (None after ``timeout_s``).
 
         ``latest=True`` skips to the newest message (what was skipped counts as dropped).
+        ``out``: a uint8 array of at least the stream's capacity to copy into (the payload is then
+        a view of it, valid until the next read into it) — no allocation per message, whose page
+        faults dominate the copy of a multi-MB message into a fresh array.
 
         Raises:
             ProducerGoneError: the writer is gone and everything it published has been read.
@@ -771,7 +795,17 @@ class Reader:
             if slot < 0:
                 return None
             nbytes = self._w[self._slot_words[slot] + S_NBYTES]
-            copy = np.empty(nbytes, np.uint8)
+            if out is None:
+                copy = np.empty(nbytes, np.uint8)
+            elif out.dtype == np.uint8 and out.ndim == 1 and out.shape[0] >= nbytes:
+                copy = out[:nbytes]
+            else:
+                self._w[self._base + R_PIN] = -1
+                msg_text = (
+                    f"stream {self.name!r}: read(out=…) needs a 1-D uint8 array of at least "
+                    f"{nbytes} bytes"
+                )
+                raise TransportError(msg_text)
             np.copyto(copy, self._payload[slot][:nbytes])  # ⓖ
             msg = self._message(slot, seq, dropped, copy)
             if self._release(slot, seq, dropped, msg):

@@ -6,10 +6,10 @@ Layout (all integers little-endian int64 "words"; a *line* is 8 words = 64 bytes
       line 0   magic, version, n_slots, slot_stride, capacity, max_readers, policy, generation
       line 1   owner_pid, owner_start, created_ns, closed
       line 2   write_seq                                  (alone on its line: written per message)
-      line 3   published, heartbeat_ns
+      line 3   published, heartbeat_ns, writer_waiting
       lines    order[n_slots]: slot of message n at order[n % n_slots]
       lines    reader r (2 lines each): pid, start, state, policy, read_seq, pin, delivered,
-               dropped | torn, lag_last_ns, lag_max_ns, lag_sum_ns, capture_lag_ns, -, -, -
+               dropped | torn, lag_last_ns, lag_max_ns, lag_sum_ns, capture_lag_ns, waiting, -, -
     slot s at control + s * slot_stride (page-aligned), each:
       line 0   seq_begin                                   (own line)
       line 1   seq_end                                     (own line)
@@ -70,12 +70,12 @@ _NAME = re.compile(r"^[A-Za-z0-9_.-]{1,200}$")
 W_MAGIC, W_VERSION, W_SLOTS, W_STRIDE, W_CAPACITY, W_READERS, W_POLICY, W_GENERATION = range(8)
 W_OWNER_PID, W_OWNER_START, W_CREATED, W_CLOSED = 8, 9, 10, 11
 W_WRITE_SEQ = 16
-W_PUBLISHED, W_HEARTBEAT = 24, 25
+W_PUBLISHED, W_HEARTBEAT, W_WRITER_WAITING = 24, 25, 26
 W_ORDER = 32
 READER_WORDS = 16
 # reader entry fields (offsets inside an entry)
 R_PID, R_START, R_STATE, R_POLICY, R_READ_SEQ, R_PIN, R_DELIVERED, R_DROPPED = range(8)
-R_TORN, R_LAG_LAST, R_LAG_MAX, R_LAG_SUM, R_CAPTURE_LAG = 8, 9, 10, 11, 12
+R_TORN, R_LAG_LAST, R_LAG_MAX, R_LAG_SUM, R_CAPTURE_LAG, R_WAITING = 8, 9, 10, 11, 12, 13
 # slot header words
 S_BEGIN, S_END, S_STAMP, S_PUBLISH, S_KIND, S_NBYTES, S_META_LEN = 0, 8, 16, 17, 18, 19, 20
 
