@@ -18,6 +18,8 @@ examples:
   redrive live --master http://127.0.0.1:11311 --topics /velodyne_points /camera/image_raw /imu \\
       --perception cluster-detector --record drive.mcap --out runs/live1
   redrive live --topics /points --pipeline pipeline.toml --frames 500
+  redrive live --replay drive.bag --record copy.mcap       a log played as a sensor rig
+  redrive live --synthetic urban --duration 20              the simulator in real time
 
 One scraper process per topic subscribes with rospy (under /usr/bin/python3) and hands each
 message to this process through shared memory; frames are assembled as the data arrives (the
@@ -71,12 +73,29 @@ def _run(args: argparse.Namespace) -> int:
     previous = signal.signal(signal.SIGINT, lambda *_: stop.set())
     recorder = None
     log = None
-    with LiveSession.ros1(
-        args.topics,
-        master_uri=master,
-        capacity=_capacities(args.capacity),
-        wait_for_topics_s=args.wait,
-    ) as session:
+    if args.replay is not None or args.synthetic is not None:
+        kind = "replay" if args.replay is not None else "synthetic"
+        session_cm = LiveSession.source(
+            kind,
+            args.replay if args.replay is not None else args.synthetic,
+            rate=args.rate,
+            topics=args.topics,
+            duration_s=args.duration,
+            lossless=args.record is not None,
+        )
+        source_text = f"{kind} source {args.replay or args.synthetic}"
+    else:
+        if not args.topics:
+            print("redrive live: give --topics (ROS 1), --replay LOG or --synthetic SCENARIO")
+            return 2
+        session_cm = LiveSession.ros1(
+            args.topics,
+            master_uri=master,
+            capacity=_capacities(args.capacity),
+            wait_for_topics_s=args.wait,
+        )
+        source_text = master
+    with session_cm as session:
         try:
             if args.record is not None:
                 recorder = DataLogger(session.specs, args.record)
@@ -86,7 +105,7 @@ def _run(args: argparse.Namespace) -> int:
                 timer.daemon = True
                 timer.start()
             console.print(
-                f"live: session {session.name}, {len(session.specs)} topic(s) from {master}; "
+                f"live: session {session.name}, {len(session.specs)} topic(s) from {source_text}; "
                 "receiving (Ctrl-C stops)",
                 highlight=False,
             )
@@ -102,7 +121,7 @@ def _run(args: argparse.Namespace) -> int:
                 "path": str(log.path),
                 "format": "live",
                 "sha256": None,
-                "master_uri": master,
+                "source": source_text,
                 "topics": {s.topic: s.msgtype for s in session.specs},
                 "record": None if args.record is None else str(args.record),
             }
@@ -121,10 +140,13 @@ def _run(args: argparse.Namespace) -> int:
     )
     assert log is not None
     for topic in log.received:
-        console.print(
-            f"  {topic}: {log.received[topic]} received, {log.dropped[topic]} not seen by the "
-            "dispatcher" + (f", {recorder.recorded[topic]} recorded" if recorder else "")
+        used = (
+            f"{log.received[topic]} to the pipeline, {log.dropped[topic]} missed"
+            if log.received[topic] or log.dropped[topic]
+            else "not used by the pipeline"
         )
+        kept = f", {recorder.recorded[topic]} recorded" if recorder else ""
+        console.print(f"  {topic}: {used}{kept}")
     if recorded is not None and recorder is not None:
         console.print(f"recorded: {recorded}")
         for err in recorder.errors[:5]:
@@ -147,7 +169,19 @@ def register(sub: Any) -> None:
     parser.add_argument(
         "--master", metavar="URI", help="ROS master (default $ROS_MASTER_URI or :11311)"
     )
-    parser.add_argument("--topics", nargs="+", required=True, metavar="TOPIC")
+    parser.add_argument(
+        "--topics", nargs="+", metavar="TOPIC", help="ROS 1 topics (with --replay: only these)"
+    )
+    source = parser.add_mutually_exclusive_group()
+    source.add_argument(
+        "--replay", type=Path, metavar="LOG", help="a replay source: a log at its recorded rate"
+    )
+    source.add_argument(
+        "--synthetic", metavar="SCENARIO", help="a synthetic source: redrive.sim in real time"
+    )
+    parser.add_argument(
+        "--rate", type=float, default=1.0, help="speed of --replay/--synthetic (default 1.0)"
+    )
     parser.add_argument("--pipeline", type=Path, metavar="TOML", help="a pipeline file")
     for role in ("perception", "planning", "control"):
         parser.add_argument(

@@ -31,6 +31,7 @@ def normalize_msgtype(name: str) -> str:
     parts = name.split("/")
     return f"{parts[0]}/msg/{parts[1]}" if len(parts) == 2 else name
 
+
 _MAGIC = b"\x89MCAP0\r\n"
 _ENCODINGS: Mapping[str, Encoding] = {"cdr": "cdr", "ros1": "ros1"}
 

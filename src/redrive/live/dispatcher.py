@@ -6,6 +6,12 @@ synchronisation, ego-state interpolation) assembles live frames unchanged. ``ros
 the scraper's serialised bytes, decoded here with redrive's decoders and a ROS 1 Noetic typestore;
 ``sensor`` streams yield already-typed samples (``native`` messages).
 
+**Clocks.** The frame assembler compares a message's *log time* (when it arrived) with header
+stamps. Live, arrival is the wall clock while the stamps are the source's clock — the wall clock
+for a live sensor, but years earlier for ``rosbag play`` or a replayed log. The log time given to
+a message is therefore its publish time minus the smallest (publish − stamp) offset seen so far in
+the session: arrival on the stamps' clock, with the lowest latency seen counted as zero.
+
 Every stream is read as a *keep-latest observer*: the dispatcher never slows a source down; the
 messages it did not get are counted (:attr:`LiveLog.dropped`). Recording reads the same streams
 losslessly on its own (:mod:`redrive.live.recorder`).
@@ -15,6 +21,7 @@ from __future__ import annotations
 
 import logging
 import select
+import struct
 import threading
 import time
 from collections.abc import Collection, Iterator, Mapping, Sequence
@@ -82,6 +89,16 @@ class LiveLog:
         from redrive.io._deserialize import Deserializer
 
         self._deserializer = Deserializer(self.path, ros1=store, cdr=None)
+        # ros1 types whose first field is a std_msgs/Header: the stamp is bytes 4..12
+        self._has_header = {
+            t
+            for t in ros1_types
+            if store is not None
+            and t in store.fielddefs
+            and store.fielddefs[t][1][:1]
+            and store.fielddefs[t][1][0][0] == "header"
+        }
+        self._offset_ns: int | None = None
         self._topics = MappingProxyType(
             {
                 s.topic: TopicInfo(
@@ -132,14 +149,14 @@ class LiveLog:
         unknown = set(topics or ()) - set(self._readers)
         if unknown:
             logger.debug("live log %s: no stream for %s", self.session, sorted(unknown))
-        fds = {r.fileno(): t for t, r in wanted.items()}
+        fds = [r.fileno() for r in wanted.values()]
         while not self.stop.is_set() and len(self.gone) < len(wanted):
-            ready, _, _ = select.select(list(fds), [], [], _POLL_S)
-            for fd in ready or list(fds):  # on a timeout, look at every stream (liveness)
-                topic = fds[fd]
-                if topic in self.gone:
-                    continue
-                yield from self._drain(topic, wanted[topic])
+            select.select(fds, [], [], _POLL_S)
+            # everything that is there, from every stream, in arrival order: a sweep read before
+            # the ego states published ahead of it would be assembled without them
+            batch = [m for t, r in wanted.items() if t not in self.gone for m in self._drain(t, r)]
+            batch.sort(key=lambda m: m.log_time_ns)
+            yield from batch
 
     def _drain(self, topic: str, reader: Reader) -> Iterator[LogMessage]:
         spec = self._specs[topic]
@@ -156,10 +173,14 @@ class LiveLog:
             self.received[topic] += 1
             self.dropped[topic] += msg.dropped_before
             if msg.kind == KIND_ROS1:
+                stamp = None
+                if spec.msgtype in self._has_header and msg.payload.shape[0] >= 12:
+                    sec, nsec = struct.unpack_from("<II", msg.payload.data, 4)
+                    stamp = sec * 1_000_000_000 + nsec
                 yield LogMessage(
                     topic=topic,
                     msgtype=spec.msgtype,
-                    log_time_ns=msg.publish_ns,
+                    log_time_ns=self._log_time(msg.publish_ns, stamp),
                     encoding="ros1",
                     raw=msg.payload.data,
                 )
@@ -171,13 +192,21 @@ class LiveLog:
                 yield LogMessage(
                     topic=topic,
                     msgtype=spec.msgtype,
-                    log_time_ns=msg.publish_ns,
+                    log_time_ns=self._log_time(msg.publish_ns, sample.stamp_ns),
                     encoding="native",
                     payload=decoded,
                 )
             else:
                 msg_text = f"live topic {topic}: message {msg.seq} has unknown kind {msg.kind}"
                 raise TransportError(msg_text)
+
+    def _log_time(self, publish_ns: int, stamp_ns: int | None) -> int:
+        """Arrival time on the stamps' clock (see the module text)."""
+        if stamp_ns:
+            offset = publish_ns - stamp_ns
+            if self._offset_ns is None or offset < self._offset_ns:
+                self._offset_ns = offset
+        return publish_ns - (self._offset_ns or 0)
 
     def deserialize(self, message: LogMessage) -> object:
         return self._deserializer(message)

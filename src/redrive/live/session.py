@@ -15,6 +15,7 @@ import os
 import shutil
 import signal
 import subprocess
+import sys
 import tempfile
 import time
 from collections.abc import Mapping, Sequence
@@ -134,7 +135,54 @@ class LiveSession:
                 session.processes.append(proc)
             deadline = time.monotonic() + ready_timeout_s
             for spec, proc in zip(specs, session.processes, strict=True):
-                _wait_ready(proc, spec.topic, deadline)
+                _wait_ready(proc, f"the scraper of {spec.topic}", deadline)
+        except BaseException:
+            session.close()
+            raise
+        return session
+
+    @classmethod
+    def source(
+        cls,
+        kind: str,
+        target: str | Path,
+        *,
+        name: str | None = None,
+        rate: float | None = 1.0,
+        topics: Sequence[str] | None = None,
+        duration_s: float | None = None,
+        lossless: bool = False,
+        ready_timeout_s: float = 60.0,
+    ) -> LiveSession:
+        """Start a replay (``kind="replay"``, ``target`` a log) or synthetic (``"synthetic"``,
+        ``target`` a scenario) source process (:mod:`redrive.live.sources`), a stand-in for a
+        sensor rig, and wait until its streams exist."""
+        from redrive.live.sources import replay_streams, synthetic_streams
+
+        name = name or default_session_name()
+        if kind == "replay":
+            specs = replay_streams(Path(target), name, topics=topics)
+            extra = ["--topics", *topics] if topics else []
+        elif kind == "synthetic":
+            specs = synthetic_streams(str(target), name)
+            extra = [] if duration_s is None else ["--duration", str(duration_s)]
+        else:
+            msg = f"unknown live source {kind!r}: replay or synthetic"
+            raise ConfigError(msg)
+        argv = [
+            sys.executable, "-m", "redrive.live.sources", kind, str(target), "--session", name,
+            "--rate", str(rate or 0), *extra, *(["--lossless"] if lossless else []),
+        ]  # fmt: skip
+        proc = subprocess.Popen(
+            argv,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            start_new_session=True,
+        )
+        session = cls(name, specs, [proc])
+        try:
+            _wait_ready(proc, f"{kind} source", time.monotonic() + ready_timeout_s)
         except BaseException:
             session.close()
             raise
@@ -185,7 +233,7 @@ def _wait_ready(proc: subprocess.Popen[str], topic: str, deadline: float) -> Non
     while True:
         left = deadline - time.monotonic()
         if left <= 0:
-            msg = f"the scraper of {topic} did not start within the timeout"
+            msg = f"{topic} did not start within the timeout"
             raise TransportError(msg)
         ready, _, _ = select.select([proc.stdout], [], [], left)
         if not ready:
@@ -196,5 +244,5 @@ def _wait_ready(proc: subprocess.Popen[str], topic: str, deadline: float) -> Non
         if not line:
             err = proc.stderr.read() if proc.stderr else ""
             last = "\n".join(err.strip().splitlines()[-5:])
-            msg = f"the scraper of {topic} exited (status {proc.wait()}): {last}"
+            msg = f"{topic} exited (status {proc.wait()}): {last}"
             raise TransportError(msg)

@@ -43,10 +43,11 @@ import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import numpy.typing as npt
+from rosbags.typesys.store import Typestore
 
 from redrive.errors import SimulationError
 from redrive.geometry import invert, transform_points
@@ -65,7 +66,16 @@ from redrive.sim.scene import Scene
 from redrive.sim.world import World
 from redrive.types import Box3D, DetectedObject, SensorType, Transform, VehicleState
 
-__all__ = ["GROUND_TRUTH_TOPIC", "SynthSummary", "ground_truth_objects", "synthesize"]
+__all__ = [
+    "EGO_STATE_TOPIC",
+    "GROUND_TRUTH_TOPIC",
+    "MessageSink",
+    "SensorSimulation",
+    "SynthSummary",
+    "ground_truth_objects",
+    "sensor_topic",
+    "synthesize",
+]
 
 GROUND_TRUTH_TOPIC = "/ground_truth/objects"
 EGO_STATE_TOPIC = "/ground_truth/ego_state"
@@ -83,6 +93,39 @@ class SynthSummary:
     duration_s: float
     messages: int
     topics: dict[str, str]  # topic → message type
+
+
+def sensor_topic(spec: SensorSpec) -> str:
+    """The topic a rig sensor's messages go on: ``/<name>``, a camera's ``/<name>/image_raw``."""
+    return f"/{spec.name}/image_raw" if spec.kind is SensorType.CAMERA else f"/{spec.name}"
+
+
+class MessageSink(Protocol):
+    """Where a :class:`SensorSimulation` sends its messages: a
+    :class:`~redrive.io.writer.McapWriter` (:func:`synthesize`), or a live source's buffer."""
+
+    @property
+    def typestore(self) -> Typestore:
+        """The ROS 2 typestore messages handed to :meth:`write_raw` are serialised with."""
+        ...
+
+    def write(
+        self,
+        topic: str,
+        log_time_ns: int,
+        value: object,
+        *,
+        frame_id: str | None = None,
+        stamp_ns: int | None = None,
+    ) -> None:
+        """A data-model value, as :meth:`McapWriter.write <redrive.io.writer.McapWriter.write>`."""
+        ...
+
+    def write_raw(
+        self, topic: str, msgtype: str, log_time_ns: int, cdr_bytes: bytes | memoryview
+    ) -> None:
+        """An already-serialised ROS 2 CDR message (the 2D LiDAR's ``LaserScan``)."""
+        ...
 
 
 def ground_truth_objects(
@@ -149,7 +192,7 @@ def _ticks(start_ns: int, stop_ns: int, rate_hz: float) -> Iterator[int]:
 class _Recorder:
     """Owns the models and the writer; turns sensor events into messages."""
 
-    def __init__(self, scenario: Scenario, rig: Rig, writer: McapWriter, world: World) -> None:
+    def __init__(self, scenario: Scenario, rig: Rig, writer: MessageSink, world: World) -> None:
         self.writer = writer
         self.world = world
         self.rig = rig
@@ -199,20 +242,18 @@ class _Recorder:
             camera = self.cameras[spec.name]
             frame = camera.render(self._scene())
             self.last_camera[spec.name] = frame
-            self.writer.write(
-                f"/{spec.name}/image_raw", stamp_ns, frame.image, frame_id=camera.frame_id
-            )
+            self.writer.write(sensor_topic(spec), stamp_ns, frame.image, frame_id=camera.frame_id)
         elif kind is SensorType.IMU:
             state = self.world.ego_state()
             yaw_accel = self._yaw_accel(state)
             imu = self.imus[spec.name].sample(state, rng, yaw_accel_rad_s2=yaw_accel)
-            self.writer.write(f"/{spec.name}", stamp_ns, imu, frame_id=spec.name)
+            self.writer.write(sensor_topic(spec), stamp_ns, imu, frame_id=spec.name)
         elif kind is SensorType.GNSS:
             fix = self.gnss[spec.name].fix(self.world.ego_state(), rng)
-            self.writer.write(f"/{spec.name}", stamp_ns, fix, frame_id=spec.name)
+            self.writer.write(sensor_topic(spec), stamp_ns, fix, frame_id=spec.name)
         elif kind is SensorType.ODOMETRY:
             odom = self.odometry[spec.name].measure(self.world.ego_state(), rng)
-            self.writer.write(f"/{spec.name}", stamp_ns, odom)
+            self.writer.write(sensor_topic(spec), stamp_ns, odom)
         else:  # pragma: no cover - the rig parser admits no other kind
             msg = f"sensor {spec.name!r}: kind {kind.value} cannot be simulated"
             raise SimulationError(msg)
@@ -232,7 +273,7 @@ class _Recorder:
         if spec.kind is SensorType.LIDAR_2D:
             self._write_laser_scan(spec, model, scan)
             return
-        self.writer.write(f"/{spec.name}", scan.stamp_ns, scan.cloud, frame_id=scan.frame_id)
+        self.writer.write(sensor_topic(spec), scan.stamp_ns, scan.cloud, frame_id=scan.frame_id)
         if spec.name == self.driver:
             pixels: dict[int, int] | None = None
             if self.last_camera:
@@ -296,8 +337,95 @@ class _Recorder:
         )
         msgtype = "sensor_msgs/msg/LaserScan"
         self.writer.write_raw(
-            f"/{spec.name}", msgtype, scan.stamp_ns, ts.serialize_cdr(msg, msgtype)
+            sensor_topic(spec), msgtype, scan.stamp_ns, ts.serialize_cdr(msg, msgtype)
         )
+
+
+class SensorSimulation:
+    """One scenario's world and sensor rig, stepped event by event (what :func:`synthesize` runs).
+
+    Building it parses the rig, builds the :class:`~redrive.sim.world.World` and schedules every
+    event; :meth:`run` then steps the world through them in time order, handing each message to a
+    :class:`MessageSink`.  Events: every sensor fires at its rate; a LiDAR's sweep is cast one
+    period after it starts (when the pose history covers it) and stamped at its start; the
+    ground-truth ego pose and ``/tf`` run at twice the odometry rate.
+
+    Args:
+        scenario: what to simulate.
+        duration_s: override the scenario's duration.
+        seed: override the scenario's seed.
+
+    Raises:
+        ConfigError: the scenario's rig is invalid.
+        SimulationError: the scenario cannot be simulated.
+    """
+
+    def __init__(
+        self, scenario: Scenario, *, duration_s: float | None = None, seed: int | None = None
+    ) -> None:
+        changes: dict[str, Any] = {}
+        if duration_s is not None:
+            if not duration_s > 0:
+                msg = f"duration must be > 0 s, got {duration_s}"
+                raise SimulationError(msg)
+            changes["duration_s"] = float(duration_s)
+        if seed is not None:
+            changes["seed"] = int(seed)
+        self.scenario = dataclasses.replace(scenario, **changes) if changes else scenario
+        self.rig = rig_from_mapping(self.scenario.rig, source=self.scenario.source)
+        self.world = World(self.scenario)
+        self.start_ns = self.world.time_ns
+        self.stop_ns = self.start_ns + round(self.scenario.duration_s * 1e9)
+        self._events = self._schedule()
+        self._started = False
+
+    def _schedule(self) -> list[tuple[int, int, str, str]]:
+        rig, start_ns, stop_ns = self.rig, self.start_ns, self.stop_ns
+        odom_rates = [s.rate_hz for s in rig.of_kind(SensorType.ODOMETRY)]
+        pose_rate_hz = 2.0 * max(odom_rates, default=50.0)
+        # Events: (time, order, kind, sensor).  A LiDAR fires at the start of each sweep and is
+        # cast one period later, when the pose history covers the whole sweep.
+        events: list[tuple[int, int, str, str]] = []
+        for order, spec in enumerate(rig):
+            for t in _ticks(start_ns, stop_ns, spec.rate_hz):
+                events.append((t, order, "fire", spec.name))
+                if spec.kind in (SensorType.LIDAR, SensorType.LIDAR_2D):
+                    end = t + round(1e9 / spec.rate_hz)
+                    if end <= stop_ns:
+                        events.append((end, -1, "sweep", spec.name))
+        events += [(t, -2, "pose", "") for t in _ticks(start_ns, stop_ns, pose_rate_hz)]
+        heapq.heapify(events)
+        return events
+
+    def run(self, sink: MessageSink) -> Iterator[int]:
+        """Write the static transforms, then step through the events in time order, writing
+        their messages to ``sink``; yields each event's time once its messages are written.
+
+        Raises:
+            SimulationError: called a second time (the world has moved on).
+        """
+        if self._started:
+            msg = "this SensorSimulation has already run; build a new one to run it again"
+            raise SimulationError(msg)
+        self._started = True
+        rig, world, events = self.rig, self.world, self._events
+        recorder = _Recorder(self.scenario, rig, sink, world)
+        recorder.write_static(self.start_ns)
+        while events:
+            stamp_ns, _, what, name = heapq.heappop(events)
+            world.step_to(stamp_ns)
+            if what == "pose":
+                recorder.write_pose(stamp_ns)
+            elif what == "sweep":
+                recorder.finish_sweep(rig[name])
+            else:
+                spec = rig[name]
+                if what == "fire" and not (
+                    spec.kind in (SensorType.LIDAR, SensorType.LIDAR_2D)
+                    and stamp_ns + round(1e9 / spec.rate_hz) > self.stop_ns
+                ):
+                    recorder.fire(spec, stamp_ns)
+            yield stamp_ns
 
 
 def synthesize(
@@ -320,54 +448,14 @@ def synthesize(
         SimulationError: the scenario cannot be simulated.
         LogError: the output cannot be written.
     """
-    changes: dict[str, Any] = {}
-    if duration_s is not None:
-        if not duration_s > 0:
-            msg = f"duration must be > 0 s, got {duration_s}"
-            raise SimulationError(msg)
-        changes["duration_s"] = float(duration_s)
-    if seed is not None:
-        changes["seed"] = int(seed)
-    scenario = dataclasses.replace(scenario, **changes) if changes else scenario
-    rig = rig_from_mapping(scenario.rig, source=scenario.source)
-    world = World(scenario)
-    start_ns = world.time_ns
-    stop_ns = start_ns + round(scenario.duration_s * 1e9)
-    odom_rates = [s.rate_hz for s in rig.of_kind(SensorType.ODOMETRY)]
-    pose_rate_hz = 2.0 * max(odom_rates, default=50.0)
-    # Events: (time, order, kind, sensor).  A LiDAR fires at the start of each sweep and is cast
-    # one period later, when the pose history covers the whole sweep.
-    events: list[tuple[int, int, str, str]] = []
-    for order, spec in enumerate(rig):
-        for t in _ticks(start_ns, stop_ns, spec.rate_hz):
-            events.append((t, order, "fire", spec.name))
-            if spec.kind in (SensorType.LIDAR, SensorType.LIDAR_2D):
-                end = t + round(1e9 / spec.rate_hz)
-                if end <= stop_ns:
-                    events.append((end, -1, "sweep", spec.name))
-    events += [(t, -2, "pose", "") for t in _ticks(start_ns, stop_ns, pose_rate_hz)]
-    heapq.heapify(events)
+    sim = SensorSimulation(scenario, duration_s=duration_s, seed=seed)
+    scenario = sim.scenario
     path = Path(output)
     with McapWriter(path) as writer:
-        recorder = _Recorder(scenario, rig, writer, world)
-        recorder.write_static(start_ns)
         total_s = scenario.duration_s
-        while events:
-            stamp_ns, _, what, name = heapq.heappop(events)
-            world.step_to(stamp_ns)
-            if what == "pose":
-                recorder.write_pose(stamp_ns)
-            elif what == "sweep":
-                recorder.finish_sweep(rig[name])
-            else:
-                spec = rig[name]
-                if what == "fire" and not (
-                    spec.kind in (SensorType.LIDAR, SensorType.LIDAR_2D)
-                    and stamp_ns + round(1e9 / spec.rate_hz) > stop_ns
-                ):
-                    recorder.fire(spec, stamp_ns)
+        for stamp_ns in sim.run(writer):
             if progress is not None:
-                progress((stamp_ns - start_ns) / 1e9, total_s)
+                progress((stamp_ns - sim.start_ns) / 1e9, total_s)
         messages = writer.message_count
         topics = dict(writer.topics)
     return SynthSummary(
