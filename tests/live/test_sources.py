@@ -298,13 +298,13 @@ def test_loop_replays_with_increasing_stamps(demo_log: Path, session: str) -> No
 def test_sample_too_large_for_its_stream_is_a_transport_error(
     demo_log: Path, session: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    real_scan = sources._scan
+    real_scan = sources.replay._scan
 
     def undersized(log: Any, topics: Any) -> Any:
         sizes, locations = real_scan(log, topics)
         return dict.fromkeys(sizes, 4096), locations
 
-    monkeypatch.setattr(sources, "_scan", undersized)
+    monkeypatch.setattr(sources.replay, "_scan", undersized)
     with pytest.raises(TransportError, match=r"/lidar_top does not fit stream .*capacity_bytes"):
         run_replay_source(demo_log, session, rate=None, topics=["/imu", "/lidar_top"])
     assert not _segments(session)

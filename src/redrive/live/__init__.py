@@ -1,4 +1,5 @@
-"""Live sources (L5): ROS 1 topics found through the master, scrapers feeding shared memory.
+"""Live sources (L5): ROS 1 topics found through the master, scrapers feeding shared memory,
+replay and synthetic sources, the live Sensor Dispatcher and the Data Logger (docs/live.md).
 
 Nothing here imports rospy: the core runs under the project's Python, where rospy is not
 importable.  The ROS master is reached through its XML-RPC API; processes that need rospy run
