@@ -8,6 +8,7 @@ import os
 import re
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -200,3 +201,30 @@ def test_live_replay_source_recorded_exactly(demo_log: Path, tmp_path: Path) -> 
         assert a.stamp_ns == b.stamp_ns
         assert np.array_equal(a.value.xyz, b.value.xyz)  # type: ignore[union-attr]
     assert not [p for p in stale_segments() if "live-" in p.name]
+
+
+def test_a_killed_live_run_leaves_no_source_and_no_segment(demo_log: Path, tmp_path: Path) -> None:
+    """SIGKILL of `redrive live`: its source process notices and stops, unlinking its streams."""
+    import signal
+
+    argv = [
+        sys.executable, "-m", "redrive", "live", "--replay", str(demo_log), "--duration", "60",
+        "--out", str(tmp_path / "run"),
+    ]  # fmt: skip
+    live = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    assert live.stderr is not None
+    for line in live.stderr:
+        if "receiving" in line:
+            break
+    session = f"redrive.live-{live.pid}."
+    assert [p for p in Path("/dev/shm").iterdir() if p.name.startswith(session)]
+    live.send_signal(signal.SIGKILL)
+    live.wait(timeout=10)
+    live.stderr.close()
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        left = [p for p in Path("/dev/shm").iterdir() if p.name.startswith(session)]
+        if not left:
+            break
+        time.sleep(0.1)
+    assert not left, left

@@ -10,7 +10,7 @@ sent, and is not deserialised here — and publishes each one into the stream as
 receive time as its stamp). The core decodes it with redrive's decoders.
 
 If the ROS master restarts (its pid changes), the subscription is registered anew with the new
-master. SIGTERM/SIGINT stop it; the stream's segment is unlinked on every exit path.
+master. SIGTERM/SIGINT stop it, and so does the death of the process that started it; the stream's segment is unlinked on every exit path.
 
 Usage: ``python3 ros1_scraper.py --topic /velodyne_points --stream live-1.velodyne_points
 --capacity 4000000 [--policy lossless] [--slots 8]``; prints ``READY`` once subscribed.
@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import signal
 import sys
 import threading
@@ -103,7 +104,11 @@ def main(argv: list[str] | None = None) -> int:
         sub = subscribe()
         pid = _master_pid(uri)
         print("READY", flush=True)
+        parent = os.getppid()
         while not stop.wait(0.5):
+            if os.getppid() != parent:  # redrive live was killed: no orphan scraper stays
+                logger.warning("the process that started this scraper is gone: stopping")
+                break
             now_pid = _master_pid(uri)
             if now_pid is not None and pid is not None and now_pid != pid:
                 logger.info("ROS master restarted (pid %d → %d): subscribing again", pid, now_pid)

@@ -85,6 +85,7 @@ class LiveSession:
             )
             raise TransportError(msg)
         name = name or default_session_name()
+        remove_stale()  # segments of killed earlier sessions
         deadline = time.monotonic() + wait_for_topics_s
         while True:
             known = {t.name: t for t in list_topics(master_uri) if t.msg_type != "*"}
@@ -160,6 +161,7 @@ class LiveSession:
         from redrive.live.sources import replay_streams, synthetic_streams
 
         name = name or default_session_name()
+        remove_stale()  # segments of killed earlier sessions
         if kind == "replay":
             specs = replay_streams(Path(target), name, topics=topics)
             extra = ["--topics", *topics] if topics else []

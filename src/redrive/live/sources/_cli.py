@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import signal
 import sys
 import time
@@ -21,10 +22,13 @@ logger = logging.getLogger(__name__)
 
 
 class _SignalStop:
-    """A stop flag set from a signal handler (a ``threading.Event`` set there may deadlock)."""
+    """A stop flag set from a signal handler (a ``threading.Event`` set there may deadlock), or
+    when the process that started this one is gone (a killed ``redrive live`` leaves no orphan
+    source publishing into shared memory)."""
 
     def __init__(self) -> None:
         self._set = False
+        self._parent = os.getppid()
 
     def handle(self, signum: int, frame: FrameType | None) -> None:
         del frame
@@ -32,6 +36,9 @@ class _SignalStop:
         self._set = True
 
     def is_set(self) -> bool:
+        if not self._set and os.getppid() != self._parent:
+            logger.warning("the process that started this source is gone: stopping")
+            self._set = True
         return self._set
 
     def wait(self, timeout: float | None = None) -> bool:
