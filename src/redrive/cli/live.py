@@ -48,24 +48,14 @@ def _capacities(items: list[str] | None) -> dict[str, int]:
 def _run(args: argparse.Namespace) -> int:
     from rich.console import Console
 
-    from redrive.cli.run import _print_report
-    from redrive.config import load_pipeline, pipeline_from_plugins, reference_pipeline
+    from redrive.cli.run import _print_report, pipeline_from_args
     from redrive.engine import RealtimeMode, RunRequest, run_reader
     from redrive.live import default_master_uri
     from redrive.live.dispatcher import LiveLog
     from redrive.live.recorder import DataLogger
     from redrive.live.session import LiveSession
 
-    if args.pipeline is not None:
-        pipeline = load_pipeline(args.pipeline)
-    elif args.perception or args.planning or args.control:
-        pipeline = pipeline_from_plugins(
-            perception=args.perception or (),
-            planning=args.planning or (),
-            control=args.control or (),
-        )
-    else:
-        pipeline = reference_pipeline()
+    pipeline = pipeline_from_args(args)
     master = args.master or default_master_uri()
     out = args.out or Path("runs") / f"live-{time.strftime('%Y%m%d-%H%M%S')}"
     console = Console(stderr=True)

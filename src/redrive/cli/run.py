@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-__all__ = ["parse_frames", "register"]
+__all__ = ["parse_frames", "pipeline_from_args", "register"]
 
 _EPILOG = """\
 examples:
@@ -87,26 +87,31 @@ def _print_report(report: Any, out: Path) -> None:
     console.print(f"results: {out}  (manifest.json, *.parquet; `redrive export {out}`)")
 
 
-def _run(args: argparse.Namespace) -> int:
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
-
+def pipeline_from_args(args: argparse.Namespace) -> Any:
+    """The pipeline of ``--pipeline FILE``, else of ``--perception/--planning/--control``
+    plugins, else the reference pipeline (shared by ``redrive run`` and ``redrive live``)."""
     from redrive.config import load_pipeline, pipeline_from_plugins, reference_pipeline
-    from redrive.engine import RunRequest, run_log
 
     if args.pipeline is not None:
-        if args.perception or args.planning or args.control:
-            print("redrive run: give either --pipeline or --perception/--planning/--control")
-            return 2
-        pipeline = load_pipeline(args.pipeline)
-    elif args.perception or args.planning or args.control:
-        pipeline = pipeline_from_plugins(
+        return load_pipeline(args.pipeline)
+    if args.perception or args.planning or args.control:
+        return pipeline_from_plugins(
             perception=args.perception or (),
             planning=args.planning or (),
             control=args.control or (),
         )
-    else:
-        pipeline = reference_pipeline()
-    pipeline = pipeline.with_options(
+    return reference_pipeline()
+
+
+def _run(args: argparse.Namespace) -> int:
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
+
+    from redrive.engine import RunRequest, run_log
+
+    if args.pipeline is not None and (args.perception or args.planning or args.control):
+        print("redrive run: give either --pipeline or --perception/--planning/--control")
+        return 2
+    pipeline = pipeline_from_args(args).with_options(
         mode=args.mode,
         executor=args.executor,
         seed=args.seed,
