@@ -180,7 +180,7 @@ def test_live_replay_source_recorded_exactly(demo_log: Path, tmp_path: Path) -> 
 
     argv = [
         sys.executable, "-m", "redrive", "live", "--replay", str(demo_log), "--rate", "2",
-        "--duration", "3", "--record", str(tmp_path / "copy.mcap"), "--out", str(tmp_path / "run"),
+        "--duration", "4", "--record", str(tmp_path / "copy.mcap"), "--out", str(tmp_path / "run"),
     ]  # fmt: skip
     done = subprocess.run(argv, capture_output=True, text=True, timeout=120, check=False)
     assert done.returncode == 0, done.stderr

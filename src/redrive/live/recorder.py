@@ -58,6 +58,7 @@ class DataLogger:
         self.path = Path(path)
         self.specs = list(specs)
         self.recorded: dict[str, int] = {s.topic: 0 for s in specs}
+        self._msgtype = {s.topic: s.msgtype for s in specs}
         self.errors: list[str] = []
         self.raw_ros1 = all(s.payload == "ros1" for s in specs)
         self._readers: dict[str, Reader] = {}
@@ -98,20 +99,20 @@ class DataLogger:
         self._seq: dict[str, int] = {}
         assert self._ros1_store is not None
         schemas: dict[str, int] = {}
+        md5s: dict[str, str] = {}
         for spec in self.specs:
             if spec.msgtype not in schemas:
                 text, md5 = self._ros1_store.generate_msgdef(spec.msgtype, ros_version=1)
-                schemas[spec.msgtype] = self._raw.register_schema(
+                schema_id = self._raw.register_schema(
                     name=ros1_type(spec.msgtype), encoding="ros1msg", data=text.encode()
                 )
-                self._md5 = md5
+                schemas[spec.msgtype] = schema_id
+                md5s[spec.msgtype] = md5
             self._channels[spec.topic] = self._raw.register_channel(
                 topic=spec.topic,
                 message_encoding="ros1",
                 schema_id=schemas[spec.msgtype],
-                metadata={
-                    "md5sum": self._ros1_store.generate_msgdef(spec.msgtype, ros_version=1)[1]
-                },
+                metadata={"md5sum": md5s[spec.msgtype]},
             )
             self._seq[spec.topic] = 0
 
@@ -128,11 +129,13 @@ class DataLogger:
                 if topic in gone:
                     continue
                 try:
-                    msg = reader.read(timeout_s=0.0)
-                    while msg is not None:
-                        idle = False
-                        self._write(topic, msg)
-                        msg = reader.read(timeout_s=0.0)
+                    # zero-copy views: the one copy is the file's own (bytes or CDR encoding)
+                    while True:
+                        with reader.view(timeout_s=0.0) as msg:
+                            if msg is None:
+                                break
+                            idle = False
+                            self._write(topic, msg)
                 except ProducerGoneError:
                     gone.add(topic)
                 except (TransportError, LogError, UnsupportedMessageError) as err:
@@ -144,7 +147,6 @@ class DataLogger:
     def _write(self, topic: str, msg: Message) -> None:
         kind, meta, data = msg.kind, msg.meta, msg.payload
         log_ns, stamp_ns = msg.publish_ns, msg.stamp_ns
-        spec_type = next(s.msgtype for s in self.specs if s.topic == topic)
         if self._native is None:
             if kind != KIND_ROS1:
                 text = f"message of kind {kind} on a ROS 1 recording"
@@ -168,7 +170,7 @@ class DataLogger:
             decoded = decode(
                 LogMessage(
                     topic=topic,
-                    msgtype=spec_type,
+                    msgtype=self._msgtype[topic],
                     log_time_ns=log_ns,
                     encoding="ros1",
                     raw=data.data,

@@ -158,20 +158,15 @@ def process_alive(pid: int, start: int) -> bool:
         return False
 
 
-_SELF_START = process_start(os.getpid())
+_START_OF: dict[int, int] = {}  # pid → start time, so a forked child reads its own
 
 
 def self_identity() -> tuple[int, int]:
-    """(pid, start time) of this process (re-read after a fork)."""
-    global _SELF_START  # noqa: PLW0603 - cached per process, refreshed after fork
+    """(pid, start time) of this process."""
     pid = os.getpid()
-    if _SELF_START is None or _CACHED_PID[0] != pid:
-        _SELF_START = process_start(pid) or 0
-        _CACHED_PID[0] = pid
-    return pid, _SELF_START
-
-
-_CACHED_PID = [os.getpid()]
+    if pid not in _START_OF:
+        _START_OF[pid] = process_start(pid) or 0
+    return pid, _START_OF[pid]
 
 
 class Segment:
