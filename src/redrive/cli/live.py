@@ -48,7 +48,7 @@ def _capacities(items: list[str] | None) -> dict[str, int]:
 def _run(args: argparse.Namespace) -> int:
     from rich.console import Console
 
-    from redrive.cli.run import _print_report, pipeline_from_args
+    from redrive.cli.run import pipeline_from_args, print_run_report
     from redrive.engine import RealtimeMode, RunRequest, run_reader
     from redrive.live import default_master_uri
     from redrive.live.dispatcher import LiveLog
@@ -122,7 +122,7 @@ def _run(args: argparse.Namespace) -> int:
             if log is not None:
                 log.close()
     recorded = recorder.stop() if recorder is not None else None
-    _print_report(report, out)
+    print_run_report(report, out)
     console = Console(width=None if sys.stdout.isatty() else 120)
     console.print(
         f"frames: {hooks.received_frames} assembled, {hooks.skipped_frames} skipped "

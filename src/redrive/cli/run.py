@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-__all__ = ["parse_frames", "pipeline_from_args", "register"]
+__all__ = ["parse_frames", "pipeline_from_args", "print_run_report", "register"]
 
 _EPILOG = """\
 examples:
@@ -53,7 +53,7 @@ def _default_out(log: Path) -> Path:
     return Path("runs") / f"{stem}-{time.strftime('%Y%m%d-%H%M%S')}"
 
 
-def _print_report(report: Any, out: Path) -> None:
+def print_run_report(report: Any, out: Path) -> None:
     from rich.console import Console
     from rich.table import Table
 
@@ -152,7 +152,7 @@ def _run(args: argparse.Namespace) -> int:
             progress_bar.update(task, completed=done, rate=rate)
 
         report = run_log(request, on_start=on_start, progress=on_progress)
-    _print_report(report, out)
+    print_run_report(report, out)
     if report.status == "interrupted":
         print(f"interrupted: continue with `redrive run {args.log} --out {out} --resume`")
         return 130

@@ -29,6 +29,7 @@ from pathlib import Path
 from types import MappingProxyType, TracebackType
 
 from redrive.errors import ConfigError, TransportError
+from redrive.io._deserialize import Deserializer
 from redrive.io.base import LogMessage, TopicInfo
 from redrive.io.decoders.base import Decoded
 from redrive.io.typestore import typestore_for
@@ -86,8 +87,6 @@ class LiveLog:
             raise
         ros1_types = sorted({s.msgtype for s in specs if s.payload == "ros1"})
         store = typestore_for(1, needed=ros1_types)[0] if ros1_types else None
-        from redrive.io._deserialize import Deserializer
-
         self._deserializer = Deserializer(self.path, ros1=store, cdr=None)
         # ros1 types whose first field is a std_msgs/Header: the stamp is bytes 4..12
         self._has_header = {
