@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 DEMO_DIR := .demo
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: demo test lint venv clean bench-read system-test-deps
+.PHONY: demo test lint venv clean bench-read system-test-deps gui
 
 # Debian's python3 ships without venv/ensurepip: install python3-venv when it is missing.
 $(BIN)/python:
@@ -23,7 +23,7 @@ $(VENV)/.installed: $(BIN)/python pyproject.toml
 	@touch $@
 
 $(VENV)/.installed-test: $(VENV)/.installed pyproject.toml
-	$(BIN)/pip install -q -e '.[test,bench]'
+	$(BIN)/pip install -q -e '.[test,bench,gui]'
 	@touch $@
 
 venv: $(VENV)/.installed
@@ -56,9 +56,15 @@ ROS1_DEBS := ros-core python3-rospy python3-rosbag python3-rostopic python3-sens
 ROS1_PY_CHECK := import rospy, rosbag, rostopic, numpy, sensor_msgs.msg, std_msgs.msg, \
   geometry_msgs.msg, nav_msgs.msg, visualization_msgs.msg, tf2_msgs.msg
 
+# Qt's xcb platform plugin and Mesa's software GL under Xvfb, for the GUI tests (NOTES.md: xauth
+# is only "recommended" by xvfb, but xvfb-run needs it).
+GUI_DEBS := xvfb xauth libgl1 libegl1 libgl1-mesa-dri libglx-mesa0 libegl-mesa0 libfontconfig1 \
+  libxkbcommon-x11-0 libxcb-cursor0 libxcb-icccm4 libxcb-keysyms1 libxcb-image0 libxcb-randr0 \
+  libxcb-render-util0 libxcb-shape0 libxcb-xfixes0 libxcb-xkb1
+
 # Debian packages the tests use: Chromium renders the HTML report (headless screenshot test);
-# ROS 1 runs the live-mode tests; libatomic1 gives the transport its memory fence.  Installs only
-# what is missing, with one apt-get update.
+# ROS 1 runs the live-mode tests; libatomic1 gives the transport its memory fence; Xvfb and the
+# GL/xcb libraries run the GUI tests.  Installs only what is missing, with one apt-get update.
 system-test-deps:
 	@debs=""; \
 	if ! command -v chromium >/dev/null 2>&1; then \
@@ -73,6 +79,12 @@ system-test-deps:
 	  echo "installing libatomic1 (Debian): the shared-memory transport's memory fence"; \
 	  debs="$$debs libatomic1"; \
 	fi; \
+	missing_gui=$$(dpkg-query -W -f='$${db:Status-Abbrev} $${Package}\n' $(GUI_DEBS) 2>&1 | \
+	  grep -v '^ii ' | wc -l); \
+	if [ "$$missing_gui" != 0 ] || ! command -v xvfb-run >/dev/null 2>&1; then \
+	  echo "installing Xvfb and the GL/xcb libraries (Debian) for the GUI tests"; \
+	  debs="$$debs $(GUI_DEBS)"; \
+	fi; \
 	if [ -n "$$debs" ]; then \
 	  $(SUDO) apt-get update -qq && \
 	  $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$debs >/dev/null; \
@@ -80,7 +92,13 @@ system-test-deps:
 
 ## test: install test needs, lint, run the whole suite (slow/soak tests run as benchmarks)
 test: system-test-deps lint
-	$(BIN)/pytest -q -m "not slow" -p no:cacheprovider
+	xvfb-run -a -s "-screen 0 1600x1000x24" $(BIN)/pytest -q -m "not slow" -p no:cacheprovider
+
+## gui: install redrive with its GUI extra and open the demo log (run `make demo` first for its run)
+gui: $(VENV)/.installed
+	$(BIN)/pip install -q -e '.[gui]'
+	@test -f $(DEMO_DIR)/urban.mcap || $(BIN)/redrive synth urban --duration 20 -o $(DEMO_DIR)/urban.mcap
+	$(BIN)/redrive gui $$( [ -d $(DEMO_DIR)/run ] && echo $(DEMO_DIR)/run || echo $(DEMO_DIR)/urban.mcap )
 
 bench-read: $(VENV)/.installed
 	$(BIN)/redrive bench read --help

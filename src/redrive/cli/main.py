@@ -27,6 +27,7 @@ _COMMANDS = (
     "compare",
     "algorithms",
     "new_algorithm",
+    "gui",
     "bench",
 )
 
@@ -43,6 +44,7 @@ examples:
   redrive compare runs/a runs/b          A/B: per-metric deltas, significance, worst frames
   redrive algorithms                     the installed algorithms
   redrive new-algorithm my_planner --role planning   a template to start from
+  redrive gui runs/mine                  the desktop GUI: planview, camera, timeline, plots
   redrive bench read drive.bag           decoding speed against a raw read
 
 Logs: ROS 1 .bag, ROS 2 bag directories (sqlite3/mcap), .mcap, KITTI object folders.

@@ -1,0 +1,413 @@
+"""The frame loader: opens logs, decodes frames and builds :class:`~redrive.gui.scene.Scene`s in
+worker threads, so the GUI thread never decodes.
+
+Requests do not queue: :meth:`FrameLoader.request` replaces whatever request is waiting, so
+when playback asks faster than frames decode, the frames in between are skipped — never piled
+up.  :attr:`FrameLoader.busy` tells the playback timer a frame is still on its way.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import threading
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from PySide6 import QtCore
+
+from redrive.errors import RedriveError
+from redrive.gui.scene import (
+    CameraScene,
+    ColorMode,
+    Layer,
+    LayerLines,
+    RasterSpec,
+    Scene,
+    box_edge_segments,
+    color_points,
+    decimate,
+    path_points,
+    project_segments,
+    rasterize_top_down,
+    splat_points,
+)
+from redrive.gui.session import LogSession, RunData, series_from_log
+from redrive.io.decoders import decode
+from redrive.io.tf_buffer import TransformBuffer
+from redrive.types import Box3D, DetectedObject, Frame, Image, PointCloud, SensorType, Transform
+
+__all__ = ["PALETTE", "FrameLoader", "LogSummary", "ViewOptions", "build_scene", "to_rgb8"]
+
+logger = logging.getLogger(__name__)
+
+GT_COLOR = (60, 220, 90)
+EGO_COLOR = (230, 230, 230)
+PATH_COLOR = (255, 200, 40)
+#: colours of the algorithms' detections, in manifest order.
+PALETTE = ((255, 80, 80), (80, 160, 255), (255, 140, 0), (200, 90, 255), (0, 220, 220))
+#: a mid-size car with its rear axle at base_link (REP-105's ego reference point).
+_EGO_BOX = Box3D(center=np.array([1.4, 0.0, 0.8]), size=np.array([4.6, 1.9, 1.6]), yaw_rad=0.0)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ViewOptions:
+    """What the views want drawn; part of every frame request."""
+
+    color_mode: ColorMode = ColorMode.DISTANCE
+    layers: frozenset[Layer] = frozenset(Layer)
+    planview_2d: bool = False
+    camera: str | None = None
+    max_points_3d: int = 150_000
+    raster: RasterSpec = field(default_factory=RasterSpec)
+    algorithms: frozenset[str] | None = None  # None: every perception algorithm of the run
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class LogSummary:
+    """What :attr:`FrameLoader.opened` tells the window about a freshly opened log."""
+
+    path: Path
+    format: str
+    topics: Mapping[str, Any]
+    driver_topic: str
+    expected_frames: int
+    start_ns: int
+    end_ns: int
+    cameras: tuple[str, ...]
+    open_s: float
+
+
+def to_rgb8(image: Image) -> npt.NDArray[np.uint8]:
+    """An (H, W, 3) uint8 rgb copy of any supported encoding (mono16 scaled by its max)."""
+    px = image.pixels
+    enc = image.encoding.lower()
+    if px.dtype != np.uint8:
+        top = float(px.max()) or 1.0
+        px = (px.astype(np.float32) * (255.0 / top)).astype(np.uint8)
+    if px.ndim == 2:
+        return np.repeat(px[:, :, None], 3, axis=2)
+    if enc.startswith("bgr"):
+        return np.ascontiguousarray(px[:, :, 2::-1])
+    return np.ascontiguousarray(px[:, :, :3])
+
+
+class _Static:
+    """Static transforms of a log (sensor mounts), read once."""
+
+    def __init__(self, session: LogSession) -> None:
+        self.tf = TransformBuffer()
+        topics = [t for t in session.assembler.sensor_map.tf_topics if t.endswith("tf_static")]
+        if topics:
+            for message in session.log.messages(topics=topics):
+                try:
+                    value = decode(message, session.log.deserialize).value
+                except RedriveError:
+                    continue
+                if isinstance(value, tuple):
+                    self.tf.add_all((t for t in value if isinstance(t, Transform)), static=True)
+        self._cache: dict[str, npt.NDArray[np.float64] | None] = {}
+
+    def base_from(self, frame_id: str) -> npt.NDArray[np.float64] | None:
+        if frame_id not in self._cache:
+            try:
+                self._cache[frame_id] = self.tf.lookup("base_link", frame_id, 0)
+            except (RedriveError, LookupError):
+                self._cache[frame_id] = None
+        return self._cache[frame_id]
+
+
+def _lidar_in_base(frame: Frame, static: _Static | None) -> tuple[Any, Any]:
+    """(xyz float32 (N,3) in base_link, intensity or None) of the frame's 3D LiDAR."""
+    for data in frame.sensors.values():
+        if data.sensor_type is SensorType.LIDAR and isinstance(data.data, PointCloud):
+            xyz = data.data.xyz
+            mat = static.base_from(data.frame_id) if static is not None else None
+            if mat is not None:
+                xyz = (xyz @ mat[:3, :3].T.astype(np.float32)) + mat[:3, 3].astype(np.float32)
+            elif any(data.sensor_location):
+                xyz = xyz + np.asarray(data.sensor_location, dtype=np.float32)
+            return np.ascontiguousarray(xyz, dtype=np.float32), data.data.channels.get("intensity")
+    return np.zeros((0, 3), np.float32), None
+
+
+def build_scene(
+    frame: Frame,
+    options: ViewOptions,
+    *,
+    run: RunData | None = None,
+    static: _Static | None = None,
+    calibrations: Mapping[str, npt.NDArray[np.float64]] | None = None,
+) -> Scene:
+    """Everything the views draw for ``frame`` (pure numpy; runs in the loader thread).
+
+    ``calibrations`` maps a camera's sensor id to its 3×4 ``image_from_base``.
+    """
+    xyz, intensity = _lidar_in_base(frame, static)
+    colors = color_points(xyz, options.color_mode, intensity=intensity)
+    layers_on = options.layers
+    raster = None
+    if options.planview_2d:
+        shown = len(xyz) if Layer.POINTS in layers_on else 0
+        raster = rasterize_top_down(xyz[:shown], colors[:shown], options.raster)
+    keep = decimate(len(xyz), options.max_points_3d)
+    layers: list[LayerLines] = []
+    gt = frame.ground_truth
+    if run is not None and not gt:
+        gt = run.ground_truth.get(frame.stamp_ns, gt)
+    if Layer.GROUND_TRUTH in layers_on and gt:
+        layers.append(
+            LayerLines(name="ground truth", color=GT_COLOR, segments=box_edge_segments(gt))
+        )
+    if run is not None and Layer.DETECTIONS in layers_on:
+        for n, (name, per_frame) in enumerate(run.detections.items()):
+            if options.algorithms is not None and name not in options.algorithms:
+                continue
+            objects = per_frame.get(frame.stamp_ns, ())
+            labels: tuple[tuple[str, float, float, float], ...] = ()
+            if Layer.TRACK_IDS in layers_on and n == len(run.detections) - 1:  # the last stage
+                labels = tuple(
+                    (
+                        str(o.object_id),
+                        float(o.box.center[0]),
+                        float(o.box.center[1]),
+                        float(o.box.center[2] + o.box.size[2] / 2),
+                    )
+                    for o in objects
+                )
+            layers.append(
+                LayerLines(
+                    name=name,
+                    color=PALETTE[n % len(PALETTE)],
+                    segments=box_edge_segments(objects),
+                    labels=labels,
+                )
+            )
+    if Layer.EGO in layers_on:
+        ego = DetectedObject(object_id=-1, box=_EGO_BOX)
+        layers.append(LayerLines(name="ego", color=EGO_COLOR, segments=box_edge_segments([ego])))
+    path = None
+    if run is not None and Layer.PATH in layers_on:
+        for paths in run.paths.values():
+            path = path_points(paths.get(frame.stamp_ns))
+            if path is not None:
+                break
+    cameras = {}
+    if options.camera is not None and options.camera in frame.sensors:
+        cameras[options.camera] = _camera_scene(
+            frame, options, xyz=xyz, layers=layers, calibrations=calibrations or {}
+        )
+    points = xyz[keep] if Layer.POINTS in layers_on else np.zeros((0, 3), np.float32)
+    return Scene(
+        index=frame.index,
+        stamp_ns=frame.stamp_ns,
+        points=points,
+        colors=colors[keep] if Layer.POINTS in layers_on else np.zeros((0, 4), np.float32),
+        point_count=len(xyz),
+        layers=tuple(layers),
+        path=path,
+        raster=raster,
+        cameras=cameras,
+        info={"ground_truth": len(gt or ())},
+    )
+
+
+def _camera_scene(
+    frame: Frame,
+    options: ViewOptions,
+    *,
+    xyz: npt.NDArray[np.float32],
+    layers: list[LayerLines],
+    calibrations: Mapping[str, npt.NDArray[np.float64]],
+) -> CameraScene:
+    sensor_id = options.camera or ""
+    data = frame.sensors[sensor_id].data
+    assert isinstance(data, Image)
+    image = to_rgb8(data)
+    mat = calibrations.get(sensor_id)
+    segments: dict[str, tuple[tuple[int, int, int], npt.NDArray[np.float64]]] = {}
+    if mat is not None:
+        if Layer.POINTS in options.layers:
+            image = image.copy() if not image.flags.writeable else image
+            splat_points(image, mat, xyz)
+        for layer in layers:
+            if layer.name != "ego":
+                segments[layer.name] = (layer.color, project_segments(mat, layer.segments))
+    return CameraScene(
+        sensor_id=sensor_id, image=image, segments=segments, calibrated=mat is not None
+    )
+
+
+class FrameLoader(QtCore.QObject):
+    """Opens a log and serves frame requests from a worker thread (signals carry the results)."""
+
+    opened = QtCore.Signal(object)  # LogSummary
+    open_failed = QtCore.Signal(str, str)  # path, message
+    indexed = QtCore.Signal(int, bool)  # driver samples known so far, done
+    series_ready = QtCore.Signal(object)  # redrive.gui.session.Series
+    scene_ready = QtCore.Signal(object)  # Scene
+    frame_failed = QtCore.Signal(int, str)  # index, message
+
+    def __init__(self, parent: QtCore.QObject | None = None) -> None:
+        super().__init__(parent)
+        self._cond = threading.Condition()
+        self._open_path: Path | None = None
+        self._wanted: tuple[int, ViewOptions] | None = None
+        self._stop = False
+        self._busy = False
+        self.session: LogSession | None = None
+        self.run: RunData | None = None
+        self._static: _Static | None = None
+        self._calibrations: dict[str, npt.NDArray[np.float64]] = {}
+        self._generation = 0
+        self._thread = threading.Thread(target=self._loop, name="redrive-gui-loader", daemon=True)
+        self._thread.start()
+
+    @property
+    def busy(self) -> bool:
+        """A request is waiting or being served."""
+        with self._cond:
+            return self._busy or self._wanted is not None or self._open_path is not None
+
+    def open(self, path: str | Path) -> None:
+        with self._cond:
+            self._open_path = Path(path)
+            self._wanted = None
+            self._cond.notify()
+
+    def set_run(self, run: RunData | None) -> None:
+        with self._cond:
+            self.run = run
+
+    def request(self, index: int, options: ViewOptions) -> None:
+        """Ask for frame ``index``; replaces a request that is still waiting."""
+        with self._cond:
+            self._wanted = (index, options)
+            self._cond.notify()
+
+    def close(self) -> None:
+        with self._cond:
+            self._stop = True
+            self._cond.notify()
+        self._thread.join(timeout=5.0)
+        if self.session is not None:
+            self.session.close()
+
+    # -- worker side ----------------------------------------------------------------------------
+
+    def _loop(self) -> None:
+        while True:
+            with self._cond:
+                while not self._stop and self._open_path is None and self._wanted is None:
+                    self._cond.wait()
+                if self._stop:
+                    return
+                path, self._open_path = self._open_path, None
+                wanted = None if path is not None else self._wanted
+                self._wanted = None
+                self._busy = True
+            try:
+                if path is not None:
+                    self._do_open(path)
+                elif wanted is not None:
+                    self._do_frame(*wanted)
+            finally:
+                with self._cond:
+                    self._busy = False
+
+    def _do_open(self, path: Path) -> None:
+        t0 = time.perf_counter()
+        if self.session is not None:
+            self.session.close()
+            self.session = None
+        self._generation += 1
+        try:
+            session = LogSession(path)
+            static = _Static(session)
+            calibrations = _calibrations(session, static)
+        except (RedriveError, OSError) as err:
+            self.open_failed.emit(str(path), str(err))
+            return
+        except Exception as err:  # a reader bug must not kill the loader thread
+            logger.exception("opening %s", path)
+            self.open_failed.emit(str(path), f"{type(err).__name__}: {err}")
+            return
+        self.session, self._static, self._calibrations = session, static, calibrations
+        smap = session.assembler.sensor_map
+        cameras = tuple(s.sensor_id for s in smap.sensors if s.sensor_type is SensorType.CAMERA)
+        self.opened.emit(
+            LogSummary(
+                path=path,
+                format=session.log.format,
+                topics=dict(session.log.topics),
+                driver_topic=session.driver_topic,
+                expected_frames=session.expected_frames,
+                start_ns=session.log.start_ns,
+                end_ns=session.log.end_ns,
+                cameras=cameras,
+                open_s=time.perf_counter() - t0,
+            )
+        )
+        threading.Thread(
+            target=self._index,
+            args=(session, self._generation),
+            daemon=True,
+            name="redrive-gui-index",
+        ).start()
+
+    def _index(self, session: LogSession, generation: int) -> None:
+        # RuntimeError: the window (and this QObject) went away while indexing.
+        with contextlib.suppress(RuntimeError):
+            try:
+                for count in session.index():
+                    if generation != self._generation:
+                        return
+                    self.indexed.emit(count, session.indexed)
+                self.series_ready.emit(series_from_log(session.path, session.assembler))
+            except (RedriveError, OSError) as err:
+                logger.warning("indexing %s stopped: %s", session.path, err)
+                self.indexed.emit(len(session.driver_times_ns), True)
+
+    def _do_frame(self, index: int, options: ViewOptions) -> None:
+        session = self.session
+        if session is None:
+            return
+        try:
+            frame = session.frame(index)
+            scene = build_scene(
+                frame, options, run=self.run, static=self._static, calibrations=self._calibrations
+            )
+        except IndexError:
+            self.frame_failed.emit(index, f"frame {index} is past the end of the log")
+            return
+        except (RedriveError, ValueError) as err:
+            self.frame_failed.emit(index, f"frame {index}: {err}")
+            return
+        except Exception as err:
+            logger.exception("frame %d", index)
+            self.frame_failed.emit(index, f"frame {index}: {type(err).__name__}: {err}")
+            return
+        self.scene_ready.emit(scene)
+
+
+def _calibrations(session: LogSession, static: _Static) -> dict[str, npt.NDArray[np.float64]]:
+    """Camera sensor id → 3×4 image_from_base, from the log's camera_info + tf_static."""
+    try:
+        from redrive.io.calibration import camera_calibrations
+    except ImportError:  # pragma: no cover - until redrive.io.calibration exists
+        return {}
+    by_topic = {s.topic: s.sensor_id for s in session.assembler.sensor_map.sensors}
+    out = {}
+    try:
+        for topic, calib in camera_calibrations(session.log).items():
+            if topic in by_topic:
+                out[by_topic[topic]] = calib.image_from_base()
+    except RedriveError as err:
+        logger.warning("camera calibration of %s: %s", session.path, err)
+    del static
+    return out

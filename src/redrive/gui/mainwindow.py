@@ -1,0 +1,435 @@
+"""The main window: planview in the centre; camera, timeline, plots, log box and the
+re-simulation panel as docks that can be rearranged (the layout is remembered)."""
+
+from __future__ import annotations
+
+import functools
+import logging
+import time
+from pathlib import Path
+from typing import Any
+
+from PySide6 import QtCore, QtGui, QtWidgets
+
+from redrive.errors import RedriveError
+from redrive.gui.camera import CameraView
+from redrive.gui.loader import FrameLoader, LogSummary, ViewOptions
+from redrive.gui.logbox import LogBox
+from redrive.gui.planview import Planview
+from redrive.gui.plots import PlotsPanel
+from redrive.gui.scene import Layer, Scene
+from redrive.gui.session import RunData, Series, find_run_log
+from redrive.gui.timeline import Timeline
+
+__all__ = ["MainWindow"]
+
+logger = logging.getLogger(__name__)
+
+_MAX_RECENT = 8
+_DEFAULT_RATE_HZ = 10.0
+
+
+def is_run_dir(path: Path) -> bool:
+    return path.is_dir() and (path / "manifest.json").is_file() and (path / "frames").is_dir()
+
+
+class MainWindow(QtWidgets.QMainWindow):
+    """``redrive gui``: open a log or a run, play it, look at it."""
+
+    frame_shown = QtCore.Signal(int)  # a frame's scene reached the views
+
+    def __init__(self, *, settings: QtCore.QSettings | None = None) -> None:
+        super().__init__()
+        self.setWindowTitle("redrive")
+        self.resize(1500, 950)
+        self.settings = settings or QtCore.QSettings()
+        self.loader = FrameLoader(self)
+        self.summary: LogSummary | None = None
+        self.run: RunData | None = None
+        self.scene: Scene | None = None
+        self.current = 0
+        self.frame_count = 0
+        self.rate_hz = _DEFAULT_RATE_HZ
+        self.frames_shown = 0
+        self.skipped_ticks = 0
+        self._play_t0 = 0.0
+        self._play_from = 0
+
+        self.planview = Planview()
+        self.setCentralWidget(self.planview)
+        self.camera = CameraView()
+        self.timeline = Timeline()
+        self.plots = PlotsPanel()
+        self.logbox = LogBox()
+        self.docks: dict[str, QtWidgets.QDockWidget] = {}
+        area = QtCore.Qt.DockWidgetArea
+        self._dock("Camera", self.camera, area.RightDockWidgetArea)
+        self._dock("Plots", self.plots, area.RightDockWidgetArea)
+        self._dock("Log", self.logbox, area.RightDockWidgetArea)
+        self.tabifyDockWidget(self.docks["Plots"], self.docks["Log"])
+        self.docks["Plots"].raise_()
+        self._dock("Timeline", self.timeline, area.BottomDockWidgetArea)
+        self.resizeDocks([self.docks["Camera"]], [620], QtCore.Qt.Orientation.Horizontal)
+        self.resim: Any = None
+        self._build_toolbar()
+        self._build_menus()
+        self.status = self.statusBar()
+
+        self.play_timer = QtCore.QTimer(self)
+        self.play_timer.setTimerType(QtCore.Qt.TimerType.PreciseTimer)
+        self.play_timer.timeout.connect(self._tick)
+
+        self.loader.opened.connect(self._opened)
+        self.loader.open_failed.connect(self._open_failed)
+        self.loader.indexed.connect(self._indexed)
+        self.loader.series_ready.connect(self._series_ready)
+        self.loader.scene_ready.connect(self._show_scene)
+        self.loader.frame_failed.connect(self._frame_failed)
+        self.timeline.frame_requested.connect(self.go_to)
+        self.timeline.play_toggled.connect(self._play_toggled)
+        self.timeline.speed_changed.connect(lambda _s: self._restart_clock())
+        self.planview.options_changed.connect(self.refresh)
+        self.camera.camera_changed.connect(lambda _c: self.refresh())
+        if logging.getLogger("redrive").level == logging.NOTSET:
+            logging.getLogger("redrive").setLevel(logging.INFO)
+        self._restore_layout()
+
+    # -- building ---------------------------------------------------------------------------------
+
+    def _dock(self, title: str, widget: QtWidgets.QWidget, area: Any) -> QtWidgets.QDockWidget:
+        dock = QtWidgets.QDockWidget(title, self)
+        dock.setObjectName(f"dock-{title.lower().replace(' ', '-')}")
+        dock.setWidget(widget)
+        self.addDockWidget(area, dock)
+        self.docks[title] = dock
+        return dock
+
+    def _build_toolbar(self) -> None:
+        bar = self.addToolBar("View")
+        bar.setObjectName("toolbar-view")
+        self.visible_button = QtWidgets.QToolButton()
+        self.visible_button.setText("Object Visible ▾")
+        self.visible_button.setPopupMode(QtWidgets.QToolButton.ToolButtonPopupMode.InstantPopup)
+        menu = QtWidgets.QMenu(self.visible_button)
+        self.layer_actions: dict[Layer, QtGui.QAction] = {}
+        for layer in Layer:
+            action = menu.addAction(layer.value)
+            action.setCheckable(True)
+            action.setChecked(True)
+            action.toggled.connect(lambda _on: self.refresh())
+            self.layer_actions[layer] = action
+        self.visible_button.setMenu(menu)
+        bar.addWidget(self.visible_button)
+
+    def _build_menus(self) -> None:
+        menus = self.menuBar()
+        file = menus.addMenu("&File")
+        file.addAction("Open &log…", QtGui.QKeySequence.StandardKey.Open, self._ask_open_log)
+        file.addAction("Open &run…", self._ask_open_run)
+        self.recent_menu = file.addMenu("Open &recent")
+        self._fill_recent()
+        file.addSeparator()
+        file.addAction("&Quit", QtGui.QKeySequence.StandardKey.Quit, self.close)
+        live = menus.addMenu("&Live")
+        live.addAction("&Connect to ROS master…", self.connect_live)
+        self.record_action = live.addAction("&Record to MCAP…", self.record_live)
+        live.addAction("&Disconnect", self.disconnect_live)
+        resim = menus.addMenu("Re-&simulation")
+        resim.addAction("Show the re-simulation panel", self.show_resim)
+        view = menus.addMenu("&View")
+        for dock in self.docks.values():
+            view.addAction(dock.toggleViewAction())
+        view.addSeparator()
+        view.addAction("Reset planview camera", self.planview.reset_view)
+        view.addAction("Reset layout", self.reset_layout)
+        help_menu = menus.addMenu("&Help")
+        help_menu.addAction("&About redrive", self._about)
+        self._space = QtGui.QShortcut(QtGui.QKeySequence("Space"), self)
+        self._space.activated.connect(lambda: self.timeline.set_playing(not self.timeline.playing))
+        QtGui.QShortcut(QtGui.QKeySequence("Right"), self).activated.connect(
+            lambda: self.go_to(self.current + 1)
+        )
+        QtGui.QShortcut(QtGui.QKeySequence("Left"), self).activated.connect(
+            lambda: self.go_to(self.current - 1)
+        )
+
+    # -- layout -----------------------------------------------------------------------------------
+
+    def _restore_layout(self) -> None:
+        self._default_state = self.saveState()
+        geometry = self.settings.value("window/geometry")
+        state = self.settings.value("window/state")
+        if isinstance(geometry, QtCore.QByteArray):
+            self.restoreGeometry(geometry)
+        if isinstance(state, QtCore.QByteArray):
+            self.restoreState(state)
+
+    def reset_layout(self) -> None:
+        self.restoreState(self._default_state)
+        for dock in self.docks.values():
+            dock.show()
+
+    def closeEvent(self, event: QtGui.QCloseEvent) -> None:
+        self.play_timer.stop()
+        self.settings.setValue("window/geometry", self.saveGeometry())
+        self.settings.setValue("window/state", self.saveState())
+        self.disconnect_live()
+        self.loader.close()
+        self.logbox.detach()
+        if self.resim is not None and hasattr(self.resim, "shutdown"):
+            self.resim.shutdown()
+        super().closeEvent(event)
+
+    # -- opening ----------------------------------------------------------------------------------
+
+    def open_path(self, path: str | Path) -> None:
+        """A run directory (its log is opened too) or a log."""
+        path = Path(path)
+        if is_run_dir(path):
+            self.open_run(path)
+        else:
+            self.open_log(path)
+
+    def open_log(self, path: str | Path) -> None:
+        self.timeline.set_playing(False)
+        self.status.showMessage(f"opening {path} …")
+        self._open_t0 = time.perf_counter()
+        self._first_frame_s: float | None = None
+        self.loader.open(path)
+
+    def open_run(self, path: str | Path) -> None:
+        try:
+            run = RunData.load(path)
+        except (RedriveError, OSError) as err:
+            self._error("Cannot open the run", f"{path}: {err}")
+            return
+        self.run = run
+        self.loader.set_run(run)
+        self.plots.set_run(run)
+        self.timeline.set_bookmarks(
+            {b.frame_index: f"{b.metric}/{b.algorithm}: {b.detail}" for b in run.bookmarks}
+        )
+        self._add_recent(Path(path))
+        log = find_run_log(run)
+        logger.info(
+            "run %s: %d frames, algorithms %s, %d bookmarks",
+            path,
+            len(run.stamps),
+            ", ".join(run.detections) or "none",
+            len(run.bookmarks),
+        )
+        if log is None:
+            self._error(
+                "The run's log is missing",
+                f"{path}: its manifest names the log {run.manifest.get('log', {}).get('path')!r}, "
+                "which is not there; open the log with File → Open log.",
+            )
+            return
+        if self.summary is None or self.summary.path != log:
+            self.open_log(log)
+        else:
+            self.refresh()
+
+    def _ask_open_log(self) -> None:
+        path, _ = QtWidgets.QFileDialog.getOpenFileName(
+            self, "Open log", "", "Logs (*.bag *.mcap *.db3 metadata.yaml);;All files (*)"
+        )
+        if path:
+            self.open_log(path)
+
+    def _ask_open_run(self) -> None:
+        path = QtWidgets.QFileDialog.getExistingDirectory(self, "Open run directory")
+        if path:
+            self.open_run(path)
+
+    def _opened(self, summary: LogSummary) -> None:
+        self.summary = summary
+        self.frame_count = summary.expected_frames
+        duration = (summary.end_ns - summary.start_ns) / 1e9
+        if summary.expected_frames > 1 and duration > 0:
+            self.rate_hz = (summary.expected_frames - 1) / duration
+        self.timeline.set_frame_count(summary.expected_frames)
+        self.camera.set_cameras(summary.cameras)
+        self.setWindowTitle(f"redrive — {summary.path.name}")
+        self._add_recent(summary.path)
+        logger.info(
+            "opened %s (%s, %d topics, %d frames driven by %s) in %.2f s",
+            summary.path,
+            summary.format,
+            len(summary.topics),
+            summary.expected_frames,
+            summary.driver_topic,
+            summary.open_s,
+        )
+        self.current = 0
+        self.refresh()
+
+    def _open_failed(self, path: str, message: str) -> None:
+        self.status.showMessage(f"could not open {path}")
+        self._error("Cannot open the log", message)
+
+    def _indexed(self, count: int, done: bool) -> None:
+        if done:
+            self.frame_count = count
+            self.timeline.set_frame_count(count)
+            self.status.showMessage(f"{count} frames", 5000)
+
+    def _series_ready(self, series: Series) -> None:
+        if self.summary is not None:
+            self.plots.set_series(series, start_ns=self.summary.start_ns)
+
+    # -- frames -----------------------------------------------------------------------------------
+
+    def view_options(self) -> ViewOptions:
+        return ViewOptions(
+            color_mode=self.planview.color_mode,
+            layers=frozenset(k for k, a in self.layer_actions.items() if a.isChecked()),
+            planview_2d=self.planview.is_2d,
+            camera=self.camera.camera if self.docks["Camera"].isVisible() else None,
+            raster=self.planview.raster_spec,
+        )
+
+    def go_to(self, index: int) -> None:
+        """Show frame ``index`` (clamped to the log)."""
+        if self.summary is None:
+            return
+        last = max(0, self.frame_count - 1)
+        index = min(max(0, index), last)
+        self.current = index
+        self.loader.request(index, self.view_options())
+        if self.timeline.playing:
+            self._restart_clock()
+
+    def refresh(self) -> None:
+        self.go_to(self.current)
+
+    def _show_scene(self, scene: Scene) -> None:
+        self.scene = scene
+        self.planview.show_scene(scene)
+        self.camera.show_camera(scene.cameras.get(self.camera.camera or ""))
+        if self.summary is not None:
+            self.timeline.show_frame(scene.index, scene.stamp_ns, start_ns=self.summary.start_ns)
+        self.plots.set_cursor(scene.stamp_ns)
+        self.frames_shown += 1
+        if self._first_frame_s is None:
+            self._first_frame_s = time.perf_counter() - self._open_t0
+            logger.info("first frame shown %.2f s after opening", self._first_frame_s)
+        self.frame_shown.emit(scene.index)
+
+    def _frame_failed(self, index: int, message: str) -> None:
+        if self.timeline.playing and index >= self.frame_count - 1:
+            self.timeline.set_playing(False)
+            return
+        logger.warning("%s", message)
+        self.status.showMessage(message, 5000)
+        if "past the end" in message:
+            self.timeline.set_playing(False)
+
+    # -- playback ---------------------------------------------------------------------------------
+
+    def _play_toggled(self, on: bool) -> None:
+        if on and self.summary is not None:
+            if self.current >= self.frame_count - 1:
+                self.go_to(0)
+            self._restart_clock()
+            self.play_timer.start(max(5, round(1000 / (self.rate_hz * self.timeline.speed) / 2)))
+        else:
+            self.play_timer.stop()
+
+    def _restart_clock(self) -> None:
+        self._play_t0 = time.perf_counter()
+        self._play_from = self.current
+        if self.play_timer.isActive():
+            self.play_timer.setInterval(
+                max(5, round(1000 / (self.rate_hz * self.timeline.speed) / 2))
+            )
+
+    def _tick(self) -> None:
+        """Advance to the frame the wall clock says; while a frame is still on its way, skip
+        (never queue) — a slow frame makes playback drop frames, not fall behind."""
+        if self.loader.busy:
+            self.skipped_ticks += 1
+            return
+        elapsed = time.perf_counter() - self._play_t0
+        target = self._play_from + int(elapsed * self.rate_hz * self.timeline.speed)
+        if target <= self.current and self.scene is not None and self.scene.index == self.current:
+            return
+        if target >= self.frame_count:
+            self.timeline.set_playing(False)
+            return
+        self.current = target
+        self.loader.request(target, self.view_options())
+
+    # -- live -------------------------------------------------------------------------------------
+
+    def connect_live(self) -> None:
+        from redrive.gui import live
+
+        live.connect_dialog(self)
+
+    def record_live(self) -> None:
+        from redrive.gui import live
+
+        live.record_dialog(self)
+
+    def disconnect_live(self) -> None:
+        feed = getattr(self, "live_feed", None)
+        if feed is not None:
+            feed.stop()
+            self.live_feed = None
+
+    # -- re-simulation ----------------------------------------------------------------------------
+
+    def show_resim(self) -> None:
+        if self.resim is None:
+            from redrive.gui.resim import ResimPanel
+
+            self.resim = ResimPanel()
+            dock = self._dock(
+                "Re-simulation", self.resim, QtCore.Qt.DockWidgetArea.RightDockWidgetArea
+            )
+            self.tabifyDockWidget(self.docks["Camera"], dock)
+            if self.summary is not None:
+                self.resim.load_log(self.summary.path)
+            self.resim.run_finished.connect(self.open_run)
+        self.docks["Re-simulation"].show()
+        self.docks["Re-simulation"].raise_()
+
+    # -- misc -------------------------------------------------------------------------------------
+
+    def _fill_recent(self) -> None:
+        self.recent_menu.clear()
+        for path in self._recent():
+            self.recent_menu.addAction(path, functools.partial(self.open_path, path))
+        self.recent_menu.setEnabled(bool(self._recent()))
+
+    def _recent(self) -> list[str]:
+        value = self.settings.value("recent", [])
+        if isinstance(value, str):
+            return [value]
+        return [str(v) for v in value] if isinstance(value, list) else []
+
+    def _add_recent(self, path: Path) -> None:
+        text = str(path.resolve())
+        recent = [text, *(p for p in self._recent() if p != text)][:_MAX_RECENT]
+        self.settings.setValue("recent", recent)
+        self._fill_recent()
+
+    def _error(self, title: str, message: str) -> None:
+        logger.error("%s: %s", title, message)
+        box = QtWidgets.QMessageBox(
+            QtWidgets.QMessageBox.Icon.Critical, title, message, parent=self
+        )
+        box.setObjectName("error-dialog")
+        box.open()
+        self.last_error = message
+
+    def _about(self) -> None:
+        from redrive import __version__
+
+        QtWidgets.QMessageBox.about(
+            self,
+            "About redrive",
+            f"redrive {__version__}\nRe-drive autonomous-driving algorithms on recorded or live "
+            "sensor data.\nDocs: docs/gui.md in the repository.",
+        )

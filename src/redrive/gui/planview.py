@@ -1,0 +1,221 @@
+"""The planview: the point cloud in 3D (OpenGL) or as a top-down raster (2D), with boxes, track
+ids, the ego vehicle and the planned path.
+
+The 3D view is pyqtgraph's ``GLViewWidget`` (orbit: left drag, pan: middle drag or ctrl+left,
+zoom: wheel); the 2D view is an ``ImageItem`` raster plus line items in a ``PlotWidget`` (pan:
+drag, zoom: wheel) — fast on software GL, where the 3D view is not (NOTES.md: 13–17 FPS at 120k
+points under llvmpipe against 25–36 for the raster).  Both are in base_link: x forward, y left.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pyqtgraph as pg
+import pyqtgraph.opengl as gl
+from PySide6 import QtCore, QtGui, QtWidgets
+
+from redrive.gui.scene import ColorMode, RasterSpec, Scene
+
+__all__ = ["Planview"]
+
+_MAX_LABELS = 60
+
+
+def _rgba(color: tuple[int, int, int], alpha: float = 1.0) -> tuple[float, float, float, float]:
+    return (color[0] / 255, color[1] / 255, color[2] / 255, alpha)
+
+
+class _GlView(gl.GLViewWidget):
+    def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.setBackgroundColor((16, 16, 20))
+        self.grid = gl.GLGridItem(size=QtGui.QVector3D(120, 120, 1))
+        self.grid.setSpacing(10, 10, 1)
+        self.grid.setColor((70, 70, 70, 120))
+        self.addItem(self.grid)
+        self.scatter = gl.GLScatterPlotItem(pos=np.zeros((1, 3)), size=2.0, pxMode=True)
+        self.scatter.setGLOptions("opaque")
+        self.addItem(self.scatter)
+        self.lines: dict[str, gl.GLLinePlotItem] = {}
+        self.path = gl.GLLinePlotItem(pos=np.zeros((2, 3)), width=3.0, mode="line_strip")
+        self.addItem(self.path)
+        self.labels: list[gl.GLTextItem] = []
+        self.reset_camera()
+
+    def reset_camera(self) -> None:
+        self.setCameraPosition(pos=QtGui.QVector3D(8, 0, 0), distance=55, elevation=35, azimuth=180)
+
+    def show_scene(self, scene: Scene) -> None:
+        if len(scene.points):
+            self.scatter.setData(pos=scene.points, color=scene.colors)
+            self.scatter.setVisible(True)
+        else:
+            self.scatter.setVisible(False)
+        seen = set()
+        for layer in scene.layers:
+            seen.add(layer.name)
+            item = self.lines.get(layer.name)
+            if item is None:
+                item = gl.GLLinePlotItem(mode="lines", width=2.0, antialias=False)
+                self.addItem(item)
+                self.lines[layer.name] = item
+            if len(layer.segments):
+                item.setData(pos=layer.segments, color=_rgba(layer.color))
+                item.setVisible(True)
+            else:
+                item.setVisible(False)
+        for name, item in self.lines.items():
+            if name not in seen:
+                item.setVisible(False)
+        if scene.path is not None and len(scene.path) > 1:
+            self.path.setData(pos=scene.path, color=_rgba((255, 200, 40)))
+            self.path.setVisible(True)
+        else:
+            self.path.setVisible(False)
+        texts = [t for layer in scene.layers for t in layer.labels][:_MAX_LABELS]
+        while len(self.labels) < len(texts):
+            item = gl.GLTextItem(color=(255, 255, 255, 255))
+            self.addItem(item)
+            self.labels.append(item)
+        for item, (text, x, y, z) in zip(self.labels, texts, strict=False):
+            item.setData(pos=(x, y, z + 0.3), text=text)
+            item.setVisible(True)
+        for item in self.labels[len(texts) :]:
+            item.setVisible(False)
+
+
+class _RasterView(pg.PlotWidget):
+    """x (forward) up the screen, y (left) to the left: plot axes are (−y, x)."""
+
+    def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent, background=(16, 16, 20))
+        self.setAspectLocked(True)
+        self.showGrid(x=True, y=True, alpha=0.15)
+        self.setLabel("bottom", "−y (right)", units="m")
+        self.setLabel("left", "x (forward)", units="m")
+        self.image = pg.ImageItem(axisOrder="row-major")
+        self.addItem(self.image)
+        self.curves: dict[str, pg.PlotCurveItem] = {}
+        self.path = pg.PlotCurveItem(pen=pg.mkPen((255, 200, 40), width=3))
+        self.addItem(self.path)
+        self.labels: list[pg.TextItem] = []
+        self._spec: RasterSpec | None = None
+
+    def _place(self, spec: RasterSpec) -> None:
+        if spec == self._spec:
+            return
+        h, cell = spec.half_extent_m, spec.cell_m
+        # Row 0 is +x (top), column 0 is +y (left): plot x = −y = col·cell − h and plot
+        # y = x = h − row·cell.
+        self.image.setTransform(QtGui.QTransform(cell, 0, 0, -cell, -h, h))
+        self._spec = spec
+
+    def show_scene(self, scene: Scene, spec: RasterSpec) -> None:
+        if scene.raster is not None:
+            self._place(spec)
+            self.image.setImage(scene.raster, autoLevels=False, levels=(0, 255))
+        seen = set()
+        for layer in scene.layers:
+            seen.add(layer.name)
+            curve = self.curves.get(layer.name)
+            if curve is None:
+                curve = pg.PlotCurveItem(connect="pairs", pen=pg.mkPen(layer.color, width=2))
+                self.addItem(curve)
+                self.curves[layer.name] = curve
+            seg = layer.segments
+            curve.setData(x=-seg[:, 1], y=seg[:, 0], connect="pairs")
+            curve.setVisible(True)
+        for name, curve in self.curves.items():
+            if name not in seen:
+                curve.setVisible(False)
+        if scene.path is not None:
+            self.path.setData(x=-scene.path[:, 1], y=scene.path[:, 0])
+            self.path.setVisible(True)
+        else:
+            self.path.setVisible(False)
+        texts = [t for layer in scene.layers for t in layer.labels][:_MAX_LABELS]
+        while len(self.labels) < len(texts):
+            item = pg.TextItem(color=(255, 255, 255), anchor=(0.5, 1.0))
+            self.addItem(item)
+            self.labels.append(item)
+        for item, (text, x, y, _z) in zip(self.labels, texts, strict=False):
+            item.setText(text)
+            item.setPos(-y, x)
+            item.setVisible(True)
+        for item in self.labels[len(texts) :]:
+            item.setVisible(False)
+
+    def reset_view(self) -> None:
+        self.setRange(xRange=(-30, 30), yRange=(-20, 50), padding=0)
+
+
+class Planview(QtWidgets.QWidget):
+    """The centre panel: a toolbar (colour by, Convert 2D Planview, reset view) over the view."""
+
+    options_changed = QtCore.Signal()
+
+    def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        layout = QtWidgets.QVBoxLayout(self)
+        layout.setContentsMargins(0, 0, 0, 0)
+        bar = QtWidgets.QHBoxLayout()
+        bar.addWidget(QtWidgets.QLabel("Colour by"))
+        self.color_box = QtWidgets.QComboBox()
+        for mode in ColorMode:
+            self.color_box.addItem(mode.value, mode)
+        self.color_box.currentIndexChanged.connect(lambda _i: self.options_changed.emit())
+        bar.addWidget(self.color_box)
+        self.convert_button = QtWidgets.QPushButton("Convert 2D Planview")
+        self.convert_button.setCheckable(True)
+        self.convert_button.setToolTip("Switch between the 3D point cloud and a top-down raster")
+        self.convert_button.toggled.connect(self._toggle_2d)
+        bar.addWidget(self.convert_button)
+        self.reset_button = QtWidgets.QPushButton("Reset view")
+        self.reset_button.clicked.connect(self.reset_view)
+        bar.addWidget(self.reset_button)
+        bar.addStretch(1)
+        self.status = QtWidgets.QLabel("")
+        bar.addWidget(self.status)
+        layout.addLayout(bar)
+        self.stack = QtWidgets.QStackedWidget()
+        self.view3d = _GlView()
+        self.view2d = _RasterView()
+        self.stack.addWidget(self.view3d)
+        self.stack.addWidget(self.view2d)
+        layout.addWidget(self.stack, 1)
+        self.raster_spec = RasterSpec()
+        self.scene: Scene | None = None
+        self.view2d.reset_view()
+
+    @property
+    def is_2d(self) -> bool:
+        return self.convert_button.isChecked()
+
+    @property
+    def color_mode(self) -> ColorMode:
+        mode = self.color_box.currentData()
+        return mode if isinstance(mode, ColorMode) else ColorMode.DISTANCE
+
+    def _toggle_2d(self, on: bool) -> None:
+        self.stack.setCurrentIndex(1 if on else 0)
+        self.convert_button.setText("Convert 3D Planview" if on else "Convert 2D Planview")
+        self.options_changed.emit()
+
+    def reset_view(self) -> None:
+        self.view3d.reset_camera()
+        self.view2d.reset_view()
+
+    def show_scene(self, scene: Scene) -> None:
+        self.scene = scene
+        if self.is_2d:
+            self.view2d.show_scene(scene, self.raster_spec)
+        else:
+            self.view3d.show_scene(scene)
+        boxes = sum(len(layer.segments) // 28 for layer in scene.layers if layer.name != "ego")
+        self.status.setText(f"{scene.point_count:,} points · {boxes} boxes")
+
+    def grab_view(self) -> QtGui.QImage:
+        """The current view as an image (the GL framebuffer in 3D)."""
+        if self.is_2d:
+            return self.view2d.grab().toImage()
+        return self.view3d.grabFramebuffer()

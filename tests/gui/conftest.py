@@ -1,0 +1,29 @@
+"""GUI tests: pytest-qt under Xvfb (``make test`` runs the suite under ``xvfb-run -a``).
+
+The Qt attributes that must precede the QApplication (shared GL contexts, pyqtgraph's row-major
+images) are set here, before pytest-qt's ``qapp`` fixture creates it.  Each test module starts
+with ``pytest.importorskip("PySide6")``; without an X display the tests skip, saying why: GL views
+do not work with ``QT_QPA_PLATFORM=offscreen`` (NOTES.md).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+
+import pytest
+
+_HAVE_QT = all(importlib.util.find_spec(m) is not None for m in ("PySide6", "pyqtgraph"))
+
+if _HAVE_QT:
+    from redrive.gui.app import configure_qt
+
+    configure_qt()
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _display() -> None:
+    # Session scope: it must run before pytest-qt's session-scoped ``qapp``, which aborts the
+    # process when Qt finds no display.
+    if not os.environ.get("DISPLAY"):
+        pytest.skip("no X display: run the GUI tests under `xvfb-run -a pytest` (make test does)")

@@ -1,0 +1,200 @@
+"""The main window on real logs: open, play, pause, step, scrub; what the planview draws; runs with
+bookmarks; corrupt logs; the remembered layout."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+pytest.importorskip("PySide6")
+pytest.importorskip("pyqtgraph")
+
+from PySide6 import QtCore, QtWidgets
+
+from redrive.gui.loader import GT_COLOR
+from redrive.gui.mainwindow import MainWindow
+from redrive.gui.session import LogSession
+
+_WAIT_MS = 20_000
+
+
+def qimage_to_array(image: Any) -> np.ndarray:
+    image = image.convertToFormat(image.Format.Format_RGB888)
+    width, height, stride = image.width(), image.height(), image.bytesPerLine()
+    buf = np.frombuffer(image.constBits(), dtype=np.uint8, count=stride * height)
+    return buf.reshape(height, stride)[:, : width * 3].reshape(height, width, 3).copy()
+
+
+@pytest.fixture
+def window(qtbot: Any, tmp_path: Path) -> MainWindow:
+    settings = QtCore.QSettings(str(tmp_path / "gui.ini"), QtCore.QSettings.Format.IniFormat)
+    win = MainWindow(settings=settings)
+    qtbot.addWidget(win)
+    win.show()
+    qtbot.waitExposed(win)
+    return win
+
+
+def _open(qtbot: Any, win: MainWindow, path: Path) -> None:
+    with qtbot.waitSignal(win.frame_shown, timeout=_WAIT_MS):
+        win.open_path(path)
+
+
+def _show(qtbot: Any, win: MainWindow, index: int) -> None:
+    with qtbot.waitSignal(win.frame_shown, timeout=_WAIT_MS, check_params_cb=lambda i: i == index):
+        win.go_to(index)
+
+
+def test_open_play_pause_step_scrub(qtbot: Any, window: MainWindow, demo_log: Path) -> None:
+    _open(qtbot, window, demo_log)
+    assert window.scene is not None
+    assert window.scene.index == 0
+    assert window.scene.point_count > 10_000
+    qtbot.waitUntil(lambda: window.frame_count == 100, timeout=_WAIT_MS)  # indexed: 10 s × 10 Hz
+
+    # Scrub: the slider asks for frame 30 and the views show that frame's data.
+    with qtbot.waitSignal(window.frame_shown, timeout=_WAIT_MS, check_params_cb=lambda i: i == 30):
+        window.timeline.slider.setValue(30)
+    ref = LogSession(demo_log)
+    list(ref.index())
+    frame30 = ref.frame(30)
+    ref.close()
+    assert window.scene.stamp_ns == frame30.stamp_ns
+    assert "frame 30 / 99" in window.timeline.frame_label.text()
+
+    # Step over / step back.
+    with qtbot.waitSignal(window.frame_shown, timeout=_WAIT_MS, check_params_cb=lambda i: i == 31):
+        qtbot.mouseClick(window.timeline.step_over, QtCore.Qt.MouseButton.LeftButton)
+    with qtbot.waitSignal(window.frame_shown, timeout=_WAIT_MS, check_params_cb=lambda i: i == 30):
+        qtbot.mouseClick(window.timeline.step_back, QtCore.Qt.MouseButton.LeftButton)
+
+    # Play at 2×: frames advance; pause: they stop.
+    window.timeline.speed_box.setCurrentIndex(3)
+    qtbot.mouseClick(window.timeline.play_button, QtCore.Qt.MouseButton.LeftButton)
+    assert window.timeline.playing
+    qtbot.waitUntil(lambda: window.scene is not None and window.scene.index >= 40, timeout=_WAIT_MS)
+    qtbot.mouseClick(window.timeline.play_button, QtCore.Qt.MouseButton.LeftButton)
+    assert not window.timeline.playing
+    qtbot.wait(300)
+    stopped_at = window.scene.index
+    qtbot.wait(500)
+    assert window.scene.index == stopped_at
+
+
+def _rendered(widget_image: Any) -> np.ndarray:
+    return qimage_to_array(widget_image)
+
+
+def test_planview_draws_the_frame(qtbot: Any, window: MainWindow, demo_log: Path) -> None:
+    """3D: the GL framebuffer is not blank; 2D: ground-truth box edges are drawn in their colour
+    where the box corners map to on screen."""
+    _open(qtbot, window, demo_log)
+    _show(qtbot, window, 20)
+    qtbot.wait(200)
+    img3d = _rendered(window.planview.grab_view())
+    background = np.array([16, 16, 20])
+    lit = np.any(np.abs(img3d.astype(int) - background) > 30, axis=2)
+    assert lit.mean() > 0.02, "the 3D planview is (nearly) blank"
+
+    with qtbot.waitSignal(window.frame_shown, timeout=_WAIT_MS):
+        qtbot.mouseClick(window.planview.convert_button, QtCore.Qt.MouseButton.LeftButton)
+    assert window.planview.is_2d
+    scene = window.scene
+    assert scene is not None
+    assert scene.raster is not None
+    gt = next(layer for layer in scene.layers if layer.name == "ground truth")
+    assert len(gt.segments) > 0
+    qtbot.wait(200)
+    view = window.planview.view2d
+    img2d = _rendered(view.grab().toImage())
+    vb = view.getPlotItem().getViewBox()
+    hits = 0
+    tested = 0
+    for x, y in gt.segments[0::2, :2]:
+        if not (-15 < x < 45 and -25 < y < 25):  # inside the default view
+            continue
+        tested += 1
+        pos = view.mapFromScene(vb.mapViewToScene(QtCore.QPointF(-y, x)))
+        r, c = pos.y(), pos.x()
+        patch = img2d[max(0, r - 2) : r + 3, max(0, c - 2) : c + 3].reshape(-1, 3).astype(int)
+        if np.any(np.abs(patch - np.array(GT_COLOR)).sum(axis=1) < 60):
+            hits += 1
+    assert tested > 0
+    assert hits / tested > 0.8, f"GT box corners drawn at {hits} of {tested} projected places"
+    # Points too: the raster has coloured cells.
+    assert np.count_nonzero(np.any(scene.raster != 24, axis=2)) > 1000
+
+
+def test_object_visible_layers(qtbot: Any, window: MainWindow, demo_log: Path) -> None:
+    from redrive.gui.scene import Layer
+
+    _open(qtbot, window, demo_log)
+    with qtbot.waitSignal(window.frame_shown, timeout=_WAIT_MS):
+        window.layer_actions[Layer.GROUND_TRUTH].setChecked(False)
+    assert window.scene is not None
+    assert all(layer.name != "ground truth" for layer in window.scene.layers)
+    with qtbot.waitSignal(window.frame_shown, timeout=_WAIT_MS):
+        window.layer_actions[Layer.POINTS].setChecked(False)
+    assert len(window.scene.points) == 0
+
+
+@pytest.fixture(scope="module")
+def evaluated_run(demo_run: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from redrive.cli.main import main
+
+    out = tmp_path_factory.mktemp("gui_run") / "run"
+    shutil.copytree(demo_run, out)
+    assert main(["evaluate", str(out), "--metric", "clear_mot"]) == 0
+    return out
+
+
+def test_run_outputs_and_bookmarks(qtbot: Any, window: MainWindow, evaluated_run: Path) -> None:
+    _open(qtbot, window, evaluated_run)
+    assert window.run is not None
+    names = {layer.name for layer in window.scene.layers}
+    assert {"clusters", "tracker", "ground truth", "ego"} <= names
+    marks = window.timeline.bookmark_frames
+    assert marks, "the evaluation found no failure frame to bookmark"
+    qtbot.waitUntil(lambda: window.frame_count == 100, timeout=_WAIT_MS)
+    with qtbot.waitSignal(
+        window.frame_shown, timeout=_WAIT_MS, check_params_cb=lambda i: i == marks[0]
+    ):
+        qtbot.mouseClick(window.timeline.next_bookmark, QtCore.Qt.MouseButton.LeftButton)
+    assert window.plots.metric_box.count() > 0
+    assert window.scene.path is not None  # the planner's path of that frame
+
+
+def test_corrupt_log_shows_an_error_and_the_window_stays_usable(
+    qtbot: Any, window: MainWindow, demo_log: Path, tmp_path: Path
+) -> None:
+    bad = tmp_path / "broken.bag"
+    bad.write_bytes(b"#ROSBAG V2.0\n" + bytes(range(256)) * 4)
+    window.open_path(bad)
+    qtbot.waitUntil(lambda: bool(getattr(window, "last_error", "")), timeout=_WAIT_MS)
+    assert "broken.bag" in window.last_error
+    dialog = window.findChild(QtWidgets.QMessageBox, "error-dialog")
+    assert dialog is not None
+    assert dialog.isVisible()
+    dialog.close()
+    _open(qtbot, window, demo_log)
+    assert window.scene is not None
+
+
+def test_layout_is_remembered(qtbot: Any, tmp_path: Path) -> None:
+    ini = str(tmp_path / "layout.ini")
+    settings = QtCore.QSettings(ini, QtCore.QSettings.Format.IniFormat)
+    first = MainWindow(settings=settings)
+    qtbot.addWidget(first)
+    first.show()
+    first.docks["Plots"].hide()
+    first.close()
+    settings.sync()
+    second = MainWindow(settings=QtCore.QSettings(ini, QtCore.QSettings.Format.IniFormat))
+    qtbot.addWidget(second)
+    second.show()
+    assert not second.docks["Plots"].isVisible()
+    assert second.docks["Camera"].isVisible()
