@@ -12,7 +12,9 @@ answer is awaited; in-process, a stage with several algorithms runs them on a th
 
 Every step is recorded (output, latency, CPU time, error); an algorithm's exception never stops a
 run unless ``fail_fast`` is set.  Ctrl-C stops reading, lets nothing half-done be written, and
-closes the run directory as ``interrupted``: ``redrive run … --resume`` continues it.
+closes the run directory as ``interrupted``: ``redrive run … --resume`` continues it.  Setting the
+``cancel`` event given to :meth:`Engine.run` (the GUI's Cancel button) does the same from another
+thread: no frame is read after it is set, the frames already read are finished and written.
 """
 
 from __future__ import annotations
@@ -129,6 +131,19 @@ class _Stage:
             runner.close()
 
 
+def _until_cancelled(
+    frames: Iterator[Frame], cancel: threading.Event, cancelled: list[bool]
+) -> Iterator[Frame]:
+    """``frames`` until ``cancel`` is set (checked before reading each frame); then
+    ``cancelled[0]`` is True."""
+    while not cancel.is_set():
+        frame = next(frames, None)
+        if frame is None:
+            return
+        yield frame
+    cancelled[0] = True
+
+
 def _run_inline(runner: AlgorithmRunner, frame: Frame, upstream: StageOutputs) -> StepResult:
     runner.submit(frame, upstream)
     return runner.result()
@@ -227,6 +242,7 @@ class Engine:
         sink: FrameSink,
         skip: frozenset[int] = frozenset(),
         progress: Callable[[int], None] | None = None,
+        cancel: threading.Event | None = None,
     ) -> RunReport:
         """Process ``frames``; hand every finished frame's record to ``sink``, in order.
 
@@ -235,13 +251,19 @@ class Engine:
             sink: receives each finished frame (the results writer).
             skip: frame indices already done (a resumed run); they are read and not processed.
             progress: called with the number of frames finished so far.
+            cancel: once set (from any thread), no further frame is read; the frames already
+                read are finished and the run ends ``interrupted``, as on Ctrl-C.
 
         Returns:
-            what happened; ``report.status`` is ``complete``, ``interrupted`` (Ctrl-C) or
-            ``failed`` (``fail_fast`` and a step failed — ``report.failure`` says which).
+            what happened; ``report.status`` is ``complete``, ``interrupted`` (Ctrl-C or
+            ``cancel``) or ``failed`` (``fail_fast`` and a step failed — ``report.failure`` says
+            which).
         """
         stats = StatsCollector([p for _, planned in self.graph.stages for p in planned])
-        todo = (f for f in frames if f.index not in skip)
+        todo: Iterator[Frame] = (f for f in frames if f.index not in skip)
+        cancelled = [False]
+        if cancel is not None:
+            todo = _until_cancelled(todo, cancel, cancelled)
         paced = self.hooks.before_frame(todo)
         done = 0
         after_frame, fail_fast = self.hooks.after_frame, self.pipeline.fail_fast
@@ -277,6 +299,8 @@ class Engine:
             status, failure = "interrupted", None
         if failure is not None:
             status = "failed"
+        elif cancelled[0]:
+            status = "interrupted"
         late = getattr(self.hooks, "late_frames", 0)
         return stats.report(
             status=status, wall_s=time.perf_counter() - t0, late_frames=late, failure=failure

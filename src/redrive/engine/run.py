@@ -9,6 +9,7 @@ from __future__ import annotations
 import hashlib
 import itertools
 import logging
+import threading
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -140,12 +141,16 @@ def run_log(
     *,
     on_start: Callable[[int | None], None] | None = None,
     progress: Callable[[int], None] | None = None,
+    cancel: threading.Event | None = None,
 ) -> RunReport:
     """Replay ``request.log`` through the pipeline into ``request.out``.
 
     Args:
         on_start: called once the log is open, with the number of frames expected (or None).
         progress: called with the number of frames finished so far.
+        cancel: set it (from another thread) to stop reading frames: the frames already read
+            are finished and the run directory is closed as ``interrupted`` (``--resume``
+            continues it), as on Ctrl-C.
 
     Raises:
         ConfigError, PluginError: the pipeline does not fit the log (checked before any frame).
@@ -162,6 +167,7 @@ def run_log(
             log_info={**log_fingerprint(request.log), "format": log.format},
             on_start=on_start,
             progress=progress,
+            cancel=cancel,
         )
 
 
@@ -174,12 +180,13 @@ def run_reader(
     on_start: Callable[[int | None], None] | None = None,
     progress: Callable[[int], None] | None = None,
     lookahead_ns: int | None = None,
+    cancel: threading.Event | None = None,
 ) -> RunReport:
     """Run the pipeline over the frames of an open ``log`` (a file, or a live session's streams)
     released by ``hooks`` (the Mode Manager: replay pacing, real-time skipping …) into
     ``request.out``; ``log_info`` is what the manifest says of the log; ``lookahead_ns`` how long
     the frame assembler waits past a driver sample for the other sensors (live: 0, a frame is
-    released once the tolerance has passed)."""
+    released once the tolerance has passed); ``cancel`` as in :func:`run_log`."""
     overrides = load_sensor_map_overrides(request.sensor_map) if request.sensor_map else None
     assembler = FrameAssembler(log, overrides=overrides)
     if lookahead_ns is not None:
@@ -204,7 +211,11 @@ def run_reader(
     frames = _select(assembler.frames(), request.first_frame, request.stop_frame)
     try:
         report = engine.run(
-            frames, sink=writer.write_frame, skip=writer.done_frames, progress=progress
+            frames,
+            sink=writer.write_frame,
+            skip=writer.done_frames,
+            progress=progress,
+            cancel=cancel,
         )
     except BaseException as err:
         writer.write_resources(sampler.stop())

@@ -1,4 +1,4 @@
-"""Time series under the views: IMU, ego speed, yaw rate and a per-frame metric, with a cursor at
+"""Time series beside the views: IMU, ego speed, yaw rate and a per-frame metric, with a cursor at
 the current frame (x = seconds since the start of the log)."""
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ _AXES = ((255, 90, 90), (90, 220, 90), (90, 150, 255))
 
 
 class PlotsPanel(QtWidgets.QWidget):
-    """Four linked-x plots; a metric dropdown picks the per-frame metric series of the run."""
+    """Four linked-x plots (IMU acceleration x/y/z, speed, yaw rate, a metric); a metric dropdown picks the per-frame metric series of the run."""
 
     def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent)
@@ -34,13 +34,12 @@ class PlotsPanel(QtWidgets.QWidget):
         self.plots: dict[str, pg.PlotItem] = {}
         for name, unit in (
             ("IMU accel", "m/s²"),
-            ("IMU gyro", "rad/s"),
             ("speed", "m/s"),
             ("yaw rate", "rad/s"),
             ("metric", ""),
         ):
-            plot = self.widget.addPlot(title=name)
-            plot.setLabel("left", units=unit)
+            plot = self.widget.addPlot()
+            plot.setLabel("left", name, units=unit)
             plot.showGrid(x=True, y=True, alpha=0.2)
             plot.setMouseEnabled(y=False)
             if self.plots:
@@ -59,14 +58,13 @@ class PlotsPanel(QtWidgets.QWidget):
 
     def set_series(self, series: Series, *, start_ns: int) -> None:
         self.start_ns = start_ns
-        for name, data in (("IMU accel", series.imu_accel), ("IMU gyro", series.imu_gyro)):
-            plot = self.plots[name]
-            plot.clear()
-            plot.addItem(self.cursors[name])
-            if data is not None:
-                t = self._t(data[0])
-                for axis in range(3):
-                    plot.plot(t, data[1][:, axis], pen=pg.mkPen(_AXES[axis]), name="xyz"[axis])
+        plot = self.plots["IMU accel"]
+        plot.clear()
+        plot.addItem(self.cursors["IMU accel"])
+        if series.imu_accel is not None:
+            t = self._t(series.imu_accel[0])
+            for axis in range(3):
+                plot.plot(t, series.imu_accel[1][:, axis], pen=pg.mkPen(_AXES[axis]))
         for name, data in (("speed", series.speed_mps), ("yaw rate", series.yaw_rate_rad_s)):
             plot = self.plots[name]
             plot.clear()
@@ -90,10 +88,10 @@ class PlotsPanel(QtWidgets.QWidget):
         plot.addItem(self.cursors["metric"])
         key = self.metric_box.currentData()
         if self.run is None or key is None:
-            plot.setTitle("metric (open a run with an evaluation)")
+            plot.setLabel("left", "metric (evaluate a run)")
             return
         stamps, values = self.run.per_frame[tuple(key)]
-        plot.setTitle(" / ".join(key))
+        plot.setLabel("left", key[2])
         plot.plot(self._t(stamps), values, pen=pg.mkPen((255, 140, 0)), symbol="o", symbolSize=3)
 
     def set_cursor(self, stamp_ns: int) -> None:

@@ -259,7 +259,6 @@ class Series:
     speed_mps: tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]] | None = None
     yaw_rate_rad_s: tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]] | None = None
     imu_accel: tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]] | None = None  # (N, 3)
-    imu_gyro: tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]] | None = None  # (N, 3)
 
 
 def series_from_log(path: Path, assembler: FrameAssembler, *, max_samples: int = 200_000) -> Series:
@@ -280,7 +279,6 @@ def series_from_log(path: Path, assembler: FrameAssembler, *, max_samples: int =
     yaw: list[float] = []
     it: list[int] = []
     acc: list[Any] = []
-    gyr: list[Any] = []
     with open_log(path) as log:
         for n, message in enumerate(log.messages(topics=topics)):
             if n >= max_samples:
@@ -297,7 +295,6 @@ def series_from_log(path: Path, assembler: FrameAssembler, *, max_samples: int =
             elif isinstance(value, Imu):
                 it.append(decoded.stamp_ns)
                 acc.append(value.linear_acceleration)
-                gyr.append(value.angular_velocity)
     if st:
         stamps = np.array(st, dtype=np.int64)
         out.speed_mps = (stamps, np.array(speed))
@@ -305,5 +302,4 @@ def series_from_log(path: Path, assembler: FrameAssembler, *, max_samples: int =
     if it:
         stamps = np.array(it, dtype=np.int64)
         out.imu_accel = (stamps, np.array(acc, dtype=np.float64))
-        out.imu_gyro = (stamps, np.array(gyr, dtype=np.float64))
     return out
