@@ -16,13 +16,14 @@ from redrive.io.convert import convert_log
 from redrive.io.decoders import decode
 from redrive.io.decoders.base import Decoded
 from redrive.io.kitti import (
+    TOPIC_CAMERA_INFO,
     TOPIC_IMAGE_2,
     TOPIC_LABEL_2,
     TOPIC_TF_STATIC,
     TOPIC_VELODYNE,
     KittiReader,
 )
-from redrive.types import DetectedObject, Image, PointCloud, Transform
+from redrive.types import CameraInfo, DetectedObject, Image, PointCloud, Transform
 
 pytestmark = pytest.mark.shared_data
 
@@ -54,6 +55,11 @@ def _assert_kitti_equal(got: Decoded, want: Decoded) -> None:
         assert isinstance(g, Image)
         assert g.encoding == w.encoding == "rgb8"
         np.testing.assert_array_equal(g.pixels, w.pixels)
+    elif isinstance(w, CameraInfo):
+        assert isinstance(g, CameraInfo)
+        assert (g.width, g.height, g.distortion_model) == (w.width, w.height, w.distortion_model)
+        for name in ("k", "d", "r", "p"):
+            np.testing.assert_array_equal(getattr(g, name), getattr(w, name), err_msg=name)
     else:
         assert isinstance(g, tuple)
         assert isinstance(w, tuple)
@@ -87,15 +93,16 @@ def test_kitti_round_trip(kitti_dir: Path, tmp_path: Path, suffix: str) -> None:
     out = tmp_path / f"kitti{suffix}"
     calls: list[tuple[int, int]] = []
     stats = convert_log(kitti_dir, out, progress=lambda done, total: calls.append((done, total)))
-    assert stats.messages_written == 12
+    assert stats.messages_written == 15
     assert stats.output_format == ("mcap" if suffix == ".mcap" else "ros1")
     assert stats.topics == {
         TOPIC_TF_STATIC: "tf2_msgs/msg/TFMessage",
         TOPIC_VELODYNE: "sensor_msgs/msg/PointCloud2",
         TOPIC_IMAGE_2: "sensor_msgs/msg/Image",
+        TOPIC_CAMERA_INFO: "sensor_msgs/msg/CameraInfo",
         TOPIC_LABEL_2: "vision_msgs/msg/Detection3DArray",
     }
-    assert calls == [(12, 12)]
+    assert calls == [(15, 15)]
     want = _kitti_values(kitti_dir)
     got = _decoded(out)
     assert set(got) == set(want)

@@ -54,6 +54,7 @@ def test_default_registry_is_complete_and_consistent() -> None:
         "sensor_msgs/msg/PointCloud2",
         "sensor_msgs/msg/Image",
         "sensor_msgs/msg/CompressedImage",
+        "sensor_msgs/msg/CameraInfo",
         "sensor_msgs/msg/Imu",
         "sensor_msgs/msg/LaserScan",
         "sensor_msgs/msg/NavSatFix",

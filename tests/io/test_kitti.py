@@ -16,6 +16,7 @@ from redrive.geometry.se3 import compose, matrix_from_transform, transform_point
 from redrive.io.base import LogReader
 from redrive.io.decoders.base import Decoded
 from redrive.io.kitti import (
+    TOPIC_CAMERA_INFO,
     TOPIC_IMAGE_2,
     TOPIC_LABEL_2,
     TOPIC_TF_STATIC,
@@ -54,11 +55,13 @@ def test_summary(kitti_dir: Path) -> None:
                 TOPIC_TF_STATIC,
                 TOPIC_VELODYNE,
                 TOPIC_IMAGE_2,
+                TOPIC_CAMERA_INFO,
                 TOPIC_LABEL_2,
             }
             assert reader.topics[TOPIC_LABEL_2].msgtype == "vision_msgs/msg/Detection3DArray"
+            assert reader.topics[TOPIC_CAMERA_INFO].msgtype == "sensor_msgs/msg/CameraInfo"
             assert all(t.count == 3 and t.encoding == "native" for t in reader.topics.values())
-            assert (reader.start_ns, reader.end_ns, reader.message_count) == (0, 200_000_000, 12)
+            assert (reader.start_ns, reader.end_ns, reader.message_count) == (0, 200_000_000, 15)
 
 
 def test_point_clouds(frames: dict[tuple[str, int], Decoded]) -> None:
@@ -161,7 +164,10 @@ def test_calibration_and_tf(kitti_dir: Path, frames: dict[tuple[str, int], Decod
     assert isinstance(tfs, tuple)
     assert all(isinstance(t, Transform) for t in tfs)
     by_child = {t.child_frame: t for t in tfs if isinstance(t, Transform)}
-    assert set(by_child) == {"imu", "cam0", "cam0_rect", "cam1", "cam2", "cam3"}
+    assert set(by_child) == {"velodyne", "imu", "cam0", "cam0_rect", "cam1", "cam2", "cam3"}
+    # KITTI's vehicle frame is the velodyne's: base_link → velodyne is the identity
+    assert by_child["velodyne"].parent_frame == "base_link"
+    np.testing.assert_array_equal(matrix_from_transform(by_child["velodyne"]), np.eye(4))
     # the tf chain velodyne → cam0 → cam0_rect agrees with R0_rect @ Tr_velo_to_cam
     velo_from_rect = compose(
         matrix_from_transform(by_child["cam0"]), matrix_from_transform(by_child["cam0_rect"])
@@ -224,7 +230,7 @@ def test_testing_split_without_labels(small_kitti: Path) -> None:
     (small_kitti / "training").rename(small_kitti / "testing")
     with KittiReader(small_kitti) as reader:
         assert TOPIC_LABEL_2 not in reader.topics
-        assert reader.message_count == 6
+        assert reader.message_count == 8  # tf_static, velodyne, image_2, camera_info
 
 
 def test_missing_calib(small_kitti: Path) -> None:

@@ -12,8 +12,9 @@ from typing import Any
 
 from redrive.errors import ConfigError, LogTruncatedError
 from redrive.io import LogReader, open_log
+from redrive.io.calibration import camera_info_topics
 from redrive.io.decoders import decoder_for
-from redrive.io.sensor_map import infer_sensor_map, load_sensor_map_overrides
+from redrive.io.sensor_map import SensorSpec, infer_sensor_map, load_sensor_map_overrides
 
 __all__ = ["collect_info", "register"]
 
@@ -35,6 +36,15 @@ class _TopicStats:
 
 def _stamp(ns: int) -> str:
     return datetime.fromtimestamp(ns / 1e9, tz=UTC).isoformat(timespec="milliseconds")
+
+
+def _camera_info_roles(log: LogReader, sensors: dict[str, SensorSpec]) -> dict[str, str]:
+    """camera info topic → ``camera info of <sensor ids>`` (the cameras of its namespace)."""
+    served: dict[str, list[str]] = {}
+    for image_topic, info_topic in camera_info_topics(log.topics).items():
+        spec = sensors.get(image_topic)
+        served.setdefault(info_topic, []).append(spec.sensor_id if spec else image_topic)
+    return {topic: f"camera info of {', '.join(names)}" for topic, names in served.items()}
 
 
 def collect_info(log: LogReader, *, sensor_map_path: Path | None = None) -> dict[str, Any]:
@@ -61,6 +71,7 @@ def collect_info(log: LogReader, *, sensor_map_path: Path | None = None) -> dict
         driver = smap.driver
         roles = {smap.vehicle_state_topic: "vehicle state", smap.ground_truth_topic: "ground truth"}
         roles.update(dict.fromkeys(smap.tf_topics, "tf"))
+        roles.update(_camera_info_roles(log, sensors))
     except ConfigError:
         if sensor_map_path:
             raise

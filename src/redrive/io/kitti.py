@@ -15,13 +15,23 @@ stamp.  Every frame yields, in this order and with that stamp:
 topic              msgtype                               payload (:class:`Decoded` value)
 =================  ====================================  =========================================
 ``/tf_static``     ``tf2_msgs/msg/TFMessage``            the calibration chain, rooted at
-                                                         ``velodyne``, transforms static (stamp 0);
-                                                         sent every frame (calibrations differ)
+                                                         ``base_link`` (≡ ``velodyne``: identity),
+                                                         transforms static (stamp 0); sent every
+                                                         frame (calibrations differ)
 ``/kitti/velodyne``  ``sensor_msgs/msg/PointCloud2``     PointCloud, channel ``intensity``, frame
                                                          ``velodyne``
 ``/kitti/image_2``   ``sensor_msgs/msg/Image``           Image rgb8, frame ``cam2``
+``/kitti/camera_info``  ``sensor_msgs/msg/CameraInfo``   CameraInfo of image_2 in frame ``cam2``
+                                                         (rectified): K = P2[:, :3], P = [K | 0]
+                                                         (cam2's offset is in the tf chain), R = I,
+                                                         no distortion; only with ``image_2/``
 ``/kitti/label_2``   ``vision_msgs/msg/Detection3DArray``  ground truth in the **velodyne** frame
 =================  ====================================  =========================================
+
+KITTI has no vehicle frame: the ground truth and the points are in the velodyne frame, so it is
+made ``base_link`` as well (an identity transform ``base_link`` → ``velodyne``), and
+:func:`redrive.io.calibration.camera_calibrations` (``image_from_base``) projects them into
+``image_2`` as ``calibration(frame).image_from_velodyne(2)`` does.
 
 Messages are ``native`` (already decoded); files are read one at a time while streaming.
 """
@@ -41,10 +51,11 @@ from redrive.errors import LogError, UnsupportedMessageError
 from redrive.io.base import LogMessage, TopicInfo
 from redrive.io.decoders.base import Decoded, DecodedValue
 from redrive.io.kitti_calib import KittiCalibration, parse_calibration, parse_labels
-from redrive.types import Image, PointCloud
+from redrive.types import CameraInfo, Image, PointCloud, Transform
 
 __all__ = [
     "KITTI_FRAME_PERIOD_NS",
+    "TOPIC_CAMERA_INFO",
     "TOPIC_IMAGE_2",
     "TOPIC_LABEL_2",
     "TOPIC_TF_STATIC",
@@ -60,12 +71,14 @@ KITTI_FRAME_PERIOD_NS = 100_000_000
 TOPIC_TF_STATIC = "/tf_static"
 TOPIC_VELODYNE = "/kitti/velodyne"
 TOPIC_IMAGE_2 = "/kitti/image_2"
+TOPIC_CAMERA_INFO = "/kitti/camera_info"
 TOPIC_LABEL_2 = "/kitti/label_2"
 
 _MSGTYPES: Mapping[str, str] = {
     TOPIC_TF_STATIC: "tf2_msgs/msg/TFMessage",
     TOPIC_VELODYNE: "sensor_msgs/msg/PointCloud2",
     TOPIC_IMAGE_2: "sensor_msgs/msg/Image",
+    TOPIC_CAMERA_INFO: "sensor_msgs/msg/CameraInfo",
     TOPIC_LABEL_2: "vision_msgs/msg/Detection3DArray",
 }
 # topic → (sub-folder, file suffix)
@@ -73,9 +86,12 @@ _FILES: Mapping[str, tuple[str, str]] = {
     TOPIC_TF_STATIC: ("calib", ".txt"),
     TOPIC_VELODYNE: ("velodyne", ".bin"),
     TOPIC_IMAGE_2: ("image_2", ".png"),
+    TOPIC_CAMERA_INFO: ("image_2", ".png"),
     TOPIC_LABEL_2: ("label_2", ".txt"),
 }
 _POINT_BYTES = 16  # float32 x, y, z, reflectance
+#: KITTI's vehicle frame is its LiDAR's: ``base_link`` → ``velodyne`` is the identity.
+_BASE_FROM_VELODYNE = Transform(parent_frame="base_link", child_frame="velodyne")
 
 
 def _find_root(path: Path) -> Path:
@@ -139,7 +155,7 @@ class KittiReader:
             )
             raise LogError(msg)
         for topic in self._topics_present:
-            if topic == TOPIC_VELODYNE:
+            if topic in (TOPIC_VELODYNE, TOPIC_CAMERA_INFO):  # camera info: image_2's files
                 continue
             sub, suffix = _FILES[topic]
             missing = sorted(scans - stems[topic])
@@ -233,6 +249,7 @@ class KittiReader:
             TOPIC_TF_STATIC: self._load_tf,
             TOPIC_VELODYNE: self._load_velodyne,
             TOPIC_IMAGE_2: self._load_image,
+            TOPIC_CAMERA_INFO: self._load_camera_info,
             TOPIC_LABEL_2: self._load_labels,
         }
         for stem in self._frames:
@@ -255,7 +272,8 @@ class KittiReader:
         return Decoded(stamp_ns=stamp_ns, frame_id=frame_id, value=value)
 
     def _load_tf(self, stem: str, stamp_ns: int) -> Decoded:
-        return self._decoded(stamp_ns, "velodyne", self.calibration(stem).transforms())
+        transforms = (_BASE_FROM_VELODYNE, *self.calibration(stem).transforms())
+        return self._decoded(stamp_ns, "base_link", transforms)
 
     def _load_velodyne(self, stem: str, stamp_ns: int) -> Decoded:
         path = self.root / "velodyne" / f"{stem}.bin"
@@ -290,6 +308,20 @@ class KittiReader:
             msg = f"{path}: cannot read the image ({err}); restore the PNG"
             raise LogError(msg) from err
         return self._decoded(stamp_ns, "cam2", image)
+
+    def _load_camera_info(self, stem: str, stamp_ns: int) -> Decoded:
+        path = self.root / "image_2" / f"{stem}.png"
+        try:
+            with PilImage.open(path) as img:  # reads the header only
+                width, height = img.size
+        except OSError as err:
+            msg = f"{path}: cannot read the image ({err}); restore the PNG"
+            raise LogError(msg) from err
+        k = self.calibration(stem).projections[2][:, :3].copy()
+        p = np.zeros((3, 4))
+        p[:, :3] = k
+        info = CameraInfo(width=width, height=height, k=k, d=np.zeros(0), p=p)
+        return self._decoded(stamp_ns, "cam2", info)
 
     def _load_labels(self, stem: str, stamp_ns: int) -> Decoded:
         objects = parse_labels(self.root / "label_2" / f"{stem}.txt", self.calibration(stem))

@@ -10,6 +10,7 @@ PointCloud                 ``sensor_msgs/msg/PointCloud2``    x, y, z FLOAT32 th
                                                               height 1; int64 channels are stored
                                                               as INT32/UINT32 when they fit
 Image                      ``sensor_msgs/msg/Image``          step = width × channels × itemsize
+CameraInfo                 ``sensor_msgs/msg/CameraInfo``     binning 0, empty region of interest
 Imu                        ``sensor_msgs/msg/Imu``            NaN orientation → covariance[0] = -1
 GnssFix                    ``sensor_msgs/msg/NavSatFix``      NaN covariance → type UNKNOWN
 VehicleState               ``nav_msgs/msg/Odometry``          twist in the body (``base_link``);
@@ -39,6 +40,7 @@ from redrive.errors import UnsupportedMessageError
 from redrive.geometry.quaternion import rotation_matrix_from_quaternion
 from redrive.geometry.se3 import quaternion_from_euler, quaternion_from_yaw
 from redrive.types import (
+    CameraInfo,
     DetectedObject,
     GnssFix,
     Image,
@@ -84,6 +86,8 @@ def msgtype_of(value: object) -> str:
         return "sensor_msgs/msg/PointCloud2"
     if isinstance(value, Image):
         return "sensor_msgs/msg/Image"
+    if isinstance(value, CameraInfo):
+        return "sensor_msgs/msg/CameraInfo"
     if isinstance(value, Imu):
         return "sensor_msgs/msg/Imu"
     if isinstance(value, GnssFix):
@@ -97,8 +101,8 @@ def msgtype_of(value: object) -> str:
             return "redrive_msgs/msg/GroundTruthObjectArray"
         return "vision_msgs/msg/Detection3DArray"
     msg = (
-        f"a {type(value).__name__} has no standard ROS 2 message; write PointCloud, Image, Imu, "
-        "GnssFix, VehicleState, tuple[Transform] or tuple[DetectedObject]"
+        f"a {type(value).__name__} has no standard ROS 2 message; write PointCloud, Image, "
+        "CameraInfo, Imu, GnssFix, VehicleState, tuple[Transform] or tuple[DetectedObject]"
     )
     raise UnsupportedMessageError(msg)
 
@@ -203,6 +207,30 @@ def _image(b: _Builder, image: Image, header: Any) -> Any:
         is_bigendian=0,
         step=int(little.strides[0]),
         data=np.frombuffer(little.tobytes(), dtype=np.uint8),
+    )
+
+
+def _camera_info(b: _Builder, info: CameraInfo, header: Any) -> Any:
+    return b.new(
+        "sensor_msgs/msg/CameraInfo",
+        header=header,
+        height=info.height,
+        width=info.width,
+        distortion_model=info.distortion_model,
+        d=info.d.copy(),
+        k=info.k.reshape(9).copy(),
+        r=info.r.reshape(9).copy(),
+        p=info.p.reshape(12).copy(),
+        binning_x=0,
+        binning_y=0,
+        roi=b.new(
+            "sensor_msgs/msg/RegionOfInterest",
+            x_offset=0,
+            y_offset=0,
+            height=0,
+            width=0,
+            do_rectify=False,
+        ),
     )
 
 
@@ -341,6 +369,8 @@ def encode_value(
         return msgtype, _point_cloud(b, value, header)
     if isinstance(value, Image):
         return msgtype, _image(b, value, header)
+    if isinstance(value, CameraInfo):
+        return msgtype, _camera_info(b, value, header)
     if isinstance(value, Imu):
         return msgtype, _imu(b, value, header)
     if isinstance(value, GnssFix):

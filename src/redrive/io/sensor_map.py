@@ -169,6 +169,7 @@ def infer_sensor_map(
     """Map topics to sensors from their message types, then apply ``overrides``.
 
     The driver is the user's choice, else the highest-rate LiDAR (then camera, 2D LiDAR, radar).
+    Camera info topics are calibration, not sensors: they map to nothing here.
 
     Raises:
         ConfigError: the overrides name a topic or sensor the log does not have.
@@ -205,6 +206,7 @@ def infer_sensor_map(
             objects.append(info)
         elif decoder.kind is DecodedKind.TRANSFORMS:
             tf_topics.append(topic)
+        # DecodedKind.CAMERA_INFO: calibration, never a sensor (see redrive.io.calibration)
     for sid, raw in ov.sensors.items():
         topic = str(raw["topic"])
         if topic not in topics:

@@ -193,7 +193,7 @@ class McapWriter:
         """Serialise a data-model value as its standard ROS 2 message and write it.
 
         Args:
-            value: PointCloud, Image, Imu, GnssFix, VehicleState, tuple[Transform],
+            value: PointCloud, Image, CameraInfo, Imu, GnssFix, VehicleState, tuple[Transform],
                 tuple[DetectedObject] (see :mod:`redrive.io.ros_encode`), or a
                 :class:`~redrive.io.decoders.base.Decoded` holding one (its frame and stamp are
                 then the defaults).

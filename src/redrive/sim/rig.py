@@ -39,7 +39,7 @@ from redrive.errors import ConfigError
 from redrive.geometry import compose, quaternion_from_euler, se3_from_rotation_translation
 from redrive.geometry.quaternion import rotation_matrix_from_quaternion
 from redrive.sim.lidar_presets import LIDAR_PRESETS
-from redrive.types import SensorType
+from redrive.types import CameraInfo, SensorType
 
 __all__ = [
     "NOISE_KEYS",
@@ -84,6 +84,14 @@ class CameraIntrinsics:
     def matrix(self) -> npt.NDArray[np.float64]:
         """The 3×3 intrinsic matrix K."""
         return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    def camera_info(self) -> CameraInfo:
+        """These intrinsics as a ROS camera info: K, P = [K | 0], R = I, ``plumb_bob`` with five
+        zero coefficients (no distortion)."""
+        k = self.matrix()
+        p = np.zeros((3, 4))
+        p[:, :3] = k
+        return CameraInfo(width=self.width, height=self.height, k=k, d=np.zeros(5), p=p)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

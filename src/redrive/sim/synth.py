@@ -12,6 +12,10 @@ topic                           type                                        what
                                                                             t_offset_ns
 ``/<lidar_2d>``                 ``sensor_msgs/msg/LaserScan``               one scan
 ``/<camera>/image_raw``         ``sensor_msgs/msg/Image``                   rgb8
+``/<camera>/camera_info``       ``sensor_msgs/msg/CameraInfo``              the true intrinsics,
+                                                                            with each image
+                                                                            (same stamp, optical
+                                                                            frame)
 ``/<imu>``                      ``sensor_msgs/msg/Imu``                     specific force,
                                                                             rate, orientation
 ``/<gnss>``                     ``sensor_msgs/msg/NavSatFix``               map = ENU at the
@@ -72,6 +76,7 @@ __all__ = [
     "MessageSink",
     "SensorSimulation",
     "SynthSummary",
+    "camera_info_topic",
     "ground_truth_objects",
     "sensor_topic",
     "synthesize",
@@ -98,6 +103,11 @@ class SynthSummary:
 def sensor_topic(spec: SensorSpec) -> str:
     """The topic a rig sensor's messages go on: ``/<name>``, a camera's ``/<name>/image_raw``."""
     return f"/{spec.name}/image_raw" if spec.kind is SensorType.CAMERA else f"/{spec.name}"
+
+
+def camera_info_topic(spec: SensorSpec) -> str:
+    """The topic of a camera's intrinsics, next to its images: ``/<name>/camera_info``."""
+    return f"/{spec.name}/camera_info"
 
 
 class MessageSink(Protocol):
@@ -206,6 +216,7 @@ class _Recorder:
             if s.kind in (SensorType.LIDAR, SensorType.LIDAR_2D)
         }
         self.cameras = {s.name: CameraModel.from_spec(s) for s in rig.of_kind(SensorType.CAMERA)}
+        self.camera_infos = {name: c.intrinsics.camera_info() for name, c in self.cameras.items()}
         self.imus = {s.name: ImuModel.from_spec(s) for s in rig.of_kind(SensorType.IMU)}
         self.gnss = {s.name: GnssModel.from_spec(s) for s in rig.of_kind(SensorType.GNSS)}
         self.odometry = {
@@ -243,6 +254,12 @@ class _Recorder:
             frame = camera.render(self._scene())
             self.last_camera[spec.name] = frame
             self.writer.write(sensor_topic(spec), stamp_ns, frame.image, frame_id=camera.frame_id)
+            self.writer.write(
+                camera_info_topic(spec),
+                stamp_ns,
+                self.camera_infos[spec.name],
+                frame_id=camera.frame_id,
+            )
         elif kind is SensorType.IMU:
             state = self.world.ego_state()
             yaw_accel = self._yaw_accel(state)

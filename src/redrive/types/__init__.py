@@ -17,13 +17,14 @@ from redrive.types.enums import (
 from redrive.types.environment import EnvironmentData, TrafficData, TrafficLight
 from redrive.types.frame import Frame, SensorData, SensorPayload
 from redrive.types.objects import Box3D, DetectedObject
-from redrive.types.sensors import IMAGE_ENCODINGS, GnssFix, Image, Imu, PointCloud
+from redrive.types.sensors import IMAGE_ENCODINGS, CameraInfo, GnssFix, Image, Imu, PointCloud
 from redrive.types.transforms import Transform
 from redrive.types.vehicle import ControlCommands, PlannedPath, VehicleState
 
 __all__ = [
     "IMAGE_ENCODINGS",
     "Box3D",
+    "CameraInfo",
     "ControlCommands",
     "DetectedObject",
     "EnvironmentData",

@@ -1,4 +1,4 @@
-"""Sensor payloads: point clouds, images, IMU samples, GNSS fixes."""
+"""Sensor payloads: point clouds, images, IMU samples, GNSS fixes; camera calibrations."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import numpy.typing as npt
 from redrive.types._arrays import frozen_array, frozen_vector
 from redrive.types._pickle import reduce_dataclass
 
-__all__ = ["IMAGE_ENCODINGS", "GnssFix", "Image", "Imu", "PointCloud"]
+__all__ = ["IMAGE_ENCODINGS", "CameraInfo", "GnssFix", "Image", "Imu", "PointCloud"]
 
 _F32 = np.dtype(np.float32)
 
@@ -166,3 +166,88 @@ class GnssFix:
             shape=(3, 3),
         )
         object.__setattr__(self, "position_covariance_m2", cov)
+
+
+def _identity3() -> npt.NDArray[np.float64]:
+    return np.eye(3)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class CameraInfo:
+    """A camera's calibration, as ROS ``sensor_msgs/CameraInfo`` holds it.
+
+    Coordinates are those of the camera's optical frame (z forward, x right, y down, metres);
+    pixel (u, v) = (column, row) with centres at integers.
+
+    Attributes:
+        width, height: image size, pixels (0 × 0 when the camera is not calibrated).
+        k: (3, 3) float64 intrinsics of the raw (distorted) image, ``[[fx, 0, cx], [0, fy, cy],
+            [0, 0, 1]]`` in pixels.
+        d: (N,) float64 distortion coefficients of ``distortion_model`` (``plumb_bob``: k1, k2,
+            t1, t2, k3); empty when there is no distortion.
+        distortion_model: ``plumb_bob``, ``rational_polynomial``, ``equidistant`` …
+        r: (3, 3) float64 rectification rotation (stereo cameras), identity otherwise.
+        p: (3, 4) float64 projection of the rectified image, ``[[fx', 0, cx', Tx], [0, fy', cy',
+            Ty], [0, 0, 1, 0]]``; all zero when the log does not give one.
+    """
+
+    width: int
+    height: int
+    k: npt.NDArray[np.float64]
+    d: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    distortion_model: str = "plumb_bob"
+    r: npt.NDArray[np.float64] = field(default_factory=_identity3)
+    p: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros((3, 4)))
+
+    def __post_init__(self) -> None:
+        for name in ("width", "height"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
+                msg = f"CameraInfo.{name} must be a non-negative int (pixels), got {value!r}"
+                raise ValueError(msg)
+            object.__setattr__(self, name, int(value))
+        shapes: dict[str, tuple[int | None, ...]] = {
+            "k": (3, 3),
+            "d": (None,),
+            "r": (3, 3),
+            "p": (3, 4),
+        }
+        for name, shape in shapes.items():
+            value = getattr(self, name)
+            if isinstance(value, np.ndarray) and value.dtype != np.float64:
+                value = value.astype(np.float64)
+            arr = frozen_array(value, name=f"CameraInfo.{name}", dtype=np.float64, shape=shape)
+            object.__setattr__(self, name, arr)
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return reduce_dataclass(self)  # rebuilt through __post_init__: arrays stay read-only
+
+    def _projection(self) -> npt.NDArray[np.float64]:
+        if np.any(self.p != 0.0):
+            return self.p
+        out = np.zeros((3, 4))
+        out[:, :3] = self.k
+        return out
+
+    @property
+    def is_calibrated(self) -> bool:
+        """True when the projection has focal lengths (ROS writes all zeros for an uncalibrated
+        camera)."""
+        proj = self._projection()
+        return bool(proj[0, 0] != 0.0 and proj[1, 1] != 0.0)
+
+    def image_from_optical(self) -> npt.NDArray[np.float64]:
+        """(3, 4) float64: optical-frame points (m, homogeneous) → pixels (homogeneous).
+
+        ``P`` when the message has one (not all zero), else ``[K | 0]`` — as
+        ``image_geometry.PinholeCameraModel.project3dToPixel`` does.  P maps into the rectified
+        image; where the distortion is not negligible, projections onto the raw (``image_raw``)
+        image are off by it.  ``R`` is not applied (it is the identity for monocular cameras).
+
+        Raises:
+            ValueError: the camera is not calibrated (no focal lengths in P nor K).
+        """
+        if not self.is_calibrated:
+            msg = "CameraInfo: the camera is not calibrated (K and P give no focal length)"
+            raise ValueError(msg)
+        return self._projection().copy()

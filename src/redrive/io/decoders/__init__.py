@@ -9,6 +9,7 @@ custom registries are built with :func:`build_registry`, which refuses duplicate
 from __future__ import annotations
 
 from redrive.io.decoders.base import Decoded, DecodedKind, DecodedValue, Decoder, Deserialize
+from redrive.io.decoders.camera_info import CameraInfoDecoder
 from redrive.io.decoders.image import CompressedImageDecoder, ImageDecoder
 from redrive.io.decoders.motion import OdometryDecoder, PoseDecoder, TwistDecoder
 from redrive.io.decoders.objects import (
@@ -33,6 +34,7 @@ from redrive.io.decoders.tf import TFMessageDecoder
 
 __all__ = [
     "DEFAULT_DECODERS",
+    "CameraInfoDecoder",
     "CompressedImageDecoder",
     "Decoded",
     "DecodedKind",

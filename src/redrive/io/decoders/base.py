@@ -9,6 +9,7 @@ from typing import Protocol
 
 from redrive.io.base import LogMessage
 from redrive.types import (
+    CameraInfo,
     DetectedObject,
     GnssFix,
     Image,
@@ -30,6 +31,7 @@ DecodedValue = (
     | VehicleState
     | tuple[DetectedObject, ...]
     | tuple[Transform, ...]
+    | CameraInfo
 )
 
 #: ``reader.deserialize``: LogMessage → rosbags message object.
@@ -43,6 +45,7 @@ class DecodedKind(enum.Enum):
     VEHICLE_STATE = "vehicle_state"  # ego motion (Odometry, PoseStamped, TwistStamped)
     OBJECTS = "objects"  # tuple[DetectedObject, ...]: ground truth or detections
     TRANSFORMS = "transforms"  # tuple[Transform, ...]: tf / tf_static
+    CAMERA_INFO = "camera_info"  # CameraInfo: a camera's calibration, never a sensor of frames
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

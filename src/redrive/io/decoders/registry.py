@@ -10,6 +10,7 @@ from redrive.errors import PluginError, UnsupportedMessageError
 from redrive.io.base import LogMessage
 from redrive.io.decoders._common import describe
 from redrive.io.decoders.base import Decoded, Decoder, Deserialize
+from redrive.io.decoders.camera_info import CameraInfoDecoder
 from redrive.io.decoders.image import CompressedImageDecoder, ImageDecoder
 from redrive.io.decoders.motion import OdometryDecoder, PoseDecoder, TwistDecoder
 from redrive.io.decoders.objects import (
@@ -68,6 +69,7 @@ DEFAULT_DECODERS: Mapping[str, Decoder] = build_registry(
         PointCloud2Decoder(),
         ImageDecoder(),
         CompressedImageDecoder(),
+        CameraInfoDecoder(),
         ImuDecoder(),
         LaserScanDecoder(),
         NavSatFixDecoder(),
