@@ -198,3 +198,47 @@ def test_layout_is_remembered(qtbot: Any, tmp_path: Path) -> None:
     second.show()
     assert not second.docks["Plots"].isVisible()
     assert second.docks["Camera"].isVisible()
+
+
+def test_camera_shows_boxes_where_their_projection_says(
+    qtbot: Any, window: MainWindow, demo_log: Path
+) -> None:
+    """The camera panel draws each ground-truth box corner at the pixel the log's calibration
+    (camera_info + tf_static, read independently here) projects it to."""
+    from redrive.geometry.boxes import box_corners
+    from redrive.geometry.projection import project_points
+    from redrive.io import open_log
+    from redrive.io.calibration import camera_calibrations
+
+    _open(qtbot, window, demo_log)
+    assert window.camera.camera == "camera_front_image_raw"
+    _show(qtbot, window, 25)
+    qtbot.wait(200)
+    shown = window.camera.scene
+    assert shown is not None
+    assert shown.calibrated
+    with open_log(demo_log) as log:
+        calib = camera_calibrations(log)["/camera_front/image_raw"]
+    ref = LogSession(demo_log)
+    frame = ref.frame(0)
+    for _ in range(25):
+        frame = ref.frame(frame.index + 1)
+    ref.close()
+    assert frame.stamp_ns == window.scene.stamp_ns
+    h, w = shown.image.shape[:2]
+    expected = []
+    for obj in frame.ground_truth or ():
+        uv, depth = project_points(calib.image_from_base(), box_corners(obj.box))
+        if np.all(depth > 1.0) and np.all((uv >= 5) & (uv < [w - 5, h - 5])):
+            expected.extend(uv.tolist())
+    assert expected, "no ground-truth box is fully in view at this frame"
+    img = qimage_to_array(window.camera.widget.grab().toImage())
+    vb = window.camera.view
+    hits = 0
+    for u, v in expected:
+        pos = window.camera.widget.mapFromScene(vb.mapViewToScene(QtCore.QPointF(u, v)))
+        r, c = pos.y(), pos.x()
+        patch = img[max(0, r - 2) : r + 3, max(0, c - 2) : c + 3].reshape(-1, 3).astype(int)
+        if np.any(np.abs(patch - np.array(GT_COLOR)).sum(axis=1) < 60):
+            hits += 1
+    assert hits / len(expected) > 0.8, f"{hits} of {len(expected)} projected corners drawn"

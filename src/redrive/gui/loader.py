@@ -38,6 +38,7 @@ from redrive.gui.scene import (
     splat_points,
 )
 from redrive.gui.session import LogSession, RunData, series_from_log
+from redrive.io.calibration import camera_calibrations
 from redrive.io.decoders import decode
 from redrive.io.tf_buffer import TransformBuffer
 from redrive.types import Box3D, DetectedObject, Frame, Image, PointCloud, SensorType, Transform
@@ -329,7 +330,7 @@ class FrameLoader(QtCore.QObject):
         try:
             session = LogSession(path)
             static = _Static(session)
-            calibrations = _calibrations(session, static)
+            calibrations = _calibrations(session)
         except (RedriveError, OSError) as err:
             self.open_failed.emit(str(path), str(err))
             return
@@ -379,6 +380,8 @@ class FrameLoader(QtCore.QObject):
             return
         try:
             frame = session.frame(index)
+            if session.log.format == "kitti":
+                self._calibrations = _calibrations(session, stamp_ns=frame.stamp_ns)
             scene = build_scene(
                 frame, options, run=self.run, static=self._static, calibrations=self._calibrations
             )
@@ -395,19 +398,19 @@ class FrameLoader(QtCore.QObject):
         self.scene_ready.emit(scene)
 
 
-def _calibrations(session: LogSession, static: _Static) -> dict[str, npt.NDArray[np.float64]]:
-    """Camera sensor id → 3×4 image_from_base, from the log's camera_info + tf_static."""
-    try:
-        from redrive.io.calibration import camera_calibrations
-    except ImportError:  # pragma: no cover - until redrive.io.calibration exists
-        return {}
+def _calibrations(
+    session: LogSession, *, stamp_ns: int | None = None
+) -> dict[str, npt.NDArray[np.float64]]:
+    """Camera sensor id → 3×4 image_from_base, from the log's camera_info + tf_static (KITTI:
+    of the frame at ``stamp_ns``, its calibration changes from frame to frame)."""
     by_topic = {s.topic: s.sensor_id for s in session.assembler.sensor_map.sensors}
     out = {}
     try:
-        for topic, calib in camera_calibrations(session.log).items():
-            if topic in by_topic:
-                out[by_topic[topic]] = calib.image_from_base()
+        found = camera_calibrations(session.log, stamp_ns=stamp_ns)
     except RedriveError as err:
         logger.warning("camera calibration of %s: %s", session.path, err)
-    del static
+        return out
+    for topic, calib in found.items():
+        if topic in by_topic:
+            out[by_topic[topic]] = calib.image_from_base()
     return out
