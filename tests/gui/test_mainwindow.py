@@ -100,9 +100,9 @@ def test_planview_draws_the_frame(qtbot: Any, window: MainWindow, demo_log: Path
     lit = np.any(np.abs(img3d.astype(int) - background) > 30, axis=2)
     assert lit.mean() > 0.02, "the 3D planview is (nearly) blank"
 
-    with qtbot.waitSignal(window.frame_shown, timeout=_WAIT_MS):
-        qtbot.mouseClick(window.planview.convert_button, QtCore.Qt.MouseButton.LeftButton)
+    qtbot.mouseClick(window.planview.convert_button, QtCore.Qt.MouseButton.LeftButton)
     assert window.planview.is_2d
+    qtbot.waitUntil(lambda: window.scene.raster is not None, timeout=_WAIT_MS)
     scene = window.scene
     assert scene is not None
     assert scene.raster is not None
@@ -118,7 +118,7 @@ def test_planview_draws_the_frame(qtbot: Any, window: MainWindow, demo_log: Path
         if not (-15 < x < 45 and -25 < y < 25):  # inside the default view
             continue
         tested += 1
-        pos = view.mapFromScene(vb.mapViewToScene(QtCore.QPointF(-y, x)))
+        pos = view.mapFromScene(vb.mapViewToScene(QtCore.QPointF(y, x)))
         r, c = pos.y(), pos.x()
         patch = img2d[max(0, r - 2) : r + 3, max(0, c - 2) : c + 3].reshape(-1, 3).astype(int)
         if np.any(np.abs(patch - np.array(GT_COLOR)).sum(axis=1) < 60):
@@ -133,13 +133,15 @@ def test_object_visible_layers(qtbot: Any, window: MainWindow, demo_log: Path) -
     from redrive.gui.scene import Layer
 
     _open(qtbot, window, demo_log)
-    with qtbot.waitSignal(window.frame_shown, timeout=_WAIT_MS):
-        window.layer_actions[Layer.GROUND_TRUTH].setChecked(False)
-    assert window.scene is not None
-    assert all(layer.name != "ground truth" for layer in window.scene.layers)
-    with qtbot.waitSignal(window.frame_shown, timeout=_WAIT_MS):
-        window.layer_actions[Layer.POINTS].setChecked(False)
-    assert len(window.scene.points) == 0
+    assert any(layer.name == "ground truth" for layer in window.scene.layers)
+    window.layer_actions[Layer.GROUND_TRUTH].setChecked(False)
+    qtbot.waitUntil(
+        lambda: all(layer.name != "ground truth" for layer in window.scene.layers),
+        timeout=_WAIT_MS,
+    )
+    assert len(window.scene.points) > 0
+    window.layer_actions[Layer.POINTS].setChecked(False)
+    qtbot.waitUntil(lambda: len(window.scene.points) == 0, timeout=_WAIT_MS)
 
 
 @pytest.fixture(scope="module")

@@ -404,7 +404,7 @@ def _calibrations(
     """Camera sensor id → 3×4 image_from_base, from the log's camera_info + tf_static (KITTI:
     of the frame at ``stamp_ns``, its calibration changes from frame to frame)."""
     by_topic = {s.topic: s.sensor_id for s in session.assembler.sensor_map.sensors}
-    out = {}
+    out: dict[str, npt.NDArray[np.float64]] = {}
     try:
         found = camera_calibrations(session.log, stamp_ns=stamp_ns)
     except RedriveError as err:

@@ -54,6 +54,9 @@ class MainWindow(QtWidgets.QMainWindow):
         self.skipped_ticks = 0
         self._play_t0 = 0.0
         self._play_from = 0
+        self._open_t0 = time.perf_counter()
+        self._first_frame_s: float | None = None
+        self.live_feed: Any = None  # a redrive.gui.live.LiveFeed while live
 
         self.planview = Planview()
         self.setCentralWidget(self.planview)
@@ -194,7 +197,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.timeline.set_playing(False)
         self.status.showMessage(f"opening {path} …")
         self._open_t0 = time.perf_counter()
-        self._first_frame_s: float | None = None
+        self._first_frame_s = None
         self.loader.open(path)
 
     def open_run(self, path: str | Path) -> None:
@@ -250,6 +253,7 @@ class MainWindow(QtWidgets.QMainWindow):
             self.rate_hz = (summary.expected_frames - 1) / duration
         self.timeline.set_frame_count(summary.expected_frames)
         self.camera.set_cameras(summary.cameras)
+        self.plots.set_start(summary.start_ns)
         self.setWindowTitle(f"redrive — {summary.path.name}")
         self._add_recent(summary.path)
         logger.info(
@@ -291,7 +295,7 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def go_to(self, index: int) -> None:
         """Show frame ``index`` (clamped to the log)."""
-        if self.summary is None:
+        if self.summary is None or self.live_feed is not None:
             return
         last = max(0, self.frame_count - 1)
         index = min(max(0, index), last)
@@ -328,6 +332,9 @@ class MainWindow(QtWidgets.QMainWindow):
     # -- playback ---------------------------------------------------------------------------------
 
     def _play_toggled(self, on: bool) -> None:
+        if on and self.live_feed is not None:
+            self.timeline.set_playing(False)
+            return
         if on and self.summary is not None:
             if self.current >= self.frame_count - 1:
                 self.go_to(0)
@@ -373,7 +380,7 @@ class MainWindow(QtWidgets.QMainWindow):
         live.record_dialog(self)
 
     def disconnect_live(self) -> None:
-        feed = getattr(self, "live_feed", None)
+        feed = self.live_feed
         if feed is not None:
             feed.stop()
             self.live_feed = None
@@ -389,7 +396,7 @@ class MainWindow(QtWidgets.QMainWindow):
                 "Re-simulation", self.resim, QtCore.Qt.DockWidgetArea.RightDockWidgetArea
             )
             self.tabifyDockWidget(self.docks["Camera"], dock)
-            if self.summary is not None:
+            if self.summary is not None and self.summary.format != "live":
                 self.resim.load_log(self.summary.path)
             self.resim.run_finished.connect(self.open_run)
         self.docks["Re-simulation"].show()

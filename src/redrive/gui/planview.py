@@ -85,13 +85,14 @@ class _GlView(gl.GLViewWidget):
 
 
 class _RasterView(pg.PlotWidget):
-    """x (forward) up the screen, y (left) to the left: plot axes are (−y, x)."""
+    """x (forward) up the screen, y (left) to the left: plot axes are (y, x), x axis inverted."""
 
     def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent, background=(16, 16, 20))
         self.setAspectLocked(True)
         self.showGrid(x=True, y=True, alpha=0.15)
-        self.setLabel("bottom", "−y (right)", units="m")
+        self.getPlotItem().invertX(True)
+        self.setLabel("bottom", "y (left)", units="m")
         self.setLabel("left", "x (forward)", units="m")
         self.image = pg.ImageItem(axisOrder="row-major")
         self.addItem(self.image)
@@ -105,9 +106,9 @@ class _RasterView(pg.PlotWidget):
         if spec == self._spec:
             return
         h, cell = spec.half_extent_m, spec.cell_m
-        # Row 0 is +x (top), column 0 is +y (left): plot x = −y = col·cell − h and plot
-        # y = x = h − row·cell.
-        self.image.setTransform(QtGui.QTransform(cell, 0, 0, -cell, -h, h))
+        # Row 0 is +x (top), column 0 is +y (left): plot x = y = h − col·cell (drawn on the
+        # left: the axis is inverted) and plot y = x = h − row·cell.
+        self.image.setTransform(QtGui.QTransform(-cell, 0, 0, -cell, h, h))
         self._spec = spec
 
     def show_scene(self, scene: Scene, spec: RasterSpec) -> None:
@@ -123,13 +124,13 @@ class _RasterView(pg.PlotWidget):
                 self.addItem(curve)
                 self.curves[layer.name] = curve
             seg = layer.segments
-            curve.setData(x=-seg[:, 1], y=seg[:, 0], connect="pairs")
+            curve.setData(x=seg[:, 1], y=seg[:, 0], connect="pairs")
             curve.setVisible(True)
         for name, curve in self.curves.items():
             if name not in seen:
                 curve.setVisible(False)
         if scene.path is not None:
-            self.path.setData(x=-scene.path[:, 1], y=scene.path[:, 0])
+            self.path.setData(x=scene.path[:, 1], y=scene.path[:, 0])
             self.path.setVisible(True)
         else:
             self.path.setVisible(False)
@@ -140,7 +141,7 @@ class _RasterView(pg.PlotWidget):
             self.labels.append(item)
         for item, (text, x, y, _z) in zip(self.labels, texts, strict=False):
             item.setText(text)
-            item.setPos(-y, x)
+            item.setPos(y, x)
             item.setVisible(True)
         for item in self.labels[len(texts) :]:
             item.setVisible(False)

@@ -56,6 +56,14 @@ class PlotsPanel(QtWidgets.QWidget):
     def _t(self, stamps: npt.NDArray[np.int64]) -> npt.NDArray[np.float64]:
         return (stamps - self.start_ns).astype(np.float64) / 1e9
 
+    def set_start(self, start_ns: int) -> None:
+        """The log's start (x = 0); clears the log's series, re-draws the metric."""
+        self.start_ns = start_ns
+        for name in ("IMU accel", "speed", "yaw rate"):
+            self.plots[name].clear()
+            self.plots[name].addItem(self.cursors[name])
+        self._show_metric()
+
     def set_series(self, series: Series, *, start_ns: int) -> None:
         self.start_ns = start_ns
         plot = self.plots["IMU accel"]
@@ -93,6 +101,7 @@ class PlotsPanel(QtWidgets.QWidget):
         stamps, values = self.run.per_frame[tuple(key)]
         plot.setLabel("left", key[2])
         plot.plot(self._t(stamps), values, pen=pg.mkPen((255, 140, 0)), symbol="o", symbolSize=3)
+        plot.enableAutoRange()
 
     def set_cursor(self, stamp_ns: int) -> None:
         t = (stamp_ns - self.start_ns) / 1e9
