@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 DEMO_DIR := .demo
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: demo test lint venv clean bench-read system-test-deps gui
+.PHONY: demo test lint venv clean bench-read system-test-deps gui screenshots
 
 # Debian's python3 ships without venv/ensurepip: install python3-venv when it is missing.
 $(BIN)/python:
@@ -93,6 +93,12 @@ system-test-deps:
 ## test: install test needs, lint, run the whole suite (slow/soak tests run as benchmarks)
 test: system-test-deps lint
 	xvfb-run -a -s "-screen 0 1600x1000x24" $(BIN)/pytest -q -m "not slow" -p no:cacheprovider
+
+## screenshots: the GUI images of README and docs/gui.md, from the demo run, under Xvfb
+screenshots: demo
+	$(BIN)/pip install -q -e '.[gui]'
+	xvfb-run -a -s "-screen 0 1600x1000x24" $(BIN)/python scripts/gui_screenshots.py \
+	  --log $(DEMO_DIR)/urban.mcap --run $(DEMO_DIR)/run --out docs/images
 
 ## gui: install redrive with its GUI extra and open the demo log (run `make demo` first for its run)
 gui: $(VENV)/.installed
