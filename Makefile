@@ -43,8 +43,8 @@ demo: $(VENV)/.installed
 
 ## lint: ruff, mypy --strict on src/, import-linter (the layers of DESIGN.md)
 lint: $(VENV)/.installed-test
-	$(BIN)/ruff check src tests benchmarks docs
-	$(BIN)/ruff format --check src tests benchmarks docs
+	$(BIN)/ruff check src tests benchmarks docs scripts
+	$(BIN)/ruff format --check src tests benchmarks docs scripts
 	$(BIN)/mypy
 	$(BIN)/lint-imports
 

@@ -10,6 +10,7 @@ from typing import Any
 
 from redrive.cli.bench_engine import add_engine_parser
 from redrive.cli.bench_eval import add_eval_parser
+from redrive.cli.bench_gui import add_gui_parser
 from redrive.cli.bench_loss import add_loss_parser
 from redrive.cli.bench_transport import add_transport_parser
 
@@ -330,3 +331,4 @@ def register(sub: Any) -> None:
     add_eval_parser(bench_sub)
     add_transport_parser(bench_sub)
     add_loss_parser(bench_sub)
+    add_gui_parser(bench_sub)
