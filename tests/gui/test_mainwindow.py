@@ -244,3 +244,27 @@ def test_camera_shows_boxes_where_their_projection_says(
         if np.any(np.abs(patch - np.array(GT_COLOR)).sum(axis=1) < 60):
             hits += 1
     assert hits / len(expected) > 0.8, f"{hits} of {len(expected)} projected corners drawn"
+
+
+def test_topic_picker_on_the_open_log(qtbot: Any, window: MainWindow, demo_log: Path) -> None:
+    """File → Topics: the topics moved to "shown" are the sensors drawn."""
+    _open(qtbot, window, demo_log)
+    picker = window.pick_topics()
+    assert picker is not None
+    assert "/lidar_top" in picker.shown_topics()
+    assert "/camera_front/image_raw" in picker.shown_topics()
+    qtbot.mouseClick(picker.clear_button, QtCore.Qt.MouseButton.LeftButton)
+    picker.show_topics(["/camera_front/image_raw"])
+    qtbot.mouseClick(picker.run_button, QtCore.Qt.MouseButton.LeftButton)
+    qtbot.waitUntil(lambda: window.scene.point_count == 0, timeout=_WAIT_MS)
+    assert window.camera.camera == "camera_front_image_raw"
+    assert window.camera.scene is not None
+
+    picker = window.pick_topics()
+    assert picker.shown_topics() == ["/camera_front/image_raw"]
+    qtbot.mouseClick(picker.clear_button, QtCore.Qt.MouseButton.LeftButton)
+    picker.show_topics(["/lidar_top"])
+    qtbot.mouseClick(picker.run_button, QtCore.Qt.MouseButton.LeftButton)
+    qtbot.waitUntil(lambda: window.scene.point_count > 10_000, timeout=_WAIT_MS)
+    assert window.camera.camera is None
+    assert window.camera.camera_box.count() == 0

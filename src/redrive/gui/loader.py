@@ -67,6 +67,8 @@ class ViewOptions:
     max_points_3d: int = 150_000
     raster: RasterSpec = field(default_factory=RasterSpec)
     algorithms: frozenset[str] | None = None  # None: every perception algorithm of the run
+    #: sensor ids drawn (the topic picker's choice); None: all of them.
+    sensors: frozenset[str] | None = None
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -82,6 +84,8 @@ class LogSummary:
     end_ns: int
     cameras: tuple[str, ...]
     open_s: float
+    #: sensor id → its topic
+    sensor_topics: Mapping[str, str] = field(default_factory=dict)
 
 
 def to_rgb8(image: Image) -> npt.NDArray[np.uint8]:
@@ -123,9 +127,14 @@ class _Static:
         return self._cache[frame_id]
 
 
-def _lidar_in_base(frame: Frame, static: _Static | None) -> tuple[Any, Any]:
-    """(xyz float32 (N,3) in base_link, intensity or None) of the frame's 3D LiDAR."""
+def _lidar_in_base(
+    frame: Frame, static: _Static | None, shown: frozenset[str] | None = None
+) -> tuple[Any, Any]:
+    """(xyz float32 (N,3) in base_link, intensity or None) of the frame's (first shown) 3D
+    LiDAR."""
     for data in frame.sensors.values():
+        if shown is not None and data.sensor_id not in shown:
+            continue
         if data.sensor_type is SensorType.LIDAR and isinstance(data.data, PointCloud):
             xyz = data.data.xyz
             mat = static.base_from(data.frame_id) if static is not None else None
@@ -149,7 +158,7 @@ def build_scene(
 
     ``calibrations`` maps a camera's sensor id to its 3×4 ``image_from_base``.
     """
-    xyz, intensity = _lidar_in_base(frame, static)
+    xyz, intensity = _lidar_in_base(frame, static, options.sensors)
     colors = color_points(xyz, options.color_mode, intensity=intensity)
     layers_on = options.layers
     raster = None
@@ -352,6 +361,7 @@ class FrameLoader(QtCore.QObject):
                 end_ns=session.log.end_ns,
                 cameras=cameras,
                 open_s=time.perf_counter() - t0,
+                sensor_topics={s.sensor_id: s.topic for s in smap.sensors},
             )
         )
         threading.Thread(

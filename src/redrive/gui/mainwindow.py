@@ -57,6 +57,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self._open_t0 = time.perf_counter()
         self._first_frame_s: float | None = None
         self.live_feed: Any = None  # a redrive.gui.live.LiveFeed while live
+        self.shown_sensors: frozenset[str] | None = None  # the topic picker's choice
 
         self.planview = Planview()
         self.setCentralWidget(self.planview)
@@ -129,6 +130,7 @@ class MainWindow(QtWidgets.QMainWindow):
         file = menus.addMenu("&File")
         file.addAction("Open &log…", QtGui.QKeySequence.StandardKey.Open, self._ask_open_log)
         file.addAction("Open &run…", self._ask_open_run)
+        file.addAction("&Topics…", self.pick_topics)
         self.recent_menu = file.addMenu("Open &recent")
         self._fill_recent()
         file.addSeparator()
@@ -247,6 +249,7 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def _opened(self, summary: LogSummary) -> None:
         self.summary = summary
+        self.shown_sensors = None
         self.frame_count = summary.expected_frames
         duration = (summary.end_ns - summary.start_ns) / 1e9
         if summary.expected_frames > 1 and duration > 0:
@@ -291,6 +294,7 @@ class MainWindow(QtWidgets.QMainWindow):
             planview_2d=self.planview.is_2d,
             camera=self.camera.camera if self.docks["Camera"].isVisible() else None,
             raster=self.planview.raster_spec,
+            sensors=self.shown_sensors,
         )
 
     def go_to(self, index: int) -> None:
@@ -366,6 +370,40 @@ class MainWindow(QtWidgets.QMainWindow):
             return
         self.current = target
         self.loader.request(target, self.view_options())
+
+    # -- topics -----------------------------------------------------------------------------------
+
+    def pick_topics(self) -> Any:
+        """The topic picker on the open log: the topics moved to "shown" are the sensors drawn
+        (the LiDAR of the planview, the cameras of the camera panel)."""
+        from redrive.gui.topics import TopicPicker
+
+        if self.summary is None or self.summary.format == "live":
+            self.status.showMessage("open a log first (live topics: Live → Connect)", 5000)
+            return None
+        summary = self.summary
+        picker = TopicPicker.for_log(
+            summary.topics, duration_s=(summary.end_ns - summary.start_ns) / 1e9, parent=self
+        )
+        shown = self.shown_sensors
+        picker.show_topics(
+            t for sid, t in summary.sensor_topics.items() if shown is None or sid in shown
+        )
+        picker.topics_chosen.connect(self.show_topics)
+        picker.open()
+        self.topic_picker = picker
+        return picker
+
+    def show_topics(self, topics: list[str]) -> None:
+        """Draw only the sensors of ``topics`` (all when every sensor topic is among them)."""
+        if self.summary is None:
+            return
+        chosen = set(topics)
+        sensors = frozenset(s for s, t in self.summary.sensor_topics.items() if t in chosen)
+        self.shown_sensors = None if len(sensors) == len(self.summary.sensor_topics) else sensors
+        self.camera.set_cameras([c for c in self.summary.cameras if c in sensors])
+        logger.info("showing %s", ", ".join(sorted(topics)) or "no topic")
+        self.refresh()
 
     # -- live -------------------------------------------------------------------------------------
 
