@@ -463,6 +463,7 @@ class LiveFeed(QtCore.QObject):
     def _first_scene(self, window: MainWindow, summary: LogSummary) -> None:
         window.camera.set_cameras(summary.cameras)  # before the summary: no loader request
         window.summary = summary
+        window.time_origin_ns = None  # the live stream's first frame is time zero
         window.run = None
         window.setWindowTitle(f"redrive — live {self.uri}")
         logger.info(

@@ -58,6 +58,8 @@ class MainWindow(QtWidgets.QMainWindow):
         self._first_frame_s: float | None = None
         self.live_feed: Any = None  # a redrive.gui.live.LiveFeed while live
         self.shown_sensors: frozenset[str] | None = None  # the topic picker's choice
+        self.time_origin_ns: int | None = None
+        self._series: Series | None = None
 
         self.planview = Planview()
         self.setCentralWidget(self.planview)
@@ -256,7 +258,10 @@ class MainWindow(QtWidgets.QMainWindow):
             self.rate_hz = (summary.expected_frames - 1) / duration
         self.timeline.set_frame_count(summary.expected_frames)
         self.camera.set_cameras(summary.cameras)
-        self.plots.set_start(summary.start_ns)
+        # Time zero of the timeline and plots: the first frame's stamp (header stamps can be on
+        # another clock than the log's record times, e.g. simulated time).
+        self.time_origin_ns = None
+        self._series = None
         self.setWindowTitle(f"redrive — {summary.path.name}")
         self._add_recent(summary.path)
         logger.info(
@@ -282,8 +287,9 @@ class MainWindow(QtWidgets.QMainWindow):
             self.status.showMessage(f"{count} frames", 5000)
 
     def _series_ready(self, series: Series) -> None:
-        if self.summary is not None:
-            self.plots.set_series(series, start_ns=self.summary.start_ns)
+        self._series = series
+        if self.time_origin_ns is not None:
+            self.plots.set_series(series, start_ns=self.time_origin_ns)
 
     # -- frames -----------------------------------------------------------------------------------
 
@@ -315,8 +321,14 @@ class MainWindow(QtWidgets.QMainWindow):
         self.scene = scene
         self.planview.show_scene(scene)
         self.camera.show_camera(scene.cameras.get(self.camera.camera or ""))
-        if self.summary is not None:
-            self.timeline.show_frame(scene.index, scene.stamp_ns, start_ns=self.summary.start_ns)
+        if self.time_origin_ns is None:
+            self.time_origin_ns = scene.stamp_ns
+            self.plots.set_start(scene.stamp_ns)
+            if self._series is not None:
+                self.plots.set_series(self._series, start_ns=scene.stamp_ns)
+        origin = self.time_origin_ns
+        assert origin is not None
+        self.timeline.show_frame(scene.index, scene.stamp_ns, start_ns=origin)
         self.plots.set_cursor(scene.stamp_ns)
         self.frames_shown += 1
         if self._first_frame_s is None:
