@@ -66,14 +66,14 @@ def main(argv: list[str] | None = None) -> int:
     pump(app, lambda: win.scene is not None)
     pump(app, lambda: win.loader.session is not None and win.loader.session.indexed)
     show_frame(app, win, args.frame)
-    win.grab().save(str(args.out / "gui-main.png"))
+    win.grab_window().save(str(args.out / "gui-main.png"))
     win.camera.grab().save(str(args.out / "gui-camera.png"))
     win.docks["Timeline"].grab().save(str(args.out / "gui-timeline.png"))
     win.plots.grab().save(str(args.out / "gui-plots.png"))
     win.planview.convert_button.setChecked(True)
     pump(app, lambda: win.scene is not None and win.scene.raster is not None)
     settle(app)
-    win.grab().save(str(args.out / "gui-2d.png"))
+    win.grab_window().save(str(args.out / "gui-2d.png"))
 
     with open_log(args.log) as log:
         topics, duration_s = dict(log.topics), (log.end_ns - log.start_ns) / 1e9

@@ -36,6 +36,7 @@ from redrive.gui.scene import (
     project_segments,
     rasterize_top_down,
     splat_points,
+    transform_xyz,
 )
 from redrive.gui.session import LogSession, RunData, series_from_log
 from redrive.io.calibration import camera_calibrations
@@ -136,10 +137,10 @@ def _lidar_in_base(
         if shown is not None and data.sensor_id not in shown:
             continue
         if data.sensor_type is SensorType.LIDAR and isinstance(data.data, PointCloud):
-            xyz = data.data.xyz
+            xyz: npt.NDArray[Any] = data.data.xyz
             mat = static.base_from(data.frame_id) if static is not None else None
-            if mat is not None:
-                xyz = (xyz @ mat[:3, :3].T.astype(np.float32)) + mat[:3, 3].astype(np.float32)
+            if mat is not None and not np.array_equal(mat, np.eye(4)):
+                xyz = transform_xyz(mat, xyz)
             elif any(data.sensor_location):
                 xyz = xyz + np.asarray(data.sensor_location, dtype=np.float32)
             return np.ascontiguousarray(xyz, dtype=np.float32), data.data.channels.get("intensity")
@@ -159,13 +160,19 @@ def build_scene(
     ``calibrations`` maps a camera's sensor id to its 3×4 ``image_from_base``.
     """
     xyz, intensity = _lidar_in_base(frame, static, options.sensors)
-    colors = color_points(xyz, options.color_mode, intensity=intensity)
     layers_on = options.layers
     raster = None
+    keep = decimate(len(xyz), options.max_points_3d)
     if options.planview_2d:
         shown = len(xyz) if Layer.POINTS in layers_on else 0
-        raster = rasterize_top_down(xyz[:shown], colors[:shown], options.raster)
-    keep = decimate(len(xyz), options.max_points_3d)
+        raster = rasterize_top_down(
+            xyz[:shown], options.color_mode, options.raster, intensity=intensity
+        )
+        colors = np.zeros((0, 4), np.float32)  # the 2D view draws the raster, not points
+        keep = slice(0, 0)
+    else:
+        kept_intensity = None if intensity is None else intensity[keep]
+        colors = color_points(xyz[keep], options.color_mode, intensity=kept_intensity)
     layers: list[LayerLines] = []
     gt = frame.ground_truth
     if run is not None and not gt:
@@ -217,7 +224,7 @@ def build_scene(
         index=frame.index,
         stamp_ns=frame.stamp_ns,
         points=points,
-        colors=colors[keep] if Layer.POINTS in layers_on else np.zeros((0, 4), np.float32),
+        colors=colors if Layer.POINTS in layers_on else np.zeros((0, 4), np.float32),
         point_count=len(xyz),
         layers=tuple(layers),
         path=path,

@@ -1,8 +1,11 @@
 """The planview: the point cloud in 3D (OpenGL) or as a top-down raster (2D), with boxes, track
 ids, the ego vehicle and the planned path.
 
-The 3D view is pyqtgraph's ``GLViewWidget`` (orbit: left drag, pan: middle drag or ctrl+left,
-zoom: wheel); the 2D view is an ``ImageItem`` raster plus line items in a ``PlotWidget`` (pan:
+The 3D view is pyqtgraph's GL view (orbit: left drag, pan: middle drag or ctrl+left, zoom:
+wheel) as a ``QOpenGLWindow`` in a window container, not a ``QOpenGLWidget``: a window holding a
+``QOpenGLWidget`` composites *everything* through GL, which under llvmpipe made every repaint of
+the 1600×1000 window cost 28–42 ms (``redrive bench gui``); the native GL window keeps the rest on
+Qt's raster backing store.  The 2D view is an ``ImageItem`` raster plus line items in a ``PlotWidget`` (pan:
 drag, zoom: wheel) — fast on software GL, where the 3D view is not (NOTES.md: 13–17 FPS at 120k
 points under llvmpipe against 25–36 for the raster).  Both are in base_link: x forward, y left.
 """
@@ -12,7 +15,8 @@ from __future__ import annotations
 import numpy as np
 import pyqtgraph as pg
 import pyqtgraph.opengl as gl
-from PySide6 import QtCore, QtGui, QtWidgets
+from pyqtgraph.opengl.GLViewWidget import GLViewMixin
+from PySide6 import QtCore, QtGui, QtOpenGL, QtWidgets
 
 from redrive.gui.scene import ColorMode, RasterSpec, Scene
 
@@ -25,9 +29,11 @@ def _rgba(color: tuple[int, int, int], alpha: float = 1.0) -> tuple[float, float
     return (color[0] / 255, color[1] / 255, color[2] / 255, alpha)
 
 
-class _GlView(gl.GLViewWidget):
-    def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
-        super().__init__(parent)
+class _GlView(GLViewMixin, QtOpenGL.QOpenGLWindow):
+    """pyqtgraph's GL view as a ``QOpenGLWindow`` (embed it with ``createWindowContainer``)."""
+
+    def __init__(self) -> None:
+        super().__init__()
         self.setBackgroundColor((16, 16, 20))
         self.grid = gl.GLGridItem(size=QtGui.QVector3D(120, 120, 1))
         self.grid.setSpacing(10, 10, 1)
@@ -41,6 +47,10 @@ class _GlView(gl.GLViewWidget):
         self.addItem(self.path)
         self.labels: list[gl.GLTextItem] = []
         self.reset_camera()
+
+    def rect(self) -> QtCore.QRect:
+        """What GLTextItem asks of its view (a QWidget method a QWindow lacks)."""
+        return QtCore.QRect(0, 0, self.width(), self.height())
 
     def reset_camera(self) -> None:
         self.setCameraPosition(pos=QtGui.QVector3D(8, 0, 0), distance=55, elevation=35, azimuth=180)
@@ -180,8 +190,10 @@ class Planview(QtWidgets.QWidget):
         layout.addLayout(bar)
         self.stack = QtWidgets.QStackedWidget()
         self.view3d = _GlView()
+        self.container3d = QtWidgets.QWidget.createWindowContainer(self.view3d, self)
+        self.container3d.setMinimumSize(200, 150)
         self.view2d = _RasterView()
-        self.stack.addWidget(self.view3d)
+        self.stack.addWidget(self.container3d)
         self.stack.addWidget(self.view2d)
         layout.addWidget(self.stack, 1)
         self.raster_spec = RasterSpec()
@@ -220,3 +232,13 @@ class Planview(QtWidgets.QWidget):
         if self.is_2d:
             return self.view2d.grab().toImage()
         return self.view3d.grabFramebuffer()
+
+    def paint_gl_into(self, image: QtGui.QImage, window: QtWidgets.QWidget) -> None:
+        """Draw the 3D view into ``image``, a grab of ``window`` (a native GL window is not part
+        of a widget grab)."""
+        if self.is_2d or not self.container3d.isVisible():
+            return
+        top_left = self.container3d.mapTo(window, QtCore.QPoint(0, 0))
+        painter = QtGui.QPainter(image)
+        painter.drawImage(top_left, self.view3d.grabFramebuffer())
+        painter.end()

@@ -123,6 +123,18 @@ class Scene:
     info: Mapping[str, Any] = field(default_factory=dict)
 
 
+def transform_xyz(mat: npt.NDArray[np.float64], xyz: npt.NDArray[np.float32]) -> Float:
+    """``mat`` (3×4 or 4×4; rows used: 3) applied to (N, 3) points, column by column — not a
+    matmul: numpy hands N×3 @ 3×3 to OpenBLAS, whose threads then spin on the second core the
+    GUI and the loader need (``redrive bench gui``)."""
+    x, y, z = (xyz[:, i].astype(np.float64) for i in range(3))
+    out = np.empty((len(xyz), 3), dtype=np.float64)
+    for row in range(3):
+        r = mat[row]
+        out[:, row] = r[0] * x + r[1] * y + r[2] * z + r[3]
+    return out
+
+
 def decimate(n: int, limit: int) -> npt.NDArray[np.intp] | slice:
     """Indices keeping at most ``limit`` of ``n`` points, evenly strided (deterministic)."""
     if n <= limit:
@@ -216,12 +228,13 @@ def splat_points(
     """Draw LiDAR points into ``image`` (in place) coloured by depth; returns how many landed."""
     if len(points_base) == 0:
         return 0
-    uv, depth = project_points(image_from_base, points_base)
+    homog = transform_xyz(np.asarray(image_from_base, dtype=np.float64), points_base)
+    depth = homog[:, 2]
+    ok = depth > 0.5
+    homog, depth = homog[ok], depth[ok]
     h, w = image.shape[:2]
-    ok = (depth > 0.5) & np.isfinite(uv[:, 0])
-    uv, depth = uv[ok], depth[ok]
-    cols = np.round(uv[:, 0]).astype(np.intp)
-    rows = np.round(uv[:, 1]).astype(np.intp)
+    cols = np.round(homog[:, 0] / depth).astype(np.intp)
+    rows = np.round(homog[:, 1] / depth).astype(np.intp)
     inside = (cols >= 0) & (cols < w) & (rows >= 0) & (rows < h)
     cols, rows, depth = cols[inside], rows[inside], depth[inside]
     # Far points first, so near ones win where they overlap.
@@ -237,11 +250,17 @@ def splat_points(
 
 
 def rasterize_top_down(
-    xyz: npt.NDArray[np.float32], colors: Rgba, spec: RasterSpec
+    xyz: npt.NDArray[np.float32],
+    mode: ColorMode,
+    spec: RasterSpec,
+    *,
+    intensity: npt.NDArray[Any] | None = None,
 ) -> npt.NDArray[np.uint8]:
     """A (S, S, 3) image of the points seen from above: row 0 is +x (ahead) far edge, column 0
     is +y (left) — so x points up the screen and y left, as a driver sees the road.  Each cell
-    takes the colour of its highest point; empty cells are dark grey."""
+    is coloured by its highest point (height), its distance from base_link, or its brightest
+    return (intensity); empty cells are dark grey.  One pass over the points (a max-scatter, no
+    sort)."""
     size = spec.size_px
     out = np.full((size, size, 3), 24, dtype=np.uint8)
     if len(xyz) == 0:
@@ -249,9 +268,23 @@ def rasterize_top_down(
     rows = ((spec.half_extent_m - xyz[:, 0]) / spec.cell_m).astype(np.intp)
     cols = ((spec.half_extent_m - xyz[:, 1]) / spec.cell_m).astype(np.intp)
     ok = (rows >= 0) & (rows < size) & (cols >= 0) & (cols < size)
-    rows, cols, z, rgb = rows[ok], cols[ok], xyz[ok, 2], colors[ok, :3]
-    order = np.argsort(z)  # highest last: it wins the cell
-    out[rows[order], cols[order]] = (rgb[order] * 255).astype(np.uint8)
+    cell = rows[ok] * size + cols[ok]
+    use_intensity = mode is ColorMode.INTENSITY and intensity is not None and len(intensity)
+    value = np.asarray(intensity, dtype=np.float32)[ok] if use_intensity else xyz[ok, 2]
+    best = np.full(size * size, -np.inf, dtype=np.float32)
+    np.maximum.at(best, cell, value)
+    filled = np.flatnonzero(np.isfinite(best))
+    if mode is ColorMode.HEIGHT:
+        rgb = _colormap(best[filled], -2.0, 3.0)
+    elif use_intensity:
+        lo, hi = np.percentile(best[filled], [1, 99])
+        rgb = _colormap(best[filled], float(lo), float(hi))
+    else:
+        fr, fc = np.divmod(filled, size)
+        dx = spec.half_extent_m - (fr + 0.5) * spec.cell_m
+        dy = spec.half_extent_m - (fc + 0.5) * spec.cell_m
+        rgb = _colormap(np.hypot(dx, dy), 0.0, 60.0)
+    out.reshape(-1, 3)[filled] = (rgb[:, :3] * 255).astype(np.uint8)
     return out
 
 

@@ -33,6 +33,10 @@ __all__ = ["Bookmark", "LogSession", "RunData", "find_run_log", "series_from_log
 logger = logging.getLogger(__name__)
 
 
+#: how many frames ahead :meth:`LogSession.frame` reads through instead of seeking.
+_READ_THROUGH = 4
+
+
 class LogSession:
     """A log opened for viewing.
 
@@ -108,6 +112,15 @@ class LogSession:
         """
         if index < 0:
             raise IndexError(index)
+        ahead = index - self._next_index
+        if self._frames is not None and 0 < ahead <= _READ_THROUGH:
+            # A few frames ahead (playback faster than decoding): reading through them costs
+            # less than a seek, which re-reads the tolerance window before the frame.
+            for _ in range(ahead):
+                if next(self._frames, None) is None:
+                    self._frames = None
+                    raise IndexError(index)
+            self._next_index = index
         if self._frames is None or index != self._next_index:
             if index == 0:
                 start = None
