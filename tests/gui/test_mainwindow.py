@@ -268,3 +268,30 @@ def test_topic_picker_on_the_open_log(qtbot: Any, window: MainWindow, demo_log: 
     qtbot.waitUntil(lambda: window.scene.point_count > 10_000, timeout=_WAIT_MS)
     assert window.camera.camera is None
     assert window.camera.camera_box.count() == 0
+
+
+def test_follow_ego_off_keeps_the_world_still(
+    qtbot: Any, window: MainWindow, demo_log: Path
+) -> None:
+    """Following (default): the ego stays at the origin; not following: the world stays put
+    and the ego box moves by what the log's ego state says it drove."""
+    _open(qtbot, window, demo_log)
+    qtbot.mouseClick(window.planview.convert_button, QtCore.Qt.MouseButton.LeftButton)
+    _show(qtbot, window, 10)
+    qtbot.waitUntil(lambda: window.scene.raster is not None, timeout=_WAIT_MS)
+    ego = window.planview.view2d.curves["ego"]
+    assert ego.transform().map(QtCore.QPointF(0, 0)) == QtCore.QPointF(0, 0)
+    start = window.scene.pose
+    assert start is not None
+    window.planview.follow_box.setChecked(False)
+    _show(qtbot, window, 40)
+    end = window.scene.pose
+    assert end is not None
+    moved = ego.transform().map(QtCore.QPointF(0, 0))  # plot (u, v) = (y, x)
+    driven = float(np.hypot(end[0] - start[0], end[1] - start[1]))
+    assert driven > 5.0
+    assert np.hypot(moved.x(), moved.y()) == pytest.approx(driven, rel=1e-6)
+    window.planview.follow_box.setChecked(True)
+    qtbot.waitUntil(
+        lambda: ego.transform().map(QtCore.QPointF(0, 0)) == QtCore.QPointF(0, 0), timeout=5000
+    )

@@ -231,7 +231,17 @@ def build_scene(
         raster=raster,
         cameras=cameras,
         info={"ground_truth": len(gt or ())},
+        pose=_pose(frame, run),
     )
+
+
+def _pose(frame: Frame, run: RunData | None) -> tuple[float, float, float] | None:
+    state = frame.vehicle_state
+    if state is None and run is not None:
+        state = run.ego.get(frame.stamp_ns)
+    if state is None:
+        return None
+    return (float(state.position[0]), float(state.position[1]), float(state.heading_rad))
 
 
 def _camera_scene(
@@ -282,6 +292,8 @@ class FrameLoader(QtCore.QObject):
         self._static: _Static | None = None
         self._calibrations: dict[str, npt.NDArray[np.float64]] = {}
         self._generation = 0
+        self._closing = threading.Event()
+        self._index_thread: threading.Thread | None = None
         self._thread = threading.Thread(target=self._loop, name="redrive-gui-loader", daemon=True)
         self._thread.start()
 
@@ -308,10 +320,15 @@ class FrameLoader(QtCore.QObject):
             self._cond.notify()
 
     def close(self) -> None:
+        """Stop both worker threads (before the QObject and the QApplication go away: a thread
+        still reading at interpreter exit crashes it)."""
+        self._closing.set()
         with self._cond:
             self._stop = True
             self._cond.notify()
         self._thread.join(timeout=5.0)
+        if self._index_thread is not None:
+            self._index_thread.join(timeout=5.0)
         if self.session is not None:
             self.session.close()
 
@@ -371,22 +388,27 @@ class FrameLoader(QtCore.QObject):
                 sensor_topics={s.sensor_id: s.topic for s in smap.sensors},
             )
         )
-        threading.Thread(
+        if self._index_thread is not None:
+            self._index_thread.join(timeout=5.0)  # the previous log's: its generation is stale
+        self._index_thread = threading.Thread(
             target=self._index,
             args=(session, self._generation),
             daemon=True,
             name="redrive-gui-index",
-        ).start()
+        )
+        self._index_thread.start()
 
     def _index(self, session: LogSession, generation: int) -> None:
         # RuntimeError: the window (and this QObject) went away while indexing.
         with contextlib.suppress(RuntimeError):
             try:
-                for count in session.index():
-                    if generation != self._generation:
+                for count in session.index(stop=self._closing):
+                    if generation != self._generation or self._closing.is_set():
                         return
                     self.indexed.emit(count, session.indexed)
-                self.series_ready.emit(series_from_log(session.path, session.assembler))
+                series = series_from_log(session.path, session.assembler, stop=self._closing)
+                if generation == self._generation and not self._closing.is_set():
+                    self.series_ready.emit(series)
             except (RedriveError, OSError) as err:
                 logger.warning("indexing %s stopped: %s", session.path, err)
                 self.indexed.emit(len(session.driver_times_ns), True)

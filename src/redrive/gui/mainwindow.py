@@ -183,6 +183,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.settings.setValue("window/state", self.saveState())
         self.disconnect_live()
         self.loader.close()
+        self.planview.shutdown()
         self.logbox.detach()
         if self.resim is not None and hasattr(self.resim, "shutdown"):
             self.resim.shutdown()

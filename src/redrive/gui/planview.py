@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 import pyqtgraph as pg
 import pyqtgraph.opengl as gl
+import shiboken6
 from pyqtgraph.opengl.GLViewWidget import GLViewMixin
 from PySide6 import QtCore, QtGui, QtOpenGL, QtWidgets
 
@@ -46,6 +47,7 @@ class _GlView(GLViewMixin, QtOpenGL.QOpenGLWindow):
         self.path = gl.GLLinePlotItem(pos=np.zeros((2, 3)), width=3.0, mode="line_strip")
         self.addItem(self.path)
         self.labels: list[gl.GLTextItem] = []
+        self._matrix = QtGui.QMatrix4x4()
         self.reset_camera()
 
     def rect(self) -> QtCore.QRect:
@@ -55,7 +57,16 @@ class _GlView(GLViewMixin, QtOpenGL.QOpenGLWindow):
     def reset_camera(self) -> None:
         self.setCameraPosition(pos=QtGui.QVector3D(8, 0, 0), distance=55, elevation=35, azimuth=180)
 
-    def show_scene(self, scene: Scene) -> None:
+    def show_scene(self, scene: Scene, world: tuple[float, float, float] | None = None) -> None:
+        """``world``: (x, y, heading) of the ego relative to the view's origin — the items are
+        placed there (a world-fixed view); None: base_link at the origin (follow ego)."""
+        matrix = QtGui.QMatrix4x4()
+        if world is not None:
+            matrix.translate(world[0], world[1], 0.0)
+            matrix.rotate(float(np.degrees(world[2])), 0.0, 0.0, 1.0)
+        for item in (self.scatter, self.path, *self.lines.values(), *self.labels):
+            item.setTransform(matrix)
+        self._matrix = matrix
         if len(scene.points):
             self.scatter.setData(pos=scene.points, color=scene.colors)
             self.scatter.setVisible(True)
@@ -67,6 +78,7 @@ class _GlView(GLViewMixin, QtOpenGL.QOpenGLWindow):
             item = self.lines.get(layer.name)
             if item is None:
                 item = gl.GLLinePlotItem(mode="lines", width=2.0, antialias=False)
+                item.setTransform(self._matrix)
                 self.addItem(item)
                 self.lines[layer.name] = item
             if len(layer.segments):
@@ -85,6 +97,7 @@ class _GlView(GLViewMixin, QtOpenGL.QOpenGLWindow):
         texts = [t for layer in scene.layers for t in layer.labels][:_MAX_LABELS]
         while len(self.labels) < len(texts):
             item = gl.GLTextItem(color=(255, 255, 255, 255))
+            item.setTransform(self._matrix)
             self.addItem(item)
             self.labels.append(item)
         for item, (text, x, y, z) in zip(self.labels, texts, strict=False):
@@ -111,6 +124,8 @@ class _RasterView(pg.PlotWidget):
         self.addItem(self.path)
         self.labels: list[pg.TextItem] = []
         self._spec: RasterSpec | None = None
+        self._raster_transform = QtGui.QTransform()
+        self._pose = QtGui.QTransform()
 
     def _place(self, spec: RasterSpec) -> None:
         if spec == self._spec:
@@ -118,12 +133,25 @@ class _RasterView(pg.PlotWidget):
         h, cell = spec.half_extent_m, spec.cell_m
         # Row 0 is +x (top), column 0 is +y (left): plot x = y = h − col·cell (drawn on the
         # left: the axis is inverted) and plot y = x = h − row·cell.
-        self.image.setTransform(QtGui.QTransform(-cell, 0, 0, -cell, h, h))
+        self._raster_transform = QtGui.QTransform(-cell, 0, 0, -cell, h, h)
         self._spec = spec
 
-    def show_scene(self, scene: Scene, spec: RasterSpec) -> None:
+    def show_scene(
+        self, scene: Scene, spec: RasterSpec, world: tuple[float, float, float] | None = None
+    ) -> None:
+        """``world`` as for the 3D view.  Plot coordinates are (u, v) = (y, x); the pose maps
+        (u, v) to (U, V) = (Y, X) with X = cos·x − sin·y + tx, Y = sin·x + cos·y + ty."""
+        pose = QtGui.QTransform()
+        if world is not None:
+            tx, ty, h = world
+            c, s = float(np.cos(h)), float(np.sin(h))
+            pose = QtGui.QTransform(c, -s, s, c, ty, tx)
+        for item in (self.path, *self.curves.values(), *self.labels):
+            item.setTransform(pose)
+        self._pose = pose
         if scene.raster is not None:
             self._place(spec)
+            self.image.setTransform(self._raster_transform * pose)
             self.image.setImage(scene.raster, autoLevels=False, levels=(0, 255))
         seen = set()
         for layer in scene.layers:
@@ -131,6 +159,7 @@ class _RasterView(pg.PlotWidget):
             curve = self.curves.get(layer.name)
             if curve is None:
                 curve = pg.PlotCurveItem(connect="pairs", pen=pg.mkPen(layer.color, width=2))
+                curve.setTransform(self._pose)
                 self.addItem(curve)
                 self.curves[layer.name] = curve
             seg = layer.segments
@@ -147,6 +176,7 @@ class _RasterView(pg.PlotWidget):
         texts = [t for layer in scene.layers for t in layer.labels][:_MAX_LABELS]
         while len(self.labels) < len(texts):
             item = pg.TextItem(color=(255, 255, 255), anchor=(0.5, 1.0))
+            item.setTransform(self._pose)
             self.addItem(item)
             self.labels.append(item)
         for item, (text, x, y, _z) in zip(self.labels, texts, strict=False):
@@ -181,6 +211,14 @@ class Planview(QtWidgets.QWidget):
         self.convert_button.setToolTip("Switch between the 3D point cloud and a top-down raster")
         self.convert_button.toggled.connect(self._toggle_2d)
         bar.addWidget(self.convert_button)
+        self.follow_box = QtWidgets.QCheckBox("Follow ego")
+        self.follow_box.setChecked(True)
+        self.follow_box.setToolTip(
+            "On: the view moves with the ego vehicle (base_link at the centre). Off: the view "
+            "stays fixed in the world and the ego drives through it (needs the log's ego state)."
+        )
+        self.follow_box.toggled.connect(self._follow_toggled)
+        bar.addWidget(self.follow_box)
         self.reset_button = QtWidgets.QPushButton("Reset view")
         self.reset_button.clicked.connect(self.reset_view)
         bar.addWidget(self.reset_button)
@@ -198,6 +236,7 @@ class Planview(QtWidgets.QWidget):
         layout.addWidget(self.stack, 1)
         self.raster_spec = RasterSpec()
         self.scene: Scene | None = None
+        self.world_origin: tuple[float, float, float] | None = None
         self.view2d.reset_view()
 
     @property
@@ -217,13 +256,35 @@ class Planview(QtWidgets.QWidget):
     def reset_view(self) -> None:
         self.view3d.reset_camera()
         self.view2d.reset_view()
+        self.world_origin = None
+        if self.scene is not None:
+            self.show_scene(self.scene)
+
+    def _follow_toggled(self, _on: bool) -> None:
+        self.world_origin = None
+        if self.scene is not None:
+            self.show_scene(self.scene)
+
+    def _world(self, scene: Scene) -> tuple[float, float, float] | None:
+        """The ego pose relative to the world origin of a fixed view (the pose where following
+        was switched off: map coordinates are too large for GL's float32)."""
+        if self.follow_box.isChecked() or scene.pose is None:
+            return None
+        if self.world_origin is None:
+            self.world_origin = scene.pose
+        x0, y0, h0 = self.world_origin
+        x, y, h = scene.pose
+        c, s = np.cos(-h0), np.sin(-h0)
+        dx, dy = x - x0, y - y0
+        return (float(c * dx - s * dy), float(s * dx + c * dy), float(h - h0))
 
     def show_scene(self, scene: Scene) -> None:
         self.scene = scene
+        world = self._world(scene)
         if self.is_2d:
-            self.view2d.show_scene(scene, self.raster_spec)
+            self.view2d.show_scene(scene, self.raster_spec, world)
         else:
-            self.view3d.show_scene(scene)
+            self.view3d.show_scene(scene, world)
         boxes = sum(len(layer.segments) // 28 for layer in scene.layers if layer.name != "ego")
         self.status.setText(f"{scene.point_count:,} points · {boxes} boxes")
 
@@ -233,10 +294,22 @@ class Planview(QtWidgets.QWidget):
             return self.view2d.grab().toImage()
         return self.view3d.grabFramebuffer()
 
+    def shutdown(self) -> None:
+        """Delete the GL window's container (and with it the window) now.  Left to Qt, a window
+        container whose widget tree was deleted later crashes QApplication's destructor
+        (QWindowContainer::toplevelAboutToBeDestroyed on a dead window; PySide6 6.11)."""
+        if shiboken6.isValid(self.container3d):
+            self.stack.removeWidget(self.container3d)
+            shiboken6.delete(self.container3d)
+
     def paint_gl_into(self, image: QtGui.QImage, window: QtWidgets.QWidget) -> None:
         """Draw the 3D view into ``image``, a grab of ``window`` (a native GL window is not part
         of a widget grab)."""
-        if self.is_2d or not self.container3d.isVisible():
+        if (
+            self.is_2d
+            or not shiboken6.isValid(self.container3d)
+            or not self.container3d.isVisible()
+        ):
             return
         top_left = self.container3d.mapTo(window, QtCore.QPoint(0, 0))
         painter = QtGui.QPainter(image)

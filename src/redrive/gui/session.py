@@ -74,13 +74,15 @@ class LogSession:
         info = self.log.topics.get(self.driver_topic)
         return info.count if info is not None else 0
 
-    def index(self, *, chunk: int = 256) -> Iterator[int]:
+    def index(self, *, chunk: int = 256, stop: threading.Event | None = None) -> Iterator[int]:
         """Fill :attr:`driver_times_ns` from a second reader; yields the count every ``chunk``
         samples (run it in a worker thread; :meth:`frame` waits for it when it seeks past what
         is indexed)."""
         times: list[int] = []
         with open_log(self.path) as log:
             for message in log.messages(topics=[self.driver_topic]):
+                if stop is not None and stop.is_set():
+                    return
                 times.append(message.log_time_ns)
                 if len(times) % chunk == 0:
                     with self._index_changed:
@@ -274,8 +276,15 @@ class Series:
     imu_accel: tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]] | None = None  # (N, 3)
 
 
-def series_from_log(path: Path, assembler: FrameAssembler, *, max_samples: int = 200_000) -> Series:
-    """Ego speed, yaw rate and IMU series of a log (small topics; read with their own reader)."""
+def series_from_log(
+    path: Path,
+    assembler: FrameAssembler,
+    *,
+    max_samples: int = 200_000,
+    stop: threading.Event | None = None,
+) -> Series:
+    """Ego speed, yaw rate and IMU series of a log (small topics; read with their own reader);
+    ``stop`` ends the reading early."""
     from redrive.io.decoders import decode
     from redrive.types import Imu
     from redrive.types.enums import SensorType
@@ -294,7 +303,7 @@ def series_from_log(path: Path, assembler: FrameAssembler, *, max_samples: int =
     acc: list[Any] = []
     with open_log(path) as log:
         for n, message in enumerate(log.messages(topics=topics)):
-            if n >= max_samples:
+            if n >= max_samples or (stop is not None and stop.is_set()):
                 break
             try:
                 decoded = decode(message, log.deserialize)
