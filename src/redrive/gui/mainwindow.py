@@ -56,11 +56,16 @@ class MainWindow(QtWidgets.QMainWindow):
         self._play_from = 0
         self._open_t0 = time.perf_counter()
         self._first_frame_s: float | None = None
+        self._closed = False
         self.live_feed: Any = None  # a redrive.gui.live.LiveFeed while live
         self.shown_sensors: frozenset[str] | None = None  # the topic picker's choice
         self.time_origin_ns: int | None = None
         self._series: Series | None = None
-        self._cursor_t = 0.0
+        self._cursor_stamp: int | None = None
+        self._cursor_timer = QtCore.QTimer(self)
+        self._cursor_timer.setSingleShot(True)
+        self._cursor_timer.setInterval(200)
+        self._cursor_timer.timeout.connect(self._move_cursor)
 
         self.planview = Planview()
         self.setCentralWidget(self.planview)
@@ -179,6 +184,8 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def closeEvent(self, event: QtGui.QCloseEvent) -> None:
         self.play_timer.stop()
+        self._cursor_timer.stop()
+        self._closed = True
         self.settings.setValue("window/geometry", self.saveGeometry())
         self.settings.setValue("window/state", self.saveState())
         self.disconnect_live()
@@ -320,6 +327,8 @@ class MainWindow(QtWidgets.QMainWindow):
         self.go_to(self.current)
 
     def _show_scene(self, scene: Scene) -> None:
+        if self._closed:  # a scene queued before the window closed: its views are gone
+            return
         self.scene = scene
         self.planview.show_scene(scene)
         self.camera.show_camera(scene.cameras.get(self.camera.camera or ""))
@@ -331,17 +340,21 @@ class MainWindow(QtWidgets.QMainWindow):
         origin = self.time_origin_ns
         assert origin is not None
         self.timeline.show_frame(scene.index, scene.stamp_ns, start_ns=origin)
-        # The plots repaint in passes of their own: during playback move their cursor at most
-        # 4 times a second (``redrive bench gui``: every frame cost 3-4 window updates).
-        now = time.perf_counter()
-        if not self.timeline.playing or now - self._cursor_t >= 0.25:
-            self.plots.set_cursor(scene.stamp_ns)
-            self._cursor_t = now
+        # The plots repaint in passes of their own (``redrive bench gui``: moving their cursor
+        # every frame cost 3-4 window updates per frame): coalesce it to ≤ 5 moves a second,
+        # always ending on the frame shown.
+        self._cursor_stamp = scene.stamp_ns
+        if not self._cursor_timer.isActive():
+            self._cursor_timer.start()
         self.frames_shown += 1
         if self._first_frame_s is None:
             self._first_frame_s = time.perf_counter() - self._open_t0
             logger.info("first frame shown %.2f s after opening", self._first_frame_s)
         self.frame_shown.emit(scene.index)
+
+    def _move_cursor(self) -> None:
+        if self._cursor_stamp is not None:
+            self.plots.set_cursor(self._cursor_stamp)
 
     def _frame_failed(self, index: int, message: str) -> None:
         if self.timeline.playing and index >= self.frame_count - 1:
