@@ -24,14 +24,14 @@ from PySide6 import QtCore, QtWidgets
 from redrive.gui.resim_views import (
     CATEGORIES,
     REFERENCE_DETECTOR,
-    RunData,
+    ResimRun,
     RunOutcome,
     RunThread,
     SummaryRow,
     TopDownView,
     default_run_dir,
     describe_error,
-    load_run_data,
+    load_resim_run,
     stored_summary_rows,
 )
 
@@ -49,7 +49,7 @@ class ResimPanel(QtWidgets.QWidget):
     Attributes for the main window and tests: ``status_label``, ``progress``, ``result_view``
     (A's result), ``overlay_view`` (A's result over ground truth), ``overlay_view_b`` (B's),
     ``summary_table``, ``frame_slider``, ``frame_label``, ``error_box`` (the last message box),
-    ``run_a`` / ``run_b`` (the :class:`RunData` shown).
+    ``run_a`` / ``run_b`` (the :class:`ResimRun` shown).
     """
 
     run_finished = QtCore.Signal(object)
@@ -59,8 +59,8 @@ class ResimPanel(QtWidgets.QWidget):
     def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent)
         self.log_path: Path | None = None
-        self.run_a: RunData | None = None
-        self.run_b: RunData | None = None
+        self.run_a: ResimRun | None = None
+        self.run_b: ResimRun | None = None
         self.error_box: QtWidgets.QMessageBox | None = None
         self._thread: RunThread | None = None
         self._auto_out = True
@@ -332,7 +332,7 @@ class ResimPanel(QtWidgets.QWidget):
     def open_run(self, path: str | Path) -> bool:
         """Show an existing run directory as run A (its stored evaluation in the summary)."""
         try:
-            data = load_run_data(Path(path))
+            data = load_resim_run(Path(path))
             rows = stored_summary_rows(Path(path), set(data.shown.values()))
         except Exception as err:  # the GUI's top level
             self._error(f"Cannot open run {path}: {describe_error(err)}")
@@ -345,7 +345,7 @@ class ResimPanel(QtWidgets.QWidget):
         """Show a second run's result over ground truth beside A's, on the same frame slider."""
         prefer = self.run_a.shown.values() if self.run_a is not None else ()
         try:
-            data = load_run_data(Path(path), prefer=prefer)
+            data = load_resim_run(Path(path), prefer=prefer)
         except Exception as err:  # the GUI's top level
             self._error(f"Cannot open run B {path}: {describe_error(err)}")
             return False
@@ -360,7 +360,7 @@ class ResimPanel(QtWidgets.QWidget):
         self._status(f"Run B: {data.label}, {len(data.frames)} frames, {data.status}.")
         return True
 
-    def _show_run_a(self, data: RunData, rows: tuple[SummaryRow, ...]) -> None:
+    def _show_run_a(self, data: ResimRun, rows: tuple[SummaryRow, ...]) -> None:
         self.run_a = data
         self.result_view.setTitle(f"A: {data.algorithms}")
         self.overlay_view.setTitle(f"A: {data.algorithms} over ground truth")

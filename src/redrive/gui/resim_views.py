@@ -2,7 +2,7 @@
 display, and the top-down views.
 
 :class:`RunThread` runs the engine over a log, evaluates the run and reads it back, off the GUI
-thread.  :class:`RunData` is a run read once (:func:`load_run_data`) into per-frame dicts, so
+thread.  :class:`ResimRun` is a run read once (:func:`load_resim_run`) into per-frame dicts, so
 moving the frame slider only looks frames up.
 
 A :class:`TopDownView` shows one frame of one run: x (forward) up the screen, y (left) to the
@@ -46,7 +46,7 @@ __all__ = [
     "REFERENCE_DETECTOR",
     "REFERENCE_PLANNER",
     "REFERENCE_TRACKER",
-    "RunData",
+    "ResimRun",
     "RunOutcome",
     "RunThread",
     "SummaryRow",
@@ -55,7 +55,7 @@ __all__ = [
     "box_outline_segments",
     "default_run_dir",
     "describe_error",
-    "load_run_data",
+    "load_resim_run",
     "shown_algorithms",
     "stored_summary_rows",
 ]
@@ -138,7 +138,7 @@ def shown_algorithms(manifest: Mapping[str, Any], prefer: Iterable[str] = ()) ->
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class RunData:
+class ResimRun:
     """One run, read once for display.
 
     Attributes:
@@ -172,7 +172,7 @@ class RunData:
         return f"{self.path.name} ({self.algorithms})"
 
 
-def load_run_data(run_dir: Path, *, prefer: Iterable[str] = ()) -> RunData:
+def load_resim_run(run_dir: Path, *, prefer: Iterable[str] = ()) -> ResimRun:
     """Read what the views draw from the run directory ``run_dir``.
 
     Raises:
@@ -187,7 +187,7 @@ def load_run_data(run_dir: Path, *, prefer: Iterable[str] = ()) -> RunData:
     detections = _or_empty(run.detections, shown.get("perception"))
     paths = _or_empty(run.paths, shown.get("planning"))
     commands = _or_empty(run.commands, shown.get("control"))
-    return RunData(
+    return ResimRun(
         path=Path(run_dir),
         status=str(run.manifest.get("status", "")),
         shown=shown,
@@ -314,7 +314,7 @@ class RunOutcome:
     out: Path
     status: str
     message: str
-    data: RunData
+    data: ResimRun
     rows: tuple[SummaryRow, ...] = field(default_factory=tuple)
 
 
@@ -383,13 +383,13 @@ class RunThread(QtCore.QThread):
         )
         message = _report_message(report, self.out)
         if report.status != "complete":  # cancelled (fail-fast is off: a run never "fails")
-            data = load_run_data(self.out, prefer=[name])
+            data = load_resim_run(self.out, prefer=[name])
             return RunOutcome(out=self.out, status=report.status, message=message, data=data)
         try:
             summary = evaluate_run(self.out, algorithms=[name])
         except Exception as err:  # the run is complete and shown all the same
             logger.exception("evaluating %s failed", self.out)
-            data = load_run_data(self.out, prefer=[name])
+            data = load_resim_run(self.out, prefer=[name])
             message += f"; evaluation failed: {describe_error(err)}"
             return RunOutcome(out=self.out, status="complete", message=message, data=data)
         rows = [
@@ -404,7 +404,7 @@ class RunThread(QtCore.QThread):
             )
             for s in summary.skipped
         ]  # fmt: skip
-        data = load_run_data(self.out, prefer=[name])
+        data = load_resim_run(self.out, prefer=[name])
         return RunOutcome(
             out=self.out, status="complete", message=message, data=data, rows=tuple(rows)
         )
@@ -481,7 +481,7 @@ class TopDownView(pg.PlotWidget):
             xRange=(cx - half_w, cx + half_w), yRange=(cy - half_h, cy + half_h), padding=0.0
         )
 
-    def show_frame(self, data: RunData | None, frame_index: int | None) -> int:
+    def show_frame(self, data: ResimRun | None, frame_index: int | None) -> int:
         """Draw ``frame_index`` of ``data`` (nothing when either is None or the run does not have
         that frame); returns the number of result objects drawn."""
         if data is None or frame_index is None:
