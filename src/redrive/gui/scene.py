@@ -265,6 +265,12 @@ def rasterize_top_down(
     sort)."""
     size = spec.size_px
     out = np.full((size, size, 3), 24, dtype=np.uint8)
+    # A 10 m grid in the empty cells (cheaper than the plot's own grid, drawn every repaint).
+    lines = np.flatnonzero(
+        np.isclose(np.mod((np.arange(size) + 0.5) * spec.cell_m, 10.0), 0.0, atol=spec.cell_m / 2)
+    )
+    out[lines, :] = 44
+    out[:, lines] = 44
     if len(xyz) == 0:
         return out
     rows = ((spec.half_extent_m - xyz[:, 0]) / spec.cell_m).astype(np.intp)
