@@ -8,8 +8,10 @@ do not work with ``QT_QPA_PLATFORM=offscreen`` (NOTES.md).
 
 from __future__ import annotations
 
+import gc
 import importlib.util
 import os
+from collections.abc import Iterator
 
 import pytest
 
@@ -27,3 +29,12 @@ def _display() -> None:
     # process when Qt finds no display.
     if not os.environ.get("DISPLAY"):
         pytest.skip("no X display: run the GUI tests under `xvfb-run -a pytest` (make test does)")
+
+
+@pytest.fixture(autouse=True)
+def _collect_between_tests() -> Iterator[None]:
+    """Collect the garbage of a test (closed windows, GL items, stopped feeds) when it ends,
+    while no other window paints and no worker runs: Qt/GL objects finalised at a random later
+    point — inside another window's GL paint — can block."""
+    yield
+    gc.collect()

@@ -50,6 +50,26 @@ class _GlView(GLViewMixin, QtOpenGL.QOpenGLWindow):
         self._matrix = QtGui.QMatrix4x4()
         self.reset_camera()
 
+    def release_gl(self) -> None:
+        """Destroy the items' GL buffers with this window's context current.  Left to the
+        garbage collector, a buffer is destroyed whenever it runs — possibly inside another
+        view's paint with another context current, where Mesa can block (seen as a hang of the
+        GUI test suite)."""
+        if self.context() is None or not self.isExposed():
+            return
+        self.makeCurrent()
+        try:
+            for item in list(self.items):
+                for value in vars(item).values():
+                    if isinstance(value, QtOpenGL.QOpenGLBuffer) and value.isCreated():
+                        value.destroy()
+            if self.default_vao.isCreated():
+                self.default_vao.destroy()
+        finally:
+            self.doneCurrent()
+        for item in list(self.items):
+            self.removeItem(item)
+
     def rect(self) -> QtCore.QRect:
         """What GLTextItem asks of its view (a QWidget method a QWindow lacks)."""
         return QtCore.QRect(0, 0, self.width(), self.height())
@@ -299,9 +319,11 @@ class Planview(QtWidgets.QWidget):
         """Delete the GL window's container (and with it the window) now.  Left to Qt, a window
         container whose widget tree was deleted later crashes QApplication's destructor
         (QWindowContainer::toplevelAboutToBeDestroyed on a dead window; PySide6 6.11)."""
-        if shiboken6.isValid(self.container3d):
-            self.stack.removeWidget(self.container3d)
-            shiboken6.delete(self.container3d)
+        if not shiboken6.isValid(self.container3d):
+            return
+        self.view3d.release_gl()
+        self.stack.removeWidget(self.container3d)
+        shiboken6.delete(self.container3d)
 
     def paint_gl_into(self, image: QtGui.QImage, window: QtWidgets.QWidget) -> None:
         """Draw the 3D view into ``image``, a grab of ``window`` (a native GL window is not part
