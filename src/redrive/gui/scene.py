@@ -230,10 +230,16 @@ def splat_points(
     """Draw LiDAR points into ``image`` (in place) coloured by depth; returns how many landed."""
     if len(points_base) == 0:
         return 0
-    homog = transform_xyz(np.asarray(image_from_base, dtype=np.float64), points_base)
+    mat = np.asarray(image_from_base, dtype=np.float64)
+    # Depth first (one row of the projection), then project only the points in front: a
+    # forward camera sees about half of a 360° sweep.
+    r = mat[2]
+    depth_all = (
+        r[0] * points_base[:, 0] + r[1] * points_base[:, 1] + r[2] * points_base[:, 2] + r[3]
+    )
+    front = points_base[depth_all > 0.5]
+    homog = transform_xyz(mat, front)
     depth = homog[:, 2]
-    ok = depth > 0.5
-    homog, depth = homog[ok], depth[ok]
     h, w = image.shape[:2]
     cols = np.round(homog[:, 0] / depth).astype(np.intp)
     rows = np.round(homog[:, 1] / depth).astype(np.intp)
