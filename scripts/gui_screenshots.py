@@ -65,6 +65,7 @@ def main(argv: list[str] | None = None) -> int:
     win.open_path(args.run)
     pump(app, lambda: win.scene is not None)
     pump(app, lambda: win.loader.session is not None and win.loader.session.indexed)
+    pump(app, lambda: win._series is not None)  # the plots' series are read after the index
     show_frame(app, win, args.frame)
     win.grab_window().save(str(args.out / "gui-main.png"))
     win.camera.grab().save(str(args.out / "gui-camera.png"))
