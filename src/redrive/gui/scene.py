@@ -11,6 +11,7 @@ Coordinates: the planview is base_link (x forward, y left, z up; REP-103), metre
 from __future__ import annotations
 
 import enum
+import functools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -284,22 +285,32 @@ def rasterize_top_down(
     ok = (rows >= 0) & (rows < size) & (cols >= 0) & (cols < size)
     cell = rows[ok] * size + cols[ok]
     use_intensity = mode is ColorMode.INTENSITY and intensity is not None and len(intensity)
+    if mode is not ColorMode.HEIGHT and not use_intensity:
+        # By distance (also intensity without an intensity channel): a cell's colour is its own.
+        out.reshape(-1, 3)[cell] = _distance_lut(spec)[cell]
+        return out
     value = np.asarray(intensity, dtype=np.float32)[ok] if use_intensity else xyz[ok, 2]
     best = np.full(size * size, -np.inf, dtype=np.float32)
     np.maximum.at(best, cell, value)
     filled = np.flatnonzero(np.isfinite(best))
     if mode is ColorMode.HEIGHT:
         rgb = _colormap(best[filled], -2.0, 3.0)
-    elif use_intensity:
+    else:
         lo, hi = np.percentile(best[filled], [1, 99])
         rgb = _colormap(best[filled], float(lo), float(hi))
-    else:
-        fr, fc = np.divmod(filled, size)
-        dx = spec.half_extent_m - (fr + 0.5) * spec.cell_m
-        dy = spec.half_extent_m - (fc + 0.5) * spec.cell_m
-        rgb = _colormap(np.hypot(dx, dy), 0.0, 60.0)
     out.reshape(-1, 3)[filled] = (rgb[:, :3] * 255).astype(np.uint8)
     return out
+
+
+@functools.lru_cache(maxsize=4)
+def _distance_lut(spec: RasterSpec) -> npt.NDArray[np.uint8]:
+    """(S·S, 3) uint8: each raster cell's colour by its centre's distance from base_link."""
+    size = spec.size_px
+    centre = spec.half_extent_m - (np.arange(size) + 0.5) * spec.cell_m
+    dist = np.hypot(centre[:, None], centre[None, :]).reshape(-1)
+    lut: npt.NDArray[np.uint8] = (_colormap(dist, 0.0, 60.0)[:, :3] * 255).astype(np.uint8)
+    lut.setflags(write=False)
+    return lut
 
 
 def path_points(path: PlannedPath | None) -> Float | None:
