@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import os
 from pathlib import Path
 from typing import Any
 
 from redrive.errors import ConfigError
 
-__all__ = ["register", "require_gui"]
+__all__ = ["register", "require_display", "require_gui"]
 
 _EPILOG = """\
 examples:
@@ -34,8 +35,21 @@ def require_gui() -> None:
         raise ConfigError(msg)
 
 
+def require_display() -> None:
+    """Raise a ConfigError when Qt would find no display (it aborts the process instead)."""
+    if os.environ.get("QT_QPA_PLATFORM"):
+        return
+    if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
+        msg = (
+            "no display: `redrive gui` needs a desktop session (DISPLAY or WAYLAND_DISPLAY); on "
+            "a headless machine run it under Xvfb: xvfb-run -a redrive gui …"
+        )
+        raise ConfigError(msg)
+
+
 def _run(args: argparse.Namespace) -> int:
     require_gui()
+    require_display()
     from redrive.gui.main import run_gui
 
     return run_gui(args.path)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import sys
 from collections.abc import Sequence
 
@@ -35,6 +34,4 @@ def ensure_app(argv: Sequence[str] | None = None) -> QtWidgets.QApplication:
     if isinstance(app, QtWidgets.QApplication):
         return app
     configure_qt()
-    if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
-        os.environ.setdefault("QT_QPA_PLATFORM", "xcb")
     return QtWidgets.QApplication(list(argv) if argv is not None else sys.argv[:1])
