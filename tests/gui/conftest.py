@@ -12,6 +12,8 @@ import gc
 import importlib.util
 import os
 from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -38,3 +40,18 @@ def _collect_between_tests() -> Iterator[None]:
     point — inside another window's GL paint — can block."""
     yield
     gc.collect()
+
+
+@pytest.fixture
+def window(qtbot: Any, tmp_path: Path) -> Any:
+    """A shown main window with its own settings file (not the user's)."""
+    from PySide6 import QtCore
+
+    from redrive.gui.mainwindow import MainWindow
+
+    settings = QtCore.QSettings(str(tmp_path / "gui.ini"), QtCore.QSettings.Format.IniFormat)
+    win = MainWindow(settings=settings)
+    qtbot.addWidget(win)
+    win.show()
+    qtbot.waitExposed(win)
+    return win

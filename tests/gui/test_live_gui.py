@@ -14,7 +14,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from PySide6 import QtCore, QtWidgets
+from PySide6 import QtWidgets
 from pytestqt.qtbot import QtBot
 
 from redrive.gui import live
@@ -66,16 +66,6 @@ while not rospy.is_shutdown():
 def rig(roscore: RosCore) -> Iterator[RosCore]:  # noqa: F811
     with roscore.python_process(PUBLISHER):
         yield roscore
-
-
-@pytest.fixture
-def window(qtbot: QtBot, tmp_path: Path) -> MainWindow:
-    settings = QtCore.QSettings(str(tmp_path / "gui.ini"), QtCore.QSettings.Format.IniFormat)
-    win = MainWindow(settings=settings)
-    qtbot.addWidget(win)
-    win.show()
-    qtbot.waitExposed(win)
-    return win
 
 
 def _segments(feed: LiveFeed) -> list[Path]:

@@ -29,16 +29,6 @@ def qimage_to_array(image: Any) -> np.ndarray:
     return buf.reshape(height, stride)[:, : width * 3].reshape(height, width, 3).copy()
 
 
-@pytest.fixture
-def window(qtbot: Any, tmp_path: Path) -> MainWindow:
-    settings = QtCore.QSettings(str(tmp_path / "gui.ini"), QtCore.QSettings.Format.IniFormat)
-    win = MainWindow(settings=settings)
-    qtbot.addWidget(win)
-    win.show()
-    qtbot.waitExposed(win)
-    return win
-
-
 def _open(qtbot: Any, win: MainWindow, path: Path) -> None:
     with qtbot.waitSignal(win.frame_shown, timeout=_WAIT_MS):
         win.open_path(path)
