@@ -260,11 +260,11 @@ class Engine:
             which).
         """
         stats = StatsCollector([p for _, planned in self.graph.stages for p in planned])
-        todo: Iterator[Frame] = (f for f in frames if f.index not in skip)
+        pending: Iterator[Frame] = (f for f in frames if f.index not in skip)
         cancelled = [False]
         if cancel is not None:
-            todo = _until_cancelled(todo, cancel, cancelled)
-        paced = self.hooks.before_frame(todo)
+            pending = _until_cancelled(pending, cancel, cancelled)
+        paced = self.hooks.before_frame(pending)
         done = 0
         after_frame, fail_fast = self.hooks.after_frame, self.pipeline.fail_fast
 

@@ -39,10 +39,8 @@ from redrive.gui.scene import (
     transform_xyz,
 )
 from redrive.gui.session import LogSession, RunData, series_from_log
-from redrive.io.calibration import camera_calibrations
-from redrive.io.decoders import decode
-from redrive.io.tf_buffer import TransformBuffer
-from redrive.types import Box3D, DetectedObject, Frame, Image, PointCloud, SensorType, Transform
+from redrive.io.calibration import camera_calibrations, static_transforms
+from redrive.types import Box3D, DetectedObject, Frame, Image, PointCloud, SensorType
 
 __all__ = ["PALETTE", "FrameLoader", "LogSummary", "ViewOptions", "build_scene", "to_rgb8"]
 
@@ -67,7 +65,6 @@ class ViewOptions:
     camera: str | None = None
     max_points_3d: int = 150_000
     raster: RasterSpec = field(default_factory=RasterSpec)
-    algorithms: frozenset[str] | None = None  # None: every perception algorithm of the run
     #: sensor ids drawn (the topic picker's choice); None: all of them.
     sensors: frozenset[str] | None = None
 
@@ -107,24 +104,17 @@ class _Static:
     """Static transforms of a log (sensor mounts), read once."""
 
     def __init__(self, session: LogSession) -> None:
-        self.tf = TransformBuffer()
-        topics = [t for t in session.assembler.sensor_map.tf_topics if t.endswith("tf_static")]
-        if topics:
-            for message in session.log.messages(topics=topics):
-                try:
-                    value = decode(message, session.log.deserialize).value
-                except RedriveError:
-                    continue
-                if isinstance(value, tuple):
-                    self.tf.add_all((t for t in value if isinstance(t, Transform)), static=True)
+        self.tf = static_transforms(session.log)
         self._cache: dict[str, npt.NDArray[np.float64] | None] = {}
 
     def base_from(self, frame_id: str) -> npt.NDArray[np.float64] | None:
+        """``base_from_<frame_id>``; None when unknown or the identity (nothing to apply)."""
         if frame_id not in self._cache:
             try:
-                self._cache[frame_id] = self.tf.lookup("base_link", frame_id, 0)
+                mat = self.tf.lookup("base_link", frame_id, 0)
             except (RedriveError, LookupError):
-                self._cache[frame_id] = None
+                mat = None
+            self._cache[frame_id] = None if mat is None or np.allclose(mat, np.eye(4)) else mat
         return self._cache[frame_id]
 
 
@@ -138,10 +128,11 @@ def _lidar_in_base(
             continue
         if data.sensor_type is SensorType.LIDAR and isinstance(data.data, PointCloud):
             xyz: npt.NDArray[Any] = data.data.xyz
+            known = static is not None and data.frame_id in static.tf.frames
             mat = static.base_from(data.frame_id) if static is not None else None
-            if mat is not None and not np.array_equal(mat, np.eye(4)):
+            if mat is not None:
                 xyz = transform_xyz(mat, xyz)
-            elif any(data.sensor_location):
+            elif not known and any(data.sensor_location):
                 xyz = xyz + np.asarray(data.sensor_location, dtype=np.float32)
             return np.ascontiguousarray(xyz, dtype=np.float32), data.data.channels.get("intensity")
     return np.zeros((0, 3), np.float32), None
@@ -183,8 +174,6 @@ def build_scene(
         )
     if run is not None and Layer.DETECTIONS in layers_on:
         for n, (name, per_frame) in enumerate(run.detections.items()):
-            if options.algorithms is not None and name not in options.algorithms:
-                continue
             objects = per_frame.get(frame.stamp_ns, ())
             labels: tuple[tuple[str, float, float, float], ...] = ()
             if Layer.TRACK_IDS in layers_on and n == len(run.detections) - 1:  # the last stage
@@ -230,7 +219,6 @@ def build_scene(
         path=path,
         raster=raster,
         cameras=cameras,
-        info={"ground_truth": len(gt or ())},
         pose=_pose(frame, run),
     )
 

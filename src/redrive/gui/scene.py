@@ -121,7 +121,6 @@ class Scene:
     path: Float | None  # (K, 3) base_link
     raster: npt.NDArray[np.uint8] | None  # (S, S, 3), row 0 = +x far edge … see rasterize
     cameras: Mapping[str, CameraScene] = field(default_factory=dict)
-    info: Mapping[str, Any] = field(default_factory=dict)
     #: the ego pose in the log's world frame (x_m, y_m, heading_rad), None without an ego state.
     pose: tuple[float, float, float] | None = None
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 import logging
 import threading
 from collections.abc import Iterator, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -63,10 +63,6 @@ class LogSession:
         self._index_changed = threading.Condition()
         self._frames: Iterator[Frame] | None = None
         self._next_index = 0
-
-    @property
-    def start_ns(self) -> int:
-        return self.log.start_ns
 
     @property
     def expected_frames(self) -> int:
@@ -138,15 +134,7 @@ class LogSession:
             self._frames = None
             raise IndexError(index) from None
         self._next_index = index + 1
-        return Frame(
-            stamp_ns=frame.stamp_ns,
-            index=index,
-            sensors=frame.sensors,
-            vehicle_state=frame.vehicle_state,
-            environment=frame.environment,
-            traffic=frame.traffic,
-            ground_truth=frame.ground_truth,
-        )
+        return replace(frame, index=index)
 
     def close(self) -> None:
         self._frames = None
@@ -204,11 +192,6 @@ class RunData:
         data.ego = _by_stamp(run.ego(), by_index)
         _load_evaluation(data, run, by_index)
         return data
-
-    def frame_of(self, stamp_ns: int) -> int | None:
-        """The run's frame index of a frame stamp, if the run has that frame."""
-        i = int(np.searchsorted(self.stamps, stamp_ns))
-        return i if i < len(self.stamps) and int(self.stamps[i]) == stamp_ns else None
 
 
 _BOOKMARK_FIELDS = ("frame_index", "stamp_ns", "kind", "metric", "algorithm", "detail", "severity")

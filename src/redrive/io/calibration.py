@@ -37,7 +37,13 @@ from redrive.io.tf_buffer import TransformBuffer, TransformLookupError
 from redrive.types import CameraInfo, SensorType, Transform
 from redrive.types._arrays import frozen_array
 
-__all__ = ["CameraCalibration", "camera_calibrations", "camera_info_topics"]
+__all__ = [
+    "CameraCalibration",
+    "camera_calibrations",
+    "camera_info_topics",
+    "static_tf_topics",
+    "static_transforms",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -199,6 +205,25 @@ def _resolve(
         return None
 
 
+def static_tf_topics(log: LogReader) -> list[str]:
+    """The log's static transform topics (``/tf_static`` and namespaced ``…/tf_static``)."""
+    return sorted(
+        t
+        for t, info in log.topics.items()
+        if is_static_tf_topic(t) and _kind_of(info) == (DecodedKind.TRANSFORMS, None)
+    )
+
+
+def static_transforms(log: LogReader, *, max_messages: int = 10_000) -> TransformBuffer:
+    """Every static transform of ``log`` (sensor mounts) in one buffer; look them up at stamp 0.
+
+    Reads only the static transform topics, at most ``max_messages`` messages.
+    """
+    search = _Search(log, info_topics=set(), max_messages=max_messages)
+    search.read_messages(static_tf_topics(log), start_ns=None, done=lambda: False)
+    return search.buffer
+
+
 def camera_calibrations(
     log: LogReader,
     *,
@@ -232,11 +257,7 @@ def camera_calibrations(
     if not info_topics:
         logger.debug("%s: no camera info topic next to an image topic", log.path)
         return {}
-    tf_topics = sorted(
-        t
-        for t, info in log.topics.items()
-        if is_static_tf_topic(t) and _kind_of(info) == (DecodedKind.TRANSFORMS, None)
-    )
+    tf_topics = static_tf_topics(log)
     search = _Search(log, info_topics=info_topics, max_messages=max_messages)
     last_ns = search.read_messages(
         sorted(info_topics) + tf_topics,
