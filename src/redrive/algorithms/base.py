@@ -31,6 +31,7 @@ from redrive.types import (
     DetectedObject,
     Frame,
     PlannedPath,
+    Role,
     SensorData,
     SensorType,
 )
@@ -61,24 +62,7 @@ Input = str | SensorType
 AlgorithmOutput = tuple[DetectedObject, ...] | PlannedPath | ControlCommands
 
 
-class Role(enum.Enum):
-    """The Algorithm Role Descriptor: which stage an algorithm belongs to and what it returns."""
-
-    PERCEPTION = "perception"
-    PLANNING = "planning"
-    CONTROL = "control"
-
-    @property
-    def output_name(self) -> str:
-        return _OUTPUT_NAMES[self]
-
-
 _PERCEPTION, _PLANNING = Role.PERCEPTION, Role.PLANNING
-_OUTPUT_NAMES = {
-    Role.PERCEPTION: "a list of DetectedObject",
-    Role.PLANNING: "a PlannedPath",
-    Role.CONTROL: "a ControlCommands",
-}
 
 
 def check_output(role: Role, value: object, *, where: str) -> AlgorithmOutput:

@@ -11,6 +11,7 @@ from redrive.types.enums import (
     LightState,
     ObjectClass,
     RoadCondition,
+    Role,
     SensorType,
     Weather,
 )
@@ -38,6 +39,7 @@ __all__ = [
     "PlannedPath",
     "PointCloud",
     "RoadCondition",
+    "Role",
     "SensorData",
     "SensorPayload",
     "SensorType",

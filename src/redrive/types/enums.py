@@ -9,6 +9,7 @@ __all__ = [
     "Lighting",
     "ObjectClass",
     "RoadCondition",
+    "Role",
     "SensorType",
     "Weather",
 ]
@@ -67,3 +68,24 @@ class LightState(enum.Enum):
     RED = "red"
     YELLOW = "yellow"
     GREEN = "green"
+
+
+class Role(enum.Enum):
+    """The Algorithm Role Descriptor: which stage an algorithm belongs to and what it returns.
+
+    Lives in the data model so that every layer (algorithms, metrics, the run manifest) names a
+    stage with the same enum.
+    """
+
+    PERCEPTION = "perception"
+    PLANNING = "planning"
+    CONTROL = "control"
+
+    @property
+    def output_name(self) -> str:
+        """What an algorithm of this role returns, in words (for error messages)."""
+        return {
+            Role.PERCEPTION: "a list of DetectedObject",
+            Role.PLANNING: "a PlannedPath",
+            Role.CONTROL: "a ControlCommands",
+        }[self]
