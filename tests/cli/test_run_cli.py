@@ -25,6 +25,8 @@ REDRIVE = [sys.executable, "-m", "redrive"]
 USER_PLUGIN = textwrap.dedent(
     '''
     """A researcher's own detector, in a file of its own."""
+    import os
+    import pathlib
     import time
 
     import numpy as np
@@ -42,6 +44,13 @@ USER_PLUGIN = textwrap.dedent(
 
         def step(self, frame, upstream):
             time.sleep(self.config["sleep_s"])
+            # Test hook (outside the config, so that --resume sees the same config): at frame 10,
+            # say so through a file and wait there until the test interrupts the run.
+            handshake = os.environ.get("TALL_HANDSHAKE_DIR")
+            if handshake and frame.index == 10:
+                pathlib.Path(handshake, "reached").touch()
+                while True:
+                    time.sleep(0.05)
             xyz = self.sensor(frame, SensorType.LIDAR).data.xyz
             tall = xyz[xyz[:, 2] > xyz[:, 2].min() + self.config["height_m"]]
             if len(tall) == 0:
@@ -102,18 +111,27 @@ def test_a_user_file_runs_without_touching_redrive(bag: Path, user_dir: Path) ->
 def test_ctrl_c_leaves_a_run_that_resume_completes(bag: Path, user_dir: Path) -> None:
     pipeline = user_dir / "slow.toml"
     pipeline.write_text(
-        '[[stage]]\nname = "p"\n[[stage.algorithm]]\nname = "tall"\n'
-        'plugin = "tall.py:TallThings"\nconfig = { sleep_s = 0.1 }\n'
+        '[[stage]]\nname = "p"\n[[stage.algorithm]]\nname = "tall"\nplugin = "tall.py:TallThings"\n'
     )
     cmd = [*REDRIVE, "run", str(bag), "--pipeline", "slow.toml", "-o", "out", "--no-progress"]
+    # The plugin waits at frame 10 until interrupted: Ctrl-C lands mid-run however slow the
+    # machine is (no sleep-and-hope race with the run's end).
+    handshake = user_dir / "handshake"
+    handshake.mkdir()
     proc = subprocess.Popen(
-        cmd, cwd=user_dir, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        cmd,
+        cwd=user_dir,
+        env={**_env(), "TALL_HANDSHAKE_DIR": str(handshake)},
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
     )
     manifest = user_dir / "out" / "manifest.json"
-    deadline = time.monotonic() + 60
-    while not manifest.exists() and time.monotonic() < deadline:
+    deadline = time.monotonic() + 120
+    while not (handshake / "reached").exists() and proc.poll() is None:
+        assert time.monotonic() < deadline, "the run never reached frame 10"
         time.sleep(0.05)
-    time.sleep(2.0)  # ~20 frames in
+    assert proc.poll() is None, proc.communicate()
     proc.send_signal(signal.SIGINT)
     stdout, stderr = proc.communicate(timeout=60)
     assert proc.returncode == 130, stderr
@@ -122,6 +140,7 @@ def test_ctrl_c_leaves_a_run_that_resume_completes(bag: Path, user_dir: Path) ->
     assert first["status"] == "interrupted"
     done = open_run(user_dir / "out").table("frames").column("frame_index").to_pylist()
     assert 0 < len(done) < 50
+    assert set(done) <= set(range(11))
 
     resumed = subprocess.run(
         [*cmd, "--resume"],
