@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 import pytest
@@ -11,6 +13,7 @@ from redrive.types import (
     Box3D,
     ControlCommands,
     DetectedObject,
+    ExtensionPayload,
     Frame,
     Image,
     Imu,
@@ -119,5 +122,21 @@ def test_imu_transform_and_frame() -> None:
     sample = SensorData(sensor_id="lidar", sensor_type=SensorType.LIDAR, stamp_ns=1, data=cloud)
     frame = Frame(stamp_ns=1, index=0, sensors={"lidar": sample})
     assert frame.sensors["lidar"].data is cloud
-    with pytest.raises(ValueError, match="a CAMERA sensor carries Image, got PointCloud"):
+    with pytest.raises(
+        ValueError, match=r"a CAMERA sensor carries Image or a payload class .* got PointCloud"
+    ):
         SensorData(sensor_id="cam", sensor_type=SensorType.CAMERA, stamp_ns=1, data=cloud)
+
+
+def test_an_extension_payload_is_carried_by_the_sensor_types_it_names() -> None:
+    @dataclass(frozen=True)
+    class RadarPoints:
+        sensor_types: ClassVar[frozenset[SensorType]] = frozenset({SensorType.RADAR})
+        range_m: np.ndarray
+
+    points = RadarPoints(range_m=np.array([1.0, 2.0]))
+    sample = SensorData(sensor_id="radar", sensor_type=SensorType.RADAR, stamp_ns=1, data=points)
+    assert sample.data is points
+    assert isinstance(points, ExtensionPayload)
+    with pytest.raises(ValueError, match="a LIDAR sensor carries PointCloud or a payload class"):
+        SensorData(sensor_id="lidar", sensor_type=SensorType.LIDAR, stamp_ns=1, data=points)

@@ -16,7 +16,7 @@ from redrive.types.enums import (
     Weather,
 )
 from redrive.types.environment import EnvironmentData, TrafficData, TrafficLight
-from redrive.types.frame import Frame, SensorData, SensorPayload
+from redrive.types.frame import ExtensionPayload, Frame, SensorData, SensorPayload
 from redrive.types.objects import Box3D, DetectedObject
 from redrive.types.sensors import IMAGE_ENCODINGS, CameraInfo, GnssFix, Image, Imu, PointCloud
 from redrive.types.transforms import Transform
@@ -29,6 +29,7 @@ __all__ = [
     "ControlCommands",
     "DetectedObject",
     "EnvironmentData",
+    "ExtensionPayload",
     "Frame",
     "GnssFix",
     "Image",

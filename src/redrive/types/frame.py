@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Any
+from typing import Any, ClassVar, Protocol, runtime_checkable
 
 from redrive.types._pickle import reduce_dataclass
 from redrive.types.enums import SensorType
@@ -14,9 +14,26 @@ from redrive.types.objects import DetectedObject
 from redrive.types.sensors import GnssFix, Image, Imu, PointCloud
 from redrive.types.vehicle import VehicleState
 
-__all__ = ["Frame", "SensorData", "SensorPayload"]
+__all__ = ["ExtensionPayload", "Frame", "SensorData", "SensorPayload"]
 
-SensorPayload = PointCloud | Image | Imu | GnssFix | VehicleState
+
+@runtime_checkable
+class ExtensionPayload(Protocol):
+    """A payload type defined outside redrive (a plugin's radar point list, say).
+
+    Any class may be a sensor payload when it says which sensor types may carry it; redrive's own
+    payloads are listed in ``_PAYLOADS`` instead.  Make it a frozen dataclass with one array per
+    field (CONVENTIONS.md) so that it behaves like the built-in payloads.
+
+    >>> @dataclass(frozen=True)
+    ... class RadarPoints:
+    ...     sensor_types: ClassVar[frozenset[SensorType]] = frozenset({SensorType.RADAR})
+    """
+
+    sensor_types: ClassVar[frozenset[SensorType]]
+
+
+SensorPayload = PointCloud | Image | Imu | GnssFix | VehicleState | ExtensionPayload
 
 _PAYLOADS: Mapping[SensorType, tuple[type, ...]] = MappingProxyType(
     {
@@ -43,7 +60,9 @@ class SensorData:
         frame_rate_hz: nominal rate; 0.0 when unknown.
         resolution: (width, height) for cameras, (columns, rows) for organised clouds, else None.
         sensor_location: (x, y, z) metres of the sensor in base_link; zeros when unknown.
-        data: the payload.
+        data: the payload: the built-in type of ``sensor_type`` (PointCloud for LiDAR and radar,
+            Image, Imu, GnssFix, VehicleState for odometry) or an :class:`ExtensionPayload`
+            that names ``sensor_type`` in its ``sensor_types``.
     """
 
     sensor_id: str
@@ -57,11 +76,13 @@ class SensorData:
 
     def __post_init__(self) -> None:
         allowed = _PAYLOADS[self.sensor_type]
-        if not isinstance(self.data, allowed):
+        extension = getattr(type(self.data), "sensor_types", ())
+        if not isinstance(self.data, allowed) and self.sensor_type not in extension:
             names = ", ".join(t.__name__ for t in allowed)
             msg = (
                 f"SensorData {self.sensor_id!r}: a {self.sensor_type.name} sensor carries "
-                f"{names}, got {type(self.data).__name__}"
+                f"{names} or a payload class whose `sensor_types` names {self.sensor_type.name}, "
+                f"got {type(self.data).__name__}"
             )
             raise ValueError(msg)
         object.__setattr__(self, "stamp_ns", int(self.stamp_ns))

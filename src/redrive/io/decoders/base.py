@@ -11,6 +11,7 @@ from redrive.io.base import LogMessage
 from redrive.types import (
     CameraInfo,
     DetectedObject,
+    ExtensionPayload,
     GnssFix,
     Image,
     Imu,
@@ -29,6 +30,7 @@ DecodedValue = (
     | Imu
     | GnssFix
     | VehicleState
+    | ExtensionPayload
     | tuple[DetectedObject, ...]
     | tuple[Transform, ...]
     | CameraInfo
