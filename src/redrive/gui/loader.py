@@ -128,7 +128,7 @@ def _lidar_in_base(
             continue
         if data.sensor_type is SensorType.LIDAR and isinstance(data.data, PointCloud):
             xyz: npt.NDArray[Any] = data.data.xyz
-            known = static is not None and data.frame_id in static.tf.frames
+            known = static is not None and data.frame_id.lstrip("/") in static.tf.frames
             mat = static.base_from(data.frame_id) if static is not None else None
             if mat is not None:
                 xyz = transform_xyz(mat, xyz)

@@ -20,6 +20,8 @@ from redrive.errors import ConfigError, UnsupportedMessageError
 from redrive.io.base import LogMessage, LogReader
 from redrive.io.decoders import decode, decoder_for
 from redrive.io.decoders.base import Decoded
+from redrive.io.decoders.tf import is_static_tf_topic
+from redrive.io.mounts import SensorMounts, mount_tf_topics
 from redrive.io.sensor_map import SensorMap, SensorMapOverrides, infer_sensor_map
 from redrive.types import (
     DetectedObject,
@@ -95,6 +97,7 @@ class FrameAssembler:
         self.lookahead_ns = lookahead_ns
         self.undecodable: dict[str, int] = {}
         self._warned: set[str] = set()
+        self._unplaced: set[str] = set()
 
     def frames(self, *, start_ns: int | None = None, stop_ns: int | None = None) -> Iterator[Frame]:
         """Frames in order, from driver samples with log time in ``[start_ns, stop_ns)``."""
@@ -105,19 +108,28 @@ class FrameAssembler:
         buffers: dict[str, deque[_Sample]] = {s.sensor_id: deque() for s in smap.sensors}
         states: deque[VehicleState] = deque()
         objects: deque[_Sample] = deque()
-        static_tf: dict[tuple[str, str], Transform] = {}
+        mounts = SensorMounts()
         pending: deque[_Sample] = deque()
         assemble = partial(
-            self._assemble, buffers=buffers, states=states, objects=objects, static_tf=static_tf
+            self._assemble, buffers=buffers, states=states, objects=objects, mounts=mounts
         )
         index = 0
         read_from = None if start_ns is None else start_ns - tol - self.lookahead_ns
-        # Only static transforms are used (sensor mounts): when the log has a static tf topic,
-        # its dynamic /tf (often 100 Hz+) is not read at all.
-        static_tf_topics = {t for t in smap.tf_topics if t.rstrip("/").endswith("tf_static")}
-        topics = [
-            t for t in smap.topics() if not static_tf_topics or t not in smap.tf_topics
-        ] + sorted(static_tf_topics)
+        # The tf topics are read for the sensor mounts only: /tf (often 100 Hz+) just when the
+        # static transforms leave a sensor unplaced.
+        tf_topics = mount_tf_topics(
+            self.log,
+            tf_topics=smap.tf_topics,
+            sensor_topics=[s.topic for s in smap.sensors if s.location is None],
+        )
+        topics = [t for t in smap.topics() if t not in smap.tf_topics] + tf_topics
+        # /tf_static is latched at the start of a log: read it whole even when seeking.
+        static_tf = [t for t in tf_topics if is_static_tf_topic(t)]
+        if read_from is not None and static_tf:
+            for message in self.log.messages(topics=static_tf, stop_ns=read_from):
+                decoded = self._decode(message)
+                if decoded is not None and isinstance(decoded.value, tuple):
+                    mounts.add(message.topic, _transforms(decoded))
         for message in self.log.messages(topics=list(dict.fromkeys(topics)), start_ns=read_from):
             decoded = self._decode(message)
             if decoded is None:
@@ -141,9 +153,7 @@ class FrameAssembler:
             elif message.topic == smap.ground_truth_topic:
                 objects.append(_Sample(decoded.stamp_ns, decoded))
             elif message.topic in smap.tf_topics and isinstance(decoded.value, tuple):
-                for tf in decoded.value:
-                    if isinstance(tf, Transform) and tf.stamp_ns == 0:
-                        static_tf[(tf.parent_frame, tf.child_frame)] = tf
+                mounts.add(message.topic, _transforms(decoded))
             while pending and now - pending[0].stamp_ns > tol + self.lookahead_ns:
                 yield assemble(pending.popleft(), index=index)
                 index += 1
@@ -179,7 +189,7 @@ class FrameAssembler:
         buffers: dict[str, deque[_Sample]],
         states: deque[VehicleState],
         objects: deque[_Sample],
-        static_tf: dict[tuple[str, str], Transform],
+        mounts: SensorMounts,
     ) -> Frame:
         smap = self.sensor_map
         t = driver.stamp_ns
@@ -195,9 +205,17 @@ class FrameAssembler:
                 continue
             value = sample.decoded.value
             location = spec.location
-            if location is None and ("base_link", sample.decoded.frame_id) in static_tf:
-                xyz = static_tf[("base_link", sample.decoded.frame_id)].translation
-                location = (float(xyz[0]), float(xyz[1]), float(xyz[2]))
+            if location is None:
+                location = mounts.location(sample.decoded.frame_id, sample.stamp_ns)
+                if location is None and spec.sensor_id not in self._unplaced:
+                    self._unplaced.add(spec.sensor_id)
+                    logger.info(
+                        "%s: no transform from %r to base_link: sensor %s is taken to sit at "
+                        "base_link's origin",
+                        self.log.path,
+                        sample.decoded.frame_id,
+                        spec.sensor_id,
+                    )
             resolution = (value.width, value.height) if isinstance(value, Image) else None
             try:
                 sensors[spec.sensor_id] = SensorData(
@@ -227,6 +245,11 @@ class FrameAssembler:
             vehicle_state=_state_at(states, t, tol),
             ground_truth=ground_truth,
         )
+
+
+def _transforms(decoded: Decoded) -> Iterator[Transform]:
+    assert isinstance(decoded.value, tuple)
+    return (t for t in decoded.value if isinstance(t, Transform))
 
 
 def _nearest(buf: deque[_Sample], stamp_ns: int, tolerance_ns: int) -> _Sample | None:
