@@ -4,8 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import pyarrow.parquet as pq
-
+from redrive.results.evaluation import read_evaluation
 from tests.docs._tutorial import DOCS, run_tutorial, steps
 
 DOC = DOCS / "evaluation.md"
@@ -19,12 +18,12 @@ def test_the_tutorial_runs(tmp_path: Path) -> None:
     assert report.is_file()
     assert "<img" in report.read_text(encoding="utf-8")
     assert (run_a / "report" / "report.xlsx").is_file()
-    # the user's metric ran from its file (before the A/B step replaced the evaluation)
+    # the user's metric ran from its file
     outputs = "\n".join(p.stdout for p in done)
     assert "near_misses" in outputs
     assert "missed_per_frame" in outputs
     # the A/B step: B (stricter detector) is compared on nuScenes values and ranked frames
-    values = pq.read_table(tmp_path / "runs" / "b" / "metrics" / "values.parquet").to_pylist()
+    values = read_evaluation(tmp_path / "runs" / "b").values.to_pylist()
     assert {v["metric"] for v in values} == {"nuscenes_detection"}
     html = (tmp_path / "ab.html").read_text(encoding="utf-8")
     assert "nuscenes_detection" in html

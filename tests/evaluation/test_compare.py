@@ -244,33 +244,33 @@ def test_different_logs_refused(tmp_path: Path) -> None:
 
 
 def test_different_definitions_not_compared(tmp_path: Path) -> None:
+    # A run stores one definition per metric name, so each difference gets its own pair of runs.
     a = make_run(
         tmp_path / "a",
         [
             (Counts(), "det", counts({"r": 1.0})),
-            (CountsV2(), "planner", counts({"r": 1.0})),  # same name, version 2 here …
             (Latency(), "", MetricResult(values={"p95": 1.0})),
         ],
         n=2,
     )
-    b = make_run(
-        tmp_path / "b",
-        [
-            (Counts(range_m=30.0), "det", counts({"r": 0.0})),  # other parameters
-            (Counts(), "planner", counts({"r": 0.0})),  # … version 1 there
-        ],
-        n=2,
-    )
+    b = make_run(tmp_path / "b", [(Counts(range_m=30.0), "det", counts({"r": 0.0}))], n=2)
     cmp = compare_runs(a, b)
     assert cmp.values == ()
     assert cmp.series == ()
     reasons = {(k.metric, k.algorithm_a): k.reason for k in cmp.skipped}
     assert reasons == {
         ("counts", "det"): "parameters differ (range_m: 50.0 → 30.0)",
-        ("counts", "planner"): "version 2 in A, 1 in B",
         ("*", ""): "algorithm '' has no evaluation in B",
     }
-    assert cmp.to_tables()["skipped"].num_rows == 3
+    assert cmp.to_tables()["skipped"].num_rows == 2
+
+    v2 = make_run(tmp_path / "v2", [(CountsV2(), "det", counts({"r": 1.0}))], n=2)
+    v1 = make_run(tmp_path / "v1", [(Counts(), "det", counts({"r": 0.0}))], n=2)
+    cmp = compare_runs(v2, v1)
+    assert cmp.values == ()
+    assert {(k.metric, k.algorithm_a): k.reason for k in cmp.skipped} == {
+        ("counts", "det"): "version 2 in A, 1 in B"
+    }
 
 
 def test_explicit_pairing(tmp_path: Path) -> None:

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from redrive.errors import ConfigError
-from redrive.evaluation.base import EvalData
+from redrive.evaluation.base import EvalData, MetricSkipped
 from redrive.evaluation.control import ControlMetrics
 from redrive.results import FrameRecord, RunWriter, StepRecord, open_run
 from redrive.types import ControlCommands, PlannedPath, VehicleState
@@ -121,7 +121,7 @@ def test_command_smoothness(tmp_path: Path) -> None:
 
 def test_the_planner_must_be_unambiguous(tmp_path: Path) -> None:
     run = open_run(make_run(tmp_path, n=3, planners=("a", "b")))
-    with pytest.raises(ConfigError, match="pass planner=NAME"):
+    with pytest.raises(MetricSkipped, match="pass planner=NAME"):
         ControlMetrics().evaluate(EvalData(run, "ctrl"))
     with pytest.raises(ConfigError, match="no planning algorithm 'c'"):
         ControlMetrics(planner="c").evaluate(EvalData(run, "ctrl"))

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -11,8 +10,8 @@ import numpy as np
 import pytest
 
 from redrive.cli.main import main
-from redrive.errors import ConfigError
-from redrive.evaluation import Bookmark, EvalData, Metric, MetricResult
+from redrive.errors import ConfigError, PluginError
+from redrive.evaluation import Bookmark, EvalData, Metric, MetricResult, MetricSkipped
 from redrive.evaluation.evaluator import evaluate_run
 from redrive.evaluation.store import read_evaluation
 from redrive.results import RunWriter, open_run
@@ -68,7 +67,19 @@ class Refuses(Metric):
     role = "planning"
 
     def evaluate(self, data: EvalData) -> MetricResult:
-        raise ConfigError(f"{data.algorithm} has no track ids")
+        raise MetricSkipped(f"{data.algorithm} has no track ids")
+
+
+class Buggy(Metric):
+    """A metric with a bug: a ValueError from deep inside (issue 14.2: it was taken as a skip
+    and `redrive evaluate` exited 0)."""
+
+    name = "buggy"
+    role = "perception"
+    needs = frozenset({"detections"})
+
+    def evaluate(self, data: EvalData) -> MetricResult:
+        return MetricResult(values={"x": float(np.array([1.0, 2.0]).reshape(3))})
 
 
 @pytest.fixture
@@ -100,19 +111,131 @@ def test_metrics_are_stored_with_the_run(run_dir: Path) -> None:
     )
     units = {(r["key"], r["unit"]) for r in ev.values.to_pylist() if r["metric"] == "object_count"}
     assert units == {("mean", "objects"), ("frames", "frames")}
-    manifest = json.loads((run_dir / "manifest.json").read_text())
-    described = {m["name"]: m for m in manifest["evaluation"]["metrics"]}
+    described = {m["name"]: m for m in ev.metrics}
     assert described["object_count"]["params"] == {"scale": 2.0}
     assert described["object_count"]["algorithms"] == ["det", "bad_det"]
     assert len(described["object_count"]["params_hash"]) == 64
 
 
-def test_evaluating_again_replaces_the_evaluation(run_dir: Path) -> None:
+def test_adding_a_metric_keeps_the_stored_ones(run_dir: Path) -> None:
+    # issue 14.3: `evaluate --metric x.py:M` replaced the whole stored evaluation
     evaluate_run(run_dir, metrics=[ObjectCount()])
+    before = read_evaluation(open_run(run_dir))
     evaluate_run(run_dir, metrics=[NeedsTruth()])
     ev = read_evaluation(open_run(run_dir))
-    assert set(ev.values.column("metric").to_pylist()) == {"needs_truth"}
-    assert ev.per_frame.num_rows == 0
+    assert set(ev.values.column("metric").to_pylist()) == {"object_count", "needs_truth"}
+    kept = [r for r in ev.values.to_pylist() if r["metric"] == "object_count"]
+    assert kept == before.values.to_pylist()
+    assert ev.per_frame.to_pylist() == before.per_frame.to_pylist()
+    assert {m["name"] for m in ev.metrics} == {"object_count", "needs_truth"}
+
+
+def test_evaluating_a_metric_again_replaces_only_its_rows(run_dir: Path) -> None:
+    evaluate_run(run_dir, metrics=[ObjectCount(), NeedsTruth()])
+    truth_rows = [
+        r for r in read_evaluation(open_run(run_dir)).values.to_pylist()
+        if r["metric"] == "needs_truth"
+    ]  # fmt: skip
+    evaluate_run(run_dir, metrics=[ObjectCount(scale=3.0)])
+    ev = read_evaluation(open_run(run_dir))
+    assert [r for r in ev.values.to_pylist() if r["metric"] == "needs_truth"] == truth_rows
+    counts = [r for r in ev.values.to_pylist() if r["metric"] == "object_count"]
+    assert len(counts) == 4  # mean and frames for det and bad_det: not doubled
+    assert {m["name"]: m["params"] for m in ev.metrics}["object_count"] == {"scale": 3.0}
+    folders = [p for p in (run_dir / "metrics").iterdir() if p.is_dir()]
+    assert len(folders) == 2  # the superseded folder is gone
+
+
+def test_a_store_that_died_half_way_leaves_the_previous_evaluation(
+    run_dir: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    evaluate_run(run_dir, metrics=[ObjectCount()])
+    before = read_evaluation(open_run(run_dir)).values.to_pylist()
+    import redrive.results.evaluation as stored
+
+    def killed(*args: object, **kwargs: object) -> None:
+        raise KeyboardInterrupt  # the process dies while writing the index
+
+    monkeypatch.setattr(stored, "write_json_atomic", killed)
+    with pytest.raises(KeyboardInterrupt):
+        evaluate_run(run_dir, metrics=[ObjectCount(scale=5.0)])
+    monkeypatch.undo()
+    assert read_evaluation(open_run(run_dir)).values.to_pylist() == before
+    # the next store removes the orphaned folder
+    evaluate_run(run_dir, metrics=[NeedsTruth()])
+    folders = [p for p in (run_dir / "metrics").iterdir() if p.is_dir()]
+    assert len(folders) == 2
+
+
+def test_a_metric_that_raises_is_an_error_not_a_skip(run_dir: Path) -> None:
+    summary = evaluate_run(run_dir, metrics=[Buggy(), ObjectCount()])
+    assert summary.skipped == ()
+    assert [(f.metric, f.algorithm) for f in summary.failed] == [
+        ("buggy", "det"),
+        ("buggy", "bad_det"),
+    ]
+    assert "ValueError" in summary.failed[0].reason
+    ev = read_evaluation(open_run(run_dir))
+    assert {r["metric"] for r in ev.values.to_pylist()} == {"object_count"}
+    failed = {m["name"]: m["failed"] for m in ev.metrics}["buggy"]
+    assert [f["algorithm"] for f in failed] == ["det", "bad_det"]
+
+
+def test_cli_exits_non_zero_when_a_metric_raises(
+    run_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    plugin = tmp_path / "buggy_metric.py"
+    plugin.write_text(
+        "import numpy as np\n"
+        "from redrive.evaluation import Metric, MetricResult\n"
+        "class Buggy(Metric):\n"
+        "    name = 'buggy'\n"
+        "    role = 'perception'\n"
+        "    def evaluate(self, data):\n"
+        "        raise ValueError('index out of range in my metric')\n"
+        "class Skips(Metric):\n"
+        "    name = 'skips'\n"
+        "    role = 'perception'\n"
+        "    def evaluate(self, data):\n"
+        "        from redrive.evaluation import MetricSkipped\n"
+        "        raise MetricSkipped('needs lane labels')\n"
+    )
+    status = main(["evaluate", str(run_dir), "--metric", f"{plugin}:Skips"])
+    out = capsys.readouterr().out
+    assert status == 0
+    assert "skipped skips on det: needs lane labels" in out
+    status = main(["evaluate", str(run_dir), "--metric", f"{plugin}:Buggy"])
+    out = capsys.readouterr().out
+    assert status == 3
+    assert "metric buggy on det raised ValueError: index out of range in my metric" in out
+    assert "Traceback" not in out
+
+
+def test_a_missing_need_is_skipped_with_what_provides_it(run_dir: Path) -> None:
+    class NeedsPaths(Metric):
+        name = "needs_paths"
+        role = "perception"
+        needs = frozenset({"paths"})
+
+        def evaluate(self, data: EvalData) -> MetricResult:
+            raise AssertionError("not called: the need is checked first")
+
+    summary = evaluate_run(run_dir, metrics=[NeedsPaths()])
+    assert summary.failed == ()
+    reasons = {s.algorithm: s.reason for s in summary.skipped}
+    assert "a planning algorithm with at least one successful step" in reasons["det"]
+
+
+def test_an_unknown_need_is_refused_when_the_class_is_defined() -> None:
+    with pytest.raises(PluginError, match="needs lanes not known"):
+
+        class NeedsLanes(Metric):
+            name = "lanes"
+            role = "run"
+            needs = frozenset({"lanes"})
+
+            def evaluate(self, data: EvalData) -> MetricResult:
+                return MetricResult(values={})
 
 
 def test_unknown_parameters_and_algorithms_are_refused(run_dir: Path) -> None:

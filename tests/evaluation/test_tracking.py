@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from redrive.errors import ConfigError
-from redrive.evaluation import EvalData
+from redrive.evaluation import EvalData, MetricSkipped
 from redrive.evaluation.evaluator import evaluate_run
 from redrive.evaluation.tracking import ClearMot, bev_iou_matrix
 from redrive.results import FrameRecord, RunWriter, StepRecord, open_run
@@ -241,7 +241,7 @@ def test_frames_without_ground_truth_are_not_scored(tmp_path: Path) -> None:
 def test_detector_without_track_ids_is_refused(tmp_path: Path) -> None:
     scenes = [((obj(7, 10.0),), (obj(1, 10.0),))]
     path = write_run(tmp_path / "run", scenes)
-    with pytest.raises(ConfigError, match="'det' produces no track ids"):
+    with pytest.raises(MetricSkipped, match="'det' produces no track ids"):
         ClearMot().evaluate(EvalData(open_run(path), "det"))
     # evaluate_run scores the tracker and lists the detector as skipped, with the reason
     result = evaluate_run(path, metrics=[ClearMot()])
@@ -350,7 +350,7 @@ def test_real_run(demo_run: Path) -> None:
     assert 0.0 <= v["IDF1"] <= 1.0
     assert 0.0 <= v["MOTP"] <= 2.0  # metres, inside the gate
     check_mota_identity(v)
-    with pytest.raises(ConfigError, match="no track ids"):
+    with pytest.raises(MetricSkipped, match="no track ids"):
         ClearMot().evaluate(EvalData(run, "clusters"))
 
 

@@ -19,10 +19,18 @@ examples:
   redrive report runs/first                            then: HTML, XLSX and CSV report
 
 Metrics score the algorithms of their role (perception, planning, control) or the run as a
-whole (latency). Results go to RUN/metrics/*.parquet, failure frames to
-RUN/metrics/bookmarks.parquet, and the metric names, versions and parameters to the manifest.
+whole (latency). Each metric is stored on its own under RUN/metrics/ (values, per-frame series,
+curves, failure-frame bookmarks, and its name, version and parameters in RUN/metrics/index.json):
+evaluating one metric again, or adding one, keeps every other stored metric.
 `redrive metrics` lists the installed metrics.
+
+exit status: 0 every metric scored or was skipped (it does not apply: the reason is printed);
+3 a metric raised an error (printed; the other metrics are stored); 1 a redrive error (not a
+run, unreadable run …); 2 bad usage.
 """
+
+#: exit status when a metric raised (the other metrics were stored).
+EXIT_METRIC_FAILED = 3
 
 
 def _fmt(value: float) -> str:
@@ -54,10 +62,23 @@ def _run(args: argparse.Namespace) -> int:
     for skip in summary.skipped:
         where = skip.algorithm or "the run"
         console.print(f"[yellow]skipped {skip.metric} on {where}: {skip.reason}[/]")
+    for fail in summary.failed:
+        where = fail.algorithm or "the run"
+        console.print(
+            f"[bold red]error: metric {fail.metric} on {where} raised {fail.reason}[/] "
+            "(`redrive -v evaluate …` shows the traceback)",
+            markup=True,
+            highlight=False,
+        )
     console.print(
         f"{len(summary.scored)} results, {summary.bookmarks} bookmarked frames → "
         f"{summary.metrics_dir} (`redrive report {args.run}` for the HTML report)"
     )
+    if summary.failed:
+        console.print(
+            f"[bold red]{len(summary.failed)} metric result(s) failed; the others are stored[/]"
+        )
+        return EXIT_METRIC_FAILED
     return 0
 
 

@@ -13,6 +13,7 @@ from redrive.evaluation.base import (
     EvalData,
     Metric,
     MetricResult,
+    MetricSkipped,
     Series,
     params_hash,
 )
@@ -24,6 +25,7 @@ __all__ = [
     "EvalData",
     "Metric",
     "MetricResult",
+    "MetricSkipped",
     "Series",
     "params_hash",
 ]

@@ -35,7 +35,7 @@ import numpy as np
 import numpy.typing as npt
 import pyarrow as pa
 
-from redrive.errors import ConfigError
+from redrive.errors import ConfigError, PluginError
 from redrive.results import Run
 from redrive.types import ControlCommands, DetectedObject, PlannedPath, VehicleState
 
@@ -46,6 +46,7 @@ __all__ = [
     "EvalData",
     "Metric",
     "MetricResult",
+    "MetricSkipped",
     "Series",
     "params_hash",
 ]
@@ -54,6 +55,32 @@ _T = TypeVar("_T")
 
 #: what a metric may need from a run.
 NEEDS = frozenset({"ground_truth", "ego", "detections", "paths", "commands", "steps", "frames"})
+#: what provides each need, for the message when a run lacks it.
+NEED_SOURCES: Mapping[str, str] = MappingProxyType(
+    {
+        "ground_truth": "a log with ground-truth objects",
+        "ego": "a log with the ego state (odometry)",
+        "detections": "a perception algorithm with at least one successful step",
+        "paths": "a planning algorithm with at least one successful step",
+        "commands": "a control algorithm with at least one successful step",
+        "steps": "a run with at least one algorithm step",
+        "frames": "a run with at least one frame",
+    }
+)
+
+
+class MetricSkipped(Exception):  # noqa: N818 - a skip is an outcome, not an error
+    """Raised by :meth:`Metric.evaluate` when the metric does not apply to what it was given
+    (say, a detector without track ids for a tracking metric); the reason is shown to the user.
+
+    Any other exception a metric raises is an error: reported, and the command exits non-zero.
+    """
+
+    def __init__(self, reason: str) -> None:
+        super().__init__(reason)
+        self.reason = reason
+
+
 #: which algorithms a metric scores: those of a role, or the run as a whole ("run").
 ROLES = ("perception", "planning", "control", "run")
 
@@ -199,7 +226,8 @@ class Metric(ABC):
         name: unique name (``nuscenes_detection``); the entry-point name should match it.
         version: bump when the definition changes; stored with every value.
         role: which algorithms it scores (:data:`ROLES`; ``run`` = the run as a whole).
-        needs: what it reads (:data:`NEEDS`); an algorithm whose run lacks it is skipped.
+        needs: what it reads (:data:`NEEDS`), checked before ``evaluate`` is called: an
+            algorithm whose run lacks it is skipped, with what would provide it.
         unit: unit of its values (per value in ``MetricResult.units`` when they differ).
         higher_is_better: for A/B comparisons and report colouring.
         defaults: parameters and their defaults; ``Metric(**params)`` overrides them.
@@ -212,6 +240,16 @@ class Metric(ABC):
     unit: ClassVar[str] = ""
     higher_is_better: ClassVar[bool] = True
     defaults: ClassVar[Mapping[str, Any]] = MappingProxyType({})
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        unknown = sorted(set(cls.needs) - NEEDS)
+        if unknown:
+            msg = (
+                f"metric class {cls.__qualname__}: needs {', '.join(unknown)} not known; "
+                f"a metric may need {', '.join(sorted(NEEDS))}"
+            )
+            raise PluginError(msg)
 
     def __init__(self, **params: Any) -> None:
         unknown = sorted(set(params) - set(self.defaults))

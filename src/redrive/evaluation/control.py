@@ -47,7 +47,7 @@ from redrive.evaluation._kinematics import (
     project_on_polyline,
     wrap_angle,
 )
-from redrive.evaluation.base import EvalData, Metric, MetricResult, Series
+from redrive.evaluation.base import EvalData, Metric, MetricResult, MetricSkipped, Series
 
 __all__ = ["ControlMetrics", "planner_of"]
 
@@ -80,7 +80,7 @@ def planner_of(data: EvalData, requested: str = "") -> str:
             f"has {len(planners)} planning algorithms ({', '.join(planners) or 'none'}); "
             "pass planner=NAME"
         )
-        raise ConfigError(msg)
+        raise MetricSkipped(msg)
     return planners[0]
 
 

@@ -8,35 +8,30 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from redrive.errors import RedriveError
-from redrive.evaluation.base import EvalData, Metric
+from redrive.errors import ConfigError
+from redrive.evaluation.base import NEED_SOURCES, EvalData, Metric, MetricSkipped
 from redrive.evaluation.registry import installed_metrics
-from redrive.evaluation.store import Scored, write_evaluation
+from redrive.evaluation.store import MetricOutcome, Scored, write_evaluation
 from redrive.results import Run, open_run
 
-__all__ = ["EvaluationSummary", "Skipped", "default_metrics", "evaluate_run"]
+__all__ = ["EvaluationSummary", "MetricOutcome", "default_metrics", "evaluate_run"]
 
 logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class Skipped:
-    """A metric not computed for an algorithm, and why."""
-
-    metric: str
-    algorithm: str
-    reason: str
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
 class EvaluationSummary:
+    """What one ``evaluate_run`` did: the results, the skips (the metric does not apply, with
+    why) and the failures (the metric raised: a bug to fix, never silent)."""
+
     run: Run
     scored: tuple[Scored, ...]
-    skipped: tuple[Skipped, ...]
+    skipped: tuple[MetricOutcome, ...]
+    failed: tuple[MetricOutcome, ...]
     metrics_dir: Path
 
     @property
@@ -49,15 +44,50 @@ def default_metrics() -> list[Metric]:
     return [cls() for cls in installed_metrics().values()]
 
 
-def _has(run: Run, data: EvalData, need: str) -> str | None:
-    """None if the run provides ``need`` for ``data.algorithm``, else why not."""
-    if need == "ground_truth" and run.table("ground_truth").num_rows == 0:
+#: the role whose algorithms produce each output a metric may need.
+_OUTPUT_ROLES = {"detections": "perception", "paths": "planning", "commands": "control"}
+
+
+class _Provides:
+    """What a run provides, read once per evaluation: which needs each algorithm meets."""
+
+    def __init__(self, run: Run, roles: Mapping[str, str]) -> None:
+        self.run = run
+        self.roles = roles
+        steps = run.table("steps")
+        ok = [s == "ok" for s in steps.column("status").to_pylist()]
+        self.ok_algorithms = {
+            a for a, good in zip(steps.column("algorithm").to_pylist(), ok, strict=True) if good
+        }
+        self.has_steps = steps.num_rows > 0
         frames = run.table("frames")
-        if frames.num_rows == 0 or frames.column("n_ground_truth").null_count == frames.num_rows:
-            return "the log has no ground truth"
-    if need == "ego" and run.table("ego").num_rows == 0:
-        return "the log has no ego state"
-    return None
+        self.has_frames = frames.num_rows > 0
+        self.has_ground_truth = run.table("ground_truth").num_rows > 0 or (
+            self.has_frames and frames.column("n_ground_truth").null_count < frames.num_rows
+        )
+        self.has_ego = run.table("ego").num_rows > 0
+
+    def missing(self, need: str, algorithm: str) -> str | None:
+        """None if the run provides ``need`` for ``algorithm``, else why not."""
+        have = {
+            "ground_truth": self.has_ground_truth,
+            "ego": self.has_ego,
+            "steps": self.has_steps,
+            "frames": self.has_frames,
+        }.get(need)
+        if have is None:  # detections, paths, commands: an algorithm's own output
+            role = _OUTPUT_ROLES[need]
+            if algorithm:
+                have = self.roles.get(algorithm) == role and algorithm in self.ok_algorithms
+                what = f"{algorithm!r} produced no {need}"
+            else:
+                have = any(r == role and a in self.ok_algorithms for a, r in self.roles.items())
+                what = f"the run has no {need}"
+        else:
+            what = f"the run has no {need.replace('_', ' ')}"
+        if have:
+            return None
+        return f"{what} (needs {NEED_SOURCES.get(need, need)})"
 
 
 def evaluate_run(
@@ -67,10 +97,13 @@ def evaluate_run(
     algorithms: Sequence[str] | None = None,
 ) -> EvaluationSummary:
     """Run ``metrics`` (default: every installed one) on the algorithms of their role and store
-    the results in the run directory (replacing an earlier evaluation).
+    each metric's results in the run directory, replacing only that metric's earlier results
+    (other stored metrics stay).
 
-    A metric that cannot score an algorithm (its run lacks ground truth, a detector has no track
-    ids for a tracking metric …) is listed in ``skipped`` with the reason, not silently dropped.
+    A metric whose declared ``needs`` the run does not meet, or that raises
+    :class:`MetricSkipped`, is listed in ``skipped`` with the reason.  A metric that raises
+    anything else is listed in ``failed`` with the exception; the other metrics still run and
+    are stored.
     """
     run = open_run(run_dir)
     chosen = list(metrics) if metrics is not None else default_metrics()
@@ -78,35 +111,52 @@ def evaluate_run(
     if algorithms is not None:
         unknown = sorted(set(algorithms) - set(roles))
         if unknown:
-            from redrive.errors import ConfigError
-
             msg = f"{run.path}: no algorithm {', '.join(unknown)} (run has: {', '.join(roles)})"
             raise ConfigError(msg)
         roles = {k: v for k, v in roles.items() if k in algorithms}
+    provides = _Provides(run, roles)
     scored: list[Scored] = []
-    skipped: list[Skipped] = []
+    outcomes: list[MetricOutcome] = []
     for metric in chosen:
         targets = (
             [""] if metric.role == "run" else [a for a, r in roles.items() if r == metric.role]
         )
         for algo in targets:
-            data = EvalData(run, algo)
-            missing = next((why for n in sorted(metric.needs) if (why := _has(run, data, n))), None)
+            missing = next(
+                (why for n in sorted(metric.needs) if (why := provides.missing(n, algo))), None
+            )
             if missing is not None:
-                skipped.append(Skipped(metric=metric.name, algorithm=algo, reason=missing))
+                outcomes.append(MetricOutcome(metric=metric.name, algorithm=algo, reason=missing))
                 continue
             try:
-                result = metric.evaluate(data)
-            except (RedriveError, ValueError) as err:
-                skipped.append(Skipped(metric=metric.name, algorithm=algo, reason=str(err)))
+                result = metric.evaluate(EvalData(run, algo))
+            except MetricSkipped as skip:
+                outcomes.append(
+                    MetricOutcome(metric=metric.name, algorithm=algo, reason=skip.reason)
+                )
+                continue
+            except Exception as err:  # a metric's bug: reported, never silent
+                logger.debug("metric %s on %s raised", metric.name, algo or "run", exc_info=True)
+                outcomes.append(
+                    MetricOutcome(
+                        metric=metric.name,
+                        algorithm=algo,
+                        reason=f"{type(err).__name__}: {err}",
+                        error=True,
+                    )
+                )
                 continue
             logger.debug(
                 "%s on %s: %s", metric.name, algo or "run", dict(list(result.values.items())[:3])
             )
             scored.append(Scored(metric=metric, algorithm=algo, result=result))
-    folder = write_evaluation(run, scored)
+    folder = write_evaluation(run, scored, metrics=chosen, outcomes=outcomes)
     return EvaluationSummary(
-        run=run, scored=tuple(scored), skipped=tuple(skipped), metrics_dir=folder
+        run=run,
+        scored=tuple(scored),
+        skipped=tuple(o for o in outcomes if not o.error),
+        failed=tuple(o for o in outcomes if o.error),
+        metrics_dir=folder,
     )
 
 

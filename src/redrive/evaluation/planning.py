@@ -77,7 +77,14 @@ from redrive.evaluation._kinematics import (
     rectangle_corners,
     rectangles_overlap,
 )
-from redrive.evaluation.base import Bookmark, EvalData, Metric, MetricResult, Series
+from redrive.evaluation.base import (
+    Bookmark,
+    EvalData,
+    Metric,
+    MetricResult,
+    MetricSkipped,
+    Series,
+)
 from redrive.types import DetectedObject, PlannedPath, VehicleState
 
 __all__ = ["COMFORT_BOUNDS", "PlanningMetrics", "time_to_collision_s"]
@@ -428,7 +435,7 @@ class PlanningMetrics(Metric):
                     f"planning metric: the plan of frame {frame} is in {path.frame_id!r}; only "
                     "base_link plans can be scored"
                 )
-                raise ConfigError(msg)
+                raise MetricSkipped(msg)
             scored += 1
             now = ego.get(frame)
             if now is not None:

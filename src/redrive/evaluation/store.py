@@ -1,35 +1,34 @@
-"""A run's evaluation, stored beside its outputs.
+"""A run's evaluation, stored beside its outputs, one metric at a time.
 
-Layout (written atomically: temp file + rename, then the manifest)::
-
-    RUN/metrics/values.parquet     metric, metric_version, algorithm, key, value, unit,
-                                   higher_is_better — one row per named aggregate value
-    RUN/metrics/per_frame.parquet  metric, algorithm, series, frame_index, value
-    RUN/metrics/curves.parquet     metric, algorithm, curve, point, x, y
-    RUN/metrics/bookmarks.parquet  frame_index, stamp_ns, kind, metric, algorithm, detail, severity
-    RUN/manifest.json              ["evaluation"] = {"evaluated": ISO time, "metrics": [{name,
-                                   version, role, unit, higher_is_better, params, params_hash,
-                                   algorithms}]}
-
-Evaluating again replaces the whole evaluation (never a mix of two).
+The on-disk format (one folder per metric, an index, atomic replacement of one metric without
+touching the others) is :mod:`redrive.results.evaluation`; this module turns metric results
+into its tables.  Storing a metric again replaces only that metric's results.
 """
 
 from __future__ import annotations
 
-import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.parquet as pq
 
 from redrive.errors import ConfigError
 from redrive.evaluation.base import Metric, MetricResult
 from redrive.results import Run
-from redrive.results.manifest import MANIFEST_NAME, now_iso, read_manifest, write_json_atomic
+from redrive.results.evaluation import (
+    BOOKMARKS,
+    CURVES,
+    METRICS_DIR,
+    PER_FRAME,
+    VALUES,
+    Evaluation,
+    store_metric,
+)
+from redrive.results.evaluation import read_evaluation as _read_stored
+from redrive.results.manifest import now_iso
 
 __all__ = [
     "BOOKMARKS",
@@ -38,50 +37,11 @@ __all__ = [
     "PER_FRAME",
     "VALUES",
     "Evaluation",
+    "MetricOutcome",
     "Scored",
     "read_evaluation",
     "write_evaluation",
 ]
-
-METRICS_DIR = "metrics"
-_S, _F, _I = pa.string(), pa.float64(), pa.int64()
-
-VALUES = pa.schema(
-    [
-        ("metric", _S),
-        ("metric_version", _S),
-        ("algorithm", _S),
-        ("key", _S),
-        ("value", _F),
-        ("unit", _S),
-        ("higher_is_better", pa.bool_()),
-    ]
-)
-PER_FRAME = pa.schema(
-    [("metric", _S), ("algorithm", _S), ("series", _S), ("frame_index", _I), ("value", _F)]
-)
-CURVES = pa.schema(
-    [
-        ("metric", _S),
-        ("algorithm", _S),
-        ("curve", _S),
-        ("point", _I),
-        ("x", _F),
-        ("y", _F),
-    ]
-)
-BOOKMARKS = pa.schema(
-    [
-        ("frame_index", _I),
-        ("stamp_ns", _I),
-        ("kind", _S),
-        ("metric", _S),
-        ("algorithm", _S),
-        ("detail", _S),
-        ("severity", _F),
-    ]
-)
-_FILES = {"values": VALUES, "per_frame": PER_FRAME, "curves": CURVES, "bookmarks": BOOKMARKS}
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -94,22 +54,14 @@ class Scored:
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class Evaluation:
-    """A run's stored evaluation: the four tables and the manifest's metric list."""
+class MetricOutcome:
+    """A metric that did not score an algorithm ("" for the run): skipped (it does not apply,
+    ``error`` False) or failed (it raised, ``error`` True), and why."""
 
-    values: pa.Table
-    per_frame: pa.Table
-    curves: pa.Table
-    bookmarks: pa.Table
-    metrics: tuple[Mapping[str, Any], ...]
-    evaluated: str
-
-    def value(self, metric: str, key: str, *, algorithm: str = "") -> float:
-        """One stored value (NaN when absent)."""
-        for row in self.values.to_pylist():
-            if row["metric"] == metric and row["key"] == key and row["algorithm"] == algorithm:
-                return float(row["value"])
-        return float("nan")
+    metric: str
+    algorithm: str
+    reason: str
+    error: bool = False
 
 
 def _tables(run: Run, scored: Sequence[Scored]) -> dict[str, pa.Table]:
@@ -187,49 +139,54 @@ def _tables(run: Run, scored: Sequence[Scored]) -> dict[str, pa.Table]:
     }
 
 
-def write_evaluation(run: Run, scored: Sequence[Scored]) -> Path:
-    """Store ``scored`` in ``run``'s directory (replacing an earlier evaluation); returns the
-    metrics directory."""
-    out = run.path / METRICS_DIR
-    out.mkdir(exist_ok=True)
-    for name, table in _tables(run, scored).items():
-        path = out / f"{name}.parquet"
-        tmp = path.with_name(path.name + ".tmp")
-        pq.write_table(table, tmp)
-        os.replace(tmp, path)
-    metrics: dict[tuple[str, str], dict[str, Any]] = {}
+def write_evaluation(
+    run: Run,
+    scored: Sequence[Scored],
+    *,
+    metrics: Sequence[Metric] = (),
+    outcomes: Sequence[MetricOutcome] = (),
+) -> Path:
+    """Store the results of every metric in ``scored`` and ``metrics`` (a metric that scored
+    nothing is stored with its skips and failures from ``outcomes``), replacing only those
+    metrics' earlier results; returns the metrics folder."""
+    by_name: dict[str, Metric] = {m.name: m for m in metrics}
     for s in scored:
-        entry = metrics.setdefault(
-            (s.metric.name, s.metric.describe()["params_hash"]),
-            {**s.metric.describe(), "algorithms": []},
-        )
-        entry["algorithms"].append(s.algorithm)
-    manifest = read_manifest(run.path)
-    manifest["evaluation"] = {"evaluated": now_iso(), "metrics": list(metrics.values())}
-    write_json_atomic(run.path / MANIFEST_NAME, manifest)
-    return out
+        known = by_name.setdefault(s.metric.name, s.metric)
+        if known.describe()["version"] != s.metric.describe()["version"] or (
+            known.describe()["params_hash"] != s.metric.describe()["params_hash"]
+        ):
+            msg = (
+                f"{run.path}: metric {s.metric.name!r} given with two definitions (versions or "
+                "parameters differ); a run stores one definition per metric name"
+            )
+            raise ConfigError(msg)
+    folder = run.path / METRICS_DIR
+    evaluated = now_iso()
+    for name, metric in by_name.items():
+        mine = [s for s in scored if s.metric.name == name]
+        record: dict[str, Any] = {
+            **metric.describe(),
+            "evaluated": evaluated,
+            "algorithms": [s.algorithm for s in mine],
+            "skipped": [
+                {"algorithm": o.algorithm, "reason": o.reason}
+                for o in outcomes
+                if o.metric == name and not o.error
+            ],
+            "failed": [
+                {"algorithm": o.algorithm, "error": o.reason}
+                for o in outcomes
+                if o.metric == name and o.error
+            ],
+        }
+        folder = store_metric(run.path, record=record, tables=_tables(run, mine))
+    return folder
 
 
 def read_evaluation(run: Run) -> Evaluation:
-    """The stored evaluation of ``run``.
+    """The stored evaluation of ``run`` (every stored metric).
 
     Raises:
         ConfigError: the run has not been evaluated (says which command does it).
     """
-    folder = run.path / METRICS_DIR
-    info = read_manifest(run.path).get("evaluation")
-    if info is None or not (folder / "values.parquet").is_file():
-        msg = f"{run.path} has not been evaluated; run `redrive evaluate {run.path}` first"
-        raise ConfigError(msg)
-    tables = {
-        name: pq.read_table(folder / f"{name}.parquet", schema=schema)
-        for name, schema in _FILES.items()
-    }
-    return Evaluation(
-        values=tables["values"],
-        per_frame=tables["per_frame"],
-        curves=tables["curves"],
-        bookmarks=tables["bookmarks"],
-        metrics=tuple(info.get("metrics", ())),
-        evaluated=str(info.get("evaluated", "")),
-    )
+    return _read_stored(run.path)

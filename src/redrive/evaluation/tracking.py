@@ -42,7 +42,14 @@ import numpy.typing as npt
 import shapely
 
 from redrive.errors import ConfigError
-from redrive.evaluation.base import Bookmark, EvalData, Metric, MetricResult, Series
+from redrive.evaluation.base import (
+    Bookmark,
+    EvalData,
+    Metric,
+    MetricResult,
+    MetricSkipped,
+    Series,
+)
 from redrive.types import DetectedObject
 
 __all__ = [
@@ -120,7 +127,7 @@ def _ids(
                 f"frame {frame_index}: {what} produces no track ids (object_id −1); tracking "
                 "metrics score a tracker's output — evaluate a tracking algorithm instead"
             )
-        raise ConfigError(msg)
+        raise MetricSkipped(msg)
     if np.unique(ids).size != ids.size:
         msg = (
             f"frame {frame_index}: {what} has the same object_id twice ({sorted(ids.tolist())}); "

@@ -226,11 +226,10 @@ def stored_summary_rows(run_dir: Path, shown: set[str]) -> tuple[SummaryRow, ...
     """The headline values of a run's stored evaluation (first value of each metric and
     algorithm) for the ``shown`` algorithms and the run itself; empty when not evaluated."""
     from redrive.errors import ConfigError
-    from redrive.evaluation.store import read_evaluation
-    from redrive.results import open_run
+    from redrive.results.evaluation import read_evaluation
 
     try:
-        values = read_evaluation(open_run(run_dir)).values.to_pylist()
+        values = read_evaluation(run_dir).values.to_pylist()
     except ConfigError:
         return ()
     rows: dict[tuple[str, str], SummaryRow] = {}
@@ -400,9 +399,9 @@ class RunThread(QtCore.QThread):
         rows += [
             SummaryRow(
                 algorithm=s.algorithm, metric=s.metric, key="", value=math.nan, unit="",
-                note=f"skipped: {s.reason}",
+                note=f"{'error' if s.error else 'skipped'}: {s.reason}",
             )
-            for s in summary.skipped
+            for s in (*summary.failed, *summary.skipped)
         ]  # fmt: skip
         data = load_resim_run(self.out, prefer=[name])
         return RunOutcome(

@@ -143,7 +143,7 @@ class LogSession:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Bookmark:
-    """A failure frame found by evaluation (``RUN/metrics/bookmarks.parquet``)."""
+    """A failure frame found by evaluation (read through :mod:`redrive.results.evaluation`)."""
 
     frame_index: int
     stamp_ns: int
@@ -210,35 +210,33 @@ def _by_stamp(values: Mapping[int, Any], by_index: Mapping[int, int]) -> dict[in
 
 
 def _load_evaluation(data: RunData, run: Run, by_index: Mapping[int, int]) -> None:
-    metrics = run.path / "metrics"
-    if not (metrics / "bookmarks.parquet").is_file():
-        return
-    import pyarrow.parquet as pq
+    from redrive.results.evaluation import read_evaluation, stored_metric_names
 
-    rows = pq.read_table(metrics / "bookmarks.parquet").to_pylist()
+    if not stored_metric_names(run.path):
+        return
+    evaluation = read_evaluation(run.path)
     data.bookmarks = sorted(
-        (Bookmark(**{k: r[k] for k in _BOOKMARK_FIELDS}) for r in rows),
+        (Bookmark(**{k: r[k] for k in _BOOKMARK_FIELDS}) for r in evaluation.bookmarks.to_pylist()),
         key=lambda b: (b.frame_index, b.kind),
     )
-    if (metrics / "per_frame.parquet").is_file():
-        table = pq.read_table(metrics / "per_frame.parquet").to_pydict()
-        groups: dict[tuple[str, str, str], tuple[list[int], list[float]]] = {}
-        for m, a, s, i, v in zip(
-            table["metric"],
-            table["algorithm"],
-            table["series"],
-            table["frame_index"],
-            table["value"],
-            strict=True,
-        ):
-            if i in by_index:
-                xs, ys = groups.setdefault((m, a, s), ([], []))
-                xs.append(by_index[i])
-                ys.append(float("nan") if v is None else v)
-        data.per_frame = {
-            key: (np.array(xs, dtype=np.int64), np.array(ys, dtype=np.float64))
-            for key, (xs, ys) in groups.items()
-        }
+    table = evaluation.per_frame.to_pydict()
+    groups: dict[tuple[str, str, str], tuple[list[int], list[float]]] = {}
+    for m, a, s, i, v in zip(
+        table["metric"],
+        table["algorithm"],
+        table["series"],
+        table["frame_index"],
+        table["value"],
+        strict=True,
+    ):
+        if i in by_index:
+            xs, ys = groups.setdefault((m, a, s), ([], []))
+            xs.append(by_index[i])
+            ys.append(float("nan") if v is None else v)
+    data.per_frame = {
+        key: (np.array(xs, dtype=np.int64), np.array(ys, dtype=np.float64))
+        for key, (xs, ys) in groups.items()
+    }
 
 
 def find_run_log(run: RunData) -> Path | None:
