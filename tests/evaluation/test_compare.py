@@ -20,6 +20,7 @@ from redrive.evaluation import Bookmark, EvalData, Metric, MetricResult
 from redrive.evaluation.compare import compare_runs, paired_bootstrap
 from redrive.evaluation.store import Scored, write_evaluation
 from redrive.results import RunWriter, open_run
+from redrive.types import Role
 from tests.results._records import MANIFEST, T0_NS, frame
 
 N = 40
@@ -30,7 +31,7 @@ class Counts(Metric):
     """Hand-written results only (evaluate is never called)."""
 
     name = "counts"
-    role = "perception"
+    role = Role.PERCEPTION
     unit = "objects"
     defaults: ClassVar[Mapping[str, Any]] = {"range_m": 50.0}
 
@@ -46,7 +47,7 @@ class Latency(Metric):
     """Run-level, lower is better."""
 
     name = "lag"
-    role = "run"
+    role = None
     unit = "ms"
     higher_is_better = False
 

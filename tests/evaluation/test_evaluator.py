@@ -15,6 +15,7 @@ from redrive.evaluation import Bookmark, EvalData, Metric, MetricResult, MetricS
 from redrive.evaluation.evaluator import evaluate_run
 from redrive.evaluation.store import read_evaluation
 from redrive.results import RunWriter, open_run
+from redrive.types import Role
 from tests.results._records import MANIFEST, frame
 
 
@@ -22,7 +23,7 @@ class ObjectCount(Metric):
     """Objects per frame; bookmarks frames with none."""
 
     name = "object_count"
-    role = "perception"
+    role = Role.PERCEPTION
     needs = frozenset({"detections"})
     unit = "objects"
     defaults: Mapping[str, Any] = {"scale": 1.0}
@@ -53,7 +54,7 @@ class NeedsTruth(Metric):
     """Needs ground truth."""
 
     name = "needs_truth"
-    role = "run"
+    role = None
     needs = frozenset({"ground_truth"})
 
     def evaluate(self, data: EvalData) -> MetricResult:
@@ -64,7 +65,7 @@ class Refuses(Metric):
     """Always refuses (like a tracking metric on a detector without ids)."""
 
     name = "refuses"
-    role = "planning"
+    role = Role.PLANNING
 
     def evaluate(self, data: EvalData) -> MetricResult:
         raise MetricSkipped(f"{data.algorithm} has no track ids")
@@ -75,7 +76,7 @@ class Buggy(Metric):
     and `redrive evaluate` exited 0)."""
 
     name = "buggy"
-    role = "perception"
+    role = Role.PERCEPTION
     needs = frozenset({"detections"})
 
     def evaluate(self, data: EvalData) -> MetricResult:
@@ -188,14 +189,15 @@ def test_cli_exits_non_zero_when_a_metric_raises(
     plugin.write_text(
         "import numpy as np\n"
         "from redrive.evaluation import Metric, MetricResult\n"
+        "from redrive.types import Role\n"
         "class Buggy(Metric):\n"
         "    name = 'buggy'\n"
-        "    role = 'perception'\n"
+        "    role = Role.PERCEPTION\n"
         "    def evaluate(self, data):\n"
         "        raise ValueError('index out of range in my metric')\n"
         "class Skips(Metric):\n"
         "    name = 'skips'\n"
-        "    role = 'perception'\n"
+        "    role = Role.PERCEPTION\n"
         "    def evaluate(self, data):\n"
         "        from redrive.evaluation import MetricSkipped\n"
         "        raise MetricSkipped('needs lane labels')\n"
@@ -214,7 +216,7 @@ def test_cli_exits_non_zero_when_a_metric_raises(
 def test_a_missing_need_is_skipped_with_what_provides_it(run_dir: Path) -> None:
     class NeedsPaths(Metric):
         name = "needs_paths"
-        role = "perception"
+        role = Role.PERCEPTION
         needs = frozenset({"paths"})
 
         def evaluate(self, data: EvalData) -> MetricResult:
@@ -231,7 +233,7 @@ def test_an_unknown_need_is_refused_when_the_class_is_defined() -> None:
 
         class NeedsLanes(Metric):
             name = "lanes"
-            role = "run"
+            role = None
             needs = frozenset({"lanes"})
 
             def evaluate(self, data: EvalData) -> MetricResult:
@@ -281,12 +283,17 @@ def test_metric_plugins_by_entry_point_or_module() -> None:
         assert cls.name == name  # the entry-point name is the metric's own
     assert load_metric_class("hota") is installed["hota"]
     assert load_metric_class("tests.evaluation.test_evaluator:ObjectCount") is ObjectCount
-    with pytest.raises(PluginError, match="no metric named 'nope'"):
+    with pytest.raises(PluginError, match="no installed metric is named 'nope'"):
         load_metric_class("nope")
-    with pytest.raises(PluginError, match=r"not a redrive\.evaluation\.Metric"):
+    with pytest.raises(
+        PluginError,
+        match=r"MANIFEST in module tests.evaluation.test_evaluator is a \w+, not a class",
+    ):
         load_metric_class("tests.evaluation.test_evaluator:MANIFEST")
-    with pytest.raises(PluginError, match="cannot import"):
+    with pytest.raises(PluginError, match="module no not found"):
         load_metric_class("no.such.module:X")
+    with pytest.raises(PluginError, match="is not a Metric subclass"):
+        load_metric_class("tests.evaluation.test_evaluator:Path")
 
 
 def test_metric_from_a_file(tmp_path: Path) -> None:
@@ -298,7 +305,7 @@ def test_metric_from_a_file(tmp_path: Path) -> None:
         "from redrive.evaluation import Metric, MetricResult\n"
         "class Frames(Metric):\n"
         "    name = 'frames'\n"
-        "    role = 'run'\n"
+        "    role = None\n"
         "    def evaluate(self, data):\n"
         "        return MetricResult(values={'n': data.frames().num_rows})\n",
         encoding="utf-8",
@@ -306,9 +313,28 @@ def test_metric_from_a_file(tmp_path: Path) -> None:
     cls = load_metric_class(f"{source}:Frames")
     assert cls.name == "frames"
     assert load_metric_class(f"{source}:Frames") is cls  # imported once
-    with pytest.raises(PluginError, match="no file"):
+    with pytest.raises(PluginError, match="not found"):
         load_metric_class(f"{tmp_path / 'nope.py'}:Frames")
     broken = tmp_path / "broken.py"
     broken.write_text("raise RuntimeError('half-written')\n", encoding="utf-8")
     with pytest.raises(PluginError, match="RuntimeError: half-written"):
         load_metric_class(f"{broken}:X")
+    assert load_metric_class(str(source)) is cls  # a file alone: its one metric class
+
+
+def test_a_metric_role_is_the_enum_or_none(tmp_path: Path) -> None:
+    from redrive.errors import PluginError
+    from redrive.evaluation.registry import load_metric_class
+
+    source = tmp_path / "string_role.py"
+    source.write_text(
+        "from redrive.evaluation import Metric, MetricResult\n"
+        "class Old(Metric):\n"
+        "    name = 'old'\n"
+        "    role = 'perception'\n"
+        "    def evaluate(self, data):\n"
+        "        return MetricResult(values={})\n",
+        encoding="utf-8",
+    )
+    with pytest.raises(PluginError, match=r"has role 'perception'; use the enum: role = Role"):
+        load_metric_class(f"{source}:Old")

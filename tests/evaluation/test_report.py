@@ -28,7 +28,7 @@ from redrive.evaluation.plots import worst_frames
 from redrive.evaluation.report import DEFAULT_WORST, render_html, write_report
 from redrive.evaluation.store import Scored, read_evaluation, write_evaluation
 from redrive.results import FrameRecord, RunWriter, StepRecord, open_run
-from redrive.types import Box3D, DetectedObject, ObjectClass, PlannedPath
+from redrive.types import Box3D, DetectedObject, ObjectClass, PlannedPath, Role
 
 EVIL = '<script>alert("x")</script>'
 FORMULA = '=HYPERLINK("http://x")'
@@ -104,7 +104,7 @@ class _Fixed(Metric):
 
 class DetMetric(_Fixed):
     name = "det_metric"
-    role = "perception"
+    role = Role.PERCEPTION
     version = "2"
     defaults: ClassVar[Mapping[str, Any]] = {"threshold_m": 2.0}
     result = MetricResult(
@@ -127,7 +127,7 @@ class DetMetric(_Fixed):
 
 class LatencyMetric(_Fixed):
     name = "lat"
-    role = "run"
+    role = None
     unit = "ms"
     higher_is_better = False
     result = MetricResult(

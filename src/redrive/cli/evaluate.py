@@ -94,7 +94,7 @@ def _list(args: argparse.Namespace) -> int:
     for name, cls in installed_metrics().items():
         doc = (cls.__doc__ or "").strip().split("\n\n", 1)[0].replace("\n", " ")
         better = "higher" if cls.higher_is_better else "lower"
-        table.add_row(name, cls.role, cls.version, cls.unit, better, doc)
+        table.add_row(name, cls.role_name(), cls.version, cls.unit, better, doc)
     Console(width=None if sys.stdout.isatty() else 140).print(table)
     return 0
 

@@ -23,7 +23,7 @@ from redrive.algorithms import GROUND_TRUTH, VEHICLE_STATE, Algorithm, Role
 from redrive.algorithms.discovery import load_algorithm_class
 from redrive.config import AlgorithmSpec, PipelineConfig
 from redrive.errors import ConfigError, PluginError
-from redrive.types import SensorType
+from redrive.types import SensorType, to_jsonable
 
 __all__ = ["LogInputs", "PlannedAlgorithm", "StageGraph", "build_graph", "config_hash"]
 
@@ -48,19 +48,9 @@ class LogInputs:
         return tuple(out)
 
 
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, Mapping):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
-    if value is None or isinstance(value, bool | int | float | str):
-        return value
-    return repr(value)
-
-
 def config_hash(config: Mapping[str, Any]) -> str:
     """sha256 of the canonical JSON of a configuration (sorted keys)."""
-    text = json.dumps(_jsonable(config), sort_keys=True, separators=(",", ":"))
+    text = json.dumps(to_jsonable(config), sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()
 
 
@@ -100,7 +90,7 @@ class PlannedAlgorithm:
             "source": source,
             "version": str(self.cls.version),
             "inputs": list(self.cls.input_names()),
-            "config": _jsonable(self.config),
+            "config": to_jsonable(self.config),
             "config_hash": config_hash(self.config),
         }
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from redrive.evaluation.base import (
     NEEDS,
-    ROLES,
+    WHOLE_RUN,
     Bookmark,
     EvalData,
     Metric,
@@ -20,7 +20,7 @@ from redrive.evaluation.base import (
 
 __all__ = [
     "NEEDS",
-    "ROLES",
+    "WHOLE_RUN",
     "Bookmark",
     "EvalData",
     "Metric",

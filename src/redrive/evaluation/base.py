@@ -10,7 +10,7 @@ different definitions are never compared silently.
 >>> class MeanObjects(Metric):
 ...     '''Mean number of objects per frame.'''
 ...     name = "mean_objects"
-...     role = "perception"
+...     role = Role.PERCEPTION
 ...     needs = frozenset({"detections"})
 ...     unit = "objects"
 ...     def evaluate(self, data):
@@ -37,11 +37,11 @@ import pyarrow as pa
 
 from redrive.errors import ConfigError, PluginError
 from redrive.results import Run
-from redrive.types import ControlCommands, DetectedObject, PlannedPath, VehicleState
+from redrive.types import ControlCommands, DetectedObject, PlannedPath, Role, VehicleState
 
 __all__ = [
     "NEEDS",
-    "ROLES",
+    "WHOLE_RUN",
     "Bookmark",
     "EvalData",
     "Metric",
@@ -81,8 +81,8 @@ class MetricSkipped(Exception):  # noqa: N818 - a skip is an outcome, not an err
         self.reason = reason
 
 
-#: which algorithms a metric scores: those of a role, or the run as a whole ("run").
-ROLES = ("perception", "planning", "control", "run")
+#: what ``Metric.role`` is stored as when a metric scores the run as a whole (``role = None``).
+WHOLE_RUN = "run"
 
 #: a per-frame series: (frame indices int64 (N,), values float64 (N,)).
 Series = tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]
@@ -225,7 +225,8 @@ class Metric(ABC):
     Class attributes:
         name: unique name (``nuscenes_detection``); the entry-point name should match it.
         version: bump when the definition changes; stored with every value.
-        role: which algorithms it scores (:data:`ROLES`; ``run`` = the run as a whole).
+        role: which algorithms it scores: those of a :class:`~redrive.types.Role`, or None for
+            the run as a whole (stored as :data:`WHOLE_RUN`).
         needs: what it reads (:data:`NEEDS`), checked before ``evaluate`` is called: an
             algorithm whose run lacks it is skipped, with what would provide it.
         unit: unit of its values (per value in ``MetricResult.units`` when they differ).
@@ -235,7 +236,7 @@ class Metric(ABC):
 
     name: ClassVar[str]
     version: ClassVar[str] = "1"
-    role: ClassVar[str]
+    role: ClassVar[Role | None]
     needs: ClassVar[frozenset[str]] = frozenset()
     unit: ClassVar[str] = ""
     higher_is_better: ClassVar[bool] = True
@@ -265,13 +266,18 @@ class Metric(ABC):
     def evaluate(self, data: EvalData) -> MetricResult:
         """Score ``data.algorithm`` of ``data.run``."""
 
+    @classmethod
+    def role_name(cls) -> str:
+        """The role's value, or :data:`WHOLE_RUN` for a metric of the run as a whole."""
+        return WHOLE_RUN if cls.role is None else cls.role.value
+
     def describe(self) -> dict[str, Any]:
         """What the manifest records: name, version, parameters and their hash."""
         params = dict(self.params)
         return {
             "name": self.name,
             "version": self.version,
-            "role": self.role,
+            "role": self.role_name(),
             "unit": self.unit,
             "higher_is_better": self.higher_is_better,
             "params": json.loads(json.dumps(params, default=repr)),

@@ -48,6 +48,7 @@ from redrive.evaluation._kinematics import (
     wrap_angle,
 )
 from redrive.evaluation.base import EvalData, Metric, MetricResult, MetricSkipped, Series
+from redrive.types import Role
 
 __all__ = ["ControlMetrics", "planner_of"]
 
@@ -111,7 +112,7 @@ class ControlMetrics(Metric):
 
     name: ClassVar[str] = "control"
     version: ClassVar[str] = "1"
-    role: ClassVar[str] = "control"
+    role: ClassVar[Role | None] = Role.CONTROL
     needs: ClassVar[frozenset[str]] = frozenset({"commands", "paths", "ego"})
     unit: ClassVar[str] = "m"
     higher_is_better: ClassVar[bool] = False

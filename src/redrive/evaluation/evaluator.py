@@ -119,7 +119,7 @@ def evaluate_run(
     outcomes: list[MetricOutcome] = []
     for metric in chosen:
         targets = (
-            [""] if metric.role == "run" else [a for a, r in roles.items() if r == metric.role]
+            [""] if metric.role is None else [a for a, r in roles.items() if r == metric.role.value]
         )
         for algo in targets:
             missing = next(

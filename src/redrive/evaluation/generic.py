@@ -35,7 +35,7 @@ from scipy.optimize import linear_sum_assignment
 from redrive.errors import ConfigError
 from redrive.evaluation._kinematics import wrap_angle
 from redrive.evaluation.base import EvalData, Metric, MetricResult
-from redrive.types import DetectedObject
+from redrive.types import DetectedObject, Role
 
 __all__ = [
     "ClassScores",
@@ -224,7 +224,7 @@ class ObjectAttributes(Metric):
 
     name: ClassVar[str] = "object_attributes"
     version: ClassVar[str] = "1"
-    role: ClassVar[str] = "perception"
+    role: ClassVar[Role | None] = Role.PERCEPTION
     needs: ClassVar[frozenset[str]] = frozenset({"detections", "ground_truth"})
     unit: ClassVar[str] = "ratio"
     higher_is_better: ClassVar[bool] = True

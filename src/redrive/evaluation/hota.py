@@ -51,6 +51,7 @@ from redrive.evaluation.tracking import (
     by_class,
     tracking_frames,
 )
+from redrive.types import Role
 
 __all__ = ["ALPHAS", "Hota", "HotaResult", "hota_sequence"]
 
@@ -241,7 +242,7 @@ class Hota(Metric):
 
     name = "hota"
     version = "1"
-    role = "perception"
+    role = Role.PERCEPTION
     needs = frozenset({"detections", "ground_truth"})
     unit = ""
     higher_is_better = True

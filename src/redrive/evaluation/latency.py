@@ -33,6 +33,7 @@ import numpy.typing as npt
 
 from redrive.errors import ConfigError
 from redrive.evaluation.base import Bookmark, EvalData, Metric, MetricResult, Series
+from redrive.types import Role
 
 __all__ = ["Latency", "latency_stats_ms"]
 
@@ -71,7 +72,7 @@ class Latency(Metric):
 
     name: ClassVar[str] = "latency"
     version: ClassVar[str] = "1"
-    role: ClassVar[str] = "run"
+    role: ClassVar[Role | None] = None
     needs: ClassVar[frozenset[str]] = frozenset({"steps", "frames"})
     unit: ClassVar[str] = "ms"
     higher_is_better: ClassVar[bool] = False

@@ -85,7 +85,7 @@ from redrive.evaluation.base import (
     MetricSkipped,
     Series,
 )
-from redrive.types import DetectedObject, PlannedPath, VehicleState
+from redrive.types import DetectedObject, PlannedPath, Role, VehicleState
 
 __all__ = ["COMFORT_BOUNDS", "PlanningMetrics", "time_to_collision_s"]
 
@@ -279,7 +279,7 @@ class PlanningMetrics(Metric):
 
     name: ClassVar[str] = "planning"
     version: ClassVar[str] = "1"
-    role: ClassVar[str] = "planning"
+    role: ClassVar[Role | None] = Role.PLANNING
     needs: ClassVar[frozenset[str]] = frozenset({"paths", "ego", "ground_truth"})
     unit: ClassVar[str] = "m"
     higher_is_better: ClassVar[bool] = False

@@ -50,7 +50,7 @@ from redrive.evaluation.base import (
     MetricSkipped,
     Series,
 )
-from redrive.types import DetectedObject
+from redrive.types import DetectedObject, Role
 
 __all__ = [
     "ClearMot",
@@ -279,7 +279,7 @@ class ClearMot(Metric):
 
     name = "clear_mot"
     version = "1"
-    role = "perception"
+    role = Role.PERCEPTION
     needs = frozenset({"detections", "ground_truth"})
     unit = ""
     higher_is_better = True

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from redrive.types import ControlCommands, DetectedObject, PlannedPath, VehicleState
+from redrive.types import ControlCommands, DetectedObject, PlannedPath, Role, VehicleState
 
 __all__ = [
     "ROLES",
@@ -19,8 +19,8 @@ __all__ = [
     "StepRecord",
 ]
 
-#: the values of ``StepRecord.role`` (``redrive.algorithms.Role`` values).
-ROLES = ("perception", "planning", "control")
+#: the values of ``StepRecord.role`` (the :class:`~redrive.types.Role` values).
+ROLES = tuple(role.value for role in Role)
 #: the values of ``StepRecord.status`` (``redrive.algorithms.StepStatus`` values).
 STATUSES = ("ok", "error", "timeout", "skipped")
 

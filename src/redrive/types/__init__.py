@@ -17,6 +17,7 @@ from redrive.types.enums import (
 )
 from redrive.types.environment import EnvironmentData, TrafficData, TrafficLight
 from redrive.types.frame import ExtensionPayload, Frame, SensorData, SensorPayload
+from redrive.types.jsonable import to_jsonable
 from redrive.types.objects import Box3D, DetectedObject
 from redrive.types.sensors import IMAGE_ENCODINGS, CameraInfo, GnssFix, Image, Imu, PointCloud
 from redrive.types.transforms import Transform
@@ -49,4 +50,5 @@ __all__ = [
     "Transform",
     "VehicleState",
     "Weather",
+    "to_jsonable",
 ]

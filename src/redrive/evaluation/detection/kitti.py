@@ -48,6 +48,7 @@ from redrive.evaluation.detection.arrays import ObjectArrays, class_codes, objec
 from redrive.evaluation.detection.classes import KITTI_CLASSES, KITTI_MIN_OVERLAP
 from redrive.evaluation.detection.iou import bev_iou_pairs, iou_3d_pairs
 from redrive.evaluation.detection.matching import PaddedFrames, pad_by_frame
+from redrive.types import Role
 
 __all__ = [
     "KittiClassResult",
@@ -261,7 +262,7 @@ class KittiDetection(Metric):
 
     name = "kitti_detection"
     version = "1"
-    role = "perception"
+    role = Role.PERCEPTION
     needs = frozenset({"detections", "ground_truth"})
     unit = ""
     higher_is_better = True

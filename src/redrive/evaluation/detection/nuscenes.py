@@ -33,6 +33,7 @@ from redrive.evaluation.base import Bookmark, EvalData, Metric, MetricResult
 from redrive.evaluation.detection.arrays import objects_to_arrays
 from redrive.evaluation.detection.classes import NUSCENES_CLASS_RANGE_M, NUSCENES_CLASSES
 from redrive.evaluation.detection.nuscenes_core import evaluate_nuscenes
+from redrive.types import Role
 
 __all__ = ["NuScenesDetection"]
 
@@ -61,7 +62,7 @@ class NuScenesDetection(Metric):
 
     name = "nuscenes_detection"
     version = "1"
-    role = "perception"
+    role = Role.PERCEPTION
     needs = frozenset({"detections", "ground_truth"})
     unit = ""
     higher_is_better = True
