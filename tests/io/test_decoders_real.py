@@ -13,8 +13,9 @@ from PIL import Image as PILImage
 from rosbags.rosbag1 import Reader as Reader1
 from rosbags.rosbag2 import Reader as Reader2
 
+from redrive.errors import UnsupportedMessageError
 from redrive.io.base import LogMessage
-from redrive.io.decoders import Deserialize, MessageDecoder, decode
+from redrive.io.decoders import Deserialize, decode, decoder_for
 from redrive.io.tf_buffer import TransformBuffer, TransformLookupError
 from redrive.io.typestore import typestore_for
 from redrive.types import GnssFix, Image, Imu, PointCloud, SensorType, VehicleState
@@ -127,13 +128,10 @@ def test_luminar_bag_laserscan_and_odometry(shared_data: Path) -> None:
 
 def test_husky_imu_odometry_navsatfix(shared_data: Path) -> None:
     bag = shared_data / "rosbag1_real" / "robot_localization_test1_husky.bag"
-    decoder: MessageDecoder | None = None
     seen: dict[str, int] = {}
     fixes: list[GnssFix] = []
     for message, deserialize in ros1_messages(bag, limit=3000):
-        decoder = decoder or MessageDecoder(deserialize, strict=True)
-        decoded = decoder.decode(message)
-        assert decoded is not None
+        decoded = decode(message, deserialize)
         seen[message.topic] = seen.get(message.topic, 0) + 1
         value = decoded.value
         ref: Any = deserialize(message)
@@ -249,24 +247,21 @@ def test_turtlesim_ros1_tf_tfmessage(shared_data: Path) -> None:
 
 
 def test_pass_through_and_velodyne_definitions(
-    shared_data: Path, caplog: pytest.LogCaptureFixture
+    shared_data: Path,
 ) -> None:
     """VelodyneScan deserialises with the shipped definition; without a decoder it passes through."""
     bag = shared_data / "velodyne_nebula_ros2" / "vlp16" / "1673400471837873222"
-    decoder: MessageDecoder | None = None
     scans = 0
-    with caplog.at_level("WARNING", logger="redrive.io.decoders.registry"):
-        for message, deserialize in ros2_messages(bag):
-            decoder = decoder or MessageDecoder(deserialize)
-            assert decoder.decode(message) is None
-            scan: Any = deserialize(message)
-            assert scan.packets
-            assert all(len(p.data) == 1206 for p in scan.packets)
-            assert all(bytes(p.data[:2]) == b"\xff\xee" for p in scan.packets)
-            scans += 1
+    for message, deserialize in ros2_messages(bag):
+        assert decoder_for(message.msgtype) is None
+        with pytest.raises(UnsupportedMessageError, match="no decoder for velodyne_msgs/msg/Velo"):
+            decode(message, deserialize)
+        scan: Any = deserialize(message)
+        assert scan.packets
+        assert all(len(p.data) == 1206 for p in scan.packets)
+        assert all(bytes(p.data[:2]) == b"\xff\xee" for p in scan.packets)
+        scans += 1
     assert scans == 4
-    warnings = [r for r in caplog.records if "velodyne_msgs/msg/VelodyneScan" in r.getMessage()]
-    assert len(warnings) == 1
 
 
 def test_sensor_types_of_real_decoders(shared_data: Path) -> None:

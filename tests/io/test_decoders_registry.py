@@ -1,10 +1,7 @@
-"""The decoder registry, decode() and the per-topic MessageDecoder."""
+"""The decoder registry, decode(), and decoder plugins of the redrive.decoders group."""
 
 from __future__ import annotations
 
-import logging
-
-import numpy as np
 import pytest
 
 from redrive.errors import PluginError, UnsupportedMessageError
@@ -14,17 +11,15 @@ from redrive.io.decoders import (
     Decoded,
     DecodedKind,
     ImuDecoder,
-    MessageDecoder,
     PointCloud2Decoder,
     TFMessageDecoder,
-    TopicDecoder,
     build_registry,
     decode,
     decoder_for,
     normalize_msgtype,
 )
 from redrive.types import GnssFix
-from tests.io._decoder_helpers import deserializer, header, log_message
+from tests.io._decoder_helpers import deserializer, log_message
 
 LOGGER = "redrive.io.decoders.registry"
 
@@ -108,7 +103,6 @@ def test_native_messages_pass_through() -> None:
         payload=payload,
     )
     assert decode(native, deserializer()) is payload
-    assert MessageDecoder(deserializer()).decode(native) is payload
     bad = LogMessage(
         topic="/x",
         msgtype="sensor_msgs/msg/NavSatFix",
@@ -118,53 +112,3 @@ def test_native_messages_pass_through() -> None:
     )
     with pytest.raises(UnsupportedMessageError, match="carries a int"):
         decode(bad, deserializer())
-
-
-def test_message_decoder_warns_once_per_unknown_topic(caplog: pytest.LogCaptureFixture) -> None:
-    calls: list[str] = []
-    base = deserializer()
-
-    def counting(message: LogMessage) -> object:
-        calls.append(message.topic)
-        return base(message)
-
-    decoder = TopicDecoder(counting)
-    unknown = [
-        LogMessage(topic=t, msgtype="std_msgs/msg/String", log_time_ns=i, encoding="cdr")
-        for i, t in enumerate(["/a", "/a", "/b", "/a"])
-    ]
-    with caplog.at_level(logging.WARNING, logger=LOGGER):
-        assert [decoder(m) for m in unknown] == [None] * 4
-    warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
-    assert len(warnings) == 2
-    assert "'/a'" in warnings[0]
-    assert "'/b'" in warnings[1]
-    assert calls == []  # nothing was deserialised for pass-through topics
-
-    fix = log_message(1, "sensor_msgs/msg/NavSatFix", topic="/fix", header=header(1, 10, "gps"))
-    decoded = decoder(fix)
-    assert decoded is not None
-    assert decoded.stamp_ns == 10
-    assert calls == ["/fix"]
-
-
-def test_message_decoder_survives_bad_messages(caplog: pytest.LogCaptureFixture) -> None:
-    bad_image = log_message(
-        2,
-        "sensor_msgs/msg/Image",
-        topic="/cam",
-        encoding="yuv422",
-        height=1,
-        width=1,
-        step=2,
-        data=np.zeros(2, np.uint8),
-    )
-    decoder = MessageDecoder(deserializer())
-    with caplog.at_level(logging.DEBUG, logger=LOGGER):
-        assert decoder.decode(bad_image) is None
-        assert decoder.decode(bad_image) is None
-    levels = [r.levelno for r in caplog.records if "yuv422" in r.getMessage()]
-    assert levels == [logging.WARNING, logging.DEBUG]
-    assert decoder.failures == {"/cam": 2}
-    with pytest.raises(UnsupportedMessageError, match="yuv422"):
-        MessageDecoder(deserializer(), strict=True).decode(bad_image)

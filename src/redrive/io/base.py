@@ -14,10 +14,23 @@ from pathlib import Path
 from types import TracebackType
 from typing import Literal, Protocol, Self, runtime_checkable
 
-__all__ = ["Encoding", "LogMessage", "LogReader", "TopicInfo"]
+__all__ = ["Encoding", "LogMessage", "LogReader", "TopicInfo", "normalize_msgtype"]
 
 #: How a message's bytes are serialised: ROS 1, ROS 2 CDR, or already decoded (``native``).
 Encoding = Literal["ros1", "cdr", "native"]
+
+
+def normalize_msgtype(msgtype: str) -> str:
+    """The one spelling of a message type: ``pkg/msg/Type``.
+
+    ROS 1 names (``sensor_msgs/PointCloud2``, as ROS 1 bags and the MCAP ``ros1`` profile write
+    them) gain the ``msg`` part; ROS 2 names come back as they are, without surrounding slashes or
+    spaces.
+    """
+    parts = msgtype.strip().strip("/").split("/")
+    if len(parts) == 2:
+        return f"{parts[0]}/msg/{parts[1]}"
+    return "/".join(parts)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

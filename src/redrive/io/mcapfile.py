@@ -17,19 +17,12 @@ from mcap.reader import NonSeekingReader, make_reader
 from redrive.errors import LogError, LogTruncatedError
 from redrive.io._deserialize import Deserializer
 from redrive.io._reader_base import RosReaderBase
-from redrive.io.base import Encoding, LogMessage, TopicInfo
+from redrive.io.base import Encoding, LogMessage, TopicInfo, normalize_msgtype
 from redrive.io.typestore import typestore_for
 
 __all__ = ["McapFileReader"]
 
 logger = logging.getLogger(__name__)
-
-
-def normalize_msgtype(name: str) -> str:
-    """``pkg/Type`` (ROS 1 schema names, as the MCAP ``ros1`` profile writes them) →
-    ``pkg/msg/Type``; ROS 2 names are returned as they are."""
-    parts = name.split("/")
-    return f"{parts[0]}/msg/{parts[1]}" if len(parts) == 2 else name
 
 
 _MAGIC = b"\x89MCAP0\r\n"

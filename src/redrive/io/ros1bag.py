@@ -30,12 +30,11 @@ import lz4.frame
 from rosbags.rosbag1 import Reader as RosbagsReader
 from rosbags.rosbag1 import ReaderError as RosbagsReaderError
 from rosbags.rosbag1.reader import decompressors as rosbags_decompressors
-from rosbags.rosbag1.reader import normalize as normalize_msgtype
 
 from redrive.errors import LogError, LogTruncatedError
 from redrive.io._deserialize import Deserializer
 from redrive.io._reader_base import RosReaderBase
-from redrive.io.base import LogMessage, TopicInfo
+from redrive.io.base import LogMessage, TopicInfo, normalize_msgtype
 from redrive.io.typestore import typestore_for
 
 __all__ = ["Ros1BagReader"]

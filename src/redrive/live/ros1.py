@@ -4,7 +4,7 @@ The ROS master answers every call with ``[code, status_message, value]``; ``code
 :func:`list_topics` asks it ``getTopicTypes`` (topic → ``pkg/Type``) and ``getSystemState``
 (topic → publishing and subscribing nodes), and says for each topic which redrive decoder — and so
 which sensor type — would handle its messages, from the same decoder registry the log readers use
-(:data:`redrive.io.decoders.DEFAULT_DECODERS`).
+(:func:`redrive.io.decoders.active_decoders`).
 
 >>> from redrive.live.ros1 import list_topics, master_alive
 >>> master_alive("http://127.0.0.1:11311")                      # doctest: +SKIP
@@ -27,7 +27,7 @@ from urllib.parse import urlsplit
 from xml.parsers.expat import ExpatError
 
 from redrive.errors import ConfigError, TransportError
-from redrive.io.decoders import DEFAULT_DECODERS, DecodedKind, Decoder, decoder_for
+from redrive.io.decoders import DecodedKind, decoder_for
 from redrive.types import SensorType
 
 __all__ = [
@@ -223,14 +223,12 @@ def list_topics(
     master_uri: str,
     *,
     timeout_s: float = 2.0,
-    registry: Mapping[str, Decoder] = DEFAULT_DECODERS,
 ) -> list[TopicInfo]:
     """Every topic with a publisher or a subscriber on the ROS 1 master at ``master_uri``, by name.
 
     Args:
         master_uri: ``http://HOST:PORT`` of the master (see :func:`default_master_uri`).
         timeout_s: how long each of the two XML-RPC calls may take.
-        registry: the decoders to match types against (default: the ones redrive ships).
 
     Raises:
         ConfigError: ``master_uri`` is not of the form ``http://HOST:PORT``.
@@ -257,7 +255,7 @@ def list_topics(
     # a topic whose last publisher and subscriber are gone is not listed.
     for name in sorted(set(publishers) | set(subscribers)):
         msg_type = str(types.get(name) or UNKNOWN_TYPE)
-        decoder = decoder_for(msg_type, registry) if msg_type != UNKNOWN_TYPE else None
+        decoder = decoder_for(msg_type) if msg_type != UNKNOWN_TYPE else None
         topics.append(
             TopicInfo(
                 name=name,

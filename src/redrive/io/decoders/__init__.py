@@ -1,13 +1,14 @@
 """Decoders: serialised ROS messages → redrive data-model values.
 
 ``decode(message, reader.deserialize)`` decodes one :class:`~redrive.io.base.LogMessage` with the
-decoder registered for its type (:data:`DEFAULT_DECODERS`); :class:`MessageDecoder` does the same
-for a stream and never raises for a topic it cannot decode.  Nothing registers itself on import:
-custom registries are built with :func:`build_registry`, which refuses duplicate types.
+decoder of its type: one that redrive ships (:data:`DEFAULT_DECODERS`) or an installed plugin of
+the ``redrive.decoders`` entry-point group (:func:`active_decoders`).  Nothing registers itself on
+import; two decoders of one type are refused.
 """
 
 from __future__ import annotations
 
+from redrive.io.base import normalize_msgtype
 from redrive.io.decoders.base import Decoded, DecodedKind, DecodedValue, Decoder, Deserialize
 from redrive.io.decoders.camera_info import CameraInfoDecoder
 from redrive.io.decoders.image import CompressedImageDecoder, ImageDecoder
@@ -22,12 +23,11 @@ from redrive.io.decoders.objects import (
 from redrive.io.decoders.pointcloud2 import PointCloud2Decoder, read_cloud_layout
 from redrive.io.decoders.registry import (
     DEFAULT_DECODERS,
-    MessageDecoder,
-    TopicDecoder,
+    active_decoders,
     build_registry,
     decode,
     decoder_for,
-    normalize_msgtype,
+    reload_decoders,
 )
 from redrive.io.decoders.sensors import ImuDecoder, LaserScanDecoder, NavSatFixDecoder
 from redrive.io.decoders.tf import TFMessageDecoder
@@ -47,19 +47,19 @@ __all__ = [
     "ImuDecoder",
     "LaserScanDecoder",
     "MarkerArrayDecoder",
-    "MessageDecoder",
     "NavSatFixDecoder",
     "ObjectArrayDecoder",
     "OdometryDecoder",
     "PointCloud2Decoder",
     "PoseDecoder",
     "TFMessageDecoder",
-    "TopicDecoder",
     "TwistDecoder",
+    "active_decoders",
     "build_registry",
     "decode",
     "decoder_for",
     "normalize_msgtype",
     "object_class_from_text",
     "read_cloud_layout",
+    "reload_decoders",
 ]

@@ -1,15 +1,28 @@
-"""The decoder registry: msgtype → decoder, plus the per-topic :class:`MessageDecoder` helper."""
+"""The decoders in use: the ones redrive ships plus the installed ``redrive.decoders`` plugins.
+
+A decoder plugin is a class following :class:`~redrive.io.decoders.Decoder` (constructed with no
+arguments), declared in its distribution's ``pyproject.toml``::
+
+    [project.entry-points."redrive.decoders"]
+    radar-scan = "my_radar.decoders:RadarScanDecoder"
+
+It is loaded by the one plugin loader (:mod:`redrive.plugins`) the first time a message type is
+looked up; :func:`reload_decoders` reads the entry points again (after installing one in a running
+process).  A plugin that fails to load, or claims a type another decoder has, is reported in a
+warning and left out: the other decoders keep working.
+"""
 
 from __future__ import annotations
 
+import functools
 import logging
 from collections.abc import Iterable, Mapping
 from types import MappingProxyType
 
 from redrive.errors import PluginError, UnsupportedMessageError
-from redrive.io.base import LogMessage
+from redrive.io.base import LogMessage, normalize_msgtype
 from redrive.io.decoders._common import describe
-from redrive.io.decoders.base import Decoded, Decoder, Deserialize
+from redrive.io.decoders.base import Decoded, DecodedKind, Decoder, Deserialize
 from redrive.io.decoders.camera_info import CameraInfoDecoder
 from redrive.io.decoders.image import CompressedImageDecoder, ImageDecoder
 from redrive.io.decoders.motion import OdometryDecoder, PoseDecoder, TwistDecoder
@@ -22,25 +35,19 @@ from redrive.io.decoders.objects import (
 from redrive.io.decoders.pointcloud2 import PointCloud2Decoder
 from redrive.io.decoders.sensors import ImuDecoder, LaserScanDecoder, NavSatFixDecoder
 from redrive.io.decoders.tf import TFMessageDecoder
+from redrive.plugins import DECODERS, installed_plugins
+from redrive.types import SensorType
 
 __all__ = [
     "DEFAULT_DECODERS",
-    "MessageDecoder",
+    "active_decoders",
     "build_registry",
     "decode",
     "decoder_for",
-    "normalize_msgtype",
+    "reload_decoders",
 ]
 
 logger = logging.getLogger(__name__)
-
-
-def normalize_msgtype(msgtype: str) -> str:
-    """``pkg/msg/Type`` for ROS 2 names and ROS 1 names alike (``sensor_msgs/PointCloud2``)."""
-    parts = msgtype.strip().strip("/").split("/")
-    if len(parts) == 2:
-        return f"{parts[0]}/msg/{parts[1]}"
-    return "/".join(parts)
 
 
 def build_registry(decoders: Iterable[Decoder]) -> Mapping[str, Decoder]:
@@ -51,16 +58,21 @@ def build_registry(decoders: Iterable[Decoder]) -> Mapping[str, Decoder]:
     """
     out: dict[str, Decoder] = {}
     for decoder in decoders:
-        for raw_name in decoder.msgtypes:
-            msgtype = normalize_msgtype(raw_name)
-            if msgtype in out:
-                msg = (
-                    f"decoders {out[msgtype].name!r} and {decoder.name!r} both claim {msgtype}; "
-                    "give each message type one decoder"
-                )
-                raise PluginError(msg)
-            out[msgtype] = decoder
+        _add(out, decoder)
     return MappingProxyType(out)
+
+
+def _add(out: dict[str, Decoder], decoder: Decoder) -> None:
+    names = [normalize_msgtype(raw) for raw in decoder.msgtypes]
+    for msgtype in names:
+        if msgtype in out:
+            msg = (
+                f"decoders {out[msgtype].name!r} and {decoder.name!r} both claim {msgtype}; "
+                "give each message type one decoder"
+            )
+            raise PluginError(msg)
+    for msgtype in names:
+        out[msgtype] = decoder
 
 
 #: The decoders redrive ships, by ROS 2 style message type.
@@ -85,17 +97,62 @@ DEFAULT_DECODERS: Mapping[str, Decoder] = build_registry(
 )
 
 
-def decoder_for(msgtype: str, registry: Mapping[str, Decoder] = DEFAULT_DECODERS) -> Decoder | None:
+def _check_decoder(obj: object) -> str | None:
+    """What keeps ``obj`` (a class) from being a decoder plugin, or None."""
+    decode_method = getattr(obj, "decode", None)
+    if not callable(decode_method):
+        return "is not a decoder: it has no decode(message, deserialize) method"
+    name = getattr(obj, "name", None)
+    msgtypes = getattr(obj, "msgtypes", None)
+    if not isinstance(name, str) or not name:
+        return ": name must be a non-empty str (class attribute)"
+    if not (isinstance(msgtypes, tuple) and msgtypes and all(isinstance(m, str) for m in msgtypes)):
+        return (
+            f": msgtypes must be a non-empty tuple of message type names "
+            f"('my_msgs/msg/RadarScan',), got {msgtypes!r}"
+        )
+    kind = getattr(obj, "kind", None)
+    if not isinstance(kind, DecodedKind):
+        return f": kind must be a redrive.io.decoders.DecodedKind, got {kind!r}"
+    sensor_type = getattr(obj, "sensor_type", None)
+    if kind is DecodedKind.SENSOR and not isinstance(sensor_type, SensorType):
+        return f": a SENSOR decoder names its sensor_type (a SensorType), got {sensor_type!r}"
+    return None
+
+
+@functools.cache
+def active_decoders() -> Mapping[str, Decoder]:
+    """Message type → decoder: the ones redrive ships and the installed decoder plugins."""
+    out = dict(DEFAULT_DECODERS)
+    registry = installed_plugins(DECODERS, _check_decoder)
+    for name, cls in registry.items():
+        try:
+            decoder: Decoder = cls()
+            _add(out, decoder)
+        except PluginError as err:
+            logger.warning("decoder plugin %s (%s) left out: %s", name, registry.target(name), err)
+        except Exception as err:
+            logger.warning(
+                "decoder plugin %s (%s) left out: constructing it raised %s: %s",
+                name,
+                registry.target(name),
+                type(err).__name__,
+                err,
+            )
+    return MappingProxyType(out)
+
+
+def reload_decoders() -> None:
+    """Read the ``redrive.decoders`` entry points again at the next lookup."""
+    active_decoders.cache_clear()
+
+
+def decoder_for(msgtype: str) -> Decoder | None:
     """The decoder of a message type (ROS 1 or ROS 2 spelling), or None."""
-    return registry.get(normalize_msgtype(msgtype))
+    return active_decoders().get(normalize_msgtype(msgtype))
 
 
-def decode(
-    message: LogMessage,
-    deserialize: Deserialize,
-    *,
-    registry: Mapping[str, Decoder] = DEFAULT_DECODERS,
-) -> Decoded:
+def decode(message: LogMessage, deserialize: Deserialize) -> Decoded:
     """Decode one message; ``native`` messages that already hold a :class:`Decoded` pass through.
 
     Raises:
@@ -110,76 +167,12 @@ def decode(
             "native readers must yield redrive.io.decoders.Decoded payloads"
         )
         raise UnsupportedMessageError(msg)
-    decoder = decoder_for(message.msgtype, registry)
+    decoder = decoder_for(message.msgtype)
     if decoder is None:
         msg = (
             f"no decoder for {message.msgtype} on {describe(message)}; redrive decodes "
-            f"{', '.join(sorted(registry))} — pass the messages through raw or add a decoder"
+            f"{', '.join(sorted(active_decoders()))} — pass the messages through raw or add a "
+            "decoder plugin (entry-point group redrive.decoders, docs/architecture.md)"
         )
         raise UnsupportedMessageError(msg)
     return decoder.decode(message, deserialize)
-
-
-class MessageDecoder:
-    """Decodes a stream of messages with one ``deserialize``, never raising for a bad topic.
-
-    The decoder is looked up once per topic.  A topic without a decoder logs one warning and its
-    messages come back as None (raw pass-through); a message that fails to decode logs a warning
-    the first time on its topic (DEBUG afterwards), is counted in :attr:`failures` and gives None —
-    unless ``strict`` is set, then the :class:`UnsupportedMessageError` propagates.
-    """
-
-    def __init__(
-        self,
-        deserialize: Deserialize,
-        *,
-        registry: Mapping[str, Decoder] = DEFAULT_DECODERS,
-        strict: bool = False,
-    ) -> None:
-        self._deserialize = deserialize
-        self._registry = registry
-        self._strict = strict
-        self._by_topic: dict[tuple[str, str], Decoder | None] = {}
-        #: topic → number of messages that failed to decode.
-        self.failures: dict[str, int] = {}
-
-    def decoder_for_topic(self, topic: str, msgtype: str) -> Decoder | None:
-        """The (cached) decoder of a topic; warns once when there is none."""
-        key = (topic, msgtype)
-        try:
-            return self._by_topic[key]
-        except KeyError:
-            pass
-        decoder = decoder_for(msgtype, self._registry)
-        if decoder is None:
-            logger.warning(
-                "no decoder for %s on topic %r: its messages pass through undecoded",
-                msgtype,
-                topic,
-            )
-        self._by_topic[key] = decoder
-        return decoder
-
-    def decode(self, message: LogMessage) -> Decoded | None:
-        """The decoded message, or None when its topic has no decoder or it does not decode."""
-        if message.encoding == "native" and isinstance(message.payload, Decoded):
-            return message.payload
-        decoder = self.decoder_for_topic(message.topic, message.msgtype)
-        if decoder is None:
-            return None
-        try:
-            return decoder.decode(message, self._deserialize)
-        except UnsupportedMessageError as err:
-            if self._strict:
-                raise
-            count = self.failures.get(message.topic, 0)
-            self.failures[message.topic] = count + 1
-            level = logging.WARNING if count == 0 else logging.DEBUG
-            logger.log(level, "skipping an undecodable message: %s", err)
-            return None
-
-    __call__ = decode
-
-
-#: Alias: the helper that decodes messages topic by topic.
-TopicDecoder = MessageDecoder
