@@ -76,13 +76,14 @@ def write_dist(
     *,
     entry_points: dict[str, str],
     modules: dict[str, str] | None = None,
+    group: str = ENTRY_POINT_GROUP,
 ) -> None:
     """An installed distribution as pip leaves it: ``NAME-1.0.dist-info`` with METADATA and
     entry_points.txt, plus its modules (``{"pkg/mod.py": source}``) in ``site``."""
     info = site / f"{dist.replace('-', '_')}-1.0.dist-info"  # escaped like pip does
     info.mkdir(parents=True)
     (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {dist}\nVersion: 1.0\n")
-    lines = [f"[{ENTRY_POINT_GROUP}]"] + [f"{k} = {v}" for k, v in entry_points.items()]
+    lines = [f"[{group}]"] + [f"{k} = {v}" for k, v in entry_points.items()]
     (info / "entry_points.txt").write_text("\n".join(lines) + "\n")
     for rel, source in (modules or {}).items():
         path = site / rel

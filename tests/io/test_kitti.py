@@ -14,6 +14,7 @@ from redrive.geometry.boxes import points_in_box, transform_box
 from redrive.geometry.projection import project_points
 from redrive.geometry.se3 import compose, matrix_from_transform, transform_points
 from redrive.io.base import LogReader
+from redrive.io.decoders import DecodedKind, decoder_for, topic_kind
 from redrive.io.decoders.base import Decoded
 from redrive.io.kitti import (
     TOPIC_CAMERA_INFO,
@@ -23,7 +24,7 @@ from redrive.io.kitti import (
     TOPIC_VELODYNE,
     KittiReader,
 )
-from redrive.types import DetectedObject, Image, ObjectClass, PointCloud, Transform
+from redrive.types import DetectedObject, Image, ObjectClass, PointCloud, SensorType, Transform
 
 pytestmark = pytest.mark.shared_data
 
@@ -58,8 +59,19 @@ def test_summary(kitti_dir: Path) -> None:
                 TOPIC_CAMERA_INFO,
                 TOPIC_LABEL_2,
             }
-            assert reader.topics[TOPIC_LABEL_2].msgtype == "vision_msgs/msg/Detection3DArray"
-            assert reader.topics[TOPIC_CAMERA_INFO].msgtype == "sensor_msgs/msg/CameraInfo"
+            # native values, not ROS messages: the types name what they hold, and the reader
+            # says how each topic is used (no decoder is asked)
+            assert reader.topics[TOPIC_LABEL_2].msgtype == "redrive/GroundTruthObjects"
+            assert reader.topics[TOPIC_CAMERA_INFO].msgtype == "redrive/CameraInfo"
+            assert topic_kind(reader.topics[TOPIC_VELODYNE]) == (
+                DecodedKind.SENSOR,
+                SensorType.LIDAR,
+            )
+            assert topic_kind(reader.topics[TOPIC_LABEL_2]) == (DecodedKind.OBJECTS, None)
+            assert all(decoder_for(t.msgtype) is None for t in reader.topics.values())
+            caps = reader.capabilities
+            assert (caps.message_typed, caps.calibration_per_frame) == (False, True)
+            assert (caps.has_tf, caps.has_ground_truth, caps.has_ego_pose) == (True, True, False)
             assert all(t.count == 3 and t.encoding == "native" for t in reader.topics.values())
             assert (reader.start_ns, reader.end_ns, reader.message_count) == (0, 200_000_000, 15)
 

@@ -29,13 +29,13 @@ LOGS = [
     ("rosbag_fixtures/rosbagjs_turtlesim_bz2.bag", "ros1", {"/tf_static": 1}),
     ("rosbag_fixtures/rosbagjs_turtlesim_lz4.bag", "ros1", {"/tf_static": 1}),
     ("rosbag_fixtures/evo_tf_example.bag", "ros1", {"/tf": 517, "/tf_static": 1}),
-    ("rosbag_fixtures/evo_tf_example_ros2", "ros2-sqlite3", {"/tf": 517, "/tf_static": 1}),
+    ("rosbag_fixtures/evo_tf_example_ros2", "ros2", {"/tf": 517, "/tf_static": 1}),
     ("rosbag_fixtures/evo_nav2_turtlebot_sim.mcap", "mcap",
      {"/odom": 2639, "/tf": 5422, "/tf_static": 1, "/amcl_pose": 135}),
     ("trajectories/evo_ROS_example_poses.bag", "ros1",
      {"groundtruth": 12765, "ORB-SLAM": 8362, "S-PTAM": 5439}),
-    ("velodyne_nebula_ros2/vlp16/1673400471837873222", "ros2-sqlite3", {"/velodyne_packets": 4}),
-    ("velodyne_nebula_ros2/vlp32/1713492677464078412", "ros2-sqlite3",
+    ("velodyne_nebula_ros2/vlp16/1673400471837873222", "ros2", {"/velodyne_packets": 4}),
+    ("velodyne_nebula_ros2/vlp32/1713492677464078412", "ros2",
      {"/sensing/lidar/front/velodyne_packets": 5}),
 ]  # fmt: skip
 

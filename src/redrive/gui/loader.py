@@ -407,7 +407,7 @@ class FrameLoader(QtCore.QObject):
             return
         try:
             frame = session.frame(index)
-            if session.log.format == "kitti":
+            if session.log.capabilities.calibration_per_frame:
                 self._calibrations = _calibrations(session, stamp_ns=frame.stamp_ns)
             scene = build_scene(
                 frame, options, run=self.run, static=self._static, calibrations=self._calibrations

@@ -9,7 +9,16 @@ model; the Sensor Dispatcher that assembles frames; the MCAP writer.
 
 from __future__ import annotations
 
-from redrive.io.base import Encoding, LogMessage, LogReader, TopicInfo
-from redrive.io.open import detect_format, open_log
+from redrive.io.base import Encoding, LogMessage, LogReader, ReaderCapabilities, TopicInfo
+from redrive.io.readers import detect_format, open_log, reader_formats
 
-__all__ = ["Encoding", "LogMessage", "LogReader", "TopicInfo", "detect_format", "open_log"]
+__all__ = [
+    "Encoding",
+    "LogMessage",
+    "LogReader",
+    "ReaderCapabilities",
+    "TopicInfo",
+    "detect_format",
+    "open_log",
+    "reader_formats",
+]

@@ -9,7 +9,7 @@ from typing import Self
 from rosbags.typesys.store import Typestore
 
 from redrive.io._deserialize import Deserializer
-from redrive.io.base import LogMessage, TopicInfo
+from redrive.io.base import LogMessage, ReaderCapabilities, TopicInfo
 
 __all__ = ["RosReaderBase"]
 
@@ -23,6 +23,13 @@ class RosReaderBase:
     @property
     def topics(self) -> Mapping[str, TopicInfo]:
         return self._topics
+
+    @property
+    def capabilities(self) -> ReaderCapabilities:
+        """From the topics: transforms, objects (ground truth) and ego motion it carries."""
+        from redrive.io.decoders import capabilities_of  # decoders import the readers' base
+
+        return capabilities_of(self._topics.values(), message_typed=True)
 
     @property
     def message_count(self) -> int:

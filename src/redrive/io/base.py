@@ -8,13 +8,24 @@ serialised bytes (``encoding`` ``ros1`` or ``cdr``) and are decoded on demand by
 
 from __future__ import annotations
 
+import enum
 from collections.abc import Collection, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 from typing import Literal, Protocol, Self, runtime_checkable
 
-__all__ = ["Encoding", "LogMessage", "LogReader", "TopicInfo", "normalize_msgtype"]
+from redrive.types import SensorType
+
+__all__ = [
+    "DecodedKind",
+    "Encoding",
+    "LogMessage",
+    "LogReader",
+    "ReaderCapabilities",
+    "TopicInfo",
+    "normalize_msgtype",
+]
 
 #: How a message's bytes are serialised: ROS 1, ROS 2 CDR, or already decoded (``native``).
 Encoding = Literal["ros1", "cdr", "native"]
@@ -33,6 +44,16 @@ def normalize_msgtype(msgtype: str) -> str:
     return "/".join(parts)
 
 
+class DecodedKind(enum.Enum):
+    """How the Sensor Dispatcher uses a decoded value."""
+
+    SENSOR = "sensor"  # a SensorData payload of ``Decoder.sensor_type``
+    VEHICLE_STATE = "vehicle_state"  # ego motion (Odometry, PoseStamped, TwistStamped)
+    OBJECTS = "objects"  # tuple[DetectedObject, ...]: ground truth or detections
+    TRANSFORMS = "transforms"  # tuple[Transform, ...]: tf / tf_static
+    CAMERA_INFO = "camera_info"  # CameraInfo: a camera's calibration, never a sensor of frames
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class TopicInfo:
     """Summary of one topic of a log.
@@ -45,6 +66,10 @@ class TopicInfo:
         encoding: how its messages are serialised.
         has_definition: False when the log carries no definition of the type and redrive knows
             none either (its messages pass through raw and cannot be deserialised).
+        kind: for a ``native`` topic, how its values are used (its reader says; it has no ROS
+            type a decoder could tell it from); None for message-typed topics, whose decoder
+            says (:func:`redrive.io.decoders.topic_kind` answers for both).
+        sensor_type: for a ``native`` topic of kind SENSOR, the sensor it feeds.
     """
 
     topic: str
@@ -53,6 +78,8 @@ class TopicInfo:
     size_bytes: int = -1
     encoding: Encoding
     has_definition: bool = True
+    kind: DecodedKind | None = None
+    sensor_type: SensorType | None = None
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -82,6 +109,29 @@ class LogMessage:
         return len(self.raw)
 
 
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ReaderCapabilities:
+    """What an opened log can provide.
+
+    Attributes:
+        message_typed: its messages are serialised ROS messages (``deserialize`` gives ROS
+            message objects, topics have ROS types); False: it yields redrive data-model values
+            directly (``native`` messages holding a :class:`~redrive.io.decoders.Decoded`).
+        has_tf: it carries transforms (``/tf_static``, ``/tf`` or a calibration the reader turns
+            into them): sensors can be placed on the vehicle.
+        has_ground_truth: it carries ground-truth objects (labels, a simulator's objects).
+        has_ego_pose: it carries the ego vehicle's motion (odometry, poses).
+        calibration_per_frame: its sensor calibration may change from frame to frame (KITTI's
+            object set: every frame its own calib file), so calibrations are looked up by stamp.
+    """
+
+    message_typed: bool
+    has_tf: bool
+    has_ground_truth: bool
+    has_ego_pose: bool
+    calibration_per_frame: bool = False
+
+
 @runtime_checkable
 class LogReader(Protocol):
     """The interface of every reader :func:`redrive.io.open_log` returns.
@@ -90,8 +140,14 @@ class LogReader(Protocol):
     """
 
     path: Path
-    #: short format name: ``ros1``, ``ros2-sqlite3``, ``ros2-mcap``, ``mcap``, ``kitti``.
+    #: the format's name in the reader registry (:mod:`redrive.io.readers`): ``ros1``, ``ros2``,
+    #: ``mcap``, ``kitti`` or a plugin's.
     format: str
+
+    @property
+    def capabilities(self) -> ReaderCapabilities:
+        """What this log can provide (ask this, not the format name)."""
+        ...
 
     @property
     def topics(self) -> Mapping[str, TopicInfo]: ...

@@ -30,7 +30,7 @@ import numpy.typing as npt
 
 from redrive.errors import UnsupportedMessageError
 from redrive.io.base import LogReader, TopicInfo
-from redrive.io.decoders import decode, decoder_for
+from redrive.io.decoders import decode, topic_kind
 from redrive.io.decoders.base import DecodedKind
 from redrive.io.decoders.tf import is_static_tf_topic
 from redrive.io.tf_buffer import TransformBuffer, TransformLookupError
@@ -94,11 +94,6 @@ class CameraCalibration:
         return out
 
 
-def _kind_of(info: TopicInfo) -> tuple[DecodedKind, SensorType | None] | None:
-    decoder = decoder_for(info.msgtype)
-    return None if decoder is None else (decoder.kind, decoder.sensor_type)
-
-
 def _namespace(topic: str) -> str:
     """``/a/b/camera_info`` → ``/a/b``; ``/camera_info`` → ``""`` (the root)."""
     return topic.rstrip("/").rsplit("/", 1)[0]
@@ -121,7 +116,7 @@ def camera_info_topics(topics: Mapping[str, TopicInfo]) -> dict[str, str]:
     infos: dict[str, str] = {}  # namespace → info topic
     images: list[str] = []
     for topic, info in topics.items():
-        kind = _kind_of(info)
+        kind = topic_kind(info)
         if kind == (DecodedKind.CAMERA_INFO, None):
             infos.setdefault(_namespace(topic), topic)
         elif kind == (DecodedKind.SENSOR, SensorType.CAMERA):
@@ -210,7 +205,7 @@ def static_tf_topics(log: LogReader) -> list[str]:
     return sorted(
         t
         for t, info in log.topics.items()
-        if is_static_tf_topic(t) and _kind_of(info) == (DecodedKind.TRANSFORMS, None)
+        if is_static_tf_topic(t) and topic_kind(info) == (DecodedKind.TRANSFORMS, None)
     )
 
 
@@ -252,7 +247,7 @@ def camera_calibrations(
     pairs = camera_info_topics(log.topics)
     info_topics = set(pairs.values())
     for topic, info in log.topics.items():
-        if _kind_of(info) == (DecodedKind.CAMERA_INFO, None) and topic not in info_topics:
+        if topic_kind(info) == (DecodedKind.CAMERA_INFO, None) and topic not in info_topics:
             logger.debug("%s: camera info %s serves no image topic", log.path, topic)
     if not info_topics:
         logger.debug("%s: no camera info topic next to an image topic", log.path)

@@ -37,7 +37,7 @@ from rosbags.typesys.store import Typestore
 from redrive.errors import LogError, RedriveError
 from redrive.io.base import LogMessage, LogReader
 from redrive.io.decoders.base import Decoded
-from redrive.io.open import open_log
+from redrive.io.readers import open_log
 from redrive.io.ros_encode import encode_value
 from redrive.io.typestore import typestore_for
 from redrive.io.writer import McapWriter

@@ -14,18 +14,18 @@ stamp.  Every frame yields, in this order and with that stamp:
 =================  ====================================  =========================================
 topic              msgtype                               payload (:class:`Decoded` value)
 =================  ====================================  =========================================
-``/tf_static``     ``tf2_msgs/msg/TFMessage``            the calibration chain, rooted at
+``/tf_static``     ``redrive/Transforms``                the calibration chain, rooted at
                                                          ``base_link`` (≡ ``velodyne``: identity),
                                                          transforms static (stamp 0); sent every
                                                          frame (calibrations differ)
-``/kitti/velodyne``  ``sensor_msgs/msg/PointCloud2``     PointCloud, channel ``intensity``, frame
+``/kitti/velodyne``  ``redrive/PointCloud``               PointCloud, channel ``intensity``, frame
                                                          ``velodyne``
-``/kitti/image_2``   ``sensor_msgs/msg/Image``           Image rgb8, frame ``cam2``
-``/kitti/camera_info``  ``sensor_msgs/msg/CameraInfo``   CameraInfo of image_2 in frame ``cam2``
+``/kitti/image_2``   ``redrive/Image``                   Image rgb8, frame ``cam2``
+``/kitti/camera_info``  ``redrive/CameraInfo``           CameraInfo of image_2 in frame ``cam2``
                                                          (rectified): K = P2[:, :3], P = [K | 0]
                                                          (cam2's offset is in the tf chain), R = I,
                                                          no distortion; only with ``image_2/``
-``/kitti/label_2``   ``vision_msgs/msg/Detection3DArray``  ground truth in the **velodyne** frame
+``/kitti/label_2``   ``redrive/GroundTruthObjects``        ground truth in the **velodyne** frame
 =================  ====================================  =========================================
 
 KITTI has no vehicle frame: the ground truth and the points are in the velodyne frame, so it is
@@ -48,10 +48,10 @@ import numpy as np
 from PIL import Image as PilImage
 
 from redrive.errors import LogError, UnsupportedMessageError
-from redrive.io.base import LogMessage, TopicInfo
+from redrive.io.base import DecodedKind, LogMessage, ReaderCapabilities, TopicInfo
 from redrive.io.decoders.base import Decoded, DecodedValue
 from redrive.io.kitti_calib import KittiCalibration, parse_calibration, parse_labels
-from redrive.types import CameraInfo, Image, PointCloud, Transform
+from redrive.types import CameraInfo, Image, PointCloud, SensorType, Transform
 
 __all__ = [
     "KITTI_FRAME_PERIOD_NS",
@@ -74,12 +74,21 @@ TOPIC_IMAGE_2 = "/kitti/image_2"
 TOPIC_CAMERA_INFO = "/kitti/camera_info"
 TOPIC_LABEL_2 = "/kitti/label_2"
 
+#: what each topic carries: its native type name (the data-model value its messages hold — KITTI has
+#: no ROS types), and how the value is used.
 _MSGTYPES: Mapping[str, str] = {
-    TOPIC_TF_STATIC: "tf2_msgs/msg/TFMessage",
-    TOPIC_VELODYNE: "sensor_msgs/msg/PointCloud2",
-    TOPIC_IMAGE_2: "sensor_msgs/msg/Image",
-    TOPIC_CAMERA_INFO: "sensor_msgs/msg/CameraInfo",
-    TOPIC_LABEL_2: "vision_msgs/msg/Detection3DArray",
+    TOPIC_TF_STATIC: "redrive/Transforms",
+    TOPIC_VELODYNE: "redrive/PointCloud",
+    TOPIC_IMAGE_2: "redrive/Image",
+    TOPIC_CAMERA_INFO: "redrive/CameraInfo",
+    TOPIC_LABEL_2: "redrive/GroundTruthObjects",
+}
+_KINDS: Mapping[str, tuple[DecodedKind, SensorType | None]] = {
+    TOPIC_TF_STATIC: (DecodedKind.TRANSFORMS, None),
+    TOPIC_VELODYNE: (DecodedKind.SENSOR, SensorType.LIDAR),
+    TOPIC_IMAGE_2: (DecodedKind.SENSOR, SensorType.CAMERA),
+    TOPIC_CAMERA_INFO: (DecodedKind.CAMERA_INFO, None),
+    TOPIC_LABEL_2: (DecodedKind.OBJECTS, None),
 }
 # topic → (sub-folder, file suffix)
 _FILES: Mapping[str, tuple[str, str]] = {
@@ -115,8 +124,19 @@ class KittiReader:
     """
 
     format = "kitti"
+    description = (
+        "a KITTI 3D-object folder (velodyne/ and calib/, optionally under training/ or testing/)"
+    )
 
-    def __init__(self, path: str | Path) -> None:
+    @classmethod
+    def recognises(cls, path: Path) -> bool:
+        roots = [path, path / "training", path / "testing"]
+        return path.is_dir() and any(
+            (r / "velodyne").is_dir() and (r / "calib").is_dir() for r in roots
+        )
+
+    def __init__(self, path: str | Path, *, strict: bool = True) -> None:
+        """``strict`` is accepted like every reader's; a KITTI folder is checked whole at open."""
         self.path = Path(path)
         if not self.path.is_dir():
             msg = f"{self.path}: not a directory; pass a KITTI object folder"
@@ -137,7 +157,14 @@ class KittiReader:
         count = len(self._frames)
         self._topics = MappingProxyType(
             {
-                t: TopicInfo(topic=t, msgtype=_MSGTYPES[t], count=count, encoding="native")
+                t: TopicInfo(
+                    topic=t,
+                    msgtype=_MSGTYPES[t],
+                    count=count,
+                    encoding="native",
+                    kind=_KINDS[t][0],
+                    sensor_type=_KINDS[t][1],
+                )
                 for t in self._topics_present
             }
         )
@@ -186,6 +213,18 @@ class KittiReader:
         return frames
 
     # -- summary -------------------------------------------------------------------------------
+
+    @property
+    def capabilities(self) -> ReaderCapabilities:
+        """Native values; transforms from calib/, ground truth when label_2/ is there, no ego
+        motion (frames are independent snapshots); a calibration per frame."""
+        return ReaderCapabilities(
+            message_typed=False,
+            has_tf=True,
+            has_ground_truth=TOPIC_LABEL_2 in self._topics,
+            has_ego_pose=False,
+            calibration_per_frame=True,
+        )
 
     @property
     def topics(self) -> Mapping[str, TopicInfo]:

@@ -18,6 +18,7 @@ from redrive.errors import LogError, LogTruncatedError
 from redrive.io._deserialize import Deserializer
 from redrive.io._reader_base import RosReaderBase
 from redrive.io.base import Encoding, LogMessage, TopicInfo, normalize_msgtype
+from redrive.io.recognise import starts_with
 from redrive.io.typestore import typestore_for
 
 __all__ = ["McapFileReader"]
@@ -37,6 +38,11 @@ class McapFileReader(RosReaderBase):
     """
 
     format = "mcap"
+    description = "an MCAP file (ROS 2 CDR or ROS 1 messages)"
+
+    @classmethod
+    def recognises(cls, path: Path) -> bool:
+        return starts_with(path, _MAGIC[:5])  # not the version byte: __init__ explains a wrong one
 
     def __init__(self, path: Path, *, strict: bool = True) -> None:
         self.path = Path(path)

@@ -35,6 +35,7 @@ from redrive.errors import LogError, LogTruncatedError
 from redrive.io._deserialize import Deserializer
 from redrive.io._reader_base import RosReaderBase
 from redrive.io.base import LogMessage, TopicInfo, normalize_msgtype
+from redrive.io.recognise import starts_with
 from redrive.io.typestore import typestore_for
 
 __all__ = ["Ros1BagReader"]
@@ -162,6 +163,11 @@ class Ros1BagReader(RosReaderBase):
     """
 
     format = "ros1"
+    description = "a ROS 1 bag (format 2.0, indexed or not)"
+
+    @classmethod
+    def recognises(cls, path: Path) -> bool:
+        return starts_with(path, b"#ROSBAG V")
 
     def __init__(self, path: Path, *, strict: bool = True) -> None:
         self.path = Path(path)

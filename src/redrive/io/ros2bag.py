@@ -21,14 +21,34 @@ __all__ = ["Ros2BagReader"]
 
 logger = logging.getLogger(__name__)
 
+_SQLITE_MAGIC = b"SQLite format 3\x00"
+
 
 class Ros2BagReader(RosReaderBase):
     """A rosbag2 directory.  Message bytes are CDR; definitions come from the bag when it embeds
     them (newer bags do), else from ROS 2 Humble plus the packages redrive ships.
     """
 
+    format = "ros2"
+    description = (
+        "a ROS 2 bag directory (metadata.yaml with sqlite3 or mcap storage; give the directory, "
+        "its metadata.yaml or a .db3 in it)"
+    )
+
+    @classmethod
+    def recognises(cls, path: Path) -> bool:
+        if path.is_dir():
+            return (path / "metadata.yaml").is_file()
+        if path.name == "metadata.yaml":
+            return True
+        if not (path.parent / "metadata.yaml").is_file():
+            return False
+        with path.open("rb") as fh:
+            return fh.read(len(_SQLITE_MAGIC)) == _SQLITE_MAGIC
+
     def __init__(self, path: Path, *, strict: bool = True) -> None:
-        self.path = Path(path)
+        path = Path(path)
+        self.path = path if path.is_dir() else path.parent
         self.strict = strict
         self.damage: str | None = None
         reader = RosbagsReader(self.path)
@@ -38,8 +58,8 @@ class Ros2BagReader(RosReaderBase):
             msg = f"{self.path}: not a readable ROS 2 bag ({err}); check metadata.yaml and the storage files it lists"
             raise LogError(msg) from err
         self._reader = reader
-        has_mcap = any(self.path.glob("*.mcap"))
-        self.format = "ros2-mcap" if has_mcap else "ros2-sqlite3"
+        #: the storage plugin of the bag: ``mcap`` or ``sqlite3``.
+        self.storage = "mcap" if any(self.path.glob("*.mcap")) else "sqlite3"
         definitions: dict[str, tuple[str, str]] = {}
         for conn in reader.connections:
             fmt = conn.msgdef.format

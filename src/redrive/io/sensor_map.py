@@ -25,7 +25,7 @@ from typing import Any
 
 from redrive.errors import ConfigError
 from redrive.io.base import TopicInfo
-from redrive.io.decoders import decoder_for
+from redrive.io.decoders import topic_kind
 from redrive.io.decoders.base import DecodedKind
 from redrive.types import SensorType
 
@@ -187,24 +187,25 @@ def infer_sensor_map(
     for topic, info in topics.items():
         if topic in ov.ignore or topic in explicit_topics:
             continue
-        decoder = decoder_for(info.msgtype)
-        if decoder is None:
+        found = topic_kind(info)
+        if found is None:
             continue
-        if decoder.kind is DecodedKind.SENSOR and decoder.sensor_type is not None:
+        kind, sensor_type = found
+        if kind is DecodedKind.SENSOR and sensor_type is not None:
             sid = sensor_id_for(topic)
             while sid in specs:
                 sid += "_"
             specs[sid] = SensorSpec(
                 sensor_id=sid,
                 topic=topic,
-                sensor_type=decoder.sensor_type,
+                sensor_type=sensor_type,
                 rate_hz=_rate_hz(info, duration_ns),
             )
-        elif decoder.kind is DecodedKind.VEHICLE_STATE:
+        elif kind is DecodedKind.VEHICLE_STATE:
             vehicle_state.append(info)
-        elif decoder.kind is DecodedKind.OBJECTS:
+        elif kind is DecodedKind.OBJECTS:
             objects.append(info)
-        elif decoder.kind is DecodedKind.TRANSFORMS:
+        elif kind is DecodedKind.TRANSFORMS:
             tf_topics.append(topic)
         # DecodedKind.CAMERA_INFO: calibration, never a sensor (see redrive.io.calibration)
     for sid, raw in ov.sensors.items():
@@ -213,11 +214,11 @@ def infer_sensor_map(
             msg = f"sensor map: [sensors.{sid}] topic {topic!r} is not in the log"
             raise ConfigError(msg)
         info = topics[topic]
-        decoder = decoder_for(info.msgtype)
+        found = topic_kind(info)
         if "type" in raw:
             stype = SensorType(raw["type"])
-        elif decoder is not None and decoder.sensor_type is not None:
-            stype = decoder.sensor_type
+        elif found is not None and found[1] is not None:
+            stype = found[1]
         else:
             msg = f"sensor map: [sensors.{sid}] {topic} ({info.msgtype}) needs an explicit type"
             raise ConfigError(msg)

@@ -27,10 +27,12 @@ import time
 from collections.abc import Collection, Iterator, Mapping, Sequence
 from pathlib import Path
 from types import MappingProxyType, TracebackType
+from typing import Any
 
 from redrive.errors import ConfigError, TransportError
 from redrive.io._deserialize import Deserializer
-from redrive.io.base import LogMessage, TopicInfo
+from redrive.io.base import LogMessage, ReaderCapabilities, TopicInfo
+from redrive.io.decoders import capabilities_of, decoder_for
 from redrive.io.decoders.base import Decoded
 from redrive.io.typestore import typestore_for
 from redrive.live.streams import StreamSpec
@@ -42,6 +44,17 @@ __all__ = ["LiveLog"]
 logger = logging.getLogger(__name__)
 
 _POLL_S = 0.1
+
+
+def _native_kind(spec: StreamSpec) -> dict[str, Any]:
+    """``kind``/``sensor_type`` of a typed-sample stream: those of the ROS type it stands for
+    (:data:`~redrive.live.streams.PAYLOAD_MSGTYPE`); nothing for ROS 1 byte streams."""
+    if spec.payload == "ros1":
+        return {}
+    decoder = decoder_for(spec.msgtype)
+    if decoder is None:
+        return {}
+    return {"kind": decoder.kind, "sensor_type": decoder.sensor_type}
 
 
 class LiveLog:
@@ -105,6 +118,7 @@ class LiveLog:
                     msgtype=s.msgtype,
                     count=0,
                     encoding="ros1" if s.payload == "ros1" else "native",
+                    **_native_kind(s),
                 )
                 for s in specs
             }
@@ -118,6 +132,14 @@ class LiveLog:
     @property
     def topics(self) -> Mapping[str, TopicInfo]:
         return self._topics
+
+    @property
+    def capabilities(self) -> ReaderCapabilities:
+        """From the session's topics; message-typed when every stream carries ROS 1 bytes."""
+        return capabilities_of(
+            self._topics.values(),
+            message_typed=all(s.payload == "ros1" for s in self._specs.values()),
+        )
 
     @property
     def start_ns(self) -> int:

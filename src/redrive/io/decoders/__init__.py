@@ -25,9 +25,11 @@ from redrive.io.decoders.registry import (
     DEFAULT_DECODERS,
     active_decoders,
     build_registry,
+    capabilities_of,
     decode,
     decoder_for,
     reload_decoders,
+    topic_kind,
 )
 from redrive.io.decoders.sensors import ImuDecoder, LaserScanDecoder, NavSatFixDecoder
 from redrive.io.decoders.tf import TFMessageDecoder
@@ -56,10 +58,12 @@ __all__ = [
     "TwistDecoder",
     "active_decoders",
     "build_registry",
+    "capabilities_of",
     "decode",
     "decoder_for",
     "normalize_msgtype",
     "object_class_from_text",
     "read_cloud_layout",
     "reload_decoders",
+    "topic_kind",
 ]

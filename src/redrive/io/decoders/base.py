@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import enum
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
-from redrive.io.base import LogMessage
+from redrive.io.base import DecodedKind, LogMessage
 from redrive.types import (
     CameraInfo,
     DetectedObject,
@@ -38,16 +37,6 @@ DecodedValue = (
 
 #: ``reader.deserialize``: LogMessage → rosbags message object.
 Deserialize = Callable[[LogMessage], object]
-
-
-class DecodedKind(enum.Enum):
-    """How the Sensor Dispatcher uses a decoded value."""
-
-    SENSOR = "sensor"  # a SensorData payload of ``Decoder.sensor_type``
-    VEHICLE_STATE = "vehicle_state"  # ego motion (Odometry, PoseStamped, TwistStamped)
-    OBJECTS = "objects"  # tuple[DetectedObject, ...]: ground truth or detections
-    TRANSFORMS = "transforms"  # tuple[Transform, ...]: tf / tf_static
-    CAMERA_INFO = "camera_info"  # CameraInfo: a camera's calibration, never a sensor of frames
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

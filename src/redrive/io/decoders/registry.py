@@ -20,7 +20,7 @@ from collections.abc import Iterable, Mapping
 from types import MappingProxyType
 
 from redrive.errors import PluginError, UnsupportedMessageError
-from redrive.io.base import LogMessage, normalize_msgtype
+from redrive.io.base import LogMessage, ReaderCapabilities, TopicInfo, normalize_msgtype
 from redrive.io.decoders._common import describe
 from redrive.io.decoders.base import Decoded, DecodedKind, Decoder, Deserialize
 from redrive.io.decoders.camera_info import CameraInfoDecoder
@@ -42,9 +42,11 @@ __all__ = [
     "DEFAULT_DECODERS",
     "active_decoders",
     "build_registry",
+    "capabilities_of",
     "decode",
     "decoder_for",
     "reload_decoders",
+    "topic_kind",
 ]
 
 logger = logging.getLogger(__name__)
@@ -150,6 +152,30 @@ def reload_decoders() -> None:
 def decoder_for(msgtype: str) -> Decoder | None:
     """The decoder of a message type (ROS 1 or ROS 2 spelling), or None."""
     return active_decoders().get(normalize_msgtype(msgtype))
+
+
+def topic_kind(info: TopicInfo) -> tuple[DecodedKind, SensorType | None] | None:
+    """How a topic's values are used — (kind, sensor type) — or None when nothing decodes it.
+
+    A ``native`` topic says so itself (its reader sets ``TopicInfo.kind``); a message-typed
+    topic's decoder says.
+    """
+    if info.encoding == "native":
+        return None if info.kind is None else (info.kind, info.sensor_type)
+    decoder = decoder_for(info.msgtype)
+    return None if decoder is None else (decoder.kind, decoder.sensor_type)
+
+
+def capabilities_of(topics: Iterable[TopicInfo], *, message_typed: bool) -> ReaderCapabilities:
+    """What a log with these topics can provide: transforms, objects (usable as ground truth)
+    and ego motion, by the kind of each topic (:func:`topic_kind`)."""
+    kinds = {found[0] for info in topics if (found := topic_kind(info)) is not None}
+    return ReaderCapabilities(
+        message_typed=message_typed,
+        has_tf=DecodedKind.TRANSFORMS in kinds,
+        has_ground_truth=DecodedKind.OBJECTS in kinds,
+        has_ego_pose=DecodedKind.VEHICLE_STATE in kinds,
+    )
 
 
 def decode(message: LogMessage, deserialize: Deserialize) -> Decoded:

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from redrive.errors import ConfigError, TransportError, UnsupportedMessageError
 from redrive.io import LogMessage, LogReader, open_log
-from redrive.io.decoders import decode, decoder_for
+from redrive.io.decoders import decode, topic_kind
 from redrive.io.decoders.base import Decoded, DecodedKind
 from redrive.io.sensor_map import infer_sensor_map, sensor_id_for
 from redrive.live.sources._common import (
@@ -78,13 +78,14 @@ def _replayable(log: LogReader) -> dict[str, tuple[type, SensorType]]:
     """Topic → (payload class, sensor type) for every topic a replay can publish."""
     out: dict[str, tuple[type, SensorType]] = {}
     for topic, info in log.topics.items():
-        decoder = decoder_for(info.msgtype)
-        if decoder is None:
+        found = topic_kind(info)
+        if found is None:
             continue
+        kind, sensor_type = found
         stype: SensorType | None = None
-        if decoder.kind is DecodedKind.SENSOR and decoder.sensor_type in _SENSOR_PAYLOAD:
-            stype = decoder.sensor_type
-        elif decoder.kind is DecodedKind.VEHICLE_STATE:
+        if kind is DecodedKind.SENSOR and sensor_type in _SENSOR_PAYLOAD:
+            stype = sensor_type
+        elif kind is DecodedKind.VEHICLE_STATE:
             stype = SensorType.ODOMETRY
         if stype is None:
             continue  # objects, transforms: no sensor payload
@@ -118,8 +119,8 @@ def _scan(
         t
         for t, info in log.topics.items()
         if t.rstrip("/").endswith("tf_static")
-        and (d := decoder_for(info.msgtype)) is not None
-        and d.kind is DecodedKind.TRANSFORMS
+        and (k := topic_kind(info)) is not None
+        and k[0] is DecodedKind.TRANSFORMS
     ]
     largest: dict[str, LogMessage] = {}
     sizes: dict[str, int] = {}

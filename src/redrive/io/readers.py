@@ -1,0 +1,194 @@
+"""The reader registry: every log format redrive opens, how it is recognised, what it can provide.
+
+A *reader format* is a reader class that declares, as class attributes and a class method:
+
+- ``format``: its short name (``ros1``, ``ros2``, ``mcap``, ``kitti``), recorded in the run
+  manifest and shown by ``redrive info``;
+- ``description``: what it reads, for listings and error messages;
+- ``recognises(path)``: whether ``path`` is a log of this format, from its content (magic bytes,
+  layout), never from its file name;
+- a constructor ``(path, *, strict)`` that opens it (a :class:`~redrive.io.base.LogReader`).
+
+An opened reader says what it can provide through ``capabilities`` (:class:`ReaderCapabilities`):
+callers (the frame assembler, the GUI, the engine) ask these, never the format name.  The
+formats redrive ships are tried first, in a fixed order; installed plugins of the
+``redrive.readers`` entry-point group (loaded by :mod:`redrive.plugins`) after them, so a new
+format (a nuScenes folder, closed-loop output …) plugs in without touching :func:`open_log`.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Protocol, runtime_checkable
+
+from redrive.errors import LogError
+from redrive.io.base import LogReader, ReaderCapabilities
+from redrive.plugins import READERS, installed_plugins
+
+__all__ = [
+    "ReaderCapabilities",
+    "ReaderFormat",
+    "detect_format",
+    "open_log",
+    "reader_format",
+    "reader_formats",
+    "reload_readers",
+]
+
+logger = logging.getLogger(__name__)
+
+
+@runtime_checkable
+class ReaderFormat(Protocol):
+    """A reader class as the registry sees it (see the module docstring)."""
+
+    format: str
+    description: str
+
+    @classmethod
+    def recognises(cls, path: Path) -> bool: ...
+
+    def __init__(self, path: Path, *, strict: bool = True) -> None: ...
+
+
+def _check_reader(obj: object) -> str | None:
+    """What keeps ``obj`` (a class) from being a reader plugin, or None."""
+    for attr in ("recognises", "messages", "deserialize", "close", "__enter__"):
+        if not callable(getattr(obj, attr, None)):
+            return (
+                f"is not a reader: it has no {attr}(); a reader follows redrive.io.LogReader "
+                "and redrive.io.readers.ReaderFormat"
+            )
+    for attr in ("format", "description"):
+        value = getattr(obj, attr, None)
+        if not isinstance(value, str) or not value:
+            return f": {attr} must be a non-empty str (class attribute), got {value!r}"
+    return None
+
+
+def _builtin() -> list[type[ReaderFormat]]:
+    # imported here: each pulls in its own dependencies (rosbags, mcap, PIL)
+    from redrive.io.kitti import KittiReader
+    from redrive.io.mcapfile import McapFileReader
+    from redrive.io.ros1bag import Ros1BagReader
+    from redrive.io.ros2bag import Ros2BagReader
+
+    # a ROS 2 bag before MCAP: a bag directory's .mcap storage is read through its metadata.yaml
+    return [Ros2BagReader, KittiReader, Ros1BagReader, McapFileReader]
+
+
+@functools.cache
+def reader_formats() -> Sequence[type[ReaderFormat]]:
+    """The reader formats in the order they are tried: redrive's, then installed plugins."""
+    out = _builtin()
+    taken = {cls.format: cls for cls in out}
+    registry = installed_plugins(READERS, _check_reader)
+    for name, cls in registry.items():
+        fmt = str(cls.format)
+        if fmt in taken:
+            logger.warning(
+                "reader plugin %s (%s) left out: format %r is already read by %s",
+                name,
+                registry.target(name),
+                fmt,
+                taken[fmt].__qualname__,
+            )
+            continue
+        taken[fmt] = cls
+        out.append(cls)
+    return tuple(out)
+
+
+def reload_readers() -> None:
+    """Read the ``redrive.readers`` entry points again at the next lookup."""
+    reader_formats.cache_clear()
+
+
+def reader_format(name: str) -> type[ReaderFormat]:
+    """The reader class of format ``name``.
+
+    Raises:
+        LogError: no reader reads that format (the message lists those that do).
+    """
+    for cls in reader_formats():
+        if cls.format == name:
+            return cls
+    known = ", ".join(cls.format for cls in reader_formats())
+    msg = f"no reader for format {name!r}; redrive reads {known}"
+    raise LogError(msg)
+
+
+def _recognising(path: Path) -> type[ReaderFormat]:
+    for cls in reader_formats():
+        try:
+            if cls.recognises(path):
+                return cls
+        except OSError as err:
+            msg = f"{path}: cannot read ({err.strerror or err})"
+            raise LogError(msg) from err
+    raise LogError(_not_a_log(path))
+
+
+def _not_a_log(path: Path) -> str:
+    described = "; ".join(f"{cls.format}: {cls.description}" for cls in reader_formats())
+    if path.is_dir():
+        storage = sorted(p.name for p in path.glob("*") if p.suffix in {".db3", ".mcap"})
+        hint = (
+            f" It holds {', '.join(storage[:3])} but no metadata.yaml: open the .mcap file "
+            "directly, or restore metadata.yaml (`ros2 bag reindex`)."
+            if storage
+            else ""
+        )
+        return f"{path}: this directory is not a log redrive reads ({described}).{hint}"
+    with path.open("rb") as fh:
+        head = fh.read(8)
+    return f"{path}: not a log redrive reads (starts with {head!r}); redrive reads {described}"
+
+
+def detect_format(path: Path) -> str:
+    """The format name of the log at ``path`` (``ros1``, ``ros2``, ``mcap``, ``kitti`` or a
+    plugin's), from its content, not its name.
+
+    Raises:
+        LogError: the path is missing, empty or not a log redrive reads.
+    """
+    path = Path(path)
+    if not path.exists():
+        msg = f"{path}: no such file or directory"
+        raise LogError(msg)
+    if path.is_file():
+        try:
+            size = path.stat().st_size
+            with path.open("rb"):
+                pass
+        except OSError as err:
+            msg = f"{path}: cannot read ({err.strerror})"
+            raise LogError(msg) from err
+        if size == 0:
+            msg = f"{path}: the file is empty (0 bytes); it holds no log"
+            raise LogError(msg)
+    return _recognising(path).format
+
+
+def open_log(path: str | Path, *, strict: bool = True) -> LogReader:
+    """Open any log redrive reads, recognised by its content.
+
+    Args:
+        path: a ROS 1 ``.bag``; a ROS 2 bag directory (sqlite3 or mcap storage), its
+            ``metadata.yaml`` or a ``.db3`` in it; a standalone ``.mcap`` (ROS 2 CDR or ROS 1
+            encoding); a KITTI 3D-object folder (``training/{velodyne,image_2,calib,label_2}``);
+            or a log of an installed reader plugin.
+        strict: when True, damage met while reading raises
+            :class:`~redrive.errors.LogTruncatedError` after every message before it was
+            yielded; when False the damage is logged and reading goes on where it can.
+
+    Raises:
+        LogError: the path is missing, empty, damaged beyond use or not a log.
+    """
+    path = Path(path)
+    cls = reader_format(detect_format(path))
+    opener: Callable[..., LogReader] = cls  # type: ignore[assignment]
+    return opener(path, strict=strict)
