@@ -1,5 +1,6 @@
-"""Small builders of a self-contained HTML page: inline CSS, images as ``data:`` URIs, no
-JavaScript, no network reference.
+"""The one HTML renderer of redrive's reports (the evaluation report, the A/B comparison): small
+builders of a self-contained page — inline CSS, tables, figures as PNG ``data:`` URIs (:func:`png`
+turns a matplotlib figure into them), no JavaScript, no network reference.
 
 Every text that enters the page goes through :func:`esc` (``html.escape`` with quotes), so a
 name like ``<script>`` from a run is shown, never run.  Builders return ``Markup`` (a ``str``
@@ -10,8 +11,13 @@ from __future__ import annotations
 
 import base64
 import html
+import io
 import math
 from collections.abc import Iterable, Sequence
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 __all__ = [
     "Markup",
@@ -22,6 +28,7 @@ __all__ = [
     "img",
     "page",
     "paragraph",
+    "png",
     "section",
     "table",
 ]
@@ -83,6 +90,19 @@ def table(
     )
 
 
+def png(fig: Figure, *, dpi: int, tight: bool = False) -> bytes:
+    """The PNG bytes of a matplotlib figure (Agg canvas, no pyplot state, no display; no
+    timestamp or software in the metadata, so the same figure gives the same bytes); ``tight``
+    crops the figure to what is drawn."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    FigureCanvasAgg(fig)
+    buf = io.BytesIO()
+    crop = "tight" if tight else None  # None: the rcParams default, the whole figure
+    fig.savefig(buf, format="png", dpi=dpi, metadata={"Software": None}, bbox_inches=crop)
+    return buf.getvalue()
+
+
 def img(png: bytes, *, alt: str, width_px: int = 0) -> Markup:
     """An ``<img>`` holding ``png`` as a base64 ``data:`` URI."""
     data = base64.b64encode(png).decode("ascii")
@@ -124,17 +144,28 @@ tr.headline td { font-weight: 600; }
 .grid { display: flex; flex-wrap: wrap; gap: 12px; }
 figure { margin: 0; } figcaption { font-size: 12px; color: #444; max-width: 420px; }
 details { margin: 4px 0 12px; } summary { cursor: pointer; color: #1f5fa8; }
+img { max-width: 100%; } code { background: #f4f4f4; padding: 0 3px; }
+.better { color: #187a2f; } .worse { color: #b3261e; }
 """
 
 
-def page(*, title: object, subtitle: object, nav: Sequence[tuple[str, str]], body: object) -> str:
-    """The whole document: inline CSS, a title, links to the sections (``#anchor``) and body."""
+def page(
+    *,
+    title: object,
+    subtitle: object,
+    nav: Sequence[tuple[str, str]],
+    body: object,
+    heading: object = None,
+) -> str:
+    """The whole document: inline CSS, a title (the ``<h1>`` is ``heading`` when given), a
+    subtitle, links to the sections (``#anchor``) and body."""
     links = "".join(f'<a href="#{esc(anchor)}">{esc(label)}</a>' for anchor, label in nav)
+    h1 = title if heading is None else heading
     return (
         "<!DOCTYPE html>\n"
         '<html lang="en"><head><meta charset="utf-8">'
         '<meta name="viewport" content="width=device-width, initial-scale=1">'
         f"<title>{esc(title)}</title><style>{_CSS}</style></head>\n"
-        f'<body><h1>{esc(title)}</h1><p class="muted">{esc(subtitle)}</p>'
+        f'<body><h1>{esc(h1)}</h1><p class="muted">{esc(subtitle)}</p>'
         f"<nav>{links}</nav>\n{esc(body)}\n</body></html>\n"
     )

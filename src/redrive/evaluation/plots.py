@@ -1,4 +1,4 @@
-"""Report plots: PNG bytes (matplotlib, Agg canvas, no pyplot state, no display), and the
+"""Report plots: PNG bytes (matplotlib through :func:`redrive.evaluation.html.png`), and the
 figures of a report made from a run's tables and its evaluation.
 
 Every ``*_png`` function returns the bytes of one PNG (``PNG_DPI`` dots per inch, no timestamp in the
@@ -13,7 +13,6 @@ left is drawn left (the plot's horizontal axis is +y pointing left), the ego ref
 
 from __future__ import annotations
 
-import io
 import math
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -23,7 +22,6 @@ import numpy.typing as npt
 import pyarrow as pa
 import pyarrow.compute as pc
 from matplotlib.axes import Axes
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle, Polygon
 
@@ -73,13 +71,6 @@ def plain(text: str) -> str:
     return text.replace("$", r"\$")
 
 
-def _png(fig: Figure) -> bytes:
-    FigureCanvasAgg(fig)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=PNG_DPI, metadata={"Software": None})
-    return buf.getvalue()
-
-
 def pr_curves_png(curves: Sequence[tuple[str, FloatArray, FloatArray]], *, title: str) -> bytes:
     """Precision (y) over recall (x), one line per ``(label, recall, precision)``, both in [0, 1].
 
@@ -104,7 +95,7 @@ def pr_curves_png(curves: Sequence[tuple[str, FloatArray, FloatArray]], *, title
     ax.grid(True, alpha=0.3)
     if curves:
         ax.legend(fontsize=6, loc="lower left", ncol=2 if len(curves) > 8 else 1)
-    return _png(fig)
+    return h.png(fig, dpi=PNG_DPI)
 
 
 def timelines_png(
@@ -129,7 +120,7 @@ def timelines_png(
             ax.axvline(frame, color="#d62728", alpha=0.25, linewidth=0.8)
     axes[-1].set_xlabel("frame index")
     axes[0].set_title(plain(title), fontsize=10)
-    return _png(fig)
+    return h.png(fig, dpi=PNG_DPI)
 
 
 def latency_histograms_png(
@@ -166,7 +157,7 @@ def latency_histograms_png(
         ax.set_ylabel("steps", fontsize=8)
     for ax in axes[len(names) :]:
         ax.set_axis_off()
-    return _png(fig)
+    return h.png(fig, dpi=PNG_DPI)
 
 
 def _footprint(obj: DetectedObject) -> FloatArray:
@@ -242,7 +233,7 @@ def birds_eye_png(
     ax.tick_params(labelsize=7)
     ax.set_title(plain(title), fontsize=9)
     fig.legend(fontsize=7, loc="outside lower center", ncol=3, frameon=False)
-    return _png(fig)
+    return h.png(fig, dpi=PNG_DPI)
 
 
 # -- figures of a run and its evaluation ------------------------------------------------------------------------------

@@ -1,0 +1,146 @@
+"""The A/B comparison as one self-contained HTML page, rendered with the report builders of
+:mod:`redrive.evaluation.html` (inline CSS, plots as base64 PNG, no network): the two runs and
+their log, the metrics not compared, the value deltas with a bar chart of relative changes, the
+per-frame series with a timeline of per-frame deltas, and the frames where B is most worse.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from redrive.evaluation import html as h
+from redrive.evaluation.deltas import pair_label
+
+if TYPE_CHECKING:
+    from redrive.evaluation.comparison import Comparison
+
+__all__ = ["render_comparison"]
+
+#: dots per inch of the comparison's charts.
+CHART_DPI = 90
+_BETTER, _WORSE = "#187a2f", "#b3261e"
+
+
+def _delta_chart(c: Comparison) -> bytes | None:
+    from matplotlib.figure import Figure
+
+    rows = [
+        v for v in c.values if math.isfinite(v.relative_delta) and v.verdict in ("better", "worse")
+    ]
+    heads = {(v.metric, v.algorithm_a): v.key for v in reversed(c.values)}  # first key each
+    rows = sorted(
+        rows, key=lambda v: (heads[(v.metric, v.algorithm_a)] != v.key, -abs(v.relative_delta))
+    )[:30]
+    if not rows:
+        return None
+    fig = Figure(figsize=(8, 0.3 * len(rows) + 1.2))
+    ax = fig.add_subplot()
+    gain = [100.0 * abs(v.relative_delta) * (1 if v.verdict == "better" else -1) for v in rows]
+    colors = [_BETTER if g > 0 else _WORSE for g in gain]
+    ax.barh(range(len(rows)), gain, color=colors)
+    ax.set_yticks(
+        range(len(rows)),
+        [f"{v.metric}{pair_label(v.algorithm_a, v.algorithm_b)} {v.key}" for v in rows],
+        fontsize=7,
+    )
+    ax.invert_yaxis()
+    ax.axvline(0.0, color="k", lw=0.8)
+    ax.set_xlabel("relative change of B against A, % (right = better; headline values first)")
+    return h.png(fig, dpi=CHART_DPI, tight=True)
+
+
+def _timeline(c: Comparison) -> bytes | None:
+    from matplotlib.figure import Figure
+
+    rows = [s for s in c.series if s.higher_is_better is not None and s.frames.size][:8]
+    if not rows:
+        return None
+    fig = Figure(figsize=(9, 1.7 * len(rows) + 0.6))
+    axes = fig.subplots(len(rows), 1, sharex=True, squeeze=False)[:, 0]
+    for ax, s in zip(axes, rows, strict=True):
+        w = s.worsening
+        ax.bar(s.frames, s.delta, width=1.0, color=np.where(w > 0, _WORSE, _BETTER))
+        ax.axhline(0.0, color="k", lw=0.6)
+        ax.set_ylabel(f"Δ {s.series}", fontsize=8)
+        ax.set_title(s.label + ("  (red = B worse)"), fontsize=8, loc="left")
+    axes[-1].set_xlabel("frame index")
+    return h.png(fig, dpi=CHART_DPI, tight=True)
+
+
+def _n(x: float) -> str:
+    return f"{x:.4g}" if math.isfinite(x) else "n/a"
+
+
+def _lines(texts: tuple[str, ...]) -> h.Markup:
+    return h.Markup("<br>".join(h.esc(t) for t in texts))
+
+
+def _chart(png: bytes | None, alt: str) -> h.Markup:
+    return h.img(png, alt=alt) if png else h.Markup("")
+
+
+def render_comparison(c: Comparison, *, worst: int) -> str:
+    """The page of ``c`` with its ``worst`` worst frames (see the module doc)."""
+    e = h.esc
+    runs = h.Markup(
+        f"A: <code>{e(str(c.run_a))}</code><br>B: <code>{e(str(c.run_b))}</code><br>"
+        f"log sha256 <code>{e(c.log_sha256)}</code> (the same in both)"
+    )
+    method = h.paragraph(
+        f"Δ = B − A. Significance: paired percentile bootstrap over frames — the frames both "
+        f"runs have are resampled with replacement {c.resamples} times (seed {c.seed}); the 95 % "
+        f"CI of the mean per-frame difference is reported, significant when it excludes 0."
+    )
+    sections = [method]
+    nav = []
+    if c.skipped:
+        items = "".join(
+            f"<li>{e(k.metric + pair_label(k.algorithm_a, k.algorithm_b))}: {e(k.reason)}</li>"
+            for k in c.skipped
+        )
+        sections.append(h.section("skipped", "Not compared", h.Markup(f"<ul>{items}</ul>")))
+        nav.append(("skipped", "not compared"))
+    values = [
+        [v.metric + pair_label(v.algorithm_a, v.algorithm_b), v.key, v.unit, _n(v.a), _n(v.b),
+         _n(v.delta), _n(100.0 * v.relative_delta),
+         h.Markup(f'<span class="{e(v.verdict)}">{e(v.verdict)}</span>'), v.significance]
+        for v in c.values
+    ]  # fmt: skip
+    head = ["metric", "value", "unit", "A", "B", "Δ", "Δ %", "B is", "significance"]
+    sections.append(
+        h.section("values", "Values", _chart(_delta_chart(c), "relative change per value"),
+                  h.table(head, values, numeric=range(3, 7)))
+    )  # fmt: skip
+    series = [
+        [s.label, {True: "higher", False: "lower", None: "—"}[s.higher_is_better],
+         str(s.bootstrap.n_frames), _n(s.bootstrap.mean_delta),
+         f"[{_n(s.bootstrap.ci_low)}, {_n(s.bootstrap.ci_high)}]",
+         "yes" if s.bootstrap.excludes_zero else "no"]
+        for s in c.series
+    ]  # fmt: skip
+    head = ["series", "better", "frames", "mean Δ/frame", "95% CI", "excludes 0"]
+    sections.append(
+        h.section("series", "Per-frame series", _chart(_timeline(c), "per-frame delta timeline"),
+                  h.table(head, series, numeric=[2, 3]))
+    )  # fmt: skip
+    frames = [
+        [str(i + 1), str(w.frame_index), str(w.stamp_ns), _n(w.score), _lines(w.differences),
+         _lines(w.new_bookmarks)]
+        for i, w in enumerate(c.worst_frames(worst))
+    ]  # fmt: skip
+    head = ["#", "frame", "stamp ns", "score", "what differs", "new bookmarks in B"]
+    sections.append(
+        h.section("worst", f"Frames where B is most worse than A (top {worst})",
+                  h.table(head, frames, numeric=range(4)))
+    )  # fmt: skip
+    nav += [("values", "values"), ("series", "per-frame"), ("worst", "worst frames")]
+    return h.page(
+        title=f"redrive compare: {c.run_a.name} vs {c.run_b.name}",
+        heading="A/B comparison",
+        subtitle=runs,
+        nav=nav,
+        body=h.Markup("".join(sections)),
+    )

@@ -1,0 +1,345 @@
+"""The numbers of an A/B comparison: one run's side of it (its evaluation's values, per-frame
+series and frame stamps), the per-value and per-series deltas of one metric with their bootstrap,
+and the frames where B is most worse than A (definitions in :mod:`redrive.evaluation.compare`).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from redrive.evaluation.bootstrap import Bootstrap, paired_bootstrap
+from redrive.evaluation.store import Evaluation, read_evaluation
+from redrive.results import Run
+
+__all__ = [
+    "RunSide",
+    "SeriesDelta",
+    "SkippedMetric",
+    "ValueDelta",
+    "WorseFrame",
+    "metric_deltas",
+    "pair_label",
+    "worst_frames",
+]
+
+_F64 = npt.NDArray[np.float64]
+_I64 = npt.NDArray[np.int64]
+#: per-frame series that count the log, not the algorithm (the same in A and B of one log).
+_NEUTRAL = frozenset({"gt", "num_gt", "n_gt", "ground_truth", "num_frames", "frames"})
+
+
+def _words(text: str) -> frozenset[str]:
+    return frozenset(text.split())
+
+
+#: tokens of per-frame series names: counts of errors (lower is better) and of successes.
+_LOWER = _words(
+    "fp fps fn fns missed miss misses switch switches idsw frag fragmentations error errors err "
+    "collision collisions latency jerk deadline late violation violations rmse ade fde"
+)
+_HIGHER = _words("tp tps hit hits match matches progress recall precision ttc")
+
+
+def _evaluation(run: Run) -> Evaluation:
+    """The stored evaluation of ``run`` (the one place this module reads it)."""
+    return read_evaluation(run)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SeriesDelta:
+    """One per-frame series of one metric, A against B on the frames both have.
+
+    Attributes:
+        frames: frame indices int64 (N,) present (finite) in both; ``a``, ``b`` float64 (N,).
+        higher_is_better: the series' direction; None for series that count the log (``gt``).
+        only_a, only_b: frames present in one run only (a failed step, a shorter run).
+    """
+
+    metric: str
+    algorithm_a: str
+    algorithm_b: str
+    series: str
+    higher_is_better: bool | None
+    frames: _I64
+    a: _F64
+    b: _F64
+    only_a: int
+    only_b: int
+    bootstrap: Bootstrap
+
+    @property
+    def label(self) -> str:
+        return f"{self.metric}{pair_label(self.algorithm_a, self.algorithm_b)}/{self.series}"
+
+    @property
+    def delta(self) -> _F64:
+        return self.b - self.a
+
+    @property
+    def worsening(self) -> _F64:
+        """How much worse B is than A per frame (positive = worse); zeros if no direction."""
+        if self.higher_is_better is None:
+            return np.zeros_like(self.a)
+        return self.a - self.b if self.higher_is_better else self.b - self.a
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ValueDelta:
+    """One stored value of a metric in A and B. ``series``/``bootstrap``: the per-frame series
+    of the same name, when there is one; otherwise ``note`` reports the metric's series."""
+
+    metric: str
+    metric_version: str
+    algorithm_a: str
+    algorithm_b: str
+    key: str
+    unit: str
+    higher_is_better: bool
+    a: float
+    b: float
+    series: str
+    bootstrap: Bootstrap | None
+    note: str
+
+    @property
+    def delta(self) -> float:
+        return self.b - self.a
+
+    @property
+    def relative_delta(self) -> float:
+        if not math.isfinite(self.a) or self.a == 0.0:
+            return float("nan")
+        return self.delta / abs(self.a)
+
+    @property
+    def significance(self) -> str:
+        """Short form of the note: the CI of the matching series and whether it excludes 0."""
+        if self.bootstrap is None:
+            return "aggregate: see the series" if "per-frame series" in self.note else "—"
+        b = self.bootstrap
+        if b.n_frames == 0:
+            return "no common frames"
+        return f"[{b.ci_low:+.3g}, {b.ci_high:+.3g}] " + ("≠ 0" if b.excludes_zero else "∋ 0")
+
+    @property
+    def verdict(self) -> str:
+        """``better``, ``worse``, ``same`` (B against A), or ``n/a`` when either is NaN."""
+        if math.isnan(self.a) or math.isnan(self.b):
+            return "n/a"
+        if self.delta == 0.0:
+            return "same"
+        return "better" if (self.delta > 0.0) == self.higher_is_better else "worse"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class WorseFrame:
+    """A frame where B is worse than A: ``score`` (module doc), what differs, bookmarks of B
+    at that frame that A does not have."""
+
+    frame_index: int
+    stamp_ns: int
+    score: float
+    differences: tuple[str, ...]
+    new_bookmarks: tuple[str, ...]
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SkippedMetric:
+    """A metric not compared, and why (different version or parameters, missing in one run)."""
+
+    metric: str
+    algorithm_a: str
+    algorithm_b: str
+    reason: str
+
+
+def pair_label(a: str, b: str) -> str:
+    """``[a]`` for one algorithm, ``[a→b]`` for a pair, nothing for run-level metrics."""
+    if not a and not b:
+        return ""
+    return f"[{a}]" if a == b else f"[{a}→{b}]"
+
+
+def _direction(series: str, key_dirs: Mapping[str, bool], default: bool) -> bool | None:
+    """A per-frame series' direction: none for log counts, a value of the same name, name
+    tokens (``missed``, ``fp`` … lower; ``tp`` … higher), else the metric's direction."""
+    if series in _NEUTRAL:
+        return None
+    for key in (series, f"num_{series}"):
+        if key in key_dirs:
+            return key_dirs[key]
+    tokens = set(re.split(r"[^a-z0-9]+", series.lower()))
+    if tokens & _LOWER:
+        return False
+    if tokens & _HIGHER:
+        return True
+    return default
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class RunSide:
+    """One run of the comparison: its evaluation, values by (metric, algorithm), per-frame series
+    by (metric, algorithm, series) and frame stamps by index."""
+
+    run: Run
+    ev: Evaluation
+    values: dict[tuple[str, str], list[dict[str, Any]]]
+    series: dict[tuple[str, str, str], tuple[_I64, _F64]]
+    stamps: dict[int, int]
+
+    @classmethod
+    def load(cls, run: Run) -> RunSide:
+        ev = _evaluation(run)
+        values: dict[tuple[str, str], list[dict[str, Any]]] = {}
+        for row in ev.values.to_pylist():
+            values.setdefault((row["metric"], row["algorithm"]), []).append(row)
+        cols = ev.per_frame.to_pydict()
+        rows: dict[tuple[str, str, str], list[int]] = {}
+        for i, key in enumerate(
+            zip(cols["metric"], cols["algorithm"], cols["series"], strict=True)
+        ):
+            rows.setdefault(key, []).append(i)
+        idx_all = np.asarray(cols["frame_index"], dtype=np.int64)
+        val_all = np.asarray(cols["value"], dtype=np.float64)
+        series = {k: (idx_all[r], val_all[r]) for k, r in rows.items()}
+        frames = run.table("frames")
+        idx, stamp = frames.column("frame_index").to_pylist(), frames.column("stamp_ns").to_pylist()
+        stamps = dict(zip(idx, stamp, strict=True))
+        return cls(run=run, ev=ev, values=values, series=series, stamps=stamps)
+
+    def definition(self, metric: str, algorithm: str) -> list[Mapping[str, Any]]:
+        return [
+            m
+            for m in self.ev.metrics
+            if m.get("name") == metric and algorithm in m.get("algorithms", ())
+        ]
+
+    def algorithms(self) -> set[str]:
+        return {algo for _, algo in self.values}
+
+
+def metric_deltas(
+    a: RunSide, b: RunSide, which: tuple[str, str, str], *, hib: bool, resamples: int, seed: int
+) -> tuple[list[ValueDelta], list[SeriesDelta]]:
+    """The value and series deltas of one metric (``which`` = metric, A's and B's algorithm)."""
+    metric, xa, xb = which
+    rows_a = {r["key"]: r for r in a.values.get((metric, xa), [])}
+    rows_b = {r["key"]: r for r in b.values.get((metric, xb), [])}
+    key_dirs = {k: bool(r["higher_is_better"]) for k, r in (rows_b | rows_a).items()}
+    names = [s for m, x, s in a.series if m == metric and x == xa]
+    names += [s for m, x, s in b.series if m == metric and x == xb and s not in names]
+    series: list[SeriesDelta] = []
+    for name in names:
+        fa, va = a.series.get((metric, xa, name), (np.zeros(0, np.int64), np.zeros(0)))
+        fb, vb = b.series.get((metric, xb, name), (np.zeros(0, np.int64), np.zeros(0)))
+        fa, va = fa[np.isfinite(va)], va[np.isfinite(va)]
+        fb, vb = fb[np.isfinite(vb)], vb[np.isfinite(vb)]
+        common, ia, ib = np.intersect1d(fa, fb, assume_unique=False, return_indices=True)
+        sa, sb = va[ia], vb[ib]
+        series.append(
+            SeriesDelta(
+                metric=metric,
+                algorithm_a=xa,
+                algorithm_b=xb,
+                series=name,
+                higher_is_better=_direction(name, key_dirs, hib),
+                frames=common.astype(np.int64),
+                a=sa,
+                b=sb,
+                only_a=int(np.setdiff1d(fa, fb).size),
+                only_b=int(np.setdiff1d(fb, fa).size),
+                bootstrap=paired_bootstrap(sb - sa, resamples=resamples, seed=seed),
+            )
+        )
+    by_name = {s.series: s for s in series}
+    summary = "; ".join(
+        f"{s.series} {s.bootstrap.mean_delta:+.3g} [{s.bootstrap.ci_low:+.3g}, "
+        f"{s.bootstrap.ci_high:+.3g}]{' ≠0' if s.bootstrap.excludes_zero else ''}"
+        for s in series
+        if s.higher_is_better is not None and s.bootstrap.n_frames
+    )
+    values: list[ValueDelta] = []
+    for key in list(rows_a) + [k for k in rows_b if k not in rows_a]:
+        ra_, rb_ = rows_a.get(key), rows_b.get(key)
+        row = ra_ or rb_
+        assert row is not None
+        match = by_name.get(key) or (by_name.get(key[4:]) if key.startswith("num_") else None)
+        if match is not None:
+            boot: Bootstrap | None = match.bootstrap
+            note = f"per-frame {match.series}: {match.bootstrap.describe()}"
+        else:
+            boot = None
+            note = (
+                f"not a per-frame mean; paired bootstrap of the per-frame series, mean Δ/frame "
+                f"[95% CI] (≠0: excludes 0): {summary}"
+                if summary
+                else "no per-frame series: no significance test"
+            )
+        values.append(
+            ValueDelta(
+                metric=metric,
+                metric_version=str(row["metric_version"]),
+                algorithm_a=xa,
+                algorithm_b=xb,
+                key=key,
+                unit=str(row["unit"]),
+                higher_is_better=bool(row["higher_is_better"]),
+                a=float(ra_["value"]) if ra_ else float("nan"),
+                b=float(rb_["value"]) if rb_ else float("nan"),
+                series=match.series if match else "",
+                bootstrap=boot,
+                note=note,
+            )
+        )
+    return values, series
+
+
+def worst_frames(
+    a: RunSide, b: RunSide, series: Sequence[SeriesDelta], *, compared: set[tuple[str, str, str]]
+) -> list[WorseFrame]:
+    """Every frame where B is worse than A on the ``compared`` metrics, worst first."""
+    score: dict[int, float] = {}
+    diffs: dict[int, list[tuple[float, str]]] = {}
+    for s in series:
+        w = s.worsening
+        top = float(np.max(np.abs(w))) if w.size else 0.0
+        if s.higher_is_better is None or top == 0.0:
+            continue
+        for k in np.flatnonzero(w != 0.0):
+            f = int(s.frames[k])
+            if w[k] > 0:
+                score[f] = score.get(f, 0.0) + float(w[k]) / top
+            word = "worse" if w[k] > 0 else "better"
+            text = f"{s.label} {s.a[k]:.4g} → {s.b[k]:.4g} ({s.b[k] - s.a[k]:+.4g}, {word})"
+            diffs.setdefault(f, []).append((-float(w[k]) / top, text))
+    to_b = {(m, xa): xb for m, xa, xb in compared}  # bookmarks of compared metrics only
+    marks_a = {
+        (r["frame_index"], r["metric"], to_b[key], r["kind"], r["detail"])
+        for r in a.ev.bookmarks.to_pylist()
+        if (key := (r["metric"], r["algorithm"])) in to_b
+    }
+    keep_b = {(m, xb) for m, _, xb in compared}
+    new: dict[int, list[str]] = {}
+    for r in b.ev.bookmarks.to_pylist():
+        mark = (r["frame_index"], r["metric"], r["algorithm"], r["kind"], r["detail"])
+        if (r["metric"], r["algorithm"]) in keep_b and mark not in marks_a:
+            text = f"{r['metric']}{pair_label(r['algorithm'], r['algorithm'])} {r['kind']}: {r['detail']}"
+            new.setdefault(int(r["frame_index"]), []).append(text)
+    ranked = sorted((f for f, v in score.items() if v > 0), key=lambda f: (-score[f], f))
+    return [
+        WorseFrame(
+            frame_index=f,
+            stamp_ns=int(a.stamps.get(f, b.stamps.get(f, 0))),
+            score=score[f],
+            differences=tuple(t for _, t in sorted(diffs[f])),
+            new_bookmarks=tuple(new.get(f, ())),
+        )
+        for f in ranked
+    ]

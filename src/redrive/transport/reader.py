@@ -1,0 +1,417 @@
+"""A reader of a shared-memory stream: attaches to its segment, pins and copies out or views
+messages, re-checks them for tearing (see :mod:`redrive.transport.channel` for the protocol and
+the numbered steps).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import socket
+import time
+from collections.abc import Iterator
+from types import TracebackType
+
+import numpy as np
+import numpy.typing as npt
+
+from redrive.errors import TransportError
+from redrive.transport._fence import fence, ordered
+from redrive.transport.segment import (
+    HEADER_BYTES,
+    META_OFFSET,
+    R_CAPTURE_LAG,
+    R_DELIVERED,
+    R_DROPPED,
+    R_LAG_LAST,
+    R_LAG_MAX,
+    R_LAG_SUM,
+    R_PID,
+    R_PIN,
+    R_POLICY,
+    R_READ_SEQ,
+    R_START,
+    R_STATE,
+    R_TORN,
+    R_WAITING,
+    READER_WORDS,
+    S_BEGIN,
+    S_END,
+    S_KIND,
+    S_META_LEN,
+    S_NBYTES,
+    S_PUBLISH,
+    S_STAMP,
+    W_ORDER,
+    W_POLICY,
+    W_WRITE_SEQ,
+    W_WRITER_WAITING,
+    Segment,
+    process_alive,
+    self_identity,
+)
+from redrive.transport.stream import (
+    CHECK_S,
+    ChannelStats,
+    Message,
+    Policy,
+    ProducerGoneError,
+    channel_stats,
+    drain,
+    socket_name,
+    wait_fd,
+)
+from redrive.types import SensorData
+
+__all__ = ["Reader"]
+
+logger = logging.getLogger(__name__)
+
+
+class Reader:
+    """A reader of stream ``name`` (waits up to ``timeout_s`` for the writer to create it).
+
+    Args:
+        policy: how this reader reads: the stream's policy by default; ``KEEP_LATEST`` on a
+            lossless stream observes it without back-pressure.
+
+    Raises:
+        TransportError: no such stream within ``timeout_s``; every reader entry taken; a
+            lossless reader asked of a keep-latest stream.
+    """
+
+    def __init__(self, name: str, *, timeout_s: float = 5.0, policy: Policy | None = None) -> None:
+        self.name = name
+        self._want_policy = policy
+        self._seg: Segment | None = None
+        self._fd = os.eventfd(0, os.EFD_NONBLOCK | os.EFD_CLOEXEC)
+        self._space_fd = -1
+        self._closed = False
+        self._attach(time.monotonic() + timeout_s)
+
+    # -- attaching ---------------------------------------------------------------------------
+    def _attach(self, deadline: float) -> None:
+        while True:
+            try:
+                seg = Segment.attach(self.name)
+            except FileNotFoundError:
+                seg = None
+            if seg is not None:
+                if seg.owner_alive():
+                    break
+                seg.close()
+            if time.monotonic() >= deadline:
+                msg = (
+                    f"no writer for stream {self.name!r} (no live /dev/shm/redrive.{self.name}); "
+                    "start its producer first"
+                )
+                raise ProducerGoneError(msg)
+            time.sleep(0.01)
+        try:
+            self._join(seg)
+        except BaseException:
+            seg.close()
+            raise
+
+    def _join(self, seg: Segment) -> None:
+        w, lay = seg.words, seg.layout
+        stream_policy = Policy(int(w[W_POLICY]))
+        policy = self._want_policy or stream_policy
+        if policy is Policy.LOSSLESS and stream_policy is not Policy.LOSSLESS:
+            msg = f"stream {self.name!r} is keep-latest: it cannot be read losslessly"
+            raise TransportError(msg)
+        pid, start = self_identity()
+        with seg.locked():
+            entry = None
+            for r in range(lay.max_readers):
+                base = lay.reader_word(r)
+                if w[base + R_STATE] == 0 or not process_alive(
+                    int(w[base + R_PID]), int(w[base + R_START])
+                ):
+                    entry = r
+                    break
+            if entry is None:
+                msg = (
+                    f"stream {self.name!r} already has {lay.max_readers} readers; stop one or "
+                    "create the stream with a larger max_readers"
+                )
+                raise TransportError(msg)
+            base = lay.reader_word(entry)
+            w[base + R_STATE] = 0
+            ws = int(w[W_WRITE_SEQ])
+            if policy is Policy.LOSSLESS:
+                start_seq = max(0, ws - (lay.n_slots - 1))  # the oldest messages still held
+            else:
+                start_seq = max(0, ws - 1)  # the newest message
+            for i in range(READER_WORDS):
+                w[base + i] = 0
+            w[base + R_PID], w[base + R_START] = pid, start
+            w[base + R_POLICY], w[base + R_READ_SEQ], w[base + R_PIN] = policy.value, start_seq, -1
+            fence()
+            w[base + R_STATE] = 1
+        self._seg, self._w, self._lay = seg, w, lay
+        self.policy = policy
+        self._base = base
+        self._read_seq = start_seq
+        self._slot_words = [lay.slot_offset(s) // 8 for s in range(lay.n_slots)]
+        self._payload = [
+            np.frombuffer(seg.mm, np.uint8, lay.capacity, lay.slot_offset(s) + HEADER_BYTES)
+            for s in range(lay.n_slots)
+        ]
+        for arr in self._payload:
+            arr.flags.writeable = False
+        self._raw = memoryview(seg.mm)
+        self._handshake(entry, seg.generation)
+
+    def _handshake(self, entry: int, generation: int) -> None:
+        with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM | socket.SOCK_CLOEXEC) as sock:
+            sock.settimeout(5.0)
+            try:
+                sock.connect(socket_name(self.name, generation))
+                socket.send_fds(sock, [entry.to_bytes(8, "little")], [self._fd])
+                _, fds, _, _ = socket.recv_fds(sock, 16, 1)
+            except OSError as err:
+                msg = f"stream {self.name!r}: the writer did not answer the attach ({err})"
+                raise ProducerGoneError(msg) from err
+        if len(fds) != 1:
+            msg = f"stream {self.name!r}: the writer sent no wake-up descriptor"
+            raise TransportError(msg)
+        if self._space_fd >= 0:
+            os.close(self._space_fd)
+        self._space_fd = fds[0]
+
+    def _detach(self) -> None:
+        seg = self._seg
+        if seg is None:
+            return
+        self._w[self._base + R_PIN] = -1
+        self._w[self._base + R_STATE] = 0
+        self._payload = []
+        self._raw.release()
+        self._w = memoryview(b"\0" * 8).cast("q")
+        seg.close()
+        self._seg = None
+
+    def _reattach_or_raise(self) -> None:
+        """The writer is gone: re-attach to a new writer of the stream, or raise."""
+        assert self._seg is not None
+        if self._seg.replaced():
+            try:
+                new = Segment.attach(self.name)
+            except (FileNotFoundError, TransportError):
+                new = None
+            if new is not None and new.owner_alive():
+                new.close()
+                logger.info("stream %s: writer restarted; re-attaching", self.name)
+                self._detach()
+                self._attach(time.monotonic() + 1.0)
+                return
+            if new is not None:
+                new.close()
+        msg = f"the writer of stream {self.name!r} is gone (last message {self._read_seq})"
+        raise ProducerGoneError(msg)
+
+    # -- reading -------------------------------------------------------------------------------
+    def _next(self, timeout_s: float | None, latest: bool) -> tuple[int, int, int]:
+        """Pin the next message: (slot, seq, dropped before it)."""
+        if self._closed:
+            msg = f"reader of stream {self.name!r} is closed"
+            raise TransportError(msg)
+        if self._seg is None:
+            self._attach(time.monotonic() + (timeout_s or 0.0))
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        last_check = time.monotonic()
+        jump = latest
+        while True:
+            w, lay = self._w, self._lay
+            ws = w[W_WRITE_SEQ]  # ⓐ
+            ordered()  # ⓑ
+            rs = self._read_seq
+            if ws > rs:
+                want = ws if jump or ws - rs > lay.n_slots else rs + 1
+                slot = w[W_ORDER + want % lay.n_slots]  # ⓒ
+                pin = self._base + R_PIN
+                w[pin] = slot  # ⓓ
+                fence()  # ⓔ
+                base = self._slot_words[slot]
+                if w[base + S_BEGIN] == want and w[base + S_END] == want:  # ⓕ
+                    return slot, want, want - rs - 1
+                w[pin] = -1
+                jump = self.policy is Policy.KEEP_LATEST  # overwritten meanwhile: newest
+                continue
+            now = time.monotonic()
+            if now - last_check >= CHECK_S or (deadline is not None and now >= deadline):
+                last_check = now
+                if self._seg is not None and not self._seg.owner_alive():
+                    if w[W_WRITE_SEQ] > self._read_seq:
+                        continue  # it left messages behind: deliver them first
+                    self._reattach_or_raise()
+                    continue
+            if deadline is not None and now >= deadline:
+                return -1, 0, 0
+            wait = CHECK_S if deadline is None else min(CHECK_S, deadline - now)
+            flag = self._base + R_WAITING
+            w[flag] = 1
+            fence()  # the writer sees the flag after this, or its write_seq is seen below
+            if w[W_WRITE_SEQ] == self._read_seq and wait_fd(self._fd, wait):
+                drain(self._fd)
+            w[flag] = 0
+
+    def _message(
+        self, slot: int, seq: int, dropped: int, payload: npt.NDArray[np.uint8]
+    ) -> Message:
+        w, base = self._w, self._slot_words[slot]
+        meta_len = w[base + S_META_LEN]
+        meta = b""
+        if meta_len:
+            off = base * 8 + META_OFFSET
+            meta = bytes(self._raw[off : off + meta_len])
+        return Message(
+            seq=seq,
+            stamp_ns=int(w[base + S_STAMP]),
+            publish_ns=int(w[base + S_PUBLISH]),
+            kind=int(w[base + S_KIND]),
+            meta=meta,
+            payload=payload,
+            dropped_before=dropped,
+        )
+
+    def _release(self, slot: int, seq: int, dropped: int, msg: Message) -> bool:
+        """Re-check the slot (ⓗⓘ), unpin it (ⓙ), count; False if the message was torn."""
+        w, me = self._w, self._base
+        ordered()  # ⓗ
+        base = self._slot_words[slot]
+        intact = w[base + S_BEGIN] == seq and w[base + S_END] == seq  # ⓘ
+        w[me + R_PIN] = -1  # ⓙ
+        self._read_seq = seq
+        w[me + R_READ_SEQ] = seq
+        if dropped:
+            w[me + R_DROPPED] += dropped
+        if not intact:
+            w[me + R_TORN] += 1
+            return False
+        now = time.time_ns()
+        lag = now - msg.publish_ns
+        w[me + R_DELIVERED] += 1
+        w[me + R_CAPTURE_LAG] = now - msg.stamp_ns if msg.stamp_ns else lag
+        w[me + R_LAG_LAST] = lag
+        w[me + R_LAG_SUM] += lag
+        w[me + R_LAG_MAX] = max(w[me + R_LAG_MAX], lag)
+        if self.policy is Policy.LOSSLESS and self._space_fd >= 0:
+            fence()  # read_seq is seen by a writer before it sleeps, or its flag is seen here
+            if w[W_WRITER_WAITING]:
+                os.eventfd_write(self._space_fd, 1)
+        return True
+
+    def read(
+        self,
+        timeout_s: float | None = None,
+        *,
+        latest: bool = False,
+        out: npt.NDArray[np.uint8] | None = None,
+    ) -> Message | None:
+        """The next message, copied out of shared memory (None after ``timeout_s``).
+
+        ``latest=True`` skips to the newest message (what was skipped counts as dropped).
+        ``out``: a uint8 array of at least the stream's capacity to copy into (the payload is then
+        a view of it, valid until the next read into it) — no allocation per message, whose page
+        faults dominate the copy of a multi-MB message into a fresh array.
+
+        Raises:
+            ProducerGoneError: the writer is gone and everything it published has been read.
+        """
+        while True:
+            slot, seq, dropped = self._next(timeout_s, latest)
+            if slot < 0:
+                return None
+            nbytes = self._w[self._slot_words[slot] + S_NBYTES]
+            if out is None:
+                copy = np.empty(nbytes, np.uint8)
+            elif out.dtype == np.uint8 and out.ndim == 1 and out.shape[0] >= nbytes:
+                copy = out[:nbytes]
+            else:
+                self._w[self._base + R_PIN] = -1
+                msg_text = (
+                    f"stream {self.name!r}: read(out=…) needs a 1-D uint8 array of at least "
+                    f"{nbytes} bytes"
+                )
+                raise TransportError(msg_text)
+            np.copyto(copy, self._payload[slot][:nbytes])  # ⓖ
+            msg = self._message(slot, seq, dropped, copy)
+            if self._release(slot, seq, dropped, msg):
+                return msg
+
+    def read_sample(
+        self, timeout_s: float | None = None, *, latest: bool = False
+    ) -> tuple[Message, SensorData] | None:
+        """The next message decoded as ``SensorData`` (copied out: keep it as long as you like).
+
+        Raises:
+            TransportError: the message is not a sensor sample.
+        """
+        from redrive.transport.codec import KIND_SENSOR, decode_sample
+
+        msg = self.read(timeout_s, latest=latest)
+        if msg is None:
+            return None
+        if msg.kind != KIND_SENSOR:
+            err = f"stream {self.name!r}: message {msg.seq} is kind {msg.kind}, not a sensor sample"
+            raise TransportError(err)
+        return msg, decode_sample(msg.meta, msg.payload)
+
+    @contextlib.contextmanager
+    def view(
+        self, timeout_s: float | None = None, *, latest: bool = False
+    ) -> Iterator[Message | None]:
+        """The next message as a read-only view into shared memory, valid inside the block
+        (the slot is pinned: the writer does not reuse it meanwhile). Yields None on timeout."""
+        slot, seq, dropped = self._next(timeout_s, latest)
+        if slot < 0:
+            yield None
+            return
+        nbytes = self._w[self._slot_words[slot] + S_NBYTES]
+        msg = self._message(slot, seq, dropped, self._payload[slot][:nbytes])
+        try:
+            yield msg
+        finally:
+            self._release(slot, seq, dropped, msg)
+
+    def stats(self) -> ChannelStats:
+        if self._seg is None:
+            return ChannelStats(name=self.name, published=0, readers=())
+        return channel_stats(self._seg, self.name)
+
+    def fileno(self) -> int:
+        """The reader's wake-up ``eventfd``: readable when a message may have arrived (for
+        ``select`` over several streams; a wake-up may be spurious — read with ``timeout_s=0``)."""
+        return self._fd
+
+    def writer_alive(self) -> bool:
+        return self._seg is not None and self._seg.owner_alive()
+
+    def close(self) -> None:
+        """Leave the stream (frees the reader entry)."""
+        if self._closed:
+            return
+        self._closed = True
+        self._detach()
+        os.close(self._fd)
+        if self._space_fd >= 0:
+            os.close(self._space_fd)
+
+    def __enter__(self) -> Reader:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def __del__(self) -> None:
+        if not getattr(self, "_closed", True):
+            with contextlib.suppress(Exception):
+                self.close()

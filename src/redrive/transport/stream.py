@@ -1,0 +1,166 @@
+"""What both ends of a shared-memory stream share: its policy, its messages, its counters, the
+errors it raises, and the wake-up and attach primitives (see :mod:`redrive.transport.channel` for
+the protocol).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import enum
+import os
+import select
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from redrive.errors import TransportError
+from redrive.transport.segment import (
+    R_CAPTURE_LAG,
+    R_DELIVERED,
+    R_DROPPED,
+    R_LAG_LAST,
+    R_LAG_MAX,
+    R_LAG_SUM,
+    R_PID,
+    R_POLICY,
+    R_READ_SEQ,
+    R_STATE,
+    R_TORN,
+    W_PUBLISHED,
+    Segment,
+)
+
+__all__ = [
+    "CHECK_S",
+    "ChannelStats",
+    "Message",
+    "Policy",
+    "ProducerGoneError",
+    "ReaderGoneError",
+    "ReaderStats",
+    "channel_stats",
+    "drain",
+    "socket_name",
+    "wait_fd",
+]
+
+CHECK_S = 0.05  # how often a waiting side checks that the other side is alive
+
+
+class Policy(enum.Enum):
+    """What happens when a reader is slower than the writer."""
+
+    KEEP_LATEST = 0
+    LOSSLESS = 1
+
+
+class ProducerGoneError(TransportError):
+    """The stream's writer process exited (or was killed) and nothing is left to read."""
+
+
+class ReaderGoneError(TransportError):
+    """A lossless reader of the stream exited; the messages it had not read are lost to it."""
+
+
+@dataclass(frozen=True, slots=True)
+class Message:
+    """One message.
+
+    Attributes:
+        seq: its number in the stream (1, 2, …).
+        stamp_ns: the producer's stamp (capture time of the sensor sample).
+        publish_ns: wall clock (``time.time_ns``) when it was published.
+        kind: the producer's payload kind (see :mod:`redrive.transport.codec`).
+        meta: the producer's metadata bytes (at most ``META_CAPACITY``).
+        payload: uint8 (nbytes,): an owned array from :meth:`Reader.read`, a read-only view into
+            shared memory from :meth:`Reader.view` (valid only inside its ``with``).
+        dropped_before: messages of the stream skipped right before this one.
+    """
+
+    seq: int
+    stamp_ns: int
+    publish_ns: int
+    kind: int
+    meta: bytes
+    payload: npt.NDArray[np.uint8]
+    dropped_before: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class ReaderStats:
+    """What one reader got. ``lag_*``: delivery time − publish time (the transport's own lag);
+    ``capture_lag_ns``: delivery time − the producer's stamp, for the last message (the sensor's
+    end-to-end lag when the stamp is the capture time on this clock)."""
+
+    pid: int
+    policy: Policy
+    read_seq: int
+    delivered: int
+    dropped: int
+    torn: int
+    lag_last_ns: int
+    lag_max_ns: int
+    lag_mean_ns: float
+    capture_lag_ns: int
+
+
+@dataclass(frozen=True, slots=True)
+class ChannelStats:
+    """Counters of a stream: ``published`` by the writer, per reader what it got."""
+
+    name: str
+    published: int
+    readers: tuple[ReaderStats, ...]
+
+    @property
+    def delivered(self) -> int:
+        return sum(r.delivered for r in self.readers)
+
+    @property
+    def dropped(self) -> int:
+        return sum(r.dropped for r in self.readers)
+
+
+def socket_name(name: str, generation: int) -> bytes:
+    """The abstract Unix socket where the writer of ``name`` (segment ``generation``) takes
+    attaches."""
+    return f"\0redrive.{name}.{generation:x}".encode()
+
+
+def drain(fd: int) -> None:
+    """Reset the eventfd ``fd`` (non-blocking: nothing to reset is fine)."""
+    with contextlib.suppress(BlockingIOError):
+        os.eventfd_read(fd)
+
+
+def wait_fd(fd: int, timeout_s: float) -> bool:
+    """Wait until ``fd`` is readable (or ``timeout_s``); True if it is."""
+    ready, _, _ = select.select([fd], [], [], max(0.0, timeout_s))
+    return bool(ready)
+
+
+def channel_stats(seg: Segment, name: str) -> ChannelStats:
+    """The counters of stream ``name`` as its segment holds them now."""
+    w, lay = seg.words, seg.layout
+    readers = []
+    for r in range(lay.max_readers):
+        base = lay.reader_word(r)
+        if w[base + R_STATE] != 1:
+            continue
+        delivered = int(w[base + R_DELIVERED])
+        readers.append(
+            ReaderStats(
+                pid=int(w[base + R_PID]),
+                policy=Policy(int(w[base + R_POLICY])),
+                read_seq=int(w[base + R_READ_SEQ]),
+                delivered=delivered,
+                dropped=int(w[base + R_DROPPED]),
+                torn=int(w[base + R_TORN]),
+                lag_last_ns=int(w[base + R_LAG_LAST]),
+                lag_max_ns=int(w[base + R_LAG_MAX]),
+                lag_mean_ns=w[base + R_LAG_SUM] / delivered if delivered else 0.0,
+                capture_lag_ns=int(w[base + R_CAPTURE_LAG]),
+            )
+        )
+    return ChannelStats(name=name, published=int(w[W_PUBLISHED]), readers=tuple(readers))

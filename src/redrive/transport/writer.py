@@ -1,0 +1,379 @@
+"""The writer of a shared-memory stream: creates its segment, claims slots, publishes, takes
+readers' attaches (see :mod:`redrive.transport.channel` for the protocol and the numbered steps).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import socket
+import threading
+import time
+from collections.abc import Iterator
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from redrive.errors import TransportError
+from redrive.transport._fence import fence, ordered
+from redrive.transport.segment import (
+    HEADER_BYTES,
+    META_CAPACITY,
+    META_OFFSET,
+    R_PID,
+    R_PIN,
+    R_POLICY,
+    R_READ_SEQ,
+    R_START,
+    R_STATE,
+    R_WAITING,
+    S_BEGIN,
+    S_END,
+    S_KIND,
+    S_META_LEN,
+    S_NBYTES,
+    S_PUBLISH,
+    S_STAMP,
+    W_HEARTBEAT,
+    W_ORDER,
+    W_PUBLISHED,
+    W_WRITE_SEQ,
+    W_WRITER_WAITING,
+    Layout,
+    Segment,
+    process_alive,
+)
+from redrive.transport.stream import (
+    CHECK_S,
+    ChannelStats,
+    Policy,
+    ReaderGoneError,
+    channel_stats,
+    drain,
+    socket_name,
+    wait_fd,
+)
+from redrive.types import SensorData
+
+__all__ = ["Writer"]
+
+logger = logging.getLogger(__name__)
+
+
+class Writer:
+    """The one writer of stream ``name``; creates (and on close unlinks) its segment.
+
+    Args:
+        name: stream name: letters, digits, ``_ . -``.
+        capacity_bytes: the largest payload.
+        slots: slots in the ring (≥ ``max_readers`` + 2).
+        policy: :class:`Policy`.
+        max_readers: reader entries (each reader process takes one).
+
+    Raises:
+        TransportError: a live writer has the name, bad sizes, /dev/shm too small.
+    """
+
+    def __init__(
+        self,
+        name: str,
+        *,
+        capacity_bytes: int,
+        slots: int = 4,
+        policy: Policy = Policy.KEEP_LATEST,
+        max_readers: int = 2,
+    ) -> None:
+        if capacity_bytes <= 0 or max_readers < 1 or slots < max_readers + 2:
+            msg = (
+                f"stream {name!r}: need capacity_bytes > 0, max_readers ≥ 1 and slots ≥ "
+                f"max_readers + 2 (got {capacity_bytes}, {max_readers}, {slots})"
+            )
+            raise TransportError(msg)
+        self.name = name
+        self.policy = policy
+        layout = Layout(n_slots=slots, capacity=capacity_bytes, max_readers=max_readers)
+        self._seg = Segment.create(name, layout, policy=policy.value)
+        self._w = self._seg.words
+        self._layout = layout
+        self._slot_seq = [0] * slots  # message each slot holds
+        self._slot_words = [layout.slot_offset(s) // 8 for s in range(slots)]
+        mm = self._seg.mm
+        self._payload = [
+            np.frombuffer(mm, np.uint8, capacity_bytes, layout.slot_offset(s) + HEADER_BYTES)
+            for s in range(slots)
+        ]
+        self._raw = memoryview(mm)
+        self._readers = [layout.reader_word(r) for r in range(max_readers)]
+        self._reader_fd = [-1] * max_readers
+        self._fd_lock = threading.Lock()
+        self._space_fd = os.eventfd(0, os.EFD_NONBLOCK | os.EFD_CLOEXEC)
+        self._lru = list(range(slots))  # slots, least recently written first
+        self._seq = 0
+        self._loaned = False
+        self._closed = False
+        self._sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM | socket.SOCK_CLOEXEC)
+        self._sock.bind(socket_name(name, self._seg.generation))
+        self._sock.listen(max_readers * 2)
+        self._sock.settimeout(0.2)
+        self._thread = threading.Thread(
+            target=self._accept_loop, name=f"redrive-shm-{name}", daemon=True
+        )
+        self._thread.start()
+
+    # -- attach handshake (a thread) ----------------------------------------------------------
+    def _accept_loop(self) -> None:
+        while not self._closed:
+            try:
+                conn, _ = self._sock.accept()
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            with conn:
+                try:
+                    conn.settimeout(2.0)
+                    data, fds, _, _ = socket.recv_fds(conn, 16, 1)
+                    index = int.from_bytes(data[:8], "little")
+                    if len(fds) != 1 or not 0 <= index < len(self._reader_fd):
+                        for fd in fds:
+                            os.close(fd)
+                        continue
+                    with self._fd_lock:
+                        old, self._reader_fd[index] = self._reader_fd[index], fds[0]
+                    if old >= 0:
+                        os.close(old)
+                    socket.send_fds(conn, [b"ok"], [self._space_fd])
+                except OSError as err:
+                    logger.debug("stream %s: a reader's attach failed: %s", self.name, err)
+
+    # -- publishing -----------------------------------------------------------------------------
+    @property
+    def capacity(self) -> int:
+        return self._layout.capacity
+
+    def _claim(self, deadline: float | None) -> int:
+        """A slot to write message ``self._seq + 1`` into, marked as being written."""
+        w = self._w
+        nxt = self._seq + 1
+        last_check = time.monotonic()
+        while True:
+            need_free = self._lossless_floor()
+            readers = [b for b in self._readers if w[b + R_STATE] == 1]
+            pinned = {w[b + R_PIN] for b in readers}
+            for slot in self._lru:  # least recently written first
+                held = self._slot_seq[slot]
+                if need_free is not None and held > need_free:
+                    break  # the newer slots all hold unread lossless messages too
+                if slot in pinned:
+                    continue
+                base_w = self._slot_words[slot]
+                w[base_w + S_BEGIN] = nxt  # ① the slot is being written
+                fence()  # ②
+                if any(w[b + R_PIN] == slot for b in readers):  # ③
+                    w[base_w + S_BEGIN] = held
+                    continue
+                return slot
+            # no slot: only lossless back-pressure (or pins of dead readers) gets here
+            now = time.monotonic()
+            if deadline is not None and now >= deadline:
+                behind = ", ".join(
+                    f"pid {w[b + R_PID]} at message {w[b + R_READ_SEQ]}"
+                    for b in self._live_readers()
+                )
+                msg = (
+                    f"stream {self.name!r}: message {nxt} not published: every slot holds a "
+                    f"message a lossless reader has not read yet ({behind}); the reader is too "
+                    "slow or stuck — raise the timeout, add slots, or read as keep-latest"
+                )
+                raise TransportError(msg)
+            if now - last_check >= CHECK_S:
+                last_check = now
+                self._reap_dead_readers()
+            wait = CHECK_S if deadline is None else min(CHECK_S, deadline - now)
+            w[W_WRITER_WAITING] = 1
+            fence()  # the readers' read_seq stores are seen after this, or they see the flag
+            if self._lossless_floor() == need_free and wait_fd(self._space_fd, wait):
+                drain(self._space_fd)
+            w[W_WRITER_WAITING] = 0
+
+    def _live_readers(self) -> list[int]:
+        w = self._w
+        return [base for base in self._readers if w[base + R_STATE] == 1]
+
+    def _lossless_floor(self) -> int | None:
+        """The lowest read position of the lossless readers (None without any)."""
+        if self.policy is not Policy.LOSSLESS:
+            return None
+        w = self._w
+        floor = None
+        for base in self._readers:
+            if w[base + R_STATE] == 1 and w[base + R_POLICY] == Policy.LOSSLESS.value:
+                seq = int(w[base + R_READ_SEQ])
+                floor = seq if floor is None else min(floor, seq)
+        return floor
+
+    def _reap_dead_readers(self) -> None:
+        w = self._w
+        for base in self._readers:
+            if w[base + R_STATE] == 1 and not process_alive(
+                int(w[base + R_PID]), int(w[base + R_START])
+            ):
+                lossless = w[base + R_POLICY] == Policy.LOSSLESS.value
+                pid, missed = int(w[base + R_PID]), self._seq - int(w[base + R_READ_SEQ])
+                w[base + R_PIN] = -1
+                w[base + R_STATE] = 0
+                if lossless:
+                    msg = (
+                        f"stream {self.name!r}: lossless reader pid {pid} exited with {missed} "
+                        "message(s) unread; they are lost to it (a new reader starts from the "
+                        "oldest message still held)"
+                    )
+                    raise ReaderGoneError(msg)
+                logger.info("stream %s: reader pid %d is gone; entry freed", self.name, pid)
+
+    def _commit(self, slot: int, nbytes: int, stamp_ns: int, kind: int, meta: bytes) -> int:
+        w, seq = self._w, self._seq + 1
+        base = self._slot_words[slot]
+        if meta:
+            off = base * 8 + META_OFFSET
+            self._raw[off : off + len(meta)] = meta
+        w[base + S_STAMP] = stamp_ns
+        now = time.time_ns()
+        w[base + S_PUBLISH] = now
+        w[base + S_KIND] = kind
+        w[base + S_NBYTES] = nbytes
+        w[base + S_META_LEN] = len(meta)
+        ordered()  # ⑤
+        w[base + S_END] = seq  # ⑥
+        w[W_ORDER + seq % self._layout.n_slots] = slot  # ⑦
+        w[W_WRITE_SEQ] = seq  # ⑧
+        w[W_PUBLISHED] = seq
+        w[W_HEARTBEAT] = now
+        self._seq = seq
+        self._slot_seq[slot] = seq
+        self._lru.remove(slot)
+        self._lru.append(slot)
+        fence()  # write_seq is seen by a reader before it sleeps, or its waiting flag is seen here
+        with self._fd_lock:
+            for base_r, fd in zip(self._readers, self._reader_fd, strict=True):
+                if fd >= 0 and w[base_r + R_WAITING]:
+                    os.eventfd_write(fd, 1)
+        return seq
+
+    def _check(self, nbytes: int, meta: bytes) -> None:
+        if self._closed:
+            msg = f"stream {self.name!r} is closed"
+            raise TransportError(msg)
+        if self._loaned:
+            msg = f"stream {self.name!r}: a loaned slot is still open; finish that `with` first"
+            raise TransportError(msg)
+        if nbytes > self._layout.capacity:
+            msg = (
+                f"stream {self.name!r}: a {nbytes}-byte message does not fit its "
+                f"{self._layout.capacity}-byte slots; create the stream with a larger "
+                "capacity_bytes"
+            )
+            raise TransportError(msg)
+        if len(meta) > META_CAPACITY:
+            msg = f"stream {self.name!r}: {len(meta)} bytes of meta (at most {META_CAPACITY})"
+            raise TransportError(msg)
+
+    def publish(
+        self,
+        payload: bytes | bytearray | memoryview | npt.NDArray[Any],
+        *,
+        stamp_ns: int = 0,
+        kind: int = 0,
+        meta: bytes = b"",
+        timeout_s: float | None = 5.0,
+    ) -> int:
+        """Copy ``payload`` (any C-contiguous buffer) into the next slot; returns its sequence.
+
+        Raises:
+            TransportError: too large; lossless back-pressure for longer than ``timeout_s``
+                (None = wait forever); :class:`ReaderGoneError` when a lossless reader died.
+        """
+        src = np.frombuffer(payload, np.uint8) if not isinstance(payload, np.ndarray) else payload
+        if src.dtype != np.uint8 or src.ndim != 1:
+            src = src.reshape(-1).view(np.uint8)
+        nbytes = src.shape[0]
+        self._check(nbytes, meta)
+        slot = self._claim(None if timeout_s is None else time.monotonic() + timeout_s)
+        np.copyto(self._payload[slot][:nbytes], src)  # ④
+        return self._commit(slot, nbytes, stamp_ns, kind, meta)
+
+    @contextlib.contextmanager
+    def loan(
+        self,
+        nbytes: int,
+        *,
+        stamp_ns: int = 0,
+        kind: int = 0,
+        meta: bytes = b"",
+        timeout_s: float | None = 5.0,
+    ) -> Iterator[npt.NDArray[np.uint8]]:
+        """The next slot itself, ``nbytes`` long, to fill in place; published when the block
+        ends without an exception (an exception abandons the slot, nothing is published)."""
+        self._check(nbytes, meta)
+        slot = self._claim(None if timeout_s is None else time.monotonic() + timeout_s)
+        self._loaned = True
+        try:
+            yield self._payload[slot][:nbytes]
+        except BaseException:
+            self._w[self._slot_words[slot] + S_BEGIN] = self._slot_seq[slot]
+            raise
+        finally:
+            self._loaned = False
+        self._commit(slot, nbytes, stamp_ns, kind, meta)
+
+    def publish_sample(self, sample: SensorData, *, timeout_s: float | None = 5.0) -> int:
+        """Publish a ``SensorData`` (typed, see :mod:`redrive.transport.codec`); returns its
+        sequence number."""
+        from redrive.transport.codec import write_sample
+
+        write_sample(self.loan, sample, timeout_s=timeout_s)
+        return self._seq
+
+    @property
+    def seq(self) -> int:
+        """The last published message's sequence number."""
+        return self._seq
+
+    def stats(self) -> ChannelStats:
+        return channel_stats(self._seg, self.name)
+
+    def close(self) -> None:
+        """Unlink the segment (readers see the writer gone) and stop the attach thread."""
+        if self._closed:
+            return
+        self._closed = True
+        self._sock.close()
+        self._thread.join(timeout=1.0)
+        with self._fd_lock:
+            for fd in self._reader_fd:
+                if fd >= 0:
+                    os.close(fd)
+            self._reader_fd = [-1] * len(self._reader_fd)
+        os.close(self._space_fd)
+        self._payload = []
+        self._raw.release()
+        self._seg.close(unlink=True)
+
+    def __enter__(self) -> Writer:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def __del__(self) -> None:
+        if not getattr(self, "_closed", True):
+            with contextlib.suppress(Exception):
+                self.close()
