@@ -230,7 +230,7 @@ class MainWindow(QtWidgets.QMainWindow):
         logger.info(
             "run %s: %d frames, algorithms %s, %d bookmarks",
             path,
-            len(run.stamps),
+            len(run.frames),
             ", ".join(run.detections) or "none",
             len(run.bookmarks),
         )
