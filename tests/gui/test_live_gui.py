@@ -86,7 +86,7 @@ def test_live_feed_draws_records_and_cleans_up(
     stats: list[dict[str, Any]] = []
     feed = LiveFeed(window, rig.uri, [POINTS, IMAGE], record=out)
     feed.stats.connect(stats.append)
-    window.live_feed = feed  # type: ignore[assignment]
+    window.live_feed = feed
     feed.start()
     qtbot.waitUntil(lambda: len(shown) >= 5, timeout=_WAIT_MS)
     assert window.scene is not None
@@ -212,7 +212,7 @@ def test_live_menu_connect_then_record(
 
 def test_a_dead_scraper_fails_the_feed(qtbot: QtBot, window: MainWindow, rig: RosCore) -> None:
     feed = LiveFeed(window, rig.uri, [POINTS])
-    window.live_feed = feed  # type: ignore[assignment]
+    window.live_feed = feed
     feed.start()
     qtbot.waitUntil(lambda: feed.shown >= 1, timeout=_WAIT_MS)
     session = feed._session

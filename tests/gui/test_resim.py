@@ -93,9 +93,15 @@ def _points(view: TopDownView, layer: str) -> int:
     return 0 if x is None else len(x)
 
 
+def _detections(panel: Any, run: str = "a") -> Any:
+    """frame index → the objects of the perception algorithm shown for run ``a`` or ``b``."""
+    data, shown = getattr(panel, f"run_{run}"), getattr(panel, f"shown_{run}")
+    return data.detections[shown["perception"]]
+
+
 def _frame_with_both(panel: Any) -> int:
-    data = panel.run_a
-    return next(i for i in data.frames if data.detections.get(i) and data.ground_truth.get(i))
+    data, detections = panel.run_a, _detections(panel)
+    return next(i for i in data.frames if detections.get(i) and data.ground_truth.get(i))
 
 
 # -- a whole algorithm test -------------------------------------------------------------------
@@ -125,7 +131,7 @@ def test_algorithm_test_runs_evaluates_shows_and_exports(
     # the result and the result over ground truth, for one frame
     index = _frame_with_both(panel)
     panel.set_frame(index)
-    n_det = len(panel.run_a.detections[index])
+    n_det = len(_detections(panel)[index])
     n_gt = len(panel.run_a.ground_truth[index])
     assert _points(panel.result_view, "result_boxes") == 10 * n_det  # 5 segments per box
     assert _points(panel.result_view, "gt_boxes") == 0  # the left view: the result only
@@ -258,7 +264,7 @@ def test_planning_and_control_run_behind_the_reference_perception(
     names = [a["name"] for a in open_run(blocker.args[0]).manifest["algorithms"]]
     assert names[:2] == ["cluster-detector", "kalman-tracker"]
     assert names[-1] == spec
-    assert panel.run_a.shown == {category: spec}
+    assert panel.shown_a == {category: spec}
     panel.set_frame(20)
     if layer is not None:
         assert _points(panel.result_view, layer) > 1
@@ -285,8 +291,8 @@ def test_a_b_views_follow_one_frame_slider(panel: Any, two_runs: tuple[Path, Pat
         panel.frame_slider.setValue(index)  # as the user drags it
         a = _points(panel.overlay_view, "result_boxes")
         b = _points(panel.overlay_view_b, "result_boxes")
-        assert a == 10 * len(panel.run_a.detections[index])
-        assert b == 10 * len(panel.run_b.detections[index]) > 0
+        assert a == 10 * len(_detections(panel, "a")[index])
+        assert b == 10 * len(_detections(panel, "b")[index]) > 0
         assert _points(panel.overlay_view_b, "gt_boxes") > 0
         seen.append((a, b, _points(panel.overlay_view_b, "gt_boxes")))
     assert seen[0] != seen[1]  # both views moved with the slider

@@ -27,12 +27,12 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 from PySide6 import QtCore, QtWidgets
 
 from redrive.errors import ConfigError, RedriveError, TransportError
-from redrive.gui.loader import LogSummary, ViewOptions, build_scene
+from redrive.gui.loader import FrameLoader, LogSummary, ViewOptions, build_scene
 from redrive.gui.scene import Scene
 from redrive.gui.topics import TopicPicker, ros_status
 from redrive.io.frames import FrameAssembler
@@ -43,15 +43,82 @@ from redrive.live.session import LiveSession
 from redrive.types import SensorType
 
 if TYPE_CHECKING:
-    from redrive.gui.mainwindow import MainWindow
+    from redrive.gui.camera import CameraView
+    from redrive.gui.logbox import LogBox
+    from redrive.gui.planview import Planview
+    from redrive.gui.session import RunData
+    from redrive.gui.timeline import Timeline
 
-__all__ = ["LiveFeed", "connect_dialog", "record_dialog", "show_ros_status", "start_feed"]
+__all__ = [
+    "LiveFeed",
+    "LiveWindow",
+    "connect_dialog",
+    "record_dialog",
+    "show_ros_status",
+    "start_feed",
+]
 
 logger = logging.getLogger(__name__)
 
 _SESSIONS = iter(range(1, 1 << 30))
 #: a window's dynamic property: the MCAP file the next connection records to
 _RECORD_NEXT = "redrive_live_record"
+
+
+@runtime_checkable
+class LiveWindow(Protocol):
+    """The window a :class:`LiveFeed` draws into and the Live menu's dialogs work on.
+
+    :class:`~redrive.gui.mainwindow.LiveWindow` is one; it imports this module, never the other
+    way round (an import-linter contract in ``pyproject.toml`` keeps it so).
+    """
+
+    timeline: Timeline
+    loader: FrameLoader
+    planview: Planview
+    camera: CameraView
+    logbox: LogBox
+    settings: QtCore.QSettings
+    status: QtWidgets.QStatusBar
+    #: the log (or live stream) shown, the run over it, the frame shown and how many there are
+    summary: LogSummary | None
+    run: RunData | None
+    current: int
+    frame_count: int
+    time_origin_ns: int | None
+    #: the feed drawing into the window, if any
+    live_feed: LiveFeed | None
+
+    # Qt's own: the top-level widget (the parent of the feed and of the dialogs), its title and
+    # dynamic properties
+    def window(self) -> QtWidgets.QWidget: ...
+    def setWindowTitle(self, title: str, /) -> None: ...
+    def property(self, name: str, /) -> Any: ...
+    def setProperty(self, name: str, value: Any, /) -> bool: ...
+
+    def view_options(self) -> ViewOptions:
+        """What the views want drawn now."""
+        ...
+
+    def show_scene(self, scene: Scene) -> None:
+        """Draw ``scene`` in every view."""
+        ...
+
+    def show_error(self, title: str, message: str) -> None:
+        """Log ``message`` and show it in a (non-blocking) message box."""
+        ...
+
+    def restart_first_frame_clock(self) -> None:
+        """Time the next first frame from now (logged as "first frame shown … after opening")."""
+        ...
+
+    def disconnect_live(self) -> None:
+        """Stop the window's live feed, if any."""
+        ...
+
+    def refresh(self) -> None:
+        """Request the current frame of the open log again."""
+        ...
 
 
 def _session_name() -> str:
@@ -77,7 +144,7 @@ class LiveFeed(QtCore.QObject):
     """Live ROS 1 topics as scenes, from a worker thread (see the module text).
 
     Args:
-        window_or_callbacks: a :class:`~redrive.gui.mainwindow.MainWindow` — the feed then
+        window_or_callbacks: a :class:`LiveWindow` (the main window) — the feed then
             draws into it (planview, camera, timeline label, plots cursor), disables its playback
             controls while live and reports failures and the recording there — or a callable
             returning the :class:`ViewOptions` to build scenes with, or None (defaults).
@@ -106,7 +173,7 @@ class LiveFeed(QtCore.QObject):
 
     def __init__(
         self,
-        window_or_callbacks: MainWindow | Callable[[], ViewOptions] | None,
+        window_or_callbacks: LiveWindow | Callable[[], ViewOptions] | None,
         uri: str,
         topics: Sequence[str],
         *,
@@ -114,14 +181,14 @@ class LiveFeed(QtCore.QObject):
         stats_interval_s: float = 1.0,
     ) -> None:
         target = window_or_callbacks
-        window: MainWindow | None = None
+        window: LiveWindow | None = None
         options_fn: Callable[[], ViewOptions] = ViewOptions
-        if isinstance(target, QtWidgets.QMainWindow) and hasattr(target, "_show_scene"):
+        if isinstance(target, LiveWindow):
             window = target
             options_fn = window.view_options
         elif callable(target):
             options_fn = target
-        super().__init__(window)
+        super().__init__(None if window is None else window.window())
         #: the window drawn into (None: only the signals)
         self.window = window
         self._options_fn = options_fn
@@ -375,7 +442,7 @@ class LiveFeed(QtCore.QObject):
         self._stop.set()  # the worker tears down; `_worker_done` finishes here
         if self.window is not None:
             self.window.status.showMessage("live feed failed", 10_000)
-            self.window._error("Live feed failed", text)
+            self.window.show_error("Live feed failed", text)
         else:
             logger.error("%s", text)
         self.failed.emit(text)
@@ -413,11 +480,11 @@ class LiveFeed(QtCore.QObject):
 
     # -- the window -----------------------------------------------------------------------------
 
-    def _playback_controls(self, window: MainWindow) -> list[QtWidgets.QWidget]:
+    def _playback_controls(self, window: LiveWindow) -> list[QtWidgets.QWidget]:
         t = window.timeline
         return [t.play_button, t.step_back, t.step_over, t.speed_box, t.slider]
 
-    def _attach(self, window: MainWindow) -> None:
+    def _attach(self, window: LiveWindow) -> None:
         """Live: playback stops, its controls are disabled, the log loader's scenes are not shown."""
         self._detached = False
         window.timeline.set_playing(False)
@@ -426,16 +493,15 @@ class LiveFeed(QtCore.QObject):
         window.timeline.prev_bookmark.setEnabled(False)
         window.timeline.next_bookmark.setEnabled(False)
         with contextlib.suppress(RuntimeError, TypeError):
-            window.loader.scene_ready.disconnect(window._show_scene)
+            window.loader.scene_ready.disconnect(window.show_scene)
         window.timeline.play_toggled.connect(self._no_playback)
         window.loader.opened.connect(self._log_opened)
         window.planview.options_changed.connect(self._refresh_options)
         window.camera.camera_changed.connect(self._refresh_options)
-        # MainWindow._show_scene times the first frame from opening; live, from connecting
-        window._open_t0 = time.perf_counter()
-        window._first_frame_s = None
+        # the window times the first frame from opening; live, from connecting
+        window.restart_first_frame_clock()
 
-    def _detach(self, window: MainWindow) -> None:
+    def _detach(self, window: LiveWindow) -> None:
         if self._detached:
             return
         self._detached = True
@@ -447,7 +513,7 @@ class LiveFeed(QtCore.QObject):
         ):
             with contextlib.suppress(RuntimeError, TypeError):
                 sig.disconnect(slot)
-        window.loader.scene_ready.connect(window._show_scene)
+        window.loader.scene_ready.connect(window.show_scene)
         for widget in self._playback_controls(window):
             widget.setEnabled(True)
         has_bookmarks = bool(window.timeline.bookmark_frames)
@@ -457,10 +523,10 @@ class LiveFeed(QtCore.QObject):
             # the last live frame stays on screen; there is nothing to play or step through
             window.summary = None
             window.frame_count = 0
-        if getattr(window, "live_feed", None) is self and self.error is not None:
+        if window.live_feed is self and self.error is not None:
             window.live_feed = None
 
-    def _first_scene(self, window: MainWindow, summary: LogSummary) -> None:
+    def _first_scene(self, window: LiveWindow, summary: LogSummary) -> None:
         window.camera.set_cameras(summary.cameras)  # before the summary: no loader request
         window.summary = summary
         window.time_origin_ns = None  # the live stream's first frame is time zero
@@ -472,11 +538,11 @@ class LiveFeed(QtCore.QObject):
             ", ".join(summary.cameras) or "none",
         )
 
-    def _show(self, window: MainWindow, scene: Scene) -> None:
+    def _show(self, window: LiveWindow, scene: Scene) -> None:
         window.current = scene.index
         window.frame_count = scene.index + 1
         window.timeline.set_frame_count(scene.index + 1)
-        window._show_scene(scene)
+        window.show_scene(scene)
 
     @QtCore.Slot(bool)
     def _no_playback(self, on: bool) -> None:
@@ -487,7 +553,7 @@ class LiveFeed(QtCore.QObject):
     def _log_opened(self, _summary: object) -> None:
         """A log was opened while live: it replaces the live view."""
         window = self.window
-        if window is not None and getattr(window, "live_feed", None) is self:
+        if window is not None and window.live_feed is self:
             window.disconnect_live()
         else:
             self.stop()
@@ -508,7 +574,7 @@ class _StatusBridge(QtCore.QObject):
     text = QtCore.Signal(str)
 
 
-def show_ros_status(window: MainWindow, uri: str) -> None:
+def show_ros_status(window: LiveWindow, uri: str) -> None:
     """Put :func:`~redrive.gui.topics.ros_status` of ``uri`` in the log box's status line; asked
     in a worker thread (it blocks up to about a second)."""
     bridge = window.logbox.findChild(_StatusBridge)
@@ -529,24 +595,24 @@ def show_ros_status(window: MainWindow, uri: str) -> None:
 
 
 def start_feed(
-    window: MainWindow, uri: str, topics: Sequence[str], *, record: str | Path | None = None
+    window: LiveWindow, uri: str, topics: Sequence[str], *, record: str | Path | None = None
 ) -> LiveFeed:
     """Stop the window's feed (if any) and start one of ``topics`` as ``window.live_feed``."""
     window.disconnect_live()
     feed = LiveFeed(window, uri, topics, record=record)
-    setattr(window, "live_feed", feed)  # noqa: B010  (MainWindow declares it as None)
+    window.live_feed = feed
     feed.start()
     return feed
 
 
-def connect_dialog(window: MainWindow) -> TopicPicker | None:
+def connect_dialog(window: LiveWindow) -> TopicPicker | None:
     """Live → Connect: ask the master URI, open the Topic Picker on it; its Run starts a
     :class:`LiveFeed` (recording when :func:`record_dialog` asked for it).  Returns the picker
     (opened, not executed), or None when cancelled."""
     remembered = window.settings.value("live/master_uri")
     default = str(remembered) if remembered else default_master_uri()
     text, ok = QtWidgets.QInputDialog.getText(
-        window,
+        window.window(),
         "Connect to ROS master",
         "ROS master URI:",
         QtWidgets.QLineEdit.EchoMode.Normal,
@@ -557,11 +623,11 @@ def connect_dialog(window: MainWindow) -> TopicPicker | None:
     try:
         uri = check_master_uri(text)
     except ConfigError as err:
-        window._error("Cannot connect", str(err))
+        window.show_error("Cannot connect", str(err))
         return None
     window.settings.setValue("live/master_uri", uri)
     show_ros_status(window, uri)
-    picker = TopicPicker.for_master(uri, parent=window)
+    picker = TopicPicker.for_master(uri, parent=window.window())
     picker.setAttribute(QtCore.Qt.WidgetAttribute.WA_DeleteOnClose)
 
     def chosen(topics: list[str]) -> None:
@@ -576,14 +642,17 @@ def connect_dialog(window: MainWindow) -> TopicPicker | None:
     return picker
 
 
-def record_dialog(window: MainWindow) -> LiveFeed | None:
+def record_dialog(window: LiveWindow) -> LiveFeed | None:
     """Live → Record: ask an output ``.mcap``; restart the running feed recording to it (returns
     the new feed), or remember it for the next connection (returns None)."""
     last = window.settings.value("live/record_dir")
     start = Path(str(last)) if last else Path.cwd()
     name = f"live-{time.strftime('%Y%m%d-%H%M%S')}.mcap"
     path_text, _ = QtWidgets.QFileDialog.getSaveFileName(
-        window, "Record live topics to MCAP", str(start / name), "MCAP (*.mcap);;All files (*)"
+        window.window(),
+        "Record live topics to MCAP",
+        str(start / name),
+        "MCAP (*.mcap);;All files (*)",
     )
     if not path_text:
         return None
@@ -591,7 +660,7 @@ def record_dialog(window: MainWindow) -> LiveFeed | None:
     if not path.suffix:
         path = path.with_suffix(".mcap")
     window.settings.setValue("live/record_dir", str(path.parent))
-    feed: LiveFeed | None = getattr(window, "live_feed", None)
+    feed = window.live_feed
     if feed is not None and feed.running:
         logger.info("live: restarting the feed to record to %s", path)
         return start_feed(window, feed.uri, feed.topics, record=path)

@@ -40,7 +40,15 @@ from redrive.gui.scene import (
 )
 from redrive.gui.session import LogSession, RunData, series_from_log
 from redrive.io.calibration import camera_calibrations, static_transforms
-from redrive.types import Box3D, DetectedObject, Frame, Image, PointCloud, SensorType
+from redrive.types import (
+    Box3D,
+    DetectedObject,
+    Frame,
+    Image,
+    PointCloud,
+    SensorType,
+    VehicleState,
+)
 
 __all__ = ["PALETTE", "FrameLoader", "LogSummary", "ViewOptions", "build_scene", "to_rgb8"]
 
@@ -165,16 +173,18 @@ def build_scene(
         kept_intensity = None if intensity is None else intensity[keep]
         colors = color_points(xyz[keep], options.color_mode, intensity=kept_intensity)
     layers: list[LayerLines] = []
+    # the run's frame shown with this log frame (the same stamp)
+    at = run.frame_at(frame.stamp_ns) if run is not None else None
     gt = frame.ground_truth
-    if run is not None and not gt:
-        gt = run.ground_truth.get(frame.stamp_ns, gt)
+    if run is not None and at is not None and not gt:
+        gt = run.ground_truth.get(at, gt)
     if Layer.GROUND_TRUTH in layers_on and gt:
         layers.append(
             LayerLines(name="ground truth", color=GT_COLOR, segments=box_edge_segments(gt))
         )
     if run is not None and Layer.DETECTIONS in layers_on:
         for n, (name, per_frame) in enumerate(run.detections.items()):
-            objects = per_frame.get(frame.stamp_ns, ())
+            objects = per_frame.get(at, ()) if at is not None else ()
             labels: tuple[tuple[str, float, float, float], ...] = ()
             if Layer.TRACK_IDS in layers_on and n == len(run.detections) - 1:  # the last stage
                 labels = tuple(
@@ -198,9 +208,9 @@ def build_scene(
         ego = DetectedObject(object_id=-1, box=_EGO_BOX)
         layers.append(LayerLines(name="ego", color=EGO_COLOR, segments=box_edge_segments([ego])))
     path = None
-    if run is not None and Layer.PATH in layers_on:
+    if run is not None and at is not None and Layer.PATH in layers_on:
         for paths in run.paths.values():
-            path = path_points(paths.get(frame.stamp_ns))
+            path = path_points(paths.get(at))
             if path is not None:
                 break
     cameras = {}
@@ -219,14 +229,13 @@ def build_scene(
         path=path,
         raster=raster,
         cameras=cameras,
-        pose=_pose(frame, run),
+        pose=_pose(frame, None if run is None or at is None else run.ego.get(at)),
     )
 
 
-def _pose(frame: Frame, run: RunData | None) -> tuple[float, float, float] | None:
-    state = frame.vehicle_state
-    if state is None and run is not None:
-        state = run.ego.get(frame.stamp_ns)
+def _pose(frame: Frame, run_ego: VehicleState | None) -> tuple[float, float, float] | None:
+    """The ego pose of the frame: the log's, else the run's."""
+    state = frame.vehicle_state if frame.vehicle_state is not None else run_ego
     if state is None:
         return None
     return (float(state.position[0]), float(state.position[1]), float(state.heading_rad))

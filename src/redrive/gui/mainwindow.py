@@ -12,6 +12,7 @@ from typing import Any
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from redrive.errors import RedriveError
+from redrive.gui import live
 from redrive.gui.camera import CameraView
 from redrive.gui.loader import FrameLoader, LogSummary, ViewOptions
 from redrive.gui.logbox import LogBox
@@ -57,7 +58,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self._open_t0 = time.perf_counter()
         self._first_frame_s: float | None = None
         self._closed = False
-        self.live_feed: Any = None  # a redrive.gui.live.LiveFeed while live
+        self.live_feed: live.LiveFeed | None = None  # while live
         self.shown_sensors: frozenset[str] | None = None  # the topic picker's choice
         self.time_origin_ns: int | None = None
         self._series: Series | None = None
@@ -95,7 +96,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.loader.open_failed.connect(self._open_failed)
         self.loader.indexed.connect(self._indexed)
         self.loader.series_ready.connect(self._series_ready)
-        self.loader.scene_ready.connect(self._show_scene)
+        self.loader.scene_ready.connect(self.show_scene)
         self.loader.frame_failed.connect(self._frame_failed)
         self.timeline.frame_requested.connect(self.go_to)
         self.timeline.play_toggled.connect(self._play_toggled)
@@ -143,10 +144,10 @@ class MainWindow(QtWidgets.QMainWindow):
         self._fill_recent()
         file.addSeparator()
         file.addAction("&Quit", QtGui.QKeySequence.StandardKey.Quit, self.close)
-        live = menus.addMenu("&Live")
-        live.addAction("&Connect to ROS master…", self.connect_live)
-        self.record_action = live.addAction("&Record to MCAP…", self.record_live)
-        live.addAction("&Disconnect", self.disconnect_live)
+        live_menu = menus.addMenu("&Live")
+        live_menu.addAction("&Connect to ROS master…", self.connect_live)
+        self.record_action = live_menu.addAction("&Record to MCAP…", self.record_live)
+        live_menu.addAction("&Disconnect", self.disconnect_live)
         resim = menus.addMenu("Re-&simulation")
         resim.addAction("Show the re-simulation panel", self.show_resim)
         view = menus.addMenu("&View")
@@ -209,15 +210,14 @@ class MainWindow(QtWidgets.QMainWindow):
     def open_log(self, path: str | Path) -> None:
         self.timeline.set_playing(False)
         self.status.showMessage(f"opening {path} …")
-        self._open_t0 = time.perf_counter()
-        self._first_frame_s = None
+        self.restart_first_frame_clock()
         self.loader.open(path)
 
     def open_run(self, path: str | Path) -> None:
         try:
             run = RunData.load(path)
         except (RedriveError, OSError) as err:
-            self._error("Cannot open the run", f"{path}: {err}")
+            self.show_error("Cannot open the run", f"{path}: {err}")
             return
         self.run = run
         self.loader.set_run(run)
@@ -230,12 +230,12 @@ class MainWindow(QtWidgets.QMainWindow):
         logger.info(
             "run %s: %d frames, algorithms %s, %d bookmarks",
             path,
-            len(run.stamps),
+            len(run.frames),
             ", ".join(run.detections) or "none",
             len(run.bookmarks),
         )
         if log is None:
-            self._error(
+            self.show_error(
                 "The run's log is missing",
                 f"{path}: its manifest names the log {run.manifest.get('log', {}).get('path')!r}, "
                 "which is not there; open the log with File → Open log.",
@@ -287,7 +287,7 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def _open_failed(self, path: str, message: str) -> None:
         self.status.showMessage(f"could not open {path}")
-        self._error("Cannot open the log", message)
+        self.show_error("Cannot open the log", message)
 
     def _indexed(self, count: int, done: bool) -> None:
         if done:
@@ -326,7 +326,8 @@ class MainWindow(QtWidgets.QMainWindow):
     def refresh(self) -> None:
         self.go_to(self.current)
 
-    def _show_scene(self, scene: Scene) -> None:
+    def show_scene(self, scene: Scene) -> None:
+        """Draw ``scene`` (a frame's, from the loader or a live feed) in every view."""
         if self._closed:  # a scene queued before the window closed: its views are gone
             return
         self.scene = scene
@@ -351,6 +352,11 @@ class MainWindow(QtWidgets.QMainWindow):
             self._first_frame_s = time.perf_counter() - self._open_t0
             logger.info("first frame shown %.2f s after opening", self._first_frame_s)
         self.frame_shown.emit(scene.index)
+
+    def restart_first_frame_clock(self) -> None:
+        """Time the next first frame from now (a log being opened, a live feed connecting)."""
+        self._open_t0 = time.perf_counter()
+        self._first_frame_s = None
 
     def _move_cursor(self) -> None:
         if self._cursor_stamp is not None:
@@ -440,13 +446,9 @@ class MainWindow(QtWidgets.QMainWindow):
     # -- live -------------------------------------------------------------------------------------
 
     def connect_live(self) -> None:
-        from redrive.gui import live
-
         live.connect_dialog(self)
 
     def record_live(self) -> None:
-        from redrive.gui import live
-
         live.record_dialog(self)
 
     def disconnect_live(self) -> None:
@@ -498,7 +500,8 @@ class MainWindow(QtWidgets.QMainWindow):
         self.settings.setValue("recent", recent)
         self._fill_recent()
 
-    def _error(self, title: str, message: str) -> None:
+    def show_error(self, title: str, message: str) -> None:
+        """Log ``message`` and show it in a (non-blocking) message box."""
         logger.error("%s: %s", title, message)
         box = QtWidgets.QMessageBox(
             QtWidgets.QMessageBox.Icon.Critical, title, message, parent=self

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -24,16 +25,16 @@ from PySide6 import QtCore, QtWidgets
 from redrive.gui.resim_views import (
     CATEGORIES,
     REFERENCE_DETECTOR,
-    ResimRun,
     RunOutcome,
     RunThread,
     SummaryRow,
     TopDownView,
     default_run_dir,
     describe_error,
-    load_resim_run,
+    shown_algorithms,
     stored_summary_rows,
 )
+from redrive.gui.session import RunData
 
 __all__ = ["ResimPanel"]
 
@@ -49,7 +50,8 @@ class ResimPanel(QtWidgets.QWidget):
     Attributes for the main window and tests: ``status_label``, ``progress``, ``result_view``
     (A's result), ``overlay_view`` (A's result over ground truth), ``overlay_view_b`` (B's),
     ``summary_table``, ``frame_slider``, ``frame_label``, ``error_box`` (the last message box),
-    ``run_a`` / ``run_b`` (the :class:`ResimRun` shown).
+    ``run_a`` / ``run_b`` (the :class:`~redrive.gui.session.RunData` shown), ``shown_a`` /
+    ``shown_b`` (role → the algorithm of that run drawn).
     """
 
     run_finished = QtCore.Signal(object)
@@ -59,8 +61,10 @@ class ResimPanel(QtWidgets.QWidget):
     def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent)
         self.log_path: Path | None = None
-        self.run_a: ResimRun | None = None
-        self.run_b: ResimRun | None = None
+        self.run_a: RunData | None = None
+        self.run_b: RunData | None = None
+        self.shown_a: Mapping[str, str] = {}
+        self.shown_b: Mapping[str, str] = {}
         self.error_box: QtWidgets.QMessageBox | None = None
         self._thread: RunThread | None = None
         self._auto_out = True
@@ -295,7 +299,7 @@ class ResimPanel(QtWidgets.QWidget):
 
     def _on_succeeded(self, outcome: RunOutcome) -> None:
         self._finish_thread()
-        self._show_run_a(outcome.data, outcome.rows)
+        self._show_run_a(outcome.data, outcome.shown, outcome.rows)
         if outcome.status == "complete":
             self.progress.setRange(0, 100)
             self.progress.setValue(100)
@@ -332,38 +336,42 @@ class ResimPanel(QtWidgets.QWidget):
     def open_run(self, path: str | Path) -> bool:
         """Show an existing run directory as run A (its stored evaluation in the summary)."""
         try:
-            data = load_resim_run(Path(path))
-            rows = stored_summary_rows(Path(path), set(data.shown.values()))
+            data = RunData.load(Path(path))
+            shown = shown_algorithms(data.manifest)
+            rows = stored_summary_rows(Path(path), set(shown.values()))
         except Exception as err:  # the GUI's top level
             self._error(f"Cannot open run {path}: {describe_error(err)}")
             return False
-        self._show_run_a(data, rows)
-        self._status(f"Run A: {data.label}, {len(data.frames)} frames, {data.status}.")
+        self._show_run_a(data, shown, rows)
+        self._status(f"Run A: {_label(data, shown)}, {len(data.frames)} frames, {data.status}.")
         return True
 
     def open_run_b(self, path: str | Path) -> bool:
         """Show a second run's result over ground truth beside A's, on the same frame slider."""
-        prefer = self.run_a.shown.values() if self.run_a is not None else ()
+        prefer = self.shown_a.values() if self.run_a is not None else ()
         try:
-            data = load_resim_run(Path(path), prefer=prefer)
+            data = RunData.load(Path(path))
+            shown = shown_algorithms(data.manifest, prefer)
         except Exception as err:  # the GUI's top level
             self._error(f"Cannot open run B {path}: {describe_error(err)}")
             return False
-        self.run_b = data
-        self.overlay_view_b.setTitle(f"B: {data.algorithms} over ground truth")
+        self.run_b, self.shown_b = data, shown
+        self.overlay_view_b.setTitle(f"B: {_names(shown)} over ground truth")
         self.overlay_view_b.setToolTip(str(data.path))
         if self.overlay_view_b.isHidden():
             self.overlay_view_b.show()
             width = sum(self._splitter.sizes())
             self._splitter.setSizes([width * 3 // 11] * 3 + [width * 2 // 11])
         self._update_slider()
-        self._status(f"Run B: {data.label}, {len(data.frames)} frames, {data.status}.")
+        self._status(f"Run B: {_label(data, shown)}, {len(data.frames)} frames, {data.status}.")
         return True
 
-    def _show_run_a(self, data: ResimRun, rows: tuple[SummaryRow, ...]) -> None:
-        self.run_a = data
-        self.result_view.setTitle(f"A: {data.algorithms}")
-        self.overlay_view.setTitle(f"A: {data.algorithms} over ground truth")
+    def _show_run_a(
+        self, data: RunData, shown: Mapping[str, str], rows: tuple[SummaryRow, ...]
+    ) -> None:
+        self.run_a, self.shown_a = data, shown
+        self.result_view.setTitle(f"A: {_names(shown)}")
+        self.overlay_view.setTitle(f"A: {_names(shown)} over ground truth")
         for view in (self.result_view, self.overlay_view):
             view.setToolTip(str(data.path))
         self._fill_summary(rows)
@@ -414,9 +422,9 @@ class ResimPanel(QtWidgets.QWidget):
 
     def _show_frame(self, index: int) -> None:
         a, b = self.run_a, self.run_b
-        n_a = self.result_view.show_frame(a, index)
-        self.overlay_view.show_frame(a, index)
-        n_b = self.overlay_view_b.show_frame(b, index)
+        n_a = self.result_view.show_frame(a, index, shown=self.shown_a)
+        self.overlay_view.show_frame(a, index, shown=self.shown_a)
+        n_b = self.overlay_view_b.show_frame(b, index, shown=self.shown_b)
         if a is None and b is None:
             self.frame_label.setText("no run")
             return
@@ -478,6 +486,16 @@ class ResimPanel(QtWidgets.QWidget):
         box.setAttribute(QtCore.Qt.WidgetAttribute.WA_DeleteOnClose, False)
         box.open()
         self.error_box = box
+
+
+def _names(shown: Mapping[str, str]) -> str:
+    """The shown algorithms, comma-separated."""
+    return ", ".join(shown.values()) or "no algorithm"
+
+
+def _label(data: RunData, shown: Mapping[str, str]) -> str:
+    """``run-dir-name (algorithm, …)``."""
+    return f"{data.path.name} ({_names(shown)})"
 
 
 def _hbox(

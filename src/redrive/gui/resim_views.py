@@ -1,9 +1,9 @@
-"""The Re-simulation panel's parts: the worker that runs an algorithm test, a run read for
-display, and the top-down views.
+"""The Re-simulation panel's parts: the worker that runs an algorithm test, which of a run's
+algorithms are shown, and the top-down views.
 
-:class:`RunThread` runs the engine over a log, evaluates the run and reads it back, off the GUI
-thread.  :class:`ResimRun` is a run read once (:func:`load_resim_run`) into per-frame dicts, so
-moving the frame slider only looks frames up.
+:class:`RunThread` runs the engine over a log, evaluates the run and reads it back
+(:class:`~redrive.gui.session.RunData`, the GUI's one run model, read once into per-frame dicts,
+so moving the frame slider only looks frames up), off the GUI thread.
 
 A :class:`TopDownView` shows one frame of one run: x (forward) up the screen, y (left) to the
 left, metres, the ego outline at the origin (the rear-axle centre).  It draws the shown
@@ -32,7 +32,7 @@ import pyqtgraph as pg
 from PySide6 import QtCore
 
 from redrive.geometry.boxes import BOX_CORNER_SIGNS
-from redrive.results import open_run
+from redrive.gui.session import RunData
 from redrive.types import ControlCommands, DetectedObject, PlannedPath
 
 if TYPE_CHECKING:
@@ -46,7 +46,6 @@ __all__ = [
     "REFERENCE_DETECTOR",
     "REFERENCE_PLANNER",
     "REFERENCE_TRACKER",
-    "ResimRun",
     "RunOutcome",
     "RunThread",
     "SummaryRow",
@@ -55,7 +54,6 @@ __all__ = [
     "box_outline_segments",
     "default_run_dir",
     "describe_error",
-    "load_resim_run",
     "shown_algorithms",
     "stored_summary_rows",
 ]
@@ -135,79 +133,6 @@ def shown_algorithms(manifest: Mapping[str, Any], prefer: Iterable[str] = ()) ->
     if chosen:
         return chosen
     return {role: name for name, role in roles}  # later entries win: the last of each role
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class ResimRun:
-    """One run, read once for display.
-
-    Attributes:
-        path: the run directory.
-        status: the manifest's status (``complete``, ``interrupted`` …).
-        shown: role → the algorithm drawn for it (:func:`shown_algorithms`).
-        frames: the frame indices of the run, ascending.
-        stamps_ns: frame index → stamp (ns).
-        detections, paths, commands: frame index → output of the shown algorithm of the role.
-        ground_truth: frame index → ground-truth objects (base_link).
-    """
-
-    path: Path
-    status: str
-    shown: Mapping[str, str]
-    frames: tuple[int, ...]
-    stamps_ns: Mapping[int, int] = field(default_factory=dict)
-    detections: Mapping[int, tuple[DetectedObject, ...]] = field(default_factory=dict)
-    paths: Mapping[int, PlannedPath] = field(default_factory=dict)
-    commands: Mapping[int, ControlCommands] = field(default_factory=dict)
-    ground_truth: Mapping[int, tuple[DetectedObject, ...]] = field(default_factory=dict)
-
-    @property
-    def algorithms(self) -> str:
-        """The shown algorithms, comma-separated."""
-        return ", ".join(self.shown.values()) or "no algorithm"
-
-    @property
-    def label(self) -> str:
-        """``run-dir-name (algorithm, …)``."""
-        return f"{self.path.name} ({self.algorithms})"
-
-
-def load_resim_run(run_dir: Path, *, prefer: Iterable[str] = ()) -> ResimRun:
-    """Read what the views draw from the run directory ``run_dir``.
-
-    Raises:
-        ConfigError: ``run_dir`` is not a readable run.
-    """
-    run = open_run(run_dir)
-    shown = shown_algorithms(run.manifest, prefer)
-    frames = run.table("frames")
-    indices = [int(i) for i in frames.column("frame_index").to_pylist()]
-    stamps = [int(s) for s in frames.column("stamp_ns").to_pylist()]
-    # an algorithm with no ok step at all has no rows: Run.* raise ValueError for it
-    detections = _or_empty(run.detections, shown.get("perception"))
-    paths = _or_empty(run.paths, shown.get("planning"))
-    commands = _or_empty(run.commands, shown.get("control"))
-    return ResimRun(
-        path=Path(run_dir),
-        status=str(run.manifest.get("status", "")),
-        shown=shown,
-        frames=tuple(sorted(set(indices))),
-        stamps_ns=dict(zip(indices, stamps, strict=True)),
-        detections=detections,
-        paths=paths,
-        commands=commands,
-        ground_truth=run.ground_truth(),
-    )
-
-
-def _or_empty(read: Any, algorithm: str | None) -> dict[int, Any]:
-    if algorithm is None:
-        return {}
-    try:
-        out: dict[int, Any] = read(algorithm)
-    except ValueError:  # the algorithm never ran a step (a run cancelled before its first frame)
-        return {}
-    return out
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -308,12 +233,14 @@ def default_run_dir(log: Path, algorithm: str) -> Path:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class RunOutcome:
-    """What the worker hands back: the run, its status, what it says, and its data to draw."""
+    """What the worker hands back: the run, its status, what it says, its data to draw and the
+    algorithms shown (role → name, :func:`shown_algorithms`)."""
 
     out: Path
     status: str
     message: str
-    data: ResimRun
+    data: RunData
+    shown: Mapping[str, str]
     rows: tuple[SummaryRow, ...] = field(default_factory=tuple)
 
 
@@ -382,15 +309,27 @@ class RunThread(QtCore.QThread):
         )
         message = _report_message(report, self.out)
         if report.status != "complete":  # cancelled (fail-fast is off: a run never "fails")
-            data = load_resim_run(self.out, prefer=[name])
-            return RunOutcome(out=self.out, status=report.status, message=message, data=data)
+            data = RunData.load(self.out)
+            return RunOutcome(
+                out=self.out,
+                status=report.status,
+                message=message,
+                data=data,
+                shown=shown_algorithms(data.manifest, [name]),
+            )
         try:
             summary = evaluate_run(self.out, algorithms=[name])
         except Exception as err:  # the run is complete and shown all the same
             logger.exception("evaluating %s failed", self.out)
-            data = load_resim_run(self.out, prefer=[name])
+            data = RunData.load(self.out)
             message += f"; evaluation failed: {describe_error(err)}"
-            return RunOutcome(out=self.out, status="complete", message=message, data=data)
+            return RunOutcome(
+                out=self.out,
+                status="complete",
+                message=message,
+                data=data,
+                shown=shown_algorithms(data.manifest, [name]),
+            )
         rows = [
             SummaryRow(algorithm=s.algorithm, metric=s.metric.name, key=k, value=v, unit=u)
             for s in summary.scored
@@ -403,9 +342,14 @@ class RunThread(QtCore.QThread):
             )
             for s in (*summary.failed, *summary.skipped)
         ]  # fmt: skip
-        data = load_resim_run(self.out, prefer=[name])
+        data = RunData.load(self.out)
         return RunOutcome(
-            out=self.out, status="complete", message=message, data=data, rows=tuple(rows)
+            out=self.out,
+            status="complete",
+            message=message,
+            data=data,
+            shown=shown_algorithms(data.manifest, [name]),
+            rows=tuple(rows),
         )
 
 
@@ -480,15 +424,24 @@ class TopDownView(pg.PlotWidget):
             xRange=(cx - half_w, cx + half_w), yRange=(cy - half_h, cy + half_h), padding=0.0
         )
 
-    def show_frame(self, data: ResimRun | None, frame_index: int | None) -> int:
-        """Draw ``frame_index`` of ``data`` (nothing when either is None or the run does not have
-        that frame); returns the number of result objects drawn."""
+    def show_frame(
+        self, data: RunData | None, frame_index: int | None, *, shown: Mapping[str, str]
+    ) -> int:
+        """Draw ``frame_index`` of ``data``: the outputs of the ``shown`` algorithms (role →
+        name, :func:`shown_algorithms`) — nothing when either is None or the run does not have
+        that frame; returns the number of result objects drawn."""
         if data is None or frame_index is None:
             self._draw((), (), None, None)
             return 0
-        detections = data.detections.get(frame_index, ())
+
+        def output(outputs: Mapping[str, Mapping[int, Any]], role: str) -> Any:
+            return outputs.get(shown.get(role, ""), {}).get(frame_index)
+
+        detections = output(data.detections, "perception") or ()
         truth = data.ground_truth.get(frame_index, ()) if self.with_ground_truth else ()
-        self._draw(detections, truth, data.paths.get(frame_index), data.commands.get(frame_index))
+        self._draw(
+            detections, truth, output(data.paths, "planning"), output(data.commands, "control")
+        )
         return len(detections)
 
     def _draw(

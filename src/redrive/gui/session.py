@@ -6,15 +6,16 @@ Sensor Dispatcher (:class:`~redrive.io.frames.FrameAssembler`) starting at the l
 driver samples (the timeline) is built by :meth:`LogSession.index` in the background, from a
 second reader, while the first frames are already shown.
 
-:class:`RunData` is a run directory's outputs keyed by frame stamp: detections per algorithm,
-ground truth, planned paths, ego states, bookmarks and per-frame metrics.
+:class:`RunData` is a run directory read for display — the one run model of the GUI (main
+window and Re-simulation panel): outputs per algorithm, ground truth and ego states by frame
+index, and the stored evaluation's bookmarks and per-frame metrics.
 """
 
 from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -26,9 +27,17 @@ from redrive.errors import LogError, UnsupportedMessageError
 from redrive.io import LogReader, open_log
 from redrive.io.frames import FrameAssembler
 from redrive.results import Run, open_run
-from redrive.types import DetectedObject, Frame, PlannedPath, VehicleState
+from redrive.types import ControlCommands, DetectedObject, Frame, PlannedPath, VehicleState
 
-__all__ = ["Bookmark", "LogSession", "RunData", "find_run_log", "series_from_log"]
+__all__ = [
+    "Bookmark",
+    "LogSession",
+    "PerFrameSeries",
+    "RunData",
+    "Series",
+    "find_run_log",
+    "series_from_log",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -154,44 +163,101 @@ class Bookmark:
     severity: float
 
 
-@dataclass(slots=True, kw_only=True)
+#: (metric, algorithm, series) → (stamps_ns, values): a run's per-frame metric series
+PerFrameSeries = dict[tuple[str, str, str], tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]]
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
 class RunData:
-    """A run's outputs, keyed by frame stamp (ns) so they line up with a log's frames."""
+    """A run directory read once for display — by the main window (over its log's frames) and
+    by the Re-simulation panel (its views and A/B) alike.
+
+    Everything is keyed by the run's frame index; :meth:`frame_at` finds the index of a log
+    frame by its stamp.
+
+    Attributes:
+        path: the run directory.
+        manifest: its manifest.
+        status: the manifest's status (``complete``, ``interrupted`` …).
+        algorithms: ``(name, role)`` of each algorithm, in pipeline order.
+        frames: the frame indices of the run, ascending.
+        stamps_ns: frame index → stamp (ns).
+        detections: perception algorithm (pipeline order) → frame index → objects.
+        paths: planning algorithm → frame index → planned path.
+        commands: control algorithm → frame index → commands.
+        ground_truth: frame index → ground-truth objects (base_link).
+        ego: frame index → ego state.
+        bookmarks: the failure frames of the stored evaluation, by frame.
+        per_frame: the stored evaluation's per-frame series, on stamps (the plots' time axis).
+    """
 
     path: Path
     manifest: Mapping[str, Any]
-    detections: dict[str, dict[int, tuple[DetectedObject, ...]]] = field(default_factory=dict)
-    ground_truth: dict[int, tuple[DetectedObject, ...]] = field(default_factory=dict)
-    paths: dict[str, dict[int, PlannedPath]] = field(default_factory=dict)
-    ego: dict[int, VehicleState] = field(default_factory=dict)
-    stamps: npt.NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
-    bookmarks: list[Bookmark] = field(default_factory=list)
-    #: (metric, algorithm, series) → (stamps_ns, values)
-    per_frame: dict[tuple[str, str, str], tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]] = (
-        field(default_factory=dict)
-    )
+    status: str = ""
+    algorithms: tuple[tuple[str, str], ...] = ()
+    frames: tuple[int, ...] = ()
+    stamps_ns: Mapping[int, int] = field(default_factory=dict)
+    detections: Mapping[str, Mapping[int, tuple[DetectedObject, ...]]] = field(default_factory=dict)
+    paths: Mapping[str, Mapping[int, PlannedPath]] = field(default_factory=dict)
+    commands: Mapping[str, Mapping[int, ControlCommands]] = field(default_factory=dict)
+    ground_truth: Mapping[int, tuple[DetectedObject, ...]] = field(default_factory=dict)
+    ego: Mapping[int, VehicleState] = field(default_factory=dict)
+    bookmarks: tuple[Bookmark, ...] = ()
+    per_frame: PerFrameSeries = field(default_factory=dict)
+    _index_of_stamp: dict[int, int] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(
+            self, "_index_of_stamp", {stamp: i for i, stamp in self.stamps_ns.items()}
+        )
+
+    def frame_at(self, stamp_ns: int) -> int | None:
+        """The index of the run's frame stamped ``stamp_ns`` (None: the run has no such frame)."""
+        return self._index_of_stamp.get(stamp_ns)
 
     @classmethod
     def load(cls, path: str | Path) -> RunData:
-        """Read a run directory (and its evaluation, when it has one).
+        """Read a run directory (and its evaluation, when it has one).  An algorithm that never
+        ran a step (a run cancelled before its first frame) has no outputs.
 
         Raises:
-            LogError: ``path`` is not a readable run directory.
+            ConfigError: ``path`` is not a readable run directory.
         """
         run = open_run(path)
-        data = cls(path=Path(path), manifest=dict(run.manifest))
         frames = run.table("frames").to_pydict()
-        by_index = dict(zip(frames["frame_index"], frames["stamp_ns"], strict=True))
-        data.stamps = np.array(sorted(by_index.values()), dtype=np.int64)
-        for algorithm, role in _algorithms(run):
-            if role == "perception":
-                data.detections[algorithm] = _by_stamp(run.detections(algorithm), by_index)
-            elif role == "planning":
-                data.paths[algorithm] = _by_stamp(run.paths(algorithm), by_index)
-        data.ground_truth = _by_stamp(run.ground_truth(), by_index)
-        data.ego = _by_stamp(run.ego(), by_index)
-        _load_evaluation(data, run, by_index)
-        return data
+        by_index = {
+            int(i): int(s) for i, s in zip(frames["frame_index"], frames["stamp_ns"], strict=True)
+        }
+        algorithms = tuple(_algorithms(run))
+        outputs: dict[str, dict[str, Mapping[int, Any]]] = {
+            "perception": {},
+            "planning": {},
+            "control": {},
+        }
+        readers: dict[str, Callable[[str], Mapping[int, Any]]] = {
+            "perception": run.detections,
+            "planning": run.paths,
+            "control": run.commands,
+        }
+        for algorithm, role in algorithms:
+            if role in readers:
+                outputs[role][algorithm] = _outputs(readers[role], algorithm)
+        bookmarks, per_frame = _evaluation(run, by_index)
+        return cls(
+            path=Path(path),
+            manifest=dict(run.manifest),
+            status=str(run.manifest.get("status", "")),
+            algorithms=algorithms,
+            frames=tuple(sorted(by_index)),
+            stamps_ns=by_index,
+            detections=outputs["perception"],
+            paths=outputs["planning"],
+            commands=outputs["control"],
+            ground_truth=run.ground_truth(),
+            ego=run.ego(),
+            bookmarks=bookmarks,
+            per_frame=per_frame,
+        )
 
 
 _BOOKMARK_FIELDS = ("frame_index", "stamp_ns", "kind", "metric", "algorithm", "detail", "severity")
@@ -205,17 +271,23 @@ def _algorithms(run: Run) -> list[tuple[str, str]]:
     return out
 
 
-def _by_stamp(values: Mapping[int, Any], by_index: Mapping[int, int]) -> dict[int, Any]:
-    return {by_index[i]: v for i, v in values.items() if i in by_index}
+def _outputs(read: Callable[[str], Mapping[int, Any]], algorithm: str) -> Mapping[int, Any]:
+    try:
+        return read(algorithm)
+    except ValueError:  # no step at all (Run.detections/paths/commands raise for it)
+        return {}
 
 
-def _load_evaluation(data: RunData, run: Run, by_index: Mapping[int, int]) -> None:
+def _evaluation(
+    run: Run, by_index: Mapping[int, int]
+) -> tuple[tuple[Bookmark, ...], PerFrameSeries]:
+    """The stored evaluation's bookmarks and per-frame series (none when not evaluated)."""
     from redrive.results.evaluation import read_evaluation, stored_metric_names
 
     if not stored_metric_names(run.path):
-        return
+        return (), {}
     evaluation = read_evaluation(run.path)
-    data.bookmarks = sorted(
+    bookmarks = sorted(
         (Bookmark(**{k: r[k] for k in _BOOKMARK_FIELDS}) for r in evaluation.bookmarks.to_pylist()),
         key=lambda b: (b.frame_index, b.kind),
     )
@@ -233,10 +305,11 @@ def _load_evaluation(data: RunData, run: Run, by_index: Mapping[int, int]) -> No
             xs, ys = groups.setdefault((m, a, s), ([], []))
             xs.append(by_index[i])
             ys.append(float("nan") if v is None else v)
-    data.per_frame = {
+    per_frame = {
         key: (np.array(xs, dtype=np.int64), np.array(ys, dtype=np.float64))
         for key, (xs, ys) in groups.items()
     }
+    return tuple(bookmarks), per_frame
 
 
 def find_run_log(run: RunData) -> Path | None:
