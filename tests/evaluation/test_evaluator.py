@@ -15,7 +15,7 @@ from redrive.evaluation import Bookmark, EvalData, Metric, MetricResult, MetricS
 from redrive.evaluation.evaluator import evaluate_run
 from redrive.evaluation.store import read_evaluation
 from redrive.results import RunWriter, open_run
-from tests.results._records import MANIFEST, frame
+from tests.results._records import SETUP, frame
 
 
 class ObjectCount(Metric):
@@ -85,7 +85,7 @@ class Buggy(Metric):
 @pytest.fixture
 def run_dir(tmp_path: Path) -> Path:
     path = tmp_path / "run"
-    with RunWriter(path, manifest=MANIFEST) as writer:
+    with RunWriter(path, setup=SETUP) as writer:
         for i in range(6):
             writer.write_frame(frame(i))
     return path
@@ -284,7 +284,7 @@ def test_metric_plugins_by_entry_point_or_module() -> None:
     with pytest.raises(PluginError, match="no metric named 'nope'"):
         load_metric_class("nope")
     with pytest.raises(PluginError, match=r"not a redrive\.evaluation\.Metric"):
-        load_metric_class("tests.evaluation.test_evaluator:MANIFEST")
+        load_metric_class("tests.evaluation.test_evaluator:SETUP")
     with pytest.raises(PluginError, match="cannot import"):
         load_metric_class("no.such.module:X")
 

@@ -48,6 +48,7 @@ from redrive.evaluation._kinematics import (
     wrap_angle,
 )
 from redrive.evaluation.base import EvalData, Metric, MetricResult, MetricSkipped, Series
+from redrive.types import Role
 
 __all__ = ["ControlMetrics", "planner_of"]
 
@@ -61,11 +62,7 @@ def planner_of(data: EvalData, requested: str = "") -> str:
     Raises:
         ConfigError: none or several planning algorithms and none requested, or an unknown one.
     """
-    planners = [
-        str(a["name"])
-        for a in data.run.manifest.get("algorithms", ())
-        if str(a.get("role", "")) == "planning"
-    ]
+    planners = data.run.manifest.names(Role.PLANNING)
     if requested:
         if requested not in planners:
             msg = (

@@ -32,7 +32,7 @@ import pyqtgraph as pg
 from PySide6 import QtCore
 
 from redrive.geometry.boxes import BOX_CORNER_SIGNS
-from redrive.results import open_run
+from redrive.results import RunSetup, RunStatus, open_run
 from redrive.types import ControlCommands, DetectedObject, PlannedPath
 
 if TYPE_CHECKING:
@@ -120,16 +120,14 @@ def _ego_outline() -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     return y, x
 
 
-def shown_algorithms(manifest: Mapping[str, Any], prefer: Iterable[str] = ()) -> dict[str, str]:
-    """role → the algorithm of a run whose results are drawn.
+def shown_algorithms(setup: RunSetup, prefer: Iterable[str] = ()) -> dict[str, str]:
+    """role (``perception`` …) → the algorithm of a run whose results are drawn.
 
     The ``prefer`` names found in the run (the algorithm under test) and nothing else; when none
     is found, the last algorithm of each role (the reference pipeline: tracker, planner,
     controller).
     """
-    roles = [
-        (str(a.get("name", "")), str(a.get("role", ""))) for a in manifest.get("algorithms", ())
-    ]
+    roles = [(a.name, a.role.value) for a in setup.algorithms]
     wanted = set(prefer)
     chosen = {role: name for name, role in roles if name in wanted}
     if chosen:
@@ -143,7 +141,7 @@ class ResimRun:
 
     Attributes:
         path: the run directory.
-        status: the manifest's status (``complete``, ``interrupted`` …).
+        status: the manifest's status.
         shown: role → the algorithm drawn for it (:func:`shown_algorithms`).
         frames: the frame indices of the run, ascending.
         stamps_ns: frame index → stamp (ns).
@@ -152,7 +150,7 @@ class ResimRun:
     """
 
     path: Path
-    status: str
+    status: RunStatus
     shown: Mapping[str, str]
     frames: tuple[int, ...]
     stamps_ns: Mapping[int, int] = field(default_factory=dict)
@@ -189,7 +187,7 @@ def load_resim_run(run_dir: Path, *, prefer: Iterable[str] = ()) -> ResimRun:
     commands = _or_empty(run.commands, shown.get("control"))
     return ResimRun(
         path=Path(run_dir),
-        status=str(run.manifest.get("status", "")),
+        status=run.manifest.status,
         shown=shown,
         frames=tuple(sorted(set(indices))),
         stamps_ns=dict(zip(indices, stamps, strict=True)),
@@ -311,7 +309,7 @@ class RunOutcome:
     """What the worker hands back: the run, its status, what it says, and its data to draw."""
 
     out: Path
-    status: str
+    status: RunStatus
     message: str
     data: ResimRun
     rows: tuple[SummaryRow, ...] = field(default_factory=tuple)
@@ -381,7 +379,9 @@ class RunThread(QtCore.QThread):
             request, on_start=self._on_start, progress=self._on_progress, cancel=self.cancel_event
         )
         message = _report_message(report, self.out)
-        if report.status != "complete":  # cancelled (fail-fast is off: a run never "fails")
+        if (
+            report.status is not RunStatus.COMPLETE
+        ):  # cancelled (fail-fast is off: a run never "fails")
             data = load_resim_run(self.out, prefer=[name])
             return RunOutcome(out=self.out, status=report.status, message=message, data=data)
         try:
@@ -390,7 +390,7 @@ class RunThread(QtCore.QThread):
             logger.exception("evaluating %s failed", self.out)
             data = load_resim_run(self.out, prefer=[name])
             message += f"; evaluation failed: {describe_error(err)}"
-            return RunOutcome(out=self.out, status="complete", message=message, data=data)
+            return RunOutcome(out=self.out, status=RunStatus.COMPLETE, message=message, data=data)
         rows = [
             SummaryRow(algorithm=s.algorithm, metric=s.metric.name, key=k, value=v, unit=u)
             for s in summary.scored
@@ -405,7 +405,7 @@ class RunThread(QtCore.QThread):
         ]  # fmt: skip
         data = load_resim_run(self.out, prefer=[name])
         return RunOutcome(
-            out=self.out, status="complete", message=message, data=data, rows=tuple(rows)
+            out=self.out, status=RunStatus.COMPLETE, message=message, data=data, rows=tuple(rows)
         )
 
 

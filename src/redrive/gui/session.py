@@ -25,8 +25,8 @@ import numpy.typing as npt
 from redrive.errors import LogError, UnsupportedMessageError
 from redrive.io import LogReader, open_log
 from redrive.io.frames import FrameAssembler
-from redrive.results import Run, open_run
-from redrive.types import DetectedObject, Frame, PlannedPath, VehicleState
+from redrive.results import Run, RunManifest, open_run
+from redrive.types import DetectedObject, Frame, PlannedPath, Role, VehicleState
 
 __all__ = ["Bookmark", "LogSession", "RunData", "find_run_log", "series_from_log"]
 
@@ -159,7 +159,7 @@ class RunData:
     """A run's outputs, keyed by frame stamp (ns) so they line up with a log's frames."""
 
     path: Path
-    manifest: Mapping[str, Any]
+    manifest: RunManifest
     detections: dict[str, dict[int, tuple[DetectedObject, ...]]] = field(default_factory=dict)
     ground_truth: dict[int, tuple[DetectedObject, ...]] = field(default_factory=dict)
     paths: dict[str, dict[int, PlannedPath]] = field(default_factory=dict)
@@ -179,15 +179,15 @@ class RunData:
             LogError: ``path`` is not a readable run directory.
         """
         run = open_run(path)
-        data = cls(path=Path(path), manifest=dict(run.manifest))
+        data = cls(path=Path(path), manifest=run.manifest)
         frames = run.table("frames").to_pydict()
         by_index = dict(zip(frames["frame_index"], frames["stamp_ns"], strict=True))
         data.stamps = np.array(sorted(by_index.values()), dtype=np.int64)
-        for algorithm, role in _algorithms(run):
-            if role == "perception":
-                data.detections[algorithm] = _by_stamp(run.detections(algorithm), by_index)
-            elif role == "planning":
-                data.paths[algorithm] = _by_stamp(run.paths(algorithm), by_index)
+        for entry in run.manifest.algorithms:
+            if entry.role is Role.PERCEPTION:
+                data.detections[entry.name] = _by_stamp(run.detections(entry.name), by_index)
+            elif entry.role is Role.PLANNING:
+                data.paths[entry.name] = _by_stamp(run.paths(entry.name), by_index)
         data.ground_truth = _by_stamp(run.ground_truth(), by_index)
         data.ego = _by_stamp(run.ego(), by_index)
         _load_evaluation(data, run, by_index)
@@ -195,14 +195,6 @@ class RunData:
 
 
 _BOOKMARK_FIELDS = ("frame_index", "stamp_ns", "kind", "metric", "algorithm", "detail", "severity")
-
-
-def _algorithms(run: Run) -> list[tuple[str, str]]:
-    out = []
-    for entry in run.manifest.get("algorithms", []) or []:
-        if isinstance(entry, Mapping) and "name" in entry:
-            out.append((str(entry["name"]), str(entry.get("role", ""))))
-    return out
 
 
 def _by_stamp(values: Mapping[int, Any], by_index: Mapping[int, int]) -> dict[int, Any]:
@@ -241,8 +233,7 @@ def _load_evaluation(data: RunData, run: Run, by_index: Mapping[int, int]) -> No
 
 def find_run_log(run: RunData) -> Path | None:
     """The log a run was made from, if it is still where the manifest says."""
-    log = run.manifest.get("log", {})
-    path = log.get("path") if isinstance(log, Mapping) else None
+    path = run.manifest.log.path
     if path and Path(path).exists():
         return Path(path)
     return None
