@@ -18,7 +18,7 @@ from redrive.cli.demo_log import write_demo_bag
 from redrive.cli.main import main
 from redrive.cli.run import parse_frames
 from redrive.errors import ConfigError
-from redrive.results import open_run
+from redrive.results import RunStatus, open_run
 
 REDRIVE = [sys.executable, "-m", "redrive"]
 
@@ -101,8 +101,8 @@ def test_a_user_file_runs_without_touching_redrive(bag: Path, user_dir: Path) ->
     assert proc.returncode == 0, proc.stderr
     assert "50 frames" in proc.stdout
     run = open_run(user_dir / "out")
-    assert run.manifest["status"] == "complete"
-    assert run.manifest["algorithms"][0]["source"] == str(user_dir / "tall.py")
+    assert run.manifest.status is RunStatus.COMPLETE
+    assert run.manifest.algorithms[0].source == str(user_dir / "tall.py")
     det = run.table("detections")
     assert det.num_rows > 0
     assert set(det.column("algorithm").to_pylist()) == {"TallThings"}
@@ -153,10 +153,10 @@ def test_ctrl_c_leaves_a_run_that_resume_completes(bag: Path, user_dir: Path) ->
     )
     assert resumed.returncode == 0, resumed.stderr
     run = open_run(user_dir / "out")
-    assert run.manifest["status"] == "complete"
+    assert run.manifest.status is RunStatus.COMPLETE
     frames = run.table("frames").column("frame_index").to_pylist()
     assert frames == list(range(50))  # each frame exactly once
-    assert len(run.manifest["resumes"]) == 1
+    assert len(run.manifest.resumes) == 1
 
 
 def test_frames_argument() -> None:

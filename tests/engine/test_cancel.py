@@ -10,7 +10,7 @@ import pytest
 
 from redrive.config import AlgorithmSpec, PipelineConfig, StageSpec
 from redrive.engine import RunRequest, run_log
-from redrive.results import open_run
+from redrive.results import RunStatus, open_run
 from tests.engine._runs import outputs
 
 P = "tests.engine.plugins:"
@@ -43,7 +43,7 @@ def test_cancel_stops_reading_and_closes_the_run_as_interrupted(
 
     assert report.status == "interrupted"
     run = open_run(tmp_path / "run")
-    assert run.manifest["status"] == "interrupted"
+    assert run.manifest.status is RunStatus.INTERRUPTED
     assert run.table("frames").column("frame_index").to_pylist() == [0, 1, 2, 3, 4]
 
     resumed = run_log(
@@ -64,7 +64,7 @@ def test_cancel_set_before_the_start_processes_nothing(
     report = run_log(request, cancel=cancel)
 
     assert report.status == "interrupted"
-    assert open_run(tmp_path / "run").manifest["status"] == "interrupted"
+    assert open_run(tmp_path / "run").manifest.status is RunStatus.INTERRUPTED
     assert open_run(tmp_path / "run").table("frames").num_rows == 0
 
 

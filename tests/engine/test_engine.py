@@ -9,7 +9,7 @@ import pytest
 from redrive.config import AlgorithmSpec, PipelineConfig, StageSpec
 from redrive.engine import RunReport, RunRequest, run_log
 from redrive.errors import ConfigError
-from redrive.results import open_run
+from redrive.results import RunStatus, open_run
 from tests.engine._runs import OUTPUT_TABLES, outputs
 
 P = "tests.engine.plugins:"
@@ -46,7 +46,7 @@ def test_every_frame_goes_through_every_stage(demo_bag: Path, tmp_path: Path) ->
     assert report.frames == 50
     assert [a.ok for a in report.algorithms] == [50, 50, 50]
     r = open_run(tmp_path / "run")
-    assert r.manifest["status"] == "complete"
+    assert r.manifest.status is RunStatus.COMPLETE
     steps = r.table("steps")
     assert steps.num_rows == 150
     det = r.table("detections")
@@ -56,10 +56,10 @@ def test_every_frame_goes_through_every_stage(demo_bag: Path, tmp_path: Path) ->
     assert len(ids) > 30
     assert r.table("commands").num_rows == 50
     assert r.table("paths").num_rows == 50 * 7
-    names = [a["name"] for a in r.manifest["algorithms"]]
+    names = [a.name for a in r.manifest.algorithms]
     assert names == ["centroid", "straight", "follow"]
-    assert all(len(a["config_hash"]) == 64 for a in r.manifest["algorithms"])
-    assert len(r.manifest["log"]["sha256"]) == 64
+    assert all(len(a.config_hash) == 64 for a in r.manifest.algorithms)
+    assert len(r.manifest.log.sha256 or "") == 64
 
 
 def test_same_log_and_config_give_identical_outputs(demo_bag: Path, tmp_path: Path) -> None:
@@ -136,7 +136,7 @@ def test_a_hanging_step_times_out_and_the_worker_is_replaced(
     timed_out = [s for s in steps if s["status"] == "timeout"]
     assert [(s["algorithm"], s["frame_index"]) for s in timed_out] == [("hang", 3)]
     assert timed_out[0]["latency_ns"] >= 1_000_000_000
-    assert open_run(tmp_path / "run").manifest["status"] == "complete"
+    assert open_run(tmp_path / "run").manifest.status is RunStatus.COMPLETE
 
 
 def test_a_wrong_output_type_is_recorded_as_an_error(demo_bag: Path, tmp_path: Path) -> None:
@@ -157,7 +157,7 @@ def test_fail_fast_stops_at_the_first_failure(demo_bag: Path, tmp_path: Path) ->
     index, step = report.failure
     assert (index, step.algorithm, step.error_type) == (0, "wrong", "AlgorithmError")
     r = open_run(tmp_path / "run")
-    assert r.manifest["status"] == "failed"
+    assert r.manifest.status is RunStatus.FAILED
     assert r.table("frames").num_rows == 1  # the failing frame is recorded
 
 
@@ -221,8 +221,9 @@ def test_a_cut_off_log_keeps_the_frames_before_the_damage(demo_bag: Path, tmp_pa
     with pytest.raises(LogError):
         run(cut, tmp_path / "run", pipeline(*STANDARD))
     r = open_run(tmp_path / "run")
-    assert r.manifest["status"] == "failed"
-    assert "LogTruncatedError" in r.manifest["summary"]["error"]
+    assert r.manifest.status is RunStatus.FAILED
+    assert r.manifest.summary is not None
+    assert "LogTruncatedError" in (r.manifest.summary.error or "")
     frames = r.table("frames").column("frame_index").to_pylist()
     assert 10 < len(frames) < 50
     assert frames == list(range(len(frames)))

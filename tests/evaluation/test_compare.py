@@ -8,8 +8,9 @@ import json
 import math
 import re
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from pathlib import Path
-from typing import Any, ClassVar, cast
+from typing import Any, ClassVar
 
 import numpy as np
 import pytest
@@ -21,7 +22,7 @@ from redrive.evaluation.compare import compare_runs, paired_bootstrap
 from redrive.evaluation.store import Scored, write_evaluation
 from redrive.results import RunWriter, open_run
 from redrive.types import Role
-from tests.results._records import MANIFEST, T0_NS, frame
+from tests.results._records import SETUP, T0_NS, frame
 
 N = 40
 FRAMES = np.arange(N, dtype=np.int64)
@@ -62,8 +63,8 @@ def make_run(
     sha: str = "abc",
     n: int = N,
 ) -> Path:
-    log = {**cast("Mapping[str, Any]", MANIFEST["log"]), "sha256": sha}
-    with RunWriter(path, manifest={**MANIFEST, "log": log}) as w:
+    log = replace(SETUP.log, sha256=sha)
+    with RunWriter(path, setup=replace(SETUP, log=log)) as w:
         for i in range(n):
             w.write_frame(frame(i, planning=False))
     write_evaluation(
@@ -384,7 +385,7 @@ def test_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     r = next(v for v in data["values"] if v["key"] == "r")
     assert (r["a"], r["b"], r["verdict"], r["relative_delta"]) == (1.0, 0.5, "worse", -0.5)
     unevaluated = tmp_path / "plain"
-    with RunWriter(unevaluated, manifest=MANIFEST) as w:
+    with RunWriter(unevaluated, setup=SETUP) as w:
         w.write_frame(frame(0, planning=False))
     with pytest.raises(ConfigError, match="has not been evaluated"):
         _cli(["compare", str(a), str(unevaluated)])

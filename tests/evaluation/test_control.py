@@ -22,8 +22,17 @@ import pytest
 from redrive.errors import ConfigError
 from redrive.evaluation.base import EvalData, MetricSkipped
 from redrive.evaluation.control import ControlMetrics
-from redrive.results import FrameRecord, RunWriter, StepRecord, open_run
-from redrive.types import ControlCommands, PlannedPath, VehicleState
+from redrive.results import (
+    AlgorithmEntry,
+    FrameRecord,
+    PipelineInfo,
+    RunSetup,
+    RunWriter,
+    SourceLog,
+    StepRecord,
+    open_run,
+)
+from redrive.types import ControlCommands, PlannedPath, Role, VehicleState
 
 T0_NS = 1_700_000_000_000_000_000
 DT_NS = 100_000_000
@@ -31,17 +40,17 @@ HEADING = 0.5
 A = math.atan(0.1)
 
 
-def manifest(planners: tuple[str, ...] = ("planner",)) -> dict[str, object]:
-    algos: list[dict[str, str]] = [
-        {"name": p, "version": "1", "config_hash": p, "role": "planning"} for p in planners
+def setup(planners: tuple[str, ...] = ("planner",)) -> RunSetup:
+    algos = [
+        AlgorithmEntry(name=p, version="1", config_hash=p, role=Role.PLANNING) for p in planners
     ]
-    algos.append({"name": "ctrl", "version": "1", "config_hash": "c", "role": "control"})
-    return {
-        "log": {"path": "synthetic", "sha256": "x"},
-        "seed": 0,
-        "pipeline": {"mode": "replay", "first_frame": 0, "stop_frame": None},
-        "algorithms": algos,
-    }
+    algos.append(AlgorithmEntry(name="ctrl", version="1", config_hash="c", role=Role.CONTROL))
+    return RunSetup(
+        log=SourceLog(path="synthetic", sha256="x", format="synthetic"),
+        seed=0,
+        pipeline=PipelineInfo(first_frame=0),
+        algorithms=tuple(algos),
+    )
 
 
 def plan(stamp_ns: int) -> PlannedPath:
@@ -54,7 +63,7 @@ def plan(stamp_ns: int) -> PlannedPath:
 def make_run(tmp_path: Path, *, n: int = 10, planners: tuple[str, ...] = ("planner",)) -> Path:
     out = tmp_path / "run"
     c, s = math.cos(HEADING), math.sin(HEADING)
-    with RunWriter(out, manifest=manifest(planners)) as writer:
+    with RunWriter(out, setup=setup(planners)) as writer:
         for i in range(n):
             stamp = T0_NS + i * DT_NS
             steps = [

@@ -20,8 +20,16 @@ from redrive.evaluation.detection import NuScenesDetection, ObjectArrays, evalua
 from redrive.evaluation.detection.arrays import class_codes
 from redrive.evaluation.detection.classes import NUSCENES_CLASS_RANGE_M, NUSCENES_CLASSES
 from redrive.evaluation.detection.nuscenes_core import MetricData, calc_ap, calc_tp
-from redrive.results import FrameRecord, RunWriter, StepRecord, open_run
-from redrive.types import Box3D, DetectedObject, ObjectClass
+from redrive.results import (
+    AlgorithmEntry,
+    FrameRecord,
+    RunSetup,
+    RunWriter,
+    SourceLog,
+    StepRecord,
+    open_run,
+)
+from redrive.types import Box3D, DetectedObject, ObjectClass, Role
 
 CLASSES = ["vehicle", "truck", "pedestrian", "bicycle", "motorcycle"]
 NAMES = ["car", "truck", "pedestrian", "bicycle", "motorcycle"]
@@ -474,12 +482,13 @@ def _obj(cls: ObjectClass, x: float, y: float, conf: float = 1.0) -> DetectedObj
 
 
 def test_metric_on_a_run(tmp_path: Path) -> None:
-    manifest = {
-        "log": {"path": "x", "sha256": "s", "format": "mcap"},
-        "seed": 0,
-        "pipeline": {},
-        "algorithms": [{"name": "det", "version": "1", "config_hash": "c", "role": "perception"}],
-    }
+    setup = RunSetup(
+        log=SourceLog(path="x", sha256="s", format="mcap"),
+        seed=0,
+        algorithms=(
+            AlgorithmEntry(name="det", version="1", config_hash="c", role=Role.PERCEPTION),
+        ),
+    )
     truth = {
         0: (_obj(ObjectClass.VEHICLE, 10, 0), _obj(ObjectClass.PEDESTRIAN, 5, 2)),
         1: (_obj(ObjectClass.VEHICLE, 12, 0),),
@@ -489,7 +498,7 @@ def test_metric_on_a_run(tmp_path: Path) -> None:
         0: (_obj(ObjectClass.VEHICLE, 10.2, 0, 0.9), _obj(ObjectClass.VEHICLE, 30, 5, 0.3)),
         1: (_obj(ObjectClass.VEHICLE, 12, 0.1, 0.8),),
     }
-    with RunWriter(tmp_path / "run", manifest=manifest) as writer:
+    with RunWriter(tmp_path / "run", setup=setup) as writer:
         for i in range(3):
             status = "ok" if i < 2 else "error"  # frame 2: the detector failed → no detections
             step = StepRecord(

@@ -16,7 +16,7 @@ from redrive.evaluation.evaluator import evaluate_run
 from redrive.evaluation.store import read_evaluation
 from redrive.results import RunWriter, open_run
 from redrive.types import Role
-from tests.results._records import MANIFEST, frame
+from tests.results._records import SETUP, frame
 
 
 class ObjectCount(Metric):
@@ -86,7 +86,7 @@ class Buggy(Metric):
 @pytest.fixture
 def run_dir(tmp_path: Path) -> Path:
     path = tmp_path / "run"
-    with RunWriter(path, manifest=MANIFEST) as writer:
+    with RunWriter(path, setup=SETUP) as writer:
         for i in range(6):
             writer.write_frame(frame(i))
     return path
@@ -287,9 +287,9 @@ def test_metric_plugins_by_entry_point_or_module() -> None:
         load_metric_class("nope")
     with pytest.raises(
         PluginError,
-        match=r"MANIFEST in module tests.evaluation.test_evaluator is a \w+, not a class",
+        match=r"SETUP in module tests.evaluation.test_evaluator is a \w+, not a class",
     ):
-        load_metric_class("tests.evaluation.test_evaluator:MANIFEST")
+        load_metric_class("tests.evaluation.test_evaluator:SETUP")
     with pytest.raises(PluginError, match="module no not found"):
         load_metric_class("no.such.module:X")
     with pytest.raises(PluginError, match="is not a Metric subclass"):

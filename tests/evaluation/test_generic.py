@@ -18,8 +18,17 @@ from redrive.evaluation.generic import (
     precision_recall,
     rmse,
 )
-from redrive.results import FrameRecord, RunWriter, StepRecord, open_run
-from redrive.types import Box3D, DetectedObject, ObjectClass
+from redrive.results import (
+    AlgorithmEntry,
+    FrameRecord,
+    PipelineInfo,
+    RunSetup,
+    RunWriter,
+    SourceLog,
+    StepRecord,
+    open_run,
+)
+from redrive.types import Box3D, DetectedObject, ObjectClass, Role
 
 T0_NS = 1_700_000_000_000_000_000
 
@@ -124,12 +133,12 @@ def test_matching_is_optimal_not_greedy() -> None:
     assert match_by_centre([], truth) == []
 
 
-MANIFEST = {
-    "log": {"path": "synthetic", "sha256": "x"},
-    "seed": 0,
-    "pipeline": {"mode": "replay", "first_frame": 0, "stop_frame": None},
-    "algorithms": [{"name": "det", "version": "1", "config_hash": "a", "role": "perception"}],
-}
+SETUP = RunSetup(
+    log=SourceLog(path="synthetic", sha256="x", format="synthetic"),
+    seed=0,
+    pipeline=PipelineInfo(first_frame=0),
+    algorithms=(AlgorithmEntry(name="det", version="1", config_hash="a", role=Role.PERCEPTION),),
+)
 
 
 def test_object_attributes(tmp_path: Path) -> None:
@@ -153,7 +162,7 @@ def test_object_attributes(tmp_path: Path) -> None:
         obj(50.0, 0.0, ObjectClass.VEHICLE),  # nothing there
     )
     out = tmp_path / "run"
-    with RunWriter(out, manifest=MANIFEST) as writer:
+    with RunWriter(out, setup=SETUP) as writer:
         for i, (dets, truth, status) in enumerate(
             [
                 (frame0_dets, frame0_truth, "ok"),

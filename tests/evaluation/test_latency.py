@@ -29,7 +29,17 @@ import pytest
 from redrive.errors import ConfigError
 from redrive.evaluation.base import EvalData
 from redrive.evaluation.latency import Latency, latency_stats_ms
-from redrive.results import FrameRecord, RunWriter, StepRecord, open_run
+from redrive.results import (
+    AlgorithmEntry,
+    FrameRecord,
+    PipelineInfo,
+    RunSetup,
+    RunWriter,
+    SourceLog,
+    StepRecord,
+    open_run,
+)
+from redrive.types import Role
 
 T0_NS = 1_700_000_000_000_000_000
 MS = 1_000_000
@@ -37,21 +47,21 @@ DET = [10, 20, 30, 40, 150]
 DET2 = [50] * 5
 PLAN = [1, 2, 999, 3, 4]
 WALL = [70, 80, 90, 100, 260]
-MANIFEST = {
-    "log": {"path": "synthetic", "sha256": "x"},
-    "seed": 0,
-    "pipeline": {"mode": "replay", "first_frame": 0, "stop_frame": None},
-    "algorithms": [
-        {"name": "det", "version": "1", "config_hash": "a", "role": "perception"},
-        {"name": "det2", "version": "1", "config_hash": "b", "role": "perception"},
-        {"name": "plan", "version": "1", "config_hash": "c", "role": "planning"},
-    ],
-}
+SETUP = RunSetup(
+    log=SourceLog(path="synthetic", sha256="x", format="synthetic"),
+    seed=0,
+    pipeline=PipelineInfo(first_frame=0),
+    algorithms=(
+        AlgorithmEntry(name="det", version="1", config_hash="a", role=Role.PERCEPTION),
+        AlgorithmEntry(name="det2", version="1", config_hash="b", role=Role.PERCEPTION),
+        AlgorithmEntry(name="plan", version="1", config_hash="c", role=Role.PLANNING),
+    ),
+)
 
 
 def make_run(tmp_path: Path) -> Path:
     out = tmp_path / "run"
-    with RunWriter(out, manifest=MANIFEST) as writer:
+    with RunWriter(out, setup=SETUP) as writer:
         for i in range(5):
             steps = (
                 StepRecord(
@@ -162,7 +172,7 @@ def test_stats_edge_cases_and_parameters() -> None:
 
 def test_unknown_deadline_gives_nan_misses(tmp_path: Path) -> None:
     out = tmp_path / "one"
-    with RunWriter(out, manifest=MANIFEST) as writer:
+    with RunWriter(out, setup=SETUP) as writer:
         step = StepRecord(
             algorithm="det", stage="perception", role="perception", status="ok", latency_ns=MS
         )

@@ -16,19 +16,28 @@ import pytest
 from redrive.errors import ConfigError
 from redrive.evaluation.base import EvalData
 from redrive.evaluation.planning import COMFORT_BOUNDS, PlanningMetrics, time_to_collision_s
-from redrive.results import FrameRecord, RunWriter, StepRecord, open_run
-from redrive.types import Box3D, DetectedObject, ObjectClass, PlannedPath, VehicleState
+from redrive.results import (
+    AlgorithmEntry,
+    FrameRecord,
+    PipelineInfo,
+    RunSetup,
+    RunWriter,
+    SourceLog,
+    StepRecord,
+    open_run,
+)
+from redrive.types import Box3D, DetectedObject, ObjectClass, PlannedPath, Role, VehicleState
 
 T0_NS = 1_700_000_000_000_000_000
 DT_NS = 100_000_000
 HEADING = 0.5
 SPEED = 10.0
-MANIFEST = {
-    "log": {"path": "synthetic", "sha256": "x"},
-    "seed": 0,
-    "pipeline": {"mode": "replay", "first_frame": 0, "stop_frame": None},
-    "algorithms": [{"name": "planner", "version": "1", "config_hash": "p", "role": "planning"}],
-}
+SETUP = RunSetup(
+    log=SourceLog(path="synthetic", sha256="x", format="synthetic"),
+    seed=0,
+    pipeline=PipelineInfo(first_frame=0),
+    algorithms=(AlgorithmEntry(name="planner", version="1", config_hash="p", role=Role.PLANNING),),
+)
 
 Plan = Callable[[int], np.ndarray]
 Truth = Callable[[int], "tuple[DetectedObject, ...] | None"]
@@ -66,7 +75,7 @@ def car(x: float, y: float = 0.0, *, vx: float = 0.0, oid: int = 7) -> DetectedO
 
 def make_run(tmp_path: Path, plan: Plan, *, n: int = 40, truth: Truth | None = None) -> Path:
     out = tmp_path / "run"
-    with RunWriter(out, manifest=MANIFEST) as writer:
+    with RunWriter(out, setup=SETUP) as writer:
         for i in range(n):
             path = PlannedPath(stamp_ns=T0_NS + i * DT_NS, waypoints=plan(i))
             step = StepRecord(

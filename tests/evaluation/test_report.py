@@ -27,7 +27,16 @@ from redrive.evaluation.evaluator import evaluate_run
 from redrive.evaluation.plots import worst_frames
 from redrive.evaluation.report import DEFAULT_WORST, render_html, write_report
 from redrive.evaluation.store import Scored, read_evaluation, write_evaluation
-from redrive.results import FrameRecord, RunWriter, StepRecord, open_run
+from redrive.results import (
+    AlgorithmEntry,
+    FrameRecord,
+    PipelineInfo,
+    RunSetup,
+    RunWriter,
+    SourceLog,
+    StepRecord,
+    open_run,
+)
 from redrive.types import Box3D, DetectedObject, ObjectClass, PlannedPath, Role
 
 EVIL = '<script>alert("x")</script>'
@@ -35,15 +44,15 @@ FORMULA = '=HYPERLINK("http://x")'
 T0_NS = 1_700_000_000_000_000_000
 IMG = '<img src="data:image/png;base64,'
 
-MANIFEST = {
-    "log": {"path": "/data/<b>drive</b>.mcap", "sha256": "ab12" * 16, "format": "mcap"},
-    "seed": 0,
-    "pipeline": {"mode": "sequential", "first_frame": 0, "stop_frame": None},
-    "algorithms": [
-        {"name": EVIL, "version": "3", "config_hash": "c0ffee" * 10, "role": "perception"},
-        {"name": "planner", "version": "1", "config_hash": "beef" * 16, "role": "planning"},
-    ],
-}
+SETUP = RunSetup(
+    log=SourceLog(path="/data/<b>drive</b>.mcap", sha256="ab12" * 16, format="mcap"),
+    seed=0,
+    pipeline=PipelineInfo(first_frame=0),
+    algorithms=(
+        AlgorithmEntry(name=EVIL, version="3", config_hash="c0ffee" * 10, role=Role.PERCEPTION),
+        AlgorithmEntry(name="planner", version="1", config_hash="beef" * 16, role=Role.PLANNING),
+    ),
+)
 
 
 def _obj(x: float, y: float, cls: ObjectClass = ObjectClass.VEHICLE, conf: float = 1.0) -> Any:
@@ -68,7 +77,7 @@ EVIL_LATENCY_MS = (1, 2, 3, 4)
 
 def build_run(path: Path) -> Path:
     """Write the 4-frame run (real RunWriter) into ``path``."""
-    with RunWriter(path, manifest=MANIFEST) as writer:
+    with RunWriter(path, setup=SETUP) as writer:
         for i, (gt, dets) in SCENE.items():
             stamp = T0_NS + i * 100_000_000
             wp = np.column_stack([np.linspace(0, 20, 5), np.zeros(5), np.zeros(5), np.arange(5.0)])

@@ -17,19 +17,28 @@ from redrive.errors import ConfigError
 from redrive.evaluation import EvalData, MetricSkipped
 from redrive.evaluation.evaluator import evaluate_run
 from redrive.evaluation.tracking import ClearMot, bev_iou_matrix
-from redrive.results import FrameRecord, RunWriter, StepRecord, open_run
-from redrive.types import Box3D, DetectedObject, ObjectClass
+from redrive.results import (
+    AlgorithmEntry,
+    FrameRecord,
+    PipelineInfo,
+    RunSetup,
+    RunWriter,
+    SourceLog,
+    StepRecord,
+    open_run,
+)
+from redrive.types import Box3D, DetectedObject, ObjectClass, Role
 
 T0_NS = 1_700_000_000_000_000_000
-MANIFEST = {
-    "log": {"path": "/data/tracks.mcap", "sha256": "t", "format": "mcap"},
-    "seed": 0,
-    "pipeline": {"mode": "replay", "first_frame": 0, "stop_frame": None, "stages": ["p"]},
-    "algorithms": [
-        {"name": "trk", "version": "1", "config_hash": "c1", "role": "perception"},
-        {"name": "det", "version": "1", "config_hash": "c2", "role": "perception"},
-    ],
-}
+SETUP = RunSetup(
+    log=SourceLog(path="/data/tracks.mcap", sha256="t", format="mcap"),
+    seed=0,
+    pipeline=PipelineInfo(first_frame=0, stages=("p",)),
+    algorithms=(
+        AlgorithmEntry(name="trk", version="1", config_hash="c1", role=Role.PERCEPTION),
+        AlgorithmEntry(name="det", version="1", config_hash="c2", role=Role.PERCEPTION),
+    ),
+)
 
 #: one frame of a scenario: (ground truth or None, tracker output or None = step failed).
 Scene = tuple[tuple[DetectedObject, ...] | None, tuple[DetectedObject, ...] | None]
@@ -54,7 +63,7 @@ def obj(
 
 def write_run(path: Path, scenes: Sequence[Scene]) -> Path:
     """A run with tracker ``trk`` (the scenes) and detector ``det`` (the same boxes, ids −1)."""
-    with RunWriter(path, manifest=MANIFEST) as writer:
+    with RunWriter(path, setup=SETUP) as writer:
         for i, (gt, pred) in enumerate(scenes):
             steps = []
             if pred is None:

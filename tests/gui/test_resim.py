@@ -26,8 +26,8 @@ from redrive.gui.resim_views import (
     box_outline_segments,
     shown_algorithms,
 )
-from redrive.results import open_run
-from redrive.types import Box3D, DetectedObject, ObjectClass
+from redrive.results import AlgorithmEntry, RunSetup, RunStatus, SourceLog, open_run
+from redrive.types import Box3D, DetectedObject, ObjectClass, Role
 
 RUN_TIMEOUT_MS = 60_000
 
@@ -123,7 +123,7 @@ def test_algorithm_test_runs_evaluates_shows_and_exports(
     assert panel.progress.value() == 100
     assert not panel.is_running()
     assert panel.test_button.isEnabled()
-    assert open_run(out).manifest["status"] == "complete"
+    assert open_run(out).manifest.status is RunStatus.COMPLETE
     from redrive.results.evaluation import stored_metric_names
 
     assert stored_metric_names(out)
@@ -201,7 +201,7 @@ def test_cancel_closes_the_run_as_interrupted_and_the_panel_runs_again(
         panel.start()
     assert blocker.args[0] != first_out  # a new automatic run directory
     assert blocker.args[0].parent == demo_log.parent / "runs"
-    assert open_run(blocker.args[0]).manifest["status"] == "complete"
+    assert open_run(blocker.args[0]).manifest.status is RunStatus.COMPLETE
 
 
 def test_a_corrupt_log_is_reported_naming_the_file(
@@ -261,7 +261,7 @@ def test_planning_and_control_run_behind_the_reference_perception(
     panel.set_algorithm(category, spec)
     with qtbot.waitSignal(panel.run_finished, timeout=RUN_TIMEOUT_MS) as blocker:
         panel.start()
-    names = [a["name"] for a in open_run(blocker.args[0]).manifest["algorithms"]]
+    names = open_run(blocker.args[0]).manifest.names()
     assert names[:2] == ["cluster-detector", "kalman-tracker"]
     assert names[-1] == spec
     assert panel.shown_a == {category: spec}
@@ -348,8 +348,14 @@ def test_the_pipelines_put_the_reference_algorithms_upstream() -> None:
         "cluster-detector", "kalman-tracker", "idm-planner",
     ]  # fmt: skip
     assert plugins("control", "pure-pursuit-pid")[-2:] == ["idm-planner", "pure-pursuit-pid"]
-    manifest = {"algorithms": [{"name": "d", "role": "perception"},
-                               {"name": "t", "role": "perception"},
-                               {"name": "p", "role": "planning"}]}  # fmt: skip
-    assert shown_algorithms(manifest) == {"perception": "t", "planning": "p"}
-    assert shown_algorithms(manifest, ["d"]) == {"perception": "d"}
+
+    def entry(name: str, role: Role) -> AlgorithmEntry:
+        return AlgorithmEntry(name=name, role=role, version="1", config_hash="h")
+
+    setup = RunSetup(
+        log=SourceLog(path="x.mcap", format="mcap", sha256="s"),
+        algorithms=(entry("d", Role.PERCEPTION), entry("t", Role.PERCEPTION),
+                    entry("p", Role.PLANNING)),
+    )  # fmt: skip
+    assert shown_algorithms(setup) == {"perception": "t", "planning": "p"}
+    assert shown_algorithms(setup, ["d"]) == {"perception": "d"}

@@ -141,7 +141,7 @@ def test_rospy_publisher_at_sensor_rates(roscore: RosCore, tmp_path: Path) -> No
     detections = run.detections("cluster-detector")
     # three car-sized boxes of points stand on the ground in every sweep
     assert sum(len(v) == 3 for v in detections.values()) >= 0.9 * frames
-    assert "realtime" in str(run.manifest["pipeline"])
+    assert "realtime" in str(run.manifest.pipeline)
     assert not [p for p in stale_segments() if "live-" in p.name]
 
 

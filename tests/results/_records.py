@@ -4,30 +4,39 @@ from __future__ import annotations
 
 import numpy as np
 
-from redrive.results import FrameRecord, ResourceSample, StepRecord
+from redrive.results import (
+    AlgorithmEntry,
+    FrameRecord,
+    PipelineInfo,
+    ResourceSample,
+    RunSetup,
+    SourceLog,
+    StepRecord,
+)
 from redrive.types import (
     Box3D,
     ControlCommands,
     DetectedObject,
     ObjectClass,
     PlannedPath,
+    Role,
     VehicleState,
 )
 
 T0_NS = 1_700_000_000_123_456_789
 EVIL = '=HYPERLINK("http://x")'
 
-MANIFEST = {
-    "log": {"path": "/data/drive.mcap", "sha256": "abc", "format": "mcap"},
-    "seed": 7,
-    "pipeline": {"mode": "replay", "first_frame": 0, "stop_frame": None, "stages": ["p", "c"]},
-    "algorithms": [
-        {"name": "det", "version": "1", "config_hash": "c1", "role": "perception"},
-        {"name": "bad_det", "version": "1", "config_hash": "c2", "role": "perception"},
-        {"name": "planner", "version": "2", "config_hash": "c3", "role": "planning"},
-        {"name": "ctrl", "version": "1", "config_hash": "c4", "role": "control"},
-    ],
-}
+SETUP = RunSetup(
+    log=SourceLog(path="/data/drive.mcap", sha256="abc", format="mcap"),
+    seed=7,
+    pipeline=PipelineInfo(first_frame=0, stages=("p", "c")),
+    algorithms=(
+        AlgorithmEntry(name="det", version="1", config_hash="c1", role=Role.PERCEPTION),
+        AlgorithmEntry(name="bad_det", version="1", config_hash="c2", role=Role.PERCEPTION),
+        AlgorithmEntry(name="planner", version="2", config_hash="c3", role=Role.PLANNING),
+        AlgorithmEntry(name="ctrl", version="1", config_hash="c4", role=Role.CONTROL),
+    ),
+)
 
 
 def detection(i: int, k: int, *, bbox: bool) -> DetectedObject:

@@ -16,7 +16,7 @@ from redrive.cli import export as export_cli
 from redrive.errors import ConfigError
 from redrive.results import RunWriter, export_run, open_run
 from redrive.results import export as export_mod
-from tests.results._records import EVIL, MANIFEST, T0_NS, frame
+from tests.results._records import EVIL, SETUP, T0_NS, frame
 
 _LONG = "Traceback:\n" + "x" * 40_000
 
@@ -29,7 +29,7 @@ def _row(header: tuple[Any, ...], row: tuple[Any, ...]) -> dict[Any, Any]:
 @pytest.fixture
 def run_dir(tmp_path: Path) -> Path:
     path = tmp_path / "urban_run"
-    with RunWriter(path, manifest=MANIFEST, flush_every=3) as writer:
+    with RunWriter(path, setup=SETUP, flush_every=3) as writer:
         for i in range(7):
             writer.write_frame(frame(i, long_traceback=_LONG if i == 4 else ""))
     return path

@@ -7,16 +7,16 @@ import subprocess
 import sys
 from pathlib import Path
 
-from redrive.results import RunWriter, open_run
-from tests.results._records import MANIFEST, frame
+from redrive.results import RunStatus, RunWriter, open_run
+from tests.results._records import SETUP, frame
 
 _ROOT = Path(__file__).resolve().parents[2]
 
 _CRASH = """
 import os, signal, sys
 from redrive.results import RunWriter
-from tests.results._records import MANIFEST, frame
-writer = RunWriter(sys.argv[1], manifest=MANIFEST, flush_every=50)
+from tests.results._records import SETUP, frame
+writer = RunWriter(sys.argv[1], setup=SETUP, flush_every=50)
 for i in range(170):  # 150 frames flushed in 3 parts, 20 still buffered
     writer.write_frame(frame(i))
 os.kill(os.getpid(), signal.SIGKILL)
@@ -36,24 +36,24 @@ def test_resume_after_kill(tmp_path: Path) -> None:
     (run_dir / "ego" / "part-00003.parquet.tmp").write_bytes(b"PAR1 half written")
 
     crashed = open_run(run_dir)
-    assert crashed.manifest["status"] == "running"
-    assert crashed.manifest["frames_done"] == 150
+    assert crashed.manifest.status is RunStatus.RUNNING
+    assert crashed.manifest.frames_done == 150
     assert crashed.table("frames").num_rows == 150
     assert crashed.table("steps").num_rows == 150 * 4  # the orphan part is not read
 
-    with RunWriter(run_dir, manifest=MANIFEST, resume=True, flush_every=50) as writer:
+    with RunWriter(run_dir, setup=SETUP, resume=True, flush_every=50) as writer:
         assert writer.done_frames == frozenset(range(150))
         for i in range(200):
             if i not in writer.done_frames:
                 writer.write_frame(frame(i))
 
     run = open_run(run_dir)
-    assert run.manifest["status"] == "complete"
-    assert run.manifest["frames_done"] == 200
-    (resume,) = run.manifest["resumes"]
-    assert resume["previous_status"] == "running"
-    assert resume["frames_done"] == 150
-    assert resume["removed_incomplete_files"] == 3
+    assert run.manifest.status is RunStatus.COMPLETE
+    assert run.manifest.frames_done == 200
+    (resume,) = run.manifest.resumes
+    assert resume.previous_status is RunStatus.RUNNING
+    assert resume.frames_done == 150
+    assert resume.removed_incomplete_files == 3
     assert not list(run_dir.rglob("*.tmp"))
     assert [p.name for p in run.part_paths("steps")][-1] == "part-00003.parquet"
 
@@ -75,9 +75,9 @@ def test_resume_after_kill(tmp_path: Path) -> None:
 
 
 def test_resume_of_missing_directory_starts_a_run(tmp_path: Path) -> None:
-    with RunWriter(tmp_path / "new", manifest=MANIFEST, resume=True) as writer:
+    with RunWriter(tmp_path / "new", setup=SETUP, resume=True) as writer:
         assert writer.done_frames == frozenset()
         writer.write_frame(frame(0))
     run = open_run(tmp_path / "new")
-    assert run.manifest["resumes"] == []
+    assert run.manifest.resumes == ()
     assert run.table("frames").num_rows == 1

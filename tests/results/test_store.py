@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -10,13 +11,21 @@ import pyarrow.parquet as pq
 import pytest
 
 from redrive.errors import ConfigError
-from redrive.results import SCHEMAS, TABLES, FrameRecord, RunWriter, StepRecord, open_run
+from redrive.results import (
+    SCHEMAS,
+    TABLES,
+    FrameRecord,
+    RunStatus,
+    RunWriter,
+    StepRecord,
+    open_run,
+)
 from redrive.types import PlannedPath
-from tests.results._records import EVIL, MANIFEST, T0_NS, frame, resources, same_object
+from tests.results._records import EVIL, SETUP, T0_NS, frame, resources, same_object
 
 
 def write_run(path: Path, n: int = 6, *, flush_every: int = 4, planning: bool = True) -> None:
-    with RunWriter(path, manifest=MANIFEST, flush_every=flush_every) as writer:
+    with RunWriter(path, setup=SETUP, flush_every=flush_every) as writer:
         for i in range(n):
             writer.write_frame(frame(i, planning=planning))
         writer.write_resources(resources(3))
@@ -26,9 +35,10 @@ def test_round_trip_values(tmp_path: Path) -> None:
     run_dir = tmp_path / "run"
     write_run(run_dir)
     run = open_run(run_dir)
-    assert run.manifest["status"] == "complete"
-    assert run.manifest["frames_done"] == 6
-    assert run.manifest["log"] == MANIFEST["log"]
+    assert run.manifest.status is RunStatus.COMPLETE
+    assert run.manifest.frames_done == 6
+    assert run.manifest.log == SETUP.log
+    assert run.manifest.setup == SETUP
     assert set(run.tables()) == set(TABLES)
     for name in TABLES:
         assert run.table(name).schema == SCHEMAS[name], name
@@ -145,7 +155,7 @@ def test_empty_output_kinds_have_schemas(tmp_path: Path) -> None:
         assert table.num_rows == 0
         assert table.schema == SCHEMAS[name]
     empty = tmp_path / "empty"
-    RunWriter(empty, manifest=MANIFEST).close(status="complete")
+    RunWriter(empty, setup=SETUP).close(status=RunStatus.COMPLETE)
     run = open_run(empty)
     assert run.tables() == ()
     assert run.summary().num_rows == 0
@@ -171,9 +181,9 @@ def test_parts_are_deterministic(tmp_path: Path) -> None:
 def test_refuses_non_run_directory(tmp_path: Path) -> None:
     (tmp_path / "notes.txt").write_text("mine")
     with pytest.raises(ConfigError, match=r"not empty and holds no redrive run.*--out"):
-        RunWriter(tmp_path, manifest=MANIFEST)
+        RunWriter(tmp_path, setup=SETUP)
     with pytest.raises(ConfigError, match="not empty and holds no redrive run"):
-        RunWriter(tmp_path, manifest=MANIFEST, resume=True)
+        RunWriter(tmp_path, setup=SETUP, resume=True)
     with pytest.raises(ConfigError, match="is not a redrive run"):
         open_run(tmp_path)
     with pytest.raises(ConfigError, match="no such run directory"):
@@ -183,60 +193,65 @@ def test_refuses_non_run_directory(tmp_path: Path) -> None:
 def test_refuses_existing_run_without_resume(tmp_path: Path) -> None:
     write_run(tmp_path / "run", n=2)
     with pytest.raises(ConfigError, match="already holds a run; use --resume"):
-        RunWriter(tmp_path / "run", manifest=MANIFEST)
+        RunWriter(tmp_path / "run", setup=SETUP)
 
 
 def test_refuses_mismatching_resume(tmp_path: Path) -> None:
     write_run(tmp_path / "run", n=2)
-    other = json.loads(json.dumps(MANIFEST))
-    other["log"]["sha256"] = "def"
-    other["algorithms"][0]["config_hash"] = "c9"
+    algos = SETUP.algorithms
+    other = replace(
+        SETUP,
+        log=replace(SETUP.log, sha256="def"),
+        algorithms=(replace(algos[0], config_hash="c9"), *algos[1:]),
+    )
     with pytest.raises(ConfigError, match=r"log\.sha256: run has \"abc\", now \"def\""):
-        RunWriter(tmp_path / "run", manifest=other, resume=True)
+        RunWriter(tmp_path / "run", setup=other, resume=True)
     for key, value in (("stop_frame", 100), ("first_frame", 5)):
-        ranged = json.loads(json.dumps(MANIFEST))
-        ranged["pipeline"][key] = value
+        ranged = replace(SETUP, pipeline=replace(SETUP.pipeline, **{key: value}))
         with pytest.raises(ConfigError, match=f"pipeline.{key}: run has"):
-            RunWriter(tmp_path / "run", manifest=ranged, resume=True)
-    reconfigured = json.loads(json.dumps(MANIFEST))
-    reconfigured["algorithms"][2]["config_hash"] = "c9"
+            RunWriter(tmp_path / "run", setup=ranged, resume=True)
+    reconfigured = replace(
+        SETUP, algorithms=(*algos[:2], replace(algos[2], config_hash="c9"), algos[3])
+    )
     with pytest.raises(ConfigError, match="algorithms: run has"):
-        RunWriter(tmp_path / "run", manifest=reconfigured, resume=True)
-    # a change outside RESUME_KEYS is fine (the log moved); tuples compare like lists
-    moved = json.loads(json.dumps(MANIFEST))
-    moved["log"]["path"] = "/elsewhere/drive.mcap"
-    moved["pipeline"]["stages"] = ("p", "c")
-    RunWriter(tmp_path / "run", manifest=moved, resume=True).close(status="complete")
+        RunWriter(tmp_path / "run", setup=reconfigured, resume=True)
+    # a change outside RESUME_KEYS is fine (the log moved, another stage layout)
+    moved = replace(
+        SETUP,
+        log=replace(SETUP.log, path="/elsewhere/drive.mcap"),
+        pipeline=replace(SETUP.pipeline, stages=("c", "p")),
+    )
+    RunWriter(tmp_path / "run", setup=moved, resume=True).close(status=RunStatus.COMPLETE)
 
 
 def test_one_writer_at_a_time(tmp_path: Path) -> None:
-    writer = RunWriter(tmp_path / "run", manifest=MANIFEST)
+    writer = RunWriter(tmp_path / "run", setup=SETUP)
     with pytest.raises(ConfigError, match="another process is writing this run"):
-        RunWriter(tmp_path / "run", manifest=MANIFEST, resume=True)
-    writer.close(status="complete")
-    RunWriter(tmp_path / "run", manifest=MANIFEST, resume=True).close(status="complete")
+        RunWriter(tmp_path / "run", setup=SETUP, resume=True)
+    writer.close(status=RunStatus.COMPLETE)
+    RunWriter(tmp_path / "run", setup=SETUP, resume=True).close(status=RunStatus.COMPLETE)
 
 
 def test_status_from_context_manager(tmp_path: Path) -> None:
     def failing_run() -> None:
-        with RunWriter(tmp_path / "failed", manifest=MANIFEST) as w:
+        with RunWriter(tmp_path / "failed", setup=SETUP) as w:
             w.write_frame(frame(0))
             raise RuntimeError("boom")
 
     with pytest.raises(RuntimeError):
         failing_run()
     failed = open_run(tmp_path / "failed")
-    assert failed.manifest["status"] == "failed"
-    assert failed.manifest["error"] == "RuntimeError: boom"
-    assert failed.manifest["frames_done"] == 1  # buffered frames were flushed
+    assert failed.manifest.status is RunStatus.FAILED
+    assert failed.manifest.error == "RuntimeError: boom"
+    assert failed.manifest.frames_done == 1  # buffered frames were flushed
 
-    with pytest.raises(KeyboardInterrupt), RunWriter(tmp_path / "int", manifest=MANIFEST):
+    with pytest.raises(KeyboardInterrupt), RunWriter(tmp_path / "int", setup=SETUP):
         raise KeyboardInterrupt
-    assert open_run(tmp_path / "int").manifest["status"] == "interrupted"
+    assert open_run(tmp_path / "int").manifest.status is RunStatus.INTERRUPTED
 
 
 def test_bad_input_is_refused(tmp_path: Path) -> None:
-    writer = RunWriter(tmp_path / "run", manifest=MANIFEST, flush_every=2)
+    writer = RunWriter(tmp_path / "run", setup=SETUP, flush_every=2)
     writer.write_frame(frame(0))
     with pytest.raises(ValueError, match="frame 0 was already written"):
         writer.write_frame(frame(0))  # buffered
@@ -245,14 +260,18 @@ def test_bad_input_is_refused(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="frame 1 was already written"):
         writer.write_frame(frame(1))  # committed
     with pytest.raises(ValueError, match="status 'done'"):
-        writer.close(status="done")
-    writer.close(status="complete")
-    writer.close(status="failed")  # a second close does nothing
-    assert open_run(tmp_path / "run").manifest["status"] == "complete"
+        writer.close(status="done")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="status 'running'"):
+        writer.close(status=RunStatus.RUNNING)
+    with pytest.raises(ValueError, match=r"summary keys \['speed'\]"):
+        writer.close(status=RunStatus.COMPLETE, summary={"speed": 1})
+    with pytest.raises(ValueError, match=r"summary\.wall_s"):
+        writer.close(status=RunStatus.COMPLETE, summary={"wall_s": "fast"})
+    writer.close(status=RunStatus.COMPLETE)
+    writer.close(status=RunStatus.FAILED)  # a second close does nothing
+    assert open_run(tmp_path / "run").manifest.status is RunStatus.COMPLETE
     with pytest.raises(ValueError, match="closed"):
         writer.write_frame(frame(2))
-    with pytest.raises(ValueError, match="must not set"):
-        RunWriter(tmp_path / "x", manifest={**MANIFEST, "status": "ok"})
     with pytest.raises(ValueError, match="planning step's output must be PlannedPath"):
         StepRecord(algorithm="p", stage="s", role="planning", status="ok", output=())
     with pytest.raises(ValueError, match="role 'sensing'"):

@@ -29,7 +29,7 @@ import numpy as np
 from redrive.algorithms import Algorithm, Role, StageOutputs
 from redrive.config import AlgorithmSpec, PipelineConfig, StageSpec
 from redrive.engine import Engine, LogInputs, build_graph
-from redrive.results import FrameRecord, RunWriter
+from redrive.results import FrameRecord, RunSetup, RunStatus, RunWriter, SourceLog
 from redrive.types import ControlCommands, DetectedObject, Frame, PlannedPath
 
 __all__ = [
@@ -214,14 +214,17 @@ def _engine(frames: list[Frame], kind: str, mode: str, writer_dir: Path | None =
     kept: list[FrameRecord] = []
     writer = None
     if writer_dir is not None:
-        writer = RunWriter(writer_dir, manifest={"bench": "engine"})
+        writer = RunWriter(
+            writer_dir,
+            setup=RunSetup(log=SourceLog(path="(in memory)", format="bench", sha256=None)),
+        )
         sink: Callable[[FrameRecord], None] = writer.write_frame
     else:
         sink = kept.append
     t0 = time.perf_counter()
     report = engine.run(frames, sink=sink)
     if writer is not None:
-        writer.close(status="complete")
+        writer.close(status=RunStatus.COMPLETE)
     elapsed = time.perf_counter() - t0
     engine.close()
     if report.frames != len(frames):

@@ -54,6 +54,7 @@ def _run(args: argparse.Namespace) -> int:
     from redrive.live.dispatcher import LiveLog
     from redrive.live.recorder import DataLogger
     from redrive.live.session import LiveSession
+    from redrive.results import SourceLog
 
     pipeline = pipeline_from_args(args)
     master = args.master or default_master_uri()
@@ -107,14 +108,14 @@ def _run(args: argparse.Namespace) -> int:
                 stop_frame=args.frames,
                 sensor_map=args.sensor_map,
             )
-            info = {
-                "path": str(log.path),
-                "format": "live",
-                "sha256": None,
-                "source": source_text,
-                "topics": {s.topic: s.msgtype for s in session.specs},
-                "record": None if args.record is None else str(args.record),
-            }
+            info = SourceLog(
+                path=str(log.path),
+                format="live",
+                sha256=None,
+                source=source_text,
+                topics={s.topic: s.msgtype for s in session.specs},
+                record=None if args.record is None else str(args.record),
+            )
             report = run_reader(request, log, hooks=hooks, log_info=info, lookahead_ns=0)
         finally:
             stop.set()

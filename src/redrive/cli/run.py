@@ -107,6 +107,7 @@ def _run(args: argparse.Namespace) -> int:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
     from redrive.engine import RunRequest, run_log
+    from redrive.results import RunStatus
 
     if args.pipeline is not None and (args.perception or args.planning or args.control):
         print("redrive run: give either --pipeline or --perception/--planning/--control")
@@ -153,10 +154,10 @@ def _run(args: argparse.Namespace) -> int:
 
         report = run_log(request, on_start=on_start, progress=on_progress)
     print_run_report(report, out)
-    if report.status == "interrupted":
+    if report.status is RunStatus.INTERRUPTED:
         print(f"interrupted: continue with `redrive run {args.log} --out {out} --resume`")
         return 130
-    if report.status == "failed" and report.failure is not None:
+    if report.status is RunStatus.FAILED and report.failure is not None:
         index, step = report.failure
         print(
             f"redrive: error: --fail-fast: {step.algorithm} {step.status} on frame {index}: "

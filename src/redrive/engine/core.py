@@ -33,7 +33,7 @@ from redrive.engine.graph import LogInputs, PlannedAlgorithm, StageGraph
 from redrive.engine.modes import ModeHooks, PacedFrame, ReplayMode
 from redrive.engine.stats import RunReport, StatsCollector
 from redrive.engine.worker import AlgorithmRunner, InlineRunner, ProcessRunner, frame_for
-from redrive.results import FrameRecord, StepRecord
+from redrive.results import FrameRecord, RunStatus, StepRecord
 from redrive.types import Frame
 
 __all__ = ["Engine", "FrameSink"]
@@ -289,18 +289,18 @@ class Engine:
             return item.failed if fail_fast else None
 
         t0 = time.perf_counter()
-        status = "complete"
+        status = RunStatus.COMPLETE
         try:
             if self.pipeline.mode == "pipelined" and len(self._stages) > 1:
                 failure = self._pipelined(paced, finish)
             else:
                 failure = self._sequential(paced, finish)
         except KeyboardInterrupt:
-            status, failure = "interrupted", None
+            status, failure = RunStatus.INTERRUPTED, None
         if failure is not None:
-            status = "failed"
+            status = RunStatus.FAILED
         elif cancelled[0]:
-            status = "interrupted"
+            status = RunStatus.INTERRUPTED
         late = getattr(self.hooks, "late_frames", 0)
         return stats.report(
             status=status, wall_s=time.perf_counter() - t0, late_frames=late, failure=failure

@@ -23,6 +23,7 @@ from redrive.algorithms import GROUND_TRUTH, VEHICLE_STATE, Algorithm, Role
 from redrive.algorithms.discovery import load_algorithm_class
 from redrive.config import AlgorithmSpec, PipelineConfig
 from redrive.errors import ConfigError, PluginError
+from redrive.results import AlgorithmEntry
 from redrive.types import SensorType, to_jsonable
 
 __all__ = ["LogInputs", "PlannedAlgorithm", "StageGraph", "build_graph", "config_hash"]
@@ -76,23 +77,23 @@ class PlannedAlgorithm:
     def role(self) -> Role:
         return self.cls.role
 
-    def manifest_entry(self) -> dict[str, Any]:
+    def manifest_entry(self) -> AlgorithmEntry:
         try:
             source = inspect.getsourcefile(self.cls) or ""
         except TypeError:
             source = ""
-        return {
-            "name": self.name,
-            "stage": self.stage,
-            "role": self.role.value,
-            "plugin": self.spec.plugin,
-            "class": f"{self.cls.__module__}:{self.cls.__qualname__}",
-            "source": source,
-            "version": str(self.cls.version),
-            "inputs": list(self.cls.input_names()),
-            "config": to_jsonable(self.config),
-            "config_hash": config_hash(self.config),
-        }
+        return AlgorithmEntry(
+            name=self.name,
+            stage=self.stage,
+            role=self.role,
+            plugin=self.spec.plugin,
+            class_name=f"{self.cls.__module__}:{self.cls.__qualname__}",
+            source=source,
+            version=str(self.cls.version),
+            inputs=tuple(self.cls.input_names()),
+            config=to_jsonable(self.config),
+            config_hash=config_hash(self.config),
+        )
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -13,7 +13,6 @@ import threading
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
 
 from redrive.config import PipelineConfig
 from redrive.engine.core import Engine
@@ -25,7 +24,13 @@ from redrive.errors import ConfigError
 from redrive.io import LogReader, open_log
 from redrive.io.frames import FrameAssembler
 from redrive.io.sensor_map import load_sensor_map_overrides
-from redrive.results import RunWriter
+from redrive.results import (
+    PipelineInfo,
+    RunSetup,
+    RunStatus,
+    RunWriter,
+    SourceLog,
+)
 from redrive.types import Frame
 
 __all__ = [
@@ -64,8 +69,9 @@ class RunRequest:
     resume: bool = False
 
 
-def log_fingerprint(path: Path) -> dict[str, Any]:
-    """Path, size and sha256 of a log file (or of every file of a log directory, in name order)."""
+def log_fingerprint(path: Path, *, format: str) -> SourceLog:
+    """Path, size and sha256 of a log file (or of every file of a log directory, in name order);
+    ``format`` is the reader's format name."""
     digest = hashlib.sha256()
     files = [path] if path.is_file() else sorted(p for p in path.rglob("*") if p.is_file())
     size = 0
@@ -75,7 +81,9 @@ def log_fingerprint(path: Path) -> dict[str, Any]:
         with file.open("rb") as fh:
             hashlib.file_digest(fh, lambda: digest)  # feeds the whole file into `digest`
         size += file.stat().st_size
-    return {"path": str(path.resolve()), "size_bytes": size, "sha256": digest.hexdigest()}
+    return SourceLog(
+        path=str(path.resolve()), format=format, sha256=digest.hexdigest(), size_bytes=size
+    )
 
 
 def log_inputs(assembler: FrameAssembler) -> LogInputs:
@@ -117,23 +125,27 @@ def _select(frames: Iterator[Frame], first: int | None, stop: int | None) -> Ite
     return frames
 
 
-def _manifest(request: RunRequest, graph: StageGraph, inputs: LogInputs) -> dict[str, Any]:
+def _setup(
+    request: RunRequest, graph: StageGraph, inputs: LogInputs, *, log: SourceLog, mode: str
+) -> RunSetup:
     pipeline = request.pipeline
-    return {
-        "sensors": {k: v.value for k, v in inputs.sensors.items()},
-        "seed": pipeline.seed,
-        "pipeline": {
-            "mode": pipeline.mode,
-            "executor": pipeline.executor,
-            "step_timeout_s": pipeline.step_timeout_s,
-            "fail_fast": pipeline.fail_fast,
-            "first_frame": request.first_frame,
-            "stop_frame": request.stop_frame,
-            "rate": request.rate,
-            "stages": [name for name, _ in graph.stages],
-        },
-        "algorithms": [p.manifest_entry() for p in graph.algorithms],
-    }
+    return RunSetup(
+        log=log,
+        sensors=dict(inputs.sensors),
+        seed=pipeline.seed,
+        pipeline=PipelineInfo(
+            mode=pipeline.mode,
+            executor=pipeline.executor,
+            step_timeout_s=pipeline.step_timeout_s,
+            fail_fast=pipeline.fail_fast,
+            first_frame=request.first_frame,
+            stop_frame=request.stop_frame,
+            rate=request.rate,
+            stages=tuple(name for name, _ in graph.stages),
+            mode_manager=mode,
+        ),
+        algorithms=tuple(p.manifest_entry() for p in graph.algorithms),
+    )
 
 
 def run_log(
@@ -164,7 +176,7 @@ def run_log(
             request,
             log,
             hooks=ReplayMode(rate=request.rate),
-            log_info={**log_fingerprint(request.log), "format": log.format},
+            log_info=log_fingerprint(request.log, format=log.format),
             on_start=on_start,
             progress=progress,
             cancel=cancel,
@@ -176,7 +188,7 @@ def run_reader(
     log: LogReader,
     *,
     hooks: ModeHooks,
-    log_info: dict[str, Any],
+    log_info: SourceLog,
     on_start: Callable[[int | None], None] | None = None,
     progress: Callable[[int], None] | None = None,
     lookahead_ns: int | None = None,
@@ -194,10 +206,8 @@ def run_reader(
     inputs = log_inputs(assembler)
     graph = build_graph(request.pipeline, inputs)
     assembler = _reading_only_inputs(log, assembler, graph, lookahead_ns=assembler.lookahead_ns)
-    manifest = _manifest(request, graph, inputs)
-    manifest["log"] = log_info
-    manifest["pipeline"]["mode_manager"] = hooks.mode.value
-    writer = RunWriter(request.out, manifest=manifest, resume=request.resume)
+    setup = _setup(request, graph, inputs, log=log_info, mode=hooks.mode.value)
+    writer = RunWriter(request.out, setup=setup, resume=request.resume)
     if on_start is not None:
         total = expected_frames(log, assembler)
         if total is not None and total > 0:
@@ -220,12 +230,14 @@ def run_reader(
     except BaseException as err:
         writer.write_resources(sampler.stop())
         engine.close()
-        status = "interrupted" if isinstance(err, KeyboardInterrupt) else "failed"
+        interrupted = isinstance(err, KeyboardInterrupt)
+        status = RunStatus.INTERRUPTED if interrupted else RunStatus.FAILED
         writer.close(status=status, summary={"error": f"{type(err).__name__}: {err}"})
         raise
     writer.write_resources(sampler.stop())
     engine.close()
     summary = report.as_dict()
+    del summary["status"]  # the manifest's own status
     if assembler.undecodable:
         summary["undecodable_messages"] = dict(assembler.undecodable)
     skipped = getattr(hooks, "skipped_frames", None)

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from redrive.engine.graph import PlannedAlgorithm
-from redrive.results import FrameRecord, StepRecord
+from redrive.results import FrameRecord, RunStatus, StepRecord
 
 __all__ = ["AlgorithmStats", "RunReport", "StatsCollector"]
 
@@ -42,7 +42,7 @@ class RunReport:
     """The outcome of :meth:`Engine.run`.
 
     Attributes:
-        status: ``complete``, ``interrupted`` or ``failed``.
+        status: complete, interrupted or failed.
         frames: frames processed in this invocation.
         wall_s: wall time of the run.
         log_span_s: log time covered by those frames (last stamp − first stamp + one period).
@@ -50,7 +50,7 @@ class RunReport:
         failure: (frame index, step) that stopped a ``fail_fast`` run.
     """
 
-    status: str
+    status: RunStatus
     frames: int
     wall_s: float
     log_span_s: float
@@ -69,7 +69,7 @@ class RunReport:
 
     def as_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {
-            "status": self.status,
+            "status": self.status.value,
             "frames": self.frames,
             "wall_s": round(self.wall_s, 3),
             "frames_per_s": round(self.frames_per_s, 2),
@@ -131,7 +131,7 @@ class StatsCollector:
     def report(
         self,
         *,
-        status: str,
+        status: RunStatus,
         wall_s: float,
         late_frames: int,
         failure: tuple[int, StepRecord] | None,

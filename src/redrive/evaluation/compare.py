@@ -71,7 +71,7 @@ logger = logging.getLogger(__name__)
 
 
 def _log_hash(run: Run) -> str:
-    sha = str(run.manifest.get("log", {}).get("sha256") or "")
+    sha = run.manifest.log.sha256 or ""
     if not sha:
         msg = (
             f"{run.path / 'manifest.json'} records no log sha256; cannot check the runs share a log"
@@ -145,8 +145,8 @@ def compare_runs(
     if sha_a != sha_b:
         msg = (
             f"runs replayed different logs: A {ra.path / 'manifest.json'} has log sha256 {sha_a} "
-            f"({ra.manifest['log'].get('path', '?')}), B {rb.path / 'manifest.json'} has {sha_b} "
-            f"({rb.manifest['log'].get('path', '?')}); compare runs of the same log"
+            f"({ra.manifest.log.path}), B {rb.path / 'manifest.json'} has {sha_b} "
+            f"({rb.manifest.log.path}); compare runs of the same log"
         )
         raise ConfigError(msg)
     a, b = RunSide.load(ra), RunSide.load(rb)

@@ -62,11 +62,7 @@ def planner_of(data: EvalData, requested: str = "") -> str:
     Raises:
         ConfigError: none or several planning algorithms and none requested, or an unknown one.
     """
-    planners = [
-        str(a["name"])
-        for a in data.run.manifest.get("algorithms", ())
-        if str(a.get("role", "")) == "planning"
-    ]
+    planners = data.run.manifest.names(Role.PLANNING)
     if requested:
         if requested not in planners:
             msg = (

@@ -107,7 +107,7 @@ def evaluate_run(
     """
     run = open_run(run_dir)
     chosen = list(metrics) if metrics is not None else default_metrics()
-    roles = {str(a["name"]): str(a.get("role", "")) for a in run.manifest.get("algorithms", ())}
+    roles = {a.name: a.role.value for a in run.manifest.algorithms}
     if algorithms is not None:
         unknown = sorted(set(algorithms) - set(roles))
         if unknown:

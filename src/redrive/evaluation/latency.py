@@ -130,7 +130,7 @@ class Latency(Metric):
         per_frame["frame_ms"] = (f_idx, f_ms)
 
         manifest = data.run.manifest
-        in_order = [str(a.get("name", "")) for a in manifest.get("algorithms", ())]
+        in_order = manifest.names()
         present = set(s_algo.tolist())
         algorithms = [a for a in in_order if a in present]
         algorithms += sorted(present - set(algorithms))
@@ -149,9 +149,7 @@ class Latency(Metric):
 
         combine = np.maximum if self.params["stage_combine"] == "max" else np.add
         stages_present = set(s_stage.tolist())
-        stages = [
-            str(x) for x in manifest.get("pipeline", {}).get("stages", ()) if x in stages_present
-        ]
+        stages = [x for x in manifest.pipeline.stages if x in stages_present]
         stages += sorted(stages_present - set(stages))
         for stage in stages:
             sel = s_stage == stage

@@ -271,7 +271,7 @@ def column_at(table: pa.Table, name: str, rows: IntArray) -> npt.NDArray[Any]:
 def algorithm_order(run: Run, names: Sequence[str]) -> list[str]:
     """The distinct ``names`` in the run's pipeline order; unknown names, then "" (the run
     as a whole) last."""
-    known = [str(a.get("name", "")) for a in run.manifest.get("algorithms", ())]
+    known = run.manifest.names()
     rank = {n: i for i, n in enumerate(known)}
     return sorted(set(names), key=lambda n: (n == "", rank.get(n, len(rank)), n))
 

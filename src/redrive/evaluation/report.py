@@ -84,24 +84,22 @@ def load_evaluation(run: Run) -> Evaluation:
 
 
 def _facts(run: Run, evaluation: Evaluation) -> list[tuple[str, Any]]:
-    m = run.manifest
-    log, summary = m.get("log") or {}, m.get("summary") or {}
-    frames = summary.get("frames", m.get("frames_done"))
+    m, s = run.manifest, run.manifest.summary
     return [
         ("run", str(run.path)),
-        ("status", m.get("status", "")),
-        ("log", log.get("path", "")),
-        ("log sha256", log.get("sha256", "")),
-        ("log format", log.get("format", "")),
-        ("frames", frames),
-        ("late frames", summary.get("late_frames")),
-        ("real-time factor (× real time)", summary.get("realtime_factor")),
-        ("frames per second", summary.get("frames_per_s")),
-        ("log span (s)", summary.get("log_span_s")),
-        ("pipeline mode", (m.get("pipeline") or {}).get("mode", "")),
-        ("created", m.get("created", "")),
-        ("finished", m.get("finished", "")),
-        ("redrive version", m.get("redrive_version", "")),
+        ("status", m.status.value),
+        ("log", m.log.path),
+        ("log sha256", m.log.sha256 or ""),
+        ("log format", m.log.format),
+        ("frames", m.frames_done if s is None else s.frames),
+        ("late frames", None if s is None else s.late_frames),
+        ("real-time factor (× real time)", None if s is None else s.realtime_factor),
+        ("frames per second", None if s is None else s.frames_per_s),
+        ("log span (s)", None if s is None else s.log_span_s),
+        ("pipeline mode", m.pipeline.mode),
+        ("created", m.created),
+        ("finished", m.finished),
+        ("redrive version", m.redrive_version),
         ("evaluated", evaluation.evaluated),
     ]
 
@@ -115,13 +113,12 @@ def _shown(value: Any) -> str:
 def _algorithms_table(run: Run) -> h.Markup:
     stats = {r["algorithm"]: r for r in run.summary().to_pylist()}
     rows = []
-    for a in run.manifest.get("algorithms", ()):
-        s = stats.get(a.get("name"), {})
-        digest = str(a.get("config_hash", ""))
+    for a in run.manifest.algorithms:
+        s = stats.get(a.name, {})
+        digest = a.config_hash
         short = h.Markup(f'<span class="mono" title="{h.esc(digest)}">{h.esc(digest[:12])}</span>')
         rows.append(
-            [a.get("name", ""), a.get("role", ""), a.get("stage", ""), a.get("plugin", ""),
-             a.get("version", ""), short,
+            [a.name, a.role.value, a.stage, a.plugin, a.version, short,
              *(_shown(s.get(k)) for k in ("ok", "error", "timeout", "skipped",
                                           "latency_p50_ms", "latency_p95_ms"))]
         )  # fmt: skip
@@ -210,7 +207,7 @@ def render_html(run: Run, evaluation: Evaluation, *, worst: int = DEFAULT_WORST)
            ("timelines", "per-frame"), ("latency", "latency"), ("worst", "worst frames"),
            ("bookmarks", "bookmarks")]  # fmt: skip
     title = f"redrive report: {run.path.resolve().name}"
-    log = (run.manifest.get("log") or {}).get("path", "")
+    log = run.manifest.log.path
     return h.page(title=title, subtitle=f"log {log}", nav=nav, body=h.Markup("".join(sections)))
 
 
@@ -261,8 +258,7 @@ def _write_xlsx(path: Path, run: Run, evaluation: Evaluation) -> None:
     headline = np.zeros(v.num_rows, dtype=bool)
     headline[list(first.values())] = True
     values = v.append_column("headline", pa.array(headline))
-    algos = [[a.get("name"), a.get("role"), a.get("version"), a.get("config_hash")]
-             for a in run.manifest.get("algorithms", ())]  # fmt: skip
+    algos = [[a.name, a.role.value, a.version, a.config_hash] for a in run.manifest.algorithms]
     metrics = [[m.get("name"), m.get("version"), m.get("role"), m.get("unit"),
                 m.get("higher_is_better"), json.dumps(m.get("params", {}), sort_keys=True),
                 m.get("params_hash"), ", ".join(m.get("algorithms", ()))]

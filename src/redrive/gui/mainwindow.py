@@ -237,7 +237,7 @@ class MainWindow(QtWidgets.QMainWindow):
         if log is None:
             self.show_error(
                 "The run's log is missing",
-                f"{path}: its manifest names the log {run.manifest.get('log', {}).get('path')!r}, "
+                f"{path}: its manifest names the log {run.manifest.log.path!r}, "
                 "which is not there; open the log with File → Open log.",
             )
             return

@@ -35,6 +35,7 @@ from redrive.gui.resim_views import (
     stored_summary_rows,
 )
 from redrive.gui.session import RunData
+from redrive.results import RunStatus
 
 __all__ = ["ResimPanel"]
 
@@ -300,7 +301,7 @@ class ResimPanel(QtWidgets.QWidget):
     def _on_succeeded(self, outcome: RunOutcome) -> None:
         self._finish_thread()
         self._show_run_a(outcome.data, outcome.shown, outcome.rows)
-        if outcome.status == "complete":
+        if outcome.status is RunStatus.COMPLETE:
             self.progress.setRange(0, 100)
             self.progress.setValue(100)
             self._status(f"Done: {outcome.message}")

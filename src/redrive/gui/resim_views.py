@@ -33,6 +33,7 @@ from PySide6 import QtCore
 
 from redrive.geometry.boxes import BOX_CORNER_SIGNS
 from redrive.gui.session import RunData
+from redrive.results import RunSetup, RunStatus
 from redrive.types import ControlCommands, DetectedObject, PlannedPath
 
 if TYPE_CHECKING:
@@ -118,16 +119,14 @@ def _ego_outline() -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     return y, x
 
 
-def shown_algorithms(manifest: Mapping[str, Any], prefer: Iterable[str] = ()) -> dict[str, str]:
-    """role → the algorithm of a run whose results are drawn.
+def shown_algorithms(setup: RunSetup, prefer: Iterable[str] = ()) -> dict[str, str]:
+    """role (``perception`` …) → the algorithm of a run whose results are drawn.
 
     The ``prefer`` names found in the run (the algorithm under test) and nothing else; when none
     is found, the last algorithm of each role (the reference pipeline: tracker, planner,
     controller).
     """
-    roles = [
-        (str(a.get("name", "")), str(a.get("role", ""))) for a in manifest.get("algorithms", ())
-    ]
+    roles = [(a.name, a.role.value) for a in setup.algorithms]
     wanted = set(prefer)
     chosen = {role: name for name, role in roles if name in wanted}
     if chosen:
@@ -237,7 +236,7 @@ class RunOutcome:
     algorithms shown (role → name, :func:`shown_algorithms`)."""
 
     out: Path
-    status: str
+    status: RunStatus
     message: str
     data: RunData
     shown: Mapping[str, str]
@@ -308,7 +307,9 @@ class RunThread(QtCore.QThread):
             request, on_start=self._on_start, progress=self._on_progress, cancel=self.cancel_event
         )
         message = _report_message(report, self.out)
-        if report.status != "complete":  # cancelled (fail-fast is off: a run never "fails")
+        if (
+            report.status is not RunStatus.COMPLETE
+        ):  # cancelled (fail-fast is off: a run never "fails")
             data = RunData.load(self.out)
             return RunOutcome(
                 out=self.out,
@@ -325,7 +326,7 @@ class RunThread(QtCore.QThread):
             message += f"; evaluation failed: {describe_error(err)}"
             return RunOutcome(
                 out=self.out,
-                status="complete",
+                status=RunStatus.COMPLETE,
                 message=message,
                 data=data,
                 shown=shown_algorithms(data.manifest, [name]),
@@ -345,7 +346,7 @@ class RunThread(QtCore.QThread):
         data = RunData.load(self.out)
         return RunOutcome(
             out=self.out,
-            status="complete",
+            status=RunStatus.COMPLETE,
             message=message,
             data=data,
             shown=shown_algorithms(data.manifest, [name]),

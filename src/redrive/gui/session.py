@@ -26,7 +26,7 @@ import numpy.typing as npt
 from redrive.errors import LogError, UnsupportedMessageError
 from redrive.io import LogReader, open_log
 from redrive.io.frames import FrameAssembler
-from redrive.results import Run, open_run
+from redrive.results import Run, RunManifest, RunStatus, open_run
 from redrive.types import ControlCommands, DetectedObject, Frame, PlannedPath, VehicleState
 
 __all__ = [
@@ -192,8 +192,8 @@ class RunData:
     """
 
     path: Path
-    manifest: Mapping[str, Any]
-    status: str = ""
+    manifest: RunManifest
+    status: RunStatus = RunStatus.RUNNING
     algorithms: tuple[tuple[str, str], ...] = ()
     frames: tuple[int, ...] = ()
     stamps_ns: Mapping[int, int] = field(default_factory=dict)
@@ -245,8 +245,8 @@ class RunData:
         bookmarks, per_frame = _evaluation(run, by_index)
         return cls(
             path=Path(path),
-            manifest=dict(run.manifest),
-            status=str(run.manifest.get("status", "")),
+            manifest=run.manifest,
+            status=run.manifest.status,
             algorithms=algorithms,
             frames=tuple(sorted(by_index)),
             stamps_ns=by_index,
@@ -264,11 +264,7 @@ _BOOKMARK_FIELDS = ("frame_index", "stamp_ns", "kind", "metric", "algorithm", "d
 
 
 def _algorithms(run: Run) -> list[tuple[str, str]]:
-    out = []
-    for entry in run.manifest.get("algorithms", []) or []:
-        if isinstance(entry, Mapping) and "name" in entry:
-            out.append((str(entry["name"]), str(entry.get("role", ""))))
-    return out
+    return [(entry.name, entry.role.value) for entry in run.manifest.algorithms]
 
 
 def _outputs(read: Callable[[str], Mapping[int, Any]], algorithm: str) -> Mapping[int, Any]:
@@ -314,8 +310,7 @@ def _evaluation(
 
 def find_run_log(run: RunData) -> Path | None:
     """The log a run was made from, if it is still where the manifest says."""
-    log = run.manifest.get("log", {})
-    path = log.get("path") if isinstance(log, Mapping) else None
+    path = run.manifest.log.path
     if path and Path(path).exists():
         return Path(path)
     return None

@@ -6,10 +6,11 @@ CSV or Excel files.  Nothing here imports the engine, the algorithms or the log 
 
 Layout of a run directory (columns: ``docs/results.md``)::
 
-    RUN/manifest.json              schema_version, redrive_version, created/finished (ISO UTC),
-                                   status (running | complete | interrupted | failed), host,
-                                   log, seed, pipeline, algorithms (from the engine),
-                                   frames_done, resumes, summary
+    RUN/manifest.json              a RunManifest (redrive.results.manifest): schema_version,
+                                   redrive_version, created/finished (ISO UTC), status (a
+                                   RunStatus: running | complete | interrupted | failed), host,
+                                   log, sensors, seed, pipeline, algorithms (the engine's
+                                   RunSetup), frames_done, resumes, summary, error
     RUN/frames/part-00000.parquet  one row per frame: frame_index, stamp_ns, wall_ns, late,
                                    n_ground_truth
     RUN/steps/part-…               one row per algorithm per frame: status, latency, errors
@@ -31,7 +32,18 @@ records give the same bytes.
 from __future__ import annotations
 
 from redrive.results.export import EXPORT_FORMATS, export_run
-from redrive.results.manifest import RESUME_KEYS, SCHEMA_VERSION
+from redrive.results.manifest import (
+    RESUME_KEYS,
+    SCHEMA_VERSION,
+    AlgorithmEntry,
+    PipelineInfo,
+    RunManifest,
+    RunSetup,
+    RunStatus,
+    RunSummary,
+    SourceLog,
+    read_manifest,
+)
 from redrive.results.records import (
     ROLES,
     STATUSES,
@@ -52,12 +64,20 @@ __all__ = [
     "SCHEMA_VERSION",
     "STATUSES",
     "TABLES",
+    "AlgorithmEntry",
     "FrameRecord",
+    "PipelineInfo",
     "ResourceSample",
     "Run",
+    "RunManifest",
+    "RunSetup",
+    "RunStatus",
+    "RunSummary",
     "RunWriter",
+    "SourceLog",
     "StepOutput",
     "StepRecord",
     "export_run",
     "open_run",
+    "read_manifest",
 ]

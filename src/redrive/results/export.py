@@ -155,7 +155,7 @@ def _flatten(prefix: str, value: Any) -> Iterator[tuple[str, Any]]:
 
 def _run_facts(run: Run) -> list[tuple[str, Any]]:
     facts: list[tuple[str, Any]] = [("run", str(run.path))]
-    for key, value in _flatten("", dict(run.manifest)):
+    for key, value in _flatten("", run.manifest.to_json()):
         if key != "summary.algorithms":
             facts.append((key, value))
     return facts

@@ -1,57 +1,95 @@
 """``manifest.json``: what a run is (log, pipeline, algorithms, seed) and how far it got.
 
-The engine supplies ``log``, ``pipeline``, ``algorithms`` and ``seed`` (and may add more keys);
-the store adds ``schema_version``, ``redrive_version``, ``created``/``finished`` (ISO 8601 UTC),
-``status``, ``host``, ``frames_done``, ``resumes`` and ``summary``.  Written atomically.
+:class:`RunManifest` is the typed, versioned model of the file.  The engine supplies a
+:class:`RunSetup` (log, sensors, seed, pipeline, algorithms); the store adds the rest
+(``schema_version``, ``redrive_version``, ``created``/``finished`` ISO 8601 UTC, ``status``,
+``host``, ``frames_done``, ``resumes``, ``summary``, ``error``).  :func:`write_manifest` writes
+atomically (temp file + ``os.replace``); :func:`read_manifest` validates every field and raises a
+:class:`~redrive.errors.ConfigError` naming the file, the field, what it found and what to do.
+
+Versions (``schema_version``):
+
+* **2** (:data:`SCHEMA_VERSION`): every field of :class:`RunManifest` is present (optional ones
+  as ``null``); ``summary`` is ``null`` until the run is closed.
+* **1** (redrive before the typed manifest): the same keys, but the engine's part was free-form
+  and may lack keys added over time.  Schema-1 manifests are **read**, not refused: the explicit
+  :func:`upgrade_v1` fills the keys older releases did not write (``sensors``,
+  ``pipeline.mode_manager`` …, ``summary`` ``{}`` → ``null``) and the result is validated as
+  version 2, so a user's existing runs keep working.  A resume rewrites the file as version 2.
+* no ``schema_version``, or one newer than :data:`SCHEMA_VERSION`: refused (re-run the run, or
+  upgrade redrive).
+
+Keys a manifest holds beyond the model are ignored when reading.
 """
 
 from __future__ import annotations
 
+import enum
 import json
 import os
 import platform
 import socket
 import sys
 from collections.abc import Mapping
+from dataclasses import dataclass, field, fields, replace
 from datetime import UTC, datetime
 from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from redrive.errors import ConfigError
+from redrive.results._fields import DAMAGED_ADVICE, Fields, manifest_error
+from redrive.types import Role, SensorType
 
 __all__ = [
     "MANIFEST_NAME",
     "RESUME_KEYS",
     "SCHEMA_VERSION",
-    "STORE_KEYS",
+    "AlgorithmEntry",
+    "HostInfo",
+    "PipelineInfo",
+    "ResumeRecord",
+    "RunManifest",
+    "RunSetup",
+    "RunStatus",
+    "RunSummary",
+    "SourceLog",
+    "StepFailure",
     "host_info",
     "now_iso",
     "read_manifest",
     "redrive_version",
     "resume_mismatches",
+    "upgrade_v1",
+    "with_resume",
     "write_json_atomic",
+    "write_manifest",
 ]
 
 MANIFEST_NAME = "manifest.json"
-#: version of the run-directory format; bumped on any incompatible change.
-SCHEMA_VERSION = 1
-#: keys the store owns; an engine-supplied manifest must not set them.
-STORE_KEYS = (
-    "schema_version",
-    "redrive_version",
-    "created",
-    "finished",
-    "status",
-    "host",
-    "frames_done",
-    "resumes",
-    "summary",
-)
-#: what must be equal for a run to be resumed: dotted paths into the manifest; for
+#: version of the manifest format; bumped on any incompatible change.
+SCHEMA_VERSION = 2
+#: what must be equal for a run to be resumed (dotted paths into the manifest); for
 #: ``algorithms`` each entry's ``name``, ``version`` and ``config_hash`` are compared in order.
 RESUME_KEYS = ("log.sha256", "algorithms", "pipeline.first_frame", "pipeline.stop_frame")
-_ALGORITHM_KEYS = ("name", "version", "config_hash")
+
+_ROLES = ", ".join(r.value for r in Role)
+_SENSOR_TYPES = ", ".join(t.value for t in SensorType)
+
+
+class RunStatus(enum.StrEnum):
+    """Where a run is: ``running`` until the writer closes it as one of the three others."""
+
+    RUNNING = "running"
+    COMPLETE = "complete"
+    INTERRUPTED = "interrupted"  # Ctrl-C or a cancel; `--resume` continues it
+    FAILED = "failed"  # `error` says why
+
+    @property
+    def is_final(self) -> bool:
+        return self is not RunStatus.RUNNING
+
+
+_STATUSES = ", ".join(s.value for s in RunStatus)
 
 
 def now_iso() -> str:
@@ -66,13 +104,401 @@ def redrive_version() -> str:
         return "unknown"
 
 
-def host_info() -> dict[str, Any]:
-    return {
-        "hostname": socket.gethostname(),
-        "platform": platform.platform(),
-        "python": sys.version.split()[0],
-        "cpu_count": os.cpu_count(),
-    }
+@dataclass(frozen=True, slots=True, kw_only=True)
+class HostInfo:
+    """The machine a run was created on."""
+
+    hostname: str
+    platform: str
+    python: str
+    cpu_count: int | None
+
+    @classmethod
+    def _parse(cls, f: Fields) -> HostInfo:
+        return cls(
+            hostname=f.text("hostname"),
+            platform=f.text("platform"),
+            python=f.text("python"),
+            cpu_count=f.opt_integer("cpu_count"),
+        )
+
+
+def host_info() -> HostInfo:
+    """This machine."""
+    return HostInfo(
+        hostname=socket.gethostname(),
+        platform=platform.platform(),
+        python=sys.version.split()[0],
+        cpu_count=os.cpu_count(),
+    )
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SourceLog:
+    """The log a run replayed: a file or directory (``sha256`` and ``size_bytes`` of its bytes), or
+    a live session (``format`` ``live``, no hash; ``source``, ``topics`` and ``record`` set)."""
+
+    path: str
+    format: str
+    sha256: str | None
+    size_bytes: int | None = None
+    source: str | None = None
+    topics: Mapping[str, str] = field(default_factory=dict)  # live: topic → message type
+    record: str | None = None  # live: the MCAP the session was recorded to
+
+    @classmethod
+    def _parse(cls, f: Fields) -> SourceLog:
+        return cls(
+            path=f.text("path"),
+            format=f.text("format"),
+            sha256=f.opt_text("sha256"),
+            size_bytes=f.opt_integer("size_bytes"),
+            source=f.opt_text("source"),
+            topics=f.text_map("topics"),
+            record=f.opt_text("record"),
+        )
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class PipelineInfo:
+    """How the stages ran, and over which frames ``[first_frame, stop_frame)``."""
+
+    mode: str = "sequential"  # sequential | pipelined
+    executor: str = "threads"  # threads | processes
+    step_timeout_s: float | None = None
+    fail_fast: bool = False
+    first_frame: int | None = None
+    stop_frame: int | None = None
+    rate: float | None = None  # real-time factor paced at; None: as fast as possible
+    stages: tuple[str, ...] = ()  # stage names in execution order
+    mode_manager: str = "replay"  # the Mode Manager's mode: replay | realtime | …
+
+    @classmethod
+    def _parse(cls, f: Fields) -> PipelineInfo:
+        return cls(
+            mode=f.text("mode"),
+            executor=f.text("executor"),
+            step_timeout_s=f.opt_number("step_timeout_s"),
+            fail_fast=f.flag("fail_fast"),
+            first_frame=f.opt_integer("first_frame"),
+            stop_frame=f.opt_integer("stop_frame"),
+            rate=f.opt_number("rate"),
+            stages=f.texts("stages"),
+            mode_manager=f.text("mode_manager"),
+        )
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class AlgorithmEntry:
+    """One algorithm of the run, in pipeline order (JSON key ``class`` for ``class_name``)."""
+
+    name: str
+    role: Role
+    version: str
+    config_hash: str  # sha256 of the canonical JSON of ``config``
+    stage: str = ""
+    plugin: str = ""  # what the user named: entry point, ``module:Class`` or ``file.py:Class``
+    class_name: str = ""  # ``module:QualName``
+    source: str = ""  # the class's source file
+    inputs: tuple[str, ...] = ()
+    config: Mapping[str, Any] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "stage": self.stage,
+            "role": self.role.value,
+            "plugin": self.plugin,
+            "class": self.class_name,
+            "source": self.source,
+            "version": self.version,
+            "inputs": list(self.inputs),
+            "config": _plain(self.config),
+            "config_hash": self.config_hash,
+        }
+
+    @classmethod
+    def _parse(cls, f: Fields) -> AlgorithmEntry:
+        return cls(
+            name=f.text("name"),
+            stage=f.text("stage"),
+            role=f.enum("role", Role, _ROLES),
+            plugin=f.text("plugin"),
+            class_name=f.text("class"),
+            source=f.text("source"),
+            version=f.text("version"),
+            inputs=f.texts("inputs"),
+            config=f.mapping("config"),
+            config_hash=f.text("config_hash"),
+        )
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class RunSetup:
+    """What the engine knows of a run before its first frame (all of it is in the manifest)."""
+
+    log: SourceLog
+    pipeline: PipelineInfo = field(default_factory=PipelineInfo)
+    algorithms: tuple[AlgorithmEntry, ...] = ()
+    seed: int | None = None
+    sensors: Mapping[str, SensorType] = field(default_factory=dict)  # sensor id → its type
+
+    def algorithm(self, name: str) -> AlgorithmEntry | None:
+        """The entry of algorithm ``name``, or None."""
+        return next((a for a in self.algorithms if a.name == name), None)
+
+    def names(self, role: Role | None = None) -> list[str]:
+        """The algorithms' names in pipeline order (only those of ``role`` if given)."""
+        return [a.name for a in self.algorithms if role is None or a.role is role]
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ResumeRecord:
+    """One resume of the run."""
+
+    at: str  # ISO 8601 UTC
+    previous_status: RunStatus
+    frames_done: int  # committed frames found on disk
+    hostname: str
+    removed_incomplete_files: int
+
+    @classmethod
+    def _parse(cls, f: Fields) -> ResumeRecord:
+        return cls(
+            at=f.text("at"),
+            previous_status=f.enum("previous_status", RunStatus, _STATUSES),
+            frames_done=f.integer("frames_done"),
+            hostname=f.text("hostname"),
+            removed_incomplete_files=f.integer("removed_incomplete_files"),
+        )
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class StepFailure:
+    """The step that stopped a ``fail_fast`` run."""
+
+    frame_index: int
+    algorithm: str
+    status: str
+    error_type: str
+    error_message: str
+
+    @classmethod
+    def _parse(cls, f: Fields) -> StepFailure:
+        return cls(
+            frame_index=f.integer("frame_index"),
+            algorithm=f.text("algorithm"),
+            status=f.text("status"),
+            error_type=f.text("error_type"),
+            error_message=f.text("error_message"),
+        )
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class RunSummary:
+    """Frame counts and timing, written when the run is closed: computed from the stored tables
+    (``frames``, ``late_frames``, ``algorithms``), overlaid with what the engine reports (then
+    ``frames`` counts the frames of the last invocation, ``algorithms`` its per-algorithm stats)."""
+
+    frames: int
+    late_frames: int
+    algorithms: tuple[Mapping[str, Any], ...] = ()  # per algorithm: counts and latencies (ms)
+    wall_s: float | None = None
+    frames_per_s: float | None = None
+    log_span_s: float | None = None
+    realtime_factor: float | None = None  # log time / wall time
+    failure: StepFailure | None = None
+    skipped_frames: int | None = None  # real-time mode: frames skipped (pipeline too slow)
+    undecodable_messages: Mapping[str, int] = field(default_factory=dict)  # topic → count
+    error: str | None = None  # ``Type: message`` of what ended a failed or interrupted run
+
+    def to_json(self) -> dict[str, Any]:
+        out = {f.name: getattr(self, f.name) for f in fields(self)}
+        out["algorithms"] = [_plain(a) for a in self.algorithms]
+        out["failure"] = None if self.failure is None else _asdict(self.failure)
+        out["undecodable_messages"] = dict(self.undecodable_messages)
+        return out
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any], *, path: Path) -> RunSummary:
+        """Validate a summary object (``path`` names the file in errors)."""
+        f = Fields(data, path=path, where="summary")
+        failure = f.opt_obj("failure", None)
+        return cls(
+            frames=f.integer("frames"),
+            late_frames=f.integer("late_frames"),
+            algorithms=tuple(a.data for a in f.objs("algorithms", [])),
+            wall_s=f.opt_number("wall_s", None),
+            frames_per_s=f.opt_number("frames_per_s", None),
+            log_span_s=f.opt_number("log_span_s", None),
+            realtime_factor=f.opt_number("realtime_factor", None),
+            failure=None if failure is None else StepFailure._parse(failure),
+            skipped_frames=f.opt_integer("skipped_frames", None),
+            undecodable_messages=f.int_map("undecodable_messages", {}),
+            error=f.opt_text("error", None),
+        )
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class RunManifest(RunSetup):
+    """``RUN/manifest.json``: the :class:`RunSetup` plus what the store records."""
+
+    redrive_version: str
+    created: str  # ISO 8601 UTC
+    status: RunStatus
+    host: HostInfo
+    finished: str | None = None  # ISO 8601 UTC; None while running
+    frames_done: int = 0  # committed frames, updated at every flush
+    resumes: tuple[ResumeRecord, ...] = ()
+    summary: RunSummary | None = None  # None until the run is closed
+    error: str | None = None  # ``Type: message`` of the exception that failed the run
+    schema_version: int = SCHEMA_VERSION
+
+    @classmethod
+    def start(cls, setup: RunSetup) -> RunManifest:
+        """The manifest of a new run of ``setup`` on this machine, now."""
+        kept = {f.name: getattr(setup, f.name) for f in fields(RunSetup)}
+        return cls(
+            **kept,
+            redrive_version=redrive_version(),
+            created=now_iso(),
+            status=RunStatus.RUNNING,
+            host=host_info(),
+        )
+
+    @property
+    def setup(self) -> RunSetup:
+        return RunSetup(**{f.name: getattr(self, f.name) for f in fields(RunSetup)})
+
+    def to_json(self) -> dict[str, Any]:
+        """The JSON object written to ``manifest.json``."""
+        return {
+            "schema_version": self.schema_version,
+            "redrive_version": self.redrive_version,
+            "created": self.created,
+            "finished": self.finished,
+            "status": self.status.value,
+            "host": _asdict(self.host),
+            "sensors": {k: v.value for k, v in self.sensors.items()},
+            "seed": self.seed,
+            "pipeline": {**_asdict(self.pipeline), "stages": list(self.pipeline.stages)},
+            "algorithms": [a.to_json() for a in self.algorithms],
+            "log": {**_asdict(self.log), "topics": dict(self.log.topics)},
+            "frames_done": self.frames_done,
+            "resumes": [
+                {**_asdict(r), "previous_status": r.previous_status.value} for r in self.resumes
+            ],
+            "summary": None if self.summary is None else self.summary.to_json(),
+            "error": self.error,
+        }
+
+    @classmethod
+    def from_json(cls, data: Any, *, path: Path) -> RunManifest:
+        """Validate the parsed JSON of ``path`` (schema 1 is upgraded first, see the module).
+
+        Raises:
+            ConfigError: not an object, no or an unsupported ``schema_version``, or a field
+                missing or of the wrong type (the message names the field and what it holds).
+        """
+        if not isinstance(data, Mapping):
+            raise manifest_error(path, f"is not a JSON object (found {type(data).__name__})")
+        version = data.get("schema_version")
+        if version is None:
+            raise manifest_error(
+                path,
+                "has no `schema_version`: it was written by a pre-release redrive or is not a "
+                "run manifest",
+                "re-run `redrive run LOG --out NEW_DIR` to make the run with this redrive",
+            )
+        if not isinstance(version, int) or isinstance(version, bool) or version < 1:
+            raise manifest_error(path, f"field `schema_version` is {version!r}, expected 1 or 2")
+        if version > SCHEMA_VERSION:
+            raise manifest_error(
+                path,
+                f"is schema_version {version}, newer than this redrive {redrive_version()} "
+                f"reads (up to {SCHEMA_VERSION})",
+                "upgrade redrive (`pip install -U redrive`) to read it",
+            )
+        if version == 1:
+            data = upgrade_v1(data)
+        return cls._parse(Fields(data, path=path))
+
+    @classmethod
+    def _parse(cls, f: Fields) -> RunManifest:
+        summary = f.opt_obj("summary")
+        return cls(
+            schema_version=SCHEMA_VERSION,
+            redrive_version=f.text("redrive_version"),
+            created=f.text("created"),
+            finished=f.opt_text("finished"),
+            status=f.enum("status", RunStatus, _STATUSES),
+            host=HostInfo._parse(f.obj("host")),
+            sensors={
+                k: Fields({"type": v}, path=f.path, where=f"sensors.{k}").enum(
+                    "type", SensorType, _SENSOR_TYPES
+                )
+                for k, v in f.mapping("sensors").items()
+            },
+            seed=f.opt_integer("seed"),
+            pipeline=PipelineInfo._parse(f.obj("pipeline")),
+            algorithms=tuple(AlgorithmEntry._parse(a) for a in f.objs("algorithms")),
+            log=SourceLog._parse(f.obj("log")),
+            frames_done=f.integer("frames_done"),
+            resumes=tuple(ResumeRecord._parse(r) for r in f.objs("resumes")),
+            summary=None if summary is None else RunSummary.from_json(summary.data, path=f.path),
+            error=f.opt_text("error"),
+        )
+
+
+#: keys a schema-1 manifest may lack (added while the format stayed at 1), with what they meant
+#: when absent.
+_V1_DEFAULTS: dict[str, Any] = {"sensors": {}, "error": None}
+_V1_PIPELINE_DEFAULTS: dict[str, Any] = {
+    "mode": "sequential",
+    "executor": "threads",
+    "step_timeout_s": None,
+    "fail_fast": False,
+    "first_frame": None,
+    "stop_frame": None,
+    "rate": None,
+    "stages": [],
+    "mode_manager": "replay",  # before live runs, every run was a replay
+}
+_V1_ALGORITHM_DEFAULTS: dict[str, Any] = {
+    "stage": "",
+    "plugin": "",
+    "class": "",
+    "source": "",
+    "inputs": [],
+    "config": {},
+}
+_V1_LOG_DEFAULTS: dict[str, Any] = {
+    "format": "unknown",
+    "size_bytes": None,
+    "source": None,  # the live-only keys: absent for a file log
+    "topics": {},
+    "record": None,
+}
+
+
+def upgrade_v1(data: Mapping[str, Any]) -> dict[str, Any]:
+    """A schema-1 manifest as schema 2: the keys older releases did not write are filled with
+    what their absence meant, an empty ``summary`` (a run never closed) becomes null.  What
+    cannot be filled (``log.path``, an algorithm's ``name``, ``role`` …) stays missing, and
+    validation names it."""
+    out = {**_V1_DEFAULTS, **data, "schema_version": SCHEMA_VERSION}
+    if isinstance(out.get("pipeline"), Mapping):
+        out["pipeline"] = {**_V1_PIPELINE_DEFAULTS, **out["pipeline"]}
+    if isinstance(out.get("log"), Mapping):
+        out["log"] = {**_V1_LOG_DEFAULTS, **out["log"]}
+    if isinstance(out.get("algorithms"), list):
+        out["algorithms"] = [
+            {**_V1_ALGORITHM_DEFAULTS, **a} if isinstance(a, Mapping) else a
+            for a in out["algorithms"]
+        ]
+    if out.get("summary") == {}:
+        out["summary"] = None
+    return out
 
 
 def write_json_atomic(path: Path, data: Mapping[str, Any]) -> None:
@@ -86,59 +512,74 @@ def write_json_atomic(path: Path, data: Mapping[str, Any]) -> None:
     os.replace(tmp, path)
 
 
-def read_manifest(run_dir: Path) -> dict[str, Any]:
-    """The manifest of ``run_dir``; ConfigError when there is none or it cannot be read."""
+def write_manifest(run_dir: Path, manifest: RunManifest) -> None:
+    """Write ``RUN/manifest.json`` atomically (temp file + ``os.replace``)."""
+    write_json_atomic(run_dir / MANIFEST_NAME, manifest.to_json())
+
+
+def read_manifest(run_dir: Path) -> RunManifest:
+    """The validated manifest of ``run_dir``.
+
+    Raises:
+        ConfigError: there is none, it is not JSON, or :meth:`RunManifest.from_json` refuses it.
+    """
     path = run_dir / MANIFEST_NAME
     if not path.is_file():
         msg = (
             f"{run_dir} is not a redrive run: it has no {MANIFEST_NAME} "
             "(give the directory a `redrive run --out` wrote)"
         )
-        raise ConfigError(msg)
+        raise manifest_error(path, "is missing", msg) from None
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
-        msg = f"{path}: cannot read the run manifest ({err}); the run directory is damaged"
-        raise ConfigError(msg) from err
-    if not isinstance(data, dict) or "schema_version" not in data:
-        msg = f"{path}: not a redrive run manifest (no schema_version)"
-        raise ConfigError(msg)
-    if data["schema_version"] != SCHEMA_VERSION:
-        msg = (
-            f"{path}: run format version {data['schema_version']} is not supported "
-            f"(this redrive reads version {SCHEMA_VERSION}); use the redrive that wrote it"
-        )
-        raise ConfigError(msg)
-    return data
+        raise manifest_error(path, f"cannot be read as JSON ({err})", DAMAGED_ADVICE) from err
+    return RunManifest.from_json(data, path=path)
 
 
-_MISSING = object()
+def _algorithms_key(algorithms: tuple[AlgorithmEntry, ...]) -> list[dict[str, str]]:
+    return [
+        {"name": a.name, "version": a.version, "config_hash": a.config_hash} for a in algorithms
+    ]
 
 
-def _lookup(data: Mapping[str, Any], dotted: str) -> Any:
-    value: Any = data
-    for part in dotted.split("."):
-        if not isinstance(value, Mapping) or part not in value:
-            return _MISSING
-        value = value[part]
-    return value
+def resume_mismatches(old: RunSetup, new: RunSetup) -> list[str]:
+    """Human-readable differences in :data:`RESUME_KEYS` between a run's setup and a new one."""
+    pairs: dict[str, tuple[Any, Any]] = {
+        "log.sha256": (old.log.sha256, new.log.sha256),
+        "algorithms": (_algorithms_key(old.algorithms), _algorithms_key(new.algorithms)),
+        "pipeline.first_frame": (old.pipeline.first_frame, new.pipeline.first_frame),
+        "pipeline.stop_frame": (old.pipeline.stop_frame, new.pipeline.stop_frame),
+    }
+    assert tuple(pairs) == RESUME_KEYS
+    return [
+        f"{key}: run has {json.dumps(a)}, now {json.dumps(b)}"
+        for key, (a, b) in pairs.items()
+        if a != b
+    ]
 
 
-def _algorithms_key(value: Any) -> Any:
-    if not isinstance(value, list | tuple):
-        return value
-    return [{k: a.get(k) for k in _ALGORITHM_KEYS} if isinstance(a, Mapping) else a for a in value]
+def with_resume(manifest: RunManifest, record: ResumeRecord) -> RunManifest:
+    """``manifest`` running again after ``record``."""
+    return replace(
+        manifest,
+        status=RunStatus.RUNNING,
+        finished=None,
+        frames_done=record.frames_done,
+        resumes=(*manifest.resumes, record),
+    )
 
 
-def resume_mismatches(old: Mapping[str, Any], new: Mapping[str, Any]) -> list[str]:
-    """Human-readable differences in :data:`RESUME_KEYS` between a run's manifest and a new one."""
-    out = []
-    for key in RESUME_KEYS:
-        a, b = _lookup(old, key), _lookup(new, key)
-        if key == "algorithms":
-            a, b = _algorithms_key(a), _algorithms_key(b)
-        if a != b:
-            show_a = "(absent)" if a is _MISSING else json.dumps(a, default=str)
-            show_b = "(absent)" if b is _MISSING else json.dumps(b, default=str)
-            out.append(f"{key}: run has {show_a}, now {show_b}")
+def _asdict(obj: Any) -> dict[str, Any]:
+    return {f.name: getattr(obj, f.name) for f in fields(obj)}
+
+
+def _plain(data: Mapping[str, Any]) -> dict[str, Any]:
+    """``data`` through JSON (tuples become lists), so it equals a manifest read back."""
+    try:
+        out = json.loads(json.dumps(dict(data), allow_nan=False))
+    except (TypeError, ValueError) as err:
+        msg = f"run manifest values must be JSON-serialisable (no NaN): {err}"
+        raise ValueError(msg) from err
+    assert isinstance(out, dict)
     return out

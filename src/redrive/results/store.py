@@ -14,8 +14,9 @@ import os
 import re
 import time
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from pathlib import Path
-from types import MappingProxyType, TracebackType
+from types import TracebackType
 from typing import Any
 
 import pyarrow as pa
@@ -26,14 +27,17 @@ from redrive.errors import ConfigError
 from redrive.results._buffers import TableBuffers
 from redrive.results.manifest import (
     MANIFEST_NAME,
-    SCHEMA_VERSION,
-    STORE_KEYS,
+    ResumeRecord,
+    RunManifest,
+    RunSetup,
+    RunStatus,
+    RunSummary,
     host_info,
     now_iso,
     read_manifest,
-    redrive_version,
     resume_mismatches,
-    write_json_atomic,
+    with_resume,
+    write_manifest,
 )
 from redrive.results.readers import (
     commands_by_frame,
@@ -56,7 +60,7 @@ __all__ = ["FINAL_STATUSES", "Run", "RunWriter", "open_run"]
 logger = logging.getLogger(__name__)
 
 #: the statuses :meth:`RunWriter.close` accepts.
-FINAL_STATUSES = ("complete", "interrupted", "failed")
+FINAL_STATUSES = (RunStatus.COMPLETE, RunStatus.INTERRUPTED, RunStatus.FAILED)
 _PART_RE = re.compile(r"^part-(\d{5,})\.parquet$")
 _LOCK_NAME = ".lock"
 #: entries a directory may hold and still count as empty (what a writer leaves before its manifest)
@@ -138,10 +142,8 @@ class RunWriter:
 
     Args:
         run_dir: the run directory; created for a new run.
-        manifest: what the engine knows about the run (``log`` with its ``sha256``, ``pipeline``
-            with ``first_frame``/``stop_frame``, ``algorithms`` with ``name``/``version``/
-            ``config_hash``, ``seed`` …); JSON-able.
-        resume: continue the run already in ``run_dir`` (its manifest must match ``manifest`` in
+        setup: what the engine knows about the run (log, pipeline, algorithms, seed, sensors).
+        resume: continue the run already in ``run_dir`` (its manifest must match ``setup`` in
             :data:`redrive.results.manifest.RESUME_KEYS`); a missing or empty directory starts
             a new run.
         flush_every: frames buffered before a flush writes them.
@@ -154,14 +156,14 @@ class RunWriter:
 
     One thread writes; the writer holds ``RUN/.lock`` until :meth:`close`.  As a context
     manager it closes with ``complete`` on a normal exit, ``interrupted`` on
-    KeyboardInterrupt and ``failed`` on any other exception (recorded in ``manifest["error"]``).
+    KeyboardInterrupt and ``failed`` on any other exception (recorded in ``manifest.error``).
     """
 
     def __init__(
         self,
         run_dir: str | Path,
         *,
-        manifest: Mapping[str, Any],
+        setup: RunSetup,
         resume: bool = False,
         flush_every: int = 1000,
         flush_interval_s: float = 2.0,
@@ -173,11 +175,6 @@ class RunWriter:
         self.flush_every = int(flush_every)
         self.flush_interval_s = float(flush_interval_s)
         self._last_flush = time.monotonic()
-        given = _jsonable(manifest)
-        reserved = sorted(set(given) & set(STORE_KEYS))
-        if reserved:
-            msg = f"RunWriter: the manifest must not set {reserved}; the store writes them"
-            raise ValueError(msg)
         path = self.path
         if path.exists() and not path.is_dir():
             msg = f"{path} is a file, not a run directory; choose another --out"
@@ -203,37 +200,26 @@ class RunWriter:
         self._closed = False
         try:
             if is_run:
-                self._manifest = self._open_existing(given)
+                self._manifest = self._open_existing(setup)
             else:
-                self._manifest = self._start_new(given)
+                self._manifest = self._start_new(setup)
         except BaseException:
             self._lock.release()
             raise
 
     # -- opening -----------------------------------------------------------------------------
 
-    def _start_new(self, given: dict[str, Any]) -> dict[str, Any]:
-        manifest: dict[str, Any] = {
-            "schema_version": SCHEMA_VERSION,
-            "redrive_version": redrive_version(),
-            "created": now_iso(),
-            "finished": None,
-            "status": "running",
-            "host": host_info(),
-            **given,
-            "frames_done": 0,
-            "resumes": [],
-            "summary": {},
-        }
+    def _start_new(self, setup: RunSetup) -> RunManifest:
+        manifest = RunManifest.start(setup)
         for name in TABLES:
             (self.path / name).mkdir(exist_ok=True)
-        write_json_atomic(self.path / MANIFEST_NAME, manifest)
+        write_manifest(self.path, manifest)
         logger.info("new run in %s", self.path)
         return manifest
 
-    def _open_existing(self, given: dict[str, Any]) -> dict[str, Any]:
+    def _open_existing(self, setup: RunSetup) -> RunManifest:
         manifest = read_manifest(self.path)
-        diffs = resume_mismatches(manifest, given)
+        diffs = resume_mismatches(manifest, setup)
         if diffs:
             msg = (
                 f"cannot resume {self.path}: it was run with other inputs ("
@@ -262,19 +248,15 @@ class RunWriter:
             done.update(col.to_pylist())
         self._done = done
         self._next_part = max(committed, default=-1) + 1
-        manifest.setdefault("resumes", []).append(
-            {
-                "at": now_iso(),
-                "previous_status": manifest.get("status"),
-                "frames_done": len(done),
-                "hostname": host_info()["hostname"],
-                "removed_incomplete_files": removed,
-            }
+        record = ResumeRecord(
+            at=now_iso(),
+            previous_status=manifest.status,
+            frames_done=len(done),
+            hostname=host_info().hostname,
+            removed_incomplete_files=removed,
         )
-        manifest["status"] = "running"
-        manifest["finished"] = None
-        manifest["frames_done"] = len(done)
-        write_json_atomic(self.path / MANIFEST_NAME, manifest)
+        manifest = with_resume(manifest, record)
+        write_manifest(self.path, manifest)
         logger.info(
             "resuming %s: %d frames done, %d incomplete files removed",
             self.path,
@@ -291,8 +273,8 @@ class RunWriter:
         return frozenset(self._done)
 
     @property
-    def manifest(self) -> Mapping[str, Any]:
-        return MappingProxyType(self._manifest)
+    def manifest(self) -> RunManifest:
+        return self._manifest
 
     def _check_open(self) -> None:
         if self._closed:
@@ -343,28 +325,38 @@ class RunWriter:
         logger.debug("%s: part %d, %d frames", self.path, number, len(self._buffered))
         self._buffered = set()
         self._has_resources = False
-        self._manifest["frames_done"] = len(self._done)
-        write_json_atomic(self.path / MANIFEST_NAME, self._manifest)
+        self._manifest = replace(self._manifest, frames_done=len(self._done))
+        write_manifest(self.path, self._manifest)
 
-    def close(self, *, status: str, summary: Mapping[str, Any] | None = None) -> None:
+    def close(self, *, status: RunStatus, summary: Mapping[str, Any] | None = None) -> None:
         """Flush, then mark the run ``complete``, ``interrupted`` or ``failed``.
 
         The manifest's ``summary`` holds ``frames``, ``late_frames`` and per-algorithm counts
-        and latencies computed from the stored tables, overlaid with ``summary``.  Closing a
-        closed writer does nothing.
+        and latencies computed from the stored tables, overlaid with ``summary`` (keys of
+        :class:`~redrive.results.manifest.RunSummary`).  Closing a closed writer does nothing.
+
+        Raises:
+            ValueError: ``status`` is not final, or ``summary`` has a key or value that
+                :class:`~redrive.results.manifest.RunSummary` does not take.
         """
         if self._closed:
             return
         if status not in FINAL_STATUSES:
-            msg = f"RunWriter.close: status {status!r} is not one of {FINAL_STATUSES}"
+            shown = ", ".join(s.value for s in FINAL_STATUSES)
+            msg = f"RunWriter.close: status {str(status)!r} is not one of {shown}"
             raise ValueError(msg)
+        extra = _jsonable(summary or {})
+        self._summary({"frames": 0, "late_frames": 0, **extra})  # refused before closing
         try:
             self.flush()
             computed = _computed_summary(Run(self.path, self._manifest))
-            self._manifest["summary"] = {**computed, **_jsonable(summary or {})}
-            self._manifest["status"] = status
-            self._manifest["finished"] = now_iso()
-            write_json_atomic(self.path / MANIFEST_NAME, self._manifest)
+            self._manifest = replace(
+                self._manifest,
+                summary=self._summary({**computed, **extra}),
+                status=RunStatus(status),
+                finished=now_iso(),
+            )
+            write_manifest(self.path, self._manifest)
         finally:
             self._closed = True
             self._lock.release()
@@ -379,15 +371,27 @@ class RunWriter:
         tb: TracebackType | None,
     ) -> None:
         if exc_type is None:
-            self.close(status="complete")
+            self.close(status=RunStatus.COMPLETE)
             return
-        status = "interrupted" if issubclass(exc_type, KeyboardInterrupt) else "failed"
-        if status == "failed":
-            self._manifest["error"] = f"{exc_type.__name__}: {exc}"
+        if issubclass(exc_type, KeyboardInterrupt):
+            status = RunStatus.INTERRUPTED
+        else:
+            status = RunStatus.FAILED
+            self._manifest = replace(self._manifest, error=f"{exc_type.__name__}: {exc}")
         try:
             self.close(status=status)
         except Exception:  # never hide the exception that ended the run
             logger.exception("could not close the run in %s after %s", self.path, exc_type)
+
+    def _summary(self, data: dict[str, Any]) -> RunSummary:
+        unknown = sorted(set(data) - set(RunSummary.__dataclass_fields__))
+        if unknown:
+            msg = f"RunWriter.close: summary keys {unknown} are not fields of RunSummary"
+            raise ValueError(msg)
+        try:
+            return RunSummary.from_json(data, path=self.path / MANIFEST_NAME)
+        except ConfigError as err:
+            raise ValueError(f"RunWriter.close: {err}") from err
 
 
 def _jsonable(data: Mapping[str, Any]) -> dict[str, Any]:
@@ -426,15 +430,15 @@ class Run:
 
     Attributes:
         path: the run directory.
-        manifest: ``manifest.json`` as read by :func:`open_run`.
+        manifest: ``manifest.json`` as read (and validated) by :func:`open_run`.
     """
 
-    def __init__(self, path: Path, manifest: Mapping[str, Any]) -> None:
+    def __init__(self, path: Path, manifest: RunManifest) -> None:
         self.path = path
-        self.manifest: Mapping[str, Any] = MappingProxyType(dict(manifest))
+        self.manifest = manifest
 
     def __repr__(self) -> str:
-        return f"Run({str(self.path)!r}, status={self.manifest.get('status')!r})"
+        return f"Run({str(self.path)!r}, status={self.manifest.status.value!r})"
 
     def part_paths(self, name: str) -> list[Path]:
         """The committed parts of table ``name``, in write order."""
