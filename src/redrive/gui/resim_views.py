@@ -307,30 +307,14 @@ class RunThread(QtCore.QThread):
             request, on_start=self._on_start, progress=self._on_progress, cancel=self.cancel_event
         )
         message = _report_message(report, self.out)
-        if (
-            report.status is not RunStatus.COMPLETE
-        ):  # cancelled (fail-fast is off: a run never "fails")
-            data = RunData.load(self.out)
-            return RunOutcome(
-                out=self.out,
-                status=report.status,
-                message=message,
-                data=data,
-                shown=shown_algorithms(data.manifest, [name]),
-            )
+        if report.status is not RunStatus.COMPLETE:  # cancelled (fail-fast is off: never "failed")
+            return self._outcome(report.status, message, name)
         try:
             summary = evaluate_run(self.out, algorithms=[name])
         except Exception as err:  # the run is complete and shown all the same
             logger.exception("evaluating %s failed", self.out)
-            data = RunData.load(self.out)
             message += f"; evaluation failed: {describe_error(err)}"
-            return RunOutcome(
-                out=self.out,
-                status=RunStatus.COMPLETE,
-                message=message,
-                data=data,
-                shown=shown_algorithms(data.manifest, [name]),
-            )
+            return self._outcome(RunStatus.COMPLETE, message, name)
         rows = [
             SummaryRow(algorithm=s.algorithm, metric=s.metric.name, key=k, value=v, unit=u)
             for s in summary.scored
@@ -343,14 +327,16 @@ class RunThread(QtCore.QThread):
             )
             for s in (*summary.failed, *summary.skipped)
         ]  # fmt: skip
+        return self._outcome(RunStatus.COMPLETE, message, name, rows)
+
+    def _outcome(
+        self, status: RunStatus, message: str, name: str, rows: Sequence[SummaryRow] = ()
+    ) -> RunOutcome:
+        """The run as the views draw it, the algorithm under test ``name`` shown."""
         data = RunData.load(self.out)
+        shown = shown_algorithms(data.manifest, [name])
         return RunOutcome(
-            out=self.out,
-            status=RunStatus.COMPLETE,
-            message=message,
-            data=data,
-            shown=shown_algorithms(data.manifest, [name]),
-            rows=tuple(rows),
+            out=self.out, status=status, message=message, data=data, shown=shown, rows=tuple(rows)
         )
 
 
