@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from redrive.cli.demo_log import write_demo_bag
 from redrive.cli.main import main
+from redrive.testing.demo_log import write_demo_bag
 
 
 def test_info_json_on_a_real_bag(shared_data: Path, capsys: pytest.CaptureFixture[str]) -> None:
