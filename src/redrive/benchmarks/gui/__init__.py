@@ -10,9 +10,9 @@ topic                          type                                        what
 ``/lidar_top``                 ``sensor_msgs/msg/PointCloud2``             ``points`` (120,000)
                                                                            x, y, z + intensity; a
                                                                            64-beam sweep of
-                                                                           :mod:`redrive.benchmarks.
-                                                                           synth_log` (ground and
-                                                                           walls 10–60 m)
+                                                                           ``benchmarks.synth_log``
+                                                                           (ground and walls
+                                                                           10–60 m)
 ``/camera_front/image_raw``    ``sensor_msgs/msg/Image``                   1280 × 720 rgb8
 ``/camera_front/camera_info``  ``sensor_msgs/msg/CameraInfo``              fx = fy = 900 px
 ``/ground_truth/objects``      ``redrive_msgs/msg/GroundTruthObjectArray`` ``boxes`` (50) moving
