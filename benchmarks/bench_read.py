@@ -2,7 +2,7 @@
 
     .venv/bin/python benchmarks/bench_read.py [--big] [--scratch /tmp] [--json-dir DIR]
 
-Runs ``redrive.bench.read.bench_read`` (the code behind ``redrive bench read``) on the real bags
+Runs ``redrive.benchmarks.read.bench_read`` (the code behind ``redrive bench read``) on the real bags
 in ../shared/data (when present) and on synthetic bags written to ``--scratch`` and deleted
 afterwards: 0.32 GB of 100k-point clouds in both point layouts, and with ``--big`` 2 GB.  Every
 case runs twice: with glibc's default allocator settings and with ``--tune-malloc``'s.
@@ -15,8 +15,8 @@ import json
 import tempfile
 from pathlib import Path
 
-from redrive.bench.read import TUNED_MALLOC_ENV, ReadBenchResult, bench_read
-from redrive.bench.synth_log import Layout, write_synthetic_bag
+from redrive.benchmarks.read import TUNED_MALLOC_ENV, ReadBenchResult, bench_read
+from redrive.benchmarks.synth_log import Layout, write_synthetic_bag
 
 _SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 _REAL = (

@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from redrive.bench.engine import bench_engine
+from redrive.benchmarks.engine import bench_engine
 from redrive.cli.main import main
 
 

@@ -8,8 +8,8 @@ import math
 
 import pytest
 
-from redrive.bench.eval import baseline_nuscenes, bench_eval, synthetic_detections
-from redrive.cli.bench_eval import add_eval_parser
+from redrive.benchmarks.cli.eval import add_eval_parser
+from redrive.benchmarks.eval import baseline_nuscenes, bench_eval, synthetic_detections
 from redrive.evaluation.detection import evaluate_nuscenes
 from redrive.evaluation.detection.classes import NUSCENES_CLASS_RANGE_M, NUSCENES_CLASSES
 

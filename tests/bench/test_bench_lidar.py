@@ -8,8 +8,8 @@ import json
 import numpy as np
 import pytest
 
-from redrive.bench.lidar import bench_lidar, bench_scene
-from redrive.cli import bench
+from redrive.benchmarks import cli as bench
+from redrive.benchmarks.lidar import bench_lidar, bench_scene
 
 
 def _run(argv: list[str]) -> int:

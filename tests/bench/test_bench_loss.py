@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from redrive.bench.loss import (
+from redrive.benchmarks.cli.loss import add_loss_parser
+from redrive.benchmarks.loss import (
     STREAMS,
     LossBenchResult,
     bench_loss,
@@ -30,7 +31,6 @@ from redrive.bench.loss import (
     wakeup_probe,
     write_outputs,
 )
-from redrive.cli.bench_loss import add_loss_parser
 from redrive.errors import TransportError
 
 T0 = 1_000_000_000_000
@@ -98,8 +98,8 @@ def test_nothing_received() -> None:
 
 
 def test_text_report(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    from redrive.bench.loss import ConfigResult
-    from redrive.cli.bench_loss import _print_report
+    from redrive.benchmarks.cli.loss import _print_report
+    from redrive.benchmarks.loss import ConfigResult
 
     due, produced, recv = _records(60.0, 2.0)
     stream = measure_stream(
@@ -147,7 +147,7 @@ def _leftovers() -> list[Path]:
 
 
 def _check_config(c: object, seconds: float) -> None:
-    from redrive.bench.loss import ConfigResult
+    from redrive.benchmarks.loss import ConfigResult
 
     assert isinstance(c, ConfigResult)
     assert c.error is None, c.error

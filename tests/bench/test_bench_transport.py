@@ -12,7 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from redrive.bench.transport import (
+from redrive.benchmarks.cli.transport import add_transport_parser
+from redrive.benchmarks.transport import (
     MIN_SIZE,
     SIDES,
     CellResult,
@@ -27,7 +28,6 @@ from redrive.bench.transport import (
     run_cell,
     side_available,
 )
-from redrive.cli.bench_transport import add_transport_parser
 from redrive.errors import TransportError
 
 SIZE = 64 << 10

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from redrive.cli import bench
+from redrive.benchmarks import cli as bench
 
 
 def _run(argv: list[str]) -> int:

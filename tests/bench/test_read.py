@@ -17,9 +17,9 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Ros2Writer
 from rosbags.typesys import Stores, get_typestore
 
-from redrive.bench.passes import PassResult, peak_rss_bytes, redrive_pass
-from redrive.bench.read import bench_read, warm_page_cache
-from redrive.bench.synth_log import point_dtype, write_synthetic_bag
+from redrive.benchmarks.passes import PassResult, peak_rss_bytes, redrive_pass
+from redrive.benchmarks.read import bench_read, warm_page_cache
+from redrive.benchmarks.synth_log import point_dtype, write_synthetic_bag
 from redrive.errors import LogError
 from redrive.io import open_log
 from redrive.io.decoders import decode

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from redrive.cli.demo_log import write_demo_bag
 from redrive.cli.main import main
+from redrive.testing.demo_log import write_demo_bag
 
 
 def test_info_json_on_a_real_bag(shared_data: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -26,6 +26,13 @@ def test_info_json_on_a_real_bag(shared_data: Path, capsys: pytest.CaptureFixtur
     assert topics["/husky_velocity_controller/odom"]["maps_to"] == "vehicle state"
     assert 390 < info["duration_s"] < 400  # "395 s"
     assert 25 < topics["/imu/data"]["rate_hz"] < 35
+    assert info["capabilities"] == {
+        "message_typed": True,
+        "has_tf": False,
+        "has_ground_truth": False,
+        "has_ego_pose": True,
+        "calibration_per_frame": False,
+    }
 
 
 def test_info_table_on_kitti(shared_data: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -33,6 +40,8 @@ def test_info_table_on_kitti(shared_data: Path, capsys: pytest.CaptureFixture[st
     out = capsys.readouterr().out
     assert "kitti" in out
     assert "driver" in out
+    assert "provides:  tf, ground truth, native values, a calibration per frame" in out
+    assert "redrive/PointCloud" in out
 
 
 def test_info_reports_damage_and_exit_status(

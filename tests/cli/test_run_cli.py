@@ -14,11 +14,11 @@ from pathlib import Path
 
 import pytest
 
-from redrive.cli.demo_log import write_demo_bag
 from redrive.cli.main import main
 from redrive.cli.run import parse_frames
 from redrive.errors import ConfigError
 from redrive.results import RunStatus, open_run
+from redrive.testing.demo_log import write_demo_bag
 
 REDRIVE = [sys.executable, "-m", "redrive"]
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from redrive.cli.demo_log import write_demo_bag
+from redrive.testing.demo_log import write_demo_bag
 
 
 @pytest.fixture(scope="session")

@@ -12,9 +12,9 @@ import pytest
 pytest.importorskip("PySide6")
 pytest.importorskip("pyqtgraph")
 
-from redrive.cli.bench_gui import _print_report
+from redrive.benchmarks.cli.gui import _print_report
+from redrive.benchmarks.gui import bench_gui, bench_log
 from redrive.cli.main import main
-from redrive.gui.bench import bench_gui, bench_log
 from redrive.io import open_log
 
 

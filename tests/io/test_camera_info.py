@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from rosbags.rosbag1 import Writer as Bag1Writer
 
-from redrive.cli.info import collect_info
 from redrive.io import open_log
 from redrive.io.base import TopicInfo
 from redrive.io.convert import convert_log
 from redrive.io.decoders import CameraInfoDecoder, Decoded, DecodedKind, decode, decoder_for
 from redrive.io.sensor_map import infer_sensor_map
+from redrive.io.summary import summarize_log
 from redrive.io.writer import McapWriter
 from redrive.types import CameraInfo, Image
 from tests.io._decoder_helpers import deserializer, header, log_message, store
@@ -152,9 +152,9 @@ def test_camera_info_is_no_sensor_and_never_the_driver(tmp_path: Path) -> None:
     assert "/cam/camera_info" not in smap.topics()
     # `redrive info` names the camera it calibrates
     with open_log(_camera_log(tmp_path / "cam.mcap")) as log:
-        info = collect_info(log)
-    rows = {t["topic"]: t for t in info["topics"]}
-    assert rows["/cam/camera_info"]["decoder"] == "camera_info"
-    assert rows["/cam/camera_info"]["count"] == 3
-    assert rows["/cam/camera_info"]["maps_to"] == "camera info of cam_image_raw"
-    assert rows["/cam/image_raw"]["maps_to"] == "cam_image_raw (camera, driver)"
+        summary = summarize_log(log)
+    rows = {t.topic: t for t in summary.topics}
+    assert rows["/cam/camera_info"].decoder == "camera_info"
+    assert rows["/cam/camera_info"].count == 3
+    assert rows["/cam/camera_info"].maps_to == "camera info of cam_image_raw"
+    assert rows["/cam/image_raw"].maps_to == "cam_image_raw (camera, driver)"

@@ -7,11 +7,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from redrive.cli.demo_log import write_demo_bag
 from redrive.errors import ConfigError
 from redrive.io import open_log
 from redrive.io.frames import FrameAssembler, interpolate_state
 from redrive.io.sensor_map import infer_sensor_map, load_sensor_map_overrides
+from redrive.testing.demo_log import write_demo_bag
 from redrive.types import Image, PointCloud, SensorType, VehicleState
 
 

@@ -181,7 +181,7 @@ def test_truncated_bag_yields_every_message_before_the_damage(
 
 
 def test_truncated_uncompressed_bag_loses_only_the_cut_message(tmp_path: Path) -> None:
-    from redrive.cli.demo_log import write_demo_bag
+    from redrive.testing.demo_log import write_demo_bag
 
     bag = write_demo_bag(tmp_path / "demo.bag", duration_s=1.0)
     with open_log(bag) as log:

@@ -3,14 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import importlib.util
-import os
 from pathlib import Path
 from typing import Any
 
-from redrive.errors import ConfigError
-
-__all__ = ["register", "require_display", "require_gui"]
+__all__ = ["register"]
 
 _EPILOG = """\
 examples:
@@ -24,30 +20,9 @@ Keys: space plays/pauses, ←/→ step.  The window layout is remembered between
 """
 
 
-def require_gui() -> None:
-    """Raise a ConfigError saying how to install the GUI when PySide6/pyqtgraph are missing."""
-    missing = [m for m in ("PySide6", "pyqtgraph", "OpenGL") if importlib.util.find_spec(m) is None]
-    if missing:
-        msg = (
-            f"the GUI needs {', '.join(missing)}: install redrive's gui extra "
-            "(pip install 'redrive[gui]', or `make gui` in the repository)"
-        )
-        raise ConfigError(msg)
-
-
-def require_display() -> None:
-    """Raise a ConfigError when Qt would find no display (it aborts the process instead)."""
-    if os.environ.get("QT_QPA_PLATFORM"):
-        return
-    if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
-        msg = (
-            "no display: `redrive gui` needs a desktop session (DISPLAY or WAYLAND_DISPLAY); on "
-            "a headless machine run it under Xvfb: xvfb-run -a redrive gui …"
-        )
-        raise ConfigError(msg)
-
-
 def _run(args: argparse.Namespace) -> int:
+    from redrive.gui.preflight import require_display, require_gui
+
     require_gui()
     require_display()
     from redrive.gui.main import run_gui

@@ -1,0 +1,113 @@
+"""``redrive bench engine`` — the engine against a bare loop; the reference pipeline on a log."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+__all__ = ["add_engine_parser"]
+
+_DESCRIPTION = """\
+Three stages each doing ~1 ms of numpy work over frames already in memory, run by the engine
+(sequential and pipelined) and by a bare Python loop calling the same three functions, in the same
+run, interleaved; the ratios are the engine's throughput over the loop's (targets: >= 0.95
+sequential, >= 1.5 pipelined on 2 cores). With no-op stages, the engine's own cost per frame
+(timing, output checks, records; target <= 20 us), and with the Parquet results writer added.
+With --log, also the reference pipeline on that log in each mode: frames/s and real-time factor.
+"""
+
+PIPELINED_TARGET = 1.5
+SEQUENTIAL_TARGET = 0.95
+OVERHEAD_TARGET_US = 20.0
+
+
+def _verdict(ok: bool) -> str:
+    return "[green]meets[/]" if ok else "[red]misses[/]"
+
+
+def _run_engine(args: argparse.Namespace) -> int:
+    from rich.console import Console
+
+    from redrive.benchmarks.engine import bench_engine, bench_reference_pipeline
+
+    status = Console(stderr=True)
+    with status.status("benchmarking") as spinner:
+
+        def progress(text: str) -> None:
+            spinner.update(f"benchmarking: {text}")
+
+        result = bench_engine(
+            frames=args.frames, work_ms=args.work_ms, repeats=args.repeat, progress=progress
+        )
+        pipeline = bench_reference_pipeline(args.log, progress=progress) if args.log else None
+    if args.json:
+        out: dict[str, Any] = {"engine": result.to_json()}
+        if pipeline is not None:
+            out["reference_pipeline"] = pipeline.to_json()
+        json.dump(out, sys.stdout, indent=2)
+        sys.stdout.write("\n")
+        return 0
+    console = Console(width=None if sys.stdout.isatty() else 120)
+    console.print(
+        f"[bold]frames[/] {result.frames}, 3 stages × {result.work_ms:g} ms of numpy work "
+        f"({result.work_elements:,} float64 elements), medians of {args.repeat} passes"
+    )
+    console.print(
+        f"bare loop {result.bare_s:.3f} s | sequential {result.sequential_s:.3f} s → "
+        f"{result.sequential_ratio:.2f}x {_verdict(result.sequential_ratio >= SEQUENTIAL_TARGET)} "
+        f"{SEQUENTIAL_TARGET}x | pipelined {result.pipelined_s:.3f} s → "
+        f"{result.pipelined_ratio:.2f}x {_verdict(result.pipelined_ratio >= PIPELINED_TARGET)} "
+        f"{PIPELINED_TARGET}x"
+    )
+    console.print(
+        f"engine cost per frame (3 no-op stages): {result.overhead_us_per_frame:.1f} µs "
+        f"{_verdict(result.overhead_us_per_frame <= OVERHEAD_TARGET_US)} {OVERHEAD_TARGET_US:g} µs"
+        + (
+            f"; with the Parquet writer: {result.writer_us_per_frame:.1f} µs"
+            if result.writer_us_per_frame is not None
+            else ""
+        )
+    )
+    if pipeline is not None:
+        console.print(
+            f"[bold]reference pipeline[/] on {pipeline.log}: {pipeline.frames} frames, "
+            f"{pipeline.log_span_s:.1f} s of log"
+        )
+        for key, fps in pipeline.frames_per_s.items():
+            rtf = pipeline.realtime_factor[key]
+            stages = ", ".join(f"{k} {v:.1f}" for k, v in pipeline.stage_ms[key].items())
+            console.print(
+                f"  {key:22s} {fps:6.1f} frames/s = {rtf:5.1f}x real time "
+                f"{_verdict(rtf >= 10.0)} 10x  (mean ms: {stages})"
+            )
+    return 0
+
+
+def add_engine_parser(bench_sub: Any) -> None:
+    engine = bench_sub.add_parser(
+        "engine",
+        help="engine throughput and cost per frame against a bare loop; reference pipeline",
+        description=_DESCRIPTION,
+        epilog=(
+            "examples:\n  redrive bench engine\n"
+            "  redrive bench engine --log .demo/urban.mcap --json"
+        ),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    engine.add_argument(
+        "--frames", type=int, default=500, metavar="N", help="frames per pass (default 500)"
+    )
+    engine.add_argument(
+        "--work-ms", type=float, default=1.0, metavar="MS", help="work per stage (default 1)"
+    )
+    engine.add_argument(
+        "--repeat", type=int, default=5, metavar="N", help="passes per variant (default 5)"
+    )
+    engine.add_argument(
+        "--log", type=Path, metavar="LOG", help="also run the reference pipeline on LOG"
+    )
+    engine.add_argument("--json", action="store_true", help="print JSON instead of text")
+    engine.set_defaults(func=_run_engine)

@@ -1,0 +1,227 @@
+"""``redrive bench transport`` — redrive's shared-memory channel against other ways of moving
+large messages between two processes, and against memcpy."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from typing import Any
+
+__all__ = ["add_transport_parser"]
+
+_DESCRIPTION = """\
+Move messages of each size between two fresh processes (multiprocessing spawn) with every
+transport side: redrive's channel copy-out (Writer.publish -> Reader.read) and in place
+(Writer.loan -> Reader.view), pipe + pickle (the legacy path), multiprocessing.Queue, ZeroMQ ipc
+with copy=False, eCAL shared memory (default settings: lossy, no back-pressure) and iceoryx2 (in
+place), each run flat out (throughput the subscriber received, after a 10 % warm-up) and paced
+(one-way latency p50/p99 from a CLOCK_MONOTONIC stamp in the payload). Every subscriber checks the
+header and sums one byte per 4 KiB page; copy sides do it on the copy they were handed, in-place
+sides on the shared memory. Also single-thread np.copyto, cache-hot and from memory (256 MiB pools).
+Sides whose package is missing show "not installed". Targets (issue 6): redrive in place >= 1.0x
+iceoryx2 at 1 and 4 MiB; >= 10x pipe + pickle at 4 MiB; >= 50 % of the from-memory copy at 16 MiB;
+paced 4 MiB p99 <= 2 ms.
+"""
+
+_EPILOG = """\
+examples:
+  redrive bench transport                                   every side, 64K 1M 4M 16M, 2 s a run
+  redrive bench transport --sizes 4M --sides redrive-inplace,iceoryx2 --seconds 5
+  redrive bench transport --json > transport.json
+
+sides: redrive-copy, redrive-inplace, pipe-pickle, mp-queue, zmq, ecal, iceoryx2
+"""
+
+
+def _verdict(met: bool | None) -> str:
+    if met is None:
+        return "[yellow]not measured[/]"
+    return "[green]meets[/]" if met else "[red]misses[/]"
+
+
+def _num(x: float | None, fmt: str) -> str:
+    return "—" if x is None or not math.isfinite(x) else format(x, fmt)
+
+
+def _loss(sent: int, lost: int) -> str:
+    if not sent:
+        return "—"
+    return "0" if lost == 0 else f"{lost} ({100 * lost / sent:.0f} %)"
+
+
+def _print_report(result: Any) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    from redrive.benchmarks.transport import SIDES, size_label
+
+    console = Console(width=None if sys.stdout.isatty() else 140)
+    m = result.machine
+    console.print(
+        f"[bold]machine[/]: {m.get('cpu', '?')}, {m.get('cpus', '?')} CPUs, "
+        f"{m.get('memory', '?')}, {m.get('system', '?')}"
+    )
+    console.print("[bold]versions[/]: " + ", ".join(f"{k} {v}" for k, v in result.versions.items()))
+    console.print(
+        f"[bold]method[/]: {result.seconds:g} s per run, flat out and paced at "
+        f"{result.paced_hz:g} Hz, {result.slots} slots / queue depth, first 10 % of each run "
+        "is warm-up"
+    )
+    table = Table()
+    for col in (
+        "size",
+        "side",
+        "msgs/s",
+        "GB/s",
+        "lost",
+        "paced p50 ms",
+        "paced p99 ms",
+        "paced max ms",
+        "paced lost",
+    ):
+        table.add_column(col, justify="left" if col in ("size", "side") else "right")
+    mem = {x.size_bytes: x for x in result.memcpy}
+    for size in result.sizes:
+        for c in (c for c in result.cells if c.size_bytes == size):
+            label = SIDES[c.side].label
+            if c.status != "ok" and c.flat is None:
+                status = "[dim]not installed[/]" if c.status == "not installed" else "[red]error[/]"
+                table.add_row(size_label(size), label, status, "", "", "", "", "", "")
+                continue
+            f, p = c.flat, c.paced
+            table.add_row(
+                size_label(size),
+                label + ("" if c.status == "ok" else " [red](error)[/]"),
+                _num(f.msgs_per_s if f else None, ",.0f"),
+                _num(f.gb_per_s if f else None, ".2f"),
+                _loss(f.sent, f.lost) if f else "—",
+                _num(p.latency_p50_ms if p else None, ".2f"),
+                _num(p.latency_p99_ms if p else None, ".2f"),
+                _num(p.latency_max_ms if p else None, ".2f"),
+                _loss(p.sent, p.lost) if p else "—",
+            )
+        if size in mem:
+            x = mem[size]
+            table.add_row(size_label(size), "memcpy cache-hot", "", _num(x.hot_gb_per_s, ".2f"))
+            table.add_row(
+                size_label(size),
+                "memcpy from memory",
+                "",
+                _num(x.from_memory_gb_per_s, ".2f"),
+                end_section=True,
+            )
+        else:
+            table.rows[-1].end_section = True
+    console.print(table)
+    for c in result.cells:
+        if c.status == "error":
+            console.print(f"[red]{SIDES[c.side].label} at {size_label(c.size_bytes)}[/]: {c.error}")
+        runs = [r for r in (c.flat, c.paced) if r is not None]
+        bad = sum(r.corrupt for r in runs)
+        if bad:
+            console.print(
+                f"[red]{SIDES[c.side].label} at {size_label(c.size_bytes)}: {bad} messages "
+                "arrived with a wrong payload[/]"
+            )
+    if not result.targets:
+        return
+    targets = Table(title="targets (issue 6)")
+    for col in ("target", "side", "size", "value", "against", "ratio", "bound", "verdict"):
+        targets.add_column(col, justify="left" if col in ("target", "side", "verdict") else "right")
+    for t in result.targets:
+        is_ms = t.target.endswith("ms")
+        targets.add_row(
+            t.name,
+            SIDES[t.side].label,
+            size_label(t.size_bytes),
+            _num(t.value, ".2f") + (" ms" if is_ms else " GB/s") if t.value is not None else "—",
+            "" if is_ms else (_num(t.reference, ".2f") + " GB/s" if t.reference else "—"),
+            "" if is_ms or t.ratio is None else f"{t.ratio:.2f}×",
+            t.target,
+            _verdict(t.met),
+        )
+    console.print(targets)
+
+
+def _run_transport(args: argparse.Namespace) -> int:
+    from rich.console import Console
+
+    from redrive.benchmarks.transport import DEFAULT_SIDES, SIDES, bench_transport, parse_size
+    from redrive.errors import ConfigError
+
+    sizes = [parse_size(s) for s in args.sizes.split(",") if s.strip()]
+    sides = [s.strip() for s in args.sides.split(",") if s.strip()] if args.sides else DEFAULT_SIDES
+    unknown = [s for s in sides if s not in SIDES]
+    if unknown:
+        msg = f"--sides: unknown {', '.join(unknown)} (choose from {', '.join(SIDES)})"
+        raise ConfigError(msg)
+    if args.seconds <= 0 or args.paced_hz <= 0:
+        msg = "--seconds and --paced-hz must be greater than 0"
+        raise ConfigError(msg)
+    status = Console(stderr=True)
+    with status.status("benchmarking") as spinner:
+
+        def progress(text: str) -> None:
+            spinner.update(f"benchmarking: {text}")
+
+        result = bench_transport(
+            sizes,
+            sides=sides,
+            seconds=args.seconds,
+            paced_hz=args.paced_hz,
+            paced=not args.no_paced,
+            memcpy=not args.no_memcpy,
+            verify=args.verify,
+            progress=progress,
+        )
+    corrupt = sum(r.corrupt for c in result.cells for r in (c.flat, c.paced) if r is not None)
+    if args.json:
+        json.dump(result.to_json(), sys.stdout, indent=2)
+        sys.stdout.write("\n")
+    else:
+        _print_report(result)
+    return 1 if corrupt else 0
+
+
+def add_transport_parser(bench_sub: Any) -> None:
+    parser = bench_sub.add_parser(
+        "transport",
+        help="two-process throughput and latency: redrive's channel, pipe+pickle, ZeroMQ, eCAL, "
+        "iceoryx2, memcpy",
+        description=_DESCRIPTION,
+        epilog=_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument(
+        "--sizes",
+        default="64K,1M,4M,16M",
+        metavar="LIST",
+        help="message sizes, comma-separated, binary units (default 64K,1M,4M,16M; at least 4K)",
+    )
+    parser.add_argument(
+        "--seconds", type=float, default=2.0, metavar="S", help="seconds per run (default 2)"
+    )
+    parser.add_argument(
+        "--sides",
+        default=None,
+        metavar="LIST",
+        help="transport sides, comma-separated (default: all; see below)",
+    )
+    parser.add_argument(
+        "--paced-hz",
+        type=float,
+        default=100.0,
+        metavar="HZ",
+        help="publishing rate of the latency runs (default 100)",
+    )
+    parser.add_argument("--no-paced", action="store_true", help="skip the paced latency runs")
+    parser.add_argument("--no-memcpy", action="store_true", help="skip the memcpy ceiling")
+    parser.add_argument(
+        "--verify",
+        action="store_true",
+        help="subscribers compare every byte of every message (slower; numbers not comparable)",
+    )
+    parser.add_argument("--json", action="store_true", help="print JSON instead of tables")
+    parser.set_defaults(func=_run_transport)

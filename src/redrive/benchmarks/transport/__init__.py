@@ -1,0 +1,117 @@
+"""``redrive bench transport``: moving large messages between two processes, every way at hand.
+
+Each *side* is one transport, run as a publisher process and a subscriber process started with
+``multiprocessing`` ``spawn`` (fresh interpreters, nothing inherited but the arguments):
+
+===================  ==========================================================================
+side                 publisher → subscriber
+===================  ==========================================================================
+``redrive-copy``     :class:`redrive.transport.Writer` ``publish`` (copies in) → ``Reader.read``
+                     (copies out into an owned array: the copy is the receiver's work)
+``redrive-inplace``  ``Writer.loan`` (the payload is written straight into the slot) →
+                     ``Reader.view`` (read-only view into the slot, no copy)
+``pipe-pickle``      ``multiprocessing.Pipe`` ``send(ndarray)`` → ``recv()``: pickle through a
+                     pipe, the legacy path of the paper
+``mp-queue``         ``multiprocessing.Queue(maxsize=4)`` ``put(ndarray)`` → ``get()``
+``zmq``              ZeroMQ PUSH → PULL over ``ipc://``, ``send(copy=False)`` /
+                     ``recv(copy=False)`` (no copy in Python; the kernel copies through the socket)
+``ecal``             eCAL 6 ``Publisher.send(bytes)`` → ``Subscriber`` receive callback, default
+                     configuration (shared memory on one host; *lossy*: no back-pressure)
+``iceoryx2``         iceoryx2 publish-subscribe of ``Slice[c_uint8]``: ``loan_slice_uninit``
+                     (written in place) → ``receive`` (a view into shared memory), one event
+                     notification per message to wake the subscriber
+===================  ==========================================================================
+
+What every side does per message, so the numbers compare like with like:
+
+- **payload**: ``size`` bytes; bytes 0–8 the publisher's ``time.monotonic_ns()`` (CLOCK_MONOTONIC,
+  the same clock in every process), bytes 8–16 the sequence number, the rest a fixed seeded random
+  pattern (``verify=True``: the pattern XOR ``seq % 256``, different in every message).
+- **publisher**: takes the stamp *before* any work on the message, then: copy sides write the
+  16-byte header into a preallocated source array and hand it to the transport, which copies or
+  serialises it; in-place sides (``redrive-inplace``, ``iceoryx2``) loan a slot and write the whole
+  payload into it (``np.copyto`` from the preallocated pattern: the one write of ``size`` bytes a
+  copy side's transport does for it), then commit. ``mp-queue`` and ``zmq`` hand over a reference
+  and serialise later, so they rotate over ``slots + 1`` source arrays (``zmq`` also waits on the
+  send tracker before reusing one). eCAL's Python ``send`` takes only ``bytes``: the publisher
+  passes ``array.tobytes()`` (one more copy, which its API imposes).
+- **subscriber** ("consume"): unpacks the header and sums one byte per 4 KiB page
+  (``np.add.reduce`` over ``payload[4095::4096]``), compares the sum with the pattern's (a
+  mismatch counts as ``corrupt``; ``verify=True`` compares every byte instead), then stamps
+  ``now``. Copy sides do this on the copy the transport delivered (the copy is their work); in-place
+  sides on the shared-memory view. One-way latency is ``now − stamp``.
+- **flat out**: the publisher sends as fast as the transport takes messages for ``seconds``; the
+  lossless sides block when the subscriber is ``slots`` (4) messages behind. Throughput is what the
+  subscriber received per second, measured by the subscriber from arrival times after a warm-up
+  (the first 10 % of the run); ``lost`` is sent − received.
+- **paced**: the same at ``paced_hz`` (default 100 Hz); latency p50 / p99 / max over the messages
+  after the warm-up.
+
+The memcpy ceiling is single-thread ``np.copyto`` between preallocated, pre-touched buffers:
+*cache-hot* (the same two ``size``-byte buffers every time) and *from memory* (source and
+destination rotate over two 256 MiB pools, so every copy reads and writes memory, not cache).
+Sides whose package is not installed are reported so, never left out silently or faked; a side
+that fails reports its error and the others still run.
+
+Set-up details that change the numbers: every side has 4 slots / a queue depth of 4 (redrive
+``slots=4``, iceoryx2 ``subscriber_max_buffer_size(4)``, ZeroMQ high-water marks 4, ``Queue(4)``);
+lossless sides are lossless (redrive ``Policy.LOSSLESS``; iceoryx2 without safe overflow and
+``RetryUntilDelivered``, its publisher created before the subscriber — the other order lost a
+block of samples after the first four in about one run in ten); eCAL's publisher waits until it
+sees the subscriber, plus 0.2 s, and still usually loses the first message. Children are started
+with ``spawn``: a script calling :func:`run_cell` needs the ``if __name__ == "__main__":`` guard.
+"""
+
+from __future__ import annotations
+
+from redrive.benchmarks.transport.cell import run_cell
+from redrive.benchmarks.transport.memcpy import bench_memcpy
+from redrive.benchmarks.transport.payload import MIN_SIZE, SLOTS, CellConfig
+from redrive.benchmarks.transport.results import (
+    CellResult,
+    MemcpyResult,
+    RunResult,
+    TargetCheck,
+    TransportBenchResult,
+)
+from redrive.benchmarks.transport.run import (
+    DEFAULT_SIZES,
+    bench_transport,
+    parse_size,
+    side_available,
+    size_label,
+)
+from redrive.benchmarks.transport.sides import DEFAULT_SIDES, SIDES, SideSpec
+from redrive.benchmarks.transport.targets import (
+    INPLACE_VS_ICEORYX2_TARGET,
+    PACED_P99_TARGET_MS,
+    VS_MEMCPY_TARGET,
+    VS_PIPE_PICKLE_TARGET,
+    check_targets,
+)
+
+__all__ = [
+    "DEFAULT_SIDES",
+    "DEFAULT_SIZES",
+    "INPLACE_VS_ICEORYX2_TARGET",
+    "MIN_SIZE",
+    "PACED_P99_TARGET_MS",
+    "SIDES",
+    "SLOTS",
+    "VS_MEMCPY_TARGET",
+    "VS_PIPE_PICKLE_TARGET",
+    "CellConfig",
+    "CellResult",
+    "MemcpyResult",
+    "RunResult",
+    "SideSpec",
+    "TargetCheck",
+    "TransportBenchResult",
+    "bench_memcpy",
+    "bench_transport",
+    "check_targets",
+    "parse_size",
+    "run_cell",
+    "side_available",
+    "size_label",
+]
