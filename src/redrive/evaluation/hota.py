@@ -42,13 +42,13 @@ import numpy as np
 import numpy.typing as npt
 from scipy.optimize import linear_sum_assignment
 
-from redrive.errors import ConfigError
 from redrive.evaluation.base import EvalData, Metric, MetricResult
 from redrive.evaluation.tracking import (
     TrackFrame,
     bev_centre_distance_m,
     bev_iou_matrix,
     by_class,
+    check_similarity,
     tracking_frames,
 )
 from redrive.types import Role
@@ -252,15 +252,7 @@ class Hota(Metric):
 
     def __init__(self, **params: Any) -> None:
         super().__init__(**params)
-        if self.params["similarity"] not in ("distance", "iou"):
-            msg = (
-                f"metric {self.name!r}: similarity must be 'distance' or 'iou', "
-                f"got {self.params['similarity']!r}"
-            )
-            raise ConfigError(msg)
-        if not float(self.params["zero_distance_m"]) > 0:
-            msg = f"metric {self.name!r}: zero_distance_m must be > 0 m"
-            raise ConfigError(msg)
+        check_similarity(self.name, self.params, distance_key="zero_distance_m")
 
     def similarity(self, frame: TrackFrame) -> npt.NDArray[np.float64]:
         """(G, P) similarity in [0, 1] of one frame."""

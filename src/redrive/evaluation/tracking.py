@@ -255,6 +255,23 @@ class _Clear:
     bookmarks: list[Bookmark]
 
 
+def check_similarity(name: str, params: Mapping[str, Any], *, distance_key: str) -> None:
+    """The matching parameters the tracking metrics share: ``similarity`` (``distance`` or
+    ``iou``) and a positive distance (``distance_key``, metres).
+
+    Raises:
+        ConfigError: either is out of range; the message names the metric and the parameter.
+    """
+    if params["similarity"] not in ("distance", "iou"):
+        msg = (
+            f"metric {name!r}: similarity must be 'distance' or 'iou', got {params['similarity']!r}"
+        )
+        raise ConfigError(msg)
+    if not float(params[distance_key]) > 0:
+        msg = f"metric {name!r}: {distance_key} must be > 0 m"
+        raise ConfigError(msg)
+
+
 class ClearMot(Metric):
     """CLEAR MOT and identity metrics of a tracker, through ``motmetrics``.
 
@@ -289,15 +306,7 @@ class ClearMot(Metric):
 
     def __init__(self, **params: Any) -> None:
         super().__init__(**params)
-        if self.params["similarity"] not in ("distance", "iou"):
-            msg = (
-                f"metric {self.name!r}: similarity must be 'distance' or 'iou', "
-                f"got {self.params['similarity']!r}"
-            )
-            raise ConfigError(msg)
-        if not float(self.params["max_distance_m"]) > 0:
-            msg = f"metric {self.name!r}: max_distance_m must be > 0 m"
-            raise ConfigError(msg)
+        check_similarity(self.name, self.params, distance_key="max_distance_m")
         if not 0.0 < float(self.params["min_iou"]) <= 1.0:
             msg = f"metric {self.name!r}: min_iou must be in (0, 1]"
             raise ConfigError(msg)
