@@ -49,6 +49,8 @@ __all__ = ["LiveFeed", "LiveWindow"]
 logger = logging.getLogger(__name__)
 
 _SESSIONS = iter(range(1, 1 << 30))
+#: how long an ended feed waits for a dying scraper to be collected, to say it exited
+_COLLECT_S = 2.0
 
 
 @runtime_checkable
@@ -336,7 +338,13 @@ class LiveFeed(QtCore.QObject):
         session = self._session
         dead = []
         if session is not None:
-            for spec, proc in zip(session.specs, session.processes, strict=False):
+            pairs = list(zip(session.specs, session.processes, strict=False))
+            # the streams end as their writer's process dies, a moment before the kernel lets it
+            # be collected: wait for that (briefly) so the message names the cause
+            deadline = time.monotonic() + _COLLECT_S
+            while not any(p.poll() is not None for _, p in pairs) and time.monotonic() < deadline:
+                time.sleep(0.02)
+            for spec, proc in pairs:
                 code = proc.poll()
                 if code is not None:
                     tail = _stderr_tail(proc)
