@@ -10,9 +10,10 @@ import hashlib
 import itertools
 import logging
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 from redrive.config import PipelineConfig
 from redrive.engine.core import Engine
@@ -25,6 +26,7 @@ from redrive.io import LogReader, open_log
 from redrive.io.frames import FrameAssembler
 from redrive.io.sensor_map import load_sensor_map_overrides
 from redrive.results import (
+    FrameRecord,
     PipelineInfo,
     RunSetup,
     RunStatus,
@@ -35,6 +37,7 @@ from redrive.types import Frame
 
 __all__ = [
     "RunRequest",
+    "execute",
     "expected_frames",
     "log_fingerprint",
     "log_inputs",
@@ -216,13 +219,56 @@ def run_reader(
         else:
             total = None
         on_start(total)
-    engine = Engine(graph, request.pipeline, inputs=inputs, hooks=hooks)
-    sampler = ResourceSampler(engine.worker_pids, threads=engine.thread_ids).start()
     frames = _select(assembler.frames(), request.first_frame, request.stop_frame)
+
+    def summary_extra() -> dict[str, Any]:
+        return (
+            {"undecodable_messages": dict(assembler.undecodable)} if assembler.undecodable else {}
+        )
+
+    return execute(
+        graph,
+        request.pipeline,
+        inputs=inputs,
+        hooks=hooks,
+        writer=writer,
+        frames=frames,
+        progress=progress,
+        cancel=cancel,
+        summary_extra=summary_extra,
+    )
+
+
+def execute(
+    graph: StageGraph,
+    pipeline: PipelineConfig,
+    *,
+    inputs: LogInputs,
+    hooks: ModeHooks,
+    writer: RunWriter,
+    frames: Iterable[Frame],
+    progress: Callable[[int], None] | None = None,
+    cancel: threading.Event | None = None,
+    sink: Callable[[FrameRecord], None] | None = None,
+    summary_extra: Callable[[], Mapping[str, Any]] | None = None,
+) -> RunReport:
+    """Run the stages over ``frames`` into ``writer`` and close it with the run's summary — the
+    part every mode shares (replay, live, closed loop).
+
+    Args:
+        sink: what receives each finished frame's record (default: ``writer.write_frame``).
+        summary_extra: more summary entries, asked once the frames are done (before closing).
+
+    Raises:
+        whatever the engine raises; the run directory is closed first (``interrupted`` on
+        Ctrl-C, else ``failed`` with the error in the manifest).
+    """
+    engine = Engine(graph, pipeline, inputs=inputs, hooks=hooks)
+    sampler = ResourceSampler(engine.worker_pids, threads=engine.thread_ids).start()
     try:
         report = engine.run(
             frames,
-            sink=writer.write_frame,
+            sink=sink or writer.write_frame,
             skip=writer.done_frames,
             progress=progress,
             cancel=cancel,
@@ -238,8 +284,8 @@ def run_reader(
     engine.close()
     summary = report.as_dict()
     del summary["status"]  # the manifest's own status
-    if assembler.undecodable:
-        summary["undecodable_messages"] = dict(assembler.undecodable)
+    if summary_extra is not None:
+        summary.update(summary_extra())
     skipped = getattr(hooks, "skipped_frames", None)
     if skipped is not None:
         summary["skipped_frames"] = int(skipped)

@@ -66,7 +66,7 @@ from redrive.sim.inertial import GnssModel, ImuModel, OdometryModel
 from redrive.sim.lidar import LidarModel, LidarScan
 from redrive.sim.rig import Rig, SensorSpec, rig_from_mapping
 from redrive.sim.scenario import Scenario
-from redrive.sim.scene import Scene
+from redrive.sim.scene import Scene, SceneObjects
 from redrive.sim.world import World
 from redrive.types import Box3D, DetectedObject, SensorType, Transform, VehicleState
 
@@ -150,9 +150,27 @@ def ground_truth_objects(
     ``num_lidar_points`` comes from ``lidar_hits`` (object id → returns in the sweep);
     ``visible`` is true when the LiDAR or the camera saw any part of the object.
     """
-    objs = scene.objects
-    base_from_map = invert(scene.map_from_base)
-    yaw_ego = yaw_from_rotation_matrix(scene.map_from_base[:3, :3])
+    return objects_in_base(
+        scene.objects,
+        scene.map_from_base,
+        lidar_hits=lidar_hits,
+        camera_pixels=camera_pixels,
+        range_m=range_m,
+    )
+
+
+def objects_in_base(
+    objs: SceneObjects,
+    map_from_base: npt.NDArray[np.float64],
+    *,
+    lidar_hits: dict[int, int] | None = None,
+    camera_pixels: dict[int, int] | None = None,
+    range_m: float = GROUND_TRUTH_RANGE_M,
+) -> tuple[DetectedObject, ...]:
+    """The ground-truth ones of ``objs`` (map frame) within ``range_m`` of an ego at
+    ``map_from_base``, in its base_link (see :func:`ground_truth_objects`)."""
+    base_from_map = invert(map_from_base)
+    yaw_ego = yaw_from_rotation_matrix(map_from_base[:3, :3])
     centers = transform_points(base_from_map, objs.centers)
     velocities = transform_vectors(base_from_map, objs.velocities)
     out = []

@@ -11,6 +11,7 @@ from __future__ import annotations
 import bisect
 import math
 from collections import deque
+from collections.abc import Callable
 
 import numpy as np
 import numpy.typing as npt
@@ -94,6 +95,8 @@ class World:
         for agent in scenario.agents:
             next_id = self._add_agent(agent, next_id)
         self._history: deque[tuple[int, float, float, float]] = deque()
+        #: steps the ego instead of the scripted driver (closed loop): ``step(model, dt_s)``
+        self._ego_step: Callable[[BicycleModel, float], None] | None = None
         self._record_pose()
 
     # -- construction -------------------------------------------------------------------------
@@ -278,16 +281,50 @@ class World:
                 walker.start(t)
         for follower in self._followers:
             follower.plan(t, obstacles, self.lights)
-        accel, steer = self._driver.control(self._ego, t, obstacles, self.lights)
+        if self._ego_step is None:
+            accel, steer = self._driver.control(self._ego, t, obstacles, self.lights)
+        else:
+            self._track_route()
         for follower in self._followers:
             follower.advance(dt_s)
-        self._ego.step(dt_s, accel_mps2=accel, steer_rad=steer)
+        if self._ego_step is None:
+            self._ego.step(dt_s, accel_mps2=accel, steer_rad=steer)
+        else:
+            self._ego_step(self._ego, dt_s)
         self._time_ns += dt_ns
         t_new = self.time_s
         for walker in self._walkers:
             walker.set_time(t_new)
         self._followers = [f for f in self._followers if f.active]
         self._record_pose()
+
+    def drive_ego(self, step: Callable[[BicycleModel, float], None] | None) -> None:
+        """Hand the ego to ``step(model, dt_s)``, called every physics step in place of the
+        scripted driver (closed loop: the algorithm's commands move the car); None gives it back.
+
+        The ego's progress along its route is still tracked (it starts the scenario's
+        pedestrian triggers), and the other agents see the ego wherever it is.
+        """
+        self._ego_step = step
+
+    @property
+    def ego_model(self) -> BicycleModel:
+        """The ego's bicycle model (its state; step it only through :meth:`drive_ego`)."""
+        return self._ego
+
+    @property
+    def ego_route_s_m(self) -> float:
+        """The ego's arc length along its route (metres), as last tracked."""
+        return self._driver.s_m
+
+    def _track_route(self) -> None:
+        route = self._driver.route
+        s, _ = route.project(
+            [[self._ego.x_m, self._ego.y_m]],
+            s_min_m=self._driver.s_m - 2.0,
+            s_max_m=self._driver.s_m + 10.0,
+        )
+        self._driver.s_m = float(s[0])
 
     def _record_pose(self) -> None:
         self._history.append((self._time_ns, self._ego.x_m, self._ego.y_m, self._ego.yaw_rad))
