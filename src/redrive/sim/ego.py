@@ -5,6 +5,10 @@ the steering angle held over a step the path has constant curvature ``tan(δ)/L`
 integrated *exactly* on a circular arc (a straight line for δ = 0) for the distance travelled at
 constant acceleration: a vehicle at constant speed and zero steer travels exactly ``v·t``.
 
+``ActuatedEgo`` is the ego under an algorithm's control (closed loop): its ``ControlCommands`` become an
+acceleration through a ``PedalModel`` (throttle, brake, coasting resistance), optionally one step late,
+and drive the bicycle within the actuator limits of ``EgoGeometry``.
+
 The driver is not a redrive algorithm: it follows the route with pure pursuit and sets its speed with
 IDM towards the set speed, stopping behind leaders, at red lights and at the end of its route.
 """
@@ -12,7 +16,8 @@ IDM towards the set speed, stopping behind leaders, at red lights and at the end
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -27,9 +32,9 @@ from redrive.sim.agents import (
 )
 from redrive.sim.lights import TrafficLights
 from redrive.sim.roads import Route
-from redrive.types import VehicleState
+from redrive.types import ControlCommands, VehicleState
 
-__all__ = ["BicycleModel", "EgoDriver", "EgoGeometry"]
+__all__ = ["ActuatedEgo", "BicycleModel", "EgoDriver", "EgoGeometry", "PedalModel"]
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -37,6 +42,9 @@ class EgoGeometry:
     """Dimensions (metres) and actuator limits of the ego vehicle.
 
     ``rear_overhang_m`` is the distance from the rear bumper to the rear axle (the reference point).
+    Limits: road-wheel angle ``max_steer_rad`` (rad) and its rate ``max_steer_rate_rad_s`` (rad/s);
+    longitudinal acceleration within [-``max_decel_mps2``, ``max_accel_mps2``] (m/s²) and, when
+    ``max_jerk_mps3`` is set, its change within ±``max_jerk_mps3`` (m/s³; ``None``: unbounded).
     """
 
     wheelbase_m: float = 2.8
@@ -48,6 +56,7 @@ class EgoGeometry:
     max_steer_rate_rad_s: float = 0.8
     max_accel_mps2: float = 3.0
     max_decel_mps2: float = 9.0
+    max_jerk_mps3: float | None = None
 
     @property
     def front_offset_m(self) -> float:
@@ -86,12 +95,21 @@ class BicycleModel:
 
     def step(self, dt_s: float, *, accel_mps2: float, steer_rad: float) -> None:
         """Advance ``dt_s`` seconds with a steering command (clipped to range and rate) and a
-        longitudinal acceleration (clipped to the limits; the vehicle never reverses)."""
+        longitudinal acceleration (clipped to the limits and, when ``max_jerk_mps3`` is set, to
+        ``max_jerk_mps3 · dt_s`` from the previous step's; the vehicle never reverses).
+
+        Coming to rest sets the acceleration to zero at once: that is the vehicle stopping, not a
+        commanded change, and the jerk bound does not apply to it.
+        """
         g = self.geometry
         max_delta = g.max_steer_rate_rad_s * dt_s
         cmd = min(max(steer_rad, -g.max_steer_rad), g.max_steer_rad)
         self.steer_rad += min(max(cmd - self.steer_rad, -max_delta), max_delta)
-        self.accel_mps2 = min(max(accel_mps2, -g.max_decel_mps2), g.max_accel_mps2)
+        accel = min(max(accel_mps2, -g.max_decel_mps2), g.max_accel_mps2)
+        if g.max_jerk_mps3 is not None:
+            max_change = g.max_jerk_mps3 * dt_s
+            accel = min(max(accel, self.accel_mps2 - max_change), self.accel_mps2 + max_change)
+        self.accel_mps2 = accel
         dist, self.speed_mps = advance_1d(0.0, self.speed_mps, self.accel_mps2, dt_s)
         if self.speed_mps == 0.0 and self.accel_mps2 < 0.0:
             self.accel_mps2 = 0.0
@@ -126,6 +144,119 @@ class BicycleModel:
     def map_from_base(self) -> npt.NDArray[np.float64]:
         """4×4 float64 pose of base_link (rear-axle centre) in the map frame."""
         return pose_matrix(self.x_m, self.y_m, self.yaw_rad)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class PedalModel:
+    """How throttle and brake (``ControlCommands``, each in [0, 1]) become longitudinal acceleration.
+
+    ``a = throttle · max_accel_mps2 − brake · max_brake_mps2 − coast(v)`` with the coasting
+    resistance ``coast(v) = rolling_resistance_mps2 + drag_coefficient_1pm · v²``.  With both pedals
+    released the vehicle decelerates by ``coast(v)`` exactly; it never reverses (the bicycle model
+    stops it at zero speed).
+
+    Attributes:
+        max_accel_mps2: acceleration at full throttle before resistance, m/s².
+        max_brake_mps2: deceleration at full brake before resistance, m/s².
+        rolling_resistance_mps2: rolling resistance as a deceleration, m/s² (≈ c_rr · g).
+        drag_coefficient_1pm: aerodynamic drag ρ·c_d·A / (2·mass), 1/m (deceleration per v²).
+    """
+
+    max_accel_mps2: float = 3.0
+    max_brake_mps2: float = 8.0
+    rolling_resistance_mps2: float = 0.1
+    drag_coefficient_1pm: float = 2.6e-4
+
+    def __post_init__(self) -> None:
+        for name in ("max_accel_mps2", "max_brake_mps2"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                msg = f"PedalModel.{name} must be a positive number, got {value}"
+                raise ValueError(msg)
+        for name in ("rolling_resistance_mps2", "drag_coefficient_1pm"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                msg = f"PedalModel.{name} must be a non-negative number, got {value}"
+                raise ValueError(msg)
+
+    def coast(self, speed_mps: float) -> float:
+        """Deceleration (m/s², ≥ 0) with both pedals released at ``speed_mps``."""
+        return self.rolling_resistance_mps2 + self.drag_coefficient_1pm * speed_mps * speed_mps
+
+    def acceleration(self, commands: ControlCommands, speed_mps: float) -> float:
+        """Longitudinal acceleration (m/s²) that ``commands`` give at ``speed_mps``."""
+        return (
+            commands.throttle * self.max_accel_mps2
+            - commands.brake * self.max_brake_mps2
+            - self.coast(speed_mps)
+        )
+
+    def pedals(self, accel_mps2: float, speed_mps: float) -> tuple[float, float]:
+        """Throttle and brake (each in [0, 1], one of them zero) that give ``accel_mps2`` at
+        ``speed_mps``; beyond what the pedals can do, the nearest (full throttle or full brake)."""
+        net = accel_mps2 + self.coast(speed_mps)
+        if net >= 0.0:
+            return min(net / self.max_accel_mps2, 1.0), 0.0
+        return 0.0, min(-net / self.max_brake_mps2, 1.0)
+
+
+class ActuatedEgo:
+    """The ego driven by ``ControlCommands``: a :class:`BicycleModel` behind a :class:`PedalModel`.
+
+    ``delay_steps`` is 0 (a command acts in the step it is applied) or 1 (the command applied at step
+    k acts at step k+1; the first step acts on a neutral command: pedals released — coasting — and
+    the steering angle held where it is).  Steering and acceleration limits (angle, rate, accel,
+    decel, jerk) are those of the model's :class:`EgoGeometry`, enforced by :meth:`BicycleModel.step`.
+    """
+
+    def __init__(
+        self, model: BicycleModel, *, pedals: PedalModel | None = None, delay_steps: int = 0
+    ) -> None:
+        if delay_steps not in (0, 1):
+            msg = f"ActuatedEgo: delay_steps must be 0 or 1, got {delay_steps!r}"
+            raise ValueError(msg)
+        self._model = model
+        self.pedals = pedals if pedals is not None else PedalModel()
+        self.delay_steps = delay_steps
+        self._pending: ControlCommands | None = None
+
+    @property
+    def model(self) -> BicycleModel:
+        """The bicycle model this ego drives (its state is the ego's true state)."""
+        return self._model
+
+    def apply(self, commands: ControlCommands, dt_s: float) -> None:
+        """Advance ``dt_s`` seconds under ``commands`` (or, with a one-step delay, the previous
+        step's commands)."""
+        if not (math.isfinite(dt_s) and dt_s > 0.0):
+            msg = f"ActuatedEgo.apply: dt_s must be a positive number of seconds, got {dt_s}"
+            raise ValueError(msg)
+        acting = commands
+        if self.delay_steps == 1:
+            acting = self._pending or ControlCommands(steering_angle_rad=self._model.steer_rad)
+            self._pending = commands
+        accel = self.pedals.acceleration(acting, self._model.speed_mps)
+        self._model.step(dt_s, accel_mps2=accel, steer_rad=acting.steering_angle_rad)
+
+    def brake(self, dt_s: float) -> None:
+        """Advance ``dt_s`` seconds under a full emergency brake with the steering angle held —
+        the fallback for a frame whose algorithm failed.  It is a command like any other: with a
+        one-step delay it acts one step later."""
+        hold = ControlCommands(throttle=0.0, brake=1.0, steering_angle_rad=self._model.steer_rad)
+        self.apply(hold, dt_s)
+
+    def state(self, stamp_ns: int) -> VehicleState:
+        """The ego's true state (rear-axle centre, map frame) at ``stamp_ns``."""
+        return self._model.state(stamp_ns)
+
+    def describe(self) -> dict[str, Any]:
+        """Every parameter of the ego's motion, for the run manifest."""
+        return {
+            "motion_model": "kinematic_bicycle",
+            "geometry": asdict(self._model.geometry),
+            "pedals": asdict(self.pedals),
+            "delay_steps": self.delay_steps,
+        }
 
 
 def pose_matrix(x_m: float, y_m: float, yaw_rad: float) -> npt.NDArray[np.float64]:

@@ -1,0 +1,12 @@
+"""Closed-loop re-simulation (layer L6): the ego driven by the algorithms' commands.
+
+``tracker`` holds the built-in path tracker that turns a planned path into ``ControlCommands`` when a
+pipeline has no control stage.  The ego's motion (kinematic bicycle, actuator limits, pedal model,
+actuation delay) lives in ``redrive.sim.ego``.
+"""
+
+from __future__ import annotations
+
+from redrive.closedloop.tracker import LqrPidTracker
+
+__all__ = ["LqrPidTracker"]
