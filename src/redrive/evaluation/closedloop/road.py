@@ -110,7 +110,7 @@ def driving_direction_score(data: EvalData, params: Mapping[str, Any]) -> tuple[
     t = ego.t_s
     window = float(params["time_horizon_s"])
     over = np.array(
-        [against[(t > t[i] - window - 1e-9) & (t <= t[i])].sum() for i in range(len(ego))]
+        [against[(t > t[i] - window + 1e-9) & (t <= t[i])].sum() for i in range(len(ego))]
     )
     worst = float(over.max()) if over.size else 0.0
     if worst < float(params["compliance_threshold_m"]):
