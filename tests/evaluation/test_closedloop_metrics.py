@@ -161,12 +161,16 @@ def _collision(tmp_path: Path, ego: Callable[[float], Pose], thing: Callable[[fl
 
 def test_head_on_is_active_front_at_fault(tmp_path: Path) -> None:
     # a car coming the other way in the ego's lane; they meet within 3 s
-    res, _ = _collision(tmp_path, cruise(10.0), lambda t: Thing(40.0 - 10.0 * t, 0.0, vx=-10.0, yaw=math.pi))
+    res, _ = _collision(
+        tmp_path, cruise(10.0), lambda t: Thing(40.0 - 10.0 * t, 0.0, vx=-10.0, yaw=math.pi)
+    )
     assert res.values["active_front"] == 1
     assert res.values["at_fault_collisions"] == 1
     assert res.values["no_at_fault_collisions"] == 0.0
     (mark,) = res.bookmarks
-    assert mark.kind == "collision" and "active_front" in mark.detail and "at fault" in mark.detail
+    assert mark.kind == "collision"
+    assert "active_front" in mark.detail
+    assert "at fault" in mark.detail
     assert res.per_frame["at_fault_collision"][1].sum() == 1  # the track counts once
 
 
@@ -179,7 +183,9 @@ def test_ego_rear_ended_while_stopped_is_not_at_fault(tmp_path: Path) -> None:
 
 
 def test_ego_rear_ended_while_moving_is_active_rear_not_at_fault(tmp_path: Path) -> None:
-    res, _ = _collision(tmp_path, cruise(5.0, x0=50.0), lambda t: Thing(30.0 + 12.0 * t, 0.0, vx=12.0))
+    res, _ = _collision(
+        tmp_path, cruise(5.0, x0=50.0), lambda t: Thing(30.0 + 12.0 * t, 0.0, vx=12.0)
+    )
     assert res.values["active_rear"] == 1
     assert res.values["no_at_fault_collisions"] == 1.0
 
@@ -193,7 +199,9 @@ def test_stopped_track_is_at_fault_and_an_object_scores_half(tmp_path: Path) -> 
 
 def _side_swipe(y_ego: float) -> tuple[Callable[[float], Pose], Callable[[float], Thing]]:
     # a car beside the ego, same speed, drifting into it from the left
-    return cruise(10.0, y=y_ego), lambda t: Thing(1.4 + 10.0 * t, y_ego + 3.0 - 1.0 * t, vx=10.0, vy=-1.0)
+    return cruise(10.0, y=y_ego), lambda t: Thing(
+        1.4 + 10.0 * t, y_ego + 3.0 - 1.0 * t, vx=10.0, vy=-1.0
+    )
 
 
 def test_lateral_collision_in_own_lane_is_not_at_fault(tmp_path: Path) -> None:
@@ -210,11 +218,13 @@ def test_lateral_collision_straddling_lanes_is_at_fault(tmp_path: Path) -> None:
 
 def test_ttc_below_threshold_is_flagged(tmp_path: Path) -> None:
     # a stopped car 5 m ahead of the bumper at 10 m/s: TTC 0.5 s on the first frame
-    run = make_run(tmp_path, cruise(10.0), n=3, things=lambda t: (Thing(FRONT_M + 2.25 + 5.0, 0.0),))
+    run = make_run(
+        tmp_path, cruise(10.0), n=3, things=lambda t: (Thing(FRONT_M + 2.25 + 5.0, 0.0),)
+    )
     res = score(TimeToCollision(), run)
     assert res.values["ttc_within_bound"] == 0.0
     assert res.values["min_ttc_s"] == pytest.approx(0.3, abs=1e-9)  # frame 2: 3 m left
-    frames, ttc = res.per_frame["ttc_s"]
+    _frames, ttc = res.per_frame["ttc_s"]
     assert ttc[0] == pytest.approx(0.5, abs=1e-9)
     assert {b.kind for b in res.bookmarks} == {"low_ttc"}
     far = make_run(tmp_path, cruise(10.0), n=3, things=lambda t: (Thing(80.0, 0.0),), name="far")
@@ -264,7 +274,12 @@ def test_map_metrics_skip_without_a_map(tmp_path: Path) -> None:
     run = make_run(tmp_path, cruise(), road=None)
     summary = evaluate_run(
         run,
-        metrics=[DrivableAreaCompliance(), DrivingDirectionCompliance(), SpeedLimitCompliance(), PdmScore()],
+        metrics=[
+            DrivableAreaCompliance(),
+            DrivingDirectionCompliance(),
+            SpeedLimitCompliance(),
+            PdmScore(),
+        ],
     )
     reasons = {o.metric: o.reason for o in summary.skipped}
     assert set(reasons) == {"drivable_area", "driving_direction", "speed_limit", "pdm_score"}
@@ -314,7 +329,16 @@ def test_pdm_score(tmp_path: Path) -> None:
     clean = score(PdmScore(), make_run(tmp_path, cruise(10.0)))
     assert clean.values["pdm_score"] == pytest.approx(1.0)
     assert dict(clean.values) == pytest.approx(
-        {"pdm_score": 1.0, "nc": 1.0, "dac": 1.0, "mp": 1.0, "ttc": 1.0, "ep": 1.0, "c": 1.0, "ddc": 1.0}
+        {
+            "pdm_score": 1.0,
+            "nc": 1.0,
+            "dac": 1.0,
+            "mp": 1.0,
+            "ttc": 1.0,
+            "ep": 1.0,
+            "c": 1.0,
+            "ddc": 1.0,
+        }
     )
     crash = make_run(
         tmp_path, cruise(10.0), things=lambda t: (Thing(30.0, 0.0),), name="crash"
@@ -388,7 +412,8 @@ def test_reference_pipeline_on_a_synthetic_cut_in(tmp_path: Path) -> None:
         PdmScore(),
     ]
     summary = evaluate_run(out, metrics=metrics)
-    assert not summary.failed and not summary.skipped
+    assert not summary.failed
+    assert not summary.skipped
     got = {s.metric.name: s.result.values for s in summary.scored}
     assert got["at_fault_collisions"]["collisions"] == 0
     assert got["at_fault_collisions"]["no_at_fault_collisions"] == 1.0
