@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from redrive.results import (
@@ -144,11 +146,15 @@ def frame(i: int, *, planning: bool = True, long_traceback: str = "") -> FrameRe
         heading_rad=0.3,
         yaw_rate_rad_s=0.01,
     )
+    logged = (  # a closed-loop run keeps the logged ego apart: here on odd frames, 1 m behind
+        replace(ego, position=ego.position - np.array([1.0, 0.0, 0.0])) if i % 2 else None
+    )
     return FrameRecord(
         frame_index=i,
         stamp_ns=stamp,
         steps=tuple(steps),
         vehicle_state=ego,
+        logged_vehicle_state=logged,
         ground_truth=gt,
         wall_ns=5_000_000,
         late=i == 2,

@@ -109,6 +109,11 @@ def test_round_trip_values(tmp_path: Path) -> None:
     assert ego[5].position.tolist() == [512_350.678, 5_412_345.125, 101.5]
     assert ego[5].stamp_ns == T0_NS + 500_000_000
     assert ego[5].frame_id == "map"
+    logged = run.logged_ego()
+    assert sorted(logged) == [1, 3, 5]
+    assert logged[5].position.tolist() == [512_349.678, 5_412_345.125, 101.5]
+    assert logged[5].heading_rad == ego[5].heading_rad
+    assert run.road_map() is None  # nothing wrote one
 
     res = run.table("resources")
     assert res.num_rows == 3
@@ -168,9 +173,10 @@ def test_parts_are_deterministic(tmp_path: Path) -> None:
     write_run(tmp_path / "b", n=9)
     files_a = sorted(p.relative_to(tmp_path / "a") for p in (tmp_path / "a").rglob("*.parquet"))
     files_b = sorted(p.relative_to(tmp_path / "b") for p in (tmp_path / "b").rglob("*.parquet"))
-    # 3 flushes × 7 tables (resources come with the last); frame 8 has empty ground truth
+    # 3 flushes × 7 tables (resources come with the last); frame 8 has empty ground truth;
+    # ego_logged (odd frames) in the first two
     assert files_a == files_b
-    assert len(files_a) == 3 * 7
+    assert len(files_a) == 3 * 7 + 2
     for rel in files_a:
         assert (tmp_path / "a" / rel).read_bytes() == (tmp_path / "b" / rel).read_bytes(), rel
     # no wall-clock metadata in the files

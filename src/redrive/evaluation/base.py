@@ -37,7 +37,14 @@ import pyarrow as pa
 
 from redrive.errors import ConfigError, PluginError
 from redrive.results import Run
-from redrive.types import ControlCommands, DetectedObject, PlannedPath, Role, VehicleState
+from redrive.types import (
+    ControlCommands,
+    DetectedObject,
+    PlannedPath,
+    RoadMap,
+    Role,
+    VehicleState,
+)
 
 __all__ = [
     "NEEDS",
@@ -54,12 +61,26 @@ __all__ = [
 _T = TypeVar("_T")
 
 #: what a metric may need from a run.
-NEEDS = frozenset({"ground_truth", "ego", "detections", "paths", "commands", "steps", "frames"})
+NEEDS = frozenset(
+    {
+        "ground_truth",
+        "ego",
+        "logged_ego",
+        "road_map",
+        "detections",
+        "paths",
+        "commands",
+        "steps",
+        "frames",
+    }
+)
 #: what provides each need, for the message when a run lacks it.
 NEED_SOURCES: Mapping[str, str] = MappingProxyType(
     {
         "ground_truth": "a log with ground-truth objects",
         "ego": "a log with the ego state (odometry)",
+        "logged_ego": "a closed-loop run, which stores the logged ego apart from the driven one",
+        "road_map": "a road map in the run (synthetic worlds store one)",
         "detections": "a perception algorithm with at least one successful step",
         "paths": "a planning algorithm with at least one successful step",
         "commands": "a control algorithm with at least one successful step",
@@ -206,6 +227,15 @@ class EvalData:
 
     def ego(self) -> dict[int, VehicleState]:
         return self._cached("ego", self.run.ego)
+
+    def logged_ego(self) -> dict[int, VehicleState]:
+        """frame index → the logged ego state stored apart from the driven one (closed loop);
+        empty in open loop, where :meth:`ego` is the logged ego."""
+        return self._cached("logged_ego", self.run.logged_ego)
+
+    def road_map(self) -> RoadMap | None:
+        """The run's road map, None when it has none."""
+        return self._cached("road_map", self.run.road_map)
 
     def paths(self) -> dict[int, PlannedPath]:
         return self._cached("paths", lambda: self.run.paths(self.algorithm))

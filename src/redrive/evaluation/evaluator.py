@@ -16,7 +16,7 @@ from redrive.errors import ConfigError
 from redrive.evaluation.base import NEED_SOURCES, EvalData, Metric, MetricSkipped
 from redrive.evaluation.registry import installed_metrics
 from redrive.evaluation.store import MetricOutcome, Scored, write_evaluation
-from redrive.results import Run, open_run
+from redrive.results import MAP_NAME, Run, open_run
 
 __all__ = ["EvaluationSummary", "MetricOutcome", "default_metrics", "evaluate_run"]
 
@@ -66,12 +66,17 @@ class _Provides:
             self.has_frames and frames.column("n_ground_truth").null_count < frames.num_rows
         )
         self.has_ego = run.table("ego").num_rows > 0
+        self.has_logged_ego = run.table("ego_logged").num_rows > 0
+        # the file's presence: a damaged map is the metric's error to report, with the file
+        self.has_road_map = (run.path / MAP_NAME).is_file()
 
     def missing(self, need: str, algorithm: str) -> str | None:
         """None if the run provides ``need`` for ``algorithm``, else why not."""
         have = {
             "ground_truth": self.has_ground_truth,
             "ego": self.has_ego,
+            "logged_ego": self.has_logged_ego,
+            "road_map": self.has_road_map,
             "steps": self.has_steps,
             "frames": self.has_frames,
         }.get(need)
@@ -87,6 +92,8 @@ class _Provides:
             what = f"the run has no {need.replace('_', ' ')}"
         if have:
             return None
+        if need == "road_map":
+            return "no road map in the run (synthetic worlds store one)"
         return f"{what} (needs {NEED_SOURCES.get(need, need)})"
 
 

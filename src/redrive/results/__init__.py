@@ -17,9 +17,13 @@ Layout of a run directory (columns: ``docs/results.md``)::
     RUN/detections/part-…          one row per object a perception algorithm returned
     RUN/ground_truth/part-…        one row per ground-truth object
     RUN/ego/part-…                 one row per frame with an ego state
+    RUN/ego_logged/part-…          closed loop: the logged ego state where it differs from the
+                                   driven one (optional: older runs have no such table)
     RUN/paths/part-…               one row per waypoint of a planned path
     RUN/commands/part-…            one row per control command
     RUN/resources/part-…           one row per process resource sample
+    RUN/map.json                   optional: the road map (lanes, drivable areas; see
+                                   redrive.results.roadmap), written by RunWriter.write_map
     RUN/.lock                      held by the writing process
 
 Each flush of the writer adds part N of every table that has rows, and always ``frames`` part
@@ -52,12 +56,14 @@ from redrive.results.records import (
     StepOutput,
     StepRecord,
 )
+from redrive.results.roadmap import MAP_NAME, read_road_map, write_road_map
 from redrive.results.schema import SCHEMAS, TABLES
 from redrive.results.store import FINAL_STATUSES, Run, RunWriter, open_run
 
 __all__ = [
     "EXPORT_FORMATS",
     "FINAL_STATUSES",
+    "MAP_NAME",
     "RESUME_KEYS",
     "ROLES",
     "SCHEMAS",
@@ -80,4 +86,6 @@ __all__ = [
     "export_run",
     "open_run",
     "read_manifest",
+    "read_road_map",
+    "write_road_map",
 ]

@@ -9,7 +9,7 @@ import pyarrow as pa
 
 from redrive.results.records import FrameRecord, ResourceSample, StepRecord
 from redrive.results.schema import SCHEMAS
-from redrive.types import ControlCommands, DetectedObject, PlannedPath
+from redrive.types import ControlCommands, DetectedObject, PlannedPath, VehicleState
 
 __all__ = ["TableBuffers"]
 
@@ -49,21 +49,9 @@ class TableBuffers:
                 cols["stamp_ns"].append(stamp)
                 cols["num_lidar_points"].append(obj.num_lidar_points)
                 cols["visible"].append(obj.visible)
-        vs = rec.vehicle_state
-        if vs is not None:
-            cols = self._cols["ego"]
-            cols["frame_index"].append(fi)
-            cols["stamp_ns"].append(vs.stamp_ns)
-            cols["frame_id"].append(vs.frame_id)
-            for names, vec in (
-                (("x", "y", "z"), vs.position),
-                (("vx", "vy", "vz"), vs.velocity),
-                (("ax", "ay", "az"), vs.acceleration),
-            ):
-                for name, value in zip(names, vec.tolist(), strict=True):
-                    cols[name].append(value)
-            cols["heading_rad"].append(vs.heading_rad)
-            cols["yaw_rate_rad_s"].append(vs.yaw_rate_rad_s)
+        for table, vs in (("ego", rec.vehicle_state), ("ego_logged", rec.logged_vehicle_state)):
+            if vs is not None:
+                _append_state(self._cols[table], fi, vs)
         self.n_frames += 1
 
     def _add_step(self, fi: int, stamp: int, step: StepRecord) -> None:
@@ -136,6 +124,22 @@ class TableBuffers:
 def _append(cols: dict[str, list[Any]], **values: Any) -> None:
     for name, value in values.items():
         cols[name].append(value)
+
+
+def _append_state(cols: dict[str, list[Any]], fi: int, vs: VehicleState) -> None:
+    """One row of the ``ego`` or ``ego_logged`` table."""
+    cols["frame_index"].append(fi)
+    cols["stamp_ns"].append(vs.stamp_ns)
+    cols["frame_id"].append(vs.frame_id)
+    for names, vec in (
+        (("x", "y", "z"), vs.position),
+        (("vx", "vy", "vz"), vs.velocity),
+        (("ax", "ay", "az"), vs.acceleration),
+    ):
+        for name, value in zip(names, vec.tolist(), strict=True):
+            cols[name].append(value)
+    cols["heading_rad"].append(vs.heading_rad)
+    cols["yaw_rate_rad_s"].append(vs.yaw_rate_rad_s)
 
 
 def _append_object(cols: dict[str, list[Any]], obj: DetectedObject) -> None:

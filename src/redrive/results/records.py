@@ -114,6 +114,9 @@ class FrameRecord:
         stamp_ns: the frame's stamp, int ns since the epoch.
         steps: one record per algorithm that was scheduled on this frame.
         vehicle_state: the frame's ego state (frame ``map``/``odom``), if the log has one.
+        logged_vehicle_state: the ego state the log recorded for this frame when the driven
+            ego differs from it (closed loop: the expert the closed-loop metrics compare
+            progress against); None in open loop, where ``vehicle_state`` is the logged one.
         ground_truth: the frame's ground-truth objects (``Frame.ground_truth``), None when the
             log carries none (an empty tuple means "ground truth: nothing there").
         wall_ns: wall time the engine spent on the whole frame, int ns.
@@ -124,6 +127,7 @@ class FrameRecord:
     stamp_ns: int
     steps: tuple[StepRecord, ...]
     vehicle_state: VehicleState | None = None
+    logged_vehicle_state: VehicleState | None = None
     ground_truth: tuple[DetectedObject, ...] | None = None
     wall_ns: int = 0
     late: bool = False

@@ -16,6 +16,7 @@ __all__ = [
     "COMMANDS",
     "DETECTIONS",
     "EGO",
+    "EGO_LOGGED",
     "FRAMES",
     "GROUND_TRUTH",
     "PATHS",
@@ -116,6 +117,10 @@ EGO = pa.schema(
     ]
 )
 
+#: one row per frame with a logged ego state besides the driven one (closed loop: the expert
+#: route); same columns as ``ego``.  Optional: runs written before it existed have no parts.
+EGO_LOGGED = EGO
+
 #: one row per waypoint of a planned path.
 PATHS = pa.schema(
     [
@@ -179,6 +184,7 @@ SCHEMAS: Mapping[str, pa.Schema] = MappingProxyType(
         "detections": DETECTIONS,
         "ground_truth": GROUND_TRUTH,
         "ego": EGO,
+        "ego_logged": EGO_LOGGED,
         "paths": PATHS,
         "commands": COMMANDS,
         "resources": RESOURCES,

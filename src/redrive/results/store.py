@@ -46,9 +46,10 @@ from redrive.results.readers import (
     paths_by_frame,
 )
 from redrive.results.records import FrameRecord, ResourceSample
+from redrive.results.roadmap import read_road_map, write_road_map
 from redrive.results.schema import SCHEMAS, SORT_KEYS, TABLES
 from redrive.results.summary import summarize_steps
-from redrive.types import ControlCommands, DetectedObject, PlannedPath, VehicleState
+from redrive.types import ControlCommands, DetectedObject, PlannedPath, RoadMap, VehicleState
 
 try:  # POSIX: an advisory lock keeps two writers out of one run directory
     import fcntl
@@ -302,6 +303,15 @@ class RunWriter:
         ):
             self.flush()
 
+    def write_map(self, road_map: RoadMap) -> None:
+        """Write the run's road map to ``RUN/map.json`` now (atomically; replaces an earlier one).
+
+        The closed-loop metrics that need road geometry (drivable area, driving direction,
+        speed limits) read it; see :mod:`redrive.results.roadmap` for the format.
+        """
+        self._check_open()
+        write_road_map(self.path, road_map)
+
     def write_resources(self, samples: Sequence[ResourceSample]) -> None:
         """Buffer resource samples; they are written with the next flush."""
         self._check_open()
@@ -522,6 +532,19 @@ class Run:
     def ego(self) -> dict[int, VehicleState]:
         """frame_index → the ego state of the frame (frame ``map``/``odom`` as recorded)."""
         return ego_by_frame(self.table("ego"))
+
+    def logged_ego(self) -> dict[int, VehicleState]:
+        """frame_index → the ego state the log recorded, where the run stored it apart from the
+        driven ego (closed loop); empty otherwise (open loop: :meth:`ego` *is* the logged ego)."""
+        return ego_by_frame(self.table("ego_logged"))
+
+    def road_map(self) -> RoadMap | None:
+        """The run's road map (``RUN/map.json``), None when the run has none.
+
+        Raises:
+            ConfigError: the file exists but is not a valid map (the message says where).
+        """
+        return read_road_map(self.path)
 
 
 def _check_table(name: str) -> None:

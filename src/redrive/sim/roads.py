@@ -300,6 +300,8 @@ class UrbanLayout:
     arm_length_m: float = 150.0
     shoulder_m: float = 2.5
     sidewalk_width_m: float = 3.0
+    #: the legal speed limit of every lane, m/s; None: 50 km/h (redrive.sim.roadmap)
+    speed_limit_mps: float | None = None
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -314,6 +316,8 @@ class HighwayLayout:
     exit_length_m: float = 150.0
     shoulder_m: float = 2.5
     sidewalk_width_m: float = 1.5
+    #: the legal speed limit of every lane, m/s; None: 120 km/h (redrive.sim.roadmap)
+    speed_limit_mps: float | None = None
 
 
 def build_network(layout: UrbanLayout | HighwayLayout) -> RoadNetwork:

@@ -19,6 +19,7 @@ from redrive.types.environment import EnvironmentData, TrafficData, TrafficLight
 from redrive.types.frame import ExtensionPayload, Frame, SensorData, SensorPayload
 from redrive.types.jsonable import to_jsonable
 from redrive.types.objects import Box3D, DetectedObject
+from redrive.types.roadmap import DrivableArea, MapLane, RoadMap
 from redrive.types.sensors import IMAGE_ENCODINGS, CameraInfo, GnssFix, Image, Imu, PointCloud
 from redrive.types.transforms import Transform
 from redrive.types.vehicle import ControlCommands, PlannedPath, VehicleState
@@ -29,6 +30,7 @@ __all__ = [
     "CameraInfo",
     "ControlCommands",
     "DetectedObject",
+    "DrivableArea",
     "EnvironmentData",
     "ExtensionPayload",
     "Frame",
@@ -37,10 +39,12 @@ __all__ = [
     "Imu",
     "LightState",
     "Lighting",
+    "MapLane",
     "ObjectClass",
     "PlannedPath",
     "PointCloud",
     "RoadCondition",
+    "RoadMap",
     "Role",
     "SensorData",
     "SensorPayload",

@@ -1,0 +1,365 @@
+"""What the closed-loop metrics share: the ego track of a run, its footprint, the ground truth
+put into the map frame, the road map's geometric queries, and the collision classification.
+
+Planar throughout: x, y metres in ``map``, headings radians about +z.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import shapely
+
+from redrive.evaluation._kinematics import (
+    ego_footprint_corners,
+    project_on_polyline,
+    rectangle_corners,
+    rectangles_overlap,
+)
+from redrive.evaluation.base import EvalData, MetricSkipped, Series
+from redrive.types import DetectedObject, ObjectClass, RoadMap, VehicleState
+
+F64 = npt.NDArray[np.float64]
+
+#: the ego footprint: ``redrive.sim.ego.EgoGeometry``'s defaults (the run manifest records no
+#: vehicle geometry; evaluation may not import the simulator, a test keeps the two equal).
+EGO_DEFAULTS: Mapping[str, float] = MappingProxyType(
+    {"ego_length_m": 4.7, "ego_width_m": 1.9, "rear_overhang_m": 0.95}
+)
+#: nuPlan ``_get_collision_type`` / ``is_track_stopped``: stopped below this speed, m/s.
+STOPPED_SPEED_MPS = 5e-2
+#: nuPlan ``is_agent_behind`` (150°) and ``is_agent_ahead`` (30°) angle tolerances, rad.
+BEHIND_ANGLE_RAD = math.radians(150.0)
+AHEAD_ANGLE_RAD = math.radians(30.0)
+#: object classes nuPlan counts as agents (an at-fault collision with one scores 0); the others
+#: are objects (one at-fault collision scores 0.5): nuPlan ``AGENT_TYPES``.
+AGENT_CLASSES = frozenset(
+    {
+        ObjectClass.VEHICLE,
+        ObjectClass.TRUCK,
+        ObjectClass.PEDESTRIAN,
+        ObjectClass.BICYCLE,
+        ObjectClass.MOTORCYCLE,
+    }
+)
+
+
+@dataclass(frozen=True, slots=True)
+class EgoRun:
+    """The ego of a run, per frame with a state, in stamp order (arrays share the first axis).
+
+    Attributes:
+        frames: frame indices (N,); stamps_ns (N,); xy: rear axle (N, 2) m; heading_rad (N,);
+        speed_mps: (N,) norm of the stored velocity.
+    """
+
+    frames: npt.NDArray[np.int64]
+    stamps_ns: npt.NDArray[np.int64]
+    xy: F64
+    heading_rad: F64
+    speed_mps: F64
+
+    @classmethod
+    def of(cls, states: Mapping[int, VehicleState]) -> EgoRun:
+        items = sorted(states.items(), key=lambda kv: (kv[1].stamp_ns, kv[0]))
+        n = len(items)
+        return cls(
+            frames=np.array([k for k, _ in items], dtype=np.int64),
+            stamps_ns=np.array([s.stamp_ns for _, s in items], dtype=np.int64),
+            xy=np.array([s.position[:2] for _, s in items], dtype=np.float64).reshape(n, 2),
+            heading_rad=np.array([s.heading_rad for _, s in items], dtype=np.float64),
+            speed_mps=np.array([s.speed_mps for _, s in items], dtype=np.float64),
+        )
+
+    def __len__(self) -> int:
+        return int(self.frames.size)
+
+    @property
+    def t_s(self) -> F64:
+        """Seconds since the first state."""
+        return np.asarray((self.stamps_ns - self.stamps_ns[0]) / 1e9, dtype=np.float64)
+
+    def corners(self, p: Mapping[str, Any]) -> F64:
+        """Footprint corners (N, 4, 2): front-left, rear-left, rear-right, front-right."""
+        return ego_footprint_corners(
+            self.xy,
+            self.heading_rad,
+            length_m=float(p["ego_length_m"]),
+            width_m=float(p["ego_width_m"]),
+            rear_overhang_m=float(p["rear_overhang_m"]),
+        )
+
+    def centres(self, p: Mapping[str, Any]) -> F64:
+        """Footprint centres (N, 2)."""
+        shift = float(p["ego_length_m"]) / 2.0 - float(p["rear_overhang_m"])
+        h = self.heading_rad
+        return self.xy + shift * np.column_stack([np.cos(h), np.sin(h)])
+
+
+def ego_run(data: EvalData, *, minimum: int = 1) -> EgoRun:
+    """The driven ego of ``data``; MetricSkipped with fewer than ``minimum`` states."""
+    ego = EgoRun.of(data.ego())
+    if len(ego) < minimum:
+        msg = f"the run has {len(ego)} ego states; this metric needs at least {minimum}"
+        raise MetricSkipped(msg)
+    return ego
+
+
+@dataclass(frozen=True, slots=True)
+class MapObjects:
+    """Ground-truth objects of one frame in the map frame, as arrays (M,)."""
+
+    ids: npt.NDArray[np.int64]
+    classes: tuple[ObjectClass, ...]
+    xy: F64
+    yaw: F64
+    length: F64
+    width: F64
+    velocity: F64
+
+    @classmethod
+    def of(cls, objects: Sequence[DetectedObject], ego_xy: F64, ego_heading: float) -> MapObjects:
+        """``objects`` (base_link of a frame whose ego pose is ``ego_xy``, ``ego_heading``) in
+        the map frame: centres rotated and shifted, yaws and velocities rotated."""
+        n = len(objects)
+        c, s = math.cos(ego_heading), math.sin(ego_heading)
+        rot = np.array([[c, -s], [s, c]])
+        local = np.array([o.box.center[:2] for o in objects], dtype=np.float64).reshape(n, 2)
+        vel = np.array([o.velocity[:2] for o in objects], dtype=np.float64).reshape(n, 2)
+        return cls(
+            ids=np.array([o.object_id for o in objects], dtype=np.int64),
+            classes=tuple(o.object_class for o in objects),
+            xy=local @ rot.T + ego_xy,
+            yaw=np.array([o.box.yaw_rad for o in objects], dtype=np.float64) + ego_heading,
+            length=np.array([o.box.size[0] for o in objects], dtype=np.float64),
+            width=np.array([o.box.size[1] for o in objects], dtype=np.float64),
+            velocity=vel @ rot.T,
+        )
+
+    def __len__(self) -> int:
+        return int(self.ids.size)
+
+    def corners(self, dt_s: float = 0.0) -> F64:
+        """Corners (M, 4, 2) after ``dt_s`` at constant velocity."""
+        return rectangle_corners(self.xy + dt_s * self.velocity, self.yaw, self.length, self.width)
+
+    @property
+    def speed_mps(self) -> F64:
+        return np.asarray(np.hypot(self.velocity[:, 0], self.velocity[:, 1]), dtype=np.float64)
+
+
+def bearing_rad(ego_xy: F64, ego_heading: float, points: F64) -> F64:
+    """|angle| (M,) between the ego heading and the direction rear axle → each point."""
+    d = np.asarray(points, dtype=np.float64).reshape(-1, 2) - ego_xy
+    ang = np.arctan2(d[:, 1], d[:, 0]) - ego_heading
+    return np.abs((ang + math.pi) % (2.0 * math.pi) - math.pi)
+
+
+class RoadIndex:
+    """Geometric queries on a :class:`RoadMap` (shapely polygons, built once per evaluation)."""
+
+    def __init__(self, road_map: RoadMap) -> None:
+        self.road_map = road_map
+        self.lanes = road_map.lanes
+        self.lane_polygons = [
+            shapely.buffer(
+                shapely.LineString(lane.centerline), lane.width_m / 2.0, cap_style="flat"
+            )
+            for lane in self.lanes
+        ]
+        areas = [shapely.Polygon(a.polygon) for a in road_map.areas]
+        self.drivable = shapely.union_all([*self.lane_polygons, *areas])
+        inter = [p for p, a in zip(areas, road_map.areas, strict=True) if a.kind == "intersection"]
+        self.intersections = shapely.union_all(inter) if inter else None
+        for geom in (self.drivable, *self.lane_polygons):
+            shapely.prepare(geom)
+
+    def lanes_containing(self, points: F64) -> npt.NDArray[np.bool_]:
+        """(L, K): lane l contains point k (its boundary included)."""
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        out = np.zeros((len(self.lanes), p.shape[0]), dtype=bool)
+        for i, poly in enumerate(self.lane_polygons):
+            out[i] = shapely.intersects_xy(poly, p[:, 0], p[:, 1])
+        return out
+
+    def distance_outside(self, points: F64) -> F64:
+        """(K,) distance of each point to the drivable area, m (0 inside or on it)."""
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        return np.asarray(shapely.distance(self.drivable, shapely.points(p)), dtype=np.float64)
+
+    def in_intersection(self, point: F64) -> bool:
+        if self.intersections is None:
+            return False
+        x, y = np.asarray(point, dtype=np.float64).reshape(2)
+        return bool(shapely.intersects_xy(self.intersections, x, y))
+
+    def in_multiple_lanes(self, corners: F64) -> bool:
+        """NAVSIM's ``MULTIPLE_LANES`` area: more than one lane holds a corner and no lane holds
+        all four (the ego straddles lanes, as in a lane change)."""
+        inside = self.lanes_containing(corners)  # (L, 4)
+        return bool(inside.any(axis=1).sum() > 1 and not inside.all(axis=1).any())
+
+    def off_road(self, corners: F64) -> bool:
+        """A corner lies outside the drivable area (NAVSIM's ``NON_DRIVABLE_AREA``)."""
+        return bool(np.any(self.distance_outside(corners) > 0.0))
+
+    def lane_tangent(self, lane: int, point: F64) -> F64:
+        """Unit direction of travel (2,) of lane ``lane`` nearest ``point``."""
+        _, _, heading = project_on_polyline(
+            np.asarray(point).reshape(1, 2), self.lanes[lane].centerline
+        )
+        return np.array([math.cos(float(heading[0])), math.sin(float(heading[0]))])
+
+
+def road_index(data: EvalData) -> RoadIndex | None:
+    """The run's road map as a :class:`RoadIndex`, None when it has none (cached per data)."""
+    road_map = data.road_map()
+    if road_map is None:
+        return None
+    cache = data._cache  # one index per EvalData, shared by pdm_score's parts
+    index = cache.get("road_index")
+    if not isinstance(index, RoadIndex):
+        index = RoadIndex(road_map)
+        cache["road_index"] = index
+    return index
+
+
+def require_road(data: EvalData) -> RoadIndex:
+    index = road_index(data)
+    if index is None:
+        raise MetricSkipped("no road map in the run (synthetic worlds store one)")
+    return index
+
+
+@dataclass(frozen=True, slots=True)
+class Collision:
+    """The first contact of the ego with one object (nuPlan counts each track once)."""
+
+    frame: int
+    object_id: int
+    object_class: ObjectClass
+    kind: str  # nuPlan CollisionType, lower case: stopped_ego, stopped_track, active_front …
+    at_fault: bool
+    relative_speed_mps: float
+
+
+def classify(
+    objs: MapObjects,
+    m: int,
+    *,
+    ego_xy: F64,
+    ego_heading: float,
+    ego_speed: float,
+    ego_corners: F64,
+    straddling: bool | None,
+) -> tuple[str, bool]:
+    """nuPlan's ``_get_collision_type`` and at-fault rule for object ``m`` touching the ego.
+
+    ``straddling``: the ego is in multiple lanes or off the drivable area (None: no map, then a
+    lateral collision is never at fault)."""
+    obj_corners = objs.corners()[m]
+    if ego_speed <= STOPPED_SPEED_MPS:
+        return "stopped_ego", False
+    if float(objs.speed_mps[m]) <= STOPPED_SPEED_MPS:
+        return "stopped_track", True
+    if float(bearing_rad(ego_xy, ego_heading, objs.xy[m : m + 1])[0]) > BEHIND_ANGLE_RAD:
+        return "active_rear", False
+    front = shapely.LineString([ego_corners[0], ego_corners[3]])
+    if front.intersects(shapely.Polygon(obj_corners)):
+        return "active_front", True
+    return "active_lateral", bool(straddling)
+
+
+@dataclass(slots=True)
+class SceneData:
+    """Per frame of the ego track: its objects in the map frame and the map's verdicts."""
+
+    ego: EgoRun
+    corners: F64
+    objects: dict[int, MapObjects] = field(default_factory=dict)
+    straddling: dict[int, bool | None] = field(default_factory=dict)
+
+
+def scene(data: EvalData, params: Mapping[str, Any]) -> SceneData:
+    """The ego, its footprints and each frame's ground truth in the map frame (cached)."""
+    key = "closedloop_scene:" + ",".join(f"{params[k]!r}" for k in EGO_DEFAULTS)
+    cached = data._cache.get(key)
+    if isinstance(cached, SceneData):
+        return cached
+    ego = ego_run(data)
+    truth = data.ground_truth()
+    road = road_index(data)
+    corners = ego.corners(params)
+    out = SceneData(ego=ego, corners=corners)
+    for i, frame in enumerate(ego.frames.tolist()):
+        objs = truth.get(frame)
+        if objs is None:
+            continue
+        out.objects[frame] = MapObjects.of(objs, ego.xy[i], float(ego.heading_rad[i]))
+        out.straddling[frame] = (
+            None
+            if road is None
+            else road.in_multiple_lanes(corners[i]) or road.off_road(corners[i])
+        )
+    data._cache[key] = out
+    return out
+
+
+def find_collisions(sc: SceneData) -> list[Collision]:
+    """Every new contact of the ego footprint with a ground-truth box, classified (nuPlan's
+    ``_find_new_collisions``: a track collides once, later frames leave it out)."""
+    seen: set[int] = set()
+    found: list[Collision] = []
+    ego = sc.ego
+    for i, frame in enumerate(ego.frames.tolist()):
+        objs = sc.objects.get(frame)
+        if objs is None or len(objs) == 0:
+            continue
+        touching = rectangles_overlap(sc.corners[i][None], objs.corners())
+        for m in np.flatnonzero(touching):
+            oid = int(objs.ids[m])
+            if oid in seen:
+                continue
+            seen.add(oid)
+            kind, at_fault = classify(
+                objs,
+                int(m),
+                ego_xy=ego.xy[i],
+                ego_heading=float(ego.heading_rad[i]),
+                ego_speed=float(ego.speed_mps[i]),
+                ego_corners=sc.corners[i],
+                straddling=sc.straddling.get(frame),
+            )
+            h = float(ego.heading_rad[i])
+            ego_v = float(ego.speed_mps[i]) * np.array([math.cos(h), math.sin(h)])
+            found.append(
+                Collision(
+                    frame=frame,
+                    object_id=oid,
+                    object_class=objs.classes[m],
+                    kind=kind,
+                    at_fault=at_fault,
+                    relative_speed_mps=float(np.hypot(*(ego_v - objs.velocity[m]))),
+                )
+            )
+    return found
+
+
+def collision_score(collisions: Sequence[Collision]) -> float:
+    """nuPlan's ``no_ego_at_fault_collisions`` score (NAVSIM's NC): 1 without at-fault
+    collisions; 0 with one involving an agent; else 1 − n/2 for n at-fault collisions with
+    objects (0.5 for one, 0 from two on)."""
+    fault = [c for c in collisions if c.at_fault]
+    if any(c.object_class in AGENT_CLASSES for c in fault):
+        return 0.0
+    return max(0.0, 1.0 - len(fault) / 2.0)
+
+
+def series(frames: Sequence[int] | npt.NDArray[np.int64], values: Sequence[float] | F64) -> Series:
+    return np.asarray(frames, dtype=np.int64), np.asarray(values, dtype=np.float64)
