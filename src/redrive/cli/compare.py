@@ -41,7 +41,7 @@ def _print(cmp: Any, *, worst: int) -> None:
 
     console = Console(width=None if sys.stdout.isatty() else 140)
     pairs = ", ".join(f"{a} ↔ {b}" if a != b else a for a, b in cmp.pairs if a or b)
-    console.print(f"A {cmp.run_a}\nB {cmp.run_b}\nlog sha256 {cmp.log_sha256}; paired {pairs}")
+    console.print(f"A {cmp.run_a}\nB {cmp.run_b}\nsource {cmp.log_sha256}; paired {pairs}")
     table = Table(title="values (Δ = B − A)", title_justify="left")
     for col in ("metric", "algorithm", "value", "A", "B", "Δ", "Δ %", "B is", "95% CI of Δ/frame"):
         table.add_column(col, justify="right" if col in ("A", "B", "Δ", "Δ %") else "left")

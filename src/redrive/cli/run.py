@@ -19,12 +19,23 @@ examples:
   redrive run drive.bag --pipeline pipeline.toml --frames 100:200 --out runs/try1
   redrive run drive.bag --mode pipelined --step-timeout 2 --out runs/try2
   redrive run drive.bag --out runs/try2 --resume           continue an interrupted run
+  redrive run cut_in --closed-loop --planning my.py:Planner   closed loop: the planner drives
+  redrive run cut_in --closed-loop --agents reactive --perception noisy-oracle \
+      --planning idm-planner --control pure-pursuit-pid    followers react to the driven ego
 
 Plugins are entry-point names (`redrive algorithms` lists them), package.module:Class or
 path/to/file.py:Class.  With no --pipeline and no plugin flag the reference pipeline runs:
 cluster-detector → kalman-tracker → idm-planner → pure-pursuit-pid.  A step that raises is
 recorded for its frame and the run goes on (--fail-fast stops instead); Ctrl-C leaves a run
 directory that --resume continues.  `redrive export RUN --format xlsx` exports the results.
+
+Closed loop (--closed-loop): LOG is a scenario of the synthetic catalogue (`redrive synth
+--list`) or a scenario TOML; the outputs move the ego (the last control stage's commands, else the
+built-in LQR + PID tracker on the last planned path, else an emergency brake) and the world goes
+on from where it puts the car.  Frames are object-level (the true ego state and the ground-truth
+objects: use a perception that reads ground truth, e.g. noisy-oracle); --agents replay (default)
+keeps the other road users on their scripted paths, --agents reactive lets them react to the ego.
+--seed seeds the scenario too.  Closed loop on recorded logs is not built yet.
 """
 
 _FRAMES = re.compile(r"^(\d*):(\d*)$")
@@ -119,6 +130,8 @@ def _run(args: argparse.Namespace) -> int:
         step_timeout_s=args.step_timeout,
         fail_fast=True if args.fail_fast else None,
     )
+    if args.closed_loop:
+        return _run_closed_loop(args, pipeline)
     first, stop = parse_frames(args.frames) if args.frames else (None, None)
     out = args.out or _default_out(args.log)
     request = RunRequest(
@@ -167,6 +180,52 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _run_closed_loop(args: argparse.Namespace, pipeline: Any) -> int:
+    from redrive.closedloop.run import ClosedLoopRequest, is_scenario, run_closed_loop
+    from redrive.errors import ConfigError
+    from redrive.results import RunStatus
+
+    name = str(args.log)
+    if not is_scenario(name):
+        if args.log.exists():
+            msg = (
+                f"{name}: closed loop on a recorded log (object-level, the ego propagated from "
+                "the log's pose) is not built yet; give a scenario of `redrive synth --list` or a "
+                "scenario TOML"
+            )
+        else:
+            msg = f"{name}: no such scenario or scenario TOML (`redrive synth --list` lists them)"
+        raise ConfigError(msg)
+    unsupported = [
+        flag
+        for flag, given in (
+            ("--frames", args.frames),
+            ("--rate", args.rate),
+            ("--resume", args.resume),
+            ("--sensor-map", args.sensor_map),
+        )
+        if given
+    ]
+    if unsupported:
+        msg = f"--closed-loop: {', '.join(unsupported)} apply to replaying a log; drop them"
+        raise ConfigError(msg)
+    out = args.out or Path("runs") / f"{Path(name).stem}-closed-{time.strftime('%Y%m%d-%H%M%S')}"
+    request = ClosedLoopRequest(
+        scenario=name,
+        pipeline=pipeline,
+        out=out,
+        agents=args.agents,
+        seed=args.seed,
+        duration_s=args.duration,
+    )
+    report = run_closed_loop(request)
+    print_run_report(report, out)
+    if report.status is RunStatus.INTERRUPTED:
+        print("interrupted: closed-loop runs do not resume; run it again into a new --out")
+        return 130
+    return 0
+
+
 def register(sub: Any) -> None:
     parser = sub.add_parser(
         "run",
@@ -179,7 +238,12 @@ def register(sub: Any) -> None:
         epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("log", type=Path, metavar="LOG", help="the log to replay")
+    parser.add_argument(
+        "log",
+        type=Path,
+        metavar="LOG",
+        help="the log to replay (with --closed-loop: a scenario name or scenario TOML)",
+    )
     parser.add_argument("--pipeline", type=Path, metavar="TOML", help="a pipeline file")
     for role in ("perception", "planning", "control"):
         parser.add_argument(
@@ -216,6 +280,20 @@ def register(sub: Any) -> None:
     )
     parser.add_argument(
         "--sensor-map", type=Path, metavar="TOML", help="which topic is which sensor"
+    )
+    parser.add_argument(
+        "--closed-loop",
+        action="store_true",
+        help="the outputs drive the ego in a simulated scenario (LOG: a scenario)",
+    )
+    parser.add_argument(
+        "--agents",
+        choices=("replay", "reactive"),
+        default="replay",
+        help="closed loop: other road users replay their script (default) or react to the ego",
+    )
+    parser.add_argument(
+        "--duration", type=float, metavar="S", help="closed loop: seconds (default: the scenario's)"
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.set_defaults(func=_run)

@@ -71,6 +71,14 @@ logger = logging.getLogger(__name__)
 
 
 def _log_hash(run: Run) -> str:
+    """What the run was made from: the log's sha256, or for a closed-loop run of a scenario the
+    scenario, its seed and duration (two such runs saw the same world if these agree)."""
+    closed = run.manifest.closed_loop
+    if closed and run.manifest.log.format == "scenario":
+        return (
+            f"scenario {closed.get('scenario')} seed {closed.get('seed')} "
+            f"duration {closed.get('duration_s')} s agents {closed.get('agents')}"
+        )
     sha = run.manifest.log.sha256 or ""
     if not sha:
         msg = (
@@ -144,9 +152,9 @@ def compare_runs(
     sha_a, sha_b = _log_hash(ra), _log_hash(rb)
     if sha_a != sha_b:
         msg = (
-            f"runs replayed different logs: A {ra.path / 'manifest.json'} has log sha256 {sha_a} "
+            f"runs replayed different logs: A {ra.path / 'manifest.json'} has {sha_a} "
             f"({ra.manifest.log.path}), B {rb.path / 'manifest.json'} has {sha_b} "
-            f"({rb.manifest.log.path}); compare runs of the same log"
+            f"({rb.manifest.log.path}); compare runs of the same log (or scenario and seed)"
         )
         raise ConfigError(msg)
     a, b = RunSide.load(ra), RunSide.load(rb)

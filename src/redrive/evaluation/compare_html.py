@@ -87,7 +87,7 @@ def render_comparison(c: Comparison, *, worst: int) -> str:
     e = h.esc
     runs = h.Markup(
         f"A: <code>{e(str(c.run_a))}</code><br>B: <code>{e(str(c.run_b))}</code><br>"
-        f"log sha256 <code>{e(c.log_sha256)}</code> (the same in both)"
+        f"source <code>{e(c.log_sha256)}</code> (the same in both: log sha256, or scenario and seed)"
     )
     method = h.paragraph(
         f"Δ = B − A. Significance: paired percentile bootstrap over frames — the frames both "

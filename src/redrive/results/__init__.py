@@ -21,6 +21,8 @@ Layout of a run directory (columns: ``docs/results.md``)::
                                    driven one (optional: older runs have no such table)
     RUN/paths/part-…               one row per waypoint of a planned path
     RUN/commands/part-…            one row per control command
+    RUN/closed_loop/part-…         closed loop: one row per frame, what moved the ego after it
+                                   (control, tracker or fallback and why) and its deviation
     RUN/resources/part-…           one row per process resource sample
     RUN/map.json                   optional: the road map (lanes, drivable areas; see
                                    redrive.results.roadmap), written by RunWriter.write_map
@@ -51,6 +53,7 @@ from redrive.results.manifest import (
 from redrive.results.records import (
     ROLES,
     STATUSES,
+    ClosedLoopRecord,
     FrameRecord,
     ResourceSample,
     StepOutput,
@@ -71,6 +74,7 @@ __all__ = [
     "STATUSES",
     "TABLES",
     "AlgorithmEntry",
+    "ClosedLoopRecord",
     "FrameRecord",
     "PipelineInfo",
     "ResourceSample",

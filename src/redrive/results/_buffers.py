@@ -52,6 +52,21 @@ class TableBuffers:
         for table, vs in (("ego", rec.vehicle_state), ("ego_logged", rec.logged_vehicle_state)):
             if vs is not None:
                 _append_state(self._cols[table], fi, vs)
+        cl = rec.closed_loop
+        if cl is not None:
+            _append(
+                self._cols["closed_loop"],
+                frame_index=fi,
+                stamp_ns=stamp,
+                source=cl.source,
+                algorithm=cl.algorithm,
+                reason=cl.reason,
+                throttle=cl.throttle,
+                brake=cl.brake,
+                steering_angle_rad=cl.steering_angle_rad,
+                deviation_m=cl.deviation_m,
+                deviation_yaw_rad=cl.deviation_yaw_rad,
+            )
         self.n_frames += 1
 
     def _add_step(self, fi: int, stamp: int, step: StepRecord) -> None:

@@ -38,7 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from redrive.results._fields import DAMAGED_ADVICE, Fields, manifest_error
-from redrive.types import Role, SensorType
+from redrive.types import Role, SensorType, to_jsonable
 
 __all__ = [
     "MANIFEST_NAME",
@@ -242,6 +242,9 @@ class RunSetup:
     algorithms: tuple[AlgorithmEntry, ...] = ()
     seed: int | None = None
     sensors: Mapping[str, SensorType] = field(default_factory=dict)  # sensor id → its type
+    #: closed loop: the simulator's description (backend, agents, ego model and limits, tracker
+    #: and gains, seed); empty for a replay
+    closed_loop: Mapping[str, Any] = field(default_factory=dict)
 
     def algorithm(self, name: str) -> AlgorithmEntry | None:
         """The entry of algorithm ``name``, or None."""
@@ -384,6 +387,7 @@ class RunManifest(RunSetup):
             "pipeline": {**_asdict(self.pipeline), "stages": list(self.pipeline.stages)},
             "algorithms": [a.to_json() for a in self.algorithms],
             "log": {**_asdict(self.log), "topics": dict(self.log.topics)},
+            "closed_loop": to_jsonable(self.closed_loop),
             "frames_done": self.frames_done,
             "resumes": [
                 {**_asdict(r), "previous_status": r.previous_status.value} for r in self.resumes
@@ -443,6 +447,7 @@ class RunManifest(RunSetup):
             pipeline=PipelineInfo._parse(f.obj("pipeline")),
             algorithms=tuple(AlgorithmEntry._parse(a) for a in f.objs("algorithms")),
             log=SourceLog._parse(f.obj("log")),
+            closed_loop=f.mapping("closed_loop", {}),
             frames_done=f.integer("frames_done"),
             resumes=tuple(ResumeRecord._parse(r) for r in f.objs("resumes")),
             summary=None if summary is None else RunSummary.from_json(summary.data, path=f.path),

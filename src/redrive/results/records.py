@@ -6,6 +6,7 @@ tables of a run directory (see :mod:`redrive.results`).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from redrive.types import ControlCommands, DetectedObject, PlannedPath, Role, VehicleState
@@ -13,6 +14,7 @@ from redrive.types import ControlCommands, DetectedObject, PlannedPath, Role, Ve
 __all__ = [
     "ROLES",
     "STATUSES",
+    "ClosedLoopRecord",
     "FrameRecord",
     "ResourceSample",
     "StepOutput",
@@ -106,6 +108,30 @@ class StepRecord:
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
+class ClosedLoopRecord:
+    """What moved the ego after one closed-loop frame, and how far it was from the logged ego.
+
+    Attributes:
+        source: ``control`` (a control stage's command), ``tracker`` (the built-in tracker on
+            the planned path) or ``fallback`` (an emergency brake).
+        algorithm: the algorithm whose output was used ("" for the fallback).
+        reason: why the fallback braked ("" otherwise).
+        throttle, brake, steering_angle_rad: the command applied.
+        deviation_m: distance of the driven from the logged ego (NaN without a logged ego).
+        deviation_yaw_rad: |heading difference| of the two (NaN without a logged ego).
+    """
+
+    source: str
+    algorithm: str = ""
+    reason: str = ""
+    throttle: float = 0.0
+    brake: float = 0.0
+    steering_angle_rad: float = 0.0
+    deviation_m: float = math.nan
+    deviation_yaw_rad: float = math.nan
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
 class FrameRecord:
     """Everything one frame produced.
 
@@ -117,6 +143,7 @@ class FrameRecord:
         logged_vehicle_state: the ego state the log recorded for this frame when the driven
             ego differs from it (closed loop: the expert the closed-loop metrics compare
             progress against); None in open loop, where ``vehicle_state`` is the logged one.
+        closed_loop: closed loop only: what moved the ego after this frame.
         ground_truth: the frame's ground-truth objects (``Frame.ground_truth``), None when the
             log carries none (an empty tuple means "ground truth: nothing there").
         wall_ns: wall time the engine spent on the whole frame, int ns.
@@ -128,6 +155,7 @@ class FrameRecord:
     steps: tuple[StepRecord, ...]
     vehicle_state: VehicleState | None = None
     logged_vehicle_state: VehicleState | None = None
+    closed_loop: ClosedLoopRecord | None = None
     ground_truth: tuple[DetectedObject, ...] | None = None
     wall_ns: int = 0
     late: bool = False

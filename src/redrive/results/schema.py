@@ -13,6 +13,7 @@ from types import MappingProxyType
 import pyarrow as pa
 
 __all__ = [
+    "CLOSED_LOOP",
     "COMMANDS",
     "DETECTIONS",
     "EGO",
@@ -154,6 +155,18 @@ RESOURCES = pa.schema(
     ]
 )
 
+#: closed loop: one row per frame, what moved the ego after it (``ClosedLoopRecord``).
+CLOSED_LOOP = pa.schema(
+    [
+        _f("frame_index", _I64),
+        _f("stamp_ns", _I64),
+        _f("source", _STR),
+        _f("algorithm", _STR),
+        _f("reason", _STR),
+        *_floats("throttle", "brake", "steering_angle_rad", "deviation_m", "deviation_yaw_rad"),
+    ]
+)
+
 #: the per-algorithm summary of :meth:`redrive.results.Run.summary` (not stored; computed).
 SUMMARY = pa.schema(
     [
@@ -187,6 +200,7 @@ SCHEMAS: Mapping[str, pa.Schema] = MappingProxyType(
         "ego_logged": EGO_LOGGED,
         "paths": PATHS,
         "commands": COMMANDS,
+        "closed_loop": CLOSED_LOOP,
         "resources": RESOURCES,
         "frames": FRAMES,
     }

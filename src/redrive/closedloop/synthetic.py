@@ -1,0 +1,170 @@
+"""Backend 1: a synthetic scenario continued with the ego under the algorithm's control.
+
+Two worlds of the same scenario and seed run in lockstep:
+
+- the *expert* world is the scenario as written (and as ``redrive synth`` records it): its ego is
+  the scripted driver, so its ego track is the logged route that progress and deviation are
+  measured against;
+- the *closed-loop* world is the same scenario with the ego handed to the commands
+  (:meth:`redrive.sim.world.World.drive_ego`): every physics step moves it by the actuated
+  bicycle model (:class:`redrive.sim.ego.ActuatedEgo`) under the command of the last frame.
+
+Agents: ``replay`` (non-reactive, as nuPlan's open-loop agents and NAVSIM): what the frames show
+are the expert world's agents, who follow their scripted motion whatever the ego does — a follower
+may then run into a braking ego.  ``reactive``: the closed-loop world's own agents, whose IDM sees
+the driven ego as an obstacle — a follower brakes for it.
+
+Frames are object-level here: the true ego state (map frame) and the ground-truth objects in
+``base_link`` of the driven ego, at a fixed rate; an algorithm that declares a sensor input is
+refused before the run.  The sensor-level variant (LiDAR, camera re-rendered from the new pose)
+is the next step of issue 15 and plugs in here.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from typing import Any, Literal
+
+from redrive.algorithms import StageOutputs
+from redrive.closedloop.simulator import EgoCommand, PathFollower, choose_command
+from redrive.errors import ConfigError
+from redrive.sim.ego import ActuatedEgo, BicycleModel, PedalModel
+from redrive.sim.roads import RoadNetwork
+from redrive.sim.scenario import Scenario
+from redrive.sim.synth import objects_in_base
+from redrive.sim.world import World
+from redrive.types import ControlCommands, Frame, SensorType, VehicleState
+
+__all__ = ["AGENT_MODES", "SyntheticSimulator"]
+
+AGENT_MODES = ("replay", "reactive")
+AgentMode = Literal["replay", "reactive"]
+
+
+class SyntheticSimulator:
+    """A scenario of the synthetic catalogue as a closed-loop :class:`~.Simulator`.
+
+    Args:
+        scenario: the scenario (its duration bounds the run).
+        tracker: follows the planned path when the pipeline has no control stage.
+        agents: ``replay`` or ``reactive`` (see the module text).
+        rate_hz: frames per second (the step between frames is ``1 / rate_hz``).
+        pedal: throttle/brake → acceleration.
+        delay_steps: 0, or 1 to act on each command one frame late.
+    """
+
+    sensors: Mapping[str, SensorType] = {}
+    has_vehicle_state = True
+    has_ground_truth = True
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        *,
+        tracker: PathFollower,
+        agents: AgentMode = "replay",
+        rate_hz: float = 10.0,
+        pedal: PedalModel | None = None,
+        delay_steps: int = 0,
+    ) -> None:
+        if agents not in AGENT_MODES:
+            msg = f"--agents must be one of {', '.join(AGENT_MODES)}, got {agents!r}"
+            raise ConfigError(msg)
+        if not rate_hz > 0:
+            msg = f"the closed-loop rate must be > 0 Hz, got {rate_hz}"
+            raise ConfigError(msg)
+        if delay_steps not in (0, 1):
+            msg = f"the actuation delay is 0 or 1 frame, got {delay_steps}"
+            raise ConfigError(msg)
+        self.scenario = scenario
+        self.tracker = tracker
+        self.agents: AgentMode = agents
+        self.dt_s = 1.0 / rate_hz
+        self.pedal = pedal or PedalModel()
+        self.delay_steps = delay_steps
+        self.reset(scenario.seed)
+
+    # -- the Simulator protocol ---------------------------------------------------------------
+
+    def reset(self, seed: int) -> None:
+        scenario = dataclasses.replace(self.scenario, seed=seed)
+        self._expert = World(scenario)
+        self._world = World(scenario)
+        self._ego = ActuatedEgo(self._world.ego_model, pedals=self.pedal, delay_steps=0)
+        self.tracker.reset()  # the PID's integral belongs to one run
+        neutral = ControlCommands(steering_angle_rad=self._world.ego_model.steer_rad)
+        self._acting: ControlCommands = neutral  # the command the ego moves under now
+        self._queued: ControlCommands = neutral  # with a one-frame delay: the next one
+        self._world.drive_ego(self._drive)
+        self._index = 0
+        self._end_ns = scenario.start_stamp_ns + round(scenario.duration_s * 1e9)
+        self._dt_ns = round(self.dt_s * 1e9)
+
+    def observe(self) -> Frame:
+        world = self._world
+        source = self._expert if self.agents == "replay" else world
+        objects = objects_in_base(source.objects(), world.map_from_base())
+        return Frame(
+            stamp_ns=world.time_ns,
+            index=self._index,
+            vehicle_state=world.ego_state(),
+            ground_truth=objects,
+        )
+
+    def step(self, outputs: StageOutputs, dt_s: float) -> EgoCommand:
+        model = self._world.ego_model
+        chosen = choose_command(
+            outputs,
+            state=self._world.ego_state(),
+            steer_rad=model.steer_rad,
+            tracker=self.tracker,
+            dt_s=dt_s,
+            stamp_ns=self._world.time_ns,
+        )
+        if self.delay_steps:
+            self._acting, self._queued = self._queued, chosen.commands
+        else:
+            self._acting = chosen.commands
+        target = self._world.time_ns + round(dt_s * 1e9)
+        self._world.step_to(target)
+        self._expert.step_to(target)
+        self._index += 1
+        return chosen
+
+    @property
+    def done(self) -> bool:
+        return self._world.time_ns + self._dt_ns > self._end_ns
+
+    @property
+    def logged_state(self) -> VehicleState | None:
+        return self._expert.ego_state()
+
+    @property
+    def time_ns(self) -> int:
+        return self._world.time_ns
+
+    @property
+    def network(self) -> RoadNetwork:
+        """The scenario's roads (the run's map)."""
+        return self._world.network
+
+    def describe(self) -> dict[str, Any]:
+        return {
+            "backend": "synthetic",
+            "level": "object",
+            "scenario": self.scenario.name,
+            "scenario_source": self.scenario.source,
+            "agents": self.agents,
+            "rate_hz": 1.0 / self.dt_s,
+            "delay_steps": self.delay_steps,
+            "ego": self._ego.describe(),
+            "tracker": self.tracker.describe(),
+        }
+
+    # -- the ego ------------------------------------------------------------------------------
+
+    def _drive(self, model: BicycleModel, dt_s: float) -> None:
+        """One physics step of the closed-loop ego under the acting command."""
+        assert model is self._ego.model
+        self._ego.apply(self._acting, dt_s)

@@ -1,0 +1,210 @@
+"""Closed loop on the synthetic backend: the outputs move the ego, the run directory holds the
+driven and the logged ego and what moved the car, and the same seed gives the same run."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pytest
+
+from redrive.cli.main import main
+from redrive.closedloop.run import ClosedLoopRequest, run_closed_loop
+from redrive.config import PipelineConfig, load_pipeline, pipeline_from_plugins
+from redrive.errors import ConfigError
+from redrive.evaluation import Metric
+from redrive.evaluation.closedloop import AtFaultCollisions, EgoProgress, PdmScore
+from redrive.evaluation.compare import compare_runs
+from redrive.evaluation.evaluator import evaluate_run
+from redrive.results import RunStatus, open_run
+
+PLUGINS = "tests.closedloop.plugins"
+
+
+def _run(out: Path, planning: str, *, scenario: str = "cut_in", duration_s: float = 4.0, **kw):  # type: ignore[no-untyped-def]
+    pipeline = pipeline_from_plugins(planning=[planning])
+    request = ClosedLoopRequest(
+        scenario=scenario, pipeline=pipeline, out=out, duration_s=duration_s, **kw
+    )
+    report = run_closed_loop(request)
+    assert report.status is RunStatus.COMPLETE
+    return open_run(out)
+
+
+def _without_timing(table: pa.Table) -> pa.Table:
+    timing = {"wall_ns", "latency_ns", "cpu_ns"}
+    return table.drop_columns([c for c in table.column_names if c in timing])
+
+
+def test_the_planner_drives_and_the_world_follows(tmp_path: Path) -> None:
+    run = _run(tmp_path / "still", f"{PLUGINS}:StandStill", duration_s=6.0)
+    manifest = run.manifest
+    assert manifest.pipeline.mode_manager == "closed_loop"
+    assert manifest.closed_loop["backend"] == "synthetic"
+    assert manifest.closed_loop["agents"] == "replay"
+    assert manifest.closed_loop["tracker"]["name"] == "lqr+pid"
+    driven, logged = run.ego(), run.logged_ego()
+    assert sorted(driven) == sorted(logged) == list(range(60))  # 6 s at 10 Hz
+    start = driven[0].position[:2]
+    # a planner that stands still: from 25 m/s the ego brakes (8 m/s² at full brake: ~39 m)
+    # to a stop, and stays
+    assert driven[0].speed_mps == pytest.approx(25.0)
+    assert driven[59].speed_mps == pytest.approx(0.0, abs=0.05)
+    assert 35.0 < np.linalg.norm(driven[59].position[:2] - start) < 50.0
+    # the logged ego (the scenario's own driver) drove on
+    assert np.linalg.norm(logged[59].position[:2] - driven[59].position[:2]) > 50.0
+    table = run.table("closed_loop").to_pylist()
+    assert {r["source"] for r in table} == {"tracker"}
+    assert table[-1]["deviation_m"] > 50.0
+    assert run.road_map() is not None
+
+
+def test_same_seed_same_run(tmp_path: Path) -> None:
+    a = _run(tmp_path / "a", f"{PLUGINS}:Straight", seed=3, agents="reactive")
+    b = _run(tmp_path / "b", f"{PLUGINS}:Straight", seed=3, agents="reactive")
+    for name in ("frames", "ego", "ego_logged", "ground_truth", "closed_loop"):
+        assert _without_timing(a.table(name)).equals(_without_timing(b.table(name))), name
+
+
+def test_a_nan_path_brakes_and_the_run_completes(tmp_path: Path) -> None:
+    run = _run(tmp_path / "nan", f"{PLUGINS}:NanAfterTwoSeconds")
+    rows = run.table("closed_loop").to_pylist()
+    assert {r["source"] for r in rows[:20]} == {"tracker"}
+    assert all(r["source"] == "fallback" for r in rows[20:])
+    assert "NaN" in rows[25]["reason"]
+    assert rows[25]["brake"] == 1.0
+    speeds = [s.speed_mps for _, s in sorted(run.ego().items())]
+    assert speeds[-1] < speeds[20] - 3.0  # braking since frame 20
+
+
+def test_a_sensor_reading_algorithm_is_refused_before_the_run(tmp_path: Path) -> None:
+    pipeline = pipeline_from_plugins(perception=["cluster-detector"], planning=["idm-planner"])
+    request = ClosedLoopRequest(scenario="cut_in", pipeline=pipeline, out=tmp_path / "x")
+    with pytest.raises(ConfigError, match=r"cluster-detector.*reads lidar.*noisy-oracle"):
+        run_closed_loop(request)
+    assert not (tmp_path / "x" / "manifest.json").exists()
+
+
+def test_cli_closed_loop_on_a_scenario_name(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "cli"
+    argv = [
+        "run", "cut_in", "--closed-loop", "--duration", "2",
+        "--perception", "noisy-oracle", "--planning", "idm-planner",
+        "--control", "pure-pursuit-pid", "--out", str(out), "--no-progress",
+    ]  # fmt: skip
+    assert main(argv) == 0
+    run = open_run(out)
+    assert len(run.ego()) == 20
+    assert {r["source"] for r in run.table("closed_loop").to_pylist()} == {"control"}
+    capsys.readouterr()
+    assert main(["run", "no_such_scenario", "--closed-loop"]) == 1
+    assert "no_such_scenario: no such scenario" in capsys.readouterr().err
+
+
+# -- scored: the closed-loop metrics on closed-loop runs -------------------------------------------
+
+FOLLOWER = Path(__file__).parent / "data" / "follower.toml"
+
+
+def _score(run_dir: Path, *metrics: Metric) -> dict[str, dict[str, float]]:
+    summary = evaluate_run(run_dir, metrics=list(metrics))
+    assert not summary.failed, summary.failed
+    return {s.metric.name: dict(s.result.values) for s in summary.scored}
+
+
+def _blind(tmp_path: Path, speed_mps: float) -> PipelineConfig:
+    toml = tmp_path / "blind.toml"
+    toml.write_text(
+        '[[stage]]\nname = "planning"\n[[stage.algorithm]]\nname = "blind"\n'
+        f'plugin = "{PLUGINS}:Straight"\nconfig = {{ speed_mps = {speed_mps} }}\n'
+    )
+    return load_pipeline(toml)
+
+
+def test_a_blind_planner_rear_ends_the_braking_lead_and_is_at_fault(tmp_path: Path) -> None:
+    out = tmp_path / "blind"
+    request = ClosedLoopRequest(
+        scenario="lead_vehicle_hard_brake", pipeline=_blind(tmp_path, 25.0), out=out
+    )
+    assert run_closed_loop(request).status is RunStatus.COMPLETE
+    scores = _score(out, AtFaultCollisions(), PdmScore())
+    assert scores["at_fault_collisions"]["at_fault_collisions"] >= 1
+    assert scores["at_fault_collisions"]["no_at_fault_collisions"] == 0.0
+    assert scores["pdm_score"]["pdm_score"] == 0.0
+
+
+def test_a_follower_rear_ends_a_braking_ego_when_replayed_and_brakes_when_reactive(
+    tmp_path: Path,
+) -> None:
+    found = {}
+    for agents in ("replay", "reactive"):
+        out = tmp_path / agents
+        _run(out, f"{PLUGINS}:StandStill", scenario=str(FOLLOWER), duration_s=8.0, agents=agents)
+        found[agents] = _score(out, AtFaultCollisions())["at_fault_collisions"]
+        behind = [
+            -float(o.box.center[0])
+            for objs in open_run(out).ground_truth().values()
+            for o in objs
+            if o.box.center[0] < 0
+        ]
+        found[agents]["closest_behind_m"] = min(behind)
+    # replayed, the follower keeps its script and runs into the ego: a collision, not at fault
+    assert found["replay"]["collisions"] >= 1
+    assert found["replay"]["at_fault_collisions"] == 0
+    assert found["replay"]["no_at_fault_collisions"] == 1.0
+    # reactive, its IDM sees the ego brake: it stops behind (ego rear bumper at -0.95 m,
+    # the follower's half length ~2.3 m behind its centre)
+    assert found["reactive"]["collisions"] == 0
+    assert found["reactive"]["closest_behind_m"] > 0.95 + 2.3
+
+
+def test_a_planner_that_never_moves_makes_no_progress(tmp_path: Path) -> None:
+    scenario = tmp_path / "parked_start.toml"
+    scenario.write_text(
+        FOLLOWER.read_text().replace(
+            "set_speed_mps = 20.0", "set_speed_mps = 20.0\ninitial_speed_mps = 0.0"
+        )
+    )
+    out = tmp_path / "still"
+    _run(out, f"{PLUGINS}:StandStill", scenario=str(scenario), duration_s=8.0)
+    driven = open_run(out).ego()
+    assert max(s.speed_mps for s in driven.values()) < 0.01
+    scores = _score(out, EgoProgress(), PdmScore())
+    assert abs(scores["ego_progress"]["ego_progress_m"]) < 0.01
+    # nuPlan's ratio floors both distances at 2 m: 2 m / the expert's ~45 m
+    ratio = scores["ego_progress"]["ego_progress_ratio"]
+    assert ratio == pytest.approx(2.0 / scores["ego_progress"]["expert_progress_m"])
+    assert ratio < 0.05
+    assert scores["pdm_score"]["pdm_score"] < 0.01
+
+
+def test_two_planners_in_closed_loop_compare_on_the_same_scenario(tmp_path: Path) -> None:
+    blind, careful = tmp_path / "blind", tmp_path / "careful"
+    run_closed_loop(
+        ClosedLoopRequest(
+            scenario="lead_vehicle_hard_brake", pipeline=_blind(tmp_path, 25.0), out=blind
+        )
+    )
+    reference = pipeline_from_plugins(
+        perception=["noisy-oracle"], planning=["idm-planner"], control=["pure-pursuit-pid"]
+    )
+    run_closed_loop(
+        ClosedLoopRequest(scenario="lead_vehicle_hard_brake", pipeline=reference, out=careful)
+    )
+    for out in (blind, careful):
+        evaluate_run(out, metrics=[AtFaultCollisions()])
+    cmp = compare_runs(blind, careful)
+    assert "scenario lead_vehicle_hard_brake seed 2" in cmp.log_sha256
+    deltas = {(v.metric, v.key): v for v in cmp.values}
+    assert deltas["at_fault_collisions", "at_fault_collisions"].a >= 1
+    assert deltas["at_fault_collisions", "at_fault_collisions"].b == 0
+    other = tmp_path / "other"
+    run_closed_loop(
+        ClosedLoopRequest(scenario="cut_in", pipeline=reference, out=other, duration_s=2.0)
+    )
+    evaluate_run(other, metrics=[AtFaultCollisions()])
+    with pytest.raises(ConfigError, match="different logs"):
+        compare_runs(blind, other)
