@@ -9,9 +9,11 @@
   own; whenever the pipeline is ready for a frame it gets the *newest* one, and the frames that
   were replaced before it could take them are skipped and counted (``skipped_frames``) — an
   algorithm slower than the sensor falls behind by at most one frame, never by a growing queue.
-- ``CLOSED_LOOP`` (commands fed back into the simulator) uses the same two hooks —
-  :meth:`ModeHooks.before_frame` to take or wait for the next frame and
-  :meth:`ModeHooks.after_frame` to act on the outputs — and is not built yet.
+- ``CLOSED_LOOP`` (the outputs move the ego in a simulator) uses the same two hooks —
+  :meth:`ModeHooks.before_frame` releases the simulator's observations and
+  :meth:`ModeHooks.after_frame` applies each frame's outputs before the next is observed. It
+  lives a layer up, in :mod:`redrive.closedloop` (its hooks: ``ClosedLoopMode``), because it
+  needs a simulator.
 """
 
 from __future__ import annotations
@@ -165,7 +167,7 @@ def mode_hooks(mode: Mode | str, *, rate: float | None = None) -> ModeHooks:
     if mode is Mode.REALTIME:
         return RealtimeMode()
     msg = (
-        f"mode {mode.value} needs a simulator in the loop, which this version of redrive does "
-        "not have yet; replay a log, or run live sources in realtime mode"
+        f"mode {mode.value} needs a simulator in the loop: run it with `redrive run SCENARIO "
+        "--closed-loop` (redrive.closedloop.run_closed_loop), not as a mode of a log replay"
     )
     raise ConfigError(msg)
