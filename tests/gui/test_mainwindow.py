@@ -285,3 +285,20 @@ def test_follow_ego_off_keeps_the_world_still(
     qtbot.waitUntil(
         lambda: ego.transform().map(QtCore.QPointF(0, 0)) == QtCore.QPointF(0, 0), timeout=5000
     )
+
+
+def test_a_closed_loop_run_says_what_the_gui_can_show(
+    qtbot: Any, window: MainWindow, tmp_path: Path
+) -> None:
+    from redrive.closedloop.run import ClosedLoopRequest, run_closed_loop
+    from redrive.config import pipeline_from_plugins
+
+    out = tmp_path / "closed"
+    pipeline = pipeline_from_plugins(planning=["idm-planner"])
+    run_closed_loop(
+        ClosedLoopRequest(scenario="cut_in", pipeline=pipeline, out=out, duration_s=1.0)
+    )
+    window.open_path(out)
+    assert "closed-loop run of 'scenario:cut_in'" in window.last_error
+    assert f"redrive report {out}" in window.last_error
+    assert window.run is not None  # its outputs are loaded all the same

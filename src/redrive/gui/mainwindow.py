@@ -234,6 +234,14 @@ class MainWindow(QtWidgets.QMainWindow):
             ", ".join(run.detections) or "none",
             len(run.bookmarks),
         )
+        if log is None and run.manifest.pipeline.mode_manager == "closed_loop":
+            self.show_error(
+                "A closed-loop run",
+                f"{path}: a closed-loop run of {run.manifest.log.path!r} at object level records "
+                "no sensor log to draw it over (the GUI's closed-loop view is not built yet); "
+                f"`redrive report {path}` shows its metrics, `redrive export {path}` its tables.",
+            )
+            return
         if log is None:
             self.show_error(
                 "The run's log is missing",
