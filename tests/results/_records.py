@@ -8,6 +8,7 @@ import numpy as np
 
 from redrive.results import (
     AlgorithmEntry,
+    ClosedLoopRecord,
     FrameRecord,
     PipelineInfo,
     ResourceSample,
@@ -149,12 +150,27 @@ def frame(i: int, *, planning: bool = True, long_traceback: str = "") -> FrameRe
     logged = (  # a closed-loop run keeps the logged ego apart: here on odd frames, 1 m behind
         replace(ego, position=ego.position - np.array([1.0, 0.0, 0.0])) if i % 2 else None
     )
+    closed = (  # ... and what moved the ego after the frame (the fallback on frame 3)
+        None
+        if logged is None
+        else ClosedLoopRecord(
+            source="fallback" if i == 3 else "tracker",
+            algorithm="" if i == 3 else "planner",
+            reason="planner: an empty path" if i == 3 else "",
+            throttle=0.0 if i == 3 else 0.25,
+            brake=1.0 if i == 3 else 0.0,
+            steering_angle_rad=0.01 * i,
+            deviation_m=1.0,
+            deviation_yaw_rad=0.0,
+        )
+    )
     return FrameRecord(
         frame_index=i,
         stamp_ns=stamp,
         steps=tuple(steps),
         vehicle_state=ego,
         logged_vehicle_state=logged,
+        closed_loop=closed,
         ground_truth=gt,
         wall_ns=5_000_000,
         late=i == 2,

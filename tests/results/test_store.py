@@ -174,9 +174,9 @@ def test_parts_are_deterministic(tmp_path: Path) -> None:
     files_a = sorted(p.relative_to(tmp_path / "a") for p in (tmp_path / "a").rglob("*.parquet"))
     files_b = sorted(p.relative_to(tmp_path / "b") for p in (tmp_path / "b").rglob("*.parquet"))
     # 3 flushes × 7 tables (resources come with the last); frame 8 has empty ground truth;
-    # ego_logged (odd frames) in the first two
+    # ego_logged and closed_loop (odd frames) in the first two
     assert files_a == files_b
-    assert len(files_a) == 3 * 7 + 2
+    assert len(files_a) == 3 * 7 + 2 * 2
     for rel in files_a:
         assert (tmp_path / "a" / rel).read_bytes() == (tmp_path / "b" / rel).read_bytes(), rel
     # no wall-clock metadata in the files
