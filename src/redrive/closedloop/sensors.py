@@ -105,9 +105,10 @@ class FrameSensors:
     """A :class:`~redrive.sim.synth.MessageSink` that keeps each rig sensor's latest sample as a
     :class:`~redrive.types.SensorData` (what a replay of the recorded log would put in a frame).
 
-    Sensor ids and types come from the log's own rule (:func:`~redrive.io.sensor_map.
-    infer_sensor_map` on the topics ``redrive synth`` writes): ``lidar_top``,
-    ``camera_front_image_raw``, …; wheel odometry is ego motion there, not a sensor.  The rate is
+    Sensor ids and types come from the log's own rule
+    (:func:`~redrive.io.sensor_map.infer_sensor_map` on the topics ``redrive synth`` writes):
+    ``lidar_top``, ``camera_front_image_raw``, …; wheel odometry is ego motion there, not a
+    sensor.  The rate is
     the rig's; the location the sensor's mount in base_link.
     """
 
