@@ -22,6 +22,8 @@ examples:
   redrive run cut_in --closed-loop --planning my.py:Planner   closed loop: the planner drives
   redrive run cut_in --closed-loop --agents reactive --perception noisy-oracle \
       --planning idm-planner --control pure-pursuit-pid    followers react to the driven ego
+  redrive run cut_in --closed-loop --sensors              the reference pipeline on sensors
+                                                          rendered from the driven ego
 
 Plugins are entry-point names (`redrive algorithms` lists them), package.module:Class or
 path/to/file.py:Class.  With no --pipeline and no plugin flag the reference pipeline runs:
@@ -33,9 +35,12 @@ Closed loop (--closed-loop): LOG is a scenario of the synthetic catalogue (`redr
 --list`) or a scenario TOML; the outputs move the ego (the last control stage's commands, else the
 built-in LQR + PID tracker on the last planned path, else an emergency brake) and the world goes
 on from where it puts the car.  Frames are object-level (the true ego state and the ground-truth
-objects: use a perception that reads ground truth, e.g. noisy-oracle); --agents replay (default)
-keeps the other road users on their scripted paths, --agents reactive lets them react to the ego.
---seed seeds the scenario too.  Closed loop on recorded logs is not built yet.
+objects: use a perception that reads ground truth, e.g. noisy-oracle); with --sensors they also
+carry the scenario's rig (LiDAR, camera, IMU, GNSS) rendered from the driven ego, as a replay of
+its `redrive synth` log would, each LiDAR's last finished sweep in a frame (the first frame comes
+one sweep after the start).  --agents replay (default) keeps the other road users on their
+scripted paths, --agents reactive lets them react to the ego.  --seed seeds the scenario too.
+Closed loop on recorded logs is not built yet.
 """
 
 _FRAMES = re.compile(r"^(\d*):(\d*)$")
@@ -132,6 +137,9 @@ def _run(args: argparse.Namespace) -> int:
     )
     if args.closed_loop:
         return _run_closed_loop(args, pipeline)
+    if args.sensors:
+        print("redrive run: --sensors renders a closed loop's sensors; add --closed-loop")
+        return 2
     first, stop = parse_frames(args.frames) if args.frames else (None, None)
     out = args.out or _default_out(args.log)
     request = RunRequest(
@@ -217,6 +225,7 @@ def _run_closed_loop(args: argparse.Namespace, pipeline: Any) -> int:
         agents=args.agents,
         seed=args.seed,
         duration_s=args.duration,
+        level="sensor" if args.sensors else "object",
     )
     report = run_closed_loop(request)
     print_run_report(report, out)
@@ -291,6 +300,11 @@ def register(sub: Any) -> None:
         choices=("replay", "reactive"),
         default="replay",
         help="closed loop: other road users replay their script (default) or react to the ego",
+    )
+    parser.add_argument(
+        "--sensors",
+        action="store_true",
+        help="closed loop: render the scenario's sensors from the driven ego (sensor level)",
     )
     parser.add_argument(
         "--duration", type=float, metavar="S", help="closed loop: seconds (default: the scenario's)"

@@ -25,7 +25,7 @@ from typing import Any
 from redrive.algorithms import GROUND_TRUTH, VEHICLE_STATE
 from redrive.algorithms.discovery import load_algorithm_class
 from redrive.closedloop.mode import ClosedLoopMode
-from redrive.closedloop.synthetic import AgentMode, SyntheticSimulator
+from redrive.closedloop.synthetic import AgentMode, Level, SyntheticSimulator
 from redrive.closedloop.tracker import LqrPidTracker
 from redrive.config import PipelineConfig
 from redrive.engine.graph import LogInputs, build_graph
@@ -59,6 +59,8 @@ class ClosedLoopRequest:
         duration_s: how long (None: the scenario's duration).
         rate_hz: frames per second.
         delay_steps: 1 to apply each command one frame late.
+        level: ``object`` (frames carry the ego state and ground truth) or ``sensor`` (the
+            scenario's rig re-rendered from the driven ego as well).
     """
 
     scenario: str
@@ -69,6 +71,7 @@ class ClosedLoopRequest:
     duration_s: float | None = None
     rate_hz: float = 10.0
     delay_steps: int = 0
+    level: Level = "object"
 
 
 def is_scenario(text: str) -> bool:
@@ -106,13 +109,15 @@ def run_closed_loop(
         agents=request.agents,
         rate_hz=request.rate_hz,
         delay_steps=request.delay_steps,
+        level=request.level,
     )
     inputs = LogInputs(
         sensors=dict(simulator.sensors),
         has_vehicle_state=simulator.has_vehicle_state,
         has_ground_truth=simulator.has_ground_truth,
     )
-    _refuse_sensor_inputs(request.pipeline, simulator.sensors)
+    if simulator.level == "object":
+        _refuse_sensor_inputs(request.pipeline, simulator.sensors)
     graph = build_graph(request.pipeline, inputs)
     pipeline = request.pipeline
     setup = RunSetup(
@@ -145,7 +150,8 @@ def run_closed_loop(
     writer.write_map(scenario_road_map(scenario))
     mode = ClosedLoopMode(simulator, write=writer.write_frame)
     if on_start is not None:
-        on_start(math.floor(scenario.duration_s * request.rate_hz + 1e-9))
+        first_s = (simulator.first_stamp_ns - scenario.start_stamp_ns) / 1e9
+        on_start(math.floor((scenario.duration_s - first_s) * request.rate_hz + 1e-9))
 
     def stored_after_the_step(record: FrameRecord) -> None:
         """The mode writes each record once the outputs moved the ego (after_frame)."""
@@ -178,7 +184,7 @@ def _refuse_sensor_inputs(pipeline: PipelineConfig, sensors: Mapping[str, Any]) 
                 f"closed loop: {spec.name} ({spec.plugin}) reads {', '.join(wanted)}, but the "
                 "object-level synthetic backend renders no sensors: its frames carry the ego "
                 "state and the ground-truth objects. Use a perception that reads ground truth "
-                "(--perception noisy-oracle) or plan from ground truth directly; sensor-level "
-                "closed loop (LiDAR and camera re-rendered from the driven pose) is not built yet"
+                "(--perception noisy-oracle) or plan from ground truth directly, or add --sensors "
+                "(sensor-level closed loop: the scenario's rig rendered from the driven pose)"
             )
             raise ConfigError(msg)

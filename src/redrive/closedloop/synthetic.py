@@ -14,10 +14,15 @@ are the expert world's agents, who follow their scripted motion whatever the ego
 may then run into a braking ego.  ``reactive``: the closed-loop world's own agents, whose IDM sees
 the driven ego as an obstacle — a follower brakes for it.
 
-Frames are object-level here: the true ego state (map frame) and the ground-truth objects in
-``base_link`` of the driven ego, at a fixed rate; an algorithm that declares a sensor input is
-refused before the run.  The sensor-level variant (LiDAR, camera re-rendered from the new pose)
-is the next step of issue 15 and plugs in here.
+Levels: ``object`` (the default): frames carry the true ego state (map frame) and the
+ground-truth objects in ``base_link`` of the driven ego, at a fixed rate; an algorithm that
+declares a sensor input is refused before the run.  ``sensor``: frames carry as well the
+scenario's rig — LiDAR sweeps ray-cast, camera images, IMU, GNSS — rendered from the driven ego's
+pose (:mod:`redrive.closedloop.sensors`), exactly as a replay of the ``redrive synth`` log of the
+same motion would show them, and the ground truth's LiDAR point counts and visibility.  The first
+sensor-level frame comes one LiDAR period after the start (the first finished sweep); the ego is
+under the commands from the start (the neutral command — pedals released, the wheel held —
+until the first frame's).
 """
 
 from __future__ import annotations
@@ -27,19 +32,23 @@ from collections.abc import Mapping
 from typing import Any, Literal
 
 from redrive.algorithms import StageOutputs
+from redrive.closedloop.sensors import FrameSensors, LockstepWorlds, warmup_ns
 from redrive.closedloop.simulator import EgoCommand, PathFollower, choose_command
 from redrive.errors import ConfigError
 from redrive.sim.ego import ActuatedEgo, BicycleModel, PedalModel
+from redrive.sim.rig import rig_from_mapping
 from redrive.sim.roads import RoadNetwork
 from redrive.sim.scenario import Scenario
-from redrive.sim.synth import objects_in_base
+from redrive.sim.synth import SensorSimulation, objects_in_base
 from redrive.sim.world import World
 from redrive.types import ControlCommands, Frame, SensorType, VehicleState
 
-__all__ = ["AGENT_MODES", "SyntheticSimulator"]
+__all__ = ["AGENT_MODES", "LEVELS", "SyntheticSimulator"]
 
 AGENT_MODES = ("replay", "reactive")
 AgentMode = Literal["replay", "reactive"]
+LEVELS = ("object", "sensor")
+Level = Literal["object", "sensor"]
 
 
 class SyntheticSimulator:
@@ -52,9 +61,9 @@ class SyntheticSimulator:
         rate_hz: frames per second (the step between frames is ``1 / rate_hz``).
         pedal: throttle/brake → acceleration.
         delay_steps: 0, or 1 to act on each command one frame late.
+        level: ``object`` or ``sensor`` (see the module text).
     """
 
-    sensors: Mapping[str, SensorType] = {}
     has_vehicle_state = True
     has_ground_truth = True
 
@@ -67,7 +76,11 @@ class SyntheticSimulator:
         rate_hz: float = 10.0,
         pedal: PedalModel | None = None,
         delay_steps: int = 0,
+        level: Level = "object",
     ) -> None:
+        if level not in LEVELS:
+            msg = f"the closed-loop level is one of {', '.join(LEVELS)}, got {level!r}"
+            raise ConfigError(msg)
         if agents not in AGENT_MODES:
             msg = f"--agents must be one of {', '.join(AGENT_MODES)}, got {agents!r}"
             raise ConfigError(msg)
@@ -83,6 +96,12 @@ class SyntheticSimulator:
         self.dt_s = 1.0 / rate_hz
         self.pedal = pedal or PedalModel()
         self.delay_steps = delay_steps
+        self.level: Level = level
+        #: sensor id → type of the frames' sensors (none at object level)
+        self.sensors: Mapping[str, SensorType] = {}
+        if level == "sensor":
+            rig = rig_from_mapping(scenario.rig, source=scenario.source)
+            self.sensors = FrameSensors(rig).sensors
         self.reset(scenario.seed)
 
     # -- the Simulator protocol ---------------------------------------------------------------
@@ -96,18 +115,48 @@ class SyntheticSimulator:
         neutral = ControlCommands(steering_angle_rad=self._world.ego_model.steer_rad)
         self._acting: ControlCommands = neutral  # the command the ego moves under now
         self._queued: ControlCommands = neutral  # with a one-frame delay: the next one
-        self._world.drive_ego(self._drive)
+        self._hand_over()
         self._index = 0
         self._end_ns = scenario.start_stamp_ns + round(scenario.duration_s * 1e9)
         self._dt_ns = round(self.dt_s * 1e9)
+        self._rendering: SensorSimulation | None = None
+        self._frame_sensors: FrameSensors | None = None
+        if self.level == "sensor":
+            worlds = LockstepWorlds(
+                scene_world=self._expert if self.agents == "replay" else self._world,
+                ego_world=self._world,
+                worlds=(self._world, self._expert),
+            )
+            self._rendering = SensorSimulation(scenario, world=worlds)
+            self._frame_sensors = FrameSensors(self._rendering.rig)
+            self._rendering.start(self._frame_sensors)
+            first_ns = scenario.start_stamp_ns + warmup_ns(self._rendering.rig)
+            for _ in self._rendering.advance_to(first_ns):
+                pass
+        self._first_ns = self._world.time_ns
 
     def observe(self) -> Frame:
         world = self._world
         source = self._expert if self.agents == "replay" else world
-        objects = objects_in_base(source.objects(), world.map_from_base())
+        if self._rendering is None or self._frame_sensors is None:
+            objects = objects_in_base(source.objects(), world.map_from_base())
+            return Frame(
+                stamp_ns=world.time_ns,
+                index=self._index,
+                vehicle_state=world.ego_state(),
+                ground_truth=objects,
+            )
+        lidar_hits, camera_pixels = self._rendering.visibility()
+        objects = objects_in_base(
+            source.objects(),
+            world.map_from_base(),
+            lidar_hits=lidar_hits,
+            camera_pixels=camera_pixels,
+        )
         return Frame(
             stamp_ns=world.time_ns,
             index=self._index,
+            sensors=self._frame_sensors.sensor_data(),
             vehicle_state=world.ego_state(),
             ground_truth=objects,
         )
@@ -127,8 +176,12 @@ class SyntheticSimulator:
         else:
             self._acting = chosen.commands
         target = self._world.time_ns + round(dt_s * 1e9)
-        self._world.step_to(target)
-        self._expert.step_to(target)
+        if self._rendering is None:
+            self._world.step_to(target)
+            self._expert.step_to(target)
+        else:
+            for _ in self._rendering.advance_to(target):  # both worlds, the sensors' events
+                pass
         self._index += 1
         return chosen
 
@@ -152,7 +205,7 @@ class SyntheticSimulator:
     def describe(self) -> dict[str, Any]:
         return {
             "backend": "synthetic",
-            "level": "object",
+            "level": self.level,
             "scenario": self.scenario.name,
             "scenario_source": self.scenario.source,
             "agents": self.agents,
@@ -160,9 +213,26 @@ class SyntheticSimulator:
             "delay_steps": self.delay_steps,
             "ego": self._ego.describe(),
             "tracker": self.tracker.describe(),
+            **(
+                {
+                    "sensors": {sid: stype.value for sid, stype in self.sensors.items()},
+                    "first_frame_s": (self._first_ns - self.scenario.start_stamp_ns) / 1e9,
+                }
+                if self.level == "sensor"
+                else {}
+            ),
         }
 
+    @property
+    def first_stamp_ns(self) -> int:
+        """The time of the first frame (sensor level: one LiDAR period after the start)."""
+        return self._first_ns
+
     # -- the ego ------------------------------------------------------------------------------
+
+    def _hand_over(self) -> None:
+        """Give the closed-loop world's ego to the commands (at the start of a run)."""
+        self._world.drive_ego(self._drive)
 
     def _drive(self, model: BicycleModel, dt_s: float) -> None:
         """One physics step of the closed-loop ego under the acting command."""

@@ -75,6 +75,7 @@ __all__ = [
     "GROUND_TRUTH_TOPIC",
     "MessageSink",
     "SensorSimulation",
+    "SensorWorld",
     "SynthSummary",
     "camera_info_topic",
     "ground_truth_objects",
@@ -135,6 +136,36 @@ class MessageSink(Protocol):
         self, topic: str, msgtype: str, log_time_ns: int, cdr_bytes: bytes | memoryview
     ) -> None:
         """An already-serialised ROS 2 CDR message (the 2D LiDAR's ``LaserScan``)."""
+        ...
+
+
+class SensorWorld(Protocol):
+    """What the sensors are rendered from: a :class:`~redrive.sim.world.World`, or a closed
+    loop's view of two worlds (the scene of one, the ego of the other)."""
+
+    @property
+    def time_ns(self) -> int:
+        """The current time, int ns since the epoch."""
+        ...
+
+    def step_to(self, stamp_ns: int) -> None:
+        """Advance to ``stamp_ns`` (never backwards)."""
+        ...
+
+    def scene(self) -> Scene:
+        """What the sensors see at :attr:`time_ns` (the ego's pose included)."""
+        ...
+
+    def ego_state(self) -> VehicleState:
+        """The ego's true state at :attr:`time_ns` (IMU, GNSS, odometry, the pose topics)."""
+        ...
+
+    def map_from_base(self) -> npt.NDArray[np.float64]:
+        """The ego pose at :attr:`time_ns`."""
+        ...
+
+    def map_from_base_at(self, stamp_ns: int) -> npt.NDArray[np.float64]:
+        """The ego pose at a recent time (a LiDAR sweep's ego-motion skew)."""
         ...
 
 
@@ -220,7 +251,9 @@ def _ticks(start_ns: int, stop_ns: int, rate_hz: float) -> Iterator[int]:
 class _Recorder:
     """Owns the models and the writer; turns sensor events into messages."""
 
-    def __init__(self, scenario: Scenario, rig: Rig, writer: MessageSink, world: World) -> None:
+    def __init__(
+        self, scenario: Scenario, rig: Rig, writer: MessageSink, world: SensorWorld
+    ) -> None:
         self.writer = writer
         self.world = world
         self.rig = rig
@@ -244,6 +277,8 @@ class _Recorder:
         self.driver = lidars3d[0].name if lidars3d else None
         self.pending: dict[str, Scene] = {}  # lidar → scene at the start of its sweep
         self.last_camera: dict[str, CameraFrame] = {}
+        #: object id → returns in the driver LiDAR's last finished sweep (None before the first)
+        self.last_hits: dict[int, int] | None = None
         self.prev_state: VehicleState | None = None
         self._scene_now: Scene | None = None
 
@@ -310,17 +345,21 @@ class _Recorder:
             return
         self.writer.write(sensor_topic(spec), scan.stamp_ns, scan.cloud, frame_id=scan.frame_id)
         if spec.name == self.driver:
-            pixels: dict[int, int] | None = None
-            if self.last_camera:
-                seen: dict[int, int] = {}
-                for frame in self.last_camera.values():
-                    for key, count in frame.pixels_per_object.items():
-                        seen[key] = seen.get(key, 0) + count
-                pixels = seen
+            self.last_hits = dict(scan.hits_per_object)
             objects = ground_truth_objects(
-                scene, lidar_hits=dict(scan.hits_per_object), camera_pixels=pixels
+                scene, lidar_hits=self.last_hits, camera_pixels=self.camera_pixels()
             )
             self.writer.write(GROUND_TRUTH_TOPIC, scan.stamp_ns, objects, frame_id="base_link")
+
+    def camera_pixels(self) -> dict[int, int] | None:
+        """Object id → pixels it covers in the last image of every camera (None before any)."""
+        if not self.last_camera:
+            return None
+        seen: dict[int, int] = {}
+        for frame in self.last_camera.values():
+            for key, count in frame.pixels_per_object.items():
+                seen[key] = seen.get(key, 0) + count
+        return seen
 
     def write_pose(self, stamp_ns: int) -> None:
         state = self.world.ego_state()
@@ -385,10 +424,17 @@ class SensorSimulation:
     period after it starts (when the pose history covers it) and stamped at its start; the
     ground-truth ego pose and ``/tf`` run at twice the odometry rate.
 
+    :meth:`run` is :meth:`start` then :meth:`advance_to` the end; a closed loop calls
+    :meth:`advance_to` one frame at a time instead, rendering from its own ``world`` (the same
+    events, random streams and models, so its sensors are what ``redrive synth`` would record of
+    the same motion).
+
     Args:
         scenario: what to simulate.
         duration_s: override the scenario's duration.
         seed: override the scenario's seed.
+        world: what the sensors render, at the scenario's start time (default: a new
+            :class:`~redrive.sim.world.World` of the scenario, after the overrides).
 
     Raises:
         ConfigError: the scenario's rig is invalid.
@@ -396,7 +442,12 @@ class SensorSimulation:
     """
 
     def __init__(
-        self, scenario: Scenario, *, duration_s: float | None = None, seed: int | None = None
+        self,
+        scenario: Scenario,
+        *,
+        duration_s: float | None = None,
+        seed: int | None = None,
+        world: SensorWorld | None = None,
     ) -> None:
         changes: dict[str, Any] = {}
         if duration_s is not None:
@@ -408,11 +459,11 @@ class SensorSimulation:
             changes["seed"] = int(seed)
         self.scenario = dataclasses.replace(scenario, **changes) if changes else scenario
         self.rig = rig_from_mapping(self.scenario.rig, source=self.scenario.source)
-        self.world = World(self.scenario)
+        self.world: SensorWorld = World(self.scenario) if world is None else world
         self.start_ns = self.world.time_ns
         self.stop_ns = self.start_ns + round(self.scenario.duration_s * 1e9)
         self._events = self._schedule()
-        self._started = False
+        self._recorder: _Recorder | None = None
 
     def _schedule(self) -> list[tuple[int, int, str, str]]:
         rig, start_ns, stop_ns = self.rig, self.start_ns, self.stop_ns
@@ -439,28 +490,58 @@ class SensorSimulation:
         Raises:
             SimulationError: called a second time (the world has moved on).
         """
-        if self._started:
+        self.start(sink)
+        yield from self.advance_to(self.stop_ns)
+
+    def start(self, sink: MessageSink) -> None:
+        """Write the static transforms to ``sink``, which gets every later message too.
+
+        Raises:
+            SimulationError: called a second time (the world has moved on).
+        """
+        if self._recorder is not None:
             msg = "this SensorSimulation has already run; build a new one to run it again"
             raise SimulationError(msg)
-        self._started = True
+        self._recorder = _Recorder(self.scenario, self.rig, sink, self.world)
+        self._recorder.write_static(self.start_ns)
+
+    def advance_to(self, stamp_ns: int) -> Iterator[int]:
+        """Step through the events up to and including ``stamp_ns`` (writing their messages),
+        then the world to ``stamp_ns``; yields each event's time once its messages are written.
+
+        Raises:
+            SimulationError: :meth:`start` was not called.
+        """
+        recorder = self._recorder
+        if recorder is None:
+            msg = "SensorSimulation.advance_to: call start(sink) first"
+            raise SimulationError(msg)
         rig, world, events = self.rig, self.world, self._events
-        recorder = _Recorder(self.scenario, rig, sink, world)
-        recorder.write_static(self.start_ns)
-        while events:
-            stamp_ns, _, what, name = heapq.heappop(events)
-            world.step_to(stamp_ns)
+        while events and events[0][0] <= stamp_ns:
+            event_ns, _, what, name = heapq.heappop(events)
+            world.step_to(event_ns)
             if what == "pose":
-                recorder.write_pose(stamp_ns)
+                recorder.write_pose(event_ns)
             elif what == "sweep":
                 recorder.finish_sweep(rig[name])
             else:
                 spec = rig[name]
                 if what == "fire" and not (
                     spec.kind in (SensorType.LIDAR, SensorType.LIDAR_2D)
-                    and stamp_ns + round(1e9 / spec.rate_hz) > self.stop_ns
+                    and event_ns + round(1e9 / spec.rate_hz) > self.stop_ns
                 ):
-                    recorder.fire(spec, stamp_ns)
-            yield stamp_ns
+                    recorder.fire(spec, event_ns)
+            yield event_ns
+        world.step_to(max(stamp_ns, world.time_ns))
+
+    def visibility(self) -> tuple[dict[int, int] | None, dict[int, int] | None]:
+        """What the sensors saw so far, for ground truth: object id → returns in the first
+        LiDAR's last finished sweep, and → pixels in every camera's last image (None before
+        the first sweep / image)."""
+        recorder = self._recorder
+        if recorder is None:
+            return None, None
+        return recorder.last_hits, recorder.camera_pixels()
 
 
 def synthesize(

@@ -307,6 +307,25 @@ class World:
         """
         self._ego_step = step
 
+    def place_ego(self, *, x_m: float, y_m: float, yaw_rad: float) -> None:
+        """Start the ego at another pose (map frame, rear-axle centre) — before the first step
+        only, so the pose history the LiDARs' skew reads starts there too.  Its speed and
+        steering stay; its progress along the route is found again from the new position.
+
+        Raises:
+            SimulationError: the world has already moved.
+        """
+        if self._time_ns != self._start_ns:
+            msg = "World.place_ego: the world has already moved; place the ego before stepping"
+            raise SimulationError(msg)
+        self._ego.x_m, self._ego.y_m, self._ego.yaw_rad = float(x_m), float(y_m), float(yaw_rad)
+        s, _ = self._driver.route.project(
+            [[self._ego.x_m, self._ego.y_m]], s_min_m=0.0, s_max_m=self._driver.route.length_m
+        )
+        self._driver.s_m = float(s[0])
+        self._history.clear()
+        self._record_pose()
+
     @property
     def ego_model(self) -> BicycleModel:
         """The ego's bicycle model (its state; step it only through :meth:`drive_ego`)."""
