@@ -53,3 +53,54 @@ class NanAfterTwoSeconds(Algorithm):
         if frame.index < 20:
             return path
         return PlannedPath(stamp_ns=frame.stamp_ns, waypoints=np.full_like(path.waypoints, np.nan))
+
+
+class LoggedPathFollower(Algorithm):
+    """Plans the log's own future: the logged ego poses of the next ``horizon_s`` seconds (read
+    from the log named by ``log``), in the driven ego's base_link — a planner that tries to drive
+    as the log did."""
+
+    role = Role.PLANNING
+    inputs = ("vehicle_state",)
+    defaults = MappingProxyType({"log": "", "horizon_s": 4.0})
+
+    def setup(self, config: Mapping[str, Any]) -> None:
+        from redrive.io import open_log
+        from redrive.io.decoders import decode
+        from redrive.io.sensor_map import infer_sensor_map
+        from redrive.types import VehicleState
+
+        self.horizon_ns = round(float(config["horizon_s"]) * 1e9)
+        states: list[VehicleState] = []
+        with open_log(str(config["log"])) as log:
+            smap = infer_sensor_map(log.topics, duration_ns=log.end_ns - log.start_ns)
+            assert smap.vehicle_state_topic is not None
+            for message in log.messages(topics=[smap.vehicle_state_topic]):
+                value = decode(message, log.deserialize).value
+                if isinstance(value, VehicleState):
+                    states.append(value)
+        states.sort(key=lambda s: s.stamp_ns)
+        self.stamps = np.array([s.stamp_ns for s in states], dtype=np.int64)
+        self.xy = np.array([s.position[:2] for s in states], dtype=np.float64)
+
+    def step(self, frame: Frame, upstream: StageOutputs) -> PlannedPath:
+        ego = frame.vehicle_state
+        assert ego is not None
+        # the logged positions every 0.5 s (odometry is noisy at 10 Hz: its differences would
+        # make a jittery speed and acceleration profile), in the driven ego's base_link
+        t = np.arange(0.0, self.horizon_ns / 1e9 + 1e-9, 0.5)
+        at = frame.stamp_ns + np.round(t * 1e9).astype(np.int64)
+        t = t[at <= self.stamps[-1]]
+        if len(t) < 2:  # the end of the log: stand still
+            return _straight(frame.stamp_ns, 0.0)
+        rel = (at[: len(t)] - self.stamps[0]).astype(np.float64)
+        stamps = (self.stamps - self.stamps[0]).astype(np.float64)
+        d = np.column_stack(
+            [np.interp(rel, stamps, self.xy[:, 0]), np.interp(rel, stamps, self.xy[:, 1])]
+        )
+        d -= ego.position[:2]
+        c, s = np.cos(ego.heading_rad), np.sin(ego.heading_rad)
+        x, y = c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]
+        return PlannedPath(
+            stamp_ns=frame.stamp_ns, waypoints=np.column_stack([x, y, np.zeros_like(t), t])
+        )

@@ -208,3 +208,10 @@ def test_two_planners_in_closed_loop_compare_on_the_same_scenario(tmp_path: Path
     evaluate_run(other, metrics=[AtFaultCollisions()])
     with pytest.raises(ConfigError, match="different logs"):
         compare_runs(blind, other)
+
+
+def test_sensors_apply_to_scenarios_only(
+    demo_log: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["run", str(demo_log), "--closed-loop", "--sensors"]) == 1
+    assert "--sensors re-renders a synthetic scenario's rig" in capsys.readouterr().err

@@ -24,6 +24,8 @@ examples:
       --planning idm-planner --control pure-pursuit-pid    followers react to the driven ego
   redrive run cut_in --closed-loop --sensors              the reference pipeline on sensors
                                                           rendered from the driven ego
+  redrive run drive.bag --closed-loop --planning my.py:Planner --duration 30
+                                                          closed loop on a recorded log
 
 Plugins are entry-point names (`redrive algorithms` lists them), package.module:Class or
 path/to/file.py:Class.  With no --pipeline and no plugin flag the reference pipeline runs:
@@ -40,7 +42,14 @@ carry the scenario's rig (LiDAR, camera, IMU, GNSS) rendered from the driven ego
 its `redrive synth` log would, each LiDAR's last finished sweep in a frame (the first frame comes
 one sweep after the start).  --agents replay (default) keeps the other road users on their
 scripted paths, --agents reactive lets them react to the ego.  --seed seeds the scenario too.
-Closed loop on recorded logs is not built yet.
+
+Closed loop on a recorded log (LOG with the ego's pose: odometry or poses): the ego starts at the
+log's first pose and the bicycle model carries it; each frame is the log's, re-expressed from the
+driven pose (point clouds and ground truth moved by the pose difference, images unchanged) — right
+only for small deviations, so each frame past 2 m / 10° from the logged ego is flagged `deviated`
+(closed_loop table; counted in the manifest summary).  --agents reactive (needs objects in the
+log) slows the logged vehicles the driven ego holds up.  --sensor-map and --duration apply.  See
+docs/closed_loop.md.
 """
 
 _FRAMES = re.compile(r"^(\d*):(\d*)$")
@@ -194,15 +203,12 @@ def _run_closed_loop(args: argparse.Namespace, pipeline: Any) -> int:
     from redrive.results import RunStatus
 
     name = str(args.log)
-    if not is_scenario(name):
-        if args.log.exists():
-            msg = (
-                f"{name}: closed loop on a recorded log (object-level, the ego propagated from "
-                "the log's pose) is not built yet; give a scenario of `redrive synth --list` or a "
-                "scenario TOML"
-            )
-        else:
-            msg = f"{name}: no such scenario or scenario TOML (`redrive synth --list` lists them)"
+    scenario = is_scenario(name)
+    if not scenario and not args.log.exists():
+        msg = (
+            f"{name}: no such scenario, scenario TOML or log (`redrive synth --list` lists the "
+            "scenarios)"
+        )
         raise ConfigError(msg)
     unsupported = [
         flag
@@ -210,12 +216,18 @@ def _run_closed_loop(args: argparse.Namespace, pipeline: Any) -> int:
             ("--frames", args.frames),
             ("--rate", args.rate),
             ("--resume", args.resume),
-            ("--sensor-map", args.sensor_map),
+            ("--sensor-map", args.sensor_map if scenario else None),
         )
         if given
     ]
+    if args.sensors and not scenario:
+        msg = (
+            f"{name}: --sensors re-renders a synthetic scenario's rig; a recorded log's sensors "
+            "are re-expressed from the driven pose without it (drop --sensors)"
+        )
+        raise ConfigError(msg)
     if unsupported:
-        msg = f"--closed-loop: {', '.join(unsupported)} apply to replaying a log; drop them"
+        msg = f"--closed-loop: {', '.join(unsupported)} apply to open-loop replay; drop them"
         raise ConfigError(msg)
     out = args.out or Path("runs") / f"{Path(name).stem}-closed-{time.strftime('%Y%m%d-%H%M%S')}"
     request = ClosedLoopRequest(
@@ -226,13 +238,39 @@ def _run_closed_loop(args: argparse.Namespace, pipeline: Any) -> int:
         seed=args.seed,
         duration_s=args.duration,
         level="sensor" if args.sensors else "object",
+        sensor_map=None if scenario else args.sensor_map,
     )
     report = run_closed_loop(request)
     print_run_report(report, out)
+    _print_deviation(out)
     if report.status is RunStatus.INTERRUPTED:
         print("interrupted: closed-loop runs do not resume; run it again into a new --out")
         return 130
     return 0
+
+
+def _print_deviation(out: Path) -> None:
+    """One line: how many frames the driven ego was past the deviation thresholds."""
+    import math
+
+    from redrive.results import open_run
+
+    summary = open_run(out).manifest.summary
+    if summary is None or "deviated_frames" not in summary.closed_loop:
+        return
+    dev = dict(summary.closed_loop)
+    worst = dev.get("max_deviation_m")
+    print(
+        f"deviation from the logged ego: {dev['deviated_frames']} of {summary.frames} "
+        f"frames past {dev['deviation_threshold_m']:g} m / "
+        f"{math.degrees(dev['deviation_threshold_rad']):g}°"
+        + (f", at most {worst:.2f} m" if worst is not None else "")
+        + (
+            f" (first: frame {dev['first_deviated_frame']})"
+            if dev.get("first_deviated_frame") is not None
+            else ""
+        )
+    )
 
 
 def register(sub: Any) -> None:
@@ -251,7 +289,7 @@ def register(sub: Any) -> None:
         "log",
         type=Path,
         metavar="LOG",
-        help="the log to replay (with --closed-loop: a scenario name or scenario TOML)",
+        help="the log to replay (with --closed-loop also a scenario name or scenario TOML)",
     )
     parser.add_argument("--pipeline", type=Path, metavar="TOML", help="a pipeline file")
     for role in ("perception", "planning", "control"):
@@ -293,7 +331,7 @@ def register(sub: Any) -> None:
     parser.add_argument(
         "--closed-loop",
         action="store_true",
-        help="the outputs drive the ego in a simulated scenario (LOG: a scenario)",
+        help="the outputs drive the ego (LOG: a scenario, or a log with the ego's pose)",
     )
     parser.add_argument(
         "--agents",
@@ -307,7 +345,10 @@ def register(sub: Any) -> None:
         help="closed loop: render the scenario's sensors from the driven ego (sensor level)",
     )
     parser.add_argument(
-        "--duration", type=float, metavar="S", help="closed loop: seconds (default: the scenario's)"
+        "--duration",
+        type=float,
+        metavar="S",
+        help="closed loop: seconds (default: the scenario's, or the whole log)",
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.set_defaults(func=_run)

@@ -18,6 +18,7 @@ import dataclasses
 import math
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
+from typing import Any
 
 from redrive.algorithms import StageOutputs, StepStatus
 from redrive.closedloop.simulator import EgoCommand, Simulator
@@ -25,7 +26,11 @@ from redrive.engine.modes import Mode, PacedFrame
 from redrive.results import ClosedLoopRecord, FrameRecord
 from redrive.types import Frame, Role, VehicleState
 
-__all__ = ["ClosedLoopMode", "ClosedLoopStep"]
+__all__ = ["DEFAULT_DEVIATION_M", "DEFAULT_DEVIATION_RAD", "ClosedLoopMode", "ClosedLoopStep"]
+
+#: a frame whose driven ego is farther than this from the logged one is flagged ``deviated``.
+DEFAULT_DEVIATION_M = 2.0
+DEFAULT_DEVIATION_RAD = math.radians(10.0)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -58,8 +63,27 @@ class ClosedLoopStep:
         )
         return dist, abs(math.remainder(a.heading_rad - b.heading_rad, math.tau))
 
-    def record(self) -> ClosedLoopRecord:
-        """What the run directory stores of this step."""
+    def deviated(
+        self,
+        *,
+        threshold_m: float = DEFAULT_DEVIATION_M,
+        threshold_rad: float = DEFAULT_DEVIATION_RAD,
+    ) -> bool | None:
+        """Whether the driven ego is farther than ``threshold_m`` or turned more than
+        ``threshold_rad`` from the logged one; None without a logged ego."""
+        dist, dyaw = self.deviation
+        if math.isnan(dist):
+            return None
+        return dist > threshold_m or dyaw > threshold_rad
+
+    def record(
+        self,
+        *,
+        threshold_m: float = DEFAULT_DEVIATION_M,
+        threshold_rad: float = DEFAULT_DEVIATION_RAD,
+    ) -> ClosedLoopRecord:
+        """What the run directory stores of this step (flagged ``deviated`` past either
+        threshold)."""
         dist, dyaw = self.deviation
         command = self.command
         return ClosedLoopRecord(
@@ -71,12 +95,15 @@ class ClosedLoopStep:
             steering_angle_rad=command.commands.steering_angle_rad,
             deviation_m=dist,
             deviation_yaw_rad=dyaw,
+            deviated=self.deviated(threshold_m=threshold_m, threshold_rad=threshold_rad),
         )
 
 
 class ClosedLoopMode:
     """Closed loop over ``simulator``, at most ``max_frames`` frames (None: until it is done);
-    every finished frame's completed record goes to ``write`` (the run writer)."""
+    every finished frame's completed record goes to ``write`` (the run writer).  A frame farther
+    than ``deviation_threshold_m`` or ``deviation_threshold_rad`` from the logged ego is flagged
+    ``deviated`` (:meth:`deviation_summary` counts them)."""
 
     mode = Mode.CLOSED_LOOP
 
@@ -86,8 +113,12 @@ class ClosedLoopMode:
         *,
         write: Callable[[FrameRecord], None],
         max_frames: int | None = None,
+        deviation_threshold_m: float = DEFAULT_DEVIATION_M,
+        deviation_threshold_rad: float = DEFAULT_DEVIATION_RAD,
     ) -> None:
         self.simulator = simulator
+        self.deviation_threshold_m = float(deviation_threshold_m)
+        self.deviation_threshold_rad = float(deviation_threshold_rad)
         self.write = write
         self.max_frames = max_frames
         self.late_frames = 0
@@ -139,5 +170,36 @@ class ClosedLoopMode:
         )
         self.steps.append(step)
         self.write(
-            dataclasses.replace(record, logged_vehicle_state=logged, closed_loop=step.record())
+            dataclasses.replace(
+                record,
+                logged_vehicle_state=logged,
+                closed_loop=step.record(
+                    threshold_m=self.deviation_threshold_m,
+                    threshold_rad=self.deviation_threshold_rad,
+                ),
+            )
         )
+
+    def deviation_summary(self) -> dict[str, Any]:
+        """For the run summary: the thresholds, how many frames passed them, the first such
+        frame and the largest deviations."""
+        flags = [
+            (
+                s.frame_index,
+                s.deviated(
+                    threshold_m=self.deviation_threshold_m,
+                    threshold_rad=self.deviation_threshold_rad,
+                ),
+            )
+            for s in self.steps
+        ]
+        flagged = [i for i, f in flags if f]
+        dists = [s.deviation for s in self.steps if not math.isnan(s.deviation[0])]
+        return {
+            "deviation_threshold_m": self.deviation_threshold_m,
+            "deviation_threshold_rad": self.deviation_threshold_rad,
+            "deviated_frames": len(flagged),
+            "first_deviated_frame": flagged[0] if flagged else None,
+            "max_deviation_m": max((d for d, _ in dists), default=None),
+            "max_deviation_yaw_rad": max((y for _, y in dists), default=None),
+        }

@@ -1,4 +1,4 @@
-"""``redrive run SCENARIO --closed-loop``: a closed-loop run into an ordinary run directory.
+"""``redrive run SCENARIO|LOG --closed-loop``: a closed-loop run into an ordinary run directory.
 
 >>> report = run_closed_loop(ClosedLoopRequest(scenario="cut_in", pipeline=planner_only,
 ...                                            out=Path("runs/cl")))          # doctest: +SKIP
@@ -6,15 +6,19 @@
 The run directory is the one every command reads (``evaluate``, ``report``, ``export``,
 ``compare``, the GUI). Its frames table holds the driven ego. The logged ego is stored beside it,
 per frame, and progress and deviation are measured against it. ``closed_loop`` holds what moved
-the ego after each frame (command, its source, the fallback's reason) and how far the ego was
-from the logged one. ``map.json`` holds the road map of the scenario. The manifest's pipeline has
-``mode_manager = "closed_loop"``, and the simulator's description (backend, agents, ego limits,
-tracker and gains) is under ``closed_loop``.
+the ego after each frame (command, its source, the fallback's reason), how far the ego was
+from the logged one and whether that passed the thresholds (``deviated``; counted in the
+summary's ``closed_loop``). ``map.json`` holds the road map of a scenario (a log has none). The
+manifest's pipeline has ``mode_manager = "closed_loop"``, and the simulator's description
+(backend ``synthetic`` or ``log``, agents, ego limits, tracker and gains, deviation thresholds)
+is under ``closed_loop``.  A log run's source is the log's usual fingerprint (path, sha256), so
+``compare`` pairs runs of the same log.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import threading
 from collections.abc import Callable, Mapping
@@ -24,14 +28,18 @@ from typing import Any
 
 from redrive.algorithms import GROUND_TRUTH, VEHICLE_STATE
 from redrive.algorithms.discovery import load_algorithm_class
-from redrive.closedloop.mode import ClosedLoopMode
+from redrive.closedloop.logreplay import LogSimulator
+from redrive.closedloop.mode import DEFAULT_DEVIATION_M, DEFAULT_DEVIATION_RAD, ClosedLoopMode
+from redrive.closedloop.simulator import Simulator
 from redrive.closedloop.synthetic import AgentMode, Level, SyntheticSimulator
 from redrive.closedloop.tracker import LqrPidTracker
 from redrive.config import PipelineConfig
 from redrive.engine.graph import LogInputs, build_graph
-from redrive.engine.run import execute
+from redrive.engine.run import execute, log_fingerprint
 from redrive.engine.stats import RunReport
 from redrive.errors import ConfigError
+from redrive.io import LogReader, open_log
+from redrive.io.sensor_map import load_sensor_map_overrides
 from redrive.results import (
     FrameRecord,
     PipelineInfo,
@@ -41,9 +49,11 @@ from redrive.results import (
 )
 from redrive.sim.roadmap import scenario_road_map
 from redrive.sim.scenario import list_scenarios, load_scenario
-from redrive.types import SensorType
+from redrive.types import RoadMap, SensorType
 
 __all__ = ["ClosedLoopRequest", "is_scenario", "run_closed_loop"]
+
+logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -51,16 +61,19 @@ class ClosedLoopRequest:
     """One closed-loop run.
 
     Attributes:
-        scenario: a scenario of the catalogue (``redrive synth --list``) or a scenario TOML.
+        scenario: what the ego drives in: a scenario of the catalogue (``redrive synth
+            --list``) or a scenario TOML (backend ``synthetic``), else the path of a recorded
+            log with the ego's pose (backend ``log``, :mod:`redrive.closedloop.logreplay`).
         pipeline: what runs (sequential mode).
         out: the run directory.
         agents: ``replay`` (non-reactive) or ``reactive`` (IDM sees the driven ego).
-        seed: the scenario's seed (None: the scenario's own).
-        duration_s: how long (None: the scenario's duration).
-        rate_hz: frames per second.
+        seed: the scenario's seed (None: the scenario's own); a log has none.
+        duration_s: how long (None: the scenario's duration, or the whole log).
+        rate_hz: frames per second (a log: at most, its frames are the log's).
         delay_steps: 1 to apply each command one frame late.
         level: ``object`` (frames carry the ego state and ground truth) or ``sensor`` (the
             scenario's rig re-rendered from the driven ego as well).
+        sensor_map: a log only: a sensor map TOML (which topic is which sensor).
     """
 
     scenario: str
@@ -72,6 +85,7 @@ class ClosedLoopRequest:
     rate_hz: float = 10.0
     delay_steps: int = 0
     level: Level = "object"
+    sensor_map: Path | None = None
 
 
 def is_scenario(text: str) -> bool:
@@ -86,17 +100,42 @@ def run_closed_loop(
     progress: Callable[[int], None] | None = None,
     cancel: threading.Event | None = None,
 ) -> RunReport:
-    """Drive the scenario's ego with the pipeline's outputs into ``request.out``.
+    """Drive the ego of ``request.scenario`` — a scenario (backend ``synthetic``) or a recorded
+    log (backend ``log``) — with the pipeline's outputs into ``request.out``.
 
     Raises:
         ConfigError, PluginError: the pipeline does not fit (an algorithm reads a sensor the
-            object-level backend does not render; the pipelined mode), checked before any frame.
+            backend does not provide; the pipelined mode), or the log cannot be driven (no ego
+            pose; no objects for ``reactive`` agents) — checked before any frame.
     """
     if request.pipeline.mode == "pipelined":
         msg = (
             "closed loop runs the stages of a frame before the next frame exists (the outputs "
             "move the ego); drop --mode pipelined"
         )
+        raise ConfigError(msg)
+    if is_scenario(request.scenario):
+        return _run_scenario(request, on_start=on_start, progress=progress, cancel=cancel)
+    path = Path(request.scenario)
+    if not path.exists():
+        msg = (
+            f"{request.scenario}: no such scenario, scenario TOML or log (`redrive synth --list` "
+            "lists the scenarios)"
+        )
+        raise ConfigError(msg)
+    with open_log(path) as log:
+        return _run_log(request, log, on_start=on_start, progress=progress, cancel=cancel)
+
+
+def _run_scenario(
+    request: ClosedLoopRequest,
+    *,
+    on_start: Callable[[int | None], None] | None,
+    progress: Callable[[int], None] | None,
+    cancel: threading.Event | None,
+) -> RunReport:
+    if request.sensor_map is not None:
+        msg = "--sensor-map applies to a recorded log, not to a scenario; drop it"
         raise ConfigError(msg)
     scenario = load_scenario(request.scenario)
     if request.duration_s is not None:
@@ -111,24 +150,87 @@ def run_closed_loop(
         delay_steps=request.delay_steps,
         level=request.level,
     )
+    if simulator.level == "object":
+        _refuse_sensor_inputs(request.pipeline, simulator.sensors)
+    source = SourceLog(
+        path=scenario.source if scenario.source.endswith(".toml") else f"scenario:{scenario.name}",
+        format="scenario",
+        sha256=None,
+        source=scenario.name,
+    )
+    described = {**simulator.describe(), "seed": scenario.seed, "duration_s": scenario.duration_s}
+    return _drive(
+        request,
+        simulator,
+        source=source,
+        described=described,
+        road_map=scenario_road_map(scenario),
+        total=math.floor(
+            (scenario.duration_s - (simulator.first_stamp_ns - scenario.start_stamp_ns) / 1e9)
+            * request.rate_hz
+            + 1e-9
+        ),
+        on_start=on_start,
+        progress=progress,
+        cancel=cancel,
+    )
+
+
+def _run_log(
+    request: ClosedLoopRequest,
+    log: LogReader,
+    *,
+    on_start: Callable[[int | None], None] | None,
+    progress: Callable[[int], None] | None,
+    cancel: threading.Event | None,
+) -> RunReport:
+    if request.seed is not None:
+        logger.debug("closed loop on a log: --seed seeds the algorithms only")
+    overrides = load_sensor_map_overrides(request.sensor_map) if request.sensor_map else None
+    simulator = LogSimulator(
+        log,
+        tracker=LqrPidTracker(),
+        agents=request.agents,
+        rate_hz=request.rate_hz,
+        duration_s=request.duration_s,
+        overrides=overrides,
+        delay_steps=request.delay_steps,
+    )
+    return _drive(
+        request,
+        simulator,
+        source=log_fingerprint(Path(request.scenario), format=log.format),
+        described=simulator.describe(),
+        road_map=None,
+        total=None,
+        on_start=on_start,
+        progress=progress,
+        cancel=cancel,
+    )
+
+
+def _drive(
+    request: ClosedLoopRequest,
+    simulator: Simulator,
+    *,
+    source: SourceLog,
+    described: Mapping[str, Any],
+    road_map: RoadMap | None,
+    total: int | None,
+    on_start: Callable[[int | None], None] | None,
+    progress: Callable[[int], None] | None,
+    cancel: threading.Event | None,
+) -> RunReport:
+    """The part both backends share: the graph, the run directory, the frame loop."""
     inputs = LogInputs(
         sensors=dict(simulator.sensors),
         has_vehicle_state=simulator.has_vehicle_state,
         has_ground_truth=simulator.has_ground_truth,
     )
-    if simulator.level == "object":
-        _refuse_sensor_inputs(request.pipeline, simulator.sensors)
     graph = build_graph(request.pipeline, inputs)
     pipeline = request.pipeline
     setup = RunSetup(
-        log=SourceLog(
-            path=scenario.source
-            if scenario.source.endswith(".toml")
-            else f"scenario:{scenario.name}",
-            format="scenario",
-            sha256=None,
-            source=scenario.name,
-        ),
+        log=source,
         sensors=dict(inputs.sensors),
         seed=pipeline.seed,
         pipeline=PipelineInfo(
@@ -141,17 +243,17 @@ def run_closed_loop(
         ),
         algorithms=tuple(p.manifest_entry() for p in graph.algorithms),
         closed_loop={
-            **simulator.describe(),
-            "seed": scenario.seed,
-            "duration_s": scenario.duration_s,
+            **described,
+            "deviation_threshold_m": DEFAULT_DEVIATION_M,
+            "deviation_threshold_rad": DEFAULT_DEVIATION_RAD,
         },
     )
     writer = RunWriter(request.out, setup=setup)
-    writer.write_map(scenario_road_map(scenario))
     mode = ClosedLoopMode(simulator, write=writer.write_frame)
+    if road_map is not None:
+        writer.write_map(road_map)
     if on_start is not None:
-        first_s = (simulator.first_stamp_ns - scenario.start_stamp_ns) / 1e9
-        on_start(math.floor((scenario.duration_s - first_s) * request.rate_hz + 1e-9))
+        on_start(total)
 
     def stored_after_the_step(record: FrameRecord) -> None:
         """The mode writes each record once the outputs moved the ego (after_frame)."""
@@ -166,6 +268,7 @@ def run_closed_loop(
         progress=progress,
         cancel=cancel,
         sink=stored_after_the_step,
+        summary_extra=lambda: {"closed_loop": mode.deviation_summary()},
     )
 
 

@@ -35,8 +35,12 @@ class Simulator(Protocol):
     sensors: Mapping[str, Any]
     has_vehicle_state: bool
     has_ground_truth: bool
-    #: the time step between frames (seconds)
-    dt_s: float
+
+    @property
+    def dt_s(self) -> float:
+        """The time step to the next frame (seconds): fixed for a scenario, the log's own gap
+        for a log."""
+        ...
 
     def reset(self, seed: int) -> None:
         """Start over from the scenario's (or log's) initial state, with ``seed``."""

@@ -66,6 +66,7 @@ class TableBuffers:
                 steering_angle_rad=cl.steering_angle_rad,
                 deviation_m=cl.deviation_m,
                 deviation_yaw_rad=cl.deviation_yaw_rad,
+                deviated=cl.deviated,
             )
         self.n_frames += 1
 

@@ -314,12 +314,16 @@ class RunSummary:
     skipped_frames: int | None = None  # real-time mode: frames skipped (pipeline too slow)
     undecodable_messages: Mapping[str, int] = field(default_factory=dict)  # topic → count
     error: str | None = None  # ``Type: message`` of what ended a failed or interrupted run
+    #: closed loop: the deviation thresholds, how many frames passed them (``deviated_frames``),
+    #: the first such frame and the largest deviations
+    closed_loop: Mapping[str, Any] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
         out = {f.name: getattr(self, f.name) for f in fields(self)}
         out["algorithms"] = [_plain(a) for a in self.algorithms]
         out["failure"] = None if self.failure is None else _asdict(self.failure)
         out["undecodable_messages"] = dict(self.undecodable_messages)
+        out["closed_loop"] = to_jsonable(self.closed_loop)
         return out
 
     @classmethod
@@ -339,6 +343,7 @@ class RunSummary:
             skipped_frames=f.opt_integer("skipped_frames", None),
             undecodable_messages=f.int_map("undecodable_messages", {}),
             error=f.opt_text("error", None),
+            closed_loop=f.mapping("closed_loop", {}),
         )
 
 

@@ -119,6 +119,8 @@ class ClosedLoopRecord:
         throttle, brake, steering_angle_rad: the command applied.
         deviation_m: distance of the driven from the logged ego (NaN without a logged ego).
         deviation_yaw_rad: |heading difference| of the two (NaN without a logged ego).
+        deviated: either deviation passed its threshold (the run manifest's ``closed_loop``
+            says which: default 2 m / 10°); None without a logged ego.
     """
 
     source: str
@@ -129,6 +131,7 @@ class ClosedLoopRecord:
     steering_angle_rad: float = 0.0
     deviation_m: float = math.nan
     deviation_yaw_rad: float = math.nan
+    deviated: bool | None = None
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -164,6 +164,8 @@ CLOSED_LOOP = pa.schema(
         _f("algorithm", _STR),
         _f("reason", _STR),
         *_floats("throttle", "brake", "steering_angle_rad", "deviation_m", "deviation_yaw_rad"),
+        # null: no logged ego to compare with (and runs written before the column existed)
+        _f("deviated", pa.bool_(), nullable=True),
     ]
 )
 

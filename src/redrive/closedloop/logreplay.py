@@ -1,0 +1,514 @@
+"""Backend 2: a recorded log replayed around an ego under the algorithm's control (object level).
+
+The driven ego starts at the log's first pose and speed (the ``VehicleState`` of the first frame
+that has one, in the log's own frame — ``odom`` or ``map``) and is propagated by the actuated
+kinematic bicycle (:class:`redrive.sim.ego.ActuatedEgo`) under the commands the outputs give.
+Each frame the algorithms see is the log's next frame *re-expressed from the driven pose*:
+
+- point clouds (``PointCloud`` payloads, in the sensor frame) are moved by the pose difference
+  ``driven_base_from_logged_base`` (planar: x, y, yaw) so the world stays put: a point the logged
+  car saw 10 m ahead is 9 m ahead of a driven car 1 m further on.  The sensor is taken to sit at
+  its ``sensor_location`` with base_link's axes (the data model carries no mount rotation);
+- ground-truth objects (base_link) are moved by the same difference;
+- images and every other payload (IMU, GNSS, …) pass through unchanged: a camera cannot be
+  re-rendered from a pose it never was at;
+- ``vehicle_state`` is the driven ego; :attr:`LogSimulator.logged_state` the logged one.
+
+This is right only for small deviations: nothing hidden from the logged viewpoint appears, the
+ground and far objects shift with the car, and the log's own motion blur and timing stay.
+:attr:`LogSimulator.deviation_threshold_m` / ``_rad`` (default 2 m / 10°) say when a frame is
+flagged as too far from the log for its sensor data to be trusted (the ``deviated`` column).
+
+Agents: ``replay`` — the logged objects as recorded (moved into the driven base frame).
+``reactive`` — the same, except the logged *vehicles that have the driven ego ahead of them in
+their lane* (the ego's rear axle within ``lane_half_width_m`` of their heading line, ahead of
+them, bumper-to-bumper gap below 150 m): each such vehicle moves along its own logged path at a
+speed set by IDM with the driven ego as its leader and its logged speed (along its logged path)
+as the desired one, never ahead of where the log has it.  A vehicle the ego never holds up is
+exactly replayed; one it held up drives on at its logged speed, behind its logged position, until
+it catches up with it (only where the log is faster).  Nothing else reacts (no lane changes, no pedestrians, no objects the
+log does not have), and an object is shown only while the log has it.
+
+Frames come from :class:`redrive.io.frames.FrameAssembler` (a log without a LiDAR, camera or radar
+is paced by its busiest sensor, e.g. an IMU), at most ``rate_hz`` of them: the first frame at
+or after each tick of a ``1 / rate_hz`` clock (less a quarter period, for jitter).  The time step between two frames is
+the log's (:attr:`LogSimulator.dt_s` is the gap to the next frame).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from redrive.algorithms import StageOutputs
+from redrive.closedloop.mode import DEFAULT_DEVIATION_M, DEFAULT_DEVIATION_RAD
+from redrive.closedloop.simulator import EgoCommand, PathFollower, choose_command
+from redrive.closedloop.synthetic import AGENT_MODES, AgentMode
+from redrive.errors import ConfigError
+from redrive.geometry import invert, transform_object
+from redrive.io import LogReader
+from redrive.io.frames import FrameAssembler
+from redrive.io.sensor_map import SensorMapOverrides, infer_sensor_map
+from redrive.sim.agents import IdmParams, idm_acceleration
+from redrive.sim.ego import ActuatedEgo, BicycleModel, EgoGeometry, PedalModel, pose_matrix
+from redrive.types import (
+    ControlCommands,
+    DetectedObject,
+    Frame,
+    ObjectClass,
+    PointCloud,
+    SensorData,
+    SensorType,
+    VehicleState,
+)
+
+__all__ = [
+    "LogSimulator",
+    "driven_from_logged",
+    "reexpress_cloud",
+    "refuse_unfit_log",
+]
+
+#: the longest physics step of the driven ego (a longer gap between frames is split).
+_MAX_PHYSICS_DT_S = 0.01
+#: ``reactive``: beyond this bumper-to-bumper gap (m) the ego does not hold a vehicle up.
+_INTERACTION_M = 150.0
+
+
+def _topics(log: LogReader) -> str:
+    return ", ".join(f"{t} ({i.msgtype})" for t, i in sorted(log.topics.items())) or "none"
+
+
+def refuse_unfit_log(log: LogReader, *, agents: str) -> None:
+    """Refuse a log closed loop cannot run on, naming what is missing.
+
+    Raises:
+        ConfigError: no ego pose; ``agents == "reactive"`` and no objects.
+    """
+    if not log.capabilities.has_ego_pose:
+        msg = (
+            f"{log.path}: closed loop needs the ego's pose (odometry/poses); this log has none "
+            f"— its topics: {_topics(log)}"
+        )
+        raise ConfigError(msg)
+    if agents == "reactive" and not log.capabilities.has_ground_truth:
+        msg = (
+            f"{log.path}: --agents reactive needs the other road users (ground-truth objects or "
+            f"tracks); this log has none — its topics: {_topics(log)}. Use --agents replay"
+        )
+        raise ConfigError(msg)
+
+
+def _pose(state: VehicleState) -> npt.NDArray[np.float64]:
+    return pose_matrix(float(state.position[0]), float(state.position[1]), state.heading_rad)
+
+
+def driven_from_logged(driven: VehicleState, logged: VehicleState) -> npt.NDArray[np.float64]:
+    """4×4 ``driven_base_from_logged_base``: planar pose difference of two ego states in one
+    frame (x, y, heading; height and tilt are not modelled)."""
+    return invert(_pose(driven)) @ _pose(logged)
+
+
+def reexpress_cloud(
+    cloud: PointCloud,
+    driven_base_from_logged_base: npt.NDArray[np.float64],
+    *,
+    sensor_location: tuple[float, float, float],
+) -> PointCloud:
+    """``cloud`` (sensor frame of the logged car) as the same sensor on the driven car sees the
+    same points: into logged base_link (the sensor at ``sensor_location``, base_link's axes),
+    through the pose difference, back into the sensor frame.  Channels are kept as they are."""
+    mount = np.asarray(sensor_location, dtype=np.float64)
+    mat = driven_base_from_logged_base
+    xyz = cloud.xyz.astype(np.float64) + mount
+    moved = xyz @ mat[:3, :3].T + mat[:3, 3] - mount
+    return PointCloud(xyz=np.ascontiguousarray(moved, dtype=np.float32), channels=cloud.channels)
+
+
+def _reexpress_sensor(data: SensorData, mat: npt.NDArray[np.float64]) -> SensorData:
+    if not isinstance(data.data, PointCloud):
+        return data  # images, IMU, GNSS …: cannot be re-rendered; passed through unchanged
+    moved = reexpress_cloud(data.data, mat, sensor_location=data.sensor_location)
+    return dataclasses.replace(data, data=moved)
+
+
+class _Agent:
+    """A logged vehicle under IDM along its own logged path (``reactive``)."""
+
+    __slots__ = ("logged_speed_mps", "path_s", "path_xy", "path_yaw", "s_m", "speed_mps")
+
+    def __init__(self, xy: npt.NDArray[np.float64], yaw_rad: float, speed_mps: float) -> None:
+        self.path_xy: list[npt.NDArray[np.float64]] = [xy]
+        self.path_yaw: list[float] = [yaw_rad]
+        self.path_s: list[float] = [0.0]
+        self.s_m = 0.0
+        self.speed_mps = speed_mps
+        self.logged_speed_mps = speed_mps
+
+    def log(self, xy: npt.NDArray[np.float64], yaw_rad: float, dt_s: float) -> None:
+        step = float(np.hypot(*(xy - self.path_xy[-1])))
+        self.path_xy.append(xy)
+        self.path_yaw.append(yaw_rad)
+        self.path_s.append(self.path_s[-1] + step)
+        self.logged_speed_mps = step / dt_s if dt_s > 0 else self.logged_speed_mps
+
+    def pose(self) -> tuple[float, float, float]:
+        """x, y, yaw (map) at ``s_m`` along the logged path."""
+        s = self.path_s
+        i = int(np.searchsorted(s, self.s_m, side="right")) - 1
+        i = min(max(i, 0), len(s) - 1)
+        if i == len(s) - 1 or s[i + 1] <= s[i]:
+            x, y = self.path_xy[i]
+            return float(x), float(y), self.path_yaw[i]
+        a = (self.s_m - s[i]) / (s[i + 1] - s[i])
+        x, y = self.path_xy[i] + a * (self.path_xy[i + 1] - self.path_xy[i])
+        dyaw = math.remainder(self.path_yaw[i + 1] - self.path_yaw[i], math.tau)
+        return float(x), float(y), self.path_yaw[i] + a * dyaw
+
+
+class LogSimulator:
+    """A recorded log as a closed-loop :class:`~redrive.closedloop.simulator.Simulator`.
+
+    Args:
+        log: an open log with the ego's pose (see :func:`refuse_unfit_log`).
+        tracker: follows the planned path when the pipeline has no control stage.
+        agents: ``replay`` or ``reactive`` (see the module text).
+        rate_hz: at most this many frames per second.
+        duration_s: how much of the log (None: all of it).
+        overrides: a sensor map file's content (which topic is which sensor).
+        geometry, pedal, delay_steps: the driven ego.
+        deviation_threshold_m, deviation_threshold_rad: a frame farther than either from the
+            logged ego is flagged ``deviated``.
+        lane_half_width_m: ``reactive``: how far off a vehicle's heading line the ego still
+            blocks it.
+
+    Raises:
+        ConfigError: the log has no ego pose, no objects for ``reactive``, no sensor to pace
+            frames, or fewer than two frames with the ego's pose.
+    """
+
+    has_vehicle_state = True
+
+    def __init__(
+        self,
+        log: LogReader,
+        *,
+        tracker: PathFollower,
+        agents: AgentMode = "replay",
+        rate_hz: float = 10.0,
+        duration_s: float | None = None,
+        overrides: SensorMapOverrides | None = None,
+        geometry: EgoGeometry | None = None,
+        pedal: PedalModel | None = None,
+        delay_steps: int = 0,
+        deviation_threshold_m: float = DEFAULT_DEVIATION_M,
+        deviation_threshold_rad: float = DEFAULT_DEVIATION_RAD,
+        lane_half_width_m: float = 1.75,
+    ) -> None:
+        if agents not in AGENT_MODES:
+            msg = f"--agents must be one of {', '.join(AGENT_MODES)}, got {agents!r}"
+            raise ConfigError(msg)
+        if not rate_hz > 0:
+            msg = f"the closed-loop rate must be > 0 Hz, got {rate_hz}"
+            raise ConfigError(msg)
+        if delay_steps not in (0, 1):
+            msg = f"the actuation delay is 0 or 1 frame, got {delay_steps}"
+            raise ConfigError(msg)
+        refuse_unfit_log(log, agents=agents)
+        smap = infer_sensor_map(
+            log.topics, duration_ns=log.end_ns - log.start_ns, overrides=overrides
+        )
+        if smap.vehicle_state_topic is None:
+            msg = (
+                f"{log.path}: closed loop needs the ego's pose (odometry/poses), but no topic "
+                f"decodes to one — its topics: {_topics(log)}"
+            )
+            raise ConfigError(msg)
+        if agents == "reactive" and smap.ground_truth_topic is None:
+            msg = (
+                f"{log.path}: --agents reactive needs the other road users (ground-truth objects "
+                f"or tracks), but no topic decodes to them — its topics: {_topics(log)}"
+            )
+            raise ConfigError(msg)
+        if smap.driver is None:
+            if not smap.sensors:
+                msg = (
+                    f"{log.path}: closed loop needs a sensor topic to pace its frames (a LiDAR, "
+                    f"camera, radar, IMU or GNSS); this log has none — its topics: {_topics(log)}"
+                )
+                raise ConfigError(msg)
+            busiest = max(smap.sensors, key=lambda s: (s.rate_hz, s.sensor_id))
+            smap = dataclasses.replace(smap, driver=busiest.sensor_id)
+        self.log = log
+        self.assembler = FrameAssembler(log, sensor_map=smap)
+        self.sensors: Mapping[str, SensorType] = {s.sensor_id: s.sensor_type for s in smap.sensors}
+        self.has_ground_truth = smap.ground_truth_topic is not None
+        self.tracker = tracker
+        self.agents: AgentMode = agents
+        self.rate_hz = float(rate_hz)
+        self.duration_s = duration_s
+        self.geometry = geometry or EgoGeometry()
+        self.pedal = pedal or PedalModel()
+        self.delay_steps = delay_steps
+        self.deviation_threshold_m = float(deviation_threshold_m)
+        self.deviation_threshold_rad = float(deviation_threshold_rad)
+        self.lane_half_width_m = float(lane_half_width_m)
+        self.reset(0)
+
+    # -- the Simulator protocol ---------------------------------------------------------------
+
+    def reset(self, seed: int) -> None:
+        """Start over from the log's first frame with a pose (``seed`` is unused: the log and
+        the bicycle are deterministic)."""
+        self._frames = self._selected_frames()
+        first = next(self._frames, None)
+        second = next(self._frames, None)
+        if first is None or second is None:
+            msg = (
+                f"{self.log.path}: closed loop needs at least two frames with the ego's pose; "
+                f"this log has {0 if first is None else 1} (are its pose stamps near its frames'?)"
+            )
+            raise ConfigError(msg)
+        self._current: Frame = first
+        self._next: Frame | None = second
+        logged = self._logged(first)
+        speed = float(np.hypot(logged.velocity[0], logged.velocity[1]))
+        steer = 0.0
+        if speed > 0.1:
+            steer = math.atan(logged.yaw_rate_rad_s * self.geometry.wheelbase_m / speed)
+            steer = min(max(steer, -self.geometry.max_steer_rad), self.geometry.max_steer_rad)
+        model = BicycleModel(
+            self.geometry,
+            x_m=float(logged.position[0]),
+            y_m=float(logged.position[1]),
+            yaw_rad=logged.heading_rad,
+            speed_mps=speed,
+            steer_rad=steer,
+        )
+        # the one-frame delay is applied per frame here (a frame spans several physics steps)
+        self._ego = ActuatedEgo(model, pedals=self.pedal, delay_steps=0)
+        neutral = ControlCommands(steering_angle_rad=steer)
+        self._acting: ControlCommands = neutral  # the command the ego moves under now
+        self._queued: ControlCommands = neutral  # with a one-frame delay: the next one
+        self.tracker.reset()
+        self._index = 0
+        self._agents: dict[int, _Agent] = {}
+        self._update_agents(first, dt_s=0.0)
+
+    def observe(self) -> Frame:
+        frame = self._current
+        logged = self._logged(frame)
+        driven = self._driven_state(frame.stamp_ns, logged)
+        mat = driven_from_logged(driven, logged)
+        sensors = {sid: _reexpress_sensor(data, mat) for sid, data in frame.sensors.items()}
+        objects = frame.ground_truth
+        if objects is not None:
+            objects = tuple(self._object(o, logged=logged, driven=driven) for o in objects)
+        return dataclasses.replace(
+            frame,
+            index=self._index,
+            sensors=sensors,
+            vehicle_state=driven,
+            ground_truth=objects,
+        )
+
+    @property
+    def dt_s(self) -> float:
+        """Seconds to the next frame (the log's own gap)."""
+        if self._next is None:
+            return 1.0 / self.rate_hz
+        return (self._next.stamp_ns - self._current.stamp_ns) / 1e9
+
+    def step(self, outputs: StageOutputs, dt_s: float) -> EgoCommand:
+        """Apply ``outputs`` and move on to the next frame, ``dt_s`` (= :attr:`dt_s`) later."""
+        if self._next is None:
+            msg = f"{self.log.path}: closed loop stepped past the last frame"
+            raise RuntimeError(msg)
+        if abs(dt_s - self.dt_s) > 1e-6:
+            msg = (
+                f"the log backend steps from frame to frame of the log ({self.dt_s:.6f} s), "
+                f"not by {dt_s:.6f} s"
+            )
+            raise ValueError(msg)
+        frame = self._current
+        model = self._ego.model
+        state = self._driven_state(frame.stamp_ns, self._logged(frame))
+        chosen = choose_command(
+            outputs,
+            state=state,
+            steer_rad=model.steer_rad,
+            tracker=self.tracker,
+            dt_s=dt_s,
+            stamp_ns=frame.stamp_ns,
+        )
+        if self.delay_steps:
+            self._acting, self._queued = self._queued, chosen.commands
+        else:
+            self._acting = chosen.commands
+        substeps = max(1, math.ceil(dt_s / _MAX_PHYSICS_DT_S - 1e-9))
+        for _ in range(substeps):
+            self._ego.apply(self._acting, dt_s / substeps)
+        self._current, self._next = self._next, next(self._frames, None)
+        self._index += 1
+        self._update_agents(self._current, dt_s=dt_s)
+        return chosen
+
+    @property
+    def done(self) -> bool:
+        return self._next is None
+
+    @property
+    def logged_state(self) -> VehicleState | None:
+        return self._logged(self._current)
+
+    @property
+    def time_ns(self) -> int:
+        return self._current.stamp_ns
+
+    def describe(self) -> dict[str, Any]:
+        smap = self.assembler.sensor_map
+        return {
+            "backend": "log",
+            "level": "object",
+            "log": str(Path(self.log.path)),
+            "agents": self.agents,
+            "rate_hz": self.rate_hz,
+            "duration_s": self.duration_s,
+            "pace_sensor": smap.driver,
+            "vehicle_state_topic": smap.vehicle_state_topic,
+            "ground_truth_topic": smap.ground_truth_topic,
+            "delay_steps": self.delay_steps,
+            "deviation_threshold_m": self.deviation_threshold_m,
+            "deviation_threshold_rad": self.deviation_threshold_rad,
+            "lane_half_width_m": self.lane_half_width_m if self.agents == "reactive" else None,
+            "sensors_reexpressed": "point clouds moved by the pose difference; images and "
+            "other payloads passed through unchanged",
+            "ego": {
+                "motion_model": "kinematic_bicycle",
+                "geometry": dataclasses.asdict(self.geometry),
+                "pedals": dataclasses.asdict(self.pedal),
+                "delay_steps": self.delay_steps,
+                "max_physics_dt_s": _MAX_PHYSICS_DT_S,
+            },
+            "tracker": self.tracker.describe(),
+        }
+
+    # -- frames and the ego -------------------------------------------------------------------
+
+    def _selected_frames(self) -> Iterator[Frame]:
+        """The log's frames with a pose, within ``duration_s``, on a ``1 / rate_hz`` clock: the
+        first frame at or after each tick (less a quarter period, for jitter), none between."""
+        period_ns = round(1e9 / self.rate_hz)
+        slack_ns = period_ns // 4
+        first_ns: int | None = None
+        due_ns = 0
+        for frame in self.assembler.frames():
+            if frame.vehicle_state is None:
+                continue
+            if first_ns is None:
+                first_ns = frame.stamp_ns
+            elif frame.stamp_ns < due_ns:
+                continue
+            elif self.duration_s is not None and frame.stamp_ns - first_ns > round(
+                self.duration_s * 1e9
+            ):
+                return
+            tick = (frame.stamp_ns - first_ns + slack_ns) // period_ns + 1
+            due_ns = first_ns + tick * period_ns - slack_ns
+            yield frame
+
+    def _logged(self, frame: Frame) -> VehicleState:
+        assert frame.vehicle_state is not None  # _selected_frames keeps only frames with one
+        return frame.vehicle_state
+
+    def _driven_state(self, stamp_ns: int, logged: VehicleState) -> VehicleState:
+        """The driven ego in the logged state's frame (its height taken from the log)."""
+        state = self._ego.state(stamp_ns)
+        position = state.position.copy()
+        position[2] = logged.position[2]
+        return dataclasses.replace(state, frame_id=logged.frame_id, position=position)
+
+    # -- agents -------------------------------------------------------------------------------
+
+    def _object(
+        self, obj: DetectedObject, *, logged: VehicleState, driven: VehicleState
+    ) -> DetectedObject:
+        agent = self._agents.get(obj.object_id) if self.agents == "reactive" else None
+        if agent is None:
+            return transform_object(driven_from_logged(driven, logged), obj)
+        # the agent where IDM has it along its logged path, in the driven base frame
+        x, y, yaw = agent.pose()
+        base_from_map = invert(_pose(driven))
+        center = base_from_map @ np.array([x, y, 0.0, 1.0])
+        yaw_base = math.remainder(yaw - driven.heading_rad, math.tau)
+        logged_base = transform_object(driven_from_logged(driven, logged), obj)
+        v = agent.speed_mps
+        velocity = base_from_map[:3, :3] @ np.array([v * math.cos(yaw), v * math.sin(yaw), 0.0])
+        orientation = logged_base.orientation.copy()
+        orientation[0] = yaw_base
+        box = dataclasses.replace(
+            logged_base.box,
+            center=np.array([center[0], center[1], logged_base.box.center[2]]),
+            yaw_rad=yaw_base,
+        )
+        return dataclasses.replace(logged_base, box=box, velocity=velocity, orientation=orientation)
+
+    def _update_agents(self, frame: Frame, *, dt_s: float) -> None:
+        """``reactive``: log the vehicles' new poses, then move each by IDM against the ego."""
+        if self.agents != "reactive" or frame.ground_truth is None:
+            return
+        logged = self._logged(frame)
+        map_from_base = _pose(logged)
+        seen: set[int] = set()
+        for obj in frame.ground_truth:
+            if obj.object_class is not ObjectClass.VEHICLE or obj.object_id < 0:
+                continue
+            seen.add(obj.object_id)
+            c = map_from_base @ np.array([obj.box.center[0], obj.box.center[1], 0.0, 1.0])
+            xy = np.array([c[0], c[1]])
+            yaw = math.remainder(obj.box.yaw_rad + logged.heading_rad, math.tau)
+            agent = self._agents.get(obj.object_id)
+            if agent is None:
+                speed = float(np.hypot(obj.velocity[0], obj.velocity[1]))
+                self._agents[obj.object_id] = _Agent(xy, yaw, speed)
+                continue
+            on_log = agent.s_m >= agent.path_s[-1]
+            agent.log(xy, yaw, dt_s)
+            self._idm_step(agent, length_m=float(obj.box.size[0]), dt_s=dt_s, on_log=on_log)
+        for gone in set(self._agents) - seen:
+            del self._agents[gone]  # shown only while the log has it
+
+    def _idm_step(self, agent: _Agent, *, length_m: float, dt_s: float, on_log: bool) -> None:
+        """Advance ``agent`` by ``dt_s``: IDM with the driven ego as leader when the ego is
+        ahead of it in its lane (gap below ``_INTERACTION_M``), else on its logged motion (or,
+        once held up, at its logged speed behind it) — never ahead of the log."""
+        x, y, yaw = agent.pose()
+        ego = self._ego.model
+        dx, dy = ego.x_m - x, ego.y_m - y
+        ahead = math.cos(yaw) * dx + math.sin(yaw) * dy
+        side = -math.sin(yaw) * dx + math.cos(yaw) * dy
+        # bumper to bumper: the agent's front (half its length ahead of its centre) to the ego's
+        # rear bumper (rear_overhang_m behind the rear axle)
+        gap = ahead - length_m / 2.0 - self.geometry.rear_overhang_m
+        blocked = ahead > 0.0 and abs(side) <= self.lane_half_width_m and gap < _INTERACTION_M
+        end = agent.path_s[-1]
+        if not blocked and on_log:
+            agent.s_m, agent.speed_mps = end, agent.logged_speed_mps  # exactly replayed
+            return
+        params = IdmParams(desired_speed_mps=max(agent.logged_speed_mps, 0.1))
+        if blocked:
+            lead = ego.speed_mps * math.cos(math.remainder(ego.yaw_rad - yaw, math.tau))
+            accel = idm_acceleration(params, agent.speed_mps, gap_m=gap, leader_speed_mps=lead)
+        else:
+            accel = idm_acceleration(params, agent.speed_mps)
+        accel = max(accel, -params.max_decel_mps2)
+        agent.speed_mps = max(0.0, agent.speed_mps + accel * dt_s)
+        agent.s_m = min(agent.s_m + agent.speed_mps * dt_s, end)
+        if agent.s_m >= end:  # caught up with the log: back on its logged motion
+            agent.speed_mps = agent.logged_speed_mps
