@@ -25,6 +25,7 @@ from typing import Any
 from redrive.algorithms import GROUND_TRUTH, VEHICLE_STATE
 from redrive.algorithms.discovery import load_algorithm_class
 from redrive.closedloop.mode import ClosedLoopMode
+from redrive.closedloop.simulator import Simulator
 from redrive.closedloop.synthetic import AgentMode, SyntheticSimulator
 from redrive.closedloop.tracker import LqrPidTracker
 from redrive.config import PipelineConfig
@@ -82,8 +83,12 @@ def run_closed_loop(
     on_start: Callable[[int | None], None] | None = None,
     progress: Callable[[int], None] | None = None,
     cancel: threading.Event | None = None,
+    wrap_simulator: Callable[[Simulator], Simulator] | None = None,
 ) -> RunReport:
     """Drive the scenario's ego with the pipeline's outputs into ``request.out``.
+
+    ``wrap_simulator`` (benchmarks) wraps the simulator the frame loop calls, e.g. to time its
+    ``observe`` and ``step``; it must delegate everything.
 
     Raises:
         ConfigError, PluginError: the pipeline does not fit (an algorithm reads a sensor the
@@ -143,7 +148,8 @@ def run_closed_loop(
     )
     writer = RunWriter(request.out, setup=setup)
     writer.write_map(scenario_road_map(scenario))
-    mode = ClosedLoopMode(simulator, write=writer.write_frame)
+    looped: Simulator = simulator if wrap_simulator is None else wrap_simulator(simulator)
+    mode = ClosedLoopMode(looped, write=writer.write_frame)
     if on_start is not None:
         on_start(math.floor(scenario.duration_s * request.rate_hz + 1e-9))
 
