@@ -289,3 +289,19 @@ def test_polyline_projection() -> None:
     np.testing.assert_allclose(lat, [1.0, -1.0, 0.0])
     np.testing.assert_allclose(dist, [1.0, 1.0, 3.0])
     np.testing.assert_allclose(line.points_at([25.0, -1.0]), [[10.0, 15.0], [-1.0, 0.0]])
+
+
+@pytest.mark.parametrize(
+    "values",
+    [
+        [3.0],
+        [2.0, 1.0, 1.0],
+        [1.0, math.inf, -math.inf],
+        [0.0, -0.0],
+        [4.0, math.nan, 1.0, math.nan],
+    ],
+)
+def test_first_min_chooses_as_numpy_argmin(values: list[float]) -> None:
+    from redrive.algorithms.reference.planner import _first_min
+
+    assert _first_min(values) == int(np.argmin(np.array(values)))

@@ -61,6 +61,30 @@ def test_route_projection_and_pose() -> None:
         assert d[0] == pytest.approx(d_true, abs=1e-3)
 
 
+def test_route_near_keeps_every_point_within_the_radius() -> None:
+    """Route.near is a cheap superset: whatever project() finds within the radius of the piece
+    passes, points far off are dropped (urban turns and highway curve, random points)."""
+    rng = np.random.default_rng(3)
+    routes = [
+        urban_network(UrbanLayout()).routes["west_north_0"],
+        highway_network(HighwayLayout()).routes["forward_0"],
+    ]
+    for route in routes:
+        for s_min in (0.0, 40.0, route.length_m / 2):
+            s_max = s_min + 80.0
+            x0, y0, _ = route.pose_at(s_min + 40.0)
+            on_route = [route.pose_at(s_min + k * 8.0, 0.4)[:2] for k in range(10)]
+            pts = np.concatenate(
+                [np.array(on_route), np.array([x0, y0]) + rng.uniform(-90.0, 90.0, size=(390, 2))]
+            )
+            radius = rng.uniform(0.5, 3.0, size=400)
+            _, lat = route.project(pts, s_min_m=s_min, s_max_m=s_max)
+            near = route.near(pts, s_min_m=s_min, s_max_m=s_max, radius_m=radius)
+            assert np.all(near[np.abs(lat) < radius])
+            assert np.all(near[:10])
+            assert not np.all(near)
+
+
 def test_raster_labels() -> None:
     net = urban_network(UrbanLayout())
     ground = rasterize(net)

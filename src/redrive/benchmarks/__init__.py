@@ -11,6 +11,8 @@ import contracts).
   large logs to run it on;
 - :mod:`~redrive.benchmarks.lidar` (``bench lidar``): the simulated LiDAR against Open3D;
 - :mod:`~redrive.benchmarks.engine` (``bench engine``): the engine against a bare loop;
+- :mod:`~redrive.benchmarks.closed_loop` (``bench closed-loop``): a closed-loop run, its
+  real-time factor and the split simulation / algorithms / other, against the world alone;
 - :mod:`~redrive.benchmarks.eval` (``bench eval``): nuScenes detection, vectorised against loops;
 - :mod:`~redrive.benchmarks.transport` (``bench transport``): the shared-memory channel against
   pipes, queues, ZeroMQ, eCAL and iceoryx2;

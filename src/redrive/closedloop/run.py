@@ -99,9 +99,13 @@ def run_closed_loop(
     on_start: Callable[[int | None], None] | None = None,
     progress: Callable[[int], None] | None = None,
     cancel: threading.Event | None = None,
+    wrap_simulator: Callable[[Simulator], Simulator] | None = None,
 ) -> RunReport:
     """Drive the ego of ``request.scenario`` — a scenario (backend ``synthetic``) or a recorded
     log (backend ``log``) — with the pipeline's outputs into ``request.out``.
+
+    ``wrap_simulator`` (benchmarks) wraps the simulator the frame loop calls, e.g. to time its
+    ``observe`` and ``step``; it must delegate everything.
 
     Raises:
         ConfigError, PluginError: the pipeline does not fit (an algorithm reads a sensor the
@@ -115,7 +119,9 @@ def run_closed_loop(
         )
         raise ConfigError(msg)
     if is_scenario(request.scenario):
-        return _run_scenario(request, on_start=on_start, progress=progress, cancel=cancel)
+        return _run_scenario(
+            request, on_start=on_start, progress=progress, cancel=cancel, wrap=wrap_simulator
+        )
     path = Path(request.scenario)
     if not path.exists():
         msg = (
@@ -124,7 +130,9 @@ def run_closed_loop(
         )
         raise ConfigError(msg)
     with open_log(path) as log:
-        return _run_log(request, log, on_start=on_start, progress=progress, cancel=cancel)
+        return _run_log(
+            request, log, on_start=on_start, progress=progress, cancel=cancel, wrap=wrap_simulator
+        )
 
 
 def _run_scenario(
@@ -133,6 +141,7 @@ def _run_scenario(
     on_start: Callable[[int | None], None] | None,
     progress: Callable[[int], None] | None,
     cancel: threading.Event | None,
+    wrap: Callable[[Simulator], Simulator] | None = None,
 ) -> RunReport:
     if request.sensor_map is not None:
         msg = "--sensor-map applies to a recorded log, not to a scenario; drop it"
@@ -173,6 +182,7 @@ def _run_scenario(
         on_start=on_start,
         progress=progress,
         cancel=cancel,
+        wrap=wrap,
     )
 
 
@@ -183,6 +193,7 @@ def _run_log(
     on_start: Callable[[int | None], None] | None,
     progress: Callable[[int], None] | None,
     cancel: threading.Event | None,
+    wrap: Callable[[Simulator], Simulator] | None = None,
 ) -> RunReport:
     if request.seed is not None:
         logger.debug("closed loop on a log: --seed seeds the algorithms only")
@@ -206,6 +217,7 @@ def _run_log(
         on_start=on_start,
         progress=progress,
         cancel=cancel,
+        wrap=wrap,
     )
 
 
@@ -220,6 +232,7 @@ def _drive(
     on_start: Callable[[int | None], None] | None,
     progress: Callable[[int], None] | None,
     cancel: threading.Event | None,
+    wrap: Callable[[Simulator], Simulator] | None = None,
 ) -> RunReport:
     """The part both backends share: the graph, the run directory, the frame loop."""
     inputs = LogInputs(
@@ -249,7 +262,8 @@ def _drive(
         },
     )
     writer = RunWriter(request.out, setup=setup)
-    mode = ClosedLoopMode(simulator, write=writer.write_frame)
+    looped: Simulator = simulator if wrap is None else wrap(simulator)
+    mode = ClosedLoopMode(looped, write=writer.write_frame)
     if road_map is not None:
         writer.write_map(road_map)
     if on_start is not None:

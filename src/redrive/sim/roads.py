@@ -13,6 +13,7 @@ network into the :class:`~redrive.sim.scene.GroundMap` of the scene.
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -210,6 +211,12 @@ class Route:
         self.stop_lines = tuple(stops)
         for arr in (self.points, self.s_m, self.heading_rad, self.curvature_1pm):
             arr.flags.writeable = False
+        # the same samples as Python floats: pose_at runs for every agent every physics step,
+        # where bisect and float arithmetic cost a fraction of numpy's per-call overhead
+        self._s_list: list[float] = self.s_m.tolist()
+        self._x_list: list[float] = self.points[:, 0].tolist()
+        self._y_list: list[float] = self.points[:, 1].tolist()
+        self._heading_list: list[float] = self.heading_rad.tolist()
 
     @property
     def length_m(self) -> float:
@@ -221,25 +228,44 @@ class Route:
         Positions are interpolated linearly between samples of the polyline (exact on straight
         lanes); beyond the ends the route is extended straight.
         """
-        s_arr = self.s_m
-        i = int(np.clip(np.searchsorted(s_arr, s_m, side="right") - 1, 0, len(s_arr) - 2))
+        s_arr, xs, ys, hs = self._s_list, self._x_list, self._y_list, self._heading_list
+        i = min(max(bisect.bisect_right(s_arr, s_m) - 1, 0), len(s_arr) - 2)
         ds = s_arr[i + 1] - s_arr[i]
         t = (s_m - s_arr[i]) / ds
-        p0, p1 = self.points[i], self.points[i + 1]
-        tx, ty = (p1[0] - p0[0]) / ds, (p1[1] - p0[1]) / ds
+        x0, y0 = xs[i], ys[i]
+        tx, ty = (xs[i + 1] - x0) / ds, (ys[i + 1] - y0) / ds
         norm = math.hypot(tx, ty)
-        heading = float(
-            self.heading_rad[i]
-            + min(max(t, 0.0), 1.0) * (self.heading_rad[i + 1] - self.heading_rad[i])
-        )
-        x = p0[0] + t * ds * tx - d_m * ty / norm
-        y = p0[1] + t * ds * ty + d_m * tx / norm
+        heading = float(hs[i] + min(max(t, 0.0), 1.0) * (hs[i + 1] - hs[i]))
+        x = x0 + t * ds * tx - d_m * ty / norm
+        y = y0 + t * ds * ty + d_m * tx / norm
         return float(x), float(y), heading
 
     def curvature_at(self, s_m: float) -> float:
         """Signed curvature (1/m) at ``s_m`` (of the sample before it)."""
         i = int(np.clip(np.searchsorted(self.s_m, s_m, side="right") - 1, 0, len(self.s_m) - 1))
         return float(self.curvature_1pm[i])
+
+    def _piece(self, s_min_m: float, s_max_m: float) -> tuple[int, int]:
+        """Sample indices ``lo < hi``: the segments ``lo … hi - 1`` cover ``[s_min_m, s_max_m]``."""
+        s_arr = self._s_list
+        last = len(s_arr) - 1
+        lo = min(max(bisect.bisect_right(s_arr, s_min_m) - 1, 0), last - 1)
+        hi = min(bisect.bisect_left(s_arr, s_max_m) + 1, last)
+        return lo, max(hi, lo + 1)
+
+    def near(
+        self, points_xy: npt.ArrayLike, *, s_min_m: float, s_max_m: float, radius_m: npt.ArrayLike
+    ) -> npt.NDArray[np.bool_]:
+        """A cheap superset test: False where a point is certainly farther than ``radius_m`` (per
+        point, or one for all) from the route piece ``[s_min_m, s_max_m]`` — outside the piece's
+        bounding box grown by the radius.  :meth:`project` only the points that pass."""
+        pts = np.asarray(points_xy, dtype=np.float64).reshape(-1, 2)
+        lo, hi = self._piece(s_min_m, s_max_m)
+        piece = self.points[lo : hi + 1]
+        low, high = piece.min(axis=0), piece.max(axis=0)
+        outside = np.maximum(np.maximum(low - pts, pts - high), 0.0)
+        reach = np.asarray(radius_m, dtype=np.float64) + 1e-6  # rounding: keep borderline points
+        return np.asarray((outside**2).sum(axis=1) < reach**2)
 
     def project(
         self, points_xy: npt.ArrayLike, *, s_min_m: float, s_max_m: float
@@ -250,10 +276,7 @@ class Route:
         Points beyond the piece project onto its ends (with their true distance).
         """
         pts = np.asarray(points_xy, dtype=np.float64).reshape(-1, 2)
-        last = len(self.s_m) - 1
-        lo = min(max(int(np.searchsorted(self.s_m, s_min_m, side="right")) - 1, 0), last - 1)
-        hi = min(int(np.searchsorted(self.s_m, s_max_m, side="left")) + 1, last)
-        hi = max(hi, lo + 1)
+        lo, hi = self._piece(s_min_m, s_max_m)
         a = self.points[lo:hi]
         seg = self.points[lo + 1 : hi + 1] - a
         seg_len = self.s_m[lo + 1 : hi + 1] - self.s_m[lo:hi]

@@ -423,24 +423,41 @@ class IdmPlanner(Algorithm):
         t_out = np.arange(n + 1, dtype=np.float64) * dt
         s_out = np.zeros(n + 1)
         s, v = 0.0, max(speed_mps, 0.0)
+        # the few leaders as Python floats: two numpy calls per step on (≤ a handful of) leaders
+        # cost more than the arithmetic; the same float64 operations in the same order, and
+        # _first_min chooses as np.argmin does
+        lead_s, lead_v = leaders_s.tolist(), leaders_v.tolist()
+        ids = range(len(lead_s))
+        front = self.front_offset_m
         for k in range(n):
             t = k * dt
             gap, v_lead, j = math.inf, 0.0, -1
-            if len(leaders_s):
-                gaps = leaders_s + leaders_v * t - (s + self.front_offset_m)
-                j = int(np.argmin(gaps))
-                gap, v_lead = float(gaps[j]), float(leaders_v[j])
+            if lead_s:
+                gaps = [lead_s[i] + lead_v[i] * t - (s + front) for i in ids]
+                j = _first_min(gaps)
+                gap, v_lead = gaps[j], lead_v[j]
             accel = self._idm(v, gap, v_lead)
             if v + accel * dt < 0.0:  # stops within the step
                 s_new, v_new = s - v * v / (2.0 * accel), 0.0
             else:
                 s_new, v_new = s + v * dt + 0.5 * accel * dt * dt, v + accel * dt
             if j >= 0:  # never closer than s0 to any obstacle
-                limits = leaders_s + leaders_v * (t + dt) - self.front_offset_m - self.s0_m
-                jj = int(np.argmin(limits))
-                limit = max(float(limits[jj]), s)
+                limits = [lead_s[i] + lead_v[i] * (t + dt) - front - self.s0_m for i in ids]
+                jj = _first_min(limits)
+                limit = max(limits[jj], s)
                 if s_new > limit:
-                    s_new, v_new = limit, min(v_new, float(leaders_v[jj]))
+                    s_new, v_new = limit, min(v_new, lead_v[jj])
             s, v = s_new, v_new
             s_out[k + 1] = s
         return t_out, s_out
+
+
+def _first_min(values: list[float]) -> int:
+    """The index np.argmin gives: the first NaN if there is one, else the first minimum."""
+    best = 0
+    for i, value in enumerate(values):
+        if math.isnan(value):
+            return i
+        if value < values[best]:
+            best = i
+    return best

@@ -1,0 +1,278 @@
+"""``redrive bench closed-loop``: a closed-loop run against the world stepping alone.
+
+Measured in the same run, interleaved, ``repeats`` times each:
+
+- *closed loop*: :func:`redrive.closedloop.run.run_closed_loop` on a scenario (default: ``urban``,
+  20 s, object level) with noisy-oracle → idm-planner → pure-pursuit-pid, results written to a
+  run directory as ``redrive run SCENARIO --closed-loop`` does.  Its wall time (the engine's frame
+  loop, as the CLI's real-time factor) is split into *simulation* (the simulator's ``observe`` and
+  ``step``, timed around each call), *algorithms* (the sum of the step latencies of the run's
+  steps table) and *other* (the rest: the engine's records, the results writer, the mode);
+- *baseline*: the same scenario's :class:`~redrive.sim.world.World` stepped alone, with its
+  scripted driver, frame by frame to the same end — the cost floor of the simulation.  The
+  closed loop steps two such worlds (the expert one that gives the logged ego and, for replayed
+  agents, the objects; and the one the commands drive), so its simulation share cannot be less
+  than about twice the baseline.
+
+The real-time factor is simulated seconds over wall seconds.  ``level="sensor"`` re-renders the
+scenario's rig every step (and the reference pipeline reads the LiDAR); the split then counts
+the rendering in *simulation*.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import statistics
+import tempfile
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pyarrow.compute as pc
+
+from redrive.algorithms import StageOutputs
+from redrive.closedloop.run import ClosedLoopRequest, run_closed_loop
+from redrive.closedloop.simulator import EgoCommand, Simulator
+from redrive.config import PipelineConfig, pipeline_from_plugins, reference_pipeline
+from redrive.errors import ConfigError
+from redrive.results import open_run
+from redrive.sim.scenario import load_scenario
+from redrive.sim.world import World
+from redrive.types import Frame, VehicleState
+
+__all__ = [
+    "LEVELS",
+    "OBJECT_LEVEL_TARGET",
+    "SENSOR_LEVEL_TARGET",
+    "ClosedLoopBenchResult",
+    "TimedSimulator",
+    "bench_closed_loop",
+    "closed_loop_pipeline",
+]
+
+#: the issue's targets (× real time): object level, and sensor level on 2 cores
+OBJECT_LEVEL_TARGET = 100.0
+SENSOR_LEVEL_TARGET = 1.0
+LEVELS = ("object", "sensor")
+
+
+def closed_loop_pipeline(level: str = "object") -> PipelineConfig:
+    """Object level: noisy-oracle → idm-planner → pure-pursuit-pid (ground truth in, the issue's
+    reference loop); sensor level: the reference pipeline on the rendered LiDAR
+    (cluster-detector → kalman-tracker → idm-planner → pure-pursuit-pid). Sequential."""
+    if level == "sensor":
+        return reference_pipeline().with_options(mode="sequential")
+    return pipeline_from_plugins(
+        perception=("noisy-oracle",), planning=("idm-planner",), control=("pure-pursuit-pid",)
+    ).with_options(mode="sequential")
+
+
+class TimedSimulator:
+    """Delegates to a :class:`~redrive.closedloop.simulator.Simulator`, adding the wall time of
+    every ``observe`` and ``step`` to :attr:`seconds`."""
+
+    def __init__(self, inner: Simulator) -> None:
+        self.inner = inner
+        self.seconds = 0.0
+        self.sensors = inner.sensors
+        self.has_vehicle_state = inner.has_vehicle_state
+        self.has_ground_truth = inner.has_ground_truth
+        self.dt_s = inner.dt_s
+
+    def reset(self, seed: int) -> None:
+        self.inner.reset(seed)
+
+    def observe(self) -> Frame:
+        t0 = time.perf_counter()
+        frame = self.inner.observe()
+        self.seconds += time.perf_counter() - t0
+        return frame
+
+    def step(self, outputs: StageOutputs, dt_s: float) -> EgoCommand:
+        t0 = time.perf_counter()
+        command = self.inner.step(outputs, dt_s)
+        self.seconds += time.perf_counter() - t0
+        return command
+
+    @property
+    def done(self) -> bool:
+        return self.inner.done
+
+    @property
+    def logged_state(self) -> VehicleState | None:
+        return self.inner.logged_state
+
+    def describe(self) -> dict[str, Any]:
+        return self.inner.describe()
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ClosedLoopBenchResult:
+    """Medians over repeats (seconds per whole run) and every pass.
+
+    Attributes:
+        scenario, level, duration_s, frames: what ran.
+        wall_s: the closed loop's frame loop (the engine's wall time).
+        total_s: the whole ``run_closed_loop`` call (plus building both worlds, the road map,
+            closing the run directory).
+        simulation_s, algorithms_s, other_s: the split of ``wall_s``.
+        baseline_s: one world stepped alone with its scripted driver to the same end.
+        algorithm_ms: mean step latency per algorithm (ms), of the median pass.
+    """
+
+    scenario: str
+    level: str
+    duration_s: float
+    frames: int
+    repeats: int
+    wall_s: float
+    total_s: float
+    simulation_s: float
+    algorithms_s: float
+    other_s: float
+    baseline_s: float
+    algorithm_ms: Mapping[str, float]
+    passes: Mapping[str, list[float]]
+
+    @property
+    def realtime_factor(self) -> float:
+        """Simulated seconds per wall second of the frame loop."""
+        return self.duration_s / self.wall_s
+
+    @property
+    def baseline_realtime_factor(self) -> float:
+        return self.duration_s / self.baseline_s
+
+    @property
+    def ratio(self) -> float:
+        """Closed-loop wall time over the world stepping alone (≥ 2: it steps two worlds)."""
+        return self.wall_s / self.baseline_s
+
+    @property
+    def target(self) -> float:
+        return OBJECT_LEVEL_TARGET if self.level == "object" else SENSOR_LEVEL_TARGET
+
+    def share(self, part: str) -> float:
+        """``simulation``, ``algorithms`` or ``other`` as a fraction of the frame loop."""
+        value: float = getattr(self, f"{part}_s")
+        return value / self.wall_s
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "scenario": self.scenario,
+            "level": self.level,
+            "duration_s": self.duration_s,
+            "frames": self.frames,
+            "repeats": self.repeats,
+            "wall_s": self.wall_s,
+            "total_s": self.total_s,
+            "realtime_factor": self.realtime_factor,
+            "target": self.target,
+            "split_s": {
+                "simulation": self.simulation_s,
+                "algorithms": self.algorithms_s,
+                "other": self.other_s,
+            },
+            "baseline_s": self.baseline_s,
+            "baseline_realtime_factor": self.baseline_realtime_factor,
+            "ratio_to_baseline": self.ratio,
+            "algorithm_ms": dict(self.algorithm_ms),
+            "passes": {k: list(v) for k, v in self.passes.items()},
+        }
+
+
+def _world_alone(scenario_name: str, duration_s: float, rate_hz: float) -> float:
+    """Step one world with its scripted driver frame by frame to the closed loop's end."""
+    scenario = dataclasses.replace(load_scenario(scenario_name), duration_s=duration_s)
+    world = World(scenario)
+    dt_ns = round(1e9 / rate_hz)
+    end_ns = scenario.start_stamp_ns + round(duration_s * 1e9)
+    t0 = time.perf_counter()
+    while world.time_ns + dt_ns <= end_ns:
+        world.objects()  # what a frame is made of: the objects and the ego state
+        world.ego_state()
+        world.step_to(world.time_ns + dt_ns)
+    return time.perf_counter() - t0
+
+
+def _closed_loop(
+    scenario: str, duration_s: float, out: Path, pipeline: PipelineConfig, level: str
+) -> dict[str, Any]:
+    timed: list[TimedSimulator] = []
+
+    def wrap(sim: Simulator) -> Simulator:
+        timed.append(TimedSimulator(sim))
+        return timed[-1]
+
+    request = ClosedLoopRequest(
+        scenario=scenario,
+        pipeline=pipeline,
+        out=out,
+        duration_s=duration_s,
+        level="sensor" if level == "sensor" else "object",
+    )
+    t0 = time.perf_counter()
+    report = run_closed_loop(request, wrap_simulator=wrap)
+    total = time.perf_counter() - t0
+    steps = open_run(out).table("steps")
+    algorithms_s = int(pc.sum(steps.column("latency_ns")).as_py() or 0) / 1e9
+    return {
+        "wall": report.wall_s,
+        "total": total,
+        "simulation": timed[0].seconds,
+        "algorithms": algorithms_s,
+        "other": report.wall_s - timed[0].seconds - algorithms_s,
+        "frames": report.frames,
+        "span": report.log_span_s,
+        "algorithm_ms": {a.name: a.latency_mean_ms for a in report.algorithms},
+    }
+
+
+def bench_closed_loop(
+    *,
+    scenario: str = "urban",
+    duration_s: float = 20.0,
+    level: str = "object",
+    repeats: int = 3,
+    pipeline: PipelineConfig | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> ClosedLoopBenchResult:
+    """Run the closed loop and the world alone ``repeats`` times each, interleaved."""
+    if level not in LEVELS:
+        msg = f"closed-loop level {level!r} is not one of {', '.join(LEVELS)}"
+        raise ConfigError(msg)
+    pipeline = pipeline or closed_loop_pipeline(level)
+    passes: dict[str, list[float]] = {
+        k: [] for k in ("wall", "total", "simulation", "algorithms", "other", "baseline")
+    }
+    runs: list[dict[str, Any]] = []
+    with tempfile.TemporaryDirectory(prefix="redrive-bench-closed-loop-") as tmp:
+        for r in range(repeats):
+            if progress is not None:
+                progress(f"pass {r + 1}/{repeats}: world alone")
+            passes["baseline"].append(_world_alone(scenario, duration_s, 10.0))
+            if progress is not None:
+                progress(f"pass {r + 1}/{repeats}: closed loop")
+            run = _closed_loop(scenario, duration_s, Path(tmp) / f"run{r}", pipeline, level)
+            runs.append(run)
+            for key in ("wall", "total", "simulation", "algorithms", "other"):
+                passes[key].append(float(run[key]))
+    med = {k: statistics.median(v) for k, v in passes.items()}
+    middle = sorted(runs, key=lambda run: float(run["wall"]))[len(runs) // 2]
+    return ClosedLoopBenchResult(
+        scenario=scenario,
+        level=level,
+        duration_s=float(middle["span"]),
+        frames=int(middle["frames"]),
+        repeats=repeats,
+        wall_s=med["wall"],
+        total_s=med["total"],
+        simulation_s=med["simulation"],
+        algorithms_s=med["algorithms"],
+        other_s=med["other"],
+        baseline_s=med["baseline"],
+        algorithm_ms=dict(middle["algorithm_ms"]),
+        passes=passes,
+    )
