@@ -48,8 +48,8 @@ import numpy.typing as npt
 
 from redrive.algorithms import StageOutputs
 from redrive.closedloop.mode import DEFAULT_DEVIATION_M, DEFAULT_DEVIATION_RAD
-from redrive.closedloop.simulator import EgoCommand, PathFollower, choose_command
-from redrive.closedloop.synthetic import AGENT_MODES, AgentMode
+from redrive.closedloop.simulator import EgoCommand, PathFollower, check_options, choose_command
+from redrive.closedloop.synthetic import AgentMode
 from redrive.errors import ConfigError
 from redrive.geometry import invert, transform_object
 from redrive.io import LogReader
@@ -211,15 +211,7 @@ class LogSimulator:
         deviation_threshold_rad: float = DEFAULT_DEVIATION_RAD,
         lane_half_width_m: float = 1.75,
     ) -> None:
-        if agents not in AGENT_MODES:
-            msg = f"--agents must be one of {', '.join(AGENT_MODES)}, got {agents!r}"
-            raise ConfigError(msg)
-        if not rate_hz > 0:
-            msg = f"the closed-loop rate must be > 0 Hz, got {rate_hz}"
-            raise ConfigError(msg)
-        if delay_steps not in (0, 1):
-            msg = f"the actuation delay is 0 or 1 frame, got {delay_steps}"
-            raise ConfigError(msg)
+        check_options(agents=agents, rate_hz=rate_hz, delay_steps=delay_steps)
         refuse_unfit_log(log, agents=agents)
         smap = infer_sensor_map(
             log.topics, duration_ns=log.end_ns - log.start_ns, overrides=overrides

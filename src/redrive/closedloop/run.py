@@ -35,15 +35,13 @@ from redrive.closedloop.synthetic import AgentMode, Level, SyntheticSimulator
 from redrive.closedloop.tracker import LqrPidTracker
 from redrive.config import PipelineConfig
 from redrive.engine.graph import LogInputs, build_graph
-from redrive.engine.run import execute, log_fingerprint
+from redrive.engine.run import execute, log_fingerprint, run_setup
 from redrive.engine.stats import RunReport
 from redrive.errors import ConfigError
 from redrive.io import LogReader, open_log
 from redrive.io.sensor_map import load_sensor_map_overrides
 from redrive.results import (
     FrameRecord,
-    PipelineInfo,
-    RunSetup,
     RunWriter,
     SourceLog,
 )
@@ -242,19 +240,12 @@ def _drive(
     )
     graph = build_graph(request.pipeline, inputs)
     pipeline = request.pipeline
-    setup = RunSetup(
+    setup = run_setup(
+        request.pipeline,
+        graph,
+        inputs,
         log=source,
-        sensors=dict(inputs.sensors),
-        seed=pipeline.seed,
-        pipeline=PipelineInfo(
-            mode=pipeline.mode,
-            executor=pipeline.executor,
-            step_timeout_s=pipeline.step_timeout_s,
-            fail_fast=pipeline.fail_fast,
-            stages=tuple(name for name, _ in graph.stages),
-            mode_manager="closed_loop",
-        ),
-        algorithms=tuple(p.manifest_entry() for p in graph.algorithms),
+        mode="closed_loop",
         closed_loop={
             **described,
             "deviation_threshold_m": DEFAULT_DEVIATION_M,

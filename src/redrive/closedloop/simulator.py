@@ -22,9 +22,37 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 from redrive.algorithms import StageOutputs
+from redrive.errors import ConfigError
 from redrive.types import ControlCommands, Frame, PlannedPath, Role, VehicleState
 
-__all__ = ["EgoCommand", "PathFollower", "Simulator", "choose_command"]
+__all__ = [
+    "AGENT_MODES",
+    "EgoCommand",
+    "PathFollower",
+    "Simulator",
+    "check_options",
+    "choose_command",
+]
+
+#: how the other road users behave: replay their log/script, or react to the driven ego.
+AGENT_MODES = ("replay", "reactive")
+
+
+def check_options(*, agents: str, rate_hz: float, delay_steps: int) -> None:
+    """The options every backend takes.
+
+    Raises:
+        ConfigError: an unknown agents mode, a rate that is not > 0, a delay other than 0 or 1.
+    """
+    if agents not in AGENT_MODES:
+        msg = f"--agents must be one of {', '.join(AGENT_MODES)}, got {agents!r}"
+        raise ConfigError(msg)
+    if not rate_hz > 0:
+        msg = f"the closed-loop rate must be > 0 Hz, got {rate_hz}"
+        raise ConfigError(msg)
+    if delay_steps not in (0, 1):
+        msg = f"the actuation delay is 0 or 1 frame, got {delay_steps}"
+        raise ConfigError(msg)
 
 
 class Simulator(Protocol):

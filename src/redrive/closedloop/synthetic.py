@@ -33,7 +33,13 @@ from typing import Any, Literal
 
 from redrive.algorithms import StageOutputs
 from redrive.closedloop.sensors import FrameSensors, LockstepWorlds, warmup_ns
-from redrive.closedloop.simulator import EgoCommand, PathFollower, choose_command
+from redrive.closedloop.simulator import (
+    AGENT_MODES,
+    EgoCommand,
+    PathFollower,
+    check_options,
+    choose_command,
+)
 from redrive.errors import ConfigError
 from redrive.sim.ego import ActuatedEgo, BicycleModel, PedalModel
 from redrive.sim.rig import rig_from_mapping
@@ -45,7 +51,6 @@ from redrive.types import ControlCommands, Frame, SensorType, VehicleState
 
 __all__ = ["AGENT_MODES", "LEVELS", "SyntheticSimulator"]
 
-AGENT_MODES = ("replay", "reactive")
 AgentMode = Literal["replay", "reactive"]
 LEVELS = ("object", "sensor")
 Level = Literal["object", "sensor"]
@@ -81,15 +86,7 @@ class SyntheticSimulator:
         if level not in LEVELS:
             msg = f"the closed-loop level is one of {', '.join(LEVELS)}, got {level!r}"
             raise ConfigError(msg)
-        if agents not in AGENT_MODES:
-            msg = f"--agents must be one of {', '.join(AGENT_MODES)}, got {agents!r}"
-            raise ConfigError(msg)
-        if not rate_hz > 0:
-            msg = f"the closed-loop rate must be > 0 Hz, got {rate_hz}"
-            raise ConfigError(msg)
-        if delay_steps not in (0, 1):
-            msg = f"the actuation delay is 0 or 1 frame, got {delay_steps}"
-            raise ConfigError(msg)
+        check_options(agents=agents, rate_hz=rate_hz, delay_steps=delay_steps)
         self.scenario = scenario
         self.tracker = tracker
         self.agents: AgentMode = agents

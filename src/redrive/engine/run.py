@@ -43,6 +43,7 @@ __all__ = [
     "log_inputs",
     "run_log",
     "run_reader",
+    "run_setup",
 ]
 
 logger = logging.getLogger(__name__)
@@ -131,7 +132,31 @@ def _select(frames: Iterator[Frame], first: int | None, stop: int | None) -> Ite
 def _setup(
     request: RunRequest, graph: StageGraph, inputs: LogInputs, *, log: SourceLog, mode: str
 ) -> RunSetup:
-    pipeline = request.pipeline
+    return run_setup(
+        request.pipeline,
+        graph,
+        inputs,
+        log=log,
+        mode=mode,
+        first_frame=request.first_frame,
+        stop_frame=request.stop_frame,
+        rate=request.rate,
+    )
+
+
+def run_setup(
+    pipeline: PipelineConfig,
+    graph: StageGraph,
+    inputs: LogInputs,
+    *,
+    log: SourceLog,
+    mode: str,
+    first_frame: int | None = None,
+    stop_frame: int | None = None,
+    rate: float | None = None,
+    closed_loop: Mapping[str, Any] | None = None,
+) -> RunSetup:
+    """What the manifest records of a run before its first frame (every mode builds it here)."""
     return RunSetup(
         log=log,
         sensors=dict(inputs.sensors),
@@ -141,13 +166,14 @@ def _setup(
             executor=pipeline.executor,
             step_timeout_s=pipeline.step_timeout_s,
             fail_fast=pipeline.fail_fast,
-            first_frame=request.first_frame,
-            stop_frame=request.stop_frame,
-            rate=request.rate,
+            first_frame=first_frame,
+            stop_frame=stop_frame,
+            rate=rate,
             stages=tuple(name for name, _ in graph.stages),
             mode_manager=mode,
         ),
         algorithms=tuple(p.manifest_entry() for p in graph.algorithms),
+        closed_loop=dict(closed_loop or {}),
     )
 
 
