@@ -1,5 +1,6 @@
 """Planners for closed-loop tests: one that never moves, one that returns NaNs, one that plans
-straight ahead at a fixed speed whatever is in the way."""
+straight ahead at a fixed speed whatever is in the way; a perception that keeps the clouds it
+was given."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from redrive.algorithms import Algorithm, Role, StageOutputs
-from redrive.types import Frame, PlannedPath
+from redrive.types import DetectedObject, Frame, PlannedPath, PointCloud
 
 
 def _straight(stamp_ns: int, speed_mps: float, horizon_s: float = 6.0) -> PlannedPath:
@@ -104,3 +105,20 @@ class LoggedPathFollower(Algorithm):
         return PlannedPath(
             stamp_ns=frame.stamp_ns, waypoints=np.column_stack([x, y, np.zeros_like(t), t])
         )
+
+
+#: frame index → the ``lidar_top`` cloud :class:`LidarWitness` was given (threads executor).
+SEEN_CLOUDS: dict[int, PointCloud] = {}
+
+
+class LidarWitness(Algorithm):
+    """Detects nothing; keeps each frame's ``lidar_top`` cloud in :data:`SEEN_CLOUDS`."""
+
+    role = Role.PERCEPTION
+    inputs = ("lidar_top",)
+
+    def step(self, frame: Frame, upstream: StageOutputs) -> tuple[DetectedObject, ...]:
+        cloud = frame.sensors["lidar_top"].data
+        assert isinstance(cloud, PointCloud)
+        SEEN_CLOUDS[frame.index] = cloud
+        return ()

@@ -19,14 +19,22 @@ from redrive.cli.main import main
 from redrive.closedloop.run import ClosedLoopRequest, run_closed_loop
 from redrive.closedloop.synthetic import SyntheticSimulator
 from redrive.closedloop.tracker import LqrPidTracker
-from redrive.config import reference_pipeline
-from redrive.errors import ConfigError
+from redrive.config import pipeline_from_plugins, reference_pipeline
+from redrive.errors import ConfigError, SimulationError
 from redrive.io import open_log
 from redrive.io.decoders import decode
 from redrive.io.frames import FrameAssembler
+from redrive.io.writer import McapWriter
 from redrive.results import RunStatus, open_run
+from redrive.sim.rig import rig_from_mapping
 from redrive.sim.scenario import Scenario, load_scenario
-from redrive.sim.synth import synthesize
+from redrive.sim.synth import (
+    EGO_STATE_TOPIC,
+    GROUND_TRUTH_TOPIC,
+    camera_info_topic,
+    sensor_topic,
+    synthesize,
+)
 from redrive.types import (
     ControlCommands,
     Frame,
@@ -38,6 +46,7 @@ from redrive.types import (
     SensorData,
     SensorType,
 )
+from tests.closedloop import plugins
 
 # Every sensor kind, a 16-beam LiDAR and a small camera keep it quick.
 SMALL_RIG: dict[str, Any] = {
@@ -322,3 +331,74 @@ def test_level_is_checked() -> None:
         "lidar_2d": SensorType.LIDAR_2D,
         "lidar_top": SensorType.LIDAR,
     }
+
+
+def test_a_sensor_level_run_records_what_its_algorithms_saw(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    plugins.SEEN_CLOUDS.clear()
+    pipeline = pipeline_from_plugins(
+        perception=["tests.closedloop.plugins:LidarWitness"], planning=["idm-planner"]
+    )
+    report = run_closed_loop(
+        ClosedLoopRequest(
+            scenario="cut_in", pipeline=pipeline, out=out, duration_s=2.0, level="sensor"
+        )
+    )
+    assert report.status is RunStatus.COMPLETE
+    run = open_run(out)
+    assert run.manifest.closed_loop["sensor_log"] == "sensors.mcap"
+    frames = sorted(run.ego())
+    assert frames == list(range(19))  # 0.1 s … 1.9 s
+    scenario = load_scenario("cut_in")
+    rig = rig_from_mapping(scenario.rig, source=scenario.source)
+    with open_log(out / "sensors.mcap") as log:
+        topics = set(log.topics)
+        expected = {sensor_topic(s) for s in rig} | {"/tf", "/tf_static"}
+        expected |= {camera_info_topic(s) for s in rig.of_kind(SensorType.CAMERA)}
+        assert expected | {EGO_STATE_TOPIC, GROUND_TRUTH_TOPIC} <= topics
+        lidar = sensor_topic(rig.of_kind(SensorType.LIDAR)[0])
+        assert abs(log.topics[lidar].count - len(frames)) <= 1
+        first = next(iter(log.messages(topics=[lidar])))
+        cloud = decode(first, log.deserialize).value
+    assert isinstance(cloud, PointCloud)
+    seen = plugins.SEEN_CLOUDS[0]
+    assert len(seen) > 1000
+    np.testing.assert_array_equal(cloud.xyz, seen.xyz)
+    for name, values in seen.channels.items():
+        np.testing.assert_array_equal(cloud.channels[name], values)
+
+
+def test_a_failed_run_leaves_a_recording_that_opens(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+
+    def interrupt(done: int) -> None:
+        if done == 3:
+            msg = "the progress display broke"
+            raise RuntimeError(msg)
+
+    with pytest.raises(RuntimeError, match="display broke"):
+        run_closed_loop(
+            ClosedLoopRequest(
+                scenario="cut_in",
+                pipeline=pipeline_from_plugins(planning=["idm-planner"]),
+                out=out,
+                duration_s=2.0,
+                level="sensor",
+            ),
+            progress=interrupt,
+        )
+    run = open_run(out)
+    assert run.manifest.status is RunStatus.FAILED
+    with open_log(out / "sensors.mcap") as log:
+        assert 3 <= log.topics["/lidar_top"].count <= 5  # rendered up to the interruption
+        assert next(iter(log.messages(topics=["/tf_static"]))).log_time_ns == log.start_ns
+
+
+def test_recording_is_for_a_sensor_level_run_from_its_start(tmp_path: Path) -> None:
+    objects = SyntheticSimulator(_small("cut_in", 1.0), tracker=LqrPidTracker())
+    with pytest.raises(ConfigError, match="object-level"):
+        objects.record_sensors(McapWriter(tmp_path / "a.mcap"))
+    sim = SyntheticSimulator(_small("cut_in", 1.0), tracker=LqrPidTracker(), level="sensor")
+    sim.observe()
+    with pytest.raises(SimulationError, match="before the first frame"):
+        sim.record_sensors(McapWriter(tmp_path / "b.mcap"))

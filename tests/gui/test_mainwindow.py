@@ -302,3 +302,33 @@ def test_a_closed_loop_run_says_what_the_gui_can_show(
     assert "closed-loop run of 'scenario:cut_in'" in window.last_error
     assert f"redrive report {out}" in window.last_error
     assert window.run is not None  # its outputs are loaded all the same
+
+
+def test_a_sensor_level_closed_loop_run_opens_over_its_rendered_sensors(
+    qtbot: Any, window: MainWindow, tmp_path: Path
+) -> None:
+    from redrive.closedloop.run import ClosedLoopRequest, run_closed_loop
+    from redrive.config import pipeline_from_plugins
+
+    out = tmp_path / "closed"
+    pipeline = pipeline_from_plugins(planning=["idm-planner"])
+    run_closed_loop(
+        ClosedLoopRequest(
+            scenario="cut_in", pipeline=pipeline, out=out, duration_s=1.0, level="sensor"
+        )
+    )
+    _open(qtbot, window, out)
+    assert window.summary is not None
+    assert window.summary.path == out / "sensors.mcap"
+    assert window.run is not None
+    assert window.scene is not None
+    assert window.scene.point_count > 10_000  # the sweep rendered from the driven ego
+    # The run's first frame (0.1 s: after the first sweep) is the recording's frame of its
+    # stamp; there the run's outputs are drawn over the rendered sensors.
+    first = window.run.frames[0]
+    _show(qtbot, window, 1)
+    assert window.scene.stamp_ns == window.run.stamps_ns[first]
+    assert window.run.frame_at(window.scene.stamp_ns) == first
+    assert window.scene.path is not None  # the planner's path of that frame
+    assert window.scene.point_count > 10_000
+    assert {"ground truth", "ego"} <= {layer.name for layer in window.scene.layers}

@@ -40,7 +40,8 @@ on from where it puts the car.  Frames are object-level (the true ego state and 
 objects: use a perception that reads ground truth, e.g. noisy-oracle); with --sensors they also
 carry the scenario's rig (LiDAR, camera, IMU, GNSS) rendered from the driven ego, as a replay of
 its `redrive synth` log would, each LiDAR's last finished sweep in a frame (the first frame comes
-one sweep after the start).  --agents replay (default) keeps the other road users on their
+one sweep after the start), and OUT/sensors.mcap records them (`redrive gui OUT` and Foxglove
+open it).  --agents replay (default) keeps the other road users on their
 scripted paths, --agents reactive lets them react to the ego.  --seed seeds the scenario too.
 
 Closed loop on a recorded log (LOG with the ego's pose: odometry or poses): the ego starts at the
@@ -342,7 +343,10 @@ def register(sub: Any) -> None:
     parser.add_argument(
         "--sensors",
         action="store_true",
-        help="closed loop: render the scenario's sensors from the driven ego (sensor level)",
+        help=(
+            "closed loop: render the scenario's sensors from the driven ego (sensor level); "
+            "they are recorded in OUT/sensors.mcap"
+        ),
     )
     parser.add_argument(
         "--duration",

@@ -13,6 +13,12 @@ manifest's pipeline has ``mode_manager = "closed_loop"``, and the simulator's de
 (backend ``synthetic`` or ``log``, agents, ego limits, tracker and gains, deviation thresholds)
 is under ``closed_loop``.  A log run's source is the log's usual fingerprint (path, sha256), so
 ``compare`` pairs runs of the same log.
+
+A sensor-level run records the rendered rig in ``RUN/sensors.mcap`` (:data:`SENSOR_LOG`): every
+message of the closed-loop world's sensors — the topics ``redrive synth`` writes — as the
+algorithms saw them; the manifest's ``closed_loop.sensor_log`` names it (relative to the run),
+so the GUI and Foxglove open the run over it.  The file is closed with the run, also when the run
+fails or is interrupted (it then holds what was rendered so far).
 """
 
 from __future__ import annotations
@@ -40,6 +46,7 @@ from redrive.engine.stats import RunReport
 from redrive.errors import ConfigError
 from redrive.io import LogReader, open_log
 from redrive.io.sensor_map import load_sensor_map_overrides
+from redrive.io.writer import McapWriter
 from redrive.results import (
     FrameRecord,
     RunWriter,
@@ -49,9 +56,12 @@ from redrive.sim.roadmap import scenario_road_map
 from redrive.sim.scenario import list_scenarios, load_scenario
 from redrive.types import RoadMap, SensorType
 
-__all__ = ["ClosedLoopRequest", "is_scenario", "run_closed_loop"]
+__all__ = ["SENSOR_LOG", "ClosedLoopRequest", "is_scenario", "run_closed_loop"]
 
 logger = logging.getLogger(__name__)
+
+#: The recording of a sensor-level run's rendered sensors, in the run directory.
+SENSOR_LOG = "sensors.mcap"
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -166,6 +176,8 @@ def _run_scenario(
         source=scenario.name,
     )
     described = {**simulator.describe(), "seed": scenario.seed, "duration_s": scenario.duration_s}
+    if simulator.level == "sensor":
+        described["sensor_log"] = SENSOR_LOG
     return _drive(
         request,
         simulator,
@@ -263,18 +275,40 @@ def _drive(
     def stored_after_the_step(record: FrameRecord) -> None:
         """The mode writes each record once the outputs moved the ego (after_frame)."""
 
-    return execute(
-        graph,
-        pipeline,
-        inputs=inputs,
-        hooks=mode,
-        writer=writer,
-        frames=mode.frames(),
-        progress=progress,
-        cancel=cancel,
-        sink=stored_after_the_step,
-        summary_extra=lambda: {"closed_loop": mode.deviation_summary()},
-    )
+    recording: McapWriter | None = None
+    if isinstance(simulator, SyntheticSimulator) and simulator.level == "sensor":
+        recording = McapWriter(request.out / SENSOR_LOG)
+        simulator.record_sensors(recording)
+    try:
+        report = execute(
+            graph,
+            pipeline,
+            inputs=inputs,
+            hooks=mode,
+            writer=writer,
+            frames=mode.frames(),
+            progress=progress,
+            cancel=cancel,
+            sink=stored_after_the_step,
+            summary_extra=lambda: {"closed_loop": mode.deviation_summary()},
+        )
+    except BaseException:
+        if recording is not None:
+            _close_after_failure(recording)
+        raise
+    if recording is not None:
+        recording.close()
+    return report
+
+
+def _close_after_failure(recording: McapWriter) -> None:
+    """Close a failed or interrupted run's recording (what was rendered so far, a file that
+    opens); if even that fails, drop it rather than hide the run's own error."""
+    try:
+        recording.close()
+    except Exception:
+        logger.warning("%s: could not be finished, dropped", recording.path, exc_info=True)
+        recording.abort()
 
 
 def _refuse_sensor_inputs(pipeline: PipelineConfig, sensors: Mapping[str, Any]) -> None:

@@ -12,6 +12,9 @@ Timing: a frame at time ``t`` holds the sensors' latest samples — the camera i
 of ``t``, and each LiDAR's last *finished* sweep, stamped at its start (``t − 1/rate``): a sweep
 needs the ego's motion over its whole period, and that motion depends on the commands of the
 frame.  The first frame is therefore one (slowest) LiDAR period after the scenario's start.
+
+A :class:`SensorTee` hands every message to more than one sink: the run's ``sensors.mcap``
+(a :class:`~redrive.io.writer.McapWriter`) records what the algorithms saw.
 """
 
 from __future__ import annotations
@@ -30,11 +33,11 @@ from redrive.io.sensor_map import infer_sensor_map
 from redrive.io.typestore import typestore_for
 from redrive.sim.rig import Rig, SensorSpec
 from redrive.sim.scene import Scene
-from redrive.sim.synth import sensor_topic
+from redrive.sim.synth import MessageSink, sensor_topic
 from redrive.sim.world import World
 from redrive.types import Image, SensorData, SensorType, VehicleState
 
-__all__ = ["FrameSensors", "LockstepWorlds", "warmup_ns"]
+__all__ = ["FrameSensors", "LockstepWorlds", "SensorTee", "warmup_ns"]
 
 #: The message each kind of rig sensor is recorded as (``redrive synth``), for the sensor map.
 _MSGTYPES: Mapping[SensorType, str] = {
@@ -185,3 +188,36 @@ class FrameSensors:
                 data=value,  # type: ignore[arg-type]
             )
         return dict(sorted(out.items()))
+
+
+class SensorTee:
+    """A :class:`~redrive.sim.synth.MessageSink` that hands every message to each of ``sinks``,
+    in order (a closed loop's :class:`FrameSensors`, and the recording of the run).
+
+    Raw messages are serialised with the first sink's :attr:`typestore` (ROS 2 CDR of the
+    standard types is the same bytes whichever store made it)."""
+
+    def __init__(self, first: MessageSink, *rest: MessageSink) -> None:
+        self.sinks: tuple[MessageSink, ...] = (first, *rest)
+
+    @property
+    def typestore(self) -> Typestore:
+        return self.sinks[0].typestore
+
+    def write(
+        self,
+        topic: str,
+        log_time_ns: int,
+        value: object,
+        *,
+        frame_id: str | None = None,
+        stamp_ns: int | None = None,
+    ) -> None:
+        for sink in self.sinks:
+            sink.write(topic, log_time_ns, value, frame_id=frame_id, stamp_ns=stamp_ns)
+
+    def write_raw(
+        self, topic: str, msgtype: str, log_time_ns: int, cdr_bytes: bytes | memoryview
+    ) -> None:
+        for sink in self.sinks:
+            sink.write_raw(topic, msgtype, log_time_ns, cdr_bytes)

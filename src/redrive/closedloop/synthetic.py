@@ -23,6 +23,12 @@ same motion would show them, and the ground truth's LiDAR point counts and visib
 sensor-level frame comes one LiDAR period after the start (the first finished sweep); the ego is
 under the commands from the start (the neutral command — pedals released, the wheel held —
 until the first frame's).
+
+Recording (sensor level): :meth:`SyntheticSimulator.record_sensors` tees every message the
+rendering writes — sensors, camera info, ``/tf`` and ``/tf_static``, the true ego state, the ground
+truth, the topics of ``redrive synth`` — into a sink, such as the run's ``sensors.mcap``: the
+closed-loop world as the algorithms saw it.  The rendering starts at the first frame (the
+warm-up sweep included), so a sink handed over before then gets every message of the run.
 """
 
 from __future__ import annotations
@@ -32,7 +38,7 @@ from collections.abc import Mapping
 from typing import Any, Literal
 
 from redrive.algorithms import StageOutputs
-from redrive.closedloop.sensors import FrameSensors, LockstepWorlds, warmup_ns
+from redrive.closedloop.sensors import FrameSensors, LockstepWorlds, SensorTee, warmup_ns
 from redrive.closedloop.simulator import (
     AGENT_MODES,
     EgoCommand,
@@ -40,12 +46,12 @@ from redrive.closedloop.simulator import (
     check_options,
     choose_command,
 )
-from redrive.errors import ConfigError
+from redrive.errors import ConfigError, SimulationError
 from redrive.sim.ego import ActuatedEgo, BicycleModel, PedalModel
 from redrive.sim.rig import rig_from_mapping
 from redrive.sim.roads import RoadNetwork
 from redrive.sim.scenario import Scenario
-from redrive.sim.synth import SensorSimulation, objects_in_base
+from redrive.sim.synth import MessageSink, SensorSimulation, objects_in_base
 from redrive.sim.world import World
 from redrive.types import ControlCommands, Frame, SensorType, VehicleState
 
@@ -118,6 +124,9 @@ class SyntheticSimulator:
         self._dt_ns = round(self.dt_s * 1e9)
         self._rendering: SensorSimulation | None = None
         self._frame_sensors: FrameSensors | None = None
+        self._recording: MessageSink | None = None
+        self._started = False
+        self._first_ns = self._world.time_ns
         if self.level == "sensor":
             worlds = LockstepWorlds(
                 scene_world=self._expert if self.agents == "replay" else self._world,
@@ -126,11 +135,36 @@ class SyntheticSimulator:
             )
             self._rendering = SensorSimulation(scenario, world=worlds)
             self._frame_sensors = FrameSensors(self._rendering.rig)
-            self._rendering.start(self._frame_sensors)
-            first_ns = scenario.start_stamp_ns + warmup_ns(self._rendering.rig)
-            for _ in self._rendering.advance_to(first_ns):
-                pass
-        self._first_ns = self._world.time_ns
+            self._first_ns = self._world.time_ns + warmup_ns(self._rendering.rig)
+
+    def record_sensors(self, sink: MessageSink) -> None:
+        """Tee every message the sensor-level rendering writes into ``sink`` as well (see the
+        module text), until the next :meth:`reset`.
+
+        Raises:
+            ConfigError: at object level (nothing is rendered).
+            SimulationError: the rendering has already started (the first frame was observed):
+                the recording would miss its start.
+        """
+        if self._rendering is None:
+            msg = "closed loop: an object-level run renders no sensors to record; use --sensors"
+            raise ConfigError(msg)
+        if self._started:
+            msg = "closed loop: record the sensors before the first frame, not during the run"
+            raise SimulationError(msg)
+        self._recording = sink
+
+    def _start_rendering(self) -> None:
+        """Start the rig (static transforms, the warm-up to the first finished sweep)."""
+        if self._started or self._rendering is None or self._frame_sensors is None:
+            return
+        self._started = True
+        sink: MessageSink = self._frame_sensors
+        if self._recording is not None:
+            sink = SensorTee(self._frame_sensors, self._recording)
+        self._rendering.start(sink)
+        for _ in self._rendering.advance_to(self._first_ns):
+            pass
 
     def observe(self) -> Frame:
         world = self._world
@@ -143,6 +177,7 @@ class SyntheticSimulator:
                 vehicle_state=world.ego_state(),
                 ground_truth=objects,
             )
+        self._start_rendering()
         lidar_hits, camera_pixels = self._rendering.visibility()
         objects = objects_in_base(
             source.objects(),
@@ -177,6 +212,7 @@ class SyntheticSimulator:
             self._world.step_to(target)
             self._expert.step_to(target)
         else:
+            self._start_rendering()
             for _ in self._rendering.advance_to(target):  # both worlds, the sensors' events
                 pass
         self._index += 1

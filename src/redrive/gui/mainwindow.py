@@ -234,6 +234,16 @@ class MainWindow(QtWidgets.QMainWindow):
             ", ".join(run.detections) or "none",
             len(run.bookmarks),
         )
+        recorded = run.manifest.closed_loop.get("sensor_log")
+        if log is None and recorded:
+            self.show_error(
+                "The run's sensor recording is missing",
+                f"{path}: a sensor-level closed-loop run records its rendered sensors in "
+                f"{recorded!r}, which is not in the run directory (the run may have been stopped "
+                f"before it was written); `redrive report {path}` shows its metrics, "
+                f"`redrive export {path}` its tables.",
+            )
+            return
         if log is None and run.manifest.pipeline.mode_manager == "closed_loop":
             self.show_error(
                 "A closed-loop run",

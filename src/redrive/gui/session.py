@@ -309,7 +309,13 @@ def _evaluation(
 
 
 def find_run_log(run: RunData) -> Path | None:
-    """The log a run was made from, if it is still where the manifest says."""
+    """The log to show a run over, if it is there: a sensor-level closed-loop run's recording
+    of its rendered sensors (``closed_loop.sensor_log``, in the run directory), else the log
+    the run was made from, where the manifest says."""
+    recorded = run.manifest.closed_loop.get("sensor_log")
+    if isinstance(recorded, str) and recorded:
+        sensor_log = run.path / recorded
+        return sensor_log if sensor_log.is_file() else None
     path = run.manifest.log.path
     if path and Path(path).exists():
         return Path(path)

@@ -26,6 +26,9 @@ Layout of a run directory (columns: ``docs/results.md``)::
     RUN/resources/part-…           one row per process resource sample
     RUN/map.json                   optional: the road map (lanes, drivable areas; see
                                    redrive.results.roadmap), written by RunWriter.write_map
+    RUN/sensors.mcap               optional: a sensor-level closed loop's rendered sensors,
+                                   named by the manifest's closed_loop.sensor_log (written by
+                                   redrive.closedloop, not by RunWriter)
     RUN/.lock                      held by the writing process
 
 Each flush of the writer adds part N of every table that has rows, and always ``frames`` part
