@@ -3,7 +3,7 @@
 Written atomically (temp file + rename) by :meth:`RunWriter.write_map
 <redrive.results.RunWriter.write_map>` or :func:`write_road_map`; read and validated by
 :meth:`Run.road_map <redrive.results.Run.road_map>`.  A run without the file has no map (logs
-of the real world: the closed-loop map metrics are skipped); synthetic worlds store one.
+and replayed logs: the closed-loop map metrics are skipped); closed-loop runs of a scenario store one.
 
 Format (schema 1)::
 

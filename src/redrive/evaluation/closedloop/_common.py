@@ -233,7 +233,9 @@ def road_index(data: EvalData) -> RoadIndex | None:
 def require_road(data: EvalData) -> RoadIndex:
     index = road_index(data)
     if index is None:
-        raise MetricSkipped("no road map in the run (synthetic worlds store one)")
+        raise MetricSkipped(
+            "no road map in the run (closed-loop runs of a scenario store one; a replayed log brings none)"
+        )
     return index
 
 
