@@ -25,15 +25,12 @@ import numpy as np
 import numpy.typing as npt
 from rosbags.typesys.store import Typestore
 
-from redrive.io import LogMessage
 from redrive.io.base import TopicInfo
-from redrive.io.decoders import decode
 from redrive.io.decoders.base import Decoded
 from redrive.io.sensor_map import infer_sensor_map
-from redrive.io.typestore import typestore_for
 from redrive.sim.rig import Rig, SensorSpec
 from redrive.sim.scene import Scene
-from redrive.sim.synth import MessageSink, sensor_topic
+from redrive.sim.synth import MessageSink, SampleSink, sensor_topic
 from redrive.sim.world import World
 from redrive.types import Image, SensorData, SensorType, VehicleState
 
@@ -104,7 +101,7 @@ class LockstepWorlds:
         return self.ego_world.map_from_base_at(stamp_ns)
 
 
-class FrameSensors:
+class FrameSensors(SampleSink):
     """A :class:`~redrive.sim.synth.MessageSink` that keeps each rig sensor's latest sample as a
     :class:`~redrive.types.SensorData` (what a replay of the recorded log would put in a frame).
 
@@ -132,13 +129,9 @@ class FrameSensors:
             sid: stype for sid, stype, _ in self._routes.values()
         }
         self._latest: dict[str, Decoded] = {}
-        self._typestore: Typestore | None = None
 
-    @property
-    def typestore(self) -> Typestore:
-        if self._typestore is None:
-            self._typestore = typestore_for(2, needed=("sensor_msgs/msg/LaserScan",))[0]
-        return self._typestore
+    def keeps(self, topic: str) -> bool:
+        return topic in self._routes  # not ground truth, transforms, the ego pose, camera info
 
     def write(
         self,
@@ -156,17 +149,6 @@ class FrameSensors:
             frame_id=frame_id or "",
             value=value,  # type: ignore[arg-type]  # a sensor payload: the rig's kinds only
         )
-
-    def write_raw(
-        self, topic: str, msgtype: str, log_time_ns: int, cdr_bytes: bytes | memoryview
-    ) -> None:
-        if topic not in self._routes:
-            return
-        message = LogMessage(
-            topic=topic, msgtype=msgtype, log_time_ns=log_time_ns, encoding="cdr", raw=cdr_bytes
-        )
-        ts = self.typestore
-        self._latest[topic] = decode(message, lambda m: ts.deserialize_cdr(bytes(m.raw), m.msgtype))
 
     def sensor_data(self) -> dict[str, SensorData]:
         """Every sensor's latest sample (sensors without one yet are left out)."""

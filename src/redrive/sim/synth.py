@@ -60,6 +60,9 @@ from redrive.geometry.se3 import (
     transform_vectors,
     yaw_from_rotation_matrix,
 )
+from redrive.io.base import LogMessage
+from redrive.io.decoders import decode
+from redrive.io.typestore import typestore_for
 from redrive.io.writer import McapWriter
 from redrive.sim.camera import CameraFrame, CameraModel
 from redrive.sim.inertial import GnssModel, ImuModel, OdometryModel
@@ -137,6 +140,50 @@ class MessageSink(Protocol):
     ) -> None:
         """An already-serialised ROS 2 CDR message (the 2D LiDAR's ``LaserScan``)."""
         ...
+
+
+class SampleSink:
+    """Base of the :class:`MessageSink` s that keep rendered samples in memory instead of writing
+    a log (a live source's buffer, a closed loop's frame): the typestore the 2D LiDAR's
+    ``LaserScan`` is serialised with, and :meth:`write_raw` decoding it back to :meth:`write`, as
+    a replay of the log would.  Subclasses say which topics they keep (:meth:`keeps`)."""
+
+    _typestore: Typestore | None = None
+
+    def keeps(self, topic: str) -> bool:
+        """Whether samples of ``topic`` are kept (the others are dropped)."""
+        raise NotImplementedError
+
+    @property
+    def typestore(self) -> Typestore:
+        if self._typestore is None:
+            self._typestore = typestore_for(2, needed=("sensor_msgs/msg/LaserScan",))[0]
+        return self._typestore
+
+    def write(
+        self,
+        topic: str,
+        log_time_ns: int,
+        value: object,
+        *,
+        frame_id: str | None = None,
+        stamp_ns: int | None = None,
+    ) -> None:
+        raise NotImplementedError
+
+    def write_raw(
+        self, topic: str, msgtype: str, log_time_ns: int, cdr_bytes: bytes | memoryview
+    ) -> None:
+        if not self.keeps(topic):
+            return
+        message = LogMessage(
+            topic=topic, msgtype=msgtype, log_time_ns=log_time_ns, encoding="cdr", raw=cdr_bytes
+        )
+        ts = self.typestore
+        decoded = decode(message, lambda m: ts.deserialize_cdr(bytes(m.raw), m.msgtype))
+        self.write(
+            topic, log_time_ns, decoded.value, frame_id=decoded.frame_id, stamp_ns=decoded.stamp_ns
+        )
 
 
 class SensorWorld(Protocol):

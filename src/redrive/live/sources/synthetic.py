@@ -10,12 +10,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
-from rosbags.typesys.store import Typestore
-
-from redrive.io import LogMessage
-from redrive.io.decoders import decode
 from redrive.io.sensor_map import sensor_id_for
-from redrive.io.typestore import typestore_for
 from redrive.live.sources._common import (
     _PAGE,
     _POLL_S,
@@ -35,7 +30,7 @@ from redrive.live.streams import StreamSpec
 from redrive.sim.lidar_presets import lidar_preset
 from redrive.sim.rig import Rig, rig_from_mapping
 from redrive.sim.scenario import Scenario, load_scenario
-from redrive.sim.synth import SensorSimulation, sensor_topic
+from redrive.sim.synth import SampleSink, SensorSimulation, sensor_topic
 from redrive.transport import Policy
 from redrive.types import SensorData, SensorType, VehicleState
 
@@ -119,20 +114,16 @@ def synthetic_streams(scenario: Scenario | str | Path, session: str) -> list[Str
     return [r.spec for r in _synthetic_routes(rig, session).values()]
 
 
-class _SampleBuffer:
+class _SampleBuffer(SampleSink):
     """A :class:`~redrive.sim.synth.MessageSink` that keeps the samples of the rig's streams
     (LaserScans decoded as a replay would) and drops the rest (ground truth, transforms)."""
 
     def __init__(self, routes: Mapping[str, _Route]) -> None:
         self.routes = routes
         self.pending: list[tuple[str, SensorData]] = []
-        self._typestore: Typestore | None = None
 
-    @property
-    def typestore(self) -> Typestore:
-        if self._typestore is None:
-            self._typestore = typestore_for(2, needed=("sensor_msgs/msg/LaserScan",))[0]
-        return self._typestore
+    def keeps(self, topic: str) -> bool:
+        return topic in self.routes
 
     def write(
         self,
@@ -155,20 +146,6 @@ class _SampleBuffer:
             frame_id=frame_id or "",
         )
         self.pending.append((topic, sample))
-
-    def write_raw(
-        self, topic: str, msgtype: str, log_time_ns: int, cdr_bytes: bytes | memoryview
-    ) -> None:
-        if topic not in self.routes:
-            return
-        message = LogMessage(
-            topic=topic, msgtype=msgtype, log_time_ns=log_time_ns, encoding="cdr", raw=cdr_bytes
-        )
-        ts = self.typestore
-        decoded = decode(message, lambda m: ts.deserialize_cdr(bytes(m.raw), m.msgtype))
-        self.write(
-            topic, log_time_ns, decoded.value, frame_id=decoded.frame_id, stamp_ns=decoded.stamp_ns
-        )
 
 
 _Batch = tuple[int, list[tuple[str, SensorData]]]  # event offset (ns since start), samples
