@@ -284,7 +284,7 @@ def test_map_metrics_skip_without_a_map(tmp_path: Path) -> None:
     reasons = {o.metric: o.reason for o in summary.skipped}
     assert set(reasons) == {"drivable_area", "driving_direction", "speed_limit", "pdm_score"}
     assert set(reasons.values()) == {
-        "no road map in the run (closed-loop runs of a scenario store one; a replayed log brings none)"
+        "no road map in the run (runs of a synthetic scenario or its log store one; recorded logs have none)"
     }
     assert not summary.failed
 

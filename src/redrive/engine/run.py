@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import hashlib
 import itertools
+import json
 import logging
 import threading
 from collections.abc import Callable, Iterable, Iterator, Mapping
@@ -33,6 +34,7 @@ from redrive.results import (
     RunWriter,
     SourceLog,
 )
+from redrive.results.roadmap import MAP_METADATA, road_map_from_json
 from redrive.types import Frame
 
 __all__ = [
@@ -119,6 +121,21 @@ def _reading_only_inputs(
     if len(kept) == len(smap.sensors):
         return assembler
     return FrameAssembler(log, sensor_map=replace(smap, sensors=kept), lookahead_ns=lookahead_ns)
+
+
+def _copy_road_map(log: LogReader, writer: RunWriter) -> None:
+    """The log's road map (a ``redrive synth`` MCAP carries one) into the run, for the map metrics;
+    a log without one, or a reader without named metadata, leaves the run without a map."""
+    metadata = getattr(log, "metadata", None)
+    found = metadata(MAP_METADATA) if callable(metadata) else None
+    if not found or "road_map" not in found:
+        return
+    try:
+        road_map = road_map_from_json(json.loads(found["road_map"]), path=Path(log.path))
+    except (ValueError, ConfigError) as err:
+        logger.warning("%s: its road map is unreadable, the run has none (%s)", log.path, err)
+        return
+    writer.write_map(road_map)
 
 
 def _select(frames: Iterator[Frame], first: int | None, stop: int | None) -> Iterator[Frame]:
@@ -237,6 +254,7 @@ def run_reader(
     assembler = _reading_only_inputs(log, assembler, graph, lookahead_ns=assembler.lookahead_ns)
     setup = _setup(request, graph, inputs, log=log_info, mode=hooks.mode.value)
     writer = RunWriter(request.out, setup=setup, resume=request.resume)
+    _copy_road_map(log, writer)
     if on_start is not None:
         total = expected_frames(log, assembler)
         if total is not None and total > 0:

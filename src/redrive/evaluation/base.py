@@ -80,7 +80,7 @@ NEED_SOURCES: Mapping[str, str] = MappingProxyType(
         "ground_truth": "a log with ground-truth objects",
         "ego": "a log with the ego state (odometry)",
         "logged_ego": "a closed-loop run, which stores the logged ego apart from the driven one",
-        "road_map": "a road map in the run (closed-loop runs of a scenario store one; a replayed log brings none)",
+        "road_map": "a road map in the run (runs of a synthetic scenario or its log store one; recorded logs have none)",
         "detections": "a perception algorithm with at least one successful step",
         "paths": "a planning algorithm with at least one successful step",
         "commands": "a control algorithm with at least one successful step",

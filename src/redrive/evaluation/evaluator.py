@@ -93,7 +93,7 @@ class _Provides:
         if have:
             return None
         if need == "road_map":
-            return "no road map in the run (closed-loop runs of a scenario store one; a replayed log brings none)"
+            return "no road map in the run (runs of a synthetic scenario or its log store one; recorded logs have none)"
         return f"{what} (needs {NEED_SOURCES.get(need, need)})"
 
 

@@ -223,5 +223,19 @@ class McapFileReader(RosReaderBase):
             msg = f"{self.path}: {self.damage}; {count} messages were read before it"
             raise LogTruncatedError(msg, messages_read=count)
 
+    def metadata(self, name: str) -> Mapping[str, str] | None:
+        """The first metadata record called ``name`` (MCAP ``Metadata``: string pairs), or None.
+
+        A reader of a format without named metadata has no such method (callers use
+        ``getattr``); a damaged file's unreadable records count as absent.
+        """
+        try:
+            for record in self._reader.iter_metadata():
+                if record.name == name:
+                    return dict(record.metadata)
+        except Exception as err:  # the index or record is damaged: there is no such metadata
+            logger.warning("%s: metadata %r unreadable (%s)", self.path, name, err)
+        return None
+
     def close(self) -> None:
         self._fh.close()

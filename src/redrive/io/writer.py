@@ -158,6 +158,12 @@ class McapWriter:
             msg = f"{self.path}: the writer is closed"
             raise LogError(msg)
 
+    def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
+        """A named metadata record of string pairs (MCAP ``Metadata``): facts about the whole log
+        that are no message stream, e.g. the road map of a synthetic scenario."""
+        self._check_open()
+        self._writer.add_metadata(name=name, data=dict(data))
+
     def write_raw(
         self,
         topic: str,

@@ -3,7 +3,7 @@
 Written atomically (temp file + rename) by :meth:`RunWriter.write_map
 <redrive.results.RunWriter.write_map>` or :func:`write_road_map`; read and validated by
 :meth:`Run.road_map <redrive.results.Run.road_map>`.  A run without the file has no map (logs
-and replayed logs: the closed-loop map metrics are skipped); closed-loop runs of a scenario store one.
+and recorded logs: the closed-loop map metrics are skipped); runs of a synthetic scenario, closed loop or a replay of its `redrive synth` log, store one.
 
 Format (schema 1)::
 
@@ -27,6 +27,7 @@ from redrive.results.manifest import MANIFEST_NAME, write_json_atomic
 from redrive.types import DrivableArea, MapLane, RoadMap
 
 __all__ = [
+    "MAP_METADATA",
     "MAP_NAME",
     "MAP_SCHEMA_VERSION",
     "read_road_map",
@@ -36,6 +37,9 @@ __all__ = [
 ]
 
 MAP_NAME = "map.json"
+#: the MCAP metadata record ``redrive synth`` writes the scenario's road map in (key ``road_map``:
+#: the JSON document of :func:`road_map_to_json`); a replay of the log copies it into the run.
+MAP_METADATA = "redrive.road_map"
 MAP_SCHEMA_VERSION = 1
 _ADVICE = "write it again with RunWriter.write_map / redrive.results.write_road_map"
 

@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import dataclasses
 import heapq
+import json
 import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -64,10 +65,12 @@ from redrive.io.base import LogMessage
 from redrive.io.decoders import decode
 from redrive.io.typestore import typestore_for
 from redrive.io.writer import McapWriter
+from redrive.results.roadmap import MAP_METADATA, road_map_to_json
 from redrive.sim.camera import CameraFrame, CameraModel
 from redrive.sim.inertial import GnssModel, ImuModel, OdometryModel
 from redrive.sim.lidar import LidarModel, LidarScan
 from redrive.sim.rig import Rig, SensorSpec, rig_from_mapping
+from redrive.sim.roadmap import scenario_road_map
 from redrive.sim.scenario import Scenario
 from redrive.sim.scene import Scene, SceneObjects
 from redrive.sim.world import World
@@ -615,6 +618,9 @@ def synthesize(
     scenario = sim.scenario
     path = Path(output)
     with McapWriter(path) as writer:
+        # the road map travels with the log: a replay stores it in the run (the map metrics)
+        road = json.dumps(road_map_to_json(scenario_road_map(scenario)), separators=(",", ":"))
+        writer.add_metadata(MAP_METADATA, {"road_map": road})
         total_s = scenario.duration_s
         for stamp_ns in sim.run(writer):
             if progress is not None:

@@ -2,7 +2,7 @@
 
 They score a run as a whole (``role = None``) from its ``ego`` table, its ground truth (in the
 frame's base_link, put into ``map`` with the frame's ego pose) and, where road geometry is
-needed, its road map (``RUN/map.json``; closed-loop runs of a scenario store one, other runs skip those
+needed, its road map (``RUN/map.json``; runs of a synthetic scenario or its log store one, others skip those
 metrics).  They apply to open-loop runs as well: there the driven ego is the logged one.
 """
 

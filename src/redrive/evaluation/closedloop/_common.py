@@ -234,7 +234,7 @@ def require_road(data: EvalData) -> RoadIndex:
     index = road_index(data)
     if index is None:
         raise MetricSkipped(
-            "no road map in the run (closed-loop runs of a scenario store one; a replayed log brings none)"
+            "no road map in the run (runs of a synthetic scenario or its log store one; recorded logs have none)"
         )
     return index
 

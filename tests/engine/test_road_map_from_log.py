@@ -1,0 +1,43 @@
+"""A synthetic log carries its scenario's road map (MCAP metadata); replaying it stores the map in
+the run, so the map metrics score an open-loop run of a synthetic log too."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from redrive.config import pipeline_from_plugins
+from redrive.engine import RunRequest, run_log
+from redrive.evaluation.closedloop import DrivableAreaCompliance
+from redrive.evaluation.evaluator import evaluate_run
+from redrive.io import open_log
+from redrive.results import open_run
+from redrive.results.roadmap import MAP_METADATA
+from redrive.sim.roadmap import scenario_road_map
+from redrive.sim.scenario import load_scenario
+from redrive.sim.synth import synthesize
+from redrive.testing.demo_log import write_demo_bag
+
+
+def test_a_replayed_synthetic_log_brings_its_road_map(tmp_path: Path) -> None:
+    log = tmp_path / "cut_in.mcap"
+    synthesize(load_scenario("cut_in"), log, duration_s=1.0)
+    with open_log(log) as reader:
+        assert "road_map" in (reader.metadata(MAP_METADATA) or {})  # type: ignore[attr-defined]
+    out = tmp_path / "run"
+    pipeline = pipeline_from_plugins(perception=["noisy-oracle"], planning=["idm-planner"])
+    run_log(RunRequest(log=log, pipeline=pipeline, out=out))
+    stored = open_run(out).road_map()
+    assert stored is not None
+    expected = scenario_road_map(load_scenario("cut_in"))
+    assert [lane.lane_id for lane in stored.lanes] == [lane.lane_id for lane in expected.lanes]
+    summary = evaluate_run(out, metrics=[DrivableAreaCompliance()])
+    assert not summary.skipped
+    (scored,) = summary.scored
+    assert scored.result.values["drivable_area_compliance"] == 1.0  # the scripted ego
+
+
+def test_a_log_without_a_map_gives_a_run_without_one(tmp_path: Path) -> None:
+    bag = write_demo_bag(tmp_path / "demo.bag")  # a ROS 1 bag: no named metadata at all
+    out = tmp_path / "run"
+    run_log(RunRequest(log=bag, pipeline=pipeline_from_plugins(planning=["idm-planner"]), out=out))
+    assert open_run(out).road_map() is None
