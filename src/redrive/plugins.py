@@ -399,13 +399,13 @@ def _import_module(
                 if as_file.is_file()
                 else ""
             )
-            todo = missing_fix or (
+            remedy = missing_fix or (
                 "install the package that provides it (pip install -e your_project), or give "
                 f"a file: path/to/file.py:ClassName{hint}"
             )
             msg = (
                 f"{kind.noun} spec {spec!r}: {where}: module {missing} not found (Python: "
-                f"{sys.executable}); {todo}"
+                f"{sys.executable}); {remedy}"
             )
             raise PluginError(msg) from err
         raise PluginError(_raised_on_import(kind, spec, where, err, fix=fix)) from err

@@ -7,12 +7,12 @@ import math
 import numpy as np
 import pytest
 
+from redrive.sim.ground import rasterize
 from redrive.sim.roads import (
     HighwayLayout,
     RoadSegment,
     UrbanLayout,
     highway_network,
-    rasterize,
     urban_network,
 )
 from redrive.sim.scene import GroundLabel

@@ -30,7 +30,8 @@ from redrive.io.decoders.base import Decoded
 from redrive.io.sensor_map import infer_sensor_map
 from redrive.sim.rig import Rig, SensorSpec
 from redrive.sim.scene import Scene
-from redrive.sim.synth import MessageSink, SampleSink, sensor_topic
+from redrive.sim.sinks import MessageSink, SampleSink
+from redrive.sim.synth import sensor_topic
 from redrive.sim.world import World
 from redrive.types import Image, SensorData, SensorType, VehicleState
 
@@ -57,7 +58,7 @@ def warmup_ns(rig: Rig) -> int:
 
 
 class LockstepWorlds:
-    """The :class:`~redrive.sim.synth.SensorWorld` of a closed loop: the scene of
+    """The :class:`~redrive.sim.sinks.SensorWorld` of a closed loop: the scene of
     ``scene_world`` seen from the ego of ``ego_world``; stepping steps every world of
     ``worlds`` (which holds both), so they stay in lockstep.
 
@@ -102,7 +103,7 @@ class LockstepWorlds:
 
 
 class FrameSensors(SampleSink):
-    """A :class:`~redrive.sim.synth.MessageSink` that keeps each rig sensor's latest sample as a
+    """A :class:`~redrive.sim.sinks.MessageSink` that keeps each rig sensor's latest sample as a
     :class:`~redrive.types.SensorData` (what a replay of the recorded log would put in a frame).
 
     Sensor ids and types come from the log's own rule
@@ -173,7 +174,7 @@ class FrameSensors(SampleSink):
 
 
 class SensorTee:
-    """A :class:`~redrive.sim.synth.MessageSink` that hands every message to each of ``sinks``,
+    """A :class:`~redrive.sim.sinks.MessageSink` that hands every message to each of ``sinks``,
     in order (a closed loop's :class:`FrameSensors`, and the recording of the run).
 
     Raw messages are serialised with the first sink's :attr:`typestore` (ROS 2 CDR of the

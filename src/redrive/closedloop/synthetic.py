@@ -51,7 +51,8 @@ from redrive.sim.ego import ActuatedEgo, BicycleModel, PedalModel
 from redrive.sim.rig import rig_from_mapping
 from redrive.sim.roads import RoadNetwork
 from redrive.sim.scenario import Scenario
-from redrive.sim.synth import MessageSink, SensorSimulation, objects_in_base
+from redrive.sim.sinks import MessageSink
+from redrive.sim.synth import SensorSimulation, objects_in_base
 from redrive.sim.world import World
 from redrive.types import ControlCommands, Frame, SensorType, VehicleState
 

@@ -19,8 +19,9 @@ import numpy.typing as npt
 from redrive.errors import SimulationError
 from redrive.sim.agents import IdmParams, LaneChange, LaneFollower, Obstacles, ParkedObject, Walker
 from redrive.sim.ego import BicycleModel, EgoDriver, EgoGeometry, pose_matrix
+from redrive.sim.ground import rasterize
 from redrive.sim.lights import TrafficLights
-from redrive.sim.roads import RoadNetwork, RoadSegment, build_network, rasterize
+from redrive.sim.roads import RoadNetwork, RoadSegment, build_network
 from redrive.sim.scenario import AgentSpec, Scenario
 from redrive.sim.scene import GroundMap, Scene, SceneObjects
 from redrive.types import ObjectClass, VehicleState

@@ -30,7 +30,8 @@ from redrive.live.streams import StreamSpec
 from redrive.sim.lidar_presets import lidar_preset
 from redrive.sim.rig import Rig, rig_from_mapping
 from redrive.sim.scenario import Scenario, load_scenario
-from redrive.sim.synth import SampleSink, SensorSimulation, sensor_topic
+from redrive.sim.sinks import SampleSink
+from redrive.sim.synth import SensorSimulation, sensor_topic
 from redrive.transport import Policy
 from redrive.types import SensorData, SensorType, VehicleState
 
@@ -115,7 +116,7 @@ def synthetic_streams(scenario: Scenario | str | Path, session: str) -> list[Str
 
 
 class _SampleBuffer(SampleSink):
-    """A :class:`~redrive.sim.synth.MessageSink` that keeps the samples of the rig's streams
+    """A :class:`~redrive.sim.sinks.MessageSink` that keeps the samples of the rig's streams
     (LaserScans decoded as a replay would) and drops the rest (ground truth, transforms)."""
 
     def __init__(self, routes: Mapping[str, _Route]) -> None:
