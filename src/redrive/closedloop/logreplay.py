@@ -359,10 +359,6 @@ class LogSimulator:
     def logged_state(self) -> VehicleState | None:
         return self._logged(self._current)
 
-    @property
-    def time_ns(self) -> int:
-        return self._current.stamp_ns
-
     def describe(self) -> dict[str, Any]:
         smap = self.assembler.sensor_map
         return {

@@ -49,7 +49,6 @@ from redrive.closedloop.simulator import (
 from redrive.errors import ConfigError, SimulationError
 from redrive.sim.ego import ActuatedEgo, BicycleModel, PedalModel
 from redrive.sim.rig import rig_from_mapping
-from redrive.sim.roads import RoadNetwork
 from redrive.sim.scenario import Scenario
 from redrive.sim.sinks import MessageSink
 from redrive.sim.synth import SensorSimulation, objects_in_base
@@ -226,15 +225,6 @@ class SyntheticSimulator:
     @property
     def logged_state(self) -> VehicleState | None:
         return self._expert.ego_state()
-
-    @property
-    def time_ns(self) -> int:
-        return self._world.time_ns
-
-    @property
-    def network(self) -> RoadNetwork:
-        """The scenario's roads (the run's map)."""
-        return self._world.network
 
     def describe(self) -> dict[str, Any]:
         return {

@@ -332,11 +332,6 @@ class World:
         """The ego's bicycle model (its state; step it only through :meth:`drive_ego`)."""
         return self._ego
 
-    @property
-    def ego_route_s_m(self) -> float:
-        """The ego's arc length along its route (metres), as last tracked."""
-        return self._driver.s_m
-
     def _track_route(self) -> None:
         route = self._driver.route
         s, _ = route.project(
