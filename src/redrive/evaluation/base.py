@@ -66,6 +66,7 @@ NEEDS = frozenset(
         "ground_truth",
         "ego",
         "logged_ego",
+        "closed_loop",
         "road_map",
         "detections",
         "paths",
@@ -80,6 +81,7 @@ NEED_SOURCES: Mapping[str, str] = MappingProxyType(
         "ground_truth": "a log with ground-truth objects",
         "ego": "a log with the ego state (odometry)",
         "logged_ego": "a closed-loop run, which stores the logged ego apart from the driven one",
+        "closed_loop": "a closed-loop run (its closed_loop table: the command that moved the ego each frame)",
         "road_map": "a road map in the run (runs of a synthetic scenario or its log store one; recorded logs have none)",
         "detections": "a perception algorithm with at least one successful step",
         "paths": "a planning algorithm with at least one successful step",
@@ -232,6 +234,11 @@ class EvalData:
         """frame index → the logged ego state stored apart from the driven one (closed loop);
         empty in open loop, where :meth:`ego` is the logged ego."""
         return self._cached("logged_ego", self.run.logged_ego)
+
+    def closed_loop(self) -> pa.Table:
+        """The closed-loop run's ``closed_loop`` table (the command that moved the ego, where it
+        came from, the deviation from the logged pose), sorted by frame; empty in open loop."""
+        return self._cached("closed_loop", lambda: self.run.table("closed_loop"))
 
     def road_map(self) -> RoadMap | None:
         """The run's road map, None when it has none."""
