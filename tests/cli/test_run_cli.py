@@ -188,3 +188,20 @@ def test_bad_plugin_is_a_clear_error(
     err = capsys.readouterr().err
     assert "nope.py" in err
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(
+    "case",
+    [("--perception", "idm-planner", "planning"), ("--control", "cluster-detector", "perception")],
+)
+def test_an_algorithm_given_under_another_role_is_refused(
+    bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], case: tuple[str, str, str]
+) -> None:
+    flag, plugin, role = case
+    out = tmp_path / "out"
+    status = main(["run", str(bag), flag, plugin, "-o", str(out), "--no-progress"])
+    assert status == 1
+    err = capsys.readouterr().err
+    assert f"is a {role} algorithm (role = Role.{role.upper()}), given as {flag}" in err
+    assert f"pass it with --{role} {plugin}" in err
+    assert not out.exists()
