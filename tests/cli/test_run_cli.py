@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import json
 import os
+import re
+import shlex
 import signal
 import subprocess
 import sys
@@ -109,11 +111,8 @@ def test_a_user_file_runs_without_touching_redrive(bag: Path, user_dir: Path) ->
 
 
 def test_ctrl_c_leaves_a_run_that_resume_completes(bag: Path, user_dir: Path) -> None:
-    pipeline = user_dir / "slow.toml"
-    pipeline.write_text(
-        '[[stage]]\nname = "p"\n[[stage.algorithm]]\nname = "tall"\nplugin = "tall.py:TallThings"\n'
-    )
-    cmd = [*REDRIVE, "run", str(bag), "--pipeline", "slow.toml", "-o", "out", "--no-progress"]
+    cmd = [*REDRIVE, "run", str(bag), "--perception", "tall.py:TallThings", "-o", "out",
+           "--no-progress"]  # fmt: skip
     # The plugin waits at frame 10 until interrupted: Ctrl-C lands mid-run however slow the
     # machine is (no sleep-and-hope race with the run's end).
     handshake = user_dir / "handshake"
@@ -135,7 +134,11 @@ def test_ctrl_c_leaves_a_run_that_resume_completes(bag: Path, user_dir: Path) ->
     proc.send_signal(signal.SIGINT)
     stdout, stderr = proc.communicate(timeout=60)
     assert proc.returncode == 130, stderr
-    assert "--resume" in stdout
+    # the hint is the exact command to paste: the same flags (--perception too) and --resume
+    hint = re.search(r"continue with `(.+)`", stdout)
+    assert hint, stdout
+    pasted = shlex.split(hint.group(1))
+    assert pasted == ["redrive", *cmd[len(REDRIVE) :], "--resume"]
     first = json.loads(manifest.read_text())
     assert first["status"] == "interrupted"
     done = open_run(user_dir / "out").table("frames").column("frame_index").to_pylist()
@@ -143,7 +146,7 @@ def test_ctrl_c_leaves_a_run_that_resume_completes(bag: Path, user_dir: Path) ->
     assert set(done) <= set(range(11))
 
     resumed = subprocess.run(
-        [*cmd, "--resume"],
+        [*REDRIVE, *pasted[1:]],
         cwd=user_dir,
         env=_env(),
         capture_output=True,

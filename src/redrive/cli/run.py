@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import re
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -113,6 +114,17 @@ def print_run_report(report: Any, out: Path) -> None:
     console.print(f"results: {out}  (manifest.json, *.parquet; `redrive export {out}`)")
 
 
+def resume_command(args: argparse.Namespace, out: Path) -> str:
+    """The command that continues this interrupted run: the one given (``args.argv``), with
+    ``--out`` where the run went (when it was chosen for the user) and ``--resume``."""
+    argv = [a for a in getattr(args, "argv", []) if a != "--resume"]
+    if not argv:  # called without main(): say what is known
+        argv = ["run", str(args.log)]
+    if args.out is None:
+        argv += ["--out", str(out)]
+    return shlex.join(["redrive", *argv, "--resume"])
+
+
 def pipeline_from_args(args: argparse.Namespace) -> Any:
     """The pipeline of ``--pipeline FILE``, else of ``--perception/--planning/--control``
     plugins, else the reference pipeline (shared by ``redrive run`` and ``redrive live``)."""
@@ -186,7 +198,7 @@ def _run(args: argparse.Namespace) -> int:
         report = run_log(request, on_start=on_start, progress=on_progress)
     print_run_report(report, out)
     if report.status is RunStatus.INTERRUPTED:
-        print(f"interrupted: continue with `redrive run {args.log} --out {out} --resume`")
+        print(f"interrupted: continue with `{resume_command(args, out)}`")
         return 130
     if report.status is RunStatus.FAILED and report.failure is not None:
         index, step = report.failure
