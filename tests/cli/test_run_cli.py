@@ -208,3 +208,48 @@ def test_an_algorithm_given_under_another_role_is_refused(
     assert f"is a {role} algorithm (role = Role.{role.upper()}), given as {flag}" in err
     assert f"pass it with --{role} {plugin}" in err
     assert not out.exists()
+
+
+FAILING_PLUGIN = textwrap.dedent(
+    '''
+    from redrive.algorithms import Algorithm, Role
+
+
+    class Broken(Algorithm):
+        """Fails on every frame, or from frame ``from_frame`` on."""
+
+        role = Role.PERCEPTION
+        defaults = {"from_frame": 0}
+
+        def step(self, frame, upstream):
+            if frame.index >= self.config["from_frame"]:
+                raise RuntimeError(f"broken on frame {frame.index}")
+            return []
+    '''
+)
+
+
+def test_a_run_where_nothing_succeeded_exits_3_and_partial_failures_are_counted(
+    bag: Path, user_dir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    (user_dir / "broken.py").write_text(FAILING_PLUGIN)
+    out = user_dir / "all"
+    argv = ["run", str(bag), "--perception", f"{user_dir / 'broken.py'}:Broken", "--no-progress"]
+    assert main([*argv, "-o", str(out)]) == 3
+    captured = capsys.readouterr()
+    assert "50 of 50 frames had a failed step" in captured.out
+    assert "no algorithm step succeeded in any of the 50 frames" in captured.err
+    assert open_run(out).manifest.status is RunStatus.COMPLETE  # the failures are stored
+
+    pipeline = user_dir / "late.toml"
+    pipeline.write_text(
+        '[[stage]]\nname = "p"\n[[stage.algorithm]]\nname = "late"\n'
+        f'plugin = "{user_dir / "broken.py"}:Broken"\nconfig = {{ from_frame = 40 }}\n'
+    )
+    some = user_dir / "some"
+    assert (
+        main(["run", str(bag), "--pipeline", str(pipeline), "--no-progress", "-o", str(some)]) == 0
+    )
+    captured = capsys.readouterr()
+    assert "10 of 50 frames had a failed step" in captured.out
+    assert "no algorithm step succeeded" not in captured.err

@@ -108,6 +108,11 @@ def print_run_report(report: Any, out: Path) -> None:
         f"{report.realtime_factor:.1f}x real time ({report.log_span_s:.1f} s of log)"
         + (f", {report.late_frames} late" if report.late_frames else "")
     )
+    if report.failed_frames:
+        console.print(
+            f"[bold red]{report.failed_frames} of {report.frames} frames had a failed step[/bold red]"
+            " (the err and t/o columns; each failure is stored in the steps table)"
+        )
     for a in report.algorithms:
         if a.first_error:
             console.print(f"[yellow]{a.name}: first failure at {a.first_error}[/yellow]")
@@ -207,7 +212,20 @@ def _run(args: argparse.Namespace) -> int:
             f"{step.error_type}: {step.error_message}"
         )
         return 1
-    return 0
+    return nothing_succeeded_status(report)
+
+
+def nothing_succeeded_status(report: Any) -> int:
+    """3 (and why, on stderr) when no step of any algorithm succeeded in any frame, else 0."""
+    if not report.nothing_succeeded:
+        return 0
+    print(
+        f"redrive: error: no algorithm step succeeded in any of the {report.frames} frames; "
+        "the run's results hold only the failures (`redrive export RUN --format csv` lists them in "
+        "steps.csv; the first failure of each algorithm is printed above)",
+        file=sys.stderr,
+    )
+    return 3
 
 
 def _run_closed_loop(args: argparse.Namespace, pipeline: Any) -> int:
@@ -259,7 +277,7 @@ def _run_closed_loop(args: argparse.Namespace, pipeline: Any) -> int:
     if report.status is RunStatus.INTERRUPTED:
         print("interrupted: closed-loop runs do not resume; run it again into a new --out")
         return 130
-    return 0
+    return nothing_succeeded_status(report)
 
 
 def _print_deviation(out: Path) -> None:

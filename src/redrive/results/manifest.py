@@ -312,6 +312,7 @@ class RunSummary:
     realtime_factor: float | None = None  # log time / wall time
     failure: StepFailure | None = None
     skipped_frames: int | None = None  # real-time mode: frames skipped (pipeline too slow)
+    failed_frames: int | None = None  # frames with a failed (error/timeout) step
     undecodable_messages: Mapping[str, int] = field(default_factory=dict)  # topic → count
     error: str | None = None  # ``Type: message`` of what ended a failed or interrupted run
     #: closed loop: the deviation thresholds, how many frames passed them (``deviated_frames``),
@@ -341,6 +342,7 @@ class RunSummary:
             realtime_factor=f.opt_number("realtime_factor", None),
             failure=None if failure is None else StepFailure._parse(failure),
             skipped_frames=f.opt_integer("skipped_frames", None),
+            failed_frames=f.opt_integer("failed_frames", None),
             undecodable_messages=f.int_map("undecodable_messages", {}),
             error=f.opt_text("error", None),
             closed_loop=f.mapping("closed_loop", {}),
