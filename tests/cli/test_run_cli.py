@@ -110,7 +110,9 @@ def test_a_user_file_runs_without_touching_redrive(bag: Path, user_dir: Path) ->
     assert set(det.column("algorithm").to_pylist()) == {"TallThings"}
 
 
-def test_ctrl_c_leaves_a_run_that_resume_completes(bag: Path, user_dir: Path) -> None:
+def test_ctrl_c_leaves_a_run_that_resume_completes(
+    bag: Path, user_dir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     cmd = [*REDRIVE, "run", str(bag), "--perception", "tall.py:TallThings", "-o", "out",
            "--no-progress"]  # fmt: skip
     # The plugin waits at frame 10 until interrupted: Ctrl-C lands mid-run however slow the
@@ -144,6 +146,12 @@ def test_ctrl_c_leaves_a_run_that_resume_completes(bag: Path, user_dir: Path) ->
     done = open_run(user_dir / "out").table("frames").column("frame_index").to_pylist()
     assert 0 < len(done) < 50
     assert set(done) <= set(range(11))
+    # evaluated now, the numbers say they cover part of the log
+    capsys.readouterr()
+    assert main(["evaluate", str(user_dir / "out"), "--metric", "latency"]) == 0
+    said = capsys.readouterr().out
+    assert f"the run was interrupted: it covers the {len(done)} frames it stored" in said
+    assert "these numbers cover part of the log" in said
 
     resumed = subprocess.run(
         [*REDRIVE, *pasted[1:]],

@@ -45,10 +45,14 @@ def _run(args: argparse.Namespace) -> int:
 
     from redrive.evaluation.evaluator import evaluate_run, headline
     from redrive.evaluation.registry import load_metric_class
+    from redrive.results import open_run
 
     metrics = [load_metric_class(name)() for name in args.metric] if args.metric else None
     summary = evaluate_run(args.run, metrics=metrics, algorithms=args.algorithm)
     console = Console(width=None if sys.stdout.isatty() else 120)
+    partial = open_run(args.run).manifest.partial_note()
+    if partial:
+        console.print(f"[bold yellow]warning: {partial}[/]", highlight=False)
     table = Table(title=f"evaluation of {args.run}", title_justify="left")
     for col in ("algorithm", "metric", "headline", "value", "unit", "bookmarks"):
         table.add_column(col, justify="right" if col in ("value", "bookmarks") else "left")
@@ -74,6 +78,10 @@ def _run(args: argparse.Namespace) -> int:
         f"{len(summary.scored)} results, {summary.bookmarks} bookmarked frames → "
         f"{summary.metrics_dir} (`redrive report {args.run}` for the HTML report)"
     )
+    if partial:
+        console.print(
+            f"[bold yellow]these numbers cover part of the log: {partial}[/]", highlight=False
+        )
     if summary.failed:
         console.print(
             f"[bold red]{len(summary.failed)} metric result(s) failed; the others are stored[/]"

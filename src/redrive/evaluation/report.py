@@ -88,6 +88,7 @@ def _facts(run: Run, evaluation: Evaluation) -> list[tuple[str, Any]]:
     return [
         ("run", str(run.path)),
         ("status", m.status.value),
+        ("coverage", m.partial_note() or _complete_coverage(m.pipeline)),
         ("log", m.log.path),
         ("log sha256", m.log.sha256 or ""),
         ("log format", m.log.format),
@@ -102,6 +103,13 @@ def _facts(run: Run, evaluation: Evaluation) -> list[tuple[str, Any]]:
         ("redrive version", m.redrive_version),
         ("evaluated", evaluation.evaluated),
     ]
+
+
+def _complete_coverage(pipeline: Any) -> str:
+    first, stop = pipeline.first_frame, pipeline.stop_frame
+    if first is None and stop is None:
+        return "the whole log (the run is complete)"
+    return f"frames {first or 0}:{'' if stop is None else stop} of the log, as asked (--frames)"
 
 
 def _shown(value: Any) -> str:

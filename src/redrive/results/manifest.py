@@ -380,6 +380,25 @@ class RunManifest(RunSetup):
     def setup(self) -> RunSetup:
         return RunSetup(**{f.name: getattr(self, f.name) for f in fields(RunSetup)})
 
+    def partial_note(self) -> str | None:
+        """What part of its log the run covers when it did not finish (None when complete):
+        numbers evaluated from it hold for those frames only."""
+        frames = f"the {self.frames_done} frames it stored"
+        if self.status is RunStatus.COMPLETE:
+            return None
+        if self.status is RunStatus.INTERRUPTED:
+            how = (
+                "continue it (`redrive run LOG --out RUN --resume` with the run's flags) and "
+                "evaluate again"
+                if self.pipeline.mode_manager != "closed_loop"
+                else "closed-loop runs do not resume: run it again to the end"
+            )
+            return f"the run was interrupted: it covers {frames}, not the whole log; {how}"
+        if self.status is RunStatus.FAILED:
+            why = f" ({self.error})" if self.error else ""
+            return f"the run failed{why}: it covers {frames}, not the whole log"
+        return f"the run is {self.status.value}: it covers {frames} so far"
+
     def to_json(self) -> dict[str, Any]:
         """The JSON object written to ``manifest.json``."""
         return {
