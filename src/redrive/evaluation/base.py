@@ -143,12 +143,14 @@ class MetricResult:
         curves: named curves (x, y), e.g. ``PR/car/2.0`` → (recall, precision).
         bookmarks: failure frames.
         higher_is_better: per value name, where it differs from the metric's
-            ``higher_is_better`` (e.g. ``{"MOTP": False, "num_switches": False}``).
+            ``higher_is_better`` (e.g. ``{"MOTP": False, "num_switches": False}``); None for a
+            value that is neither better nor worse when it grows (a count of what the log
+            held, a parameter echoed): compared, it gets no verdict.
     """
 
     values: Mapping[str, float]
     units: Mapping[str, str] = field(default_factory=dict)
-    higher_is_better: Mapping[str, bool] = field(default_factory=dict)
+    higher_is_better: Mapping[str, bool | None] = field(default_factory=dict)
     per_frame: Mapping[str, Series] = field(default_factory=dict)
     curves: Mapping[str, tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]] = field(
         default_factory=dict

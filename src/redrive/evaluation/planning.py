@@ -565,9 +565,16 @@ class PlanningMetrics(Metric):
             units[key] = "ratio"
         units.update(collisions="frames", at_fault_collisions="frames", frames="frames")
         units.update(min_ttc_s="s", progress_m="m")
+        # errors, collisions and comfort maxima are lower-is-better (the metric's direction);
+        # these are not
+        better = {"min_ttc_s", "progress_ratio", "progress_m", "comfortable_fraction"}
+        better.add("min_lon_accel_mps2")  # the hardest braking: closer to 0 is gentler
+        directions: dict[str, bool | None] = {k: True for k in values if k in better}
+        directions["frames"] = None
         return MetricResult(
             values=values,
             units=units,
+            higher_is_better=directions,
             per_frame={k: s.series() for k, s in series.items()},
             bookmarks=bookmarks,
         )

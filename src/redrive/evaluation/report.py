@@ -145,7 +145,7 @@ def _headline_tables(run: Run, evaluation: Evaluation) -> list[h.Markup]:
         seen: set[str] = set()
         for i in rows:
             r = {name: v.column(name)[int(i)].as_py() for name in v.column_names}
-            better = "higher ↑" if r["higher_is_better"] else "lower ↓"
+            better = {True: "higher ↑", False: "lower ↓", None: "—"}[r["higher_is_better"]]
             line = [r["metric"], r["key"], h.fmt_number(r["value"]), r["unit"], better]
             every.append(line)
             if r["metric"] not in seen:

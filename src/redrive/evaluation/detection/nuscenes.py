@@ -134,5 +134,33 @@ class NuScenesDetection(Metric):
             for i in missed
         ]
         return MetricResult(
-            values=values, units=units, per_frame=per_frame, curves=ev.curves, bookmarks=marks
+            values=values,
+            units=units,
+            higher_is_better=nuscenes_directions(values),
+            per_frame=per_frame,
+            curves=ev.curves,
+            bookmarks=marks,
         )
+
+
+#: the nuScenes true-positive errors (``mATE`` … and per class ``ATE/car`` …): lower is better.
+_TP_ERRORS = frozenset({"ATE", "ASE", "AOE", "AVE", "AAE"})
+#: counts of what the data held: no direction.
+_COUNTS = frozenset({"gt_objects", "detections", "frames"})
+
+
+def nuscenes_directions(values: Mapping[str, float]) -> dict[str, bool | None]:
+    """Per value: the TP errors and ``frames_without_output`` are lower-is-better, the counts
+    of the data have none; the rest (AP, recall, NDS) take the metric's higher-is-better."""
+    out: dict[str, bool | None] = {}
+    for key in values:
+        head = key.split("/", 1)[0]
+        if (
+            head in _TP_ERRORS
+            or head.removeprefix("m") in _TP_ERRORS
+            or key == "frames_without_output"
+        ):
+            out[key] = False
+        elif key in _COUNTS:
+            out[key] = None
+    return out
