@@ -193,13 +193,11 @@ def build_scene(
         kept_intensity = None if intensity is None else intensity[keep]
         colors = color_points(xyz[keep], options.color_mode, intensity=kept_intensity)
     layers: list[LayerLines] = []
-    if Layer.ROAD_MAP in layers_on and driven is not None and run is not None:
-        if run.map_lines is not None:  # (the map is drawn around the driven ego)
-            layers.append(
-                LayerLines(
-                    name="road map", color=MAP_COLOR, segments=map_segments(run.map_lines, driven)
-                )
-            )
+    map_lines = None if run is None else run.map_lines
+    if Layer.ROAD_MAP in layers_on and driven is not None and map_lines is not None:
+        layers.append(
+            LayerLines(name="road map", color=MAP_COLOR, segments=map_segments(map_lines, driven))
+        )
     gt = frame.ground_truth
     if run is not None and at is not None and (not gt or driven is not None):
         # closed loop: the run's ground truth is in the driven ego's base_link, as the view
@@ -272,17 +270,20 @@ def build_scene(
 def _run_frame(frame: Frame, run: RunData | None, shown: frozenset[str] | None) -> int | None:
     """The run frame drawn over ``frame``: the one of the same stamp — except in a sensor-level
     closed loop, whose recording stamps a LiDAR sweep at its start while the algorithms' frame
-    at t had the sweep that *ended* at t: there, the run frame one LiDAR period after the sweep
-    drawn (the frame whose algorithms saw that cloud)."""
+    at t had the sweep that *ended* at t: there, the first run frame after the sweep's start,
+    one LiDAR period later (the frame whose algorithms saw that cloud)."""
     if run is None:
         return None
     if run.closed_loop_level == "sensor":
         for data in frame.sensors.values():
             if shown is not None and data.sensor_id not in shown:
                 continue
-            if data.sensor_type is SensorType.LIDAR and data.frame_rate_hz > 0:
-                period_ns = round(1e9 / data.frame_rate_hz)
-                return run.frame_at(data.stamp_ns + period_ns)
+            if data.sensor_type is SensorType.LIDAR:
+                # (the log's rate is estimated from its counts, not exact: it only bounds the
+                # lag, the frame is the first one after the sweep's start)
+                rate = data.frame_rate_hz
+                within = round(1.5e9 / rate) if rate > 0 else None
+                return run.frame_after(data.stamp_ns, within_ns=within)
     return run.frame_at(frame.stamp_ns)
 
 

@@ -59,7 +59,7 @@ def deviation_strip(run: RunData) -> StripData | None:
     markers = [
         StripMarker(frame=b.frame_index, t_s=t_s(b.stamp_ns), kind="collision", text=b.detail)
         for b in run.bookmarks
-        if b.kind == "collision"
+        if b.metric == "at_fault_collisions" and b.kind == "collision"
     ]
     by_frame = dict(zip(dev.frames.tolist(), dev.stamps_ns.tolist(), strict=True))
     markers += [

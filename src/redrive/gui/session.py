@@ -13,6 +13,7 @@ index, and the stored evaluation's bookmarks and per-frame metrics.
 
 from __future__ import annotations
 
+import bisect
 import logging
 import threading
 from collections.abc import Callable, Iterator, Mapping
@@ -213,15 +214,26 @@ class RunData:
     deviation: Deviation | None = None
     map_lines: npt.NDArray[np.float64] | None = None
     _index_of_stamp: dict[int, int] = field(init=False, repr=False, compare=False)
+    _sorted_stamps: list[int] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(
             self, "_index_of_stamp", {stamp: i for i, stamp in self.stamps_ns.items()}
         )
+        object.__setattr__(self, "_sorted_stamps", sorted(self._index_of_stamp))
 
     def frame_at(self, stamp_ns: int) -> int | None:
         """The index of the run's frame stamped ``stamp_ns`` (None: the run has no such frame)."""
         return self._index_of_stamp.get(stamp_ns)
+
+    def frame_after(self, stamp_ns: int, *, within_ns: int | None = None) -> int | None:
+        """The index of the run's first frame stamped after ``stamp_ns`` (and at most
+        ``within_ns`` after it); None when there is none."""
+        stamps = self._sorted_stamps
+        i = bisect.bisect_right(stamps, stamp_ns)
+        if i == len(stamps) or (within_ns is not None and stamps[i] - stamp_ns > within_ns):
+            return None
+        return self._index_of_stamp[stamps[i]]
 
     @property
     def closed_loop(self) -> bool:
