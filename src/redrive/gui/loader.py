@@ -317,7 +317,7 @@ def _camera_scene(
             image = image.copy() if not image.flags.writeable else image
             splat_points(image, mat, xyz)
         for layer in layers:
-            if layer.name not in ("ego", "road map"):
+            if layer.name not in ("ego", "logged ego", "road map"):
                 segments[layer.name] = (layer.color, project_segments(mat, layer.segments))
     return CameraScene(
         sensor_id=sensor_id, image=image, segments=segments, calibrated=mat is not None
