@@ -99,8 +99,9 @@ def test_an_object_level_run_plays_its_frames_with_the_logged_ego_as_a_ghost(
     road = _layer(window, "road map")
     assert len(road.segments) > 0
     assert np.all(road.segments[:, 2] == 0.0)
-    # Nothing of a sensor: no points.
+    # Nothing of a sensor: no points; the boxes counted are the scene's (not ghost, map, ego).
     assert scene.point_count == 0
+    assert window.planview.status.text() == f"0 points · {len(truth[k])} boxes"
 
 
 def test_the_timeline_plots_the_deviation_and_bookmarks_collisions_and_crossings(

@@ -311,7 +311,11 @@ class Planview(QtWidgets.QWidget):
             self.view2d.show_scene(scene, self.raster_spec, world)
         else:
             self.view3d.show_scene(scene, world)
-        boxes = sum(len(layer.segments) // 28 for layer in scene.layers if layer.name != "ego")
+        boxes = sum(
+            len(layer.segments) // 28
+            for layer in scene.layers
+            if layer.name not in ("ego", "logged ego", "road map")  # (not the scene's boxes)
+        )
         self.status.setText(f"{scene.point_count:,} points · {boxes} boxes")
 
     def grab_view(self) -> QtGui.QImage:
