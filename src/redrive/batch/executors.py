@@ -26,7 +26,7 @@ from multiprocessing.connection import wait
 from typing import Any, Protocol
 
 from redrive.batch.cell import CellRunner, CellTask
-from redrive.batch.manifest import CellRecord, CellStatus, read_cell_record
+from redrive.batch.manifest import CellRecord, CellStatus, read_cell_record, write_cell_record
 from redrive.errors import ConfigError
 from redrive.results.manifest import now_iso
 
@@ -100,6 +100,7 @@ class LocalExecutor:
                             pending.appendleft(replace(task, attempt=task.attempt + 1))
                             continue
                         record = task.record(CellStatus.FAILED, error=reason, finished=now_iso())
+                        write_cell_record(task.record_path, record)
                     events.finished(record)
         except BaseException:
             _stop(running)
@@ -207,6 +208,7 @@ class RayExecutor:
                             attempts=self.retries + 1,
                             finished=now_iso(),
                         )
+                        write_cell_record(task.record_path, record)
                     events.finished(record)
         except BaseException:
             for ref, task in running.items():
