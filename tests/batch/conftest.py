@@ -9,6 +9,8 @@ import pytest
 
 from redrive.testing.demo_log import write_demo_bag
 
+from .outputs import batch
+
 #: seconds of the four logs: about 2 s each, different so that their cells differ.
 DURATIONS_S = (2.0, 2.1, 2.2, 2.3)
 
@@ -53,4 +55,16 @@ def pipelines(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
         path = folder / f"{name}.toml"
         path.write_text(text, encoding="utf-8")
         out.append(path)
+    return out
+
+
+@pytest.fixture(scope="package")
+def two_workers(
+    logs: list[Path], pipelines: list[Path], tmp_path_factory: pytest.TempPathFactory
+) -> Path:
+    out = tmp_path_factory.mktemp("two_workers") / "batch"
+    args = [str(p) for p in logs]
+    for p in pipelines:
+        args += ["--pipeline", str(p)]
+    assert batch(out, *args, "--workers", "2") == 0
     return out

@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from redrive.cli.main import main
 from redrive.results import open_run
 
 TIMING_COLUMNS = {"wall_ns", "late", "latency_ns", "cpu_ns"}
@@ -30,3 +31,8 @@ def batch_outputs(batch_dir: Path) -> dict[str, dict[str, Any]]:
         str(manifest.parent.relative_to(runs)): cell_outputs(manifest.parent)
         for manifest in sorted(runs.glob("*/*/*/manifest.json"))
     }
+
+
+def batch(out: Path, *args: str) -> int:
+    """``redrive batch ARGS --out OUT --no-progress``; its exit status."""
+    return main(["batch", *args, "--out", str(out), "--no-progress"])

@@ -14,25 +14,9 @@ from redrive.cli.batch import EXIT_CELLS_FAILED
 from redrive.cli.main import main
 from redrive.results import RunStatus, read_manifest
 
-from .outputs import batch_outputs
+from .outputs import batch, batch_outputs
 
 PLUGINS = Path(__file__).with_name("plugins.py")
-
-
-def _batch(out: Path, *args: str) -> int:
-    return main(["batch", *args, "--out", str(out), "--no-progress"])
-
-
-@pytest.fixture(scope="module")
-def two_workers(
-    logs: list[Path], pipelines: list[Path], tmp_path_factory: pytest.TempPathFactory
-) -> Path:
-    out = tmp_path_factory.mktemp("two_workers") / "batch"
-    args = [str(p) for p in logs]
-    for p in pipelines:
-        args += ["--pipeline", str(p)]
-    assert _batch(out, *args, "--workers", "2") == 0
-    return out
 
 
 def test_every_cell_is_an_ordinary_complete_run(two_workers: Path, logs: list[Path]) -> None:
@@ -61,7 +45,7 @@ def test_one_worker_gives_the_same_outputs(
     args = [str(p) for p in logs]
     for p in pipelines:
         args += ["--pipeline", str(p)]
-    assert _batch(tmp_path / "one", *args, "--workers", "1") == 0
+    assert batch(tmp_path / "one", *args, "--workers", "1") == 0
     one = batch_outputs(tmp_path / "one")
     assert len(one) == 8
     assert one == batch_outputs(two_workers)
@@ -79,14 +63,14 @@ def test_rerun_skips_complete_cells_and_force_redoes_them(
     args = [str(p) for p in logs]
     for p in pipelines:
         args += ["--pipeline", str(p)]
-    assert _batch(out, *args, "--workers", "2") == 0
+    assert batch(out, *args, "--workers", "2") == 0
     cells = {c.cell_id: c for c in read_batch_manifest(out).cells}
     redone = {i for i, c in cells.items() if c.status is CellStatus.COMPLETE}
     assert redone == {"a/open/drive1", "b/open/drive3"}
     assert all(c.status is CellStatus.SKIPPED for i, c in cells.items() if i not in redone)
     assert batch_outputs(out) == batch_outputs(two_workers)
 
-    assert _batch(out, *args, "--workers", "2", "--force") == 0
+    assert batch(out, *args, "--workers", "2", "--force") == 0
     assert {c.status for c in read_batch_manifest(out).cells} == {CellStatus.COMPLETE}
 
 
@@ -97,7 +81,7 @@ def test_a_changed_pipeline_is_not_skipped(
     shutil.copytree(two_workers, out)
     changed = tmp_path / "a.toml"  # same name: same cells, other config
     changed.write_text("seed = 5\n" + pipelines[0].read_text(encoding="utf-8"), encoding="utf-8")
-    assert _batch(out, str(logs[0]), "--pipeline", str(changed), "--workers", "1") == 0
+    assert batch(out, str(logs[0]), "--pipeline", str(changed), "--workers", "1") == 0
     (cell,) = read_batch_manifest(out).cells
     assert cell.status is CellStatus.COMPLETE
     assert read_manifest(out / cell.run_dir).seed == 5
@@ -110,7 +94,7 @@ def test_a_corrupt_log_fails_only_its_cell_with_the_readers_error(
     data = logs[0].read_bytes()
     corrupt.write_bytes(data[: len(data) // 2])
     out = tmp_path / "batch"
-    status = _batch(
+    status = batch(
         out,
         str(logs[0]),
         str(corrupt),
@@ -142,7 +126,7 @@ def test_a_sigkilled_worker_fails_only_its_cell_after_its_retries(
 
     write_demo_bag(long_log, duration_s=3.0)  # 30 frames: reaches frame 25, the others do not
     out = tmp_path / "batch"
-    status = _batch(
+    status = batch(
         out,
         str(logs[0]),
         str(long_log),
@@ -176,7 +160,7 @@ def test_a_worker_killed_once_is_retried_and_completes(logs: list[Path], tmp_pat
         encoding="utf-8",
     )
     out = tmp_path / "batch"
-    assert _batch(out, *map(str, logs[:3]), "--pipeline", str(pipeline), "--workers", "2") == 0
+    assert batch(out, *map(str, logs[:3]), "--pipeline", str(pipeline), "--workers", "2") == 0
     assert marker.exists()
     cells = read_batch_manifest(out).cells
     assert {c.status for c in cells} == {CellStatus.COMPLETE}
@@ -192,11 +176,11 @@ def test_retries_zero_fails_the_killed_cell_at_once(logs: list[Path], tmp_path: 
         encoding="utf-8",
     )
     out = tmp_path / "batch"
-    status = _batch(out, str(logs[0]), "--pipeline", str(pipeline), "--retries", "0")
+    status = batch(out, str(logs[0]), "--pipeline", str(pipeline), "--retries", "0")
     assert status == EXIT_CELLS_FAILED
     (cell,) = read_batch_manifest(out).cells
     assert cell.status is CellStatus.FAILED
     assert cell.attempts == 1
     assert "SIGKILL" in (cell.error or "")
     # the same command again: the failed cell runs again (the marker lets it live now)
-    assert _batch(out, str(logs[0]), "--pipeline", str(pipeline), "--retries", "0") == 0
+    assert batch(out, str(logs[0]), "--pipeline", str(pipeline), "--retries", "0") == 0
