@@ -185,7 +185,7 @@ def _logs_in_dir(path: Path) -> list[Path]:
 def _expand_one(entry: str, base: Path, seeds: Sequence[int], depth: int) -> list[LogItem | Path]:
     name, at, seed_text = entry.rpartition("@")
     if not at:
-        name = entry
+        name, seed_text = entry, ""
     scenario = name if _is_scenario(name) else None
     if scenario is None and name.endswith(".toml") and _is_scenario(str(base / name)):
         scenario = str(base / name)
