@@ -55,3 +55,27 @@ class KillOnce(Algorithm):
                 os.close(fd)
                 os.kill(os.getpid(), signal.SIGKILL)
         return _stand_still(frame.stamp_ns)
+
+
+class InterruptDriver(Algorithm):
+    """Sends SIGINT (Ctrl-C) to process ``driver_pid`` at frame ``frame_index``, once: the run
+    that creates ``marker`` does; later runs plan on."""
+
+    role = Role.PLANNING
+    defaults = MappingProxyType({"driver_pid": 0, "frame_index": 21, "marker": ""})
+
+    def setup(self, config: Mapping[str, Any]) -> None:
+        self.driver_pid = int(config["driver_pid"])
+        self.frame_index = int(config["frame_index"])
+        self.marker = str(config["marker"])
+
+    def step(self, frame: Frame, upstream: StageOutputs) -> PlannedPath:
+        if frame.index == self.frame_index:
+            try:
+                fd = os.open(self.marker, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+            except FileExistsError:
+                pass
+            else:
+                os.close(fd)
+                os.kill(self.driver_pid, signal.SIGINT)
+        return _stand_still(frame.stamp_ns)

@@ -4,6 +4,7 @@ worker and a corrupt log fail only their cells, a re-run skips complete cells, -
 from __future__ import annotations
 
 import json
+import os
 import shutil
 from pathlib import Path
 
@@ -184,3 +185,38 @@ def test_retries_zero_fails_the_killed_cell_at_once(logs: list[Path], tmp_path: 
     assert "SIGKILL" in (cell.error or "")
     # the same command again: the failed cell runs again (the marker lets it live now)
     assert batch(out, str(logs[0]), "--pipeline", str(pipeline), "--retries", "0") == 0
+
+
+def test_ctrl_c_then_the_same_command_runs_only_the_missing_cells(
+    logs: list[Path], tmp_path: Path
+) -> None:
+    marker = tmp_path / "interrupted-once"
+    pipeline = tmp_path / "ctrl_c.toml"
+    pipeline.write_text(
+        f'[[stage]]\nname = "planning"\n[[stage.algorithm]]\nplugin = "{PLUGINS}:InterruptDriver"\n'
+        f'config = {{ driver_pid = {os.getpid()}, marker = "{marker}" }}\n',
+        encoding="utf-8",
+    )
+    args = [*map(str, logs), "--pipeline", str(pipeline), "--workers", "1"]
+    out = tmp_path / "batch"
+    # one worker: drive0 and drive1 (20, 21 frames) complete, drive2 reaches frame 21 and
+    # presses Ctrl-C on this process, drive3 never starts
+    assert batch(out, *args) == 130
+    manifest = read_batch_manifest(out)
+    assert manifest.status == "interrupted"
+    status = {c.log_id: c.status for c in manifest.cells}
+    assert status == {
+        "drive0": CellStatus.COMPLETE,
+        "drive1": CellStatus.COMPLETE,
+        "drive2": CellStatus.INTERRUPTED,
+        "drive3": CellStatus.PENDING,
+    }
+    assert read_manifest(out / "runs/ctrl_c/open/drive2").status is RunStatus.INTERRUPTED
+    assert batch(out, *args) == 0
+    status = {c.log_id: c.status for c in read_batch_manifest(out).cells}
+    assert status == {
+        "drive0": CellStatus.SKIPPED,
+        "drive1": CellStatus.SKIPPED,
+        "drive2": CellStatus.COMPLETE,
+        "drive3": CellStatus.COMPLETE,
+    }

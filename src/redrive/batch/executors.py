@@ -58,7 +58,10 @@ def dead_worker_reason(exitcode: int | None) -> str:
 
 
 def _child(runner: CellRunner, task: CellTask) -> None:
-    """A local worker: run one cell (its record is written by the runner)."""
+    """A local worker: run one cell (its record is written by the runner).  It leaves the
+    terminal's process group, so that Ctrl-C reaches the driver only, which then interrupts each
+    running cell once (:func:`_stop`)."""
+    os.setpgrp()
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     try:
         runner(task)
