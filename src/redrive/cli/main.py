@@ -22,6 +22,7 @@ _COMMANDS = (
     "convert",
     "synth",
     "run",
+    "batch",
     "export",
     "evaluate",
     "report",
@@ -38,6 +39,7 @@ examples:
   redrive synth urban -o urban.mcap      simulate a driving scenario into a log
   redrive run urban.mcap                 replay it through perception → planning → control
   redrive run drive.bag --perception my_detector.py:MyDetector --out runs/mine
+  redrive batch drives/ --pipeline a.toml --pipeline b.toml --out batches/ab   many logs × pipelines
   redrive export runs/mine --format xlsx results as Excel (or csv, parquet)
   redrive evaluate runs/mine             detection, tracking, planning, control, latency metrics
   redrive report runs/mine               self-contained HTML report, Excel workbook, CSV files
