@@ -69,10 +69,15 @@ def test_open_play_pause_step_scrub(qtbot: Any, window: MainWindow, demo_log: Pa
     qtbot.waitUntil(lambda: window.scene is not None and window.scene.index >= 40, timeout=_WAIT_MS)
     qtbot.mouseClick(window.timeline.play_button, QtCore.Qt.MouseButton.LeftButton)
     assert not window.timeline.playing
-    qtbot.wait(300)
+    # the frame asked for before the pause may still be on its way: wait for the loader to be
+    # idle and its scene shown (no fixed sleep: a loaded machine is slow), then nothing more
+    # may come however long one waits
+    qtbot.waitUntil(lambda: not window.loader.busy, timeout=_WAIT_MS)
+    qtbot.wait(100)
     stopped_at = window.scene.index
     qtbot.wait(500)
     assert window.scene.index == stopped_at
+    assert not window.loader.busy
 
 
 def _rendered(widget_image: Any) -> np.ndarray:
