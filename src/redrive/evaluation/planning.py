@@ -280,7 +280,9 @@ class PlanningMetrics(Metric):
     name: ClassVar[str] = "planning"
     version: ClassVar[str] = "1"
     role: ClassVar[Role | None] = Role.PLANNING
-    needs: ClassVar[frozenset[str]] = frozenset({"paths", "ego", "ground_truth"})
+    # ground truth only for the collision and TTC values: ADE/FDE, progress and comfort need
+    # the ego track alone (real logs without object labels)
+    needs: ClassVar[frozenset[str]] = frozenset({"paths", "ego"})
     unit: ClassVar[str] = "m"
     higher_is_better: ClassVar[bool] = False
     defaults: ClassVar[Mapping[str, Any]] = MappingProxyType(
