@@ -3,6 +3,7 @@ Ctrl-C and --resume."""
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import re
@@ -17,7 +18,7 @@ from pathlib import Path
 import pytest
 
 from redrive.cli.main import main
-from redrive.cli.run import parse_frames
+from redrive.cli.run import ProgressLines, parse_frames
 from redrive.errors import ConfigError
 from redrive.results import RunStatus, open_run
 from redrive.testing.demo_log import write_demo_bag
@@ -91,7 +92,6 @@ def test_a_user_file_runs_without_touching_redrive(bag: Path, user_dir: Path) ->
             "tall.py:TallThings",
             "-o",
             "out",
-            "--no-progress",
         ],
         cwd=user_dir,
         env=_env(),
@@ -102,6 +102,12 @@ def test_a_user_file_runs_without_touching_redrive(bag: Path, user_dir: Path) ->
     )
     assert proc.returncode == 0, proc.stderr
     assert "50 frames" in proc.stdout
+    # stderr is a pipe here: progress comes as plain lines, one per tenth of the frames
+    lines = [line for line in proc.stderr.splitlines() if " frames, " in line]
+    assert [line.split(":")[1].split()[0] for line in lines] == [
+        f"{n}/50" for n in range(5, 51, 5)
+    ], proc.stderr
+    assert "ETA" in lines[0]
     run = open_run(user_dir / "out")
     assert run.manifest.status is RunStatus.COMPLETE
     assert run.manifest.algorithms[0].source == str(user_dir / "tall.py")
@@ -261,3 +267,39 @@ def test_a_run_where_nothing_succeeded_exits_3_and_partial_failures_are_counted(
     captured = capsys.readouterr()
     assert "10 of 50 frames had a failed step" in captured.out
     assert "no algorithm step succeeded" not in captured.err
+
+
+def test_stale_inputs_are_reported_per_frame_and_counted(
+    shared_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The Luminar bag's odometry is stamped months from its clouds: no frame has an ego state
+    within the tolerance. Each frame says so and the run's summary counts it (it was silent)."""
+    bag = shared_data / "rosbag1_real" / "embag_luminar_test.bag"
+    out = tmp_path / "lum"
+    status = main(["run", str(bag), "--perception", "cluster-detector", "-o", str(out),
+                   "--no-progress"])  # fmt: skip
+    assert status == 0
+    said = capsys.readouterr().out
+    assert "5 of 5 frames had no vehicle_state within the tolerance" in said
+    run = open_run(out)
+    assert run.table("frames").column("missing_inputs").to_pylist() == ["vehicle_state"] * 5
+    assert run.manifest.summary is not None
+    assert run.manifest.summary.missing_inputs == {"vehicle_state": 5}
+    # a log whose inputs are all there has none
+    full = tmp_path / "full"
+    assert main(["run", str(shared_data / "rosbag1_recorded_here" / "kitti_3frames_rosbag_record_lz4.bag"),
+                 "--perception", "cluster-detector", "-o", str(full), "--no-progress"]) == 0  # fmt: skip
+    assert "within the tolerance" not in capsys.readouterr().out
+    assert set(open_run(full).table("frames").column("missing_inputs").to_pylist()) == {""}
+
+
+def test_progress_lines_without_a_total_come_every_100_frames() -> None:
+    out = io.StringIO()
+    lines = ProgressLines("x.bag", out)
+    lines.start(None)
+    for done in range(1, 251):
+        lines.update(done, done / 50.0)
+    assert out.getvalue().splitlines() == [
+        "x.bag: 100 frames, 50.0 frames/s",
+        "x.bag: 200 frames, 50.0 frames/s",
+    ]

@@ -80,6 +80,42 @@ def _default_out(log: Path) -> Path:
     return Path("runs") / f"{stem}-{time.strftime('%Y%m%d-%H%M%S')}"
 
 
+class ProgressLines:
+    """Progress as plain lines when stderr is not a terminal (a pipe, a CI log, a batch
+    worker): one line at every tenth of the frames (every 100 frames when the total is not
+    known), with frames/s and the estimated time left."""
+
+    def __init__(self, name: str, stream: Any) -> None:
+        self.name, self.stream = name, stream
+        self.total: int | None = None
+        self._next = 0
+
+    def start(self, total: int | None) -> None:
+        self.total = total
+        self._next = self._step()
+
+    def _step(self) -> int:
+        return max(1, self.total // 10) if self.total else 100
+
+    def update(self, done: int, elapsed_s: float) -> None:
+        if done < self._next and done != self.total:
+            return
+        while self._next <= done:
+            self._next += self._step()
+        rate = done / elapsed_s if elapsed_s > 0 else 0.0
+        of = f"/{self.total}" if self.total else ""
+        eta = (
+            f", ETA {(self.total - done) / rate:.0f} s"
+            if self.total and rate > 0 and done < self.total
+            else ""
+        )
+        print(
+            f"{self.name}: {done}{of} frames, {rate:.1f} frames/s{eta}",
+            file=self.stream,
+            flush=True,
+        )
+
+
 def print_run_report(report: Any, out: Path) -> None:
     from rich.console import Console
     from rich.table import Table
@@ -108,6 +144,13 @@ def print_run_report(report: Any, out: Path) -> None:
         f"{report.realtime_factor:.1f}x real time ({report.log_span_s:.1f} s of log)"
         + (f", {report.late_frames} late" if report.late_frames else "")
     )
+    for name, count in sorted(report.missing_inputs.items()):
+        console.print(
+            f"[bold yellow]{count} of {report.frames} frames had no {name} within the tolerance"
+            "[/bold yellow] (stale or absent there; the frames table's missing_inputs says which "
+            "frames; `--sensor-map` sets tolerance_ms)",
+            highlight=False,
+        )
     if report.failed_frames:
         console.print(
             f"[bold red]{report.failed_frames} of {report.frames} frames had a failed step[/bold red]"
@@ -147,7 +190,14 @@ def pipeline_from_args(args: argparse.Namespace) -> Any:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
+    from rich.console import Console
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeRemainingColumn,
+    )
 
     from redrive.engine import RunRequest, run_log
     from redrive.results import RunStatus
@@ -184,8 +234,16 @@ def _run(args: argparse.Namespace) -> int:
         BarColumn(),
         MofNCompleteColumn(),
         TextColumn("{task.fields[rate]}"),
+        TextColumn("ETA"),
+        TimeRemainingColumn(),
         transient=True,
-        disable=args.no_progress,
+        disable=args.no_progress or not sys.stderr.isatty(),
+        console=Console(stderr=True),
+    )
+    lines = (
+        None
+        if args.no_progress or sys.stderr.isatty()
+        else ProgressLines(args.log.name, sys.stderr)
     )
     started = [0.0]
     with progress_bar:
@@ -194,11 +252,15 @@ def _run(args: argparse.Namespace) -> int:
         def on_start(total: int | None) -> None:
             started[0] = time.perf_counter()
             progress_bar.update(task, total=total)
+            if lines is not None:
+                lines.start(total)
 
         def on_progress(done: int) -> None:
             elapsed = time.perf_counter() - started[0]
             rate = f"{done / elapsed:.1f} frames/s" if elapsed > 0 else ""
             progress_bar.update(task, completed=done, rate=rate)
+            if lines is not None:
+                lines.update(done, elapsed)
 
         report = run_log(request, on_start=on_start, progress=on_progress)
     print_run_report(report, out)

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -49,6 +49,7 @@ class RunReport:
         late_frames: frames released after their due time (real-time pacing only).
         failure: (frame index, step) that stopped a ``fail_fast`` run.
         failed_frames: frames in which at least one step failed (error or timeout).
+        missing_inputs: input → frames that had no sample of it within the tolerance.
     """
 
     status: RunStatus
@@ -59,6 +60,7 @@ class RunReport:
     algorithms: tuple[AlgorithmStats, ...] = ()
     failure: tuple[int, StepRecord] | None = field(default=None)
     failed_frames: int = 0
+    missing_inputs: Mapping[str, int] = field(default_factory=dict)
 
     @property
     def nothing_succeeded(self) -> bool:
@@ -84,6 +86,7 @@ class RunReport:
             "realtime_factor": round(self.realtime_factor, 2),
             "late_frames": self.late_frames,
             "failed_frames": self.failed_frames,
+            "missing_inputs": dict(self.missing_inputs),
             "algorithms": [a.as_dict() for a in self.algorithms],
         }
         if self.failure is not None:
@@ -111,6 +114,7 @@ class StatsCollector:
         self._first_error: dict[str, str] = {}
         self.frames = 0
         self.failed_frames = 0
+        self.missing_inputs: dict[str, int] = {}
         self._first_stamp: int | None = None
         self._last_stamp = 0
 
@@ -121,6 +125,8 @@ class StatsCollector:
         self._last_stamp = record.stamp_ns
         if any(step.status in ("error", "timeout") for step in record.steps):
             self.failed_frames += 1
+        for name in record.missing:
+            self.missing_inputs[name] = self.missing_inputs.get(name, 0) + 1
         for step in record.steps:
             name, status = step.algorithm, step.status
             if status == "ok":
@@ -185,4 +191,5 @@ class StatsCollector:
             algorithms=tuple(algos),
             failure=failure,
             failed_frames=self.failed_frames,
+            missing_inputs=dict(self.missing_inputs),
         )

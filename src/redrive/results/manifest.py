@@ -313,6 +313,8 @@ class RunSummary:
     failure: StepFailure | None = None
     skipped_frames: int | None = None  # real-time mode: frames skipped (pipeline too slow)
     failed_frames: int | None = None  # frames with a failed (error/timeout) step
+    #: input → frames without a sample of it within the tolerance (stale or absent there)
+    missing_inputs: Mapping[str, int] = field(default_factory=dict)
     undecodable_messages: Mapping[str, int] = field(default_factory=dict)  # topic → count
     error: str | None = None  # ``Type: message`` of what ended a failed or interrupted run
     #: closed loop: the deviation thresholds, how many frames passed them (``deviated_frames``),
@@ -324,6 +326,7 @@ class RunSummary:
         out["algorithms"] = [_plain(a) for a in self.algorithms]
         out["failure"] = None if self.failure is None else _asdict(self.failure)
         out["undecodable_messages"] = dict(self.undecodable_messages)
+        out["missing_inputs"] = dict(self.missing_inputs)
         out["closed_loop"] = to_jsonable(self.closed_loop)
         return out
 
@@ -343,6 +346,7 @@ class RunSummary:
             failure=None if failure is None else StepFailure._parse(failure),
             skipped_frames=f.opt_integer("skipped_frames", None),
             failed_frames=f.opt_integer("failed_frames", None),
+            missing_inputs=f.int_map("missing_inputs", {}),
             undecodable_messages=f.int_map("undecodable_messages", {}),
             error=f.opt_text("error", None),
             closed_loop=f.mapping("closed_loop", {}),
