@@ -74,6 +74,20 @@ class GapSearch:
         self._seg: F64 = pts[1:] - pts[:-1] if n else np.zeros((0, 2))
         self._seg_len: F64 = s[1:] - s[:-1] if n else np.zeros(0)
         self._seg_len2: F64 = self._seg_len**2
+        self._x, self._y = pts[:, 0].copy(), pts[:, 1].copy()
+        self._seg_x, self._seg_y = self._seg[:, 0].copy(), self._seg[:, 1].copy()
+        # sparse tables of the samples' running min and max: level k holds, at sample i, the
+        # bounding box of samples i … i + 2^k - 1 (a piece's box is two look-ups of one level)
+        low, high = [pts], [pts]
+        while 2 ** len(low) <= n:
+            half = 2 ** (len(low) - 1)
+            low.append(np.minimum(low[-1][:-half], low[-1][half:]))
+            high.append(np.maximum(high[-1][:-half], high[-1][half:]))
+        # (levels, samples, 2), the tail of each level (no full run there) never read
+        self._low: F64 = np.stack([np.concatenate([lv, np.zeros((n - len(lv), 2))]) for lv in low])
+        self._high: F64 = np.stack(
+            [np.concatenate([lv, np.zeros((n - len(lv), 2))]) for lv in high]
+        )
 
     def gaps(self, queries: Sequence[GapQuery], obstacles: Obstacles) -> list[tuple[float, float]]:
         """For each query: the gap (metres, inf if none) and the leader's speed along the route
@@ -83,25 +97,25 @@ class GapSearch:
         if nq == 0 or len(obstacles.ids) == 0:
             return none
         horizon = self.horizon_m
-        lo_g, n_seg = np.empty(nq, dtype=np.int64), np.empty(nq, dtype=np.int64)
-        s_center, s_front, s_max = np.empty(nq), np.empty(nq), np.empty(nq)
-        widths, self_ids = np.empty(nq), np.empty(nq, dtype=np.int64)
-        for k, q in enumerate(queries):
-            top = q.s_front_m + horizon
-            lo, hi = q.route._piece(q.s_center_m, top)
-            lo_g[k] = self._offset[id(q.route)] + lo
-            n_seg[k] = hi - lo
-            s_center[k], s_front[k], s_max[k] = q.s_center_m, q.s_front_m, top
-            widths[k], self_ids[k] = q.width_m, q.self_id
+        pieces = [q.route._piece(q.s_center_m, q.s_front_m + horizon) for q in queries]
+        lo_g = np.array(
+            [self._offset[id(q.route)] + lo for q, (lo, _) in zip(queries, pieces, strict=True)],
+            dtype=np.int64,
+        )
+        n_seg = np.array([hi - lo for lo, hi in pieces], dtype=np.int64)
+        s_center = np.array([q.s_center_m for q in queries])
+        s_front = np.array([q.s_front_m for q in queries])
+        s_max = np.array([q.s_front_m + horizon for q in queries])
+        widths = np.array([q.width_m for q in queries])
+        self_ids = np.array([q.self_id for q in queries], dtype=np.int64)
         centers = obstacles.centers
         span = int(n_seg.max())
-        cols = np.arange(span + 1)
-        # the piece's samples lo … hi (hi - lo segments), padded with its first sample
-        in_piece = cols[None, :] <= n_seg[:, None]
-        samples = np.where(in_piece, lo_g[:, None] + cols[None, :], lo_g[:, None])
-        piece = self._points[samples]  # (Q, span + 1, 2)
-        low = np.where(in_piece[..., None], piece, np.inf).min(axis=1)
-        high = np.where(in_piece[..., None], piece, -np.inf).max(axis=1)
+        cols = np.arange(span)
+        # the bounding box of each piece's samples lo … hi (hi - lo + 1 of them)
+        level = np.frexp(n_seg + 1)[1] - 1  # floor(log2(hi - lo + 1)), exactly
+        last = lo_g + n_seg + 1 - np.left_shift(1, level)
+        low = np.minimum(self._low[level, lo_g], self._low[level, last])
+        high = np.maximum(self._high[level, lo_g], self._high[level, last])
         reach = (widths[:, None] + obstacles.widths[None, :]) / 2.0 + self.margin_m  # (Q, M)
         # Route.near: what lies outside every piece's bounding box grown by the reach can never
         # be in the lane; project only the rest (a superset of what is ahead)
@@ -115,21 +129,24 @@ class GapSearch:
         if len(qk) == 0:
             return none
         # Route.project of each (query, obstacle) pair onto the query's piece
-        valid = in_piece[qk, 1:]  # segment j of the piece exists when j < hi - lo
+        valid = cols[None, :] < n_seg[qk][:, None]  # segment j of the piece: j < hi - lo
         # (P, span) segment indices (segment i runs from sample i to i + 1), padded with the first
-        seg_idx = np.where(valid, samples[qk, :span], lo_g[qk][:, None])
-        a = self._points[seg_idx]
-        seg = self._seg[seg_idx]
+        first_seg = lo_g[qk][:, None]
+        seg_idx = np.where(valid, first_seg + cols[None, :], first_seg)
+        # x and y apart: the sums over the two coordinates written out are several times
+        # faster than .sum(-1) and equal to it (+ 0.0 makes a sum of two -0.0 the +0.0 that
+        # numpy's reduction, which starts from +0.0, gives)
+        rel_x = centers[mk, 0:1] - self._x[seg_idx]
+        rel_y = centers[mk, 1:2] - self._y[seg_idx]
+        seg_x, seg_y = self._seg_x[seg_idx], self._seg_y[seg_idx]
         seg_len = self._seg_len[seg_idx]
-        rel = centers[mk][:, None, :] - a
-        t = np.clip((rel * seg).sum(-1) / self._seg_len2[seg_idx], 0.0, 1.0)
-        diff = rel - t[..., None] * seg
-        dist2 = np.where(valid, (diff**2).sum(-1), np.inf)
+        t = np.clip(((rel_x * seg_x + rel_y * seg_y) + 0.0) / self._seg_len2[seg_idx], 0.0, 1.0)
+        diff_x, diff_y = rel_x - t * seg_x, rel_y - t * seg_y
+        dist2 = np.where(valid, diff_x**2 + diff_y**2, np.inf)
         j = np.argmin(dist2, axis=1)
         rows = np.arange(len(qk))
         s = self._s[lo_g[qk] + j] + t[rows, j] * seg_len[rows, j]
-        sj = seg[rows, j]
-        cross = sj[:, 0] * rel[rows, j, 1] - sj[:, 1] * rel[rows, j, 0]
+        cross = seg_x[rows, j] * rel_y[rows, j] - seg_y[rows, j] * rel_x[rows, j]
         lateral = np.where(cross < 0.0, -1.0, 1.0) * np.sqrt(dist2[rows, j])
         ahead = (
             (s > s_center[qk] + 1e-6) & (s < s_max[qk] - 1e-6) & (np.abs(lateral) < reach[qk, mk])
