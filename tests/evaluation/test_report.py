@@ -270,19 +270,30 @@ def test_worst_frames_without_bookmarks_are_the_most_missed(tmp_path: Path) -> N
 
 def test_xlsx(report: tuple[Path, Any]) -> None:
     wb = load_workbook(report[1].xlsx, read_only=True)
-    assert wb.sheetnames == ["summary", "per_frame", "curves", "bookmarks", "metrics"]
+    assert wb.sheetnames == [
+        "summary", "run", "algorithms", "per_frame", "curves", "bookmarks", "metrics",
+    ]  # fmt: skip
+    # the summary is one tidy table: a header, then a row per value (issue 17 item 12)
     summary = [list(r) for r in wb["summary"].iter_rows(values_only=True)]
-    assert ["log sha256", "ab12" * 16] in summary
-    assert [EVIL, "perception", "3", "c0ffee" * 10] in summary
-    head = summary.index(
-        ["metric", "metric_version", "algorithm", "key", "value", "unit", "higher_is_better",
-         "headline"]
-    )  # fmt: skip
-    assert summary[head + 1 :] == [  # an empty string reads back as an empty cell (None)
-        ["det_metric", "2", EVIL, "mAP", 0.625, None, True, True],
-        ["det_metric", "2", EVIL, "recall", 0.6, "ratio", True, False],
-        ["lat", "1", None, "p95_ms", 4.85, "ms", False, True],
+    assert summary[0] == [
+        "metric", "algorithm", "value", "number", "unit", "better", "headline", "definition",
+    ]  # fmt: skip
+    rows = [r[:7] for r in summary[1:]]
+    assert rows == [  # an empty string reads back as an empty cell (None)
+        ["det_metric", EVIL, "mAP", 0.625, None, "higher", True],
+        ["det_metric", EVIL, "recall", 0.6, "ratio", "higher", False],
+        ["lat", "(run)", "p95_ms", 4.85, "ms", "lower", True],
     ]
+    assert all(r[7].startswith(("v2 params ", "v1 params ")) for r in summary[1:])
+    # header frozen and filterable on every sheet with rows
+    full = load_workbook(report[1].xlsx)
+    for name in ("summary", "run", "algorithms", "bookmarks", "metrics"):
+        assert full[name].freeze_panes == "A2", name
+        assert full[name].auto_filter.ref is not None, name
+    facts = [list(r) for r in wb["run"].iter_rows(values_only=True)]
+    assert ["log sha256", "ab12" * 16] in facts
+    algos = [list(r) for r in wb["algorithms"].iter_rows(values_only=True)]
+    assert [EVIL, "perception", "3", "c0ffee" * 10] in algos
     wide = [list(r) for r in wb["per_frame"].iter_rows(values_only=True)]
     assert wide == [
         ["frame_index", f"{EVIL} / det_metric / tp", f"{EVIL} / det_metric / missed",

@@ -52,7 +52,7 @@ __all__ = [
     "worst_frames",
 ]
 
-PNG_DPI = 80
+PNG_DPI = 110  # 6-inch figures come out 660 px wide: readable without zooming
 #: ground-truth boxes in bird's-eye views (green).
 GROUND_TRUTH_COLOR = "#2ca02c"
 #: detections of the 1st, 2nd … algorithm in bird's-eye views (red, blue, orange, purple).

@@ -258,24 +258,46 @@ def _wide_per_frame(evaluation: Evaluation, run: Run) -> Iterator[list[Any]]:
         yield [frame, *grid[i].tolist()]
 
 
+#: the summary sheet: one tidy table, a row per stored value.
+SUMMARY_COLUMNS = (
+    "metric", "algorithm", "value", "number", "unit", "better", "headline", "definition",
+)  # fmt: skip
+
+
+def summary_rows(evaluation: Evaluation) -> Iterator[list[Any]]:
+    """The summary sheet's rows after its header: metric, algorithm ("(run)" for run-level
+    metrics), the value's name, the number, its unit, which way is better (higher / lower /
+    —), whether it is the metric's headline, and the definition (version and parameter hash)."""
+    v = evaluation.values
+    defs = {m.get("name"): m for m in evaluation.metrics}
+    seen: set[tuple[str, str]] = set()
+    for r in v.to_pylist():
+        key = (r["metric"], r["algorithm"])
+        first = key not in seen
+        seen.add(key)
+        d = defs.get(r["metric"], {})
+        definition = f"v{r['metric_version']} params {str(d.get('params_hash', ''))[:12]}"
+        better = {True: "higher", False: "lower", None: "—"}[r["higher_is_better"]]
+        yield [r["metric"], r["algorithm"] or "(run)", r["key"], r["value"], r["unit"], better,
+               first, definition]  # fmt: skip
+
+
 def _write_xlsx(path: Path, run: Run, evaluation: Evaluation) -> None:
     from openpyxl import Workbook
+    from openpyxl.utils import get_column_letter
 
-    v = evaluation.values
-    first = {k: int(rows[0]) for k, rows in plots.group_rows(v, ["algorithm", "metric"]).items()}
-    headline = np.zeros(v.num_rows, dtype=bool)
-    headline[list(first.values())] = True
-    values = v.append_column("headline", pa.array(headline))
     algos = [[a.name, a.role.value, a.version, a.config_hash] for a in run.manifest.algorithms]
     metrics = [[m.get("name"), m.get("version"), m.get("role"), m.get("unit"),
                 m.get("higher_is_better"), json.dumps(m.get("params", {}), sort_keys=True),
                 m.get("params_hash"), ", ".join(m.get("algorithms", ()))]
                for m in evaluation.metrics]  # fmt: skip
     sheets: dict[str, Callable[[], Iterator[list[Any]]]] = {
-        "summary": lambda: iter(
-            [*([k, _shown(x) if x is None else x] for k, x in _facts(run, evaluation)), [],
-             ["algorithm", "role", "version", "config_hash"], *algos, [], *_rows(values)]
+        "summary": lambda: iter([list(SUMMARY_COLUMNS), *summary_rows(evaluation)]),
+        "run": lambda: iter(
+            [["fact", "value"],
+             *([k, _shown(x) if x is None else x] for k, x in _facts(run, evaluation))]
         ),
+        "algorithms": lambda: iter([["algorithm", "role", "version", "config_hash"], *algos]),
         "per_frame": lambda: _wide_per_frame(evaluation, run),
         "curves": lambda: _rows(evaluation.curves),
         "bookmarks": lambda: _rows(evaluation.bookmarks),
@@ -285,8 +307,13 @@ def _write_xlsx(path: Path, run: Run, evaluation: Evaluation) -> None:
     wb = Workbook(write_only=True)
     for name, rows in sheets.items():
         ws = wb.create_sheet(name)
+        ws.freeze_panes = "A2"  # every sheet's first row is its header
+        width = n = 0
         for row in rows():
             ws.append([_cell(x) for x in row])
+            width, n = max(width, len(row)), n + 1
+        if width and n > 1:
+            ws.auto_filter.ref = f"A1:{get_column_letter(width)}{n}"
     _atomic(path, wb.save)
 
 
