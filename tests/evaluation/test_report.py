@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
+import pyarrow as pa
 import pytest
 from openpyxl import load_workbook
 
@@ -24,9 +25,9 @@ from redrive.errors import ConfigError
 from redrive.evaluation import Bookmark, EvalData, Metric, MetricResult, Series
 from redrive.evaluation.detection.nuscenes import NuScenesDetection
 from redrive.evaluation.evaluator import evaluate_run
-from redrive.evaluation.plots import worst_frames
+from redrive.evaluation.plots import frame_scores, worst_frames
 from redrive.evaluation.report import DEFAULT_WORST, render_html, write_report
-from redrive.evaluation.store import Scored, read_evaluation, write_evaluation
+from redrive.evaluation.store import Evaluation, Scored, read_evaluation, write_evaluation
 from redrive.results import (
     AlgorithmEntry,
     FrameRecord,
@@ -378,3 +379,43 @@ def test_real_detection_metric(tmp_path: Path) -> None:
     text = files.html.read_text(encoding="utf-8")
     assert text.count(IMG) == 1 + 1 + 1 + len(frames)
     assert "nuscenes_detection" in text
+
+
+def _evaluation(per_frame: list[tuple[str, str, str, int, float]], marks: list[dict]) -> Evaluation:
+    from redrive.results.evaluation import BOOKMARKS, CURVES, PER_FRAME, VALUES
+
+    rows = [dict(zip(PER_FRAME.names, r, strict=True)) for r in per_frame]
+    return Evaluation(
+        values=VALUES.empty_table(),
+        per_frame=pa.Table.from_pylist(rows, schema=PER_FRAME),
+        curves=CURVES.empty_table(),
+        bookmarks=pa.Table.from_pylist(marks, schema=BOOKMARKS),
+        metrics=(),
+        evaluated="",
+    )
+
+
+def test_worst_frames_rank_by_a_score_of_errors_not_by_switch_bookmarks(
+    report: tuple[Path, Any],
+) -> None:
+    """Frame 4 has one identity switch (bookmark severity 1.0), frame 7 three missed objects
+    and a false positive (missed-object bookmarks of severity ~0.05): by the documented score
+    (missed + fp + switches) frame 7 is worse; --rank-by clear_mot.switches puts frame 4 first."""
+    run = open_run(report[0])
+    pf = [("nuscenes_detection", "det", "missed", f, float(m)) for f, m in ((4, 0), (7, 3))]
+    pf += [("nuscenes_detection", "det", "fp", f, float(m)) for f, m in ((4, 0), (7, 1))]
+    pf += [("clear_mot", "det", "switches", f, float(m)) for f, m in ((4, 1), (7, 0))]
+    mark = {"stamp_ns": 0, "metric": "clear_mot", "algorithm": "det", "detail": ""}
+    marks = [
+        {**mark, "frame_index": 4, "kind": "id_switch", "severity": 1.0},
+        {**mark, "frame_index": 7, "kind": "missed_object", "severity": 0.05},
+    ]
+    ev = _evaluation(pf, marks)
+    assert frame_scores(ev) == {4: 1.0, 7: 4.0}
+    ranked = worst_frames(run, ev, count=2)
+    assert [f for f, _ in ranked] == [7, 4]
+    assert ranked[0][1][0] == "score (missed + false positives + switches) 4"
+    by_switches = worst_frames(run, ev, count=2, rank_by="clear_mot.switches")
+    assert [f for f, _ in by_switches] == [4, 7]
+    with pytest.raises(ConfigError, match=r"--rank-by latency\.frame_ms: no such per-frame"):
+        worst_frames(run, ev, count=2, rank_by="latency.frame_ms")

@@ -23,7 +23,7 @@ would run as a formula get a leading ' .
 def _run(args: argparse.Namespace) -> int:
     from redrive.evaluation.report import write_report
 
-    files = write_report(args.run, out=args.output, worst=args.worst)
+    files = write_report(args.run, out=args.output, worst=args.worst, rank_by=args.rank_by)
     for path in files.paths():
         print(path)
     return 0
@@ -70,5 +70,13 @@ def register(sub: Any) -> None:
         default=DEFAULT_WORST,
         metavar="N",
         help=f"bird's-eye snapshots of the N worst frames (default {DEFAULT_WORST})",
+    )
+    parser.add_argument(
+        "--rank-by",
+        metavar="METRIC.SERIES",
+        help="rank the worst frames by this stored per-frame series (e.g. "
+        "nuscenes_detection.missed, clear_mot.switches, latency.frame_ms; larger is worse, "
+        "'tp'-like series the other way) instead of the default score: missed objects + false "
+        "positives (the detection metric's, at 2 m) + identity switches, per algorithm",
     )
     parser.set_defaults(func=_run)

@@ -5,12 +5,14 @@ The HTML page (``report.html``) needs no network and no JavaScript: CSS is inlin
 is a PNG (matplotlib, Agg) inside a ``data:`` URI.  It shows the run's facts (log, hash,
 algorithms with versions and config hashes, status, frames, real-time factor), a headline table
 per algorithm, precision/recall curves (the ``PR/…`` curves of the evaluation), per-frame metric
-timelines, step-latency histograms, bird's-eye views of the worst frames (the frames of the
-most severe bookmarks; without bookmarks, the frames with most missed objects) with ground
-truth beside the detections, and the bookmarks.  Every string from the run is HTML-escaped.
+timelines, step-latency histograms, bird's-eye views of the worst frames (ranked by
+:func:`redrive.evaluation.plots.frame_scores`: missed objects + false positives + identity
+switches, or any stored per-frame series with ``rank_by``; without either, the frames with most
+missed objects) with ground truth beside the detections, and the bookmarks.  Every string from the run is HTML-escaped.
 
-The workbook (``report.xlsx``, openpyxl write-only) has the sheets ``summary`` (run facts, then
-every value per algorithm and metric, the headline flagged), ``per_frame`` (one row per frame,
+The workbook (``report.xlsx``, openpyxl write-only) has the sheets ``summary`` (one tidy table:
+every value per metric and algorithm with unit, direction, headline flag and definition),
+``run`` (the facts), ``algorithms``, ``per_frame`` (one row per frame,
 one column per algorithm / metric / series), ``curves``, ``bookmarks`` and ``metrics`` (metric
 definitions: versions, parameters, their hash).  CSV files: ``values``, ``per_frame``,
 ``curves``, ``bookmarks`` as stored.  Text cells that a spreadsheet would run as a formula get a
@@ -194,10 +196,14 @@ def _grid(items: Sequence[h.Markup], empty: str) -> h.Markup:
     return h.Markup('<div class="grid">' + "".join(items) + "</div>")
 
 
-def render_html(run: Run, evaluation: Evaluation, *, worst: int = DEFAULT_WORST) -> str:
+def render_html(
+    run: Run, evaluation: Evaluation, *, worst: int = DEFAULT_WORST, rank_by: str | None = None
+) -> str:
     """The report page of ``run`` (see the module docstring)."""
     facts = h.table(None, [(k, _shown(v)) for k, v in _facts(run, evaluation)])
-    snaps = plots.snapshot_figures(run, plots.worst_frames(run, evaluation, count=worst))
+    snaps = plots.snapshot_figures(
+        run, plots.worst_frames(run, evaluation, count=worst, rank_by=rank_by)
+    )
     sections = [
         h.section("run", "Run", facts, h.Markup("<h3>Algorithms</h3>"), _algorithms_table(run)),
         h.section("headline", "Headline values", *_headline_tables(run, evaluation),
@@ -341,7 +347,11 @@ def _atomic(path: Path, write: Callable[[Path], object]) -> None:
 
 
 def write_report(
-    run_dir: str | Path, *, out: str | Path | None = None, worst: int = DEFAULT_WORST
+    run_dir: str | Path,
+    *,
+    out: str | Path | None = None,
+    worst: int = DEFAULT_WORST,
+    rank_by: str | None = None,
 ) -> ReportFiles:
     """Write ``report.html``, ``report.xlsx`` and ``values|per_frame|curves|bookmarks.csv`` of
     the evaluated run ``run_dir`` into ``out`` (default ``RUN/report/``, created); ``worst``
@@ -354,7 +364,7 @@ def write_report(
     evaluation = load_evaluation(run)
     folder = Path(out) if out is not None else run.path / "report"
     folder.mkdir(parents=True, exist_ok=True)
-    page = render_html(run, evaluation, worst=worst)
+    page = render_html(run, evaluation, worst=worst, rank_by=rank_by)
     html_path = folder / "report.html"
     _atomic(html_path, lambda p: p.write_text(page, encoding="utf-8"))
     xlsx_path = folder / "report.xlsx"
