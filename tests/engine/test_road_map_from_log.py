@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from redrive.closedloop.run import ClosedLoopRequest, run_closed_loop
 from redrive.config import pipeline_from_plugins
 from redrive.engine import RunRequest, run_log
 from redrive.evaluation.closedloop import DrivableAreaCompliance
@@ -34,6 +35,20 @@ def test_a_replayed_synthetic_log_brings_its_road_map(tmp_path: Path) -> None:
     assert not summary.skipped
     (scored,) = summary.scored
     assert scored.result.values["drivable_area_compliance"] == 1.0  # the scripted ego
+
+
+def test_a_closed_loop_on_a_synthetic_log_brings_its_road_map(tmp_path: Path) -> None:
+    log = tmp_path / "cut_in.mcap"
+    synthesize(load_scenario("cut_in"), log, duration_s=1.0)
+    out = tmp_path / "closed"
+    pipeline = pipeline_from_plugins(perception=["noisy-oracle"], planning=["idm-planner"])
+    run_closed_loop(ClosedLoopRequest(scenario=str(log), pipeline=pipeline, out=out))
+    stored = open_run(out).road_map()
+    assert stored is not None
+    expected = scenario_road_map(load_scenario("cut_in"))
+    assert [lane.lane_id for lane in stored.lanes] == [lane.lane_id for lane in expected.lanes]
+    summary = evaluate_run(out, metrics=[DrivableAreaCompliance()])
+    assert not summary.skipped, summary.skipped
 
 
 def test_a_log_without_a_map_gives_a_run_without_one(tmp_path: Path) -> None:

@@ -8,7 +8,7 @@ The run directory is the one every command reads (``evaluate``, ``report``, ``ex
 per frame, and progress and deviation are measured against it. ``closed_loop`` holds what moved
 the ego after each frame (command, its source, the fallback's reason), how far the ego was
 from the logged one and whether that passed the thresholds (``deviated``; counted in the
-summary's ``closed_loop``). ``map.json`` holds the road map of a scenario (a log has none). The
+summary's ``closed_loop``). ``map.json`` holds the road map of a scenario or of a ``redrive synth`` log (a recorded log has none). The
 manifest's pipeline has ``mode_manager = "closed_loop"``, and the simulator's description
 (backend ``synthetic`` or ``log``, agents, ego limits, tracker and gains, deviation thresholds)
 is under ``closed_loop``.  A log run's source is the log's usual fingerprint (path, sha256), so
@@ -41,7 +41,7 @@ from redrive.closedloop.synthetic import AgentMode, Level, SyntheticSimulator
 from redrive.closedloop.tracker import LqrPidTracker
 from redrive.config import PipelineConfig
 from redrive.engine.graph import LogInputs, build_graph
-from redrive.engine.run import execute, log_fingerprint, run_setup
+from redrive.engine.run import execute, log_fingerprint, log_road_map, run_setup
 from redrive.engine.stats import RunReport
 from redrive.errors import ConfigError
 from redrive.io import LogReader, open_log
@@ -222,7 +222,7 @@ def _run_log(
         simulator,
         source=log_fingerprint(Path(request.scenario), format=log.format),
         described=simulator.describe(),
-        road_map=None,
+        road_map=log_road_map(log),  # a redrive synth log's: the map metrics apply
         total=None,
         on_start=on_start,
         progress=progress,

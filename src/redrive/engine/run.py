@@ -35,7 +35,7 @@ from redrive.results import (
     SourceLog,
 )
 from redrive.results.roadmap import MAP_METADATA, road_map_from_json
-from redrive.types import Frame
+from redrive.types import Frame, RoadMap
 
 __all__ = [
     "RunRequest",
@@ -43,6 +43,7 @@ __all__ = [
     "expected_frames",
     "log_fingerprint",
     "log_inputs",
+    "log_road_map",
     "run_log",
     "run_reader",
     "run_setup",
@@ -123,19 +124,24 @@ def _reading_only_inputs(
     return FrameAssembler(log, sensor_map=replace(smap, sensors=kept), lookahead_ns=lookahead_ns)
 
 
-def _copy_road_map(log: LogReader, writer: RunWriter) -> None:
-    """The log's road map (a ``redrive synth`` MCAP carries one) into the run, for the map metrics;
-    a log without one, or a reader without named metadata, leaves the run without a map."""
+def log_road_map(log: LogReader) -> RoadMap | None:
+    """The log's road map (a ``redrive synth`` MCAP carries one), for the map metrics; None for
+    a log without one, or a reader without named metadata."""
     metadata = getattr(log, "metadata", None)
     found = metadata(MAP_METADATA) if callable(metadata) else None
     if not found or "road_map" not in found:
-        return
+        return None
     try:
-        road_map = road_map_from_json(json.loads(found["road_map"]), path=Path(log.path))
+        return road_map_from_json(json.loads(found["road_map"]), path=Path(log.path))
     except (ValueError, ConfigError) as err:
         logger.warning("%s: its road map is unreadable, the run has none (%s)", log.path, err)
-        return
-    writer.write_map(road_map)
+        return None
+
+
+def _copy_road_map(log: LogReader, writer: RunWriter) -> None:
+    road_map = log_road_map(log)
+    if road_map is not None:
+        writer.write_map(road_map)
 
 
 def _select(frames: Iterator[Frame], first: int | None, stop: int | None) -> Iterator[Frame]:
