@@ -18,7 +18,7 @@ from redrive.evaluation.report import write_report
 from tests.evaluation.test_report import build_run, evaluate
 
 CHROMIUM = Path("/usr/bin/chromium")
-WIDTH_PX, HEIGHT_PX = 1280, 2000
+WIDTH_PX, HEIGHT_PX = 1280, 2800  # the timelines sit below the PR curves at 110 dpi
 
 pytestmark = pytest.mark.skipif(
     not CHROMIUM.exists(), reason="/usr/bin/chromium is not installed (apt-get install chromium)"
@@ -56,7 +56,7 @@ def test_report_renders_its_plots(tmp_path: Path) -> None:
     # the plots are drawn: lines of the first two series colours of matplotlib's cycle
     # (PR curves and the tp timeline in #1f77b4, the "missed" timeline in #ff7f0e)
     assert _near(rgb, "#1f77b4") > 300
-    assert _near(rgb, "#ff7f0e") > 100
+    assert _near(rgb, "#ff7f0e") > 40  # a short flat line (frames 0-2), antialiased at 110 dpi
     # control: the same page without its images has none of these colours
     bare = page.with_name("bare.html")
     bare.write_text(re.sub(r"<img [^>]*>", "", page.read_text(encoding="utf-8")), encoding="utf-8")
