@@ -19,6 +19,7 @@ A :class:`SensorTee` hands every message to more than one sink: the run's ``sens
 
 from __future__ import annotations
 
+import time
 from collections.abc import Mapping
 
 import numpy as np
@@ -62,7 +63,7 @@ class LockstepWorlds:
     ``scene_world`` seen from the ego of ``ego_world``; stepping steps every world of
     ``worlds`` (which holds both), so they stay in lockstep.
 
-    :attr:`step_ns` adds up the time spent stepping the worlds (the rest of a
+    :attr:`step_s` adds up the wall time spent stepping the worlds, in seconds (the rest of a
     :meth:`SensorSimulation.advance_to <redrive.sim.synth.SensorSimulation.advance_to>` is
     rendering)."""
 
@@ -71,14 +72,17 @@ class LockstepWorlds:
             msg = "LockstepWorlds: scene_world and ego_world must be among worlds"
             raise ValueError(msg)
         self.scene_world, self.ego_world, self.worlds = scene_world, ego_world, worlds
+        self.step_s = 0.0
 
     @property
     def time_ns(self) -> int:
         return self.ego_world.time_ns
 
     def step_to(self, stamp_ns: int) -> None:
+        t0 = time.perf_counter()
         for world in self.worlds:
             world.step_to(stamp_ns)
+        self.step_s += time.perf_counter() - t0
 
     def scene(self) -> Scene:
         scene = self.scene_world.scene()
