@@ -27,6 +27,7 @@ def test_bench_closed_loop_split_adds_up() -> None:
     parts = result.simulation_s + result.algorithms_s + result.other_s
     assert parts == pytest.approx(result.wall_s)
     assert result.total_s >= result.wall_s
+    assert result.cpu_s > 0
     assert set(result.algorithm_ms) == {"noisy-oracle", "idm-planner", "pure-pursuit-pid"}
     # the closed loop steps two worlds and runs three algorithms: never cheaper than one world
     assert result.ratio > 1.0

@@ -131,6 +131,8 @@ class ClosedLoopBenchResult:
         wall_s: the closed loop's frame loop (the engine's wall time).
         total_s: the whole ``run_closed_loop`` call (plus building both worlds, the road map,
             closing the run directory).
+        cpu_s: CPU seconds of the benchmark's process (all its threads) over that call: below
+            ``total_s`` on one busy thread means other processes had the cores.
         rendering_s, simulation_s, algorithms_s, other_s: the split of ``wall_s`` (rendering
             is 0 at object level).
         baseline_s: one world stepped alone with its scripted driver to the same end.
@@ -145,6 +147,7 @@ class ClosedLoopBenchResult:
     lidar: str | None
     wall_s: float
     total_s: float
+    cpu_s: float
     rendering_s: float
     simulation_s: float
     algorithms_s: float
@@ -187,6 +190,7 @@ class ClosedLoopBenchResult:
             "lidar": self.lidar,
             "wall_s": self.wall_s,
             "total_s": self.total_s,
+            "cpu_s": self.cpu_s,
             "realtime_factor": self.realtime_factor,
             "target": self.target,
             "split_s": {
@@ -233,9 +237,9 @@ def _closed_loop(
         duration_s=duration_s,
         level="sensor" if level == "sensor" else "object",
     )
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     report = run_closed_loop(request, wrap_simulator=wrap)
-    total = time.perf_counter() - t0
+    total, cpu = time.perf_counter() - t0, time.process_time() - cpu0
     steps = open_run(out).table("steps")
     algorithms_s = int(pc.sum(steps.column("latency_ns")).as_py() or 0) / 1e9
     inner = timed[0].inner
@@ -243,6 +247,7 @@ def _closed_loop(
     return {
         "wall": report.wall_s,
         "total": total,
+        "cpu": cpu,
         "rendering": rendering_s,
         "simulation": timed[0].seconds - rendering_s,
         "algorithms": algorithms_s,
@@ -253,7 +258,7 @@ def _closed_loop(
     }
 
 
-_PARTS = ("wall", "total", "rendering", "simulation", "algorithms", "other")
+_PARTS = ("wall", "total", "cpu", "rendering", "simulation", "algorithms", "other")
 
 
 def scenario_with_lidar(scenario: str, preset: str, folder: Path) -> Path:
@@ -350,6 +355,7 @@ def bench_closed_loop(
         lidar=preset,
         wall_s=med["wall"],
         total_s=med["total"],
+        cpu_s=med["cpu"],
         rendering_s=med["rendering"],
         simulation_s=med["simulation"],
         algorithms_s=med["algorithms"],

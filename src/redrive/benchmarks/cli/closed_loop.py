@@ -68,7 +68,8 @@ def _run_closed_loop(args: argparse.Namespace) -> int:
     console.print(
         f"closed loop {result.wall_s:.3f} s = {rtf:.1f}x real time "
         f"{_verdict(rtf >= result.target)} {result.target:g}x  "
-        f"(whole call with setup and close: {result.total_s:.3f} s)"
+        f"(whole call with setup and close: {result.total_s:.3f} s, "
+        f"process CPU {result.cpu_s:.3f} s)"
     )
     console.print(
         "  split: "
