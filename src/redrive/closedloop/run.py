@@ -36,6 +36,7 @@ from redrive.algorithms import GROUND_TRUTH, VEHICLE_STATE
 from redrive.algorithms.discovery import load_algorithm_class
 from redrive.closedloop.logreplay import LogSimulator
 from redrive.closedloop.mode import DEFAULT_DEVIATION_M, DEFAULT_DEVIATION_RAD, ClosedLoopMode
+from redrive.closedloop.sensors import RecordingThread
 from redrive.closedloop.simulator import Simulator
 from redrive.closedloop.synthetic import AgentMode, Level, SyntheticSimulator
 from redrive.closedloop.tracker import LqrPidTracker
@@ -276,9 +277,11 @@ def _drive(
         """The mode writes each record once the outputs moved the ego (after_frame)."""
 
     recording: McapWriter | None = None
+    recorder: RecordingThread | None = None
     if isinstance(simulator, SyntheticSimulator) and simulator.level == "sensor":
         recording = McapWriter(request.out / SENSOR_LOG)
-        simulator.record_sensors(recording)
+        recorder = RecordingThread(recording)  # serialised and compressed beside the loop
+        simulator.record_sensors(recorder)
     try:
         report = execute(
             graph,
@@ -293,18 +296,24 @@ def _drive(
             summary_extra=lambda: {"closed_loop": mode.deviation_summary()},
         )
     except BaseException:
-        if recording is not None:
-            _close_after_failure(recording)
+        if recording is not None and recorder is not None:
+            _close_after_failure(recording, recorder)
         raise
-    if recording is not None:
+    if recording is not None and recorder is not None:
+        try:
+            recorder.stop()
+        except BaseException:
+            recording.abort()
+            raise
         recording.close()
     return report
 
 
-def _close_after_failure(recording: McapWriter) -> None:
+def _close_after_failure(recording: McapWriter, recorder: RecordingThread) -> None:
     """Close a failed or interrupted run's recording (what was rendered so far, a file that
     opens); if even that fails, drop it rather than hide the run's own error."""
     try:
+        recorder.stop()
         recording.close()
     except Exception:
         logger.warning("%s: could not be finished, dropped", recording.path, exc_info=True)

@@ -14,20 +14,28 @@ needs the ego's motion over its whole period, and that motion depends on the com
 frame.  The first frame is therefore one (slowest) LiDAR period after the scenario's start.
 
 A :class:`SensorTee` hands every message to more than one sink: the run's ``sensors.mcap``
-(a :class:`~redrive.io.writer.McapWriter`) records what the algorithms saw.
+(a :class:`~redrive.io.writer.McapWriter`) records what the algorithms saw, through a
+:class:`RecordingThread` that serialises and compresses on its own thread (zstd releases the
+GIL), off the frame loop.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import queue
+import threading
+import time
+from collections.abc import Callable, Mapping
+from functools import partial
 
 import numpy as np
 import numpy.typing as npt
 from rosbags.typesys.store import Typestore
 
+from redrive.errors import SimulationError
 from redrive.io.base import TopicInfo
 from redrive.io.decoders.base import Decoded
 from redrive.io.sensor_map import infer_sensor_map
+from redrive.io.writer import McapWriter
 from redrive.sim.rig import Rig, SensorSpec
 from redrive.sim.scene import Scene
 from redrive.sim.sinks import MessageSink, SampleSink
@@ -35,7 +43,7 @@ from redrive.sim.synth import sensor_topic
 from redrive.sim.world import World
 from redrive.types import Image, SensorData, SensorType, VehicleState
 
-__all__ = ["FrameSensors", "LockstepWorlds", "SensorTee", "warmup_ns"]
+__all__ = ["FrameSensors", "LockstepWorlds", "RecordingThread", "SensorTee", "warmup_ns"]
 
 #: The message each kind of rig sensor is recorded as (``redrive synth``), for the sensor map.
 _MSGTYPES: Mapping[SensorType, str] = {
@@ -62,7 +70,7 @@ class LockstepWorlds:
     ``scene_world`` seen from the ego of ``ego_world``; stepping steps every world of
     ``worlds`` (which holds both), so they stay in lockstep.
 
-    :attr:`step_ns` adds up the time spent stepping the worlds (the rest of a
+    :attr:`step_s` adds up the wall time spent stepping the worlds, in seconds (the rest of a
     :meth:`SensorSimulation.advance_to <redrive.sim.synth.SensorSimulation.advance_to>` is
     rendering)."""
 
@@ -71,14 +79,17 @@ class LockstepWorlds:
             msg = "LockstepWorlds: scene_world and ego_world must be among worlds"
             raise ValueError(msg)
         self.scene_world, self.ego_world, self.worlds = scene_world, ego_world, worlds
+        self.step_s = 0.0
 
     @property
     def time_ns(self) -> int:
         return self.ego_world.time_ns
 
     def step_to(self, stamp_ns: int) -> None:
+        t0 = time.perf_counter()
         for world in self.worlds:
             world.step_to(stamp_ns)
+        self.step_s += time.perf_counter() - t0
 
     def scene(self) -> Scene:
         scene = self.scene_world.scene()
@@ -204,3 +215,77 @@ class SensorTee:
     ) -> None:
         for sink in self.sinks:
             sink.write_raw(topic, msgtype, log_time_ns, cdr_bytes)
+
+
+class RecordingThread:
+    """A :class:`~redrive.sim.sinks.MessageSink` that hands every message to ``writer`` on a
+    thread of its own, in the order they came: the file is the one writing them in place would
+    give, while serialising and compressing (zstd of the LiDAR sweeps is the costly part) run
+    beside the frame loop.
+
+    At most ``max_pending`` messages wait (the frame loop blocks beyond).  An error of the writer
+    is raised by the next :meth:`write` / :meth:`write_raw` or by :meth:`stop`; the messages after
+    it are dropped.
+    """
+
+    def __init__(self, writer: McapWriter, *, max_pending: int = 256) -> None:
+        self.writer = writer
+        self._queue: queue.Queue[Callable[[], None] | None] = queue.Queue(max_pending)
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._drain, name="sensors-mcap", daemon=True)
+        self._thread.start()
+
+    @property
+    def typestore(self) -> Typestore:
+        return self.writer.typestore
+
+    def write(
+        self,
+        topic: str,
+        log_time_ns: int,
+        value: object,
+        *,
+        frame_id: str | None = None,
+        stamp_ns: int | None = None,
+    ) -> None:
+        self._put(
+            partial(
+                self.writer.write, topic, log_time_ns, value, frame_id=frame_id, stamp_ns=stamp_ns
+            )
+        )
+
+    def write_raw(
+        self, topic: str, msgtype: str, log_time_ns: int, cdr_bytes: bytes | memoryview
+    ) -> None:
+        self._put(partial(self.writer.write_raw, topic, msgtype, log_time_ns, bytes(cdr_bytes)))
+
+    def stop(self) -> None:
+        """Wait until every message is with the writer (it stays open).
+
+        Raises:
+            the writer's error, if it had one.
+        """
+        if self._thread.is_alive():
+            self._queue.put(None)
+            self._thread.join()
+        self._raise()
+
+    def _put(self, call: Callable[[], None]) -> None:
+        self._raise()
+        if not self._thread.is_alive():
+            msg = f"{self.writer.path}: the recording was stopped; no more messages"
+            raise SimulationError(msg)
+        self._queue.put(call)
+
+    def _raise(self) -> None:
+        if self._error is not None:
+            raise self._error
+
+    def _drain(self) -> None:
+        while (call := self._queue.get()) is not None:
+            if self._error is not None:
+                continue
+            try:
+                call()
+            except BaseException as err:  # handed to the frame loop's thread
+                self._error = err

@@ -36,6 +36,7 @@ warm-up sweep included), so a sink handed over before then gets every message of
 from __future__ import annotations
 
 import dataclasses
+import time
 from collections.abc import Mapping
 from typing import Any, Literal
 
@@ -129,7 +130,11 @@ class SyntheticSimulator:
         self._end_ns = scenario.start_stamp_ns + round(scenario.duration_s * 1e9)
         self._dt_ns = round(self.dt_s * 1e9)
         self._rendering: SensorSimulation | None = None
+        self._lockstep: LockstepWorlds | None = None
         self._frame_sensors: FrameSensors | None = None
+        #: sensor level: wall seconds spent rendering so far (the sensor models and handing
+        #: their messages to the frames and the recording; the worlds' physics left out)
+        self.rendering_s = 0.0
         self._recording: MessageSink | None = None
         self._started = False
         self._first_ns = self._world.time_ns
@@ -139,6 +144,7 @@ class SyntheticSimulator:
                 ego_world=self._world,
                 worlds=(self._world, self._expert),
             )
+            self._lockstep = worlds
             self._rendering = SensorSimulation(scenario, world=worlds)
             self._frame_sensors = FrameSensors(self._rendering.rig)
             self._first_ns = self._world.time_ns + warmup_ns(self._rendering.rig)
@@ -169,8 +175,17 @@ class SyntheticSimulator:
         if self._recording is not None:
             sink = SensorTee(self._frame_sensors, self._recording)
         self._rendering.start(sink)
-        for _ in self._rendering.advance_to(self._first_ns):
+        self._render_to(self._first_ns)
+
+    def _render_to(self, stamp_ns: int) -> None:
+        """Advance the rendering (and both worlds) to ``stamp_ns``, timing the rendering."""
+        assert self._rendering is not None
+        assert self._lockstep is not None
+        t0, physics0 = time.perf_counter(), self._lockstep.step_s
+        for _ in self._rendering.advance_to(stamp_ns):  # both worlds, the sensors' events
             pass
+        physics = self._lockstep.step_s - physics0
+        self.rendering_s += time.perf_counter() - t0 - physics
 
     def observe(self) -> Frame:
         world = self._world
@@ -219,8 +234,7 @@ class SyntheticSimulator:
             self._expert.step_to(target)
         else:
             self._start_rendering()
-            for _ in self._rendering.advance_to(target):  # both worlds, the sensors' events
-                pass
+            self._render_to(target)
         self._index += 1
         return chosen
 

@@ -46,6 +46,7 @@ import heapq
 import json
 import math
 from collections.abc import Callable, Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -226,6 +227,9 @@ class _Recorder:
         self.last_hits: dict[int, int] | None = None
         self.prev_state: VehicleState | None = None
         self._scene_now: Scene | None = None
+        #: camera → (stamp, its image being drawn on :attr:`_drawing`), see :meth:`draw_ahead`
+        self._drawn: dict[str, tuple[int, Future[CameraFrame]]] = {}
+        self._drawing: ThreadPoolExecutor | None = None
 
     # -- static ---------------------------------------------------------------------------------
 
@@ -249,7 +253,11 @@ class _Recorder:
             self.pending[spec.name] = self._scene()
         elif kind is SensorType.CAMERA:
             camera = self.cameras[spec.name]
-            frame = camera.render(self._scene())
+            ahead = self._drawn.pop(spec.name, None)
+            if ahead is not None and ahead[0] == stamp_ns:
+                frame = ahead[1].result()
+            else:
+                frame = camera.render(self._scene())
             self.last_camera[spec.name] = frame
             self.writer.write(sensor_topic(spec), stamp_ns, frame.image, frame_id=camera.frame_id)
             self.writer.write(
@@ -272,6 +280,16 @@ class _Recorder:
         else:  # pragma: no cover - the rig parser admits no other kind
             msg = f"sensor {spec.name!r}: kind {kind.value} cannot be simulated"
             raise SimulationError(msg)
+
+    def draw_ahead(self, names: list[str], stamp_ns: int) -> None:
+        """Start drawing the images the cameras ``names`` take at ``stamp_ns`` (the world's
+        time now) on a thread, so that they are drawn while the LiDAR sweeps that end at the
+        same instant are cast; :meth:`fire` then takes them.  The image is the same."""
+        if self._drawing is None:
+            self._drawing = ThreadPoolExecutor(1, thread_name_prefix="camera-ahead")
+        scene = self._scene()
+        for name in names:
+            self._drawn[name] = (stamp_ns, self._drawing.submit(self.cameras[name].render, scene))
 
     def _scene(self) -> Scene:
         """The world's scene at its current time, built once per instant (LiDARs and cameras
@@ -408,6 +426,12 @@ class SensorSimulation:
         self.start_ns = self.world.time_ns
         self.stop_ns = self.start_ns + round(self.scenario.duration_s * 1e9)
         self._events = self._schedule()
+        #: time → the cameras firing then, where a LiDAR sweep ends too (drawn while it is cast)
+        self._cameras_at_sweeps: dict[int, list[str]] = {}
+        sweeps = {t for t, _, what, _ in self._events if what == "sweep"}
+        for t, _, what, name in sorted(self._events):
+            if what == "fire" and t in sweeps and self.rig[name].kind is SensorType.CAMERA:
+                self._cameras_at_sweeps.setdefault(t, []).append(name)
         self._recorder: _Recorder | None = None
 
     def _schedule(self) -> list[tuple[int, int, str, str]]:
@@ -468,6 +492,9 @@ class SensorSimulation:
             if what == "pose":
                 recorder.write_pose(event_ns)
             elif what == "sweep":
+                cameras = self._cameras_at_sweeps.pop(event_ns, None)
+                if cameras:
+                    recorder.draw_ahead(cameras, event_ns)
                 recorder.finish_sweep(rig[name])
             else:
                 spec = rig[name]

@@ -22,6 +22,12 @@ step latencies of the run's steps table) and other (engine records, results writ
 in the same run and interleaved: the scenario's world stepped alone with its scripted driver to
 the same end, the cost floor of the simulation (the closed loop steps two worlds: the expert one
 and the driven one). Medians of --repeat passes.
+
+--level sensor runs the reference pipeline (cluster-detector -> kalman-tracker -> idm-planner ->
+pure-pursuit-pid) on the scenario's rig re-rendered from the driven ego every step, its first 3D
+LiDAR swapped for --lidar (default HDL-64E, 64 beams; target >= 1x real time), and splits
+rendering (the sensor models and handing their messages to the frames and to the run's
+sensors.mcap) out of simulation (the worlds' physics and the rest).
 """
 
 
@@ -45,6 +51,7 @@ def _run_closed_loop(args: argparse.Namespace) -> int:
             duration_s=args.duration,
             level=args.level,
             repeats=args.repeat,
+            lidar=args.lidar,
             progress=progress,
         )
     if args.json:
@@ -52,21 +59,24 @@ def _run_closed_loop(args: argparse.Namespace) -> int:
         sys.stdout.write("\n")
         return 0
     console = Console(width=None if sys.stdout.isatty() else 120)
+    lidar = f" ({result.lidar} LiDAR)" if result.lidar else ""
     console.print(
-        f"[bold]{result.scenario}[/], {result.level} level, {result.duration_s:g} s simulated, "
-        f"{result.frames} frames; medians of {result.repeats} passes"
+        f"[bold]{result.scenario}[/], {result.level} level{lidar}, {result.duration_s:g} s "
+        f"simulated, {result.frames} frames; medians of {result.repeats} passes"
     )
     rtf = result.realtime_factor
     console.print(
         f"closed loop {result.wall_s:.3f} s = {rtf:.1f}x real time "
         f"{_verdict(rtf >= result.target)} {result.target:g}x  "
-        f"(whole call with setup and close: {result.total_s:.3f} s)"
+        f"(whole call with setup and close: {result.total_s:.3f} s, "
+        f"process CPU {result.cpu_s:.3f} s)"
     )
     console.print(
         "  split: "
         + ", ".join(
             f"{part} {getattr(result, f'{part}_s'):.3f} s ({result.share(part):.0%})"
-            for part in ("simulation", "algorithms", "other")
+            for part in ("rendering", "simulation", "algorithms", "other")
+            if part != "rendering" or result.level == "sensor"
         )
     )
     console.print(
@@ -88,7 +98,8 @@ def add_closed_loop_parser(bench_sub: Any) -> None:
         description=_DESCRIPTION,
         epilog=(
             "examples:\n  redrive bench closed-loop\n"
-            "  redrive bench closed-loop --scenario cut_in --duration 10 --repeat 5 --json"
+            "  redrive bench closed-loop --scenario cut_in --duration 10 --repeat 5 --json\n"
+            "  redrive bench closed-loop --level sensor --repeat 1"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -98,6 +109,12 @@ def add_closed_loop_parser(bench_sub: Any) -> None:
     )
     parser.add_argument(
         "--level", choices=LEVELS, default="object", help="closed-loop level (default object)"
+    )
+    parser.add_argument(
+        "--lidar",
+        metavar="PRESET",
+        help="sensor level: the preset the scenario's first 3D LiDAR is swapped for (default "
+        "HDL-64E; 'scenario' keeps the scenario's own)",
     )
     parser.add_argument(
         "--repeat", type=int, default=3, metavar="N", help="passes of each (default 3)"
