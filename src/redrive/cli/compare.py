@@ -16,9 +16,15 @@ examples:
   redrive compare runs/a runs/b --worst 20 --html ab.html
   redrive compare runs/a runs/b --algorithm-a clusters --algorithm-b clusters_v2
   redrive compare runs/a runs/b --json > ab.json
+  redrive compare runs/open runs/closed                 open loop beside closed loop
 
 Both runs must have replayed the same log (checked by its sha256) and been evaluated
-(`redrive evaluate RUN`). Δ = B − A; "better"/"worse" follow each value's direction. Metrics
+(`redrive evaluate RUN`). Two closed-loop runs of a scenario pair when scenario, seed, duration
+and agents agree. An open-loop run of a `redrive synth` log and a closed-loop run of the
+scenario it was made from (same name, seed and duration), or of the same recorded log, pair in
+either order: the output says which run is open and which closed loop, whether the pipelines
+are the same (and how they differ), and lists metrics only one run has with — on the other
+side. Δ = B − A; "better"/"worse" follow each value's direction. Metrics
 are compared only where name, version and parameters agree; the others are listed as not
 compared. Significance: a paired bootstrap over frames (the frames both runs have are resampled
 with replacement; 95 % CI of the mean per-frame difference). Aggregates such as mAP are not
@@ -28,6 +34,11 @@ per-frame means: their note refers to the metric's per-frame series.
 
 def _fmt(value: float) -> str:
     return "n/a" if math.isnan(value) else f"{value:.4g}"
+
+
+def _side(value: float, present: bool) -> str:
+    """A run's value, ``—`` when the run has no such value (only the other run has it)."""
+    return _fmt(value) if present else "—"
 
 
 def _pct(value: float) -> str:
@@ -41,10 +52,23 @@ def _print(cmp: Any, *, worst: int) -> None:
 
     console = Console(width=None if sys.stdout.isatty() else 140)
     pairs = ", ".join(f"{a} ↔ {b}" if a != b else a for a, b in cmp.pairs if a or b)
-    console.print(f"A {cmp.run_a}\nB {cmp.run_b}\nsource {cmp.log_sha256}; paired {pairs}")
-    table = Table(title="values (Δ = B − A)", title_justify="left")
-    for col in ("metric", "algorithm", "value", "A", "B", "Δ", "Δ %", "B is", "95% CI of Δ/frame"):
-        table.add_column(col, justify="right" if col in ("A", "B", "Δ", "Δ %") else "left")
+    p = cmp.pairing
+    console.print(
+        f"{p.label_a} {cmp.run_a}\n{p.label_b} {cmp.run_b}\nsource {cmp.log_sha256}; paired {pairs}"
+    )
+    if p.open_closed:
+        console.print(f"[bold]{escape(p.describe())}[/]")
+        for note in p.notes:
+            console.print(escape(note))
+        if p.pipeline_differences:
+            console.print("[yellow]the pipelines differ: the values are not of one pipeline[/]")
+    numbers = (p.label_a, p.label_b, "Δ", "Δ %")
+    title = "values (Δ = B − A" + (f" = {p.loop_b} − {p.loop_a})" if p.open_closed else ")")
+    if p.open_closed:
+        title += "; — = the run has no such value"
+    table = Table(title=title, title_justify="left")
+    for col in ("metric", "algorithm", "value", *numbers, f"{p.label_b} is", "95% CI of Δ/frame"):
+        table.add_column(col, justify="right" if col in numbers else "left")
     colour = {"better": "green", "worse": "red"}
     for v in cmp.values:
         algo = (
@@ -52,7 +76,8 @@ def _print(cmp: Any, *, worst: int) -> None:
         )
         verdict = f"[{colour[v.verdict]}]{v.verdict}[/]" if v.verdict in colour else v.verdict
         table.add_row(
-            escape(v.metric), escape(algo or "(run)"), escape(v.key), _fmt(v.a), _fmt(v.b),
+            escape(v.metric), escape(algo or "(run)"), escape(v.key), _side(v.a, v.in_a),
+            _side(v.b, v.in_b),
             _fmt(v.delta), _pct(v.relative_delta), verdict, escape(v.significance),
         )  # fmt: skip
     console.print(table)
@@ -112,9 +137,11 @@ def _run(args: argparse.Namespace) -> int:
 def register(sub: Any) -> None:
     parser = sub.add_parser(
         "compare",
-        help="A/B comparison of two evaluated runs of the same log",
+        help="A/B comparison of two evaluated runs of the same log (or open beside closed loop)",
         description=(
-            "Compare the evaluation of run B against run A: per-metric deltas with a significance "
+            "Compare the evaluation of run B against run A (two runs of one log, or an "
+            "open-loop and a closed-loop run of the same scenario): per-metric deltas with a "
+            "significance "
             "note (paired bootstrap over frames), per-frame deltas, and the frames where B is "
             "most worse than A, as a table, JSON or a self-contained HTML file."
         ),

@@ -24,6 +24,14 @@ Definitions (B − A throughout):
 Only metrics whose name, version and ``params_hash`` agree in both manifests are compared; the
 others are listed in :attr:`Comparison.skipped` with the reason.
 
+Which runs pair (:mod:`redrive.evaluation.pairing`): two runs of the same log, two closed-loop
+runs of the same scenario, seed, duration and agents, or — either order — an open-loop run of a
+``redrive synth`` log beside a closed-loop run of the scenario it was made from (same name, seed,
+duration; or both on the same recorded log). In that open/closed pairing every algorithm and
+metric either run has is shown: a value only one run has is NaN on the other side with
+``in_a``/``in_b`` False (``—`` in the tables), never dropped; :attr:`Comparison.pairing` says
+which run is which loop and how the pipelines differ.
+
 This module pairs the runs, their algorithms and their metric definitions; the numbers are in
 :mod:`redrive.evaluation.deltas` and :mod:`redrive.evaluation.bootstrap`, the result and its
 tables/JSON in :mod:`redrive.evaluation.comparison`, the HTML page in
@@ -54,11 +62,13 @@ from redrive.evaluation.deltas import (
     pair_label,
     worst_frames,
 )
+from redrive.evaluation.pairing import Pairing, pair_runs
 from redrive.results import Run, open_run
 
 __all__ = [
     "Bootstrap",
     "Comparison",
+    "Pairing",
     "SeriesDelta",
     "SkippedMetric",
     "ValueDelta",
@@ -70,29 +80,18 @@ __all__ = [
 logger = logging.getLogger(__name__)
 
 
-def _log_hash(run: Run) -> str:
-    """What the run was made from: the log's sha256, or for a closed-loop run of a scenario the
-    scenario, its seed and duration (two such runs saw the same world if these agree)."""
-    closed = run.manifest.closed_loop
-    if closed and run.manifest.log.format == "scenario":
-        return (
-            f"scenario {closed.get('scenario')} seed {closed.get('seed')} "
-            f"duration {closed.get('duration_s')} s agents {closed.get('agents')}"
-        )
-    sha = run.manifest.log.sha256 or ""
-    if not sha:
-        msg = (
-            f"{run.path / 'manifest.json'} records no log sha256; cannot check the runs share a log"
-        )
-        raise ConfigError(msg)
-    return sha
-
-
 def _pairs(
-    a: RunSide, b: RunSide, algorithm_a: str | None, algorithm_b: str | None
+    a: RunSide,
+    b: RunSide,
+    algorithm_a: str | None,
+    algorithm_b: str | None,
+    *,
+    one_sided: bool,
 ) -> tuple[list[tuple[str, str]], list[SkippedMetric]]:
     algos_a, algos_b = a.algorithms(), b.algorithms()
     skipped: list[SkippedMetric] = []
+    if algorithm_a is None and algorithm_b is None and one_sided:
+        return [(x, x) for x in sorted(algos_a | algos_b)], skipped
     if algorithm_a is None and algorithm_b is None:
         pairs = [(x, x) for x in sorted(algos_a & algos_b)]
         for only, other in ((algos_a - algos_b, "B"), (algos_b - algos_a, "A")):
@@ -138,27 +137,26 @@ def compare_runs(
     bootstrap: int = 2000,
     seed: int = 0,
 ) -> Comparison:
-    """Compare two evaluated runs of the same log (B against A); see the module doc.
+    """Compare two evaluated runs of the same log or situation (B against A); see the module
+    doc. An open-loop and a closed-loop run of the same scenario pair in either order.
 
     Algorithms are paired by name, or, with ``algorithm_a``/``algorithm_b`` (one defaults to the
     other), only that pair is compared (plus run-level metrics).
 
     Raises:
-        ConfigError: the runs replayed different logs (both hashes and manifests named), a run is
+        ConfigError: the runs replayed different logs (both hashes and manifests named), an
+            open/closed pair ran different scenarios, seeds or durations (what differs named,
+            and the closed-loop options that match), a run is
             not evaluated, or a named algorithm has no evaluation.
     """
     ra = run_a if isinstance(run_a, Run) else open_run(Path(run_a))
     rb = run_b if isinstance(run_b, Run) else open_run(Path(run_b))
-    sha_a, sha_b = _log_hash(ra), _log_hash(rb)
-    if sha_a != sha_b:
-        msg = (
-            f"runs replayed different logs: A {ra.path / 'manifest.json'} has {sha_a} "
-            f"({ra.manifest.log.path}), B {rb.path / 'manifest.json'} has {sha_b} "
-            f"({rb.manifest.log.path}); compare runs of the same log (or scenario and seed)"
-        )
-        raise ConfigError(msg)
+    pairing = pair_runs(ra, rb)
+    if pairing.open_closed:
+        logger.info("%s", pairing.describe())
+    one_sided = pairing.open_closed  # side by side: what only one run has is shown, not dropped
     a, b = RunSide.load(ra), RunSide.load(rb)
-    pairs, skipped = _pairs(a, b, algorithm_a, algorithm_b)
+    pairs, skipped = _pairs(a, b, algorithm_a, algorithm_b, one_sided=one_sided)
     values: list[ValueDelta] = []
     series: list[SeriesDelta] = []
     metric_names = list(
@@ -170,7 +168,18 @@ def compare_runs(
             if not da and not db:
                 continue
             reason = None
-            if not da or not db:
+            if (not da or not db) and one_sided:
+                only = da or db
+                if len(only) == 1:
+                    hib_one = bool(only[0].get("higher_is_better", True))
+                    v, s = metric_deltas(
+                        a, b, (metric, xa, xb), hib=hib_one, resamples=bootstrap, seed=seed
+                    )
+                    values += v
+                    series += s
+                    continue
+                reason = "evaluated with several parameter sets in one run; values are ambiguous"
+            elif not da or not db:
                 reason = f"not evaluated in {'A' if not da else 'B'}"
             elif len(da) > 1 or len(db) > 1:
                 reason = "evaluated with several parameter sets in one run; values are ambiguous"
@@ -195,7 +204,8 @@ def compare_runs(
     return Comparison(
         run_a=ra.path,
         run_b=rb.path,
-        log_sha256=sha_a,
+        log_sha256=pairing.source,
+        pairing=pairing,
         pairs=tuple(pairs),
         values=tuple(values),
         series=tuple(series),

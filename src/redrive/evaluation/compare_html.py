@@ -85,10 +85,18 @@ def _chart(png: bytes | None, alt: str) -> h.Markup:
 def render_comparison(c: Comparison, *, worst: int) -> str:
     """The page of ``c`` with its ``worst`` worst frames (see the module doc)."""
     e = h.esc
+    p = c.pairing
     runs = h.Markup(
-        f"A: <code>{e(str(c.run_a))}</code><br>B: <code>{e(str(c.run_b))}</code><br>"
+        f"{e(p.label_a)}: <code>{e(str(c.run_a))}</code><br>"
+        f"{e(p.label_b)}: <code>{e(str(c.run_b))}</code><br>"
         f"source <code>{e(c.log_sha256)}</code> (the same in both: log sha256, or scenario and seed)"
     )
+    if p.open_closed:
+        runs = h.Markup(
+            runs
+            + f"<br><strong>{e(p.describe())}</strong>"
+            + "".join(f"<br>{e(n)}" for n in p.notes)
+        )
     method = h.paragraph(
         f"Δ = B − A. Significance: paired percentile bootstrap over frames — the frames both "
         f"runs have are resampled with replacement {c.resamples} times (seed {c.seed}); the 95 % "
@@ -104,12 +112,14 @@ def render_comparison(c: Comparison, *, worst: int) -> str:
         sections.append(h.section("skipped", "Not compared", h.Markup(f"<ul>{items}</ul>")))
         nav.append(("skipped", "not compared"))
     values = [
-        [v.metric + pair_label(v.algorithm_a, v.algorithm_b), v.key, v.unit, _n(v.a), _n(v.b),
+        [v.metric + pair_label(v.algorithm_a, v.algorithm_b), v.key, v.unit,
+         _n(v.a) if v.in_a else "—", _n(v.b) if v.in_b else "—",
          _n(v.delta), _n(100.0 * v.relative_delta),
          h.Markup(f'<span class="{e(v.verdict)}">{e(v.verdict)}</span>'), v.significance]
         for v in c.values
     ]  # fmt: skip
-    head = ["metric", "value", "unit", "A", "B", "Δ", "Δ %", "B is", "significance"]
+    head = ["metric", "value", "unit", p.label_a, p.label_b, "Δ", "Δ %", f"{p.label_b} is",
+            "significance"]  # fmt: skip
     sections.append(
         h.section("values", "Values", _chart(_delta_chart(c), "relative change per value"),
                   h.table(head, values, numeric=range(3, 7)))
@@ -139,7 +149,7 @@ def render_comparison(c: Comparison, *, worst: int) -> str:
     nav += [("values", "values"), ("series", "per-frame"), ("worst", "worst frames")]
     return h.page(
         title=f"redrive compare: {c.run_a.name} vs {c.run_b.name}",
-        heading="A/B comparison",
+        heading="Open loop beside closed loop" if p.open_closed else "A/B comparison",
         subtitle=runs,
         nav=nav,
         body=h.Markup("".join(sections)),
