@@ -74,10 +74,18 @@ class AlgorithmSpec:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class StageSpec:
-    """A stage: algorithms that run side by side on the same frame."""
+    """A stage: algorithms that run side by side on the same frame.
+
+    Attributes:
+        name: the stage's name.
+        algorithms: what runs in it.
+        role: the role the user gave its algorithms (``--perception`` … sets it: "perception",
+            "planning" or "control"); an algorithm of another role is refused. None: any.
+    """
 
     name: str
     algorithms: tuple[AlgorithmSpec, ...]
+    role: str | None = None
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -157,7 +165,7 @@ def pipeline_from_plugins(
         for i, plugin in enumerate(plugins):
             name = f"{role}" if len(plugins) == 1 else f"{role}_{i + 1}"
             spec = AlgorithmSpec(name=_default_name(plugin), plugin=plugin)
-            stages.append(StageSpec(name=name, algorithms=(spec,)))
+            stages.append(StageSpec(name=name, algorithms=(spec,), role=role))
     if not stages:
         raise ConfigError("give at least one of --perception, --planning, --control")
     return PipelineConfig(stages=tuple(stages))

@@ -56,6 +56,32 @@ class NanAfterTwoSeconds(Algorithm):
         return PlannedPath(stamp_ns=frame.stamp_ns, waypoints=np.full_like(path.waypoints, np.nan))
 
 
+class EmptyAfterTwoSeconds(Algorithm):
+    """Plans straight at 10 m/s, then from frame 20 a path without waypoints."""
+
+    role = Role.PLANNING
+
+    def step(self, frame: Frame, upstream: StageOutputs) -> PlannedPath:
+        path = _straight(frame.stamp_ns, 10.0)
+        if frame.index < 20:
+            return path
+        return PlannedPath(stamp_ns=frame.stamp_ns, waypoints=np.empty((0, 4)))
+
+
+class CameraFrameAfterTwoSeconds(Algorithm):
+    """Plans straight at 10 m/s, then from frame 20 the same path in a camera's frame."""
+
+    role = Role.PLANNING
+
+    def step(self, frame: Frame, upstream: StageOutputs) -> PlannedPath:
+        path = _straight(frame.stamp_ns, 10.0)
+        if frame.index < 20:
+            return path
+        return PlannedPath(
+            stamp_ns=frame.stamp_ns, waypoints=path.waypoints, frame_id="camera_front"
+        )
+
+
 class LoggedPathFollower(Algorithm):
     """Plans the log's own future: the logged ego poses of the next ``horizon_s`` seconds (read
     from the log named by ``log``), in the driven ego's base_link — a planner that tries to drive

@@ -14,7 +14,12 @@ from redrive.closedloop.run import ClosedLoopRequest, run_closed_loop
 from redrive.config import PipelineConfig, load_pipeline, pipeline_from_plugins
 from redrive.errors import ConfigError
 from redrive.evaluation import Metric
-from redrive.evaluation.closedloop import AtFaultCollisions, EgoProgress, PdmScore
+from redrive.evaluation.closedloop import (
+    AtFaultCollisions,
+    EgoProgress,
+    FallbackCommands,
+    PdmScore,
+)
 from redrive.evaluation.compare import compare_runs
 from redrive.evaluation.evaluator import evaluate_run
 from redrive.results import RunStatus, open_run
@@ -60,22 +65,57 @@ def test_the_planner_drives_and_the_world_follows(tmp_path: Path) -> None:
     assert run.road_map() is not None
 
 
-def test_same_seed_same_run(tmp_path: Path) -> None:
-    a = _run(tmp_path / "a", f"{PLUGINS}:Straight", seed=3, agents="reactive")
-    b = _run(tmp_path / "b", f"{PLUGINS}:Straight", seed=3, agents="reactive")
+@pytest.mark.parametrize("agents", ["replay", "reactive"])
+def test_same_seed_same_run(tmp_path: Path, agents: str) -> None:
+    a = _run(tmp_path / "a", f"{PLUGINS}:Straight", seed=3, agents=agents)
+    b = _run(tmp_path / "b", f"{PLUGINS}:Straight", seed=3, agents=agents)
     for name in ("frames", "ego", "ego_logged", "ground_truth", "closed_loop"):
         assert _without_timing(a.table(name)).equals(_without_timing(b.table(name))), name
 
 
-def test_a_nan_path_brakes_and_the_run_completes(tmp_path: Path) -> None:
-    run = _run(tmp_path / "nan", f"{PLUGINS}:NanAfterTwoSeconds")
+@pytest.mark.parametrize(
+    ("planner", "reason"),
+    [
+        ("NanAfterTwoSeconds", "a path with NaN or infinite waypoints"),
+        ("EmptyAfterTwoSeconds", "an empty path"),
+        ("CameraFrameAfterTwoSeconds", "a path in frame 'camera_front'"),
+    ],
+)
+def test_a_bad_path_brakes_the_run_completes_and_the_metric_shows_it(
+    tmp_path: Path, planner: str, reason: str
+) -> None:
+    out = tmp_path / planner
+    run = _run(out, f"{PLUGINS}:{planner}")
     rows = run.table("closed_loop").to_pylist()
+    assert len(rows) == 40  # 4 s at 10 Hz: the run completed
     assert {r["source"] for r in rows[:20]} == {"tracker"}
     assert all(r["source"] == "fallback" for r in rows[20:])
-    assert "NaN" in rows[25]["reason"]
+    assert reason in rows[25]["reason"]
     assert rows[25]["brake"] == 1.0
     speeds = [s.speed_mps for _, s in sorted(run.ego().items())]
     assert speeds[-1] < speeds[20] - 3.0  # braking since frame 20
+    summary = evaluate_run(out, metrics=[FallbackCommands()])
+    (scored,) = summary.scored
+    assert dict(scored.result.values) == {
+        "fallback_frames": 20.0,
+        "fallback_ratio": 0.5,
+        "driven_frames": 20.0,
+    }
+    (mark,) = scored.result.bookmarks
+    assert (mark.frame_index, mark.kind, mark.severity) == (20, "fallback", 20.0)
+    assert reason in mark.detail
+
+
+def test_the_fallback_metric_skips_an_open_loop_run(tmp_path: Path) -> None:
+    log = tmp_path / "cut_in.mcap"
+    assert main(["synth", "cut_in", "--duration", "1", "-o", str(log)]) == 0
+    out = tmp_path / "open"
+    assert main(["run", str(log), "--planning", "idm-planner", "--out", str(out),
+                 "--no-progress"]) == 0  # fmt: skip
+    summary = evaluate_run(out, metrics=[FallbackCommands()])
+    assert not summary.scored
+    (skipped,) = summary.skipped
+    assert "closed-loop run" in skipped.reason
 
 
 def test_a_sensor_reading_algorithm_is_refused_before_the_run(tmp_path: Path) -> None:

@@ -167,6 +167,17 @@ def test_same_log_same_run(shared_data: Path, tmp_path: Path) -> None:
         assert _without_timing(a.table(name)).equals(_without_timing(b.table(name))), name
 
 
+@pytest.mark.parametrize("agents", ["replay", "reactive"])
+def test_same_synthetic_log_same_run(follower_log: Path, tmp_path: Path, agents: str) -> None:
+    """Both agent modes on a log with objects: the reactive agents' IDM is deterministic too."""
+    pipeline = pipeline_from_plugins(planning=[f"{PLUGINS}:StandStill"])
+    a = _run(tmp_path / "a", follower_log, pipeline, agents=agents, duration_s=3.0)
+    b = _run(tmp_path / "b", follower_log, pipeline, agents=agents, duration_s=3.0)
+    for name in ("frames", "ego", "ego_logged", "ground_truth", "closed_loop"):
+        assert _without_timing(a.table(name)).equals(_without_timing(b.table(name))), name
+    assert a.table("ground_truth").num_rows > 0
+
+
 def test_a_bag_without_a_pose_is_refused_naming_what_is_missing(
     shared_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from redrive.cli.main import main
 from redrive.evaluation import EvalData
 from redrive.evaluation.detection import NuScenesDetection, ObjectArrays, evaluate_nuscenes
 from redrive.evaluation.detection.arrays import class_codes
@@ -29,6 +30,7 @@ from redrive.results import (
     StepRecord,
     open_run,
 )
+from redrive.results.evaluation import read_evaluation
 from redrive.types import Box3D, DetectedObject, ObjectClass, Role
 
 CLASSES = ["vehicle", "truck", "pedestrian", "bicycle", "motorcycle"]
@@ -87,6 +89,33 @@ def test_perfect_detections() -> None:
     # classes with neither ground truth nor detections are NaN and not averaged
     assert math.isnan(v["AP/truck/2.0"])
     assert math.isnan(v["AP/bicycle"])
+
+
+def test_devkit_class_mean_averages_over_the_ten_classes() -> None:
+    """Cars only, detected perfectly: redrive's default mean (classes present) gives mAP 1, the
+    devkit's ten-class mean gives 0.1 — absent classes score AP 0 and TP errors 1, the cone's
+    velocity/orientation and the barrier's velocity errors are NaN and left out of the means."""
+    gt = boxes([(f, 0, 10 + f, 0.0, 0.3, 1.0) for f in range(3)])
+    pred = boxes([(f, 0, 10 + f, 0.0, 0.3, 0.9) for f in range(3)])
+    present = run_eval(gt, pred)
+    assert present["mAP"] == pytest.approx(1.0, abs=1e-12)
+    assert present["NDS_no_AAE"] == pytest.approx(1.0, abs=1e-12)
+    assert "NDS" not in present
+    v = run_eval(gt, pred, class_mean="devkit")
+    assert v["mAP"] == pytest.approx(0.1, abs=1e-12)
+    assert v["AP/bus"] == 0.0
+    assert v["ATE/bus"] == 1.0
+    assert math.isnan(v["AVE/barrier"])
+    assert math.isnan(v["AOE/traffic_cone"])
+    assert v["mATE"] == pytest.approx(9 / 10, abs=1e-12)  # car 0, nine classes 1
+    assert v["mASE"] == pytest.approx(9 / 10, abs=1e-12)
+    assert v["mAOE"] == pytest.approx(8 / 9, abs=1e-12)  # the cone's is NaN
+    assert v["mAVE"] == pytest.approx(7 / 8, abs=1e-12)  # the cone's and barrier's are NaN
+    assert v["mAAE"] == 1.0
+    nds = (5 * 0.1 + (1 - 9 / 10) + (1 - 9 / 10) + (1 - 8 / 9) + (1 - 7 / 8) + 0.0) / 10
+    assert v["NDS"] == pytest.approx(nds, abs=1e-12)
+    with pytest.raises(ValueError, match="class_mean"):
+        run_eval(gt, pred, class_mean="mine")
 
 
 def test_false_positive_with_higher_confidence() -> None:
@@ -481,7 +510,7 @@ def _obj(cls: ObjectClass, x: float, y: float, conf: float = 1.0) -> DetectedObj
     )
 
 
-def test_metric_on_a_run(tmp_path: Path) -> None:
+def _write_run(path: Path) -> None:
     setup = RunSetup(
         log=SourceLog(path="x", sha256="s", format="mcap"),
         seed=0,
@@ -498,7 +527,7 @@ def test_metric_on_a_run(tmp_path: Path) -> None:
         0: (_obj(ObjectClass.VEHICLE, 10.2, 0, 0.9), _obj(ObjectClass.VEHICLE, 30, 5, 0.3)),
         1: (_obj(ObjectClass.VEHICLE, 12, 0.1, 0.8),),
     }
-    with RunWriter(tmp_path / "run", setup=setup) as writer:
+    with RunWriter(path, setup=setup) as writer:
         for i in range(3):
             status = "ok" if i < 2 else "error"  # frame 2: the detector failed → no detections
             step = StepRecord(
@@ -515,6 +544,10 @@ def test_metric_on_a_run(tmp_path: Path) -> None:
                     frame_index=i, stamp_ns=10**9 * (i + 1), steps=(step,), ground_truth=truth[i]
                 )
             )
+
+
+def test_metric_on_a_run(tmp_path: Path) -> None:
+    _write_run(tmp_path / "run")
     res = NuScenesDetection().evaluate(EvalData(open_run(tmp_path / "run"), "det"))
     assert res.headline == "mAP"
     assert res.values["frames"] == 3.0
@@ -533,3 +566,35 @@ def test_metric_on_a_run(tmp_path: Path) -> None:
     # FP at recall 2/3 gives 2/3; beyond 2/3 → 0.  bins 11..66 → 56 × 0.9; bin 67 → 0
     assert res.values["AP/car/2.0"] == pytest.approx(56 * 0.9 / 90 / 0.9, abs=1e-12)
     assert res.curves["PR/car/2.0"][0].shape == (101,)
+
+
+def test_cli_metric_params_and_devkit_compat_are_stored_with_the_values(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    run = tmp_path / "run"
+    _write_run(run)
+    argv = ["evaluate", str(run), "--metric", "nuscenes_detection"]
+    assert (
+        main([*argv, "--metric-param", "nuscenes_detection.dist_ths_m=1,2", "--devkit-compat"]) == 0
+    )
+    ev = read_evaluation(run)
+    (record,) = [m for m in ev.metrics if m["name"] == "nuscenes_detection"]
+    assert record["params"]["dist_ths_m"] == [1, 2]
+    assert record["params"]["class_mean"] == "devkit"
+    keys = {r["key"] for r in ev.values.to_pylist()}
+    assert {"AP/car/1.0", "AP/car/2.0", "NDS", "mAAE", "AP/bus"} <= keys
+    assert "AP/car/0.5" not in keys
+    # by redrive's default the mean runs over the two classes present (car, pedestrian); the
+    # devkit's over ten, eight of them absent with AP 0
+    assert main([*argv, "--metric-param", "nuscenes_detection.dist_ths_m=1,2"]) == 0
+    present = read_evaluation(run).value("nuscenes_detection", "mAP", algorithm="det")
+    devkit = ev.value("nuscenes_detection", "mAP", algorithm="det")
+    assert present > 0
+    assert devkit == pytest.approx(present * 2 / 10, abs=1e-12)
+    capsys.readouterr()
+    assert main([*argv, "--metric-param", "nuscenes_detection.no_such=1"]) == 1
+    assert "unknown parameter(s) no_such" in capsys.readouterr().err
+    assert main([*argv, "--metric-param", "latency.deadline_ms=50"]) == 1
+    assert "not among the metrics evaluated" in capsys.readouterr().err
+    assert main([*argv, "--metric-param", "nuscenes_detection"]) == 1
+    assert "give METRIC.PARAM=VALUE" in capsys.readouterr().err

@@ -15,6 +15,7 @@ import pytest
 
 from redrive.errors import ConfigError
 from redrive.evaluation.base import EvalData
+from redrive.evaluation.evaluator import evaluate_run
 from redrive.evaluation.planning import COMFORT_BOUNDS, PlanningMetrics, time_to_collision_s
 from redrive.results import (
     AlgorithmEntry,
@@ -73,7 +74,10 @@ def car(x: float, y: float = 0.0, *, vx: float = 0.0, oid: int = 7) -> DetectedO
     )
 
 
-def make_run(tmp_path: Path, plan: Plan, *, n: int = 40, truth: Truth | None = None) -> Path:
+def make_run(
+    tmp_path: Path, plan: Plan, *, n: int = 40, truth: Truth | None = None, labels: bool = True
+) -> Path:
+    """A run of a planner; ``labels=False``: the log has no ground-truth objects at all."""
     out = tmp_path / "run"
     with RunWriter(out, setup=SETUP) as writer:
         for i in range(n):
@@ -87,7 +91,7 @@ def make_run(tmp_path: Path, plan: Plan, *, n: int = 40, truth: Truth | None = N
                     stamp_ns=T0_NS + i * DT_NS,
                     steps=(step,),
                     vehicle_state=ego_state(i),
-                    ground_truth=truth(i) if truth else (),
+                    ground_truth=(truth(i) if truth else ()) if labels else None,
                     wall_ns=1_000_000,
                 )
             )
@@ -117,6 +121,23 @@ def test_exact_plan_has_zero_displacement_full_progress_and_is_comfortable(tmp_p
     assert res.values["low_ttc_fraction"] == 0.0
     assert res.bookmarks == ()
     assert res.values["frames"] == 40
+
+
+def test_a_log_without_object_labels_still_scores_the_plan_against_the_ego(
+    tmp_path: Path,
+) -> None:
+    """Real logs often have odometry but no labelled objects: ADE/FDE, progress and comfort
+    need only the ego track; the collision and TTC values are not defined."""
+    run = make_run(tmp_path, plan_xy(lambda t: SPEED * t, y=1.0), labels=False)
+    summary = evaluate_run(run, metrics=[PlanningMetrics()])
+    assert not summary.skipped, summary.skipped
+    (scored,) = summary.scored
+    values = scored.result.values
+    assert values["ADE/3s"] == pytest.approx(1.0, abs=1e-9)
+    assert values["progress_ratio"] == pytest.approx(1.0)
+    assert values["comfortable_fraction"] == 1.0
+    assert "collision_rate" not in values or math.isnan(values["collision_rate"])
+    assert "min_ttc_s" not in values or math.isnan(values["min_ttc_s"])
 
 
 def test_lateral_offset_of_one_metre_gives_ade_and_fde_one(tmp_path: Path) -> None:

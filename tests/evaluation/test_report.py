@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
+import pyarrow as pa
 import pytest
 from openpyxl import load_workbook
 
@@ -24,9 +25,9 @@ from redrive.errors import ConfigError
 from redrive.evaluation import Bookmark, EvalData, Metric, MetricResult, Series
 from redrive.evaluation.detection.nuscenes import NuScenesDetection
 from redrive.evaluation.evaluator import evaluate_run
-from redrive.evaluation.plots import worst_frames
+from redrive.evaluation.plots import frame_scores, worst_frames
 from redrive.evaluation.report import DEFAULT_WORST, render_html, write_report
-from redrive.evaluation.store import Scored, read_evaluation, write_evaluation
+from redrive.evaluation.store import Evaluation, Scored, read_evaluation, write_evaluation
 from redrive.results import (
     AlgorithmEntry,
     FrameRecord,
@@ -270,19 +271,30 @@ def test_worst_frames_without_bookmarks_are_the_most_missed(tmp_path: Path) -> N
 
 def test_xlsx(report: tuple[Path, Any]) -> None:
     wb = load_workbook(report[1].xlsx, read_only=True)
-    assert wb.sheetnames == ["summary", "per_frame", "curves", "bookmarks", "metrics"]
+    assert wb.sheetnames == [
+        "summary", "run", "algorithms", "per_frame", "curves", "bookmarks", "metrics",
+    ]  # fmt: skip
+    # the summary is one tidy table: a header, then a row per value (issue 17 item 12)
     summary = [list(r) for r in wb["summary"].iter_rows(values_only=True)]
-    assert ["log sha256", "ab12" * 16] in summary
-    assert [EVIL, "perception", "3", "c0ffee" * 10] in summary
-    head = summary.index(
-        ["metric", "metric_version", "algorithm", "key", "value", "unit", "higher_is_better",
-         "headline"]
-    )  # fmt: skip
-    assert summary[head + 1 :] == [  # an empty string reads back as an empty cell (None)
-        ["det_metric", "2", EVIL, "mAP", 0.625, None, True, True],
-        ["det_metric", "2", EVIL, "recall", 0.6, "ratio", True, False],
-        ["lat", "1", None, "p95_ms", 4.85, "ms", False, True],
+    assert summary[0] == [
+        "metric", "algorithm", "value", "number", "unit", "better", "headline", "definition",
+    ]  # fmt: skip
+    rows = [r[:7] for r in summary[1:]]
+    assert rows == [  # an empty string reads back as an empty cell (None)
+        ["det_metric", EVIL, "mAP", 0.625, None, "higher", True],
+        ["det_metric", EVIL, "recall", 0.6, "ratio", "higher", False],
+        ["lat", "(run)", "p95_ms", 4.85, "ms", "lower", True],
     ]
+    assert all(r[7].startswith(("v2 params ", "v1 params ")) for r in summary[1:])
+    # header frozen and filterable on every sheet with rows
+    full = load_workbook(report[1].xlsx)
+    for name in ("summary", "run", "algorithms", "bookmarks", "metrics"):
+        assert full[name].freeze_panes == "A2", name
+        assert full[name].auto_filter.ref is not None, name
+    facts = [list(r) for r in wb["run"].iter_rows(values_only=True)]
+    assert ["log sha256", "ab12" * 16] in facts
+    algos = [list(r) for r in wb["algorithms"].iter_rows(values_only=True)]
+    assert [EVIL, "perception", "3", "c0ffee" * 10] in algos
     wide = [list(r) for r in wb["per_frame"].iter_rows(values_only=True)]
     assert wide == [
         ["frame_index", f"{EVIL} / det_metric / tp", f"{EVIL} / det_metric / missed",
@@ -367,3 +379,43 @@ def test_real_detection_metric(tmp_path: Path) -> None:
     text = files.html.read_text(encoding="utf-8")
     assert text.count(IMG) == 1 + 1 + 1 + len(frames)
     assert "nuscenes_detection" in text
+
+
+def _evaluation(per_frame: list[tuple[str, str, str, int, float]], marks: list[dict]) -> Evaluation:
+    from redrive.results.evaluation import BOOKMARKS, CURVES, PER_FRAME, VALUES
+
+    rows = [dict(zip(PER_FRAME.names, r, strict=True)) for r in per_frame]
+    return Evaluation(
+        values=VALUES.empty_table(),
+        per_frame=pa.Table.from_pylist(rows, schema=PER_FRAME),
+        curves=CURVES.empty_table(),
+        bookmarks=pa.Table.from_pylist(marks, schema=BOOKMARKS),
+        metrics=(),
+        evaluated="",
+    )
+
+
+def test_worst_frames_rank_by_a_score_of_errors_not_by_switch_bookmarks(
+    report: tuple[Path, Any],
+) -> None:
+    """Frame 4 has one identity switch (bookmark severity 1.0), frame 7 three missed objects
+    and a false positive (missed-object bookmarks of severity ~0.05): by the documented score
+    (missed + fp + switches) frame 7 is worse; --rank-by clear_mot.switches puts frame 4 first."""
+    run = open_run(report[0])
+    pf = [("nuscenes_detection", "det", "missed", f, float(m)) for f, m in ((4, 0), (7, 3))]
+    pf += [("nuscenes_detection", "det", "fp", f, float(m)) for f, m in ((4, 0), (7, 1))]
+    pf += [("clear_mot", "det", "switches", f, float(m)) for f, m in ((4, 1), (7, 0))]
+    mark = {"stamp_ns": 0, "metric": "clear_mot", "algorithm": "det", "detail": ""}
+    marks = [
+        {**mark, "frame_index": 4, "kind": "id_switch", "severity": 1.0},
+        {**mark, "frame_index": 7, "kind": "missed_object", "severity": 0.05},
+    ]
+    ev = _evaluation(pf, marks)
+    assert frame_scores(ev) == {4: 1.0, 7: 4.0}
+    ranked = worst_frames(run, ev, count=2)
+    assert [f for f, _ in ranked] == [7, 4]
+    assert ranked[0][1][0] == "score (missed + false positives + switches) 4"
+    by_switches = worst_frames(run, ev, count=2, rank_by="clear_mot.switches")
+    assert [f for f, _ in by_switches] == [4, 7]
+    with pytest.raises(ConfigError, match=r"--rank-by latency\.frame_ms: no such per-frame"):
+        worst_frames(run, ev, count=2, rank_by="latency.frame_ms")

@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from redrive.errors import UnsupportedMessageError
 from redrive.io.base import LogMessage
 from redrive.io.decoders import PointCloud2Decoder, read_cloud_layout
+from redrive.types import PointCloud
 from tests.io._decoder_helpers import deserializer, header, log_message
 
 TYPE = "sensor_msgs/msg/PointCloud2"
@@ -175,6 +176,12 @@ def test_random_layouts_match_full_deserialisation(layout: dict[str, Any], share
         assert got.dtype == values.dtype.newbyteorder("="), name
         assert got.dtype.isnative
         np.testing.assert_array_equal(got, values, err_msg=name)
+    # Whichever path decoded it, the cloud meets the data model's checks as it is.
+    assert not cloud.xyz.flags.writeable
+    assert all(not values.flags.writeable for values in cloud.channels.values())
+    checked = PointCloud(xyz=cloud.xyz, channels=dict(cloud.channels))
+    assert checked.xyz is cloud.xyz
+    assert all(checked.channels[k] is v for k, v in cloud.channels.items())
     layout_read = read_cloud_layout(message.raw, message.encoding)
     assert (layout_read.width, layout_read.height) == (msg.width, msg.height)
     assert layout_read.point_step == msg.point_step
@@ -359,3 +366,57 @@ def test_zero_stamp_falls_back_to_log_time() -> None:
     decoded = PointCloud2Decoder().decode(message, _no_deserialize)
     assert decoded.stamp_ns == message.log_time_ns
     assert decoded.value.num_points == 0
+
+
+@pytest.mark.parametrize("ros_version", [1, 2])
+@pytest.mark.parametrize("raw_wrapper", [bytes, lambda b: memoryview(bytearray(b))])
+def test_fast_and_general_paths_give_the_same_cloud(ros_version: int, raw_wrapper: Any) -> None:
+    """A driver's layout (native, x/y/z adjacent float32) read from immutable bytes takes the
+    fast path, from a reusable buffer the general one; the clouds are equal member for member."""
+    n = 300
+    points = np.zeros(
+        n,
+        dtype={
+            "names": ["x", "y", "z", "intensity", "ring", "time"],
+            "formats": ["<f4", "<f4", "<f4", "<f4", "<u2", "<f8"],
+            "offsets": [0, 4, 8, 12, 16, 24],
+            "itemsize": 32,
+        },
+    )
+    rng = np.random.default_rng(3)
+    for name in ("x", "y", "z", "intensity"):
+        points[name] = rng.normal(size=n)
+    points["x"][5] = np.nan
+    points["ring"] = np.arange(n) % 32
+    points["time"] = np.arange(n) * 1e-5
+    fields = [
+        _field("x", 0, 7),
+        _field("y", 4, 7),
+        _field("z", 8, 7),
+        _field("intensity", 12, 7),
+        _field("ring", 16, 4),
+        _field("time", 24, 8),
+    ]
+    message = _cloud_message(
+        ros_version,
+        fields=fields,
+        data=points.tobytes(),
+        width=n,
+        point_step=32,
+        raw_wrapper=raw_wrapper,
+    )
+    decoder = PointCloud2Decoder()
+    clouds = [decoder.decode(message, _no_deserialize) for _ in range(2)]  # miss, then cached
+    expected_xyz, expected_channels, _ = _reference(message)
+    for decoded in clouds:
+        cloud = decoded.value
+        assert decoded.frame_id == "lidar_top"
+        assert cloud.xyz.shape == (n, 3)
+        assert cloud.xyz.flags.c_contiguous
+        assert not cloud.xyz.flags.writeable
+        np.testing.assert_array_equal(cloud.xyz, expected_xyz)
+        assert list(cloud.channels) == ["intensity", "ring", "time"]
+        for name, values in expected_channels.items():
+            assert cloud.channels[name].dtype == values.dtype
+            assert not cloud.channels[name].flags.writeable
+            np.testing.assert_array_equal(cloud.channels[name], values)

@@ -134,6 +134,17 @@ def test_cli_synth_writes_a_log(tmp_path: Path, capsys: pytest.CaptureFixture[st
     assert "pedestrian_from_occlusion" in capsys.readouterr().out
 
 
+def test_cli_synth_refuses_an_output_that_is_not_mcap(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "x.txt"
+    assert main(["synth", "urban", "--duration", "0.2", "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"{out}: synth writes an MCAP log, so OUT must end in .mcap" in err
+    assert "-o " + str(tmp_path / "x.mcap") in err
+    assert not out.exists()
+
+
 def test_bad_duration_is_refused(tmp_path: Path) -> None:
     with pytest.raises(SimulationError, match="duration"):
         synthesize(_small("urban"), tmp_path / "x.mcap", duration_s=0.0)

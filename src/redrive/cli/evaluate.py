@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import sys
 from pathlib import Path
@@ -44,11 +45,17 @@ def _run(args: argparse.Namespace) -> int:
     from rich.table import Table
 
     from redrive.evaluation.evaluator import evaluate_run, headline
-    from redrive.evaluation.registry import load_metric_class
+    from redrive.evaluation.registry import build_metrics, parse_metric_params
+    from redrive.results import open_run
 
-    metrics = [load_metric_class(name)() for name in args.metric] if args.metric else None
+    metrics = build_metrics(
+        args.metric, parse_metric_params(args.metric_param or []), devkit_compat=args.devkit_compat
+    )
     summary = evaluate_run(args.run, metrics=metrics, algorithms=args.algorithm)
     console = Console(width=None if sys.stdout.isatty() else 120)
+    partial = open_run(args.run).manifest.partial_note()
+    if partial:
+        console.print(f"[bold yellow]warning: {partial}[/]", highlight=False)
     table = Table(title=f"evaluation of {args.run}", title_justify="left")
     for col in ("algorithm", "metric", "headline", "value", "unit", "bookmarks"):
         table.add_column(col, justify="right" if col in ("value", "bookmarks") else "left")
@@ -74,6 +81,10 @@ def _run(args: argparse.Namespace) -> int:
         f"{len(summary.scored)} results, {summary.bookmarks} bookmarked frames → "
         f"{summary.metrics_dir} (`redrive report {args.run}` for the HTML report)"
     )
+    if partial:
+        console.print(
+            f"[bold yellow]these numbers cover part of the log: {partial}[/]", highlight=False
+        )
     if summary.failed:
         console.print(
             f"[bold red]{len(summary.failed)} metric result(s) failed; the others are stored[/]"
@@ -95,7 +106,16 @@ def _list(args: argparse.Namespace) -> int:
         doc = (cls.__doc__ or "").strip().split("\n\n", 1)[0].replace("\n", " ")
         better = "higher" if cls.higher_is_better else "lower"
         table.add_row(name, cls.role_name(), cls.version, cls.unit, better, doc)
-    Console(width=None if sys.stdout.isatty() else 140).print(table)
+    console = Console(width=None if sys.stdout.isatty() else 140)
+    console.print(table)
+    for name in args.params or []:
+        found = installed_metrics().get(name)
+        if found is None:
+            console.print(f"[red]no installed metric {name!r}[/]")
+            return 1
+        console.print(f"[bold]{name}[/] parameters (--metric-param {name}.PARAM=VALUE):")
+        for param, default in found.defaults.items():
+            console.print(f"  {param} = {json.dumps(default, default=repr)}", highlight=False)
     return 0
 
 
@@ -122,10 +142,28 @@ def register(sub: Any) -> None:
     parser.add_argument(
         "--algorithm", action="append", metavar="NAME", help="an algorithm (repeat; default: all)"
     )
+    parser.add_argument(
+        "--metric-param",
+        action="append",
+        metavar="METRIC.PARAM=VALUE",
+        help="set a metric's parameter (repeat), e.g. nuscenes_detection.dist_ths_m=0.5,1,2,4 or "
+        "nuscenes_detection.class_mean=devkit; stored with its values, so each number carries the "
+        "definition that produced it (`redrive metrics --params NAME` lists a metric's parameters)",
+    )
+    parser.add_argument(
+        "--devkit-compat",
+        action="store_true",
+        help="the official devkits' conventions where redrive's default differs: nuScenes mAP and "
+        "TP errors averaged over its ten classes (absent ones score AP 0, errors 1) and the "
+        "official NDS with mAAE (nuscenes_detection.class_mean=devkit)",
+    )
     parser.set_defaults(func=_run)
     metrics = sub.add_parser(
         "metrics",
         help="list the installed metrics",
         description="List the metrics of the redrive.metrics entry-point group.",
+    )
+    metrics.add_argument(
+        "--params", action="append", metavar="NAME", help="also list this metric's parameters"
     )
     metrics.set_defaults(func=_list)

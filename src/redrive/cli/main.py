@@ -22,6 +22,7 @@ _COMMANDS = (
     "convert",
     "synth",
     "run",
+    "batch",
     "export",
     "evaluate",
     "report",
@@ -38,6 +39,7 @@ examples:
   redrive synth urban -o urban.mcap      simulate a driving scenario into a log
   redrive run urban.mcap                 replay it through perception → planning → control
   redrive run drive.bag --perception my_detector.py:MyDetector --out runs/mine
+  redrive batch drives/ --pipeline a.toml --pipeline b.toml --out batches/ab   many logs × pipelines
   redrive export runs/mine --format xlsx results as Excel (or csv, parquet)
   redrive evaluate runs/mine             detection, tracking, planning, control, latency metrics
   redrive report runs/mine               self-contained HTML report, Excel workbook, CSV files
@@ -78,6 +80,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; returns the process exit status (0 ok, 1 a redrive error, 2 bad usage)."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    args.argv = list(sys.argv[1:] if argv is None else argv)  # for hints that repeat the command
     level = logging.WARNING - 10 * min(int(args.verbose), 2)
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     if not getattr(args, "command", None):

@@ -15,8 +15,9 @@ examples:
   redrive report runs/closed --beside runs/open                open loop beside closed loop
 
 report.html needs no network (plots are inline PNG images, no JavaScript): open it from disk or
-mail it. report.xlsx: sheets summary, per_frame (one column per algorithm / metric / series),
-curves, bookmarks, metrics. CSV: values, per_frame, curves, bookmarks. Text cells a spreadsheet
+mail it. report.xlsx: sheets summary (one tidy table: a row per value), run, algorithms,
+per_frame (one column per algorithm / metric / series), curves, bookmarks, metrics (and beside
+with --beside). CSV: values, per_frame, curves, bookmarks. Text cells a spreadsheet
 would run as a formula get a leading ' .
 
 --beside OTHER adds another evaluated run of the same log or situation next to RUN: above all
@@ -30,7 +31,9 @@ workbook a sheet `beside`; and beside.csv. The pairing is `redrive compare`'s.
 def _run(args: argparse.Namespace) -> int:
     from redrive.evaluation.report import write_report
 
-    files = write_report(args.run, out=args.output, worst=args.worst, beside=args.beside)
+    files = write_report(
+        args.run, out=args.output, worst=args.worst, beside=args.beside, rank_by=args.rank_by
+    )
     for path in files.paths():
         print(path)
     return 0
@@ -87,5 +90,13 @@ def register(sub: Any) -> None:
             "another evaluated run of the same log or scenario (e.g. the open-loop run beside "
             "a closed-loop RUN) shown side by side in the page, the workbook and beside.csv"
         ),
+    )
+    parser.add_argument(
+        "--rank-by",
+        metavar="METRIC.SERIES",
+        help="rank the worst frames by this stored per-frame series (e.g. "
+        "nuscenes_detection.missed, clear_mot.switches, latency.frame_ms; larger is worse, "
+        "'tp'-like series the other way) instead of the default score: missed objects + false "
+        "positives (the detection metric's, at 2 m) + identity switches, per algorithm",
     )
     parser.set_defaults(func=_run)

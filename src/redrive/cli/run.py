@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import re
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -79,6 +80,42 @@ def _default_out(log: Path) -> Path:
     return Path("runs") / f"{stem}-{time.strftime('%Y%m%d-%H%M%S')}"
 
 
+class ProgressLines:
+    """Progress as plain lines when stderr is not a terminal (a pipe, a CI log, a batch
+    worker): one line at every tenth of the frames (every 100 frames when the total is not
+    known), with frames/s and the estimated time left."""
+
+    def __init__(self, name: str, stream: Any) -> None:
+        self.name, self.stream = name, stream
+        self.total: int | None = None
+        self._next = 0
+
+    def start(self, total: int | None) -> None:
+        self.total = total
+        self._next = self._step()
+
+    def _step(self) -> int:
+        return max(1, self.total // 10) if self.total else 100
+
+    def update(self, done: int, elapsed_s: float) -> None:
+        if done < self._next and done != self.total:
+            return
+        while self._next <= done:
+            self._next += self._step()
+        rate = done / elapsed_s if elapsed_s > 0 else 0.0
+        of = f"/{self.total}" if self.total else ""
+        eta = (
+            f", ETA {(self.total - done) / rate:.0f} s"
+            if self.total and rate > 0 and done < self.total
+            else ""
+        )
+        print(
+            f"{self.name}: {done}{of} frames, {rate:.1f} frames/s{eta}",
+            file=self.stream,
+            flush=True,
+        )
+
+
 def print_run_report(report: Any, out: Path) -> None:
     from rich.console import Console
     from rich.table import Table
@@ -107,10 +144,33 @@ def print_run_report(report: Any, out: Path) -> None:
         f"{report.realtime_factor:.1f}x real time ({report.log_span_s:.1f} s of log)"
         + (f", {report.late_frames} late" if report.late_frames else "")
     )
+    for name, count in sorted(report.missing_inputs.items()):
+        console.print(
+            f"[bold yellow]{count} of {report.frames} frames had no {name} within the tolerance"
+            "[/bold yellow] (stale or absent there; the frames table's missing_inputs says which "
+            "frames; `--sensor-map` sets tolerance_ms)",
+            highlight=False,
+        )
+    if report.failed_frames:
+        console.print(
+            f"[bold red]{report.failed_frames} of {report.frames} frames had a failed step[/bold red]"
+            " (the err and t/o columns; each failure is stored in the steps table)"
+        )
     for a in report.algorithms:
         if a.first_error:
             console.print(f"[yellow]{a.name}: first failure at {a.first_error}[/yellow]")
     console.print(f"results: {out}  (manifest.json, *.parquet; `redrive export {out}`)")
+
+
+def resume_command(args: argparse.Namespace, out: Path) -> str:
+    """The command that continues this interrupted run: the one given (``args.argv``), with
+    ``--out`` where the run went (when it was chosen for the user) and ``--resume``."""
+    argv = [a for a in getattr(args, "argv", []) if a != "--resume"]
+    if not argv:  # called without main(): say what is known
+        argv = ["run", str(args.log)]
+    if args.out is None:
+        argv += ["--out", str(out)]
+    return shlex.join(["redrive", *argv, "--resume"])
 
 
 def pipeline_from_args(args: argparse.Namespace) -> Any:
@@ -130,7 +190,14 @@ def pipeline_from_args(args: argparse.Namespace) -> Any:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
+    from rich.console import Console
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeRemainingColumn,
+    )
 
     from redrive.engine import RunRequest, run_log
     from redrive.results import RunStatus
@@ -167,8 +234,16 @@ def _run(args: argparse.Namespace) -> int:
         BarColumn(),
         MofNCompleteColumn(),
         TextColumn("{task.fields[rate]}"),
+        TextColumn("ETA"),
+        TimeRemainingColumn(),
         transient=True,
-        disable=args.no_progress,
+        disable=args.no_progress or not sys.stderr.isatty(),
+        console=Console(stderr=True),
+    )
+    lines = (
+        None
+        if args.no_progress or sys.stderr.isatty()
+        else ProgressLines(args.log.name, sys.stderr)
     )
     started = [0.0]
     with progress_bar:
@@ -177,16 +252,20 @@ def _run(args: argparse.Namespace) -> int:
         def on_start(total: int | None) -> None:
             started[0] = time.perf_counter()
             progress_bar.update(task, total=total)
+            if lines is not None:
+                lines.start(total)
 
         def on_progress(done: int) -> None:
             elapsed = time.perf_counter() - started[0]
             rate = f"{done / elapsed:.1f} frames/s" if elapsed > 0 else ""
             progress_bar.update(task, completed=done, rate=rate)
+            if lines is not None:
+                lines.update(done, elapsed)
 
         report = run_log(request, on_start=on_start, progress=on_progress)
     print_run_report(report, out)
     if report.status is RunStatus.INTERRUPTED:
-        print(f"interrupted: continue with `redrive run {args.log} --out {out} --resume`")
+        print(f"interrupted: continue with `{resume_command(args, out)}`")
         return 130
     if report.status is RunStatus.FAILED and report.failure is not None:
         index, step = report.failure
@@ -195,7 +274,20 @@ def _run(args: argparse.Namespace) -> int:
             f"{step.error_type}: {step.error_message}"
         )
         return 1
-    return 0
+    return nothing_succeeded_status(report)
+
+
+def nothing_succeeded_status(report: Any) -> int:
+    """3 (and why, on stderr) when no step of any algorithm succeeded in any frame, else 0."""
+    if not report.nothing_succeeded:
+        return 0
+    print(
+        f"redrive: error: no algorithm step succeeded in any of the {report.frames} frames; "
+        "the run's results hold only the failures (`redrive export RUN --format csv` lists them in "
+        "steps.csv; the first failure of each algorithm is printed above)",
+        file=sys.stderr,
+    )
+    return 3
 
 
 def _run_closed_loop(args: argparse.Namespace, pipeline: Any) -> int:
@@ -247,7 +339,7 @@ def _run_closed_loop(args: argparse.Namespace, pipeline: Any) -> int:
     if report.status is RunStatus.INTERRUPTED:
         print("interrupted: closed-loop runs do not resume; run it again into a new --out")
         return 130
-    return 0
+    return nothing_succeeded_status(report)
 
 
 def _print_deviation(out: Path) -> None:

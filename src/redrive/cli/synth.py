@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -35,6 +36,14 @@ def _run(args: argparse.Namespace) -> int:
         return 0
     if args.scenario is None or args.output is None:
         print("redrive synth: give a SCENARIO and -o OUT.mcap (or --list)")
+        return 2
+    if args.output.suffix.lower() != ".mcap":
+        print(
+            f"redrive synth: {args.output}: synth writes an MCAP log, so OUT must end in .mcap "
+            f"(e.g. -o {args.output.with_suffix('.mcap')}); to get a ROS 1 bag, "
+            f"`redrive convert` the MCAP file to a .bag",
+            file=sys.stderr,
+        )
         return 2
     scenario = load_scenario(args.scenario)
     with Progress(

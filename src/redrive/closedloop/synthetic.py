@@ -11,8 +11,10 @@ Two worlds of the same scenario and seed run in lockstep:
 
 Agents: ``replay`` (non-reactive, as nuPlan's open-loop agents and NAVSIM): what the frames show
 are the expert world's agents, who follow their scripted motion whatever the ego does — a follower
-may then run into a braking ego.  ``reactive``: the closed-loop world's own agents, whose IDM sees
-the driven ego as an obstacle — a follower brakes for it.
+may then run into a braking ego (the closed-loop world drops its own copies of them,
+:meth:`redrive.sim.world.World.drop_agents`: they could not change what it shows).  ``reactive``:
+the closed-loop world's own agents, whose IDM sees the driven ego as an obstacle — a follower
+brakes for it.
 
 Levels: ``object`` (the default): frames carry the true ego state (map frame) and the
 ground-truth objects in ``base_link`` of the driven ego, at a fixed rate; an algorithm that
@@ -113,6 +115,10 @@ class SyntheticSimulator:
         scenario = dataclasses.replace(self.scenario, seed=seed)
         self._expert = World(scenario)
         self._world = World(scenario)
+        if self.agents == "replay":
+            # the frames show the expert world's agents, and nothing of the driven world moves
+            # its ego: stepping its own copies of them would only cost time
+            self._world.drop_agents()
         self._ego = ActuatedEgo(self._world.ego_model, pedals=self.pedal, delay_steps=0)
         self.tracker.reset()  # the PID's integral belongs to one run
         neutral = ControlCommands(steering_angle_rad=self._world.ego_model.steer_rad)

@@ -279,6 +279,7 @@ class Engine:
                 ground_truth=frame.ground_truth,
                 wall_ns=time.perf_counter_ns() - item.t0_ns,
                 late=item.paced.late,
+                missing=frame.missing,
             )
             sink(record)
             stats.add(record)

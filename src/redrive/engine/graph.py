@@ -131,6 +131,13 @@ def build_graph(pipeline: PipelineConfig, inputs: LogInputs) -> StageGraph:
             if not isinstance(role, Role):
                 msg = f"{spec.plugin}: {cls.__name__} sets no `role` (Role.PERCEPTION, …)"
                 raise PluginError(msg)
+            if stage.role is not None and role.value != stage.role:
+                msg = (
+                    f"{spec.plugin}: {cls.__name__} is a {role.value} algorithm "
+                    f"(role = Role.{role.name}), given as --{stage.role}; "
+                    f"pass it with --{role.value} {spec.plugin}"
+                )
+                raise ConfigError(msg)
             if last_role is not None and _ROLE_ORDER[role] < _ROLE_ORDER[last_role]:
                 msg = (
                     f"stage {stage.name!r}: {spec.name} is a {role.name} algorithm after the "

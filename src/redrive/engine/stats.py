@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -48,6 +48,8 @@ class RunReport:
         log_span_s: log time covered by those frames (last stamp − first stamp + one period).
         late_frames: frames released after their due time (real-time pacing only).
         failure: (frame index, step) that stopped a ``fail_fast`` run.
+        failed_frames: frames in which at least one step failed (error or timeout).
+        missing_inputs: input → frames that had no sample of it within the tolerance.
     """
 
     status: RunStatus
@@ -57,6 +59,13 @@ class RunReport:
     late_frames: int
     algorithms: tuple[AlgorithmStats, ...] = ()
     failure: tuple[int, StepRecord] | None = field(default=None)
+    failed_frames: int = 0
+    missing_inputs: Mapping[str, int] = field(default_factory=dict)
+
+    @property
+    def nothing_succeeded(self) -> bool:
+        """Frames were processed and no step of any algorithm succeeded in any of them."""
+        return self.frames > 0 and bool(self.algorithms) and not any(a.ok for a in self.algorithms)
 
     @property
     def frames_per_s(self) -> float:
@@ -76,6 +85,8 @@ class RunReport:
             "log_span_s": round(self.log_span_s, 3),
             "realtime_factor": round(self.realtime_factor, 2),
             "late_frames": self.late_frames,
+            "failed_frames": self.failed_frames,
+            "missing_inputs": dict(self.missing_inputs),
             "algorithms": [a.as_dict() for a in self.algorithms],
         }
         if self.failure is not None:
@@ -102,6 +113,8 @@ class StatsCollector:
         self._cpu: dict[str, list[int]] = {p.name: [] for p in planned}
         self._first_error: dict[str, str] = {}
         self.frames = 0
+        self.failed_frames = 0
+        self.missing_inputs: dict[str, int] = {}
         self._first_stamp: int | None = None
         self._last_stamp = 0
 
@@ -110,6 +123,10 @@ class StatsCollector:
         if self._first_stamp is None:
             self._first_stamp = record.stamp_ns
         self._last_stamp = record.stamp_ns
+        if any(step.status in ("error", "timeout") for step in record.steps):
+            self.failed_frames += 1
+        for name in record.missing:
+            self.missing_inputs[name] = self.missing_inputs.get(name, 0) + 1
         for step in record.steps:
             name, status = step.algorithm, step.status
             if status == "ok":
@@ -173,4 +190,6 @@ class StatsCollector:
             late_frames=late_frames,
             algorithms=tuple(algos),
             failure=failure,
+            failed_frames=self.failed_frames,
+            missing_inputs=dict(self.missing_inputs),
         )

@@ -66,6 +66,7 @@ NEEDS = frozenset(
         "ground_truth",
         "ego",
         "logged_ego",
+        "closed_loop",
         "road_map",
         "detections",
         "paths",
@@ -80,6 +81,7 @@ NEED_SOURCES: Mapping[str, str] = MappingProxyType(
         "ground_truth": "a log with ground-truth objects",
         "ego": "a log with the ego state (odometry)",
         "logged_ego": "a closed-loop run, which stores the logged ego apart from the driven one",
+        "closed_loop": "a closed-loop run (its closed_loop table: the command that moved the ego each frame)",
         "road_map": "a road map in the run (runs of a synthetic scenario or its log store one; recorded logs have none)",
         "detections": "a perception algorithm with at least one successful step",
         "paths": "a planning algorithm with at least one successful step",
@@ -141,12 +143,14 @@ class MetricResult:
         curves: named curves (x, y), e.g. ``PR/car/2.0`` → (recall, precision).
         bookmarks: failure frames.
         higher_is_better: per value name, where it differs from the metric's
-            ``higher_is_better`` (e.g. ``{"MOTP": False, "num_switches": False}``).
+            ``higher_is_better`` (e.g. ``{"MOTP": False, "num_switches": False}``); None for a
+            value that is neither better nor worse when it grows (a count of what the log
+            held, a parameter echoed): compared, it gets no verdict.
     """
 
     values: Mapping[str, float]
     units: Mapping[str, str] = field(default_factory=dict)
-    higher_is_better: Mapping[str, bool] = field(default_factory=dict)
+    higher_is_better: Mapping[str, bool | None] = field(default_factory=dict)
     per_frame: Mapping[str, Series] = field(default_factory=dict)
     curves: Mapping[str, tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]] = field(
         default_factory=dict
@@ -232,6 +236,11 @@ class EvalData:
         """frame index → the logged ego state stored apart from the driven one (closed loop);
         empty in open loop, where :meth:`ego` is the logged ego."""
         return self._cached("logged_ego", self.run.logged_ego)
+
+    def closed_loop(self) -> pa.Table:
+        """The closed-loop run's ``closed_loop`` table (the command that moved the ego, where it
+        came from, the deviation from the logged pose), sorted by frame; empty in open loop."""
+        return self._cached("closed_loop", lambda: self.run.table("closed_loop"))
 
     def road_map(self) -> RoadMap | None:
         """The run's road map, None when it has none."""

@@ -70,7 +70,7 @@ def _n(value: float, present: bool) -> str:
 
 
 def _direction(v: ValueDelta) -> str:
-    return "higher ↑" if v.higher_is_better else "lower ↓"
+    return {True: "higher ↑", False: "lower ↓", None: "—"}[v.higher_is_better]
 
 
 def beside_section(beside: Beside) -> h.Markup:

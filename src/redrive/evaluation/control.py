@@ -109,7 +109,8 @@ class ControlMetrics(Metric):
     name: ClassVar[str] = "control"
     version: ClassVar[str] = "1"
     role: ClassVar[Role | None] = Role.CONTROL
-    needs: ClassVar[frozenset[str]] = frozenset({"commands", "paths", "ego"})
+    # the plans it reads are the planner's, not the scored controller's: checked in evaluate
+    needs: ClassVar[frozenset[str]] = frozenset({"commands", "ego"})
     unit: ClassVar[str] = "m"
     higher_is_better: ClassVar[bool] = False
     defaults: ClassVar[Mapping[str, Any]] = MappingProxyType({"planner": "", "max_gap_s": 0.5})
@@ -117,6 +118,9 @@ class ControlMetrics(Metric):
     def evaluate(self, data: EvalData) -> MetricResult:
         planner = planner_of(data, str(self.params["planner"]))
         paths = data.run.paths(planner)
+        if not paths:
+            msg = f"the planner {planner!r} produced no paths for the controller to follow"
+            raise MetricSkipped(msg)
         commands = data.commands()
         ego = data.ego()
         track = EgoTrack.from_states(ego)
@@ -203,7 +207,11 @@ class ControlMetrics(Metric):
             "throttle_rate_1_s": (rate_frames, rates[:, 1]),
             "brake_rate_1_s": (rate_frames, rates[:, 2]),
         }
-        return MetricResult(values=values, units=units, per_frame=per_frame)
+        # the errors and rates are lower-is-better (the metric's direction); the frame count is
+        # neither
+        return MetricResult(
+            values=values, units=units, higher_is_better={"frames": None}, per_frame=per_frame
+        )
 
 
 def _frame_stamps(data: EvalData) -> dict[int, int]:

@@ -103,7 +103,7 @@ class ValueDelta:
     algorithm_b: str
     key: str
     unit: str
-    higher_is_better: bool
+    higher_is_better: bool | None  # None: neither (a count of the data, a parameter)
     a: float
     b: float
     series: str
@@ -134,14 +134,17 @@ class ValueDelta:
 
     @property
     def verdict(self) -> str:
-        """``better``, ``worse``, ``same`` (B against A), ``only A`` / ``only B`` when one run
-        has no such value, or ``n/a`` when either is NaN."""
+        """``better``, ``worse``, ``same`` (B against A), ``changed`` for a value without a
+        direction, ``only A`` / ``only B`` when one run has no such value, or ``n/a`` when
+        either is NaN."""
         if not (self.in_a and self.in_b):
             return "only A" if self.in_a else "only B"
         if math.isnan(self.a) or math.isnan(self.b):
             return "n/a"
         if self.delta == 0.0:
             return "same"
+        if self.higher_is_better is None:
+            return "changed"
         return "better" if (self.delta > 0.0) == self.higher_is_better else "worse"
 
 
@@ -174,7 +177,13 @@ def pair_label(a: str, b: str) -> str:
     return f"[{a}]" if a == b else f"[{a}→{b}]"
 
 
-def _direction(series: str, key_dirs: Mapping[str, bool], default: bool) -> bool | None:
+def _stored_direction(row: Mapping[str, Any]) -> bool | None:
+    """A stored value's direction: True, False, or None (neither)."""
+    hib = row.get("higher_is_better")
+    return None if hib is None else bool(hib)
+
+
+def _direction(series: str, key_dirs: Mapping[str, bool | None], default: bool) -> bool | None:
     """A per-frame series' direction: none for log counts, a value of the same name, name
     tokens (``missed``, ``fp`` … lower; ``tp`` … higher), else the metric's direction."""
     if series in _NEUTRAL:
@@ -239,7 +248,7 @@ def metric_deltas(
     metric, xa, xb = which
     rows_a = {r["key"]: r for r in a.values.get((metric, xa), [])}
     rows_b = {r["key"]: r for r in b.values.get((metric, xb), [])}
-    key_dirs = {k: bool(r["higher_is_better"]) for k, r in (rows_b | rows_a).items()}
+    key_dirs = {k: _stored_direction(r) for k, r in (rows_b | rows_a).items()}
     names = [s for m, x, s in a.series if m == metric and x == xa]
     names += [s for m, x, s in b.series if m == metric and x == xb and s not in names]
     series: list[SeriesDelta] = []
@@ -297,7 +306,7 @@ def metric_deltas(
                 algorithm_b=xb,
                 key=key,
                 unit=str(row["unit"]),
-                higher_is_better=bool(row["higher_is_better"]),
+                higher_is_better=_stored_direction(row),
                 a=float(ra_["value"]) if ra_ else float("nan"),
                 b=float(rb_["value"]) if rb_ else float("nan"),
                 series=match.series if match else "",

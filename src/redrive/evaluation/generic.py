@@ -295,9 +295,13 @@ class ObjectAttributes(Metric):
             "unmatched_ground_truth": "objects",
         }
         idx = np.array(frames, dtype=np.int64)
+        errors = ("position_rmse_m", "size_rmse_m", "yaw_rmse_rad", "velocity_rmse_mps")
+        directions: dict[str, bool | None] = dict.fromkeys(errors, False)
+        directions.update(unmatched_detections=False, unmatched_ground_truth=False, matched=None)
         return MetricResult(
             values=values,
             units=units,
+            higher_is_better=directions,
             per_frame={
                 "matched": (idx, np.array(matched_per_frame)),
                 "position_rmse_m": (idx, np.array(pos_rmse_per_frame)),

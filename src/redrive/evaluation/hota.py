@@ -288,6 +288,7 @@ class Hota(Metric):
         return MetricResult(
             values=values,
             units=units,
+            higher_is_better={"num_frames": None},
             per_frame={
                 "tp@0.5": (index, res.frame_tp[:, half]),
                 "fn@0.5": (index, res.frame_fn[:, half]),

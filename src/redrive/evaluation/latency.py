@@ -181,4 +181,10 @@ class Latency(Metric):
                         severity=float(over[i]),
                     )
                 )
-        return MetricResult(values=values, units=units, per_frame=per_frame, bookmarks=bookmarks)
+        return MetricResult(
+            values=values,
+            units=units,
+            higher_is_better={"deadline_ms": None},  # the parameter, echoed
+            per_frame=per_frame,
+            bookmarks=bookmarks,
+        )

@@ -280,7 +280,9 @@ class PlanningMetrics(Metric):
     name: ClassVar[str] = "planning"
     version: ClassVar[str] = "1"
     role: ClassVar[Role | None] = Role.PLANNING
-    needs: ClassVar[frozenset[str]] = frozenset({"paths", "ego", "ground_truth"})
+    # ground truth only for the collision and TTC values: ADE/FDE, progress and comfort need
+    # the ego track alone (real logs without object labels)
+    needs: ClassVar[frozenset[str]] = frozenset({"paths", "ego"})
     unit: ClassVar[str] = "m"
     higher_is_better: ClassVar[bool] = False
     defaults: ClassVar[Mapping[str, Any]] = MappingProxyType(
@@ -565,9 +567,16 @@ class PlanningMetrics(Metric):
             units[key] = "ratio"
         units.update(collisions="frames", at_fault_collisions="frames", frames="frames")
         units.update(min_ttc_s="s", progress_m="m")
+        # errors, collisions and comfort maxima are lower-is-better (the metric's direction);
+        # these are not
+        better = {"min_ttc_s", "progress_ratio", "progress_m", "comfortable_fraction"}
+        better.add("min_lon_accel_mps2")  # the hardest braking: closer to 0 is gentler
+        directions: dict[str, bool | None] = {k: True for k in values if k in better}
+        directions["frames"] = None
         return MetricResult(
             values=values,
             units=units,
+            higher_is_better=directions,
             per_frame={k: s.series() for k, s in series.items()},
             bookmarks=bookmarks,
         )

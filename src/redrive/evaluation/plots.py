@@ -25,6 +25,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle, Polygon
 
+from redrive.errors import ConfigError
 from redrive.evaluation import html as h
 from redrive.evaluation.store import Evaluation
 from redrive.geometry.boxes import box_corners
@@ -52,7 +53,7 @@ __all__ = [
     "worst_frames",
 ]
 
-PNG_DPI = 80
+PNG_DPI = 110  # 6-inch figures come out 660 px wide: readable without zooming
 #: ground-truth boxes in bird's-eye views (green).
 GROUND_TRUTH_COLOR = "#2ca02c"
 #: detections of the 1st, 2nd … algorithm in bird's-eye views (red, blue, orange, purple).
@@ -279,27 +280,108 @@ def algorithm_order(run: Run, names: Sequence[str]) -> list[str]:
 # -- worst frames --------------------------------------------------------------------------
 
 
-def worst_frames(run: Run, evaluation: Evaluation, *, count: int) -> list[tuple[int, list[str]]]:
+#: the default ranking's per-frame errors: (metric, series) → weight, per algorithm; a
+#: detection metric's misses and false positives (the first of these metrics the run has) and
+#: the tracker's identity switches each count 1.
+FRAME_SCORE_TERMS: tuple[tuple[tuple[str, str], ...], ...] = (
+    (("nuscenes_detection", "missed"), ("nuscenes_detection", "fp")),
+    (("kitti_detection", "missed"), ("kitti_detection", "fp")),
+    (("clear_mot", "misses"), ("clear_mot", "fp")),
+)
+FRAME_SCORE_SWITCHES = ("clear_mot", "switches")
+
+
+def frame_scores(evaluation: Evaluation, rank_by: str | None = None) -> dict[int, float]:
+    """Per frame, how bad it is (larger is worse).
+
+    Default: for each algorithm, its missed objects + false positives (of the first detection
+    metric in :data:`FRAME_SCORE_TERMS` stored for it) + identity switches (``clear_mot``); a
+    frame's score is its largest over algorithms.  ``rank_by`` = ``METRIC.SERIES``: that stored
+    per-frame series instead (its largest value over algorithms; negated when the series is
+    higher-is-better by its name, e.g. ``tp``), so any metric can rank the frames.
+
+    Raises:
+        ConfigError: ``rank_by`` names a series the evaluation does not have.
+    """
+    pf = evaluation.per_frame.to_pylist()
+    series: dict[tuple[str, str, str], dict[int, float]] = {}
+    for r in pf:
+        if r["value"] == r["value"]:  # not NaN
+            series.setdefault((r["metric"], r["algorithm"], r["series"]), {})[
+                int(r["frame_index"])
+            ] = float(r["value"])
+    score: dict[int, float] = {}
+    if rank_by is not None:
+        metric, _, name = rank_by.partition(".")
+        hits = {k: v for k, v in series.items() if k[0] == metric and k[2] == name}
+        if not hits:
+            have = sorted({f"{m}.{n}" for m, _, n in series})
+            msg = f"--rank-by {rank_by}: no such per-frame series (stored: {', '.join(have)})"
+            raise ConfigError(msg)
+        sign = -1.0 if _higher_is_better_by_name(name) else 1.0
+        for values in hits.values():
+            for f, v in values.items():
+                score[f] = max(score.get(f, -math.inf), sign * v)
+        return score
+    algorithms = {a for _, a, _ in series}
+    for algo in algorithms:
+        per: dict[int, float] = {}
+        for terms in FRAME_SCORE_TERMS:
+            if all((m, algo, n) in series for m, n in terms):
+                for m, n in terms:
+                    for f, v in series[(m, algo, n)].items():
+                        per[f] = per.get(f, 0.0) + v
+                break
+        m, n = FRAME_SCORE_SWITCHES
+        for f, v in series.get((m, algo, n), {}).items():
+            per[f] = per.get(f, 0.0) + v
+        for f, v in per.items():
+            score[f] = max(score.get(f, 0.0), v)
+    return score
+
+
+def _higher_is_better_by_name(name: str) -> bool:
+    return name.lower() in ("tp", "matches", "matched", "tp@0.5", "progress_m")
+
+
+def worst_frames(
+    run: Run, evaluation: Evaluation, *, count: int, rank_by: str | None = None
+) -> list[tuple[int, list[str]]]:
     """Up to ``count`` frames to look at, worst first, each with lines saying why.
 
-    The frames of the most severe bookmarks (every bookmark of a chosen frame is listed); when
-    the run has no bookmarks, the frames with the largest shortfall of objects: ground-truth
-    objects (``n_ground_truth``) minus the objects of the perception algorithm that returned
-    fewest there (among those whose step was ``ok``).
+    Ranked by :func:`frame_scores` (misses + false positives + identity switches by default, or
+    the series ``rank_by`` names), ties and frames without a score by their most severe
+    bookmark, then frame index; every bookmark of a chosen frame is listed.  When the run has
+    neither scores nor bookmarks: the frames with the largest shortfall of objects
+    (ground-truth objects minus the objects of the perception algorithm that returned fewest
+    there, among those whose step was ``ok``).
     """
+    scores = frame_scores(evaluation, rank_by)
     marks = sorted(
         evaluation.bookmarks.to_pylist(), key=lambda r: (-r["severity"], r["frame_index"])
     )
-    chosen: dict[int, list[str]] = {}
+    why: dict[int, list[str]] = {}
+    worst_mark: dict[int, float] = {}
     for m in marks:
         frame = int(m["frame_index"])
-        if frame not in chosen and len(chosen) >= count:
-            continue
         who = "/".join(x for x in (m["metric"], m["algorithm"]) if x)
         text = f"{m['kind']} ({who}, severity {h.fmt_number(m['severity'], digits=3)})"
-        chosen.setdefault(frame, []).append(text + (f": {m['detail']}" if m["detail"] else ""))
-    if chosen or count <= 0:
-        return list(chosen.items())
+        why.setdefault(frame, []).append(text + (f": {m['detail']}" if m["detail"] else ""))
+        worst_mark.setdefault(frame, float(m["severity"]))
+    candidates = set(why) | {f for f, v in scores.items() if v > 0 or rank_by is not None}
+    if candidates and count > 0:
+        ranked = sorted(
+            candidates,
+            key=lambda f: (-scores.get(f, -math.inf), -worst_mark.get(f, -math.inf), f),
+        )[:count]
+        label = f"{rank_by} " if rank_by else "score (missed + false positives + switches) "
+        out = []
+        for f in ranked:
+            lines = [f"{label}{h.fmt_number(abs(scores[f]), digits=3)}"] if f in scores else []
+            out.append((f, lines + why.get(f, [])))
+        return out
+    if count <= 0:
+        return []
     frames = run.table("frames")
     n_gt = {
         int(f): int(n)

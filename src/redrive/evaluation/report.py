@@ -5,12 +5,14 @@ The HTML page (``report.html``) needs no network and no JavaScript: CSS is inlin
 is a PNG (matplotlib, Agg) inside a ``data:`` URI.  It shows the run's facts (log, hash,
 algorithms with versions and config hashes, status, frames, real-time factor), a headline table
 per algorithm, precision/recall curves (the ``PR/…`` curves of the evaluation), per-frame metric
-timelines, step-latency histograms, bird's-eye views of the worst frames (the frames of the
-most severe bookmarks; without bookmarks, the frames with most missed objects) with ground
-truth beside the detections, and the bookmarks.  Every string from the run is HTML-escaped.
+timelines, step-latency histograms, bird's-eye views of the worst frames (ranked by
+:func:`redrive.evaluation.plots.frame_scores`: missed objects + false positives + identity
+switches, or any stored per-frame series with ``rank_by``; without either, the frames with most
+missed objects) with ground truth beside the detections, and the bookmarks.  Every string from the run is HTML-escaped.
 
-The workbook (``report.xlsx``, openpyxl write-only) has the sheets ``summary`` (run facts, then
-every value per algorithm and metric, the headline flagged), ``per_frame`` (one row per frame,
+The workbook (``report.xlsx``, openpyxl write-only) has the sheets ``summary`` (one tidy table:
+every value per metric and algorithm with unit, direction, headline flag and definition),
+``run`` (the facts), ``algorithms``, ``per_frame`` (one row per frame,
 one column per algorithm / metric / series), ``curves``, ``bookmarks`` and ``metrics`` (metric
 definitions: versions, parameters, their hash).  CSV files: ``values``, ``per_frame``,
 ``curves``, ``bookmarks`` as stored.  Text cells that a spreadsheet would run as a formula get a
@@ -95,6 +97,7 @@ def _facts(run: Run, evaluation: Evaluation) -> list[tuple[str, Any]]:
     return [
         ("run", str(run.path)),
         ("status", m.status.value),
+        ("coverage", m.partial_note() or _complete_coverage(m.pipeline)),
         ("log", m.log.path),
         ("log sha256", m.log.sha256 or ""),
         ("log format", m.log.format),
@@ -109,6 +112,13 @@ def _facts(run: Run, evaluation: Evaluation) -> list[tuple[str, Any]]:
         ("redrive version", m.redrive_version),
         ("evaluated", evaluation.evaluated),
     ]
+
+
+def _complete_coverage(pipeline: Any) -> str:
+    first, stop = pipeline.first_frame, pipeline.stop_frame
+    if first is None and stop is None:
+        return "the whole log (the run is complete)"
+    return f"frames {first or 0}:{'' if stop is None else stop} of the log, as asked (--frames)"
 
 
 def _shown(value: Any) -> str:
@@ -144,7 +154,7 @@ def _headline_tables(run: Run, evaluation: Evaluation) -> list[h.Markup]:
         seen: set[str] = set()
         for i in rows:
             r = {name: v.column(name)[int(i)].as_py() for name in v.column_names}
-            better = "higher ↑" if r["higher_is_better"] else "lower ↓"
+            better = {True: "higher ↑", False: "lower ↓", None: "—"}[r["higher_is_better"]]
             line = [r["metric"], r["key"], h.fmt_number(r["value"]), r["unit"], better]
             every.append(line)
             if r["metric"] not in seen:
@@ -194,11 +204,18 @@ def _grid(items: Sequence[h.Markup], empty: str) -> h.Markup:
 
 
 def render_html(
-    run: Run, evaluation: Evaluation, *, worst: int = DEFAULT_WORST, beside: Beside | None = None
+    run: Run,
+    evaluation: Evaluation,
+    *,
+    worst: int = DEFAULT_WORST,
+    beside: Beside | None = None,
+    rank_by: str | None = None,
 ) -> str:
     """The report page of ``run`` (see the module docstring), with the run ``beside`` it."""
     facts = h.table(None, [(k, _shown(v)) for k, v in _facts(run, evaluation)])
-    snaps = plots.snapshot_figures(run, plots.worst_frames(run, evaluation, count=worst))
+    snaps = plots.snapshot_figures(
+        run, plots.worst_frames(run, evaluation, count=worst, rank_by=rank_by)
+    )
     sections = [
         h.section("run", "Run", facts, h.Markup("<h3>Algorithms</h3>"), _algorithms_table(run)),
         h.section("headline", "Headline values", *_headline_tables(run, evaluation),
@@ -264,24 +281,46 @@ def _wide_per_frame(evaluation: Evaluation, run: Run) -> Iterator[list[Any]]:
         yield [frame, *grid[i].tolist()]
 
 
+#: the summary sheet: one tidy table, a row per stored value.
+SUMMARY_COLUMNS = (
+    "metric", "algorithm", "value", "number", "unit", "better", "headline", "definition",
+)  # fmt: skip
+
+
+def summary_rows(evaluation: Evaluation) -> Iterator[list[Any]]:
+    """The summary sheet's rows after its header: metric, algorithm ("(run)" for run-level
+    metrics), the value's name, the number, its unit, which way is better (higher / lower /
+    —), whether it is the metric's headline, and the definition (version and parameter hash)."""
+    v = evaluation.values
+    defs = {m.get("name"): m for m in evaluation.metrics}
+    seen: set[tuple[str, str]] = set()
+    for r in v.to_pylist():
+        key = (r["metric"], r["algorithm"])
+        first = key not in seen
+        seen.add(key)
+        d = defs.get(r["metric"], {})
+        definition = f"v{r['metric_version']} params {str(d.get('params_hash', ''))[:12]}"
+        better = {True: "higher", False: "lower", None: "—"}[r["higher_is_better"]]
+        yield [r["metric"], r["algorithm"] or "(run)", r["key"], r["value"], r["unit"], better,
+               first, definition]  # fmt: skip
+
+
 def _write_xlsx(path: Path, run: Run, evaluation: Evaluation, beside: Beside | None) -> None:
     from openpyxl import Workbook
+    from openpyxl.utils import get_column_letter
 
-    v = evaluation.values
-    first = {k: int(rows[0]) for k, rows in plots.group_rows(v, ["algorithm", "metric"]).items()}
-    headline = np.zeros(v.num_rows, dtype=bool)
-    headline[list(first.values())] = True
-    values = v.append_column("headline", pa.array(headline))
     algos = [[a.name, a.role.value, a.version, a.config_hash] for a in run.manifest.algorithms]
     metrics = [[m.get("name"), m.get("version"), m.get("role"), m.get("unit"),
                 m.get("higher_is_better"), json.dumps(m.get("params", {}), sort_keys=True),
                 m.get("params_hash"), ", ".join(m.get("algorithms", ()))]
                for m in evaluation.metrics]  # fmt: skip
     sheets: dict[str, Callable[[], Iterator[list[Any]]]] = {
-        "summary": lambda: iter(
-            [*([k, _shown(x) if x is None else x] for k, x in _facts(run, evaluation)), [],
-             ["algorithm", "role", "version", "config_hash"], *algos, [], *_rows(values)]
+        "summary": lambda: iter([list(SUMMARY_COLUMNS), *summary_rows(evaluation)]),
+        "run": lambda: iter(
+            [["fact", "value"],
+             *([k, _shown(x) if x is None else x] for k, x in _facts(run, evaluation))]
         ),
+        "algorithms": lambda: iter([["algorithm", "role", "version", "config_hash"], *algos]),
         "per_frame": lambda: _wide_per_frame(evaluation, run),
         "curves": lambda: _rows(evaluation.curves),
         "bookmarks": lambda: _rows(evaluation.bookmarks),
@@ -293,8 +332,13 @@ def _write_xlsx(path: Path, run: Run, evaluation: Evaluation, beside: Beside | N
     wb = Workbook(write_only=True)
     for name, rows in sheets.items():
         ws = wb.create_sheet(name)
+        ws.freeze_panes = "A2"  # every sheet's first row is its header
+        width = n = 0
         for row in rows():
             ws.append([_cell(x) for x in row])
+            width, n = max(width, len(row)), n + 1
+        if width and n > 1:
+            ws.auto_filter.ref = f"A1:{get_column_letter(width)}{n}"
     _atomic(path, wb.save)
 
 
@@ -327,6 +371,7 @@ def write_report(
     out: str | Path | None = None,
     worst: int = DEFAULT_WORST,
     beside: str | Path | None = None,
+    rank_by: str | None = None,
 ) -> ReportFiles:
     """Write ``report.html``, ``report.xlsx`` and ``values|per_frame|curves|bookmarks.csv`` of
     the evaluated run ``run_dir`` into ``out`` (default ``RUN/report/``, created); ``worst``
@@ -345,7 +390,7 @@ def write_report(
         other = Beside(compare_runs(run, open_run(beside), bootstrap=REPORT_RESAMPLES))
     folder = Path(out) if out is not None else run.path / "report"
     folder.mkdir(parents=True, exist_ok=True)
-    page = render_html(run, evaluation, worst=worst, beside=other)
+    page = render_html(run, evaluation, worst=worst, beside=other, rank_by=rank_by)
     html_path = folder / "report.html"
     _atomic(html_path, lambda p: p.write_text(page, encoding="utf-8"))
     xlsx_path = folder / "report.xlsx"

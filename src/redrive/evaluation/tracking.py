@@ -390,12 +390,18 @@ class ClearMot(Metric):
                         units[f"{key}/{cls}"] = units[key]
         lower = {"MOTP", "num_switches", "num_fragmentations", "mostly_lost"}
         lower |= {"num_false_positives", "num_misses"}
+        neither = {"num_objects", "num_predictions", "num_frames"}  # counts of the data
+        directions: dict[str, bool | None] = {}
+        for k in values:
+            head = k.split("/", 1)[0]
+            if head in lower:  # MOTP is a distance or 1 − IoU; the counts are errors
+                directions[k] = False
+            elif head in neither:
+                directions[k] = None
         return MetricResult(
             values=values,
             units=units,
             per_frame=main.per_frame,
             bookmarks=main.bookmarks,
-            higher_is_better={
-                k: False for k in values if k.split("/", 1)[0] in lower
-            },  # MOTP is a distance or 1 − IoU; the counts are errors
+            higher_is_better=directions,
         )

@@ -22,6 +22,13 @@ import numpy.typing as npt
 from PySide6 import QtCore
 
 from redrive.errors import RedriveError
+from redrive.gui.closedloop import (
+    EGO_BOX,
+    RunFrames,
+    driven_from_frame,
+    ghost_segments,
+    map_segments,
+)
 from redrive.gui.scene import (
     CameraScene,
     ColorMode,
@@ -56,11 +63,13 @@ logger = logging.getLogger(__name__)
 
 GT_COLOR = (60, 220, 90)
 EGO_COLOR = (230, 230, 230)
+GHOST_COLOR = (120, 200, 255)
+GHOST_ALPHA = 0.45
+MAP_COLOR = (110, 110, 125)
 PATH_COLOR = (255, 200, 40)
 #: colours of the algorithms' detections, in manifest order.
 PALETTE = ((255, 80, 80), (80, 160, 255), (255, 140, 0), (200, 90, 255), (0, 220, 220))
-#: a mid-size car with its rear axle at base_link (REP-105's ego reference point).
-_EGO_BOX = Box3D(center=np.array([1.4, 0.0, 0.8]), size=np.array([4.6, 1.9, 1.6]), yaw_rad=0.0)
+_EGO_BOX: Box3D = EGO_BOX
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -159,6 +168,17 @@ def build_scene(
     ``calibrations`` maps a camera's sensor id to its 3×4 ``image_from_base``.
     """
     xyz, intensity = _lidar_in_base(frame, static, options.sensors)
+    # the run's frame shown with this log frame (the same stamp; see _run_frame)
+    at = _run_frame(frame, run, options.sensors)
+    driven = None if run is None or at is None or not run.closed_loop else run.ego.get(at)
+    if driven is not None and run is not None and run.closed_loop_level == "log":
+        # A closed loop on a recorded log: the log's cloud is in the logged ego's base_link;
+        # the algorithms saw it re-expressed from the driven pose, and so does the view.
+        mat = (
+            None if frame.vehicle_state is None else driven_from_frame(driven, frame.vehicle_state)
+        )
+        if mat is not None and len(xyz):
+            xyz = transform_xyz(mat, xyz).astype(np.float32)
     layers_on = options.layers
     raster = None
     keep = decimate(len(xyz), options.max_points_3d)
@@ -173,10 +193,14 @@ def build_scene(
         kept_intensity = None if intensity is None else intensity[keep]
         colors = color_points(xyz[keep], options.color_mode, intensity=kept_intensity)
     layers: list[LayerLines] = []
-    # the run's frame shown with this log frame (the same stamp)
-    at = run.frame_at(frame.stamp_ns) if run is not None else None
+    map_lines = None if run is None else run.map_lines
+    if Layer.ROAD_MAP in layers_on and driven is not None and map_lines is not None:
+        layers.append(
+            LayerLines(name="road map", color=MAP_COLOR, segments=map_segments(map_lines, driven))
+        )
     gt = frame.ground_truth
-    if run is not None and at is not None and not gt:
+    if run is not None and at is not None and (not gt or driven is not None):
+        # closed loop: the run's ground truth is in the driven ego's base_link, as the view
         gt = run.ground_truth.get(at, gt)
     if Layer.GROUND_TRUTH in layers_on and gt:
         layers.append(
@@ -207,6 +231,16 @@ def build_scene(
     if Layer.EGO in layers_on:
         ego = DetectedObject(object_id=-1, box=_EGO_BOX)
         layers.append(LayerLines(name="ego", color=EGO_COLOR, segments=box_edge_segments([ego])))
+    logged = None if driven is None or run is None or at is None else run.logged_ego.get(at)
+    if Layer.LOGGED_EGO in layers_on and driven is not None and logged is not None:
+        layers.append(
+            LayerLines(
+                name="logged ego",
+                color=GHOST_COLOR,
+                segments=ghost_segments(driven, logged),
+                alpha=GHOST_ALPHA,
+            )
+        )
     path = None
     if run is not None and at is not None and Layer.PATH in layers_on:
         for paths in run.paths.values():
@@ -229,13 +263,36 @@ def build_scene(
         path=path,
         raster=raster,
         cameras=cameras,
-        pose=_pose(frame, None if run is None or at is None else run.ego.get(at)),
+        pose=_pose(frame, None if run is None or at is None else run.ego.get(at), driven),
     )
 
 
-def _pose(frame: Frame, run_ego: VehicleState | None) -> tuple[float, float, float] | None:
-    """The ego pose of the frame: the log's, else the run's."""
-    state = frame.vehicle_state if frame.vehicle_state is not None else run_ego
+def _run_frame(frame: Frame, run: RunData | None, shown: frozenset[str] | None) -> int | None:
+    """The run frame drawn over ``frame``: the one of the same stamp — except in a sensor-level
+    closed loop, whose recording stamps a LiDAR sweep at its start while the algorithms' frame
+    at t had the sweep that *ended* at t: there, the first run frame after the sweep's start,
+    one LiDAR period later (the frame whose algorithms saw that cloud)."""
+    if run is None:
+        return None
+    if run.closed_loop_level == "sensor":
+        for data in frame.sensors.values():
+            if shown is not None and data.sensor_id not in shown:
+                continue
+            if data.sensor_type is SensorType.LIDAR:
+                # (the log's rate is estimated from its counts, not exact: it only bounds the
+                # lag, the frame is the first one after the sweep's start)
+                rate = data.frame_rate_hz
+                within = round(1.5e9 / rate) if rate > 0 else None
+                return run.frame_after(data.stamp_ns, within_ns=within)
+    return run.frame_at(frame.stamp_ns)
+
+
+def _pose(
+    frame: Frame, run_ego: VehicleState | None, driven: VehicleState | None = None
+) -> tuple[float, float, float] | None:
+    """The ego pose of the frame: a closed loop's driven ego, else the log's, else the run's."""
+    state = driven if driven is not None else frame.vehicle_state
+    state = state if state is not None else run_ego
     if state is None:
         return None
     return (float(state.position[0]), float(state.position[1]), float(state.heading_rad))
@@ -260,7 +317,7 @@ def _camera_scene(
             image = image.copy() if not image.flags.writeable else image
             splat_points(image, mat, xyz)
         for layer in layers:
-            if layer.name != "ego":
+            if layer.name not in ("ego", "logged ego", "road map"):
                 segments[layer.name] = (layer.color, project_segments(mat, layer.segments))
     return CameraScene(
         sensor_id=sensor_id, image=image, segments=segments, calibrated=mat is not None
@@ -280,11 +337,13 @@ class FrameLoader(QtCore.QObject):
     def __init__(self, parent: QtCore.QObject | None = None) -> None:
         super().__init__(parent)
         self._cond = threading.Condition()
-        self._open_path: Path | None = None
+        self._open_path: Path | RunData | None = None
         self._wanted: tuple[int, ViewOptions] | None = None
         self._stop = False
         self._busy = False
         self.session: LogSession | None = None
+        #: an object-level run's frames, played from its tables (instead of a log's)
+        self.run_frames: RunFrames | None = None
         self.run: RunData | None = None
         self._static: _Static | None = None
         self._calibrations: dict[str, npt.NDArray[np.float64]] = {}
@@ -303,6 +362,15 @@ class FrameLoader(QtCore.QObject):
     def open(self, path: str | Path) -> None:
         with self._cond:
             self._open_path = Path(path)
+            self._wanted = None
+            self._cond.notify()
+
+    def open_run_frames(self, run: RunData) -> None:
+        """Play ``run``'s own frames (its stored ego and ground truth; no sensor data) — an
+        object-level closed-loop run, which has no log to play."""
+        with self._cond:
+            self._open_path = run
+            self.run = run
             self._wanted = None
             self._cond.notify()
 
@@ -351,12 +419,16 @@ class FrameLoader(QtCore.QObject):
                 with self._cond:
                     self._busy = False
 
-    def _do_open(self, path: Path) -> None:
+    def _do_open(self, path: Path | RunData) -> None:
         t0 = time.perf_counter()
         if self.session is not None:
             self.session.close()
             self.session = None
+        self.run_frames = None
         self._generation += 1
+        if isinstance(path, RunData):
+            self._open_run_frames(path, t0)
+            return
         try:
             session = LogSession(path)
             static = _Static(session)
@@ -395,6 +467,25 @@ class FrameLoader(QtCore.QObject):
         )
         self._index_thread.start()
 
+    def _open_run_frames(self, run: RunData, t0: float) -> None:
+        frames = RunFrames(run.stamps_ns, ego=run.ego, ground_truth=run.ground_truth)
+        self.run_frames, self._static, self._calibrations = frames, None, {}
+        stamps = [run.stamps_ns[i] for i in frames.indices]
+        self.opened.emit(
+            LogSummary(
+                path=run.path,
+                format="run",
+                topics={},
+                driver_topic="",
+                expected_frames=len(frames),
+                start_ns=stamps[0] if stamps else 0,
+                end_ns=stamps[-1] if stamps else 0,
+                cameras=(),
+                open_s=time.perf_counter() - t0,
+            )
+        )
+        self.indexed.emit(len(frames), True)
+
     def _index(self, session: LogSession, generation: int) -> None:
         # RuntimeError: the window (and this QObject) went away while indexing.
         with contextlib.suppress(RuntimeError):
@@ -412,11 +503,15 @@ class FrameLoader(QtCore.QObject):
 
     def _do_frame(self, index: int, options: ViewOptions) -> None:
         session = self.session
-        if session is None:
+        if session is None and self.run_frames is None:
             return
         try:
-            frame = session.frame(index)
-            if session.log.capabilities.calibration_per_frame:
+            if session is None:
+                assert self.run_frames is not None
+                frame = self.run_frames.frame(index)
+            else:
+                frame = session.frame(index)
+            if session is not None and session.log.capabilities.calibration_per_frame:
                 self._calibrations = _calibrations(session, stamp_ns=frame.stamp_ns)
             scene = build_scene(
                 frame, options, run=self.run, static=self._static, calibrations=self._calibrations

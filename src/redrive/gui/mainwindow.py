@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from redrive.errors import RedriveError
@@ -20,7 +21,7 @@ from redrive.gui.planview import Planview
 from redrive.gui.plots import PlotsPanel
 from redrive.gui.scene import Layer, Scene
 from redrive.gui.session import RunData, Series, find_run_log
-from redrive.gui.timeline import Timeline
+from redrive.gui.timeline import StripData, StripMarker, Timeline
 
 __all__ = ["MainWindow"]
 
@@ -32,6 +33,53 @@ _DEFAULT_RATE_HZ = 10.0
 
 def is_run_dir(path: Path) -> bool:
     return path.is_dir() and (path / "manifest.json").is_file() and (path / "frames").is_dir()
+
+
+def deviation_strip(run: RunData) -> StripData | None:
+    """The timeline's deviation strip of a closed-loop run (None: the run has no deviation
+    series).  Markers: the collisions of the stored evaluation (``at_fault_collisions``'
+    ``collision`` bookmarks; none before ``redrive evaluate``) and the frames where the run's
+    ``deviated`` flag turns on.  Time: seconds since the run's first frame."""
+    dev = run.deviation
+    if dev is None or not run.closed_loop:
+        return None
+    start_ns = int(dev.stamps_ns[0])
+
+    def t_s(stamp_ns: int) -> float:
+        return (stamp_ns - start_ns) / 1e9
+
+    limits = " / ".join(
+        text
+        for text in (
+            None if dev.threshold_m is None else f"{dev.threshold_m:g} m",
+            None if dev.threshold_rad is None else f"{np.degrees(dev.threshold_rad):g}°",
+        )
+        if text
+    )
+    markers = [
+        StripMarker(frame=b.frame_index, t_s=t_s(b.stamp_ns), kind="collision", text=b.detail)
+        for b in run.bookmarks
+        if b.metric == "at_fault_collisions" and b.kind == "collision"
+    ]
+    by_frame = dict(zip(dev.frames.tolist(), dev.stamps_ns.tolist(), strict=True))
+    markers += [
+        StripMarker(
+            frame=f,
+            t_s=t_s(by_frame[f]),
+            kind="deviation",
+            text=f"deviation from the logged ego passed {limits or 'its threshold'}",
+        )
+        for f in dev.crossings()
+    ]
+    return StripData(
+        frames=dev.frames,
+        t_s=(dev.stamps_ns - start_ns).astype(np.float64) / 1e9,
+        distance_m=dev.distance_m,
+        heading_rad=dev.heading_rad,
+        threshold_m=dev.threshold_m,
+        threshold_rad=dev.threshold_rad,
+        bookmarks=tuple(sorted(markers, key=lambda m: (m.frame, m.kind))),
+    )
 
 
 class MainWindow(QtWidgets.QMainWindow):
@@ -222,9 +270,13 @@ class MainWindow(QtWidgets.QMainWindow):
         self.run = run
         self.loader.set_run(run)
         self.plots.set_run(run)
-        self.timeline.set_bookmarks(
-            {b.frame_index: f"{b.metric}/{b.algorithm}: {b.detail}" for b in run.bookmarks}
-        )
+        bookmarks = {b.frame_index: f"{b.metric}/{b.algorithm}: {b.detail}" for b in run.bookmarks}
+        strip = deviation_strip(run)
+        for marker in strip.bookmarks if strip is not None else ():
+            if marker.kind == "deviation":
+                bookmarks.setdefault(marker.frame, marker.text)
+        self.timeline.set_bookmarks(bookmarks)
+        self.timeline.set_deviation(strip)
         self._add_recent(Path(path))
         log = find_run_log(run)
         logger.info(
@@ -244,13 +296,13 @@ class MainWindow(QtWidgets.QMainWindow):
                 f"`redrive export {path}` its tables.",
             )
             return
-        if log is None and run.manifest.pipeline.mode_manager == "closed_loop":
-            self.show_error(
-                "A closed-loop run",
-                f"{path}: a closed-loop run of {run.manifest.log.path!r} at object level records "
-                "no sensor log to draw it over (the GUI's closed-loop view is not built yet); "
-                f"`redrive report {path}` shows its metrics, `redrive export {path}` its tables.",
-            )
+        if log is None and run.closed_loop:
+            # An object-level closed loop (or one whose recorded log is gone): no sensor data,
+            # so the view plays the run's own frames — its ego, ground truth and outputs.
+            self.timeline.set_playing(False)
+            self.status.showMessage(f"opening {path} (the run's frames, no sensor data) …")
+            self.restart_first_frame_clock()
+            self.loader.open_run_frames(run)
             return
         if log is None:
             self.show_error(
@@ -259,7 +311,7 @@ class MainWindow(QtWidgets.QMainWindow):
                 "which is not there; open the log with File → Open log.",
             )
             return
-        if self.summary is None or self.summary.path != log:
+        if self.summary is None or self.summary.path != log or self.summary.format == "run":
             self.open_log(log)
         else:
             self.refresh()
@@ -434,7 +486,7 @@ class MainWindow(QtWidgets.QMainWindow):
         (the LiDAR of the planview, the cameras of the camera panel)."""
         from redrive.gui.topics import TopicPicker
 
-        if self.summary is None or self.summary.format == "live":
+        if self.summary is None or self.summary.format in ("live", "run"):
             self.status.showMessage("open a log first (live topics: Live → Connect)", 5000)
             return None
         summary = self.summary

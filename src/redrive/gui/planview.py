@@ -101,8 +101,10 @@ class _GlView(GLViewMixin, QtOpenGL.QOpenGLWindow):
                 item.setTransform(self._matrix)
                 self.addItem(item)
                 self.lines[layer.name] = item
+            if layer.alpha < 1.0:
+                item.setGLOptions("translucent")
             if len(layer.segments):
-                item.setData(pos=layer.segments, color=_rgba(layer.color))
+                item.setData(pos=layer.segments, color=_rgba(layer.color, layer.alpha))
                 item.setVisible(True)
             else:
                 item.setVisible(False)
@@ -179,7 +181,10 @@ class _RasterView(pg.PlotWidget):
             seen.add(layer.name)
             curve = self.curves.get(layer.name)
             if curve is None:
-                curve = pg.PlotCurveItem(connect="pairs", pen=pg.mkPen(layer.color, width=2))
+                pen = pg.mkPen((*layer.color, round(255 * layer.alpha)), width=2)
+                if layer.alpha < 1.0:  # a ghost: translucent and dashed
+                    pen.setStyle(QtCore.Qt.PenStyle.DashLine)
+                curve = pg.PlotCurveItem(connect="pairs", pen=pen)
                 curve.setTransform(self._pose)
                 self.addItem(curve)
                 self.curves[layer.name] = curve
@@ -306,7 +311,11 @@ class Planview(QtWidgets.QWidget):
             self.view2d.show_scene(scene, self.raster_spec, world)
         else:
             self.view3d.show_scene(scene, world)
-        boxes = sum(len(layer.segments) // 28 for layer in scene.layers if layer.name != "ego")
+        boxes = sum(
+            len(layer.segments) // 28
+            for layer in scene.layers
+            if layer.name not in ("ego", "logged ego", "road map")  # (not the scene's boxes)
+        )
         self.status.setText(f"{scene.point_count:,} points · {boxes} boxes")
 
     def grab_view(self) -> QtGui.QImage:

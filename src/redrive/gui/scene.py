@@ -73,7 +73,9 @@ class Layer(enum.Enum):
     DETECTIONS = "detections"
     TRACK_IDS = "track ids"
     EGO = "ego vehicle"
+    LOGGED_EGO = "logged ego (ghost)"
     PATH = "planned path"
+    ROAD_MAP = "road map"
 
 
 @dataclass(frozen=True, slots=True)
@@ -96,6 +98,8 @@ class LayerLines:
     color: tuple[int, int, int]
     segments: Float
     labels: tuple[tuple[str, float, float, float], ...] = ()  # text, x, y, z
+    #: opacity: below 1 the layer is a ghost (translucent, dashed in 2D).
+    alpha: float = 1.0
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -13,6 +13,7 @@ index, and the stored evaluation's bookmarks and per-frame metrics.
 
 from __future__ import annotations
 
+import bisect
 import logging
 import threading
 from collections.abc import Callable, Iterator, Mapping
@@ -24,6 +25,7 @@ import numpy as np
 import numpy.typing as npt
 
 from redrive.errors import LogError, UnsupportedMessageError
+from redrive.gui.closedloop import Deviation, map_polylines, read_deviation
 from redrive.io import LogReader, open_log
 from redrive.io.frames import FrameAssembler
 from redrive.results import Run, RunManifest, RunStatus, open_run
@@ -189,6 +191,10 @@ class RunData:
         ego: frame index → ego state.
         bookmarks: the failure frames of the stored evaluation, by frame.
         per_frame: the stored evaluation's per-frame series, on stamps (the plots' time axis).
+        logged_ego: closed loop: frame index → the logged ego state (the ghost).
+        deviation: closed loop: the deviation series and threshold crossings.
+        map_lines: the road map's (``RUN/map.json``) lane edges and areas as (2M, 2) segment
+            endpoints in the map frame; None without a map.
     """
 
     path: Path
@@ -204,16 +210,46 @@ class RunData:
     ego: Mapping[int, VehicleState] = field(default_factory=dict)
     bookmarks: tuple[Bookmark, ...] = ()
     per_frame: PerFrameSeries = field(default_factory=dict)
+    logged_ego: Mapping[int, VehicleState] = field(default_factory=dict)
+    deviation: Deviation | None = None
+    map_lines: npt.NDArray[np.float64] | None = None
     _index_of_stamp: dict[int, int] = field(init=False, repr=False, compare=False)
+    _sorted_stamps: list[int] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(
             self, "_index_of_stamp", {stamp: i for i, stamp in self.stamps_ns.items()}
         )
+        object.__setattr__(self, "_sorted_stamps", sorted(self._index_of_stamp))
 
     def frame_at(self, stamp_ns: int) -> int | None:
         """The index of the run's frame stamped ``stamp_ns`` (None: the run has no such frame)."""
         return self._index_of_stamp.get(stamp_ns)
+
+    def frame_after(self, stamp_ns: int, *, within_ns: int | None = None) -> int | None:
+        """The index of the run's first frame stamped after ``stamp_ns`` (and at most
+        ``within_ns`` after it); None when there is none."""
+        stamps = self._sorted_stamps
+        i = bisect.bisect_right(stamps, stamp_ns)
+        if i == len(stamps) or (within_ns is not None and stamps[i] - stamp_ns > within_ns):
+            return None
+        return self._index_of_stamp[stamps[i]]
+
+    @property
+    def closed_loop(self) -> bool:
+        """A closed-loop run: the ego drawn is the driven one."""
+        return self.manifest.pipeline.mode_manager == "closed_loop"
+
+    @property
+    def closed_loop_level(self) -> str:
+        """``object``, ``sensor`` (a scenario's closed loop) or ``log`` (on a recorded log);
+        "" for an open-loop run."""
+        entry = self.manifest.closed_loop
+        if not self.closed_loop:
+            return ""
+        if entry.get("backend") == "log":
+            return "log"
+        return "sensor" if entry.get("level") == "sensor" else "object"
 
     @classmethod
     def load(cls, path: str | Path) -> RunData:
@@ -243,6 +279,7 @@ class RunData:
             if role in readers:
                 outputs[role][algorithm] = _outputs(readers[role], algorithm)
         bookmarks, per_frame = _evaluation(run, by_index)
+        road_map = run.road_map()
         return cls(
             path=Path(path),
             manifest=run.manifest,
@@ -257,6 +294,9 @@ class RunData:
             ego=run.ego(),
             bookmarks=bookmarks,
             per_frame=per_frame,
+            logged_ego=run.logged_ego(),
+            deviation=read_deviation(run),
+            map_lines=None if road_map is None else map_polylines(road_map),
         )
 
 

@@ -1,15 +1,23 @@
 """The timeline: Replay/Pause, Step back, Step over, speed, a scrub slider with failure-frame
-bookmarks from evaluation, jump to the previous/next bookmark, frame index and timestamp."""
+bookmarks from evaluation, jump to the previous/next bookmark, frame index and timestamp; for a
+closed-loop run, a strip below plots the deviation of the driven from the logged ego over time,
+with markers at collisions and at the frames where the deviation passes its threshold (a click
+on a marker, or anywhere on the strip, seeks there)."""
 
 from __future__ import annotations
 
 import bisect
 import datetime as dt
+import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 
+import numpy as np
+import numpy.typing as npt
+import pyqtgraph as pg
 from PySide6 import QtCore, QtGui, QtWidgets
 
-__all__ = ["SPEEDS", "BookmarkSlider", "Timeline"]
+__all__ = ["SPEEDS", "BookmarkSlider", "DeviationStrip", "StripData", "StripMarker", "Timeline"]
 
 SPEEDS = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0)
 
@@ -55,6 +63,150 @@ class BookmarkSlider(QtWidgets.QSlider):
         painter.end()
 
 
+@dataclass(frozen=True, slots=True, kw_only=True)
+class StripMarker:
+    """A bookmark of the deviation strip: ``kind`` is ``collision`` or ``deviation``."""
+
+    frame: int
+    t_s: float
+    kind: str
+    text: str
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class StripData:
+    """What the deviation strip plots: one value per frame (``frames`` ascending, ``t_s`` their
+    times), the thresholds (None: not known) and the markers."""
+
+    frames: npt.NDArray[np.int64]
+    t_s: npt.NDArray[np.float64]
+    distance_m: npt.NDArray[np.float64]
+    heading_rad: npt.NDArray[np.float64]
+    threshold_m: float | None
+    threshold_rad: float | None
+    bookmarks: tuple[StripMarker, ...]
+
+
+_MARKER_STYLE = {  # kind → symbol, colour
+    "collision": ("x", (255, 70, 70)),
+    "deviation": ("t", (255, 170, 40)),
+}
+_DISTANCE_COLOR = (90, 200, 255)
+_HEADING_COLOR = (200, 140, 255)
+
+
+class DeviationStrip(pg.PlotWidget):
+    """Distance (m) and heading difference (°) of the driven from the logged ego over time
+    (s since the first frame), the thresholds dashed, the bookmarks as markers along the top
+    and a cursor at the frame shown.  Emits ``frame_requested`` on a click."""
+
+    frame_requested = QtCore.Signal(int)
+
+    def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent, background=(24, 24, 28))
+        self.setMinimumHeight(110)
+        self.setMaximumHeight(170)
+        item = self.getPlotItem()
+        item.showGrid(x=True, y=True, alpha=0.2)
+        item.setLabel("bottom", "t", units="s")
+        item.setLabel("left", "deviation")
+        item.setMouseEnabled(y=False)
+        item.addLegend(offset=(8, 4), labelTextSize="8pt")
+        self.distance = item.plot(pen=pg.mkPen(_DISTANCE_COLOR, width=2), name="distance (m)")
+        self.heading = item.plot(pen=pg.mkPen(_HEADING_COLOR, width=2), name="heading (°)")
+        dash = QtCore.Qt.PenStyle.DashLine
+        self.limit_m = pg.InfiniteLine(angle=0, pen=pg.mkPen(_DISTANCE_COLOR, style=dash))
+        self.limit_deg = pg.InfiniteLine(angle=0, pen=pg.mkPen(_HEADING_COLOR, style=dash))
+        self.cursor = pg.InfiniteLine(angle=90, pen=pg.mkPen((255, 255, 0), width=1))
+        for line in (self.limit_m, self.limit_deg, self.cursor):
+            item.addItem(line, ignoreBounds=line is not self.cursor)
+        self.marker_lines: list[pg.InfiniteLine] = []
+        self.markers = pg.ScatterPlotItem(size=13, pxMode=True, hoverable=True)
+        self.markers.sigClicked.connect(self._marker_clicked)
+        item.addItem(self.markers)
+        self.bookmarks: list[StripMarker] = []
+        self.frames: npt.NDArray[np.int64] = np.zeros(0, np.int64)
+        self.t_s: npt.NDArray[np.float64] = np.zeros(0)
+        self.scene().sigMouseClicked.connect(self._clicked)
+        self._marker_hit = False
+
+    def set_data(self, data: StripData) -> None:
+        """The series (one value per frame) and the markers."""
+        self.frames, self.t_s = data.frames, data.t_s
+        distance_m, heading_rad = data.distance_m, data.heading_rad
+        threshold_m, threshold_rad = data.threshold_m, data.threshold_rad
+        heading_deg = np.degrees(heading_rad)
+        self.distance.setData(self.t_s, distance_m, connect="finite")
+        self.heading.setData(self.t_s, heading_deg, connect="finite")
+        for line, value in (
+            (self.limit_m, threshold_m),
+            (self.limit_deg, None if threshold_rad is None else math.degrees(threshold_rad)),
+        ):
+            line.setVisible(value is not None)
+            if value is not None:
+                line.setValue(value)
+        finite = np.concatenate([distance_m[np.isfinite(distance_m)],
+                                 heading_deg[np.isfinite(heading_deg)]])  # fmt: skip
+        top = max(
+            float(finite.max()) if len(finite) else 1.0,
+            threshold_m or 0.0,
+            math.degrees(threshold_rad or 0.0),
+        )
+        self.bookmarks = list(data.bookmarks)
+        for line in self.marker_lines:
+            self.getPlotItem().removeItem(line)
+        self.marker_lines = []
+        spots = []
+        for b in self.bookmarks:
+            symbol, color = _MARKER_STYLE.get(b.kind, ("o", (220, 220, 220)))
+            line = pg.InfiniteLine(pos=b.t_s, angle=90, pen=pg.mkPen((*color, 140), width=1))
+            self.getPlotItem().addItem(line, ignoreBounds=True)
+            self.marker_lines.append(line)
+            spots.append(
+                {
+                    "pos": (b.t_s, top * 1.08),
+                    "symbol": symbol,
+                    "brush": pg.mkBrush(color),
+                    "pen": pg.mkPen(color),
+                    "data": b.frame,
+                }
+            )
+        self.markers.setData(spots=spots)
+        self.markers.setToolTip("\n".join(b.text for b in self.bookmarks))
+        self.getPlotItem().setYRange(0.0, top * 1.15, padding=0)
+        if len(self.t_s):
+            self.getPlotItem().setXRange(float(self.t_s[0]), float(self.t_s[-1]), padding=0.01)
+
+    def show_frame(self, frame: int) -> None:
+        """Move the cursor to ``frame``'s time."""
+        i = int(np.searchsorted(self.frames, frame))
+        if i < len(self.frames) and self.frames[i] == frame:
+            self.cursor.setValue(float(self.t_s[i]))
+
+    def frame_near(self, t_s: float) -> int | None:
+        """The frame whose time is nearest ``t_s``."""
+        if len(self.t_s) == 0:
+            return None
+        return int(self.frames[int(np.argmin(np.abs(self.t_s - t_s)))])
+
+    def _marker_clicked(self, _item: object, points: Sequence[pg.SpotItem], *_: object) -> None:
+        if len(points):
+            self._marker_hit = True
+            self.frame_requested.emit(int(points[0].data()))
+
+    def _clicked(self, event: object) -> None:
+        if self._marker_hit:  # the marker's own click already sought
+            self._marker_hit = False
+            return
+        pos = event.scenePos()  # type: ignore[attr-defined]
+        vb = self.getPlotItem().getViewBox()
+        if not vb.sceneBoundingRect().contains(pos):
+            return
+        frame = self.frame_near(float(vb.mapSceneToView(pos).x()))
+        if frame is not None:
+            self.frame_requested.emit(frame)
+
+
 class Timeline(QtWidgets.QWidget):
     """Transport controls; emits ``frame_requested`` when the user moves to a frame."""
 
@@ -64,8 +216,16 @@ class Timeline(QtWidgets.QWidget):
 
     def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent)
-        layout = QtWidgets.QHBoxLayout(self)
+        rows = QtWidgets.QVBoxLayout(self)
+        rows.setContentsMargins(0, 0, 0, 0)
+        rows.setSpacing(0)
+        layout = QtWidgets.QHBoxLayout()
         layout.setContentsMargins(4, 2, 4, 2)
+        rows.addLayout(layout)
+        self.deviation = DeviationStrip()
+        self.deviation.hide()
+        self.deviation.frame_requested.connect(self.frame_requested)
+        rows.addWidget(self.deviation, 1)
         self.setSizePolicy(
             QtWidgets.QSizePolicy.Policy.Preferred, QtWidgets.QSizePolicy.Policy.Fixed
         )
@@ -140,11 +300,27 @@ class Timeline(QtWidgets.QWidget):
         for b in (self.prev_bookmark, self.next_bookmark):
             b.setEnabled(bool(bookmarks))
 
+    def set_deviation(self, data: StripData | None) -> None:
+        """Show the deviation strip with ``data``; None hides it (an open-loop run, a log)."""
+        if data is None:
+            self.deviation.hide()
+            self.setSizePolicy(
+                QtWidgets.QSizePolicy.Policy.Preferred, QtWidgets.QSizePolicy.Policy.Fixed
+            )
+            return
+        self.deviation.set_data(data)
+        self.deviation.show()
+        self.setSizePolicy(
+            QtWidgets.QSizePolicy.Policy.Preferred, QtWidgets.QSizePolicy.Policy.Minimum
+        )
+
     def show_frame(self, index: int, stamp_ns: int, *, start_ns: int) -> None:
         """Move the slider to ``index`` without requesting it, and show index and time."""
         self._setting = True
         self.slider.setValue(index)
         self._setting = False
+        if self.deviation.isVisible():
+            self.deviation.show_frame(index)
         self.frame_label.setText(f"frame {index} / {self.slider.maximum()}")
         when = dt.datetime.fromtimestamp(stamp_ns / 1e9, tz=dt.UTC)
         self.time_label.setText(

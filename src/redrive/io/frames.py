@@ -195,6 +195,7 @@ class FrameAssembler:
         t = driver.stamp_ns
         tol = smap.tolerance_ns
         sensors: dict[str, SensorData] = {}
+        missing: list[str] = []
         for spec in smap.sensors:
             sample = (
                 driver
@@ -202,6 +203,7 @@ class FrameAssembler:
                 else _nearest(buffers[spec.sensor_id], t, tol)
             )
             if sample is None:
+                missing.append(spec.sensor_id)
                 continue
             value = sample.decoded.value
             location = spec.location
@@ -238,12 +240,17 @@ class FrameAssembler:
             )
         elif smap.ground_truth_topic is not None:
             ground_truth = ()
+            missing.append("ground_truth")  # the log has labels, none near this frame
+        state = _state_at(states, t, tol)
+        if state is None and smap.vehicle_state_topic is not None:
+            missing.append("vehicle_state")
         return Frame(
             stamp_ns=t,
             index=index,
             sensors=sensors,
-            vehicle_state=_state_at(states, t, tol),
+            vehicle_state=state,
             ground_truth=ground_truth,
+            missing=tuple(missing),
         )
 
 

@@ -101,6 +101,39 @@ def _parse_header(buf: bytes | memoryview, pos: int, end: int) -> tuple[dict[str
     return fields, stop
 
 
+def _record_op(buf: bytes | memoryview, pos: int, end: int) -> tuple[int, int]:
+    """The ``op`` of the record whose header starts at ``pos`` (-1 when it has none), and the
+    position after the header.
+
+    :func:`_parse_header` + :func:`_op` without building the field dict — the indexed reader runs
+    this for every message — with the same checks and errors: a header or field that is cut off
+    or has no ``=`` is damage; the last ``op`` field counts, and it must hold one byte.
+    """
+    if pos + 4 > end:
+        raise _DamageError(pos, "record header length is cut off")
+    (size,) = _U32.unpack_from(buf, pos)
+    pos += 4
+    stop = pos + size
+    if stop > end:
+        raise _DamageError(pos - 4, f"record header of {size} bytes runs past the end")
+    head = bytes(buf[pos:stop])
+    op = -1
+    at = 0
+    while at < size:
+        if at + 4 > size:
+            raise _DamageError(pos + at, "header field length is cut off")
+        (flen,) = _U32.unpack_from(head, at)
+        at += 4
+        field_end = at + flen
+        sep = head.find(b"=", at, field_end)
+        if sep < 0 or field_end > size:
+            raise _DamageError(pos + field_end, "header field is malformed")
+        if sep == at + 2 and head.startswith(b"op", at):
+            op = head[sep + 1] if field_end == sep + 2 else -1
+        at = field_end
+    return op, stop
+
+
 def _data_span(buf: bytes | memoryview, pos: int, end: int) -> tuple[int, int]:
     """(start, stop) of the data block that follows a header at ``pos``."""
     if pos + 4 > end:
@@ -418,9 +451,10 @@ class Ros1BagReader(RosReaderBase):
         end = len(chunk)
         pos = offset
         while True:
-            fields, pos = _parse_header(chunk, pos, end)
+            op, pos = _record_op(chunk, pos, end)
             start, stop = _data_span(chunk, pos, end)
-            op = _op(fields, offset)
+            if op < 0:
+                raise _DamageError(offset, "record has no op field")
             if op == _OP_MSGDATA:
                 return chunk[start:stop]
             if op != _OP_CONNECTION:

@@ -38,6 +38,7 @@ class TableBuffers:
             wall_ns=rec.wall_ns,
             late=rec.late,
             n_ground_truth=None if gt is None else len(gt),
+            missing_inputs=",".join(rec.missing),
         )
         for step in rec.steps:
             self._add_step(fi, stamp, step)

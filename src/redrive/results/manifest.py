@@ -323,6 +323,9 @@ class RunSummary:
     realtime_factor: float | None = None  # log time / wall time
     failure: StepFailure | None = None
     skipped_frames: int | None = None  # real-time mode: frames skipped (pipeline too slow)
+    failed_frames: int | None = None  # frames with a failed (error/timeout) step
+    #: input → frames without a sample of it within the tolerance (stale or absent there)
+    missing_inputs: Mapping[str, int] = field(default_factory=dict)
     undecodable_messages: Mapping[str, int] = field(default_factory=dict)  # topic → count
     error: str | None = None  # ``Type: message`` of what ended a failed or interrupted run
     #: closed loop: the deviation thresholds, how many frames passed them (``deviated_frames``),
@@ -334,6 +337,7 @@ class RunSummary:
         out["algorithms"] = [_plain(a) for a in self.algorithms]
         out["failure"] = None if self.failure is None else _asdict(self.failure)
         out["undecodable_messages"] = dict(self.undecodable_messages)
+        out["missing_inputs"] = dict(self.missing_inputs)
         out["closed_loop"] = to_jsonable(self.closed_loop)
         return out
 
@@ -352,6 +356,8 @@ class RunSummary:
             realtime_factor=f.opt_number("realtime_factor", None),
             failure=None if failure is None else StepFailure._parse(failure),
             skipped_frames=f.opt_integer("skipped_frames", None),
+            failed_frames=f.opt_integer("failed_frames", None),
+            missing_inputs=f.int_map("missing_inputs", {}),
             undecodable_messages=f.int_map("undecodable_messages", {}),
             error=f.opt_text("error", None),
             closed_loop=f.mapping("closed_loop", {}),
@@ -388,6 +394,25 @@ class RunManifest(RunSetup):
     @property
     def setup(self) -> RunSetup:
         return RunSetup(**{f.name: getattr(self, f.name) for f in fields(RunSetup)})
+
+    def partial_note(self) -> str | None:
+        """What part of its log the run covers when it did not finish (None when complete):
+        numbers evaluated from it hold for those frames only."""
+        frames = f"the {self.frames_done} frames it stored"
+        if self.status is RunStatus.COMPLETE:
+            return None
+        if self.status is RunStatus.INTERRUPTED:
+            how = (
+                "continue it (`redrive run LOG --out RUN --resume` with the run's flags) and "
+                "evaluate again"
+                if self.pipeline.mode_manager != "closed_loop"
+                else "closed-loop runs do not resume: run it again to the end"
+            )
+            return f"the run was interrupted: it covers {frames}, not the whole log; {how}"
+        if self.status is RunStatus.FAILED:
+            why = f" ({self.error})" if self.error else ""
+            return f"the run failed{why}: it covers {frames}, not the whole log"
+        return f"the run is {self.status.value}: it covers {frames} so far"
 
     def to_json(self) -> dict[str, Any]:
         """The JSON object written to ``manifest.json``."""

@@ -151,6 +151,7 @@ class FrameRecord:
             log carries none (an empty tuple means "ground truth: nothing there").
         wall_ns: wall time the engine spent on the whole frame, int ns.
         late: real-time pacing only: the frame was processed after its due time.
+        missing: the frame's inputs with no sample within the tolerance (``Frame.missing``).
     """
 
     frame_index: int
@@ -162,6 +163,7 @@ class FrameRecord:
     ground_truth: tuple[DetectedObject, ...] | None = None
     wall_ns: int = 0
     late: bool = False
+    missing: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         index = int(self.frame_index)

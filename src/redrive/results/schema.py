@@ -55,6 +55,9 @@ FRAMES = pa.schema(
         _f("wall_ns", _I64),
         _f("late", pa.bool_()),
         _f("n_ground_truth", _I64, nullable=True),
+        # inputs with no sample within the tolerance, comma-separated ("" none; null in runs
+        # written before the column)
+        _f("missing_inputs", _STR, nullable=True),
     ]
 )
 

@@ -233,14 +233,7 @@ class LaneFollower:
 
     def plan(self, time_s: float, obstacles: Obstacles, lights: TrafficLights) -> None:
         """Choose the acceleration for the next step from the snapshot ``obstacles``."""
-        self._time_s = time_s
-        lc = self.lane_change
-        if lc is not None and not self._lc_started and time_s >= lc.start_time_s:
-            x, y, _ = self.pose()
-            s_new, lat = lc.target.project([[x, y]], s_min_m=0.0, s_max_m=lc.target.length_m)
-            self.route, self.s_m = lc.target, float(s_new[0])
-            self._lc_offset0_m = float(lat[0]) - self.lateral_offset_m
-            self._lc_started = True
+        self.start_plan(time_s)
         half_l = self.size_lwh_m[0] / 2.0
         gap, v_lead = gap_ahead(
             self.route,
@@ -250,6 +243,28 @@ class LaneFollower:
             width_m=self.size_lwh_m[1],
             self_id=self.agent_id,
         )
+        self.finish_plan(time_s, lights, gap_m=gap, leader_speed_mps=v_lead)
+
+    def start_plan(self, time_s: float) -> None:
+        """:meth:`plan` up to the gap search (a lane change that starts now moves the vehicle onto
+        its target route): then search along ``route`` from ``s_m`` (the box centre) and
+        ``s_m + length / 2`` (the front), for the width ``size_lwh_m[1]``, and call
+        :meth:`finish_plan` with the result (the world batches all agents' searches)."""
+        self._time_s = time_s
+        lc = self.lane_change
+        if lc is not None and not self._lc_started and time_s >= lc.start_time_s:
+            x, y, _ = self.pose()
+            s_new, lat = lc.target.project([[x, y]], s_min_m=0.0, s_max_m=lc.target.length_m)
+            self.route, self.s_m = lc.target, float(s_new[0])
+            self._lc_offset0_m = float(lat[0]) - self.lateral_offset_m
+            self._lc_started = True
+
+    def finish_plan(
+        self, time_s: float, lights: TrafficLights, *, gap_m: float, leader_speed_mps: float
+    ) -> None:
+        """:meth:`plan` after the gap search: the stop lines, IDM and the scripted braking."""
+        gap, v_lead = gap_m, leader_speed_mps
+        half_l = self.size_lwh_m[0] / 2.0
         if self.obeys_lights and lights.signals:
             stop = light_gap(
                 self.route,

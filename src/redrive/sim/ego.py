@@ -298,6 +298,23 @@ class EgoDriver:
         self, model: BicycleModel, time_s: float, obstacles: Obstacles, lights: TrafficLights
     ) -> tuple[float, float]:
         """Acceleration (m/s²) and steering angle (rad) for the next step."""
+        steer = self.steer(model)
+        g = model.geometry
+        gap, v_lead = gap_ahead(
+            self.route,
+            obstacles,
+            s_center_m=self.s_m + g.center_offset_m,
+            s_front_m=self.s_m + g.front_offset_m,
+            width_m=g.width_m,
+            self_id=self.ego_id,
+        )
+        return self.accelerate(model, time_s, lights, gap_m=gap, leader_speed_mps=v_lead), steer
+
+    def steer(self, model: BicycleModel) -> float:
+        """:meth:`control` up to the gap search: find the ego on the route again and return the
+        steering angle (rad); then search along ``route`` from ``s_m + center_offset_m`` (the
+        box centre) and ``s_m + front_offset_m`` (the front) for the ego's width, and call
+        :meth:`accelerate` with the result (the world batches all agents' searches)."""
         g = model.geometry
         s, _ = self.route.project(
             [[model.x_m, model.y_m]], s_min_m=self.s_m - 2.0, s_max_m=self.s_m + 10.0
@@ -310,16 +327,21 @@ class EgoDriver:
         c, sn = math.cos(model.yaw_rad), math.sin(model.yaw_rad)
         lx, ly = c * dx + sn * dy, -sn * dx + c * dy
         dist = max(math.hypot(lx, ly), 1e-6)
-        steer = math.atan2(2.0 * g.wheelbase_m * ly, dist * dist)
-        s_front = self.s_m + g.front_offset_m
-        gap, v_lead = gap_ahead(
-            self.route,
-            obstacles,
-            s_center_m=self.s_m + g.center_offset_m,
-            s_front_m=s_front,
-            width_m=g.width_m,
-            self_id=self.ego_id,
-        )
+        return math.atan2(2.0 * g.wheelbase_m * ly, dist * dist)
+
+    def accelerate(
+        self,
+        model: BicycleModel,
+        time_s: float,
+        lights: TrafficLights,
+        *,
+        gap_m: float,
+        leader_speed_mps: float,
+    ) -> float:
+        """:meth:`control` after the gap search: the stop lines, the route's end and IDM (m/s²)."""
+        gap, v_lead = gap_m, leader_speed_mps
+        v = model.speed_mps
+        s_front = self.s_m + model.geometry.front_offset_m
         stop = light_gap(
             self.route,
             lights,
@@ -332,5 +354,4 @@ class EgoDriver:
         end = self.route.length_m - 1.0 - s_front
         if min(stop, end) < gap:
             gap, v_lead = min(stop, end), 0.0
-        accel = idm_acceleration(self.idm, v, gap_m=gap, leader_speed_mps=v_lead)
-        return accel, steer
+        return idm_acceleration(self.idm, v, gap_m=gap, leader_speed_mps=v_lead)

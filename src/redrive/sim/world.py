@@ -19,6 +19,7 @@ import numpy.typing as npt
 from redrive.errors import SimulationError
 from redrive.sim.agents import IdmParams, LaneChange, LaneFollower, Obstacles, ParkedObject, Walker
 from redrive.sim.ego import BicycleModel, EgoDriver, EgoGeometry, pose_matrix
+from redrive.sim.gaps import GapQuery, GapSearch
 from redrive.sim.ground import rasterize
 from redrive.sim.lights import TrafficLights
 from redrive.sim.roads import RoadNetwork, RoadSegment, build_network
@@ -98,6 +99,8 @@ class World:
         self._history: deque[tuple[int, float, float, float]] = deque()
         #: steps the ego instead of the scripted driver (closed loop): ``step(model, dt_s)``
         self._ego_step: Callable[[BicycleModel, float], None] | None = None
+        #: every lane follower's and the scripted ego's gap search, batched per physics step
+        self._gaps = GapSearch(self.network.routes.values())
         self._record_pose()
 
     # -- construction -------------------------------------------------------------------------
@@ -275,23 +278,56 @@ class World:
     def _substep(self, dt_ns: int) -> None:
         t = self.time_s
         dt_s = dt_ns / 1e9
-        obstacles = self._obstacles()
+        ego_step = self._ego_step
+        scripted = ego_step is None
+        # every agent plans from one snapshot (taken before any moves or changes lane), their
+        # gap searches in one batch; a driven ego with nobody around needs none
+        obstacles = self._obstacles() if scripted or self._followers else None
         front = self._driver.s_m + self.ego_geometry.front_offset_m
         for walker, s_cross, distance in self._triggers:
             if s_cross - front <= distance:
                 walker.start(t)
+        queries: list[GapQuery] = []
         for follower in self._followers:
-            follower.plan(t, obstacles, self.lights)
-        if self._ego_step is None:
-            accel, steer = self._driver.control(self._ego, t, obstacles, self.lights)
+            follower.start_plan(t)
+            half_l = follower.size_lwh_m[0] / 2.0
+            queries.append(
+                GapQuery(
+                    route=follower.route,
+                    s_center_m=follower.s_m,
+                    s_front_m=follower.s_m + half_l,
+                    width_m=follower.size_lwh_m[1],
+                    self_id=follower.agent_id,
+                )
+            )
+        if scripted:
+            g, driver = self.ego_geometry, self._driver
+            steer = driver.steer(self._ego)
+            queries.append(
+                GapQuery(
+                    route=driver.route,
+                    s_center_m=driver.s_m + g.center_offset_m,
+                    s_front_m=driver.s_m + g.front_offset_m,
+                    width_m=g.width_m,
+                    self_id=driver.ego_id,
+                )
+            )
         else:
             self._track_route()
+        gaps = self._gaps.gaps(queries, obstacles) if obstacles is not None else []
+        for follower, (gap, v_lead) in zip(self._followers, gaps, strict=False):
+            follower.finish_plan(t, self.lights, gap_m=gap, leader_speed_mps=v_lead)
+        if scripted:
+            gap, v_lead = gaps[-1]
+            accel = self._driver.accelerate(
+                self._ego, t, self.lights, gap_m=gap, leader_speed_mps=v_lead
+            )
         for follower in self._followers:
             follower.advance(dt_s)
-        if self._ego_step is None:
+        if ego_step is None:
             self._ego.step(dt_s, accel_mps2=accel, steer_rad=steer)
         else:
-            self._ego_step(self._ego, dt_s)
+            ego_step(self._ego, dt_s)
         self._time_ns += dt_ns
         t_new = self.time_s
         for walker in self._walkers:
@@ -307,6 +343,16 @@ class World:
         pedestrian triggers), and the other agents see the ego wherever it is.
         """
         self._ego_step = step
+
+    def drop_agents(self) -> None:
+        """Remove every agent — lane followers, pedestrians, parked vehicles — for good: the world
+        keeps its roads, lights, scenery and ego, and :meth:`objects` lists the scenery only.
+
+        For a closed loop whose agents come from another world of the same scenario (replayed
+        agents do what the scripted world's do, whatever the driven ego does): stepping this
+        world then moves only its ego.
+        """
+        self._followers, self._walkers, self._triggers, self._parked = [], [], [], []
 
     def place_ego(self, *, x_m: float, y_m: float, yaw_rad: float) -> None:
         """Start the ego at another pose (map frame, rear-axle centre) — before the first step
@@ -364,6 +410,11 @@ class World:
             if isinstance(agent, ParkedObject):
                 centers.append(agent.center_xy)
                 vels.append((0.0, 0.0))
+            elif isinstance(agent, LaneFollower):  # its velocity() without a second pose()
+                x, y, yaw = agent.pose()
+                centers.append((x, y))
+                v = agent.speed_mps
+                vels.append((v * math.cos(yaw), v * math.sin(yaw)))
             else:
                 x, y, _ = agent.pose()
                 centers.append((x, y))

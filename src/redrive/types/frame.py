@@ -104,6 +104,9 @@ class Frame:
         vehicle_state: ego state interpolated to ``stamp_ns``; None when the log has none.
         ground_truth: objects (in base_link when a transform was known, else in their own
             frame) or None when the log carries no ground truth.
+        missing: what the log provides but had no sample of within the tolerance of this
+            frame's stamp (stale or absent here): sensor ids, ``vehicle_state``,
+            ``ground_truth``.  Their fields above are then absent / None.
     """
 
     stamp_ns: int
@@ -113,9 +116,11 @@ class Frame:
     environment: EnvironmentData = field(default_factory=EnvironmentData)
     traffic: TrafficData = field(default_factory=TrafficData)
     ground_truth: tuple[DetectedObject, ...] | None = None
+    missing: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "stamp_ns", int(self.stamp_ns))
+        object.__setattr__(self, "missing", tuple(self.missing))
         if self.index < 0:
             msg = f"Frame.index must be >= 0, got {self.index}"
             raise ValueError(msg)

@@ -60,6 +60,22 @@ class PointCloud:
             checked[key] = values
         object.__setattr__(self, "channels", MappingProxyType(checked))
 
+    @classmethod
+    def from_frozen(
+        cls, xyz: npt.NDArray[np.float32], channels: Mapping[str, npt.NDArray[Any]]
+    ) -> PointCloud:
+        """A cloud from arrays that already are what ``__post_init__`` would make of them.
+
+        For decoders, which build the arrays themselves and call this once per message: the
+        checks are skipped, so the caller guarantees ``xyz`` is a read-only float32 (N, 3)
+        ``ndarray`` and every channel a read-only, non-structured ``ndarray`` of shape (N,).
+        ``channels`` is wrapped as it is (not copied): hand over a dict nothing else holds.
+        """
+        cloud = object.__new__(cls)
+        object.__setattr__(cloud, "xyz", xyz)
+        object.__setattr__(cloud, "channels", MappingProxyType(channels))
+        return cloud
+
     def __len__(self) -> int:
         return int(self.xyz.shape[0])
 

@@ -9,6 +9,7 @@ metrics).  They apply to open-loop runs as well: there the driven ego is the log
 from __future__ import annotations
 
 from redrive.evaluation.closedloop.collisions import AtFaultCollisions, TimeToCollision
+from redrive.evaluation.closedloop.commands import FallbackCommands
 from redrive.evaluation.closedloop.motion import Comfort, EgoProgress
 from redrive.evaluation.closedloop.pdm import PdmScore
 from redrive.evaluation.closedloop.road import (
@@ -23,6 +24,7 @@ __all__ = [
     "DrivableAreaCompliance",
     "DrivingDirectionCompliance",
     "EgoProgress",
+    "FallbackCommands",
     "PdmScore",
     "SpeedLimitCompliance",
     "TimeToCollision",

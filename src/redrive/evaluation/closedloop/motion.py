@@ -64,6 +64,7 @@ class EgoProgress(Metric):
     role: ClassVar[Role | None] = None
     needs: ClassVar[frozenset[str]] = frozenset({"ego"})
     unit: ClassVar[str] = "ratio"
+    higher_is_better: ClassVar[bool] = True  # the headline; per value in the result
     defaults: ClassVar[Mapping[str, Any]] = MappingProxyType(
         {**PROGRESS_DEFAULTS, "min_progress_ratio": 0.2}
     )
@@ -78,6 +79,7 @@ class EgoProgress(Metric):
                 "making_progress": float(ratio > float(self.params["min_progress_ratio"])),
             },
             units={"ego_progress_m": "m", "expert_progress_m": "m", "making_progress": "score"},
+            higher_is_better={"expert_progress_m": None},  # the logged ego's: the reference
             per_frame={"progress_m": series(frames.astype(np.int64), arc)},
         )
 
@@ -157,6 +159,7 @@ class Comfort(Metric):
     role: ClassVar[Role | None] = None
     needs: ClassVar[frozenset[str]] = frozenset({"ego"})
     unit: ClassVar[str] = "score"
+    higher_is_better: ClassVar[bool] = True  # the headline; per value in the result
     defaults: ClassVar[Mapping[str, Any]] = COMFORT_DEFAULTS
 
     def evaluate(self, data: EvalData) -> MetricResult:

@@ -52,6 +52,7 @@ class PdmScore(Metric):
     role: ClassVar[Role | None] = None
     needs: ClassVar[frozenset[str]] = frozenset({"ego", "ground_truth", "road_map"})
     unit: ClassVar[str] = "score"
+    higher_is_better: ClassVar[bool] = True  # the headline; per value in the result
     defaults: ClassVar[Mapping[str, Any]] = MappingProxyType(
         {
             **TTC_DEFAULTS,

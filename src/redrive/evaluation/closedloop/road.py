@@ -53,6 +53,7 @@ class DrivableAreaCompliance(Metric):
     role: ClassVar[Role | None] = None
     needs: ClassVar[frozenset[str]] = frozenset({"ego", "road_map"})
     unit: ClassVar[str] = "score"
+    higher_is_better: ClassVar[bool] = True  # the headline; per value in the result
     defaults: ClassVar[Mapping[str, Any]] = DAC_DEFAULTS
 
     def evaluate(self, data: EvalData) -> MetricResult:
@@ -136,6 +137,7 @@ class DrivingDirectionCompliance(Metric):
     role: ClassVar[Role | None] = None
     needs: ClassVar[frozenset[str]] = frozenset({"ego", "road_map"})
     unit: ClassVar[str] = "score"
+    higher_is_better: ClassVar[bool] = True  # the headline; per value in the result
     defaults: ClassVar[Mapping[str, Any]] = DDC_DEFAULTS
 
     def evaluate(self, data: EvalData) -> MetricResult:
@@ -178,6 +180,7 @@ class SpeedLimitCompliance(Metric):
     role: ClassVar[Role | None] = None
     needs: ClassVar[frozenset[str]] = frozenset({"ego", "road_map"})
     unit: ClassVar[str] = "score"
+    higher_is_better: ClassVar[bool] = True  # the headline; per value in the result
     defaults: ClassVar[Mapping[str, Any]] = MappingProxyType(
         {**EGO_DEFAULTS, "max_overspeed_mps": 2.23}
     )

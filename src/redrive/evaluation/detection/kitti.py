@@ -328,6 +328,7 @@ class KittiDetection(Metric):
         return MetricResult(
             values=values,
             units=units,
+            higher_is_better={k: None for k in values if k.startswith("gt/")},  # counts
             curves=curves,
             per_frame={"tp": (frames, tp_f), "fp": (frames, fp_f), "missed": (frames, fn_f)},
         )

@@ -4,10 +4,12 @@ Definition: nuScenes devkit ``python-sdk/nuscenes/eval/detection`` (see :mod:`.n
 for the ported functions and the details that decide numbers).  What differs, and why:
 
 * **Classes**: ObjectClass → nuScenes name by ``class_map`` (default vehicle→car, truck,
-  pedestrian, bicycle, motorcycle; unknown/static/other are not evaluated).  The means (mAP, mATE …)
-  run over the classes that have ground truth or predictions in the run — the devkit's class list
-  is fixed at ten, and a class with neither would score AP 0 there.  A class with predictions only
-  gets AP 0 and TP errors 1, as in the devkit.
+  pedestrian, bicycle, motorcycle; unknown/static/other are not evaluated).  By default
+  (``class_mean = "present"``) the means (mAP, mATE …) run over the classes that have ground truth
+  or predictions in the run — the devkit's class list is fixed at ten, and a class with neither
+  scores AP 0 there (on a cars-only set with perfect detections: mAP 1.0 here, 0.1 in the
+  devkit).  ``class_mean = "devkit"`` averages as the devkit does (and adds ``mAAE`` and the
+  official ``NDS``).  A class with predictions only gets AP 0 and TP errors 1, as in the devkit.
 * **No attributes** in redrive's data model, so no ``attr_err`` (mAAE): the value
   ``NDS_no_AAE`` = ``(5·mAP + Σ max(0, 1 − mTPE)) / 9`` over mATE, mASE, mAOE, mAVE.  It is **not**
   the official NDS (``/10`` with ``1 − mAAE``); the devkit run on attribute-less ground truth
@@ -52,6 +54,9 @@ class NuScenesDetection(Metric):
         distance_bands_m: [[0, 20], [20, 40], [40, None]] ego-distance bands [lo, hi), metres.
         bookmark_range_m: 20, ground truth nearer than this (BEV) and not matched at
             ``dist_th_tp_m`` is bookmarked ``missed_object`` (severity 1/range).
+        class_mean: ``present`` (default: the means over the classes the run has) or
+            ``devkit`` (over the devkit's ten classes, absent ones scoring AP 0 and TP errors 1,
+            plus ``mAAE`` = 1 and the official ``NDS``; ``redrive evaluate --devkit-compat``).
 
     Values: ``mAP`` (headline), ``NDS_no_AAE``, ``mATE`` ``mASE`` ``mAOE`` ``mAVE``,
     ``AP/<class>/<th>``, ``AP/<class>``, ``ATE/<class>`` ``ASE/…`` ``AOE/…`` ``AVE/…``,
@@ -77,6 +82,7 @@ class NuScenesDetection(Metric):
             "mean_ap_weight": 5.0,
             "distance_bands_m": [[0.0, 20.0], [20.0, 40.0], [40.0, None]],
             "bookmark_range_m": 20.0,
+            "class_mean": "present",
         }
     )
 
@@ -100,6 +106,7 @@ class NuScenesDetection(Metric):
             distance_bands_m=[
                 (float(lo), None if hi is None else float(hi)) for lo, hi in p["distance_bands_m"]
             ],
+            class_mean=str(p["class_mean"]),
         )
         values = dict(ev.values)
         values["frames"] = float(frames.size)
@@ -134,5 +141,33 @@ class NuScenesDetection(Metric):
             for i in missed
         ]
         return MetricResult(
-            values=values, units=units, per_frame=per_frame, curves=ev.curves, bookmarks=marks
+            values=values,
+            units=units,
+            higher_is_better=nuscenes_directions(values),
+            per_frame=per_frame,
+            curves=ev.curves,
+            bookmarks=marks,
         )
+
+
+#: the nuScenes true-positive errors (``mATE`` … and per class ``ATE/car`` …): lower is better.
+_TP_ERRORS = frozenset({"ATE", "ASE", "AOE", "AVE", "AAE"})
+#: counts of what the data held: no direction.
+_COUNTS = frozenset({"gt_objects", "detections", "frames"})
+
+
+def nuscenes_directions(values: Mapping[str, float]) -> dict[str, bool | None]:
+    """Per value: the TP errors and ``frames_without_output`` are lower-is-better, the counts
+    of the data have none; the rest (AP, recall, NDS) take the metric's higher-is-better."""
+    out: dict[str, bool | None] = {}
+    for key in values:
+        head = key.split("/", 1)[0]
+        if (
+            head in _TP_ERRORS
+            or head.removeprefix("m") in _TP_ERRORS
+            or key == "frames_without_output"
+        ):
+            out[key] = False
+        elif key in _COUNTS:
+            out[key] = None
+    return out

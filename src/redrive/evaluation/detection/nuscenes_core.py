@@ -288,6 +288,16 @@ def nd_score_without_attributes(
     return float(mean_ap_weight * mean_ap + np.sum(scores)) / float(mean_ap_weight + len(scores))
 
 
+def _devkit_tp(name: str, metric: str, value: float) -> float:
+    """The devkit's TP error of ``metric`` for class ``name``: NaN for a traffic cone's
+    velocity and orientation and a barrier's velocity (``DetectionEval.evaluate``)."""
+    if (name == "traffic_cone" and metric in ("vel_err", "orient_err")) or (
+        name == "barrier" and metric == "vel_err"
+    ):
+        return math.nan
+    return value
+
+
 def band_name(lo_m: float, hi_m: float | None) -> str:
     """``band_0_20``, ``band_40_inf``."""
     hi = "inf" if hi_m is None or math.isinf(hi_m) else f"{hi_m:g}"
@@ -376,6 +386,7 @@ def evaluate_nuscenes(
     min_precision: float = 0.1,
     mean_ap_weight: float = 5.0,
     distance_bands_m: Sequence[tuple[float, float | None]] = ((0, 20), (20, 40), (40, None)),
+    class_mean: str = "present",
 ) -> NuScenesEvaluation:
     """nuScenes detection metrics of predictions against ground truth (frames as given: the
     caller decides which frames count).
@@ -389,6 +400,12 @@ def evaluate_nuscenes(
         min_recall, min_precision: ``calc_ap`` / ``calc_tp`` clipping.
         mean_ap_weight: weight of mAP in the NDS formula (devkit 5).
         distance_bands_m: [lo, hi) ego-distance bands for ``AP/band_lo_hi/th`` (hi None = ∞).
+        class_mean: ``present`` — the means run over the classes with ground truth or
+            predictions; ``devkit`` — over the devkit's ten classes (``class_range_m``'s keys, in
+            their order) and any other mapped class, a class with neither scoring AP 0 and TP
+            errors 1 as the devkit's ``accumulate`` gives it, plus ``mAAE`` and the official
+            ``NDS`` (redrive has no attributes: every attribute error is NaN, which the
+            devkit's ``cummean`` turns into 1, so mAAE = 1).
 
     Returns:
         values ``mAP`` (first), ``NDS_no_AAE``, ``mATE`` ``mASE`` ``mAOE`` ``mAVE``,
@@ -397,7 +414,11 @@ def evaluate_nuscenes(
         ``PR/<class>/<th>``.  A class with neither ground truth nor predictions is NaN and left
         out of the means.
     """
-    names: list[str] = []
+    if class_mean not in ("present", "devkit"):
+        msg = f"class_mean must be 'present' or 'devkit', not {class_mean!r}"
+        raise ValueError(msg)
+    devkit = class_mean == "devkit"
+    names: list[str] = list(class_range_m) if devkit else []
     for name in class_map.values():
         if name not in names:
             names.append(name)
@@ -423,12 +444,18 @@ def evaluate_nuscenes(
         g_rows, p_rows = np.flatnonzero(g_label == c), np.flatnonzero(p_label == c)
         present = g_rows.size > 0 or p_rows.size > 0
         if not present:
+            # devkit: accumulate() of a class without ground truth is "no predictions": AP 0
+            # at every threshold, TP errors 1 (NaN where the class has no such error)
             for th in dist_ths_m:
-                values[f"AP/{name}/{thr_name(th)}"] = math.nan
-            values[f"AP/{name}"] = math.nan
+                values[f"AP/{name}/{thr_name(th)}"] = 0.0 if devkit else math.nan
+            values[f"AP/{name}"] = 0.0 if devkit else math.nan
+            absent = {k: _devkit_tp(name, k, 1.0) if devkit else math.nan for k in TP_METRICS}
             for k in TP_METRICS:
-                values[f"{TP_SHORT[k]}/{name}"] = math.nan
+                values[f"{TP_SHORT[k]}/{name}"] = absent[k]
             values[f"recall/{name}/{tp_name}"] = math.nan
+            if devkit:
+                class_ap[name] = 0.0
+                class_tp[name] = absent
             continue
         g_c, p_c = gt_f.subset(g_rows), pred_f.subset(p_rows)
         mds, aps, matched = _class_aps(
@@ -445,12 +472,7 @@ def evaluate_nuscenes(
         md_tp = mds[float(dist_th_tp_m)]
         errs: dict[str, float] = {}
         for k in TP_METRICS:
-            if (name == "traffic_cone" and k in ("vel_err", "orient_err")) or (
-                name == "barrier" and k == "vel_err"
-            ):
-                errs[k] = math.nan
-            else:
-                errs[k] = calc_tp(md_tp, min_recall, k)
+            errs[k] = _devkit_tp(name, k, calc_tp(md_tp, min_recall, k))
             values[f"{TP_SHORT[k]}/{name}"] = errs[k]
             units[f"{TP_SHORT[k]}/{name}"] = TP_UNITS[k]
         class_tp[name] = errs
@@ -473,6 +495,11 @@ def evaluate_nuscenes(
         )
         for k in TP_METRICS:
             values[f"m{TP_SHORT[k]}"] = tp_errors[k]
+        if devkit:  # no attributes: attr_err 1 for every class but traffic_cone (NaN)
+            values["mAAE"] = 1.0
+            values["NDS"] = nd_score_without_attributes(  # with the attribute error: official
+                mean_ap, {**tp_errors, "attr_err": 1.0}, mean_ap_weight=mean_ap_weight
+            )
     else:
         for k in TP_METRICS:
             values[f"m{TP_SHORT[k]}"] = math.nan

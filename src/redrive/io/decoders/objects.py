@@ -15,6 +15,7 @@ text, so the same string always gives the same id; an empty id is -1.
 
 from __future__ import annotations
 
+import functools
 import math
 import re
 import zlib
@@ -58,10 +59,12 @@ _CLASS_WORDS: tuple[tuple[ObjectClass, frozenset[str]], ...] = (
 )
 
 
+@functools.lru_cache(maxsize=1024)
 def object_class_from_text(text: str) -> ObjectClass:
     """An ObjectClass from a class name (``Car``, ``pedestrian``, ``vehicle.truck``, a marker ns).
 
-    Numbers, empty and unrecognised text give UNKNOWN.
+    Numbers, empty and unrecognised text give UNKNOWN.  Remembered per text: a log repeats a
+    handful of class names in every message.
     """
     words = {w for w in re.split(r"[^a-z0-9]+", text.lower()) if w}
     words |= {w[:-1] for w in words if len(w) > 3 and w.endswith("s")}
@@ -202,7 +205,7 @@ class GroundTruthObjectArrayDecoder:
                 _from_detection(
                     message,
                     det,
-                    velocity=vec3(vel),
+                    velocity=np.array(vec3(vel)),
                     num_lidar_points=None if points < 0 else int(points),
                     visible=None if visible < 0 else bool(visible),
                 )

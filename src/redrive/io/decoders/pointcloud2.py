@@ -164,6 +164,11 @@ class LayoutCache:
         del self.blocks[self.size :]
 
 
+#: What :func:`_read_head` finds: the buffer, stamp (ns), frame, height, width, field block,
+#: data offset, data size, is_dense.
+_Head = tuple[memoryview, int, str, int, int, _FieldBlock, int, int, bool]
+
+
 def read_cloud_layout(
     raw: bytes | memoryview, encoding: str, *, cache: LayoutCache | None = None
 ) -> CloudLayout:
@@ -174,9 +179,36 @@ def read_cloud_layout(
     Raises:
         ValueError: the bytes are truncated or use an unsupported CDR representation.
     """
+    _, stamp_ns, frame_id, height, width, block, data_offset, data_size, is_dense = _read_head(
+        raw, encoding, cache
+    )
+    return CloudLayout(
+        stamp_ns=stamp_ns,
+        frame_id=frame_id,
+        height=height,
+        width=width,
+        fields=block.fields,
+        is_bigendian=block.is_bigendian,
+        point_step=block.point_step,
+        row_step=block.row_step,
+        data_offset=data_offset,
+        data_size_bytes=data_size,
+        is_dense=is_dense,
+    )
+
+
+def _read_head(raw: bytes | memoryview, encoding: str, cache: LayoutCache | None) -> _Head:
+    """:func:`read_cloud_layout` as a plain tuple: it runs once per message, so no object is
+    built on the way (the decoder reads the fields it needs straight from it)."""
     buf = memoryview(raw).cast("B")
     try:
-        if encoding == "cdr":
+        if encoding == "ros1":
+            big = False
+            _seq, sec, nanosec, size = _ROS1_HEAD.unpack_from(buf, 0)
+            frame_id = str(buf[16 : 16 + size], "utf-8", "replace")
+            pos = 16 + size
+            cdr = False
+        elif encoding == "cdr":
             if len(buf) < 4 or buf[0] != 0 or buf[1] not in (0, 1):
                 head = bytes(buf[:4]).hex()
                 msg = f"CDR encapsulation header {head!r} is not plain CDR (00 00 / 00 01)"
@@ -184,13 +216,9 @@ def read_cloud_layout(
             cdr, big = True, buf[1] == 0
             sec, nanosec, size = _CDR_HEAD[big].unpack_from(buf, 4)
             text = bytes(buf[16 : 16 + size]).rstrip(b"\x00")
+            frame_id = text.decode("utf-8", errors="replace")
             pos = 16 + size
             pos += -(pos - 4) % 4
-        elif encoding == "ros1":
-            cdr, big = False, False
-            _seq, sec, nanosec, size = _ROS1_HEAD.unpack_from(buf, 0)
-            text = bytes(buf[16 : 16 + size])
-            pos = 16 + size
         else:
             msg = f"encoding {encoding!r} is not ros1 or cdr"
             raise ValueError(msg)
@@ -214,19 +242,8 @@ def read_cloud_layout(
     if data_offset + data_size > len(buf):
         msg = f"data array of {data_size} bytes overruns the {len(buf)}-byte message"
         raise ValueError(msg)
-    return CloudLayout(
-        stamp_ns=sec * 1_000_000_000 + nanosec,
-        frame_id=text.decode("utf-8", errors="replace"),
-        height=height,
-        width=width,
-        fields=block.fields,
-        is_bigendian=block.is_bigendian,
-        point_step=block.point_step,
-        row_step=block.row_step,
-        data_offset=data_offset,
-        data_size_bytes=data_size,
-        is_dense=is_dense,
-    )
+    stamp_ns = sec * 1_000_000_000 + nanosec
+    return buf, stamp_ns, frame_id, height, width, block, data_offset, data_size, is_dense
 
 
 def _parse_field_block(buf: memoryview, pos: int, *, cdr: bool, big_endian: bool) -> _FieldBlock:
@@ -250,11 +267,6 @@ def _parse_field_block(buf: memoryview, pos: int, *, cdr: bool, big_endian: bool
         point_step=point_step,
         row_step=row_step,
     )
-
-
-def _point_dtype(layout: CloudLayout) -> np.dtype[Any]:
-    """A structured dtype of itemsize ``point_step`` with one scalar member per channel."""
-    return _cached_point_dtype(layout.fields, layout.is_bigendian, layout.point_step)
 
 
 @functools.lru_cache(maxsize=64)
@@ -356,8 +368,69 @@ def _packed_xyz(dtype: np.dtype[Any]) -> np.dtype[Any] | None:
     )
 
 
+_F32 = np.dtype(np.float32)
+
+
+#: The member of a plan's view dtype that holds x, y, z as one 12-byte record.
+_XYZ = "xyz"
+
+
+@dataclass(frozen=True, slots=True)
+class _Plan:
+    """How the points of one field block are cut into xyz and channels.
+
+    Attributes:
+        block: the cached field block this plan is for (kept so its id is not reused).
+        dtype: the structured point dtype (the general path's).
+        missing: coordinate fields the layout lacks (empty when it has x, y and z).
+        view: for the fast path, a dtype of itemsize ``point_step`` with x, y, z as one 12-byte
+            member ``xyz`` and every other member as it is; None when the general path must be
+            taken (a member not in native byte order, x/y/z not adjacent float32, a channel
+            called ``xyz``).
+        channels: the names of the other members, in order.
+    """
+
+    block: _FieldBlock
+    dtype: np.dtype[Any]
+    missing: tuple[str, ...]
+    view: np.dtype[Any] | None
+    channels: tuple[str, ...]
+
+
+def _make_plan(block: _FieldBlock) -> _Plan:
+    dtype = _cached_point_dtype(block.fields, block.is_bigendian, block.point_step)
+    members = dtype.fields
+    assert members is not None
+    missing = tuple(a for a in "xyz" if a not in members)
+    channels = tuple(name for name in dtype.names or () if name not in ("x", "y", "z"))
+    view: np.dtype[Any] | None = None
+    fast = (
+        not missing
+        and _XYZ not in channels
+        and all(member[0].isnative for member in members.values())
+        and _packed_xyz(dtype) is not None
+    )
+    if fast:
+        view = np.dtype(
+            {
+                "names": [_XYZ, *channels],
+                "formats": ["V12", *(members[name][0] for name in channels)],
+                "offsets": [members["x"][1], *(members[name][1] for name in channels)],
+                "itemsize": dtype.itemsize,
+            }
+        )
+    return _Plan(block, dtype, missing, view, channels)
+
+
 class PointCloud2Decoder:
-    """``sensor_msgs/msg/PointCloud2`` → PointCloud (any field layout, both encodings)."""
+    """``sensor_msgs/msg/PointCloud2`` → PointCloud (any field layout, both encodings).
+
+    Every message pays only for its header (the field list is cached, see :class:`LayoutCache`),
+    one copy of xyz and one strided view per channel: a cloud whose members are in native byte
+    order, whose x, y, z are adjacent float32 and whose rows carry no padding (what drivers
+    publish) is cut straight from the message bytes; any other layout takes the general path
+    through a structured view of the points.  Both give the same arrays.
+    """
 
     name = "pointcloud2"
     msgtypes: tuple[str, ...] = ("sensor_msgs/msg/PointCloud2",)
@@ -366,45 +439,76 @@ class PointCloud2Decoder:
 
     def __init__(self) -> None:
         self._layouts = LayoutCache()
-        # id(fields tuple of a cached block) → (that tuple, its dtype); the tuple is kept so its
-        # id cannot be reused.  Hashing the field list per message costs more than the lookup.
-        self._dtypes: dict[int, tuple[tuple[CloudField, ...], bool, int, np.dtype[Any]]] = {}
+        # id(cached field block) → its plan; the plan keeps the block so its id cannot be
+        # reused.  Hashing the field list per message costs more than the lookup.
+        self._plans: dict[int, _Plan] = {}
 
-    def _dtype(self, layout: CloudLayout) -> np.dtype[Any]:
-        hit = self._dtypes.get(id(layout.fields))
-        if (
-            hit is not None
-            and hit[0] is layout.fields
-            and hit[1] == layout.is_bigendian
-            and hit[2] == layout.point_step
-        ):
-            return hit[3]
-        dtype = _point_dtype(layout)
-        if len(self._dtypes) > 64:
-            self._dtypes.clear()
-        self._dtypes[id(layout.fields)] = (
-            layout.fields,
-            layout.is_bigendian,
-            layout.point_step,
-            dtype,
-        )
-        return dtype
+    def _plan(self, block: _FieldBlock) -> _Plan:
+        plan = self._plans.get(id(block))
+        if plan is not None and plan.block is block:
+            return plan
+        plan = _make_plan(block)
+        if len(self._plans) > 64:
+            self._plans.clear()
+        self._plans[id(block)] = plan
+        return plan
 
     def decode(self, message: LogMessage, deserialize: Deserialize) -> Decoded:
         del deserialize  # the fast path never deserialises
+        raw = message.raw
         try:
-            layout = read_cloud_layout(message.raw, message.encoding, cache=self._layouts)
-            dtype = self._dtype(layout)
+            head = _read_head(raw, message.encoding, self._layouts)
+            plan = self._plan(head[5])
         except ValueError as err:
             raise unsupported(message, f"PointCloud2 cannot be read: {err}", _WHAT_TO_DO) from err
-        missing = [a for a in "xyz" if dtype.fields is None or a not in dtype.fields]
-        if missing:
-            have = ", ".join(f.name for f in layout.fields) or "none"
+        _, stamp_ns, frame_id, height, width, block, data_offset, data_size, is_dense = head
+        if plan.missing:
+            have = ", ".join(f.name for f in block.fields) or "none"
             raise unsupported(
                 message,
-                f"PointCloud2 has no {'/'.join(missing)} field (fields: {have})",
+                f"PointCloud2 has no {'/'.join(plan.missing)} field (fields: {have})",
                 "redrive needs x, y, z; decode this topic with a custom decoder or skip it",
             )
+        stamp_ns = stamp_ns or message.log_time_ns
+        n = width * height
+        step = block.point_step
+        view = plan.view
+        if (
+            view is not None
+            and n > 0
+            and (height == 1 or block.row_step == width * step)
+            and data_size >= n * step
+            and raw_is_immutable(message)
+        ):
+            # The fast path: one view of the points, no layout object (see the class docstring).
+            points = np.ndarray((n,), view, raw, data_offset)
+            xyz: npt.NDArray[np.float32] = points[_XYZ].copy().view(_F32).reshape(n, 3)
+            xyz.flags.writeable = False
+            channels = {name: points[name] for name in plan.channels}
+            # The arrays are what PointCloud's checks would make of them (read-only views of
+            # immutable bytes, shapes (N, 3) and (N,)), so they are not checked again.
+            cloud = PointCloud.from_frozen(xyz, channels)
+            return Decoded(stamp_ns=stamp_ns, frame_id=frame_id, value=cloud)
+        layout = CloudLayout(
+            stamp_ns=stamp_ns,
+            frame_id=frame_id,
+            height=height,
+            width=width,
+            fields=block.fields,
+            is_bigendian=block.is_bigendian,
+            point_step=step,
+            row_step=block.row_step,
+            data_offset=data_offset,
+            data_size_bytes=data_size,
+            is_dense=is_dense,
+        )
+        return Decoded(
+            stamp_ns=stamp_ns, frame_id=frame_id, value=self._general(message, layout, plan.dtype)
+        )
+
+    @staticmethod
+    def _general(message: LogMessage, layout: CloudLayout, dtype: np.dtype[Any]) -> PointCloud:
+        """Any layout: a structured view of the points (a copy first when the bytes may change)."""
         buf: bytes | memoryview = message.raw
         data_offset = layout.data_offset
         if not raw_is_immutable(message):
@@ -424,9 +528,7 @@ class PointCloud2Decoder:
             if not values.dtype.isnative:
                 values = values.astype(values.dtype.newbyteorder("="))
             channels[name] = values
-        stamp_ns = layout.stamp_ns or message.log_time_ns
-        cloud = PointCloud(xyz=xyz, channels=channels)
-        return Decoded(stamp_ns=stamp_ns, frame_id=layout.frame_id, value=cloud)
+        return PointCloud(xyz=xyz, channels=channels)
 
 
 _WHAT_TO_DO = "check the publisher's PointField list, or report the bag to the redrive developers"

@@ -144,14 +144,28 @@ def active_decoders() -> Mapping[str, Decoder]:
     return MappingProxyType(out)
 
 
+#: decoder_for's answers by the type name as given: a lookup per message, so the name is not
+#: normalised again every time.  Emptied by :func:`reload_decoders`.
+_BY_GIVEN_NAME: dict[str, Decoder | None] = {}
+
+
 def reload_decoders() -> None:
     """Read the ``redrive.decoders`` entry points again at the next lookup."""
     active_decoders.cache_clear()
+    _BY_GIVEN_NAME.clear()
 
 
 def decoder_for(msgtype: str) -> Decoder | None:
     """The decoder of a message type (ROS 1 or ROS 2 spelling), or None."""
-    return active_decoders().get(normalize_msgtype(msgtype))
+    try:
+        return _BY_GIVEN_NAME[msgtype]
+    except KeyError:
+        pass
+    decoder = active_decoders().get(normalize_msgtype(msgtype))
+    if len(_BY_GIVEN_NAME) > 1024:
+        _BY_GIVEN_NAME.clear()
+    _BY_GIVEN_NAME[msgtype] = decoder
+    return decoder
 
 
 def topic_kind(info: TopicInfo) -> tuple[DecodedKind, SensorType | None] | None:

@@ -1,0 +1,199 @@
+"""One cell of a batch — a log × a pipeline × a loop mode — run where the executor puts it.
+
+A :class:`CellTask` holds only strings and paths (the log's path, the pipeline's file or plugin
+names, the run directory): workers read the logs themselves and hand back a small
+:class:`~redrive.batch.manifest.CellRecord`, also written to the task's ``record_path``.
+
+The closed loop lives beside this package (DESIGN.md L6: ``closedloop | batch``), so a cell runs
+it through a :class:`ClosedLoopRunner` given by the caller (the CLI gives
+``redrive.closedloop.run.run_closed_loop``); a runner — what executors call in the worker — is a
+module-level function ``(CellTask) -> CellRecord`` so that it pickles by name.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import shutil
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Protocol
+
+from redrive.batch.manifest import CellKey, CellRecord, CellStatus, write_cell_record
+from redrive.batch.spec import LogItem, LoopMode, PipelineItem
+from redrive.config import PipelineConfig
+from redrive.engine.run import RunRequest, run_log
+from redrive.engine.stats import RunReport
+from redrive.errors import ConfigError
+from redrive.results import RunStatus
+from redrive.results.manifest import now_iso
+
+__all__ = ["CellRunner", "CellTask", "ClosedLoopRunner", "run_cell", "synthetic_log_path"]
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class CellTask:
+    """What a worker needs to run one cell.
+
+    Attributes:
+        cell_id: ``PIPELINE/LOOP/LOG_ID``.
+        batch_dir: the batch directory (absolute); the cell's run directory is
+            ``BATCH/runs/<cell_id>`` (emptied first: a cell is redone from scratch), its record
+            ``BATCH/cells/<cell_id>.json``, a synthetic scenario's log ``BATCH/logs/…``.
+    """
+
+    cell_id: str
+    batch_dir: str
+    log: LogItem
+    pipeline: PipelineItem
+    loop: LoopMode
+    key: CellKey
+    duration_s: float | None = None
+    agents: str = "replay"
+    fail_fast: bool = False
+    attempt: int = 1
+
+    @property
+    def run_dir(self) -> Path:
+        return Path(self.batch_dir) / "runs" / self.cell_id
+
+    @property
+    def record_path(self) -> Path:
+        return Path(self.batch_dir) / "cells" / f"{self.cell_id}.json"
+
+    def record(self, status: CellStatus, **changes: object) -> CellRecord:
+        """A record of this cell with ``status`` (and ``changes``)."""
+        values: dict[str, object] = {
+            "cell_id": self.cell_id,
+            "log_id": self.log.log_id,
+            "log": self.log.describe(),
+            "pipeline": self.pipeline.name,
+            "loop": self.loop,
+            "run_dir": f"runs/{self.cell_id}",
+            "status": status,
+            "key": self.key,
+            "attempts": self.attempt,
+            **changes,
+        }
+        return CellRecord(**values)  # type: ignore[arg-type]
+
+
+class ClosedLoopRunner(Protocol):
+    """Runs a closed loop into ``out`` (``target``: a scenario or a log's path)."""
+
+    def __call__(
+        self,
+        *,
+        target: str,
+        pipeline: PipelineConfig,
+        out: Path,
+        seed: int | None,
+        duration_s: float | None,
+        agents: str,
+    ) -> RunReport: ...
+
+
+#: what an executor calls in its worker: a module-level function, so that it pickles by name.
+CellRunner = Callable[[CellTask], CellRecord]
+
+
+def synthetic_log_path(task: CellTask) -> Path:
+    """Where the open-loop log of a synthetic scenario cell is kept (shared by its pipelines)."""
+    suffix = "" if task.duration_s is None else f"_{task.duration_s:g}s"
+    return Path(task.batch_dir) / "logs" / f"{task.log.log_id}{suffix}.mcap"
+
+
+def _synthesize(task: CellTask) -> Path:
+    """The scenario's log, simulated once: the same scenario, seed and duration give the same
+    bytes, so two workers that race here write the same file (each renames its own temp)."""
+    from redrive.sim.scenario import load_scenario
+    from redrive.sim.synth import synthesize
+
+    path = synthetic_log_path(task)
+    if path.is_file():
+        return path
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.mcap")
+    assert task.log.scenario is not None
+    synthesize(
+        load_scenario(task.log.scenario), tmp, duration_s=task.duration_s, seed=task.log.seed
+    )
+    os.replace(tmp, path)
+    return path
+
+
+def run_cell(task: CellTask, *, closed_loop: ClosedLoopRunner | None = None) -> CellRecord:
+    """Run ``task`` into its run directory and write its record (also returned).  A failure of the
+    cell — a log that cannot be read, a pipeline that does not fit it, a failed run — is its
+    record's ``error``; only Ctrl-C (``interrupted``) and the process dying escape."""
+    started = time.perf_counter()
+    run_dir = task.run_dir
+    if run_dir.exists():
+        shutil.rmtree(run_dir)
+    run_dir.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        report = _run(task, run_dir, closed_loop)
+    except KeyboardInterrupt:
+        record = task.record(
+            CellStatus.INTERRUPTED, wall_s=time.perf_counter() - started, finished=now_iso()
+        )
+        write_cell_record(task.record_path, record)
+        raise
+    except Exception as err:  # the cell's failure, whatever raised it: recorded, not raised
+        logger.debug("cell %s failed", task.cell_id, exc_info=True)
+        record = task.record(
+            CellStatus.FAILED,
+            error=f"{type(err).__name__}: {err}",
+            wall_s=time.perf_counter() - started,
+            finished=now_iso(),
+        )
+    else:
+        record = _record_of(task, report, time.perf_counter() - started)
+    write_cell_record(task.record_path, record)
+    return record
+
+
+def _run(task: CellTask, run_dir: Path, closed_loop: ClosedLoopRunner | None) -> RunReport:
+    pipeline = task.pipeline.load(fail_fast=task.fail_fast)
+    if task.loop == "open":
+        log = Path(task.log.path) if task.log.path is not None else _synthesize(task)
+        return run_log(RunRequest(log=log, pipeline=pipeline, out=run_dir))
+    if closed_loop is None:
+        msg = "this batch runs no closed loop (its runner was given none); use --loop open"
+        raise ConfigError(msg)
+    target = task.log.path if task.log.path is not None else task.log.scenario
+    assert target is not None
+    return closed_loop(
+        target=target,
+        pipeline=pipeline,
+        out=run_dir,
+        seed=task.log.seed,
+        duration_s=task.duration_s,
+        agents=task.agents,
+    )
+
+
+def _record_of(task: CellTask, report: RunReport, wall_s: float) -> CellRecord:
+    step_errors = sum(a.error + a.timeout for a in report.algorithms)
+    common = {
+        "wall_s": wall_s,
+        "frames": report.frames,
+        "step_errors": step_errors,
+        "finished": now_iso(),
+    }
+    if report.status is RunStatus.COMPLETE:
+        return task.record(CellStatus.COMPLETE, **common)
+    if report.status is RunStatus.INTERRUPTED:
+        return task.record(CellStatus.INTERRUPTED, **common)
+    error = "the run failed"
+    if report.failure is not None:
+        index, step = report.failure
+        error = (
+            f"fail-fast: {step.algorithm} {step.status} on frame {index}: "
+            f"{step.error_type}: {step.error_message}"
+        )
+    return task.record(CellStatus.FAILED, error=error, **common)

@@ -1,0 +1,262 @@
+"""Run a batch: lay out its cells, skip the ones already complete, run the rest, keep the manifest.
+
+>>> manifest = run_batch(spec, Path("batches/nightly"), runner=my_runner)   # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+from redrive.batch.cell import CellRunner, CellTask
+from redrive.batch.executors import LocalExecutor, RayExecutor
+from redrive.batch.manifest import (
+    BatchManifest,
+    CellKey,
+    CellRecord,
+    CellStatus,
+    read_cell_record,
+    write_batch_manifest,
+)
+from redrive.batch.spec import BatchSpec, LogItem, pipeline_hash
+from redrive.engine.run import log_fingerprint
+from redrive.errors import ConfigError
+from redrive.results import RunStatus, read_manifest
+from redrive.results.manifest import host_info, now_iso, redrive_version
+
+__all__ = ["BatchProgress", "run_batch"]
+
+
+@dataclass(slots=True)
+class BatchProgress:
+    """The counts a progress display shows, updated at every cell event."""
+
+    total: int
+    done: int = 0
+    failed: int = 0
+    skipped: int = 0
+    running: int = 0
+    started_at: float = field(default_factory=time.perf_counter)
+    walls: list[float] = field(default_factory=list)
+
+    @property
+    def remaining(self) -> int:
+        return self.total - self.done - self.failed - self.skipped
+
+    def eta_s(self, workers: int) -> float | None:
+        """Seconds left: the mean wall time of the cells finished in this run × the cells left,
+        over the workers; None before the first cell finished."""
+        if not self.walls:
+            return None
+        mean = sum(self.walls) / len(self.walls)
+        left = self.remaining - self.running
+        return mean * (max(left, 0) / max(workers, 1)) + mean * 0.5 * min(self.running, 1)
+
+
+#: what run_batch tells its caller: (event, the cell's record, the counts); events are
+#: ``skipped``, ``started``, ``complete``, ``failed``, ``interrupted``.
+ProgressCallback = Callable[[str, CellRecord, BatchProgress], None]
+
+
+def _log_key(item: LogItem, duration_s: float | None, cache: dict[str, str]) -> str:
+    if item.path is not None:
+        if item.path not in cache:
+            cache[item.path] = str(log_fingerprint(Path(item.path), format="").sha256)
+        return cache[item.path]
+    scenario = item.scenario or ""
+    if scenario.endswith(".toml"):
+        import hashlib
+
+        scenario += " sha256 " + hashlib.sha256(Path(scenario).read_bytes()).hexdigest()
+    return f"scenario {scenario} seed {item.seed} duration {duration_s}"
+
+
+def _is_complete(task: CellTask) -> bool:
+    """Whether the cell's run directory is complete for the same key (log, pipeline hash,
+    redrive version, options) as ``task``'s."""
+    record = read_cell_record(task.record_path)
+    if record is None or record.status is not CellStatus.COMPLETE or record.key != task.key:
+        return False
+    try:
+        manifest = read_manifest(task.run_dir)
+    except ConfigError:
+        return False
+    if manifest.status is not RunStatus.COMPLETE:
+        return False
+    if task.log.path is not None and task.loop == "open":
+        return manifest.log.sha256 == task.key.log
+    return True
+
+
+def plan_cells(spec: BatchSpec, out: Path) -> list[CellTask]:
+    """Every cell of the matrix, in order pipeline → loop → log, with its key.
+
+    Raises:
+        ConfigError: a pipeline cannot be loaded (a missing file, an invalid key).
+    """
+    version = redrive_version()
+    hashes = {p.name: pipeline_hash(p.load(fail_fast=spec.fail_fast)) for p in spec.pipelines}
+    log_keys: dict[str, str] = {}
+    tasks = []
+    for pipeline in spec.pipelines:
+        for loop in spec.loops:
+            for log in spec.logs:
+                options = f"agents={spec.agents}" if loop == "closed" else ""
+                key = CellKey(
+                    log=_log_key(log, spec.duration_s, log_keys),
+                    pipeline_hash=hashes[pipeline.name],
+                    redrive_version=version,
+                    options=options,
+                )
+                tasks.append(
+                    CellTask(
+                        cell_id=f"{pipeline.name}/{loop}/{log.log_id}",
+                        batch_dir=str(out.resolve()),
+                        log=log,
+                        pipeline=pipeline,
+                        loop=loop,
+                        key=key,
+                        duration_s=spec.duration_s,
+                        agents=spec.agents,
+                        fail_fast=spec.fail_fast,
+                    )
+                )
+    return tasks
+
+
+def run_batch(
+    spec: BatchSpec,
+    out: Path,
+    *,
+    runner: CellRunner,
+    executor: str = "local",
+    workers: int | None = None,
+    retries: int = 1,
+    address: str | None = None,
+    cpus_per_cell: float = 1.0,
+    force: bool = False,
+    progress: ProgressCallback | None = None,
+) -> BatchManifest:
+    """Run every cell of ``spec`` that is not complete yet (all of them with ``force``) into the
+    batch directory ``out``, and return its final manifest (also in ``out/batch.json``).
+
+    ``runner`` runs one cell in a worker (:data:`redrive.batch.cell.CellRunner`).  A cell's
+    failure is in its record, not raised.
+
+    Raises:
+        ConfigError: a pipeline cannot be loaded, Ray is asked for but not installed, or another
+            batch is running in ``out``.
+        KeyboardInterrupt: after the running cells were stopped and the manifest written.
+    """
+    workers = workers or os.cpu_count() or 1
+    if workers < 1 or retries < 0:
+        raise ConfigError("--workers must be >= 1 and --retries >= 0")
+    if executor == "local":
+        chosen: LocalExecutor | RayExecutor = LocalExecutor(workers=workers, retries=retries)
+    elif executor == "ray":
+        chosen = RayExecutor(
+            workers=workers, retries=retries, address=address, cpus_per_cell=cpus_per_cell
+        )
+    else:
+        raise ConfigError(f"--executor {executor!r}: expected local or ray")
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / ".lock", "w") as lock:
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError as err:
+            msg = f"{out}: another `redrive batch` is running in this directory"
+            raise ConfigError(msg) from err
+        return _run_locked(
+            spec, out, runner=runner, executor=chosen, force=force, progress=progress
+        )
+
+
+def _run_locked(
+    spec: BatchSpec,
+    out: Path,
+    *,
+    runner: CellRunner,
+    executor: LocalExecutor | RayExecutor,
+    force: bool,
+    progress: ProgressCallback | None,
+) -> BatchManifest:
+    tasks = plan_cells(spec, out)
+    records: dict[str, CellRecord] = {}
+    todo: list[CellTask] = []
+    counts = BatchProgress(total=len(tasks))
+    for task in tasks:
+        if not force and _is_complete(task):
+            old = read_cell_record(task.record_path)
+            assert old is not None
+            records[task.cell_id] = replace(old, status=CellStatus.SKIPPED)
+            counts.skipped += 1
+        else:
+            records[task.cell_id] = task.record(CellStatus.PENDING, attempts=0)
+            todo.append(task)
+    manifest = BatchManifest(
+        redrive_version=redrive_version(),
+        created=now_iso(),
+        updated=now_iso(),
+        status="running",
+        host=host_info(),
+        spec=spec.to_json(),
+        executor="ray" if isinstance(executor, RayExecutor) else "local",
+        workers=executor.workers,
+        retries=executor.retries,
+        address=executor.address if isinstance(executor, RayExecutor) else None,
+        cells=(),
+    )
+
+    def save(status: str = "running", finished: str | None = None) -> None:
+        nonlocal manifest
+        manifest = replace(
+            manifest,
+            cells=tuple(records[t.cell_id] for t in tasks),
+            updated=now_iso(),
+            status=status,
+            finished=finished,
+        )
+        write_batch_manifest(out, manifest)
+
+    save()
+    if progress is not None:
+        for task in tasks:
+            if records[task.cell_id].status is CellStatus.SKIPPED:
+                progress("skipped", records[task.cell_id], counts)
+
+    class Events:
+        def started(self, task: CellTask) -> None:
+            records[task.cell_id] = task.record(CellStatus.RUNNING)
+            counts.running += 1
+            save()
+            if progress is not None:
+                progress("started", records[task.cell_id], counts)
+
+        def finished(self, record: CellRecord) -> None:
+            records[record.cell_id] = record
+            counts.running -= 1
+            if record.status is CellStatus.COMPLETE:
+                counts.done += 1
+            elif record.status is CellStatus.FAILED:
+                counts.failed += 1
+            if record.wall_s is not None and record.status is CellStatus.COMPLETE:
+                counts.walls.append(record.wall_s)
+            save()
+            if progress is not None:
+                progress(record.status.value, record, counts)
+
+    try:
+        executor.run(todo, runner, Events())
+    except BaseException:
+        save("interrupted", now_iso())
+        raise
+    failed = any(
+        r.status is not CellStatus.COMPLETE and r.status is not CellStatus.SKIPPED
+        for r in records.values()
+    )
+    save("failed" if failed else "complete", now_iso())
+    return manifest

@@ -1,0 +1,438 @@
+"""The matrix of a batch: logs × pipelines × loop modes, from the command line or a TOML spec.
+
+A batch spec file (``redrive batch --spec batch.toml``; relative paths are relative to the file)::
+
+    logs = ["drives/*.mcap", "fleet.txt", "drives/night", "urban@3", "cut_in"]
+    seeds = "0-3"            # scenario names without @SEED run once per seed (default: their own)
+    duration_s = 2.0         # synthetic scenarios only (default: the scenario's duration)
+    loop = "open"            # "open", "closed" or "both"
+    agents = "replay"        # closed loop: "replay" or "reactive"
+    out = "batches/nightly"  # the batch directory
+    executor = "local"       # "local" or "ray"
+    workers = 2              # default: the number of cores
+    retries = 1              # a cell whose worker died is run again up to this many times
+    fail_fast = false        # a failed step fails its cell (default: recorded, the run goes on)
+
+    [[pipeline]]
+    file = "pipelines/a.toml"        # a pipeline file, as `redrive run --pipeline` takes
+
+    [[pipeline]]
+    name = "idm"                     # default: the file's stem, else "flags"
+    planning = ["idm-planner"]       # or plugins, as --perception/--planning/--control
+    control = ["pure-pursuit-pid"]
+
+A log entry is a log (file or ROS 2 bag directory), a glob, a directory (the logs in it: ``.bag``
+and ``.mcap`` files, ROS 2 bag directories, KITTI folders), a ``.txt`` file of such entries (one a
+line, ``#`` comments), or a synthetic scenario: a name of ``redrive synth --list`` or a scenario
+``.toml`` with an optional ``@SEED``.  No pipeline means the reference pipeline.
+"""
+
+from __future__ import annotations
+
+import glob
+import hashlib
+import json
+import re
+import tomllib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+from redrive.config import PipelineConfig, load_pipeline, pipeline_from_plugins, reference_pipeline
+from redrive.errors import ConfigError
+from redrive.sim.scenario import list_scenarios
+
+__all__ = [
+    "LOOP_MODES",
+    "BatchSpec",
+    "LogItem",
+    "LoopMode",
+    "PipelineItem",
+    "expand_logs",
+    "load_batch_spec",
+    "make_pipeline_item",
+    "parse_seeds",
+    "pipeline_hash",
+    "unique_pipelines",
+]
+
+LoopMode = Literal["open", "closed"]
+#: what ``--loop`` takes: one mode or both.
+LOOP_MODES: Mapping[str, tuple[LoopMode, ...]] = {
+    "open": ("open",),
+    "closed": ("closed",),
+    "both": ("open", "closed"),
+}
+_LOG_SUFFIXES = (".bag", ".mcap", ".db3")
+_SEEDS = re.compile(r"^(\d+)(?:-(\d+))?$")
+_ID_CHARS = re.compile(r"[^A-Za-z0-9_.@+\-]")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class LogItem:
+    """One log of the matrix: a recorded log (``path``) or a synthetic scenario (``scenario``,
+    ``seed`` or None for the scenario's own).  ``log_id`` names its cells' directories."""
+
+    log_id: str
+    path: str | None = None
+    scenario: str | None = None
+    seed: int | None = None
+
+    def describe(self) -> str:
+        return self.path if self.path is not None else self.log_id
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class PipelineItem:
+    """One pipeline of the matrix: a pipeline file, or plugins per role (none at all: the
+    reference pipeline).  Workers rebuild the :class:`PipelineConfig` from these strings."""
+
+    name: str
+    file: str | None = None
+    perception: tuple[str, ...] = ()
+    planning: tuple[str, ...] = ()
+    control: tuple[str, ...] = ()
+
+    def load(self, *, fail_fast: bool = False) -> PipelineConfig:
+        """The pipeline (raises ConfigError as ``redrive run`` does for a bad file or plugin)."""
+        if self.file is not None:
+            config = load_pipeline(self.file)
+        elif self.perception or self.planning or self.control:
+            config = pipeline_from_plugins(
+                perception=self.perception, planning=self.planning, control=self.control
+            )
+        else:
+            config = reference_pipeline()
+        return config.with_options(fail_fast=True if fail_fast else None)
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "file": self.file,
+            "perception": list(self.perception),
+            "planning": list(self.planning),
+            "control": list(self.control),
+        }
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class BatchSpec:
+    """The whole matrix and how to run it (the TOML keys of the module docstring)."""
+
+    logs: tuple[LogItem, ...]
+    pipelines: tuple[PipelineItem, ...]
+    loops: tuple[LoopMode, ...] = ("open",)
+    duration_s: float | None = None
+    agents: Literal["replay", "reactive"] = "replay"
+    fail_fast: bool = False
+    options: Mapping[str, Any] = field(default_factory=dict)  # out, executor, workers, retries
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "logs": [
+                {"log_id": x.log_id, "path": x.path, "scenario": x.scenario, "seed": x.seed}
+                for x in self.logs
+            ],
+            "pipelines": [p.to_json() for p in self.pipelines],
+            "loops": list(self.loops),
+            "duration_s": self.duration_s,
+            "agents": self.agents,
+            "fail_fast": self.fail_fast,
+        }
+
+
+def parse_seeds(text: str) -> tuple[int, ...]:
+    """``"0-7"`` → 0…7, ``"3"`` → (3,), ``"1,4,9"`` and mixes (``"0-2,7"``) too."""
+    seeds: list[int] = []
+    for part in str(text).split(","):
+        match = _SEEDS.match(part.strip())
+        if not match:
+            msg = f"seeds {text!r}: expected N, A-B or a comma list of them (e.g. 0-7)"
+            raise ConfigError(msg)
+        first = int(match[1])
+        last = int(match[2]) if match[2] else first
+        if last < first:
+            msg = f"seeds {text!r}: {part.strip()} ends before it starts"
+            raise ConfigError(msg)
+        seeds.extend(range(first, last + 1))
+    return tuple(dict.fromkeys(seeds))
+
+
+def _is_scenario(name: str) -> bool:
+    return name in list_scenarios() or (name.endswith(".toml") and Path(name).is_file())
+
+
+def _is_log_dir(path: Path) -> bool:
+    """A directory that is one log: a ROS 2 bag (metadata.yaml) or a KITTI object folder."""
+    return (path / "metadata.yaml").is_file() or (path / "velodyne").is_dir()
+
+
+def _logs_in_dir(path: Path) -> list[Path]:
+    if _is_log_dir(path):
+        return [path]
+    found = [
+        p
+        for p in sorted(path.iterdir())
+        if (p.is_file() and p.suffix in (".bag", ".mcap")) or (p.is_dir() and _is_log_dir(p))
+    ]
+    if not found:
+        msg = f"{path}: a directory with no logs in it (.bag, .mcap, ROS 2 bag directories)"
+        raise ConfigError(msg)
+    return found
+
+
+def _expand_one(entry: str, base: Path, seeds: Sequence[int], depth: int) -> list[LogItem | Path]:
+    name, at, seed_text = entry.rpartition("@")
+    if not at:
+        name, seed_text = entry, ""
+    scenario = name if _is_scenario(name) else None
+    if scenario is None and name.endswith(".toml") and _is_scenario(str(base / name)):
+        scenario = str(base / name)
+    if scenario is not None:
+        stem = Path(scenario).stem if scenario.endswith(".toml") else scenario
+        if seed_text:
+            chosen: Sequence[int | None] = parse_seeds(seed_text)
+        else:
+            chosen = list(seeds) or [None]
+        return [
+            LogItem(log_id=stem if s is None else f"{stem}@{s}", scenario=scenario, seed=s)
+            for s in chosen
+        ]
+    path = Path(entry) if Path(entry).is_absolute() else base / entry
+    if glob.has_magic(entry):
+        matches = sorted(Path(p) for p in glob.glob(str(path), recursive=True))
+        if not matches:
+            msg = f"{entry}: the pattern matches no file"
+            raise ConfigError(msg)
+        return [m for m in matches if m.is_file() or _is_log_dir(m)]
+    if path.is_dir():
+        return list(_logs_in_dir(path))
+    if path.suffix == ".txt" and path.is_file():
+        if depth > 4:
+            raise ConfigError(f"{entry}: lists of logs nest more than 4 deep")
+        out: list[LogItem | Path] = []
+        for raw_line in path.read_text(encoding="utf-8").splitlines():
+            line = raw_line.split("#", 1)[0].strip()
+            if line:
+                out.extend(_expand_one(line, path.parent, seeds, depth + 1))
+        return out
+    if not path.exists():
+        msg = (
+            f"{entry}: no such log, directory, list of logs (.txt) or scenario "
+            "(`redrive synth --list` lists the scenarios)"
+        )
+        raise ConfigError(msg)
+    return [path]
+
+
+def expand_logs(
+    entries: Sequence[str], *, base: Path = Path(), seeds: Sequence[int] = ()
+) -> tuple[LogItem, ...]:
+    """The logs of ``entries`` (paths, globs, directories, ``.txt`` lists, scenarios with seeds),
+    each once, in the order given; each gets a unique ``log_id`` (the file's stem, with a short
+    hash of its path when two stems collide).
+
+    Raises:
+        ConfigError: an entry matches nothing, or no log at all.
+    """
+    items: list[LogItem | Path] = []
+    for entry in entries:
+        items.extend(_expand_one(str(entry), base, seeds, 0))
+    seen: set[str] = set()
+    unique: list[LogItem | Path] = []
+    for item in items:
+        key = str(item.resolve()) if isinstance(item, Path) else item.log_id
+        if key not in seen:
+            seen.add(key)
+            unique.append(item)
+    stems = [_stem(x) for x in unique if isinstance(x, Path)]
+    logs: list[LogItem] = []
+    for item in unique:
+        if isinstance(item, LogItem):
+            logs.append(item)
+            continue
+        resolved = str(item.resolve())
+        stem = _stem(item)
+        if stems.count(stem) > 1:
+            stem = f"{stem}-{hashlib.sha256(resolved.encode()).hexdigest()[:8]}"
+        logs.append(LogItem(log_id=stem, path=resolved))
+    if not logs:
+        raise ConfigError("the batch has no logs: give paths, globs, directories or scenarios")
+    ids = [x.log_id for x in logs]
+    clash = sorted({i for i in ids if ids.count(i) > 1})
+    if clash:
+        msg = f"two logs are both named {clash[0]!r} in the batch (a log and a scenario?)"
+        raise ConfigError(msg)
+    return tuple(logs)
+
+
+def _stem(path: Path) -> str:
+    stem = path.name
+    for suffix in _LOG_SUFFIXES:
+        stem = stem.removesuffix(suffix)
+    return _ID_CHARS.sub("_", stem) or "log"
+
+
+def pipeline_hash(config: PipelineConfig) -> str:
+    """sha256 of the pipeline as run: stages, algorithms (plugin, config), mode, executor, seed,
+    timeout, fail-fast, and the bytes of every ``file.py:Class`` plugin's file."""
+    stages = []
+    for stage in config.stages:
+        algos = []
+        for algo in stage.algorithms:
+            entry: dict[str, Any] = {
+                "name": algo.name,
+                "plugin": algo.plugin,
+                "config": json.loads(json.dumps(dict(algo.config), sort_keys=True, default=str)),
+            }
+            module = algo.plugin.rsplit(":", 1)[0]
+            if module.endswith(".py") and Path(module).is_file():
+                entry["file_sha256"] = hashlib.sha256(Path(module).read_bytes()).hexdigest()
+            algos.append(entry)
+        stages.append({"name": stage.name, "algorithms": algos})
+    canonical = {
+        "stages": stages,
+        "mode": config.mode,
+        "executor": config.executor,
+        "seed": config.seed,
+        "step_timeout_s": config.step_timeout_s,
+        "fail_fast": config.fail_fast,
+    }
+    text = json.dumps(canonical, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _pipeline_items(raw: Any, base: Path, where: str) -> tuple[PipelineItem, ...]:
+    if not isinstance(raw, list):
+        raise ConfigError(f"{where}: `pipeline` must be [[pipeline]] tables")
+    items = []
+    for i, entry in enumerate(raw):
+        here = f"{where}: pipeline {i + 1}"
+        if not isinstance(entry, dict):
+            raise ConfigError(f"{here}: expected a table")
+        unknown = sorted(set(entry) - {"name", "file", "perception", "planning", "control"})
+        if unknown:
+            raise ConfigError(f"{here}: unknown key(s) {', '.join(unknown)}")
+        plugins = {}
+        for role in ("perception", "planning", "control"):
+            value = entry.get(role, [])
+            if isinstance(value, str):
+                value = [value]
+            if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+                raise ConfigError(f"{here}: `{role}` must be a list of plugin names")
+            plugins[role] = tuple(value)
+        file = entry.get("file")
+        if file is not None and any(plugins.values()):
+            raise ConfigError(f"{here}: give either `file` or plugins, not both")
+        if file is not None:
+            file = str(Path(file) if Path(file).is_absolute() else base / file)
+        items.append(make_pipeline_item(name=entry.get("name"), file=file, **plugins))
+    return tuple(items)
+
+
+def make_pipeline_item(
+    *,
+    name: str | None,
+    file: str | None = None,
+    perception: Sequence[str] = (),
+    planning: Sequence[str] = (),
+    control: Sequence[str] = (),
+) -> PipelineItem:
+    """A pipeline item named ``name``, else the file's stem, else ``flags`` (``reference`` for
+    no plugin at all)."""
+    if name is None:
+        if file is not None:
+            name = Path(file).stem
+        else:
+            name = "flags" if (perception or planning or control) else "reference"
+    if not name or _ID_CHARS.search(name):
+        msg = f"pipeline name {name!r}: use letters, digits, '.', '_', '-' (it names directories)"
+        raise ConfigError(msg)
+    return PipelineItem(
+        name=name,
+        file=file,
+        perception=tuple(perception),
+        planning=tuple(planning),
+        control=tuple(control),
+    )
+
+
+def unique_pipelines(items: Sequence[PipelineItem]) -> tuple[PipelineItem, ...]:
+    """``items``, refusing two with one name (their run directories would collide)."""
+    names = [p.name for p in items]
+    clash = sorted({n for n in names if names.count(n) > 1})
+    if clash:
+        msg = (
+            f"two pipelines are named {clash[0]!r}: give each a `name` (spec) or rename a file "
+            "(the name is the directory of its cells)"
+        )
+        raise ConfigError(msg)
+    return tuple(items) or (make_pipeline_item(name=None),)
+
+
+_SPEC_KEYS = {
+    "logs",
+    "seeds",
+    "duration_s",
+    "loop",
+    "agents",
+    "out",
+    "executor",
+    "workers",
+    "retries",
+    "fail_fast",
+    "address",
+    "pipeline",
+}
+
+
+def load_batch_spec(path: Path) -> dict[str, Any]:
+    """The keys of a batch spec file, checked and with paths resolved against its directory
+    (``logs`` expanded to :class:`LogItem`, ``pipeline`` to :class:`PipelineItem`); the CLI lays
+    its flags over them.
+
+    Raises:
+        ConfigError: the file is missing, not TOML, or a key is unknown or of the wrong type.
+    """
+    try:
+        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError as err:
+        raise ConfigError(f"{path}: batch spec not found") from err
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"{path}: not valid TOML: {err}") from err
+    unknown = sorted(set(raw) - _SPEC_KEYS)
+    if unknown:
+        msg = (
+            f"{path}: unknown key(s) {', '.join(unknown)} (known: {', '.join(sorted(_SPEC_KEYS))})"
+        )
+        raise ConfigError(msg)
+    base = path.parent
+    out: dict[str, Any] = {}
+    types: dict[str, tuple[type, ...]] = {
+        "duration_s": (int, float),
+        "loop": (str,),
+        "agents": (str,),
+        "out": (str,),
+        "executor": (str,),
+        "workers": (int,),
+        "retries": (int,),
+        "fail_fast": (bool,),
+        "address": (str,),
+        "seeds": (str, int),
+    }
+    for key, kinds in types.items():
+        if key in raw:
+            value = raw[key]
+            if not isinstance(value, kinds) or (bool not in kinds and isinstance(value, bool)):
+                raise ConfigError(f"{path}: `{key}` has the wrong type ({value!r})")
+            out[key] = value
+    if "out" in out:
+        out["out"] = Path(out["out"]) if Path(out["out"]).is_absolute() else base / out["out"]
+    seeds = parse_seeds(str(out.pop("seeds"))) if "seeds" in out else ()
+    logs = raw.get("logs", [])
+    if not isinstance(logs, list) or not all(isinstance(x, str) for x in logs):
+        raise ConfigError(f"{path}: `logs` must be a list of strings")
+    out["logs"] = expand_logs(logs, base=base, seeds=seeds) if logs else ()
+    out["pipelines"] = _pipeline_items(raw.get("pipeline", []), base, str(path))
+    return out

@@ -1,0 +1,81 @@
+"""Planners for batch tests that take their worker process down (a crash no ``except`` sees)."""
+
+from __future__ import annotations
+
+import os
+import signal
+from collections.abc import Mapping
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+
+from redrive.algorithms import Algorithm, Role, StageOutputs
+from redrive.types import Frame, PlannedPath
+
+
+def _stand_still(stamp_ns: int) -> PlannedPath:
+    t = np.arange(0.0, 3.0 + 1e-9, 0.5)
+    zeros = np.zeros_like(t)
+    return PlannedPath(stamp_ns=stamp_ns, waypoints=np.column_stack([zeros, zeros, zeros, t]))
+
+
+class KillAtFrame(Algorithm):
+    """SIGKILLs its own process at frame ``frame_index``: only logs that long lose their worker."""
+
+    role = Role.PLANNING
+    defaults = MappingProxyType({"frame_index": 25})
+
+    def setup(self, config: Mapping[str, Any]) -> None:
+        self.frame_index = int(config["frame_index"])
+
+    def step(self, frame: Frame, upstream: StageOutputs) -> PlannedPath:
+        if frame.index == self.frame_index:
+            os.kill(os.getpid(), signal.SIGKILL)
+        return _stand_still(frame.stamp_ns)
+
+
+class KillOnce(Algorithm):
+    """SIGKILLs its process on the first frame of the first run that creates ``marker`` (an
+    atomic O_EXCL create: exactly one run dies, whichever gets there first)."""
+
+    role = Role.PLANNING
+    defaults = MappingProxyType({"marker": ""})
+
+    def setup(self, config: Mapping[str, Any]) -> None:
+        self.marker = str(config["marker"])
+
+    def step(self, frame: Frame, upstream: StageOutputs) -> PlannedPath:
+        if frame.index == 0:
+            try:
+                fd = os.open(self.marker, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+            except FileExistsError:
+                pass
+            else:
+                os.close(fd)
+                os.kill(os.getpid(), signal.SIGKILL)
+        return _stand_still(frame.stamp_ns)
+
+
+class InterruptDriver(Algorithm):
+    """Sends SIGINT (Ctrl-C) to process ``driver_pid`` at frame ``frame_index``, once: the run
+    that creates ``marker`` does; later runs plan on."""
+
+    role = Role.PLANNING
+    defaults = MappingProxyType({"driver_pid": 0, "frame_index": 21, "marker": ""})
+
+    def setup(self, config: Mapping[str, Any]) -> None:
+        self.driver_pid = int(config["driver_pid"])
+        self.frame_index = int(config["frame_index"])
+        self.marker = str(config["marker"])
+
+    def step(self, frame: Frame, upstream: StageOutputs) -> PlannedPath:
+        if frame.index == self.frame_index:
+            try:
+                fd = os.open(self.marker, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+            except FileExistsError:
+                pass
+            else:
+                os.close(fd)
+                os.kill(self.driver_pid, signal.SIGINT)
+        return _stand_still(frame.stamp_ns)
