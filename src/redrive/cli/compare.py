@@ -45,7 +45,30 @@ def _pct(value: float) -> str:
     return "" if not math.isfinite(value) else f"{100.0 * value:+.1f}%"
 
 
-def _print(cmp: Any, *, worst: int) -> None:
+#: rows of the text output unless --all: what fits a screen (the rest: --all, --html, --json).
+SCREEN_VALUES = 30
+SCREEN_SERIES = 12
+
+
+def shown_values(cmp: Any, *, everything: bool) -> list[Any]:
+    """The values the text output lists: every one with ``everything``; else each metric's
+    headline (its first value per algorithm pair) and the values whose per-frame CI excludes
+    0, at most :data:`SCREEN_VALUES`."""
+    if everything:
+        return list(cmp.values)
+    seen: set[tuple[str, str, str]] = set()
+    keep = []
+    for v in cmp.values:
+        key = (v.metric, v.algorithm_a, v.algorithm_b)
+        headline = key not in seen
+        seen.add(key)
+        significant = v.bootstrap is not None and v.bootstrap.excludes_zero
+        if headline or significant:
+            keep.append(v)
+    return keep[:SCREEN_VALUES]
+
+
+def _print(cmp: Any, *, worst: int, everything: bool = False) -> None:
     from rich.console import Console
     from rich.markup import escape
     from rich.table import Table
@@ -70,7 +93,8 @@ def _print(cmp: Any, *, worst: int) -> None:
     for col in ("metric", "algorithm", "value", *numbers, f"{p.label_b} is", "95% CI of Δ/frame"):
         table.add_column(col, justify="right" if col in numbers else "left")
     colour = {"better": "green", "worse": "red"}
-    for v in cmp.values:
+    values = shown_values(cmp, everything=everything)
+    for v in values:
         algo = (
             v.algorithm_a if v.algorithm_a == v.algorithm_b else f"{v.algorithm_a}→{v.algorithm_b}"
         )
@@ -86,7 +110,8 @@ def _print(cmp: Any, *, worst: int) -> None:
     )
     for col in ("series", "better", "frames", "mean Δ/frame", "95% CI", "excludes 0"):
         series.add_column(col)
-    for s in cmp.series:
+    series_shown = list(cmp.series) if everything else list(cmp.series)[:SCREEN_SERIES]
+    for s in series_shown:
         b = s.bootstrap
         better = {True: "higher", False: "lower", None: "—"}[s.higher_is_better]
         ci = f"[{_fmt(b.ci_low)}, {_fmt(b.ci_high)}]"
@@ -104,6 +129,12 @@ def _print(cmp: Any, *, worst: int) -> None:
     console.print(frames)
     if not cmp.worst:
         console.print("B is not worse than A on any frame of any per-frame series.")
+    hidden_v, hidden_s = len(cmp.values) - len(values), len(cmp.series) - len(series_shown)
+    if hidden_v or hidden_s:
+        console.print(
+            f"{hidden_v} more values and {hidden_s} more series not shown (headlines and "
+            "significant changes are): --all lists every row, --html OUT.html writes them all"
+        )
     for k in cmp.skipped:
         where = (
             k.algorithm_a if k.algorithm_a == k.algorithm_b else f"{k.algorithm_a}→{k.algorithm_b}"
@@ -127,7 +158,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.json:
         print(cmp.to_json(worst=args.worst))
     else:
-        _print(cmp, worst=args.worst)
+        _print(cmp, worst=args.worst, everything=args.all)
     if args.html is not None:
         path = cmp.write_html(args.html, worst=args.worst)
         print(f"HTML: {path}", file=sys.stderr if args.json else sys.stdout)
@@ -166,6 +197,12 @@ def register(sub: Any) -> None:
         "--html", type=Path, default=None, metavar="OUT.html", help="also write an HTML file"
     )
     parser.add_argument("--json", action="store_true", help="print JSON instead of tables")
+    parser.add_argument(
+        "--all",
+        action="store_true",
+        help="list every value and series (default: each metric's headline and the values "
+        "whose change is significant, to fit a screen)",
+    )
     parser.add_argument(
         "--bootstrap", type=int, default=2000, metavar="N", help="bootstrap resamples (2000)"
     )

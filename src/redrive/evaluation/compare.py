@@ -94,10 +94,22 @@ def _pairs(
         return [(x, x) for x in sorted(algos_a | algos_b)], skipped
     if algorithm_a is None and algorithm_b is None:
         pairs = [(x, x) for x in sorted(algos_a & algos_b)]
-        for only, other in ((algos_a - algos_b, "B"), (algos_b - algos_a, "A")):
+        by_role = _pair_by_role(a, b, algos_a - algos_b, algos_b - algos_a)
+        pairs += by_role
+        paired_a = {x for x, _ in by_role}
+        paired_b = {y for _, y in by_role}
+        for only, other in (
+            (algos_a - algos_b - paired_a, "B"),
+            (algos_b - algos_a - paired_b, "A"),
+        ):
             for x in sorted(only):
                 xa, xb = (x, "") if other == "B" else ("", x)
                 reason = f"algorithm {x!r} has no evaluation in {other}"
+                if x:  # an algorithm, not the run-level metrics
+                    reason += (
+                        " and no single algorithm of its role there to pair with: pair it with "
+                        "--algorithm-a/--algorithm-b"
+                    )
                 skipped.append(
                     SkippedMetric(metric="*", algorithm_a=xa, algorithm_b=xb, reason=reason)
                 )
@@ -112,6 +124,22 @@ def _pairs(
     if "" in algos_a and "" in algos_b:
         pairs.append(("", ""))  # run-level metrics (latency …) are about the run as a whole
     return pairs, skipped
+
+
+def _pair_by_role(
+    a: RunSide, b: RunSide, only_a: set[str], only_b: set[str]
+) -> list[tuple[str, str]]:
+    """Algorithms with different names in A and B, paired when each is the only unpaired
+    algorithm of its role on its side (``det_v1`` ↔ ``det_v2``: a new version renamed)."""
+    roles_a = {x.name: x.role for x in a.run.manifest.algorithms}
+    roles_b = {x.name: x.role for x in b.run.manifest.algorithms}
+    pairs = []
+    for role in dict.fromkeys(roles_a.values()):
+        xa = [x for x in sorted(only_a) if x and roles_a.get(x) is role]
+        xb = [x for x in sorted(only_b) if x and roles_b.get(x) is role]
+        if len(xa) == 1 and len(xb) == 1:
+            pairs.append((xa[0], xb[0]))
+    return pairs
 
 
 def _definition_mismatch(metric: str, da: Mapping[str, Any], db: Mapping[str, Any]) -> str | None:

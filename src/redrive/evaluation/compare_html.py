@@ -24,9 +24,10 @@ CHART_DPI = 90
 _BETTER, _WORSE = "#187a2f", "#b3261e"
 
 
-def _delta_chart(c: Comparison) -> bytes | None:
-    from matplotlib.figure import Figure
-
+def delta_bars(c: Comparison) -> list[tuple[str, float]]:
+    """The bar chart's bars, headline values first: (label, relative change of B against A in
+    %, positive when B is better in the value's own direction — a latency that drops is a
+    positive bar, a recall that drops a negative one)."""
     rows = [
         v for v in c.values if math.isfinite(v.relative_delta) and v.verdict in ("better", "worse")
     ]
@@ -34,18 +35,27 @@ def _delta_chart(c: Comparison) -> bytes | None:
     rows = sorted(
         rows, key=lambda v: (heads[(v.metric, v.algorithm_a)] != v.key, -abs(v.relative_delta))
     )[:30]
-    if not rows:
+    return [
+        (
+            f"{v.metric}{pair_label(v.algorithm_a, v.algorithm_b)} {v.key}",
+            100.0 * abs(v.relative_delta) * (1 if v.verdict == "better" else -1),
+        )
+        for v in rows
+    ]
+
+
+def _delta_chart(c: Comparison) -> bytes | None:
+    from matplotlib.figure import Figure
+
+    bars = delta_bars(c)
+    if not bars:
         return None
-    fig = Figure(figsize=(8, 0.3 * len(rows) + 1.2))
+    fig = Figure(figsize=(8, 0.3 * len(bars) + 1.2))
     ax = fig.add_subplot()
-    gain = [100.0 * abs(v.relative_delta) * (1 if v.verdict == "better" else -1) for v in rows]
+    gain = [g for _, g in bars]
     colors = [_BETTER if g > 0 else _WORSE for g in gain]
-    ax.barh(range(len(rows)), gain, color=colors)
-    ax.set_yticks(
-        range(len(rows)),
-        [f"{v.metric}{pair_label(v.algorithm_a, v.algorithm_b)} {v.key}" for v in rows],
-        fontsize=7,
-    )
+    ax.barh(range(len(bars)), gain, color=colors)
+    ax.set_yticks(range(len(bars)), [label for label, _ in bars], fontsize=7)
     ax.invert_yaxis()
     ax.axvline(0.0, color="k", lw=0.8)
     ax.set_xlabel("relative change of B against A, % (right = better; headline values first)")
