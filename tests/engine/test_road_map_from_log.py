@@ -31,6 +31,8 @@ def test_a_replayed_synthetic_log_brings_its_road_map(tmp_path: Path) -> None:
     assert stored is not None
     expected = scenario_road_map(load_scenario("cut_in"))
     assert [lane.lane_id for lane in stored.lanes] == [lane.lane_id for lane in expected.lanes]
+    # and what it was made from: compare pairs it with a closed loop of the same scenario
+    assert open_run(out).manifest.log.scenario == {"name": "cut_in", "seed": 3, "duration_s": 1.0}
     summary = evaluate_run(out, metrics=[DrivableAreaCompliance()])
     assert not summary.skipped
     (scored,) = summary.scored
@@ -56,3 +58,4 @@ def test_a_log_without_a_map_gives_a_run_without_one(tmp_path: Path) -> None:
     out = tmp_path / "run"
     run_log(RunRequest(log=bag, pipeline=pipeline_from_plugins(planning=["idm-planner"]), out=out))
     assert open_run(out).road_map() is None
+    assert open_run(out).manifest.log.scenario == {}

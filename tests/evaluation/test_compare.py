@@ -19,6 +19,7 @@ from redrive.cli import compare as compare_cli
 from redrive.errors import ConfigError
 from redrive.evaluation import Bookmark, EvalData, Metric, MetricResult
 from redrive.evaluation.compare import compare_runs, paired_bootstrap
+from redrive.evaluation.compare_html import delta_bars
 from redrive.evaluation.store import Scored, write_evaluation
 from redrive.results import RunWriter, open_run
 from redrive.types import Role
@@ -62,9 +63,12 @@ def make_run(
     *,
     sha: str = "abc",
     n: int = N,
+    rename: Mapping[str, str] | None = None,
 ) -> Path:
+    """``rename``: algorithms of the manifest under another name (a new version renamed)."""
     log = replace(SETUP.log, sha256=sha)
-    with RunWriter(path, setup=replace(SETUP, log=log)) as w:
+    algos = tuple(replace(x, name=(rename or {}).get(x.name, x.name)) for x in SETUP.algorithms)
+    with RunWriter(path, setup=replace(SETUP, log=log, algorithms=algos)) as w:
         for i in range(n):
             w.write_frame(frame(i, planning=False))
     write_evaluation(
@@ -281,8 +285,10 @@ def test_explicit_pairing(tmp_path: Path) -> None:
     by_name = compare_runs(a, b)
     assert by_name.values == ()
     assert {k.reason for k in by_name.skipped} == {
-        "algorithm 'det' has no evaluation in B",
-        "algorithm 'det_v2' has no evaluation in A",
+        "algorithm 'det' has no evaluation in B and no single algorithm of its role there to "
+        "pair with: pair it with --algorithm-a/--algorithm-b",
+        "algorithm 'det_v2' has no evaluation in A and no single algorithm of its role there to "
+        "pair with: pair it with --algorithm-a/--algorithm-b",
     }
     cmp = compare_runs(a, b, algorithm_a="det", algorithm_b="det_v2")
     assert cmp.pairs == (("det", "det_v2"),)
@@ -290,6 +296,20 @@ def test_explicit_pairing(tmp_path: Path) -> None:
     assert (v.algorithm_a, v.algorithm_b, v.delta, v.verdict) == ("det", "det_v2", -0.5, "worse")
     with pytest.raises(ConfigError, match=r"no evaluated algorithm 'nope' \(evaluated: det_v2\)"):
         compare_runs(a, b, algorithm_a="det", algorithm_b="nope")
+
+
+def test_renamed_algorithms_pair_by_role(tmp_path: Path) -> None:
+    """A's only evaluated detector 'det' and B's 'det_v2' (the manifest's perception algorithm
+    renamed): paired by their role without flags (issue 17 item 7)."""
+    a = make_run(tmp_path / "a", [(Counts(), "det", counts({"r": 1.0}))], n=2)
+    b = make_run(
+        tmp_path / "b", [(Counts(), "det_v2", counts({"r": 0.5}))], n=2, rename={"det": "det_v2"}
+    )
+    cmp = compare_runs(a, b)
+    assert cmp.pairs == (("det", "det_v2"),)
+    (v,) = cmp.values
+    assert (v.algorithm_a, v.algorithm_b, v.verdict) == ("det", "det_v2", "worse")
+    assert cmp.skipped == ()
 
 
 def _worst_pair(tmp_path: Path) -> tuple[Path, Path]:
@@ -427,3 +447,34 @@ def test_demo_runs_with_different_detector_parameters(tmp_path: Path, demo_log: 
     top = cmp.worst_frames(1)[0]
     assert any("/missed" in d and d.endswith("worse)") for d in top.differences)
     assert missed.bootstrap.mean_delta > 0
+
+
+def test_bar_chart_is_right_for_better_in_each_direction(ab: tuple[Path, Path]) -> None:
+    """A latency that drops is a bar to the right (better); one that rises, to the left; the
+    same for an error (ate) against a score (recall) (issue 17 item 2)."""
+    a, b = ab
+    bars = dict(delta_bars(compare_runs(a, b)))
+    assert bars["lag p95"] == pytest.approx(-25.0)  # 12 → 15 ms: worse, left
+    assert bars["counts[det] ate"] == pytest.approx(20.0)  # 0.5 → 0.4 m: better, right
+    assert bars["counts[det] recall"] == pytest.approx(-25.0)  # 0.8 → 0.6: worse, left
+    back = dict(delta_bars(compare_runs(b, a)))
+    assert back["lag p95"] == pytest.approx(20.0)  # 15 → 12 ms: better, right
+
+
+def test_cli_text_fits_a_screen_and_says_where_the_rest_is(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    many = {f"v{i:03d}": float(i) for i in range(200)}
+    a = make_run(tmp_path / "a", [(Counts(), "det", counts(many))], n=2)
+    b = make_run(
+        tmp_path / "b", [(Counts(), "det", counts({k: v + 1 for k, v in many.items()}))], n=2
+    )
+    assert _cli(["compare", str(a), str(b), "--bootstrap", "50"]) == 0
+    out = capsys.readouterr().out
+    assert "v000" in out  # the headline
+    assert "v150" not in out
+    assert "199 more values" in out
+    assert "--all lists every row" in out
+    assert len(out.splitlines()) < 80
+    assert _cli(["compare", str(a), str(b), "--bootstrap", "50", "--all"]) == 0
+    assert "v150" in capsys.readouterr().out

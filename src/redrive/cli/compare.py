@@ -16,9 +16,15 @@ examples:
   redrive compare runs/a runs/b --worst 20 --html ab.html
   redrive compare runs/a runs/b --algorithm-a clusters --algorithm-b clusters_v2
   redrive compare runs/a runs/b --json > ab.json
+  redrive compare runs/open runs/closed                 open loop beside closed loop
 
 Both runs must have replayed the same log (checked by its sha256) and been evaluated
-(`redrive evaluate RUN`). Δ = B − A; "better"/"worse" follow each value's direction. Metrics
+(`redrive evaluate RUN`). Two closed-loop runs of a scenario pair when scenario, seed, duration
+and agents agree. An open-loop run of a `redrive synth` log and a closed-loop run of the
+scenario it was made from (same name, seed and duration), or of the same recorded log, pair in
+either order: the output says which run is open and which closed loop, whether the pipelines
+are the same (and how they differ), and lists metrics only one run has with — on the other
+side. Δ = B − A; "better"/"worse" follow each value's direction. Metrics
 are compared only where name, version and parameters agree; the others are listed as not
 compared. Significance: a paired bootstrap over frames (the frames both runs have are resampled
 with replacement; 95 % CI of the mean per-frame difference). Aggregates such as mAP are not
@@ -30,29 +36,72 @@ def _fmt(value: float) -> str:
     return "n/a" if math.isnan(value) else f"{value:.4g}"
 
 
+def _side(value: float, present: bool) -> str:
+    """A run's value, ``—`` when the run has no such value (only the other run has it)."""
+    return _fmt(value) if present else "—"
+
+
 def _pct(value: float) -> str:
     return "" if not math.isfinite(value) else f"{100.0 * value:+.1f}%"
 
 
-def _print(cmp: Any, *, worst: int) -> None:
+#: rows of the text output unless --all: what fits a screen (the rest: --all, --html, --json).
+SCREEN_VALUES = 30
+SCREEN_SERIES = 12
+
+
+def shown_values(cmp: Any, *, everything: bool) -> list[Any]:
+    """The values the text output lists: every one with ``everything``; else each metric's
+    headline (its first value per algorithm pair) and the values whose per-frame CI excludes
+    0, at most :data:`SCREEN_VALUES`."""
+    if everything:
+        return list(cmp.values)
+    seen: set[tuple[str, str, str]] = set()
+    keep = []
+    for v in cmp.values:
+        key = (v.metric, v.algorithm_a, v.algorithm_b)
+        headline = key not in seen
+        seen.add(key)
+        significant = v.bootstrap is not None and v.bootstrap.excludes_zero
+        if headline or significant:
+            keep.append(v)
+    return keep[:SCREEN_VALUES]
+
+
+def _print(cmp: Any, *, worst: int, everything: bool = False) -> None:
     from rich.console import Console
     from rich.markup import escape
     from rich.table import Table
 
     console = Console(width=None if sys.stdout.isatty() else 140)
     pairs = ", ".join(f"{a} ↔ {b}" if a != b else a for a, b in cmp.pairs if a or b)
-    console.print(f"A {cmp.run_a}\nB {cmp.run_b}\nsource {cmp.log_sha256}; paired {pairs}")
-    table = Table(title="values (Δ = B − A)", title_justify="left")
-    for col in ("metric", "algorithm", "value", "A", "B", "Δ", "Δ %", "B is", "95% CI of Δ/frame"):
-        table.add_column(col, justify="right" if col in ("A", "B", "Δ", "Δ %") else "left")
+    p = cmp.pairing
+    console.print(
+        f"{p.label_a} {cmp.run_a}\n{p.label_b} {cmp.run_b}\nsource {cmp.log_sha256}; paired {pairs}"
+    )
+    if p.open_closed:
+        console.print(f"[bold]{escape(p.describe())}[/]")
+        for note in p.notes:
+            console.print(escape(note))
+        if p.pipeline_differences:
+            console.print("[yellow]the pipelines differ: the values are not of one pipeline[/]")
+    numbers = (p.label_a, p.label_b, "Δ", "Δ %")
+    title = "values (Δ = B − A" + (f" = {p.loop_b} − {p.loop_a})" if p.open_closed else ")")
+    if p.open_closed:
+        title += "; — = the run has no such value"
+    table = Table(title=title, title_justify="left")
+    for col in ("metric", "algorithm", "value", *numbers, f"{p.label_b} is", "95% CI of Δ/frame"):
+        table.add_column(col, justify="right" if col in numbers else "left")
     colour = {"better": "green", "worse": "red"}
-    for v in cmp.values:
+    values = shown_values(cmp, everything=everything)
+    for v in values:
         algo = (
             v.algorithm_a if v.algorithm_a == v.algorithm_b else f"{v.algorithm_a}→{v.algorithm_b}"
         )
         verdict = f"[{colour[v.verdict]}]{v.verdict}[/]" if v.verdict in colour else v.verdict
         table.add_row(
-            escape(v.metric), escape(algo or "(run)"), escape(v.key), _fmt(v.a), _fmt(v.b),
+            escape(v.metric), escape(algo or "(run)"), escape(v.key), _side(v.a, v.in_a),
+            _side(v.b, v.in_b),
             _fmt(v.delta), _pct(v.relative_delta), verdict, escape(v.significance),
         )  # fmt: skip
     console.print(table)
@@ -61,7 +110,8 @@ def _print(cmp: Any, *, worst: int) -> None:
     )
     for col in ("series", "better", "frames", "mean Δ/frame", "95% CI", "excludes 0"):
         series.add_column(col)
-    for s in cmp.series:
+    series_shown = list(cmp.series) if everything else list(cmp.series)[:SCREEN_SERIES]
+    for s in series_shown:
         b = s.bootstrap
         better = {True: "higher", False: "lower", None: "—"}[s.higher_is_better]
         ci = f"[{_fmt(b.ci_low)}, {_fmt(b.ci_high)}]"
@@ -79,6 +129,12 @@ def _print(cmp: Any, *, worst: int) -> None:
     console.print(frames)
     if not cmp.worst:
         console.print("B is not worse than A on any frame of any per-frame series.")
+    hidden_v, hidden_s = len(cmp.values) - len(values), len(cmp.series) - len(series_shown)
+    if hidden_v or hidden_s:
+        console.print(
+            f"{hidden_v} more values and {hidden_s} more series not shown (headlines and "
+            "significant changes are): --all lists every row, --html OUT.html writes them all"
+        )
     for k in cmp.skipped:
         where = (
             k.algorithm_a if k.algorithm_a == k.algorithm_b else f"{k.algorithm_a}→{k.algorithm_b}"
@@ -102,7 +158,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.json:
         print(cmp.to_json(worst=args.worst))
     else:
-        _print(cmp, worst=args.worst)
+        _print(cmp, worst=args.worst, everything=args.all)
     if args.html is not None:
         path = cmp.write_html(args.html, worst=args.worst)
         print(f"HTML: {path}", file=sys.stderr if args.json else sys.stdout)
@@ -112,9 +168,11 @@ def _run(args: argparse.Namespace) -> int:
 def register(sub: Any) -> None:
     parser = sub.add_parser(
         "compare",
-        help="A/B comparison of two evaluated runs of the same log",
+        help="A/B comparison of two evaluated runs of the same log (or open beside closed loop)",
         description=(
-            "Compare the evaluation of run B against run A: per-metric deltas with a significance "
+            "Compare the evaluation of run B against run A (two runs of one log, or an "
+            "open-loop and a closed-loop run of the same scenario): per-metric deltas with a "
+            "significance "
             "note (paired bootstrap over frames), per-frame deltas, and the frames where B is "
             "most worse than A, as a table, JSON or a self-contained HTML file."
         ),
@@ -139,6 +197,12 @@ def register(sub: Any) -> None:
         "--html", type=Path, default=None, metavar="OUT.html", help="also write an HTML file"
     )
     parser.add_argument("--json", action="store_true", help="print JSON instead of tables")
+    parser.add_argument(
+        "--all",
+        action="store_true",
+        help="list every value and series (default: each metric's headline and the values "
+        "whose change is significant, to fit a screen)",
+    )
     parser.add_argument(
         "--bootstrap", type=int, default=2000, metavar="N", help="bootstrap resamples (2000)"
     )

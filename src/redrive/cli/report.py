@@ -12,18 +12,28 @@ _EPILOG = """\
 examples:
   redrive evaluate runs/first && redrive report runs/first     into runs/first/report/
   redrive report runs/first -o out/ --worst 12                 12 bird's-eye snapshots
+  redrive report runs/closed --beside runs/open                open loop beside closed loop
 
 report.html needs no network (plots are inline PNG images, no JavaScript): open it from disk or
-mail it. report.xlsx: sheets summary, per_frame (one column per algorithm / metric / series),
-curves, bookmarks, metrics. CSV: values, per_frame, curves, bookmarks. Text cells a spreadsheet
+mail it. report.xlsx: sheets summary (one tidy table: a row per value), run, algorithms,
+per_frame (one column per algorithm / metric / series), curves, bookmarks, metrics (and beside
+with --beside). CSV: values, per_frame, curves, bookmarks. Text cells a spreadsheet
 would run as a formula get a leading ' .
+
+--beside OTHER adds another evaluated run of the same log or situation next to RUN: above all
+an open-loop run of a `redrive synth` log beside a closed-loop run of its scenario (same name,
+seed, duration; either way round). The page gets a section with both runs' values (— where a
+run has none), which is open and which closed loop, and whether the pipelines differ; the
+workbook a sheet `beside`; and beside.csv. The pairing is `redrive compare`'s.
 """
 
 
 def _run(args: argparse.Namespace) -> int:
     from redrive.evaluation.report import write_report
 
-    files = write_report(args.run, out=args.output, worst=args.worst, rank_by=args.rank_by)
+    files = write_report(
+        args.run, out=args.output, worst=args.worst, beside=args.beside, rank_by=args.rank_by
+    )
     for path in files.paths():
         print(path)
     return 0
@@ -70,6 +80,16 @@ def register(sub: Any) -> None:
         default=DEFAULT_WORST,
         metavar="N",
         help=f"bird's-eye snapshots of the N worst frames (default {DEFAULT_WORST})",
+    )
+    parser.add_argument(
+        "--beside",
+        type=Path,
+        default=None,
+        metavar="OTHER",
+        help=(
+            "another evaluated run of the same log or scenario (e.g. the open-loop run beside "
+            "a closed-loop RUN) shown side by side in the page, the workbook and beside.csv"
+        ),
     )
     parser.add_argument(
         "--rank-by",

@@ -34,6 +34,7 @@ from redrive.results import (
     RunWriter,
     SourceLog,
 )
+from redrive.results.manifest import SCENARIO_METADATA
 from redrive.results.roadmap import MAP_METADATA, road_map_from_json
 from redrive.types import Frame, RoadMap
 
@@ -44,6 +45,7 @@ __all__ = [
     "log_fingerprint",
     "log_inputs",
     "log_road_map",
+    "log_scenario",
     "run_log",
     "run_reader",
     "run_setup",
@@ -144,6 +146,27 @@ def _copy_road_map(log: LogReader, writer: RunWriter) -> None:
         writer.write_map(road_map)
 
 
+def log_scenario(log: LogReader) -> dict[str, Any]:
+    """What a ``redrive synth`` log was synthesized from (its MCAP metadata record
+    ``redrive.scenario``: ``name``, ``seed``, ``duration_s``), for the manifest's
+    ``log.scenario``; empty for any other log, or one whose record is unreadable."""
+    metadata = getattr(log, "metadata", None)
+    found = metadata(SCENARIO_METADATA) if callable(metadata) else None
+    if not found:
+        return {}
+    try:
+        return {
+            "name": str(found["name"]),
+            "seed": int(found["seed"]),
+            "duration_s": float(found["duration_s"]),
+        }
+    except (KeyError, ValueError) as err:
+        logger.warning(
+            "%s: its scenario record is unreadable, the run has none (%s)", log.path, err
+        )
+        return {}
+
+
 def _select(frames: Iterator[Frame], first: int | None, stop: int | None) -> Iterator[Frame]:
     if first:
         frames = itertools.dropwhile(lambda f: f.index < first, frames)
@@ -228,7 +251,9 @@ def run_log(
             request,
             log,
             hooks=ReplayMode(rate=request.rate),
-            log_info=log_fingerprint(request.log, format=log.format),
+            log_info=replace(
+                log_fingerprint(request.log, format=log.format), scenario=log_scenario(log)
+            ),
             on_start=on_start,
             progress=progress,
             cancel=cancel,

@@ -24,6 +24,14 @@ Definitions (B − A throughout):
 Only metrics whose name, version and ``params_hash`` agree in both manifests are compared; the
 others are listed in :attr:`Comparison.skipped` with the reason.
 
+Which runs pair (:mod:`redrive.evaluation.pairing`): two runs of the same log, two closed-loop
+runs of the same scenario, seed, duration and agents, or — either order — an open-loop run of a
+``redrive synth`` log beside a closed-loop run of the scenario it was made from (same name, seed,
+duration; or both on the same recorded log). In that open/closed pairing every algorithm and
+metric either run has is shown: a value only one run has is NaN on the other side with
+``in_a``/``in_b`` False (``—`` in the tables), never dropped; :attr:`Comparison.pairing` says
+which run is which loop and how the pipelines differ.
+
 This module pairs the runs, their algorithms and their metric definitions; the numbers are in
 :mod:`redrive.evaluation.deltas` and :mod:`redrive.evaluation.bootstrap`, the result and its
 tables/JSON in :mod:`redrive.evaluation.comparison`, the HTML page in
@@ -54,11 +62,13 @@ from redrive.evaluation.deltas import (
     pair_label,
     worst_frames,
 )
+from redrive.evaluation.pairing import Pairing, pair_runs
 from redrive.results import Run, open_run
 
 __all__ = [
     "Bootstrap",
     "Comparison",
+    "Pairing",
     "SeriesDelta",
     "SkippedMetric",
     "ValueDelta",
@@ -70,35 +80,36 @@ __all__ = [
 logger = logging.getLogger(__name__)
 
 
-def _log_hash(run: Run) -> str:
-    """What the run was made from: the log's sha256, or for a closed-loop run of a scenario the
-    scenario, its seed and duration (two such runs saw the same world if these agree)."""
-    closed = run.manifest.closed_loop
-    if closed and run.manifest.log.format == "scenario":
-        return (
-            f"scenario {closed.get('scenario')} seed {closed.get('seed')} "
-            f"duration {closed.get('duration_s')} s agents {closed.get('agents')}"
-        )
-    sha = run.manifest.log.sha256 or ""
-    if not sha:
-        msg = (
-            f"{run.path / 'manifest.json'} records no log sha256; cannot check the runs share a log"
-        )
-        raise ConfigError(msg)
-    return sha
-
-
 def _pairs(
-    a: RunSide, b: RunSide, algorithm_a: str | None, algorithm_b: str | None
+    a: RunSide,
+    b: RunSide,
+    algorithm_a: str | None,
+    algorithm_b: str | None,
+    *,
+    one_sided: bool,
 ) -> tuple[list[tuple[str, str]], list[SkippedMetric]]:
     algos_a, algos_b = a.algorithms(), b.algorithms()
     skipped: list[SkippedMetric] = []
+    if algorithm_a is None and algorithm_b is None and one_sided:
+        return [(x, x) for x in sorted(algos_a | algos_b)], skipped
     if algorithm_a is None and algorithm_b is None:
         pairs = [(x, x) for x in sorted(algos_a & algos_b)]
-        for only, other in ((algos_a - algos_b, "B"), (algos_b - algos_a, "A")):
+        by_role = _pair_by_role(a, b, algos_a - algos_b, algos_b - algos_a)
+        pairs += by_role
+        paired_a = {x for x, _ in by_role}
+        paired_b = {y for _, y in by_role}
+        for only, other in (
+            (algos_a - algos_b - paired_a, "B"),
+            (algos_b - algos_a - paired_b, "A"),
+        ):
             for x in sorted(only):
                 xa, xb = (x, "") if other == "B" else ("", x)
                 reason = f"algorithm {x!r} has no evaluation in {other}"
+                if x:  # an algorithm, not the run-level metrics
+                    reason += (
+                        " and no single algorithm of its role there to pair with: pair it with "
+                        "--algorithm-a/--algorithm-b"
+                    )
                 skipped.append(
                     SkippedMetric(metric="*", algorithm_a=xa, algorithm_b=xb, reason=reason)
                 )
@@ -113,6 +124,22 @@ def _pairs(
     if "" in algos_a and "" in algos_b:
         pairs.append(("", ""))  # run-level metrics (latency …) are about the run as a whole
     return pairs, skipped
+
+
+def _pair_by_role(
+    a: RunSide, b: RunSide, only_a: set[str], only_b: set[str]
+) -> list[tuple[str, str]]:
+    """Algorithms with different names in A and B, paired when each is the only unpaired
+    algorithm of its role on its side (``det_v1`` ↔ ``det_v2``: a new version renamed)."""
+    roles_a = {x.name: x.role for x in a.run.manifest.algorithms}
+    roles_b = {x.name: x.role for x in b.run.manifest.algorithms}
+    pairs = []
+    for role in dict.fromkeys(roles_a.values()):
+        xa = [x for x in sorted(only_a) if x and roles_a.get(x) is role]
+        xb = [x for x in sorted(only_b) if x and roles_b.get(x) is role]
+        if len(xa) == 1 and len(xb) == 1:
+            pairs.append((xa[0], xb[0]))
+    return pairs
 
 
 def _definition_mismatch(metric: str, da: Mapping[str, Any], db: Mapping[str, Any]) -> str | None:
@@ -138,27 +165,26 @@ def compare_runs(
     bootstrap: int = 2000,
     seed: int = 0,
 ) -> Comparison:
-    """Compare two evaluated runs of the same log (B against A); see the module doc.
+    """Compare two evaluated runs of the same log or situation (B against A); see the module
+    doc. An open-loop and a closed-loop run of the same scenario pair in either order.
 
     Algorithms are paired by name, or, with ``algorithm_a``/``algorithm_b`` (one defaults to the
     other), only that pair is compared (plus run-level metrics).
 
     Raises:
-        ConfigError: the runs replayed different logs (both hashes and manifests named), a run is
+        ConfigError: the runs replayed different logs (both hashes and manifests named), an
+            open/closed pair ran different scenarios, seeds or durations (what differs named,
+            and the closed-loop options that match), a run is
             not evaluated, or a named algorithm has no evaluation.
     """
     ra = run_a if isinstance(run_a, Run) else open_run(Path(run_a))
     rb = run_b if isinstance(run_b, Run) else open_run(Path(run_b))
-    sha_a, sha_b = _log_hash(ra), _log_hash(rb)
-    if sha_a != sha_b:
-        msg = (
-            f"runs replayed different logs: A {ra.path / 'manifest.json'} has {sha_a} "
-            f"({ra.manifest.log.path}), B {rb.path / 'manifest.json'} has {sha_b} "
-            f"({rb.manifest.log.path}); compare runs of the same log (or scenario and seed)"
-        )
-        raise ConfigError(msg)
+    pairing = pair_runs(ra, rb)
+    if pairing.open_closed:
+        logger.info("%s", pairing.describe())
+    one_sided = pairing.open_closed  # side by side: what only one run has is shown, not dropped
     a, b = RunSide.load(ra), RunSide.load(rb)
-    pairs, skipped = _pairs(a, b, algorithm_a, algorithm_b)
+    pairs, skipped = _pairs(a, b, algorithm_a, algorithm_b, one_sided=one_sided)
     values: list[ValueDelta] = []
     series: list[SeriesDelta] = []
     metric_names = list(
@@ -170,7 +196,18 @@ def compare_runs(
             if not da and not db:
                 continue
             reason = None
-            if not da or not db:
+            if (not da or not db) and one_sided:
+                only = da or db
+                if len(only) == 1:
+                    hib_one = bool(only[0].get("higher_is_better", True))
+                    v, s = metric_deltas(
+                        a, b, (metric, xa, xb), hib=hib_one, resamples=bootstrap, seed=seed
+                    )
+                    values += v
+                    series += s
+                    continue
+                reason = "evaluated with several parameter sets in one run; values are ambiguous"
+            elif not da or not db:
                 reason = f"not evaluated in {'A' if not da else 'B'}"
             elif len(da) > 1 or len(db) > 1:
                 reason = "evaluated with several parameter sets in one run; values are ambiguous"
@@ -195,7 +232,8 @@ def compare_runs(
     return Comparison(
         run_a=ra.path,
         run_b=rb.path,
-        log_sha256=sha_a,
+        log_sha256=pairing.source,
+        pairing=pairing,
         pairs=tuple(pairs),
         values=tuple(values),
         series=tuple(series),

@@ -24,9 +24,10 @@ CHART_DPI = 90
 _BETTER, _WORSE = "#187a2f", "#b3261e"
 
 
-def _delta_chart(c: Comparison) -> bytes | None:
-    from matplotlib.figure import Figure
-
+def delta_bars(c: Comparison) -> list[tuple[str, float]]:
+    """The bar chart's bars, headline values first: (label, relative change of B against A in
+    %, positive when B is better in the value's own direction — a latency that drops is a
+    positive bar, a recall that drops a negative one)."""
     rows = [
         v for v in c.values if math.isfinite(v.relative_delta) and v.verdict in ("better", "worse")
     ]
@@ -34,18 +35,27 @@ def _delta_chart(c: Comparison) -> bytes | None:
     rows = sorted(
         rows, key=lambda v: (heads[(v.metric, v.algorithm_a)] != v.key, -abs(v.relative_delta))
     )[:30]
-    if not rows:
+    return [
+        (
+            f"{v.metric}{pair_label(v.algorithm_a, v.algorithm_b)} {v.key}",
+            100.0 * abs(v.relative_delta) * (1 if v.verdict == "better" else -1),
+        )
+        for v in rows
+    ]
+
+
+def _delta_chart(c: Comparison) -> bytes | None:
+    from matplotlib.figure import Figure
+
+    bars = delta_bars(c)
+    if not bars:
         return None
-    fig = Figure(figsize=(8, 0.3 * len(rows) + 1.2))
+    fig = Figure(figsize=(8, 0.3 * len(bars) + 1.2))
     ax = fig.add_subplot()
-    gain = [100.0 * abs(v.relative_delta) * (1 if v.verdict == "better" else -1) for v in rows]
+    gain = [g for _, g in bars]
     colors = [_BETTER if g > 0 else _WORSE for g in gain]
-    ax.barh(range(len(rows)), gain, color=colors)
-    ax.set_yticks(
-        range(len(rows)),
-        [f"{v.metric}{pair_label(v.algorithm_a, v.algorithm_b)} {v.key}" for v in rows],
-        fontsize=7,
-    )
+    ax.barh(range(len(bars)), gain, color=colors)
+    ax.set_yticks(range(len(bars)), [label for label, _ in bars], fontsize=7)
     ax.invert_yaxis()
     ax.axvline(0.0, color="k", lw=0.8)
     ax.set_xlabel("relative change of B against A, % (right = better; headline values first)")
@@ -85,10 +95,18 @@ def _chart(png: bytes | None, alt: str) -> h.Markup:
 def render_comparison(c: Comparison, *, worst: int) -> str:
     """The page of ``c`` with its ``worst`` worst frames (see the module doc)."""
     e = h.esc
+    p = c.pairing
     runs = h.Markup(
-        f"A: <code>{e(str(c.run_a))}</code><br>B: <code>{e(str(c.run_b))}</code><br>"
+        f"{e(p.label_a)}: <code>{e(str(c.run_a))}</code><br>"
+        f"{e(p.label_b)}: <code>{e(str(c.run_b))}</code><br>"
         f"source <code>{e(c.log_sha256)}</code> (the same in both: log sha256, or scenario and seed)"
     )
+    if p.open_closed:
+        runs = h.Markup(
+            runs
+            + f"<br><strong>{e(p.describe())}</strong>"
+            + "".join(f"<br>{e(n)}" for n in p.notes)
+        )
     method = h.paragraph(
         f"Δ = B − A. Significance: paired percentile bootstrap over frames — the frames both "
         f"runs have are resampled with replacement {c.resamples} times (seed {c.seed}); the 95 % "
@@ -104,12 +122,14 @@ def render_comparison(c: Comparison, *, worst: int) -> str:
         sections.append(h.section("skipped", "Not compared", h.Markup(f"<ul>{items}</ul>")))
         nav.append(("skipped", "not compared"))
     values = [
-        [v.metric + pair_label(v.algorithm_a, v.algorithm_b), v.key, v.unit, _n(v.a), _n(v.b),
+        [v.metric + pair_label(v.algorithm_a, v.algorithm_b), v.key, v.unit,
+         _n(v.a) if v.in_a else "—", _n(v.b) if v.in_b else "—",
          _n(v.delta), _n(100.0 * v.relative_delta),
          h.Markup(f'<span class="{e(v.verdict)}">{e(v.verdict)}</span>'), v.significance]
         for v in c.values
     ]  # fmt: skip
-    head = ["metric", "value", "unit", "A", "B", "Δ", "Δ %", "B is", "significance"]
+    head = ["metric", "value", "unit", p.label_a, p.label_b, "Δ", "Δ %", f"{p.label_b} is",
+            "significance"]  # fmt: skip
     sections.append(
         h.section("values", "Values", _chart(_delta_chart(c), "relative change per value"),
                   h.table(head, values, numeric=range(3, 7)))
@@ -139,7 +159,7 @@ def render_comparison(c: Comparison, *, worst: int) -> str:
     nav += [("values", "values"), ("series", "per-frame"), ("worst", "worst frames")]
     return h.page(
         title=f"redrive compare: {c.run_a.name} vs {c.run_b.name}",
-        heading="A/B comparison",
+        heading="Open loop beside closed loop" if p.open_closed else "A/B comparison",
         subtitle=runs,
         nav=nav,
         body=h.Markup("".join(sections)),

@@ -16,6 +16,7 @@ import pyarrow as pa
 
 from redrive.evaluation.compare_html import render_comparison
 from redrive.evaluation.deltas import SeriesDelta, SkippedMetric, ValueDelta, WorseFrame
+from redrive.evaluation.pairing import Pairing
 
 __all__ = ["Comparison"]
 
@@ -27,7 +28,8 @@ def _schema(spec: str) -> pa.Schema:
 
 _VALUES = _schema(
     "metric:s metric_version:s algorithm_a:s algorithm_b:s key:s unit:s higher_is_better:b a:f "
-    "b:f delta:f relative_delta:f verdict:s series:s ci_low:f ci_high:f excludes_zero:b note:s"
+    "b:f delta:f relative_delta:f verdict:s series:s ci_low:f ci_high:f excludes_zero:b note:s "
+    "in_a:b in_b:b"
 )
 _SERIES = _schema(
     "metric:s algorithm_a:s algorithm_b:s series:s higher_is_better:b n_frames:i only_a:i "
@@ -60,9 +62,12 @@ def _num(x: Any) -> Any:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Comparison:
-    """The A/B comparison of two runs of one log (B against A); see the module doc.
+    """The comparison of two runs of one log or situation (B against A); see the module doc.
 
     Attributes:
+        log_sha256: what both were made from (``pairing.source``).
+        pairing: an A/B of one loop, or an open-loop run beside a closed-loop one; the
+            pipelines' differences.
         pairs: the compared algorithm pairs (A's name, B's name); ("", "") = run-level metrics.
         values: per metric value; series: per per-frame series (with its bootstrap);
         worst: every frame where B is worse, worst first; skipped: metrics not compared.
@@ -79,6 +84,7 @@ class Comparison:
     skipped: tuple[SkippedMetric, ...]
     resamples: int
     seed: int
+    pairing: Pairing
 
     def worst_frames(self, n: int | None = None) -> tuple[WorseFrame, ...]:
         """The ``n`` frames where B is most worse than A (all of them for None), worst first."""
@@ -108,6 +114,7 @@ class Comparison:
             "run_a": str(self.run_a),
             "run_b": str(self.run_b),
             "log_sha256": self.log_sha256,
+            "pairing": self.pairing.to_dict(),
             "pairs": [list(p) for p in self.pairs],
             "bootstrap": {"resampled": "frames", "resamples": self.resamples, "seed": self.seed},
         }

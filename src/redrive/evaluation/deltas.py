@@ -93,7 +93,9 @@ class SeriesDelta:
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ValueDelta:
     """One stored value of a metric in A and B. ``series``/``bootstrap``: the per-frame series
-    of the same name, when there is one; otherwise ``note`` reports the metric's series."""
+    of the same name, when there is one; otherwise ``note`` reports the metric's series.
+    ``in_a``/``in_b``: the run has the value (False: only the other run has it; its side is
+    NaN)."""
 
     metric: str
     metric_version: str
@@ -107,6 +109,8 @@ class ValueDelta:
     series: str
     bootstrap: Bootstrap | None
     note: str
+    in_a: bool = True
+    in_b: bool = True
 
     @property
     def delta(self) -> float:
@@ -131,7 +135,10 @@ class ValueDelta:
     @property
     def verdict(self) -> str:
         """``better``, ``worse``, ``same`` (B against A), ``changed`` for a value without a
-        direction, or ``n/a`` when either is NaN."""
+        direction, ``only A`` / ``only B`` when one run has no such value, or ``n/a`` when
+        either is NaN."""
+        if not (self.in_a and self.in_b):
+            return "only A" if self.in_a else "only B"
         if math.isnan(self.a) or math.isnan(self.b):
             return "n/a"
         if self.delta == 0.0:
@@ -305,6 +312,8 @@ def metric_deltas(
                 series=match.series if match else "",
                 bootstrap=boot,
                 note=note,
+                in_a=ra_ is not None,
+                in_b=rb_ is not None,
             )
         )
     return values, series

@@ -18,6 +18,11 @@ definitions: versions, parameters, their hash).  CSV files: ``values``, ``per_fr
 ``curves``, ``bookmarks`` as stored.  Text cells that a spreadsheet would run as a formula get a
 leading ``'`` (:func:`redrive.results.export.neutralize_cell`).
 
+``beside=OTHER`` puts another evaluated run of the same log or situation next to this one — an
+open-loop run beside a closed-loop run of the same scenario, seed and pipeline, in either role
+(:mod:`redrive.evaluation.beside`): a section of the page, the sheet ``beside`` and
+``beside.csv`` with both runs' values, the pairing and how the pipelines differ.
+
 >>> files = write_report("runs/first")     # doctest: +SKIP
 >>> files.html                              # doctest: +SKIP
 PosixPath('runs/first/report/report.html')
@@ -40,6 +45,8 @@ import pyarrow.csv as pacsv
 
 from redrive.evaluation import html as h
 from redrive.evaluation import plots
+from redrive.evaluation.beside import REPORT_RESAMPLES, Beside, beside_rows, beside_section
+from redrive.evaluation.compare import compare_runs
 from redrive.evaluation.store import Evaluation, read_evaluation
 from redrive.results import Run, open_run
 from redrive.results.export import EXCEL_MAX_CHARS, neutralize_cell
@@ -197,9 +204,14 @@ def _grid(items: Sequence[h.Markup], empty: str) -> h.Markup:
 
 
 def render_html(
-    run: Run, evaluation: Evaluation, *, worst: int = DEFAULT_WORST, rank_by: str | None = None
+    run: Run,
+    evaluation: Evaluation,
+    *,
+    worst: int = DEFAULT_WORST,
+    beside: Beside | None = None,
+    rank_by: str | None = None,
 ) -> str:
-    """The report page of ``run`` (see the module docstring)."""
+    """The report page of ``run`` (see the module docstring), with the run ``beside`` it."""
     facts = h.table(None, [(k, _shown(v)) for k, v in _facts(run, evaluation)])
     snaps = plots.snapshot_figures(
         run, plots.worst_frames(run, evaluation, count=worst, rank_by=rank_by)
@@ -220,6 +232,11 @@ def render_html(
     nav = [("run", "run"), ("headline", "headline"), ("pr", "PR curves"),
            ("timelines", "per-frame"), ("latency", "latency"), ("worst", "worst frames"),
            ("bookmarks", "bookmarks")]  # fmt: skip
+    if beside is not None:
+        sections.insert(2, beside_section(beside))
+        nav.insert(
+            2, ("beside", "open/closed loop" if beside.cmp.pairing.open_closed else "beside")
+        )
     title = f"redrive report: {run.path.resolve().name}"
     log = run.manifest.log.path
     return h.page(title=title, subtitle=f"log {log}", nav=nav, body=h.Markup("".join(sections)))
@@ -288,7 +305,7 @@ def summary_rows(evaluation: Evaluation) -> Iterator[list[Any]]:
                first, definition]  # fmt: skip
 
 
-def _write_xlsx(path: Path, run: Run, evaluation: Evaluation) -> None:
+def _write_xlsx(path: Path, run: Run, evaluation: Evaluation, beside: Beside | None) -> None:
     from openpyxl import Workbook
     from openpyxl.utils import get_column_letter
 
@@ -310,6 +327,8 @@ def _write_xlsx(path: Path, run: Run, evaluation: Evaluation) -> None:
         "metrics": lambda: iter([["metric", "version", "role", "unit", "higher_is_better",
                                   "params", "params_hash", "algorithms"], *metrics]),
     }  # fmt: skip
+    if beside is not None:
+        sheets["beside"] = lambda: beside_rows(beside)
     wb = Workbook(write_only=True)
     for name, rows in sheets.items():
         ws = wb.create_sheet(name)
@@ -351,28 +370,39 @@ def write_report(
     *,
     out: str | Path | None = None,
     worst: int = DEFAULT_WORST,
+    beside: str | Path | None = None,
     rank_by: str | None = None,
 ) -> ReportFiles:
     """Write ``report.html``, ``report.xlsx`` and ``values|per_frame|curves|bookmarks.csv`` of
     the evaluated run ``run_dir`` into ``out`` (default ``RUN/report/``, created); ``worst``
-    bird's-eye snapshots.
+    bird's-eye snapshots; ``beside``: another evaluated run of the same log or situation (an
+    open-loop run beside a closed-loop one …) shown next to it, plus ``beside.csv``.
 
     Raises:
-        ConfigError: the run has not been evaluated (run ``redrive evaluate RUN`` first).
+        ConfigError: the run (or ``beside``) has not been evaluated (run ``redrive evaluate RUN``
+            first), or ``beside`` is not a run of the same log or situation (the message says
+            what differs).
     """
     run = open_run(run_dir)
     evaluation = load_evaluation(run)
+    other = None
+    if beside is not None:
+        other = Beside(compare_runs(run, open_run(beside), bootstrap=REPORT_RESAMPLES))
     folder = Path(out) if out is not None else run.path / "report"
     folder.mkdir(parents=True, exist_ok=True)
-    page = render_html(run, evaluation, worst=worst, rank_by=rank_by)
+    page = render_html(run, evaluation, worst=worst, beside=other, rank_by=rank_by)
     html_path = folder / "report.html"
     _atomic(html_path, lambda p: p.write_text(page, encoding="utf-8"))
     xlsx_path = folder / "report.xlsx"
-    _write_xlsx(xlsx_path, run, evaluation)
+    _write_xlsx(xlsx_path, run, evaluation, other)
     csvs = []
     for name in ("values", "per_frame", "curves", "bookmarks"):
         path = folder / f"{name}.csv"
         _write_csv(path, _neutralized(getattr(evaluation, name)))
+        csvs.append(path)
+    if other is not None:
+        path = folder / "beside.csv"
+        _write_csv(path, _neutralized(other.cmp.to_tables()["values"]))
         csvs.append(path)
     logger.info("report of %s: %s", run.path, folder)
     return ReportFiles(html=html_path, xlsx=xlsx_path, csvs=tuple(csvs))

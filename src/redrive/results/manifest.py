@@ -43,6 +43,7 @@ from redrive.types import Role, SensorType, to_jsonable
 __all__ = [
     "MANIFEST_NAME",
     "RESUME_KEYS",
+    "SCENARIO_METADATA",
     "SCHEMA_VERSION",
     "AlgorithmEntry",
     "HostInfo",
@@ -66,6 +67,9 @@ __all__ = [
 ]
 
 MANIFEST_NAME = "manifest.json"
+#: the MCAP metadata record ``redrive synth`` writes the scenario in (string pairs ``name``,
+#: ``seed``, ``duration_s``); a replay of the log records it as the manifest's ``log.scenario``.
+SCENARIO_METADATA = "redrive.scenario"
 #: version of the manifest format; bumped on any incompatible change.
 SCHEMA_VERSION = 2
 #: what must be equal for a run to be resumed (dotted paths into the manifest); for
@@ -136,7 +140,12 @@ def host_info() -> HostInfo:
 @dataclass(frozen=True, slots=True, kw_only=True)
 class SourceLog:
     """The log a run replayed: a file or directory (``sha256`` and ``size_bytes`` of its bytes), or
-    a live session (``format`` ``live``, no hash; ``source``, ``topics`` and ``record`` set)."""
+    a live session (``format`` ``live``, no hash; ``source``, ``topics`` and ``record`` set).
+
+    ``scenario``: what a ``redrive synth`` log was synthesized from (``name``, ``seed``,
+    ``duration_s``; its MCAP metadata record :data:`SCENARIO_METADATA`), empty for other logs —
+    ``redrive compare`` pairs an open-loop run of the log with a closed-loop run of the scenario.
+    """
 
     path: str
     format: str
@@ -145,6 +154,7 @@ class SourceLog:
     source: str | None = None
     topics: Mapping[str, str] = field(default_factory=dict)  # live: topic → message type
     record: str | None = None  # live: the MCAP the session was recorded to
+    scenario: Mapping[str, Any] = field(default_factory=dict)
 
     @classmethod
     def _parse(cls, f: Fields) -> SourceLog:
@@ -156,6 +166,7 @@ class SourceLog:
             source=f.opt_text("source"),
             topics=f.text_map("topics"),
             record=f.opt_text("record"),
+            scenario=f.mapping("scenario", {}),
         )
 
 
@@ -416,7 +427,11 @@ class RunManifest(RunSetup):
             "seed": self.seed,
             "pipeline": {**_asdict(self.pipeline), "stages": list(self.pipeline.stages)},
             "algorithms": [a.to_json() for a in self.algorithms],
-            "log": {**_asdict(self.log), "topics": dict(self.log.topics)},
+            "log": {
+                **_asdict(self.log),
+                "topics": dict(self.log.topics),
+                "scenario": to_jsonable(self.log.scenario),
+            },
             "closed_loop": to_jsonable(self.closed_loop),
             "frames_done": self.frames_done,
             "resumes": [

@@ -62,6 +62,7 @@ from redrive.geometry.se3 import (
     yaw_from_rotation_matrix,
 )
 from redrive.io.writer import McapWriter
+from redrive.results.manifest import SCENARIO_METADATA
 from redrive.results.roadmap import MAP_METADATA, road_map_to_json
 from redrive.sim.camera import CameraFrame, CameraModel
 from redrive.sim.inertial import GnssModel, ImuModel, OdometryModel
@@ -83,6 +84,7 @@ __all__ = [
     "SynthSummary",
     "camera_info_topic",
     "ground_truth_objects",
+    "scenario_metadata",
     "sensor_topic",
     "synthesize",
 ]
@@ -516,6 +518,17 @@ class SensorSimulation:
         return recorder.last_hits, recorder.camera_pixels()
 
 
+def scenario_metadata(scenario: Scenario) -> dict[str, str]:
+    """The MCAP metadata record (:data:`~redrive.results.manifest.SCENARIO_METADATA`) of a log
+    synthesized from ``scenario``: its ``name``, ``seed`` and ``duration_s``, as text (``repr``
+    of the float, so it reads back equal)."""
+    return {
+        "name": scenario.name,
+        "seed": str(scenario.seed),
+        "duration_s": repr(float(scenario.duration_s)),
+    }
+
+
 def synthesize(
     scenario: Scenario,
     output: str | Path,
@@ -543,6 +556,9 @@ def synthesize(
         # the road map travels with the log: a replay stores it in the run (the map metrics)
         road = json.dumps(road_map_to_json(scenario_road_map(scenario)), separators=(",", ":"))
         writer.add_metadata(MAP_METADATA, {"road_map": road})
+        # and so does what it was made from: `redrive compare` pairs a replay of the log with a
+        # closed-loop run of the same scenario, seed and duration
+        writer.add_metadata(SCENARIO_METADATA, scenario_metadata(scenario))
         total_s = scenario.duration_s
         for stamp_ns in sim.run(writer):
             if progress is not None:
