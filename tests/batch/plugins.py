@@ -86,15 +86,19 @@ class NoisyOracle(Algorithm):
     """A detector and tracker for evaluation tests: the frame's ground truth, shifted by a
     deterministic error that grows with the object, some objects missed, one false positive on
     some frames, confidences that do not sort hits above misses — so that AP is neither 0 nor 1
-    and differs from log to log."""
+    and differs from log to log.  ``worse``: it misses more."""
 
     role = Role.PERCEPTION
+    defaults = MappingProxyType({"worse": False})
+
+    def setup(self, config: Mapping[str, Any]) -> None:
+        self.worse = bool(config["worse"])
 
     def step(self, frame: Frame, upstream: StageOutputs) -> list[DetectedObject]:
         out = []
         for obj in frame.ground_truth or ():
             key = (obj.object_id * 7 + frame.index * 3) % 11
-            if key == 0:
+            if key == 0 or (self.worse and key % 3 == 0):
                 continue  # missed
             shift = 0.15 * key if obj.object_id % 3 else 0.9 * key  # some far off: FPs
             box = Box3D(

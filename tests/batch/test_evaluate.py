@@ -211,3 +211,74 @@ def test_failed_cells_are_left_out_with_their_reason(
     text = capsys.readouterr().out
     assert "not evaluated: cell flags/open/corrupt (failed)" in text
     assert [r["logs"] for r in read_pooled(out).to_pylist()] == [1] * read_pooled(out).num_rows
+
+
+def _oracle_pipeline(folder: Path, name: str, *, worse: bool) -> Path:
+    path = folder / f"{name}.toml"
+    path.write_text(
+        f"""\
+[[stage]]
+name = "perception"
+[[stage.algorithm]]
+name = "det"
+plugin = "{PLUGINS}:NoisyOracle"
+config = {{ worse = {"true" if worse else "false"} }}
+""",
+        encoding="utf-8",
+    )
+    return path
+
+
+def test_batch_gates_and_fleet_ab(
+    truth_logs: list[Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    good = _oracle_pipeline(tmp_path, "good", worse=False)
+    bad = _oracle_pipeline(tmp_path, "bad", worse=True)
+    out = tmp_path / "ab"
+    logs = [str(p) for p in truth_logs]
+    args = [*logs, "--pipeline", str(good), "--pipeline", str(bad), "--workers", "2"]
+    # redrive batch evaluates after running when gated: a gate every pipeline passes …
+    assert batch(out, *args, "--fail-under", "nuscenes_detection.mAP=0.01") == 0
+    text = capsys.readouterr().out
+    assert "pipeline good (open loop)" in text
+    assert "CI gates: all passed" in text
+    pooled = {
+        r["pipeline"]: r["value"]
+        for r in read_pooled(out).to_pylist()
+        if r["metric"] == "nuscenes_detection" and r["key"] == "mAP"
+    }
+    assert pooled["bad"] < pooled["good"]
+    # … and one the worse pipeline fails (the cells are complete: skipped, then evaluated)
+    gate = f"nuscenes_detection.mAP={(pooled['bad'] + pooled['good']) / 2:.4f}"
+    assert batch(out, *args, "--fail-under", gate) == EXIT_GATE_FAILED
+    text = capsys.readouterr().out
+    assert "1 of 2 FAILED" in text
+    assert "bad/open det" in next(ln for ln in text.splitlines() if "FAILED" in ln and "bad" in ln)
+
+    # two pipelines of one batch: per-log differences, a bootstrap over logs, the gate
+    ab = ["compare", str(out), "--pipeline-a", "good", "--pipeline-b", "bad"]
+    assert main([*ab, "--value", "nuscenes_detection.mAP"]) == 0
+    text = capsys.readouterr().out
+    assert "nuscenes_detection.mAP per log, B's worst first" in text
+    assert "paired bootstrap over logs" in text
+    for log in ("truth0", "truth1", "truth2"):
+        assert log in text
+    assert main([*ab, "--max-regression", "mAP=1"]) == 0
+    capsys.readouterr()
+    assert main([*ab, "--max-regression", "nuscenes_detection.mAP=0.001"]) == EXIT_GATE_FAILED
+    text = capsys.readouterr().out
+    assert "CI gates: 1 of 1 FAILED" in text
+    failed = next(ln for ln in text.splitlines() if "FAILED" in ln and "mAP" in ln)
+    assert "nuscenes_detection.mAP" in failed
+    assert "worse by <= 0.001" in failed
+
+    from redrive.batch.compare import compare_batches
+
+    cmp = compare_batches(out, out, pipeline_a="good", pipeline_b="bad")
+    # by default the headline of the first metric that scores an algorithm
+    assert (cmp.metric, cmp.key) == ("clear_mot", "MOTA")
+    assert [d.worse_by for d in cmp.logs] == sorted((d.worse_by for d in cmp.logs), reverse=True)
+    assert cmp.bootstrap.n_frames == 3
+    assert cmp.bootstrap.ci_low <= cmp.bootstrap.mean_delta <= cmp.bootstrap.ci_high
+    mean = sum(d.delta for d in cmp.logs) / 3
+    assert cmp.bootstrap.mean_delta == pytest.approx(mean)
