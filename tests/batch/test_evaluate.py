@@ -5,6 +5,7 @@ holds every frame), stored as Parquet; CI gates exit 4 with the table of what fa
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import pyarrow.dataset as ds
@@ -282,3 +283,31 @@ def test_batch_gates_and_fleet_ab(
     assert cmp.bootstrap.ci_low <= cmp.bootstrap.mean_delta <= cmp.bootstrap.ci_high
     mean = sum(d.delta for d in cmp.logs) / 3
     assert cmp.bootstrap.mean_delta == pytest.approx(mean)
+
+
+def test_fleet_report(truth_batch: Path, tmp_path: Path) -> None:
+    from openpyxl import load_workbook
+
+    cells = read_batch_manifest(truth_batch).cells
+    # one cell's own report, written as for any run: the fleet report links to it
+    assert main(["report", str(truth_batch / cells[1].run_dir), "--worst", "0"]) == 0
+    out = tmp_path / "fleet"
+    assert main(["report", str(truth_batch), "-o", str(out), "--no-cell-reports"]) == 0
+    page = (out / "report.html").read_text(encoding="utf-8")
+    for section in ("pooled", "distribution", "worst-logs", "worst-frames", "cells"):
+        assert f'<section id="{section}">' in page
+    hrefs = set(re.findall(r'href="([^"#][^"]*)"', page))
+    report = truth_batch / cells[1].run_dir / "report" / "report.html"
+    assert {(out / href).resolve() for href in hrefs} == {report.resolve()}
+    (mAP,) = [
+        r["value"]
+        for r in read_pooled(truth_batch).to_pylist()
+        if r["metric"] == "nuscenes_detection" and r["key"] == "mAP"
+    ]
+    assert f'<td class="num">{mAP:.4g}</td>' in page
+    assert "data:image/png;base64," in page  # the per-log box plots
+    wb = load_workbook(out / "report.xlsx", read_only=True)
+    assert wb.sheetnames == ["pooled", "cells", "worst_logs", "worst_frames", "cells_left_out"]
+    rows = list(wb["cells"].iter_rows(values_only=True))
+    assert {"pipeline", "loop", "log", "metric", "value"} <= set(rows[0])
+    assert len(rows) - 1 == read_cell_values(truth_batch).num_rows

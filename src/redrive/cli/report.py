@@ -1,4 +1,5 @@
-"""``redrive report RUN`` — an evaluated run as a self-contained HTML page, Excel and CSV."""
+"""``redrive report RUN`` — an evaluated run as a self-contained HTML page, Excel and CSV;
+``redrive report BATCH`` — the fleet report of an evaluated batch."""
 
 from __future__ import annotations
 
@@ -17,11 +18,30 @@ report.html needs no network (plots are inline PNG images, no JavaScript): open 
 mail it. report.xlsx: sheets summary, per_frame (one column per algorithm / metric / series),
 curves, bookmarks, metrics. CSV: values, per_frame, curves, bookmarks. Text cells a spreadsheet
 would run as a formula get a leading ' .
+
+A batch (evaluated with `redrive evaluate BATCH`):
+  redrive report batches/ab                       into batches/ab/report/ (+ each cell's report)
+  redrive report batches/ab --no-cell-reports     the fleet page and workbook only
+The fleet report: the pooled values per pipeline, the per-log distribution of each headline
+(quartiles and a box plot), the worst logs and the worst frames of all cells, and every cell
+linked to its own report. report.xlsx: pooled, cells, worst_logs, worst_frames, cells_left_out.
 """
 
 
 def _run(args: argparse.Namespace) -> int:
+    from redrive.batch.manifest import BATCH_MANIFEST
     from redrive.evaluation.report import write_report
+
+    if (args.run / BATCH_MANIFEST).is_file():
+        from redrive.batch.report import write_batch_report
+
+        fleet = write_batch_report(
+            args.run, out=args.output, cell_reports=not args.no_cell_reports, worst=args.worst
+        )
+        print(fleet.html)
+        print(fleet.xlsx)
+        print(f"{len(fleet.cell_reports)} cell reports (RUN/report/ of each cell)")
+        return 0
 
     files = write_report(args.run, out=args.output, worst=args.worst)
     for path in files.paths():
@@ -45,7 +65,7 @@ DEFAULT_WORST = 6
 def register(sub: Any) -> None:
     parser = sub.add_parser(
         "report",
-        help="write an evaluated run's HTML report, Excel workbook and CSV files",
+        help="write an evaluated run's (or batch's) HTML report, Excel workbook and CSV files",
         description=(
             "Write one self-contained HTML page (run facts, headline values per algorithm, "
             "precision/recall curves, per-frame metric timelines, latency histograms, "
@@ -55,7 +75,9 @@ def register(sub: Any) -> None:
         epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("run", type=Path, metavar="RUN", help="an evaluated run directory")
+    parser.add_argument(
+        "run", type=Path, metavar="RUN", help="an evaluated run (or batch) directory"
+    )
     parser.add_argument(
         "-o",
         "--output",
@@ -70,5 +92,10 @@ def register(sub: Any) -> None:
         default=DEFAULT_WORST,
         metavar="N",
         help=f"bird's-eye snapshots of the N worst frames (default {DEFAULT_WORST})",
+    )
+    parser.add_argument(
+        "--no-cell-reports",
+        action="store_true",
+        help="a batch: do not write each cell's own report (the fleet report links those there)",
     )
     parser.set_defaults(func=_run)
