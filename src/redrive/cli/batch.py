@@ -305,7 +305,11 @@ def register(sub: Any) -> None:
         "--address", metavar="ADDR", help="ray: an existing cluster (default: start a local one)"
     )
     parser.add_argument(
-        "--cpus-per-cell", type=float, default=1.0, metavar="N", help="ray: num_cpus per task"
+        "--cpus-per-cell",
+        type=float,
+        default=1.0,
+        metavar="N",
+        help="ray: num_cpus per task; local: the OpenMP/BLAS threads of each cell (default 1)",
     )
     parser.add_argument("--force", action="store_true", help="redo the cells already complete")
     parser.add_argument("--no-progress", action="store_true", help="no progress lines")
