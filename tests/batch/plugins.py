@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import signal
 from collections.abc import Mapping
@@ -11,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from redrive.algorithms import Algorithm, Role, StageOutputs
-from redrive.types import Frame, PlannedPath
+from redrive.types import Box3D, DetectedObject, Frame, ObjectClass, PlannedPath
 
 
 def _stand_still(stamp_ns: int) -> PlannedPath:
@@ -79,3 +80,41 @@ class InterruptDriver(Algorithm):
                 os.close(fd)
                 os.kill(self.driver_pid, signal.SIGINT)
         return _stand_still(frame.stamp_ns)
+
+
+class NoisyOracle(Algorithm):
+    """A detector and tracker for evaluation tests: the frame's ground truth, shifted by a
+    deterministic error that grows with the object, some objects missed, one false positive on
+    some frames, confidences that do not sort hits above misses — so that AP is neither 0 nor 1
+    and differs from log to log.  ``worse``: it misses more."""
+
+    role = Role.PERCEPTION
+    defaults = MappingProxyType({"worse": False})
+
+    def setup(self, config: Mapping[str, Any]) -> None:
+        self.worse = bool(config["worse"])
+
+    def step(self, frame: Frame, upstream: StageOutputs) -> list[DetectedObject]:
+        out = []
+        for obj in frame.ground_truth or ():
+            key = (obj.object_id * 7 + frame.index * 3) % 11
+            if key == 0 or (self.worse and key % 3 == 0):
+                continue  # missed
+            shift = 0.15 * key if obj.object_id % 3 else 0.9 * key  # some far off: FPs
+            box = Box3D(
+                center=np.asarray(obj.box.center) + np.array([shift, 0.0, 0.0]),
+                size=np.asarray(obj.box.size),
+                yaw_rad=obj.box.yaw_rad,
+            )
+            conf = 0.3 + 0.06 * ((key * 5 + obj.object_id) % 11)
+            out.append(dataclasses.replace(obj, box=box, confidence=conf))
+        if frame.index % 4 == 1:
+            out.append(
+                DetectedObject(
+                    object_id=999,
+                    object_class=ObjectClass.VEHICLE,
+                    confidence=0.5 + 0.04 * (frame.index % 7),
+                    box=Box3D(center=np.array([30.0, -5.0, 0.0]), size=np.array([4.0, 1.8, 1.5])),
+                )
+            )
+        return out

@@ -6,8 +6,9 @@ signal, ``os._exit`` in an algorithm, the OOM killer — fails only its cell, wh
 to ``retries`` times; a cell that fails on its own (a corrupt log, a pipeline that does not fit)
 is not retried: it would fail the same way.
 
-``local`` starts one process per cell from a ``forkserver`` (redrive is imported once, in the
-server; each cell is a fresh fork of it), so one dead process is one failed cell — unlike a
+``local`` starts one process per cell from a ``forkserver`` (redrive, its readers and reference
+algorithms are imported once, in the server — :mod:`redrive.batch.preload`; each cell is a fresh
+fork of it), so one dead process is one failed cell — unlike a
 ``concurrent.futures`` pool, which breaks as a whole.  ``ray`` submits one task per cell with
 ``num_cpus`` per task and Ray's own ``max_retries`` for dead workers; Ray is imported only here,
 only when asked for.
@@ -20,7 +21,8 @@ import multiprocessing
 import os
 import signal
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from multiprocessing.connection import wait
 from typing import Any, Protocol
@@ -69,16 +71,48 @@ def _child(runner: CellRunner, task: CellTask) -> None:
         os._exit(130)
 
 
+#: the thread pools of the numeric libraries a cell's process sizes from these variables.
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+@contextmanager
+def _threads(count: int) -> Iterator[None]:
+    """While the forkserver starts: ``count`` threads for OpenMP/OpenBLAS/MKL (variables the
+    user set are kept), as Ray does for its workers (``num_cpus``).  Otherwise every cell's
+    BLAS would start one thread per core and ``workers`` cells would fight over the cores (2
+    workers were slower than 1 on 2 cores: ``redrive bench batch``)."""
+    saved = {name: os.environ.get(name) for name in THREAD_VARIABLES}
+    for name in THREAD_VARIABLES:
+        os.environ.setdefault(name, str(count))
+    try:
+        yield
+    finally:
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class LocalExecutor:
-    """One process per cell, ``workers`` at a time, forked from a forkserver."""
+    """One process per cell, ``workers`` at a time, forked from a forkserver whose numeric
+    libraries use ``threads_per_cell`` threads (the forkserver of a process keeps the variables
+    it started with)."""
 
     workers: int
     retries: int = 1
+    threads_per_cell: int = 1
 
     def run(self, tasks: Sequence[CellTask], runner: CellRunner, events: CellEvents) -> None:
+        with _threads(self.threads_per_cell):
+            self._run(tasks, runner, events)
+
+    def _run(self, tasks: Sequence[CellTask], runner: CellRunner, events: CellEvents) -> None:
         ctx = multiprocessing.get_context("forkserver")
-        ctx.set_forkserver_preload(["redrive.batch.cell", runner.__module__])
+        ctx.set_forkserver_preload(
+            ["redrive.batch.preload", "redrive.batch.cell", runner.__module__]
+        )
         pending: deque[CellTask] = deque(tasks)
         running: dict[Any, tuple[Any, CellTask]] = {}
         try:

@@ -156,7 +156,9 @@ def run_batch(
     if workers < 1 or retries < 0:
         raise ConfigError("--workers must be >= 1 and --retries >= 0")
     if executor == "local":
-        chosen: LocalExecutor | RayExecutor = LocalExecutor(workers=workers, retries=retries)
+        chosen: LocalExecutor | RayExecutor = LocalExecutor(
+            workers=workers, retries=retries, threads_per_cell=max(1, round(cpus_per_cell))
+        )
     elif executor == "ray":
         chosen = RayExecutor(
             workers=workers, retries=retries, address=address, cpus_per_cell=cpus_per_cell

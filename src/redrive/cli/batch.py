@@ -9,6 +9,8 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from ._gates import add_gate_options
+
 if TYPE_CHECKING:
     from redrive.batch import BatchProgress, CellRecord, CellTask
     from redrive.config import PipelineConfig
@@ -41,8 +43,13 @@ log (sha256), pipeline (hash) and redrive version — an interrupted batch does 
 missing; --force redoes them all.  A cell that fails (a corrupt log, a pipeline that does not fit
 the log, a worker that dies) fails alone; a cell whose worker died is retried --retries times.
 
-Exit status: 0 every cell complete, 3 some cell failed (the others ran), 1 the batch could not
-start (bad spec, pipeline, Ray missing), 2 bad usage, 130 interrupted (run again to continue).
+With --evaluate, --fail-under or --fail-over the batch is then evaluated as `redrive evaluate
+BATCH` does (every complete cell, pooled per pipeline across the logs), and the gates are
+checked on the pooled values: `--fail-under nuscenes_detection.mAP=0.40`.
+
+Exit status: 0 every cell complete (and every gate passed), 3 some cell failed (the others ran)
+or a metric raised, 4 a CI gate failed, 1 the batch could not start (bad spec, pipeline, Ray
+missing), 2 bad usage, 130 interrupted (run again to continue).
 See docs/batch.md.
 """
 
@@ -213,7 +220,29 @@ def _run(args: argparse.Namespace) -> int:
     for cell in by_status[CellStatus.FAILED]:
         print(f"  failed {cell.cell_id}: {cell.error}")
     print(f"manifest: {out / 'batch.json'}; runs: {out / 'runs'}")
-    return EXIT_CELLS_FAILED if manifest.status != "complete" else 0
+    status = EXIT_CELLS_FAILED if manifest.status != "complete" else 0
+    gates = [*args.fail_under, *args.fail_over]
+    if gates or args.evaluate:
+        gated = _evaluate(out, gates)
+        return status or gated
+    return status
+
+
+def _evaluate(out: Path, gates: list[Any]) -> int:
+    """``redrive evaluate BATCH`` after the batch, with its gates; 3 a metric raised, 4 a gate
+    failed, else 0."""
+    from rich.console import Console
+
+    from redrive.batch.evaluate import evaluate_batch
+
+    from ._gates import gate_batch, print_gates
+    from .evaluate import EXIT_METRIC_FAILED, print_batch_evaluation
+
+    console = Console(width=None if sys.stdout.isatty() else 120)
+    evaluation = evaluate_batch(out)
+    print_batch_evaluation(evaluation, console)
+    gated = print_gates(gate_batch(gates, evaluation), console)
+    return EXIT_METRIC_FAILED if evaluation.failed_metrics else gated
 
 
 def register(sub: Any) -> None:
@@ -276,8 +305,18 @@ def register(sub: Any) -> None:
         "--address", metavar="ADDR", help="ray: an existing cluster (default: start a local one)"
     )
     parser.add_argument(
-        "--cpus-per-cell", type=float, default=1.0, metavar="N", help="ray: num_cpus per task"
+        "--cpus-per-cell",
+        type=float,
+        default=1.0,
+        metavar="N",
+        help="ray: num_cpus per task; local: the OpenMP/BLAS threads of each cell (default 1)",
     )
     parser.add_argument("--force", action="store_true", help="redo the cells already complete")
     parser.add_argument("--no-progress", action="store_true", help="no progress lines")
+    parser.add_argument(
+        "--evaluate",
+        action="store_true",
+        help="then evaluate the batch (as `redrive evaluate BATCH`; implied by a gate)",
+    )
+    add_gate_options(parser, on="the pooled value (the batch is evaluated after it ran)")
     parser.set_defaults(func=_run)

@@ -1,4 +1,5 @@
-"""``redrive compare RUN_A RUN_B`` — A/B comparison of two evaluated runs of the same log."""
+"""``redrive compare RUN_A RUN_B`` — A/B comparison of two evaluated runs of the same log;
+``redrive compare BATCH_A BATCH_B`` (or two pipelines of one batch) — A/B over a fleet."""
 
 from __future__ import annotations
 
@@ -7,6 +8,8 @@ import math
 import sys
 from pathlib import Path
 from typing import Any
+
+from ._gates import gate_type
 
 __all__ = ["register"]
 
@@ -29,6 +32,18 @@ are compared only where name, version and parameters agree; the others are liste
 compared. Significance: a paired bootstrap over frames (the frames both runs have are resampled
 with replacement; 95 % CI of the mean per-frame difference). Aggregates such as mAP are not
 per-frame means: their note refers to the metric's per-frame series.
+
+Batches (each evaluated with `redrive evaluate BATCH`):
+  redrive compare batches/ab --pipeline-a a --pipeline-b b     two pipelines of one batch
+  redrive compare batches/monday batches/tuesday               two batches (one pipeline each,
+                                                               or name them with --pipeline-a/b)
+  redrive compare batches/ab --pipeline-a a --pipeline-b b --value clear_mot.MOTA
+The pooled values side by side, then the chosen value (--value METRIC.KEY; default the headline
+of the first metric that scores an algorithm) per log, B's worst logs first, with a paired
+bootstrap over logs (95 % CI of the mean per-log Δ).
+
+CI gate: --max-regression mAP=0.01 (or METRIC.VALUE=X) fails — exit 4, with the table — when B
+is worse than A by more than 0.01 in the value's own direction (a batch: on the pooled values).
 """
 
 
@@ -144,8 +159,98 @@ def _print(cmp: Any, *, worst: int, everything: bool = False) -> None:
         )
 
 
+def _regressions(gates: list[Any], values: list[tuple[str, str, str, float, float, Any]]) -> Any:
+    """Each regression gate on each (metric, key, where, a, b, higher_is_better) it names."""
+    from redrive.evaluation.gates import check_regression
+
+    checks = []
+    for gate in gates:
+        found = [v for v in values if v[1] == gate.key and gate.metric in ("", v[0])]
+        if not found:
+            checks.append(check_regression(gate, math.nan, math.nan, True, where="(no such value)"))
+        for metric, _key, where, a, b, hib in found:
+            checks.append(check_regression(gate, a, b, hib, where=f"{metric} {where}".rstrip()))
+    return checks
+
+
+def _print_batches(cmp: Any, *, worst: int) -> None:
+    from rich.console import Console
+    from rich.markup import escape
+    from rich.table import Table
+
+    console = Console(width=None if sys.stdout.isatty() else 140)
+    console.print(f"A {escape(cmp.side_a)}\nB {escape(cmp.side_b)}")
+    table = Table(title="pooled values (Δ = B − A)", title_justify="left")
+    for col in ("metric", "loop", "value", "A", "B", "Δ", "B is"):
+        table.add_column(col, justify="right" if col in ("A", "B", "Δ") else "left")
+    colour = {"better": "green", "worse": "red"}
+    for v in cmp.pooled:
+        verdict = f"[{colour[v.verdict]}]{v.verdict}[/]" if v.verdict in colour else v.verdict
+        table.add_row(
+            escape(v.metric), v.loop, escape(v.key), _fmt(v.a), _fmt(v.b), _fmt(v.delta), verdict
+        )
+    console.print(table)
+    logs = Table(
+        title=f"{cmp.metric}.{cmp.key} per log, B's worst first (top {worst} of {len(cmp.logs)})",
+        title_justify="left",
+    )
+    for col in ("#", "log", "loop", "A", "B", "Δ", "worse by"):
+        logs.add_column(col, justify="left" if col in ("log", "loop") else "right")
+    for i, d in enumerate(cmp.logs[:worst]):
+        logs.add_row(
+            str(i + 1), escape(d.log), d.loop, _fmt(d.a), _fmt(d.b), _fmt(d.delta),
+            _fmt(d.worse_by),
+        )  # fmt: skip
+    console.print(logs)
+    b = cmp.bootstrap
+    better = {True: "higher is better", False: "lower is better", None: "no direction"}
+    console.print(
+        f"mean Δ over {b.n_frames} logs {_fmt(b.mean_delta)}, 95% CI [{_fmt(b.ci_low)}, "
+        f"{_fmt(b.ci_high)}] ({'excludes' if b.excludes_zero else 'includes'} 0; paired "
+        f"bootstrap over logs, {b.resamples} resamples; {better[cmp.higher_is_better]})",
+        highlight=False,
+    )
+    if cmp.unpaired:
+        console.print(f"[yellow]logs only one side has: {escape(', '.join(cmp.unpaired))}[/]")
+
+
+def _run_batches(args: argparse.Namespace) -> int:
+    from rich.console import Console
+
+    from redrive.batch.compare import compare_batches
+
+    from ._gates import print_gates
+
+    cmp = compare_batches(
+        args.run_a,
+        args.run_b or args.run_a,
+        pipeline_a=args.pipeline_a,
+        pipeline_b=args.pipeline_b,
+        value=args.value,
+        algorithm_a=args.algorithm_a,
+        algorithm_b=args.algorithm_b,
+        resamples=args.bootstrap,
+        seed=args.seed,
+    )
+    _print_batches(cmp, worst=args.worst)
+    values = [
+        (v.metric, v.key, f"{v.loop} {v.algorithm_a}".rstrip(), v.a, v.b, v.higher_is_better)
+        for v in cmp.pooled
+    ]
+    console = Console(width=None if sys.stdout.isatty() else 140)
+    return int(print_gates(_regressions(args.max_regression, values), console))
+
+
 def _run(args: argparse.Namespace) -> int:
+    from redrive.batch.manifest import BATCH_MANIFEST
+    from redrive.errors import ConfigError
     from redrive.evaluation.compare import compare_runs
+
+    if (args.run_a / BATCH_MANIFEST).is_file():
+        return _run_batches(args)
+    if args.run_b is None:
+        msg = "compare needs RUN_B (only a batch compares two of its own pipelines)"
+        raise ConfigError(msg)
 
     cmp = compare_runs(
         args.run_a,
@@ -162,13 +267,25 @@ def _run(args: argparse.Namespace) -> int:
     if args.html is not None:
         path = cmp.write_html(args.html, worst=args.worst)
         print(f"HTML: {path}", file=sys.stderr if args.json else sys.stdout)
+    if args.max_regression:
+        from rich.console import Console
+
+        from ._gates import print_gates
+
+        values = [
+            (v.metric, v.key, v.algorithm_b or "(run)", v.a, v.b, v.higher_is_better)
+            for v in cmp.values
+        ]
+        out = sys.stderr if args.json else sys.stdout
+        console = Console(file=out, width=None if out.isatty() else 140)
+        return int(print_gates(_regressions(args.max_regression, values), console))
     return 0
 
 
 def register(sub: Any) -> None:
     parser = sub.add_parser(
         "compare",
-        help="A/B comparison of two evaluated runs of the same log (or open beside closed loop)",
+        help="A/B comparison of two evaluated runs of the same log (or open beside closed loop), or of two batches",
         description=(
             "Compare the evaluation of run B against run A (two runs of one log, or an "
             "open-loop and a closed-loop run of the same scenario): per-metric deltas with a "
@@ -179,8 +296,16 @@ def register(sub: Any) -> None:
         epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("run_a", type=Path, metavar="RUN_A", help="the baseline run directory")
-    parser.add_argument("run_b", type=Path, metavar="RUN_B", help="the run compared against it")
+    parser.add_argument(
+        "run_a", type=Path, metavar="RUN_A", help="the baseline run (or batch) directory"
+    )
+    parser.add_argument(
+        "run_b",
+        type=Path,
+        nargs="?",
+        metavar="RUN_B",
+        help="the run (or batch) compared against it (a batch alone: two of its pipelines)",
+    )
     parser.add_argument(
         "--algorithm-a", metavar="X", default=None, help="compare only this algorithm of A"
     )
@@ -207,4 +332,19 @@ def register(sub: Any) -> None:
         "--bootstrap", type=int, default=2000, metavar="N", help="bootstrap resamples (2000)"
     )
     parser.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
+    parser.add_argument("--pipeline-a", metavar="NAME", help="batches: the pipeline of A")
+    parser.add_argument("--pipeline-b", metavar="NAME", help="batches: the pipeline of B")
+    parser.add_argument(
+        "--value",
+        metavar="METRIC.KEY",
+        help="batches: the value compared per log (default: the first metric's headline)",
+    )
+    parser.add_argument(
+        "--max-regression",
+        action="append",
+        default=[],
+        type=gate_type("regression"),
+        metavar="[METRIC.]VALUE=X",
+        help="CI gate: fail (exit 4) when B is worse than A by more than X (repeat)",
+    )
     parser.set_defaults(func=_run)

@@ -1,4 +1,5 @@
-"""``redrive evaluate RUN`` — score a run with every installed metric; store the results."""
+"""``redrive evaluate RUN|BATCH`` — score a run (or every cell of a batch, pooled across its
+logs) with every installed metric; store the results; optional CI gates."""
 
 from __future__ import annotations
 
@@ -9,7 +10,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
-__all__ = ["register"]
+from ._gates import add_gate_options
+
+__all__ = ["print_batch_evaluation", "register"]
 
 _EPILOG = """\
 examples:
@@ -18,6 +21,10 @@ examples:
   redrive evaluate runs/first --metric my_metrics.py:LaneOffset   a metric of your own
   redrive evaluate runs/first --algorithm clusters     only this algorithm (and run-level metrics)
   redrive report runs/first                            then: HTML, XLSX and CSV report
+  redrive evaluate batches/ab                          a batch: every cell, then pooled per
+                                                       pipeline × loop across the logs
+  redrive evaluate batches/ab --fail-under nuscenes_detection.mAP=0.40 \
+      --fail-over latency.frame_p95_ms=50              CI gates on the pooled values
 
 Metrics score the algorithms of their role (perception, planning, control) or the run as a
 whole (latency). Each metric is stored on its own under RUN/metrics/ (values, per-frame series,
@@ -25,9 +32,17 @@ curves, failure-frame bookmarks, and its name, version and parameters in RUN/met
 evaluating one metric again, or adding one, keeps every other stored metric.
 `redrive metrics` lists the installed metrics.
 
+A batch directory (`redrive batch`) is evaluated cell by cell (complete cells; failed ones are
+listed with their reason), then each metric is pooled per pipeline × loop across the logs as
+its definition demands (`redrive metrics` shows each metric's rule): detection AP, CLEAR MOT,
+HOTA, object attributes and latency over all frames of all logs together; the others as the
+mean of the logs' values weighted by their frame counts. Stored in BATCH/evaluation/ (Parquet:
+cells/pipeline=P/loop=L/log=ID/values.parquet and pooled.parquet); see docs/batch.md.
+
 exit status: 0 every metric scored or was skipped (it does not apply: the reason is printed);
-3 a metric raised an error (printed; the other metrics are stored); 1 a redrive error (not a
-run, unreadable run …); 2 bad usage.
+3 a metric raised an error (printed; the other metrics are stored); 4 a CI gate failed (the
+table says which value, and its threshold); 1 a redrive error (not a run, unreadable run …);
+2 bad usage.
 """
 
 #: exit status when a metric raised (the other metrics were stored).
@@ -44,13 +59,18 @@ def _run(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.table import Table
 
+    from redrive.batch.manifest import BATCH_MANIFEST
     from redrive.evaluation.evaluator import evaluate_run, headline
     from redrive.evaluation.registry import build_metrics, parse_metric_params
     from redrive.results import open_run
 
+    from ._gates import gate_run, print_gates
+
     metrics = build_metrics(
         args.metric, parse_metric_params(args.metric_param or []), devkit_compat=args.devkit_compat
     )
+    if (args.run / BATCH_MANIFEST).is_file():
+        return _run_batch(args, metrics)
     summary = evaluate_run(args.run, metrics=metrics, algorithms=args.algorithm)
     console = Console(width=None if sys.stdout.isatty() else 120)
     partial = open_run(args.run).manifest.partial_note()
@@ -85,12 +105,83 @@ def _run(args: argparse.Namespace) -> int:
         console.print(
             f"[bold yellow]these numbers cover part of the log: {partial}[/]", highlight=False
         )
+    gated = print_gates(gate_run([*args.fail_under, *args.fail_over], summary), console)
     if summary.failed:
         console.print(
             f"[bold red]{len(summary.failed)} metric result(s) failed; the others are stored[/]"
         )
         return EXIT_METRIC_FAILED
-    return 0
+    return gated
+
+
+def _run_batch(args: argparse.Namespace, metrics: list[Any] | None) -> int:
+    from rich.console import Console
+
+    from redrive.batch.evaluate import evaluate_batch
+
+    from ._gates import gate_batch, print_gates
+
+    console = Console(width=None if sys.stdout.isatty() else 120)
+    evaluation = evaluate_batch(args.run, metrics=metrics, algorithms=args.algorithm)
+    print_batch_evaluation(evaluation, console)
+    gated = print_gates(gate_batch([*args.fail_under, *args.fail_over], evaluation), console)
+    if evaluation.failed_metrics:
+        console.print(
+            f"[bold red]{evaluation.failed_metrics} metric result(s) failed; the others are "
+            "stored[/]"
+        )
+        return EXIT_METRIC_FAILED
+    return gated
+
+
+def print_batch_evaluation(evaluation: Any, console: Any) -> None:
+    """Per pipeline × loop: the pooled headline of each metric and algorithm, the rule, the
+    logs and frames; then the cells left out and the metrics that failed."""
+    from rich.markup import escape
+    from rich.table import Table
+
+    from redrive.evaluation.pooling import rule_text
+
+    for (pipeline, loop), items in evaluation.pooled.items():
+        table = Table(
+            title=f"pipeline {pipeline} ({loop} loop): pooled over its logs", title_justify="left"
+        )
+        for col in ("algorithm", "metric", "headline", "pooled", "unit", "logs", "frames", "rule"):
+            table.add_column(
+                col, justify="right" if col in ("pooled", "logs", "frames") else "left"
+            )
+        for p in items:
+            key = next(iter(p.values), "")
+            value = p.values.get(key, math.nan)
+            table.add_row(
+                escape(p.algorithm or "(run)"), escape(p.metric), escape(key), _fmt(value),
+                escape(p.units.get(key, "")), str(p.logs), str(p.frames),
+                escape(p.note or p.rule),
+            )  # fmt: skip
+        console.print(table)
+    rules = sorted({p.rule for items in evaluation.pooled.values() for p in items})
+    for rule in rules:
+        console.print(f"  {rule}: {rule_text(rule)}", highlight=False)
+    for pipeline, loop, metric, algo, error in evaluation.pool_errors:
+        console.print(
+            f"[bold red]error: pooling {escape(metric)} on {escape(algo or 'the run')} of "
+            f"{escape(pipeline)}/{escape(loop)} raised {escape(error)}[/]"
+        )
+    for ce in evaluation.cells:
+        for fail in ce.summary.failed:
+            console.print(
+                f"[bold red]error: metric {escape(fail.metric)} on cell {escape(ce.cell.cell_id)} "
+                f"raised {escape(fail.reason)}[/]"
+            )
+    for out in evaluation.left_out:
+        console.print(
+            f"[yellow]not evaluated: cell {escape(out.cell_id)} ({out.status}): "
+            f"{escape(out.reason)}[/]"
+        )
+    console.print(
+        f"{len(evaluation.cells)} cells evaluated (each stored in its run directory), "
+        f"{len(evaluation.left_out)} left out → {evaluation.folder}"
+    )
 
 
 def _list(args: argparse.Namespace) -> int:
@@ -100,12 +191,12 @@ def _list(args: argparse.Namespace) -> int:
     from redrive.evaluation.registry import installed_metrics
 
     table = Table(title="installed metrics (redrive.metrics)", title_justify="left")
-    for col in ("name", "role", "version", "unit", "better", "summary"):
+    for col in ("name", "role", "version", "unit", "better", "pooled by", "summary"):
         table.add_column(col)
     for name, cls in installed_metrics().items():
         doc = (cls.__doc__ or "").strip().split("\n\n", 1)[0].replace("\n", " ")
         better = "higher" if cls.higher_is_better else "lower"
-        table.add_row(name, cls.role_name(), cls.version, cls.unit, better, doc)
+        table.add_row(name, cls.role_name(), cls.version, cls.unit, better, cls.pooling, doc)
     console = Console(width=None if sys.stdout.isatty() else 140)
     console.print(table)
     for name in args.params or []:
@@ -122,16 +213,19 @@ def _list(args: argparse.Namespace) -> int:
 def register(sub: Any) -> None:
     parser = sub.add_parser(
         "evaluate",
-        help="score a run with the installed metrics and store the results",
+        help="score a run (or a batch) with the installed metrics and store the results",
         description=(
             "Evaluate the outputs of a run against its ground truth (detection, tracking, "
             "planning, control, latency metrics) and store values, per-frame series, curves and "
-            "failure-frame bookmarks in the run directory."
+            "failure-frame bookmarks in the run directory. Given a batch directory, evaluate "
+            "every complete cell and pool the values per pipeline across its logs."
         ),
         epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("run", type=Path, metavar="RUN", help="a run directory")
+    parser.add_argument(
+        "run", type=Path, metavar="RUN", help="a run directory, or a batch directory"
+    )
     parser.add_argument(
         "--metric",
         action="append",
@@ -157,6 +251,7 @@ def register(sub: Any) -> None:
         "TP errors averaged over its ten classes (absent ones score AP 0, errors 1) and the "
         "official NDS with mAAE (nuscenes_detection.class_mean=devkit)",
     )
+    add_gate_options(parser, on="the value (a batch: the pooled value)")
     parser.set_defaults(func=_run)
     metrics = sub.add_parser(
         "metrics",

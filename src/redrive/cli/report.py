@@ -1,4 +1,5 @@
-"""``redrive report RUN`` — an evaluated run as a self-contained HTML page, Excel and CSV."""
+"""``redrive report RUN`` — an evaluated run as a self-contained HTML page, Excel and CSV;
+``redrive report BATCH`` — the fleet report of an evaluated batch."""
 
 from __future__ import annotations
 
@@ -25,11 +26,30 @@ an open-loop run of a `redrive synth` log beside a closed-loop run of its scenar
 seed, duration; either way round). The page gets a section with both runs' values (— where a
 run has none), which is open and which closed loop, and whether the pipelines differ; the
 workbook a sheet `beside`; and beside.csv. The pairing is `redrive compare`'s.
+
+A batch (evaluated with `redrive evaluate BATCH`):
+  redrive report batches/ab                       into batches/ab/report/ (+ each cell's report)
+  redrive report batches/ab --no-cell-reports     the fleet page and workbook only
+The fleet report: the pooled values per pipeline, the per-log distribution of each headline
+(quartiles and a box plot), the worst logs and the worst frames of all cells, and every cell
+linked to its own report. report.xlsx: pooled, cells, worst_logs, worst_frames, cells_left_out.
 """
 
 
 def _run(args: argparse.Namespace) -> int:
+    from redrive.batch.manifest import BATCH_MANIFEST
     from redrive.evaluation.report import write_report
+
+    if (args.run / BATCH_MANIFEST).is_file():
+        from redrive.batch.report import write_batch_report
+
+        fleet = write_batch_report(
+            args.run, out=args.output, cell_reports=not args.no_cell_reports, worst=args.worst
+        )
+        print(fleet.html)
+        print(fleet.xlsx)
+        print(f"{len(fleet.cell_reports)} cell reports (RUN/report/ of each cell)")
+        return 0
 
     files = write_report(
         args.run, out=args.output, worst=args.worst, beside=args.beside, rank_by=args.rank_by
@@ -55,7 +75,7 @@ DEFAULT_WORST = 6
 def register(sub: Any) -> None:
     parser = sub.add_parser(
         "report",
-        help="write an evaluated run's HTML report, Excel workbook and CSV files",
+        help="write an evaluated run's (or batch's) HTML report, Excel workbook and CSV files",
         description=(
             "Write one self-contained HTML page (run facts, headline values per algorithm, "
             "precision/recall curves, per-frame metric timelines, latency histograms, "
@@ -65,7 +85,9 @@ def register(sub: Any) -> None:
         epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("run", type=Path, metavar="RUN", help="an evaluated run directory")
+    parser.add_argument(
+        "run", type=Path, metavar="RUN", help="an evaluated run (or batch) directory"
+    )
     parser.add_argument(
         "-o",
         "--output",
@@ -98,5 +120,10 @@ def register(sub: Any) -> None:
         "nuscenes_detection.missed, clear_mot.switches, latency.frame_ms; larger is worse, "
         "'tp'-like series the other way) instead of the default score: missed objects + false "
         "positives (the detection metric's, at 2 m) + identity switches, per algorithm",
+    )
+    parser.add_argument(
+        "--no-cell-reports",
+        action="store_true",
+        help="a batch: do not write each cell's own report (the fleet report links those there)",
     )
     parser.set_defaults(func=_run)

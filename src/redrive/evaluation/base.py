@@ -48,6 +48,7 @@ from redrive.types import (
 
 __all__ = [
     "NEEDS",
+    "POOLING_RULES",
     "WHOLE_RUN",
     "Bookmark",
     "EvalData",
@@ -103,6 +104,9 @@ class MetricSkipped(Exception):  # noqa: N818 - a skip is an outcome, not an err
         super().__init__(reason)
         self.reason = reason
 
+
+#: how a metric pools across the logs of a batch (``Metric.pooling``).
+POOLING_RULES = ("concatenate", "frame_weighted_mean", "none")
 
 #: what ``Metric.role`` is stored as when a metric scores the run as a whole (``role = None``).
 WHOLE_RUN = "run"
@@ -271,6 +275,13 @@ class Metric(ABC):
         unit: unit of its values (per value in ``MetricResult.units`` when they differ).
         higher_is_better: for A/B comparisons and report colouring.
         defaults: parameters and their defaults; ``Metric(**params)`` overrides them.
+        pooling: how ``redrive evaluate BATCH`` pools it across the logs of a batch
+            (:mod:`redrive.evaluation.pooling`): ``"concatenate"`` — evaluated once over all
+            frames of all logs together (frame and object ids made unique per log), for metrics
+            whose definition is a sum over frames (detection AP, CLEAR MOT and HOTA totals,
+            latency percentiles); ``"frame_weighted_mean"`` (default) — each value is the mean of
+            the logs' values weighted by their frame counts; ``"none"`` — it cannot be pooled
+            (per-log values only).
     """
 
     name: ClassVar[str]
@@ -280,6 +291,7 @@ class Metric(ABC):
     unit: ClassVar[str] = ""
     higher_is_better: ClassVar[bool] = True
     defaults: ClassVar[Mapping[str, Any]] = MappingProxyType({})
+    pooling: ClassVar[str] = "frame_weighted_mean"
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -288,6 +300,12 @@ class Metric(ABC):
             msg = (
                 f"metric class {cls.__qualname__}: needs {', '.join(unknown)} not known; "
                 f"a metric may need {', '.join(sorted(NEEDS))}"
+            )
+            raise PluginError(msg)
+        if cls.pooling not in POOLING_RULES:
+            msg = (
+                f"metric class {cls.__qualname__}: pooling {cls.pooling!r} is not one of "
+                f"{', '.join(POOLING_RULES)}"
             )
             raise PluginError(msg)
 

@@ -223,6 +223,7 @@ class ObjectAttributes(Metric):
     """
 
     name: ClassVar[str] = "object_attributes"
+    pooling: ClassVar[str] = "concatenate"
     version: ClassVar[str] = "1"
     role: ClassVar[Role | None] = Role.PERCEPTION
     needs: ClassVar[frozenset[str]] = frozenset({"detections", "ground_truth"})

@@ -241,6 +241,7 @@ class Hota(Metric):
     """
 
     name = "hota"
+    pooling = "concatenate"
     version = "1"
     role = Role.PERCEPTION
     needs = frozenset({"detections", "ground_truth"})

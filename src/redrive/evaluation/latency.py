@@ -71,6 +71,7 @@ class Latency(Metric):
     """
 
     name: ClassVar[str] = "latency"
+    pooling: ClassVar[str] = "concatenate"
     version: ClassVar[str] = "1"
     role: ClassVar[Role | None] = None
     needs: ClassVar[frozenset[str]] = frozenset({"steps", "frames"})

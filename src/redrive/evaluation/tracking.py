@@ -295,6 +295,7 @@ class ClearMot(Metric):
     """
 
     name = "clear_mot"
+    pooling = "concatenate"
     version = "1"
     role = Role.PERCEPTION
     needs = frozenset({"detections", "ground_truth"})

@@ -261,6 +261,7 @@ class KittiDetection(Metric):
     """
 
     name = "kitti_detection"
+    pooling = "concatenate"
     version = "1"
     role = Role.PERCEPTION
     needs = frozenset({"detections", "ground_truth"})

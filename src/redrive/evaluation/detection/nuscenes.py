@@ -66,6 +66,7 @@ class NuScenesDetection(Metric):
     """
 
     name = "nuscenes_detection"
+    pooling = "concatenate"
     version = "1"
     role = Role.PERCEPTION
     needs = frozenset({"detections", "ground_truth"})

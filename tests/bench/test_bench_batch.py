@@ -1,0 +1,44 @@
+"""`redrive bench batch` runs tiny batches and reports consistent numbers (no timing asserts:
+speed targets are met in the benchmark, BENCHMARKS.md)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from redrive.benchmarks.batch import bench_batch
+from redrive.cli.main import main
+from redrive.errors import ConfigError
+
+
+def test_bench_batch_local_numbers_add_up() -> None:
+    r = bench_batch(logs=2, log_duration_s=0.5, empty_cells=2, ray=False)
+    assert (r.logs, r.empty_cells, r.repeats) == (2, 2, 1)
+    assert r.ray2_s is None
+    assert r.ray_ratio is None
+    assert r.ray_cell_overhead_s is None
+    assert r.local1_s > 0
+    assert r.local2_s > 0
+    assert r.scaling == pytest.approx(r.local1_s / r.local2_s)
+    # the cost beyond the run is part of the wall per cell
+    assert r.local_empty_cell_s > 0
+    assert r.local_cell_overhead_s < r.local_empty_cell_s
+    assert set(r.passes) == {"local1", "local2", "local_empty"}
+    out = r.to_json()
+    assert out["targets"] == {"scaling": 1.7, "ray_ratio": 0.9, "ray_cell_overhead_s": 0.5}
+    assert len(out["load_before"]) == 3
+
+
+def test_bench_batch_refuses_no_logs() -> None:
+    with pytest.raises(ConfigError, match="must be >= 1"):
+        bench_batch(logs=0, ray=False)
+
+
+def test_bench_batch_cli_json(capsys: pytest.CaptureFixture[str]) -> None:
+    argv = ["bench", "batch", "--logs", "1", "--duration", "0.3", "--empty-cells", "1"]
+    assert main([*argv, "--no-ray", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["logs"] == 1
+    assert out["ray2_s"] is None
+    assert out["pipeline"] == ["cluster-detector", "idm-planner", "pure-pursuit-pid"]
