@@ -7,7 +7,7 @@ import struct
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from redrive.io.ros1bag import _DamageError, _op, _parse_header, _record_op
+from redrive.io.ros1bag_records import DamageError, op_of, parse_header, record_op
 
 
 def _field(key: bytes, value: bytes) -> bytes:
@@ -30,16 +30,16 @@ _FIELDS = st.one_of(
 
 def _full(buf: bytes, end: int) -> tuple[str, int, int]:
     try:
-        fields, stop = _parse_header(buf, 0, end)
-        return ("ok", _op(fields, -7), stop)
-    except _DamageError as err:
+        fields, stop = parse_header(buf, 0, end)
+        return ("ok", op_of(fields, -7), stop)
+    except DamageError as err:
         return (err.reason, err.offset, -1)
 
 
 def _walk(buf: bytes, end: int) -> tuple[str, int, int]:
     try:
-        op, stop = _record_op(buf, 0, end)
-    except _DamageError as err:
+        op, stop = record_op(buf, 0, end)
+    except DamageError as err:
         return (err.reason, err.offset, -1)
     if op < 0:
         return ("record has no op field", -7, -1)

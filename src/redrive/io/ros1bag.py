@@ -15,18 +15,16 @@ record walking below exists.  It relies on rosbags 0.11's reader internals (``ch
 
 from __future__ import annotations
 
-import bz2
 import heapq
 import logging
 import mmap
 import struct
 from bisect import bisect_left
-from collections.abc import Callable, Collection, Iterator, Mapping
+from collections.abc import Collection, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, BinaryIO
 
-import lz4.frame
 from rosbags.rosbag1 import Reader as RosbagsReader
 from rosbags.rosbag1 import ReaderError as RosbagsReaderError
 from rosbags.rosbag1.reader import decompressors as rosbags_decompressors
@@ -36,124 +34,26 @@ from redrive.io._deserialize import Deserializer
 from redrive.io._reader_base import RosReaderBase
 from redrive.io.base import LogMessage, TopicInfo, normalize_msgtype
 from redrive.io.recognise import starts_with
+from redrive.io.ros1bag_records import (
+    DECOMPRESSORS,
+    MAGIC,
+    OP_CHUNK,
+    OP_CONNECTION,
+    OP_MSGDATA,
+    U32,
+    DamageError,
+    data_span,
+    decode_time,
+    decompress_prefix,
+    op_of,
+    parse_header,
+    record_op,
+)
 from redrive.io.typestore import typestore_for
 
 __all__ = ["Ros1BagReader"]
 
 logger = logging.getLogger(__name__)
-
-_OP_MSGDATA = 0x02
-_OP_CHUNK = 0x05
-_OP_CONNECTION = 0x07
-_MAGIC = b"#ROSBAG V2.0\n"
-_U32 = struct.Struct("<I")
-_TIME = struct.Struct("<II")
-
-_DECOMPRESSORS: Mapping[str, Callable[[bytes], bytes]] = {
-    "none": lambda data: data,
-    "bz2": bz2.decompress,
-    "lz4": lz4.frame.decompress,
-}
-
-
-def _decompress_prefix(compression: str, data: bytes) -> bytes:
-    """Decompress as much of a cut-off chunk as its bytes allow."""
-    if compression == "none":
-        return data
-    if compression == "bz2":
-        return bz2.BZ2Decompressor().decompress(data)
-    if compression == "lz4":
-        out: bytes = lz4.frame.LZ4FrameDecompressor().decompress(data)
-        return out
-    raise KeyError(compression)
-
-
-class _DamageError(Exception):
-    """Internal: the bytes at ``offset`` are not a valid record."""
-
-    def __init__(self, offset: int, reason: str) -> None:
-        super().__init__(f"byte {offset}: {reason}")
-        self.offset = offset
-        self.reason = reason
-
-
-def _parse_header(buf: bytes | memoryview, pos: int, end: int) -> tuple[dict[str, bytes], int]:
-    """Parse one record header at ``pos``; returns its fields and the position after it."""
-    if pos + 4 > end:
-        raise _DamageError(pos, "record header length is cut off")
-    (size,) = _U32.unpack_from(buf, pos)
-    pos += 4
-    stop = pos + size
-    if stop > end:
-        raise _DamageError(pos - 4, f"record header of {size} bytes runs past the end")
-    fields: dict[str, bytes] = {}
-    while pos < stop:
-        if pos + 4 > stop:
-            raise _DamageError(pos, "header field length is cut off")
-        (flen,) = _U32.unpack_from(buf, pos)
-        pos += 4
-        field = bytes(buf[pos : pos + flen])
-        pos += flen
-        key, sep, value = field.partition(b"=")
-        if not sep or pos > stop:
-            raise _DamageError(pos, "header field is malformed")
-        fields[key.decode("ascii", "replace")] = value
-    return fields, stop
-
-
-def _record_op(buf: bytes | memoryview, pos: int, end: int) -> tuple[int, int]:
-    """The ``op`` of the record whose header starts at ``pos`` (-1 when it has none), and the
-    position after the header.
-
-    :func:`_parse_header` + :func:`_op` without building the field dict — the indexed reader runs
-    this for every message — with the same checks and errors: a header or field that is cut off
-    or has no ``=`` is damage; the last ``op`` field counts, and it must hold one byte.
-    """
-    if pos + 4 > end:
-        raise _DamageError(pos, "record header length is cut off")
-    (size,) = _U32.unpack_from(buf, pos)
-    pos += 4
-    stop = pos + size
-    if stop > end:
-        raise _DamageError(pos - 4, f"record header of {size} bytes runs past the end")
-    head = bytes(buf[pos:stop])
-    op = -1
-    at = 0
-    while at < size:
-        if at + 4 > size:
-            raise _DamageError(pos + at, "header field length is cut off")
-        (flen,) = _U32.unpack_from(head, at)
-        at += 4
-        field_end = at + flen
-        sep = head.find(b"=", at, field_end)
-        if sep < 0 or field_end > size:
-            raise _DamageError(pos + field_end, "header field is malformed")
-        if sep == at + 2 and head.startswith(b"op", at):
-            op = head[sep + 1] if field_end == sep + 2 else -1
-        at = field_end
-    return op, stop
-
-
-def _data_span(buf: bytes | memoryview, pos: int, end: int) -> tuple[int, int]:
-    """(start, stop) of the data block that follows a header at ``pos``."""
-    if pos + 4 > end:
-        raise _DamageError(pos, "record data length is cut off")
-    (size,) = _U32.unpack_from(buf, pos)
-    if pos + 4 + size > end:
-        raise _DamageError(pos, f"record data of {size} bytes runs past the end")
-    return pos + 4, pos + 4 + size
-
-
-def _op(fields: Mapping[str, bytes], offset: int) -> int:
-    value = fields.get("op")
-    if value is None or len(value) != 1:
-        raise _DamageError(offset, "record has no op field")
-    return value[0]
-
-
-def _time_ns(value: bytes) -> int:
-    secs, nsecs = _TIME.unpack(value)
-    return int(secs) * 1_000_000_000 + int(nsecs)
 
 
 @dataclass(slots=True)
@@ -233,7 +133,7 @@ class Ros1BagReader(RosReaderBase):
             msg = f"{self.path}: the file is empty (0 bytes); it holds no ROS 1 bag"
             raise LogError(msg)
         with self.path.open("rb") as fh:
-            if fh.read(len(_MAGIC)) != _MAGIC:
+            if fh.read(len(MAGIC)) != MAGIC:
                 msg = (
                     f"{self.path}: not a ROS 1 bag (no '#ROSBAG V2.0' magic at the start); "
                     "only bag format 2.0 is supported"
@@ -379,7 +279,7 @@ class Ros1BagReader(RosReaderBase):
                 current_pos = chunk_pos
             try:
                 data = self._message_at(chunk, offset)
-            except _DamageError as err:
+            except DamageError as err:
                 self._chunk_damage(chunk_pos, err, yielded)
                 bad_chunk = chunk_pos
                 continue
@@ -451,14 +351,14 @@ class Ros1BagReader(RosReaderBase):
         end = len(chunk)
         pos = offset
         while True:
-            op, pos = _record_op(chunk, pos, end)
-            start, stop = _data_span(chunk, pos, end)
+            op, pos = record_op(chunk, pos, end)
+            start, stop = data_span(chunk, pos, end)
             if op < 0:
-                raise _DamageError(offset, "record has no op field")
-            if op == _OP_MSGDATA:
+                raise DamageError(offset, "record has no op field")
+            if op == OP_MSGDATA:
                 return chunk[start:stop]
-            if op != _OP_CONNECTION:
-                raise _DamageError(offset, f"expected a message record, found op {op:#x}")
+            if op != OP_CONNECTION:
+                raise DamageError(offset, f"expected a message record, found op {op:#x}")
             pos = stop
 
     def _scan(
@@ -495,24 +395,24 @@ class Ros1BagReader(RosReaderBase):
 
     def _walk(self) -> None:
         """Walk every record from the start: connections, chunk spans, counts, damage."""
-        pos = len(_MAGIC)
+        pos = len(MAGIC)
         with self.path.open("rb") as fh:
             while pos < self._file_size:
                 try:
                     fh.seek(pos)
                     head = fh.read(min(self._file_size - pos, 1 << 16))
-                    fields, hstop = _parse_header(head, 0, len(head))
-                    op = _op(fields, pos)
+                    fields, hstop = parse_header(head, 0, len(head))
+                    op = op_of(fields, pos)
                     if hstop + 4 > len(head):
-                        raise _DamageError(pos, "record data length is cut off")
-                    (dsize,) = _U32.unpack_from(head, hstop)
+                        raise DamageError(pos, "record data length is cut off")
+                    (dsize,) = U32.unpack_from(head, hstop)
                     cut = pos + hstop + 4 + dsize > self._file_size
-                    if cut and op == _OP_CHUNK:
+                    if cut and op == OP_CHUNK:
                         # The last chunk was cut off: salvage the messages its first bytes hold.
                         self._salvage_cut_chunk(fh, fields, pos, pos + hstop + 4)
                     if cut:
-                        raise _DamageError(pos, f"a record of {dsize} bytes runs past the end")
-                except _DamageError as err:
+                        raise DamageError(pos, f"a record of {dsize} bytes runs past the end")
+                except DamageError as err:
                     self._tail_damage = (
                         f"the bag is cut off or damaged at byte {pos} of {self._file_size} "
                         f"({err.reason}); the {self._file_size - pos} bytes from there on are lost"
@@ -520,14 +420,14 @@ class Ros1BagReader(RosReaderBase):
                     logger.warning("%s: %s", self.path, self._tail_damage)
                     return
                 datapos = pos + hstop + 4
-                if op == _OP_CHUNK:
+                if op == OP_CHUNK:
                     compression = fields.get("compression", b"none").decode("ascii", "replace")
                     span = _ChunkSpan(pos, datapos, dsize, compression)
                     times = [t for _, t, _ in self._chunk_records(fh, span, None, first=True)]
                     if times:
                         span.start_ns, span.end_ns = min(times), max(times)
                     self._spans.append(span)
-                elif op == _OP_CONNECTION:
+                elif op == OP_CONNECTION:
                     fh.seek(datapos)
                     self._add_connection(fields, fh.read(dsize), pos)
                 pos = datapos + dsize
@@ -553,9 +453,9 @@ class Ros1BagReader(RosReaderBase):
         fh.seek(span.datapos)
         try:
             if span.cut:
-                chunk = memoryview(_decompress_prefix(span.compression, fh.read(span.datasize)))
+                chunk = memoryview(decompress_prefix(span.compression, fh.read(span.datasize)))
             else:
-                decompress = _DECOMPRESSORS[span.compression]
+                decompress = DECOMPRESSORS[span.compression]
                 chunk = memoryview(decompress(fh.read(span.datasize)))
         except KeyError:
             span.damaged = f"uses an unknown compression {span.compression!r}"
@@ -567,21 +467,21 @@ class Ros1BagReader(RosReaderBase):
         pos, end = 0, len(chunk)
         while pos < end:
             try:
-                fields, hstop = _parse_header(chunk, pos, end)
-                start, stop = _data_span(chunk, hstop, end)
-                op = _op(fields, pos)
-                if op == _OP_CONNECTION and first:
+                fields, hstop = parse_header(chunk, pos, end)
+                start, stop = data_span(chunk, hstop, end)
+                op = op_of(fields, pos)
+                if op == OP_CONNECTION and first:
                     self._add_connection(fields, bytes(chunk[start:stop]), span.pos)
-                elif op == _OP_MSGDATA:
-                    conn_id = _U32.unpack(fields["conn"])[0]
-                    time_ns = _time_ns(fields["time"])
+                elif op == OP_MSGDATA:
+                    conn_id = U32.unpack(fields["conn"])[0]
+                    time_ns = decode_time(fields["time"])
                     if first and conn_id in self._conns:
                         conn = self._conns[conn_id]
                         conn.count += 1
                         conn.size_bytes += stop - start
                     if conn_id in self._conns and (wanted is None or conn_id in wanted):
                         yield conn_id, time_ns, chunk[start:stop]
-            except (_DamageError, KeyError, struct.error) as err:
+            except (DamageError, KeyError, struct.error) as err:
                 if first and not span.cut:
                     span.damaged = f"holds a damaged record at offset {pos} ({err})"
                     logger.warning("%s: the chunk at byte %d %s", self.path, span.pos, span.damaged)
@@ -590,13 +490,13 @@ class Ros1BagReader(RosReaderBase):
 
     def _add_connection(self, fields: Mapping[str, bytes], data: bytes, offset: int) -> None:
         try:
-            conn_id = _U32.unpack(fields["conn"])[0]
+            conn_id = U32.unpack(fields["conn"])[0]
             topic = fields["topic"].decode()
-            conn_fields, _ = _parse_header(_U32.pack(len(data)) + data, 0, len(data) + 4)
+            conn_fields, _ = parse_header(U32.pack(len(data)) + data, 0, len(data) + 4)
             msgtype = normalize_msgtype(conn_fields["type"].decode())
             msgdef = conn_fields.get("message_definition", b"").decode()
-        except (KeyError, UnicodeDecodeError, _DamageError, struct.error) as err:
-            raise _DamageError(offset, f"connection record is malformed ({err})") from err
+        except (KeyError, UnicodeDecodeError, DamageError, struct.error) as err:
+            raise DamageError(offset, f"connection record is malformed ({err})") from err
         if conn_id not in self._conns:
             self._conns[conn_id] = _Conn(id=conn_id, topic=topic, msgtype=msgtype, msgdef=msgdef)
 

@@ -42,7 +42,6 @@ from __future__ import annotations
 
 from redrive.results.export import EXPORT_FORMATS, export_run
 from redrive.results.manifest import (
-    RESUME_KEYS,
     SCHEMA_VERSION,
     AlgorithmEntry,
     PipelineInfo,
@@ -62,6 +61,7 @@ from redrive.results.records import (
     StepOutput,
     StepRecord,
 )
+from redrive.results.resume import RESUME_KEYS
 from redrive.results.roadmap import MAP_NAME, read_road_map, write_road_map
 from redrive.results.schema import SCHEMAS, TABLES
 from redrive.results.store import FINAL_STATUSES, Run, RunWriter, open_run

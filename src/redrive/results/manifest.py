@@ -31,7 +31,7 @@ import platform
 import socket
 import sys
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, fields
 from datetime import UTC, datetime
 from importlib import metadata
 from pathlib import Path
@@ -42,7 +42,6 @@ from redrive.types import Role, SensorType, to_jsonable
 
 __all__ = [
     "MANIFEST_NAME",
-    "RESUME_KEYS",
     "SCENARIO_METADATA",
     "SCHEMA_VERSION",
     "AlgorithmEntry",
@@ -59,9 +58,7 @@ __all__ = [
     "now_iso",
     "read_manifest",
     "redrive_version",
-    "resume_mismatches",
     "upgrade_v1",
-    "with_resume",
     "write_json_atomic",
     "write_manifest",
 ]
@@ -72,9 +69,6 @@ MANIFEST_NAME = "manifest.json"
 SCENARIO_METADATA = "redrive.scenario"
 #: version of the manifest format; bumped on any incompatible change.
 SCHEMA_VERSION = 2
-#: what must be equal for a run to be resumed (dotted paths into the manifest); for
-#: ``algorithms`` each entry's ``name``, ``version`` and ``config_hash`` are compared in order.
-RESUME_KEYS = ("log.sha256", "algorithms", "pipeline.first_frame", "pipeline.stop_frame")
 
 _ROLES = ", ".join(r.value for r in Role)
 _SENSOR_TYPES = ", ".join(t.value for t in SensorType)
@@ -585,39 +579,6 @@ def read_manifest(run_dir: Path) -> RunManifest:
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
         raise manifest_error(path, f"cannot be read as JSON ({err})", DAMAGED_ADVICE) from err
     return RunManifest.from_json(data, path=path)
-
-
-def _algorithms_key(algorithms: tuple[AlgorithmEntry, ...]) -> list[dict[str, str]]:
-    return [
-        {"name": a.name, "version": a.version, "config_hash": a.config_hash} for a in algorithms
-    ]
-
-
-def resume_mismatches(old: RunSetup, new: RunSetup) -> list[str]:
-    """Human-readable differences in :data:`RESUME_KEYS` between a run's setup and a new one."""
-    pairs: dict[str, tuple[Any, Any]] = {
-        "log.sha256": (old.log.sha256, new.log.sha256),
-        "algorithms": (_algorithms_key(old.algorithms), _algorithms_key(new.algorithms)),
-        "pipeline.first_frame": (old.pipeline.first_frame, new.pipeline.first_frame),
-        "pipeline.stop_frame": (old.pipeline.stop_frame, new.pipeline.stop_frame),
-    }
-    assert tuple(pairs) == RESUME_KEYS
-    return [
-        f"{key}: run has {json.dumps(a)}, now {json.dumps(b)}"
-        for key, (a, b) in pairs.items()
-        if a != b
-    ]
-
-
-def with_resume(manifest: RunManifest, record: ResumeRecord) -> RunManifest:
-    """``manifest`` running again after ``record``."""
-    return replace(
-        manifest,
-        status=RunStatus.RUNNING,
-        finished=None,
-        frames_done=record.frames_done,
-        resumes=(*manifest.resumes, record),
-    )
 
 
 def _asdict(obj: Any) -> dict[str, Any]:

@@ -35,8 +35,6 @@ from redrive.results.manifest import (
     host_info,
     now_iso,
     read_manifest,
-    resume_mismatches,
-    with_resume,
     write_manifest,
 )
 from redrive.results.readers import (
@@ -46,6 +44,7 @@ from redrive.results.readers import (
     paths_by_frame,
 )
 from redrive.results.records import FrameRecord, ResourceSample
+from redrive.results.resume import resume_mismatches, with_resume
 from redrive.results.roadmap import read_road_map, write_road_map
 from redrive.results.schema import SCHEMAS, SORT_KEYS, TABLES
 from redrive.results.summary import summarize_steps
@@ -145,7 +144,7 @@ class RunWriter:
         run_dir: the run directory; created for a new run.
         setup: what the engine knows about the run (log, pipeline, algorithms, seed, sensors).
         resume: continue the run already in ``run_dir`` (its manifest must match ``setup`` in
-            :data:`redrive.results.manifest.RESUME_KEYS`); a missing or empty directory starts
+            :data:`redrive.results.resume.RESUME_KEYS`); a missing or empty directory starts
             a new run.
         flush_every: frames buffered before a flush writes them.
         flush_interval_s: a flush also happens when this long has passed since the last one
