@@ -105,3 +105,57 @@ def test_sensor_map_file_overrides_and_errors(tmp_path: Path) -> None:
     bad.write_text("drivr = 'x'\n")
     with pytest.raises(ConfigError, match="unknown key"):
         load_sensor_map_overrides(bad)
+
+
+def _thin_gnss(src: Path, dst: Path, every: int) -> Path:
+    """A copy of ``src`` keeping one GNSS fix in ``every`` (a slow input)."""
+    from rosbags.rosbag1 import Reader, Writer
+
+    kept = 0
+    with Reader(src) as reader, Writer(dst) as writer:
+        conns = {
+            c.id: writer.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, md5sum=c.digest)
+            for c in reader.connections
+        }
+        for conn, stamp, raw in reader.messages():
+            if conn.topic == "/gnss/fix":
+                kept += 1
+                if (kept - 1) % every:
+                    continue
+            writer.write(conns[conn.id], stamp, raw)
+    return dst
+
+
+def test_a_slow_input_gets_a_tolerance_of_half_its_period(tmp_path: Path) -> None:
+    """GNSS at 2 Hz beside a 10 Hz LiDAR: by default its tolerance is half its period as the
+    log's message count tells it, so the frames have the nearest fix; a sensor map's
+    tolerance_ms holds for every input, and then 4 frames in 5 lack the fix, each saying so."""
+    bag = _thin_gnss(
+        write_demo_bag(tmp_path / "demo.bag", duration_s=2.0), tmp_path / "slow.bag", 5
+    )
+    with open_log(bag) as log:
+        assembler = FrameAssembler(log)
+        smap = assembler.sensor_map
+        assert smap.tolerance_for("velodyne_points") == 50_000_000  # 10 Hz: the default
+        rate = smap.sensor("gnss_fix").rate_hz  # (4 − 1) fixes over the log's ~2 s
+        assert 1.4 < rate < 2.1
+        assert smap.tolerance_for("gnss_fix") == round(0.5e9 / rate)
+        frames = list(assembler.frames())
+    assert len(frames) == 20
+    # fixes at 0, 0.5, 1.0, 1.5 s: every frame up to 1.8 s is within the tolerance; the last
+    # (1.9 s, 0.4 s after the last fix, the log ends) says it has none
+    assert all("gnss_fix" in f.sensors for f in frames[:-1])
+    assert all(f.missing == () for f in frames[:-1])
+    assert frames[-1].missing == ("gnss_fix",)
+    fixed = tmp_path / "map.toml"
+    fixed.write_text("tolerance_ms = 50\n")
+    with open_log(bag) as log:
+        smap = infer_sensor_map(
+            log.topics, duration_ns=log.end_ns - log.start_ns,
+            overrides=load_sensor_map_overrides(fixed),
+        )  # fmt: skip
+        assert smap.tolerances_ns == {}
+        frames = list(FrameAssembler(log, sensor_map=smap).frames())
+    lacking = [f.index for f in frames if "gnss_fix" in f.missing]
+    assert len(lacking) == 16
+    assert all("gnss_fix" not in frames[i].sensors for i in lacking)

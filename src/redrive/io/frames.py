@@ -1,10 +1,12 @@
 """The Sensor Dispatcher for replay: a log becomes a stream of synchronised :class:`Frame`s.
 
 Every sample of the *driver* sensor makes one frame.  Each other sensor contributes the sample
-whose header stamp is nearest the driver's, if it is within the tolerance; the ego state is
-interpolated to the driver's stamp; ground truth is the nearest objects message within the
-tolerance.  Reading is streaming: only a window of ``tolerance + lookahead`` around the frame being
-assembled is held, whatever the log's length.
+whose header stamp is nearest the driver's, if it is within that input's tolerance (the sensor
+map's: 50 ms, or half the period of an input slower than ~8 Hz); the ego state is interpolated
+to the driver's stamp; ground truth is the nearest objects message within its tolerance.  What
+no sample within its tolerance provides is named in ``Frame.missing``.  Reading is streaming:
+only a window of the widest tolerance + lookahead around the frame being assembled is held,
+whatever the log's length.
 """
 
 from __future__ import annotations
@@ -104,7 +106,7 @@ class FrameAssembler:
         smap = self.sensor_map
         driver = smap.sensor(smap.driver or "")
         by_topic = smap.by_topic()
-        tol = smap.tolerance_ns
+        tol = smap.widest_tolerance_ns  # frames wait this long for the slowest input's samples
         buffers: dict[str, deque[_Sample]] = {s.sensor_id: deque() for s in smap.sensors}
         states: deque[VehicleState] = deque()
         objects: deque[_Sample] = deque()
@@ -193,14 +195,13 @@ class FrameAssembler:
     ) -> Frame:
         smap = self.sensor_map
         t = driver.stamp_ns
-        tol = smap.tolerance_ns
         sensors: dict[str, SensorData] = {}
         missing: list[str] = []
         for spec in smap.sensors:
             sample = (
                 driver
                 if spec.sensor_id == smap.driver
-                else _nearest(buffers[spec.sensor_id], t, tol)
+                else _nearest(buffers[spec.sensor_id], t, smap.tolerance_for(spec.sensor_id))
             )
             if sample is None:
                 missing.append(spec.sensor_id)
@@ -232,7 +233,7 @@ class FrameAssembler:
                 )
             except ValueError as err:
                 logger.debug("sensor %s: %s", spec.sensor_id, err)
-        gt_sample = _nearest(objects, t, tol)
+        gt_sample = _nearest(objects, t, smap.tolerance_for("ground_truth"))
         ground_truth: tuple[DetectedObject, ...] | None = None
         if gt_sample is not None and isinstance(gt_sample.decoded.value, tuple):
             ground_truth = tuple(
@@ -241,7 +242,7 @@ class FrameAssembler:
         elif smap.ground_truth_topic is not None:
             ground_truth = ()
             missing.append("ground_truth")  # the log has labels, none near this frame
-        state = _state_at(states, t, tol)
+        state = _state_at(states, t, smap.tolerance_for("vehicle_state"))
         if state is None and smap.vehicle_state_topic is not None:
             missing.append("vehicle_state")
         return Frame(

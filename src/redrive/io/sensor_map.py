@@ -3,7 +3,8 @@
 A sensor map file (all keys optional)::
 
     driver = "lidar_top"            # the sensor whose samples make the frames
-    tolerance_ms = 50               # how far another sensor's sample may be from a frame
+    tolerance_ms = 50               # how far any input's sample may be from a frame (default:
+                                    # 50, or half the period of an input slower than ~8 Hz)
     vehicle_state = "/odom"         # ego motion topic (Odometry, PoseStamped, TwistStamped)
     ground_truth = "/carla/objects" # objects topic used as ground truth
     ignore = ["/rosout"]            # topics never mapped
@@ -64,9 +65,23 @@ class SensorMap:
     vehicle_state_topic: str | None = None
     ground_truth_topic: str | None = None
     tf_topics: tuple[str, ...] = ()
+    #: per input (sensor id, ``vehicle_state``, ``ground_truth``): how far its sample may be from
+    #: a frame's stamp; inputs not listed use ``tolerance_ns``.  Inferred from each input's rate
+    #: over the log: half its period for inputs slower than ~8 Hz (a 2 Hz input: 250 ms) —
+    #: unless a sensor map file sets ``tolerance_ms``, which then holds for every input.
+    tolerances_ns: Mapping[str, int] = field(default_factory=dict)
 
     def by_topic(self) -> dict[str, SensorSpec]:
         return {s.topic: s for s in self.sensors}
+
+    def tolerance_for(self, name: str) -> int:
+        """The tolerance of input ``name`` (a sensor id, ``vehicle_state``, ``ground_truth``)."""
+        return self.tolerances_ns.get(name, self.tolerance_ns)
+
+    @property
+    def widest_tolerance_ns(self) -> int:
+        """The largest tolerance of any input: how long frames wait for the others' samples."""
+        return max([self.tolerance_ns, *self.tolerances_ns.values()])
 
     def sensor(self, sensor_id: str) -> SensorSpec:
         for spec in self.sensors:
@@ -242,6 +257,16 @@ def infer_sensor_map(
                 break
     state_topic = ov.vehicle_state_topic or _busiest(vehicle_state, prefer="odom")
     gt_topic = ov.ground_truth_topic or _busiest(objects, prefer="groundtruth")
+    tolerances: dict[str, int] = {}
+    if ov.tolerance_ns is None:  # a sensor map file's tolerance_ms holds for every input
+        rates = {s.sensor_id: s.rate_hz for s in specs.values()}
+        for name, input_topic in (("vehicle_state", state_topic), ("ground_truth", gt_topic)):
+            if input_topic is not None and input_topic in topics:
+                rates[name] = _rate_hz(topics[input_topic], duration_ns)
+        for name, rate in rates.items():
+            half_period = round(0.5e9 / rate) if rate > 0 else 0
+            if half_period > 1.2 * _DEFAULT_TOLERANCE_NS:  # slower than ~8 Hz
+                tolerances[name] = half_period
     return SensorMap(
         sensors=tuple(sorted(specs.values(), key=lambda s: s.sensor_id)),
         driver=driver,
@@ -249,6 +274,7 @@ def infer_sensor_map(
         vehicle_state_topic=state_topic,
         ground_truth_topic=gt_topic,
         tf_topics=tuple(sorted(tf_topics)),
+        tolerances_ns=tolerances,
     )
 
 
