@@ -66,8 +66,11 @@ def test_every_byte_arrives(side: str) -> None:
     if not SIDES[side].lossy:
         assert r.received == r.sent
         assert r.out_of_order == 0
-    assert r.msgs_per_s > 0
-    assert r.gb_per_s == pytest.approx(r.msgs_per_s * SIZE / 1e9)
+    if r.received >= 2:
+        assert r.msgs_per_s > 0
+        assert r.gb_per_s == pytest.approx(r.msgs_per_s * SIZE / 1e9)
+    else:  # a loaded machine got one message through the 0.15 s window: a rate needs two
+        assert math.isnan(r.msgs_per_s)
     assert 0 < r.latency_p50_ms <= r.latency_p99_ms <= r.latency_max_ms
 
 
