@@ -188,7 +188,7 @@ def _run_locked(
 ) -> BatchManifest:
     tasks = plan_cells(spec, out)
     records: dict[str, CellRecord] = {}
-    todo: list[CellTask] = []
+    to_run: list[CellTask] = []
     counts = BatchProgress(total=len(tasks))
     for task in tasks:
         if not force and _is_complete(task):
@@ -198,7 +198,7 @@ def _run_locked(
             counts.skipped += 1
         else:
             records[task.cell_id] = task.record(CellStatus.PENDING, attempts=0)
-            todo.append(task)
+            to_run.append(task)
     manifest = BatchManifest(
         redrive_version=redrive_version(),
         created=now_iso(),
@@ -252,7 +252,7 @@ def _run_locked(
                 progress(record.status.value, record, counts)
 
     try:
-        executor.run(todo, runner, Events())
+        executor.run(to_run, runner, Events())
     except BaseException:
         save("interrupted", now_iso())
         raise

@@ -26,6 +26,7 @@ __all__ = [
     "WorseFrame",
     "metric_deltas",
     "pair_label",
+    "series_direction",
     "worst_frames",
 ]
 
@@ -44,7 +45,7 @@ _LOWER = _words(
     "fp fps fn fns missed miss misses switch switches idsw frag fragmentations error errors err "
     "collision collisions latency jerk deadline late violation violations rmse ade fde"
 )
-_HIGHER = _words("tp tps hit hits match matches progress recall precision ttc")
+_HIGHER = _words("tp tps hit hits match matches matched progress recall precision ttc")
 
 
 def _evaluation(run: Run) -> Evaluation:
@@ -181,6 +182,12 @@ def _stored_direction(row: Mapping[str, Any]) -> bool | None:
     """A stored value's direction: True, False, or None (neither)."""
     hib = row.get("higher_is_better")
     return None if hib is None else bool(hib)
+
+
+def series_direction(series: str) -> bool | None:
+    """A per-frame series' direction by its name alone: True higher is better (``tp`` …),
+    None a count of the log (``gt`` …), else False (``missed``, ``fp``, anything unnamed)."""
+    return _direction(series, {}, False)
 
 
 def _direction(series: str, key_dirs: Mapping[str, bool | None], default: bool) -> bool | None:

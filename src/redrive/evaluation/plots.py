@@ -27,6 +27,7 @@ from matplotlib.patches import Circle, Polygon
 
 from redrive.errors import ConfigError
 from redrive.evaluation import html as h
+from redrive.evaluation.deltas import series_direction
 from redrive.evaluation.store import Evaluation
 from redrive.geometry.boxes import box_corners
 from redrive.results import Run
@@ -318,7 +319,7 @@ def frame_scores(evaluation: Evaluation, rank_by: str | None = None) -> dict[int
             have = sorted({f"{m}.{n}" for m, _, n in series})
             msg = f"--rank-by {rank_by}: no such per-frame series (stored: {', '.join(have)})"
             raise ConfigError(msg)
-        sign = -1.0 if _higher_is_better_by_name(name) else 1.0
+        sign = -1.0 if series_direction(name) else 1.0
         for values in hits.values():
             for f, v in values.items():
                 score[f] = max(score.get(f, -math.inf), sign * v)
@@ -338,10 +339,6 @@ def frame_scores(evaluation: Evaluation, rank_by: str | None = None) -> dict[int
         for f, v in per.items():
             score[f] = max(score.get(f, 0.0), v)
     return score
-
-
-def _higher_is_better_by_name(name: str) -> bool:
-    return name.lower() in ("tp", "matches", "matched", "tp@0.5", "progress_m")
 
 
 def worst_frames(
