@@ -40,8 +40,22 @@ class BatchProgress:
     failed: int = 0
     skipped: int = 0
     running: int = 0
+    frames: int = 0
     started_at: float = field(default_factory=time.perf_counter)
     walls: list[float] = field(default_factory=list)
+
+    @property
+    def finished(self) -> int:
+        """Cells that need no more work in this run: complete, failed or skipped."""
+        return self.done + self.failed + self.skipped
+
+    def frames_per_s(self, now: float | None = None) -> float | None:
+        """Frames of the cells completed in this run per second of batch wall time; None before
+        the first one completed."""
+        elapsed = (time.perf_counter() if now is None else now) - self.started_at
+        if not self.frames or elapsed <= 0:
+            return None
+        return self.frames / elapsed
 
     @property
     def remaining(self) -> int:
@@ -247,6 +261,7 @@ def _run_locked(
                 counts.failed += 1
             if record.wall_s is not None and record.status is CellStatus.COMPLETE:
                 counts.walls.append(record.wall_s)
+                counts.frames += record.frames or 0
             save()
             if progress is not None:
                 progress(record.status.value, record, counts)

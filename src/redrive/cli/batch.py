@@ -4,15 +4,17 @@ modes into one batch directory, on a local process pool or a Ray cluster."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from ._batch_progress import BatchBar, batch_progress
 from ._gates import add_gate_options
 
 if TYPE_CHECKING:
-    from redrive.batch import BatchProgress, CellRecord, CellTask
+    from redrive.batch import CellRecord, CellTask
     from redrive.config import PipelineConfig
     from redrive.engine.stats import RunReport
 
@@ -86,34 +88,6 @@ def _closed_loop(
     return run_closed_loop(request)
 
 
-def _fmt_s(seconds: float | None) -> str:
-    if seconds is None:
-        return "?"
-    whole = round(seconds)
-    return f"{whole // 60}m{whole % 60:02d}s" if whole >= 60 else f"{whole}s"
-
-
-class _Lines:
-    """One line per cell event on stderr (when it is not a terminal, or with --no-progress bar)."""
-
-    def __init__(self, workers: int) -> None:
-        self.workers = workers
-
-    def __call__(self, event: str, record: CellRecord, counts: BatchProgress) -> None:
-        finished = counts.done + counts.failed + counts.skipped
-        line = f"batch: {event:11s} {record.cell_id}"
-        if event in ("complete", "failed") and record.wall_s is not None:
-            line += f" ({record.wall_s:.1f} s"
-            line += f", {record.step_errors} failed steps)" if record.step_errors else ")"
-        if event == "failed" and record.error:
-            line += f": {record.error.splitlines()[0]}"
-        line += (
-            f" | {finished}/{counts.total} done ({counts.failed} failed, {counts.skipped} "
-            f"skipped), {counts.running} running, ETA {_fmt_s(counts.eta_s(self.workers))}"
-        )
-        print(line, file=sys.stderr, flush=True)
-
-
 def _spec_from_args(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
     """The batch spec of ``--spec`` with the command line's logs, pipelines and options over it."""
     from redrive.batch import (
@@ -182,8 +156,8 @@ def _run(args: argparse.Namespace) -> int:
     spec, options = _spec_from_args(args)
     out = Path(options["out"])
     workers = int(options["workers"] or os.cpu_count() or 1)
-    progress = None if args.no_progress else _Lines(workers)
     cells = len(spec.logs) * len(spec.pipelines) * len(spec.loops)
+    progress = batch_progress(workers, cells, quiet=args.no_progress)
     print(
         f"batch {out}: {len(spec.logs)} logs × {len(spec.pipelines)} pipelines × "
         f"{len(spec.loops)} loop modes = {cells} cells on {options['executor']} "
@@ -191,19 +165,21 @@ def _run(args: argparse.Namespace) -> int:
         file=sys.stderr,
     )
     started = time.perf_counter()
+    bar = progress if isinstance(progress, BatchBar) else contextlib.nullcontext()
     try:
-        manifest = run_batch(
-            spec,
-            out,
-            runner=batch_cell,
-            executor=options["executor"],
-            workers=workers,
-            retries=int(options["retries"]),
-            address=options["address"],
-            cpus_per_cell=args.cpus_per_cell,
-            force=args.force,
-            progress=progress,
-        )
+        with bar:
+            manifest = run_batch(
+                spec,
+                out,
+                runner=batch_cell,
+                executor=options["executor"],
+                workers=workers,
+                retries=int(options["retries"]),
+                address=options["address"],
+                cpus_per_cell=args.cpus_per_cell,
+                force=args.force,
+                progress=progress,
+            )
     except KeyboardInterrupt:
         print(
             f"interrupted: the same command continues the batch (only missing cells run); "
@@ -312,7 +288,7 @@ def register(sub: Any) -> None:
         help="ray: num_cpus per task; local: the OpenMP/BLAS threads of each cell (default 1)",
     )
     parser.add_argument("--force", action="store_true", help="redo the cells already complete")
-    parser.add_argument("--no-progress", action="store_true", help="no progress lines")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar or lines")
     parser.add_argument(
         "--evaluate",
         action="store_true",
