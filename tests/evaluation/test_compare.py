@@ -478,3 +478,15 @@ def test_cli_text_fits_a_screen_and_says_where_the_rest_is(
     assert len(out.splitlines()) < 80
     assert _cli(["compare", str(a), str(b), "--bootstrap", "50", "--all"]) == 0
     assert "v150" in capsys.readouterr().out
+
+
+def test_verdict_of_infinite_values() -> None:
+    from redrive.evaluation.deltas import verdict
+
+    inf = math.inf
+    assert verdict(inf, inf, True) == "same"  # min TTC with nobody ahead on both sides
+    assert verdict(inf, 3.0, True) == "worse"
+    assert verdict(2.0, inf, True) == "better"
+    assert verdict(-inf, inf, False) == "worse"
+    assert verdict(math.nan, 1.0, True) == "n/a"
+    assert verdict(1.0, 2.0, None) == "changed"

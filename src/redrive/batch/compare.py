@@ -19,6 +19,7 @@ import numpy as np
 from redrive.batch.evaluate import read_cell_values, read_pooled
 from redrive.errors import ConfigError
 from redrive.evaluation.bootstrap import Bootstrap, paired_bootstrap
+from redrive.evaluation.deltas import verdict
 
 __all__ = ["BatchComparison", "LogDelta", "PooledDelta", "compare_batches"]
 
@@ -43,13 +44,7 @@ class PooledDelta:
 
     @property
     def verdict(self) -> str:
-        if math.isnan(self.a) or math.isnan(self.b):
-            return "n/a"
-        if self.delta == 0.0:
-            return "same"
-        if self.higher_is_better is None:
-            return "changed"
-        return "better" if (self.delta > 0.0) == self.higher_is_better else "worse"
+        return verdict(self.a, self.b, self.higher_is_better)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -27,6 +27,7 @@ __all__ = [
     "metric_deltas",
     "pair_label",
     "series_direction",
+    "verdict",
     "worst_frames",
 ]
 
@@ -51,6 +52,19 @@ _HIGHER = _words("tp tps hit hits match matches matched progress recall precisio
 def _evaluation(run: Run) -> Evaluation:
     """The stored evaluation of ``run`` (the one place this module reads it)."""
     return read_evaluation(run)
+
+
+def verdict(a: float, b: float, higher_is_better: bool | None) -> str:
+    """B against A: ``same`` when equal (``inf`` and ``inf`` too, whose difference is NaN),
+    ``n/a`` when either is NaN, ``changed`` for a value without a direction, else ``better`` or
+    ``worse`` (``inf`` against a finite value included)."""
+    if math.isnan(a) or math.isnan(b):
+        return "n/a"
+    if a == b:
+        return "same"
+    if higher_is_better is None:
+        return "changed"
+    return "better" if (b > a) == higher_is_better else "worse"
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -140,13 +154,7 @@ class ValueDelta:
         either is NaN."""
         if not (self.in_a and self.in_b):
             return "only A" if self.in_a else "only B"
-        if math.isnan(self.a) or math.isnan(self.b):
-            return "n/a"
-        if self.delta == 0.0:
-            return "same"
-        if self.higher_is_better is None:
-            return "changed"
-        return "better" if (self.delta > 0.0) == self.higher_is_better else "worse"
+        return verdict(self.a, self.b, self.higher_is_better)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
