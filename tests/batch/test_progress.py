@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 
+import pytest
 from rich.console import Console
 
 from redrive.batch import BatchProgress, CellRecord, CellStatus
@@ -57,11 +58,13 @@ def test_the_bar_counts_cells_frames_and_failures() -> None:
         fields = bar.progress.tasks[0].fields
         assert bar.progress.tasks[0].completed == 4 == counts.finished
         assert fields["states"] == "2 done, 1 failed, 0 running, 1 skipped"
-        assert fields["rate"].endswith(" frames/s") and fields["rate"] != "? frames/s"
+        assert fields["rate"].endswith(" frames/s")
+        assert fields["rate"] != "? frames/s"
         bar.progress.refresh()
     text = out.getvalue()
     assert "failed ref/open/d: LogError: truncated" in text  # the reason stays above the bar
-    assert "4/4" in text and "2 done, 1 failed" in text
+    assert "4/4" in text
+    assert "2 done, 1 failed" in text
 
 
 def test_lines_when_not_a_terminal() -> None:
@@ -85,3 +88,24 @@ def test_frames_per_second_is_over_the_batch_wall_time() -> None:
     assert counts.frames_per_s(now=20.0) is None
     counts.frames = 250
     assert counts.frames_per_s(now=20.0) == 25.0
+
+
+def test_batch_json_is_rewritten_at_most_once_a_second_while_cells_run(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from redrive.batch import run as batch_run
+
+    clock = [100.0]
+    monkeypatch.setattr(batch_run.time, "perf_counter", lambda: clock[0])
+    throttle = batch_run._Throttle()
+    assert throttle.due()  # the first write
+    throttle.wrote(0.01)
+    clock[0] += 0.5
+    assert not throttle.due()
+    clock[0] += 0.5
+    assert throttle.due()
+    throttle.wrote(0.3)  # a manifest of thousands of cells: wait 10× its write time
+    clock[0] += 2.9
+    assert not throttle.due()
+    clock[0] += 0.1
+    assert throttle.due()

@@ -42,3 +42,22 @@ def test_bench_batch_cli_json(capsys: pytest.CaptureFixture[str]) -> None:
     assert out["logs"] == 1
     assert out["ray2_s"] is None
     assert out["pipeline"] == ["cluster-detector", "idm-planner", "pure-pursuit-pid"]
+
+
+def test_bench_fleet_slope_and_rss() -> None:
+    from redrive.benchmarks.fleet import _slope, rss_bytes
+
+    assert rss_bytes() > 10_000_000  # this process: Python, numpy, pyarrow
+    assert _slope([(0, 1.0), (100, 3.0), (200, 5.0)]) == pytest.approx(2.0)
+    assert _slope([(5, 7.0)]) == 0.0
+
+
+@pytest.mark.slow  # four cells, each a process: ~20 s on a loaded 2-core machine
+def test_bench_fleet_samples_the_driver_at_every_finished_cell() -> None:
+    from redrive.benchmarks.fleet import bench_fleet
+
+    r = bench_fleet(cells=4, log_duration_s=0.2, executor="local", workers=1)
+    assert r.failed == 0
+    assert [n for n, _ in r.samples] == [1, 2, 3, 4]
+    assert r.rss_mb_max == max(mb for _, mb in r.samples)
+    assert r.rss_mb_end == r.samples[-1][1]

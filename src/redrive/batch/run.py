@@ -6,6 +6,7 @@
 from __future__ import annotations
 
 import fcntl
+import math
 import os
 import time
 from collections.abc import Callable
@@ -74,6 +75,26 @@ class BatchProgress:
 #: what run_batch tells its caller: (event, the cell's record, the counts); events are
 #: ``skipped``, ``started``, ``complete``, ``failed``, ``interrupted``.
 ProgressCallback = Callable[[str, CellRecord, BatchProgress], None]
+
+
+class _Throttle:
+    """When ``batch.json`` is rewritten while cells run: at most once a second, and never more
+    often than every 10× the time the last write took, so that a fleet of thousands of cells
+    (a manifest of megabytes) costs the driver at most a tenth of its time. The cells' own
+    records (written by the workers) are what a rerun trusts, so a manifest that lags behind by
+    a second loses nothing; the final state is always written."""
+
+    def __init__(self, min_interval_s: float = 1.0) -> None:
+        self.min_interval_s = min_interval_s
+        self.interval_s = 0.0
+        self.last = -math.inf
+
+    def due(self) -> bool:
+        return time.perf_counter() - self.last >= self.interval_s
+
+    def wrote(self, took_s: float) -> None:
+        self.last = time.perf_counter()
+        self.interval_s = max(self.min_interval_s, 10.0 * took_s)
 
 
 def _log_key(item: LogItem, duration_s: float | None, cache: dict[str, str]) -> str:
@@ -227,8 +248,13 @@ def _run_locked(
         cells=(),
     )
 
+    throttle = _Throttle()
+
     def save(status: str = "running", finished: str | None = None) -> None:
         nonlocal manifest
+        if status == "running" and not throttle.due():
+            return
+        started = time.perf_counter()
         manifest = replace(
             manifest,
             cells=tuple(records[t.cell_id] for t in tasks),
@@ -237,6 +263,7 @@ def _run_locked(
             finished=finished,
         )
         write_batch_manifest(out, manifest)
+        throttle.wrote(time.perf_counter() - started)
 
     save()
     if progress is not None:

@@ -7,7 +7,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from redrive.benchmarks.cli.batch import add_batch_parser
+from redrive.benchmarks.cli.batch import add_batch_parser, add_fleet_parser
 from redrive.benchmarks.cli.closed_loop import add_closed_loop_parser
 from redrive.benchmarks.cli.engine import add_engine_parser
 from redrive.benchmarks.cli.eval import add_eval_parser
@@ -41,6 +41,7 @@ def register(sub: Any) -> None:
     add_engine_parser(bench_sub)
     add_closed_loop_parser(bench_sub)
     add_batch_parser(bench_sub)
+    add_fleet_parser(bench_sub)
     add_eval_parser(bench_sub)
     add_transport_parser(bench_sub)
     add_loss_parser(bench_sub)

@@ -8,7 +8,7 @@ import json
 import sys
 from typing import Any
 
-__all__ = ["add_batch_parser"]
+__all__ = ["add_batch_parser", "add_fleet_parser"]
 
 _DESCRIPTION = """\
 Run a batch of LOGS demo bags (ROS 1, LiDAR + odometry + IMU + GNSS, --duration seconds each) ×
@@ -113,3 +113,60 @@ def add_batch_parser(bench_sub: Any) -> None:
     parser.add_argument("--no-ray", action="store_true", help="skip the Ray passes")
     parser.add_argument("--json", action="store_true", help="print JSON instead of text")
     parser.set_defaults(func=_run_batch)
+
+
+def _run_fleet(args: argparse.Namespace) -> int:
+    from rich.console import Console
+
+    from redrive.benchmarks.fleet import bench_fleet
+
+    status = Console(stderr=True)
+    with status.status("benchmarking") as spinner:
+        r = bench_fleet(
+            cells=args.cells,
+            log_duration_s=args.duration,
+            executor=args.executor,
+            workers=args.workers,
+            progress=lambda text: spinner.update(f"benchmarking: {text}"),
+        )
+    if args.json:
+        json.dump(r.to_json(), sys.stdout, indent=2)
+        sys.stdout.write("\n")
+        return 0
+    c = Console(width=None if sys.stdout.isatty() else 120)
+    c.print(
+        f"[bold]{r.cells} cells[/] ({r.log_duration_s:g}-s logs, cluster detector) on "
+        f"{r.executor}{f' {r.ray_version}' if r.ray_version else ''} with {r.workers} workers "
+        f"in {r.wall_s:.1f} s ({r.cells / r.wall_s:.1f} cells/s), {r.failed} failed; load "
+        f"{r.load_before[0]:.2f} before, {r.load_after[0]:.2f} after"
+    )
+    c.print(
+        f"driver RSS: {r.rss_mb_start:.0f} MB before, {r.rss_mb_first:.0f} MB after the first "
+        f"cell, {r.rss_mb_quarter:.0f} MB after a quarter, {r.rss_mb_end:.0f} MB at the end "
+        f"(max {r.rss_mb_max:.0f} MB); slope over the last three quarters "
+        f"{r.slope_mb_per_100:+.2f} MB per 100 cells"
+    )
+    return 0
+
+
+def add_fleet_parser(bench_sub: Any) -> None:
+    parser = bench_sub.add_parser(
+        "fleet",
+        help="many small logs through Ray: does the driver's memory stay flat?",
+        description=(
+            "Run --cells tiny demo bags through the cluster detector on one executor and read the "
+            "driver's resident memory after every finished cell: before, after the first cell, "
+            "after a quarter, at the end, the maximum, and the slope over the last three quarters "
+            "(MB per 100 cells)."
+        ),
+        epilog="examples:\n  redrive bench fleet\n  redrive bench fleet --cells 1000 --json",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--cells", type=int, default=200, metavar="N", help="cells (default 200)")
+    parser.add_argument(
+        "--duration", type=float, default=0.3, metavar="S", help="seconds per log (default 0.3)"
+    )
+    parser.add_argument("--executor", choices=("ray", "local"), default="ray", help="default ray")
+    parser.add_argument("--workers", type=int, default=2, metavar="N", help="default 2")
+    parser.add_argument("--json", action="store_true", help="print JSON instead of text")
+    parser.set_defaults(func=_run_fleet)
