@@ -73,11 +73,20 @@ def _builtin() -> list[type[ReaderFormat]]:
     # imported here: each pulls in its own dependencies (rosbags, mcap, PIL)
     from redrive.io.kitti import KittiReader
     from redrive.io.mcapfile import McapFileReader
+    from redrive.io.mmdet3d_info import Mmdet3dInfoReader
+    from redrive.io.nuscenes import NuScenesReader
     from redrive.io.ros1bag import Ros1BagReader
     from redrive.io.ros2bag import Ros2BagReader
 
     # a ROS 2 bag before MCAP: a bag directory's .mcap storage is read through its metadata.yaml
-    return [Ros2BagReader, KittiReader, Ros1BagReader, McapFileReader]
+    return [
+        Ros2BagReader,
+        KittiReader,
+        NuScenesReader,
+        Mmdet3dInfoReader,
+        Ros1BagReader,
+        McapFileReader,
+    ]
 
 
 @functools.cache
