@@ -70,7 +70,15 @@ def _plain_dtype(*args: Any) -> np.dtype[Any]:
     return dtype
 
 
+def _frombuffer(buf: Any, dtype: Any, shape: Any, order: str) -> Any:
+    """numpy's protocol-5 array reconstruction, refusing object dtypes."""
+    plain = _plain_dtype(dtype)
+    return np.frombuffer(buf, dtype=plain).reshape(shape, order=order)  # type: ignore[call-overload]
+
+
 _ALLOWED: Mapping[tuple[str, str], Any] = {
+    ("numpy.core.numeric", "_frombuffer"): _frombuffer,
+    ("numpy._core.numeric", "_frombuffer"): _frombuffer,
     ("numpy.core.multiarray", "_reconstruct"): np._core.multiarray._reconstruct,  # type: ignore[attr-defined]
     ("numpy._core.multiarray", "_reconstruct"): np._core.multiarray._reconstruct,  # type: ignore[attr-defined]
     ("numpy.core.multiarray", "scalar"): np._core.multiarray.scalar,  # type: ignore[attr-defined]

@@ -193,7 +193,7 @@ def write_mini_tables(
     # annotations: the info file's boxes, moving with their velocities
     global_from_lidar = ego2global @ np.asarray(lidar["lidar2ego"], dtype=np.float64)
     for i, inst in enumerate(entry["instances"]):
-        x, y, z, length, width, height, yaw = (float(v) for v in inst["bbox_3d"][:7])
+        x, y, z, box_l, box_w, box_h, yaw = (float(v) for v in inst["bbox_3d"][:7])
         center = global_from_lidar @ np.array([x, y, z, 1.0])
         rot = global_from_lidar[:3, :3] @ Rotation.from_euler("z", yaw).as_matrix()
         vel = np.zeros(3)
@@ -223,7 +223,7 @@ def write_mini_tables(
                     "visibility_token": "4",
                     "attribute_tokens": [],
                     "translation": (center[:3] + vel_global * k * dt_s).tolist(),
-                    "size": [width, length, height],
+                    "size": [box_w, box_l, box_h],
                     "rotation": _wxyz(rot),
                     "prev": ann_tokens[k - 1] if k else "",
                     "next": ann_tokens[k + 1] if k + 1 < n_samples else "",
