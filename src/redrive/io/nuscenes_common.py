@@ -27,6 +27,10 @@ topic                       msgtype                   payload (:class:`Decoded` 
                                                       LiDAR's stamp
 ==========================  ========================  =============================================
 
+Every message of a sample has the sample's (its LiDAR sweep's) stamp as its log time, the
+calibration first; header stamps (``Decoded.stamp_ns``) are each sensor's own — the cameras are
+exposed up to ~45 ms before the sweep's stamp — and frames pair sensors by those.
+
 The points are *rotated* from the sensor's axes into base_link's, around the sensor's origin
 (frame ``LIDAR_TOP_base_axes``: ``LIDAR_TOP``'s origin, base_link's axes).  redrive's data model
 places a sensor by ``sensor_location`` only (no mount rotation), and nuScenes' LIDAR_TOP is turned
@@ -303,12 +307,11 @@ class NuScenesReaderBase:
 
     @property
     def start_ns(self) -> int:
-        """The earliest stamp of the first sample (a camera may precede its LiDAR sweep)."""
-        return _span(self._samples[0])[0] if self._samples else 0
+        return self._samples[0].stamp_ns if self._samples else 0
 
     @property
     def end_ns(self) -> int:
-        return _span(self._samples[-1])[1] if self._samples else 0
+        return self._samples[-1].stamp_ns if self._samples else 0
 
     @property
     def message_count(self) -> int:
@@ -316,22 +319,22 @@ class NuScenesReaderBase:
 
     # -- reading -------------------------------------------------------------------------------
 
-    def _messages_of(self, sample: NuScenesSample) -> list[tuple[int, str, Callable[[], Decoded]]]:
-        """(log time, topic, loader) of one sample's messages, in log-time order."""
+    def _messages_of(self, sample: NuScenesSample) -> list[tuple[str, Callable[[], Decoded]]]:
+        """(topic, loader) of one sample's messages, in the order they are yielded: the
+        calibration before the sensors it places."""
         t = sample.stamp_ns
-        out: list[tuple[int, str, Callable[[], Decoded]]] = [
-            (t, TOPIC_TF_STATIC, lambda: self._load_tf(sample)),
-            (t, TOPIC_EGO_POSE, lambda: self._load_ego(sample)),
-            (t, TOPIC_LIDAR, lambda: self._load_lidar(sample)),
-            (t, TOPIC_ANNOTATIONS, lambda: _decoded(t, "base_link", sample.objects)),
+        out: list[tuple[str, Callable[[], Decoded]]] = [
+            (TOPIC_TF_STATIC, lambda: self._load_tf(sample))
         ]
         for cam in sample.cameras:
-            out.append((cam.stamp_ns, _camera_topic(cam.channel, "camera_info"), _info_loader(cam)))
-            out.append((cam.stamp_ns, _camera_topic(cam.channel, "image"), _image_loader(cam)))
-        # the calibration first at a shared stamp: /tf_static before the sensors it places
-        first = min(stamp for stamp, _, _ in out)
-        out[0] = (first, TOPIC_TF_STATIC, out[0][2])
-        out.sort(key=lambda m: m[0])
+            out.append((_camera_topic(cam.channel, "camera_info"), _info_loader(cam)))
+        for cam in sample.cameras:
+            out.append((_camera_topic(cam.channel, "image"), _image_loader(cam)))
+        out += [
+            (TOPIC_LIDAR, lambda: self._load_lidar(sample)),
+            (TOPIC_EGO_POSE, lambda: self._load_ego(sample)),
+            (TOPIC_ANNOTATIONS, lambda: _decoded(t, "base_link", sample.objects)),
+        ]
         return out
 
     def messages(
@@ -342,13 +345,14 @@ class NuScenesReaderBase:
         stop_ns: int | None = None,
     ) -> Iterator[LogMessage]:
         for sample in self._samples:
-            logger.debug("nuScenes sample %s at %d ns", sample.token, sample.stamp_ns)
-            for stamp_ns, topic, load in self._messages_of(sample):
+            stamp_ns = sample.stamp_ns
+            if (start_ns is not None and stamp_ns < start_ns) or (
+                stop_ns is not None and stamp_ns >= stop_ns
+            ):
+                continue
+            logger.debug("nuScenes sample %s at %d ns", sample.token, stamp_ns)
+            for topic, load in self._messages_of(sample):
                 if topics is not None and topic not in topics:
-                    continue
-                if (start_ns is not None and stamp_ns < start_ns) or (
-                    stop_ns is not None and stamp_ns >= stop_ns
-                ):
                     continue
                 yield LogMessage(
                     topic=topic,
@@ -421,11 +425,6 @@ class NuScenesReaderBase:
         tb: TracebackType | None,
     ) -> None:
         self.close()
-
-
-def _span(sample: NuScenesSample) -> tuple[int, int]:
-    stamps = [sample.stamp_ns, *(cam.stamp_ns for cam in sample.cameras)]
-    return min(stamps), max(stamps)
 
 
 def _decoded(stamp_ns: int, frame_id: str, value: DecodedValue) -> Decoded:
