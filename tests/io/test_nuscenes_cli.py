@@ -57,3 +57,10 @@ def test_run_the_reference_detector_and_evaluate(
     assert values["frames"] == 1
     assert values["detections"] > 0
     assert 0.0 < values["mAP"] <= 1.0
+
+
+def test_batch_takes_a_nuscenes_folder_for_one_log(nuscenes_demo: Path) -> None:
+    from redrive.batch.spec import _logs_in_dir
+
+    assert _logs_in_dir(nuscenes_demo) == [nuscenes_demo]
+    assert nuscenes_demo in _logs_in_dir(nuscenes_demo.parent)

@@ -156,9 +156,11 @@ def test_restricted_unpickler_refuses_globals_and_object_arrays(tmp_path: Path) 
         assert back["b"] == np.float32(2.5)
         assert back["c"] == [1, "x", (2, 3)]
     bad = tmp_path / "evil.pkl"
-    bad.write_bytes(pickle.dumps({"metainfo": {}, "data_list": [_Boom()], "x": "lidar_points"}, 2))
+    evil = {"metainfo": {"dataset": "nuscenes"}, "data_list": [_Boom()], "x": "lidar_points"}
+    bad.write_bytes(pickle.dumps(evil, 2))
+    assert detect_format(bad) == "nuscenes-mmdet3d"  # it looks like one; opening refuses it
     with pytest.raises(LogError, match="not allowed"):
-        Mmdet3dInfoReader(bad)
+        open_log(bad)
 
 
 def test_missing_sweep_and_broken_fields_say_where(nuscenes_demo: Path, tmp_path: Path) -> None:
@@ -185,3 +187,14 @@ def test_annotations_topic_is_ground_truth(nuscenes_demo: Path) -> None:
     assert [m.topic for m in msgs] == [TOPIC_LIDAR, TOPIC_ANNOTATIONS]
     assert all(m.log_time_ns == _LIDAR_NS for m in msgs)
     assert msgs[1].payload.frame_id == "base_link"
+
+
+def test_a_kitti_info_file_is_not_taken_for_nuscenes(shared_data: Path) -> None:
+    kitti = shared_data / "kitti_mmdet3d_demo"
+    if not (kitti / "000008.pkl").is_file():
+        pytest.skip("kitti_mmdet3d_demo is not in ../shared/data")
+    assert not Mmdet3dInfoReader.recognises(kitti)
+    with pytest.raises(LogError, match="not a log redrive reads"):
+        detect_format(kitti)
+    with pytest.raises(LogError, match="not nuScenes"):
+        Mmdet3dInfoReader(kitti / "000008.pkl")

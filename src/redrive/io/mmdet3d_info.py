@@ -147,7 +147,12 @@ def _looks_like_info(path: Path) -> bool:
         return False
     with path.open("rb") as fh:
         head = fh.read(_HEAD_BYTES)
-    return b"data_list" in head and b"metainfo" in head and b"lidar_points" in head
+    return (
+        b"data_list" in head
+        and b"metainfo" in head
+        and b"lidar_points" in head
+        and b"nuscenes" in head.lower()  # metainfo: dataset "nuscenes" (KITTI's has other names)
+    )
 
 
 def find_info_file(path: Path) -> Path | None:
@@ -193,7 +198,8 @@ class Mmdet3dInfoReader(NuScenesReaderBase):
     def __init__(self, path: str | Path, *, strict: bool = True) -> None:
         """``strict`` is accepted like every reader's; the info file is checked whole at open."""
         self.path = Path(path)
-        info_file = find_info_file(self.path)
+        # a file given by name is read whatever it holds: load_info and the dataset check say why not
+        info_file = self.path if self.path.is_file() else find_info_file(self.path)
         if info_file is None:
             msg = (
                 f"{self.path}: no mmdetection3d info file (a .pkl or .json with metainfo and "
@@ -203,6 +209,13 @@ class Mmdet3dInfoReader(NuScenesReaderBase):
         self.info_file = info_file
         content = load_info(info_file)
         meta = content.get("metainfo") or {}
+        dataset = str(meta.get("dataset", meta.get("DATASET", "nuscenes")))
+        if dataset.lower() != "nuscenes":
+            msg = (
+                f"{info_file}: an mmdetection3d info file of {dataset}, not nuScenes; redrive "
+                "reads nuScenes info files (and KITTI as its own folder layout)"
+            )
+            raise LogError(msg)
         categories = meta.get("categories") or {}
         self.class_names: dict[int, str] = {int(i): str(n) for n, i in categories.items()}
         samples: list[NuScenesSample] = []
