@@ -4,7 +4,7 @@ No full nuScenes tables are in ``../shared/data``; its ``nuscenes_mmdet3d_demo``
 mmdetection3d info file, its LiDAR sweep and six camera images) is turned into ``n_samples``
 samples of one scene, written as the documented JSON tables (sample, sample_data,
 calibrated_sensor, sensor, ego_pose, sample_annotation, instance, category, attribute,
-visibility, scene, log, map) with ``samples/<channel>/`` files linked to the real ones:
+visibility, scene, log, map with an empty mask in ``maps/``) with ``samples/<channel>/`` files linked to the real ones:
 
 - sample ``k`` is ``k × dt_s`` after the keyframe; the ego moves ``k × ego_step_m`` along its own
   heading (every sample shows the same real sweep and images);
@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+from PIL import Image as PilImage
 from scipy.spatial.transform import Rotation
 
 __all__ = ["CATEGORY_OF_DETECTION_NAME", "write_mini_tables"]
@@ -105,6 +106,17 @@ def write_mini_tables(
             "vehicle": "n015",
             "date_captured": "2018-07-24",
             "location": "singapore-onenorth",
+        }
+    )
+    # the devkit indexes logs by map and wants its mask file: an empty 8×8 one
+    (root / "maps").mkdir(parents=True, exist_ok=True)
+    PilImage.fromarray(np.zeros((8, 8), dtype=np.uint8)).save(root / "maps" / "empty.png")
+    tables["map"].append(
+        {
+            "token": _token("map"),
+            "log_tokens": [log_token],
+            "category": "semantic_prior",
+            "filename": "maps/empty.png",
         }
     )
     tables["visibility"] = [
