@@ -69,7 +69,7 @@ def register(sub: Any) -> None:
         "convert",
         help="convert a log to MCAP (ROS 2 CDR) or a ROS 1 bag",
         description=(
-            "Convert any log redrive reads (ROS 1/ROS 2 bag, MCAP, KITTI) to MCAP with ROS 2 CDR "
+            "Convert any log redrive reads (ROS 1/ROS 2 bag, MCAP, KITTI, nuScenes) to MCAP with ROS 2 CDR "
             "messages and embedded schemas (opens in Foxglove, Lichtblick and ROS 2 tools), or to "
             "a ROS 1 bag; the output format follows OUTPUT's suffix (.mcap or .bag). Messages are "
             "re-encoded field by field, not decoded to redrive's data model, so nothing is lost. "

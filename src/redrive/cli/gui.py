@@ -35,7 +35,7 @@ def register(sub: Any) -> None:
         "gui",
         help="the desktop GUI: camera, 2D/3D planview, timeline, plots, re-simulation",
         description=(
-            "Open the desktop GUI on a log (ROS 1/2 bag, MCAP, KITTI) or a run directory. "
+            "Open the desktop GUI on a log (ROS 1/2 bag, MCAP, KITTI, nuScenes) or a run directory. "
             "Logs are streamed: the first frame shows while the timeline is still being indexed. "
             "A run shows its algorithms' outputs beside the ground truth, its per-frame metrics "
             "and its failure bookmarks. Live: connect to a ROS 1 master and pick topics. "

@@ -94,7 +94,11 @@ def register(sub: Any) -> None:
         epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("log", type=Path, help="a .bag, .mcap, ROS 2 bag directory or KITTI folder")
+    parser.add_argument(
+        "log",
+        type=Path,
+        help="a .bag, .mcap, ROS 2 bag directory, KITTI folder, nuScenes data root or mmdetection3d info file",
+    )
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
     parser.add_argument(
         "--sensor-map",

@@ -49,7 +49,8 @@ examples:
   redrive gui runs/mine                  the desktop GUI: planview, camera, timeline, plots
   redrive bench read drive.bag           decoding speed against a raw read
 
-Logs: ROS 1 .bag, ROS 2 bag directories (sqlite3/mcap), .mcap, KITTI object folders.
+Logs: ROS 1 .bag, ROS 2 bag directories (sqlite3/mcap), .mcap, KITTI object folders, nuScenes
+(v1.0-*/ tables, or mmdetection3d info files).
 """
 
 

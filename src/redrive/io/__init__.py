@@ -1,4 +1,4 @@
-"""Log I/O (layer L2): readers for ROS 1 bags, ROS 2 bags, MCAP and KITTI; decoders to the data
+"""Log I/O (layer L2): readers for ROS 1 bags, ROS 2 bags, MCAP, KITTI and nuScenes; decoders to the data
 model; the Sensor Dispatcher that assembles frames; the MCAP writer.
 
 >>> from redrive.io import open_log

@@ -141,7 +141,7 @@ class LogReader(Protocol):
 
     path: Path
     #: the format's name in the reader registry (:mod:`redrive.io.readers`): ``ros1``, ``ros2``,
-    #: ``mcap``, ``kitti`` or a plugin's.
+    #: ``mcap``, ``kitti``, ``nuscenes``, ``nuscenes-mmdet3d`` or a plugin's.
     format: str
 
     @property

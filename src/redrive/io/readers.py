@@ -2,7 +2,8 @@
 
 A *reader format* is a reader class that declares, as class attributes and a class method:
 
-- ``format``: its short name (``ros1``, ``ros2``, ``mcap``, ``kitti``), recorded in the run
+- ``format``: its short name (``ros1``, ``ros2``, ``mcap``, ``kitti``, ``nuscenes``,
+  ``nuscenes-mmdet3d``), recorded in the run
   manifest and shown by ``redrive info``;
 - ``description``: what it reads, for listings and error messages;
 - ``recognises(path)``: whether ``path`` is a log of this format, from its content (magic bytes,
@@ -13,7 +14,7 @@ An opened reader says what it can provide through ``capabilities`` (:class:`Read
 callers (the frame assembler, the GUI, the engine) ask these, never the format name.  The
 formats redrive ships are tried first, in a fixed order; installed plugins of the
 ``redrive.readers`` entry-point group (loaded by :mod:`redrive.plugins`) after them, so a new
-format (a nuScenes folder, closed-loop output …) plugs in without touching :func:`open_log`.
+format (closed-loop output, another dataset …) plugs in without touching :func:`open_log`.
 """
 
 from __future__ import annotations
@@ -73,11 +74,20 @@ def _builtin() -> list[type[ReaderFormat]]:
     # imported here: each pulls in its own dependencies (rosbags, mcap, PIL)
     from redrive.io.kitti import KittiReader
     from redrive.io.mcapfile import McapFileReader
+    from redrive.io.mmdet3d_info import Mmdet3dInfoReader
+    from redrive.io.nuscenes import NuScenesReader
     from redrive.io.ros1bag import Ros1BagReader
     from redrive.io.ros2bag import Ros2BagReader
 
     # a ROS 2 bag before MCAP: a bag directory's .mcap storage is read through its metadata.yaml
-    return [Ros2BagReader, KittiReader, Ros1BagReader, McapFileReader]
+    return [
+        Ros2BagReader,
+        KittiReader,
+        NuScenesReader,
+        Mmdet3dInfoReader,
+        Ros1BagReader,
+        McapFileReader,
+    ]
 
 
 @functools.cache
@@ -149,8 +159,8 @@ def _not_a_log(path: Path) -> str:
 
 
 def detect_format(path: Path) -> str:
-    """The format name of the log at ``path`` (``ros1``, ``ros2``, ``mcap``, ``kitti`` or a
-    plugin's), from its content, not its name.
+    """The format name of the log at ``path`` (``ros1``, ``ros2``, ``mcap``, ``kitti``,
+    ``nuscenes``, ``nuscenes-mmdet3d`` or a plugin's), from its content, not its name.
 
     Raises:
         LogError: the path is missing, empty or not a log redrive reads.
@@ -180,6 +190,8 @@ def open_log(path: str | Path, *, strict: bool = True) -> LogReader:
         path: a ROS 1 ``.bag``; a ROS 2 bag directory (sqlite3 or mcap storage), its
             ``metadata.yaml`` or a ``.db3`` in it; a standalone ``.mcap`` (ROS 2 CDR or ROS 1
             encoding); a KITTI 3D-object folder (``training/{velodyne,image_2,calib,label_2}``);
+            a nuScenes data root (``v1.0-*/`` tables + ``samples/``) or an mmdetection3d nuScenes
+            info file (``.pkl`` / JSON, or its folder);
             or a log of an installed reader plugin.
         strict: when True, damage met while reading raises
             :class:`~redrive.errors.LogTruncatedError` after every message before it was
