@@ -130,3 +130,7 @@ def test_project_point_equals_project_bit_for_bit() -> None:
                 s, lat = route.project([[x, y]], s_min_m=s_min, s_max_m=s_max)
                 got = route.project_point(float(x), float(y), s_min_m=s_min, s_max_m=s_max)
                 assert got == (float(s[0]), float(lat[0]))
+    # a lost ego (nan position) stays lost, as with project
+    s, lat = routes[0].project([[math.nan, 0.0]], s_min_m=10.0, s_max_m=22.0)
+    got = routes[0].project_point(math.nan, 0.0, s_min_m=10.0, s_max_m=22.0)
+    assert np.isnan([s[0], lat[0], *got]).all()

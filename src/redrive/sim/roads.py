@@ -310,11 +310,15 @@ class Route:
             except ZeroDivisionError:  # a repeated sample: numpy's inf and nan, as project has
                 s_np, lat_np = self.project([[x_m, y_m]], s_min_m=s_min_m, s_max_m=s_max_m)
                 return float(s_np[0]), float(lat_np[0])
-            t = t if t > 0.0 else 0.0  # np.clip's order: max, then min
-            t = t if t < 1.0 else 1.0
+            if t < 0.0:  # np.clip: a nan stays nan
+                t = 0.0
+            elif t > 1.0:
+                t = 1.0
             dx, dy = rx - t * sx, ry - t * sy
             dist2 = dx * dx + dy * dy
-            if dist2 < best or i == lo:
+            # np.argmin: the first minimum, or the first nan if there is one
+            # (not >= : a nan is involved; checked only then)
+            if i == lo or dist2 < best or (not dist2 >= best and not math.isnan(best)):
                 best, best_j, best_t = dist2, i, t
                 best_rx, best_ry, best_sx, best_sy = rx, ry, sx, sy
         s = s_arr[best_j] + best_t * (s_arr[best_j + 1] - s_arr[best_j])
