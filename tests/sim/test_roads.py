@@ -105,3 +105,32 @@ def test_raster_labels() -> None:
     labels = hw.label_at(np.stack([xs, np.full_like(xs, -3.75)], axis=1))
     assert 0.2 < np.mean(labels == GroundLabel.LANE_MARKING) < 0.5
     assert set(np.unique(labels).tolist()) == {GroundLabel.ROAD, GroundLabel.LANE_MARKING}
+
+
+def test_project_point_equals_project_bit_for_bit() -> None:
+    """Route.project_point (pure Python, the ego's tracking every physics step) answers what
+    Route.project does, exactly: random points near and far, short and whole-route pieces,
+    points on sample positions (ties between segments) and beyond the ends."""
+    rng = np.random.default_rng(11)
+    routes = [
+        *urban_network(UrbanLayout()).routes.values(),
+        highway_network(HighwayLayout()).routes["forward_0"],
+    ]
+    for route in routes:
+        samples = route.points[rng.integers(len(route.points), size=5)]
+        for k in range(16):
+            s_min = float(rng.uniform(-5.0, route.length_m))
+            s_max = s_min + (12.0 if k % 2 else float(rng.uniform(0.0, route.length_m)))
+            x0, y0, _ = route.pose_at(s_min + 4.0)
+            for x, y in (
+                (x0 + rng.normal(0.0, 3.0), y0 + rng.normal(0.0, 3.0)),
+                (x0 + rng.uniform(-200.0, 200.0), y0 + rng.uniform(-200.0, 200.0)),
+                tuple(samples[k % len(samples)]),
+            ):
+                s, lat = route.project([[x, y]], s_min_m=s_min, s_max_m=s_max)
+                got = route.project_point(float(x), float(y), s_min_m=s_min, s_max_m=s_max)
+                assert got == (float(s[0]), float(lat[0]))
+    # a lost ego (nan position) stays lost, as with project
+    s, lat = routes[0].project([[math.nan, 0.0]], s_min_m=10.0, s_max_m=22.0)
+    got = routes[0].project_point(math.nan, 0.0, s_min_m=10.0, s_max_m=22.0)
+    assert np.isnan([s[0], lat[0], *got]).all()

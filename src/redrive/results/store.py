@@ -192,6 +192,10 @@ class RunWriter:
             raise ConfigError(msg)
         path.mkdir(parents=True, exist_ok=True)
         self._lock = _DirLock(path)
+        # pyarrow imports pandas (0.3-0.5 s) on its first conversion of Python values: pay that
+        # now rather than at the first flush, in the middle of the frames (a live run's frames
+        # would come late, a benchmark's frame loop would carry it)
+        pa.array([], type=pa.int64())
         self._buffers = TableBuffers()
         self._buffered: set[int] = set()
         self._has_resources = False

@@ -316,10 +316,9 @@ class EgoDriver:
         box centre) and ``s_m + front_offset_m`` (the front) for the ego's width, and call
         :meth:`accelerate` with the result (the world batches all agents' searches)."""
         g = model.geometry
-        s, _ = self.route.project(
-            [[model.x_m, model.y_m]], s_min_m=self.s_m - 2.0, s_max_m=self.s_m + 10.0
+        self.s_m, _ = self.route.project_point(
+            model.x_m, model.y_m, s_min_m=self.s_m - 2.0, s_max_m=self.s_m + 10.0
         )
-        self.s_m = float(s[0])
         v = model.speed_mps
         look = min(max(self.lookahead_time_s * v, self.min_lookahead_m), self.max_lookahead_m)
         tx, ty, _ = self.route.pose_at(self.s_m + look)

@@ -380,12 +380,12 @@ class World:
 
     def _track_route(self) -> None:
         route = self._driver.route
-        s, _ = route.project(
-            [[self._ego.x_m, self._ego.y_m]],
+        self._driver.s_m, _ = route.project_point(
+            self._ego.x_m,
+            self._ego.y_m,
             s_min_m=self._driver.s_m - 2.0,
             s_max_m=self._driver.s_m + 10.0,
         )
-        self._driver.s_m = float(s[0])
 
     def _record_pose(self) -> None:
         self._history.append((self._time_ns, self._ego.x_m, self._ego.y_m, self._ego.yaw_rad))
