@@ -113,7 +113,7 @@ def test_live_feed_draws_records_and_cleans_up(
 
     t0 = time.perf_counter()
     window.disconnect_live()
-    assert time.perf_counter() - t0 < 5.0
+    assert time.perf_counter() - t0 < 30.0  # returns (joins its threads), however loaded
     assert window.live_feed is None
     assert not feed.running
     assert _segments(feed) == []

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import time
 
 import numpy as np
 import pytest
@@ -53,14 +52,12 @@ def test_same_seed_identical_different_seed_differs() -> None:
 @pytest.mark.parametrize("name", list_scenarios())
 def test_catalogue_scenario_runs_two_seconds(name: str) -> None:
     sc = load_scenario(name)
-    start = time.perf_counter()
     world = World(sc)
     t0 = world.time_ns
     for _ in range(20):
         world.step(0.1)
     assert world.time_ns - t0 == 2_000_000_000
-    scene = world.scene()
-    assert time.perf_counter() - start < 5.0
+    scene = world.scene()  # its speed is measured by `redrive bench closed-loop`, not here
     assert scene.stamp_ns == world.time_ns
     objs = scene.objects
     assert len(objs) > 0
