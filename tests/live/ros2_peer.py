@@ -5,14 +5,13 @@ The sensor types are written out here as IdlStruct classes, the way ``idlc -l py
 ``.idl`` files (``sensor_msgs::msg::dds_::PointCloud2_`` …): they are what rmw_cyclonedds_cpp puts
 on the wire, independent of redrive's generated types. Run as its own process::
 
-    python ros2_peer.py --domain 42 --count 25 --rate 10 [--points 2000] [--listen TOPIC TYPE]
+    python ros2_peer.py --domain 42 --count 25 --rate 10 [--points 2000] [--only TOPIC…]
+        [--listen TOPIC TYPE]
 
 It prints ``ADVERTISED`` once its writers exist, publishes ``--count`` samples per topic (0:
 until SIGTERM) after every writer is matched with a reader, ``SENT <n>`` when done, and for every
 sample received on ``--listen`` a line ``RESULT <json>``.
 """
-
-
 
 import argparse
 import json
@@ -23,7 +22,7 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from cyclonedds.core import WaitSet, ReadCondition, SampleState, ViewState, InstanceState
+from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
 from cyclonedds.domain import DomainParticipant
 from cyclonedds.idl import IdlStruct
 from cyclonedds.idl import types as t
@@ -103,7 +102,9 @@ class Imu(IdlStruct, typename="sensor_msgs::msg::dds_::Imu_"):
     linear_acceleration_covariance: t.array[t.float64, 9]
 
 
-SENSOR_QOS = Qos(Policy.Reliability.BestEffort, Policy.Durability.Volatile, Policy.History.KeepLast(5))
+SENSOR_QOS = Qos(
+    Policy.Reliability.BestEffort, Policy.Durability.Volatile, Policy.History.KeepLast(5)
+)
 DEFAULT_QOS = Qos(
     Policy.Reliability.Reliable(max_blocking_time=100_000_000),
     Policy.Durability.Volatile,
@@ -118,7 +119,9 @@ def cloud(i: int, points: int) -> PointCloud2:
     intensity = np.full((points, 1), float(i), np.float32)
     data = np.hstack([xyz, intensity]).astype("<f4").tobytes()
     fields = [PointField(n, 4 * k, 7, 1) for k, n in enumerate(("x", "y", "z", "intensity"))]
-    return PointCloud2(stamp(i, "lidar"), 1, points, fields, False, 16, 16 * points, list(data), True)
+    return PointCloud2(
+        stamp(i, "lidar"), 1, points, fields, False, 16, 16 * points, list(data), True
+    )
 
 
 def stamp(i: int, frame: str) -> Header:
@@ -128,14 +131,27 @@ def stamp(i: int, frame: str) -> Header:
 
 def image(i: int) -> Image:
     pixels = (np.arange(24 * 32 * 3, dtype=np.uint32) + i).astype(np.uint8)
-    return Image(stamp(i, "camera"), 24, 32, "rgb8", 0, 96, list(pixels.tobytes()), )
+    return Image(
+        stamp(i, "camera"),
+        24,
+        32,
+        "rgb8",
+        0,
+        96,
+        list(pixels.tobytes()),
+    )
 
 
 def imu(i: int) -> Imu:
     cov = [0.0] * 9
     return Imu(
-        stamp(i, "imu"), Quaternion(0.0, 0.0, 0.0, 1.0), cov, Vector3(0.01 * i, 0.0, 0.0), cov,
-        Vector3(0.0, 0.0, 9.81), cov,
+        stamp(i, "imu"),
+        Quaternion(0.0, 0.0, 0.0, 1.0),
+        cov,
+        Vector3(0.01 * i, 0.0, 0.0),
+        cov,
+        Vector3(0.0, 0.0, 9.81),
+        cov,
     )
 
 
@@ -146,16 +162,23 @@ def main() -> int:
     parser.add_argument("--rate", type=float, default=10.0)
     parser.add_argument("--points", type=int, default=2000)
     parser.add_argument("--listen", nargs=2, metavar=("TOPIC", "TYPE"))
+    parser.add_argument(
+        "--only", nargs="+", help="publish only these of /points /camera/image_raw /imu"
+    )
     args = parser.parse_args()
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     dp = DomainParticipant(args.domain)
+    kinds = {
+        "/points": (PointCloud2, SENSOR_QOS, lambda i: cloud(i, args.points)),
+        "/camera/image_raw": (Image, DEFAULT_QOS, image),
+        "/imu": (Imu, DEFAULT_QOS, imu),
+    }
     writers = [
-        (DataWriter(dp, Topic(dp, "rt/points", PointCloud2, qos=SENSOR_QOS), qos=SENSOR_QOS),
-         lambda i: cloud(i, args.points)),
-        (DataWriter(dp, Topic(dp, "rt/camera/image_raw", Image, qos=DEFAULT_QOS), qos=DEFAULT_QOS), image),
-        (DataWriter(dp, Topic(dp, "rt/imu", Imu, qos=DEFAULT_QOS), qos=DEFAULT_QOS), imu),
-    ]  # fmt: skip
+        (DataWriter(dp, Topic(dp, "rt" + name, cls, qos=qos), qos=qos), make)
+        for name, (cls, qos, make) in kinds.items()
+        if not args.only or name in args.only
+    ]
     if args.listen:
         from redrive.io.typestore import typestore_for
         from redrive.live.ros2_dds import idl_struct
@@ -166,7 +189,9 @@ def main() -> int:
 
         def listen() -> None:
             waitset = WaitSet(dp)
-            waitset.attach(ReadCondition(reader, SampleState.Any | ViewState.Any | InstanceState.Any))
+            waitset.attach(
+                ReadCondition(reader, SampleState.Any | ViewState.Any | InstanceState.Any)
+            )
             while not stop.is_set():
                 waitset.wait(100_000_000)
                 for sample in reader.take(N=64):

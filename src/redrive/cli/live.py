@@ -193,7 +193,10 @@ def register(sub: Any) -> None:
         "--master", metavar="URI", help="ROS master (default $ROS_MASTER_URI or :11311)"
     )
     parser.add_argument(
-        "--topics", nargs="+", metavar="TOPIC", help="ROS 1 (or --ros2) topics (with --replay: only these)"
+        "--topics",
+        nargs="+",
+        metavar="TOPIC",
+        help="ROS 1 (or --ros2) topics (with --replay: only these)",
     )
     source = parser.add_mutually_exclusive_group()
     source.add_argument(

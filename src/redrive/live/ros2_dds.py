@@ -40,10 +40,10 @@ __all__ = [
     "QosProfile",
     "RawReader",
     "RawWriter",
-    "default_domain_id",
-    "discover",
     "dds_topic",
     "dds_type",
+    "default_domain_id",
+    "discover",
     "idl_struct",
     "participant",
     "require_cyclonedds",
@@ -168,7 +168,7 @@ class QosProfile:
         from cyclonedds.qos import Policy
 
         def policy(kind: Any) -> Any:
-            return qos[kind] if kind in qos else None
+            return qos[kind]  # None when the endpoint does not set it
 
         reliability = policy(Policy.Reliability)
         durability = policy(Policy.Durability)
@@ -235,7 +235,9 @@ def idl_struct(store: Typestore, msgtype: str) -> Any:
 @cache
 def _idl_struct(store: Typestore, msgtype: str) -> Any:
     from cyclonedds.idl import make_idl_struct
-    from cyclonedds.idl import types as idl
+    from cyclonedds.idl import types as idl_types
+
+    idl: Any = idl_types  # its generics are subscripted at run time, which mypy cannot follow
 
     def element(node: tuple[Any, Any]) -> Any:
         kind, detail = node
@@ -256,7 +258,8 @@ def _idl_struct(store: Typestore, msgtype: str) -> Any:
         )
         raise ConfigError(msg)
     fields: dict[str, Any] = {}
-    for name, (kind, detail) in store.fielddefs[msgtype][1]:
+    fielddefs: Any = store.fielddefs[msgtype][1]
+    for name, (kind, detail) in fielddefs:
         if kind in (Nodetype.BASE, Nodetype.NAME):
             fields[name] = element((kind, detail))
         elif kind == Nodetype.ARRAY:
@@ -369,7 +372,7 @@ class RawReader:
     """Takes the CDR samples of one ROS 2 topic as bytes (no deserialisation)."""
 
     def __init__(self, dp: Any, topic: str, msgtype: str, *, store: Typestore, qos: QosProfile):
-        from cyclonedds.core import ReadCondition, SampleState, ViewState, InstanceState
+        from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState
         from cyclonedds.sub import DataReader
         from cyclonedds.topic import Topic
 
