@@ -229,3 +229,17 @@ def test_redrive_live_ros2_runs_the_pipeline_and_publishes_results(
     stamps = set(frames["stamp_ns"])
     assert all(r["stamp_ns"] in stamps for r in results)
     assert (tmp_path / "rec.mcap").stat().st_size > 0
+
+
+def test_a_topic_nobody_publishes_is_an_error_naming_it_and_the_domain(
+    domain: int, capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    from redrive.cli.main import main
+
+    argv = ["live", "--ros2", "--domain", str(domain), "--topics", "/nothing", "--wait", "0",
+            "--out", str(tmp_path / "run")]  # fmt: skip
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert "no publisher of /nothing on ROS 2 (DDS) domain" in err
+    assert "Traceback" not in err
+    assert not (tmp_path / "run").exists()
