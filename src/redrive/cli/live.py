@@ -1,4 +1,5 @@
-"""``redrive live`` — run algorithms on live ROS 1 topics through shared memory, and record them."""
+"""``redrive live`` — run algorithms on live ROS 1 or ROS 2 topics through shared memory, and
+record them."""
 
 from __future__ import annotations
 
@@ -20,12 +21,15 @@ examples:
   redrive live --topics /points --pipeline pipeline.toml --frames 500
   redrive live --replay drive.bag --record copy.mcap       a log played as a sensor rig
   redrive live --synthetic urban --duration 20              the simulator in real time
+  redrive live --ros2 --topics /points /imu --record out.mcap     ROS 2 (DDS) topics
 
 One scraper process per topic subscribes with rospy (under /usr/bin/python3) and hands each
 message to this process through shared memory; frames are assembled as the data arrives (the
 highest-rate LiDAR drives them, or the sensor map's `driver`) and run through the pipeline in
 realtime mode: when an algorithm is slower than the sensor it gets the newest frame and the ones
-in between are skipped and counted. --record writes every message (lossless, in a thread of its
+in between are skipped and counted. With --ros2 one scraper process reads the ROS 2 topics
+through Cyclone DDS (ROS_DOMAIN_ID / --domain, CYCLONEDDS_URI as for ROS 2 nodes) and the
+results are published back as ROS 2 messages. --record writes every message (lossless, in a thread of its
 own) to MCAP. Stops after --duration seconds, --frames frames, when every publisher's stream ends,
 or on Ctrl-C; the run directory is written as `redrive run` writes it.
 """
@@ -64,6 +68,7 @@ def _run(args: argparse.Namespace) -> int:
     previous = signal.signal(signal.SIGINT, lambda *_: stop.set())
     recorder = None
     log = None
+    publisher = None
     if args.replay is not None or args.synthetic is not None:
         kind = "replay" if args.replay is not None else "synthetic"
         session_cm = LiveSession.source(
@@ -75,6 +80,21 @@ def _run(args: argparse.Namespace) -> int:
             lossless=args.record is not None,
         )
         source_text = f"{kind} source {args.replay or args.synthetic}"
+    elif args.ros2:
+        from redrive.live.ros2 import ros2_session
+        from redrive.live.ros2_dds import default_domain_id
+
+        if not args.topics:
+            print("redrive live --ros2: give --topics")
+            return 2
+        domain = default_domain_id() if args.domain is None else args.domain
+        session_cm = ros2_session(
+            args.topics,
+            domain_id=domain,
+            capacity=_capacities(args.capacity),
+            wait_for_topics_s=args.wait,
+        )
+        source_text = f"ROS 2 (DDS domain {domain})"
     else:
         if not args.topics:
             print("redrive live: give --topics (ROS 1), --replay LOG or --synthetic SCENARIO")
@@ -116,12 +136,20 @@ def _run(args: argparse.Namespace) -> int:
                 topics={s.topic: s.msgtype for s in session.specs},
                 record=None if args.record is None else str(args.record),
             )
-            report = run_reader(request, log, hooks=hooks, log_info=info, lookahead_ns=0)
+            if args.ros2 and not args.no_publish:
+                from redrive.live.ros2 import ResultPublisher
+
+                publisher = ResultPublisher(domain)
+            report = run_reader(
+                request, log, hooks=hooks, log_info=info, lookahead_ns=0, on_frame=publisher
+            )
         finally:
             stop.set()
             signal.signal(signal.SIGINT, previous)
             if log is not None:
                 log.close()
+            if publisher is not None:
+                publisher.close()
     recorded = recorder.stop() if recorder is not None else None
     print_run_report(report, out)
     console = Console(width=None if sys.stdout.isatty() else 120)
@@ -138,6 +166,9 @@ def _run(args: argparse.Namespace) -> int:
         )
         kept = f", {recorder.recorded[topic]} recorded" if recorder else ""
         console.print(f"  {topic}: {used}{kept}")
+    if publisher is not None:
+        for topic, count in sorted(publisher.published.items()):
+            console.print(f"  published {topic}: {count}")
     if recorded is not None and recorder is not None:
         console.print(f"recorded: {recorded}")
         for err in recorder.errors[:5]:
@@ -148,9 +179,10 @@ def _run(args: argparse.Namespace) -> int:
 def register(sub: Any) -> None:
     parser = sub.add_parser(
         "live",
-        help="run algorithms on live ROS 1 topics (shared memory), optionally recording them",
+        help="run algorithms on live ROS 1 or ROS 2 topics (shared memory), optionally recording",
         description=(
-            "Subscribe to ROS 1 topics through scraper processes and shared memory, assemble "
+            "Subscribe to ROS 1 (or, with --ros2, ROS 2) topics through scraper processes and "
+            "shared memory, assemble "
             "frames as the data arrives, run the pipeline on them in realtime mode into a run "
             "directory, and record the topics to MCAP."
         ),
@@ -161,9 +193,18 @@ def register(sub: Any) -> None:
         "--master", metavar="URI", help="ROS master (default $ROS_MASTER_URI or :11311)"
     )
     parser.add_argument(
-        "--topics", nargs="+", metavar="TOPIC", help="ROS 1 topics (with --replay: only these)"
+        "--topics",
+        nargs="+",
+        metavar="TOPIC",
+        help="ROS 1 (or --ros2) topics (with --replay: only these)",
     )
     source = parser.add_mutually_exclusive_group()
+    source.add_argument(
+        "--ros2",
+        action="store_true",
+        help="ROS 2 topics over DDS (Cyclone DDS, the default ROS 2 middleware); results are "
+        "published back on /redrive/<algorithm>/detections and /path",
+    )
     source.add_argument(
         "--replay", type=Path, metavar="LOG", help="a replay source: a log at its recorded rate"
     )
@@ -172,6 +213,12 @@ def register(sub: Any) -> None:
     )
     parser.add_argument(
         "--rate", type=float, default=1.0, help="speed of --replay/--synthetic (default 1.0)"
+    )
+    parser.add_argument(
+        "--domain", type=int, metavar="ID", help="--ros2: DDS domain (default $ROS_DOMAIN_ID or 0)"
+    )
+    parser.add_argument(
+        "--no-publish", action="store_true", help="--ros2: do not publish the results"
     )
     parser.add_argument("--pipeline", type=Path, metavar="TOML", help="a pipeline file")
     for role in ("perception", "planning", "control"):

@@ -270,12 +270,14 @@ def run_reader(
     progress: Callable[[int], None] | None = None,
     lookahead_ns: int | None = None,
     cancel: threading.Event | None = None,
+    on_frame: Callable[[FrameRecord], None] | None = None,
 ) -> RunReport:
     """Run the pipeline over the frames of an open ``log`` (a file, or a live session's streams)
     released by ``hooks`` (the Mode Manager: replay pacing, real-time skipping …) into
     ``request.out``; ``log_info`` is what the manifest says of the log; ``lookahead_ns`` how long
     the frame assembler waits past a driver sample for the other sensors (live: 0, a frame is
-    released once the tolerance has passed); ``cancel`` as in :func:`run_log`."""
+    released once the tolerance has passed); ``cancel`` as in :func:`run_log`; ``on_frame`` gets
+    each finished frame's record once it is stored (live: publishing the results)."""
     overrides = load_sensor_map_overrides(request.sensor_map) if request.sensor_map else None
     assembler = FrameAssembler(log, overrides=overrides)
     if lookahead_ns is not None:
@@ -310,8 +312,19 @@ def run_reader(
         frames=frames,
         progress=progress,
         cancel=cancel,
+        sink=None if on_frame is None else _then(writer.write_frame, on_frame),
         summary_extra=summary_extra,
     )
+
+
+def _then(
+    first: Callable[[FrameRecord], None], second: Callable[[FrameRecord], None]
+) -> Callable[[FrameRecord], None]:
+    def both(record: FrameRecord) -> None:
+        first(record)
+        second(record)
+
+    return both
 
 
 def execute(

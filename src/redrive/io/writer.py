@@ -125,7 +125,19 @@ class McapWriter:
             self._schemas[msgtype] = schema_id
         return schema_id
 
-    def _channel_id(self, topic: str, msgtype: str) -> int:
+    def add_channel(self, topic: str, msgtype: str, *, offered_qos: str = "") -> None:
+        """Declare ``topic`` of ``msgtype`` before its first message, with the QoS its publishers
+        offered (rosbag2's ``offered_qos_profiles`` YAML; "" for the default, latched for
+        ``/tf_static``).
+
+        Raises:
+            LogError: the topic already carries another type.
+            UnsupportedMessageError: no definition of ``msgtype`` is known.
+        """
+        self._check_open()
+        self._channel_id(topic, msgtype, offered_qos=offered_qos or None)
+
+    def _channel_id(self, topic: str, msgtype: str, *, offered_qos: str | None = None) -> int:
         known = self._channels.get(topic)
         if known is not None:
             if known[0] != msgtype:
@@ -135,7 +147,9 @@ class McapWriter:
                 )
                 raise LogError(msg)
             return known[1]
-        metadata = {"offered_qos_profiles": _LATCHED_QOS if topic.endswith("tf_static") else ""}
+        if offered_qos is None:
+            offered_qos = _LATCHED_QOS if topic.endswith("tf_static") else ""
+        metadata = {"offered_qos_profiles": offered_qos}
         channel_id = self._writer.register_channel(
             topic=topic,
             message_encoding="cdr",

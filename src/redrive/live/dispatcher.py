@@ -3,7 +3,8 @@
 :class:`LiveLog` implements :class:`redrive.io.LogReader` over the streams of a live session, so
 the replay path's :class:`~redrive.io.frames.FrameAssembler` (sensor map inference, nearest-stamp
 synchronisation, ego-state interpolation) assembles live frames unchanged. ``ros1`` streams yield
-the scraper's serialised bytes, decoded here with redrive's decoders and a ROS 1 Noetic typestore;
+the scraper's serialised bytes, decoded here with redrive's decoders and a ROS 1 Noetic typestore
+(``cdr`` streams: the ROS 2 scraper's CDR bytes and a ROS 2 Humble one);
 ``sensor`` streams yield already-typed samples (``native`` messages).
 
 **Clocks.** The frame assembler compares a message's *log time* (when it arrived) with header
@@ -37,7 +38,7 @@ from redrive.io.decoders.base import Decoded
 from redrive.io.typestore import typestore_for
 from redrive.live.streams import StreamSpec
 from redrive.transport import Policy, ProducerGoneError, Reader
-from redrive.transport.codec import KIND_ROS1, KIND_SENSOR, decode_sample
+from redrive.transport.codec import KIND_CDR, KIND_ROS1, KIND_SENSOR, decode_sample
 
 __all__ = ["LiveLog"]
 
@@ -100,15 +101,19 @@ class LiveLog:
             raise
         ros1_types = sorted({s.msgtype for s in specs if s.payload == "ros1"})
         store = typestore_for(1, needed=ros1_types)[0] if ros1_types else None
-        self._deserializer = Deserializer(self.path, ros1=store, cdr=None)
-        # ros1 types whose first field is a std_msgs/Header: the stamp is bytes 4..12
+        cdr_types = sorted({s.msgtype for s in specs if s.payload == "cdr"})
+        cdr_store = typestore_for(2, needed=cdr_types)[0] if cdr_types else None
+        self._deserializer = Deserializer(self.path, ros1=store, cdr=cdr_store)
+        # types whose first field is a std_msgs/Header: the stamp is bytes 4..12 (ROS 1: after
+        # the header's seq; CDR: after the encapsulation header)
         self._has_header = {
             t
-            for t in ros1_types
-            if store is not None
-            and t in store.fielddefs
-            and store.fielddefs[t][1][:1]
-            and store.fielddefs[t][1][0][0] == "header"
+            for types, st in ((ros1_types, store), (cdr_types, cdr_store))
+            for t in types
+            if st is not None
+            and t in st.fielddefs
+            and st.fielddefs[t][1][:1]
+            and st.fielddefs[t][1][0][0] == "header"
         }
         self._offset_ns: int | None = None
         self._topics = MappingProxyType(
@@ -117,7 +122,7 @@ class LiveLog:
                     topic=s.topic,
                     msgtype=s.msgtype,
                     count=0,
-                    encoding="ros1" if s.payload == "ros1" else "native",
+                    encoding="native" if s.payload == "sensor" else s.payload,
                     **_native_kind(s),
                 )
                 for s in specs
@@ -135,10 +140,10 @@ class LiveLog:
 
     @property
     def capabilities(self) -> ReaderCapabilities:
-        """From the session's topics; message-typed when every stream carries ROS 1 bytes."""
+        """From the session's topics; message-typed when every stream carries ROS bytes."""
         return capabilities_of(
             self._topics.values(),
-            message_typed=all(s.payload == "ros1" for s in self._specs.values()),
+            message_typed=all(s.payload != "sensor" for s in self._specs.values()),
         )
 
     @property
@@ -193,7 +198,7 @@ class LiveLog:
                 return
             self.received[topic] += 1
             self.dropped[topic] += msg.dropped_before
-            if msg.kind == KIND_ROS1:
+            if msg.kind in (KIND_ROS1, KIND_CDR):
                 stamp = None
                 if spec.msgtype in self._has_header and msg.payload.shape[0] >= 12:
                     sec, nsec = struct.unpack_from("<II", msg.payload.data, 4)
@@ -202,7 +207,7 @@ class LiveLog:
                     topic=topic,
                     msgtype=spec.msgtype,
                     log_time_ns=self._log_time(msg.publish_ns, stamp),
-                    encoding="ros1",
+                    encoding="ros1" if msg.kind == KIND_ROS1 else "cdr",
                     raw=msg.payload.data,
                 )
             elif msg.kind == KIND_SENSOR:

@@ -7,9 +7,11 @@ it has not recorded) in its own thread, so the algorithm pipeline never waits fo
   ``ros1`` profile: each message's bytes exactly as the publisher sent them, schemas in
   ``ros1msg`` encoding from ROS Noetic's definitions (``rosbag``-compatible md5sums). ``redrive
   info``/``open_log``, Foxglove and Lichtblick read it.
-* Otherwise (typed samples from the replay or synthetic sources, possibly mixed with ROS 1
-  topics) it is redrive's native format (:class:`redrive.io.writer.McapWriter`: ROS 2 CDR of
-  standard types); ROS 1 messages are decoded and re-encoded as their standard type.
+* Otherwise (ROS 2 topics, typed samples from the replay or synthetic sources, possibly mixed
+  with ROS 1 topics) it is redrive's native format (:class:`redrive.io.writer.McapWriter`: ROS 2
+  CDR of standard types); ROS 2 messages are written byte for byte as DDS delivered them, with
+  the QoS their publishers offer as ``offered_qos_profiles``; ROS 1 messages are decoded and
+  re-encoded as their standard type.
 
 The file appears atomically when the logger stops (temporary file + rename); a crash leaves no
 half-written file at the target path.
@@ -37,7 +39,7 @@ from redrive.io.typestore import typestore_for
 from redrive.io.writer import McapWriter
 from redrive.live.streams import StreamSpec, ros1_type
 from redrive.transport import Message, Policy, ProducerGoneError, Reader
-from redrive.transport.codec import KIND_ROS1, KIND_SENSOR, decode_sample
+from redrive.transport.codec import KIND_CDR, KIND_ROS1, KIND_SENSOR, decode_sample
 
 __all__ = ["DataLogger"]
 
@@ -81,6 +83,9 @@ class DataLogger:
     def _open(self) -> None:
         if not self.raw_ros1:
             self._native: McapWriter | None = McapWriter(self.path)
+            for spec in self.specs:
+                if spec.payload == "cdr":  # ROS 2 topics: the QoS their publishers offer
+                    self._native.add_channel(spec.topic, spec.msgtype, offered_qos=spec.qos)
             return
         self._native = None
         try:
@@ -160,6 +165,8 @@ class DataLogger:
                 data=data.tobytes(),
                 sequence=seq,
             )
+        elif kind == KIND_CDR:  # ROS 2: recorded as it came off the wire
+            self._native.write_raw(topic, self._msgtype[topic], log_ns, data.data)
         elif kind == KIND_SENSOR:
             sample = decode_sample(meta, data)
             self._native.write(

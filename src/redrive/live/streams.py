@@ -5,9 +5,10 @@ stream ``<session>.<topic>`` (``/velodyne_points`` → ``live-123.velodyne_point
 starts the sources (the engine, a test, the loss benchmark) knows the topics and their types and
 hands the list of :class:`StreamSpec` to the Sensor Dispatcher and the Data Logger.
 
-Two payload kinds travel (see :mod:`redrive.transport.codec`): ``ros1`` streams carry ROS 1
-messages as serialised bytes (the ROS scraper forwards what rospy received), ``sensor`` streams
-carry typed data-model samples (the replay and synthetic sources).
+Three payload kinds travel (see :mod:`redrive.transport.codec`): ``ros1`` streams carry ROS 1
+messages as serialised bytes (the ROS scraper forwards what rospy received), ``cdr`` streams ROS 2
+messages as CDR bytes (the ROS 2 scraper forwards what DDS received), ``sensor`` streams carry
+typed data-model samples (the replay and synthetic sources).
 """
 
 from __future__ import annotations
@@ -57,12 +58,16 @@ class StreamSpec:
         msgtype: its ROS 2 style type (``sensor_msgs/msg/PointCloud2``); for ``sensor`` streams
             the type the sample stands for (:data:`PAYLOAD_MSGTYPE`).
         stream: the shared-memory stream name (:func:`stream_name`).
-        payload: ``ros1`` (serialised ROS 1 bytes) or ``sensor`` (typed samples).
+        payload: ``ros1`` (serialised ROS 1 bytes), ``cdr`` (ROS 2 CDR bytes) or ``sensor``
+            (typed samples).
         capacity_bytes: the largest message the stream takes.
+        qos: ``cdr`` streams: what the publishers offer, as rosbag2's ``offered_qos_profiles``
+            YAML (recorded on the topic's channel); "" otherwise.
     """
 
     topic: str
     msgtype: str
     stream: str
-    payload: Literal["ros1", "sensor"]
+    payload: Literal["ros1", "cdr", "sensor"]
     capacity_bytes: int
+    qos: str = ""

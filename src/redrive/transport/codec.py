@@ -34,6 +34,7 @@ from redrive.errors import TransportError
 from redrive.types import GnssFix, Image, Imu, PointCloud, SensorData, SensorType, VehicleState
 
 __all__ = [
+    "KIND_CDR",
     "KIND_RAW",
     "KIND_ROS1",
     "KIND_SENSOR",
@@ -48,6 +49,8 @@ __all__ = [
 KIND_RAW = 0
 KIND_SENSOR = 1
 KIND_ROS1 = 2
+#: one ROS 2 message as its CDR bytes (the ROS 2 scraper); the stream's spec says its type.
+KIND_CDR = 3
 
 _VERSION = 1
 _HEAD = struct.Struct("<BBBBqdii3d")
