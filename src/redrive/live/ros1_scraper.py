@@ -19,6 +19,7 @@ Usage: ``python3 ros1_scraper.py --topic /velodyne_points --stream live-1.velody
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import os
 import signal
@@ -38,6 +39,17 @@ def _master_pid(uri: str) -> int | None:
     except (OSError, xmlrpc.client.Error, ValueError):
         return None
     return int(pid) if code == 1 else None
+
+
+def _publishers(sub: Any) -> list[str]:
+    """The caller ids of the publishers this subscriber has an open connection to."""
+    impl = getattr(sub, "impl", None)
+    connections = list(getattr(impl, "connections", ()) or ())
+    return sorted(
+        str(getattr(c, "callerid_pub", "unknown"))
+        for c in connections
+        if not getattr(c, "done", False)
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -79,6 +91,14 @@ def main(argv: list[str] | None = None) -> int:
             if not meta:
                 header = msg._connection_header
                 meta.append(encode_ros1_meta(args.topic, header["type"], header["md5sum"]))
+                # the full definition, for a recorder that does not know the type: printed
+                # before the first message is published, so it is there when that one is read
+                definition = {
+                    "type": header["type"],
+                    "md5sum": header["md5sum"],
+                    "definition": header.get("message_definition", ""),
+                }
+                print("DEF " + json.dumps(definition), flush=True)
             try:
                 writer.publish(msg._buff, stamp_ns=now, kind=KIND_ROS1, meta=meta[0],
                                timeout_s=args.timeout)  # fmt: skip
@@ -105,7 +125,18 @@ def main(argv: list[str] | None = None) -> int:
         pid = _master_pid(uri)
         print("READY", flush=True)
         parent = os.getppid()
-        while not stop.wait(0.5):
+        state = ""
+        while not stop.wait(0.25):
+            with lock:
+                now_state = json.dumps({
+                    "publishers": _publishers(sub),
+                    "received": counts["received"],
+                    "forwarded": counts["published"],
+                    "failed": counts["failed"],
+                })  # fmt: skip
+            if now_state != state:
+                print("STATE " + now_state, flush=True)
+                state = now_state
             if os.getppid() != parent:  # redrive live was killed: no orphan scraper stays
                 logger.warning("the process that started this scraper is gone: stopping")
                 break
