@@ -42,6 +42,7 @@ def warn_orphans(record: Path, console: Any) -> None:
             f"[yellow]found {part}: an unfinished recording left by a session that was killed; "
             f"recover what it holds with `redrive repair {part} -o {fixed}`, then delete it[/]",
             highlight=False,
+            soft_wrap=True,
         )
 
 
@@ -118,7 +119,7 @@ def record_only(args: argparse.Namespace, master: str) -> int:
     from redrive.live.recorder import DataLogger
     from redrive.live.recording import Recording, TopicSelection
     from redrive.live.ros1 import list_topics
-    from redrive.live.session import LiveSession
+    from redrive.live.session import LiveSession, wait_for_topics
 
     console = Console(stderr=True)
     if args.frames is not None:
@@ -143,25 +144,10 @@ def record_only(args: argparse.Namespace, master: str) -> int:
         return 2
     warn_orphans(args.record, console)
     if ros:
-        grown = {}
+        types = wait_for_topics(list(selection.topics), master_uri=master, wait_s=args.wait)
         if selection.grows:
-            grown = {
-                name: msg_type
-                for name, msg_type in selection.chosen(list_topics(master)).items()
-                if name not in selection.topics
-            }
-        session = LiveSession.ros1(
-            list(selection.topics),
-            master_uri=master,
-            capacity=args.capacities,
-            wait_for_topics_s=args.wait,
-        )
-        try:
-            if grown:
-                session.add_ros1(grown)
-        except BaseException:
-            session.close()
-            raise
+            types.update(selection.chosen(list_topics(master)))
+        session = LiveSession.ros1([], master_uri=master, capacity=args.capacities)
         source_text = master
     else:
         kind = "replay" if args.replay is not None else "synthetic"
@@ -188,6 +174,8 @@ def record_only(args: argparse.Namespace, master: str) -> int:
                 max_size_bytes=max_size,
             )
             try:
+                if ros:  # each scraper subscribes once the recorder reads its stream
+                    session.add_ros1(types, on_stream=recorder.add)
                 recording = Recording(
                     session,
                     recorder,

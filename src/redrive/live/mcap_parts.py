@@ -92,7 +92,7 @@ class SplitMcapWriter:
         self._fh = os.fdopen(fd, "wb")
         chunk = 1 << 20
         if self.split_size_bytes is not None:
-            chunk = max(64 << 10, min(chunk, self.split_size_bytes // 4))
+            chunk = max(4 << 10, min(chunk, self.split_size_bytes // 4))
         self._writer = McapRawWriter(self._fh, chunk_size=chunk, compression=CompressionType.ZSTD)
         self._writer.start(profile="ros1", library="redrive")
         self._schemas: dict[str, int] = {}

@@ -10,7 +10,8 @@
   again with it by themselves);
 * says why the session ends: every publisher of the recorded topics gone for ``idle_timeout_s``
   (a publisher is there while it is registered with the master or a scraper is connected to it;
-  the master's own ``/rosout`` node and redrive's scrapers do not count), the recording full
+  the master's own ``/rosout`` node and redrive's scrapers do not count; with ``--all``/``--regex``
+  the clock starts once a first publisher was there), the recording full
   (``--max-size``), or — for replay and synthetic sources — the source finished.
 """
 
@@ -159,12 +160,10 @@ class Recording:
         if not new:
             return
         try:
-            specs = self.session.add_ros1(new)
+            self.session.add_ros1(new, on_stream=self.recorder.add)
         except TransportError as err:
             self.say(f"not recording {', '.join(sorted(new))}: {err}")
             return
-        for spec in specs:
-            self.recorder.add(spec)
         self.say(f"recording {', '.join(sorted(new))} too (new on the master)")
 
     def _publishers(self, topic: str) -> set[str]:
@@ -180,8 +179,8 @@ class Recording:
             self._seen_publisher = True
             self._idle_since = None
             return None
-        if not self._seen_publisher:  # nothing published yet: wait for the first publisher
-            return None
+        if self.selection.grows and not self._seen_publisher:
+            return None  # -a/-e before anything is published: wait for the first publisher
         if self._idle_since is None:
             self._idle_since = now
         if now - self._idle_since >= self.idle_timeout_s:

@@ -13,7 +13,9 @@ If the ROS master restarts (its pid changes), the subscription is registered ane
 master. SIGTERM/SIGINT stop it, and so does the death of the process that started it; the stream's segment is unlinked on every exit path.
 
 Usage: ``python3 ros1_scraper.py --topic /velodyne_points --stream live-1.velodyne_points
---capacity 4000000 [--policy lossless] [--slots 8]``; prints ``READY`` once subscribed.
+--capacity 4000000 [--policy lossless] [--slots 8] [--await-lossless 20]``; prints ``READY``
+once subscribed (with ``--await-lossless``: ``STREAM`` first, and it subscribes once a recorder
+reads the stream).
 """
 
 from __future__ import annotations
@@ -67,6 +69,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--slots", type=int, default=8)
     parser.add_argument("--max-readers", type=int, default=2)
     parser.add_argument("--timeout", type=float, default=5.0, help="lossless back-pressure, s")
+    parser.add_argument(
+        "--await-lossless",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="print STREAM once the stream exists, and subscribe only once a lossless reader "
+        "(a recorder) attached, up to S seconds: no message is published before it reads",
+    )
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s scraper %(message)s")
 
@@ -110,6 +120,14 @@ def main(argv: list[str] | None = None) -> int:
                 )
 
     try:
+        if args.await_lossless > 0:
+            print("STREAM", flush=True)
+            deadline = time.monotonic() + args.await_lossless
+            while not any(r.policy == Policy.LOSSLESS for r in writer.stats().readers):
+                if time.monotonic() >= deadline or stop.is_set():
+                    logger.error("%s: no recorder attached to %s", args.topic, args.stream)
+                    return 1
+                time.sleep(0.01)
         rospy.init_node("redrive_scraper", anonymous=True, disable_signals=True)
         import rosgraph
 

@@ -19,7 +19,7 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
@@ -30,7 +30,13 @@ from redrive.live.scraper_state import Ros1Definition, ScraperState
 from redrive.live.streams import StreamSpec, ros2_type, stream_name
 from redrive.transport import remove_stale
 
-__all__ = ["DEFAULT_CAPACITY", "ROS_PYTHON", "LiveSession", "default_session_name"]
+__all__ = [
+    "DEFAULT_CAPACITY",
+    "ROS_PYTHON",
+    "LiveSession",
+    "default_session_name",
+    "wait_for_topics",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -100,26 +106,14 @@ class LiveSession:
             raise TransportError(msg)
         name = name or default_session_name()
         remove_stale()  # segments of killed earlier sessions
-        deadline = time.monotonic() + wait_for_topics_s
-        while True:
-            known = {t.name: t for t in list_topics(master_uri) if t.msg_type != "*"}
-            missing = [t for t in topics if t not in known]
-            if not missing or time.monotonic() >= deadline:
-                break
-            time.sleep(0.2)
-        if missing:
-            msg = (
-                f"not on the ROS master {master_uri}: {', '.join(missing)}; "
-                f"it has {', '.join(sorted(known)) or 'no topics'} (`redrive topics` lists them)"
-            )
-            raise ConfigError(msg)
+        types = wait_for_topics(topics, master_uri=master_uri, wait_s=wait_for_topics_s)
         session = cls(name, [], [])
         session._ros1 = _Ros1Options(
             master_uri=master_uri, capacity=dict(capacity or {}), slots=slots,
             ready_timeout_s=ready_timeout_s,
         )  # fmt: skip
         try:
-            session.add_ros1({topic: known[topic].msg_type for topic in topics})
+            session.add_ros1(types)
         except BaseException:
             session.close()
             raise
@@ -173,9 +167,18 @@ class LiveSession:
             raise
         return session
 
-    def add_ros1(self, topics: Mapping[str, str]) -> list[StreamSpec]:
+    def add_ros1(
+        self,
+        topics: Mapping[str, str],
+        *,
+        on_stream: Callable[[StreamSpec], None] | None = None,
+    ) -> list[StreamSpec]:
         """Start a scraper for each of ``topics`` (topic → ROS 1 type) and wait until each is
         subscribed; returns their streams (also appended to :attr:`specs`).
+
+        With ``on_stream`` (a recorder's ``add``), each scraper waits until ``on_stream`` was
+        called with its stream, and a lossless reader attached, before it subscribes: no message
+        is published before the recorder reads the stream.
 
         Raises:
             TransportError: a scraper failed to start (those of this call are stopped).
@@ -207,6 +210,8 @@ class LiveSession:
                     str(ROS_PYTHON), str(_SCRAPER), "--topic", spec.topic, "--stream", spec.stream,
                     "--capacity", str(spec.capacity_bytes), "--slots", str(opts.slots),
                 ]  # fmt: skip
+                if on_stream is not None:
+                    argv += ["--await-lossless", str(opts.ready_timeout_s)]
                 proc = subprocess.Popen(
                     argv,
                     env=env,
@@ -217,6 +222,10 @@ class LiveSession:
                 )
                 started.append((spec, proc))
             deadline = time.monotonic() + opts.ready_timeout_s
+            if on_stream is not None:
+                for spec, proc in started:
+                    _wait_ready(proc, f"the scraper of {spec.topic}", deadline, word="STREAM")
+                    on_stream(spec)
             for spec, proc in started:
                 _wait_ready(proc, f"the scraper of {spec.topic}", deadline)
         except BaseException:
@@ -289,7 +298,32 @@ def _stop(processes: Sequence[subprocess.Popen[str]], *, timeout_s: float) -> No
             proc.stderr.close()
 
 
-def _wait_ready(proc: subprocess.Popen[str], topic: str, deadline: float) -> None:
+def wait_for_topics(topics: Sequence[str], *, master_uri: str, wait_s: float) -> dict[str, str]:
+    """Topic → ROS 1 type of ``topics``, waiting up to ``wait_s`` for those not yet published.
+
+    Raises:
+        ConfigError: a topic is not on the master by then.
+        TransportError: no master answers.
+    """
+    deadline = time.monotonic() + wait_s
+    while True:
+        known = {t.name: t for t in list_topics(master_uri) if t.msg_type != "*"}
+        missing = [t for t in topics if t not in known]
+        if not missing or time.monotonic() >= deadline:
+            break
+        time.sleep(0.2)
+    if missing:
+        msg = (
+            f"not on the ROS master {master_uri}: {', '.join(missing)}; "
+            f"it has {', '.join(sorted(known)) or 'no topics'} (`redrive topics` lists them)"
+        )
+        raise ConfigError(msg)
+    return {topic: known[topic].msg_type for topic in topics}
+
+
+def _wait_ready(
+    proc: subprocess.Popen[str], topic: str, deadline: float, *, word: str = "READY"
+) -> None:
     import select
 
     assert proc.stdout is not None
@@ -302,7 +336,7 @@ def _wait_ready(proc: subprocess.Popen[str], topic: str, deadline: float) -> Non
         if not ready:
             continue
         line = proc.stdout.readline()
-        if line.strip() == "READY":
+        if line.strip() == word:
             return
         if not line:
             err = proc.stderr.read() if proc.stderr else ""
