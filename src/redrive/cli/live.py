@@ -33,8 +33,8 @@ runs (no frames, no sensor map needed). Topics: those named, -a/--all, -e/--rege
 two, topics that appear later are recorded too), minus -x/--exclude. Such a session ends at the
 first of: --duration seconds; --max-size bytes recorded; every publisher of the recorded topics
 gone (unregistered from the master and disconnected; the master's own /rosout node does not
-count) for --idle-timeout seconds (with -a/-e: once one was there); the replay/synthetic source finished;
-Ctrl-C or SIGTERM. A status line per topic shows while it records; the summary gives wall time,
+count) for --idle-timeout seconds (with -a/-e counted once a first publisher was there); the
+replay/synthetic source finished; Ctrl-C or SIGTERM. A status line per topic shows while it records; the summary gives wall time,
 messages, bytes and drops per topic.
 
 Otherwise frames are assembled as the data arrives (the highest-rate LiDAR drives them, or the
