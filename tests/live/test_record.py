@@ -20,7 +20,14 @@ from pathlib import Path
 import pytest
 
 from redrive.io import open_log
-from tests.live.conftest import RosCore, _stop_group, ros1_missing, start_master
+from tests.live.conftest import (
+    ROSMASTER,
+    RosCore,
+    RosProcess,
+    _stop_group,
+    ros1_missing,
+    start_master,
+)
 
 HUSKY_BAG = "rosbag1_real/robot_localization_test1_husky.bag"
 HUSKY_TOPICS = ["/imu/data", "/husky_velocity_controller/odom", "/fix"]
@@ -29,7 +36,7 @@ ros1 = pytest.mark.skipif(ros1_missing() is not None, reason=str(ros1_missing())
 # A publisher of a type no ROS package and no redrive decoder knows, made at run time from its
 # definition (as rosbag does for the types of a bag); 20 messages once subscribed, then it exits.
 CUSTOM_PUBLISHER = r"""
-import time
+import os, sys, time
 import rospy
 from genpy.dynamic import generate_dynamic
 DEFINITION = '''string label
@@ -43,7 +50,7 @@ float32 speed_mps
 Rig = generate_dynamic("redrive_test/Rig", DEFINITION)["redrive_test/Rig"]
 Wheel = generate_dynamic("redrive_test/Rig", DEFINITION)["redrive_test/Wheel"]
 rospy.init_node("custom_rig", anonymous=True)
-pub = rospy.Publisher("/custom/rig", Rig, queue_size=100)
+pub = rospy.Publisher(sys.argv[1], Rig, queue_size=100)
 print("READY", flush=True)
 while pub.get_num_connections() == 0:
     time.sleep(0.05)
@@ -51,6 +58,8 @@ for i in range(20):
     pub.publish(Rig(label=f"rig {i}", values=[i, i / 2], wheels=[Wheel(id=i, speed_mps=1.5 * i)]))
     time.sleep(0.01)
 print("DONE", flush=True)
+while not os.path.exists(sys.argv[2]):  # stays connected until the test lets it go
+    time.sleep(0.05)
 """
 
 
@@ -213,34 +222,73 @@ def test_records_what_rosbag_record_records(
     assert not list(tmp_path.rglob(".*.part"))
 
 
+def _read_until(proc: subprocess.Popen[str], text: str) -> None:
+    assert proc.stderr is not None
+    seen = []
+    for line in proc.stderr:
+        seen.append(line)
+        if text in line:
+            return
+    pytest.fail(f"redrive live never said {text!r}:\n{''.join(seen)}")
+
+
+def _wait_output(process: RosProcess, text: str) -> None:
+    deadline = time.monotonic() + 60
+    while text not in process.output:
+        assert process.proc.poll() is None, process.output
+        assert time.monotonic() < deadline, process.output
+        time.sleep(0.05)
+
+
 @ros1
-def test_a_type_redrive_does_not_know_is_recorded_with_its_definition(
-    master: RosCore, tmp_path: Path
-) -> None:
+def test_a_type_redrive_does_not_know_is_recorded_with_its_definition(tmp_path: Path) -> None:
+    """A type made at run time is recorded with its definition; the ROS master killed and started
+    again at the same address: a topic published after the restart is recorded too."""
     from mcap.reader import make_reader
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-    with master.python_process(CUSTOM_PUBLISHER) as publisher:
-        live = _redrive(master, "-e", "/custom/.*", "--record", str(tmp_path / "c.mcap"),
-                        "--idle-timeout", "1")  # fmt: skip
-        _finish(live)
-    assert "DONE" in publisher.output
+    core, master_proc = start_master(tmp_path / "ros")
+    free = tmp_path / "let-go"
+    live = None
+    try:
+        with core.python_process(CUSTOM_PUBLISHER, "/custom/rig", str(free)) as first:
+            live = _redrive(core, "-e", "/custom/.*", "--record", str(tmp_path / "c.mcap"),
+                            "--idle-timeout", "1")  # fmt: skip
+            _wait_output(first, "DONE")
+            _stop_group(master_proc, wait_s=10)
+            _read_until(live, "is gone")
+            master_proc = subprocess.Popen(
+                [str(ROSMASTER), "--core", "-p", str(core.port)], env=core.env,
+                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+            )  # fmt: skip
+            _read_until(live, "is back")
+            with core.python_process(CUSTOM_PUBLISHER, "/custom/after", str(free)) as second:
+                _wait_output(second, "DONE")
+                free.touch()
+            _finish(live)
+    finally:
+        if live is not None:
+            _stop_group(live, wait_s=5)
+        _stop_group(master_proc, wait_s=10)
     with (tmp_path / "c.mcap").open("rb") as fh:  # the mcap library reads it
         reader = make_reader(fh)
         schema = next(iter(reader.get_summary().schemas.values()))  # type: ignore[union-attr]
-        raws = [m.data for _, _, m in reader.iter_messages()]
+        raws: dict[str, list[bytes]] = {}
+        for _, channel, message in reader.iter_messages():
+            raws.setdefault(channel.topic, []).append(message.data)
     assert schema.name == "redrive_test/Rig"
     assert schema.encoding == "ros1msg"
     assert b"MSG: redrive_test/Wheel" in schema.data
     store = get_typestore(Stores.EMPTY)  # rosbags, from the definition in the file alone
     store.register(get_types_from_msg(schema.data.decode(), "redrive_test/msg/Rig"))
     store.register(get_types_from_msg("int32 id\nfloat32 speed_mps", "redrive_test/msg/Wheel"))
-    rigs = [store.deserialize_ros1(r, "redrive_test/msg/Rig") for r in raws]
-    assert [r.label for r in rigs] == [f"rig {i}" for i in range(20)]
-    assert rigs[7].wheels[0].speed_mps == pytest.approx(10.5)
+    for topic in ("/custom/rig", "/custom/after"):  # before and after the restart
+        rigs = [store.deserialize_ros1(r, "redrive_test/msg/Rig") for r in raws[topic]]
+        assert [r.label for r in rigs] == [f"rig {i}" for i in range(20)]
+        assert rigs[7].wheels[0].speed_mps == pytest.approx(10.5)
     with open_log(tmp_path / "c.mcap") as log:  # and redrive
-        first = log.deserialize(next(log.messages()))
-    assert first.values.tolist() == [0.0, 0.0]  # type: ignore[attr-defined]
+        first_rig = log.deserialize(next(log.messages(topics=["/custom/rig"])))
+    assert first_rig.values.tolist() == [0.0, 0.0]  # type: ignore[attr-defined]
 
 
 @ros1

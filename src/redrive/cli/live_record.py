@@ -182,7 +182,9 @@ def record_only(args: argparse.Namespace, master: str) -> int:
                     selection=selection,
                     master_uri=master if ros else None,
                     idle_timeout_s=args.idle_timeout,
-                    say=lambda text: console.print(f"[yellow]{text}[/]", highlight=False),
+                    say=lambda text: console.print(
+                        f"[yellow]{text}[/]", highlight=False, soft_wrap=True
+                    ),
                 )
                 console.print(
                     f"live: recording {len(session.specs)} topic(s) from {source_text} to "
