@@ -85,3 +85,43 @@ def test_split_duration_starts_new_files(tmp_path: Path) -> None:
 def test_a_glob_that_names_nothing(tmp_path: Path) -> None:
     with pytest.raises(LogError, match="names none"):
         open_log(tmp_path / "nothing_*.mcap")
+
+
+def test_the_recorder_stops_at_max_size_and_takes_streams_added_later(tmp_path: Path) -> None:
+    """DataLogger on real shared-memory streams, in process: a stream added while it records is
+    recorded, definitions come from the callback, and ``full`` is set at --max-size."""
+    import os
+
+    from redrive.live.recorder import DataLogger
+    from redrive.live.scraper_state import Ros1Definition
+    from redrive.live.streams import StreamSpec
+    from redrive.transport import Policy, Writer
+    from redrive.transport.codec import KIND_ROS1, encode_ros1_meta
+
+    schema, messages = _imu_messages(40)
+    specs = [
+        StreamSpec(topic=t, msgtype="sensor_msgs/msg/Imu", stream=f"t{os.getpid()}.{n}",
+                   payload="ros1", capacity_bytes=1 << 16)
+        for n, t in (("a", "/a"), ("b", "/b"))
+    ]  # fmt: skip
+    writers = [Writer(s.stream, capacity_bytes=1 << 16, slots=4, policy=Policy.LOSSLESS)
+               for s in specs]  # fmt: skip
+    definition = Ros1Definition(msg_type="sensor_msgs/Imu", md5sum=schema.md5sum, text=schema.text)
+    size = sum(len(m) for m in messages[:30])
+    recorder = DataLogger(
+        specs[:1], tmp_path / "r.mcap", definitions=lambda _topic: definition, max_size_bytes=size
+    )
+    try:
+        recorder.add(specs[1])
+        meta = {s.topic: encode_ros1_meta(s.topic, "sensor_msgs/Imu", schema.md5sum) for s in specs}
+        for i, data in enumerate(messages[:30]):
+            spec, writer = (specs[i % 2], writers[i % 2])
+            writer.publish(data, stamp_ns=i + 1, kind=KIND_ROS1, meta=meta[spec.topic])
+        assert recorder.full.wait(20)
+    finally:
+        for writer in writers:
+            writer.close()
+        recorder.stop()
+    assert recorder.recorded == {"/a": 15, "/b": 15}
+    assert len(_read(tmp_path / "r.mcap")) == 30
+    assert not list(tmp_path.glob(".*.part"))

@@ -31,11 +31,11 @@ thread of its own) to MCAP, each type with the full definition its publisher sen
 With --record and no --pipeline/--perception/--planning/--control, nothing but the recording
 runs (no frames, no sensor map needed). Topics: those named, -a/--all, -e/--regex (with these
 two, topics that appear later are recorded too), minus -x/--exclude. Such a session ends at the
-first of: --duration seconds; --max-size bytes recorded; every publisher of the recorded topics
-gone (unregistered from the master and disconnected; the master's own /rosout node does not
-count) for --idle-timeout seconds (with -a/-e counted once a first publisher was there); the
-replay/synthetic source finished; Ctrl-C or SIGTERM. A status line per topic shows while it records; the summary gives wall time,
-messages, bytes and drops per topic.
+first of: --duration seconds; --max-size bytes of messages recorded; every publisher of the
+recorded topics gone (unregistered from the master and disconnected; the master's own /rosout
+node does not count) for --idle-timeout seconds (with -a/-e counted once a first publisher was
+there); the replay/synthetic source finished; Ctrl-C or SIGTERM. A status line per topic shows
+while it records; the summary gives wall time, messages, bytes and drops per topic.
 
 Otherwise frames are assembled as the data arrives (the highest-rate LiDAR drives them, or the
 sensor map's `driver`) and run through the pipeline (the reference one when none is named) in
@@ -261,7 +261,9 @@ def register(sub: Any) -> None:
         help="recording only: stop when every publisher has been gone S seconds (default 5)",
     )
     parser.add_argument(
-        "--max-size", metavar="SIZE", help="recording only: stop at SIZE recorded (500M, 2G)"
+        "--max-size",
+        metavar="SIZE",
+        help="recording only: stop once SIZE of messages is recorded (500M, 2G)",
     )
     parser.add_argument(
         "--split-size",

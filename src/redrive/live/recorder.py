@@ -51,7 +51,7 @@ class DataLogger:
         definitions: topic → the type's full definition from the publisher (ROS 1 sessions:
             :meth:`redrive.live.session.LiveSession.definition`); without one, ROS Noetic's.
         split_size_bytes, split_duration_s: split a ROS 1 recording into numbered files.
-        max_size_bytes: :attr:`full` is set once the recording holds this many bytes.
+        max_size_bytes: :attr:`full` is set once this many bytes of messages are recorded.
 
     Raises:
         ProducerGoneError: a stream has no writer within ``attach_timeout_s``.
@@ -178,7 +178,7 @@ class DataLogger:
             if (
                 self.max_size_bytes is not None
                 and not self.full.is_set()
-                and self.bytes_written >= self.max_size_bytes
+                and sum(self.recorded_bytes.values()) >= self.max_size_bytes
             ):
                 self.full.set()
             if stopping and idle:

@@ -126,7 +126,8 @@ class Recording:
     def step(self) -> str | None:
         """Look at the master and the sources once; the reason the session ends, or None."""
         if self.recorder.full.is_set():
-            return f"the recording reached --max-size ({self.recorder.bytes_written / 1e6:.1f} MB)"
+            size = sum(self.recorder.recorded_bytes.values())
+            return f"the recording reached --max-size ({size / 1e6:.1f} MB of messages)"
         if self.master_uri is None:  # a replay or synthetic source: it ends by itself
             return None if self.session.alive() else "the source finished"
         self._watch_master()
