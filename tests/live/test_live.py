@@ -173,7 +173,7 @@ def test_rosbag_play_of_a_real_bag(roscore: RosCore, tmp_path: Path, shared_data
 
 def test_live_replay_source_recorded_exactly(demo_log: Path, tmp_path: Path) -> None:
     """`redrive live --replay`: a log played at its rate as a sensor rig (its own process), frames
-    through the reference pipeline, every message recorded (lossless) equal to the log's."""
+    through a detector and a planner, every message recorded (lossless) equal to the log's."""
     import numpy as np
 
     from redrive.io.decoders import decode
@@ -181,6 +181,7 @@ def test_live_replay_source_recorded_exactly(demo_log: Path, tmp_path: Path) -> 
     argv = [
         sys.executable, "-m", "redrive", "live", "--replay", str(demo_log), "--rate", "2",
         "--duration", "4", "--record", str(tmp_path / "copy.mcap"), "--out", str(tmp_path / "run"),
+        "--perception", "cluster-detector", "--planning", "idm-planner",
     ]  # fmt: skip
     done = subprocess.run(argv, capture_output=True, text=True, timeout=120, check=False)
     assert done.returncode == 0, done.stderr
@@ -190,7 +191,7 @@ def test_live_replay_source_recorded_exactly(demo_log: Path, tmp_path: Path) -> 
     # machine's load, not on redrive — what matters is that frames were made from them
     assert frames >= 5
     steps = run.table("steps").to_pylist()
-    planner_ok = [s for s in steps if s["algorithm"] == "planner" and s["status"] == "ok"]
+    planner_ok = [s for s in steps if s["algorithm"] == "idm-planner" and s["status"] == "ok"]
     assert len(planner_ok) >= 0.8 * frames  # ego states arrive with the sweeps
     with open_log(demo_log) as original, open_log(tmp_path / "copy.mcap") as copy:
         got = [decode(m, copy.deserialize) for m in copy.messages(topics=["/lidar_top"])]

@@ -243,3 +243,38 @@ def test_a_topic_nobody_publishes_is_an_error_naming_it_and_the_domain(
     assert "no publisher of /nothing on ROS 2 (DDS) domain" in err
     assert "Traceback" not in err
     assert not (tmp_path / "run").exists()
+
+
+def test_record_only_on_ros2_stops_at_max_size(
+    domain: int, peer_factory: list[subprocess.Popen[str]], tmp_path: Path
+) -> None:
+    """`redrive live --ros2 /imu --record …` without a pipeline records only, in the ros2 MCAP
+    profile, and ends on a count (--max-size), not on a clock."""
+    from mcap.reader import make_reader
+
+    from redrive.cli.main import main
+
+    _start_peer(peer_factory, "--domain", str(domain), "--count", "0", "--only", "/imu")
+    out = tmp_path / "imu.mcap"
+    argv = ["live", "--ros2", "--domain", str(domain), "/imu", "--record", str(out),
+            "--max-size", "4K", "--wait", "15", "--duration", "120"]  # fmt: skip
+    assert main(argv) == 0
+    with out.open("rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        assert summary is not None
+        (channel,) = summary.channels.values()
+        assert channel.topic == "/imu"
+        assert channel.message_encoding == "cdr"
+        assert "reliability" in channel.metadata["offered_qos_profiles"]
+        assert summary.schemas[channel.schema_id].name == "sensor_msgs/msg/Imu"
+        sizes = [len(message.data) for _, _, message in reader.iter_messages()]
+    assert sum(sizes) >= 4 * 1024  # it stopped once --max-size of messages were recorded
+    assert sum(sizes[:-1]) < 4 * 1024 + 100 * max(sizes)  # soon after (messages in flight)
+    assert not list(tmp_path.glob(".*.part"))
+
+
+def test_record_only_on_ros2_names_its_topics() -> None:
+    from redrive.cli.main import main
+
+    assert main(["live", "--ros2", "-a", "--record", "x.mcap"]) == 2

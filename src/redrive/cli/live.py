@@ -15,6 +15,9 @@ __all__ = ["register"]
 
 _EPILOG = """\
 examples:
+  redrive live /imu/data /odom /fix --record husky.mcap     record only (as rosbag record)
+  redrive live -a -x '/rosout.*' --record all.mcap --split-size 500M
+  redrive live -e '/camera/.*' --record cams.mcap --duration 60
   redrive live --topics /velodyne_points --duration 60
   redrive live --master http://127.0.0.1:11311 --topics /velodyne_points /camera/image_raw /imu \\
       --perception cluster-detector --record drive.mcap --out runs/live1
@@ -24,14 +27,34 @@ examples:
   redrive live --ros2 --topics /points /imu --record out.mcap     ROS 2 (DDS) topics
 
 One scraper process per topic subscribes with rospy (under /usr/bin/python3) and hands each
-message to this process through shared memory; frames are assembled as the data arrives (the
-highest-rate LiDAR drives them, or the sensor map's `driver`) and run through the pipeline in
+message to this process through shared memory. --record writes every message (lossless, in a
+thread of its own) to MCAP, each type with the full definition its publisher sent.
+
+With --record and no --pipeline/--perception/--planning/--control, nothing but the recording
+runs (no frames, no sensor map needed). Topics: those named, -a/--all, -e/--regex (with these
+two, topics that appear later are recorded too), minus -x/--exclude. Such a session ends at the
+first of: --duration seconds; --max-size bytes of messages recorded; every publisher of the
+recorded topics gone (unregistered from the master and disconnected; the master's own /rosout
+node does not count) for --idle-timeout seconds (with -a/-e counted once a first publisher was
+there); the replay/synthetic source finished; Ctrl-C or SIGTERM. A status line per topic shows
+while it records; the summary gives wall time, messages, bytes and drops per topic.
+
+Otherwise frames are assembled as the data arrives (the highest-rate LiDAR drives them, or the
+sensor map's `driver`) and run through the pipeline (the reference one when none is named) in
 realtime mode: when an algorithm is slower than the sensor it gets the newest frame and the ones
-in between are skipped and counted. With --ros2 one scraper process reads the ROS 2 topics
-through Cyclone DDS (ROS_DOMAIN_ID / --domain, CYCLONEDDS_URI as for ROS 2 nodes) and the
-results are published back as ROS 2 messages. --record writes every message (lossless, in a thread of its
-own) to MCAP. Stops after --duration seconds, --frames frames, when every publisher's stream ends,
-or on Ctrl-C; the run directory is written as `redrive run` writes it.
+in between are skipped and counted. That session ends after --duration seconds, --frames frames,
+when a replay/synthetic source finished, or on Ctrl-C; the run directory is written as `redrive
+run` writes it.
+
+With --ros2 one scraper process reads the ROS 2 topics through Cyclone DDS (ROS_DOMAIN_ID /
+--domain, CYCLONEDDS_URI as for ROS 2 nodes) and the results are published back as ROS 2
+messages. With --ros2 --record and no pipeline the named topics are recorded only, and the
+session ends on --duration, --max-size or Ctrl-C (-a/-e and the idle stop are ROS 1 only).
+
+If the ROS master goes away, recording goes on with what still flows; when a master is back at
+the same address the scrapers register again. A recording left unfinished by a killed session
+(a .NAME.PID-XXXX.part file) is named at the next start in that folder, with the command that
+recovers it (`redrive repair PART -o FIXED.mcap`).
 """
 
 
@@ -52,6 +75,7 @@ def _capacities(items: list[str] | None) -> dict[str, int]:
 def _run(args: argparse.Namespace) -> int:
     from rich.console import Console
 
+    from redrive.cli.live_record import record_only, warn_orphans
     from redrive.cli.run import pipeline_from_args, print_run_report
     from redrive.engine import RealtimeMode, RunRequest, run_reader
     from redrive.live import default_master_uri
@@ -60,8 +84,27 @@ def _run(args: argparse.Namespace) -> int:
     from redrive.live.session import LiveSession
     from redrive.results import SourceLog
 
-    pipeline = pipeline_from_args(args)
     master = args.master or default_master_uri()
+    args.topics = [*(args.topic or ()), *(args.topics or ())] or None
+    args.capacities = _capacities(args.capacity)
+    named = args.pipeline is not None or args.perception or args.planning or args.control
+    if args.record is not None and not named:
+        return record_only(args, master)
+    for option, given in (
+        ("-a/--all", args.all),
+        ("-e/--regex", args.regex),
+        ("-x/--exclude", args.exclude),
+        ("--split-size", args.split_size),
+        ("--split-duration", args.split_duration),
+        ("--max-size", args.max_size),
+    ):
+        if given:
+            print(
+                f"redrive live: {option} is for recording only (--record without a pipeline); "
+                "a pipeline session takes named topics and records them to one file"
+            )
+            return 2
+    pipeline = pipeline_from_args(args)
     out = args.out or Path("runs") / f"live-{time.strftime('%Y%m%d-%H%M%S')}"
     console = Console(stderr=True)
     stop = threading.Event()
@@ -102,14 +145,20 @@ def _run(args: argparse.Namespace) -> int:
         session_cm = LiveSession.ros1(
             args.topics,
             master_uri=master,
-            capacity=_capacities(args.capacity),
+            capacity=args.capacities,
             wait_for_topics_s=args.wait,
         )
         source_text = master
+    if args.record is not None:
+        warn_orphans(args.record, console)
     with session_cm as session:
         try:
             if args.record is not None:
-                recorder = DataLogger(session.specs, args.record)
+                recorder = DataLogger(
+                    session.specs,
+                    args.record,
+                    definitions=session.definition if session.scrapers else None,
+                )
             log = LiveLog(session.specs, session.name, stop=stop)
             if args.duration is not None:
                 timer = threading.Timer(args.duration, stop.set)
@@ -143,6 +192,10 @@ def _run(args: argparse.Namespace) -> int:
             report = run_reader(
                 request, log, hooks=hooks, log_info=info, lookahead_ns=0, on_frame=publisher
             )
+        except BaseException:
+            if recorder is not None:
+                recorder.abort()  # a refused start or an error leaves no part behind
+            raise
         finally:
             stop.set()
             signal.signal(signal.SIGINT, previous)
@@ -151,7 +204,7 @@ def _run(args: argparse.Namespace) -> int:
             if publisher is not None:
                 publisher.close()
     recorded = recorder.stop() if recorder is not None else None
-    print_run_report(report, out)
+    print_run_report(report, out, live=True)
     console = Console(width=None if sys.stdout.isatty() else 120)
     console.print(
         f"frames: {hooks.received_frames} assembled, {hooks.skipped_frames} skipped "
@@ -179,12 +232,13 @@ def _run(args: argparse.Namespace) -> int:
 def register(sub: Any) -> None:
     parser = sub.add_parser(
         "live",
-        help="run algorithms on live ROS 1 or ROS 2 topics (shared memory), optionally recording",
+        help="record live ROS 1 topics to MCAP (as rosbag record), or run algorithms on live "
+        "ROS 1 or ROS 2 topics",
         description=(
-            "Subscribe to ROS 1 (or, with --ros2, ROS 2) topics through scraper processes and "
-            "shared memory, assemble "
-            "frames as the data arrives, run the pipeline on them in realtime mode into a run "
-            "directory, and record the topics to MCAP."
+            "Subscribe to ROS 1 topics through scraper processes and shared memory and record "
+            "them to MCAP; or assemble frames as the data arrives and run a pipeline on them in "
+            "realtime mode into a run directory (and record the topics too); with --ros2, the "
+            "same for ROS 2 topics over DDS."
         ),
         epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -192,11 +246,25 @@ def register(sub: Any) -> None:
     parser.add_argument(
         "--master", metavar="URI", help="ROS master (default $ROS_MASTER_URI or :11311)"
     )
+    parser.add_argument("topic", nargs="*", help="ROS 1 topics (as --topics)")
     parser.add_argument(
         "--topics",
         nargs="+",
         metavar="TOPIC",
         help="ROS 1 (or --ros2) topics (with --replay: only these)",
+    )
+    parser.add_argument(
+        "-a", "--all", action="store_true", help="record every topic, also those that appear later"
+    )
+    parser.add_argument(
+        "-e",
+        "--regex",
+        action="append",
+        metavar="REGEX",
+        help="record topics matching REGEX (whole name), also those that appear later (repeat)",
+    )
+    parser.add_argument(
+        "-x", "--exclude", metavar="REGEX", help="leave out topics matching REGEX from -a/-e"
     )
     source = parser.add_mutually_exclusive_group()
     source.add_argument(
@@ -225,10 +293,40 @@ def register(sub: Any) -> None:
         parser.add_argument(
             f"--{role}", action="append", metavar="PLUGIN", help=f"a {role} algorithm (repeat)"
         )
-    parser.add_argument("--record", type=Path, metavar="OUT.mcap", help="record the topics")
+    parser.add_argument(
+        "--record",
+        type=Path,
+        metavar="OUT.mcap",
+        help="record the topics (only that, unless a pipeline or algorithm is named)",
+    )
     parser.add_argument("--out", type=Path, metavar="DIR", help="run directory")
     parser.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
-    parser.add_argument("--frames", type=int, metavar="N", help="stop after N frames")
+    parser.add_argument(
+        "--frames", type=int, metavar="N", help="stop after N frames (with a pipeline)"
+    )
+    parser.add_argument(
+        "--idle-timeout",
+        type=float,
+        default=5.0,
+        metavar="S",
+        help="recording only: stop when every publisher has been gone S seconds (default 5)",
+    )
+    parser.add_argument(
+        "--max-size",
+        metavar="SIZE",
+        help="recording only: stop once SIZE of messages is recorded (500M, 2G)",
+    )
+    parser.add_argument(
+        "--split-size",
+        metavar="SIZE",
+        help="recording only: numbered files NAME_0000.mcap … of about SIZE each (500M, 2G)",
+    )
+    parser.add_argument(
+        "--split-duration",
+        type=float,
+        metavar="S",
+        help="recording only: a new numbered file every S seconds",
+    )
     parser.add_argument(
         "--wait",
         type=float,

@@ -116,7 +116,9 @@ class ProgressLines:
         )
 
 
-def print_run_report(report: Any, out: Path) -> None:
+def print_run_report(report: Any, out: Path, *, live: bool = False) -> None:
+    """The run's table of algorithms and its speed; ``live``: wall time only, no real-time factor
+    (a live session's log stamps say nothing of how long it ran)."""
     from rich.console import Console
     from rich.table import Table
 
@@ -139,11 +141,14 @@ def print_run_report(report: Any, out: Path) -> None:
             f"{a.latency_max_ms:.2f}",
         )
     console.print(table)
-    console.print(
-        f"{report.frames} frames in {report.wall_s:.1f} s: {report.frames_per_s:.1f} frames/s, "
-        f"{report.realtime_factor:.1f}x real time ({report.log_span_s:.1f} s of log)"
-        + (f", {report.late_frames} late" if report.late_frames else "")
+    speed = (
+        f"{report.frames} frames in {report.wall_s:.1f} s of wall time: "
+        f"{report.frames_per_s:.1f} frames/s"
+        if live
+        else f"{report.frames} frames in {report.wall_s:.1f} s: {report.frames_per_s:.1f} "
+        f"frames/s, {report.realtime_factor:.1f}x real time ({report.log_span_s:.1f} s of log)"
     )
+    console.print(speed + (f", {report.late_frames} late" if report.late_frames else ""))
     for name, count in sorted(report.missing_inputs.items()):
         console.print(
             f"[bold yellow]{count} of {report.frames} frames had no {name} within the tolerance"

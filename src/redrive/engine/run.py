@@ -81,17 +81,28 @@ class RunRequest:
 def log_fingerprint(path: Path, *, format: str) -> SourceLog:
     """Path, size and sha256 of a log file (or of every file of a log directory, in name order);
     ``format`` is the reader's format name."""
+    from redrive.io.mcapset import expand_log_set
+
     digest = hashlib.sha256()
-    files = [path] if path.is_file() else sorted(p for p in path.rglob("*") if p.is_file())
+    if path.is_file():
+        files = [path]
+    elif path.is_dir():
+        files = sorted(p for p in path.rglob("*") if p.is_file())
+    else:  # a glob of split files
+        files = expand_log_set(path)
     size = 0
     for file in files:
         if file is not path:
-            digest.update(file.relative_to(path).as_posix().encode() + b"\0")
+            name = file.relative_to(path) if path.is_dir() else Path(file.name)
+            digest.update(name.as_posix().encode() + b"\0")
         with file.open("rb") as fh:
             hashlib.file_digest(fh, lambda: digest)  # feeds the whole file into `digest`
         size += file.stat().st_size
     return SourceLog(
-        path=str(path.resolve()), format=format, sha256=digest.hexdigest(), size_bytes=size
+        path=str(path.absolute() if files and not path.exists() else path.resolve()),
+        format=format,
+        sha256=digest.hexdigest(),
+        size_bytes=size,
     )
 
 

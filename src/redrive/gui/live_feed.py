@@ -286,7 +286,9 @@ class LiveFeed(QtCore.QObject):
         if self._stop.is_set():
             return
         if self.record is not None:
-            self._recorder = DataLogger(self._session.specs, self.record)
+            self._recorder = DataLogger(
+                self._session.specs, self.record, definitions=self._session.definition
+            )
         self._log = LiveLog(self._session.specs, self._session.name, stop=self._stop)
         assembler = FrameAssembler(self._log, lookahead_ns=0)
         smap = assembler.sensor_map

@@ -74,12 +74,14 @@ def _builtin() -> list[type[ReaderFormat]]:
     # imported here: each pulls in its own dependencies (rosbags, mcap, PIL)
     from redrive.io.kitti import KittiReader
     from redrive.io.mcapfile import McapFileReader
+    from redrive.io.mcapset import McapSetReader
     from redrive.io.mmdet3d_info import Mmdet3dInfoReader
     from redrive.io.nuscenes import NuScenesReader
     from redrive.io.ros1bag import Ros1BagReader
     from redrive.io.ros2bag import Ros2BagReader
 
-    # a ROS 2 bag before MCAP: a bag directory's .mcap storage is read through its metadata.yaml
+    # a ROS 2 bag before MCAP: a bag directory's .mcap storage is read through its metadata.yaml;
+    # a folder of .mcap files without one is a set of split files
     return [
         Ros2BagReader,
         KittiReader,
@@ -87,6 +89,7 @@ def _builtin() -> list[type[ReaderFormat]]:
         Mmdet3dInfoReader,
         Ros1BagReader,
         McapFileReader,
+        McapSetReader,
     ]
 
 
@@ -167,7 +170,13 @@ def detect_format(path: Path) -> str:
     """
     path = Path(path)
     if not path.exists():
+        from redrive.io.mcapset import expand_log_set, is_glob
+
+        if is_glob(path) and expand_log_set(path):
+            return _recognising(path).format
         msg = f"{path}: no such file or directory"
+        if is_glob(path):
+            msg += " (a glob names MCAP files of one recording; this one names none)"
         raise LogError(msg)
     if path.is_file():
         try:
@@ -189,9 +198,11 @@ def open_log(path: str | Path, *, strict: bool = True) -> LogReader:
     Args:
         path: a ROS 1 ``.bag``; a ROS 2 bag directory (sqlite3 or mcap storage), its
             ``metadata.yaml`` or a ``.db3`` in it; a standalone ``.mcap`` (ROS 2 CDR or ROS 1
-            encoding); a KITTI 3D-object folder (``training/{velodyne,image_2,calib,label_2}``);
-            a nuScenes data root (``v1.0-*/`` tables + ``samples/``) or an mmdetection3d nuScenes
-            info file (``.pkl`` / JSON, or its folder);
+            encoding); split MCAP files of one recording, as a folder or a glob
+            (``drive_*.mcap``); a KITTI 3D-object folder
+            (``training/{velodyne,image_2,calib,label_2}``); a nuScenes data root (``v1.0-*/``
+            tables + ``samples/``) or an mmdetection3d nuScenes info file (``.pkl`` / JSON, or its
+            folder);
             or a log of an installed reader plugin.
         strict: when True, damage met while reading raises
             :class:`~redrive.errors.LogTruncatedError` after every message before it was

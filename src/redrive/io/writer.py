@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import logging
 import os
-import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 from types import MappingProxyType, TracebackType
@@ -28,6 +27,7 @@ from rosbags.typesys.store import Typestore
 
 from redrive.errors import LogError, UnsupportedMessageError
 from redrive.io.decoders.base import Decoded
+from redrive.io.partfiles import create_part
 from redrive.io.ros_encode import encode_value
 from redrive.io.typestore import typestore_for
 from redrive.types import Frame, VehicleState
@@ -90,14 +90,10 @@ class McapWriter:
         self.typestore = typestore if typestore is not None else typestore_for(2)[0]
         self.message_count = 0
         try:
-            fd, tmp = tempfile.mkstemp(
-                dir=self.path.parent, prefix=f".{self.path.name}.", suffix=".part"
-            )
+            fd, self._tmp_path = create_part(self.path)
         except OSError as err:
             msg = f"{self.path}: cannot create a file in {self.path.parent} ({err.strerror}); check the directory exists and is writable"
             raise LogError(msg) from err
-        self._tmp_path = Path(tmp)
-        os.chmod(self._tmp_path, 0o644)  # mkstemp makes it 0600; a recording is a normal file
         self._fh: IO[bytes] | None = os.fdopen(fd, "wb")
         self._writer = _McapWriter(
             self._fh, chunk_size=chunk_size_bytes, compression=_COMPRESSION[compression]

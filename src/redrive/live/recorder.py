@@ -5,41 +5,39 @@ it has not recorded) in its own thread, so the algorithm pipeline never waits fo
 
 * A session of ROS 1 topics only (the scraper's ``ros1`` streams) is written with the MCAP
   ``ros1`` profile: each message's bytes exactly as the publisher sent them, schemas in
-  ``ros1msg`` encoding from ROS Noetic's definitions (``rosbag``-compatible md5sums). ``redrive
-  info``/``open_log``, Foxglove and Lichtblick read it.
+  ``ros1msg`` encoding — the full definition the publisher sent in its connection header (as
+  ``rosbag record`` stores it; so types redrive has no decoder or definition of are recorded
+  too), else ROS Noetic's. ``redrive info``/``open_log``, rosbags, Foxglove and Lichtblick read
+  it. It may be split into numbered files (:mod:`redrive.live.mcap_parts`).
 * Otherwise (ROS 2 topics, typed samples from the replay or synthetic sources, possibly mixed
   with ROS 1 topics) it is redrive's native format (:class:`redrive.io.writer.McapWriter`: ROS 2
   CDR of standard types); ROS 2 messages are written byte for byte as DDS delivered them, with
   the QoS their publishers offer as ``offered_qos_profiles``; ROS 1 messages are decoded and
   re-encoded as their standard type.
 
-The file appears atomically when the logger stops (temporary file + rename); a crash leaves no
-half-written file at the target path.
+The file appears atomically when the logger stops (temporary ``.part`` file + rename); an error
+removes the part; a process killed outright leaves it, and the next recording in that folder
+names it (:func:`redrive.io.partfiles.orphaned_parts`).
 """
 
 from __future__ import annotations
 
-import contextlib
 import logging
-import os
 import select
-import tempfile
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import IO
 
-from mcap.writer import CompressionType
-from mcap.writer import Writer as McapRawWriter
-
-from redrive.errors import LogError, TransportError, UnsupportedMessageError
+from redrive.errors import ConfigError, LogError, TransportError, UnsupportedMessageError
 from redrive.io.base import LogMessage
 from redrive.io.decoders import decode
 from redrive.io.typestore import typestore_for
 from redrive.io.writer import McapWriter
+from redrive.live.mcap_parts import Ros1Schema, SplitMcapWriter
+from redrive.live.scraper_state import Ros1Definition
 from redrive.live.streams import StreamSpec, ros1_type
 from redrive.transport import Message, Policy, ProducerGoneError, Reader
-from redrive.transport.codec import KIND_CDR, KIND_ROS1, KIND_SENSOR, decode_sample
+from redrive.transport.codec import KIND_CDR, KIND_ROS1, KIND_SENSOR, decode_ros1, decode_sample
 
 __all__ = ["DataLogger"]
 
@@ -47,24 +45,59 @@ logger = logging.getLogger(__name__)
 
 
 class DataLogger:
-    """Record ``specs`` to ``path`` until :meth:`stop`.
+    """Record ``specs`` to ``path`` until :meth:`stop`; more streams join with :meth:`add`.
+
+    Args:
+        specs: the streams to record.
+        path: the MCAP file (with a split limit: the name the numbered files are made from).
+        definitions: topic → the type's full definition from the publisher (ROS 1 sessions:
+            :meth:`redrive.live.session.LiveSession.definition`); without one, ROS Noetic's.
+        split_size_bytes, split_duration_s: split a ROS 1 recording into numbered files.
+        max_size_bytes: :attr:`full` is set once this many bytes of messages are recorded.
 
     Raises:
         ProducerGoneError: a stream has no writer within ``attach_timeout_s``.
         LogError: the file cannot be created.
+        ConfigError: a split limit for a recording of typed samples (only ROS 1 recordings split).
     """
 
     def __init__(
-        self, specs: Sequence[StreamSpec], path: str | Path, *, attach_timeout_s: float = 10.0
+        self,
+        specs: Sequence[StreamSpec],
+        path: str | Path,
+        *,
+        attach_timeout_s: float = 10.0,
+        definitions: Callable[[str], Ros1Definition | None] | None = None,
+        split_size_bytes: int | None = None,
+        split_duration_s: float | None = None,
+        max_size_bytes: int | None = None,
     ) -> None:
         self.path = Path(path)
         self.specs = list(specs)
         self.recorded: dict[str, int] = {s.topic: 0 for s in specs}
+        #: bytes of message data recorded per topic
+        self.recorded_bytes: dict[str, int] = {s.topic: 0 for s in specs}
         self._msgtype = {s.topic: s.msgtype for s in specs}
         self.errors: list[str] = []
         self.raw_ros1 = all(s.payload == "ros1" for s in specs)
+        self.max_size_bytes = max_size_bytes
+        #: set when the recording reached ``max_size_bytes``
+        self.full = threading.Event()
+        #: the files written, once stopped (more than one when split)
+        self.files: list[Path] = []
+        self._definitions = definitions
+        self._schemas: dict[str, Ros1Schema] = {}
+        self._attach_timeout_s = attach_timeout_s
         self._readers: dict[str, Reader] = {}
+        self._pending: list[tuple[str, Reader]] = []
+        self._lock = threading.Lock()
         self._stop = threading.Event()
+        if (split_size_bytes is not None or split_duration_s is not None) and not self.raw_ros1:
+            msg = (
+                "--split-size/--split-duration split recordings of ROS 1 topics; a --replay or "
+                "--synthetic source is recorded to one file"
+            )
+            raise ConfigError(msg)
         try:
             for spec in specs:
                 self._readers[spec.topic] = Reader(
@@ -74,61 +107,62 @@ class DataLogger:
             self._close_readers()
             raise
         ros1_types = sorted({s.msgtype for s in specs if s.payload == "ros1"})
-        self._ros1_store = typestore_for(1, needed=ros1_types)[0] if ros1_types else None
+        self._ros1_store = (
+            typestore_for(1, needed=ros1_types)[0] if ros1_types and not self.raw_ros1 else None
+        )
+        self._native: McapWriter | None = None
+        self._files: SplitMcapWriter | None = None
+        try:
+            if self.raw_ros1:
+                self._files = SplitMcapWriter(
+                    self.path, split_size_bytes=split_size_bytes, split_duration_s=split_duration_s
+                )
+            else:
+                self._native = McapWriter(self.path)
+                for spec in self.specs:
+                    if spec.payload == "cdr":  # ROS 2 topics: the QoS their publishers offer
+                        self._native.add_channel(spec.topic, spec.msgtype, offered_qos=spec.qos)
+        except BaseException:
+            self._close_readers()
+            raise
         self._thread = threading.Thread(target=self._run, name="redrive-recorder", daemon=True)
-        self._open()
         self._thread.start()
 
-    # -- files -------------------------------------------------------------------------------
-    def _open(self) -> None:
-        if not self.raw_ros1:
-            self._native: McapWriter | None = McapWriter(self.path)
-            for spec in self.specs:
-                if spec.payload == "cdr":  # ROS 2 topics: the QoS their publishers offer
-                    self._native.add_channel(spec.topic, spec.msgtype, offered_qos=spec.qos)
-            return
-        self._native = None
-        try:
-            fd, tmp = tempfile.mkstemp(
-                dir=self.path.parent, prefix=f".{self.path.name}.", suffix=".part"
-            )
-        except OSError as err:
-            msg = f"{self.path}: cannot create a file in {self.path.parent} ({err.strerror})"
-            raise LogError(msg) from err
-        os.chmod(tmp, 0o644)
-        self._tmp = Path(tmp)
-        self._fh: IO[bytes] = os.fdopen(fd, "wb")
-        self._raw = McapRawWriter(self._fh, compression=CompressionType.ZSTD)
-        self._raw.start(profile="ros1", library="redrive")
-        self._channels: dict[str, int] = {}
-        self._seq: dict[str, int] = {}
-        assert self._ros1_store is not None
-        schemas: dict[str, int] = {}
-        md5s: dict[str, str] = {}
-        for spec in self.specs:
-            if spec.msgtype not in schemas:
-                text, md5 = self._ros1_store.generate_msgdef(spec.msgtype, ros_version=1)
-                schema_id = self._raw.register_schema(
-                    name=ros1_type(spec.msgtype), encoding="ros1msg", data=text.encode()
-                )
-                schemas[spec.msgtype] = schema_id
-                md5s[spec.msgtype] = md5
-            self._channels[spec.topic] = self._raw.register_channel(
-                topic=spec.topic,
-                message_encoding="ros1",
-                schema_id=schemas[spec.msgtype],
-                metadata={"md5sum": md5s[spec.msgtype]},
-            )
-            self._seq[spec.topic] = 0
+    def add(self, spec: StreamSpec) -> None:
+        """Record one more ROS 1 stream (a topic that appeared while recording).
+
+        Raises:
+            ProducerGoneError: the stream has no writer within the attach timeout.
+        """
+        reader = Reader(spec.stream, timeout_s=self._attach_timeout_s, policy=Policy.LOSSLESS)
+        with self._lock:
+            self.specs.append(spec)
+            self._msgtype[spec.topic] = spec.msgtype
+            self.recorded.setdefault(spec.topic, 0)
+            self.recorded_bytes.setdefault(spec.topic, 0)
+            self._pending.append((spec.topic, reader))
+
+    @property
+    def bytes_written(self) -> int:
+        """Bytes of the recording on disk so far (ROS 1 recordings; else message bytes)."""
+        if self._files is not None:
+            return self._files.bytes_written
+        return sum(self.recorded_bytes.values())
 
     # -- the thread --------------------------------------------------------------------------
     def _run(self) -> None:
-        fds = {r.fileno(): t for t, r in self._readers.items()}
         gone: set[str] = set()
-        while len(gone) < len(fds):
+        while True:
+            with self._lock:
+                for topic, reader in self._pending:
+                    self._readers[topic] = reader
+                self._pending.clear()
+            fds = [r.fileno() for t, r in self._readers.items() if t not in gone]
             stopping = self._stop.is_set()
+            if not fds and stopping:
+                return
             if not stopping:
-                select.select(list(fds), [], [], 0.1)
+                select.select(fds, [], [], 0.1)
             idle = True
             for topic, reader in self._readers.items():
                 if topic in gone:
@@ -146,34 +180,63 @@ class DataLogger:
                 except (TransportError, LogError, UnsupportedMessageError) as err:
                     self.errors.append(f"{topic}: {err}")
                     logger.warning("recording %s: %s", topic, err)
+            if (
+                self.max_size_bytes is not None
+                and not self.full.is_set()
+                and sum(self.recorded_bytes.values()) >= self.max_size_bytes
+            ):
+                self.full.set()
             if stopping and idle:
                 return
+
+    def _schema(self, topic: str, msg_type: str, md5sum: str) -> Ros1Schema:
+        schema = self._schemas.get(topic)
+        if schema is not None:
+            return schema
+        found = self._definitions(topic) if self._definitions is not None else None
+        if found is not None and found.text:
+            schema = Ros1Schema(msg_type=found.msg_type, md5sum=found.md5sum, text=found.text)
+        else:
+            msgtype = self._msgtype[topic]
+            store = typestore_for(1, needed=[msgtype])[0]
+            if msgtype not in store.fielddefs:
+                text = (
+                    f"no definition of {msg_type}: its publisher sent none and redrive knows "
+                    "none; the topic is not recorded"
+                )
+                raise UnsupportedMessageError(text)
+            text_def, md5 = store.generate_msgdef(msgtype, ros_version=1)
+            schema = Ros1Schema(msg_type=ros1_type(msgtype), md5sum=md5sum or md5, text=text_def)
+        self._schemas[topic] = schema
+        return schema
 
     def _write(self, topic: str, msg: Message) -> None:
         kind, meta, data = msg.kind, msg.meta, msg.payload
         log_ns, stamp_ns = msg.publish_ns, msg.stamp_ns
-        if self._native is None:
+        if self._files is not None:
             if kind != KIND_ROS1:
                 text = f"message of kind {kind} on a ROS 1 recording"
                 raise TransportError(text)
-            seq = self._seq[topic]
-            self._seq[topic] = seq + 1
-            self._raw.add_message(
-                channel_id=self._channels[topic],
-                log_time=log_ns,
-                publish_time=stamp_ns or log_ns,
+            head = decode_ros1(bytes(meta), data)
+            self._files.write(
+                topic,
+                self._schema(topic, head.msg_type, head.md5sum),
+                log_ns=log_ns,
+                publish_ns=stamp_ns or log_ns,
                 data=data.tobytes(),
-                sequence=seq,
             )
         elif kind == KIND_CDR:  # ROS 2: recorded as it came off the wire
+            assert self._native is not None
             self._native.write_raw(topic, self._msgtype[topic], log_ns, data.data)
         elif kind == KIND_SENSOR:
+            assert self._native is not None
             sample = decode_sample(meta, data)
             self._native.write(
                 topic, log_ns, sample.data, frame_id=sample.frame_id, stamp_ns=sample.stamp_ns
             )
         else:
             assert self._ros1_store is not None
+            assert self._native is not None
             decoded = decode(
                 LogMessage(
                     topic=topic,
@@ -186,34 +249,38 @@ class DataLogger:
             )
             self._native.write(topic, log_ns, decoded)
         self.recorded[topic] += 1
+        self.recorded_bytes[topic] += len(data)
 
     # -- stopping ----------------------------------------------------------------------------
     def stop(self, *, timeout_s: float = 30.0) -> Path:
-        """Record what the streams still hold, close the file; returns its path."""
+        """Record what the streams still hold, close the file; returns its path (the first of
+        split files: :attr:`files` has them all)."""
         self._stop.set()
         self._thread.join(timeout=timeout_s)
         self._close_readers()
         if self._native is not None:
             self._native.close()
+            self.files = [self.path]
         else:
-            self._raw.finish()  # type: ignore[no-untyped-call]
-            self._fh.close()
-            os.replace(self._tmp, self.path)
-        return self.path
+            assert self._files is not None
+            self.files = self._files.close()
+        return self.files[0] if self.files else self.path
 
     def abort(self) -> None:
-        """Stop without keeping the file."""
+        """Stop without keeping the file being written (split files finished before stay)."""
         self._stop.set()
         self._thread.join(timeout=5.0)
         self._close_readers()
         if self._native is not None:
             self._native.abort()
-        else:
-            with contextlib.suppress(OSError):
-                self._fh.close()
-            self._tmp.unlink(missing_ok=True)
+        elif self._files is not None:
+            self._files.abort()
 
     def _close_readers(self) -> None:
+        with self._lock:
+            for _, reader in self._pending:
+                reader.close()
+            self._pending.clear()
         for reader in self._readers.values():
             reader.close()
         self._readers.clear()

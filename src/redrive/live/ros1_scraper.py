@@ -13,12 +13,15 @@ If the ROS master restarts (its pid changes), the subscription is registered ane
 master. SIGTERM/SIGINT stop it, and so does the death of the process that started it; the stream's segment is unlinked on every exit path.
 
 Usage: ``python3 ros1_scraper.py --topic /velodyne_points --stream live-1.velodyne_points
---capacity 4000000 [--policy lossless] [--slots 8]``; prints ``READY`` once subscribed.
+--capacity 4000000 [--policy lossless] [--slots 8] [--await-lossless 20]``; prints ``READY``
+once subscribed (with ``--await-lossless``: ``STREAM`` first, and it subscribes once a recorder
+reads the stream).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import os
 import signal
@@ -40,6 +43,17 @@ def _master_pid(uri: str) -> int | None:
     return int(pid) if code == 1 else None
 
 
+def _publishers(sub: Any) -> list[str]:
+    """The caller ids of the publishers this subscriber has an open connection to."""
+    impl = getattr(sub, "impl", None)
+    connections = list(getattr(impl, "connections", ()) or ())
+    return sorted(
+        str(getattr(c, "callerid_pub", "unknown"))
+        for c in connections
+        if not getattr(c, "done", False)
+    )
+
+
 def main(argv: list[str] | None = None) -> int:
     import rospy
 
@@ -55,6 +69,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--slots", type=int, default=8)
     parser.add_argument("--max-readers", type=int, default=2)
     parser.add_argument("--timeout", type=float, default=5.0, help="lossless back-pressure, s")
+    parser.add_argument(
+        "--await-lossless",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="print STREAM once the stream exists, and subscribe only once a lossless reader "
+        "(a recorder) attached, up to S seconds: no message is published before it reads",
+    )
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s scraper %(message)s")
 
@@ -79,6 +101,14 @@ def main(argv: list[str] | None = None) -> int:
             if not meta:
                 header = msg._connection_header
                 meta.append(encode_ros1_meta(args.topic, header["type"], header["md5sum"]))
+                # the full definition, for a recorder that does not know the type: printed
+                # before the first message is published, so it is there when that one is read
+                definition = {
+                    "type": header["type"],
+                    "md5sum": header["md5sum"],
+                    "definition": header.get("message_definition", ""),
+                }
+                print("DEF " + json.dumps(definition), flush=True)
             try:
                 writer.publish(msg._buff, stamp_ns=now, kind=KIND_ROS1, meta=meta[0],
                                timeout_s=args.timeout)  # fmt: skip
@@ -90,6 +120,14 @@ def main(argv: list[str] | None = None) -> int:
                 )
 
     try:
+        if args.await_lossless > 0:
+            print("STREAM", flush=True)
+            deadline = time.monotonic() + args.await_lossless
+            while not any(r.policy == Policy.LOSSLESS for r in writer.stats().readers):
+                if time.monotonic() >= deadline or stop.is_set():
+                    logger.error("%s: no recorder attached to %s", args.topic, args.stream)
+                    return 1
+                time.sleep(0.01)
         rospy.init_node("redrive_scraper", anonymous=True, disable_signals=True)
         import rosgraph
 
@@ -105,7 +143,18 @@ def main(argv: list[str] | None = None) -> int:
         pid = _master_pid(uri)
         print("READY", flush=True)
         parent = os.getppid()
-        while not stop.wait(0.5):
+        state = ""
+        while not stop.wait(0.25):
+            with lock:
+                now_state = json.dumps({
+                    "publishers": _publishers(sub),
+                    "received": counts["received"],
+                    "forwarded": counts["published"],
+                    "failed": counts["failed"],
+                })  # fmt: skip
+            if now_state != state:
+                print("STATE " + now_state, flush=True)
+                state = now_state
             if os.getppid() != parent:  # redrive live was killed: no orphan scraper stays
                 logger.warning("the process that started this scraper is gone: stopping")
                 break

@@ -17,17 +17,26 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 
 from redrive.errors import ConfigError, TransportError
 from redrive.live.ros1 import list_topics
+from redrive.live.scraper_state import Ros1Definition, ScraperState
 from redrive.live.streams import StreamSpec, ros2_type, stream_name
 from redrive.transport import remove_stale
 
-__all__ = ["DEFAULT_CAPACITY", "ROS_PYTHON", "LiveSession", "default_session_name"]
+__all__ = [
+    "DEFAULT_CAPACITY",
+    "ROS_PYTHON",
+    "LiveSession",
+    "default_session_name",
+    "wait_for_topics",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -45,6 +54,14 @@ DEFAULT_CAPACITY: Mapping[str, int] = {
 _OTHER_CAPACITY = 1 << 20
 
 
+@dataclass(frozen=True, slots=True, kw_only=True)
+class _Ros1Options:
+    master_uri: str
+    capacity: dict[str, int]
+    slots: int
+    ready_timeout_s: float
+
+
 def default_session_name() -> str:
     return f"live-{os.getpid()}"
 
@@ -58,7 +75,10 @@ class LiveSession:
         self.name = name
         self.specs = list(specs)
         self.processes = list(processes)
+        #: topic → what its ROS 1 scraper reports (publishers, counts, the definition)
+        self.scrapers: dict[str, ScraperState] = {}
         self._shim: Path | None = None
+        self._ros1: _Ros1Options | None = None
 
     @classmethod
     def ros1(
@@ -86,57 +106,14 @@ class LiveSession:
             raise TransportError(msg)
         name = name or default_session_name()
         remove_stale()  # segments of killed earlier sessions
-        deadline = time.monotonic() + wait_for_topics_s
-        while True:
-            known = {t.name: t for t in list_topics(master_uri) if t.msg_type != "*"}
-            missing = [t for t in topics if t not in known]
-            if not missing or time.monotonic() >= deadline:
-                break
-            time.sleep(0.2)
-        if missing:
-            msg = (
-                f"not on the ROS master {master_uri}: {', '.join(missing)}; "
-                f"it has {', '.join(sorted(known)) or 'no topics'} (`redrive topics` lists them)"
-            )
-            raise ConfigError(msg)
-        specs = []
-        for topic in topics:
-            msgtype = ros2_type(known[topic].msg_type)
-            size = (capacity or {}).get(topic) or DEFAULT_CAPACITY.get(msgtype, _OTHER_CAPACITY)
-            specs.append(
-                StreamSpec(
-                    topic=topic,
-                    msgtype=msgtype,
-                    stream=stream_name(name, topic),
-                    payload="ros1",
-                    capacity_bytes=size,
-                )
-            )
-        session = cls(name, specs, [])
-        session._shim = Path(tempfile.mkdtemp(prefix="redrive-shim-"))
-        package = Path(__file__).resolve().parents[1]
-        (session._shim / "redrive").symlink_to(package, target_is_directory=True)
-        env = {k: v for k, v in os.environ.items() if k not in ("PYTHONHOME",)}
-        env["PYTHONPATH"] = str(session._shim)
-        env["ROS_MASTER_URI"] = master_uri
+        types = wait_for_topics(topics, master_uri=master_uri, wait_s=wait_for_topics_s)
+        session = cls(name, [], [])
+        session._ros1 = _Ros1Options(
+            master_uri=master_uri, capacity=dict(capacity or {}), slots=slots,
+            ready_timeout_s=ready_timeout_s,
+        )  # fmt: skip
         try:
-            for spec in specs:
-                argv = [
-                    str(ROS_PYTHON), str(_SCRAPER), "--topic", spec.topic, "--stream", spec.stream,
-                    "--capacity", str(spec.capacity_bytes), "--slots", str(slots),
-                ]  # fmt: skip
-                proc = subprocess.Popen(
-                    argv,
-                    env=env,
-                    stdout=subprocess.PIPE,
-                    stderr=subprocess.PIPE,
-                    text=True,
-                    start_new_session=True,
-                )
-                session.processes.append(proc)
-            deadline = time.monotonic() + ready_timeout_s
-            for spec, proc in zip(specs, session.processes, strict=True):
-                _wait_ready(proc, f"the scraper of {spec.topic}", deadline)
+            session.add_ros1(types)
         except BaseException:
             session.close()
             raise
@@ -190,26 +167,102 @@ class LiveSession:
             raise
         return session
 
+    def add_ros1(
+        self,
+        topics: Mapping[str, str],
+        *,
+        on_stream: Callable[[StreamSpec], None] | None = None,
+    ) -> list[StreamSpec]:
+        """Start a scraper for each of ``topics`` (topic → ROS 1 type) and wait until each is
+        subscribed; returns their streams (also appended to :attr:`specs`).
+
+        With ``on_stream`` (a recorder's ``add``), each scraper waits until ``on_stream`` was
+        called with its stream, and a lossless reader attached, before it subscribes: no message
+        is published before the recorder reads the stream.
+
+        Raises:
+            TransportError: a scraper failed to start (those of this call are stopped).
+        """
+        opts = self._ros1
+        if opts is None:
+            msg = "add_ros1 on a session that was not started with LiveSession.ros1"
+            raise TransportError(msg)
+        if self._shim is None:
+            self._shim = Path(tempfile.mkdtemp(prefix="redrive-shim-"))
+            package = Path(__file__).resolve().parents[1]
+            (self._shim / "redrive").symlink_to(package, target_is_directory=True)
+        env = {k: v for k, v in os.environ.items() if k not in ("PYTHONHOME",)}
+        env["PYTHONPATH"] = str(self._shim)
+        env["ROS_MASTER_URI"] = opts.master_uri
+        started: list[tuple[StreamSpec, subprocess.Popen[str]]] = []
+        try:
+            for topic, ros_type in topics.items():
+                msgtype = ros2_type(ros_type)
+                size = opts.capacity.get(topic) or DEFAULT_CAPACITY.get(msgtype, _OTHER_CAPACITY)
+                spec = StreamSpec(
+                    topic=topic,
+                    msgtype=msgtype,
+                    stream=stream_name(self.name, topic),
+                    payload="ros1",
+                    capacity_bytes=size,
+                )
+                argv = [
+                    str(ROS_PYTHON), str(_SCRAPER), "--topic", spec.topic, "--stream", spec.stream,
+                    "--capacity", str(spec.capacity_bytes), "--slots", str(opts.slots),
+                ]  # fmt: skip
+                if on_stream is not None:
+                    argv += ["--await-lossless", str(opts.ready_timeout_s)]
+                proc = subprocess.Popen(
+                    argv,
+                    env=env,
+                    stdout=subprocess.PIPE,
+                    stderr=subprocess.PIPE,
+                    text=True,
+                    start_new_session=True,
+                )
+                started.append((spec, proc))
+            deadline = time.monotonic() + opts.ready_timeout_s
+            if on_stream is not None:
+                for spec, proc in started:
+                    _wait_ready(proc, f"the scraper of {spec.topic}", deadline, word="STREAM")
+                    on_stream(spec)
+            for spec, proc in started:
+                _wait_ready(proc, f"the scraper of {spec.topic}", deadline)
+        except BaseException:
+            for spec, proc in started:
+                _stop([proc], timeout_s=2.0)
+                remove_stale(spec.stream)
+            raise
+        for spec, proc in started:
+            self.specs.append(spec)
+            self.processes.append(proc)
+            self.scrapers[spec.topic] = ScraperState(proc)
+            threading.Thread(
+                target=self.scrapers[spec.topic].follow, name=f"scraper-{spec.topic}", daemon=True
+            ).start()
+        return [spec for spec, _ in started]
+
+    def definition(self, topic: str, *, timeout_s: float = 5.0) -> Ros1Definition | None:
+        """The type, md5sum and full definition of ``topic`` from its publisher's connection
+        header, once its scraper received a message (waits up to ``timeout_s``); None for a
+        topic of no scraper, or when it did not come in time."""
+        state = self.scrapers.get(topic)
+        if state is None or not state.defined.wait(timeout_s):
+            return None
+        return state.definition
+
     def alive(self) -> bool:
         return all(p.poll() is None for p in self.processes)
 
     def close(self, *, timeout_s: float = 5.0) -> None:
         """Stop every source (SIGTERM, then SIGKILL) and remove what a killed one left."""
+        _stop(self.processes, timeout_s=timeout_s)
+        for state in self.scrapers.values():
+            state.ended.wait(1.0)  # its reader saw the end of the output
         for proc in self.processes:
-            if proc.poll() is None:
-                with contextlib.suppress(ProcessLookupError):
-                    os.killpg(proc.pid, signal.SIGTERM)
-        deadline = time.monotonic() + timeout_s
-        for proc in self.processes:
-            try:
-                proc.wait(timeout=max(0.1, deadline - time.monotonic()))
-            except subprocess.TimeoutExpired:
-                with contextlib.suppress(ProcessLookupError):
-                    os.killpg(proc.pid, signal.SIGKILL)
-                proc.wait()
-            for stream in (proc.stdout, proc.stderr):
-                if stream is not None:
-                    stream.close()
+            if proc.stdout is not None:
+                with contextlib.suppress(OSError, ValueError):
+                    proc.stdout.close()
         for spec in self.specs:
             remove_stale(spec.stream)
         if self._shim is not None:
@@ -228,7 +281,49 @@ class LiveSession:
         self.close()
 
 
-def _wait_ready(proc: subprocess.Popen[str], topic: str, deadline: float) -> None:
+def _stop(processes: Sequence[subprocess.Popen[str]], *, timeout_s: float) -> None:
+    for proc in processes:
+        if proc.poll() is None:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(proc.pid, signal.SIGTERM)
+    deadline = time.monotonic() + timeout_s
+    for proc in processes:
+        try:
+            proc.wait(timeout=max(0.1, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+        if proc.stderr is not None:
+            proc.stderr.close()
+
+
+def wait_for_topics(topics: Sequence[str], *, master_uri: str, wait_s: float) -> dict[str, str]:
+    """Topic → ROS 1 type of ``topics``, waiting up to ``wait_s`` for those not yet published.
+
+    Raises:
+        ConfigError: a topic is not on the master by then.
+        TransportError: no master answers.
+    """
+    deadline = time.monotonic() + wait_s
+    while True:
+        known = {t.name: t for t in list_topics(master_uri) if t.msg_type != "*"}
+        missing = [t for t in topics if t not in known]
+        if not missing or time.monotonic() >= deadline:
+            break
+        time.sleep(0.2)
+    if missing:
+        msg = (
+            f"not on the ROS master {master_uri}: {', '.join(missing)}; "
+            f"it has {', '.join(sorted(known)) or 'no topics'} (`redrive topics` lists them)"
+        )
+        raise ConfigError(msg)
+    return {topic: known[topic].msg_type for topic in topics}
+
+
+def _wait_ready(
+    proc: subprocess.Popen[str], topic: str, deadline: float, *, word: str = "READY"
+) -> None:
     import select
 
     assert proc.stdout is not None
@@ -241,7 +336,7 @@ def _wait_ready(proc: subprocess.Popen[str], topic: str, deadline: float) -> Non
         if not ready:
             continue
         line = proc.stdout.readline()
-        if line.strip() == "READY":
+        if line.strip() == word:
             return
         if not line:
             err = proc.stderr.read() if proc.stderr else ""

@@ -1,0 +1,175 @@
+"""ROS 1 messages into MCAP files (``ros1`` profile), optionally split into numbered files.
+
+Each file is written to a ``.part`` (:mod:`redrive.io.partfiles`) and moved into place when it is
+finished, so every file that appears is complete and valid alone. Split files are named
+``<stem>_0000.mcap``, ``<stem>_0001.mcap`` … beside the target; each holds the schemas and
+channels of the topics it has messages of. Together they hold exactly what one unsplit file would.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO
+
+from mcap.writer import CompressionType
+from mcap.writer import Writer as McapRawWriter
+
+from redrive.errors import LogError
+from redrive.io.partfiles import create_part
+
+__all__ = ["Ros1Schema", "SplitMcapWriter", "split_name"]
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Ros1Schema:
+    """A topic's ROS 1 type as the file records it: ``msg_type`` (``sensor_msgs/Imu``), its
+    ``md5sum`` and the full ``ros1msg`` definition ``text``."""
+
+    msg_type: str
+    md5sum: str
+    text: str
+
+
+def split_name(path: Path, index: int) -> Path:
+    """``drive.mcap`` → ``drive_0003.mcap`` for ``index`` 3."""
+    return path.with_name(f"{path.stem}_{index:04d}{path.suffix or '.mcap'}")
+
+
+class SplitMcapWriter:
+    """Write ROS 1 messages to ``path`` — or, when a split limit is given, to numbered files.
+
+    Args:
+        path: the target file (``--record``).
+        split_size_bytes: start a new file once the current one holds this many bytes.
+        split_duration_s: start a new file after this many seconds of wall time.
+
+    Raises:
+        LogError: the folder cannot be written.
+    """
+
+    def __init__(
+        self,
+        path: Path,
+        *,
+        split_size_bytes: int | None = None,
+        split_duration_s: float | None = None,
+    ) -> None:
+        self.path = path
+        self.split_size_bytes = split_size_bytes
+        self.split_duration_s = split_duration_s
+        self.split = split_size_bytes is not None or split_duration_s is not None
+        #: the files finished so far, in order
+        self.finished: list[Path] = []
+        #: bytes of the finished files
+        self.finished_bytes = 0
+        self._index = 0
+        self._fh: IO[bytes] | None = None
+        self._open()
+
+    @property
+    def bytes_written(self) -> int:
+        """Bytes on disk so far, every file (the current one up to its last written chunk)."""
+        current = self._fh.tell() if self._fh is not None else 0
+        return self.finished_bytes + current
+
+    def _target(self) -> Path:
+        return split_name(self.path, self._index) if self.split else self.path
+
+    def _open(self) -> None:
+        target = self._target()
+        try:
+            fd, self._tmp = create_part(target)
+        except OSError as err:
+            msg = f"{target}: cannot create a file in {target.parent} ({err.strerror}); check the folder exists and is writable"
+            raise LogError(msg) from err
+        self._fh = os.fdopen(fd, "wb")
+        chunk = 1 << 20
+        if self.split_size_bytes is not None:
+            chunk = max(4 << 10, min(chunk, self.split_size_bytes // 4))
+        self._writer = McapRawWriter(self._fh, chunk_size=chunk, compression=CompressionType.ZSTD)
+        self._writer.start(profile="ros1", library="redrive")
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, int] = {}
+        self._sequence: dict[str, int] = {}
+        self._opened_s = time.monotonic()
+
+    def write(
+        self, topic: str, schema: Ros1Schema, *, log_ns: int, publish_ns: int, data: bytes
+    ) -> None:
+        """Add one message (its bytes as published) to the current file, splitting first when the
+        current file is full."""
+        if self._fh is None:
+            msg = f"{self.path}: the recording is closed"
+            raise LogError(msg)
+        if self.split and self._channels and self._full():
+            self._finish_current()
+            self._index += 1
+            self._open()
+        channel = self._channels.get(topic)
+        if channel is None:
+            schema_id = self._schemas.get(schema.msg_type)
+            if schema_id is None:
+                schema_id = self._writer.register_schema(
+                    name=schema.msg_type, encoding="ros1msg", data=schema.text.encode()
+                )
+                self._schemas[schema.msg_type] = schema_id
+            channel = self._writer.register_channel(
+                topic=topic,
+                message_encoding="ros1",
+                schema_id=schema_id,
+                metadata={"md5sum": schema.md5sum},
+            )
+            self._channels[topic] = channel
+        seq = self._sequence.get(topic, 0)
+        self._sequence[topic] = seq + 1
+        self._writer.add_message(
+            channel_id=channel, log_time=log_ns, publish_time=publish_ns, data=data, sequence=seq
+        )
+
+    def _full(self) -> bool:
+        assert self._fh is not None
+        if self.split_size_bytes is not None and self._fh.tell() >= self.split_size_bytes:
+            return True
+        return (
+            self.split_duration_s is not None
+            and time.monotonic() - self._opened_s >= self.split_duration_s
+        )
+
+    def _finish_current(self) -> None:
+        fh, self._fh = self._fh, None
+        assert fh is not None
+        try:
+            self._writer.finish()  # type: ignore[no-untyped-call]
+            fh.flush()
+            os.fsync(fh.fileno())
+            fh.close()
+            target = self._target()
+            os.replace(self._tmp, target)
+        except BaseException:
+            fh.close()
+            self._tmp.unlink(missing_ok=True)
+            raise
+        self.finished.append(target)
+        self.finished_bytes += target.stat().st_size
+        logger.debug("recorded %s", target)
+
+    def close(self) -> list[Path]:
+        """Finish the current file; returns every file written, in order."""
+        if self._fh is not None:
+            self._finish_current()
+        return list(self.finished)
+
+    def abort(self) -> None:
+        """Drop the file being written (files already finished stay)."""
+        fh, self._fh = self._fh, None
+        if fh is not None:
+            with contextlib.suppress(OSError):
+                fh.close()
+            self._tmp.unlink(missing_ok=True)
