@@ -42,18 +42,18 @@ class LogDamage:
 
     def __str__(self) -> str:
         where = (
-            f"bytes {self.start_byte}–{self.stop_byte}"
+            f"bytes {self.start_byte}–{self.stop_byte}: "
             if self.start_byte is not None
-            else f"from message {self.message_index}"
+            else f"from message {self.message_index}: "
             if self.message_index is not None
-            else "somewhere"
+            else ""
         )
         lost = (
             "messages lost unknown"
             if self.messages_lost is None
             else f"{self.messages_lost} message{'s' if self.messages_lost != 1 else ''} lost"
         )
-        return f"{where}: {self.what} ({lost})"
+        return f"{where}{self.what} ({lost})"
 
     def to_json(self) -> dict[str, object]:
         return {
@@ -84,7 +84,7 @@ class DamageLog:
         """Reading reached ``damage``: raise when strict, else record it and go on."""
         if self.strict:
             msg = (
-                f"{self.path}: damaged at {damage}; {messages_read} messages were read before it. "
+                f"{self.path}: damaged {'at ' if damage.start_byte is not None else ''}{damage}; {messages_read} messages were read before it. "
                 "`redrive info` lists all the damage, `redrive repair` saves what is intact; "
                 "without --strict (strict=False) redrive reads past it."
             )
