@@ -77,7 +77,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the CLI; returns the process exit status (0 ok, 1 a redrive error, 2 bad usage)."""
+    """Run the CLI; returns the process exit status (docs/exit_status.md: 0 ok, 1 a redrive
+    error, 2 bad usage, …); a Python traceback is printed only with ``-v``."""
     parser = build_parser()
     args = parser.parse_args(argv)
     args.argv = list(sys.argv[1:] if argv is None else argv)  # for hints that repeat the command
@@ -89,9 +90,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         status: int = args.func(args)
     except RedriveError as err:
+        if args.verbose:
+            logging.getLogger("redrive").debug("the error, with its traceback", exc_info=True)
         print(f"redrive: error: {err}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("redrive: interrupted", file=sys.stderr)
         return 130
+    except Exception as err:  # a bug, or an error nothing translated: no traceback without -v
+        if args.verbose:
+            raise
+        print(
+            f"redrive: internal error: {type(err).__name__}: {err}\n"
+            f"  (in `redrive {args.command}`; run it again with -v for the traceback and "
+            "report it with that output)",
+            file=sys.stderr,
+        )
+        return 1
     return status

@@ -353,6 +353,16 @@ class MainWindow(QtWidgets.QMainWindow):
             summary.open_s,
         )
         self.current = 0
+        if summary.damage:
+            logger.warning(
+                "%s is damaged; the intact part is shown: %s",
+                summary.path,
+                "; ".join(summary.damage),
+            )
+            self.status.showMessage(
+                f"{summary.path.name} is damaged: {len(summary.damage)} part(s) skipped, the intact "
+                "part is shown (the Log panel lists them; `redrive repair` saves the intact part)"
+            )
         self.refresh()
 
     def _open_failed(self, path: str, message: str) -> None:

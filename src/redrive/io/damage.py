@@ -85,8 +85,9 @@ class DamageLog:
         if self.strict:
             msg = (
                 f"{self.path}: damaged {'at ' if damage.start_byte is not None else ''}{damage}; {messages_read} messages were read before it. "
-                "`redrive info` lists all the damage, `redrive repair` saves what is intact; "
-                "without --strict (strict=False) redrive reads past it."
+                "`redrive info` lists all the damage, `redrive repair` saves what is intact. To "
+                "read past it: `redrive run` or `info` without --strict, `redrive convert "
+                "--skip-damaged`, open_log(..., strict=False)."
             )
             raise LogDamagedError(msg, messages_read=messages_read, offset=damage.start_byte)
         self.add(damage)

@@ -136,10 +136,11 @@ class McapFileReader(RosReaderBase):
         try:
             summary = make_reader(self._fh).get_summary()
         except Exception as err:  # mcap raises struct.error, EndOfFile, McapError … on damage
+            logger.debug("%s: no summary (%s: %s)", self.path, type(err).__name__, err)
             self._damage.add(
                 LogDamage(
-                    what=f"no readable summary section ({type(err).__name__}: {err}); the file "
-                    "was read with a forward scan",
+                    what="the summary section (the index at the end) is missing or unreadable; "
+                    "the file was read with a forward scan",
                     messages_lost=0,
                 )
             )

@@ -116,9 +116,25 @@ class BagWalk:
                     (dsize,) = U32.unpack_from(buf, hstop)
                     datapos = hstop + 4
                     if datapos + dsize > self.size:
-                        if op == OP_CHUNK:  # the last chunk was cut off: salvage its first bytes
+                        salvaged = (  # the last chunk was cut off: salvage its first bytes
                             self._salvage_cut_chunk(buf, fields, pos, datapos)
-                        raise DamageError(pos, f"a record of {dsize} bytes runs past the end")
+                            if op == OP_CHUNK
+                            else 0
+                        )
+                        self.items.append(
+                            LogDamage(
+                                what=f"the bag is cut off inside a record of {dsize} bytes"
+                                + (
+                                    f" (a chunk: the {salvaged} messages its first bytes hold "
+                                    "were read)"
+                                    if op == OP_CHUNK
+                                    else ""
+                                ),
+                                start_byte=pos,
+                                stop_byte=self.size,
+                            )
+                        )
+                        break
                 except DamageError as err:
                     resume = _resync(buf, pos + 1, self.size)
                     cut = resume >= self.size
@@ -174,13 +190,15 @@ class BagWalk:
 
     def _salvage_cut_chunk(
         self, buf: mmap.mmap, fields: Mapping[str, bytes], pos: int, datapos: int
-    ) -> None:
+    ) -> int:
+        """Read what the first bytes of a cut-off chunk hold; returns how many messages."""
         compression = fields.get("compression", b"none").decode("ascii", "replace")
         span = ChunkSpan(pos, datapos, self.size - datapos, compression, cut=True)
         times = [t for _, t, _ in self.records(buf, span, None, first=True)]
         if times:
             span.start_ns, span.end_ns = min(times), max(times)
             self.items.append(span)
+        return len(times)
 
     def records(
         self, buf: mmap.mmap, span: ChunkSpan, wanted: set[int] | None, *, first: bool
