@@ -55,10 +55,13 @@ def test_info_reports_damage_and_exit_status(
     assert "cut off" in info["damage"]
     assert info["messages"] > 0
     cut_at = [d for d in info["damage_report"] if d["start_byte"] is not None]
-    assert cut_at and cut_at[-1]["stop_byte"] == cut.stat().st_size
+    assert cut_at
+    assert cut_at[-1]["stop_byte"] == cut.stat().st_size
     assert main(["info", str(cut), "--strict"]) == 1
     err = capsys.readouterr().err
-    assert "cut.bag" in err and "--strict" in err and "Traceback" not in err
+    assert "cut.bag" in err
+    assert "--strict" in err
+    assert "Traceback" not in err
 
 
 def test_bad_input_is_a_clear_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

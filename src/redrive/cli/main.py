@@ -20,6 +20,7 @@ _COMMANDS = (
     "topics",
     "live",
     "convert",
+    "repair",
     "synth",
     "run",
     "batch",
@@ -36,6 +37,7 @@ _EPILOG = """\
 examples:
   redrive info drive.bag                 topics, counts, rates, decoders of a log
   redrive convert drive.bag drive.mcap   any log (KITTI too) to MCAP or a ROS 1 bag
+  redrive repair cut.mcap -o fixed.mcap  what a damaged log still holds, as a valid MCAP
   redrive synth urban -o urban.mcap      simulate a driving scenario into a log
   redrive run urban.mcap                 replay it through perception → planning → control
   redrive run drive.bag --perception my_detector.py:MyDetector --out runs/mine

@@ -34,6 +34,7 @@ from redrive.io.mcap_scan import (
     McapSchema,
     Message,
     RecordError,
+    ScanEvent,
     chunk_head,
     message_index_count,
     read_chunk,
@@ -120,6 +121,11 @@ class McapFileReader(RosReaderBase):
             ),
         )
         self._topics = self._summarise()
+
+    def scan(self) -> Iterator[ScanEvent]:
+        """Every intact record of the file and every damage, in file order (a forward scan:
+        see :class:`~redrive.io.mcap_scan.McapScan`); ``redrive repair`` copies from it."""
+        return McapScan(self._buf).events()
 
     @property
     def damage_report(self) -> tuple[LogDamage, ...]:

@@ -157,6 +157,10 @@ class Ros1BagReader(RosReaderBase):
             if isinstance(item, LogDamage):
                 self._damage.add(item)
 
+    def definitions(self) -> dict[str, tuple[str, str]]:
+        """Topic → (message type, its ROS 1 definition text) as the bag stores them."""
+        return {c.topic: (c.msgtype, c.msgdef) for c in self._conns.values()}
+
     @property
     def damage_report(self) -> tuple[LogDamage, ...]:
         return tuple(self._damage.items)

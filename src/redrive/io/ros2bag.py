@@ -191,6 +191,22 @@ class Ros2BagReader(RosReaderBase):
                 for damage in reader.damage_report:
                     self._damage.add(damage)
 
+    def definitions(self) -> dict[str, tuple[str, str, str]]:
+        """Topic → (message type, definition format ``msg``/``idl`` or "" when the bag holds
+        none, definition text) as the bag stores them."""
+        out: dict[str, tuple[str, str, str]] = {}
+        for conn in self._reader.connections:
+            fmt = conn.msgdef.format
+            kind = (
+                "msg"
+                if fmt == MessageDefinitionFormat.MSG and conn.msgdef.data
+                else "idl"
+                if fmt == MessageDefinitionFormat.IDL and conn.msgdef.data
+                else ""
+            )
+            out[conn.topic] = (conn.msgtype, kind, conn.msgdef.data if kind else "")
+        return out
+
     @property
     def damage_report(self) -> tuple[LogDamage, ...]:
         return tuple(self._damage.items)
