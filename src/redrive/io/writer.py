@@ -206,7 +206,7 @@ class McapWriter:
         if self._chunk_first_ns is None:
             self._chunk_first_ns = log_time_ns
         elif abs(log_time_ns - self._chunk_first_ns) > self._chunk_span_ns:
-            self._writer.flush()  # finishes the chunk and flushes the file
+            self._writer.flush()  # type: ignore[no-untyped-call]  # ends the chunk, flushes the file
             self._chunk_first_ns = None
             self._written = self._fh.tell()
             return
