@@ -50,3 +50,27 @@ def write_string_mcap(
             out.append((topic, t, data))
         writer.finish()
     return out
+
+
+def write_string_bag(path: Path, *, messages: int = 200, compression: str = "lz4") -> None:
+    """A ROS 1 bag of ``messages`` std_msgs/String on two topics in many small chunks, written
+    with rosbags (``compression``: ``bz2``, ``lz4`` or ``none``)."""
+    from rosbags.rosbag1 import Writer as BagWriter
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    string = store.types["std_msgs/msg/String"]
+    writer = BagWriter(path)
+    writer.chunk_threshold = 1024
+    if compression != "none":
+        writer.set_compression(BagWriter.CompressionFormat[compression.upper()])
+    with writer:
+        conns = {
+            t: writer.add_connection(t, "std_msgs/msg/String", typestore=store)
+            for t in ("/a", "/b")
+        }
+        for i in range(messages):
+            data = store.serialize_ros1(
+                string(data=f"message {i} " + "x" * (i % 50)), string.__msgtype__
+            )
+            writer.write(conns["/a" if i % 3 else "/b"], T0_NS + i * 10_000_000, data)

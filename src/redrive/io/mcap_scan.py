@@ -40,6 +40,7 @@ __all__ = [
     "chunk_head",
     "message_index_count",
     "read_chunk",
+    "summary_crc_ok",
 ]
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -273,6 +274,23 @@ def read_chunk(buf: memoryview, head: ChunkHead) -> tuple[list[Message], list[ob
     except RecordError as err:
         return messages, others, f"a record at offset {pos} of the chunk is malformed ({err})"
     return messages, others, None
+
+
+def summary_crc_ok(buf: memoryview) -> bool:
+    """Whether the summary section matches the CRC its footer records (True when it records
+    none, or the file has no footer to check against)."""
+    size = len(buf)
+    footer = size - len(MAGIC) - 9 - 20
+    if footer < len(MAGIC) or bytes(buf[size - len(MAGIC) :]) != MAGIC:
+        return True
+    op, length = _OPLEN.unpack_from(buf, footer)
+    if op != OP_FOOTER or length != 20:
+        return True
+    summary_start, _, crc = struct.unpack_from("<QQI", buf, footer + 9)
+    if crc == 0:
+        return True
+    start = summary_start if 0 < summary_start <= footer else footer
+    return bool(zlib.crc32(buf[start : size - len(MAGIC) - 4]) == crc)
 
 
 def message_index_count(buf: memoryview, pos: int, size: int) -> int | None:

@@ -38,6 +38,7 @@ from redrive.io.mcap_scan import (
     chunk_head,
     message_index_count,
     read_chunk,
+    summary_crc_ok,
 )
 from redrive.io.recognise import starts_with
 from redrive.io.typestore import typestore_for
@@ -153,6 +154,15 @@ class McapFileReader(RosReaderBase):
             return None
         if summary is None:
             return None  # written without one: nothing is damaged
+        if not summary_crc_ok(self._buf):
+            self._damage.add(
+                LogDamage(
+                    what="the summary section (the index at the end) fails its CRC check; the "
+                    "file was read with a forward scan",
+                    messages_lost=0,
+                )
+            )
+            return None
         for index in summary.chunk_indexes:
             end = index.chunk_start_offset + index.chunk_length
             if end > self._size or self._buf[index.chunk_start_offset] != OP_CHUNK:
@@ -311,7 +321,9 @@ class McapFileReader(RosReaderBase):
             if stop_ns is not None and index.message_start_time >= stop_ns:
                 break
             if (start_ns is not None and index.message_end_time < start_ns) or (
-                index.message_index_offsets and not ids.intersection(index.message_index_offsets)
+                len(ids) < len(self._channels)  # a topic filter: skip chunks without its topics
+                and index.message_index_offsets
+                and not ids.intersection(index.message_index_offsets)
             ):
                 continue
             while heap and heap[0][0] < index.message_start_time:

@@ -38,6 +38,8 @@ from redrive.io.ros1bag_records import (
     MAGIC,
     OP_CONNECTION,
     OP_MSGDATA,
+    TIME,
+    U32,
     DamageError,
     data_span,
     record_op,
@@ -119,6 +121,12 @@ class Ros1BagReader(RosReaderBase):
                 reader.close()
             self.indexed = False
             self._scan_open(f"{type(err).__name__}: {err}")
+            return
+        why = _index_contradiction(reader)
+        if why is not None:
+            reader.close()
+            self.indexed = False
+            self._scan_open(why)
             return
         self._rosbags = reader
         if not reader.connections and self._file_size > 4096:
@@ -274,7 +282,7 @@ class Ros1BagReader(RosReaderBase):
                     continue
                 current_pos = chunk_pos
             try:
-                data = self._message_at(chunk, offset)
+                data = self._message_at(chunk, offset, time_ns, conn_id)
             except DamageError as err:
                 self._chunk_damage(chunk_pos, err, yielded)
                 bad_chunk = chunk_pos
@@ -341,15 +349,24 @@ class Ros1BagReader(RosReaderBase):
         )
 
     @staticmethod
-    def _message_at(chunk: memoryview, offset: int) -> memoryview:
+    def _message_at(chunk: memoryview, offset: int, time_ns: int, conn_id: int) -> memoryview:
+        """The data of the message the index says is at ``offset``; the record's time and
+        connection must be the index's (a damaged index points at other bytes)."""
         end = len(chunk)
         pos = offset
         while True:
+            head = pos
             op, pos = record_op(chunk, pos, end)
             start, stop = data_span(chunk, pos, end)
             if op < 0:
                 raise DamageError(offset, "record has no op field")
             if op == OP_MSGDATA:
+                fields = bytes(chunk[head:pos])
+                secs, nsecs = divmod(time_ns, 1_000_000_000)
+                if b"time=" + TIME.pack(secs, nsecs) not in fields or (
+                    b"conn=" + U32.pack(conn_id) not in fields
+                ):
+                    raise DamageError(offset, "the index points at another message")
                 return chunk[start:stop]
             if op != OP_CONNECTION:
                 raise DamageError(offset, f"expected a message record, found op {op:#x}")
@@ -394,6 +411,29 @@ def _entries(index: list[Any], first: int, conn_id: int) -> Iterator[tuple[int, 
     """(time, chunk position, offset in chunk, connection id) of one connection's index."""
     for entry in index[first:]:
         yield entry.time, entry.chunk_pos, entry.offset, conn_id
+
+
+def _index_contradiction(reader: RosbagsReader) -> str | None:
+    """Why the bag's index cannot be right (None when it is consistent): every entry must point
+    into a known chunk, within that chunk's time range, and the entries per chunk and connection
+    must add up to the chunk's counts.  A damaged index (zeroed, flipped) fails this, and the
+    bag is then read sequentially instead of trusting offsets that point at other messages."""
+    infos = {info.pos: info for info in reader.chunk_infos}
+    if set(infos) != set(reader.chunks):
+        return "the chunk infos and the chunks of the index do not match"
+    counts: dict[tuple[int, int], int] = {}
+    for conn_id, entries in reader.indexes.items():
+        for entry in entries:
+            info = infos.get(entry.chunk_pos)
+            if info is None or not info.start_time <= entry.time <= info.end_time:
+                return f"an index entry of connection {conn_id} points outside its chunk"
+            key = (entry.chunk_pos, conn_id)
+            counts[key] = counts.get(key, 0) + 1
+    for info in infos.values():
+        for conn_id, count in info.connection_counts.items():
+            if counts.get((info.pos, conn_id), 0) != count:
+                return f"the index of the chunk at byte {info.pos} does not match its counts"
+    return None
 
 
 def _chunk_counts(reader: RosbagsReader | None, chunk_pos: int) -> dict[int, int]:
