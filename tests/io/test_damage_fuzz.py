@@ -29,6 +29,7 @@ from mcap.records import Channel, Chunk, Message
 from mcap.stream_reader import breakup_chunk
 from rosbags.rosbag1 import Reader as Bag1Reader
 
+from redrive.cli.main import main
 from redrive.errors import LogError, RedriveError
 from redrive.io import open_log
 
@@ -217,25 +218,34 @@ def test_real_ros2_bag(shared_data: Path, tmp_path: Path) -> None:
         _TOTALS["ros2: truncated"] += 1
 
 
-def test_cli_on_damaged_logs_prints_no_traceback(tmp_path: Path) -> None:
+def test_cli_on_damaged_logs_prints_no_traceback(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     src = tmp_path / "log.mcap"
     write_string_mcap(src, messages=100)
     data = src.read_bytes()
-    cases = {"cut.mcap": data[: len(data) // 2], "head.mcap": data[:40]}
-    for name, content in cases.items():
-        (tmp_path / name).write_bytes(content)
-        done = subprocess.run(
-            [sys.executable, "-m", "redrive", "info", name],
-            cwd=tmp_path,
-            env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2] / "src")},
-            capture_output=True,
-            text=True,
-            timeout=120,
-            check=False,
-        )
-        assert done.returncode == 5, done.stderr
-        assert "Traceback" not in done.stdout + done.stderr
-        assert "damaged" in done.stdout
+    (tmp_path / "cut.mcap").write_bytes(data[: len(data) // 2])
+    (tmp_path / "head.mcap").write_bytes(data[:40])
+    done = subprocess.run(  # one real process: what a user sees, exit status included
+        [sys.executable, "-m", "redrive", "info", "cut.mcap"],
+        cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2] / "src")},
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert done.returncode == 5, done.stderr
+    assert "Traceback" not in done.stdout + done.stderr
+    assert "damaged" in done.stdout
+    for args in (
+        ["info", str(tmp_path / "head.mcap")],
+        ["info", "--strict", str(tmp_path / "cut.mcap")],
+    ):
+        status = main(args)
+        out = capsys.readouterr()
+        assert status == (1 if "--strict" in args else 5)
+        assert "Traceback" not in out.out + out.err
 
 
 def test_zz_print_counts() -> None:

@@ -315,8 +315,14 @@ class McapScan:
         self.channel_ids: set[int] = set()
         self.chunked = False
 
-    def events(self) -> Iterator[ScanEvent]:
-        """Every intact record's content and every damage, in file order."""
+    def events(self, *, counts_only: bool = False) -> Iterator[ScanEvent]:
+        """Every intact record's content and every damage, in file order.
+
+        ``counts_only``: a chunk whose message index records name only channels already seen is
+        not decompressed; ("counts", (channel id → messages, first time, last time)) from its
+        index and header stands for its messages (a quick pass to open a file without a
+        summary; damage inside such a chunk is found when its messages are read).
+        """
         buf, size = self.buf, self.size
         pos = len(MAGIC)
         data_done = False  # past the data section: damage there loses no message
@@ -345,6 +351,11 @@ class McapScan:
                 if op == OP_CHUNK:
                     self.chunked = True
                     head = chunk_head(buf, pos, size)
+                    listed = self._listed(stop) if counts_only else None
+                    if listed is not None:
+                        yield "counts", (listed, head.start_time, head.end_time)
+                        pos = stop
+                        continue
                     messages, others, why = read_chunk(buf, head)
                     for record in others:
                         yield self._record(record)
@@ -392,6 +403,18 @@ class McapScan:
                 pos = resume
         if lost is not None:
             yield "damage", _counted(*lost)
+
+    def _listed(self, pos: int) -> dict[int, int] | None:
+        """Channel id → messages of the message index records at ``pos`` (after a chunk), or
+        None when there are none or they name a channel not seen yet."""
+        out: dict[int, int] = {}
+        while (n := message_index_count(self.buf, pos, self.size)) is not None:
+            (cid,) = _U16.unpack_from(self.buf, pos + 9)
+            if cid not in self.channel_ids:
+                return None
+            out[cid] = out.get(cid, 0) + n
+            pos += 9 + _OPLEN.unpack_from(self.buf, pos)[1]
+        return out or None
 
     def _record(self, record: object) -> ScanEvent:
         if isinstance(record, McapChannel):

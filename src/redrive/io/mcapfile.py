@@ -208,14 +208,23 @@ class McapFileReader(RosReaderBase):
         schemas: dict[int, McapSchema] = {}
         seen_channels: set[int] = set()
         self._metadata = []
+        unsized: set[int] = set()
         first = True
-        for kind, item in McapScan(self._buf).events():
+        for kind, item in McapScan(self._buf).events(counts_only=True):
             if kind == "message":
                 cid, _, t, _, data = cast("Message", item)
                 self._counts[cid] = self._counts.get(cid, 0) + 1
                 self._sizes[cid] = self._sizes.get(cid, 0) + len(data)
                 self._start_ns = t if first else min(self._start_ns, t)
                 self._end_ns = max(self._end_ns, t)
+                first = False
+            elif kind == "counts":  # a chunk not decompressed: its index's counts and times
+                listed, t0, t1 = cast("tuple[dict[int, int], int, int]", item)
+                for cid, n in listed.items():
+                    self._counts[cid] = self._counts.get(cid, 0) + n
+                    unsized.add(cid)
+                self._start_ns = t0 if first else min(self._start_ns, t0)
+                self._end_ns = max(self._end_ns, t1)
                 first = False
             elif kind == "schema":
                 assert isinstance(item, McapSchema)
@@ -233,6 +242,8 @@ class McapFileReader(RosReaderBase):
             elif kind == "damage":
                 assert isinstance(item, LogDamage)
                 self._damage.add(item)
+        for cid in unsized:  # bytes unknown without decompressing (-1 in the topic info)
+            self._sizes.pop(cid, None)
         for cid in list(self._counts):
             if cid not in self._channels:  # messages of an unknown or unread channel
                 del self._counts[cid]
