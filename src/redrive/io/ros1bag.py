@@ -6,11 +6,14 @@ index at the end of the file; messages are then read chunk by chunk from that in
 range seeks straight to the first chunk that holds it and a topic filter never decompresses a
 chunk that holds none of its messages.
 
-A bag whose index is missing or unreadable — a recording that was killed, a copy that was cut
-short — is read *sequentially* from the start instead (what ``rosbag reindex`` does), and every
-message before the damage is delivered.  rosbags offers no such salvage, which is why the
-record walking below exists.  It relies on rosbags 0.11's reader internals (``chunks``,
-``indexes``, decompressors), pinned in ``pyproject.toml``.
+A bag whose index is missing, unreadable or contradicts itself — a recording that was killed, a
+copy that was cut short, a damaged index — is read *sequentially* from the start instead (what
+``rosbag reindex`` does; :mod:`redrive.io.ros1bag_scan`), and every intact chunk is delivered.
+A damaged chunk is skipped (or, with ``strict=True``, raises
+:class:`~redrive.errors.LogDamagedError`) and listed in ``damage_report``; a message the index
+points at must carry the index's time and connection.  rosbags offers no such salvage, which is
+why the record walking exists.  It relies on rosbags 0.11's reader internals (``chunks``,
+``indexes``, ``chunk_infos``, decompressors), pinned in ``pyproject.toml``.
 """
 
 from __future__ import annotations
