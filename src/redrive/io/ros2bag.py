@@ -10,6 +10,7 @@ from __future__ import annotations
 import logging
 import sqlite3
 from collections.abc import Collection, Iterator
+from dataclasses import replace
 from pathlib import Path
 
 from rosbags.interfaces import Connection, MessageDefinitionFormat
@@ -136,7 +137,9 @@ class Ros2BagReader(RosReaderBase):
                 f"({type(err).__name__}: {err})",
                 message_index=count,
             )
-        self._damage.hit(failure, messages_read=count)  # strict: raises here
+        if self.strict:
+            self._damage.hit(failure, messages_read=count)  # raises
+        # lenient: the salvage below reports the damage, with what it found
         msgtypes = {c.topic: c.msgtype for c in self._reader.connections}
         wanted = None if topics is None else set(topics)
         salvaged: Iterator[tuple[int, str, bytes | memoryview]] = self._salvaged(failure)
@@ -173,7 +176,16 @@ class Ros2BagReader(RosReaderBase):
                 expected=self._reader.message_count,
                 decompress=decompress,
             )
-            for damage in found.damage or [failure]:
+            missing = self._reader.message_count - len(found.rows)  # metadata.yaml's count
+            for damage in found.damage or [
+                replace(
+                    failure,
+                    what=f"{failure.what}; {len(found.rows)} rows were then read one by one, "
+                    f"{max(missing, 0)} of the {self._reader.message_count} that metadata.yaml "
+                    "counts are missing",
+                    messages_lost=max(missing, 0),
+                )
+            ]:
                 self._damage.add(damage)
             yield from found.rows
             return
@@ -189,7 +201,9 @@ class Ros2BagReader(RosReaderBase):
                 for message in reader.messages():
                     yield message.log_time_ns, message.topic, message.raw
                 for damage in reader.damage_report:
-                    self._damage.add(damage)
+                    self._damage.add(replace(damage, what=f"{storage.name}: {damage.what}"))
+        if not self._damage.items:  # redrive's reader read past what stopped rosbags
+            self._damage.add(failure)
 
     def definitions(self) -> dict[str, tuple[str, str, str]]:
         """Topic → (message type, definition format ``msg``/``idl`` or "" when the bag holds
