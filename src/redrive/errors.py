@@ -10,6 +10,7 @@ from __future__ import annotations
 __all__ = [
     "AlgorithmError",
     "ConfigError",
+    "LogDamagedError",
     "LogError",
     "LogTruncatedError",
     "PluginError",
@@ -38,6 +39,23 @@ class LogTruncatedError(LogError):
     def __init__(self, msg: str, *, messages_read: int = 0) -> None:
         super().__init__(msg)
         self.messages_read = messages_read
+
+
+class LogDamagedError(LogTruncatedError):
+    """A log holds a damaged record (a corrupt chunk, a malformed header, a cut-off end).
+
+    Raised by readers opened with ``strict=True`` when they reach the damage, after every message
+    before it was yielded.  Opened with ``strict=False`` they skip the damage instead and list it
+    in their ``damage_report``.
+
+    Attributes:
+        messages_read: how many messages were yielded before the damage was hit.
+        offset: the byte offset of the damage in the file (None when unknown, e.g. in a database).
+    """
+
+    def __init__(self, msg: str, *, messages_read: int = 0, offset: int | None = None) -> None:
+        super().__init__(msg, messages_read=messages_read)
+        self.offset = offset
 
 
 class UnsupportedMessageError(RedriveError):

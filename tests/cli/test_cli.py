@@ -50,10 +50,18 @@ def test_info_reports_damage_and_exit_status(
     bag = write_demo_bag(tmp_path / "demo.bag", duration_s=1.0)
     cut = tmp_path / "cut.bag"
     cut.write_bytes(bag.read_bytes()[: bag.stat().st_size // 2])
-    assert main(["info", str(cut), "--json"]) == 1
+    assert main(["info", str(cut), "--json"]) == 5  # damaged: read past it (docs/exit_status.md)
     info = json.loads(capsys.readouterr().out)
     assert "cut off" in info["damage"]
     assert info["messages"] > 0
+    cut_at = [d for d in info["damage_report"] if d["start_byte"] is not None]
+    assert cut_at
+    assert cut_at[-1]["stop_byte"] == cut.stat().st_size
+    assert main(["info", str(cut), "--strict"]) == 1
+    err = capsys.readouterr().err
+    assert "cut.bag" in err
+    assert "--strict" in err
+    assert "Traceback" not in err
 
 
 def test_bad_input_is_a_clear_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -223,10 +223,15 @@ def test_a_cut_off_log_keeps_the_frames_before_the_damage(demo_bag: Path, tmp_pa
     r = open_run(tmp_path / "run")
     assert r.manifest.status is RunStatus.FAILED
     assert r.manifest.summary is not None
-    assert "LogTruncatedError" in (r.manifest.summary.error or "")
+    assert "LogDamagedError" in (r.manifest.summary.error or "")  # a LogTruncatedError
     frames = r.table("frames").column("frame_index").to_pylist()
     assert 10 < len(frames) < 50
     assert frames == list(range(len(frames)))
+    # not strict (`redrive run` without --strict): the intact part, the damage in the report
+    report = run(cut, tmp_path / "lenient", pipeline(*STANDARD), strict=False)
+    assert report.status == "complete"
+    assert report.frames >= len(frames)
+    assert any(d.stop_byte == cut.stat().st_size for d in report.damage)
 
 
 @pytest.mark.parametrize("executor", ["threads", "processes"])

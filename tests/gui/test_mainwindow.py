@@ -332,3 +332,16 @@ def test_a_sensor_level_closed_loop_run_opens_over_its_rendered_sensors(
     assert np.array_equal(
         window.scene.path, next(iter(window.run.paths.values()))[second].waypoints[:, :3]
     )
+
+
+def test_a_damaged_log_opens_with_its_intact_part(
+    qtbot: Any, window: MainWindow, demo_log: Path, tmp_path: Path
+) -> None:
+    data = demo_log.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: len(data) * 3 // 5])  # a recording killed part-way
+    _open(qtbot, window, cut)
+    assert window.scene is not None
+    assert "damaged" in window.damage_label.text()
+    assert window.summary is not None
+    assert window.summary.damage  # what was skipped, for the Log panel

@@ -4,20 +4,28 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import sys
 from pathlib import Path
 from typing import Any
 
+from redrive.errors import LogDamagedError
 from redrive.io import open_log
 from redrive.io.summary import LogSummary, summarize_log
 
-__all__ = ["register"]
+__all__ = ["EXIT_DAMAGED", "damage_lines", "register"]
+
+#: ``redrive info`` read a damaged log: what is intact is summarised, the damage listed.
+EXIT_DAMAGED = 5
 
 _EPILOG = """\
 examples:
   redrive info drive.bag
   redrive info rosbag2_dir/ --json
   redrive info kitti/training --sensor-map sensors.toml
+  redrive info cut.mcap --strict        exit 1 if the log is damaged at all
+
+exit status: 0 intact, 5 damaged (read past the damage; the damage is listed), 1 an error.
 """
 
 
@@ -67,19 +75,64 @@ def _print_table(summary: LogSummary) -> None:
             t.maps_to or "",
         )
     console.print(table)
-    if summary.damage:
-        console.print(f"[bold red]damaged[/]: {summary.damage}")
+    if summary.damage_report or summary.damage:
+        lines = damage_lines(summary)
+        console.print(f"[bold red]damaged[/]: {lines[0]}")
+        for line in lines[1:]:
+            console.print(f"  {line}", highlight=False)
+
+
+def damage_lines(summary: LogSummary) -> list[str]:
+    """The damage of a log in words: a headline, one line per damaged part, what to do."""
+    report = summary.damage_report
+    if not report:
+        return [summary.damage or "", _advice(summary)]
+    known, unknown = summary.messages_lost
+    lost = f"{known} message{'s' if known != 1 else ''} lost" + (
+        " (and an unknown number more)" if unknown and known else ""
+    )
+    if unknown and not known:
+        lost = "an unknown number of messages lost"
+    head = (
+        f"{len(report)} damaged part{'s' if len(report) != 1 else ''} skipped, {lost}; "
+        f"{summary.messages} messages were read"
+    )
+    return [head, *(str(d) for d in report), _advice(summary)]
+
+
+def _advice(summary: LogSummary) -> str:
+    fixed = Path(summary.path).with_suffix("").name + "-repaired.mcap"
+    return (
+        f"`redrive repair {summary.path} -o {fixed}` writes what is intact to a valid MCAP; "
+        "`redrive run` and `redrive gui` read the intact part"
+    )
 
 
 def _run(args: argparse.Namespace) -> int:
-    with open_log(args.log, strict=False) as log:
-        summary = summarize_log(log, sensor_map_path=args.sensor_map)
+    io_logger = logging.getLogger("redrive.io")
+    level = io_logger.level
+    if not args.verbose:  # the damage is listed below: no warning per damaged part
+        io_logger.setLevel(logging.ERROR)
+    try:
+        with open_log(args.log, strict=args.strict) as log:
+            summary = summarize_log(log, sensor_map_path=args.sensor_map)
+    finally:
+        io_logger.setLevel(level)
+    if args.strict and (summary.damage_report or summary.damage):
+        msg = (
+            f"{args.log}: damaged at "
+            + "; ".join(str(d) for d in summary.damage_report)
+            + "; --strict refuses damaged logs (without it redrive reads past the damage)"
+            if summary.damage_report
+            else str(summary.damage)
+        )
+        raise LogDamagedError(msg, messages_read=summary.messages)
     if args.json:
         json.dump(summary.to_json(), sys.stdout, indent=2)
         sys.stdout.write("\n")
     else:
         _print_table(summary)
-    return 1 if summary.damage else 0
+    return EXIT_DAMAGED if summary.damage or summary.damage_report else 0
 
 
 def register(sub: Any) -> None:
@@ -88,8 +141,10 @@ def register(sub: Any) -> None:
         help="summarise a log: topics, types, counts, rates, decoders, sensors",
         description=(
             "Print a log's time range and, per topic, its type, message count, rate, bytes, the "
-            "decoder redrive uses and the sensor it maps to. Damaged logs are read up to the "
-            "damage; the exit status is then 1."
+            "decoder redrive uses and the sensor it maps to. A damaged log (cut off, a corrupt "
+            "chunk or record) is read past its damage: what is intact is summarised, each "
+            "damaged part is listed with its byte range and the messages it lost, and the exit "
+            "status is 5 (1 with --strict, which refuses damaged logs)."
         ),
         epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -100,6 +155,11 @@ def register(sub: Any) -> None:
         help="a .bag, .mcap, ROS 2 bag directory, KITTI folder, nuScenes data root or mmdetection3d info file",
     )
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    parser.add_argument(
+        "--strict",
+        action="store_true",
+        help="refuse a damaged log: stop at the first damage with an error (exit status 1)",
+    )
     parser.add_argument(
         "--sensor-map",
         type=Path,

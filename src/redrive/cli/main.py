@@ -20,6 +20,7 @@ _COMMANDS = (
     "topics",
     "live",
     "convert",
+    "repair",
     "synth",
     "run",
     "batch",
@@ -36,6 +37,7 @@ _EPILOG = """\
 examples:
   redrive info drive.bag                 topics, counts, rates, decoders of a log
   redrive convert drive.bag drive.mcap   any log (KITTI too) to MCAP or a ROS 1 bag
+  redrive repair cut.mcap -o fixed.mcap  what a damaged log still holds, as a valid MCAP
   redrive synth urban -o urban.mcap      simulate a driving scenario into a log
   redrive run urban.mcap                 replay it through perception → planning → control
   redrive run drive.bag --perception my_detector.py:MyDetector --out runs/mine
@@ -78,7 +80,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the CLI; returns the process exit status (0 ok, 1 a redrive error, 2 bad usage)."""
+    """Run the CLI; returns the process exit status (docs/exit_status.md: 0 ok, 1 a redrive
+    error, 2 bad usage, …); a Python traceback is printed only with ``-v``."""
     parser = build_parser()
     args = parser.parse_args(argv)
     args.argv = list(sys.argv[1:] if argv is None else argv)  # for hints that repeat the command
@@ -90,9 +93,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         status: int = args.func(args)
     except RedriveError as err:
+        if args.verbose:
+            logging.getLogger("redrive").debug("the error, with its traceback", exc_info=True)
         print(f"redrive: error: {err}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("redrive: interrupted", file=sys.stderr)
         return 130
+    except Exception as err:  # a bug, or an error nothing translated: no traceback without -v
+        if args.verbose:
+            raise
+        print(
+            f"redrive: internal error: {type(err).__name__}: {err}\n"
+            f"  (in `redrive {args.command}`; run it again with -v for the traceback and "
+            "report it with that output)",
+            file=sys.stderr,
+        )
+        return 1
     return status

@@ -149,6 +149,17 @@ def print_run_report(report: Any, out: Path, *, live: bool = False) -> None:
         f"frames/s, {report.realtime_factor:.1f}x real time ({report.log_span_s:.1f} s of log)"
     )
     console.print(speed + (f", {report.late_frames} late" if report.late_frames else ""))
+    damage = getattr(report, "damage", ())
+    if damage:
+        known = sum(d.messages_lost or 0 for d in damage)
+        unknown = any(d.messages_lost is None for d in damage)
+        console.print(
+            f"[bold yellow]the log is damaged: {len(damage)} part{'s' if len(damage) != 1 else ''} "
+            f"skipped ({known} messages lost{' and an unknown number more' if unknown else ''}); "
+            "the run covers the intact part — `redrive info LOG` lists the damage, --strict "
+            "refuses damaged logs",
+            highlight=False,
+        )
     for name, count in sorted(report.missing_inputs.items()):
         console.print(
             f"[bold yellow]{count} of {report.frames} frames had no {name} within the tolerance"
@@ -233,6 +244,7 @@ def _run(args: argparse.Namespace) -> int:
         sensor_map=args.sensor_map,
         rate=args.rate,
         resume=args.resume,
+        strict=args.strict,
     )
     progress_bar = Progress(
         TextColumn(f"[bold]{args.log.name}"),
@@ -450,6 +462,14 @@ def register(sub: Any) -> None:
         type=float,
         metavar="S",
         help="closed loop: seconds (default: the scenario's, or the whole log)",
+    )
+    parser.add_argument(
+        "--strict",
+        action="store_true",
+        help=(
+            "refuse a damaged log (stop at its first damage, exit status 1); by default the "
+            "damaged parts are skipped with a warning and the run covers the intact part"
+        ),
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.set_defaults(func=_run)

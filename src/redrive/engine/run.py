@@ -24,6 +24,7 @@ from redrive.engine.resources import ResourceSampler
 from redrive.engine.stats import RunReport
 from redrive.errors import ConfigError
 from redrive.io import LogReader, open_log
+from redrive.io.damage import damage_report
 from redrive.io.frames import FrameAssembler
 from redrive.io.sensor_map import load_sensor_map_overrides
 from redrive.results import (
@@ -66,6 +67,9 @@ class RunRequest:
         sensor_map: a sensor map TOML (which topic is which sensor) or None to infer it.
         rate: real-time factor to pace at, or None for as fast as possible.
         resume: continue the (interrupted) run in ``out``.
+        strict: refuse a damaged log (:class:`~redrive.errors.LogDamagedError` at the first
+            damage); when False the damaged parts are skipped and listed in the report's
+            ``damage``.
     """
 
     log: Path
@@ -76,6 +80,7 @@ class RunRequest:
     sensor_map: Path | None = None
     rate: float | None = None
     resume: bool = False
+    strict: bool = True
 
 
 def log_fingerprint(path: Path, *, format: str) -> SourceLog:
@@ -257,8 +262,8 @@ def run_log(
     """
     if request.first_frame is not None and request.first_frame < 0:
         raise ConfigError(f"--frames: the first frame must be >= 0, got {request.first_frame}")
-    with open_log(request.log) as log:
-        return run_reader(
+    with open_log(request.log, strict=request.strict) as log:
+        report = run_reader(
             request,
             log,
             hooks=ReplayMode(rate=request.rate),
@@ -269,6 +274,7 @@ def run_log(
             progress=progress,
             cancel=cancel,
         )
+        return replace(report, damage=damage_report(log))
 
 
 def run_reader(

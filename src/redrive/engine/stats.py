@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from redrive.engine.graph import PlannedAlgorithm
+from redrive.io.damage import LogDamage
 from redrive.results import FrameRecord, RunStatus, StepRecord
 
 __all__ = ["AlgorithmStats", "RunReport", "StatsCollector"]
@@ -50,6 +51,7 @@ class RunReport:
         failure: (frame index, step) that stopped a ``fail_fast`` run.
         failed_frames: frames in which at least one step failed (error or timeout).
         missing_inputs: input → frames that had no sample of it within the tolerance.
+        damage: the damaged parts of the log that were skipped (a run with ``strict=False``).
     """
 
     status: RunStatus
@@ -61,6 +63,7 @@ class RunReport:
     failure: tuple[int, StepRecord] | None = field(default=None)
     failed_frames: int = 0
     missing_inputs: Mapping[str, int] = field(default_factory=dict)
+    damage: tuple[LogDamage, ...] = ()
 
     @property
     def nothing_succeeded(self) -> bool:

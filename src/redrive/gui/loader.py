@@ -101,6 +101,8 @@ class LogSummary:
     open_s: float
     #: sensor id → its topic
     sensor_topics: Mapping[str, str] = field(default_factory=dict)
+    #: the damaged parts found while opening (skipped; more may turn up while reading)
+    damage: tuple[str, ...] = ()
 
 
 def to_rgb8(image: Image) -> npt.NDArray[np.uint8]:
@@ -455,6 +457,7 @@ class FrameLoader(QtCore.QObject):
                 cameras=cameras,
                 open_s=time.perf_counter() - t0,
                 sensor_topics={s.sensor_id: s.topic for s in smap.sensors},
+                damage=tuple(str(d) for d in getattr(session.log, "damage_report", ())),
             )
         )
         if self._index_thread is not None:

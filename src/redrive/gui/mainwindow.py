@@ -135,6 +135,10 @@ class MainWindow(QtWidgets.QMainWindow):
         self._build_toolbar()
         self._build_menus()
         self.status = self.statusBar()
+        #: says the open log is damaged (stays while it is open; status messages come and go)
+        self.damage_label = QtWidgets.QLabel("")
+        self.damage_label.setStyleSheet("color: #c0392b")
+        self.status.addPermanentWidget(self.damage_label)
 
         self.play_timer = QtCore.QTimer(self)
         self.play_timer.setTimerType(QtCore.Qt.TimerType.PreciseTimer)
@@ -353,6 +357,22 @@ class MainWindow(QtWidgets.QMainWindow):
             summary.open_s,
         )
         self.current = 0
+        self.damage_label.setText("")
+        self.damage_label.setToolTip("")
+        if summary.damage:
+            logger.warning(
+                "%s is damaged; the intact part is shown: %s",
+                summary.path,
+                "; ".join(summary.damage),
+            )
+            self.damage_label.setText(
+                f"damaged log: {len(summary.damage)} part(s) skipped, the intact part is shown"
+            )
+            self.damage_label.setToolTip(
+                "\n".join(summary.damage)
+                + "\n\nThe Log panel lists them; `redrive repair LOG -o FIXED.mcap` saves the "
+                "intact part."
+            )
         self.refresh()
 
     def _open_failed(self, path: str, message: str) -> None:

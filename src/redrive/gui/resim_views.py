@@ -302,7 +302,7 @@ class RunThread(QtCore.QThread):
         from redrive.evaluation.evaluator import evaluate_run, headline
 
         pipeline, name = algorithm_test_pipeline(self.category, self.spec)
-        request = RunRequest(log=self.log, pipeline=pipeline, out=self.out)
+        request = RunRequest(log=self.log, pipeline=pipeline, out=self.out, strict=False)
         report = run_log(
             request, on_start=self._on_start, progress=self._on_progress, cancel=self.cancel_event
         )

@@ -60,7 +60,8 @@ class LogSession:
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
-        self.log: LogReader = open_log(self.path)
+        # a damaged log is read past its damage (listed in the reader's damage_report)
+        self.log: LogReader = open_log(self.path, strict=False)
         try:
             self.assembler = FrameAssembler(self.log)
         except BaseException:
@@ -86,7 +87,7 @@ class LogSession:
         samples (run it in a worker thread; :meth:`frame` waits for it when it seeks past what
         is indexed)."""
         times: list[int] = []
-        with open_log(self.path) as log:
+        with open_log(self.path, strict=False) as log:
             for message in log.messages(topics=[self.driver_topic]):
                 if stop is not None and stop.is_set():
                     return
@@ -396,7 +397,7 @@ def series_from_log(
     yaw: list[float] = []
     it: list[int] = []
     acc: list[Any] = []
-    with open_log(path) as log:
+    with open_log(path, strict=False) as log:
         for n, message in enumerate(log.messages(topics=topics)):
             if n >= max_samples or (stop is not None and stop.is_set()):
                 break

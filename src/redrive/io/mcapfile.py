@@ -1,4 +1,9 @@
-"""Standalone MCAP files with ROS 2 (CDR) or ROS 1 message encodings, read with ``mcap``.
+"""Standalone MCAP files with ROS 2 (CDR) or ROS 1 message encodings.
+
+The summary section (schemas, channels, statistics, chunk indexes) is read with ``mcap``; chunks
+are read and checked with :mod:`redrive.io.mcap_scan`, so a damaged chunk is skipped (and
+reported) rather than ending the read.  A file without a usable summary — cut off, or written
+without one — is read with a forward scan of its records, which resumes after any damage.
 
 Message bytes are deserialised with ``rosbags`` typestores built from the schemas the file embeds
 (``ros2msg``, ``ros2idl`` or ``ros1msg``), so one deserialiser serves every log format.
@@ -6,18 +11,35 @@ Message bytes are deserialised with ``rosbags`` typestores built from the schema
 
 from __future__ import annotations
 
+import heapq
 import logging
+import mmap
 from collections.abc import Collection, Iterator, Mapping
 from pathlib import Path
-from typing import IO, Any, Literal
+from typing import IO, Any, Literal, cast
 
-from mcap.exceptions import McapError
-from mcap.reader import NonSeekingReader, make_reader
+from mcap.reader import make_reader
+from mcap.summary import Summary
 
-from redrive.errors import LogError, LogTruncatedError
+from redrive.errors import LogError
 from redrive.io._deserialize import Deserializer
 from redrive.io._reader_base import RosReaderBase
 from redrive.io.base import Encoding, LogMessage, TopicInfo, normalize_msgtype
+from redrive.io.damage import DamageLog, LogDamage
+from redrive.io.mcap_scan import (
+    OP_CHUNK,
+    McapChannel,
+    McapMetadata,
+    McapScan,
+    McapSchema,
+    Message,
+    RecordError,
+    ScanEvent,
+    chunk_head,
+    message_index_count,
+    read_chunk,
+    summary_crc_ok,
+)
 from redrive.io.recognise import starts_with
 from redrive.io.typestore import typestore_for
 
@@ -31,10 +53,18 @@ _ENCODINGS: Mapping[str, Encoding] = {"cdr": "cdr", "ros1": "ros1"}
 
 
 class McapFileReader(RosReaderBase):
-    """A standalone ``.mcap`` file.
+    """A standalone ``.mcap`` file (see the module text).
 
-    Uses the summary section (indexes, statistics) when present; a file without one — cut off, or
-    written without it — is read linearly, and a cut-off file yields every message before the cut.
+    Args:
+        path: the file.
+        strict: when True, reading stops at the first damage with
+            :class:`~redrive.errors.LogDamagedError` (every message before it was yielded); when
+            False the damage is skipped and listed in :attr:`damage_report`.
+
+    Attributes:
+        damage_report: the damage met so far (found while opening a file without a summary, or
+            while reading).
+        indexed: whether the summary's chunk indexes are used (False: forward scan).
     """
 
     format = "mcap"
@@ -47,9 +77,10 @@ class McapFileReader(RosReaderBase):
     def __init__(self, path: Path, *, strict: bool = True) -> None:
         self.path = Path(path)
         self.strict = strict
-        self.damage: str | None = None
+        self._damage = DamageLog(self.path, strict=strict)
         try:
             self._fh: IO[bytes] = self.path.open("rb")
+            self._size = self.path.stat().st_size
         except OSError as err:
             msg = f"{self.path}: cannot open ({err.strerror}); check the path and permissions"
             raise LogError(msg) from err
@@ -57,21 +88,14 @@ class McapFileReader(RosReaderBase):
             self._fh.close()
             msg = f"{self.path}: not an MCAP file (the magic bytes are missing)"
             raise LogError(msg)
-        self._fh.seek(0)
-        self._reader = make_reader(self._fh)
-        try:
-            self._summary = self._reader.get_summary()
-        except (McapError, ValueError, OSError, EOFError) as err:
-            self._summary = None
-            self.damage = f"no readable summary section ({err})"
-            logger.warning(
-                "%s: %s; reading it linearly (a cut-off file yields what is before the cut)",
-                self.path,
-                self.damage,
-            )
+        self._map = mmap.mmap(self._fh.fileno(), 0, access=mmap.ACCESS_READ)
+        self._buf = memoryview(self._map)
+        self._summary = self._read_summary()
+        self.indexed = self._summary is not None and bool(self._summary.chunk_indexes)
         self._channels: dict[int, tuple[str, str, Encoding]] = {}
         self._counts: dict[int, int] = {}
         self._sizes: dict[int, int] = {}
+        self._metadata: list[McapMetadata] | None = None
         self._start_ns = self._end_ns = 0
         defs: dict[Literal[1, 2], dict[str, tuple[str, str]]] = {1: {}, 2: {}}
         if self._summary is not None and self._summary.statistics is not None:
@@ -99,6 +123,60 @@ class McapFileReader(RosReaderBase):
         )
         self._topics = self._summarise()
 
+    def scan(self) -> Iterator[ScanEvent]:
+        """Every intact record of the file and every damage, in file order (a forward scan:
+        see :class:`~redrive.io.mcap_scan.McapScan`); ``redrive repair`` copies from it."""
+        return McapScan(self._buf).events()
+
+    @property
+    def damage_report(self) -> tuple[LogDamage, ...]:
+        return tuple(self._damage.items)
+
+    @property
+    def damage(self) -> str | None:
+        """The damage met so far, as one line (None while none was met)."""
+        return "; ".join(str(d) for d in self._damage.items) or None
+
+    def _read_summary(self) -> Summary | None:
+        """The summary section, or None when it is missing or does not fit the file."""
+        self._fh.seek(0)
+        try:
+            summary = make_reader(self._fh).get_summary()
+        except Exception as err:  # mcap raises struct.error, EndOfFile, McapError … on damage
+            logger.debug("%s: no summary (%s: %s)", self.path, type(err).__name__, err)
+            self._damage.add(
+                LogDamage(
+                    what="the summary section (the index at the end) is missing or unreadable; "
+                    "the file was read with a forward scan",
+                    messages_lost=0,
+                )
+            )
+            return None
+        if summary is None:
+            return None  # written without one: nothing is damaged
+        if not summary_crc_ok(self._buf):
+            self._damage.add(
+                LogDamage(
+                    what="the summary section (the index at the end) fails its CRC check; the "
+                    "file was read with a forward scan",
+                    messages_lost=0,
+                )
+            )
+            return None
+        for index in summary.chunk_indexes:
+            end = index.chunk_start_offset + index.chunk_length
+            if end > self._size or self._buf[index.chunk_start_offset] != OP_CHUNK:
+                self._damage.add(
+                    LogDamage(
+                        what=f"the summary's chunk index points at byte "
+                        f"{index.chunk_start_offset}, where no chunk is; the file was read "
+                        "with a forward scan",
+                        messages_lost=0,
+                    )
+                )
+                return None
+        return summary
+
     def _add_schema(
         self, defs: dict[Literal[1, 2], dict[str, tuple[str, str]]], schema: Any
     ) -> None:
@@ -125,32 +203,50 @@ class McapFileReader(RosReaderBase):
         self._channels[channel.id] = (channel.topic, msgtype, encoding)
 
     def _scan(self, defs: dict[Literal[1, 2], dict[str, tuple[str, str]]]) -> None:
-        """One linear pass for a file without a summary: channels, counts, time range."""
-        seen_schemas: set[int] = set()
-        for schema, channel, message in self._linear():
-            if channel.id not in self._channels:
-                if schema is not None and schema.id not in seen_schemas:
-                    seen_schemas.add(schema.id)
-                    self._add_schema(defs, schema)
-                self._add_channel(channel, schema)
-            self._counts[channel.id] = self._counts.get(channel.id, 0) + 1
-            self._sizes[channel.id] = self._sizes.get(channel.id, 0) + len(message.data)
-            t = int(message.log_time)
-            self._start_ns = (
-                t
-                if not any(self._counts.values()) or self._start_ns == 0
-                else min(self._start_ns, t)
-            )
-            self._end_ns = max(self._end_ns, t)
-
-    def _linear(self) -> Iterator[tuple[Any, Any, Any]]:
-        self._fh.seek(0)
-        try:
-            yield from NonSeekingReader(self._fh).iter_messages(log_time_order=False)
-        except (McapError, ValueError, OSError, EOFError) as err:
-            at = self._fh.tell()
-            self.damage = f"cut off or damaged near byte {at} ({type(err).__name__}: {err})"
-            logger.warning("%s: %s; messages from there on are lost", self.path, self.damage)
+        """One forward pass for a file without a usable summary: channels, counts, time range,
+        metadata and damage."""
+        schemas: dict[int, McapSchema] = {}
+        seen_channels: set[int] = set()
+        self._metadata = []
+        unsized: set[int] = set()
+        first = True
+        for kind, item in McapScan(self._buf).events(counts_only=True):
+            if kind == "message":
+                cid, _, t, _, data = cast("Message", item)
+                self._counts[cid] = self._counts.get(cid, 0) + 1
+                self._sizes[cid] = self._sizes.get(cid, 0) + len(data)
+                self._start_ns = t if first else min(self._start_ns, t)
+                self._end_ns = max(self._end_ns, t)
+                first = False
+            elif kind == "counts":  # a chunk not decompressed: its index's counts and times
+                listed, t0, t1 = cast("tuple[dict[int, int], int, int]", item)
+                for cid, n in listed.items():
+                    self._counts[cid] = self._counts.get(cid, 0) + n
+                    unsized.add(cid)
+                self._start_ns = t0 if first else min(self._start_ns, t0)
+                self._end_ns = max(self._end_ns, t1)
+                first = False
+            elif kind == "schema":
+                assert isinstance(item, McapSchema)
+                if item.id not in schemas:
+                    schemas[item.id] = item
+                    self._add_schema(defs, item)
+            elif kind == "channel":
+                assert isinstance(item, McapChannel)
+                if item.id not in seen_channels:
+                    seen_channels.add(item.id)
+                    self._add_channel(item, schemas.get(item.schema_id))
+            elif kind == "metadata":
+                assert isinstance(item, McapMetadata)
+                self._metadata.append(item)
+            elif kind == "damage":
+                assert isinstance(item, LogDamage)
+                self._damage.add(item)
+        for cid in unsized:  # bytes unknown without decompressing (-1 in the topic info)
+            self._sizes.pop(cid, None)
+        for cid in list(self._counts):
+            if cid not in self._channels:  # messages of an unknown or unread channel
+                del self._counts[cid]
 
     def _summarise(self) -> dict[str, TopicInfo]:
         out: dict[str, TopicInfo] = {}
@@ -181,47 +277,109 @@ class McapFileReader(RosReaderBase):
         start_ns: int | None = None,
         stop_ns: int | None = None,
     ) -> Iterator[LogMessage]:
-        wanted = None if topics is None else set(topics)
-        count = 0
-        if self._summary is not None and self._summary.chunk_indexes:
-            source = self._reader.iter_messages(
-                topics=None if wanted is None else sorted(wanted),
-                starting_at=start_ns,
-                ending_before=stop_ns,
-                log_time_order=True,
+        ids = {
+            cid
+            for cid, (topic, _, _) in self._channels.items()
+            if topics is None or topic in topics
+        }
+        source = (
+            self._indexed(ids, start_ns, stop_ns)
+            if self.indexed
+            else self._scanned(ids, start_ns, stop_ns)
+        )
+        channels = self._channels
+        for cid, t, data in source:
+            topic, msgtype, encoding = channels[cid]
+            yield LogMessage(
+                topic=topic, msgtype=msgtype, log_time_ns=t, encoding=encoding, raw=data
             )
-        else:
-            source = self._linear()
-        try:
-            for _, channel, message in source:
-                info = self._channels.get(channel.id)
-                if info is None:
-                    continue
-                topic, msgtype, encoding = info
-                t = int(message.log_time)
-                if (wanted is not None and topic not in wanted) or (
-                    (start_ns is not None and t < start_ns)
-                    or (stop_ns is not None and t >= stop_ns)
+
+    def _scanned(
+        self, ids: set[int], start_ns: int | None, stop_ns: int | None
+    ) -> Iterator[tuple[int, int, memoryview]]:
+        """Messages in file order, from a forward scan (no summary)."""
+        count = 0
+        for kind, item in McapScan(self._buf).events():
+            if kind == "message":
+                cid, _, t, _, data = cast("Message", item)
+                if (
+                    cid in ids
+                    and (start_ns is None or t >= start_ns)
+                    and (stop_ns is None or t < stop_ns)
                 ):
-                    continue
+                    count += 1
+                    yield cid, t, data
+            elif kind == "damage":
+                assert isinstance(item, LogDamage)
+                self._damage.hit(item, messages_read=count)
+
+    def _indexed(
+        self, ids: set[int], start_ns: int | None, stop_ns: int | None
+    ) -> Iterator[tuple[int, int, memoryview]]:
+        """Messages in log-time order, chunk by chunk from the summary's chunk indexes.
+
+        Chunks are taken in order of their first message; a message is yielded once no chunk
+        still to be read can hold an earlier one (chunks whose times overlap are merged).
+        """
+        assert self._summary is not None
+        chunks = sorted(
+            self._summary.chunk_indexes,
+            key=lambda c: (c.message_start_time, c.chunk_start_offset),
+        )
+        heap: list[tuple[int, int, int, memoryview]] = []
+        order = count = 0
+        for index in chunks:
+            if stop_ns is not None and index.message_start_time >= stop_ns:
+                break
+            if (start_ns is not None and index.message_end_time < start_ns) or (
+                len(ids) < len(self._channels)  # a topic filter: skip chunks without its topics
+                and index.message_index_offsets
+                and not ids.intersection(index.message_index_offsets)
+            ):
+                continue
+            while heap and heap[0][0] < index.message_start_time:
+                t, _, cid, data = heapq.heappop(heap)
                 count += 1
-                yield LogMessage(
-                    topic=topic, msgtype=msgtype, log_time_ns=t, encoding=encoding, raw=message.data
-                )
-        except (McapError, ValueError, OSError, EOFError) as err:
-            self.damage = f"reading stopped after {count} messages ({type(err).__name__}: {err})"
-            if self.strict:
-                msg = f"{self.path}: {self.damage}; the file may be damaged"
-                raise LogTruncatedError(msg, messages_read=count) from err
-            logger.warning("%s: %s", self.path, self.damage)
-        if (
-            self.strict
-            and self.damage is not None
-            and self._summary is None
-            and "cut off" in self.damage
-        ):
-            msg = f"{self.path}: {self.damage}; {count} messages were read before it"
-            raise LogTruncatedError(msg, messages_read=count)
+                yield cid, t, data
+            for cid, _, t, _, data in self._chunk_messages(index, count):
+                if (
+                    cid in ids
+                    and (start_ns is None or t >= start_ns)
+                    and (stop_ns is None or t < stop_ns)
+                ):
+                    heapq.heappush(heap, (t, order, cid, data))
+                    order += 1
+        while heap:
+            t, _, cid, data = heapq.heappop(heap)
+            count += 1
+            yield cid, t, data
+
+    def _chunk_messages(
+        self, index: Any, count: int
+    ) -> list[tuple[int, int, int, int, memoryview]]:
+        """The messages of the chunk ``index`` points at; damage there is hit (raised or
+        recorded) and its intact prefix, if any, returned."""
+        pos = int(index.chunk_start_offset)
+        messages: list[Message] = []
+        why: str | None
+        try:
+            head = chunk_head(self._buf, pos, self._size)
+        except RecordError as err:
+            messages, why, stop = [], str(err), pos + int(index.chunk_length)
+        else:
+            messages, _, why = read_chunk(self._buf, head)
+            stop = head.stop
+        if why is not None:
+            listed = [
+                message_index_count(self._buf, int(at), self._size)
+                for at in index.message_index_offsets.values()
+            ]
+            lost = None if None in listed else sum(n or 0 for n in listed) - len(messages)
+            self._damage.hit(
+                LogDamage(what=why, start_byte=pos, stop_byte=stop, messages_lost=lost),
+                messages_read=count,
+            )
+        return messages
 
     def metadata(self, name: str) -> Mapping[str, str] | None:
         """The first metadata record called ``name`` (MCAP ``Metadata``: string pairs), or None.
@@ -229,8 +387,11 @@ class McapFileReader(RosReaderBase):
         A reader of a format without named metadata has no such method (callers use
         ``getattr``); a damaged file's unreadable records count as absent.
         """
+        if self._metadata is not None:  # read by the forward scan
+            return next((dict(m.metadata) for m in self._metadata if m.name == name), None)
         try:
-            for record in self._reader.iter_metadata():
+            self._fh.seek(0)
+            for record in make_reader(self._fh).iter_metadata():
                 if record.name == name:
                     return dict(record.metadata)
         except Exception as err:  # the index or record is damaged: there is no such metadata
@@ -238,4 +399,6 @@ class McapFileReader(RosReaderBase):
         return None
 
     def close(self) -> None:
+        self._buf.release()
+        # the map is not closed: messages handed out may still view it (dropped with the last)
         self._fh.close()

@@ -6,78 +6,53 @@ index at the end of the file; messages are then read chunk by chunk from that in
 range seeks straight to the first chunk that holds it and a topic filter never decompresses a
 chunk that holds none of its messages.
 
-A bag whose index is missing or unreadable — a recording that was killed, a copy that was cut
-short — is read *sequentially* from the start instead (what ``rosbag reindex`` does), and every
-message before the damage is delivered.  rosbags offers no such salvage, which is why the
-record walking below exists.  It relies on rosbags 0.11's reader internals (``chunks``,
-``indexes``, decompressors), pinned in ``pyproject.toml``.
+A bag whose index is missing, unreadable or contradicts itself — a recording that was killed, a
+copy that was cut short, a damaged index — is read *sequentially* from the start instead (what
+``rosbag reindex`` does; :mod:`redrive.io.ros1bag_scan`), and every intact chunk is delivered.
+A damaged chunk is skipped (or, with ``strict=True``, raises
+:class:`~redrive.errors.LogDamagedError`) and listed in ``damage_report``; a message the index
+points at must carry the index's time and connection.  rosbags offers no such salvage, which is
+why the record walking exists.  It relies on rosbags 0.11's reader internals (``chunks``,
+``indexes``, ``chunk_infos``, decompressors), pinned in ``pyproject.toml``.
 """
 
 from __future__ import annotations
 
+import contextlib
 import heapq
 import logging
 import mmap
-import struct
 from bisect import bisect_left
-from collections.abc import Collection, Iterator, Mapping
-from dataclasses import dataclass
+from collections.abc import Collection, Iterator
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any
 
 from rosbags.rosbag1 import Reader as RosbagsReader
 from rosbags.rosbag1 import ReaderError as RosbagsReaderError
 from rosbags.rosbag1.reader import decompressors as rosbags_decompressors
 
-from redrive.errors import LogError, LogTruncatedError
+from redrive.errors import LogError
 from redrive.io._deserialize import Deserializer
 from redrive.io._reader_base import RosReaderBase
-from redrive.io.base import LogMessage, TopicInfo, normalize_msgtype
+from redrive.io.base import LogMessage, TopicInfo
+from redrive.io.damage import DamageLog, LogDamage
 from redrive.io.recognise import starts_with
 from redrive.io.ros1bag_records import (
-    DECOMPRESSORS,
     MAGIC,
-    OP_CHUNK,
     OP_CONNECTION,
     OP_MSGDATA,
+    TIME,
     U32,
     DamageError,
     data_span,
-    decode_time,
-    decompress_prefix,
-    op_of,
-    parse_header,
     record_op,
 )
+from redrive.io.ros1bag_scan import BagWalk, ChunkSpan, Conn
 from redrive.io.typestore import typestore_for
 
 __all__ = ["Ros1BagReader"]
 
 logger = logging.getLogger(__name__)
-
-
-@dataclass(slots=True)
-class _Conn:
-    id: int
-    topic: str
-    msgtype: str
-    msgdef: str
-    count: int = 0
-    size_bytes: int = 0
-
-
-@dataclass(slots=True)
-class _ChunkSpan:
-    """Where a chunk's compressed bytes are, for the sequential (salvage) path."""
-
-    pos: int
-    datapos: int
-    datasize: int
-    compression: str
-    start_ns: int = 0
-    end_ns: int = 0
-    damaged: str | None = None
-    cut: bool = False  # the file ends inside this chunk: only a prefix of it is readable
 
 
 class Ros1BagReader(RosReaderBase):
@@ -91,7 +66,8 @@ class Ros1BagReader(RosReaderBase):
             readable chunk.
 
     Attributes:
-        damage: a description of the damage found while opening (None for an intact bag).
+        damage_report: the damage met so far (found by the sequential walk at open, or while
+            reading an indexed bag).
         indexed: False when the bag had to be read sequentially.
     """
 
@@ -105,12 +81,11 @@ class Ros1BagReader(RosReaderBase):
     def __init__(self, path: Path, *, strict: bool = True) -> None:
         self.path = Path(path)
         self.strict = strict
-        self.damage: str | None = None
+        self._damage = DamageLog(self.path, strict=strict)
         self.indexed = True
-        self._conns: dict[int, _Conn] = {}
+        self._conns: dict[int, Conn] = {}
         self._rosbags: RosbagsReader | None = None
-        self._spans: list[_ChunkSpan] = []
-        self._tail_damage: str | None = None
+        self._walked: BagWalk | None = None
         self._file_size = 0
         self._map: mmap.mmap | None = None
         self._open()
@@ -142,9 +117,19 @@ class Ros1BagReader(RosReaderBase):
         reader = RosbagsReader(self.path)
         try:
             reader.open()
-        except (RosbagsReaderError, OSError, ValueError, AssertionError, struct.error) as err:
+        except Exception as err:  # rosbags raises ReaderError, struct.error, KeyError … on damage
+            if not isinstance(err, RosbagsReaderError | OSError | ValueError | LookupError):
+                logger.debug("rosbags failed to open %s", self.path, exc_info=True)
+            with contextlib.suppress(Exception):
+                reader.close()
             self.indexed = False
-            self._scan_open(str(err))
+            self._scan_open(f"{type(err).__name__}: {err}")
+            return
+        why = _index_contradiction(reader)
+        if why is not None:
+            reader.close()
+            self.indexed = False
+            self._scan_open(why)
             return
         self._rosbags = reader
         if not reader.connections and self._file_size > 4096:
@@ -155,7 +140,7 @@ class Ros1BagReader(RosReaderBase):
             self._scan_open("the index lists no chunks")
             return
         for conn in reader.connections:
-            self._conns[conn.id] = _Conn(
+            self._conns[conn.id] = Conn(
                 id=conn.id,
                 topic=conn.topic,
                 msgtype=conn.msgtype,
@@ -165,23 +150,45 @@ class Ros1BagReader(RosReaderBase):
 
     def _scan_open(self, why: str) -> None:
         logger.warning(
-            "%s: the bag index is unreadable (%s); reading the bag sequentially — messages after "
-            "any damage are lost (the file itself is not changed)",
+            "%s: the bag index is unreadable (%s); reading the bag sequentially — messages in "
+            "damaged parts are lost (the file itself is not changed)",
             self.path,
             why,
         )
-        self._walk()
-        lost = [s for s in self._spans if s.damaged is not None]
-        parts = [f"no usable index ({why})"]
-        if self._tail_damage is not None:
-            parts.append(self._tail_damage)
-        parts += [f"the chunk at byte {s.pos} {s.damaged}" for s in lost]
-        self.damage = "; ".join(parts)
+        self._damage.add(
+            LogDamage(
+                what=f"no usable index ({why}); the bag was read sequentially", messages_lost=0
+            )
+        )
+        walk = BagWalk(self.path, self._file_size)
+        walk.walk()
+        self._walked = walk
+        self._conns = walk.conns
+        for item in walk.items:
+            if isinstance(item, LogDamage):
+                self._damage.add(item)
+
+    def definitions(self) -> dict[str, tuple[str, str]]:
+        """Topic → (message type, its ROS 1 definition text) as the bag stores them."""
+        return {c.topic: (c.msgtype, c.msgdef) for c in self._conns.values()}
+
+    @property
+    def damage_report(self) -> tuple[LogDamage, ...]:
+        return tuple(self._damage.items)
+
+    @property
+    def damage(self) -> str | None:
+        """The damage met so far, as one line (None while none was met)."""
+        return "; ".join(str(d) for d in self._damage.items) or None
+
+    @property
+    def _spans(self) -> list[ChunkSpan]:
+        return self._walked.spans if self._walked is not None else []
 
     # -- summary -------------------------------------------------------------------------------
 
     def _summarise(self) -> dict[str, TopicInfo]:
-        by_topic: dict[str, list[_Conn]] = {}
+        by_topic: dict[str, list[Conn]] = {}
         for conn in self._conns.values():
             by_topic.setdefault(conn.topic, []).append(conn)
         out: dict[str, TopicInfo] = {}
@@ -278,7 +285,7 @@ class Ros1BagReader(RosReaderBase):
                     continue
                 current_pos = chunk_pos
             try:
-                data = self._message_at(chunk, offset)
+                data = self._message_at(chunk, offset, time_ns, conn_id)
             except DamageError as err:
                 self._chunk_damage(chunk_pos, err, yielded)
                 bad_chunk = chunk_pos
@@ -329,33 +336,40 @@ class Ros1BagReader(RosReaderBase):
             self._map.madvise(mmap.MADV_DONTNEED, start, length)
 
     def _chunk_damage(self, chunk_pos: int, err: Exception, yielded: int) -> None:
-        lost = {
-            self._conns[c].topic: n
-            for c, n in _chunk_counts(self._rosbags, chunk_pos).items()
-            if c in self._conns
-        }
-        text = (
-            f"the chunk at byte {chunk_pos} is damaged ({err}); it held {sum(lost.values())} "
-            f"messages ({', '.join(f'{t}: {n}' for t, n in sorted(lost.items()))})"
+        counts = _chunk_counts(self._rosbags, chunk_pos)
+        header = self._rosbags.chunks.get(chunk_pos) if self._rosbags is not None else None
+        stop = header.datapos + header.datasize if header is not None else None
+        lost = {self._conns[c].topic: n for c, n in counts.items() if c in self._conns}
+        self._damage.hit(
+            LogDamage(
+                what=f"the chunk is damaged ({err}); it held "
+                + (", ".join(f"{t}: {n}" for t, n in sorted(lost.items())) or "no message"),
+                start_byte=chunk_pos,
+                stop_byte=stop,
+                messages_lost=sum(counts.values()) if counts else None,
+            ),
+            messages_read=yielded,
         )
-        if self.strict:
-            msg = (
-                f"{self.path}: {text}; {yielded} messages were read before it. Open the log with "
-                "strict=False (CLI: --skip-damaged) to read past it."
-            )
-            raise LogTruncatedError(msg, messages_read=yielded)
-        logger.warning("%s: %s; skipping it", self.path, text)
 
     @staticmethod
-    def _message_at(chunk: memoryview, offset: int) -> memoryview:
+    def _message_at(chunk: memoryview, offset: int, time_ns: int, conn_id: int) -> memoryview:
+        """The data of the message the index says is at ``offset``; the record's time and
+        connection must be the index's (a damaged index points at other bytes)."""
         end = len(chunk)
         pos = offset
         while True:
+            head = pos
             op, pos = record_op(chunk, pos, end)
             start, stop = data_span(chunk, pos, end)
             if op < 0:
                 raise DamageError(offset, "record has no op field")
             if op == OP_MSGDATA:
+                fields = bytes(chunk[head:pos])
+                secs, nsecs = divmod(time_ns, 1_000_000_000)
+                if b"time=" + TIME.pack(secs, nsecs) not in fields or (
+                    b"conn=" + U32.pack(conn_id) not in fields
+                ):
+                    raise DamageError(offset, "the index points at another message")
                 return chunk[start:stop]
             if op != OP_CONNECTION:
                 raise DamageError(offset, f"expected a message record, found op {op:#x}")
@@ -365,140 +379,25 @@ class Ros1BagReader(RosReaderBase):
         self, *, topics: Collection[str] | None, start_ns: int | None, stop_ns: int | None
     ) -> Iterator[tuple[int, int, memoryview]]:
         """Read the chunks found by the sequential walk at open (the salvage path)."""
+        walk = self._walked
+        assert walk is not None
         wanted = self._selected_ids(topics)
         yielded = 0
-        with self.path.open("rb") as fh:
-            for span in self._spans:
-                if span.damaged is not None:
-                    self._salvage_damage(f"the chunk at byte {span.pos} {span.damaged}", yielded)
+        with self.path.open("rb") as fh, mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as buf:
+            for item in walk.items:
+                if isinstance(item, LogDamage):
+                    self._damage.hit(item, messages_read=yielded)
                     continue
-                if start_ns is not None and span.end_ns < start_ns:
+                if start_ns is not None and item.end_ns < start_ns:
                     continue
-                if stop_ns is not None and span.start_ns >= stop_ns:
+                if stop_ns is not None and item.start_ns >= stop_ns:
                     return
-                for item in self._chunk_records(fh, span, wanted, first=False):
-                    if (start_ns is None or item[1] >= start_ns) and (
-                        stop_ns is None or item[1] < stop_ns
+                for record in walk.records(buf, item, wanted, first=False):
+                    if (start_ns is None or record[1] >= start_ns) and (
+                        stop_ns is None or record[1] < stop_ns
                     ):
                         yielded += 1
-                        yield item
-        if self._tail_damage is not None:
-            self._salvage_damage(self._tail_damage, yielded)
-
-    def _salvage_damage(self, text: str, yielded: int) -> None:
-        if self.strict:
-            msg = (
-                f"{self.path}: {text}; {yielded} messages were read before it. Open the log "
-                "with strict=False (CLI: --skip-damaged) to read what is readable."
-            )
-            raise LogTruncatedError(msg, messages_read=yielded)
-
-    def _walk(self) -> None:
-        """Walk every record from the start: connections, chunk spans, counts, damage."""
-        pos = len(MAGIC)
-        with self.path.open("rb") as fh:
-            while pos < self._file_size:
-                try:
-                    fh.seek(pos)
-                    head = fh.read(min(self._file_size - pos, 1 << 16))
-                    fields, hstop = parse_header(head, 0, len(head))
-                    op = op_of(fields, pos)
-                    if hstop + 4 > len(head):
-                        raise DamageError(pos, "record data length is cut off")
-                    (dsize,) = U32.unpack_from(head, hstop)
-                    cut = pos + hstop + 4 + dsize > self._file_size
-                    if cut and op == OP_CHUNK:
-                        # The last chunk was cut off: salvage the messages its first bytes hold.
-                        self._salvage_cut_chunk(fh, fields, pos, pos + hstop + 4)
-                    if cut:
-                        raise DamageError(pos, f"a record of {dsize} bytes runs past the end")
-                except DamageError as err:
-                    self._tail_damage = (
-                        f"the bag is cut off or damaged at byte {pos} of {self._file_size} "
-                        f"({err.reason}); the {self._file_size - pos} bytes from there on are lost"
-                    )
-                    logger.warning("%s: %s", self.path, self._tail_damage)
-                    return
-                datapos = pos + hstop + 4
-                if op == OP_CHUNK:
-                    compression = fields.get("compression", b"none").decode("ascii", "replace")
-                    span = _ChunkSpan(pos, datapos, dsize, compression)
-                    times = [t for _, t, _ in self._chunk_records(fh, span, None, first=True)]
-                    if times:
-                        span.start_ns, span.end_ns = min(times), max(times)
-                    self._spans.append(span)
-                elif op == OP_CONNECTION:
-                    fh.seek(datapos)
-                    self._add_connection(fields, fh.read(dsize), pos)
-                pos = datapos + dsize
-
-    def _salvage_cut_chunk(
-        self, fh: BinaryIO, fields: Mapping[str, bytes], pos: int, datapos: int
-    ) -> None:
-        compression = fields.get("compression", b"none").decode("ascii", "replace")
-        span = _ChunkSpan(pos, datapos, self._file_size - datapos, compression, cut=True)
-        times = [t for _, t, _ in self._chunk_records(fh, span, None, first=True)]
-        if times:
-            span.start_ns, span.end_ns = min(times), max(times)
-            self._spans.append(span)
-
-    def _chunk_records(
-        self,
-        fh: BinaryIO,
-        span: _ChunkSpan,
-        wanted: set[int] | None,
-        *,
-        first: bool,
-    ) -> Iterator[tuple[int, int, memoryview]]:
-        fh.seek(span.datapos)
-        try:
-            if span.cut:
-                chunk = memoryview(decompress_prefix(span.compression, fh.read(span.datasize)))
-            else:
-                decompress = DECOMPRESSORS[span.compression]
-                chunk = memoryview(decompress(fh.read(span.datasize)))
-        except KeyError:
-            span.damaged = f"uses an unknown compression {span.compression!r}"
-            return
-        except (OSError, ValueError, RuntimeError, EOFError) as err:
-            span.damaged = f"does not decompress ({err})"
-            logger.warning("%s: the chunk at byte %d %s", self.path, span.pos, span.damaged)
-            return
-        pos, end = 0, len(chunk)
-        while pos < end:
-            try:
-                fields, hstop = parse_header(chunk, pos, end)
-                start, stop = data_span(chunk, hstop, end)
-                op = op_of(fields, pos)
-                if op == OP_CONNECTION and first:
-                    self._add_connection(fields, bytes(chunk[start:stop]), span.pos)
-                elif op == OP_MSGDATA:
-                    conn_id = U32.unpack(fields["conn"])[0]
-                    time_ns = decode_time(fields["time"])
-                    if first and conn_id in self._conns:
-                        conn = self._conns[conn_id]
-                        conn.count += 1
-                        conn.size_bytes += stop - start
-                    if conn_id in self._conns and (wanted is None or conn_id in wanted):
-                        yield conn_id, time_ns, chunk[start:stop]
-            except (DamageError, KeyError, struct.error) as err:
-                if first and not span.cut:
-                    span.damaged = f"holds a damaged record at offset {pos} ({err})"
-                    logger.warning("%s: the chunk at byte %d %s", self.path, span.pos, span.damaged)
-                return
-            pos = stop
-
-    def _add_connection(self, fields: Mapping[str, bytes], data: bytes, offset: int) -> None:
-        try:
-            conn_id = U32.unpack(fields["conn"])[0]
-            topic = fields["topic"].decode()
-            conn_fields, _ = parse_header(U32.pack(len(data)) + data, 0, len(data) + 4)
-            msgtype = normalize_msgtype(conn_fields["type"].decode())
-            msgdef = conn_fields.get("message_definition", b"").decode()
-        except (KeyError, UnicodeDecodeError, DamageError, struct.error) as err:
-            raise DamageError(offset, f"connection record is malformed ({err})") from err
-        if conn_id not in self._conns:
-            self._conns[conn_id] = _Conn(id=conn_id, topic=topic, msgtype=msgtype, msgdef=msgdef)
+                        yield record
 
     # -- deserialising -------------------------------------------------------------------------
 
@@ -515,6 +414,29 @@ def _entries(index: list[Any], first: int, conn_id: int) -> Iterator[tuple[int, 
     """(time, chunk position, offset in chunk, connection id) of one connection's index."""
     for entry in index[first:]:
         yield entry.time, entry.chunk_pos, entry.offset, conn_id
+
+
+def _index_contradiction(reader: RosbagsReader) -> str | None:
+    """Why the bag's index cannot be right (None when it is consistent): every entry must point
+    into a known chunk, within that chunk's time range, and the entries per chunk and connection
+    must add up to the chunk's counts.  A damaged index (zeroed, flipped) fails this, and the
+    bag is then read sequentially instead of trusting offsets that point at other messages."""
+    infos = {info.pos: info for info in reader.chunk_infos}
+    if set(infos) != set(reader.chunks):
+        return "the chunk infos and the chunks of the index do not match"
+    counts: dict[tuple[int, int], int] = {}
+    for conn_id, entries in reader.indexes.items():
+        for entry in entries:
+            info = infos.get(entry.chunk_pos)
+            if info is None or not info.start_time <= entry.time <= info.end_time:
+                return f"an index entry of connection {conn_id} points outside its chunk"
+            key = (entry.chunk_pos, conn_id)
+            counts[key] = counts.get(key, 0) + 1
+    for info in infos.values():
+        for conn_id, count in info.connection_counts.items():
+            if counts.get((info.pos, conn_id), 0) != count:
+                return f"the index of the chunk at byte {info.pos} does not match its counts"
+    return None
 
 
 def _chunk_counts(reader: RosbagsReader | None, chunk_pos: int) -> dict[int, int]:

@@ -5,6 +5,7 @@ bags and to find messages without building a header dict per message."""
 from __future__ import annotations
 
 import bz2
+import mmap
 import struct
 from collections.abc import Callable, Mapping
 
@@ -18,6 +19,7 @@ __all__ = [
     "OP_MSGDATA",
     "TIME",
     "U32",
+    "Buf",
     "DamageError",
     "data_span",
     "decode_time",
@@ -41,6 +43,10 @@ DECOMPRESSORS: Mapping[str, Callable[[bytes], bytes]] = {
 }
 
 
+#: what the record functions read: file bytes, a view of them, or a map of the file.
+Buf = bytes | memoryview | mmap.mmap
+
+
 def decompress_prefix(compression: str, data: bytes) -> bytes:
     """Decompress as much of a cut-off chunk as its bytes allow."""
     if compression == "none":
@@ -62,7 +68,7 @@ class DamageError(Exception):
         self.reason = reason
 
 
-def parse_header(buf: bytes | memoryview, pos: int, end: int) -> tuple[dict[str, bytes], int]:
+def parse_header(buf: Buf, pos: int, end: int) -> tuple[dict[str, bytes], int]:
     """Parse one record header at ``pos``; returns its fields and the position after it."""
     if pos + 4 > end:
         raise DamageError(pos, "record header length is cut off")
@@ -86,7 +92,7 @@ def parse_header(buf: bytes | memoryview, pos: int, end: int) -> tuple[dict[str,
     return fields, stop
 
 
-def record_op(buf: bytes | memoryview, pos: int, end: int) -> tuple[int, int]:
+def record_op(buf: Buf, pos: int, end: int) -> tuple[int, int]:
     """The ``op`` of the record whose header starts at ``pos`` (-1 when it has none), and the
     position after the header.
 
@@ -119,7 +125,7 @@ def record_op(buf: bytes | memoryview, pos: int, end: int) -> tuple[int, int]:
     return op, stop
 
 
-def data_span(buf: bytes | memoryview, pos: int, end: int) -> tuple[int, int]:
+def data_span(buf: Buf, pos: int, end: int) -> tuple[int, int]:
     """(start, stop) of the data block that follows a header at ``pos``."""
     if pos + 4 > end:
         raise DamageError(pos, "record data length is cut off")

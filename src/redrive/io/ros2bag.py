@@ -1,20 +1,28 @@
-"""ROS 2 bag directories (``metadata.yaml`` + sqlite3 ``.db3`` or ``.mcap`` storage) via rosbags."""
+"""ROS 2 bag directories (``metadata.yaml`` + sqlite3 ``.db3`` or ``.mcap`` storage) via rosbags.
+
+When rosbags stops on damaged storage, a reader opened with ``strict=False`` goes on with what is
+still readable: the message rows of a ``.db3`` one by one (:mod:`redrive.io.ros2bag_salvage`), an
+``.mcap`` storage file with redrive's own damage-tolerant MCAP reader.
+"""
 
 from __future__ import annotations
 
 import logging
 import sqlite3
 from collections.abc import Collection, Iterator
+from dataclasses import replace
 from pathlib import Path
 
 from rosbags.interfaces import Connection, MessageDefinitionFormat
 from rosbags.rosbag2 import Reader as RosbagsReader
 from rosbags.rosbag2 import ReaderError as RosbagsReaderError
 
-from redrive.errors import LogError, LogTruncatedError
+from redrive.errors import LogError
 from redrive.io._deserialize import Deserializer
 from redrive.io._reader_base import RosReaderBase
 from redrive.io.base import LogMessage, TopicInfo
+from redrive.io.damage import DamageLog, LogDamage
+from redrive.io.ros2bag_salvage import salvage_sqlite
 from redrive.io.typestore import typestore_for
 
 __all__ = ["Ros2BagReader"]
@@ -50,12 +58,18 @@ class Ros2BagReader(RosReaderBase):
         path = Path(path)
         self.path = path if path.is_dir() else path.parent
         self.strict = strict
-        self.damage: str | None = None
-        reader = RosbagsReader(self.path)
+        self._damage = DamageLog(self.path, strict=strict)
         try:
+            reader = RosbagsReader(self.path)
             reader.open()
-        except (RosbagsReaderError, sqlite3.Error, OSError, ValueError, KeyError) as err:
-            msg = f"{self.path}: not a readable ROS 2 bag ({err}); check metadata.yaml and the storage files it lists"
+        except Exception as err:  # rosbags: ReaderError, apsw/sqlite3 errors, YAML, KeyError …
+            if not isinstance(err, RosbagsReaderError | sqlite3.Error | OSError | ValueError):
+                logger.debug("rosbags failed to open %s", self.path, exc_info=True)
+            msg = (
+                f"{self.path}: not a readable ROS 2 bag ({type(err).__name__}: {err}); check "
+                "metadata.yaml and the storage files it lists (a storage file damaged at its "
+                "start holds nothing redrive can read)"
+            )
             raise LogError(msg) from err
         self._reader = reader
         #: the storage plugin of the bag: ``mcap`` or ``sqlite3``.
@@ -103,9 +117,12 @@ class Ros2BagReader(RosReaderBase):
         if topics is not None and not conns:
             return
         count = 0
+        last_ns, at_last = -1, 0  # the last time yielded, and how many messages had it
         try:
             for conn, time_ns, raw in self._reader.messages(conns, start=start_ns, stop=stop_ns):
                 count += 1
+                at_last = at_last + 1 if time_ns == last_ns else 1
+                last_ns = int(time_ns)
                 yield LogMessage(
                     topic=conn.topic,
                     msgtype=conn.msgtype,
@@ -113,12 +130,105 @@ class Ros2BagReader(RosReaderBase):
                     encoding="cdr",
                     raw=raw,
                 )
-        except (RosbagsReaderError, sqlite3.Error, OSError, ValueError, EOFError) as err:
-            self.damage = f"reading stopped after {count} messages: {err}"
-            msg = f"{self.path}: {self.damage}; the storage file may be damaged or cut off"
-            if self.strict:
-                raise LogTruncatedError(msg, messages_read=count) from err
-            logger.warning("%s", msg)
+            return
+        except Exception as err:  # rosbags: apsw.CorruptError, sqlite3, zstd, ReaderError …
+            failure = LogDamage(
+                what=f"the {self.storage} storage stopped reading after {count} messages "
+                f"({type(err).__name__}: {err})",
+                message_index=count,
+            )
+        if self.strict:
+            self._damage.hit(failure, messages_read=count)  # raises
+        # lenient: the salvage below reports the damage, with what it found
+        msgtypes = {c.topic: c.msgtype for c in self._reader.connections}
+        wanted = None if topics is None else set(topics)
+        salvaged: Iterator[tuple[int, str, bytes | memoryview]] = self._salvaged(failure)
+        for time_ns, topic, data in salvaged:
+            if (wanted is not None and topic not in wanted) or topic not in msgtypes:
+                continue
+            if (start_ns is not None and time_ns < start_ns) or (
+                stop_ns is not None and time_ns >= stop_ns
+            ):
+                continue
+            if time_ns < last_ns or (time_ns == last_ns and at_last > 0):
+                at_last -= time_ns == last_ns
+                continue  # yielded before the storage stopped
+            yield LogMessage(
+                topic=topic,
+                msgtype=msgtypes[topic],
+                log_time_ns=time_ns,
+                encoding="cdr",
+                raw=data,
+            )
+
+    def _salvaged(self, failure: LogDamage) -> Iterator[tuple[int, str, bytes | memoryview]]:
+        """Every message still readable from the storage files, in time order (the damage
+        met is added to the report)."""
+        if self.storage == "sqlite3":
+            compressed = self._reader.compression_mode == "message"
+            decompress = None
+            if compressed:
+                import zstandard
+
+                decompress = zstandard.ZstdDecompressor().decompress
+            found = salvage_sqlite(
+                sorted(self.path.glob("*.db3")),
+                expected=self._reader.message_count,
+                decompress=decompress,
+            )
+            missing = self._reader.message_count - len(found.rows)  # metadata.yaml's count
+            for damage in found.damage or [
+                replace(
+                    failure,
+                    what=f"{failure.what}; {len(found.rows)} rows were then read one by one, "
+                    f"{max(missing, 0)} of the {self._reader.message_count} that metadata.yaml "
+                    "counts are missing",
+                    messages_lost=max(missing, 0),
+                )
+            ]:
+                self._damage.add(damage)
+            yield from found.rows
+            return
+        from redrive.io.mcapfile import McapFileReader
+
+        for storage in sorted(self.path.glob("*.mcap")):
+            try:
+                reader = McapFileReader(storage, strict=False)
+            except LogError as err:
+                self._damage.add(LogDamage(what=f"{storage.name}: {err}"))
+                continue
+            with reader:
+                for message in reader.messages():
+                    yield message.log_time_ns, message.topic, message.raw
+                for damage in reader.damage_report:
+                    self._damage.add(replace(damage, what=f"{storage.name}: {damage.what}"))
+        if not self._damage.items:  # redrive's reader read past what stopped rosbags
+            self._damage.add(failure)
+
+    def definitions(self) -> dict[str, tuple[str, str, str]]:
+        """Topic → (message type, definition format ``msg``/``idl`` or "" when the bag holds
+        none, definition text) as the bag stores them."""
+        out: dict[str, tuple[str, str, str]] = {}
+        for conn in self._reader.connections:
+            fmt = conn.msgdef.format
+            kind = (
+                "msg"
+                if fmt == MessageDefinitionFormat.MSG and conn.msgdef.data
+                else "idl"
+                if fmt == MessageDefinitionFormat.IDL and conn.msgdef.data
+                else ""
+            )
+            out[conn.topic] = (conn.msgtype, kind, conn.msgdef.data if kind else "")
+        return out
+
+    @property
+    def damage_report(self) -> tuple[LogDamage, ...]:
+        return tuple(self._damage.items)
+
+    @property
+    def damage(self) -> str | None:
+        """The damage met so far, as one line (None while none was met)."""
+        return "; ".join(str(d) for d in self._damage.items) or None
 
     def close(self) -> None:
         if self._reader is not None:

@@ -18,6 +18,7 @@ from typing import Any
 from redrive.errors import ConfigError, LogTruncatedError
 from redrive.io.base import LogReader, ReaderCapabilities
 from redrive.io.calibration import camera_info_topics
+from redrive.io.damage import LogDamage, damage_report
 from redrive.io.decoders import decoder_for
 from redrive.io.sensor_map import SensorSpec, infer_sensor_map, load_sensor_map_overrides
 
@@ -67,6 +68,7 @@ class LogSummary:
     topics: tuple[TopicSummary, ...]
     damage: str | None
     capabilities: ReaderCapabilities
+    damage_report: tuple[LogDamage, ...] = ()
 
     @property
     def provides(self) -> list[str]:
@@ -85,6 +87,13 @@ class LogSummary:
         if caps.calibration_per_frame:
             out.append("a calibration per frame")
         return out
+
+    @property
+    def messages_lost(self) -> tuple[int, bool]:
+        """Messages the damage lost as far as the log says, and whether some part lost an
+        unknown number more."""
+        known = sum(d.messages_lost or 0 for d in self.damage_report)
+        return known, any(d.messages_lost is None for d in self.damage_report)
 
     @property
     def duration_s(self) -> float:
@@ -121,6 +130,7 @@ class LogSummary:
             "bytes": self.size_bytes,
             "topics": [t.to_json() for t in self.topics],
             "damage": self.damage,
+            "damage_report": [d.to_json() for d in self.damage_report],
             "capabilities": {
                 "message_typed": self.capabilities.message_typed,
                 "has_tf": self.capabilities.has_tf,
@@ -224,4 +234,5 @@ def summarize_log(log: LogReader, *, sensor_map_path: Path | None = None) -> Log
         topics=tuple(topics),
         damage=damage,
         capabilities=log.capabilities,
+        damage_report=damage_report(log),
     )
