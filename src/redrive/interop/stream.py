@@ -8,8 +8,9 @@ channels (known before the first message, so a server can advertise them) and
 What a stream holds:
 
 * the log's own messages, as they are, on their own topics (ROS 2 ``cdr`` with ``ros2msg``
-  schemas; a ROS 1 log's ``ros1`` with ``ros1msg``) — except, for a closed-loop run, the log's
-  ``/tf`` (it moves the logged ego; the run's driven ego moves ``base_link`` instead);
+  schemas; a ROS 1 log's ``ros1`` with ``ros1msg``) — except, for a run, the log's ``/tf``:
+  the run's ego places ``base_link`` (``/redrive/transforms``), and a frame has one parent (in
+  a closed loop the log's ``/tf`` moves the logged ego, not the driven one);
 * every LiDAR cloud again as ``foxglove.PointCloud`` and every camera image as
   ``foxglove.CompressedImage`` on ``/foxglove/<topic>``;
 * for a run: ``/redrive/transforms`` (``foxglove.FrameTransforms``) and the SceneUpdate topics
@@ -45,6 +46,7 @@ from redrive.interop.shapes import ShapeSet
 from redrive.io import open_log
 from redrive.io.base import LogMessage, LogReader
 from redrive.io.decoders import DecodedKind, decode, topic_kind
+from redrive.io.qos import offered_qos_profiles
 from redrive.io.typestore import typestore_for
 from redrive.results import Run, open_run
 from redrive.types import DetectedObject, Image, PointCloud, SensorType, Transform
@@ -111,7 +113,6 @@ class SceneStream:
         self.reader = reader
         self.run = run
         self._typestore = typestore_for(2)[0]
-        self._closed_loop = run is not None and bool(run.manifest.closed_loop)
         self.channels: dict[str, ChannelSpec] = {}
         self._raw: dict[str, str] = {}  # log topic → how to pass it on
         self._decoded: dict[str, tuple[DecodedKind, SensorType | None]] = {}
@@ -128,8 +129,8 @@ class SceneStream:
     def _add_log_channels(self, reader: LogReader) -> None:
         stores: Mapping[str, Any] = getattr(reader, "typestores", {})
         for topic, info in sorted(reader.topics.items()):
-            if self._closed_loop and topic.removeprefix("/") == "tf":
-                continue  # the logged ego's tf: the driven ego moves base_link instead
+            if self.run is not None and topic.rstrip("/").endswith("/tf"):
+                continue  # the run's ego places base_link (/redrive/transforms): one parent
             store = stores.get(info.encoding) if info.encoding != "native" else None
             if store is not None and info.has_definition and info.msgtype in store.fielddefs:
                 version = 1 if info.encoding == "ros1" else 2
@@ -140,7 +141,7 @@ class SceneStream:
                 text, _ = store.generate_msgdef(info.msgtype, ros_version=version)
                 metadata = {}
                 if version == 2:
-                    metadata["offered_qos_profiles"] = ""
+                    metadata["offered_qos_profiles"] = offered_qos_profiles(topic)
                 self.channels[topic] = ChannelSpec(
                     topic=topic,
                     message_encoding=info.encoding,
@@ -197,7 +198,7 @@ class SceneStream:
                 schema_name=MARKER_ARRAY,
                 schema_encoding="ros2msg",
                 schema_data=marker_def.encode("utf-8"),
-                metadata={"offered_qos_profiles": ""},
+                metadata={"offered_qos_profiles": offered_qos_profiles(topic)},
             )
 
     # -- messages --------------------------------------------------------------------------------
