@@ -57,6 +57,10 @@ class _Client:
         self.channels: dict[int, dict[str, Any]] = {}
         self.subscriptions: dict[int, int] = {}
         self.info: dict[str, Any] = {}
+        self.received: list[OutMessage] = []
+        self.taken = 0
+        self.states: list[tuple[int, int, bool, str]] = []
+        self.states_taken = 0
 
     async def next(self) -> str | bytes:
         return await asyncio.wait_for(self.ws.recv(), 30)
@@ -74,26 +78,36 @@ class _Client:
         subs = [{"id": i, "channelId": c} for i, c in self.subscriptions.items()]
         await self.ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
 
+    async def _receive(self) -> None:
+        """One frame into :attr:`received` (data) or :attr:`states` (playback states); the
+        server's time messages are dropped.  Data and control frames travel on separate queues
+        of the server, so a state may overtake data sent before it."""
+        frame = await self.next()
+        if isinstance(frame, bytes) and frame[0] == _MESSAGE_DATA:
+            sub, log_time = struct.unpack_from("<IQ", frame, 1)
+            topic = self.channels[self.subscriptions[sub]]["topic"]
+            self.received.append(OutMessage(topic, log_time, bytes(frame[13:])))
+        elif isinstance(frame, bytes) and frame[0] == _PLAYBACK_STATE:
+            st, current, _speed, did_seek, n = struct.unpack_from("<BQfBI", frame, 1)
+            self.states.append((st, current, bool(did_seek), frame[19 : 19 + n].decode()))
+
     async def data(self, n: int) -> list[OutMessage]:
-        """The next ``n`` data messages (time messages skipped)."""
-        out: list[OutMessage] = []
-        while len(out) < n:
-            frame = await self.next()
-            if isinstance(frame, bytes) and frame[0] == _MESSAGE_DATA:
-                sub, log_time = struct.unpack_from("<IQ", frame, 1)
-                topic = self.channels[self.subscriptions[sub]]["topic"]
-                out.append(OutMessage(topic, log_time, bytes(frame[13:])))
-        return out
+        """The next ``n`` data messages."""
+        start = self.taken
+        while len(self.received) < start + n:
+            await self._receive()
+        self.taken = start + n
+        return self.received[start : start + n]
 
     async def state(self, status: int | None = None) -> tuple[int, int, bool, str]:
-        """The next playback state (``status``: the next one with that status), data skipped."""
+        """The next playback state not yet taken (``status``: the next with that status)."""
         while True:
-            frame = await self.next()
-            if isinstance(frame, bytes) and frame[0] == _PLAYBACK_STATE:
-                st, current, _speed, did_seek, n = struct.unpack_from("<BQfBI", frame, 1)
-                rid = frame[19 : 19 + n].decode()
-                if status is None or st == status:
-                    return st, current, bool(did_seek), rid
+            while self.states_taken >= len(self.states):
+                await self._receive()
+            found = self.states[self.states_taken]
+            self.states_taken += 1
+            if status is None or found[0] == status:
+                return found
 
 
 def test_a_client_sees_the_channels_and_the_first_messages_in_order(
