@@ -259,3 +259,50 @@ def test_the_docs_layout_is_the_scripts_and_shows_exported_topics(
     # the ghost exists in closed-loop runs only; everything else is in this open-loop export
     assert topics - {"/redrive/ego_logged"} <= set(decoded)
     assert "/foxglove/camera_front/image_raw" in topics
+
+
+def test_a_closed_loop_export_shows_the_ghost_where_the_log_drove(
+    short_log: Path, tmp_path: Path
+) -> None:
+    from redrive.sim.ego import EgoGeometry
+
+    run_dir = tmp_path / "closed"
+    argv = ["run", str(short_log), "--closed-loop", "--out", str(run_dir), "--no-progress"]
+    assert main(argv) == 0
+    assert main(["export", str(run_dir), "--format", "mcap", "-o", str(tmp_path)]) == 0
+    run = open_run(run_dir)
+    driven, logged = run.ego(), run.logged_ego()
+    assert logged
+    stamps = dict(
+        zip(
+            run.table("frames").column("frame_index").to_pylist(),
+            run.table("frames").column("stamp_ns").to_pylist(),
+            strict=True,
+        )
+    )
+    ghosts: dict[int, Any] = {}
+    base_link: dict[int, Any] = {}
+    with (tmp_path / "closed.mcap").open("rb") as fh:
+        reader = make_reader(fh, decoder_factories=[ProtobufDecoders()])
+        topics = {c.topic for c in reader.get_summary().channels.values()}  # type: ignore[union-attr]
+        assert "/tf" not in topics  # the log's tf moves the logged ego, not the driven one
+        wanted = ["/redrive/ego_logged", "/redrive/transforms"]
+        for _, channel, message, value in reader.iter_decoded_messages(topics=wanted):
+            if channel.topic == "/redrive/ego_logged":
+                ghosts[message.log_time] = value
+            else:
+                (tf,) = [t for t in value.transforms if t.child_frame_id == "base_link"]
+                base_link[message.log_time] = tf
+    offset = EgoGeometry().center_offset_m
+    for frame, state in logged.items():
+        (entity,) = ghosts[stamps[frame]].entities
+        cube = entity.cubes[0]
+        assert entity.frame_id == state.frame_id
+        assert cube.pose.position.x == pytest.approx(
+            state.position[0] + offset * math.cos(state.heading_rad)
+        )
+        assert cube.color.a < 0.5  # translucent
+    for frame, state in driven.items():
+        tf = base_link[stamps[frame]]
+        assert tf.parent_frame_id == state.frame_id
+        assert (tf.translation.x, tf.translation.y) == pytest.approx(tuple(state.position[:2]))
