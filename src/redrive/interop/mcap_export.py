@@ -2,7 +2,9 @@
 
 The file holds the :class:`~redrive.interop.stream.SceneStream` of the run (its channels are
 listed there), written through ``foxglove-sdk``'s MCAP writer (``foxglove.open_mcap`` on a
-context of its own, zstd chunks, CRCs, summary with statistics and indexes).  It is written next
+context of its own, LZ4 chunks, CRCs, summary with statistics and indexes).  LZ4, not zstd:
+on the demo log it wrote 4.5× faster than single-threaded zstd (0.25 s against 1.14 s for a
+second of log) for a file 30 % larger.  It is written next
 to its place and renamed into it, so a stopped export leaves no half file.
 """
 
@@ -14,7 +16,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import foxglove
-from foxglove.mcap import MCAPWriteOptions
+from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
 from redrive.interop.stream import SceneStream, open_scene_stream
 
@@ -37,7 +39,7 @@ def write_stream(
             tmp,
             allow_overwrite=True,
             context=context,
-            writer_options=MCAPWriteOptions(compression_threads=0),
+            writer_options=MCAPWriteOptions(compression=MCAPCompression.Lz4),
         ):
             channels = {
                 topic: foxglove.Channel(
