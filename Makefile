@@ -23,7 +23,7 @@ $(VENV)/.installed: $(BIN)/python pyproject.toml
 	@touch $@
 
 $(VENV)/.installed-test: $(VENV)/.installed pyproject.toml
-	$(BIN)/pip install -q -e '.[test,bench,gui,ray,ros2]'
+	$(BIN)/pip install -q -e '.[test,bench,gui,ray,ros2,foxglove]'
 	@touch $@
 
 venv: $(VENV)/.installed

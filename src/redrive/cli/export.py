@@ -1,4 +1,5 @@
-"""``redrive export RUN --format csv|xlsx|parquet`` — a run's tables as files for other tools."""
+"""``redrive export RUN --format csv|xlsx|parquet|mcap`` — a run's tables as files for other
+tools, or (``mcap``) the run over its log as one MCAP for Foxglove and RViz."""
 
 from __future__ import annotations
 
@@ -13,11 +14,30 @@ examples:
   redrive export runs/urban --format xlsx          one workbook in runs/urban/export/
   redrive export runs/urban --format csv -o out/   one CSV per table plus summary.csv
   redrive export runs/urban --format parquet       each table merged into one Parquet file
+  redrive export runs/urban --format mcap          runs/urban/export/urban.mcap: open it in
+                                                   Foxglove (layout: docs/foxglove_layout.json)
 
 Only tables with rows are written. In CSV and Excel, text cells that a spreadsheet would run as a
 formula (starting with = + - @, tab or CR) get a leading ' ; Excel cells are cut at 32,767
 characters and a table longer than 1,048,576 rows continues on sheets "name (2)", "name (3)" ….
+
+mcap (needs `pip install 'redrive[foxglove]'`): the log's own channels, its LiDAR clouds and
+camera images again as foxglove.PointCloud / foxglove.CompressedImage on /foxglove/<topic>, and the
+run's results at each frame — ground truth, every perception algorithm's boxes (ids, velocity
+arrows), planned paths, the ego (and, closed loop, the logged ego as a ghost), the evaluation's
+bookmarks — as foxglove.SceneUpdate on /redrive/… and visualization_msgs/MarkerArray on
+/redrive/markers/…, placed by foxglove.FrameTransforms on /redrive/transforms.  See docs/foxglove.md.
 """
+
+
+def _export_mcap(args: argparse.Namespace, out: Path) -> int:
+    from redrive.interop import require_foxglove
+
+    require_foxglove()
+    from redrive.interop.mcap_export import export_mcap
+
+    print(export_mcap(args.run, out=out))
+    return 0
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -25,6 +45,8 @@ def _run(args: argparse.Namespace) -> int:
 
     run = open_run(args.run)
     out = args.output if args.output is not None else run.path / "export"
+    if args.format == "mcap":
+        return _export_mcap(args, out)
     for path in export_run(run, fmt=args.format, out=out):
         print(path)
     return 0
@@ -35,19 +57,23 @@ def register(sub: Any) -> None:
 
     parser = sub.add_parser(
         "export",
-        help="export a run's tables to CSV, Excel or merged Parquet files",
+        help="export a run's tables to CSV, Excel or Parquet, or the run over its log to MCAP",
         description=(
             "Write the tables of a run directory (frames, steps, detections, ground truth, ego, "
             "paths, commands, resources) and the per-algorithm summary as CSV files, one Excel "
             "workbook (a summary sheet with the run's facts, then a sheet per table) or one "
-            "Parquet file per table. Prints the files written."
+            "Parquet file per table; or, with --format mcap, the run's log and results as one "
+            "MCAP that Foxglove and RViz draw. Prints the files written."
         ),
         epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("run", type=Path, help="a run directory (the --out of a run)")
     parser.add_argument(
-        "--format", required=True, choices=EXPORT_FORMATS, help="the file format to write"
+        "--format",
+        required=True,
+        choices=(*EXPORT_FORMATS, "mcap"),
+        help="the file format to write",
     )
     parser.add_argument(
         "-o",

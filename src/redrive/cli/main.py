@@ -25,6 +25,7 @@ _COMMANDS = (
     "run",
     "batch",
     "export",
+    "serve",
     "evaluate",
     "report",
     "compare",
@@ -42,7 +43,8 @@ examples:
   redrive run urban.mcap                 replay it through perception → planning → control
   redrive run drive.bag --perception my_detector.py:MyDetector --out runs/mine
   redrive batch drives/ --pipeline a.toml --pipeline b.toml --out batches/ab   many logs × pipelines
-  redrive export runs/mine --format xlsx results as Excel (or csv, parquet)
+  redrive export runs/mine --format xlsx results as Excel (or csv, parquet; mcap for Foxglove)
+  redrive serve runs/mine                the run over its log live in Foxglove (WebSocket)
   redrive evaluate runs/mine             detection, tracking, planning, control, latency metrics
   redrive report runs/mine               self-contained HTML report, Excel workbook, CSV files
   redrive compare runs/a runs/b          A/B: per-metric deltas, significance, worst frames

@@ -2,7 +2,9 @@
 
 The file uses profile ``ros2``, message encoding ``cdr`` and schemas in ``ros2msg`` encoding with
 the full concatenated definition (the type, then ``MSG: pkg/Type`` sections for every nested
-type), so Foxglove, Lichtblick and ``ros2 bag`` open it.
+type), so Foxglove, Lichtblick and ``ros2 bag`` open it.  Every channel carries rosbag2's
+``offered_qos_profiles`` (:mod:`redrive.io.qos`): ``/tf_static`` transient local, so ``ros2 bag
+play`` replays it latched; every other topic reliable and volatile.
 
 Writes are atomic: everything goes to a hidden temporary file in the target directory, which is
 renamed over ``path`` only when the writer closes normally; an exception inside the ``with``
@@ -34,6 +36,7 @@ from rosbags.typesys.store import Typestore
 from redrive.errors import LogError, UnsupportedMessageError
 from redrive.io.decoders.base import Decoded
 from redrive.io.partfiles import create_part
+from redrive.io.qos import offered_qos_profiles
 from redrive.io.ros_encode import encode_value
 from redrive.io.typestore import typestore_for
 from redrive.types import Frame, VehicleState
@@ -46,24 +49,6 @@ Compression = Literal["zstd", "lz4", "none"]
 _COMPRESSION: Mapping[str, CompressionType] = MappingProxyType(
     {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
 )
-
-# rosbag2's QoS for latched topics (transient local), so `ros2 bag play` re-latches /tf_static.
-_LATCHED_QOS = """- history: 3
-  depth: 0
-  reliability: 1
-  durability: 1
-  deadline:
-    sec: 2147483647
-    nsec: 4294967295
-  lifespan:
-    sec: 2147483647
-    nsec: 4294967295
-  liveliness: 1
-  liveliness_lease_duration:
-    sec: 2147483647
-    nsec: 4294967295
-  avoid_ros_namespace_conventions: false
-"""
 
 
 class McapWriter:
@@ -135,7 +120,7 @@ class McapWriter:
 
     def add_channel(self, topic: str, msgtype: str, *, offered_qos: str = "") -> None:
         """Declare ``topic`` of ``msgtype`` before its first message, with the QoS its publishers
-        offered (rosbag2's ``offered_qos_profiles`` YAML; "" for the default, latched for
+        offered (rosbag2's ``offered_qos_profiles`` YAML; "" for redrive's default: reliable, latched for
         ``/tf_static``).
 
         Raises:
@@ -156,7 +141,7 @@ class McapWriter:
                 raise LogError(msg)
             return known[1]
         if offered_qos is None:
-            offered_qos = _LATCHED_QOS if topic.endswith("tf_static") else ""
+            offered_qos = offered_qos_profiles(topic)
         metadata = {"offered_qos_profiles": offered_qos}
         channel_id = self._writer.register_channel(
             topic=topic,

@@ -257,6 +257,18 @@ class OdometryModel:
     def reset(self) -> None:
         self._pose = None
 
+    def odom_from_base(self) -> npt.NDArray[np.float64] | None:
+        """The dead-reckoned pose of ``base_link`` in ``odom`` (4×4, z = 0) of the last
+        reading; None before the first."""
+        if self._pose is None:
+            return None
+        x, y, yaw = self._pose
+        c, s = math.cos(yaw), math.sin(yaw)
+        out = np.eye(4)
+        out[:2, :2] = [[c, -s], [s, c]]
+        out[0, 3], out[1, 3] = x, y
+        return out
+
     def measure(self, state: VehicleState, rng: np.random.Generator) -> VehicleState:
         """The odometry reading at ``state.stamp_ns`` (frame ``odom``)."""
         heading = state.heading_rad

@@ -30,8 +30,12 @@ topic                           type                                        what
                                                                             ``base_link``, at
                                                                             each sweep of the
                                                                             first LiDAR
-``/tf``, ``/tf_static``         ``tf2_msgs/msg/TFMessage``                  map→base_link;
-                                                                            base_link→sensors
+``/tf``                         ``tf2_msgs/msg/TFMessage``                  map→odom→base_link
+                                                                            (REP-105), with the
+                                                                            ground-truth pose
+``/tf_static``                  ``tf2_msgs/msg/TFMessage``                  base_link→sensors
+                                                                            (latched: transient
+                                                                            local QoS)
 ==============================  ==========================================  ====================
 
 Determinism: one :class:`numpy.random.SeedSequence` of the scenario seed is split into one
@@ -236,8 +240,13 @@ class _Recorder:
     # -- static ---------------------------------------------------------------------------------
 
     def write_static(self, stamp_ns: int) -> None:
+        """``/tf_static``: where every mounted sensor sits on ``base_link`` (and each camera's
+        optical frame).  Odometry is not mounted: ``odom`` is the frame its poses are in, a
+        parent of ``base_link`` in ``/tf`` (REP-105), never a child."""
         transforms = []
         for spec in self.rig:
+            if spec.kind is SensorType.ODOMETRY:
+                continue
             transforms.append(_transform("base_link", spec.name, spec.base_from_sensor(), 0))
             if spec.kind is SensorType.CAMERA:
                 optical = spec.base_from_optical()
@@ -327,10 +336,27 @@ class _Recorder:
         return seen
 
     def write_pose(self, stamp_ns: int) -> None:
+        """The true ego state, and ``/tf`` as REP-105 has it: ``map → odom → base_link``.
+
+        ``odom → base_link`` is the wheel odometry's dead-reckoned pose (its last reading; the
+        true pose while there is none, ``odom`` = ``map`` at the start), ``map → odom`` the
+        correction that puts ``base_link`` at its true pose — what a localizer publishes.
+        Composed, they give ``map → base_link`` exactly."""
         state = self.world.ego_state()
         self.writer.write(EGO_STATE_TOPIC, stamp_ns, state)
+        map_from_base = self.world.map_from_base()
+        odom_from_base = next(
+            (m for o in self.odometry.values() if (m := o.odom_from_base()) is not None),
+            map_from_base,
+        )
+        map_from_odom = map_from_base @ invert(odom_from_base)
         self.writer.write(
-            "/tf", stamp_ns, (_transform("map", "base_link", self.world.map_from_base(), stamp_ns),)
+            "/tf",
+            stamp_ns,
+            (
+                _transform("map", "odom", map_from_odom, stamp_ns),
+                _transform("odom", "base_link", odom_from_base, stamp_ns),
+            ),
         )
         self.prev_state = state
 

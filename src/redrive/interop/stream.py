@@ -1,0 +1,345 @@
+"""One time-ordered stream of a log and a run's results, as the channels Foxglove reads.
+
+:func:`open_scene_stream` opens a run directory or a log and gives a :class:`SceneStream`: its
+channels (known before the first message, so a server can advertise them) and
+``messages(start_ns=…)``, every message in log-time order.  The MCAP export
+(:mod:`.mcap_export`) writes it to a file, ``redrive serve`` (:mod:`.serve`) to a WebSocket.
+
+What a stream holds:
+
+* the log's own messages, as they are, on their own topics (ROS 2 ``cdr`` with ``ros2msg``
+  schemas; a ROS 1 log's ``ros1`` with ``ros1msg``) — except, for a run, the log's ``/tf``:
+  the run's ego places ``base_link`` (``/redrive/transforms``), and a frame has one parent (in
+  a closed loop the log's ``/tf`` moves the logged ego, not the driven one);
+* every LiDAR cloud again as ``foxglove.PointCloud`` and every camera image as
+  ``foxglove.CompressedImage`` on ``/foxglove/<topic>``;
+* for a run: ``/redrive/transforms`` (``foxglove.FrameTransforms``) and the SceneUpdate topics
+  of :mod:`.run_scene` at each frame's stamp, each also as a MarkerArray on
+  ``/redrive/markers/<topic without /redrive/>``;
+* for a log without a run: its ground-truth and object topics as SceneUpdates on
+  ``/foxglove/<topic>`` and its static transforms on ``/redrive/transforms``.
+"""
+
+from __future__ import annotations
+
+import heapq
+import logging
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import TracebackType
+from typing import Any, Self
+
+from foxglove import messages as fm
+
+from redrive.errors import LogError, UnsupportedMessageError
+from redrive.interop import foxglove_msgs as fx
+from redrive.interop.markers import MARKER_ARRAY, marker_array
+from redrive.interop.run_scene import (
+    BODY_FRAME,
+    FrameScene,
+    log_object_shapes,
+    run_scenes,
+    scene_topics,
+)
+from redrive.interop.shapes import ShapeSet
+from redrive.io import open_log
+from redrive.io.base import LogMessage, LogReader
+from redrive.io.decoders import DecodedKind, decode, topic_kind
+from redrive.io.qos import offered_qos_profiles
+from redrive.io.typestore import typestore_for
+from redrive.results import Run, open_run
+from redrive.types import DetectedObject, Image, PointCloud, SensorType, Transform
+
+__all__ = ["TRANSFORMS_TOPIC", "ChannelSpec", "OutMessage", "SceneStream", "open_scene_stream"]
+
+logger = logging.getLogger(__name__)
+
+TRANSFORMS_TOPIC = "/redrive/transforms"
+_LATCHED = "transient_local"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ChannelSpec:
+    """A channel: its topic, message encoding and schema (name, encoding, definition)."""
+
+    topic: str
+    message_encoding: str
+    schema_name: str
+    schema_encoding: str
+    schema_data: bytes
+    metadata: Mapping[str, str] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, slots=True)
+class OutMessage:
+    """One message: its topic, log time (int ns) and encoded bytes."""
+
+    topic: str
+    log_time_ns: int
+    data: bytes
+
+
+def _foxglove_spec(topic: str, message_type: Any) -> ChannelSpec:
+    schema = message_type.get_schema()
+    return ChannelSpec(
+        topic=topic,
+        message_encoding=schema.encoding,
+        schema_name=schema.name,
+        schema_encoding=schema.encoding,
+        schema_data=bytes(schema.data),
+    )
+
+
+def _marker_topic(topic: str) -> str:
+    return "/redrive/markers/" + topic.removeprefix("/redrive/").removeprefix("/")
+
+
+def find_run_log(run: Run) -> Path | None:
+    """The log a run is shown over: a sensor-level closed loop's recording of its rendered
+    sensors (in the run directory), else the log the manifest names; None when it is gone."""
+    recorded = run.manifest.closed_loop.get("sensor_log")
+    if isinstance(recorded, str) and recorded:
+        path = run.path / recorded
+        return path if path.is_file() else None
+    named = run.manifest.log.path
+    return Path(named) if named and Path(named).exists() else None
+
+
+class SceneStream:
+    """A log and (optionally) a run as Foxglove channels; a context manager (closes the log)."""
+
+    def __init__(self, *, reader: LogReader | None, run: Run | None) -> None:
+        self.reader = reader
+        self.run = run
+        self._typestore = typestore_for(2)[0]
+        self.channels: dict[str, ChannelSpec] = {}
+        self._raw: dict[str, str] = {}  # log topic → how to pass it on
+        self._decoded: dict[str, tuple[DecodedKind, SensorType | None]] = {}
+        self._static: tuple[Transform, ...] = ()
+        if reader is not None:
+            self._add_log_channels(reader)
+        if run is not None:
+            self._add_run_channels(run)
+        elif self._static:
+            self.channels[TRANSFORMS_TOPIC] = _foxglove_spec(TRANSFORMS_TOPIC, fm.FrameTransforms)
+
+    # -- channels --------------------------------------------------------------------------------
+
+    def _add_log_channels(self, reader: LogReader) -> None:
+        stores: Mapping[str, Any] = getattr(reader, "typestores", {})
+        for topic, info in sorted(reader.topics.items()):
+            if self.run is not None and topic.rstrip("/").endswith("/tf"):
+                continue  # the run's ego places base_link (/redrive/transforms): one parent
+            store = stores.get(info.encoding) if info.encoding != "native" else None
+            if store is not None and info.has_definition and info.msgtype in store.fielddefs:
+                version = 1 if info.encoding == "ros1" else 2
+                name = info.msgtype
+                if version == 1:
+                    pkg, _, typ = info.msgtype.split("/")
+                    name = f"{pkg}/{typ}"
+                text, _ = store.generate_msgdef(info.msgtype, ros_version=version)
+                metadata = {}
+                if version == 2:
+                    metadata["offered_qos_profiles"] = offered_qos_profiles(topic)
+                self.channels[topic] = ChannelSpec(
+                    topic=topic,
+                    message_encoding=info.encoding,
+                    schema_name=name,
+                    schema_encoding="ros1msg" if version == 1 else "ros2msg",
+                    schema_data=text.encode("utf-8"),
+                    metadata=metadata,
+                )
+                self._raw[topic] = info.encoding
+            kind = topic_kind(info)
+            if kind is None:
+                continue
+            if kind[0] == DecodedKind.SENSOR and kind[1] == SensorType.LIDAR:
+                self.channels[f"/foxglove{topic}"] = _foxglove_spec(
+                    f"/foxglove{topic}", fm.PointCloud
+                )
+                self._decoded[topic] = kind
+            elif kind[0] == DecodedKind.SENSOR and kind[1] == SensorType.CAMERA:
+                self.channels[f"/foxglove{topic}"] = _foxglove_spec(
+                    f"/foxglove{topic}", fm.CompressedImage
+                )
+                self._decoded[topic] = kind
+            elif kind[0] == DecodedKind.OBJECTS and self.run is None:
+                self.channels[f"/foxglove{topic}"] = _foxglove_spec(
+                    f"/foxglove{topic}", fm.SceneUpdate
+                )
+                self._decoded[topic] = kind
+            elif kind[0] == DecodedKind.TRANSFORMS and topic.endswith("tf_static"):
+                self._static += self._read_static(reader, topic)
+
+    @staticmethod
+    def _read_static(reader: LogReader, topic: str) -> tuple[Transform, ...]:
+        found: dict[tuple[str, str], Transform] = {}
+        for message in reader.messages(topics=[topic]):
+            try:
+                value = decode(message, reader.deserialize).value
+            except UnsupportedMessageError as err:
+                logger.warning("%s: %s", reader.path, err)
+                continue
+            if isinstance(value, tuple):
+                for t in value:
+                    if isinstance(t, Transform):
+                        found[(t.parent_frame, t.child_frame)] = t
+        return tuple(found.values())
+
+    def _add_run_channels(self, run: Run) -> None:
+        self.channels[TRANSFORMS_TOPIC] = _foxglove_spec(TRANSFORMS_TOPIC, fm.FrameTransforms)
+        marker_def, _ = self._typestore.generate_msgdef(MARKER_ARRAY, ros_version=2)
+        for topic in scene_topics(run):
+            self.channels[topic] = _foxglove_spec(topic, fm.SceneUpdate)
+            self.channels[_marker_topic(topic)] = ChannelSpec(
+                topic=_marker_topic(topic),
+                message_encoding="cdr",
+                schema_name=MARKER_ARRAY,
+                schema_encoding="ros2msg",
+                schema_data=marker_def.encode("utf-8"),
+                metadata={"offered_qos_profiles": offered_qos_profiles(topic)},
+            )
+
+    # -- messages --------------------------------------------------------------------------------
+
+    @property
+    def start_ns(self) -> int:
+        starts = []
+        if self.reader is not None and self.reader.message_count:
+            starts.append(self.reader.start_ns)
+        if self.run is not None:
+            frames = self.run.table("frames").column("stamp_ns")
+            if len(frames):
+                starts.append(int(frames[0].as_py()))
+        return min(starts, default=0)
+
+    @property
+    def end_ns(self) -> int:
+        ends = []
+        if self.reader is not None and self.reader.message_count:
+            ends.append(self.reader.end_ns)
+        if self.run is not None:
+            frames = self.run.table("frames").column("stamp_ns")
+            if len(frames):
+                ends.append(int(frames[-1].as_py()))
+        return max(ends, default=0)
+
+    def messages(self, *, start_ns: int | None = None) -> Iterator[OutMessage]:
+        """Every message with log time ≥ ``start_ns`` (all when None), in log-time order."""
+        parts: list[Iterator[OutMessage]] = []
+        if self.reader is not None:
+            parts.append(self._log_messages(start_ns))
+        if self.run is not None:
+            parts.append(self._run_messages(start_ns))
+        elif self._static:
+            t0 = self.start_ns if start_ns is None else start_ns
+            parts.append(iter([self._transforms_message(self._static, t0)]))
+        return heapq.merge(*parts, key=lambda m: m.log_time_ns)
+
+    def _transforms_message(self, transforms: tuple[Transform, ...], stamp_ns: int) -> OutMessage:
+        data = fx.frame_transforms(transforms, stamp_ns=stamp_ns).encode()
+        return OutMessage(TRANSFORMS_TOPIC, stamp_ns, data)
+
+    def _log_messages(self, start_ns: int | None) -> Iterator[OutMessage]:
+        assert self.reader is not None
+        reader = self.reader
+        wanted = set(self._raw) | set(self._decoded)
+        for message in reader.messages(topics=wanted, start_ns=start_ns):
+            if message.topic in self._raw:
+                yield OutMessage(message.topic, message.log_time_ns, bytes(message.raw))
+            if message.topic in self._decoded:
+                out = self._decoded_message(reader, message)
+                if out is not None:
+                    yield out
+
+    def _decoded_message(self, reader: LogReader, message: LogMessage) -> OutMessage | None:
+        try:
+            decoded = decode(message, reader.deserialize)
+        except UnsupportedMessageError as err:
+            logger.debug("%s: %s", reader.path, err)
+            return None
+        value, topic = decoded.value, f"/foxglove{message.topic}"
+        encoded: Any = None
+        if isinstance(value, PointCloud):
+            encoded = fx.point_cloud(value, frame_id=decoded.frame_id, stamp_ns=decoded.stamp_ns)
+        elif isinstance(value, Image):
+            encoded = fx.compressed_image(
+                value, frame_id=decoded.frame_id, stamp_ns=decoded.stamp_ns
+            )
+        elif isinstance(value, tuple):
+            objects = [o for o in value if isinstance(o, DetectedObject)]
+            encoded = fx.scene_update(
+                log_object_shapes(
+                    objects, frame_id=decoded.frame_id or BODY_FRAME, stamp_ns=decoded.stamp_ns
+                )
+            )
+        if encoded is None:
+            return None
+        return OutMessage(topic, message.log_time_ns, encoded.encode())
+
+    def _run_messages(self, start_ns: int | None) -> Iterator[OutMessage]:
+        assert self.run is not None
+        for scene in run_scenes(self.run, static_transforms=self._static):
+            if start_ns is not None and scene.stamp_ns < start_ns:
+                continue
+            yield from self._scene_messages(scene)
+
+    def _scene_messages(self, scene: FrameScene) -> Iterator[OutMessage]:
+        stamp = scene.stamp_ns
+        if scene.transforms:
+            yield self._transforms_message(scene.transforms, stamp)
+        for topic, shapes in sorted(scene.shapes.items()):
+            yield OutMessage(topic, stamp, fx.scene_update(shapes).encode())
+            yield OutMessage(_marker_topic(topic), stamp, self._marker_bytes(shapes))
+
+    def _marker_bytes(self, shapes: ShapeSet) -> bytes:
+        message = marker_array(shapes, self._typestore)
+        return bytes(self._typestore.serialize_cdr(message, MARKER_ARRAY))
+
+    # -- closing ---------------------------------------------------------------------------------
+
+    def close(self) -> None:
+        if self.reader is not None:
+            self.reader.close()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+
+def _is_run_dir(path: Path) -> bool:
+    return path.is_dir() and (path / "manifest.json").is_file() and (path / "frames").is_dir()
+
+
+def open_scene_stream(path: str | Path) -> SceneStream:
+    """The stream of a run directory (its log, found as the GUI finds it, plus its results) or
+    of a log alone.
+
+    Raises:
+        LogError: the log cannot be opened (the message names the file and what to do).
+        ConfigError: the run directory cannot be read.
+    """
+    path = Path(path)
+    if _is_run_dir(path):
+        run = open_run(path)
+        log = find_run_log(run)
+        if log is None:
+            logger.warning(
+                "%s: the run's log (%s) is not there; only the run's results are included",
+                path,
+                run.manifest.closed_loop.get("sensor_log") or run.manifest.log.path,
+            )
+            return SceneStream(reader=None, run=run)
+        return SceneStream(reader=open_log(log), run=run)
+    if not path.exists():
+        msg = f"{path}: no such log or run directory; give a log file or the --out of a run"
+        raise LogError(msg)
+    return SceneStream(reader=open_log(path), run=None)
