@@ -163,19 +163,23 @@ class Writer:
             need_free = self._lossless_floor()
             readers = [b for b in self._readers if w[b + R_STATE] == 1]
             pinned = {w[b + R_PIN] for b in readers}
+            if readers:
+                # a slot whose message every reader has read is of use to nobody: take the one
+                # written last (just read, still in cache) rather than walking the whole ring
+                read_by_all = min(w[b + R_READ_SEQ] for b in readers)
+                for slot in reversed(self._lru):
+                    if self._slot_seq[slot] > read_by_all or slot in pinned:
+                        continue
+                    if self._try_claim(slot, nxt, readers):
+                        return slot
             for slot in self._lru:  # least recently written first
                 held = self._slot_seq[slot]
                 if need_free is not None and held > need_free:
                     break  # the newer slots all hold unread lossless messages too
                 if slot in pinned:
                     continue
-                base_w = self._slot_words[slot]
-                w[base_w + S_BEGIN] = nxt  # ① the slot is being written
-                fence()  # ②
-                if any(w[b + R_PIN] == slot for b in readers):  # ③
-                    w[base_w + S_BEGIN] = held
-                    continue
-                return slot
+                if self._try_claim(slot, nxt, readers):
+                    return slot
             # no slot: only lossless back-pressure (or pins of dead readers) gets here
             now = time.monotonic()
             if deadline is not None and now >= deadline:
@@ -198,6 +202,16 @@ class Writer:
             if self._lossless_floor() == need_free and wait_fd(self._space_fd, wait):
                 drain(self._space_fd)
             w[W_WRITER_WAITING] = 0
+
+    def _try_claim(self, slot: int, nxt: int, readers: list[int]) -> bool:
+        """Mark ``slot`` as being written (①②③); False (and unmarked) if a reader pins it."""
+        w, base_w = self._w, self._slot_words[slot]
+        w[base_w + S_BEGIN] = nxt  # ① the slot is being written
+        fence()  # ②
+        if any(w[b + R_PIN] == slot for b in readers):  # ③
+            w[base_w + S_BEGIN] = self._slot_seq[slot]
+            return False
+        return True
 
     def _live_readers(self) -> list[int]:
         w = self._w
