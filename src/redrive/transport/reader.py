@@ -53,6 +53,7 @@ from redrive.transport.segment import (
 )
 from redrive.transport.stream import (
     CHECK_S,
+    SPIN_NS,
     ChannelStats,
     Message,
     Policy,
@@ -224,6 +225,7 @@ class Reader:
         last_check = time.monotonic()
         jump = latest
         skip_to = 0  # a lossless reader's first message still held (see below)
+        spin_until = 0
         while True:
             w, lay = self._w, self._lay
             ws = w[W_WRITE_SEQ]  # ⓐ
@@ -256,6 +258,10 @@ class Reader:
                     continue
             if deadline is not None and now >= deadline:
                 return -1, 0, 0
+            if not spin_until:
+                spin_until = time.perf_counter_ns() + SPIN_NS
+            if time.perf_counter_ns() < spin_until:
+                continue  # poll write_seq a little before sleeping
             wait = CHECK_S if deadline is None else min(CHECK_S, deadline - now)
             flag = self._base + R_WAITING
             w[flag] = 1

@@ -48,6 +48,7 @@ from redrive.transport.segment import (
 )
 from redrive.transport.stream import (
     CHECK_S,
+    SPIN_NS,
     ChannelStats,
     Policy,
     ReaderGoneError,
@@ -159,6 +160,7 @@ class Writer:
         w = self._w
         nxt = self._seq + 1
         last_check = time.monotonic()
+        spin_until = 0
         while True:
             need_free = self._lossless_floor()
             readers = [b for b in self._readers if w[b + R_STATE] == 1]
@@ -196,6 +198,10 @@ class Writer:
             if now - last_check >= CHECK_S:
                 last_check = now
                 self._reap_dead_readers()
+            if not spin_until:
+                spin_until = time.perf_counter_ns() + SPIN_NS
+            if time.perf_counter_ns() < spin_until:
+                continue  # poll the readers' positions a little before sleeping
             wait = CHECK_S if deadline is None else min(CHECK_S, deadline - now)
             w[W_WRITER_WAITING] = 1
             fence()  # the readers' read_seq stores are seen after this, or they see the flag
