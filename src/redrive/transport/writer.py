@@ -161,14 +161,27 @@ class Writer:
         nxt = self._seq + 1
         last_check = time.monotonic()
         spin_until = 0
+        lossless = self.policy is Policy.LOSSLESS
+        lossless_value = Policy.LOSSLESS.value
         while True:
-            need_free = self._lossless_floor()
-            readers = [b for b in self._readers if w[b + R_STATE] == 1]
-            pinned = {w[b + R_PIN] for b in readers}
-            if readers:
+            # one pass over the reader entries: the live ones, their pins, the lowest read
+            # position of all and of the lossless ones (None: no such reader)
+            readers: list[int] = []
+            pinned: set[int] = set()
+            read_by_all = need_free = None
+            for b in self._readers:
+                if w[b + R_STATE] != 1:
+                    continue
+                readers.append(b)
+                pinned.add(w[b + R_PIN])
+                seq = w[b + R_READ_SEQ]
+                if read_by_all is None or seq < read_by_all:
+                    read_by_all = seq
+                if lossless and w[b + R_POLICY] == lossless_value:
+                    need_free = seq if need_free is None or seq < need_free else need_free
+            if read_by_all is not None:
                 # a slot whose message every reader has read is of use to nobody: take the one
                 # written last (just read, still in cache) rather than walking the whole ring
-                read_by_all = min(w[b + R_READ_SEQ] for b in readers)
                 for slot in reversed(self._lru):
                     if self._slot_seq[slot] > read_by_all or slot in pinned:
                         continue
