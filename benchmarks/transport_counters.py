@@ -137,7 +137,9 @@ def run_pair(side: str, size: int, count: int, wrap: str, outdir: Path) -> dict[
         cmd += ["--fifo-dir", str(fifo_dir)] + (["--callgrind"] if callgrind else [])
         procs.append(subprocess.Popen(cmd))
         if role == "pub":
-            time.sleep(15.0 if "valgrind" in wrap or "py-spy" in wrap else 2.0)  # let it create the service
+            time.sleep(
+                15.0 if "valgrind" in wrap or "py-spy" in wrap else 2.0
+            )  # let it create the service
     while any(p.poll() is None for p in procs):  # one failing: stop the other (it would block)
         if any(p.returncode for p in procs):
             for p in procs:
