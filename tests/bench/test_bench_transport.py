@@ -4,6 +4,7 @@ byte compared); the result types, targets and CLI. No timing is asserted."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import shutil
@@ -27,6 +28,7 @@ from redrive.benchmarks.transport import (
     parse_size,
     run_cell,
     side_available,
+    target_spreads,
 )
 from redrive.errors import TransportError
 
@@ -156,6 +158,35 @@ def test_targets() -> None:
     assert by["paced p99", "redrive-inplace", 4 * mib].met is False
 
 
+def test_target_spreads_take_the_verdict_on_the_median() -> None:
+    mib = 1 << 20
+
+    def rep(redrive_gb: float, p99_ms: float) -> TransportBenchResult:
+        cells = (
+            _run("redrive-inplace", mib, redrive_gb),
+            _run("iceoryx2", mib, 10.0),
+            _run("redrive-inplace", 4 * mib, 10.0, p99_ms=p99_ms),
+            _run("redrive-copy", 4 * mib, 10.0, p99_ms=p99_ms),
+        )
+        result = TransportBenchResult(
+            sizes=(mib, 4 * mib), seconds=1.0, paced_hz=100.0, slots=4, cells=cells, memcpy=(),
+            targets=(),
+        )  # fmt: skip
+        return dataclasses.replace(result, targets=check_targets(result))
+
+    spreads = target_spreads([rep(12.0, 1.0), rep(8.0, 3.0), rep(11.0, 2.5)])
+    by = {(t.name.split(" at ")[0], t.side, t.size_bytes): t for t in spreads}
+    iox = by["vs iceoryx2 in place", "redrive-inplace", mib]
+    assert iox.values == pytest.approx((1.2, 0.8, 1.1))
+    assert (iox.min, iox.median, iox.max) == pytest.approx((0.8, 1.1, 1.2))
+    assert iox.met is True  # one repetition below 1.0x does not decide it
+    p99 = by["paced p99", "redrive-inplace", 4 * mib]
+    assert (p99.min, p99.median, p99.max) == pytest.approx((1.0, 2.5, 3.0))
+    assert p99.met is False  # ≤ 2 ms on the median
+    assert by["vs pipe + pickle", "redrive-copy", 4 * mib].met is None  # never ran
+    assert json.loads(json.dumps(iox.to_json()))["median"] == pytest.approx(1.1)
+
+
 def test_parse_size() -> None:
     assert parse_size("64K") == 64 << 10
     assert parse_size("64KiB") == 64 << 10
@@ -183,6 +214,17 @@ def test_cli(capsys: pytest.CaptureFixture[str]) -> None:
     text = capsys.readouterr().out
     assert "pipe + pickle" in text
     assert "16 KiB" in text
+
+
+def test_cli_repeat_reports_every_repetition(capsys: pytest.CaptureFixture[str]) -> None:
+    parser = argparse.ArgumentParser()
+    add_transport_parser(parser.add_subparsers())
+    argv = ["transport", "--sizes", "16K", "--seconds", "0.1", "--sides", "pipe-pickle"]
+    args = parser.parse_args([*argv, "--no-paced", "--no-memcpy", "--repeat", "2", "--json"])
+    assert args.func(args) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert [r["cells"][0]["status"] for r in out["repetitions"]] == ["ok", "ok"]
+    assert out["spread"] == []  # no target needs pipe + pickle alone
 
 
 def test_cli_rejects_unknown_side() -> None:

@@ -139,6 +139,52 @@ def test_a_pinned_view_is_never_overwritten(name: str) -> None:
         assert int(newest.payload[0]) == 49
 
 
+def test_a_slot_every_reader_has_read_is_reused_first(name: str) -> None:
+    """A reader that keeps up gets every message through the same (cache-warm) slot; unread
+    messages are never the ones overwritten."""
+    with (
+        Writer(name, capacity_bytes=64, slots=4, policy=Policy.LOSSLESS) as w,
+        Reader(name) as r,
+    ):
+        addresses = set()
+        for i in range(1, 9):
+            w.publish(np.full(64, i, np.uint8))
+            with r.view(timeout_s=1.0) as msg:
+                assert msg is not None
+                assert (msg.seq, int(msg.payload[0])) == (i, i)
+                addresses.add(msg.payload.__array_interface__["data"][0])
+        assert len(addresses) == 1
+        for i in range(9, 12):  # unread: each takes another slot
+            w.publish(np.full(64, i, np.uint8))
+        got = [r.read(timeout_s=1.0) for _ in range(3)]
+        assert [(m.seq, int(m.payload[0])) for m in got if m is not None] == [
+            (9, 9),
+            (10, 10),
+            (11, 11),
+        ]
+
+
+def test_a_late_lossless_reader_skips_messages_no_longer_held(name: str) -> None:
+    """Messages every attached reader had read may be overwritten before a new lossless reader
+    joins: it starts at the oldest one still held and counts the rest as dropped."""
+    with (
+        Writer(name, capacity_bytes=64, slots=4, policy=Policy.LOSSLESS) as w,
+        Reader(name) as first,
+    ):
+        for i in range(1, 11):
+            w.publish(np.full(64, i, np.uint8))
+            assert first.read(timeout_s=1.0) is not None
+        with Reader(name, policy=Policy.LOSSLESS) as late:
+            msg = late.read(timeout_s=1.0)
+            assert msg is not None
+            assert (msg.seq, int(msg.payload[0])) == (10, 10)
+            assert msg.dropped_before == 2  # it joined at 7: 8 and 9 were overwritten
+            w.publish(np.full(64, 11, np.uint8))
+            nxt = late.read(timeout_s=1.0)
+            assert nxt is not None
+            assert (nxt.seq, nxt.dropped_before) == (11, 0)
+
+
 def test_errors_say_what_to_do(name: str) -> None:
     with pytest.raises(TransportError, match="slots ≥ max_readers"):
         Writer(name, capacity_bytes=10, slots=2, max_readers=1)

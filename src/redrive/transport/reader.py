@@ -53,6 +53,7 @@ from redrive.transport.segment import (
 )
 from redrive.transport.stream import (
     CHECK_S,
+    SPIN_NS,
     ChannelStats,
     Message,
     Policy,
@@ -223,13 +224,15 @@ class Reader:
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
         last_check = time.monotonic()
         jump = latest
+        skip_to = 0  # a lossless reader's first message still held (see below)
+        spin_until = 0
         while True:
             w, lay = self._w, self._lay
             ws = w[W_WRITE_SEQ]  # ⓐ
             ordered()  # ⓑ
             rs = self._read_seq
             if ws > rs:
-                want = ws if jump or ws - rs > lay.n_slots else rs + 1
+                want = ws if jump or ws - rs > lay.n_slots else max(rs + 1, skip_to)
                 slot = w[W_ORDER + want % lay.n_slots]  # ⓒ
                 pin = self._base + R_PIN
                 w[pin] = slot  # ⓓ
@@ -238,7 +241,12 @@ class Reader:
                 if w[base + S_BEGIN] == want and w[base + S_END] == want:  # ⓕ
                     return slot, want, want - rs - 1
                 w[pin] = -1
-                jump = self.policy is Policy.KEEP_LATEST  # overwritten meanwhile: newest
+                if self.policy is Policy.KEEP_LATEST:
+                    jump = True  # overwritten meanwhile: newest
+                elif w[base + S_END] > want:
+                    # overwritten before this reader's position was seen (it joined while the
+                    # writer reused a slot every reader then had read): gone, counted as dropped
+                    skip_to = want + 1
                 continue
             now = time.monotonic()
             if now - last_check >= CHECK_S or (deadline is not None and now >= deadline):
@@ -250,6 +258,10 @@ class Reader:
                     continue
             if deadline is not None and now >= deadline:
                 return -1, 0, 0
+            if not spin_until:
+                spin_until = time.perf_counter_ns() + SPIN_NS
+            if time.perf_counter_ns() < spin_until:
+                continue  # poll write_seq a little before sleeping
             wait = CHECK_S if deadline is None else min(CHECK_S, deadline - now)
             flag = self._base + R_WAITING
             w[flag] = 1

@@ -48,6 +48,7 @@ from redrive.transport.segment import (
 )
 from redrive.transport.stream import (
     CHECK_S,
+    SPIN_NS,
     ChannelStats,
     Policy,
     ReaderGoneError,
@@ -159,23 +160,41 @@ class Writer:
         w = self._w
         nxt = self._seq + 1
         last_check = time.monotonic()
+        spin_until = 0
+        lossless = self.policy is Policy.LOSSLESS
+        lossless_value = Policy.LOSSLESS.value
         while True:
-            need_free = self._lossless_floor()
-            readers = [b for b in self._readers if w[b + R_STATE] == 1]
-            pinned = {w[b + R_PIN] for b in readers}
+            # one pass over the reader entries: the live ones, their pins, the lowest read
+            # position of all and of the lossless ones (None: no such reader)
+            readers: list[int] = []
+            pinned: set[int] = set()
+            read_by_all = need_free = None
+            for b in self._readers:
+                if w[b + R_STATE] != 1:
+                    continue
+                readers.append(b)
+                pinned.add(w[b + R_PIN])
+                seq = w[b + R_READ_SEQ]
+                if read_by_all is None or seq < read_by_all:
+                    read_by_all = seq
+                if lossless and w[b + R_POLICY] == lossless_value:
+                    need_free = seq if need_free is None or seq < need_free else need_free
+            if read_by_all is not None:
+                # a slot whose message every reader has read is of use to nobody: take the one
+                # written last (just read, still in cache) rather than walking the whole ring
+                for slot in reversed(self._lru):
+                    if self._slot_seq[slot] > read_by_all or slot in pinned:
+                        continue
+                    if self._try_claim(slot, nxt, readers):
+                        return slot
             for slot in self._lru:  # least recently written first
                 held = self._slot_seq[slot]
                 if need_free is not None and held > need_free:
                     break  # the newer slots all hold unread lossless messages too
                 if slot in pinned:
                     continue
-                base_w = self._slot_words[slot]
-                w[base_w + S_BEGIN] = nxt  # ① the slot is being written
-                fence()  # ②
-                if any(w[b + R_PIN] == slot for b in readers):  # ③
-                    w[base_w + S_BEGIN] = held
-                    continue
-                return slot
+                if self._try_claim(slot, nxt, readers):
+                    return slot
             # no slot: only lossless back-pressure (or pins of dead readers) gets here
             now = time.monotonic()
             if deadline is not None and now >= deadline:
@@ -192,12 +211,26 @@ class Writer:
             if now - last_check >= CHECK_S:
                 last_check = now
                 self._reap_dead_readers()
+            if not spin_until:
+                spin_until = time.perf_counter_ns() + SPIN_NS
+            if time.perf_counter_ns() < spin_until:
+                continue  # poll the readers' positions a little before sleeping
             wait = CHECK_S if deadline is None else min(CHECK_S, deadline - now)
             w[W_WRITER_WAITING] = 1
             fence()  # the readers' read_seq stores are seen after this, or they see the flag
             if self._lossless_floor() == need_free and wait_fd(self._space_fd, wait):
                 drain(self._space_fd)
             w[W_WRITER_WAITING] = 0
+
+    def _try_claim(self, slot: int, nxt: int, readers: list[int]) -> bool:
+        """Mark ``slot`` as being written (①②③); False (and unmarked) if a reader pins it."""
+        w, base_w = self._w, self._slot_words[slot]
+        w[base_w + S_BEGIN] = nxt  # ① the slot is being written
+        fence()  # ②
+        if any(w[b + R_PIN] == slot for b in readers):  # ③
+            w[base_w + S_BEGIN] = self._slot_seq[slot]
+            return False
+        return True
 
     def _live_readers(self) -> list[int]:
         w = self._w

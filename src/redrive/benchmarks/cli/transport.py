@@ -20,9 +20,11 @@ place), each run flat out (throughput the subscriber received, after a 10 % warm
 (one-way latency p50/p99 from a CLOCK_MONOTONIC stamp in the payload). Every subscriber checks the
 header and sums one byte per 4 KiB page; copy sides do it on the copy they were handed, in-place
 sides on the shared memory. Also single-thread np.copyto, cache-hot and from memory (256 MiB pools).
-Sides whose package is missing show "not installed". Targets (issue 6): redrive in place >= 1.0x
-iceoryx2 at 1 and 4 MiB; >= 10x pipe + pickle at 4 MiB; >= 50 % of the from-memory copy at 16 MiB;
-paced 4 MiB p99 <= 2 ms.
+Sides whose package is missing show "not installed". Targets (issues 6, 20): redrive in place
+>= 1.0x iceoryx2 at 64 KiB, 1 and 4 MiB; >= 10x pipe + pickle at 4 MiB; >= 50 % of the
+from-memory copy at 16 MiB; paced 4 MiB p99 <= 2 ms. --repeat N runs the whole set N times,
+interleaved (every side at every size once per repetition), and prints min / median / max of each
+target's ratio over the repetitions, judged on the median.
 """
 
 _EPILOG = """\
@@ -30,6 +32,7 @@ examples:
   redrive bench transport                                   every side, 64K 1M 4M 16M, 2 s a run
   redrive bench transport --sizes 4M --sides redrive-inplace,iceoryx2 --seconds 5
   redrive bench transport --json > transport.json
+  redrive bench transport --sizes 64K,1M,4M --sides redrive-inplace,iceoryx2 --repeat 3 --no-paced
 
 sides: redrive-copy, redrive-inplace, pipe-pickle, mp-queue, zmq, ecal, iceoryx2
 """
@@ -148,7 +151,13 @@ def _print_report(result: Any) -> None:
 def _run_transport(args: argparse.Namespace) -> int:
     from rich.console import Console
 
-    from redrive.benchmarks.transport import DEFAULT_SIDES, SIDES, bench_transport, parse_size
+    from redrive.benchmarks.transport import (
+        DEFAULT_SIDES,
+        SIDES,
+        bench_transport,
+        parse_size,
+        target_spreads,
+    )
     from redrive.errors import ConfigError
 
     sizes = [parse_size(s) for s in args.sizes.split(",") if s.strip()]
@@ -160,29 +169,72 @@ def _run_transport(args: argparse.Namespace) -> int:
     if args.seconds <= 0 or args.paced_hz <= 0:
         msg = "--seconds and --paced-hz must be greater than 0"
         raise ConfigError(msg)
+    if args.repeat < 1:
+        msg = "--repeat must be at least 1"
+        raise ConfigError(msg)
     status = Console(stderr=True)
+    results = []
     with status.status("benchmarking") as spinner:
+        for rep in range(args.repeat):
+            prefix = f"repetition {rep + 1}/{args.repeat}: " if args.repeat > 1 else ""
 
-        def progress(text: str) -> None:
-            spinner.update(f"benchmarking: {text}")
+            def progress(text: str, prefix: str = prefix) -> None:
+                spinner.update(f"benchmarking: {prefix}{text}")
 
-        result = bench_transport(
-            sizes,
-            sides=sides,
-            seconds=args.seconds,
-            paced_hz=args.paced_hz,
-            paced=not args.no_paced,
-            memcpy=not args.no_memcpy,
-            verify=args.verify,
-            progress=progress,
-        )
-    corrupt = sum(r.corrupt for c in result.cells for r in (c.flat, c.paced) if r is not None)
+            results.append(
+                bench_transport(
+                    sizes,
+                    sides=sides,
+                    seconds=args.seconds,
+                    paced_hz=args.paced_hz,
+                    paced=not args.no_paced,
+                    memcpy=not args.no_memcpy,
+                    verify=args.verify,
+                    progress=progress,
+                )
+            )
+    corrupt = sum(
+        r.corrupt for res in results for c in res.cells for r in (c.flat, c.paced) if r is not None
+    )
+    spreads = target_spreads(results)
     if args.json:
-        json.dump(result.to_json(), sys.stdout, indent=2)
+        out = (
+            results[0].to_json()
+            if args.repeat == 1
+            else {
+                "repetitions": [r.to_json() for r in results],
+                "spread": [t.to_json() for t in spreads],
+            }
+        )
+        json.dump(out, sys.stdout, indent=2)
         sys.stdout.write("\n")
     else:
-        _print_report(result)
+        _print_report(results[-1])
+        if args.repeat > 1:
+            _print_spread(spreads, len(results))
     return 1 if corrupt else 0
+
+
+def _print_spread(spreads: Any, repeats: int) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    from redrive.benchmarks.transport import SIDES, size_label
+
+    table = Table(title=f"targets over {repeats} interleaved repetitions (verdict on the median)")
+    for col in ("target", "side", "size", "min", "median", "max", "bound", "verdict"):
+        table.add_column(col, justify="left" if col in ("target", "side", "verdict") else "right")
+    for t in spreads:
+        unit = " ms" if t.at_most else "×"
+        table.add_row(
+            t.name,
+            SIDES[t.side].label,
+            size_label(t.size_bytes),
+            *(_num(v, ".2f") + unit if v is not None else "—" for v in (t.min, t.median, t.max)),
+            t.target,
+            _verdict(t.met),
+        )
+    Console(width=None if sys.stdout.isatty() else 140).print(table)
 
 
 def add_transport_parser(bench_sub: Any) -> None:
@@ -222,6 +274,14 @@ def add_transport_parser(bench_sub: Any) -> None:
         "--verify",
         action="store_true",
         help="subscribers compare every byte of every message (slower; numbers not comparable)",
+    )
+    parser.add_argument(
+        "--repeat",
+        type=int,
+        default=1,
+        metavar="N",
+        help="run everything N times, interleaved; print min/median/max per target ratio "
+        "(default 1)",
     )
     parser.add_argument("--json", action="store_true", help="print JSON instead of tables")
     parser.set_defaults(func=_run_transport)

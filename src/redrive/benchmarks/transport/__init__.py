@@ -82,6 +82,7 @@ from redrive.benchmarks.transport.run import (
     size_label,
 )
 from redrive.benchmarks.transport.sides import DEFAULT_SIDES, SIDES, SideSpec
+from redrive.benchmarks.transport.spread import TargetSpread, target_spreads
 from redrive.benchmarks.transport.targets import (
     INPLACE_VS_ICEORYX2_TARGET,
     PACED_P99_TARGET_MS,
@@ -106,6 +107,7 @@ __all__ = [
     "RunResult",
     "SideSpec",
     "TargetCheck",
+    "TargetSpread",
     "TransportBenchResult",
     "bench_memcpy",
     "bench_transport",
@@ -114,4 +116,5 @@ __all__ = [
     "run_cell",
     "side_available",
     "size_label",
+    "target_spreads",
 ]
