@@ -160,6 +160,8 @@ def _check(layout: Layout, tmp_path: Path, *, seed: int, n: int) -> None:
         wanted = Counter(k for k, end in layout.messages if end <= first_bad)
         missing = wanted - Counter(got)
         assert not missing, f"{kind} at byte {first_bad}: {sum(missing.values())} intact lost"
+        if kind in ("truncated", "header only"):  # nothing made up from the bytes of a cut record
+            assert not Counter(got) - Counter(k for k, _ in layout.messages), kind
         if rng.random() < 0.3:
             strict = _read(damaged, strict=True)
             assert not Counter(strict) - Counter(got)
@@ -176,6 +178,26 @@ def test_synthetic_mcap(tmp_path: Path, compression: str, chunked: bool) -> None
     write_string_mcap(src, messages=200, compression=compression, chunked=chunked)
     seed = ["zstd", "lz4", "none"].index(compression) * 2 + chunked
     _check(_mcap_layout(src), tmp_path, seed=seed, n=6)
+
+
+@pytest.mark.parametrize("compression", ["zstd", "lz4", "none"])
+def test_the_start_of_a_chunk_cut_off_by_the_end_of_the_file_is_read(
+    tmp_path: Path, compression: str
+) -> None:
+    """A recorder killed while writing a chunk: the whole messages of its start are read (zstd
+    and lz4 frames give their complete blocks), in order, none made up; the rest is reported."""
+    src = tmp_path / "one_chunk.mcap"
+    sent = write_string_mcap(src, messages=6000, compression=compression, chunk_size=1 << 22)
+    data = src.read_bytes()
+    (chunk_at, chunk_end) = _mcap_layout(src).chunks[0]
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: chunk_at + (chunk_end - chunk_at) * 7 // 10])
+    with open_log(cut, strict=False) as log:
+        got = [(m.topic, m.log_time_ns, bytes(m.raw)) for m in log.messages()]
+        (damage,) = [d for d in log.damage_report if "inside a chunk" in d.what]
+    assert 0 < len(got) < len(sent)
+    assert got == sent[: len(got)]  # the chunk's first messages, in order
+    assert f"{len(got)} whole messages of its start were read" in damage.what
 
 
 def test_real_mcap(shared_data: Path, tmp_path: Path) -> None:

@@ -248,7 +248,17 @@ def read_chunk(buf: memoryview, head: ChunkHead) -> tuple[list[Message], list[ob
         )
     if head.crc != 0 and zlib.crc32(data) != head.crc:
         return [], [], "the chunk fails its CRC check (its bytes changed)"
-    view = memoryview(data)
+    messages, others, pos, why = _chunk_records(memoryview(data))
+    if why is not None:
+        return messages, others, f"a record at offset {pos} of the chunk is malformed ({why})"
+    return messages, others, None
+
+
+def _chunk_records(
+    view: memoryview,
+) -> tuple[list[Message], list[object], int, str | None]:
+    """The records of a chunk's decompressed bytes: messages, schemas/channels, the offset
+    reached, and why it stopped early (None when every byte was read)."""
     messages: list[Message] = []
     others: list[object] = []
     pos, end = 0, len(view)
@@ -272,8 +282,45 @@ def read_chunk(buf: memoryview, head: ChunkHead) -> tuple[list[Message], list[ob
                 others.append(_channel(view, body, stop))
             pos = stop
     except RecordError as err:
-        return messages, others, f"a record at offset {pos} of the chunk is malformed ({err})"
-    return messages, others, None
+        return messages, others, pos, str(err)
+    return messages, others, pos, None
+
+
+def salvage_cut_chunk(buf: memoryview, pos: int) -> tuple[list[Message], list[object]]:
+    """The whole records at the start of a chunk record at ``pos`` that the end of the file cuts
+    off: what a recorder killed in the middle of writing a chunk left of it.
+
+    The chunk's bytes up to the end of the file are decompressed as a stream (zstd and lz4
+    frames give what their complete blocks hold; an uncompressed chunk is read as it is), and the
+    records that are whole in them are read; the cut record is dropped. The chunk's CRC covers
+    the whole chunk, so it cannot be checked: the records' own framing is what is trusted.
+    Nothing when the chunk's header itself is cut, or its compression is unknown.
+    """
+    size = len(buf)
+    head_end = pos + 9 + _CHUNK.size
+    if head_end + 4 > size:
+        return [], []
+    usize = _CHUNK.unpack_from(buf, pos + 9)[2]
+    try:
+        compression, at = _string(buf, head_end, size)
+    except RecordError:
+        return [], []
+    if compression not in _COMPRESSIONS or usize > _MAX_CHUNK or at + 8 > size:
+        return [], []
+    raw = buf[at + 8 : size]
+    try:
+        if compression == "zstd":
+            data: bytes | memoryview = (
+                zstandard.ZstdDecompressor().decompressobj().decompress(bytes(raw))
+            )
+        elif compression == "lz4":
+            data = lz4.frame.LZ4FrameDecompressor().decompress(bytes(raw))
+        else:
+            data = raw
+    except (zstandard.ZstdError, RuntimeError, ValueError, OSError, EOFError, MemoryError):
+        return [], []
+    messages, others, _pos, _why = _chunk_records(memoryview(data)[:usize])
+    return messages, others
 
 
 def summary_crc_ok(buf: memoryview) -> bool:
@@ -342,6 +389,25 @@ class McapScan:
                     raise RecordError("the file ends inside a record header")
                 op, length = _OPLEN.unpack_from(buf, pos)
                 stop = pos + 9 + length
+                if (stop > size or length > size) and op == OP_CHUNK and not data_done:
+                    messages, others = salvage_cut_chunk(buf, pos)
+                    for record in others:
+                        yield self._record(record)
+                    for message in messages:
+                        yield "message", message
+                    yield (
+                        "damage",
+                        LogDamage(
+                            what=(
+                                f"the file is cut off inside a chunk record of {length} bytes at "
+                                f"byte {size}: {len(messages)} whole messages of its start were "
+                                "read, the rest of it is lost"
+                            ),
+                            start_byte=pos,
+                            stop_byte=size,
+                        ),
+                    )
+                    return
                 if stop > size or length > size:
                     kind = _KINDS.get(op, f"an opcode-{op:#04x}")
                     raise RecordError(
