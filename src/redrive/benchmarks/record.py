@@ -40,6 +40,7 @@ __all__ = [
     "TopicCount",
     "bench_record",
     "compare_counts",
+    "cpu_by_process",
     "tree_cpu_s",
 ]
 
@@ -110,6 +111,31 @@ def tree_cpu_s(pid: int) -> float:
     return total
 
 
+def cpu_by_process(pid: int) -> dict[str, float]:
+    """CPU seconds of each living process of ``pid``'s tree, by what it is: ``recorder`` (the
+    process ``pid``, with what its waited-for children used), ``scraper TOPIC``, else its name."""
+    import psutil
+
+    out: dict[str, float] = {}
+    try:
+        root = psutil.Process(pid)
+        procs = [root, *root.children(recursive=True)]
+    except psutil.NoSuchProcess:
+        return out
+    for proc in procs:
+        with contextlib.suppress(psutil.NoSuchProcess, psutil.AccessDenied):
+            t = proc.cpu_times()
+            used = t.user + t.system
+            if proc is root:
+                label, used = "recorder", used + t.children_user + t.children_system
+            else:
+                argv = proc.cmdline()
+                topic = argv[argv.index("--topic") + 1] if "--topic" in argv[:-1] else None
+                label = f"scraper {topic}" if topic else proc.name()
+            out[label] = out.get(label, 0.0) + used
+    return out
+
+
 @dataclass(slots=True)
 class RecordResult:
     """One run: per-topic counts, CPU seconds of each recorder's tree over the window (and over
@@ -125,6 +151,8 @@ class RecordResult:
     reference_cpu_total_s: float
     redrive_cpu_total_s: float
     redrive_processes: int
+    #: redrive's CPU seconds in the window by process (recorder, each scraper)
+    redrive_cpu_by_process: dict[str, float]
     cpus: int
     load_before: tuple[float, float, float]
     load_after: tuple[float, float, float]
@@ -426,6 +454,7 @@ def _run(plan: _Plan, work: Path, say: Callable[[str], None]) -> RecordResult:
                 time.sleep(0.05)
             say(f"recording {window_s:g} s of playback at {rate:g}x")
             cpu0 = (tree_cpu_s(reference.pid), tree_cpu_s(ours.pid))
+            parts0 = cpu_by_process(ours.pid)
             start = time.monotonic()
             _set_paused(uri, paused=False)
             time.sleep(max(window_s - (time.monotonic() - start), 0.0))
@@ -433,6 +462,7 @@ def _run(plan: _Plan, work: Path, say: Callable[[str], None]) -> RecordResult:
             window = time.monotonic() - start
             time.sleep(1.0)  # both write what they still hold
             cpu1 = (tree_cpu_s(reference.pid), tree_cpu_s(ours.pid))
+            parts = {k: v - parts0.get(k, 0.0) for k, v in cpu_by_process(ours.pid).items()}
             import psutil
 
             processes = 0
@@ -463,6 +493,7 @@ def _run(plan: _Plan, work: Path, say: Callable[[str], None]) -> RecordResult:
         reference_cpu_total_s=cpu1[0],
         redrive_cpu_total_s=cpu1[1],
         redrive_processes=processes,
+        redrive_cpu_by_process=parts,
         cpus=os.cpu_count() or 1,
         load_before=load_before,
         load_after=os.getloadavg(),

@@ -105,10 +105,16 @@ class SplitMcapWriter:
         self._opened_s = time.monotonic()
 
     def write(
-        self, topic: str, schema: Ros1Schema, *, log_ns: int, publish_ns: int, data: bytes
+        self,
+        topic: str,
+        schema: Ros1Schema,
+        *,
+        log_ns: int,
+        publish_ns: int,
+        data: bytes | memoryview,
     ) -> None:
         """Add one message (its bytes as published) to the current file, splitting first when the
-        current file is full."""
+        current file is full. ``data`` is copied before this returns (a view may be released)."""
         if self._fh is None:
             msg = f"{self.path}: the recording is closed"
             raise LogError(msg)
@@ -134,7 +140,11 @@ class SplitMcapWriter:
         seq = self._sequence.get(topic, 0)
         self._sequence[topic] = seq + 1
         self._writer.add_message(
-            channel_id=channel, log_time=log_ns, publish_time=publish_ns, data=data, sequence=seq
+            channel_id=channel,
+            log_time=log_ns,
+            publish_time=publish_ns,
+            data=data,  # type: ignore[arg-type]  # mcap writes it into its chunk buffer at once
+            sequence=seq,
         )
 
     def _full(self) -> bool:

@@ -38,6 +38,7 @@ from redrive.live.scraper_state import Ros1Definition
 from redrive.live.streams import StreamSpec, ros1_type
 from redrive.transport import Message, Policy, ProducerGoneError, Reader
 from redrive.transport.codec import KIND_CDR, KIND_ROS1, KIND_SENSOR, decode_ros1, decode_sample
+from redrive.transport.heap import keep_freed_memory
 
 __all__ = ["DataLogger"]
 
@@ -134,6 +135,7 @@ class DataLogger:
         except BaseException:
             self._close_readers()
             raise
+        keep_freed_memory()  # the MCAP writer's chunk buffers reuse warm pages
         self._thread = threading.Thread(target=self._run, name="redrive-recorder", daemon=True)
         self._thread.start()
 
@@ -235,7 +237,7 @@ class DataLogger:
                 self._schema(topic, head.msg_type, head.md5sum),
                 log_ns=log_ns,
                 publish_ns=stamp_ns or log_ns,
-                data=data.tobytes(),
+                data=data.data,  # the view: the MCAP chunk copies it, once
             )
         elif kind == KIND_CDR:  # ROS 2: recorded as it came off the wire
             assert self._native is not None

@@ -69,10 +69,18 @@ def _run_record(args: argparse.Namespace) -> int:
             highlight=False,
         )
     c.print(f"lost relative to rosbag record: {r.lost} {_verdict(r.lost == 0)} 0")
+    more = sum(max(t.redrive - t.reference, 0) for t in r.topics)
+    if more:
+        c.print(f"  (redrive recorded {more} messages that rosbag record did not)")
     c.print(
         f"CPU over the playback: rosbag record {r.reference_cpu_s:.2f} s, redrive "
         f"{r.redrive_cpu_s:.2f} s ({r.redrive_processes} processes): {r.cpu_ratio:.2f}x "
         f"{_verdict(r.cpu_ratio <= TARGET_CPU_RATIO)} <= {TARGET_CPU_RATIO:g}x"
+    )
+    c.print(
+        "  redrive by process: "
+        + ", ".join(f"{k} {v:.2f} s" for k, v in sorted(r.redrive_cpu_by_process.items())),
+        highlight=False,
     )
     c.print(
         f"CPU from start to the end of the playback: rosbag record {r.reference_cpu_total_s:.2f} s, "
