@@ -369,11 +369,13 @@ def bench_record(
     bag: Path = KITTI_BAG,
     topics: Sequence[str] | None = None,
     compression: str = "none",
+    settle_s: float = 1.0,
     workdir: Path | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> RecordResult:
     """Record ``window_s`` seconds of a looped playback of ``data_dir / bag`` at ``rate`` with both,
-    with chunk ``compression`` (``none``, ``lz4``; ``zstd``: redrive only).
+    with chunk ``compression`` (``none``, ``lz4``; ``zstd``: redrive only). The CPU time is read
+    ``settle_s`` after the playback paused (both have written what they received by then).
 
     Raises:
         ConfigError: ROS 1 is not installed, the bag is missing or a number is out of range.
@@ -399,6 +401,7 @@ def bench_record(
         window_s=window_s,
         topics=list(topics) if topics else _bag_topics(bag_path),
         compression=compression,
+        settle_s=settle_s,
     )
     if workdir is not None:
         return _run(plan, workdir, say)
@@ -413,6 +416,7 @@ class _Plan:
     window_s: float
     topics: list[str]
     compression: str
+    settle_s: float
 
 
 def _run(plan: _Plan, work: Path, say: Callable[[str], None]) -> RecordResult:
@@ -460,7 +464,7 @@ def _run(plan: _Plan, work: Path, say: Callable[[str], None]) -> RecordResult:
             time.sleep(max(window_s - (time.monotonic() - start), 0.0))
             _set_paused(uri, paused=True)
             window = time.monotonic() - start
-            time.sleep(1.0)  # both write what they still hold
+            time.sleep(plan.settle_s)  # both write what they still hold
             cpu1 = (tree_cpu_s(reference.pid), tree_cpu_s(ours.pid))
             parts = {k: v - parts0.get(k, 0.0) for k, v in cpu_by_process(ours.pid).items()}
             import psutil
@@ -469,6 +473,9 @@ def _run(plan: _Plan, work: Path, say: Callable[[str], None]) -> RecordResult:
             with contextlib.suppress(psutil.NoSuchProcess):
                 processes = 1 + len(psutil.Process(ours.pid).children(recursive=True))
             say("stopping both with SIGINT")
+            for proc in (reference, ours):  # Ctrl-C to both at once; each closes its file
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(proc.pid, signal.SIGINT)
             _stop(reference, signal.SIGINT, wait_s=30)
             _stop(ours, signal.SIGINT, wait_s=60)
         finally:
