@@ -473,11 +473,12 @@ def _run(plan: _Plan, work: Path, say: Callable[[str], None]) -> RecordResult:
             with contextlib.suppress(psutil.NoSuchProcess):
                 processes = 1 + len(psutil.Process(ours.pid).children(recursive=True))
             say("stopping both with SIGINT")
-            for proc in (reference, ours):  # Ctrl-C to both at once; each closes its file
-                with contextlib.suppress(ProcessLookupError):
+            for proc in (reference, ours):  # Ctrl-C to both at once (once: a second one
+                with contextlib.suppress(ProcessLookupError):  # interrupts the closing)
                     os.killpg(proc.pid, signal.SIGINT)
-            _stop(reference, signal.SIGINT, wait_s=30)
-            _stop(ours, signal.SIGINT, wait_s=60)
+            for proc, wait_s in ((reference, 30.0), (ours, 60.0)):
+                with contextlib.suppress(subprocess.TimeoutExpired):
+                    proc.wait(timeout=wait_s)
         finally:
             for proc in (reference, ours, player):
                 _stop(proc, wait_s=10)
