@@ -158,6 +158,7 @@ def _run(args: argparse.Namespace) -> int:
                     session.specs,
                     args.record,
                     definitions=session.definition if session.scrapers else None,
+                    compression=args.compression,
                 )
             log = LiveLog(session.specs, session.name, stop=stop)
             if args.duration is not None:
@@ -320,6 +321,13 @@ def register(sub: Any) -> None:
         "--split-size",
         metavar="SIZE",
         help="recording only: numbered files NAME_0000.mcap … of about SIZE each (500M, 2G)",
+    )
+    parser.add_argument(
+        "--compression",
+        choices=("zstd", "lz4", "none"),
+        default="zstd",
+        help="the recording's chunk compression (default zstd: the smallest files; none, as "
+        "rosbag record writes by default, costs the least CPU)",
     )
     parser.add_argument(
         "--split-duration",

@@ -190,6 +190,7 @@ def record_only(args: argparse.Namespace, master: str) -> int:
                 split_size_bytes=split_size,
                 split_duration_s=args.split_duration,
                 max_size_bytes=max_size,
+                compression=args.compression,
             )
             try:
                 if ros:  # each scraper subscribes once the recorder reads its stream

@@ -41,12 +41,12 @@ from redrive.io.ros_encode import encode_value
 from redrive.io.typestore import typestore_for
 from redrive.types import Frame, VehicleState
 
-__all__ = ["Compression", "McapWriter"]
+__all__ = ["COMPRESSION", "Compression", "McapWriter"]
 
 logger = logging.getLogger(__name__)
 
 Compression = Literal["zstd", "lz4", "none"]
-_COMPRESSION: Mapping[str, CompressionType] = MappingProxyType(
+COMPRESSION: Mapping[str, CompressionType] = MappingProxyType(
     {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
 )
 
@@ -77,8 +77,8 @@ class McapWriter:
         chunk_size_bytes: int = 4 * 1024 * 1024,
         chunk_span_s: float = 2.0,
     ) -> None:
-        if compression not in _COMPRESSION:
-            msg = f"compression must be one of {sorted(_COMPRESSION)}, got {compression!r}"
+        if compression not in COMPRESSION:
+            msg = f"compression must be one of {sorted(COMPRESSION)}, got {compression!r}"
             raise ValueError(msg)
         self.path = Path(path)
         self.typestore = typestore if typestore is not None else typestore_for(2)[0]
@@ -90,7 +90,7 @@ class McapWriter:
             raise LogError(msg) from err
         self._fh: IO[bytes] | None = os.fdopen(fd, "wb")
         self._writer = _McapWriter(
-            self._fh, chunk_size=chunk_size_bytes, compression=_COMPRESSION[compression]
+            self._fh, chunk_size=chunk_size_bytes, compression=COMPRESSION[compression]
         )
         self._writer.start(profile="ros2", library="redrive")
         self._chunk_span_ns = round(chunk_span_s * 1e9)

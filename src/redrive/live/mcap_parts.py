@@ -16,11 +16,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
-from mcap.writer import CompressionType
 from mcap.writer import Writer as McapRawWriter
 
 from redrive.errors import LogError
 from redrive.io.partfiles import create_part
+from redrive.io.writer import COMPRESSION as _COMPRESSION
+from redrive.io.writer import Compression
 
 __all__ = ["Ros1Schema", "SplitMcapWriter", "split_name"]
 
@@ -49,6 +50,7 @@ class SplitMcapWriter:
         path: the target file (``--record``).
         split_size_bytes: start a new file once the current one holds this many bytes.
         split_duration_s: start a new file after this many seconds of wall time.
+        compression: chunk compression, ``zstd`` (default), ``lz4`` or ``none``.
 
     Raises:
         LogError: the folder cannot be written.
@@ -60,8 +62,10 @@ class SplitMcapWriter:
         *,
         split_size_bytes: int | None = None,
         split_duration_s: float | None = None,
+        compression: Compression = "zstd",
     ) -> None:
         self.path = path
+        self.compression = _COMPRESSION[compression]
         self.split_size_bytes = split_size_bytes
         self.split_duration_s = split_duration_s
         self.split = split_size_bytes is not None or split_duration_s is not None
@@ -93,7 +97,7 @@ class SplitMcapWriter:
         chunk = 1 << 20
         if self.split_size_bytes is not None:
             chunk = max(4 << 10, min(chunk, self.split_size_bytes // 4))
-        self._writer = McapRawWriter(self._fh, chunk_size=chunk, compression=CompressionType.ZSTD)
+        self._writer = McapRawWriter(self._fh, chunk_size=chunk, compression=self.compression)
         self._writer.start(profile="ros1", library="redrive")
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
@@ -101,10 +105,16 @@ class SplitMcapWriter:
         self._opened_s = time.monotonic()
 
     def write(
-        self, topic: str, schema: Ros1Schema, *, log_ns: int, publish_ns: int, data: bytes
+        self,
+        topic: str,
+        schema: Ros1Schema,
+        *,
+        log_ns: int,
+        publish_ns: int,
+        data: bytes | memoryview,
     ) -> None:
         """Add one message (its bytes as published) to the current file, splitting first when the
-        current file is full."""
+        current file is full. ``data`` is copied before this returns (a view may be released)."""
         if self._fh is None:
             msg = f"{self.path}: the recording is closed"
             raise LogError(msg)
@@ -130,7 +140,11 @@ class SplitMcapWriter:
         seq = self._sequence.get(topic, 0)
         self._sequence[topic] = seq + 1
         self._writer.add_message(
-            channel_id=channel, log_time=log_ns, publish_time=publish_ns, data=data, sequence=seq
+            channel_id=channel,
+            log_time=log_ns,
+            publish_time=publish_ns,
+            data=data,  # type: ignore[arg-type]  # mcap writes it into its chunk buffer at once
+            sequence=seq,
         )
 
     def _full(self) -> bool:

@@ -33,6 +33,12 @@ from typing import Any
 
 logger = logging.getLogger("redrive.live.ros1_scraper")
 
+#: ask the master whether it restarted every this many 0.25-s ticks (once a second)
+_MASTER_EVERY = 4
+#: rospy's socket read size: below glibc's mmap threshold as raised by keep_freed_memory (a
+#: read buffer of 64 MiB was a fresh mmap for every read)
+_RECV_BYTES = 4 << 20
+
 
 def _master_pid(uri: str) -> int | None:
     try:
@@ -60,6 +66,9 @@ def main(argv: list[str] | None = None) -> int:
     from redrive.errors import TransportError
     from redrive.transport import Policy, ReaderGoneError, Writer
     from redrive.transport.codec import KIND_ROS1, encode_ros1_meta
+    from redrive.transport.heap import keep_freed_memory
+
+    keep_freed_memory()  # rospy's per-message buffers reuse warm pages (redrive.transport.heap)
 
     parser = argparse.ArgumentParser(prog="ros1_scraper", description=__doc__)
     parser.add_argument("--topic", required=True)
@@ -135,7 +144,7 @@ def main(argv: list[str] | None = None) -> int:
 
         def subscribe() -> Any:
             return rospy.Subscriber(
-                args.topic, rospy.AnyMsg, on_message, queue_size=1000, buff_size=1 << 26,
+                args.topic, rospy.AnyMsg, on_message, queue_size=1000, buff_size=_RECV_BYTES,
                 tcp_nodelay=True,
             )  # fmt: skip
 
@@ -144,6 +153,7 @@ def main(argv: list[str] | None = None) -> int:
         print("READY", flush=True)
         parent = os.getppid()
         state = ""
+        ticks = 0
         while not stop.wait(0.25):
             with lock:
                 now_state = json.dumps({
@@ -158,6 +168,9 @@ def main(argv: list[str] | None = None) -> int:
             if os.getppid() != parent:  # redrive live was killed: no orphan scraper stays
                 logger.warning("the process that started this scraper is gone: stopping")
                 break
+            ticks += 1
+            if ticks % _MASTER_EVERY:  # an XML-RPC call costs the scraper and the master CPU
+                continue
             now_pid = _master_pid(uri)
             if now_pid is not None and pid is not None and now_pid != pid:
                 logger.info("ROS master restarted (pid %d → %d): subscribing again", pid, now_pid)

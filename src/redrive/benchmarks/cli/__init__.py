@@ -16,6 +16,7 @@ from redrive.benchmarks.cli.lidar import add_lidar_parser
 from redrive.benchmarks.cli.loss import add_loss_parser
 from redrive.benchmarks.cli.read import EPILOG as _EPILOG
 from redrive.benchmarks.cli.read import add_read_parser
+from redrive.benchmarks.cli.record import add_record_parser
 from redrive.benchmarks.cli.transport import add_transport_parser
 
 __all__ = ["register"]
@@ -45,4 +46,5 @@ def register(sub: Any) -> None:
     add_eval_parser(bench_sub)
     add_transport_parser(bench_sub)
     add_loss_parser(bench_sub)
+    add_record_parser(bench_sub)
     add_gui_parser(bench_sub)
