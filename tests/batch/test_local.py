@@ -112,11 +112,11 @@ def test_a_corrupt_log_fails_only_its_cell_with_the_readers_error(
     assert bad.status is CellStatus.FAILED
     assert bad.attempts == 1  # a corrupt log is not retried: it would fail the same way
     assert bad.error is not None
-    assert bad.error.startswith("LogTruncatedError: ")
+    assert bad.error.startswith("LogDamagedError: ")  # the reader's error, as it was raised
     assert str(corrupt) in bad.error
-    assert "cut off or damaged" in bad.error
+    assert "the bag is cut off" in bad.error
     assert read_batch_manifest(out).status == "failed"
-    assert "failed a/open/corrupt: LogTruncatedError" in capsys.readouterr().out
+    assert "failed a/open/corrupt: LogDamagedError" in capsys.readouterr().out
 
 
 def test_a_sigkilled_worker_fails_only_its_cell_after_its_retries(
