@@ -62,6 +62,8 @@ def test_run_exported_and_copied(
     assert len(data["export_s"]) == len(data["copy_s"]) == 1
     assert data["log_span_s"] == pytest.approx(0.99, abs=0.02)
     assert data["ratio"] == pytest.approx(data["export_median_s"] / data["copy_median_s"])
+    assert data["export_cpu_s"][0] > 0
+    assert data["cpu_ratio"] == pytest.approx(data["export_cpu_s"][0] / data["copy_cpu_s"][0])
     assert not list(tmp_path.iterdir())  # the outputs were temporary
 
 

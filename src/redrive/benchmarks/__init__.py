@@ -17,6 +17,8 @@ import contracts).
 - :mod:`~redrive.benchmarks.transport` (``bench transport``): the shared-memory channel against
   pipes, queues, ZeroMQ, eCAL and iceoryx2;
 - :mod:`~redrive.benchmarks.loss` (``bench loss``): the paper's message-loss experiment;
+- :mod:`~redrive.benchmarks.export` (``bench export``): the demo run's Foxglove MCAP export
+  against copying its log with the ``mcap`` library alone;
 - :mod:`~redrive.benchmarks.gui` (``bench gui``, the only Qt part): the main window's frame rate;
 - :mod:`~redrive.benchmarks.cli`: the argument parsers and reports.
 """

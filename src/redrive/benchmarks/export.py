@@ -12,7 +12,8 @@ interpreter and the imports are not timed; the log is read once first so the pag
   floor of any export that reads the log and writes it out.
 
 Reported: seconds (median of the repeats), × real time (the log's span over the seconds), the
-ratio export / copy, and the load average before and after (2 cores are shared here).
+ratio export / copy, the same ratio in CPU seconds of the process (less moved by other work on
+the machine than the wall clock), and the load average before and after (2 cores are shared here).
 """
 
 from __future__ import annotations
@@ -43,7 +44,9 @@ class ExportBenchResult:
         log_span_s: the log's span (first to last message), the real time of the ratios.
         log_bytes, export_bytes, copy_bytes: sizes of the log, the export and the copy.
         export_messages, copy_messages: messages written by each.
-        export_s, copy_s: every repeat's seconds, in the order run.
+        export_s, copy_s: every repeat's wall-clock seconds, in the order run.
+        export_cpu_s, copy_cpu_s: the same passes' CPU seconds of this process (user + system,
+            every thread): less moved by the machine's other work than the wall clock.
         load_before, load_after: 1-minute load average before the first and after the last pass.
     """
 
@@ -57,6 +60,8 @@ class ExportBenchResult:
     copy_messages: int
     export_s: tuple[float, ...]
     copy_s: tuple[float, ...]
+    export_cpu_s: tuple[float, ...]
+    copy_cpu_s: tuple[float, ...]
     load_before: float
     load_after: float
 
@@ -67,6 +72,12 @@ class ExportBenchResult:
     @property
     def copy_median_s(self) -> float:
         return statistics.median(self.copy_s)
+
+    @property
+    def cpu_ratio(self) -> float:
+        """Export CPU seconds over copy CPU seconds (medians)."""
+        copy = statistics.median(self.copy_cpu_s)
+        return statistics.median(self.export_cpu_s) / copy if copy > 0 else float("inf")
 
     @property
     def export_realtime(self) -> float:
@@ -91,6 +102,7 @@ class ExportBenchResult:
             export_realtime=self.export_realtime,
             copy_realtime=self.copy_realtime,
             ratio=self.ratio,
+            cpu_ratio=self.cpu_ratio,
         )
         return out
 
@@ -212,18 +224,22 @@ def bench_export(
         load_before = os.getloadavg()[0]
         export_s: list[float] = []
         copy_s: list[float] = []
+        export_cpu: list[float] = []
+        copy_cpu: list[float] = []
         export_path = copy_path = tmp / "none"
         export_messages = copy_messages = 0
         for i in range(repeats):
             say(f"repeat {i + 1}/{repeats}: export")
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             export_path = export_mcap(run, out=tmp / "export")
             export_s.append(time.perf_counter() - t0)
+            export_cpu.append(time.process_time() - c0)
             say(f"repeat {i + 1}/{repeats}: copy")
             copy_path = tmp / "copy.mcap"
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             copy_messages = copy_mcap(log, copy_path)
             copy_s.append(time.perf_counter() - t0)
+            copy_cpu.append(time.process_time() - c0)
         load_after = os.getloadavg()[0]
         export_messages = _message_count(export_path)
         return ExportBenchResult(
@@ -237,6 +253,8 @@ def bench_export(
             copy_messages=copy_messages,
             export_s=tuple(export_s),
             copy_s=tuple(copy_s),
+            export_cpu_s=tuple(export_cpu),
+            copy_cpu_s=tuple(copy_cpu),
             load_before=load_before,
             load_after=load_after,
         )
