@@ -19,6 +19,8 @@ import contracts).
 - :mod:`~redrive.benchmarks.loss` (``bench loss``): the paper's message-loss experiment;
 - :mod:`~redrive.benchmarks.record` (``bench record``): ``redrive live --record`` against
   ``rosbag record`` on one playback: messages lost, CPU of each process tree;
+- :mod:`~redrive.benchmarks.export` (``bench export``): the demo run's Foxglove MCAP export
+  against copying its log with the ``mcap`` library alone;
 - :mod:`~redrive.benchmarks.gui` (``bench gui``, the only Qt part): the main window's frame rate;
 - :mod:`~redrive.benchmarks.cli`: the argument parsers and reports.
 """

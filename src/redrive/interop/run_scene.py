@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import pyarrow.compute as pc
 
 from redrive.errors import ConfigError
 from redrive.geometry.se3 import quaternion_from_yaw
@@ -96,10 +97,14 @@ def _rows_by_frame(run: Run, name: str, algorithm: str | None = None) -> dict[in
     if name not in run.tables():
         return {}
     table = run.table(name)
+    if algorithm is not None:
+        if "algorithm" not in table.column_names:
+            return {}
+        # the algorithm's rows only, in their order: the others are not turned into dicts
+        table = table.filter(pc.equal(table.column("algorithm"), algorithm))
     out: dict[int, list[Row]] = {}
     for row in table.to_pylist():
-        if algorithm is None or row.get("algorithm") == algorithm:
-            out.setdefault(int(row["frame_index"]), []).append(row)
+        out.setdefault(int(row["frame_index"]), []).append(row)
     return out
 
 

@@ -34,7 +34,7 @@ from foxglove import messages as fm
 
 from redrive.errors import LogError, UnsupportedMessageError
 from redrive.interop import foxglove_msgs as fx
-from redrive.interop.markers import MARKER_ARRAY, marker_array
+from redrive.interop.markers import MARKER_ARRAY, marker_array_cdr
 from redrive.interop.run_scene import (
     BODY_FRAME,
     FrameScene,
@@ -42,7 +42,6 @@ from redrive.interop.run_scene import (
     run_scenes,
     scene_topics,
 )
-from redrive.interop.shapes import ShapeSet
 from redrive.io import open_log
 from redrive.io.base import LogMessage, LogReader
 from redrive.io.decoders import DecodedKind, decode, topic_kind
@@ -291,11 +290,7 @@ class SceneStream:
             yield self._transforms_message(scene.transforms, stamp)
         for topic, shapes in sorted(scene.shapes.items()):
             yield OutMessage(topic, stamp, fx.scene_update(shapes).encode())
-            yield OutMessage(_marker_topic(topic), stamp, self._marker_bytes(shapes))
-
-    def _marker_bytes(self, shapes: ShapeSet) -> bytes:
-        message = marker_array(shapes, self._typestore)
-        return bytes(self._typestore.serialize_cdr(message, MARKER_ARRAY))
+            yield OutMessage(_marker_topic(topic), stamp, marker_array_cdr(shapes))
 
     # -- closing ---------------------------------------------------------------------------------
 

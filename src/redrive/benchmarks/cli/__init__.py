@@ -11,6 +11,7 @@ from redrive.benchmarks.cli.batch import add_batch_parser, add_fleet_parser
 from redrive.benchmarks.cli.closed_loop import add_closed_loop_parser
 from redrive.benchmarks.cli.engine import add_engine_parser
 from redrive.benchmarks.cli.eval import add_eval_parser
+from redrive.benchmarks.cli.export import add_export_parser
 from redrive.benchmarks.cli.gui import add_gui_parser
 from redrive.benchmarks.cli.lidar import add_lidar_parser
 from redrive.benchmarks.cli.loss import add_loss_parser
@@ -48,3 +49,4 @@ def register(sub: Any) -> None:
     add_loss_parser(bench_sub)
     add_record_parser(bench_sub)
     add_gui_parser(bench_sub)
+    add_export_parser(bench_sub)
