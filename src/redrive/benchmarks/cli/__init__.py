@@ -16,6 +16,7 @@ from redrive.benchmarks.cli.lidar import add_lidar_parser
 from redrive.benchmarks.cli.loss import add_loss_parser
 from redrive.benchmarks.cli.read import EPILOG as _EPILOG
 from redrive.benchmarks.cli.read import add_read_parser
+from redrive.benchmarks.cli.suite import add_all_parser
 from redrive.benchmarks.cli.transport import add_transport_parser
 
 __all__ = ["register"]
@@ -46,3 +47,4 @@ def register(sub: Any) -> None:
     add_transport_parser(bench_sub)
     add_loss_parser(bench_sub)
     add_gui_parser(bench_sub)
+    add_all_parser(bench_sub)
