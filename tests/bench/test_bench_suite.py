@@ -23,6 +23,14 @@ _ENGINE_JSON = {
 }  # fmt: skip
 
 
+_EVAL_JSON = {
+    "speedup": 41.5,
+    "target_ratio": 10,
+    "log_duration_s": 0.3,
+    "vectorised": {"frames_per_s": 9e4},
+}
+
+
 def _fake(outcomes: dict[str, Any]) -> Any:
     def run(cmd: list[str], **kwargs: Any) -> subprocess.CompletedProcess[str]:
         name = cmd[cmd.index("bench") + 1]
@@ -45,7 +53,7 @@ def test_rows_say_what_each_benchmark_did() -> None:
     ]
     outcomes = {
         "engine": (0, json.dumps(_ENGINE_JSON), ""),
-        "eval": (0, json.dumps({"speedup": 41.5, "n": 3, "vectorised": {"frames_per_s": 9e4}}), ""),
+        "eval": (0, json.dumps(_EVAL_JSON), ""),
         "lidar": (1, "", "Traceback ...\nredrive: open3d is not installed; pip install open3d"),
         "gui": "timeout",
     }

@@ -25,8 +25,10 @@ from typing import Any
 
 __all__ = ["SUITE", "SuiteEntry", "SuiteRow", "run_suite", "summary_markdown"]
 
-#: leaf keys of a benchmark's JSON reported as figures when it gives no spread
-_FIGURE_WORDS = ("ratio", "speedup", "factor", "per_s", "fps", "us_per_frame")
+#: leaf keys of a benchmark's JSON reported as figures when it gives no spread: a key holding
+#: one of these words (``_``-separated), or ending in a rate or a cost per frame
+_FIGURE_WORDS = frozenset({"ratio", "speedup", "factor", "fps"})
+_FIGURE_ENDINGS = ("_per_s", "_us_per_frame")
 _MAX_FIGURES = 6
 
 
@@ -176,7 +178,8 @@ def figures(result: Mapping[str, Any]) -> tuple[str, ...]:
     for key, value in _leaves(result):
         last = key.rsplit(".", 1)[-1]
         is_number = isinstance(value, int | float) and not isinstance(value, bool)
-        if is_number and any(word in last for word in _FIGURE_WORDS):
+        wanted = bool(_FIGURE_WORDS & set(last.split("_"))) or last.endswith(_FIGURE_ENDINGS)
+        if is_number and wanted and not last.startswith("target"):
             out.append(f"{key} {_num(float(value))}")
     return tuple(out[:_MAX_FIGURES])
 
