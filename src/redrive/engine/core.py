@@ -91,7 +91,13 @@ class _Stage:
         self.last = False
         self._inline = all(isinstance(r, InlineRunner) for r in runners)
         self._single: tuple[Algorithm, frozenset[str], str, str, str] | None = None
-        if self._inline and len(runners) == 1:
+        # the short path calls Algorithm.timed_step; an algorithm that overrides run_step keeps
+        # being run through it (the general path below)
+        if (
+            self._inline
+            and len(runners) == 1
+            and type(planned[0].instance).run_step is Algorithm.run_step
+        ):
             algo = planned[0].instance
             self._single = (
                 algo,
