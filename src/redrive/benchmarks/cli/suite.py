@@ -64,15 +64,28 @@ def _run_all(args: argparse.Namespace) -> int:
     return 0 if all(r.status == "ok" or r.status.startswith("skipped") for r in rows) else 1
 
 
+def _epilog() -> str:
+    from redrive.benchmarks.suite import SUITE
+
+    lines = ["the set (limit in seconds; TMP is a scratch directory of its own):"]
+    for e in SUITE:
+        lines.append(f"  {e.name:12s} redrive bench {' '.join(e.args).replace('{tmp}', 'TMP')}")
+        lines.append(f"  {'':12s} {e.why} ({e.timeout_s:g} s)")
+    lines += [
+        "",
+        "examples:",
+        "  redrive bench all --out bench-summary.md",
+        "  redrive bench all --only engine,eval",
+    ]
+    return "\n".join(lines)
+
+
 def add_all_parser(bench_sub: Any) -> None:
     parser = bench_sub.add_parser(
         "all",
         help="every benchmark once in a small configuration; one markdown summary (make bench)",
         description=_DESCRIPTION,
-        epilog=(
-            "examples:\n  redrive bench all --out bench-summary.md\n"
-            "  redrive bench all --only engine,eval"
-        ),
+        epilog=_epilog(),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--out", type=Path, metavar="FILE", help="write the summary here too")
