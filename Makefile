@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 DEMO_DIR := .demo
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: demo test lint venv clean bench-read system-test-deps gui screenshots
+.PHONY: demo test lint venv clean bench bench-read system-test-deps gui screenshots
 
 # Debian's python3 ships without venv/ensurepip: install python3-venv when it is missing.
 $(BIN)/python:
@@ -105,6 +105,11 @@ gui: $(VENV)/.installed
 	$(BIN)/pip install -q -e '.[gui]'
 	@test -f $(DEMO_DIR)/urban.mcap || $(BIN)/redrive synth urban --duration 20 -o $(DEMO_DIR)/urban.mcap
 	$(BIN)/redrive gui $$( [ -d $(DEMO_DIR)/run ] && echo $(DEMO_DIR)/run || echo $(DEMO_DIR)/urban.mcap )
+
+## bench: every benchmark once in a small configuration (under 15 minutes; `redrive bench all
+## --help` lists them), one markdown summary table in bench-summary.md
+bench: $(VENV)/.installed-test
+	$(BIN)/redrive bench all --out bench-summary.md
 
 bench-read: $(VENV)/.installed
 	$(BIN)/redrive bench read --help

@@ -5,11 +5,12 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
-from redrive.algorithms import VEHICLE_STATE, Algorithm, Role, StageOutputs
+from redrive.algorithms import VEHICLE_STATE, Algorithm, Role, StageOutputs, StepResult
 from redrive.types import (
     Box3D,
     ControlCommands,
@@ -140,3 +141,15 @@ class OnlyDeclared(Algorithm):
         if extra:
             raise AssertionError(f"undeclared sensors in the frame: {sorted(extra)}")
         return []
+
+
+class OwnRunStep(Algorithm):
+    """Overrides ``run_step``: the engine must keep running it through that."""
+
+    role = Role.CONTROL
+
+    def step(self, frame: Frame, upstream: StageOutputs) -> ControlCommands:
+        return ControlCommands(throttle=0.1)
+
+    def run_step(self, frame: Frame, upstream: StageOutputs) -> StepResult:
+        return replace(super().run_step(frame, upstream), output=ControlCommands(throttle=0.5))

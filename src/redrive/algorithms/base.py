@@ -62,7 +62,7 @@ Input = str | SensorType
 AlgorithmOutput = tuple[DetectedObject, ...] | PlannedPath | ControlCommands
 
 
-_PERCEPTION, _PLANNING = Role.PERCEPTION, Role.PLANNING
+_PERCEPTION, _PLANNING, _CONTROL = Role.PERCEPTION, Role.PLANNING, Role.CONTROL
 
 
 def check_output(role: Role, value: object, *, where: str) -> AlgorithmOutput:
@@ -137,10 +137,25 @@ class StageOutputs:
         self, more: Mapping[str, AlgorithmOutput], roles: Mapping[str, Role]
     ) -> StageOutputs:
         """These outputs followed by ``more`` (a later stage's)."""
-        out = object.__new__(StageOutputs)  # fresh dicts: no need to copy them again
-        object.__setattr__(out, "outputs", MappingProxyType({**self.outputs, **more}))
-        object.__setattr__(out, "roles", MappingProxyType({**self.roles, **roles}))
+        return StageOutputs.of_proxies(
+            MappingProxyType({**self.outputs, **more}), MappingProxyType({**self.roles, **roles})
+        )
+
+    @staticmethod
+    def of_proxies(
+        outputs: MappingProxyType[str, AlgorithmOutput], roles: MappingProxyType[str, Role]
+    ) -> StageOutputs:
+        """Stage outputs holding these read-only views as they are (no copy): for callers that
+        never change the dicts behind them (the engine, per frame)."""
+        out = _new(StageOutputs)
+        _set_outputs(out, outputs)
+        _set_roles(out, roles)
         return out
+
+
+_new = object.__new__
+_set_outputs = StageOutputs.__dict__["outputs"].__set__
+_set_roles = StageOutputs.__dict__["roles"].__set__
 
 
 class StepStatus(enum.Enum):
@@ -307,30 +322,40 @@ class Algorithm(ABC):
 
     def run_step(self, frame: Frame, upstream: StageOutputs) -> StepResult:
         """Time :meth:`step`, check its output, and turn an exception into a recorded error."""
+        status, output, latency_ns, cpu_ns, error = self.timed_step(frame, upstream)
+        return StepResult(
+            status=status, output=output, latency_ns=latency_ns, cpu_ns=cpu_ns, error=error
+        )
+
+    def timed_step(
+        self, frame: Frame, upstream: StageOutputs
+    ) -> tuple[StepStatus, AlgorithmOutput | None, int, int, StepError | None]:
+        """:meth:`run_step` as a plain tuple ``(status, output, latency_ns, cpu_ns, error)``:
+        what the engine calls on every frame (no result object to build and take apart)."""
         cpu0 = _thread_time_ns()
         t0 = _perf_counter_ns()
         try:
             value = self.step(frame, upstream)
         except Exception as err:  # recorded, never swallowed: the engine stores it per frame
             t1 = _perf_counter_ns()
-            return StepResult(
-                status=_ERROR,
-                latency_ns=t1 - t0,
-                cpu_ns=_thread_time_ns() - cpu0,
-                error=StepError.from_exception(err),
-            )
+            cpu_ns = _thread_time_ns() - cpu0
+            return _ERROR, None, t1 - t0, cpu_ns, StepError.from_exception(err)
         t1 = _perf_counter_ns()
         cpu_ns = _thread_time_ns() - cpu0
+        # the common outputs checked inline (check_output says the same, one call later)
+        kind, role = type(value), self.role
+        if (
+            (kind is PlannedPath and role is _PLANNING)
+            or (kind is ControlCommands and role is _CONTROL)
+            or (kind is tuple and role is _PERCEPTION and not value)
+        ):
+            return _OK, value, t1 - t0, cpu_ns, None
         try:
-            output = check_output(self.role, value, where=self.name)
+            output = check_output(role, value, where=self.name)
         except AlgorithmError as err:
-            return StepResult(
-                status=_ERROR,
-                latency_ns=t1 - t0,
-                cpu_ns=cpu_ns,
-                error=StepError(type=type(err).__name__, message=f"frame {frame.index}: {err}"),
-            )
-        return StepResult(status=_OK, output=output, latency_ns=t1 - t0, cpu_ns=cpu_ns)
+            error = StepError(type=type(err).__name__, message=f"frame {frame.index}: {err}")
+            return _ERROR, None, t1 - t0, cpu_ns, error
+        return _OK, output, t1 - t0, cpu_ns, None
 
     @classmethod
     def describe(cls) -> str:

@@ -11,7 +11,13 @@ same run, interleaved:
   algorithms, every step timed, checked and handed to the recording sink (kept in memory, as the
   results writer's buffer does; ``writer=True`` adds the real Parquet writer);
 - *overhead*: the same with no-op stages: (engine − bare loop) / frames is the engine's own cost
-  per frame (timing, output checks, records).
+  per frame (timing, output checks, records), in wall time and in the CPU time of the thread
+  that runs them (``time.thread_time``: what a loaded, shared machine does not inflate the way it
+  inflates wall time; the no-op runs are sequential, all on that one thread).
+
+Every variant runs once per pass and the passes are interleaved, so load that comes and goes hits
+all variants alike; :meth:`EngineBenchResult.spreads` gives each target's min / median / max over
+the passes (verdict on the median), from the ratios and costs of each pass.
 """
 
 from __future__ import annotations
@@ -27,18 +33,29 @@ from typing import Any
 import numpy as np
 
 from redrive.algorithms import Algorithm, Role, StageOutputs
+from redrive.benchmarks.spread import Spread
 from redrive.config import AlgorithmSpec, PipelineConfig, StageSpec
 from redrive.engine import Engine, LogInputs, build_graph
 from redrive.results import FrameRecord, RunSetup, RunStatus, RunWriter, SourceLog
 from redrive.types import ControlCommands, DetectedObject, Frame, PlannedPath
 
 __all__ = [
+    "OVERHEAD_TARGET_US",
+    "PIPELINED_TARGET",
+    "SEQUENTIAL_TARGET",
+    "WRITER_TARGET_US",
     "EngineBenchResult",
     "PipelineBenchResult",
     "bench_engine",
     "bench_reference_pipeline",
     "calibrate_work",
 ]
+
+#: issue 20's targets, judged on the median of the passes
+SEQUENTIAL_TARGET = 0.95
+PIPELINED_TARGET = 1.5
+OVERHEAD_TARGET_US = 20.0
+WRITER_TARGET_US = 50.0
 
 _WORK: dict[str, Any] = {"a": np.zeros(1), "out": np.zeros(1)}
 _PATH = PlannedPath(stamp_ns=0, waypoints=np.zeros((1, 4)))
@@ -153,6 +170,9 @@ class EngineBenchResult:
     noop_bare_s: float
     noop_engine_s: float
     writer_s: float | None
+    noop_bare_cpu_s: float = 0.0
+    noop_engine_cpu_s: float = 0.0
+    writer_cpu_s: float | None = None
     passes: Mapping[str, list[float]] = field(default_factory=dict)
 
     @property
@@ -177,6 +197,68 @@ class EngineBenchResult:
             return None
         return (self.writer_s - self.noop_bare_s) / self.frames * 1e6
 
+    @property
+    def overhead_cpu_us_per_frame(self) -> float:
+        """The engine's own cost per frame with no-op stages, in thread CPU time."""
+        return (self.noop_engine_cpu_s - self.noop_bare_cpu_s) / self.frames * 1e6
+
+    @property
+    def writer_cpu_us_per_frame(self) -> float | None:
+        """The same with the Parquet writer, in thread CPU time (its fsyncs are not CPU)."""
+        if self.writer_cpu_s is None:
+            return None
+        return (self.writer_cpu_s - self.noop_bare_cpu_s) / self.frames * 1e6
+
+    def spreads(self) -> tuple[Spread, ...]:
+        """Each target over the passes: ratios and costs per frame computed pass by pass."""
+        p, n = self.passes, self.frames
+
+        def per_frame(key: str, base: str) -> tuple[float | None, ...]:
+            return tuple((a - b) / n * 1e6 for a, b in zip(p.get(key, []), p[base], strict=False))
+
+        out = [
+            Spread(
+                name="sequential ÷ bare loop",
+                bound=SEQUENTIAL_TARGET,
+                at_most=False,
+                values=tuple(b / s for b, s in zip(p["bare"], p["sequential"], strict=True)),
+            ),
+            Spread(
+                name="pipelined ÷ bare loop",
+                bound=PIPELINED_TARGET,
+                at_most=False,
+                values=tuple(b / s for b, s in zip(p["bare"], p["pipelined"], strict=True)),
+            ),
+            Spread(
+                name="engine µs/frame, wall",
+                bound=OVERHEAD_TARGET_US,
+                at_most=True,
+                values=per_frame("noop_engine", "noop_bare"),
+            ),
+            Spread(
+                name="engine µs/frame, CPU",
+                bound=OVERHEAD_TARGET_US,
+                at_most=True,
+                values=per_frame("noop_engine_cpu", "noop_bare_cpu"),
+            ),
+        ]
+        if p.get("writer"):
+            out += [
+                Spread(
+                    name="with writer µs/frame, wall",
+                    bound=WRITER_TARGET_US,
+                    at_most=True,
+                    values=per_frame("writer", "noop_bare"),
+                ),
+                Spread(
+                    name="with writer µs/frame, CPU",
+                    bound=WRITER_TARGET_US,
+                    at_most=True,
+                    values=per_frame("writer_cpu", "noop_bare_cpu"),
+                ),
+            ]
+        return tuple(out)
+
     def to_json(self) -> dict[str, Any]:
         return {
             "frames": self.frames,
@@ -189,25 +271,34 @@ class EngineBenchResult:
             "pipelined_ratio": self.pipelined_ratio,
             "overhead_us_per_frame": self.overhead_us_per_frame,
             "writer_us_per_frame": self.writer_us_per_frame,
+            "overhead_cpu_us_per_frame": self.overhead_cpu_us_per_frame,
+            "writer_cpu_us_per_frame": self.writer_cpu_us_per_frame,
+            "spread": [t.to_json() for t in self.spreads()],
             "passes": dict(self.passes),
         }
 
 
-def _bare(frames: list[Frame], fns: tuple[Callable[[], Any], ...]) -> float:
+def _bare(frames: list[Frame], fns: tuple[Callable[[], Any], ...]) -> tuple[float, float]:
+    """Wall and thread CPU seconds of the loop."""
     a, b, c = fns
+    cpu0 = time.thread_time()
     t0 = time.perf_counter()
     for _frame in frames:
         a()
         b()
         c()
-    return time.perf_counter() - t0
+    return time.perf_counter() - t0, time.thread_time() - cpu0
 
 
 def _noop() -> None:
     return None
 
 
-def _engine(frames: list[Frame], kind: str, mode: str, writer_dir: Path | None = None) -> float:
+def _engine(
+    frames: list[Frame], kind: str, mode: str, writer_dir: Path | None = None
+) -> tuple[float, float]:
+    """Wall and CPU seconds of this thread for the run (and the writer's close); the CPU time
+    is the whole cost only in sequential mode, where everything runs on this thread."""
     pipeline = _pipeline(kind, mode)
     graph = build_graph(pipeline, LogInputs())
     engine = Engine(graph, pipeline, inputs=LogInputs())
@@ -221,16 +312,18 @@ def _engine(frames: list[Frame], kind: str, mode: str, writer_dir: Path | None =
         sink: Callable[[FrameRecord], None] = writer.write_frame
     else:
         sink = kept.append
+    cpu0 = time.thread_time()
     t0 = time.perf_counter()
     report = engine.run(frames, sink=sink)
     if writer is not None:
         writer.close(status=RunStatus.COMPLETE)
     elapsed = time.perf_counter() - t0
+    cpu = time.thread_time() - cpu0
     engine.close()
     if report.frames != len(frames):
         msg = f"engine processed {report.frames} of {len(frames)} frames"
         raise RuntimeError(msg)
-    return elapsed
+    return elapsed, cpu
 
 
 def bench_engine(
@@ -245,22 +338,39 @@ def bench_engine(
     elements = calibrate_work(work_ms)
     data = [Frame(stamp_ns=i * 100_000_000, index=i) for i in range(frames)]
     passes: dict[str, list[float]] = {
-        k: [] for k in ("bare", "sequential", "pipelined", "noop_bare", "noop_engine", "writer")
+        k: []
+        for k in (
+            "bare",
+            "sequential",
+            "pipelined",
+            "noop_bare",
+            "noop_engine",
+            "writer",
+            "noop_bare_cpu",
+            "noop_engine_cpu",
+            "writer_cpu",
+        )
     }
+
+    def keep(key: str, measured: tuple[float, float], *, cpu: bool = False) -> None:
+        passes[key].append(measured[0])
+        if cpu:
+            passes[key + "_cpu"].append(measured[1])
+
     with tempfile.TemporaryDirectory(prefix="redrive-bench-engine-") as tmp:
         for r in range(repeats):
             if progress is not None:
                 progress(f"pass {r + 1}/{repeats}")
-            passes["bare"].append(_bare(data, (_work, _work, _work)))
-            passes["sequential"].append(_engine(data, "busy", "sequential"))
-            passes["pipelined"].append(_engine(data, "busy", "pipelined"))
-            passes["noop_bare"].append(_bare(data, (_noop, _noop, _noop)))
-            passes["noop_engine"].append(_engine(data, "noop", "sequential"))
+            keep("bare", _bare(data, (_work, _work, _work)))
+            keep("sequential", _engine(data, "busy", "sequential"))
+            keep("pipelined", _engine(data, "busy", "pipelined"))
+            keep("noop_bare", _bare(data, (_noop, _noop, _noop)), cpu=True)
+            keep("noop_engine", _engine(data, "noop", "sequential"), cpu=True)
             if writer:
-                passes["writer"].append(
-                    _engine(data, "noop", "sequential", writer_dir=Path(tmp) / f"run{r}")
-                )
-    med = {k: statistics.median(v) for k, v in passes.items() if v}
+                run_dir = Path(tmp) / f"run{r}"
+                keep("writer", _engine(data, "noop", "sequential", writer_dir=run_dir), cpu=True)
+    passes = {k: v for k, v in passes.items() if v}
+    med = {k: statistics.median(v) for k, v in passes.items()}
     return EngineBenchResult(
         frames=frames,
         work_ms=work_ms,
@@ -271,6 +381,9 @@ def bench_engine(
         noop_bare_s=med["noop_bare"],
         noop_engine_s=med["noop_engine"],
         writer_s=med.get("writer"),
+        noop_bare_cpu_s=med["noop_bare_cpu"],
+        noop_engine_cpu_s=med["noop_engine_cpu"],
+        writer_cpu_s=med.get("writer_cpu"),
         passes=passes,
     )
 

@@ -23,8 +23,10 @@ import logging
 import queue
 import threading
 import time
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from concurrent.futures import ThreadPoolExecutor
+from time import perf_counter_ns
+from types import MappingProxyType
 from typing import Any
 
 from redrive.algorithms import Algorithm, StageOutputs, StepResult, StepStatus
@@ -34,7 +36,8 @@ from redrive.engine.modes import ModeHooks, PacedFrame, ReplayMode
 from redrive.engine.stats import RunReport, StatsCollector
 from redrive.engine.worker import AlgorithmRunner, InlineRunner, ProcessRunner, frame_for
 from redrive.results import FrameRecord, RunStatus, StepRecord
-from redrive.types import Frame
+from redrive.results.records import frame_record_unchecked, step_record_unchecked
+from redrive.types import Frame, Role
 
 __all__ = ["Engine", "FrameSink"]
 
@@ -69,18 +72,40 @@ class _Item:
 class _Stage:
     """One stage's runners and how they are driven."""
 
-    def __init__(self, name: str, planned: tuple[PlannedAlgorithm, ...], runners: list[Any]):
+    def __init__(
+        self,
+        name: str,
+        planned: tuple[PlannedAlgorithm, ...],
+        runners: list[Any],
+        *,
+        roles_before: Mapping[str, Role],
+    ):
         self.name = name
         self.planned = planned
         self.runners: list[AlgorithmRunner] = runners
         self.roles = {p.name: p.role for p in planned}
+        # the roles every frame's upstream holds after this stage (they do not depend on the
+        # frame: a failed step's role is listed too), built once instead of once per frame
+        self.roles_after = MappingProxyType({**roles_before, **self.roles})
         self._role_values = [p.role.value for p in planned]
         self.last = False
         self._inline = all(isinstance(r, InlineRunner) for r in runners)
-        self._single: tuple[Algorithm, frozenset[str]] | None = None
-        if self._inline and len(runners) == 1:
+        self._single: tuple[Algorithm, frozenset[str], str, str, str] | None = None
+        # the short path calls Algorithm.timed_step; an algorithm that overrides run_step keeps
+        # being run through it (the general path below)
+        if (
+            self._inline
+            and len(runners) == 1
+            and type(planned[0].instance).run_step is Algorithm.run_step
+        ):
             algo = planned[0].instance
-            self._single = (algo, frozenset(algo.bound_inputs.values()))
+            self._single = (
+                algo,
+                frozenset(algo.bound_inputs.values()),
+                planned[0].spec.name,
+                planned[0].stage,
+                self._role_values[0],
+            )
         self._pool = (
             ThreadPoolExecutor(len(runners), thread_name_prefix=f"redrive-{name}")
             if self._inline and len(runners) > 1
@@ -90,19 +115,48 @@ class _Stage:
     def run(self, item: _Item) -> None:
         frame = item.paced.frame
         if self._single is not None:  # the common case, kept short: one algorithm in-process
-            algo, sensors = self._single
-            if not frame.sensors.keys() <= sensors:
+            algo, sensors, name, stage, role = self._single
+            if frame.sensors and not frame.sensors.keys() <= sensors:
                 frame = frame_for(frame, sensors)
-            result = algo.run_step(frame, item.upstream)
-            record = _record(self.planned[0], self._role_values[0], result)
+            status, output, latency_ns, cpu_ns, error = algo.timed_step(frame, item.upstream)
+            if error is None:
+                record = step_record_unchecked(
+                    name,
+                    stage,
+                    role,
+                    "ok" if status is _OK else status.value,
+                    latency_ns,
+                    cpu_ns,
+                    output,
+                )
+            else:
+                record = step_record_unchecked(
+                    name,
+                    stage,
+                    role,
+                    status.value,
+                    latency_ns,
+                    cpu_ns,
+                    output,
+                    error.type,
+                    error.message,
+                    error.traceback,
+                )
             item.steps.append(record)
-            output = result.output
-            ok = result.status is _OK and output is not None
+            ok = status is _OK and output is not None
             if not ok and item.failed is None:
                 item.failed = (frame.index, record)
             if not self.last:  # nobody reads the upstream after the last stage
-                more = {algo.name: output} if ok and output is not None else {}
-                item.upstream = item.upstream.merged(more, self.roles)
+                upstream = item.upstream
+                outputs = (
+                    MappingProxyType({**upstream.outputs, algo.name: output})
+                    if ok
+                    else upstream.outputs
+                )
+                item.upstream = StageOutputs.of_proxies(
+                    outputs,  # type: ignore[arg-type]
+                    self.roles_after,
+                )
             return
         results: list[StepResult]
         if self._pool is not None:
@@ -197,6 +251,7 @@ class Engine:
             "has_ground_truth": inputs.has_ground_truth,
         }
         self._stages: list[_Stage] = []
+        roles_before: Mapping[str, Role] = {}
         for name, planned in graph.stages:
             runners: list[Any] = []
             for p in planned:
@@ -212,7 +267,9 @@ class Engine:
                     )
                 else:
                     runners.append(InlineRunner(p.instance))
-            self._stages.append(_Stage(name, planned, runners))
+            stage = _Stage(name, planned, runners, roles_before=roles_before)
+            roles_before = stage.roles_after
+            self._stages.append(stage)
         self._stages[-1].last = True
         self._threads: dict[str, int] = {"thread:main": threading.get_native_id()}
 
@@ -271,15 +328,15 @@ class Engine:
         def finish(item: _Item) -> tuple[int, StepRecord] | None:
             nonlocal done
             frame = item.paced.frame
-            record = FrameRecord(
-                frame_index=frame.index,
-                stamp_ns=frame.stamp_ns,
-                steps=tuple(item.steps),
-                vehicle_state=frame.vehicle_state,
-                ground_truth=frame.ground_truth,
-                wall_ns=time.perf_counter_ns() - item.t0_ns,
-                late=item.paced.late,
-                missing=frame.missing,
+            record = frame_record_unchecked(  # Frame and the graph keep its invariants
+                int(frame.index),
+                frame.stamp_ns,
+                tuple(item.steps),
+                frame.vehicle_state,
+                frame.ground_truth,
+                perf_counter_ns() - item.t0_ns,
+                bool(item.paced.late),
+                frame.missing,
             )
             sink(record)
             stats.add(record)

@@ -126,16 +126,15 @@ class StatsCollector:
         if self._first_stamp is None:
             self._first_stamp = record.stamp_ns
         self._last_stamp = record.stamp_ns
-        if any(step.status in ("error", "timeout") for step in record.steps):
-            self.failed_frames += 1
         for name in record.missing:
             self.missing_inputs[name] = self.missing_inputs.get(name, 0) + 1
+        failed = False
         for step in record.steps:
             name, status = step.algorithm, step.status
             if status == "ok":
                 self._ok[name] += 1
                 output = step.output
-                self._outputs[name] += len(output) if isinstance(output, tuple) else 1
+                self._outputs[name] += len(output) if type(output) is tuple else 1
             else:
                 counts = self._status[name]
                 counts[status] = counts.get(status, 0) + 1
@@ -145,8 +144,11 @@ class StatsCollector:
                     )
                 if status == "skipped":
                     continue
+                failed = True  # error or timeout
             self._latency[name].append(step.latency_ns)
             self._cpu[name].append(step.cpu_ns)
+        if failed:
+            self.failed_frames += 1
 
     def report(
         self,

@@ -1,4 +1,9 @@
-"""Records → column buffers → Arrow tables (the write side of the store)."""
+"""Records → row buffers → Arrow tables (the write side of the store).
+
+Each table buffers one tuple per row, in its schema's column order, and is turned into columns
+only when a flush takes it (``zip(*rows)``, in C): per frame that is one tuple and one append per
+row instead of one append per column through a dict of lists.
+"""
 
 from __future__ import annotations
 
@@ -13,17 +18,65 @@ from redrive.types import ControlCommands, DetectedObject, PlannedPath, VehicleS
 
 __all__ = ["TableBuffers"]
 
+#: the column order the rows below are built in; checked against the schemas on import
+_ORDER: dict[str, tuple[str, ...]] = {
+    "steps": (
+        "frame_index", "stamp_ns", "algorithm", "stage", "role", "status", "latency_ns",
+        "cpu_ns", "n_outputs", "error_type", "error_message", "traceback",
+    ),
+    "detections": (
+        "algorithm", "frame_index", "stamp_ns", "object_id", "object_class", "confidence",
+        "x", "y", "z", "length", "width", "height", "yaw_rad", "vx", "vy", "vz", "ax", "ay",
+        "az", "bbox_x", "bbox_y", "bbox_w", "bbox_h",
+    ),
+    "ground_truth": (
+        "frame_index", "stamp_ns", "object_id", "object_class", "x", "y", "z", "length",
+        "width", "height", "yaw_rad", "vx", "vy", "vz", "ax", "ay", "az", "bbox_x", "bbox_y",
+        "bbox_w", "bbox_h", "num_lidar_points", "visible",
+    ),
+    "ego": (
+        "frame_index", "stamp_ns", "frame_id", "x", "y", "z", "vx", "vy", "vz", "ax", "ay",
+        "az", "heading_rad", "yaw_rate_rad_s",
+    ),
+    "paths": (
+        "algorithm", "frame_index", "stamp_ns", "frame_id", "waypoint", "x", "y", "z", "t_s",
+    ),
+    "commands": (
+        "algorithm", "frame_index", "stamp_ns", "throttle", "brake", "steering_angle_rad",
+    ),
+    "closed_loop": (
+        "frame_index", "stamp_ns", "source", "algorithm", "reason", "throttle", "brake",
+        "steering_angle_rad", "deviation_m", "deviation_yaw_rad", "deviated",
+    ),
+    "resources": ("t_ns", "label", "pid", "cpu_percent", "rss_bytes"),
+    "frames": (
+        "frame_index", "stamp_ns", "wall_ns", "late", "n_ground_truth", "missing_inputs",
+    ),
+}  # fmt: skip
+_ORDER["ego_logged"] = _ORDER["ego"]
+if {k: tuple(v) for k, v in _ORDER.items()} != {k: tuple(s.names) for k, s in SCHEMAS.items()}:
+    msg = "redrive.results._buffers builds rows in an order the table schemas no longer have"
+    raise RuntimeError(msg)
+
+_NO_BBOX = (None, None, None, None)
+
 
 class TableBuffers:
-    """Column lists per table, filled record by record and emptied by :meth:`take`."""
+    """Row lists per table, filled record by record and emptied by :meth:`take`."""
 
     def __init__(self) -> None:
-        self._cols: dict[str, dict[str, list[Any]]] = {}
+        self._rows: dict[str, list[tuple[Any, ...]]] = {}
         self.n_frames = 0
         self.clear()
 
     def clear(self) -> None:
-        self._cols = {name: {c: [] for c in schema.names} for name, schema in SCHEMAS.items()}
+        self._rows = {name: [] for name in SCHEMAS}
+        rows = self._rows
+        self._frames = rows["frames"].append
+        self._steps = rows["steps"].append
+        self._commands = rows["commands"].append
+        self._paths = rows["paths"].extend
+        self._detections = rows["detections"].append
         self.n_frames = 0
 
     # -- filling -----------------------------------------------------------------------------
@@ -31,159 +84,124 @@ class TableBuffers:
     def add_frame(self, rec: FrameRecord) -> None:
         fi, stamp = rec.frame_index, rec.stamp_ns
         gt = rec.ground_truth
-        _append(
-            self._cols["frames"],
-            frame_index=fi,
-            stamp_ns=stamp,
-            wall_ns=rec.wall_ns,
-            late=rec.late,
-            n_ground_truth=None if gt is None else len(gt),
-            missing_inputs=",".join(rec.missing),
+        self._frames(
+            (
+                fi,
+                stamp,
+                rec.wall_ns,
+                rec.late,
+                None if gt is None else len(gt),
+                ",".join(rec.missing),
+            )
         )
         for step in rec.steps:
             self._add_step(fi, stamp, step)
         if gt:
-            cols = self._cols["ground_truth"]
+            add = self._rows["ground_truth"].append
             for obj in gt:
-                _append_object(cols, obj)
-                cols["frame_index"].append(fi)
-                cols["stamp_ns"].append(stamp)
-                cols["num_lidar_points"].append(obj.num_lidar_points)
-                cols["visible"].append(obj.visible)
-        for table, vs in (("ego", rec.vehicle_state), ("ego_logged", rec.logged_vehicle_state)):
-            if vs is not None:
-                _append_state(self._cols[table], fi, vs)
+                add((fi, stamp, *_object_columns(obj), obj.num_lidar_points, obj.visible))
+        if rec.vehicle_state is not None:
+            self._rows["ego"].append(_state_row(fi, rec.vehicle_state))
+        if rec.logged_vehicle_state is not None:
+            self._rows["ego_logged"].append(_state_row(fi, rec.logged_vehicle_state))
         cl = rec.closed_loop
         if cl is not None:
-            _append(
-                self._cols["closed_loop"],
-                frame_index=fi,
-                stamp_ns=stamp,
-                source=cl.source,
-                algorithm=cl.algorithm,
-                reason=cl.reason,
-                throttle=cl.throttle,
-                brake=cl.brake,
-                steering_angle_rad=cl.steering_angle_rad,
-                deviation_m=cl.deviation_m,
-                deviation_yaw_rad=cl.deviation_yaw_rad,
-                deviated=cl.deviated,
+            self._rows["closed_loop"].append(
+                (
+                    fi,
+                    stamp,
+                    cl.source,
+                    cl.algorithm,
+                    cl.reason,
+                    cl.throttle,
+                    cl.brake,
+                    cl.steering_angle_rad,
+                    cl.deviation_m,
+                    cl.deviation_yaw_rad,
+                    cl.deviated,
+                )
             )
         self.n_frames += 1
 
     def _add_step(self, fi: int, stamp: int, step: StepRecord) -> None:
-        _append(
-            self._cols["steps"],
-            frame_index=fi,
-            stamp_ns=stamp,
-            algorithm=step.algorithm,
-            stage=step.stage,
-            role=step.role,
-            status=step.status,
-            latency_ns=step.latency_ns,
-            cpu_ns=step.cpu_ns,
-            n_outputs=step.n_outputs,
-            error_type=step.error_type,
-            error_message=step.error_message,
-            traceback=step.traceback,
-        )
         out = step.output
-        if isinstance(out, tuple):
-            cols = self._cols["detections"]
-            for obj in out:
-                _append_object(cols, obj)
-                cols["algorithm"].append(step.algorithm)
-                cols["frame_index"].append(fi)
-                cols["stamp_ns"].append(stamp)
-                cols["confidence"].append(obj.confidence)
-        elif isinstance(out, PlannedPath):
-            cols = self._cols["paths"]
-            k = out.waypoints.shape[0]
-            cols["algorithm"].extend([step.algorithm] * k)
-            cols["frame_index"].extend([fi] * k)
-            cols["stamp_ns"].extend([out.stamp_ns] * k)
-            cols["frame_id"].extend([out.frame_id] * k)
-            cols["waypoint"].extend(range(k))
-            for j, name in enumerate(("x", "y", "z", "t_s")):
-                cols[name].extend(out.waypoints[:, j].tolist())
-        elif isinstance(out, ControlCommands):
-            _append(
-                self._cols["commands"],
-                algorithm=step.algorithm,
-                frame_index=fi,
-                stamp_ns=stamp,
-                throttle=out.throttle,
-                brake=out.brake,
-                steering_angle_rad=out.steering_angle_rad,
+        name = step.algorithm
+        self._steps(
+            (
+                fi,
+                stamp,
+                name,
+                step.stage,
+                step.role,
+                step.status,
+                step.latency_ns,
+                step.cpu_ns,
+                0 if out is None else len(out) if isinstance(out, tuple) else 1,
+                step.error_type,
+                step.error_message,
+                step.traceback,
             )
+        )
+        if isinstance(out, tuple):
+            add = self._detections
+            for obj in out:
+                cols = _object_columns(obj)
+                add((name, fi, stamp, cols[0], cols[1], obj.confidence, *cols[2:]))
+        elif isinstance(out, PlannedPath):
+            fid, pstamp = out.frame_id, out.stamp_ns
+            self._paths(
+                (name, fi, pstamp, fid, j, x, y, z, t)
+                for j, (x, y, z, t) in enumerate(out.waypoints.tolist())
+            )
+        elif isinstance(out, ControlCommands):
+            self._commands((name, fi, stamp, out.throttle, out.brake, out.steering_angle_rad))
 
     def add_resources(self, samples: Sequence[ResourceSample]) -> None:
-        cols = self._cols["resources"]
+        add = self._rows["resources"].append
         for s in samples:
-            cols["t_ns"].append(int(s.t_ns))
-            cols["label"].append(s.label)
-            cols["pid"].append(int(s.pid))
-            cols["cpu_percent"].append(float(s.cpu_percent))
-            cols["rss_bytes"].append(int(s.rss_bytes))
+            add((int(s.t_ns), s.label, int(s.pid), float(s.cpu_percent), int(s.rss_bytes)))
 
     # -- emptying ----------------------------------------------------------------------------
 
     def take(self) -> dict[str, pa.Table]:
         """The buffered rows as one Arrow table per table name (empty ones included); clears."""
-        out = {
-            name: pa.Table.from_pydict(self._cols[name], schema=schema)
-            for name, schema in SCHEMAS.items()
-        }
+        out = {}
+        for name, schema in SCHEMAS.items():
+            rows = self._rows[name]
+            columns = list(zip(*rows, strict=True)) if rows else [() for _ in schema.names]
+            out[name] = pa.Table.from_pydict(
+                dict(zip(schema.names, columns, strict=True)), schema=schema
+            )
         self.clear()
         return out
 
 
-def _append(cols: dict[str, list[Any]], **values: Any) -> None:
-    for name, value in values.items():
-        cols[name].append(value)
-
-
-def _append_state(cols: dict[str, list[Any]], fi: int, vs: VehicleState) -> None:
+def _state_row(fi: int, vs: VehicleState) -> tuple[Any, ...]:
     """One row of the ``ego`` or ``ego_logged`` table."""
-    cols["frame_index"].append(fi)
-    cols["stamp_ns"].append(vs.stamp_ns)
-    cols["frame_id"].append(vs.frame_id)
-    for names, vec in (
-        (("x", "y", "z"), vs.position),
-        (("vx", "vy", "vz"), vs.velocity),
-        (("ax", "ay", "az"), vs.acceleration),
-    ):
-        for name, value in zip(names, vec.tolist(), strict=True):
-            cols[name].append(value)
-    cols["heading_rad"].append(vs.heading_rad)
-    cols["yaw_rate_rad_s"].append(vs.yaw_rate_rad_s)
+    return (
+        fi,
+        vs.stamp_ns,
+        vs.frame_id,
+        *vs.position.tolist(),
+        *vs.velocity.tolist(),
+        *vs.acceleration.tolist(),
+        vs.heading_rad,
+        vs.yaw_rate_rad_s,
+    )
 
 
-def _append_object(cols: dict[str, list[Any]], obj: DetectedObject) -> None:
-    """The columns a detection and a ground-truth row share (not frame, stamp, extras)."""
+def _object_columns(obj: DetectedObject) -> tuple[Any, ...]:
+    """``object_id, object_class, x … az, bbox_x … bbox_h``: the columns a detection and a
+    ground-truth row share, in the ground-truth table's order."""
     box = obj.box
-    cols["object_id"].append(obj.object_id)
-    cols["object_class"].append(obj.object_class.value)
-    cx, cy, cz = box.center.tolist()
-    sl, sw, sh = box.size.tolist()
-    vx, vy, vz = obj.velocity.tolist()
-    ax, ay, az = obj.acceleration.tolist()
-    for name, value in (
-        ("x", cx),
-        ("y", cy),
-        ("z", cz),
-        ("length", sl),
-        ("width", sw),
-        ("height", sh),
-        ("yaw_rad", box.yaw_rad),
-        ("vx", vx),
-        ("vy", vy),
-        ("vz", vz),
-        ("ax", ax),
-        ("ay", ay),
-        ("az", az),
-    ):
-        cols[name].append(value)
     bbox = obj.bbox_2d
-    for j, name in enumerate(("bbox_x", "bbox_y", "bbox_w", "bbox_h")):
-        cols[name].append(None if bbox is None else bbox[j])
+    return (
+        obj.object_id,
+        obj.object_class.value,
+        *box.center.tolist(),
+        *box.size.tolist(),
+        box.yaw_rad,
+        *obj.velocity.tolist(),
+        *obj.acceleration.tolist(),
+        *(_NO_BBOX if bbox is None else bbox),
+    )

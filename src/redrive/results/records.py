@@ -19,6 +19,8 @@ __all__ = [
     "ResourceSample",
     "StepOutput",
     "StepRecord",
+    "frame_record_unchecked",
+    "step_record_unchecked",
 ]
 
 #: the values of ``StepRecord.role`` (the :class:`~redrive.types.Role` values).
@@ -201,3 +203,85 @@ class ResourceSample:
     pid: int
     cpu_percent: float
     rss_bytes: int
+
+
+# -- the engine's per-frame path -------------------------------------------------------------
+# A frozen dataclass's __init__ sets every field through object.__setattr__ and then runs
+# __post_init__; for records whose fields the engine has already made what they must be, that
+# was a third of its own cost per frame.  These set the slots directly (same objects, equal to
+# what the checked constructors make) and are for callers that guarantee the invariants.
+
+_new = object.__new__
+_STEP_SETTERS = tuple(StepRecord.__dict__[name].__set__ for name in StepRecord.__slots__)
+_FRAME_SETTERS = tuple(FrameRecord.__dict__[name].__set__ for name in FrameRecord.__slots__)
+assert StepRecord.__slots__ == (
+    "algorithm", "stage", "role", "status", "latency_ns", "cpu_ns", "output",
+    "error_type", "error_message", "traceback",
+)  # fmt: skip
+assert FrameRecord.__slots__ == (
+    "frame_index", "stamp_ns", "steps", "vehicle_state", "logged_vehicle_state", "closed_loop",
+    "ground_truth", "wall_ns", "late", "missing",
+)  # fmt: skip
+
+
+def step_record_unchecked(  # noqa: PLR0917 (per step: positional is cheaper)
+    algorithm: str,
+    stage: str,
+    role: str,
+    status: str,
+    latency_ns: int,
+    cpu_ns: int,
+    output: StepOutput | None,
+    error_type: str = "",
+    error_message: str = "",
+    traceback: str = "",
+) -> StepRecord:
+    """A :class:`StepRecord` without its checks (positional: this is called per step).
+
+    The caller guarantees what ``__post_init__`` would check: ``role`` in :data:`ROLES`,
+    ``status`` in :data:`STATUSES`, int times, and ``output`` None or of the role's type (a
+    tuple of :class:`DetectedObject` for perception).
+    """
+    record: StepRecord = _new(StepRecord)
+    s = _STEP_SETTERS
+    s[0](record, algorithm)
+    s[1](record, stage)
+    s[2](record, role)
+    s[3](record, status)
+    s[4](record, latency_ns)
+    s[5](record, cpu_ns)
+    s[6](record, output)
+    s[7](record, error_type)
+    s[8](record, error_message)
+    s[9](record, traceback)
+    return record
+
+
+def frame_record_unchecked(  # noqa: PLR0917 (per frame: positional is cheaper)
+    frame_index: int,
+    stamp_ns: int,
+    steps: tuple[StepRecord, ...],
+    vehicle_state: VehicleState | None,
+    ground_truth: tuple[DetectedObject, ...] | None,
+    wall_ns: int,
+    late: bool,
+    missing: tuple[str, ...],
+) -> FrameRecord:
+    """A :class:`FrameRecord` of an open-loop frame without its checks (called per frame).
+
+    The caller guarantees int index ≥ 0, stamp and wall time, a bool ``late``, tuples, and
+    steps of distinct algorithms.
+    """
+    record: FrameRecord = _new(FrameRecord)
+    s = _FRAME_SETTERS
+    s[0](record, frame_index)
+    s[1](record, stamp_ns)
+    s[2](record, steps)
+    s[3](record, vehicle_state)
+    s[4](record, None)
+    s[5](record, None)
+    s[6](record, ground_truth)
+    s[7](record, wall_ns)
+    s[8](record, late)
+    s[9](record, missing)
+    return record

@@ -18,6 +18,7 @@ from redrive.benchmarks.cli.loss import add_loss_parser
 from redrive.benchmarks.cli.read import EPILOG as _EPILOG
 from redrive.benchmarks.cli.read import add_read_parser
 from redrive.benchmarks.cli.record import add_record_parser
+from redrive.benchmarks.cli.suite import add_all_parser
 from redrive.benchmarks.cli.transport import add_transport_parser
 
 __all__ = ["register"]
@@ -50,3 +51,4 @@ def register(sub: Any) -> None:
     add_record_parser(bench_sub)
     add_gui_parser(bench_sub)
     add_export_parser(bench_sub)
+    add_all_parser(bench_sub)

@@ -1,55 +1,27 @@
 """``redrive bench transport --repeat N``: each target's value over N interleaved repetitions
 (every side at every size once per repetition, so load that comes and goes hits all sides alike),
-as min / median / max with the verdict taken on the median."""
+as min / median / max with the verdict taken on the median (:class:`redrive.benchmarks.spread.Spread`)."""
 
 from __future__ import annotations
 
-import statistics
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from redrive.benchmarks.spread import Spread
 from redrive.benchmarks.transport.results import TargetCheck, TransportBenchResult
 
 __all__ = ["TargetSpread", "target_spreads"]
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class TargetSpread:
+class TargetSpread(Spread):
     """One target over the repetitions: ``values`` are ratios (``≥`` targets) or milliseconds
     (``≤`` targets), one per repetition (None where a side did not run)."""
 
-    name: str
     side: str
     size_bytes: int
     target: str
-    bound: float
-    at_most: bool  # True: the value must stay ≤ bound (latency); False: ratio ≥ bound
-    values: tuple[float | None, ...]
-
-    @property
-    def measured(self) -> list[float]:
-        return [v for v in self.values if v is not None]
-
-    @property
-    def min(self) -> float | None:
-        return min(self.measured) if self.measured else None
-
-    @property
-    def median(self) -> float | None:
-        return statistics.median(self.measured) if self.measured else None
-
-    @property
-    def max(self) -> float | None:
-        return max(self.measured) if self.measured else None
-
-    @property
-    def met(self) -> bool | None:
-        """The verdict on the median (None when nothing was measured)."""
-        m = self.median
-        if m is None:
-            return None
-        return m <= self.bound if self.at_most else m >= self.bound
 
     def to_json(self) -> dict[str, Any]:
         return {
