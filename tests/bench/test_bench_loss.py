@@ -165,6 +165,7 @@ def _check_config(c: object, seconds: float) -> None:
         assert s.latency_p50_ms > 0
 
 
+@pytest.mark.slow  # ~25 s: both chains of the loss experiment; `make bench` runs it
 def test_short_run_of_both_chains(tmp_path: Path) -> None:
     seconds = 3.0
     result = bench_loss(seconds=seconds, rate_factors=(1.0, 10.0), chains=("legacy", "redrive"))

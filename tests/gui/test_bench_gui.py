@@ -41,6 +41,7 @@ def test_bench_log_is_cached_and_readable(tmp_path: Path) -> None:
         assert log.topics["/camera_front/image_raw"].count == 3
 
 
+@pytest.mark.slow  # ~30 s: the whole `redrive bench gui`; `make bench` runs it
 def test_bench_gui_json(qapp: Any, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     del qapp  # pytest-qt's QApplication; bench_gui uses it
     lines: list[str] = []
