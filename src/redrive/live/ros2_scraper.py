@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import signal
 import sys
 import threading
@@ -77,8 +78,11 @@ def main(argv: list[str] | None = None) -> int:
             waitset.attach(reader.condition)
             readers.append(reader)
         print("READY", flush=True)
+        parent = os.getppid()
         while not stop.is_set():
             waitset.wait(100_000_000)  # ns: wake at least every 0.1 s to see a stop
+            if os.getppid() != parent:  # redrive live was killed: no orphan scraper stays
+                break
             for reader in readers:
                 for cdr, _source_ns in reader.take():
                     counts[reader.topic][0] += 1
