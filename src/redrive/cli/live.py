@@ -53,8 +53,8 @@ session ends on --duration, --max-size or Ctrl-C (-a/-e and the idle stop are RO
 
 If the ROS master goes away, recording goes on with what still flows; when a master is back at
 the same address the scrapers register again. A recording left unfinished by a killed session
-(a .NAME.PID-XXXX.part file) is named at the next start in that folder, with the command that
-recovers it (`redrive repair PART -o FIXED.mcap`).
+(.NAME.PID-RANDOM.part, RANDOM being mkstemp's letters) is named at the next start in that
+folder, with the command that recovers it (`redrive repair PART -o FIXED.mcap`).
 """
 
 
