@@ -51,10 +51,11 @@ from redrive.closedloop.simulator import (
 )
 from redrive.errors import ConfigError, SimulationError
 from redrive.sim.ego import ActuatedEgo, BicycleModel, PedalModel
+from redrive.sim.ground_truth import objects_in_base
 from redrive.sim.rig import rig_from_mapping
 from redrive.sim.scenario import Scenario
 from redrive.sim.sinks import MessageSink
-from redrive.sim.synth import SensorSimulation, objects_in_base
+from redrive.sim.synth import SensorSimulation
 from redrive.sim.world import World
 from redrive.types import ControlCommands, Frame, SensorType, VehicleState
 

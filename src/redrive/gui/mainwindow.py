@@ -17,6 +17,7 @@ from redrive.gui import live
 from redrive.gui.camera import CameraView
 from redrive.gui.loader import FrameLoader, LogSummary, ViewOptions
 from redrive.gui.logbox import LogBox
+from redrive.gui.menu_helpers import RecentPaths, show_about
 from redrive.gui.planview import Planview
 from redrive.gui.plots import PlotsPanel
 from redrive.gui.scene import Layer, Scene
@@ -574,20 +575,13 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def _fill_recent(self) -> None:
         self.recent_menu.clear()
-        for path in self._recent():
+        paths = RecentPaths(self.settings, _MAX_RECENT).paths()
+        for path in paths:
             self.recent_menu.addAction(path, functools.partial(self.open_path, path))
-        self.recent_menu.setEnabled(bool(self._recent()))
-
-    def _recent(self) -> list[str]:
-        value = self.settings.value("recent", [])
-        if isinstance(value, str):
-            return [value]
-        return [str(v) for v in value] if isinstance(value, list) else []
+        self.recent_menu.setEnabled(bool(paths))
 
     def _add_recent(self, path: Path) -> None:
-        text = str(path.resolve())
-        recent = [text, *(p for p in self._recent() if p != text)][:_MAX_RECENT]
-        self.settings.setValue("recent", recent)
+        RecentPaths(self.settings, _MAX_RECENT).add(path)
         self._fill_recent()
 
     def show_error(self, title: str, message: str) -> None:
@@ -601,11 +595,4 @@ class MainWindow(QtWidgets.QMainWindow):
         self.last_error = message
 
     def _about(self) -> None:
-        from redrive import __version__
-
-        QtWidgets.QMessageBox.about(
-            self,
-            "About redrive",
-            f"redrive {__version__}\nRe-drive autonomous-driving algorithms on recorded or live "
-            "sensor data.\nDocs: docs/gui.md in the repository.",
-        )
+        show_about(self)

@@ -1,0 +1,78 @@
+"""The ground truth a synthetic log records: the scene's objects near the ego, in its
+``base_link``, with how many LiDAR returns and camera pixels each got."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import numpy.typing as npt
+
+from redrive.geometry import invert, transform_points
+from redrive.geometry.se3 import transform_vectors, yaw_from_rotation_matrix
+from redrive.sim.scene import Scene, SceneObjects
+from redrive.types import Box3D, DetectedObject
+
+__all__ = ["GROUND_TRUTH_RANGE_M", "ground_truth_objects", "objects_in_base"]
+
+#: Objects farther than this from the ego are left out of the ground truth, metres.
+GROUND_TRUTH_RANGE_M = 120.0
+
+
+def ground_truth_objects(
+    scene: Scene,
+    *,
+    lidar_hits: dict[int, int] | None,
+    camera_pixels: dict[int, int] | None,
+    range_m: float = GROUND_TRUTH_RANGE_M,
+) -> tuple[DetectedObject, ...]:
+    """The scene's ground-truth objects within ``range_m`` of the ego, in base_link.
+
+    ``num_lidar_points`` comes from ``lidar_hits`` (object id → returns in the sweep);
+    ``visible`` is true when the LiDAR or the camera saw any part of the object.
+    """
+    return objects_in_base(
+        scene.objects,
+        scene.map_from_base,
+        lidar_hits=lidar_hits,
+        camera_pixels=camera_pixels,
+        range_m=range_m,
+    )
+
+
+def objects_in_base(
+    objs: SceneObjects,
+    map_from_base: npt.NDArray[np.float64],
+    *,
+    lidar_hits: dict[int, int] | None = None,
+    camera_pixels: dict[int, int] | None = None,
+    range_m: float = GROUND_TRUTH_RANGE_M,
+) -> tuple[DetectedObject, ...]:
+    """The ground-truth ones of ``objs`` (map frame) within ``range_m`` of an ego at
+    ``map_from_base``, in its base_link (see :func:`ground_truth_objects`)."""
+    base_from_map = invert(map_from_base)
+    yaw_ego = yaw_from_rotation_matrix(map_from_base[:3, :3])
+    centers = transform_points(base_from_map, objs.centers)
+    velocities = transform_vectors(base_from_map, objs.velocities)
+    out = []
+    for i in np.flatnonzero(objs.is_ground_truth):
+        if float(np.hypot(centers[i, 0], centers[i, 1])) > range_m:
+            continue
+        object_id = int(objs.object_ids[i])
+        points = None if lidar_hits is None else int(lidar_hits.get(object_id, 0))
+        pixels = 0 if camera_pixels is None else int(camera_pixels.get(object_id, 0))
+        visible = None if lidar_hits is None and camera_pixels is None else (points or pixels) > 0
+        yaw = math.remainder(float(objs.yaws_rad[i]) - yaw_ego, math.tau)
+        out.append(
+            DetectedObject(
+                object_id=object_id,
+                object_class=objs.classes[i],
+                confidence=1.0,
+                box=Box3D(center=centers[i], size=objs.sizes[i], yaw_rad=yaw),
+                velocity=velocities[i],
+                orientation=np.array([yaw, 0.0, 0.0]),
+                num_lidar_points=points,
+                visible=visible,
+            )
+        )
+    return tuple(out)
