@@ -28,6 +28,8 @@ from pathlib import Path
 
 import pytest
 
+from redrive.testing.processes import stop_group
+
 ROS_PYTHON = Path("/usr/bin/python3")
 ROSCORE = Path("/usr/bin/roscore")
 ROSMASTER = Path("/usr/bin/rosmaster")
@@ -88,16 +90,7 @@ def _python_argv(code: str | Path, args: tuple[str, ...]) -> list[str]:
 
 def _stop_group(proc: subprocess.Popen[str] | subprocess.Popen[bytes], *, wait_s: float) -> None:
     """SIGTERM to the process group of ``proc`` (its own session), SIGKILL after ``wait_s``."""
-    if proc.poll() is not None:
-        return
-    with contextlib.suppress(ProcessLookupError):
-        os.killpg(proc.pid, signal.SIGTERM)
-    try:
-        proc.wait(timeout=wait_s)
-    except subprocess.TimeoutExpired:
-        with contextlib.suppress(ProcessLookupError):
-            os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait(timeout=10)
+    stop_group(proc, signal.SIGTERM, wait_s=wait_s)
 
 
 @dataclass(slots=True)

@@ -4,7 +4,6 @@ killed session leaves."""
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import os
 import signal
@@ -20,6 +19,7 @@ from pathlib import Path
 import pytest
 
 from redrive.io import open_log
+from redrive.testing.processes import stop_group
 from tests.live.conftest import (
     ROSMASTER,
     RosCore,
@@ -197,11 +197,12 @@ def test_records_what_rosbag_record_records(
         summary = _finish(whole)
         _finish(split)
     finally:
-        with contextlib.suppress(ProcessLookupError):
-            os.killpg(reference.pid, signal.SIGINT)  # rosbag record closes its bag on SIGINT
-        reference.wait(timeout=30)
+        # rosbag record closes its bag on SIGINT. Its Python wrapper leaves at once while the C++
+        # recorder still closes the bag (renaming reference.bag.active last): wait for the group
+        reference_stopped = stop_group(reference, signal.SIGINT, wait_s=60)
         for proc in (whole, split, play):
             _stop_group(proc, wait_s=5)
+    assert reference_stopped, "rosbag record did not close its bag within 60 s of SIGINT"
     want = _per_topic(tmp_path / "reference.bag", HUSKY_TOPICS)
     assert all(len(v) > 10 for v in want.values()), {t: len(v) for t, v in want.items()}
     got = _per_topic(tmp_path / "husky.mcap", HUSKY_TOPICS)

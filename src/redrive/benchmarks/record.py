@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from redrive.errors import ConfigError, TransportError
+from redrive.testing.processes import stop_group, wait_group
 
 __all__ = [
     "DEFAULT_RATE",
@@ -205,20 +206,6 @@ def _free_port() -> int:
         return port
 
 
-def _stop(proc: subprocess.Popen[Any], sig: int = signal.SIGTERM, wait_s: float = 10.0) -> None:
-    """``sig`` to the process group of ``proc`` (its own session), SIGKILL after ``wait_s``."""
-    if proc.poll() is not None:
-        return
-    with contextlib.suppress(ProcessLookupError):
-        os.killpg(proc.pid, sig)
-    try:
-        proc.wait(timeout=wait_s)
-    except subprocess.TimeoutExpired:
-        with contextlib.suppress(ProcessLookupError):
-            os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait(timeout=10)
-
-
 def _missing_tools() -> str | None:
     for tool in ("rosmaster", "rosbag"):
         if shutil.which(tool, path="/usr/bin:/bin") is None:
@@ -256,7 +243,7 @@ def _master(home: Path) -> Iterator[tuple[str, dict[str, str]]]:
             time.sleep(0.05)
         yield uri, env
     finally:
-        _stop(proc)
+        stop_group(proc)
 
 
 def _outbound_connections(uri: str, node: str) -> int:
@@ -476,12 +463,13 @@ def _run(plan: _Plan, work: Path, say: Callable[[str], None]) -> RecordResult:
             for proc in (reference, ours):  # Ctrl-C to both at once (once: a second one
                 with contextlib.suppress(ProcessLookupError):  # interrupts the closing)
                     os.killpg(proc.pid, signal.SIGINT)
+            # the whole group: rosbag record's Python wrapper leaves at once, its C++ recorder
+            # closes the bag after it
             for proc, wait_s in ((reference, 30.0), (ours, 60.0)):
-                with contextlib.suppress(subprocess.TimeoutExpired):
-                    proc.wait(timeout=wait_s)
+                wait_group(proc, wait_s)
         finally:
             for proc in (reference, ours, player):
-                _stop(proc, wait_s=10)
+                stop_group(proc, wait_s=10)
         if ours.returncode != 0:
             msg = f"redrive live exited with {ours.returncode}: {err_lines.text[-2000:]}"
             raise TransportError(msg)
