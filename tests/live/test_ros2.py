@@ -16,6 +16,7 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 from types import ModuleType
+from typing import Any
 
 import numpy as np
 import pytest
@@ -278,3 +279,53 @@ def test_record_only_on_ros2_names_its_topics() -> None:
     from redrive.cli.main import main
 
     assert main(["live", "--ros2", "-a", "--record", "x.mcap"]) == 2
+
+
+def test_the_scraper_ends_when_redrive_live_is_killed(
+    domain: int, peer_factory: list[subprocess.Popen[str]], tmp_path: Path
+) -> None:
+    """SIGKILL of `redrive live --ros2` (no chance to clean up): its DDS scraper process notices
+    its parent is gone and ends, instead of reading the domain on for ever."""
+    import psutil
+
+    _start_peer(peer_factory, "--domain", str(domain), "--count", "0", "--only", "/imu")
+    argv = [sys.executable, "-m", "redrive", "live", "--ros2", "--domain", str(domain), "/imu",
+            "--record", str(tmp_path / "imu.mcap"), "--wait", "15", "--duration", "300"]  # fmt: skip
+    live = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    scraper = None
+    try:
+        assert live.stderr is not None
+        for line in live.stderr:
+            if "live: recording" in line:
+                break
+        else:
+            pytest.fail(f"redrive live --ros2 ended before recording (exit {live.wait()})")
+        (scraper,) = (
+            child for child in psutil.Process(live.pid).children(recursive=True)
+            if "redrive.live.ros2_scraper" in " ".join(child.cmdline())
+        )  # fmt: skip
+        live.kill()
+        live.wait(timeout=10)
+        # the scraper looks at its parent at least every 0.1 s; 60 s leaves room for a loaded machine
+        deadline = time.monotonic() + 60
+        while _still_runs(scraper) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not _still_runs(scraper), f"the ROS 2 scraper {scraper.pid} outlived redrive live"
+    finally:
+        if live.poll() is None:
+            live.kill()
+            live.wait(timeout=10)
+        if live.stderr is not None:
+            live.stderr.close()
+        if scraper is not None and _still_runs(scraper):
+            scraper.kill()  # not left behind when the test fails
+
+
+def _still_runs(process: Any) -> bool:
+    """Whether a psutil process runs (an orphan that ended may stay a zombie until reaped)."""
+    import psutil
+
+    try:
+        return bool(process.status() != psutil.STATUS_ZOMBIE)
+    except psutil.NoSuchProcess:
+        return False
