@@ -6,15 +6,17 @@ The sensor types are written out here as IdlStruct classes, the way ``idlc -l py
 on the wire, independent of redrive's generated types. Run as its own process::
 
     python ros2_peer.py --domain 42 --count 25 --rate 10 [--points 2000] [--only TOPIC…]
-        [--listen TOPIC TYPE]
+        [--match TOPIC…] [--exit] [--listen TOPIC TYPE]
 
 It prints ``ADVERTISED`` once its writers exist, publishes ``--count`` samples per topic (0:
-until SIGTERM) after every writer is matched with a reader, ``SENT <n>`` when done, and for every
-sample received on ``--listen`` a line ``RESULT <json>``.
+until SIGTERM) after every writer (or those of ``--match``) is matched with a reader, ``SENT <n>``
+when done (and with ``--exit`` leaves the domain and exits, once its reliable samples are
+acknowledged), and for every sample received on ``--listen`` a line ``RESULT <json>``.
 """
 
 import argparse
 import json
+import os
 import signal
 import sys
 import threading
@@ -162,6 +164,8 @@ def main() -> int:
     parser.add_argument("--rate", type=float, default=10.0)
     parser.add_argument("--points", type=int, default=2000)
     parser.add_argument("--listen", nargs=2, metavar=("TOPIC", "TYPE"))
+    parser.add_argument("--match", nargs="+", help="wait for readers of these topics only")
+    parser.add_argument("--exit", action="store_true", help="exit once the samples are sent")
     parser.add_argument(
         "--only", nargs="+", help="publish only these of /points /camera/image_raw /imu"
     )
@@ -174,10 +178,15 @@ def main() -> int:
         "/camera/image_raw": (Image, DEFAULT_QOS, image),
         "/imu": (Imu, DEFAULT_QOS, imu),
     }
+    published = [name for name in kinds if not args.only or name in args.only]
     writers = [
         (DataWriter(dp, Topic(dp, "rt" + name, cls, qos=qos), qos=qos), make)
-        for name, (cls, qos, make) in kinds.items()
-        if not args.only or name in args.only
+        for name, (cls, qos, make) in ((n, kinds[n]) for n in published)
+    ]
+    matched = [
+        writer
+        for (writer, _), name in zip(writers, published, strict=True)
+        if not args.match or name in args.match
     ]
     if args.listen:
         from redrive.io.typestore import typestore_for
@@ -205,7 +214,7 @@ def main() -> int:
 
         threading.Thread(target=listen, daemon=True).start()
     print("ADVERTISED", flush=True)
-    while not stop.is_set() and not all(w.get_matched_subscriptions() for w, _ in writers):
+    while not stop.is_set() and not all(w.get_matched_subscriptions() for w in matched):
         time.sleep(0.02)
     i = 0
     next_s = time.monotonic()
@@ -218,6 +227,9 @@ def main() -> int:
     for writer, _ in writers:
         writer.wait_for_acks(2_000_000_000)
     print(f"SENT {i}", flush=True)
+    if args.exit:  # leave the domain now (readers see the writers go) rather than at exit
+        dp._delete(dp._ref)
+        os._exit(0)
     stop.wait()  # stay until told: the readers must not see the writers vanish mid-test
     return 0
 

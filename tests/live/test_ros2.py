@@ -275,10 +275,66 @@ def test_record_only_on_ros2_stops_at_max_size(
     assert not list(tmp_path.glob(".*.part"))
 
 
-def test_record_only_on_ros2_names_its_topics() -> None:
+def test_record_only_on_ros2_needs_topics_or_a_selection() -> None:
     from redrive.cli.main import main
 
-    assert main(["live", "--ros2", "-a", "--record", "x.mcap"]) == 2
+    assert main(["live", "--ros2", "--record", "x.mcap"]) == 2
+
+
+def _counts(path: Path) -> dict[str, int]:
+    from mcap.reader import make_reader
+
+    with path.open("rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    assert summary.statistics is not None
+    return {
+        c.topic: summary.statistics.channel_message_counts.get(c.id, 0)
+        for c in summary.channels.values()
+    }
+
+
+def test_record_all_on_ros2_records_every_message_and_ends_when_the_publishers_leave(
+    domain: int,
+    peer_factory: list[subprocess.Popen[str]],
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """-a: the topics the scraper finds on the domain are recorded, every message of them (the
+    peer publishes once redrive's readers matched, and exits once its reliable samples are
+    acknowledged), and the session ends by itself (--idle-timeout 1) once it left the domain.
+    With -a every topic joins through discovery, as a topic appearing later does."""
+    from redrive.cli.main import main
+
+    peer = _start_peer(peer_factory, "--domain", str(domain), "--count", "15", "--rate", "30",
+                       "--only", "/camera/image_raw", "/imu", "--exit")  # fmt: skip
+    out = tmp_path / "rec.mcap"
+    argv = ["live", "--ros2", "--domain", str(domain), "-a", "--record", str(out),
+            "--idle-timeout", "1", "--duration", "120"]  # fmt: skip
+    assert main(argv) == 0
+    assert peer.wait(timeout=10) == 0
+    captured = capsys.readouterr()
+    assert "stopped: every publisher of the recorded topics has been gone for 1 s" in " ".join(
+        captured.out.split()
+    )
+    assert "recording /imu (published on the DDS domain)" in captured.err
+    assert _counts(out) == {"/camera/image_raw": 15, "/imu": 15}
+    assert not list(tmp_path.glob(".*.part"))
+
+
+def test_record_regex_and_exclude_on_ros2_pick_their_topics(
+    domain: int, peer_factory: list[subprocess.Popen[str]], tmp_path: Path
+) -> None:
+    from redrive.cli.main import main
+
+    peer = _start_peer(peer_factory, "--domain", str(domain), "--count", "10", "--rate", "30",
+                       "--points", "100", "--match", "/camera/image_raw", "--exit")  # fmt: skip
+    out = tmp_path / "rec.mcap"
+    argv = ["live", "--ros2", "--domain", str(domain), "-e", "/camera/.*", "-e", "/im.*",
+            "-x", "/imu", "--record", str(out), "--idle-timeout", "1", "--duration", "120"]  # fmt: skip
+    assert main(argv) == 0
+    assert peer.wait(timeout=10) == 0
+    assert _counts(out) == {"/camera/image_raw": 10}
 
 
 def test_the_scraper_ends_when_redrive_live_is_killed(

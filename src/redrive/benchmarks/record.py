@@ -132,6 +132,8 @@ def cpu_by_process(pid: int) -> dict[str, float]:
             else:
                 argv = proc.cmdline()
                 topic = argv[argv.index("--topic") + 1] if "--topic" in argv[:-1] else None
+                if "redrive.live.ros2_scraper" in argv:  # one process for every ROS 2 topic
+                    topic = "(ROS 2)"
                 label = f"scraper {topic}" if topic else proc.name()
             out[label] = out.get(label, 0.0) + used
     return out

@@ -25,6 +25,7 @@ examples:
   redrive live --replay drive.bag --record copy.mcap       a log played as a sensor rig
   redrive live --synthetic urban --duration 20              the simulator in real time
   redrive live --ros2 --topics /points /imu --record out.mcap     ROS 2 (DDS) topics
+  redrive live --ros2 -a --record all.mcap --idle-timeout 10
 
 One scraper process per topic subscribes with rospy (under /usr/bin/python3) and hands each
 message to this process through shared memory. --record writes every message (lossless, in a
@@ -48,8 +49,12 @@ run` writes it.
 
 With --ros2 one scraper process reads the ROS 2 topics through Cyclone DDS (ROS_DOMAIN_ID /
 --domain, CYCLONEDDS_URI as for ROS 2 nodes) and the results are published back as ROS 2
-messages. With --ros2 --record and no pipeline the named topics are recorded only, and the
-session ends on --duration, --max-size or Ctrl-C (-a/-e and the idle stop are ROS 1 only).
+messages. --ros2 --record without a pipeline records as above: named topics, -a/-e (topics that
+appear later on the DDS domain too), -x; it ends on the same conditions, a publisher counting
+while the scraper's DDS reader is matched with its writer (a killed publisher leaves when its
+DDS lease expires, 10 s by default; the /rosout and /parameter_events publishers every node has
+do not count). Unlike ROS 1, a type redrive has no definition of cannot be recorded (ROS 2 sends
+none): it is named and left out; --split-size/--split-duration are ROS 1 only.
 
 If the ROS master goes away, recording goes on with what still flows; when a master is back at
 the same address the scrapers register again. A recording left unfinished by a killed session

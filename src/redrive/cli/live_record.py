@@ -119,6 +119,7 @@ def record_only(args: argparse.Namespace, master: str) -> int:
     from redrive.live.recorder import DataLogger
     from redrive.live.recording import Recording, TopicSelection
     from redrive.live.ros1 import list_topics
+    from redrive.live.ros2 import Ros2Session
     from redrive.live.session import LiveSession, wait_for_topics
 
     console = Console(stderr=True)
@@ -140,25 +141,22 @@ def record_only(args: argparse.Namespace, master: str) -> int:
     max_size = None if args.max_size is None else parse_size(args.max_size, option="--max-size")
     ros2 = bool(getattr(args, "ros2", False))
     ros = args.replay is None and args.synthetic is None and not ros2
-    if ros and selection.empty:
+    if (ros or ros2) and selection.empty:
         print("redrive live: name topics, or give -a/--all or -e/--regex (or --replay/--synthetic)")
         return 2
-    if ros2 and (selection.grows or not selection.topics):
-        print(
-            "redrive live --ros2 --record: name the topics (-a/--all and -e/--regex are ROS 1 only)"
-        )
-        return 2
     warn_orphans(args.record, console)
-    if ros2:  # ends on --duration, --max-size or Ctrl-C (no idle watch of DDS publishers yet)
-        from redrive.live.ros2 import ros2_session
+    session: LiveSession
+    if ros2:
+        from redrive.live.ros2 import find_publications, ros2_session
         from redrive.live.ros2_dds import default_domain_id
 
         domain = default_domain_id() if args.domain is None else args.domain
+        publications = find_publications(
+            list(selection.topics), domain_id=domain, wait_for_topics_s=args.wait
+        )
+        # the scraper starts reading nothing; each topic is added once the recorder reads it
         session = ros2_session(
-            list(selection.topics),
-            domain_id=domain,
-            capacity=args.capacities,
-            wait_for_topics_s=args.wait,
+            [], domain_id=domain, capacity=args.capacities, discover_new=selection.grows
         )
         source_text = f"ROS 2 (DDS domain {domain})"
     elif ros:
@@ -191,10 +189,13 @@ def record_only(args: argparse.Namespace, master: str) -> int:
                 split_duration_s=args.split_duration,
                 max_size_bytes=max_size,
                 compression=args.compression,
+                native=ros2,
             )
             try:
                 if ros:  # each scraper subscribes once the recorder reads its stream
                     session.add_ros1(types, on_stream=recorder.add)
+                elif isinstance(session, Ros2Session):  # the same: the scraper reads it then
+                    session.add_ros2(publications, on_stream=recorder.add)
                 recording = Recording(
                     session,
                     recorder,

@@ -60,6 +60,8 @@ class DataLogger:
         max_size_bytes: :attr:`full` is set once this many bytes of messages are recorded.
         compression: chunk compression, ``zstd`` (default), ``lz4`` or ``none`` (as ``rosbag
             record`` writes by default: the cheapest in CPU).
+        native: write redrive's native format (ROS 2 CDR) even when ``specs`` is empty — a ROS 2
+            recording whose topics all join later through :meth:`add`.
 
     Raises:
         ProducerGoneError: a stream has no writer within ``attach_timeout_s``.
@@ -78,6 +80,7 @@ class DataLogger:
         split_duration_s: float | None = None,
         max_size_bytes: int | None = None,
         compression: Compression = "zstd",
+        native: bool = False,
     ) -> None:
         self.path = Path(path)
         self.specs = list(specs)
@@ -86,7 +89,7 @@ class DataLogger:
         self.recorded_bytes: dict[str, int] = {s.topic: 0 for s in specs}
         self._msgtype = {s.topic: s.msgtype for s in specs}
         self.errors: list[str] = []
-        self.raw_ros1 = all(s.payload == "ros1" for s in specs)
+        self.raw_ros1 = not native and all(s.payload == "ros1" for s in specs)
         self.max_size_bytes = max_size_bytes
         #: set when the recording reached ``max_size_bytes``
         self.full = threading.Event()
@@ -96,13 +99,13 @@ class DataLogger:
         self._schemas: dict[str, Ros1Schema] = {}
         self._attach_timeout_s = attach_timeout_s
         self._readers: dict[str, Reader] = {}
-        self._pending: list[tuple[str, Reader]] = []
+        self._pending: list[tuple[StreamSpec, Reader]] = []
         self._lock = threading.Lock()
         self._stop = threading.Event()
         if (split_size_bytes is not None or split_duration_s is not None) and not self.raw_ros1:
             msg = (
-                "--split-size/--split-duration split recordings of ROS 1 topics; a --replay or "
-                "--synthetic source is recorded to one file"
+                "--split-size/--split-duration split recordings of ROS 1 topics; ROS 2 topics "
+                "(--ros2) and a --replay or --synthetic source are recorded to one file"
             )
             raise ConfigError(msg)
         try:
@@ -140,7 +143,8 @@ class DataLogger:
         self._thread.start()
 
     def add(self, spec: StreamSpec) -> None:
-        """Record one more ROS 1 stream (a topic that appeared while recording).
+        """Record one more stream (a topic that appeared while recording): ROS 1 bytes on a ROS 1
+        recording, ROS 2 CDR on a native one.
 
         Raises:
             ProducerGoneError: the stream has no writer within the attach timeout.
@@ -151,7 +155,7 @@ class DataLogger:
             self._msgtype[spec.topic] = spec.msgtype
             self.recorded.setdefault(spec.topic, 0)
             self.recorded_bytes.setdefault(spec.topic, 0)
-            self._pending.append((spec.topic, reader))
+            self._pending.append((spec, reader))
 
     @property
     def bytes_written(self) -> int:
@@ -166,8 +170,14 @@ class DataLogger:
         idle = True
         while True:
             with self._lock:
-                for topic, reader in self._pending:
-                    self._readers[topic] = reader
+                for spec, reader in self._pending:
+                    self._readers[spec.topic] = reader
+                    if self._native is not None and spec.payload == "cdr":
+                        try:  # in this thread: the writer is not shared
+                            self._native.add_channel(spec.topic, spec.msgtype, offered_qos=spec.qos)
+                        except (LogError, UnsupportedMessageError) as err:
+                            self.errors.append(f"{spec.topic}: {err}")
+                            gone.add(spec.topic)
                 self._pending.clear()
             fds = [r.fileno() for t, r in self._readers.items() if t not in gone]
             stopping = self._stop.is_set()

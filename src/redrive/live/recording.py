@@ -8,11 +8,16 @@
   join the recording; when the master stops answering it says so once and recording goes on (open
   connections keep delivering); when a master answers again it says so (the scrapers register
   again with it by themselves);
+* for a ROS 2 session (:class:`~redrive.live.ros2.Ros2Session`), looks at the topics the ROS 2
+  scraper found published on the DDS domain instead: new ones that match join the recording
+  (types redrive has no definition of are named once and left out: ROS 2 sends no definitions);
 * says why the session ends: every publisher of the recorded topics gone for ``idle_timeout_s``
-  (a publisher is there while it is registered with the master or a scraper is connected to it;
-  the master's own ``/rosout`` node and redrive's scrapers do not count; with ``--all``/``--regex``
-  the clock starts once a first publisher was there), the recording full
-  (``--max-size``), or — for replay and synthetic sources — the source finished.
+  (a ROS 1 publisher is there while it is registered with the master or a scraper is connected
+  to it; the master's own ``/rosout`` node and redrive's scrapers do not count; a ROS 2 publisher
+  while the scraper's DDS reader is matched with its writer, the ``/rosout`` and
+  ``/parameter_events`` every ROS 2 node publishes not counting; with ``--all``/``--regex`` the
+  clock starts once a first publisher was there), the recording full (``--max-size``), or — for
+  replay and synthetic sources — the source finished.
 """
 
 from __future__ import annotations
@@ -26,6 +31,8 @@ from dataclasses import dataclass
 from redrive.errors import ConfigError, TransportError
 from redrive.live.recorder import DataLogger
 from redrive.live.ros1 import TopicInfo, list_topics
+from redrive.live.ros2 import Ros2Session
+from redrive.live.ros2_dds import QosProfile
 from redrive.live.session import LiveSession
 
 __all__ = ["Recording", "TopicSelection", "TopicStatus"]
@@ -34,6 +41,9 @@ logger = logging.getLogger(__name__)
 
 #: publishers that never go away by themselves, left out when telling whether data can still come
 _NOT_A_SOURCE = re.compile(r"^/(rosout|redrive_scraper_[^/]*)$")
+#: ROS 2 topics every node publishes (a long-lived ``ros2 daemon`` too): their publishers do not
+#: tell whether data can still come
+_NOT_A_SOURCE_TOPIC = frozenset({"/rosout", "/parameter_events"})
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -118,6 +128,7 @@ class Recording:
         self._seen_publisher = False
         self._idle_since: float | None = None
         self._registered: dict[str, tuple[str, ...]] = {}
+        self._refused: set[str] = set()
 
     @property
     def wall_s(self) -> float:
@@ -128,10 +139,47 @@ class Recording:
         if self.recorder.full.is_set():
             size = sum(self.recorder.recorded_bytes.values())
             return f"the recording reached --max-size ({size / 1e6:.1f} MB of messages)"
+        if isinstance(self.session, Ros2Session):
+            if not self.session.alive():
+                return "the ROS 2 scraper exited (its errors are above)"
+            self._watch_dds(self.session)
+            return self._idle()
         if self.master_uri is None:  # a replay or synthetic source: it ends by itself
             return None if self.session.alive() else "the source finished"
         self._watch_master()
         return self._idle()
+
+    def _watch_dds(self, session: Ros2Session) -> None:
+        from redrive.live.ros2_dds import Publication
+
+        if not self.selection.grows:
+            return
+        new = {}
+        for topic, offered in list(session.offered.items()):
+            if topic in session.scrapers or topic in self._refused:
+                continue
+            if not self.selection.matches(topic):
+                continue
+            if not session.known_type(offered.msgtype):
+                self._refused.add(topic)
+                self.say(
+                    f"not recording {topic}: redrive has no definition of {offered.msgtype}, and "
+                    "ROS 2 publishers send none (ROS 1 ones do); add its .msg to redrive/io/msgs"
+                )
+                continue
+            qos = QosProfile(
+                reliability="best_effort" if offered.reliability == "best_effort" else "reliable",
+                durability="transient_local" if offered.durability == "transient_local" else "volatile",
+            )  # fmt: skip
+            new[topic] = Publication(topic=topic, msgtype=offered.msgtype, qos=qos)
+        for topic, pub in sorted(new.items()):
+            try:
+                session.add_ros2({topic: pub}, on_stream=self.recorder.add)
+            except TransportError as err:
+                self._refused.add(topic)
+                self.say(f"not recording {topic}: {err}")
+                continue
+            self.say(f"recording {topic} (published on the DDS domain)")
 
     def _watch_master(self) -> None:
         assert self.master_uri is not None
@@ -174,7 +222,12 @@ class Recording:
         return {n for n in nodes if not _NOT_A_SOURCE.match(n)}
 
     def _idle(self) -> str | None:
-        present = any(self._publishers(t) for t in self.session.scrapers)
+        ros2 = isinstance(self.session, Ros2Session)
+        present = any(
+            self._publishers(t)
+            for t in list(self.session.scrapers)
+            if not (ros2 and t in _NOT_A_SOURCE_TOPIC)
+        )
         now = time.monotonic()
         if present:
             self._seen_publisher = True

@@ -17,25 +17,30 @@ on ``/redrive/<algorithm>/detections``, each planner's path as ``nav_msgs/msg/Pa
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import re
 import subprocess
 import sys
+import threading
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
-from redrive.errors import ConfigError, UnsupportedMessageError
+from redrive.errors import ConfigError, TransportError, UnsupportedMessageError
 from redrive.io.ros_encode import encode_value
 from redrive.io.typestore import typestore_for
 from redrive.live.ros2_dds import (
     DEFAULT,
+    Publication,
+    QosProfile,
     RawWriter,
     discover,
     participant,
     require_cyclonedds,
 )
+from redrive.live.scraper_state import Offered, Ros2Reports
 from redrive.live.session import (
     _OTHER_CAPACITY,
     DEFAULT_CAPACITY,
@@ -48,7 +53,7 @@ from redrive.results.records import FrameRecord
 from redrive.transport import remove_stale
 from redrive.types import PlannedPath
 
-__all__ = ["RESULT_PREFIX", "ResultPublisher", "ros2_session"]
+__all__ = ["RESULT_PREFIX", "ResultPublisher", "Ros2Session", "find_publications", "ros2_session"]
 
 logger = logging.getLogger(__name__)
 
@@ -57,28 +62,18 @@ RESULT_PREFIX = "/redrive"
 _NAME = re.compile(r"[^A-Za-z0-9_]+")
 
 
-def ros2_session(
-    topics: Sequence[str],
-    *,
-    domain_id: int,
-    name: str | None = None,
-    capacity: Mapping[str, int] | None = None,
-    slots: int = 8,
-    ready_timeout_s: float = 30.0,
-    wait_for_topics_s: float = 2.0,
-) -> LiveSession:
-    """Start the ROS 2 scraper for ``topics`` on DDS domain ``domain_id`` and wait until it reads.
-
-    Topics are looked up among the domain's publications for ``wait_for_topics_s`` (at least
-    the time DDS discovery takes, ~1 s).
+def find_publications(
+    topics: Sequence[str], *, domain_id: int, wait_for_topics_s: float = 2.0
+) -> dict[str, Publication]:
+    """Topic → its publication (type, offered QoS) of each of ``topics`` on DDS domain
+    ``domain_id``, looked up for ``wait_for_topics_s`` (at least the ~1 s DDS discovery takes).
 
     Raises:
         ConfigError: a topic has no publisher on the domain.
-        TransportError: cyclonedds is missing, or the scraper failed to start.
+        TransportError: cyclonedds is missing or the domain cannot be joined.
     """
-    require_cyclonedds()
-    name = name or default_session_name()
-    remove_stale()  # segments of killed earlier sessions
+    if not topics:
+        return {}
     dp = participant(domain_id)
     try:
         found = discover(dp, topics, timeout_s=max(wait_for_topics_s, 1.0))
@@ -92,10 +87,144 @@ def ros2_session(
             "CYCLONEDDS_URI, and raise --wait if the publishers start later"
         )
         raise ConfigError(msg)
+    return {topic: found[topic] for topic in topics}
+
+
+class Ros2Session(LiveSession):
+    """A live session fed by the one ROS 2 scraper process (see :func:`ros2_session`).
+
+    :attr:`scrapers` has a state per topic (its publishers are the DDS writers its reader is
+    matched with); :attr:`offered` every ROS 2 topic published on the domain when the scraper
+    was started with ``discover_new``; :meth:`add_ros2` records more topics while it runs.
+    """
+
+    def __init__(
+        self,
+        name: str,
+        specs: Sequence[StreamSpec],
+        proc: subprocess.Popen[str],
+        *,
+        capacity: Mapping[str, int] | None,
+        ready_timeout_s: float,
+    ) -> None:
+        super().__init__(name, specs, [proc])
+        self.reports = Ros2Reports(proc, self.scrapers)
+        for spec in specs:
+            self.reports.state(spec.topic)
+        self._capacity = dict(capacity or {})
+        self._ready_timeout_s = ready_timeout_s
+        self._store: Any = None
+
+    @property
+    def offered(self) -> dict[str, Offered]:
+        return self.reports.offered
+
+    def known_type(self, msgtype: str) -> bool:
+        """True when redrive has a definition of ``msgtype`` (a DDS reader needs one)."""
+        if self._store is None:
+            self._store = typestore_for(2)[0]
+        return msgtype in self._store.fielddefs
+
+    def spec(self, topic: str, msgtype: str, qos: QosProfile) -> StreamSpec:
+        size = self._capacity.get(topic) or DEFAULT_CAPACITY.get(msgtype, _OTHER_CAPACITY)
+        return StreamSpec(
+            topic=topic, msgtype=msgtype, stream=stream_name(self.name, topic), payload="cdr",
+            capacity_bytes=size, qos=qos.to_yaml(),
+        )  # fmt: skip
+
+    def add_ros2(
+        self,
+        publications: Mapping[str, Publication],
+        *,
+        on_stream: Callable[[StreamSpec], None] | None = None,
+    ) -> list[StreamSpec]:
+        """Have the scraper read ``publications`` too; returns their streams (also appended to
+        :attr:`specs`). With ``on_stream`` (a recorder's ``add``), each topic's DDS reader is
+        created only once ``on_stream`` was called with its stream and a lossless reader
+        attached: no sample is forwarded before the recorder reads the stream.
+
+        Raises:
+            TransportError: the scraper could not add a topic (those before it stay added).
+        """
+        proc = self.processes[0]
+        added = []
+        for topic, pub in publications.items():
+            spec = self.spec(topic, pub.msgtype, pub.qos)
+            command = {
+                **_spec_json(spec, pub.qos), "await": on_stream is not None,
+            }  # fmt: skip
+            self.reports.state(topic)
+            try:
+                assert proc.stdin is not None
+                proc.stdin.write("ADD " + json.dumps(command) + "\n")
+                proc.stdin.flush()
+            except (OSError, ValueError) as err:
+                msg = f"the ROS 2 scraper does not take {topic} ({err}): it has exited"
+                raise TransportError(msg) from err
+            try:
+                error = None
+                if on_stream is not None:
+                    error = self.reports.wait_answer(topic, self._ready_timeout_s, stream=True)
+                    if error is None:
+                        on_stream(spec)
+                if error is None:
+                    error = self.reports.wait_answer(topic, self._ready_timeout_s)
+            except BaseException:
+                remove_stale(spec.stream)
+                raise
+            if error is not None:
+                msg = f"the ROS 2 scraper cannot read {topic} ({pub.msgtype}): {error}"
+                raise TransportError(msg)
+            self.specs.append(spec)
+            added.append(spec)
+        return added
+
+    def close(self, *, timeout_s: float = 5.0) -> None:
+        proc = self.processes[0]
+        if proc.stdin is not None:
+            with contextlib.suppress(OSError, ValueError):
+                proc.stdin.close()
+        super().close(timeout_s=timeout_s)
+        self.reports.ended.wait(1.0)
+
+
+def _spec_json(spec: StreamSpec, qos: QosProfile) -> dict[str, Any]:
+    return {
+        "topic": spec.topic, "msgtype": spec.msgtype, "stream": spec.stream,
+        "capacity": spec.capacity_bytes, "reliability": qos.reliability,
+        "durability": qos.durability,
+    }  # fmt: skip
+
+
+def ros2_session(
+    topics: Sequence[str],
+    *,
+    domain_id: int,
+    name: str | None = None,
+    capacity: Mapping[str, int] | None = None,
+    slots: int = 8,
+    ready_timeout_s: float = 30.0,
+    wait_for_topics_s: float = 2.0,
+    discover_new: bool = False,
+) -> Ros2Session:
+    """Start the ROS 2 scraper for ``topics`` on DDS domain ``domain_id`` and wait until it reads.
+
+    Topics are looked up among the domain's publications for ``wait_for_topics_s`` (at least
+    the time DDS discovery takes, ~1 s). With ``discover_new`` the scraper reports every topic
+    published on the domain (:attr:`Ros2Session.offered`), those that appear later too.
+
+    Raises:
+        ConfigError: a topic has no publisher on the domain.
+        TransportError: cyclonedds is missing, or the scraper failed to start.
+    """
+    require_cyclonedds()
+    name = name or default_session_name()
+    remove_stale()  # segments of killed earlier sessions
+    found = find_publications(topics, domain_id=domain_id, wait_for_topics_s=wait_for_topics_s)
+    size_of = dict(capacity or {})
     specs = []
-    for topic in topics:
-        pub = found[topic]
-        size = (capacity or {}).get(topic) or DEFAULT_CAPACITY.get(pub.msgtype, _OTHER_CAPACITY)
+    for topic, pub in found.items():
+        size = size_of.get(topic) or DEFAULT_CAPACITY.get(pub.msgtype, _OTHER_CAPACITY)
         specs.append(
             StreamSpec(
                 topic=topic,
@@ -106,32 +235,26 @@ def ros2_session(
                 qos=pub.qos.to_yaml(),
             )
         )
-    spec_json = json.dumps(
-        [
-            {
-                "topic": s.topic,
-                "msgtype": s.msgtype,
-                "stream": s.stream,
-                "capacity": s.capacity_bytes,
-                "reliability": found[s.topic].qos.reliability,
-                "durability": found[s.topic].qos.durability,
-            }
-            for s in specs
-        ]
-    )
+    spec_json = json.dumps([_spec_json(s, found[s.topic].qos) for s in specs])
     argv = [
         sys.executable, "-m", "redrive.live.ros2_scraper", "--domain", str(domain_id),
-        "--spec", spec_json, "--slots", str(slots),
+        "--spec", spec_json, "--slots", str(slots), *(["--discover"] if discover_new else []),
     ]  # fmt: skip
     proc = subprocess.Popen(
-        argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True
+        argv,
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
     )
-    session = LiveSession(name, specs, [proc])
+    session = Ros2Session(name, specs, proc, capacity=capacity, ready_timeout_s=ready_timeout_s)
     try:
         _wait_ready(proc, "the ROS 2 scraper", time.monotonic() + ready_timeout_s)
     except BaseException:
         session.close()
         raise
+    threading.Thread(target=session.reports.follow, name="ros2-scraper", daemon=True).start()
     return session
 
 

@@ -398,4 +398,10 @@ class RawReader:
 
     def matched(self) -> int:
         """How many publishers this reader is matched with."""
-        return len(self._reader.get_matched_publications())
+        return len(self.publications())
+
+    def publications(self) -> list[int]:
+        """The DDS instance handles of the writers (publishers) this reader is matched with;
+        a writer leaves the list when it is deleted, its participant leaves the domain or its
+        lease expires (a killed process: after its lease duration, 10 s by default)."""
+        return list(self._reader.get_matched_publications())
