@@ -87,7 +87,7 @@ def _deserialised(message: LogMessage, monkeypatch: pytest.MonkeyPatch) -> Any:
         return GroundTruthObjectArrayDecoder().decode(message, DESERIALIZE)
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=15, deadline=None)
 @given(
     objects=st.lists(_OBJECT, max_size=3),
     little_endian=st.booleans(),

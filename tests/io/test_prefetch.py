@@ -22,10 +22,11 @@ def test_results_in_order_and_an_error_raised_at_its_item() -> None:
             raise ValueError("five")
         return x * x
 
-    results = prefetched(square, list(range(8)), ahead=2)
+    def take_all() -> None:
+        seen.extend(prefetched(square, list(range(8)), ahead=2))
+
     with pytest.raises(ValueError, match="five"):
-        for value in results:
-            seen.append(value)
+        take_all()
     assert seen == [0, 1, 4, 9, 16]
     assert list(prefetched(square, [3])) == [9]
     assert not _prefetch_threads()
