@@ -98,3 +98,22 @@ def test_unusual_bytes_are_deserialised_and_bad_values_refused() -> None:
     )
     with pytest.raises(UnsupportedMessageError, match="not finite"):
         OdometryDecoder().decode(nan, DESERIALIZE)
+
+
+def test_pending_state_checks_now_and_builds_later() -> None:
+    decoder = OdometryDecoder()
+    v = [1.0, 2.0, 3.0, 0.0, 0.0, 0.6, 0.8, 4.0, 0.0, 0.0, 0.0, 0.0, 0.1]
+    message = _odometry(2, little_endian=True, stamp_ns=7, frame="odom", child="b", v=v)
+    pending = decoder.read_pending(message)
+    assert pending is not None
+    assert pending.stamp_ns == 7
+    assert pending.value is pending.value  # built once
+    np.testing.assert_array_equal(pending.value.position, _by_deserialising(message).value.position)
+    nan = _odometry(2, little_endian=True, stamp_ns=7, frame="o", child="b", v=[float("nan")] * 13)
+    with pytest.raises(UnsupportedMessageError, match="not finite"):
+        decoder.read_pending(nan)
+    tiny = [*v[:3], 1e-13, 0.0, 0.0, 0.0, *v[7:]]  # refused by quaternion_normalized: raised now
+    with pytest.raises(ValueError, match="not a usable quaternion"):
+        decoder.read_pending(
+            _odometry(2, little_endian=True, stamp_ns=7, frame="o", child="b", v=tiny)
+        )

@@ -159,3 +159,40 @@ def test_a_slow_input_gets_a_tolerance_of_half_its_period(tmp_path: Path) -> Non
     lacking = [f.index for f in frames if "gnss_fix" in f.missing]
     assert len(lacking) == 16
     assert all("gnss_fix" not in frames[i].sensors for i in lacking)
+
+
+def test_ego_states_are_built_only_around_frames_and_equal_the_eager_ones(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from redrive.io.decoders.motion import OdometryDecoder, PendingState
+
+    bag = write_demo_bag(tmp_path / "demo.bag", duration_s=1.0)
+    built: list[int] = []
+    build = PendingState.decoded
+
+    def counted(self: PendingState) -> object:
+        built.append(id(self))
+        return build(self)
+
+    with monkeypatch.context() as patch:
+        patch.setattr(PendingState, "decoded", counted)
+        with open_log(bag) as log:
+            lazy = [f.vehicle_state for f in FrameAssembler(log).frames()]
+            n_odom = log.topics["/odom"].count
+    with monkeypatch.context() as patch:
+        patch.setattr(OdometryDecoder, "read_pending", lambda self, message: None)
+        with open_log(bag) as log:
+            eager = [f.vehicle_state for f in FrameAssembler(log).frames()]
+    assert 0 < len(set(built)) < n_odom / 2  # 10 frames, 1 s of odometry
+    assert len(lazy) == len(eager) == 10
+    for a, b in zip(lazy, eager, strict=True):
+        assert a is not None
+        assert b is not None
+        assert (a.stamp_ns, a.frame_id, a.heading_rad, a.yaw_rate_rad_s) == (
+            b.stamp_ns,
+            b.frame_id,
+            b.heading_rad,
+            b.yaw_rate_rad_s,
+        )
+        for name in ("position", "velocity", "acceleration"):
+            assert getattr(a, name).tobytes() == getattr(b, name).tobytes()

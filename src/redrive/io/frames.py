@@ -22,6 +22,7 @@ from redrive.errors import ConfigError, UnsupportedMessageError
 from redrive.io.base import LogMessage, LogReader
 from redrive.io.decoders import decode, decoder_for
 from redrive.io.decoders.base import Decoded
+from redrive.io.decoders.motion import OdometryDecoder, PendingState
 from redrive.io.decoders.tf import is_static_tf_topic
 from redrive.io.mounts import SensorMounts, mount_tf_topics
 from redrive.io.sensor_map import SensorMap, SensorMapOverrides, infer_sensor_map
@@ -108,7 +109,7 @@ class FrameAssembler:
         by_topic = smap.by_topic()
         tol = smap.widest_tolerance_ns  # frames wait this long for the slowest input's samples
         buffers: dict[str, deque[_Sample]] = {s.sensor_id: deque() for s in smap.sensors}
-        states: deque[VehicleState] = deque()
+        states: deque[VehicleState | PendingState] = deque()
         objects: deque[_Sample] = deque()
         mounts = SensorMounts()
         pending: deque[_Sample] = deque()
@@ -132,30 +133,44 @@ class FrameAssembler:
                 decoded = self._decode(message)
                 if decoded is not None and isinstance(decoded.value, tuple):
                     mounts.add(message.topic, _transforms(decoded))
+        # The ego state (often 100 Hz odometry) is read, and built only for the frames' stamps.
+        state_topic = smap.vehicle_state_topic if smap.vehicle_state_topic not in by_topic else None
         for message in self.log.messages(topics=list(dict.fromkeys(topics)), start_ns=read_from):
-            decoded = self._decode(message)
-            if decoded is None:
-                continue
+            pending_state = None
+            if message.topic == state_topic:
+                decoder = decoder_for(message.msgtype)
+                if type(decoder) is OdometryDecoder:
+                    try:
+                        pending_state = decoder.read_pending(message)
+                    except UnsupportedMessageError as err:
+                        self._undecodable(message, err)
+                        continue
             now = message.log_time_ns
-            spec = by_topic.get(message.topic)
-            if spec is not None:
-                sample = _Sample(decoded.stamp_ns, decoded)
-                buffers[spec.sensor_id].append(sample)
-                if spec.sensor_id == driver.sensor_id:
-                    if start_ns is not None and now < start_ns:
-                        pass
-                    elif stop_ns is not None and now >= stop_ns:
-                        break
-                    else:
-                        pending.append(sample)
-            elif message.topic == smap.vehicle_state_topic and isinstance(
-                decoded.value, VehicleState
-            ):
-                states.append(decoded.value)
-            elif message.topic == smap.ground_truth_topic:
-                objects.append(_Sample(decoded.stamp_ns, decoded))
-            elif message.topic in smap.tf_topics and isinstance(decoded.value, tuple):
-                mounts.add(message.topic, _transforms(decoded))
+            if pending_state is not None:
+                states.append(pending_state)
+            else:
+                decoded = self._decode(message)
+                if decoded is None:
+                    continue
+                spec = by_topic.get(message.topic)
+                if spec is not None:
+                    sample = _Sample(decoded.stamp_ns, decoded)
+                    buffers[spec.sensor_id].append(sample)
+                    if spec.sensor_id == driver.sensor_id:
+                        if start_ns is not None and now < start_ns:
+                            pass
+                        elif stop_ns is not None and now >= stop_ns:
+                            break
+                        else:
+                            pending.append(sample)
+                elif message.topic == smap.vehicle_state_topic and isinstance(
+                    decoded.value, VehicleState
+                ):
+                    states.append(decoded.value)
+                elif message.topic == smap.ground_truth_topic:
+                    objects.append(_Sample(decoded.stamp_ns, decoded))
+                elif message.topic in smap.tf_topics and isinstance(decoded.value, tuple):
+                    mounts.add(message.topic, _transforms(decoded))
             while pending and now - pending[0].stamp_ns > tol + self.lookahead_ns:
                 yield assemble(pending.popleft(), index=index)
                 index += 1
@@ -177,11 +192,14 @@ class FrameAssembler:
         try:
             return decode(message, self.log.deserialize)
         except UnsupportedMessageError as err:
-            self.undecodable[message.topic] = self.undecodable.get(message.topic, 0) + 1
-            if message.topic not in self._warned:
-                self._warned.add(message.topic)
-                logger.warning("%s (further failures on this topic are counted, not logged)", err)
+            self._undecodable(message, err)
             return None
+
+    def _undecodable(self, message: LogMessage, err: UnsupportedMessageError) -> None:
+        self.undecodable[message.topic] = self.undecodable.get(message.topic, 0) + 1
+        if message.topic not in self._warned:
+            self._warned.add(message.topic)
+            logger.warning("%s (further failures on this topic are counted, not logged)", err)
 
     def _assemble(
         self,
@@ -189,7 +207,7 @@ class FrameAssembler:
         *,
         index: int,
         buffers: dict[str, deque[_Sample]],
-        states: deque[VehicleState],
+        states: deque[VehicleState | PendingState],
         objects: deque[_Sample],
         mounts: SensorMounts,
     ) -> Frame:
@@ -270,7 +288,9 @@ def _nearest(buf: deque[_Sample], stamp_ns: int, tolerance_ns: int) -> _Sample |
     return best
 
 
-def _state_at(states: deque[VehicleState], stamp_ns: int, tolerance_ns: int) -> VehicleState | None:
+def _state_at(
+    states: deque[VehicleState | PendingState], stamp_ns: int, tolerance_ns: int
+) -> VehicleState | None:
     before = after = None
     for state in states:
         if state.stamp_ns <= stamp_ns:
@@ -278,11 +298,15 @@ def _state_at(states: deque[VehicleState], stamp_ns: int, tolerance_ns: int) -> 
         elif after is None:
             after = state
     if before is not None and after is not None:
-        return interpolate_state(before, after, stamp_ns)
+        return interpolate_state(_built(before), _built(after), stamp_ns)
     near = before or after
     if near is not None and abs(near.stamp_ns - stamp_ns) <= tolerance_ns:
-        return near
+        return _built(near)
     return None
+
+
+def _built(state: VehicleState | PendingState) -> VehicleState:
+    return state if isinstance(state, VehicleState) else state.value
 
 
 def iter_frames(

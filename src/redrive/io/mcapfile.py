@@ -23,6 +23,7 @@ from mcap.summary import Summary
 
 from redrive.errors import LogError
 from redrive.io._deserialize import Deserializer
+from redrive.io._prefetch import prefetched
 from redrive.io._reader_base import RosReaderBase
 from redrive.io.base import Encoding, LogMessage, TopicInfo, normalize_msgtype
 from redrive.io.damage import DamageLog, LogDamage
@@ -326,8 +327,7 @@ class McapFileReader(RosReaderBase):
             self._summary.chunk_indexes,
             key=lambda c: (c.message_start_time, c.chunk_start_offset),
         )
-        heap: list[tuple[int, int, int, memoryview]] = []
-        order = count = 0
+        wanted: list[Any] = []
         for index in chunks:
             if stop_ns is not None and index.message_start_time >= stop_ns:
                 break
@@ -337,39 +337,53 @@ class McapFileReader(RosReaderBase):
                 and not ids.intersection(index.message_index_offsets)
             ):
                 continue
-            while heap and heap[0][0] < index.message_start_time:
-                t, _, cid, data = heapq.heappop(heap)
-                count += 1
-                yield cid, t, data
-            for cid, _, t, _, data in self._chunk_messages(index, count):
-                if (
-                    cid in ids
-                    and (start_ns is None or t >= start_ns)
-                    and (stop_ns is None or t < stop_ns)
-                ):
-                    heapq.heappush(heap, (t, order, cid, data))
-                    order += 1
+            wanted.append(index)
+        heap: list[tuple[int, int, int, memoryview]] = []
+        order = count = 0
+        # The next chunks are decompressed and checked in a thread (zstd, lz4 and crc32 release
+        # the GIL) while this one's messages are decoded and used.
+        loads = prefetched(self._load_chunk, wanted)
+        try:
+            for index, loaded in zip(wanted, loads, strict=True):
+                while heap and heap[0][0] < index.message_start_time:
+                    t, _, cid, data = heapq.heappop(heap)
+                    count += 1
+                    yield cid, t, data
+                for cid, _, t, _, data in self._chunk_messages(index, loaded, count):
+                    if (
+                        cid in ids
+                        and (start_ns is None or t >= start_ns)
+                        and (stop_ns is None or t < stop_ns)
+                    ):
+                        heapq.heappush(heap, (t, order, cid, data))
+                        order += 1
+        finally:
+            loads.close()  # stops the thread when the caller stops early
         while heap:
             t, _, cid, data = heapq.heappop(heap)
             count += 1
             yield cid, t, data
 
-    def _chunk_messages(
-        self, index: Any, count: int
-    ) -> list[tuple[int, int, int, int, memoryview]]:
-        """The messages of the chunk ``index`` points at; damage there is hit (raised or
-        recorded) and its intact prefix, if any, returned."""
+    def _load_chunk(self, index: Any) -> tuple[list[Message], str | None, int]:
+        """The messages of the chunk ``index`` points at (its intact prefix when damaged), why
+        it stopped early (None when whole) and the chunk's end; no side effects, so it may run
+        in the prefetch thread."""
         pos = int(index.chunk_start_offset)
-        messages: list[Message] = []
-        why: str | None
         try:
             head = chunk_head(self._buf, pos, self._size)
         except RecordError as err:
-            messages, why, stop = [], str(err), pos + int(index.chunk_length)
-        else:
-            messages, _, why = read_chunk(self._buf, head)
-            stop = head.stop
+            return [], str(err), pos + int(index.chunk_length)
+        messages, _, why = read_chunk(self._buf, head)
+        return messages, why, head.stop
+
+    def _chunk_messages(
+        self, index: Any, loaded: tuple[list[Message], str | None, int], count: int
+    ) -> list[Message]:
+        """The messages of a loaded chunk; damage there is hit (raised or recorded) and its
+        intact prefix, if any, returned."""
+        messages, why, stop = loaded
         if why is not None:
+            pos = int(index.chunk_start_offset)
             listed = [
                 message_index_count(self._buf, int(at), self._size)
                 for at in index.message_index_offsets.values()

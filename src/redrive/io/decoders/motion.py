@@ -29,7 +29,7 @@ from redrive.io.decoders._common import header_stamp_ns, quat, unsupported, vec3
 from redrive.io.decoders.base import Decoded, DecodedKind, Deserialize
 from redrive.types import SensorType, VehicleState
 
-__all__ = ["OdometryDecoder", "PoseDecoder", "TwistDecoder"]
+__all__ = ["OdometryDecoder", "PendingState", "PoseDecoder", "TwistDecoder"]
 
 
 def _check_orientation(
@@ -126,21 +126,76 @@ class OdometryDecoder:
     sensor_type: SensorType | None = SensorType.ODOMETRY
 
     def decode(self, message: LogMessage, deserialize: Deserialize) -> Decoded:
+        pending = self.read_pending(message)
+        if pending is not None:
+            return pending.decoded()
+        msg: Any = deserialize(message)
+        return _state(message, msg, pose=msg.pose.pose, twist=msg.twist.twist, twist_in_body=True)
+
+    def read_pending(self, message: LogMessage) -> PendingState | None:
+        """The message's stamp and values read from its bytes, its VehicleState built when
+        asked (:class:`PendingState`); None when the bytes are not the plain layout.
+
+        Raises:
+            UnsupportedMessageError: what :meth:`decode` raises for it (a non-finite orientation).
+        """
         read = _read_odometry(message)
-        if read is not None:
-            stamp_ns, frame_id, (position, orientation, linear, angular) = read
-            return _state_of(
-                message,
-                stamp_ns=stamp_ns or message.log_time_ns,
-                frame_id=frame_id,
+        if read is None:
+            return None
+        stamp_ns, frame_id, motion = read
+        q = _check_orientation(message, motion[1])
+        pending = PendingState(message, stamp_ns or message.log_time_ns, frame_id, motion)
+        if not _SURELY_USABLE[0] < sum(v * v for v in q) < _SURELY_USABLE[1]:
+            pending.decoded()  # near a bound of quaternion_normalized: build it now, so that
+            # a ValueError is raised where decode would raise it
+        return pending
+
+
+#: Squared quaternion norms far inside what quaternion_normalized accepts ([1e-12, inf) for the
+#: norm), whatever the rounding of the sum.
+_SURELY_USABLE = (1e-20, 1e300)
+
+
+class PendingState:
+    """An odometry message read from its bytes whose VehicleState is built on first use.
+
+    The frame assembler reads every ego-state message (100 Hz in many logs) but interpolates
+    each frame's state from the two around its stamp: building the others (arrays, rotation
+    matrix, data-model checks) would be wasted.  :meth:`decoded` gives what
+    :meth:`OdometryDecoder.decode` gives for the message, built once.
+    """
+
+    __slots__ = ("_decoded", "_frame_id", "_message", "_motion", "stamp_ns")
+
+    def __init__(self, message: LogMessage, stamp_ns: int, frame_id: str, motion: _Motion) -> None:
+        self.stamp_ns = stamp_ns
+        self._message: LogMessage | None = message
+        self._frame_id = frame_id
+        self._motion = motion
+        self._decoded: Decoded | None = None
+
+    def decoded(self) -> Decoded:
+        if self._decoded is None:
+            assert self._message is not None
+            position, orientation, linear, angular = self._motion
+            self._decoded = _state_of(
+                self._message,
+                stamp_ns=self.stamp_ns,
+                frame_id=self._frame_id,
                 position=position,
                 orientation=orientation,
                 linear=linear,
                 angular=angular,
                 twist_in_body=True,
             )
-        msg: Any = deserialize(message)
-        return _state(message, msg, pose=msg.pose.pose, twist=msg.twist.twist, twist_in_body=True)
+            self._message = None  # its bytes (a view of a whole chunk) are no longer held
+        return self._decoded
+
+    @property
+    def value(self) -> VehicleState:
+        state = self.decoded().value
+        assert isinstance(state, VehicleState)
+        return state
 
 
 _ROS1_ODOM_HEAD = struct.Struct("<IIII")  # seq, sec, nsec, frame_id length

@@ -19,15 +19,17 @@ import functools
 import math
 import re
 import zlib
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from types import MappingProxyType
 from typing import Any
 
 import numpy as np
 
+from redrive.errors import UnsupportedMessageError
 from redrive.geometry.quaternion import euler_from_quaternion
 from redrive.io.base import LogMessage
 from redrive.io.decoders._common import header_stamp_ns, quat, unsupported, vec3
+from redrive.io.decoders._gt_bytes import GroundTruthBytes, read_ground_truth
 from redrive.io.decoders.base import Decoded, DecodedKind, Deserialize
 from redrive.types import Box3D, DetectedObject, ObjectClass, SensorType
 
@@ -86,12 +88,20 @@ def object_id_from_text(text: str) -> int:
 
 
 def _box(message: LogMessage, center: Any, orientation: Any, size: tuple[float, ...]) -> Any:
-    q = quat(orientation)
+    return _box_of(message, vec3(center), quat(orientation), size)
+
+
+def _box_of(
+    message: LogMessage,
+    center: tuple[float, float, float],
+    q: tuple[float, float, float, float],
+    size: tuple[float, ...],
+) -> Any:
     if q == (0.0, 0.0, 0.0, 0.0):
         q = (0.0, 0.0, 0.0, 1.0)
     try:
         roll_rad, pitch_rad, yaw_rad = euler_from_quaternion(q)
-        box = Box3D(center=np.array(vec3(center)), size=np.abs(np.array(size)), yaw_rad=yaw_rad)
+        box = Box3D(center=np.array(center), size=np.abs(np.array(size)), yaw_rad=yaw_rad)
     except ValueError as err:
         raise unsupported(message, f"object box is invalid: {err}", "check the publisher") from err
     return box, np.array([yaw_rad, pitch_rad, roll_rad])
@@ -154,26 +164,52 @@ class Detection3DArrayDecoder:
 
 def _from_detection(message: LogMessage, det: Any, **extra: Any) -> DetectedObject:
     """One vision_msgs Detection3D (4.x or noetic layout) as a DetectedObject."""
-    best_class, best_score = "", None
+    results = []
     for result in det.results:
         hyp = getattr(result, "hypothesis", None)
         class_id, score = (
             (hyp.class_id, hyp.score) if hyp is not None else (result.id, result.score)
         )
-        if best_score is None or float(score) > best_score:
-            best_class, best_score = str(class_id), float(score)
+        results.append((str(class_id), float(score)))
     bbox = det.bbox
     center = getattr(bbox, "center", None) or bbox.origin
-    box, orientation = _box(message, center.position, center.orientation, vec3(bbox.size))
     raw_id = getattr(det, "id", None)
     if raw_id is None:
         raw_id = getattr(det, "tracking_id", "")
+    return _detected(
+        message,
+        results=results,
+        position=vec3(center.position),
+        orientation=quat(center.orientation),
+        size=vec3(bbox.size),
+        raw_id=str(raw_id),
+        **extra,
+    )
+
+
+def _detected(
+    message: LogMessage,
+    *,
+    results: Iterable[tuple[str, float]],
+    position: tuple[float, float, float],
+    orientation: tuple[float, float, float, float],
+    size: tuple[float, float, float],
+    raw_id: str,
+    **extra: Any,
+) -> DetectedObject:
+    """A DetectedObject from a detection's values: the best-scoring hypothesis (the first of
+    equals) gives class and confidence."""
+    best_class, best_score = "", None
+    for class_id, score in results:
+        if best_score is None or score > best_score:
+            best_class, best_score = class_id, score
+    box, euler = _box_of(message, position, orientation, size)
     return DetectedObject(
-        object_id=object_id_from_text(str(raw_id)),
+        object_id=object_id_from_text(raw_id),
         object_class=object_class_from_text(best_class),
         confidence=1.0 if best_score is None else _confidence(best_score),
         box=box,
-        orientation=orientation,
+        orientation=euler,
         **extra,
     )
 
@@ -188,14 +224,14 @@ class GroundTruthObjectArrayDecoder:
     sensor_type: SensorType | None = None
 
     def decode(self, message: LogMessage, deserialize: Deserialize) -> Decoded:
+        read = read_ground_truth(message)
+        if read is not None:
+            return self._from_bytes(message, read)
         msg: Any = deserialize(message)
         n = len(msg.detections)
         if not len(msg.velocities) == len(msg.num_lidar_points) == len(msg.visible) == n:
-            raise unsupported(
-                message,
-                f"GroundTruthObjectArray has {n} detections but {len(msg.velocities)} velocities, "
-                f"{len(msg.num_lidar_points)} point counts and {len(msg.visible)} visible flags",
-                "the arrays must be parallel; the writer of this log is broken",
+            raise _not_parallel(
+                message, n, len(msg.velocities), len(msg.num_lidar_points), len(msg.visible)
             )
         out = []
         for det, vel, points, visible in zip(
@@ -215,6 +251,47 @@ class GroundTruthObjectArrayDecoder:
             frame_id=str(msg.header.frame_id),
             value=tuple(out),
         )
+
+    @staticmethod
+    def _from_bytes(message: LogMessage, read: GroundTruthBytes) -> Decoded:
+        n = len(read.objects)
+        if not len(read.velocities) == len(read.num_lidar_points) == len(read.visible) == n:
+            raise _not_parallel(
+                message, n, len(read.velocities), len(read.num_lidar_points), len(read.visible)
+            )
+        out = [
+            _detected(
+                message,
+                results=obj.results,
+                position=obj.position,
+                orientation=obj.orientation,
+                size=obj.size,
+                raw_id=obj.raw_id,
+                velocity=np.array(vel),
+                num_lidar_points=None if points < 0 else int(points),
+                visible=None if visible < 0 else bool(visible),
+            )
+            for obj, vel, points, visible in zip(
+                read.objects, read.velocities, read.num_lidar_points, read.visible, strict=True
+            )
+        ]
+        stamp_ns = read.stamp_sec * 1_000_000_000 + read.stamp_nanosec
+        return Decoded(
+            stamp_ns=stamp_ns if stamp_ns != 0 else message.log_time_ns,
+            frame_id=read.frame_id,
+            value=tuple(out),
+        )
+
+
+def _not_parallel(
+    message: LogMessage, n: int, velocities: int, points: int, visible: int
+) -> UnsupportedMessageError:
+    return unsupported(
+        message,
+        f"GroundTruthObjectArray has {n} detections but {velocities} velocities, "
+        f"{points} point counts and {visible} visible flags",
+        "the arrays must be parallel; the writer of this log is broken",
+    )
 
 
 #: derived_object_msgs/Object classification constant → ObjectClass.
