@@ -41,7 +41,7 @@ def _start(path: Path, compression: StreamCompression) -> tuple[int, McapStream]
 
 def _write(
     path: Path, compression: StreamCompression, messages: list[tuple[int, int, bytes]]
-) -> None:
+) -> int:
     fd, out = _start(path, compression)
     scratch = bytearray(3 * _CHUNK)
     for seq, (channel, log_ns, data) in enumerate(messages):
@@ -55,6 +55,7 @@ def _write(
             out.add_metadata("note", {"k": "v"})
     out.finish()
     os.close(fd)
+    return out.uncompressed_chunks  # the compression thread was behind (a busy machine)
 
 
 @pytest.mark.parametrize("compression", ["none", "lz4", "zstd"])
@@ -63,7 +64,7 @@ def test_the_mcap_library_reads_it_with_summary_index_and_crcs(
 ) -> None:
     messages = _messages(7)
     path = tmp_path / "out.mcap"
-    _write(path, compression, messages)
+    behind = _write(path, compression, messages)
     expected = [(f"/{'abc'[c - 1]}", t, d) for c, t, d in messages]
 
     with path.open("rb") as fh:  # every record in file order, chunk and data CRCs checked
@@ -78,20 +79,18 @@ def test_the_mcap_library_reads_it_with_summary_index_and_crcs(
         assert summary.statistics.channel_message_counts == {1: 40, 2: 40, 3: 40}
         assert summary.statistics.metadata_count == 1
         assert len(summary.chunk_indexes) == summary.statistics.chunk_count
-        assert all(
-            i.compression == ("" if compression == "none" else compression)
-            for i in summary.chunk_indexes
+        kinds = [i.compression for i in summary.chunk_indexes]
+        assert kinds.count("") == (len(kinds) if compression == "none" else behind)
+        assert kinds.count(compression) == (0 if compression == "none" else len(kinds) - behind)
+        # in file order (chunks the compressor was behind on come before those it still held)
+        got = sorted(
+            (m.sequence, c.topic, m.log_time, m.data)
+            for _, c, m in reader.iter_messages(log_time_order=False)
         )
-        got = [
-            (c.topic, m.log_time, m.data) for _, c, m in reader.iter_messages(log_time_order=False)
-        ]
-        assert got == expected
+        assert got == [(i, *m) for i, m in enumerate(expected)]
         by_time = [m.log_time for _, _, m in reader.iter_messages()]
         assert by_time == sorted(t for _, t, _ in messages)
         assert [m.name for m in reader.iter_metadata()] == ["note"]
-        assert [m.sequence for _, _, m in reader.iter_messages(log_time_order=False)] == list(
-            range(120)
-        )
     # the summary CRC covers the summary and the footer's first fields
     raw = path.read_bytes()
     footer = raw[-8 - 29 : -8]
@@ -128,3 +127,47 @@ def test_a_failed_write_in_the_compression_thread_reaches_the_caller(tmp_path: P
             out.add_message(1, log_time=seq, publish_time=seq, sequence=seq, data=bytes(3 * _CHUNK))
         out.finish()
     out.abandon()
+
+
+def test_chunks_the_compressor_cannot_take_are_written_uncompressed(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A compressor that is behind (its queue full) never holds up the recording."""
+    import threading
+
+    from redrive.io import mcap_stream
+
+    real = mcap_stream._compressor
+    gate = threading.Event()
+    calls: list[int] = []
+
+    def held(compression: StreamCompression) -> object:
+        compress = real(compression)
+
+        def slow(data: bytes) -> bytes:
+            calls.append(len(data))
+            if len(calls) > 1:  # the chunk defining the channels passes, then it is stuck
+                gate.wait()
+            return compress(data)
+
+        return slow
+
+    monkeypatch.setattr(mcap_stream, "_compressor", held)
+    messages = _messages(11)
+    path = tmp_path / "behind.mcap"
+    fd, out = _start(path, "zstd")
+    for seq, (channel, log_ns, data) in enumerate(messages):
+        out.add_message(channel, log_time=log_ns, publish_time=log_ns, sequence=seq, data=data)
+    assert out.uncompressed_chunks > 0
+    gate.set()
+    out.finish()
+    os.close(fd)
+    with path.open("rb") as fh:
+        reader = make_reader(fh, validate_crcs=True)
+        summary = reader.get_summary()
+        assert summary is not None
+        kinds = [i.compression for i in summary.chunk_indexes]
+        assert kinds.count("") == out.uncompressed_chunks
+        assert kinds.count("zstd") >= 3
+        got = [(m.channel_id, m.log_time, m.data) for _, _, m in reader.iter_messages()]
+    assert got == sorted(messages, key=lambda m: m[1])

@@ -75,6 +75,7 @@ class _OpenChunk:
     end_ns: int = 0
     messages: int = 0
     index: dict[int, list[int]] = field(default_factory=dict)  # channel → [log, offset, …]
+    defines: bool = False  # holds schema or channel records
 
 
 @dataclass(frozen=True, slots=True)
@@ -85,6 +86,7 @@ class _ChunkJob:
     start_ns: int
     end_ns: int
     index: dict[int, list[int]]
+    defines: bool
 
 
 def _compressor(compression: StreamCompression) -> Callable[[bytes], bytes]:
@@ -156,6 +158,10 @@ class McapStream:
         #: bytes handed to the file so far (compressed files: once the thread wrote them)
         self.position = 0
         self._queued = 0  # uncompressed bytes of chunks waiting for the compression thread
+        self._defining = 0  # chunks with schema/channel records waiting for the thread
+        self._lock = threading.Lock()  # one writer of the file (and its offsets) at a time
+        #: chunks written uncompressed because the compression thread was behind
+        self.uncompressed_chunks = 0
         self._schemas: dict[int, Schema] = {}
         self._channels: dict[int, Channel] = {}
         self._chunk_indexes: list[ChunkIndex] = []
@@ -165,7 +171,7 @@ class McapStream:
         self._start_ns = 0
         self._end_ns = 0
         self._failed: BaseException | None = None
-        self._jobs: queue.Queue[_ChunkJob | bytes | None] | None = None
+        self._jobs: queue.Queue[_ChunkJob | None] | None = None
         self._thread: threading.Thread | None = None
         if self._compress is not None:
             self._jobs = queue.Queue(maxsize=max(1, queue_chunks))
@@ -177,7 +183,7 @@ class McapStream:
     # -- records before and between chunks -------------------------------------------------
     def start(self, *, profile: str, library: str) -> None:
         """The magic and the header record."""
-        self._emit(MAGIC + _record(Header(profile=profile, library=library)))
+        self._put(MAGIC + _record(Header(profile=profile, library=library)))
 
     def register_schema(self, name: str, encoding: str, data: bytes) -> int:
         """A new schema (written into the open chunk); returns its id."""
@@ -207,12 +213,12 @@ class McapStream:
         self.end_chunk()
         record = _record(Metadata(name=name, metadata=dict(data)))
         self._metadata_indexes.append(
-            MetadataIndex(offset=self._pending_position(), length=len(record), name=name)
+            MetadataIndex(offset=self._put(record), length=len(record), name=name)
         )
-        self._emit(record)
 
     def _append_record(self, record: Schema | Channel) -> None:
         data = _record(record)
+        self._chunk.defines = True
         self._reserve(len(data))
         self._view[self._used : self._used + len(data)] = data
         self._used += len(data)
@@ -281,11 +287,20 @@ class McapStream:
     def _finish_chunk(self, tail: bytes | bytearray | memoryview | None) -> None:
         head = self._view[: self._used]
         chunk = self._chunk
-        if self._jobs is not None:  # compressed: the thread gets its own copy of the bytes
+        # compressed: the thread gets its own copy of the bytes — unless it is behind (its queue
+        # full): then the chunk is written now, uncompressed, rather than the recording waiting
+        # (and its live sources dropping messages); not while a chunk defining schemas or
+        # channels is queued, so no message reaches the file before its channel
+        behind = self._jobs is not None and self._jobs.full() and not self._defining
+        if self._jobs is not None and not behind:
             records = bytes(head) if tail is None else b"".join((head, tail))
-            self._queued += len(records)
-            self._submit(_ChunkJob(records, chunk.start_ns, chunk.end_ns, chunk.index))
+            with self._lock:
+                self._queued += len(records)
+                self._defining += chunk.defines
+            job = _ChunkJob(records, chunk.start_ns, chunk.end_ns, chunk.index, chunk.defines)
+            self._submit(job)
         else:
+            self.uncompressed_chunks += behind
             pieces = [head] if tail is None else [head, memoryview(tail).cast("B")]
             self._write_chunk(pieces, chunk.start_ns, chunk.end_ns, chunk.index, None)
         del head
@@ -316,35 +331,35 @@ class McapStream:
             + name_bytes
             + _U64.pack(body_size)
         )
-        chunk_start = self.position
-        chunk_length = 9 + record_length
-        index_start = chunk_start + chunk_length
-        offsets: dict[int, int] = {}
+        relative: dict[int, int] = {}  # channel → its message index, from the chunk's end
         indexes = bytearray()
         for channel_id, entries in index.items():
-            offsets[channel_id] = index_start + len(indexes)
+            relative[channel_id] = len(indexes)
             pairs = len(entries) // 2
             indexes += _INDEX_HEAD.pack(
                 Opcode.MESSAGE_INDEX, 6 + 16 * pairs, channel_id, 16 * pairs
             )
             indexes += struct.pack(f"<{len(entries)}Q", *entries)
-        self.position += _write_all(self._fd, [head, *body, indexes])
-        self._chunk_indexes.append(
-            ChunkIndex(
-                message_start_time=start_ns,
-                message_end_time=end_ns,
-                chunk_start_offset=chunk_start,
-                chunk_length=chunk_length,
-                message_index_offsets=offsets,
-                message_index_length=len(indexes),
-                compression=name,
-                compressed_size=body_size,
-                uncompressed_size=size,
+        with self._lock:  # the compression thread and the caller may both write chunks
+            chunk_start = self.position
+            index_start = chunk_start + len(head) + body_size
+            self.position += _write_all(self._fd, [head, *body, indexes])
+            self._chunk_indexes.append(
+                ChunkIndex(
+                    message_start_time=start_ns,
+                    message_end_time=end_ns,
+                    chunk_start_offset=chunk_start,
+                    chunk_length=len(head) + body_size,
+                    message_index_offsets={c: index_start + at for c, at in relative.items()},
+                    message_index_length=len(indexes),
+                    compression=name,
+                    compressed_size=body_size,
+                    uncompressed_size=size,
+                )
             )
-        )
 
     # -- the compression thread ----------------------------------------------------------------
-    def _submit(self, job: _ChunkJob | bytes | None) -> None:
+    def _submit(self, job: _ChunkJob | None) -> None:
         assert self._jobs is not None
         while True:  # a bounded wait, so a failed thread is noticed
             try:
@@ -367,14 +382,13 @@ class McapStream:
                 jobs.task_done()
                 continue  # drain: the caller raises the failure
             try:
-                if isinstance(job, bytes):
-                    self.position += _write_all(self._fd, [job])
-                else:
-                    packed = compress(job.records)
-                    self._write_chunk(
-                        [job.records], job.start_ns, job.end_ns, job.index, (name, packed)
-                    )
+                packed = compress(job.records)
+                self._write_chunk(
+                    [job.records], job.start_ns, job.end_ns, job.index, (name, packed)
+                )
+                with self._lock:
                     self._queued -= len(job.records)
+                    self._defining -= job.defines
             except BaseException as err:  # handed to the caller's thread
                 self._failed = err
             jobs.task_done()
@@ -384,23 +398,25 @@ class McapStream:
             raise self._failed
 
     @property
+    def chunks(self) -> int:
+        """Chunks written so far."""
+        return len(self._chunk_indexes)
+
+    @property
     def size_estimate(self) -> int:
         """The file's size once what is queued is written (queued chunks counted uncompressed,
         the open chunk not at all)."""
         return self.position + self._queued
 
-    def _pending_position(self) -> int:
-        """Where the next record handed to :meth:`_emit` starts in the file."""
+    def _put(self, record: bytes) -> int:
+        """Write ``record`` after everything queued; returns where it starts in the file."""
         if self._jobs is not None:
-            self._jobs.join()  # everything queued is written
+            self._jobs.join()  # the thread wrote every chunk queued before it
             self._raise_failure()
-        return self.position
-
-    def _emit(self, data: bytes) -> None:
-        if self._jobs is not None:
-            self._submit(data)
-        else:
-            self.position += _write_all(self._fd, [data])
+        with self._lock:
+            start = self.position
+            self.position += _write_all(self._fd, [record])
+        return start
 
     def _drain(self) -> None:
         """Wait until the compression thread wrote everything queued (and stop it)."""

@@ -160,6 +160,12 @@ class DataLogger:
             return self._files.bytes_written
         return sum(self.recorded_bytes.values())
 
+    @property
+    def chunks(self) -> tuple[int, int]:
+        """MCAP chunks of a ROS 1 recording: (written, written uncompressed because the
+        compressor was behind); (0, 0) for other recordings."""
+        return self._files.chunks if self._files is not None else (0, 0)
+
     # -- the thread --------------------------------------------------------------------------
     def _run(self) -> None:
         gone: set[str] = set()
