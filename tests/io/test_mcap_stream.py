@@ -29,9 +29,13 @@ def _messages(seed: int) -> list[tuple[int, int, bytes]]:
     return out
 
 
-def _start(path: Path, compression: StreamCompression) -> tuple[int, McapStream]:
+def _start(
+    path: Path, compression: StreamCompression, *, live: bool = False
+) -> tuple[int, McapStream]:
     fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-    out = McapStream(fd, compression=compression, chunk_size_bytes=_CHUNK, queue_chunks=2)
+    out = McapStream(
+        fd, compression=compression, chunk_size_bytes=_CHUNK, queue_chunks=2, live=live
+    )
     out.start(profile="ros1", library="redrive-test")
     schema = out.register_schema("std_msgs/String", "ros1msg", b"string data")
     for topic in ("/a", "/b", "/c"):
@@ -55,7 +59,8 @@ def _write(
             out.add_metadata("note", {"k": "v"})
     out.finish()
     os.close(fd)
-    return out.uncompressed_chunks  # the compression thread was behind (a busy machine)
+    assert out.uncompressed_chunks == 0  # not live: it waits for the compression thread
+    return out.uncompressed_chunks
 
 
 @pytest.mark.parametrize("compression", ["none", "lz4", "zstd"])
@@ -141,8 +146,8 @@ def test_chunks_the_compressor_cannot_take_are_written_uncompressed(
     gate = threading.Event()
     calls: list[int] = []
 
-    def held(compression: StreamCompression) -> object:
-        compress = real(compression)
+    def held(compression: StreamCompression, *, live: bool) -> object:
+        compress = real(compression, live=live)
 
         def slow(data: bytes) -> bytes:
             calls.append(len(data))
@@ -155,7 +160,7 @@ def test_chunks_the_compressor_cannot_take_are_written_uncompressed(
     monkeypatch.setattr(mcap_stream, "_compressor", held)
     messages = _messages(11)
     path = tmp_path / "behind.mcap"
-    fd, out = _start(path, "zstd")
+    fd, out = _start(path, "zstd", live=True)
     for seq, (channel, log_ns, data) in enumerate(messages):
         out.add_message(channel, log_time=log_ns, publish_time=log_ns, sequence=seq, data=data)
     assert out.uncompressed_chunks > 0

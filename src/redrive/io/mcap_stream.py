@@ -17,7 +17,9 @@ differs in how the bytes move:
 * with compression (``lz4``/``zstd``) the finished chunks are compressed and written by a
   background thread (compressors and ``os.writev`` release the GIL), so the caller — a recorder
   reading live streams — does not wait for the compressor; at most ``queue_chunks`` chunks wait
-  for it, then :meth:`add_message` blocks (back-pressure, never a silent drop).
+  for it, then :meth:`add_message` blocks (back-pressure) — or, for a live recording
+  (``live=True``), the chunk is written uncompressed, so a compressor that cannot keep up with
+  the sensors costs file size, never messages.
 
 >>> out = McapStream(fd, compression="none")                         # doctest: +SKIP
 >>> out.start(profile="ros1", library="redrive")
@@ -89,7 +91,7 @@ class _ChunkJob:
     defines: bool
 
 
-def _compressor(compression: StreamCompression) -> Callable[[bytes], bytes]:
+def _compressor(compression: StreamCompression, *, live: bool) -> Callable[[bytes], bytes]:
     if compression == "lz4":
         import lz4.frame
 
@@ -97,9 +99,9 @@ def _compressor(compression: StreamCompression) -> Callable[[bytes], bytes]:
     if compression == "zstd":
         import zstandard
 
-        # level 1: ~2x the speed of the default level 3 at a few % larger chunks; live
-        # recording must keep up with its sensors
-        return zstandard.ZstdCompressor(level=1).compress
+        # live: level 1, ~2x the speed of the default level 3 at a few % larger chunks (a
+        # recording must keep up with its sensors)
+        return zstandard.ZstdCompressor(level=1 if live else 3).compress
     msg = f"compression must be zstd, lz4 or none, got {compression!r}"
     raise ValueError(msg)
 
@@ -134,6 +136,9 @@ class McapStream:
         compression: chunk compression: ``none``, ``lz4`` or ``zstd`` (level 1).
         chunk_size_bytes: a chunk is finished once its records reach this size.
         queue_chunks: compressed files: chunks that may wait for the compression thread.
+        live: a live recording: zstd at level 1 (else 3), and when ``queue_chunks`` wait for the
+            compression thread the next chunk is written uncompressed rather than waiting
+            (:attr:`uncompressed_chunks`); otherwise :meth:`add_message` waits for the thread.
 
     Raises:
         ValueError: an unknown compression.
@@ -146,10 +151,12 @@ class McapStream:
         compression: StreamCompression = "zstd",
         chunk_size_bytes: int = 1 << 20,
         queue_chunks: int = 8,
+        live: bool = False,
     ) -> None:
         self._fd = fd
         self.compression: StreamCompression = compression
-        self._compress = None if compression == "none" else _compressor(compression)
+        self._compress = None if compression == "none" else _compressor(compression, live=live)
+        self._live = live
         self._chunk_size = max(1024, chunk_size_bytes)
         self._buffer = bytearray(2 * self._chunk_size + 4096)
         self._view = memoryview(self._buffer)
@@ -162,6 +169,8 @@ class McapStream:
         self._lock = threading.Lock()  # one writer of the file (and its offsets) at a time
         #: chunks written uncompressed because the compression thread was behind
         self.uncompressed_chunks = 0
+        #: chunks finished so far (written, or queued for the compression thread)
+        self.finished_chunks = 0
         self._schemas: dict[int, Schema] = {}
         self._channels: dict[int, Channel] = {}
         self._chunk_indexes: list[ChunkIndex] = []
@@ -287,11 +296,13 @@ class McapStream:
     def _finish_chunk(self, tail: bytes | bytearray | memoryview | None) -> None:
         head = self._view[: self._used]
         chunk = self._chunk
+        self.finished_chunks += 1
         # compressed: the thread gets its own copy of the bytes — unless it is behind (its queue
         # full): then the chunk is written now, uncompressed, rather than the recording waiting
         # (and its live sources dropping messages); not while a chunk defining schemas or
         # channels is queued, so no message reaches the file before its channel
-        behind = self._jobs is not None and self._jobs.full() and not self._defining
+        jobs = self._jobs
+        behind = self._live and jobs is not None and jobs.full() and not self._defining
         if self._jobs is not None and not behind:
             records = bytes(head) if tail is None else b"".join((head, tail))
             with self._lock:

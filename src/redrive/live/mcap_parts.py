@@ -108,7 +108,9 @@ class SplitMcapWriter:
         chunk = 1 << 20
         if self.split_size_bytes is not None:
             chunk = max(4 << 10, min(chunk, self.split_size_bytes // 4))
-        self._writer = McapStream(fd, chunk_size_bytes=chunk, compression=self.compression)
+        self._writer = McapStream(
+            fd, chunk_size_bytes=chunk, compression=self.compression, live=True
+        )
         self._writer.start(profile="ros1", library="redrive")
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}

@@ -128,7 +128,7 @@ class DataLogger:
                     compression=compression,
                 )
             else:
-                self._native = McapWriter(self.path, compression=compression)
+                self._native = McapWriter(self.path, compression=compression, live=True)
                 for spec in self.specs:
                     if spec.payload == "cdr":  # ROS 2 topics: the QoS their publishers offer
                         self._native.add_channel(spec.topic, spec.msgtype, offered_qos=spec.qos)
