@@ -30,6 +30,7 @@ differs in how the bytes move:
 
 from __future__ import annotations
 
+import contextlib
 import os
 import queue
 import struct
@@ -65,8 +66,10 @@ _CHUNK_HEAD = struct.Struct("<BQQQQI")  # opcode, length, start, end, uncompress
 _U32 = struct.Struct("<I")
 _U64 = struct.Struct("<Q")
 _INDEX_HEAD = struct.Struct("<BQHI")  # opcode, length, channel, records length
-_INDEX_ENTRY = struct.Struct("<QQ")
 _IOV_MAX = 512  # os.writev takes at most IOV_MAX (1024 on Linux) pieces at once
+#: live recordings: the compression thread's niceness (above the receiving threads' 0, so on a
+#: busy machine compression yields and more chunks are written uncompressed, no message lost)
+_COMPRESS_NICE = 10
 
 
 @dataclass(slots=True)
@@ -383,6 +386,9 @@ class McapStream:
         jobs, compress = self._jobs, self._compress
         assert jobs is not None
         assert compress is not None
+        if self._live:  # compress with the CPU receiving leaves over (Linux: nice per thread)
+            with contextlib.suppress(OSError, AttributeError):
+                os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), _COMPRESS_NICE)
         name = self.compression
         while True:
             job = jobs.get()

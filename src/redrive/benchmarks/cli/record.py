@@ -77,6 +77,14 @@ def _run_record(args: argparse.Namespace) -> int:
         f"{r.redrive_cpu_s:.2f} s ({r.redrive_processes} processes): {r.cpu_ratio:.2f}x "
         f"{_verdict(r.cpu_ratio <= TARGET_CPU_RATIO)} <= {TARGET_CPU_RATIO:g}x"
     )
+    ref_ms, ours_ms = r.cpu_per_mb
+    c.print(f"  per MB recorded: rosbag record {ref_ms:.2f} ms, redrive {ours_ms:.2f} ms")
+    if r.redrive_chunks:
+        c.print(
+            "  redrive's chunks: "
+            + ", ".join(f"{n} {kind}" for kind, n in sorted(r.redrive_chunks.items())),
+            highlight=False,
+        )
     c.print(
         "  redrive by process: "
         + ", ".join(f"{k} {v:.2f} s" for k, v in sorted(r.redrive_cpu_by_process.items())),
