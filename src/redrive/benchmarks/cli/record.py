@@ -21,7 +21,9 @@ Once both are connected to every topic the playback runs for --duration seconds 
 both are offered the same messages; then both are stopped with SIGINT and the messages are counted
 per topic from the files they wrote. Reported: messages per topic by each and how many redrive
 lost relative to rosbag record (target 0), and the CPU time of each one's process tree over the
-playback (redrive's includes its scraper processes; target <= 1.0x rosbag record's). Needs
+playback (redrive's includes its scraper processes; target <= 1.0x rosbag record's), also per MB
+recorded, and how many of redrive's chunks are compressed (with --compression lz4/zstd, chunks the
+compressor could not keep up with are written uncompressed). Needs
 Debian's ROS 1 (`make system-test-deps`). The machine may be shared: the load is reported.
 """
 
