@@ -21,11 +21,14 @@ differs in how the bytes move:
   (``live=True``), the chunk is written uncompressed, so a compressor that cannot keep up with
   the sensors costs file size, never messages.
 
->>> out = McapStream(fd, compression="none")                         # doctest: +SKIP
->>> out.start(profile="ros1", library="redrive")
->>> channel = out.register_channel("/imu", "ros1", out.register_schema("sensor_msgs/Imu", "ros1msg", text))
->>> out.add_message(channel, log_time=t, publish_time=t, sequence=0, data=view)
->>> out.finish()                                     # summary, footer; the caller closes ``fd``
+Use (``fd`` from ``os.open``; the caller fsyncs and closes it)::
+
+    out = McapStream(fd, compression="none")
+    out.start(profile="ros1", library="redrive")
+    schema = out.register_schema("sensor_msgs/Imu", "ros1msg", definition)
+    channel = out.register_channel("/imu", "ros1", schema, {"md5sum": md5sum})
+    out.add_message(channel, log_time=t_ns, publish_time=t_ns, sequence=0, data=view)
+    out.finish()  # the open chunk, data end, summary, footer
 """
 
 from __future__ import annotations
@@ -136,7 +139,7 @@ class McapStream:
 
     Args:
         fd: an open file descriptor positioned at 0 (the caller closes it).
-        compression: chunk compression: ``none``, ``lz4`` or ``zstd`` (level 1).
+        compression: chunk compression: ``none``, ``lz4`` or ``zstd``.
         chunk_size_bytes: a chunk is finished once its records reach this size.
         queue_chunks: compressed files: chunks that may wait for the compression thread.
         live: a live recording: zstd at level 1 (else 3), and when ``queue_chunks`` wait for the
