@@ -124,6 +124,7 @@ def test_the_recorder_stops_at_max_size_and_takes_streams_added_later(tmp_path: 
         recorder.stop()
     assert recorder.recorded == {"/a": 15, "/b": 15}
     assert len(_read(tmp_path / "r.mcap")) == 30
+    assert recorder.chunks[0] >= 1  # (chunks, written uncompressed) of the finished file
     assert not list(tmp_path.glob(".*.part"))
 
 
