@@ -95,6 +95,7 @@ def test_refuses_a_missing_bag(tmp_path: Path) -> None:
 @ros1
 @pytest.mark.shared_data
 def test_a_short_run_reports_what_the_files_hold(shared_data: Path, tmp_path: Path) -> None:
+    from mcap.reader import make_reader
     from rosbags.rosbag1 import Reader
 
     from redrive.io import open_log
@@ -123,3 +124,10 @@ def test_a_short_run_reports_what_the_files_hold(shared_data: Path, tmp_path: Pa
     assert r.redrive_processes == 2  # redrive live and the topic's scraper
     assert set(r.redrive_cpu_by_process) == {"recorder", *(f"scraper {t}" for t in topics)}
     assert r.bag.endswith(str(KITTI_BAG))
+    # the default compression of bench record is none: every chunk of redrive's file says so
+    with (tmp_path / "redrive.mcap").open("rb") as fh:
+        summary = make_reader(fh).get_summary()
+    assert summary is not None
+    assert r.redrive_chunks == {"none": len(summary.chunk_indexes)}
+    mb = sum(t.redrive_bytes for t in r.topics) / 1e6
+    assert r.cpu_per_mb[1] == pytest.approx(1e3 * r.redrive_cpu_s / mb)

@@ -124,4 +124,23 @@ def test_the_recorder_stops_at_max_size_and_takes_streams_added_later(tmp_path: 
         recorder.stop()
     assert recorder.recorded == {"/a": 15, "/b": 15}
     assert len(_read(tmp_path / "r.mcap")) == 30
+    assert recorder.chunks[0] >= 1  # (chunks, written uncompressed) of the finished file
     assert not list(tmp_path.glob(".*.part"))
+
+
+def test_chunks_are_counted_over_every_file(tmp_path: Path) -> None:
+    from mcap.reader import make_reader
+
+    schema, messages = _imu_messages(300)
+    writer = SplitMcapWriter(tmp_path / "r.mcap", split_size_bytes=16 << 10, compression="none")
+    for i, data in enumerate(messages):
+        writer.write("/imu", schema, log_ns=i, publish_ns=i, data=data)
+    parts = writer.close()
+    in_files = 0
+    for part in parts:
+        with part.open("rb") as fh:
+            summary = make_reader(fh).get_summary()
+            assert summary is not None
+            in_files += len(summary.chunk_indexes)
+    assert len(parts) >= 3
+    assert writer.chunks == (in_files, 0)

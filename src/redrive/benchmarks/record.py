@@ -160,6 +160,9 @@ class RecordResult:
     load_before: tuple[float, float, float]
     load_after: tuple[float, float, float]
     notes: list[str] = field(default_factory=list)
+    #: chunks of redrive's file by compression ("none" included): with compression, the chunks
+    #: the compressor could not keep up with are written uncompressed
+    redrive_chunks: dict[str, int] = field(default_factory=dict)
 
     @property
     def lost(self) -> int:
@@ -172,6 +175,17 @@ class RecordResult:
             return float("inf")
         return self.redrive_cpu_s / self.reference_cpu_s
 
+    @property
+    def cpu_per_mb(self) -> tuple[float, float]:
+        """CPU milliseconds per MB recorded: (rosbag record, redrive) — fair when one of them
+        recorded fewer messages than the other (a loaded machine)."""
+        ref_mb = sum(t.reference_bytes for t in self.topics) / 1e6
+        ours_mb = sum(t.redrive_bytes for t in self.topics) / 1e6
+        return (
+            1e3 * self.reference_cpu_s / ref_mb if ref_mb else float("inf"),
+            1e3 * self.redrive_cpu_s / ours_mb if ours_mb else float("inf"),
+        )
+
     def hz(self, count: TopicCount) -> float:
         """Messages per second ``rosbag record`` recorded on a topic in the window."""
         return count.reference / self.window_s if self.window_s > 0 else 0.0
@@ -181,6 +195,7 @@ class RecordResult:
         out["topics"] = [dict(asdict(t), lost=t.lost) for t in self.topics]
         out["lost"] = self.lost
         out["cpu_ratio"] = self.cpu_ratio
+        out["cpu_ms_per_mb"] = self.cpu_per_mb
         return out
 
 
@@ -309,6 +324,18 @@ def _count_bag(path: Path) -> dict[str, tuple[int, int]]:
         for conn, _, raw in reader.messages():
             n, size = out.get(conn.topic, (0, 0))
             out[conn.topic] = (n + 1, size + len(raw))
+    return out
+
+
+def _chunks(path: Path) -> dict[str, int]:
+    from mcap.reader import make_reader
+
+    out: dict[str, int] = {}
+    with path.open("rb") as fh:
+        summary = make_reader(fh).get_summary()
+    for index in summary.chunk_indexes if summary is not None else ():
+        kind = index.compression or "none"
+        out[kind] = out.get(kind, 0) + 1
     return out
 
 
@@ -496,4 +523,5 @@ def _run(plan: _Plan, work: Path, say: Callable[[str], None]) -> RecordResult:
         load_before=load_before,
         load_after=os.getloadavg(),
         notes=notes,
+        redrive_chunks=_chunks(work / "redrive.mcap"),
     )

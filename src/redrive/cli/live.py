@@ -332,7 +332,8 @@ def register(sub: Any) -> None:
         choices=("zstd", "lz4", "none"),
         default="zstd",
         help="the recording's chunk compression (default zstd: the smallest files; none, as "
-        "rosbag record writes by default, costs the least CPU)",
+        "rosbag record writes by default, costs the least CPU). Compression runs on its own "
+        "thread; chunks it cannot keep up with are written uncompressed (never dropped)",
     )
     parser.add_argument(
         "--split-duration",

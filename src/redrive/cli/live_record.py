@@ -262,5 +262,13 @@ def _summary(recording: Any, recorder: Any, *, wall_s: float, reason: str) -> No
     console.print(table)
     for path in recorder.files:
         console.print(f"recorded: {path}", highlight=False)
+    chunks, behind = recorder.chunks
+    if behind:
+        console.print(
+            f"[yellow]{behind} of {chunks} chunks were written uncompressed: the compressor "
+            "did not keep up with the data (nothing was lost for it); --compression lz4 costs "
+            "less CPU, none the least[/]",
+            highlight=False,
+        )
     for err in recorder.errors[:5]:
         console.print(f"[yellow]recording: {err}[/]", highlight=False)

@@ -27,14 +27,14 @@ import os
 from collections.abc import Mapping
 from pathlib import Path
 from types import MappingProxyType, TracebackType
-from typing import IO, Literal, Self
+from typing import Literal, Self
 
 from mcap.writer import CompressionType
-from mcap.writer import Writer as _McapWriter
 from rosbags.typesys.store import Typestore
 
 from redrive.errors import LogError, UnsupportedMessageError
 from redrive.io.decoders.base import Decoded
+from redrive.io.mcap_stream import McapStream
 from redrive.io.partfiles import create_part
 from redrive.io.qos import offered_qos_profiles
 from redrive.io.ros_encode import encode_value
@@ -63,6 +63,8 @@ class McapWriter:
         chunk_size_bytes: uncompressed bytes per chunk (at most: what a crash can lose).
         chunk_span_s: log time after which a chunk is closed even if it is smaller, so slow
             topics reach the disk too.
+        live: a live recording: a compressor that is behind gets chunks written uncompressed
+            rather than holding up the recording (:class:`~redrive.io.mcap_stream.McapStream`).
 
     Raises:
         LogError: the directory cannot be written.
@@ -76,6 +78,7 @@ class McapWriter:
         typestore: Typestore | None = None,
         chunk_size_bytes: int = 4 * 1024 * 1024,
         chunk_span_s: float = 2.0,
+        live: bool = False,
     ) -> None:
         if compression not in COMPRESSION:
             msg = f"compression must be one of {sorted(COMPRESSION)}, got {compression!r}"
@@ -88,14 +91,14 @@ class McapWriter:
         except OSError as err:
             msg = f"{self.path}: cannot create a file in {self.path.parent} ({err.strerror}); check the directory exists and is writable"
             raise LogError(msg) from err
-        self._fh: IO[bytes] | None = os.fdopen(fd, "wb")
-        self._writer = _McapWriter(
-            self._fh, chunk_size=chunk_size_bytes, compression=COMPRESSION[compression]
+        self._fd: int | None = fd
+        self._writer = McapStream(
+            fd, compression=compression, chunk_size_bytes=chunk_size_bytes, live=live
         )
         self._writer.start(profile="ros2", library="redrive")
         self._chunk_span_ns = round(chunk_span_s * 1e9)
         self._chunk_first_ns: int | None = None  # log time of the open chunk's first message
-        self._written = self._fh.tell()  # bytes handed to the file so far
+        self._finished = 0  # chunks finished so far
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, tuple[str, int]] = {}
         self._sequences: dict[int, int] = {}
@@ -161,7 +164,7 @@ class McapWriter:
     # -- writing -------------------------------------------------------------------------------
 
     def _check_open(self) -> None:
-        if self._fh is None:
+        if self._fd is None:
             msg = f"{self.path}: the writer is closed"
             raise LogError(msg)
 
@@ -185,30 +188,27 @@ class McapWriter:
         channel_id = self._channel_id(topic, msgtype)
         sequence = self._sequences[channel_id]
         self._sequences[channel_id] = sequence + 1
-        self._writer.add_message(
-            channel_id=channel_id,
+        self._writer.add_message(  # written or copied before it returns
+            channel_id,
             log_time=int(log_time_ns),
-            data=bytes(cdr_bytes),
             publish_time=int(log_time_ns if publish_time_ns is None else publish_time_ns),
             sequence=sequence,
+            data=cdr_bytes,
         )
         self.message_count += 1
         self._keep_chunks_on_disk(int(log_time_ns))
 
     def _keep_chunks_on_disk(self, log_time_ns: int) -> None:
-        """Close a chunk that spans ``chunk_span_s``; flush the file when a chunk was written."""
-        assert self._fh is not None
-        if self._chunk_first_ns is None:
+        """Close a chunk that spans ``chunk_span_s`` (each finished chunk goes to the file at
+        once: :class:`~redrive.io.mcap_stream.McapStream` keeps no file buffer)."""
+        if self._writer.finished_chunks != self._finished:  # this message ended a chunk (size)
+            self._finished = self._writer.finished_chunks
+            self._chunk_first_ns = None
+        elif self._chunk_first_ns is None:
             self._chunk_first_ns = log_time_ns
         elif abs(log_time_ns - self._chunk_first_ns) > self._chunk_span_ns:
-            self._writer.flush()  # type: ignore[no-untyped-call]  # ends the chunk, flushes the file
-            self._chunk_first_ns = None
-            self._written = self._fh.tell()
-            return
-        position = self._fh.tell()
-        if position != self._written:  # the mcap writer finished a chunk (by size)
-            self._fh.flush()
-            self._written = position
+            self._writer.end_chunk()
+            self._finished = self._writer.finished_chunks
             self._chunk_first_ns = None
 
     def write(
@@ -289,27 +289,31 @@ class McapWriter:
 
     def close(self) -> None:
         """Finish the file (summary, indexes) and move it into place.  Idempotent."""
-        if self._fh is None:
+        if self._fd is None:
             return
-        fh, self._fh = self._fh, None
+        fd, self._fd = self._fd, None
+        closed = False
         try:
-            self._writer.finish()  # type: ignore[no-untyped-call]
-            fh.flush()
-            os.fsync(fh.fileno())
-            fh.close()
+            self._writer.finish()
+            os.fsync(fd)
+            closed = True
+            os.close(fd)
             os.replace(self._tmp_path, self.path)
         except BaseException:
-            fh.close()
+            self._writer.abandon()
+            if not closed:
+                os.close(fd)
             self._tmp_path.unlink(missing_ok=True)
             raise
         logger.debug("%s: %d messages written", self.path, self.message_count)
 
     def abort(self) -> None:
         """Drop the file being written (nothing appears at ``path``).  Idempotent."""
-        if self._fh is None:
+        if self._fd is None:
             return
-        fh, self._fh = self._fh, None
-        fh.close()
+        fd, self._fd = self._fd, None
+        self._writer.abandon()
+        os.close(fd)
         self._tmp_path.unlink(missing_ok=True)
 
     def __enter__(self) -> Self:
@@ -328,5 +332,5 @@ class McapWriter:
 
     def __del__(self) -> None:
         # A writer dropped without close() leaves no temporary file behind.
-        if getattr(self, "_fh", None) is not None:
+        if getattr(self, "_fd", None) is not None:
             self.abort()

@@ -14,11 +14,9 @@ import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO
-
-from mcap.writer import Writer as McapRawWriter
 
 from redrive.errors import LogError
+from redrive.io.mcap_stream import McapStream
 from redrive.io.partfiles import create_part
 from redrive.io.writer import COMPRESSION as _COMPRESSION
 from redrive.io.writer import Compression
@@ -65,7 +63,10 @@ class SplitMcapWriter:
         compression: Compression = "zstd",
     ) -> None:
         self.path = path
-        self.compression = _COMPRESSION[compression]
+        if compression not in _COMPRESSION:
+            msg = f"compression must be one of {sorted(_COMPRESSION)}, got {compression!r}"
+            raise ValueError(msg)
+        self.compression: Compression = compression
         self.split_size_bytes = split_size_bytes
         self.split_duration_s = split_duration_s
         self.split = split_size_bytes is not None or split_duration_s is not None
@@ -73,15 +74,25 @@ class SplitMcapWriter:
         self.finished: list[Path] = []
         #: bytes of the finished files
         self.finished_bytes = 0
+        self._chunks_done = (0, 0)  # chunks of the finished files: all, written uncompressed
         self._index = 0
-        self._fh: IO[bytes] | None = None
+        self._fd: int | None = None
         self._open()
 
     @property
     def bytes_written(self) -> int:
         """Bytes on disk so far, every file (the current one up to its last written chunk)."""
-        current = self._fh.tell() if self._fh is not None else 0
+        current = self._writer.size_estimate if self._fd is not None else 0
         return self.finished_bytes + current
+
+    @property
+    def chunks(self) -> tuple[int, int]:
+        """Chunks written so far, every file: (all, those written uncompressed because the
+        compressor was behind — see :class:`~redrive.io.mcap_stream.McapStream`)."""
+        done, behind = self._chunks_done
+        if self._fd is not None:
+            done, behind = done + self._writer.chunks, behind + self._writer.uncompressed_chunks
+        return done, behind
 
     def _target(self) -> Path:
         return split_name(self.path, self._index) if self.split else self.path
@@ -93,11 +104,13 @@ class SplitMcapWriter:
         except OSError as err:
             msg = f"{target}: cannot create a file in {target.parent} ({err.strerror}); check the folder exists and is writable"
             raise LogError(msg) from err
-        self._fh = os.fdopen(fd, "wb")
+        self._fd = fd
         chunk = 1 << 20
         if self.split_size_bytes is not None:
             chunk = max(4 << 10, min(chunk, self.split_size_bytes // 4))
-        self._writer = McapRawWriter(self._fh, chunk_size=chunk, compression=self.compression)
+        self._writer = McapStream(
+            fd, chunk_size_bytes=chunk, compression=self.compression, live=True
+        )
         self._writer.start(profile="ros1", library="redrive")
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
@@ -115,7 +128,7 @@ class SplitMcapWriter:
     ) -> None:
         """Add one message (its bytes as published) to the current file, splitting first when the
         current file is full. ``data`` is copied before this returns (a view may be released)."""
-        if self._fh is None:
+        if self._fd is None:
             msg = f"{self.path}: the recording is closed"
             raise LogError(msg)
         if self.split and self._channels and self._full():
@@ -139,17 +152,16 @@ class SplitMcapWriter:
             self._channels[topic] = channel
         seq = self._sequence.get(topic, 0)
         self._sequence[topic] = seq + 1
-        self._writer.add_message(
-            channel_id=channel,
-            log_time=log_ns,
-            publish_time=publish_ns,
-            data=data,  # type: ignore[arg-type]  # mcap writes it into its chunk buffer at once
-            sequence=seq,
+        self._writer.add_message(  # written or copied before it returns
+            channel, log_time=log_ns, publish_time=publish_ns, sequence=seq, data=data
         )
 
     def _full(self) -> bool:
-        assert self._fh is not None
-        if self.split_size_bytes is not None and self._fh.tell() >= self.split_size_bytes:
+        assert self._fd is not None
+        if (
+            self.split_size_bytes is not None
+            and self._writer.size_estimate >= self.split_size_bytes
+        ):
             return True
         return (
             self.split_duration_s is not None
@@ -157,33 +169,40 @@ class SplitMcapWriter:
         )
 
     def _finish_current(self) -> None:
-        fh, self._fh = self._fh, None
-        assert fh is not None
+        fd, self._fd = self._fd, None
+        assert fd is not None
+        closed = False
         try:
-            self._writer.finish()  # type: ignore[no-untyped-call]
-            fh.flush()
-            os.fsync(fh.fileno())
-            fh.close()
+            self._writer.finish()
+            os.fsync(fd)
+            closed = True
+            os.close(fd)
             target = self._target()
             os.replace(self._tmp, target)
         except BaseException:
-            fh.close()
+            self._writer.abandon()
+            if not closed:
+                with contextlib.suppress(OSError):
+                    os.close(fd)
             self._tmp.unlink(missing_ok=True)
             raise
         self.finished.append(target)
+        done, behind = self._chunks_done
+        self._chunks_done = (done + self._writer.chunks, behind + self._writer.uncompressed_chunks)
         self.finished_bytes += target.stat().st_size
         logger.debug("recorded %s", target)
 
     def close(self) -> list[Path]:
         """Finish the current file; returns every file written, in order."""
-        if self._fh is not None:
+        if self._fd is not None:
             self._finish_current()
         return list(self.finished)
 
     def abort(self) -> None:
         """Drop the file being written (files already finished stay)."""
-        fh, self._fh = self._fh, None
-        if fh is not None:
+        fd, self._fd = self._fd, None
+        if fd is not None:
+            self._writer.abandon()
             with contextlib.suppress(OSError):
-                fh.close()
+                os.close(fd)
             self._tmp.unlink(missing_ok=True)

@@ -131,7 +131,7 @@ class DataLogger:
                     compression=compression,
                 )
             else:
-                self._native = McapWriter(self.path, compression=compression)
+                self._native = McapWriter(self.path, compression=compression, live=True)
                 for spec in self.specs:
                     if spec.payload == "cdr":  # ROS 2 topics: the QoS their publishers offer
                         self._native.add_channel(spec.topic, spec.msgtype, offered_qos=spec.qos)
@@ -163,6 +163,12 @@ class DataLogger:
         if self._files is not None:
             return self._files.bytes_written
         return sum(self.recorded_bytes.values())
+
+    @property
+    def chunks(self) -> tuple[int, int]:
+        """MCAP chunks of a ROS 1 recording: (written, written uncompressed because the
+        compressor was behind); (0, 0) for other recordings."""
+        return self._files.chunks if self._files is not None else (0, 0)
 
     # -- the thread --------------------------------------------------------------------------
     def _run(self) -> None:

@@ -9,6 +9,12 @@ sent, and is not deserialised here — and publishes each one into the stream as
 :data:`~redrive.transport.codec.KIND_ROS1` message (topic, type and md5sum in the meta, the
 receive time as its stamp). The core decodes it with redrive's decoders.
 
+The message is received straight into its shared-memory slot: :func:`receive_in_place` replaces
+rospy's read loop for ``AnyMsg`` subscriptions (``recv`` into a fresh bytes object, appended to a
+``BytesIO``, sliced out again — three copies and two allocations of every message) by reading
+the 4-byte length, loaning the next slot of the stream and ``recv_into`` it; the kernel's copy
+is the only one. rospy's connection handling (handshake, reconnects, the master) is untouched.
+
 If the ROS master restarts (its pid changes), the subscription is registered anew with the new
 master. SIGTERM/SIGINT stop it, and so does the death of the process that started it; the stream's segment is unlinked on every exit path.
 
@@ -21,14 +27,17 @@ reads the stream).
 from __future__ import annotations
 
 import argparse
+import errno
 import json
 import logging
 import os
 import signal
+import struct
 import sys
 import threading
 import time
 import xmlrpc.client
+from collections.abc import Callable
 from typing import Any
 
 logger = logging.getLogger("redrive.live.ros1_scraper")
@@ -38,6 +47,60 @@ _MASTER_EVERY = 4
 #: rospy's socket read size: below glibc's mmap threshold as raised by keep_freed_memory (a
 #: read buffer of 64 MiB was a fresh mmap for every read)
 _RECV_BYTES = 4 << 20
+_LENGTH = struct.Struct("<I")
+
+#: ``deliver(transport, size, read_into)``: receive one message of ``size`` bytes of the
+#: connection ``transport``; ``read_into(view)`` fills a writable byte view of that size from it
+Deliver = Callable[[Any, int, Callable[[Any], None]], None]
+
+
+def receive_in_place(rospy: Any, deliver: Deliver) -> None:
+    """Make rospy's TCPROS connections of ``AnyMsg`` subscribers hand each message's length to
+    ``deliver`` and let it read the bytes where they belong (see the module text); rospy's own
+    callbacks then get nothing. Other connections keep rospy's read loop."""
+    from rospy.impl.tcpros_base import TCPROSTransport, TransportTerminated
+
+    original = TCPROSTransport.receive_once
+
+    def fill(transport: Any, view: memoryview) -> None:
+        got = 0
+        carry = transport.read_buff  # bytes that came with the handshake, read first
+        if carry.tell():
+            data = carry.getvalue()[: carry.tell()]
+            got = min(len(data), len(view))
+            view[:got] = data[:got]
+            carry.seek(0)
+            carry.truncate(0)
+            carry.write(data[got:])
+        sock = transport.socket
+        while got < len(view):
+            try:
+                n = sock.recv_into(view[got:])
+            except OSError as err:
+                if err.errno in (errno.EAGAIN, errno.EWOULDBLOCK):
+                    continue
+                text = "unable to receive data from sender, check sender's logs for details"
+                raise TransportTerminated(text) from err
+            if n == 0:
+                text = "unable to receive data from sender, check sender's logs for details"
+                raise TransportTerminated(text)
+            got += n
+
+    def receive_once(self: Any) -> list[Any]:
+        if getattr(self.protocol, "recv_data_class", None) is not rospy.AnyMsg:
+            return original(self)  # type: ignore[no-any-return]
+        if self.socket is None or self.done or rospy.is_shutdown():
+            return original(self)  # type: ignore[no-any-return]  # rospy's own answer
+        self.socket.setblocking(1)
+        length = bytearray(4)
+        fill(self, memoryview(length))
+        (size,) = _LENGTH.unpack(length)
+        deliver(self, size, lambda view: fill(self, memoryview(view).cast("B")))
+        self.stat_bytes += 4 + size
+        self.stat_num_msg += 1
+        return []
+
+    TCPROSTransport.receive_once = receive_once
 
 
 def _master_pid(uri: str) -> int | None:
@@ -58,6 +121,10 @@ def _publishers(sub: Any) -> list[str]:
         for c in connections
         if not getattr(c, "done", False)
     )
+
+
+def _ignore(_msg: Any) -> None:
+    """rospy's callback: :func:`receive_in_place` delivers every message before it."""
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -103,12 +170,16 @@ def main(argv: list[str] | None = None) -> int:
     meta: list[bytes] = []
     lock = threading.Lock()
 
-    def on_message(msg: Any) -> None:
+    send = threading.Lock()  # one connection at a time fills the stream's next slot
+    scratch = bytearray()  # a message that cannot be forwarded is read into this
+
+    def deliver(transport: Any, size: int, read_into: Callable[[Any], None]) -> None:
         now = time.time_ns()
         with lock:
             counts["received"] += 1
+            received = counts["received"]
             if not meta:
-                header = msg._connection_header
+                header = transport.header
                 meta.append(encode_ros1_meta(args.topic, header["type"], header["md5sum"]))
                 # the full definition, for a recorder that does not know the type: printed
                 # before the first message is published, so it is there when that one is read
@@ -118,15 +189,23 @@ def main(argv: list[str] | None = None) -> int:
                     "definition": header.get("message_definition", ""),
                 }
                 print("DEF " + json.dumps(definition), flush=True)
+        with send:
+            read = False
             try:
-                writer.publish(msg._buff, stamp_ns=now, kind=KIND_ROS1, meta=meta[0],
-                               timeout_s=args.timeout)  # fmt: skip
-                counts["published"] += 1
+                with writer.loan(size, stamp_ns=now, kind=KIND_ROS1, meta=meta[0],
+                                 timeout_s=args.timeout) as slot:  # fmt: skip
+                    read = True
+                    read_into(slot)  # from the socket into the slot: the only copy
+                published = True
             except (TransportError, ReaderGoneError) as err:
-                counts["failed"] += 1
-                logger.warning(
-                    "%s: message %d not forwarded: %s", args.topic, counts["received"], err
-                )
+                published = False
+                logger.warning("%s: message %d not forwarded: %s", args.topic, received, err)
+            if not read:  # no slot: the message is still on the socket
+                if len(scratch) < size:
+                    scratch.extend(bytes(size - len(scratch)))
+                read_into(memoryview(scratch)[:size])
+        with lock:
+            counts["published" if published else "failed"] += 1
 
     try:
         if args.await_lossless > 0:
@@ -137,6 +216,7 @@ def main(argv: list[str] | None = None) -> int:
                     logger.error("%s: no recorder attached to %s", args.topic, args.stream)
                     return 1
                 time.sleep(0.01)
+        receive_in_place(rospy, deliver)
         rospy.init_node("redrive_scraper", anonymous=True, disable_signals=True)
         import rosgraph
 
@@ -144,7 +224,7 @@ def main(argv: list[str] | None = None) -> int:
 
         def subscribe() -> Any:
             return rospy.Subscriber(
-                args.topic, rospy.AnyMsg, on_message, queue_size=1000, buff_size=_RECV_BYTES,
+                args.topic, rospy.AnyMsg, _ignore, queue_size=1000, buff_size=_RECV_BYTES,
                 tcp_nodelay=True,
             )  # fmt: skip
 

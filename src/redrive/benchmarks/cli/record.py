@@ -21,7 +21,9 @@ Once both are connected to every topic the playback runs for --duration seconds 
 both are offered the same messages; then both are stopped with SIGINT and the messages are counted
 per topic from the files they wrote. Reported: messages per topic by each and how many redrive
 lost relative to rosbag record (target 0), and the CPU time of each one's process tree over the
-playback (redrive's includes its scraper processes; target <= 1.0x rosbag record's). Needs
+playback (redrive's includes its scraper processes; target <= 1.0x rosbag record's), also per MB
+recorded, and how many of redrive's chunks are compressed (with --compression lz4/zstd, chunks the
+compressor could not keep up with are written uncompressed). Needs
 Debian's ROS 1 (`make system-test-deps`). The machine may be shared: the load is reported.
 """
 
@@ -77,6 +79,14 @@ def _run_record(args: argparse.Namespace) -> int:
         f"{r.redrive_cpu_s:.2f} s ({r.redrive_processes} processes): {r.cpu_ratio:.2f}x "
         f"{_verdict(r.cpu_ratio <= TARGET_CPU_RATIO)} <= {TARGET_CPU_RATIO:g}x"
     )
+    ref_ms, ours_ms = r.cpu_per_mb
+    c.print(f"  per MB recorded: rosbag record {ref_ms:.2f} ms, redrive {ours_ms:.2f} ms")
+    if r.redrive_chunks:
+        c.print(
+            "  redrive's chunks: "
+            + ", ".join(f"{n} {kind}" for kind, n in sorted(r.redrive_chunks.items())),
+            highlight=False,
+        )
     c.print(
         "  redrive by process: "
         + ", ".join(f"{k} {v:.2f} s" for k, v in sorted(r.redrive_cpu_by_process.items())),
