@@ -200,7 +200,8 @@ def foxglove_message(topic: str, log_time_ns: int, decoded: Decoded) -> OutMessa
 def scene_channels(topic: str) -> dict[str, ChannelSpec]:
     """A results topic's channels: its ``foxglove.SceneUpdate`` and the same shapes as a
     ``visualization_msgs/msg/MarkerArray`` on ``/redrive/markers/…``."""
-    marker_def, _ = typestore_for(2)[0].generate_msgdef(MARKER_ARRAY, ros_version=2)
+    store = typestore_for(2, needed=[MARKER_ARRAY])[0]
+    marker_def, _ = store.generate_msgdef(MARKER_ARRAY, ros_version=2)
     return {
         topic: _foxglove_spec(topic, fm.SceneUpdate),
         _marker_topic(topic): ChannelSpec(

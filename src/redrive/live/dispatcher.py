@@ -147,6 +147,11 @@ class LiveLog:
         )
 
     @property
+    def typestores(self) -> Mapping[str, Any]:
+        """Encoding (``ros1`` / ``cdr``) → the typestore the streams' bytes are read with."""
+        return self._deserializer.typestores
+
+    @property
     def start_ns(self) -> int:
         return self._start_ns
 

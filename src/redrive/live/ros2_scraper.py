@@ -69,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
                 capacity_bytes=int(spec["capacity"]),
                 slots=args.slots,
                 policy=Policy.LOSSLESS,
-                max_readers=2,
+                max_readers=3,  # the dispatcher, the recorder, the Foxglove view
             )
             qos = QosProfile(
                 reliability=spec["reliability"], durability=spec["durability"], depth=READER_DEPTH
