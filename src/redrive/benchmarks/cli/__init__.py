@@ -18,6 +18,7 @@ from redrive.benchmarks.cli.loss import add_loss_parser
 from redrive.benchmarks.cli.read import EPILOG as _EPILOG
 from redrive.benchmarks.cli.read import add_read_parser
 from redrive.benchmarks.cli.record import add_record_parser
+from redrive.benchmarks.cli.serve import add_serve_parser
 from redrive.benchmarks.cli.suite import add_all_parser
 from redrive.benchmarks.cli.transport import add_transport_parser
 
@@ -51,4 +52,5 @@ def register(sub: Any) -> None:
     add_record_parser(bench_sub)
     add_gui_parser(bench_sub)
     add_export_parser(bench_sub)
+    add_serve_parser(bench_sub)
     add_all_parser(bench_sub)
