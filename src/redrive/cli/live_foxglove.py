@@ -47,7 +47,7 @@ class FoxgloveFeed:
         new = [s for s in specs if s.topic not in self._followed]
         if not new:
             return
-        log = LiveLog(new, self.session, stop=self._stop)
+        log = LiveLog(new, self.session, stop=self._stop, warn_gone=False)
         self._followed.update(s.topic for s in new)
         self._logs.append(log)
         self.view.add_topics(log.topics.values(), log.typestores)
