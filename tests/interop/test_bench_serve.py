@@ -46,6 +46,8 @@ def test_dropped_frames_count_the_cloud_and_image_channels_only() -> None:
     assert result.server_cpu_percent == pytest.approx(25.0)
     out = result.to_json()
     assert out["dropped_frames"] == 3
+    assert out["frames_received_ratio"] == pytest.approx(397 / 400)
+    assert out["realtime_factor"] == pytest.approx(1.0)
     assert out["channels"][2] == {
         "topic": "/imu", "schema": "sensor_msgs/msg/Imu", "sent": 2000, "received": 1990,
         "dropped": 10,

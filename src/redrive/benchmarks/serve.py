@@ -123,6 +123,12 @@ class ServeBenchResult:
             frames=self.frames,
             dropped_frames=self.dropped_frames,
             server_cpu_percent=self.server_cpu_percent,
+            # the figures `redrive bench all` puts in its summary (1.0: nothing dropped)
+            received_ratio=self.received / self.sent if self.sent else 0.0,
+            frames_received_ratio=(
+                (self.frames - self.dropped_frames) / self.frames if self.frames else 0.0
+            ),
+            realtime_factor=self.log_span_s / self.play_wall_s if self.play_wall_s > 0 else 0.0,
         )
         return out
 
