@@ -105,6 +105,7 @@ class _Watcher:
         self.channels: dict[int, dict[str, Any]] = {}
         self.subscribed: dict[int, int] = {}  # subscription id → channel id
         self.received: dict[str, list[bytes]] = defaultdict(list)
+        self.notes: list[dict[str, Any]] = []  # the server's other JSON messages (status …)
 
     def by_topic(self) -> dict[str, dict[str, Any]]:
         return {c["topic"]: c for c in self.channels.values()}
@@ -124,6 +125,8 @@ class _Watcher:
                     self.subscribed[sub] = channel["id"]
                     subs.append({"id": sub, "channelId": channel["id"]})
                 await self.ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
+            elif msg["op"] != "serverInfo":
+                self.notes.append(msg)
         elif frame[0] == 1:  # message data: subscription id u32, log time u64, payload
             (sub,) = struct.unpack_from("<I", frame, 1)
             topic = self.channels[self.subscribed[sub]]["topic"]
@@ -136,7 +139,7 @@ class _Watcher:
                 got = {t: len(v) for t, v in self.received.items()}
                 pytest.fail(
                     f"no {what} within {timeout_s} s; channels {list(self.by_topic())}, "
-                    f"received {got}"
+                    f"received {got}; the server said {self.notes}"
                 )
             await self.step()
 

@@ -172,9 +172,7 @@ def _run(args: argparse.Namespace) -> int:
                     compression=args.compression,
                 )
             log = LiveLog(session.specs, session.name, stop=stop)
-            feed = open_feed(args, session.name)
-            if feed is not None:
-                feed.follow(session.specs)
+            feed = open_feed(args, session.name, session.specs, pipeline=pipeline)
             if args.duration is not None:
                 timer = threading.Timer(args.duration, stop.set)
                 timer.daemon = True

@@ -15,6 +15,7 @@ from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
+    from redrive.config import PipelineConfig
     from redrive.live.dispatcher import LiveLog
     from redrive.live.streams import StreamSpec
     from redrive.results.records import FrameRecord
@@ -60,6 +61,15 @@ class FoxgloveFeed:
         self._threads.append(thread)
         thread.start()
 
+    def add_results(self, pipeline: PipelineConfig) -> None:
+        """Advertise the results channels of ``pipeline``'s algorithms whose role is known."""
+        self.view.add_results(
+            (algorithm.name, stage.role)
+            for stage in pipeline.stages
+            if stage.role is not None
+            for algorithm in stage.algorithms
+        )
+
     def on_frame(self, record: FrameRecord) -> None:
         self.view.on_frame(record)
 
@@ -88,11 +98,26 @@ class FoxgloveFeed:
         return text
 
 
-def open_feed(args: argparse.Namespace, session: str) -> FoxgloveFeed | None:
-    """A feed when ``--foxglove`` was given (its URL printed on stdout), else None."""
+def open_feed(
+    args: argparse.Namespace,
+    session: str,
+    specs: Sequence[StreamSpec],
+    *,
+    pipeline: PipelineConfig | None = None,
+) -> FoxgloveFeed | None:
+    """A feed of ``specs`` (and of ``pipeline``'s results) when ``--foxglove`` was given, else
+    None.  Its URL is printed on stdout once the channels exist: a client that connects then
+    finds them all."""
     if not args.foxglove:
         return None
     feed = FoxgloveFeed(host=args.foxglove_host, port=args.foxglove_port, session=session)
+    try:
+        feed.follow(specs)
+        if pipeline is not None:
+            feed.add_results(pipeline)
+    except BaseException:
+        feed.close()
+        raise
     print(f"foxglove: live view on {feed.view.url} (open it in Foxglove)", flush=True)
     return feed
 

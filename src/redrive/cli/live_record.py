@@ -197,9 +197,7 @@ def record_only(args: argparse.Namespace, master: str) -> int:
             try:
                 if ros:  # each scraper subscribes once the recorder reads its stream
                     session.add_ros1(types, on_stream=recorder.add)
-                feed = open_feed(args, session.name)
-                if feed is not None:
-                    feed.follow(session.specs)
+                feed = open_feed(args, session.name, session.specs)
                 recording = Recording(
                     session,
                     recorder,

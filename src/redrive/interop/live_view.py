@@ -32,7 +32,7 @@ from typing import Any
 import foxglove
 
 from redrive.errors import ConfigError, RedriveError
-from redrive.interop.run_scene import record_scene
+from redrive.interop.run_scene import live_topics, record_scene
 from redrive.interop.serve_defaults import DEFAULT_HOST, DEFAULT_PORT
 from redrive.interop.stream import (
     TRANSFORMS_TOPIC,
@@ -229,6 +229,17 @@ class LiveView:
             self.publish(message, deserialize)
 
     # -- results ---------------------------------------------------------------------------------
+
+    def add_results(self, algorithms: Iterable[tuple[str, str]]) -> None:
+        """Advertise the results channels of a run of ``algorithms`` ((name, role) pairs) before
+        its first frame, so a client finds them when it connects (channels of algorithms not
+        named here appear with their first frame)."""
+        for topic in live_topics(algorithms):
+            self._scene_specs.setdefault(topic, scene_channels(topic))
+            for spec in self._scene_specs[topic].values():
+                self._channel(spec)
+        if self._ego_transform:
+            self._channel(transforms_channel())
 
     def on_frame(self, record: FrameRecord) -> None:
         """Hand over a finished frame (the engine's ``on_frame``); returns at once."""

@@ -25,7 +25,7 @@ The transforms per frame: the log's static transforms (sensors on ``base_link``)
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -51,6 +51,7 @@ from redrive.types import DetectedObject, PlannedPath, Transform, VehicleState
 __all__ = [
     "BODY_FRAME",
     "FrameScene",
+    "live_topics",
     "log_object_shapes",
     "record_scene",
     "run_scenes",
@@ -303,6 +304,19 @@ def run_scenes(
             ),
         )
         yield FrameScene(frame_index=index, stamp_ns=stamp, shapes=shapes, transforms=transforms)
+
+
+def live_topics(algorithms: Iterable[tuple[str, str]]) -> tuple[str, ...]:
+    """The SceneUpdate topics :func:`record_scene` fills for a live run of ``algorithms``
+    ((name, role) pairs): ground truth, the ego, each perception algorithm's detections and
+    each planner's path (sorted)."""
+    topics = {_GT_TOPIC, _EGO_TOPIC}
+    for name, role in algorithms:
+        if role == "perception":
+            topics.add(f"/redrive/detections/{name}")
+        elif role == "planning":
+            topics.add(f"/redrive/paths/{name}")
+    return tuple(sorted(topics))
 
 
 def _state_row(state: VehicleState) -> Row:
