@@ -186,7 +186,7 @@ async def _client(
 
     got = _Received([], [], [])
     async with websockets.connect(
-        url, subprotocols=[Subprotocol(_SUBPROTOCOL)], max_size=None
+        url, subprotocols=[Subprotocol(_SUBPROTOCOL)], max_size=None, close_timeout=1
     ) as ws:
         by_id: dict[int, str] = {}
         while len(by_id) < channels:

@@ -22,6 +22,7 @@ What a stream holds:
 
 from __future__ import annotations
 
+import functools
 import heapq
 import logging
 from collections.abc import Iterator, Mapping
@@ -197,11 +198,17 @@ def foxglove_message(topic: str, log_time_ns: int, decoded: Decoded) -> OutMessa
     return OutMessage(f"/foxglove{topic}", log_time_ns, encoded.encode())
 
 
+@functools.cache
+def _marker_definition() -> str:
+    store = typestore_for(2, needed=[MARKER_ARRAY])[0]
+    text: str = store.generate_msgdef(MARKER_ARRAY, ros_version=2)[0]
+    return text
+
+
 def scene_channels(topic: str) -> dict[str, ChannelSpec]:
     """A results topic's channels: its ``foxglove.SceneUpdate`` and the same shapes as a
     ``visualization_msgs/msg/MarkerArray`` on ``/redrive/markers/…``."""
-    store = typestore_for(2, needed=[MARKER_ARRAY])[0]
-    marker_def, _ = store.generate_msgdef(MARKER_ARRAY, ros_version=2)
+    marker_def = _marker_definition()
     return {
         topic: _foxglove_spec(topic, fm.SceneUpdate),
         _marker_topic(topic): ChannelSpec(
