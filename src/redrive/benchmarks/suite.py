@@ -130,6 +130,13 @@ SUITE: tuple[SuiteEntry, ...] = (
         timeout_s=90,
         display=True,
     ),
+    SuiteEntry(
+        name="serve",
+        args=("serve", "--duration", "5"),
+        why="redrive serve of a 5-s demo log at 1x to a WebSocket client on loopback: dropped "
+        "frames, lag, CPU",
+        timeout_s=120,
+    ),
 )
 
 

@@ -26,6 +26,8 @@ examples:
   redrive live --synthetic urban --duration 20              the simulator in real time
   redrive live --ros2 --topics /points /imu --record out.mcap     ROS 2 (DDS) topics
   redrive live --ros2 -a --record all.mcap --idle-timeout 10
+  redrive live --topics /points /imu --perception cluster-detector --foxglove
+                                            and watch it in Foxglove: ws://127.0.0.1:8765
 
 One scraper process per topic subscribes with rospy (under /usr/bin/python3) and hands each
 message to this process through shared memory. --record writes every message (lossless, in a
@@ -56,6 +58,13 @@ DDS lease expires, 10 s by default; the /rosout and /parameter_events publishers
 do not count). Unlike ROS 1, a type redrive has no definition of cannot be recorded (ROS 2 sends
 none): it is named and left out; --split-size/--split-duration are ROS 1 only.
 
+--foxglove also streams the session to Foxglove (foxglove-sdk's WebSocket server, on
+127.0.0.1:8765 unless --foxglove-host/--foxglove-port say otherwise): every topic as it arrives,
+on the channels `redrive serve` gives its type (LiDARs also as foxglove.PointCloud, cameras as
+foxglove.CompressedImage), and with a pipeline each frame's ground truth, detections, tracks,
+paths and ego as scene updates. It never slows the session or the recording down: a slow or
+absent client misses messages (docs/foxglove.md).
+
 If the ROS master goes away, recording goes on with what still flows; when a master is back at
 the same address the scrapers register again. A recording left unfinished by a killed session
 (.NAME.PID-RANDOM.part, RANDOM being mkstemp's letters) is named at the next start in that
@@ -80,6 +89,7 @@ def _capacities(items: list[str] | None) -> dict[str, int]:
 def _run(args: argparse.Namespace) -> int:
     from rich.console import Console
 
+    from redrive.cli.live_foxglove import both, open_feed
     from redrive.cli.live_record import record_only, warn_orphans
     from redrive.cli.run import pipeline_from_args, print_run_report
     from redrive.engine import RealtimeMode, RunRequest, run_reader
@@ -117,6 +127,7 @@ def _run(args: argparse.Namespace) -> int:
     recorder = None
     log = None
     publisher = None
+    feed = None
     if args.replay is not None or args.synthetic is not None:
         kind = "replay" if args.replay is not None else "synthetic"
         session_cm = LiveSession.source(
@@ -166,6 +177,7 @@ def _run(args: argparse.Namespace) -> int:
                     compression=args.compression,
                 )
             log = LiveLog(session.specs, session.name, stop=stop)
+            feed = open_feed(args, session.name, session.specs, pipeline=pipeline)
             if args.duration is not None:
                 timer = threading.Timer(args.duration, stop.set)
                 timer.daemon = True
@@ -195,8 +207,9 @@ def _run(args: argparse.Namespace) -> int:
                 from redrive.live.ros2 import ResultPublisher
 
                 publisher = ResultPublisher(domain)
+            on_frame = both(publisher, None if feed is None else feed.on_frame)
             report = run_reader(
-                request, log, hooks=hooks, log_info=info, lookahead_ns=0, on_frame=publisher
+                request, log, hooks=hooks, log_info=info, lookahead_ns=0, on_frame=on_frame
             )
         except BaseException:
             if recorder is not None:
@@ -209,6 +222,8 @@ def _run(args: argparse.Namespace) -> int:
                 log.close()
             if publisher is not None:
                 publisher.close()
+            if feed is not None:
+                feed.close()
     recorded = recorder.stop() if recorder is not None else None
     print_run_report(report, out, live=True)
     console = Console(width=None if sys.stdout.isatty() else 120)
@@ -228,6 +243,8 @@ def _run(args: argparse.Namespace) -> int:
     if publisher is not None:
         for topic, count in sorted(publisher.published.items()):
             console.print(f"  published {topic}: {count}")
+    if feed is not None:
+        console.print(feed.summary(), highlight=False)
     if recorded is not None and recorder is not None:
         console.print(f"recorded: {recorded}")
         for err in recorder.errors[:5]:
@@ -236,6 +253,8 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def register(sub: Any) -> None:
+    from redrive.cli.live_foxglove import add_arguments as add_foxglove_arguments
+
     parser = sub.add_parser(
         "live",
         help="record live ROS 1 topics to MCAP (as rosbag record), or run algorithms on live "
@@ -349,6 +368,7 @@ def register(sub: Any) -> None:
         help="wait up to S seconds for topics nobody publishes yet (default 10)",
     )
     parser.add_argument("--sensor-map", type=Path, metavar="TOML", help="which topic is which")
+    add_foxglove_arguments(parser)
     parser.add_argument(
         "--capacity",
         action="append",

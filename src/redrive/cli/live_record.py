@@ -115,6 +115,7 @@ def record_only(args: argparse.Namespace, master: str) -> int:
     """Record the selected topics (or a replay/synthetic source) until a stop condition."""
     from rich.console import Console
 
+    from redrive.cli.live_foxglove import open_feed
     from redrive.errors import ConfigError
     from redrive.live.recorder import DataLogger
     from redrive.live.recording import Recording, TopicSelection
@@ -179,6 +180,7 @@ def record_only(args: argparse.Namespace, master: str) -> int:
     stop = threading.Event()
     handlers = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
     reason = "Ctrl-C"
+    feed = None
     try:
         with session:
             recorder = DataLogger(
@@ -196,6 +198,7 @@ def record_only(args: argparse.Namespace, master: str) -> int:
                     session.add_ros1(types, on_stream=recorder.add)
                 elif isinstance(session, Ros2Session):  # the same: the scraper reads it then
                     session.add_ros2(publications, on_stream=recorder.add)
+                feed = open_feed(args, session.name, session.specs)
                 recording = Recording(
                     session,
                     recorder,
@@ -222,18 +225,25 @@ def record_only(args: argparse.Namespace, master: str) -> int:
                         if found is not None:
                             reason = found
                             break
+                        if feed is not None:
+                            feed.follow(session.specs)  # topics that appeared (-a/-e)
                         status.update()
                 finally:
                     status.close()
             except BaseException:
                 recorder.abort()
                 raise
+            finally:
+                if feed is not None:
+                    feed.close()
             wall_s = recording.wall_s
     finally:
         for sig, previous in handlers.items():
             signal.signal(sig, previous)
     recorder.stop()
     _summary(recording, recorder, wall_s=wall_s, reason=reason)
+    if feed is not None:
+        print(feed.summary())
     return 0
 
 

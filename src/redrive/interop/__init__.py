@@ -6,6 +6,8 @@
   the log's own ROS channels;
 * :mod:`.serve` — ``redrive serve RUN|LOG``: the same stream live on Foxglove's WebSocket
   protocol, paced at the log's rate, with the app's play / pause / seek / speed.
+* :mod:`.live_view` — ``redrive live … --foxglove``: a live session's topics as they arrive and
+  each frame's results, on the same channels (the CLI feeds it from the session's streams).
 
 Both need ``foxglove-sdk`` (``pip install 'redrive[foxglove]'``); the modules of this package
 import it, so import them only where it is needed (:func:`require_foxglove` says how to get it).

@@ -1,4 +1,5 @@
-"""A run's stored results → per-frame shapes and transforms (what the scene export draws).
+"""A run's stored results → per-frame shapes and transforms (what the scene export draws);
+:func:`record_scene` draws the same from one frame the engine just finished (a live run).
 
 Topics (each a :class:`~redrive.interop.shapes.ShapeSet` per frame, stamped with the frame):
 
@@ -24,7 +25,7 @@ The transforms per frame: the log's static transforms (sensors on ``base_link``)
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -43,13 +44,16 @@ from redrive.interop.shapes import (
 )
 from redrive.results import Run
 from redrive.results.evaluation import read_evaluation, stored_metric_names
+from redrive.results.records import FrameRecord
 from redrive.sim.ego import EgoGeometry
-from redrive.types import DetectedObject, Transform
+from redrive.types import DetectedObject, PlannedPath, Transform, VehicleState
 
 __all__ = [
     "BODY_FRAME",
     "FrameScene",
+    "live_topics",
     "log_object_shapes",
+    "record_scene",
     "run_scenes",
     "scene_topics",
 ]
@@ -146,11 +150,8 @@ def _object_shapes(
     return tuple(boxes), tuple(labels)
 
 
-def log_object_shapes(
-    objects: Sequence[DetectedObject], *, frame_id: str, stamp_ns: int
-) -> ShapeSet:
-    """A log's objects (ground truth or detections of its own) as boxes with labels."""
-    rows = [
+def _object_rows(objects: Sequence[DetectedObject]) -> list[Row]:
+    return [
         {
             "object_id": o.object_id,
             "object_class": o.object_class.value,
@@ -168,6 +169,13 @@ def log_object_shapes(
         }
         for o in objects
     ]
+
+
+def log_object_shapes(
+    objects: Sequence[DetectedObject], *, frame_id: str, stamp_ns: int
+) -> ShapeSet:
+    """A log's objects (ground truth or detections of its own) as boxes with labels."""
+    rows = _object_rows(objects)
     boxes, labels = _object_shapes(rows, prefix="object", detections=False)
     return ShapeSet(stamp_ns=stamp_ns, frame_id=frame_id, boxes=boxes, labels=labels)
 
@@ -296,3 +304,86 @@ def run_scenes(
             ),
         )
         yield FrameScene(frame_index=index, stamp_ns=stamp, shapes=shapes, transforms=transforms)
+
+
+def live_topics(algorithms: Iterable[tuple[str, str]]) -> tuple[str, ...]:
+    """The SceneUpdate topics :func:`record_scene` fills for a live run of ``algorithms``
+    ((name, role) pairs): ground truth, the ego, each perception algorithm's detections and
+    each planner's path (sorted)."""
+    topics = {_GT_TOPIC, _EGO_TOPIC}
+    for name, role in algorithms:
+        if role == "perception":
+            topics.add(f"/redrive/detections/{name}")
+        elif role == "planning":
+            topics.add(f"/redrive/paths/{name}")
+    return tuple(sorted(topics))
+
+
+def _state_row(state: VehicleState) -> Row:
+    x, y, z = (float(v) for v in state.position)
+    return {"x": x, "y": y, "z": z, "heading_rad": state.heading_rad, "frame_id": state.frame_id}
+
+
+def _path_line(alg: str, path: PlannedPath, color: Color) -> tuple[LineShape, ...]:
+    if len(path.waypoints) < 2:
+        return ()
+    points = tuple((float(w[0]), float(w[1]), float(w[2])) for w in path.waypoints)
+    return (LineShape(id=f"{alg}/path", points=points, color=color, width_m=0.25),)
+
+
+def record_scene(
+    record: FrameRecord,
+    *,
+    ego_transform: bool = True,
+    geometry: EgoGeometry | None = None,
+) -> FrameScene:
+    """What one finished frame of a live run shows — the shapes :func:`run_scenes` draws for a
+    stored frame, from the engine's record: ground truth (when the frame has some), each
+    perception algorithm's boxes, each planner's path and the ego box, on the same topics.
+
+    ``ego_transform``: give the ego's ``frame_id → base_link`` as the frame's transform (leave it
+    out when the source's own ``/tf`` places ``base_link``: a frame has one parent).
+    """
+    geometry = geometry or EgoGeometry()
+    stamp = record.stamp_ns
+    shapes: dict[str, ShapeSet] = {}
+    if record.ground_truth is not None:
+        boxes, labels = _object_shapes(
+            _object_rows(record.ground_truth), prefix="gt", detections=False
+        )
+        shapes[_GT_TOPIC] = ShapeSet(
+            stamp_ns=stamp, frame_id=BODY_FRAME, boxes=boxes, labels=labels
+        )
+    paths = 0
+    for step in record.steps:
+        if step.role == "perception":
+            objects = step.output if isinstance(step.output, tuple) else ()
+            boxes, labels = _object_shapes(
+                _object_rows(objects), prefix=step.algorithm, detections=True
+            )
+            shapes[f"/redrive/detections/{step.algorithm}"] = ShapeSet(
+                stamp_ns=stamp, frame_id=BODY_FRAME, boxes=boxes, labels=labels
+            )
+        elif step.role == "planning":
+            color = _PATH_COLORS[paths % len(_PATH_COLORS)]
+            paths += 1
+            path = step.output if isinstance(step.output, PlannedPath) else None
+            shapes[f"/redrive/paths/{step.algorithm}"] = ShapeSet(
+                stamp_ns=stamp,
+                frame_id=path.frame_id if path is not None else BODY_FRAME,
+                lines=() if path is None else _path_line(step.algorithm, path, color),
+            )
+    transforms: tuple[Transform, ...] = ()
+    state = record.vehicle_state
+    if state is not None:
+        row = _state_row(state)
+        if ego_transform:
+            transforms = (_ego_transform(row, stamp),)
+        shapes[_EGO_TOPIC] = ShapeSet(
+            stamp_ns=stamp,
+            frame_id=state.frame_id or "map",
+            boxes=(_ego_box(row, geometry=geometry, ident="ego", color=_EGO_COLOR),),
+        )
+    return FrameScene(
+        frame_index=record.frame_index, stamp_ns=stamp, shapes=shapes, transforms=transforms
+    )

@@ -22,6 +22,7 @@ What a stream holds:
 
 from __future__ import annotations
 
+import functools
 import heapq
 import logging
 from collections.abc import Iterator, Mapping
@@ -43,14 +44,28 @@ from redrive.interop.run_scene import (
     scene_topics,
 )
 from redrive.io import open_log
-from redrive.io.base import LogMessage, LogReader
+from redrive.io.base import LogMessage, LogReader, TopicInfo
 from redrive.io.decoders import DecodedKind, decode, topic_kind
+from redrive.io.decoders.base import Decoded
 from redrive.io.qos import offered_qos_profiles
 from redrive.io.typestore import typestore_for
 from redrive.results import Run, open_run
 from redrive.types import DetectedObject, Image, PointCloud, SensorType, Transform
 
-__all__ = ["TRANSFORMS_TOPIC", "ChannelSpec", "OutMessage", "SceneStream", "open_scene_stream"]
+__all__ = [
+    "TRANSFORMS_TOPIC",
+    "ChannelSpec",
+    "OutMessage",
+    "SceneStream",
+    "TopicRoute",
+    "foxglove_message",
+    "open_scene_stream",
+    "route_topic",
+    "scene_channels",
+    "scene_messages",
+    "transforms_channel",
+    "transforms_message",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -94,6 +109,139 @@ def _marker_topic(topic: str) -> str:
     return "/redrive/markers/" + topic.removeprefix("/redrive/").removeprefix("/")
 
 
+@dataclass(frozen=True, slots=True, kw_only=True)
+class TopicRoute:
+    """How one log topic reaches Foxglove (:func:`route_topic`).
+
+    Attributes:
+        raw: passed on as it is, on its own topic (its ROS bytes and schema).
+        decoded: (kind, sensor type) when it is also converted to a Foxglove message on
+            ``/foxglove<topic>`` (:func:`foxglove_message`); None otherwise.
+        static: static transforms (``/tf_static``): gathered onto ``/redrive/transforms``.
+        channels: the channels the topic fills.
+    """
+
+    raw: bool
+    decoded: tuple[DecodedKind, SensorType | None] | None
+    static: bool
+    channels: tuple[ChannelSpec, ...]
+
+
+def route_topic(info: TopicInfo, stores: Mapping[str, Any], *, objects: bool) -> TopicRoute:
+    """The channels of a log topic: its own (ROS 1 ``ros1msg`` / ROS 2 ``ros2msg`` schema, when
+    its type is known to the log's typestore in ``stores``), a ``foxglove.PointCloud`` of a
+    LiDAR, a ``foxglove.CompressedImage`` of a camera and — when ``objects`` — a
+    ``foxglove.SceneUpdate`` of an object topic (ground truth or detections)."""
+    topic = info.topic
+    channels: list[ChannelSpec] = []
+    store = stores.get(info.encoding) if info.encoding != "native" else None
+    raw = False
+    if store is not None and info.has_definition and info.msgtype in store.fielddefs:
+        version = 1 if info.encoding == "ros1" else 2
+        name = info.msgtype
+        if version == 1:
+            pkg, _, typ = info.msgtype.split("/")
+            name = f"{pkg}/{typ}"
+        text, _ = store.generate_msgdef(info.msgtype, ros_version=version)
+        metadata = {}
+        if version == 2:
+            metadata["offered_qos_profiles"] = offered_qos_profiles(topic)
+        channels.append(
+            ChannelSpec(
+                topic=topic,
+                message_encoding=info.encoding,
+                schema_name=name,
+                schema_encoding="ros1msg" if version == 1 else "ros2msg",
+                schema_data=text.encode("utf-8"),
+                metadata=metadata,
+            )
+        )
+        raw = True
+    kind = topic_kind(info)
+    decoded: tuple[DecodedKind, SensorType | None] | None = None
+    static = False
+    if kind is not None:
+        message_type: Any = None
+        if kind[0] == DecodedKind.SENSOR and kind[1] == SensorType.LIDAR:
+            message_type = fm.PointCloud
+        elif kind[0] == DecodedKind.SENSOR and kind[1] == SensorType.CAMERA:
+            message_type = fm.CompressedImage
+        elif kind[0] == DecodedKind.OBJECTS and objects:
+            message_type = fm.SceneUpdate
+        elif kind[0] == DecodedKind.TRANSFORMS and topic.endswith("tf_static"):
+            static = True
+        if message_type is not None:
+            channels.append(_foxglove_spec(f"/foxglove{topic}", message_type))
+            decoded = kind
+    return TopicRoute(raw=raw, decoded=decoded, static=static, channels=tuple(channels))
+
+
+def foxglove_message(topic: str, log_time_ns: int, decoded: Decoded) -> OutMessage | None:
+    """A decoded LiDAR cloud, camera image or object list of ``topic`` as its Foxglove message
+    on ``/foxglove<topic>``; None for other values (and float images, which neither JPEG nor
+    PNG holds)."""
+    value = decoded.value
+    encoded: Any = None
+    if isinstance(value, PointCloud):
+        encoded = fx.point_cloud(value, frame_id=decoded.frame_id, stamp_ns=decoded.stamp_ns)
+    elif isinstance(value, Image):
+        encoded = fx.compressed_image(value, frame_id=decoded.frame_id, stamp_ns=decoded.stamp_ns)
+    elif isinstance(value, tuple):
+        found = [o for o in value if isinstance(o, DetectedObject)]
+        encoded = fx.scene_update(
+            log_object_shapes(
+                found, frame_id=decoded.frame_id or BODY_FRAME, stamp_ns=decoded.stamp_ns
+            )
+        )
+    if encoded is None:
+        return None
+    return OutMessage(f"/foxglove{topic}", log_time_ns, encoded.encode())
+
+
+@functools.cache
+def _marker_definition() -> str:
+    store = typestore_for(2, needed=[MARKER_ARRAY])[0]
+    text: str = store.generate_msgdef(MARKER_ARRAY, ros_version=2)[0]
+    return text
+
+
+def scene_channels(topic: str) -> dict[str, ChannelSpec]:
+    """A results topic's channels: its ``foxglove.SceneUpdate`` and the same shapes as a
+    ``visualization_msgs/msg/MarkerArray`` on ``/redrive/markers/…``."""
+    marker_def = _marker_definition()
+    return {
+        topic: _foxglove_spec(topic, fm.SceneUpdate),
+        _marker_topic(topic): ChannelSpec(
+            topic=_marker_topic(topic),
+            message_encoding="cdr",
+            schema_name=MARKER_ARRAY,
+            schema_encoding="ros2msg",
+            schema_data=marker_def.encode("utf-8"),
+            metadata={"offered_qos_profiles": offered_qos_profiles(topic)},
+        ),
+    }
+
+
+def transforms_channel() -> ChannelSpec:
+    """``/redrive/transforms``: ``foxglove.FrameTransforms``."""
+    return _foxglove_spec(TRANSFORMS_TOPIC, fm.FrameTransforms)
+
+
+def transforms_message(transforms: tuple[Transform, ...], stamp_ns: int) -> OutMessage:
+    data = fx.frame_transforms(transforms, stamp_ns=stamp_ns).encode()
+    return OutMessage(TRANSFORMS_TOPIC, stamp_ns, data)
+
+
+def scene_messages(scene: FrameScene) -> Iterator[OutMessage]:
+    """One frame's results: its transforms, then each topic's SceneUpdate and MarkerArray."""
+    stamp = scene.stamp_ns
+    if scene.transforms:
+        yield transforms_message(scene.transforms, stamp)
+    for topic, shapes in sorted(scene.shapes.items()):
+        yield OutMessage(topic, stamp, fx.scene_update(shapes).encode())
+        yield OutMessage(_marker_topic(topic), stamp, marker_array_cdr(shapes))
+
+
 def find_run_log(run: Run) -> Path | None:
     """The log a run is shown over: a sensor-level closed loop's recording of its rendered
     sensors (in the run directory), else the log the manifest names; None when it is gone."""
@@ -111,7 +259,6 @@ class SceneStream:
     def __init__(self, *, reader: LogReader | None, run: Run | None) -> None:
         self.reader = reader
         self.run = run
-        self._typestore = typestore_for(2)[0]
         self.channels: dict[str, ChannelSpec] = {}
         self._raw: dict[str, str] = {}  # log topic → how to pass it on
         self._decoded: dict[str, tuple[DecodedKind, SensorType | None]] = {}
@@ -130,45 +277,13 @@ class SceneStream:
         for topic, info in sorted(reader.topics.items()):
             if self.run is not None and topic.rstrip("/").endswith("/tf"):
                 continue  # the run's ego places base_link (/redrive/transforms): one parent
-            store = stores.get(info.encoding) if info.encoding != "native" else None
-            if store is not None and info.has_definition and info.msgtype in store.fielddefs:
-                version = 1 if info.encoding == "ros1" else 2
-                name = info.msgtype
-                if version == 1:
-                    pkg, _, typ = info.msgtype.split("/")
-                    name = f"{pkg}/{typ}"
-                text, _ = store.generate_msgdef(info.msgtype, ros_version=version)
-                metadata = {}
-                if version == 2:
-                    metadata["offered_qos_profiles"] = offered_qos_profiles(topic)
-                self.channels[topic] = ChannelSpec(
-                    topic=topic,
-                    message_encoding=info.encoding,
-                    schema_name=name,
-                    schema_encoding="ros1msg" if version == 1 else "ros2msg",
-                    schema_data=text.encode("utf-8"),
-                    metadata=metadata,
-                )
+            route = route_topic(info, stores, objects=self.run is None)
+            self.channels.update((c.topic, c) for c in route.channels)
+            if route.raw:
                 self._raw[topic] = info.encoding
-            kind = topic_kind(info)
-            if kind is None:
-                continue
-            if kind[0] == DecodedKind.SENSOR and kind[1] == SensorType.LIDAR:
-                self.channels[f"/foxglove{topic}"] = _foxglove_spec(
-                    f"/foxglove{topic}", fm.PointCloud
-                )
-                self._decoded[topic] = kind
-            elif kind[0] == DecodedKind.SENSOR and kind[1] == SensorType.CAMERA:
-                self.channels[f"/foxglove{topic}"] = _foxglove_spec(
-                    f"/foxglove{topic}", fm.CompressedImage
-                )
-                self._decoded[topic] = kind
-            elif kind[0] == DecodedKind.OBJECTS and self.run is None:
-                self.channels[f"/foxglove{topic}"] = _foxglove_spec(
-                    f"/foxglove{topic}", fm.SceneUpdate
-                )
-                self._decoded[topic] = kind
-            elif kind[0] == DecodedKind.TRANSFORMS and topic.endswith("tf_static"):
+            if route.decoded is not None:
+                self._decoded[topic] = route.decoded
+            if route.static:
                 self._static += self._read_static(reader, topic)
 
     @staticmethod
@@ -188,17 +303,8 @@ class SceneStream:
 
     def _add_run_channels(self, run: Run) -> None:
         self.channels[TRANSFORMS_TOPIC] = _foxglove_spec(TRANSFORMS_TOPIC, fm.FrameTransforms)
-        marker_def, _ = self._typestore.generate_msgdef(MARKER_ARRAY, ros_version=2)
         for topic in scene_topics(run):
-            self.channels[topic] = _foxglove_spec(topic, fm.SceneUpdate)
-            self.channels[_marker_topic(topic)] = ChannelSpec(
-                topic=_marker_topic(topic),
-                message_encoding="cdr",
-                schema_name=MARKER_ARRAY,
-                schema_encoding="ros2msg",
-                schema_data=marker_def.encode("utf-8"),
-                metadata={"offered_qos_profiles": offered_qos_profiles(topic)},
-            )
+            self.channels.update(scene_channels(topic))
 
     # -- messages --------------------------------------------------------------------------------
 
@@ -233,12 +339,8 @@ class SceneStream:
             parts.append(self._run_messages(start_ns))
         elif self._static:
             t0 = self.start_ns if start_ns is None else start_ns
-            parts.append(iter([self._transforms_message(self._static, t0)]))
+            parts.append(iter([transforms_message(self._static, t0)]))
         return heapq.merge(*parts, key=lambda m: m.log_time_ns)
-
-    def _transforms_message(self, transforms: tuple[Transform, ...], stamp_ns: int) -> OutMessage:
-        data = fx.frame_transforms(transforms, stamp_ns=stamp_ns).encode()
-        return OutMessage(TRANSFORMS_TOPIC, stamp_ns, data)
 
     def _log_messages(self, start_ns: int | None) -> Iterator[OutMessage]:
         assert self.reader is not None
@@ -258,39 +360,14 @@ class SceneStream:
         except UnsupportedMessageError as err:
             logger.debug("%s: %s", reader.path, err)
             return None
-        value, topic = decoded.value, f"/foxglove{message.topic}"
-        encoded: Any = None
-        if isinstance(value, PointCloud):
-            encoded = fx.point_cloud(value, frame_id=decoded.frame_id, stamp_ns=decoded.stamp_ns)
-        elif isinstance(value, Image):
-            encoded = fx.compressed_image(
-                value, frame_id=decoded.frame_id, stamp_ns=decoded.stamp_ns
-            )
-        elif isinstance(value, tuple):
-            objects = [o for o in value if isinstance(o, DetectedObject)]
-            encoded = fx.scene_update(
-                log_object_shapes(
-                    objects, frame_id=decoded.frame_id or BODY_FRAME, stamp_ns=decoded.stamp_ns
-                )
-            )
-        if encoded is None:
-            return None
-        return OutMessage(topic, message.log_time_ns, encoded.encode())
+        return foxglove_message(message.topic, message.log_time_ns, decoded)
 
     def _run_messages(self, start_ns: int | None) -> Iterator[OutMessage]:
         assert self.run is not None
         for scene in run_scenes(self.run, static_transforms=self._static):
             if start_ns is not None and scene.stamp_ns < start_ns:
                 continue
-            yield from self._scene_messages(scene)
-
-    def _scene_messages(self, scene: FrameScene) -> Iterator[OutMessage]:
-        stamp = scene.stamp_ns
-        if scene.transforms:
-            yield self._transforms_message(scene.transforms, stamp)
-        for topic, shapes in sorted(scene.shapes.items()):
-            yield OutMessage(topic, stamp, fx.scene_update(shapes).encode())
-            yield OutMessage(_marker_topic(topic), stamp, marker_array_cdr(shapes))
+            yield from scene_messages(scene)
 
     # -- closing ---------------------------------------------------------------------------------
 

@@ -66,6 +66,8 @@ class LiveLog:
         session: the session name (shown as the log's path, ``live:<session>``).
         stop: set it to end :meth:`messages`.
         attach_timeout_s: how long to wait for each stream's writer.
+        warn_gone: log a stream whose writer went away as a warning (False: at DEBUG, for an
+            observer such as the Foxglove view, for which a finished source is no news).
         duration_hint_s: the duration the sensor map infers rates over (live topics have no
             counts yet: the map is inferred from types).
 
@@ -82,6 +84,7 @@ class LiveLog:
         *,
         stop: threading.Event | None = None,
         attach_timeout_s: float = 10.0,
+        warn_gone: bool = True,
     ) -> None:
         if not specs:
             msg = "a live session needs at least one topic"
@@ -89,6 +92,7 @@ class LiveLog:
         self.path = Path(f"live:{session}")
         self.session = session
         self.stop = stop or threading.Event()
+        self._gone_level = logging.WARNING if warn_gone else logging.DEBUG
         self._specs = {s.topic: s for s in specs}
         self._readers: dict[str, Reader] = {}
         try:
@@ -147,6 +151,11 @@ class LiveLog:
         )
 
     @property
+    def typestores(self) -> Mapping[str, Any]:
+        """Encoding (``ros1`` / ``cdr``) → the typestore the streams' bytes are read with."""
+        return self._deserializer.typestores
+
+    @property
     def start_ns(self) -> int:
         return self._start_ns
 
@@ -191,7 +200,7 @@ class LiveLog:
                 msg = reader.read(timeout_s=0.0)
             except ProducerGoneError as err:
                 if topic not in self.gone:
-                    logger.warning("live topic %s: %s", topic, err)
+                    logger.log(self._gone_level, "live topic %s: %s", topic, err)
                     self.gone.add(topic)
                 return
             if msg is None:

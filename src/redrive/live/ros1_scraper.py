@@ -143,7 +143,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--capacity", type=int, required=True, help="largest message, bytes")
     parser.add_argument("--policy", choices=("keep_latest", "lossless"), default="lossless")
     parser.add_argument("--slots", type=int, default=8)
-    parser.add_argument("--max-readers", type=int, default=2)
+    # the dispatcher, the recorder and the Foxglove live view
+    parser.add_argument("--max-readers", type=int, default=3)
     parser.add_argument("--timeout", type=float, default=5.0, help="lossless back-pressure, s")
     parser.add_argument(
         "--await-lossless",

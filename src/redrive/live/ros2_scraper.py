@@ -96,7 +96,7 @@ class _Scraper:
             capacity_bytes=int(spec["capacity"]),
             slots=self.slots,
             policy=Policy.LOSSLESS,
-            max_readers=2,
+            max_readers=3,  # the dispatcher, the recorder, the Foxglove view
         )
         self.counts[spec["topic"]] = [0, 0]
 

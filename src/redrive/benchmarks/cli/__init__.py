@@ -19,6 +19,7 @@ from redrive.benchmarks.cli.read import EPILOG as _EPILOG
 from redrive.benchmarks.cli.read import add_read_parser
 from redrive.benchmarks.cli.record import add_record_parser
 from redrive.benchmarks.cli.record_ros2 import add_record_ros2_parser
+from redrive.benchmarks.cli.serve import add_serve_parser
 from redrive.benchmarks.cli.suite import add_all_parser
 from redrive.benchmarks.cli.transport import add_transport_parser
 
@@ -53,4 +54,5 @@ def register(sub: Any) -> None:
     add_record_ros2_parser(bench_sub)
     add_gui_parser(bench_sub)
     add_export_parser(bench_sub)
+    add_serve_parser(bench_sub)
     add_all_parser(bench_sub)
