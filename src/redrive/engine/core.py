@@ -1,8 +1,9 @@
 """The Orchestration Engine: frames through the stage graph, sequentially or pipelined.
 
 - *sequential*: each frame goes through every stage before the next frame starts.
-- *pipelined*: one thread per stage and one reading the log, joined by short bounded queues, so
-  stage k works on frame t while stage k-1 works on frame t+1.  Each stage still sees frames in
+- *pipelined*: one thread per stage and one reading the log, joined by short bounded hand-offs
+  (:class:`~redrive.engine.handoff.Handoff`), so stage k works on frame t while stage k-1 works
+  on frame t+1.  Each stage still sees frames in
   order and the same upstream outputs, so the outputs are identical to a sequential run; the
   stages overlap where their work releases the GIL (numpy, scipy, I/O) or runs in worker
   processes (``executor="processes"``).
@@ -20,7 +21,6 @@ thread: no frame is read after it is set, the frames already read are finished a
 from __future__ import annotations
 
 import logging
-import queue
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping
@@ -39,6 +39,7 @@ from redrive.algorithms import (
 )
 from redrive.config import PipelineConfig
 from redrive.engine.graph import LogInputs, PlannedAlgorithm, StageGraph
+from redrive.engine.handoff import Handoff, HandoffClosedError
 from redrive.engine.modes import ModeHooks, PacedFrame, ReplayMode
 from redrive.engine.stats import RunReport, StatsCollector
 from redrive.engine.worker import AlgorithmRunner, InlineRunner, ProcessRunner, frame_for
@@ -50,14 +51,9 @@ __all__ = ["Engine", "FrameSink"]
 
 logger = logging.getLogger(__name__)
 
-_POLL_S = 0.05
 _QUEUE_DEPTH = 2
 
 FrameSink = Callable[[FrameRecord], None]
-
-
-class _StopRequestedError(Exception):
-    """Internal: the run was asked to stop."""
 
 
 _NO_UPSTREAM = StageOutputs()  # immutable: every frame starts from it
@@ -489,60 +485,46 @@ class Engine:
     def _pipelined(
         self, paced: Iterator[PacedFrame], finish: Callable[[_Item], tuple[int, StepRecord] | None]
     ) -> tuple[int, StepRecord] | None:
-        stop = threading.Event()
         end = object()
-        queues: list[queue.Queue[Any]] = [
-            queue.Queue(maxsize=_QUEUE_DEPTH) for _ in range(len(self._stages) + 1)
-        ]
+        # one hand-off into each stage and one out of the last: each has one producer thread
+        # and one consumer thread; closing them all stops every thread at its next hand-off
+        handoffs = [Handoff(_QUEUE_DEPTH) for _ in range(len(self._stages) + 1)]
         crashed: list[BaseException] = []
 
-        def put(q: queue.Queue[Any], value: Any) -> None:
-            while True:
-                if stop.is_set():
-                    raise _StopRequestedError
-                try:
-                    q.put(value, timeout=_POLL_S)
-                    return
-                except queue.Full:
-                    continue
-
-        def get(q: queue.Queue[Any]) -> Any:
-            while True:
-                if stop.is_set():
-                    raise _StopRequestedError
-                try:
-                    return q.get(timeout=_POLL_S)
-                except queue.Empty:
-                    continue
+        def stop() -> None:
+            for handoff in handoffs:
+                handoff.close()
 
         def feed() -> None:
             self._threads["thread:reader"] = threading.get_native_id()
+            put = handoffs[0].put
             try:
                 for pf in paced:
-                    put(queues[0], _Item(pf.frame, pf.late, perf_counter_ns()))
-                put(queues[0], end)
-            except _StopRequestedError:
+                    put(_Item(pf.frame, pf.late, perf_counter_ns()))
+                put(end)
+            except HandoffClosedError:
                 pass
             except BaseException as err:  # a log error: hand it to the main thread
                 crashed.append(err)
-                stop.set()
+                stop()
 
         def work(k: int) -> None:
             stage = self._stages[k]
             self._threads[f"thread:{stage.name}"] = threading.get_native_id()
+            get, put = handoffs[k].get, handoffs[k + 1].put
             try:
                 while True:
-                    item = get(queues[k])
+                    item = get()
                     if item is end:
-                        put(queues[k + 1], end)
+                        put(end)
                         return
                     stage.run(item)
-                    put(queues[k + 1], item)
-            except _StopRequestedError:
+                    put(item)
+            except HandoffClosedError:
                 pass
             except BaseException as err:
                 crashed.append(err)
-                stop.set()
+                stop()
 
         threads = [threading.Thread(target=feed, name="redrive-reader", daemon=True)]
         threads += [
@@ -551,11 +533,12 @@ class Engine:
         ]
         for t in threads:
             t.start()
+        get = handoffs[-1].get
         try:
             while True:
                 try:
-                    item = get(queues[-1])
-                except _StopRequestedError:
+                    item = get()
+                except HandoffClosedError:
                     break
                 if item is end:
                     break
@@ -563,7 +546,7 @@ class Engine:
                 if failed is not None:
                     return failed
         finally:
-            stop.set()
+            stop()
             for t in threads:  # a stage stuck in a step (no timeout set) is left behind: daemon
                 t.join(timeout=10.0)
             for name in [n for n in self._threads if n != "thread:main"]:
