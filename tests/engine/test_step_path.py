@@ -3,6 +3,8 @@ general path records, and leaves an algorithm that overrides ``run_step`` on tha
 
 from __future__ import annotations
 
+import pytest
+
 from redrive.config import AlgorithmSpec, PipelineConfig, StageSpec
 from redrive.engine import Engine, LogInputs, build_graph
 from redrive.results import FrameRecord
@@ -103,8 +105,15 @@ def _run_in(mode: str, *, fail_fast: bool = False) -> tuple[list[FrameRecord], o
     return kept, report.failure
 
 
-def test_the_short_sequential_path_records_what_the_stage_path_records() -> None:
-    short, _ = _run_in("sequential")  # one in-process algorithm per stage: the short loop
+def test_the_short_sequential_path_records_what_the_stage_path_records(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    def not_here(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the general sequential path ran instead of the short one")
+
+    with monkeypatch.context() as patch:
+        patch.setattr(Engine, "_sequential", not_here)
+        short, _ = _run_in("sequential")  # one in-process algorithm per stage: the short loop
     general, _ = _run_in("pipelined")  # the same stages through _Stage.run
     assert [r.frame_index for r in short] == [0, *range(2, 12)]
     assert _steps_of(short) == _steps_of(general)
