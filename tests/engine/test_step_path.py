@@ -3,6 +3,8 @@ general path records, and leaves an algorithm that overrides ``run_step`` on tha
 
 from __future__ import annotations
 
+import pytest
+
 from redrive.config import AlgorithmSpec, PipelineConfig, StageSpec
 from redrive.engine import Engine, LogInputs, build_graph
 from redrive.results import FrameRecord
@@ -50,3 +52,80 @@ def test_records_of_the_short_path_are_complete() -> None:
         assert "frame " + str(r.frame_index) in r.steps[2].error_message
         assert r.steps[2].output is None
         assert all(s.latency_ns >= 0 and s.cpu_ns >= 0 for s in r.steps)
+
+
+def _steps_of(records: list[FrameRecord]) -> list[tuple[object, ...]]:
+    """What a run recorded, timing and traceback lines aside (the exception's last line kept)."""
+    return [
+        (
+            r.frame_index,
+            r.stamp_ns,
+            r.late,
+            tuple(
+                (
+                    s.algorithm,
+                    s.stage,
+                    s.role,
+                    s.status,
+                    s.output,
+                    s.error_type,
+                    s.error_message,
+                    s.traceback.strip().splitlines()[-1:],
+                )
+                for s in r.steps
+            ),
+        )
+        for r in records
+    ]
+
+
+def _run_in(mode: str, *, fail_fast: bool = False) -> tuple[list[FrameRecord], object]:
+    noop = "redrive.benchmarks.engine:"
+    pipeline = PipelineConfig(
+        stages=(
+            StageSpec(name="p", algorithms=(AlgorithmSpec(name="p", plugin=P + "FailEvery10th"),)),
+            StageSpec(
+                name="l", algorithms=(AlgorithmSpec(name="l", plugin=noop + "NoopPlanning"),)
+            ),
+            StageSpec(name="c", algorithms=(AlgorithmSpec(name="c", plugin=P + "FollowSpeed"),)),
+        ),
+        mode=mode,  # type: ignore[arg-type]
+        fail_fast=fail_fast,
+    )
+    engine = Engine(build_graph(pipeline, LogInputs()), pipeline, inputs=LogInputs())
+    kept: list[FrameRecord] = []
+    try:
+        report = engine.run(
+            [Frame(stamp_ns=i * 10, index=i) for i in range(12)],
+            sink=kept.append,
+            skip=frozenset({1}),
+        )
+    finally:
+        engine.close()
+    return kept, report.failure
+
+
+def test_the_short_sequential_path_records_what_the_stage_path_records(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    def not_here(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the general sequential path ran instead of the short one")
+
+    with monkeypatch.context() as patch:
+        patch.setattr(Engine, "_sequential", not_here)
+        short, _ = _run_in("sequential")  # one in-process algorithm per stage: the short loop
+    general, _ = _run_in("pipelined")  # the same stages through _Stage.run
+    assert [r.frame_index for r in short] == [0, *range(2, 12)]
+    assert _steps_of(short) == _steps_of(general)
+    failed = [r for r in short if r.steps[0].status == "error"]
+    assert [r.frame_index for r in failed] == [0, 10]
+    assert "planned failure on frame 10" in failed[1].steps[0].traceback
+    assert all(s.latency_ns >= 0 and s.cpu_ns >= 0 for r in short for s in r.steps)
+
+
+def test_the_short_path_stops_a_fail_fast_run_at_the_first_failure() -> None:
+    records, failure = _run_in("sequential", fail_fast=True)
+    assert [r.frame_index for r in records] == [0]
+    assert failure is not None
+    index, step = failure  # type: ignore[misc]
+    assert (index, step.algorithm, step.status) == (0, "p", "error")

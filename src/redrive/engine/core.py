@@ -1,8 +1,9 @@
 """The Orchestration Engine: frames through the stage graph, sequentially or pipelined.
 
 - *sequential*: each frame goes through every stage before the next frame starts.
-- *pipelined*: one thread per stage and one reading the log, joined by short bounded queues, so
-  stage k works on frame t while stage k-1 works on frame t+1.  Each stage still sees frames in
+- *pipelined*: one thread per stage and one reading the log, joined by short bounded hand-offs
+  (:class:`~redrive.engine.handoff.Handoff`), so stage k works on frame t while stage k-1 works
+  on frame t+1.  Each stage still sees frames in
   order and the same upstream outputs, so the outputs are identical to a sequential run; the
   stages overlap where their work releases the GIL (numpy, scipy, I/O) or runs in worker
   processes (``executor="processes"``).
@@ -20,7 +21,6 @@ thread: no frame is read after it is set, the frames already read are finished a
 from __future__ import annotations
 
 import logging
-import queue
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping
@@ -29,9 +29,17 @@ from time import perf_counter_ns
 from types import MappingProxyType
 from typing import Any
 
-from redrive.algorithms import Algorithm, StageOutputs, StepResult, StepStatus
+from redrive.algorithms import (
+    Algorithm,
+    AlgorithmOutput,
+    StageOutputs,
+    StepError,
+    StepResult,
+    StepStatus,
+)
 from redrive.config import PipelineConfig
 from redrive.engine.graph import LogInputs, PlannedAlgorithm, StageGraph
+from redrive.engine.handoff import Handoff, HandoffClosedError
 from redrive.engine.modes import ModeHooks, PacedFrame, ReplayMode
 from redrive.engine.stats import RunReport, StatsCollector
 from redrive.engine.worker import AlgorithmRunner, InlineRunner, ProcessRunner, frame_for
@@ -43,26 +51,26 @@ __all__ = ["Engine", "FrameSink"]
 
 logger = logging.getLogger(__name__)
 
-_POLL_S = 0.05
 _QUEUE_DEPTH = 2
 
 FrameSink = Callable[[FrameRecord], None]
 
 
-class _StopRequestedError(Exception):
-    """Internal: the run was asked to stop."""
-
-
 _NO_UPSTREAM = StageOutputs()  # immutable: every frame starts from it
+_thread_time_ns = time.thread_time_ns
+
+#: a stage of one in-process algorithm: (algorithm, its sensors, name, stage, role value)
+_Single = tuple[Algorithm, frozenset[str], str, str, str]
 
 
 class _Item:
     """A frame on its way through the stages."""
 
-    __slots__ = ("failed", "paced", "steps", "t0_ns", "upstream")
+    __slots__ = ("failed", "frame", "late", "steps", "t0_ns", "upstream")
 
-    def __init__(self, paced: PacedFrame, *, t0_ns: int) -> None:
-        self.paced = paced
+    def __init__(self, frame: Frame, late: bool, t0_ns: int) -> None:
+        self.frame = frame
+        self.late = late
         self.upstream = _NO_UPSTREAM
         self.steps: list[StepRecord] = []
         self.failed: tuple[int, StepRecord] | None = None
@@ -90,7 +98,7 @@ class _Stage:
         self._role_values = [p.role.value for p in planned]
         self.last = False
         self._inline = all(isinstance(r, InlineRunner) for r in runners)
-        self._single: tuple[Algorithm, frozenset[str], str, str, str] | None = None
+        self._single: _Single | None = None
         # the short path calls Algorithm.timed_step; an algorithm that overrides run_step keeps
         # being run through it (the general path below)
         if (
@@ -113,35 +121,13 @@ class _Stage:
         )
 
     def run(self, item: _Item) -> None:
-        frame = item.paced.frame
+        frame = item.frame
         if self._single is not None:  # the common case, kept short: one algorithm in-process
-            algo, sensors, name, stage, role = self._single
+            algo, sensors = self._single[0], self._single[1]
             if frame.sensors and not frame.sensors.keys() <= sensors:
                 frame = frame_for(frame, sensors)
             status, output, latency_ns, cpu_ns, error = algo.timed_step(frame, item.upstream)
-            if error is None:
-                record = step_record_unchecked(
-                    name,
-                    stage,
-                    role,
-                    "ok" if status is _OK else status.value,
-                    latency_ns,
-                    cpu_ns,
-                    output,
-                )
-            else:
-                record = step_record_unchecked(
-                    name,
-                    stage,
-                    role,
-                    status.value,
-                    latency_ns,
-                    cpu_ns,
-                    output,
-                    error.type,
-                    error.message,
-                    error.traceback,
-                )
+            record = _step_record(self._single, status, output, latency_ns, cpu_ns, error)
             item.steps.append(record)
             ok = status is _OK and output is not None
             if not ok and item.failed is None:
@@ -178,6 +164,12 @@ class _Stage:
                 item.failed = (frame.index, record)
         item.upstream = item.upstream.merged(outputs, self.roles)
 
+    @property
+    def single(self) -> _Single | None:
+        """``(algorithm, its sensors, name, stage, role)`` of a stage of one in-process
+        algorithm run through :meth:`Algorithm.timed_step` (the short paths); else None."""
+        return self._single
+
     def close(self) -> None:
         if self._pool is not None:
             self._pool.shutdown(wait=True)
@@ -205,6 +197,39 @@ def _run_inline(runner: AlgorithmRunner, frame: Frame, upstream: StageOutputs) -
 
 _OK = StepStatus.OK
 _STATUS_VALUES = {s: s.value for s in StepStatus}
+
+
+def _step_record(  # noqa: PLR0917 (per step: positional is cheaper)
+    single: _Single,
+    status: StepStatus,
+    output: AlgorithmOutput | None,
+    latency_ns: int,
+    cpu_ns: int,
+    error: StepError | None,
+) -> StepRecord:
+    """The record of a step of a single-algorithm stage (see :attr:`_Stage.single`)."""
+    if error is None:
+        return step_record_unchecked(
+            single[2],
+            single[3],
+            single[4],
+            "ok" if status is _OK else status.value,
+            latency_ns,
+            cpu_ns,
+            output,
+        )
+    return step_record_unchecked(
+        single[2],
+        single[3],
+        single[4],
+        status.value,
+        latency_ns,
+        cpu_ns,
+        output,
+        error.type,
+        error.message,
+        error.traceback,
+    )
 
 
 def _record(planned: PlannedAlgorithm, role: str, result: StepResult) -> StepRecord:
@@ -317,17 +342,27 @@ class Engine:
             which).
         """
         stats = StatsCollector([p for _, planned in self.graph.stages for p in planned])
-        pending: Iterator[Frame] = (f for f in frames if f.index not in skip)
+        pending: Iterator[Frame] = (
+            (f for f in frames if f.index not in skip) if skip else iter(frames)
+        )
         cancelled = [False]
         if cancel is not None:
             pending = _until_cancelled(pending, cancel, cancelled)
-        paced = self.hooks.before_frame(pending)
+        pipelined = self.pipeline.mode == "pipelined" and len(self._stages) > 1
+        # the common replay: as fast as possible, one algorithm in-process per stage, in order
+        short = (
+            not pipelined
+            and type(self.hooks) is ReplayMode
+            and self.hooks.rate is None
+            and all(stage.single is not None for stage in self._stages)
+        )
+        paced = None if short else self.hooks.before_frame(pending)
         done = 0
         after_frame, fail_fast = self.hooks.after_frame, self.pipeline.fail_fast
 
         def finish(item: _Item) -> tuple[int, StepRecord] | None:
             nonlocal done
-            frame = item.paced.frame
+            frame = item.frame
             record = frame_record_unchecked(  # Frame and the graph keep its invariants
                 int(frame.index),
                 frame.stamp_ns,
@@ -335,7 +370,7 @@ class Engine:
                 frame.vehicle_state,
                 frame.ground_truth,
                 perf_counter_ns() - item.t0_ns,
-                bool(item.paced.late),
+                bool(item.late),
                 frame.missing,
             )
             sink(record)
@@ -349,7 +384,11 @@ class Engine:
         t0 = time.perf_counter()
         status = RunStatus.COMPLETE
         try:
-            if self.pipeline.mode == "pipelined" and len(self._stages) > 1:
+            if paced is None:
+                failure = self._sequential_short(
+                    pending, sink=sink, stats=stats, progress=progress, fail_fast=fail_fast
+                )
+            elif pipelined:
                 failure = self._pipelined(paced, finish)
             else:
                 failure = self._sequential(paced, finish)
@@ -368,7 +407,7 @@ class Engine:
         self, paced: Iterator[PacedFrame], finish: Callable[[_Item], tuple[int, StepRecord] | None]
     ) -> tuple[int, StepRecord] | None:
         for pf in paced:
-            item = _Item(pf, t0_ns=time.perf_counter_ns())
+            item = _Item(pf.frame, pf.late, perf_counter_ns())
             for stage in self._stages:
                 stage.run(item)
             failed = finish(item)
@@ -376,63 +415,116 @@ class Engine:
                 return failed
         return None
 
+    def _sequential_short(
+        self,
+        frames: Iterator[Frame],
+        *,
+        sink: FrameSink,
+        stats: StatsCollector,
+        progress: Callable[[int], None] | None,
+        fail_fast: bool,
+    ) -> tuple[int, StepRecord] | None:
+        """:meth:`_sequential` for single-algorithm in-process stages replayed as fast as
+        possible (no pacing, nothing to do after a frame): the same records, with the thread
+        CPU clock read once per step and once per frame instead of twice per step (see
+        :meth:`Algorithm.timed_step_from`), and the step records built after the frame's last
+        step, so that only the hand-off of the upstream outputs falls between two readings."""
+        stages = [
+            (stage.single, stage.roles_after, stage.last)
+            for stage in self._stages
+            if stage.single is not None
+        ]
+        add = stats.add
+        raw: list[tuple[Any, ...]] = []
+        for done, frame in enumerate(frames, 1):
+            t0_ns = perf_counter_ns()
+            cpu = _thread_time_ns()
+            upstream = _NO_UPSTREAM
+            for single, roles_after, last in stages:
+                algo, sensors = single[0], single[1]
+                seen = frame
+                if frame.sensors and not frame.sensors.keys() <= sensors:
+                    seen = frame_for(frame, sensors)
+                status, output, latency_ns, cpu1, error = algo.timed_step_from(seen, upstream, cpu)
+                raw.append((single, status, output, latency_ns, cpu1 - cpu, error))
+                cpu = cpu1
+                if not last:  # nobody reads the upstream after the last stage
+                    outputs = upstream.outputs
+                    if status is _OK and output is not None:
+                        outputs = MappingProxyType({**outputs, algo.name: output})
+                    upstream = StageOutputs.of_proxies(
+                        outputs,  # type: ignore[arg-type]
+                        roles_after,
+                    )
+            failed: tuple[int, StepRecord] | None = None
+            steps = []
+            for single, status, output, latency_ns, cpu_ns, error in raw:
+                step = _step_record(single, status, output, latency_ns, cpu_ns, error)
+                steps.append(step)
+                if failed is None and (status is not _OK or output is None):
+                    failed = (frame.index, step)
+            raw.clear()
+            record = frame_record_unchecked(  # Frame and the graph keep its invariants
+                int(frame.index),
+                frame.stamp_ns,
+                tuple(steps),
+                frame.vehicle_state,
+                frame.ground_truth,
+                perf_counter_ns() - t0_ns,
+                False,
+                frame.missing,
+            )
+            sink(record)
+            add(record)
+            if progress is not None:
+                progress(done)
+            if fail_fast and failed is not None:
+                return failed
+        return None
+
     def _pipelined(
         self, paced: Iterator[PacedFrame], finish: Callable[[_Item], tuple[int, StepRecord] | None]
     ) -> tuple[int, StepRecord] | None:
-        stop = threading.Event()
         end = object()
-        queues: list[queue.Queue[Any]] = [
-            queue.Queue(maxsize=_QUEUE_DEPTH) for _ in range(len(self._stages) + 1)
-        ]
+        # one hand-off into each stage and one out of the last: each has one producer thread
+        # and one consumer thread; closing them all stops every thread at its next hand-off
+        handoffs = [Handoff(_QUEUE_DEPTH) for _ in range(len(self._stages) + 1)]
         crashed: list[BaseException] = []
 
-        def put(q: queue.Queue[Any], value: Any) -> None:
-            while True:
-                if stop.is_set():
-                    raise _StopRequestedError
-                try:
-                    q.put(value, timeout=_POLL_S)
-                    return
-                except queue.Full:
-                    continue
-
-        def get(q: queue.Queue[Any]) -> Any:
-            while True:
-                if stop.is_set():
-                    raise _StopRequestedError
-                try:
-                    return q.get(timeout=_POLL_S)
-                except queue.Empty:
-                    continue
+        def stop() -> None:
+            for handoff in handoffs:
+                handoff.close()
 
         def feed() -> None:
             self._threads["thread:reader"] = threading.get_native_id()
+            put = handoffs[0].put
             try:
                 for pf in paced:
-                    put(queues[0], _Item(pf, t0_ns=time.perf_counter_ns()))
-                put(queues[0], end)
-            except _StopRequestedError:
+                    put(_Item(pf.frame, pf.late, perf_counter_ns()))
+                put(end)
+            except HandoffClosedError:
                 pass
             except BaseException as err:  # a log error: hand it to the main thread
                 crashed.append(err)
-                stop.set()
+                stop()
 
         def work(k: int) -> None:
             stage = self._stages[k]
             self._threads[f"thread:{stage.name}"] = threading.get_native_id()
+            get, put = handoffs[k].get, handoffs[k + 1].put
             try:
                 while True:
-                    item = get(queues[k])
+                    item = get()
                     if item is end:
-                        put(queues[k + 1], end)
+                        put(end)
                         return
                     stage.run(item)
-                    put(queues[k + 1], item)
-            except _StopRequestedError:
+                    put(item)
+            except HandoffClosedError:
                 pass
             except BaseException as err:
                 crashed.append(err)
-                stop.set()
+                stop()
 
         threads = [threading.Thread(target=feed, name="redrive-reader", daemon=True)]
         threads += [
@@ -441,11 +533,12 @@ class Engine:
         ]
         for t in threads:
             t.start()
+        get = handoffs[-1].get
         try:
             while True:
                 try:
-                    item = get(queues[-1])
-                except _StopRequestedError:
+                    item = get()
+                except HandoffClosedError:
                     break
                 if item is end:
                     break
@@ -453,7 +546,7 @@ class Engine:
                 if failed is not None:
                     return failed
         finally:
-            stop.set()
+            stop()
             for t in threads:  # a stage stuck in a step (no timeout set) is left behind: daemon
                 t.join(timeout=10.0)
             for name in [n for n in self._threads if n != "thread:main"]:

@@ -126,6 +126,26 @@ class TableBuffers:
     def _add_step(self, fi: int, stamp: int, step: StepRecord) -> None:
         out = step.output
         name = step.algorithm
+        if isinstance(out, ControlCommands):
+            n_outputs = 1
+            self._commands((name, fi, stamp, out.throttle, out.brake, out.steering_angle_rad))
+        elif isinstance(out, PlannedPath):
+            n_outputs = 1
+            fid, pstamp = out.frame_id, out.stamp_ns
+            self._paths(
+                [
+                    (name, fi, pstamp, fid, j, x, y, z, t)
+                    for j, (x, y, z, t) in enumerate(out.waypoints.tolist())
+                ]
+            )
+        elif isinstance(out, tuple):
+            n_outputs = len(out)
+            add = self._detections
+            for obj in out:
+                cols = _object_columns(obj)
+                add((name, fi, stamp, cols[0], cols[1], obj.confidence, *cols[2:]))
+        else:
+            n_outputs = 0
         self._steps(
             (
                 fi,
@@ -136,25 +156,12 @@ class TableBuffers:
                 step.status,
                 step.latency_ns,
                 step.cpu_ns,
-                0 if out is None else len(out) if isinstance(out, tuple) else 1,
+                n_outputs,
                 step.error_type,
                 step.error_message,
                 step.traceback,
             )
         )
-        if isinstance(out, tuple):
-            add = self._detections
-            for obj in out:
-                cols = _object_columns(obj)
-                add((name, fi, stamp, cols[0], cols[1], obj.confidence, *cols[2:]))
-        elif isinstance(out, PlannedPath):
-            fid, pstamp = out.frame_id, out.stamp_ns
-            self._paths(
-                (name, fi, pstamp, fid, j, x, y, z, t)
-                for j, (x, y, z, t) in enumerate(out.waypoints.tolist())
-            )
-        elif isinstance(out, ControlCommands):
-            self._commands((name, fi, stamp, out.throttle, out.brake, out.steering_angle_rad))
 
     def add_resources(self, samples: Sequence[ResourceSample]) -> None:
         add = self._rows["resources"].append

@@ -323,6 +323,11 @@ class RunWriter:
 
     def flush(self) -> None:
         """Write what is buffered as one new part per table (``frames`` last), then the manifest."""
+        self._flush(manifest=True)
+
+    def _flush(self, *, manifest: bool) -> None:
+        """:meth:`flush`; without the manifest's ``frames_done`` when the caller writes the
+        manifest next (:meth:`close`: a resume counts the frames from the parts anyway)."""
         self._check_open()
         if not self._buffered and not self._has_resources:
             return
@@ -339,7 +344,8 @@ class RunWriter:
         self._buffered = set()
         self._has_resources = False
         self._manifest = replace(self._manifest, frames_done=len(self._done))
-        write_manifest(self.path, self._manifest)
+        if manifest:
+            write_manifest(self.path, self._manifest)
 
     def close(self, *, status: RunStatus, summary: Mapping[str, Any] | None = None) -> None:
         """Flush, then mark the run ``complete``, ``interrupted`` or ``failed``.
@@ -361,7 +367,7 @@ class RunWriter:
         extra = _jsonable(summary or {})
         self._summary({"frames": 0, "late_frames": 0, **extra})  # refused before closing
         try:
-            self.flush()
+            self._flush(manifest=False)
             computed = _computed_summary(Run(self.path, self._manifest))
             self._manifest = replace(
                 self._manifest,
@@ -419,10 +425,18 @@ def _jsonable(data: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def _computed_summary(run: Run) -> dict[str, Any]:
-    frames = run.table("frames")
-    late = int(pc.sum(frames.column("late")).as_py() or 0)
-    algorithms = run.summary().to_pylist()
-    return {"frames": frames.num_rows, "late_frames": late, "algorithms": algorithms}
+    # only the columns the summary reads (what Run.table("frames") and Run.summary() give)
+    late_column = run.raw_columns("frames", ("late",)).column("late")
+    late = int(pc.sum(late_column).as_py() or 0)
+    steps = run.raw_columns("steps", _SUMMARY_STEP_COLUMNS)
+    algorithms = summarize_steps(steps).to_pylist()
+    return {"frames": len(late_column), "late_frames": late, "algorithms": algorithms}
+
+
+#: the columns of ``steps`` that :func:`summarize_steps` reads
+_SUMMARY_STEP_COLUMNS = (
+    "algorithm", "stage", "role", "status", "latency_ns", "cpu_ns", "n_outputs",
+)  # fmt: skip
 
 
 def open_run(run_dir: str | Path) -> Run:
@@ -480,6 +494,15 @@ class Run:
         schema = SCHEMAS[name]
         parts = [_read_part(p, schema) for p in self.part_paths(name)]
         return pa.concat_tables(parts) if parts else schema.empty_table()
+
+    def raw_columns(self, name: str, columns: Sequence[str]) -> pa.Table:
+        """``columns`` of all parts of ``name`` in write order (unsorted, as read)."""
+        _check_table(name)
+        schema = SCHEMAS[name]
+        parts = [_read_part(p, schema, columns) for p in self.part_paths(name)]
+        if parts:
+            return pa.concat_tables(parts)
+        return pa.schema([schema.field(c) for c in columns]).empty_table()
 
     def table(self, name: str) -> pa.Table:
         """All parts of ``name`` concatenated, stably sorted by ``SORT_KEYS[name]``."""

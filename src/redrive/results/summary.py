@@ -21,30 +21,35 @@ def summarize_steps(steps: pa.Table) -> pa.Table:
     and CPU statistics are in milliseconds over the steps that ran (every status but
     ``skipped``); null when none ran.
     """
-    algorithm = steps.column("algorithm").to_pylist()
-    stage = steps.column("stage").to_pylist()
-    role = steps.column("role").to_pylist()
-    status = np.asarray(steps.column("status").to_pylist(), dtype=object)
+    # the algorithm and status names as codes (numpy compares ints, not Python strings); a
+    # dictionary encoding lists its values in order of first appearance
+    algorithm = _encoded(steps.column("algorithm"))
+    status_codes = _encoded(steps.column("status"))
+    status = status_codes.indices.to_numpy(zero_copy_only=False)
+    status_code = {name: k for k, name in enumerate(status_codes.dictionary.to_pylist())}
+    codes = algorithm.indices.to_numpy(zero_copy_only=False)
+    names = algorithm.dictionary.to_pylist()
+    _, firsts = np.unique(codes, return_index=True)  # by code: the order of first appearance
+    stage = steps.column("stage")
+    role = steps.column("role")
     latency_ms = steps.column("latency_ns").to_numpy().astype(np.float64) / 1e6
     cpu_ms = steps.column("cpu_ns").to_numpy().astype(np.float64) / 1e6
     n_outputs = steps.column("n_outputs").to_numpy()
-    names = np.asarray(algorithm, dtype=object)
+    skipped = status_code.get("skipped", -1)
     rows: dict[str, list[Any]] = {name: [] for name in SUMMARY.names}
-    first: dict[str, int] = {}
-    for i, name in enumerate(algorithm):
-        first.setdefault(name, i)
-    for name, i0 in first.items():
-        sel = names == name
+    for code, name in enumerate(names):
+        i0 = int(firsts[code])
+        sel = codes == code
         st = status[sel]
-        ran = st != "skipped"
+        ran = st != skipped
         lat = latency_ms[sel][ran]
         cpu = cpu_ms[sel][ran]
         rows["algorithm"].append(name)
-        rows["stage"].append(stage[i0])
-        rows["role"].append(role[i0])
+        rows["stage"].append(stage[i0].as_py())
+        rows["role"].append(role[i0].as_py())
         rows["frames"].append(int(sel.sum()))
         for s in STATUSES:
-            rows[s].append(int((st == s).sum()))
+            rows[s].append(int((st == status_code.get(s, -1)).sum()))
         rows["outputs"].append(int(n_outputs[sel].sum()))
         has = lat.size > 0
         rows["latency_mean_ms"].append(float(lat.mean()) if has else None)
@@ -53,3 +58,11 @@ def summarize_steps(steps: pa.Table) -> pa.Table:
         rows["latency_max_ms"].append(float(lat.max()) if has else None)
         rows["cpu_mean_ms"].append(float(cpu.mean()) if has else None)
     return pa.Table.from_pydict(rows, schema=SUMMARY)
+
+
+def _encoded(column: pa.ChunkedArray) -> pa.DictionaryArray:
+    """``column`` dictionary-encoded in one chunk (values in order of first appearance)."""
+    array = column.combine_chunks() if column.num_chunks != 1 else column.chunk(0)
+    encoded = array.dictionary_encode()
+    assert isinstance(encoded, pa.DictionaryArray)
+    return encoded
