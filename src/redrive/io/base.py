@@ -9,11 +9,11 @@ serialised bytes (``encoding`` ``ros1`` or ``cdr``) and are decoded on demand by
 from __future__ import annotations
 
 import enum
-from collections.abc import Collection, Iterator, Mapping
-from dataclasses import dataclass
+from collections.abc import Collection, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
-from typing import Literal, Protocol, Self, runtime_checkable
+from typing import Any, Literal, Protocol, Self, runtime_checkable
 
 from redrive.types import SensorType
 
@@ -22,6 +22,7 @@ __all__ = [
     "Encoding",
     "LogMessage",
     "LogReader",
+    "MessageBatch",
     "ReaderCapabilities",
     "TopicInfo",
     "normalize_msgtype",
@@ -82,6 +83,46 @@ class TopicInfo:
     sensor_type: SensorType | None = None
 
 
+class MessageBatch:
+    """Messages of one connection that a reader read together (a ROS 1 chunk's), for decoders
+    that decode many messages with a few array operations instead of one at a time.
+
+    A reader that yields messages from one buffer links each to its batch
+    (:attr:`LogMessage.batch`); a decoder may then decode the whole batch the first time one
+    of its messages is asked for, keep the results in :attr:`memo` and hand each message its
+    own.  Decoders that do not know batches ignore the link: every message stays complete.
+
+    Attributes:
+        buffer: the bytes the messages lie in (immutable, or a read-only file map).
+        starts, stops: each message's byte span in ``buffer`` (``raw`` is
+            ``buffer[starts[i]:stops[i]]``), in the order they are yielded.
+        log_times_ns: each message's log time.
+        encoding: the messages' encoding (all the same).
+        memo: per-decoder results (keyed by the decoder object); empty until one decodes.
+    """
+
+    __slots__ = ("buffer", "encoding", "log_times_ns", "memo", "starts", "stops")
+
+    def __init__(
+        self,
+        buffer: bytes | memoryview,
+        *,
+        starts: Sequence[int],
+        stops: Sequence[int],
+        log_times_ns: Sequence[int],
+        encoding: Encoding,
+    ) -> None:
+        self.buffer = buffer
+        self.starts = starts
+        self.stops = stops
+        self.log_times_ns = log_times_ns
+        self.encoding = encoding
+        self.memo: dict[object, Any] = {}
+
+    def __len__(self) -> int:
+        return len(self.starts)
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class LogMessage:
     """One message of a log.
@@ -95,6 +136,9 @@ class LogMessage:
         raw: the serialised message (empty for native messages).  May be a view into a chunk
             buffer: copy it if you keep it beyond the next message.
         payload: the decoded value for native messages, else None.
+        batch: (the batch, this message's index in it) when the reader read it together with
+            others (:class:`MessageBatch`); set by the reader, never by ``__init__``, and not
+            carried over by ``dataclasses.replace`` (a changed copy is decoded on its own).
     """
 
     topic: str
@@ -103,6 +147,9 @@ class LogMessage:
     encoding: Encoding
     raw: bytes | memoryview = b""
     payload: object | None = None
+    batch: tuple[MessageBatch, int] | None = field(
+        default=None, init=False, repr=False, compare=False
+    )
 
     @property
     def size_bytes(self) -> int:

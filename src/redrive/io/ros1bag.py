@@ -19,14 +19,14 @@ why the record walking exists.  It relies on rosbags 0.11's reader internals (``
 from __future__ import annotations
 
 import contextlib
-import heapq
 import logging
 import mmap
-from bisect import bisect_left
 from collections.abc import Collection, Iterator
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+import numpy.typing as npt
 from rosbags.rosbag1 import Reader as RosbagsReader
 from rosbags.rosbag1 import ReaderError as RosbagsReaderError
 from rosbags.rosbag1.reader import decompressors as rosbags_decompressors
@@ -34,9 +34,10 @@ from rosbags.rosbag1.reader import decompressors as rosbags_decompressors
 from redrive.errors import LogError
 from redrive.io._deserialize import Deserializer
 from redrive.io._reader_base import RosReaderBase
-from redrive.io.base import LogMessage, TopicInfo
+from redrive.io.base import LogMessage, MessageBatch, TopicInfo
 from redrive.io.damage import DamageLog, LogDamage
 from redrive.io.recognise import starts_with
+from redrive.io.ros1bag_index import IndexArrays, chunk_spans, merged_index
 from redrive.io.ros1bag_records import (
     MAGIC,
     OP_CONNECTION,
@@ -88,6 +89,7 @@ class Ros1BagReader(RosReaderBase):
         self._walked: BagWalk | None = None
         self._file_size = 0
         self._map: mmap.mmap | None = None
+        self._arrays: dict[int, IndexArrays] | None = None
         self._open()
         definitions = {c.msgtype: ("msg", c.msgdef) for c in self._conns.values()}
         self._typestore, self._bad_definitions = typestore_for(
@@ -229,13 +231,15 @@ class Ros1BagReader(RosReaderBase):
         start_ns: int | None = None,
         stop_ns: int | None = None,
     ) -> Iterator[LogMessage]:
+        if self._rosbags is not None:
+            return self._indexed_messages(topics=topics, start_ns=start_ns, stop_ns=stop_ns)
+        return self._scanned_messages(topics=topics, start_ns=start_ns, stop_ns=stop_ns)
+
+    def _scanned_messages(
+        self, *, topics: Collection[str] | None, start_ns: int | None, stop_ns: int | None
+    ) -> Iterator[LogMessage]:
         conns = self._conns
-        source = (
-            self._indexed_messages(topics=topics, start_ns=start_ns, stop_ns=stop_ns)
-            if self._rosbags is not None
-            else self._scan(topics=topics, start_ns=start_ns, stop_ns=stop_ns)
-        )
-        for conn_id, time_ns, data in source:
+        for conn_id, time_ns, data in self._scan(topics=topics, start_ns=start_ns, stop_ns=stop_ns):
             conn = conns[conn_id]
             yield LogMessage(
                 topic=conn.topic,
@@ -251,49 +255,91 @@ class Ros1BagReader(RosReaderBase):
         wanted = set(topics)
         return {c.id for c in self._conns.values() if c.topic in wanted}
 
+    def _index_arrays(self) -> dict[int, IndexArrays]:
+        if self._arrays is None:
+            assert self._rosbags is not None
+            indexes = self._rosbags.indexes
+            self._arrays = {cid: IndexArrays(indexes.get(cid, [])) for cid in self._conns}
+        return self._arrays
+
     def _indexed_messages(
         self, *, topics: Collection[str] | None, start_ns: int | None, stop_ns: int | None
-    ) -> Iterator[tuple[int, int, memoryview]]:
+    ) -> Iterator[LogMessage]:
+        """The messages of the index, chunk by chunk: each chunk's messages are found and
+        checked against the index together (:func:`~redrive.io.ros1bag_index.chunk_spans`),
+        and those of one connection are linked as one :class:`~redrive.io.base.MessageBatch`."""
         reader = self._rosbags
         assert reader is not None
-        assert reader.bio is not None
-        streams = []
-        for conn_id in sorted(self._selected_ids(topics)):
-            index = reader.indexes.get(conn_id, [])
-            first = 0 if start_ns is None else bisect_left([e.time for e in index], start_ns)
-            streams.append(_entries(index, first, conn_id))
-        current_pos = -1
-        chunk: memoryview = memoryview(b"")
-        bad_chunk = -1
+        times, chunk_pos, offsets, conn_ids = merged_index(
+            self._index_arrays(), sorted(self._selected_ids(topics)), start_ns
+        )
+        if stop_ns is not None:
+            times_stop = int(np.searchsorted(times, stop_ns, "left"))
+            times, chunk_pos, offsets, conn_ids = (
+                a[:times_stop] for a in (times, chunk_pos, offsets, conn_ids)
+            )
+        # Where the chunk changes: the messages of [bounds[k], bounds[k + 1]) share a chunk.
+        bounds = [0, *(np.flatnonzero(np.diff(chunk_pos)) + 1).tolist(), len(times)]
+        heads = {cid: (c.topic, c.msgtype) for cid, c in self._conns.items()}
         yielded = 0
-        mapped: tuple[int, int] | None = None  # page-aligned span of the map the last chunk used
-        for time_ns, chunk_pos, offset, conn_id in heapq.merge(*streams):
-            if stop_ns is not None and time_ns >= stop_ns:
-                return
-            if chunk_pos == bad_chunk:
+        for k in range(len(bounds) - 1):
+            lo, hi = bounds[k], bounds[k + 1]
+            pos = int(chunk_pos[lo])
+            try:
+                chunk, mapped = self._chunk_bytes(reader.chunks[pos])
+            except (OSError, ValueError, RuntimeError, EOFError) as err:
+                self._chunk_damage(pos, err, yielded)
                 continue
-            if chunk_pos != current_pos:
+            try:
+                (starts, stops), damage = self._chunk_spans(
+                    chunk, offsets[lo:hi], times[lo:hi], conn_ids[lo:hi]
+                )
+                good = len(starts)
+                for message in _batched(
+                    chunk,
+                    starts.tolist(),
+                    stops.tolist(),
+                    times[lo : lo + good].tolist(),
+                    conn_ids[lo : lo + good].tolist(),
+                    heads,
+                ):
+                    yielded += 1
+                    yield message
+                if damage is not None:
+                    self._chunk_damage(pos, damage, yielded)
+            finally:
                 if mapped is not None:
                     self._release(*mapped)
-                    mapped = None
-                header = reader.chunks[chunk_pos]
-                try:
-                    chunk, mapped = self._chunk_bytes(header)
-                except (OSError, ValueError, RuntimeError, EOFError) as err:
-                    self._chunk_damage(chunk_pos, err, yielded)
-                    bad_chunk = chunk_pos
-                    continue
-                current_pos = chunk_pos
+
+    def _chunk_spans(
+        self,
+        chunk: memoryview,
+        offsets: npt.NDArray[np.int64],
+        times: npt.NDArray[np.int64],
+        conn_ids: npt.NDArray[np.int64],
+    ) -> tuple[tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]], DamageError | None]:
+        """The data spans of the messages the index places in ``chunk``, each checked to carry
+        the index's time and connection: all at once when the chunk holds enough of them to
+        pay for it, else (or when that check declines) one by one up to the first damaged one,
+        which is returned with the spans before it."""
+        if len(offsets) >= _CHECK_AT_ONCE_FROM:
+            spans = chunk_spans(chunk, offsets, times, conn_ids)
+            if spans is not None:
+                return spans, None
+        starts: list[int] = []
+        stops: list[int] = []
+        damage = None
+        for offset, time_ns, conn_id in zip(
+            offsets.tolist(), times.tolist(), conn_ids.tolist(), strict=True
+        ):
             try:
-                data = self._message_at(chunk, offset, time_ns, conn_id)
+                start, stop = self._message_span(chunk, offset, time_ns, conn_id)
             except DamageError as err:
-                self._chunk_damage(chunk_pos, err, yielded)
-                bad_chunk = chunk_pos
-                continue
-            yielded += 1
-            yield conn_id, time_ns, data
-        if mapped is not None:
-            self._release(*mapped)
+                damage = err
+                break
+            starts.append(start)
+            stops.append(stop)
+        return (np.array(starts, dtype=np.int64), np.array(stops, dtype=np.int64)), damage
 
     def _chunk_bytes(self, header: Any) -> tuple[memoryview, tuple[int, int] | None]:
         """The decompressed records of one chunk, and the map span they occupy (if mapped).
@@ -352,9 +398,12 @@ class Ros1BagReader(RosReaderBase):
         )
 
     @staticmethod
-    def _message_at(chunk: memoryview, offset: int, time_ns: int, conn_id: int) -> memoryview:
-        """The data of the message the index says is at ``offset``; the record's time and
-        connection must be the index's (a damaged index points at other bytes)."""
+    def _message_span(
+        chunk: memoryview, offset: int, time_ns: int, conn_id: int
+    ) -> tuple[int, int]:
+        """Where the data of the message the index says is at ``offset`` lies in ``chunk``; the
+        record's time and connection must be the index's (a damaged index points at other
+        bytes)."""
         end = len(chunk)
         pos = offset
         while True:
@@ -370,7 +419,7 @@ class Ros1BagReader(RosReaderBase):
                     b"conn=" + U32.pack(conn_id) not in fields
                 ):
                     raise DamageError(offset, "the index points at another message")
-                return chunk[start:stop]
+                return start, stop
             if op != OP_CONNECTION:
                 raise DamageError(offset, f"expected a message record, found op {op:#x}")
             pos = stop
@@ -410,10 +459,56 @@ class Ros1BagReader(RosReaderBase):
         self._map = None
 
 
-def _entries(index: list[Any], first: int, conn_id: int) -> Iterator[tuple[int, int, int, int]]:
-    """(time, chunk position, offset in chunk, connection id) of one connection's index."""
-    for entry in index[first:]:
-        yield entry.time, entry.chunk_pos, entry.offset, conn_id
+#: Chunks with at least this many selected messages are checked against the index with array
+#: operations (a fixed cost of a few tens of µs); smaller ones are walked message by message.
+_CHECK_AT_ONCE_FROM = 12
+
+_new_message = object.__new__
+_SET = tuple(
+    LogMessage.__dict__[name].__set__
+    for name in ("topic", "msgtype", "log_time_ns", "encoding", "raw", "payload", "batch")
+)
+
+
+def _batched(  # noqa: PLR0917 (the chunk's columns, one call per chunk)
+    chunk: memoryview,
+    starts: list[int],
+    stops: list[int],
+    times: list[int],
+    conn_ids: list[int],
+    heads: dict[int, tuple[str, str]],
+) -> Iterator[LogMessage]:
+    """The checked messages of one chunk, those of each connection linked as one batch.
+
+    The messages are built through their slots' setters (what the dataclass's ``__init__``
+    does, at half its cost: this runs for every message of the log).
+    """
+    members: dict[int, list[int]] = {}
+    for i, cid in enumerate(conn_ids):
+        members.setdefault(cid, []).append(i)
+    slot_of: list[tuple[MessageBatch, int] | None] = [None] * len(starts)
+    for rows in members.values():
+        batch = MessageBatch(
+            chunk,
+            starts=[starts[i] for i in rows],
+            stops=[stops[i] for i in rows],
+            log_times_ns=[times[i] for i in rows],
+            encoding="ros1",
+        )
+        for j, i in enumerate(rows):
+            slot_of[i] = (batch, j)
+    set_topic, set_type, set_time, set_encoding, set_raw, set_payload, set_batch = _SET
+    for i, start in enumerate(starts):
+        topic, msgtype = heads[conn_ids[i]]
+        message = _new_message(LogMessage)
+        set_topic(message, topic)
+        set_type(message, msgtype)
+        set_time(message, times[i])
+        set_encoding(message, "ros1")
+        set_raw(message, chunk[start : stops[i]])
+        set_payload(message, None)
+        set_batch(message, slot_of[i])
+        yield message
 
 
 def _index_contradiction(reader: RosbagsReader) -> str | None:

@@ -9,6 +9,7 @@ from redrive.errors import UnsupportedMessageError
 from redrive.io.base import LogMessage
 
 __all__ = [
+    "buffer_is_immutable",
     "describe",
     "header_stamp_ns",
     "quat",
@@ -51,7 +52,11 @@ def raw_is_immutable(message: LogMessage) -> bool:
     view into a reader's reusable buffer (bytearray, writable map) is not, and arrays built on it
     must be copied.
     """
-    raw = message.raw
+    return buffer_is_immutable(message.raw)
+
+
+def buffer_is_immutable(raw: object) -> bool:
+    """:func:`raw_is_immutable` of a buffer (a :class:`~redrive.io.base.MessageBatch`'s)."""
     if isinstance(raw, bytes):
         return True
     if not (isinstance(raw, memoryview) and raw.readonly):

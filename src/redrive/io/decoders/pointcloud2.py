@@ -27,6 +27,7 @@ import numpy.typing as npt
 from redrive.io.base import LogMessage
 from redrive.io.decoders._common import raw_is_immutable, unsupported
 from redrive.io.decoders.base import Decoded, DecodedKind, Deserialize
+from redrive.io.decoders.pointcloud2_batch import decode_batch
 from redrive.types import PointCloud, SensorType
 
 __all__ = [
@@ -455,6 +456,18 @@ class PointCloud2Decoder:
 
     def decode(self, message: LogMessage, deserialize: Deserialize) -> Decoded:
         del deserialize  # the fast path never deserialises
+        if message.batch is not None:
+            # Read with others (a ROS 1 chunk's clouds): decode them all at the first one.
+            batch, index = message.batch
+            done = batch.memo.get(self)
+            if done is None:
+                done = decode_batch(
+                    batch, read_head=_read_head, layouts=self._layouts, plan_of=self._plan
+                )
+                batch.memo[self] = done
+            found = done[index]
+            if found is not None:
+                return found
         raw = message.raw
         try:
             head = _read_head(raw, message.encoding, self._layouts)
