@@ -46,6 +46,7 @@ __all__ = [
     "discover",
     "idl_struct",
     "participant",
+    "receiving_config",
     "require_cyclonedds",
     "ros_topic",
     "ros_type",
@@ -274,6 +275,28 @@ def _idl_struct(store: Typestore, msgtype: str) -> Any:
 
 
 # -- entities -----------------------------------------------------------------------------------
+#: the socket receive buffer a receiving participant asks for, bytes: a whole 1.9 MB cloud in
+#: ~1 400 UDP fragments (Cyclone's default fragment size) twice over. Cyclone's own default is
+#: 1 MiB, in which a cloud does not fit: when its receive thread is scheduled out the kernel drops
+#: fragments, and each is asked for again (NACK) and sent again — CPU on both sides, and a loss
+#: when the writer's history (keep last 10) no longer holds the sample. Linux caps the request at
+#: ``net.core.rmem_max`` (and doubles what it grants); nothing fails when it is lower.
+RECEIVE_BUFFER_BYTES = 8 << 20
+
+
+def receiving_config(user_uri: str | None) -> str:
+    """The ``CYCLONEDDS_URI`` for a participant that receives large samples: redrive's socket
+    receive buffer (:data:`RECEIVE_BUFFER_BYTES`) first, then the user's configuration
+    ``user_uri`` (``$CYCLONEDDS_URI``), whose settings win where both set one (Cyclone reads the
+    comma-separated parts in order, later ones overriding earlier ones)."""
+    ours = (
+        '<CycloneDDS><Domain id="any"><Internal><SocketReceiveBufferSize min="default" '
+        f'max="{RECEIVE_BUFFER_BYTES >> 20}MiB"/></Internal></Domain></CycloneDDS>'
+    )
+    user = (user_uri or "").strip()
+    return f"{ours},{user}" if user else ours
+
+
 def participant(domain_id: int) -> Any:
     """A DomainParticipant on ``domain_id`` (configured by ``$CYCLONEDDS_URI`` as in ROS 2).
 

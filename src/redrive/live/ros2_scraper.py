@@ -202,8 +202,13 @@ def _offered(discovery: Any, seen: set[str]) -> None:
 def main(argv: list[str] | None = None) -> int:
     from cyclonedds.core import WaitSet
 
-    from redrive.live.ros2_dds import participant
+    from redrive.live.ros2_dds import participant, receiving_config
+    from redrive.transport.heap import keep_freed_memory
 
+    # Cyclone allocates (and zeroes) each sample twice, and the take copies it into a Python
+    # bytes: ~2 MB blocks that glibc would otherwise map, fault in and give back every time
+    keep_freed_memory()
+    os.environ["CYCLONEDDS_URI"] = receiving_config(os.environ.get("CYCLONEDDS_URI"))
     parser = argparse.ArgumentParser(prog="ros2_scraper", description=__doc__)
     parser.add_argument("--domain", type=int, required=True)
     parser.add_argument("--spec", required=True, help="the topics, JSON (see the module text)")
