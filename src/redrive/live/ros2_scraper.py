@@ -6,8 +6,8 @@ Each topic gets a DDS reader of its type (built from the ROS 2 definitions,
 :func:`redrive.live.ros2_dds.idl_struct`) whose reliability and durability follow what the
 publisher offers (a reliable reader would not match a best-effort sensor; a transient-local one
 receives a latched ``/tf_static``) with a deep history, so nothing is dropped while this process
-is scheduled out. Samples are taken as CDR bytes — never deserialised here — and published into
-the topic's stream as :data:`~redrive.transport.codec.KIND_CDR` messages (the receive time as
+is scheduled out. Samples are taken as CDR bytes — never deserialised here, and copied once, from
+Cyclone's buffer straight into a shared-memory slot — and published into the topic's stream as :data:`~redrive.transport.codec.KIND_CDR` messages (the receive time as
 their stamp); the core decodes them with redrive's decoders and records them as they came.
 
 While it runs it reports on its stdout (one JSON object a line, read by
@@ -152,16 +152,22 @@ class _Scraper:
         from redrive.transport.codec import KIND_CDR
 
         for reader in self.readers:
-            for cdr, _source_ns in reader.take():
-                counts = self.counts[reader.topic]
-                counts[0] += 1
-                try:
-                    self.writers[reader.topic].publish(
-                        cdr, stamp_ns=time.time_ns(), kind=KIND_CDR, timeout_s=self.timeout_s
-                    )
-                except (TransportError, ReaderGoneError) as err:
-                    counts[1] += 1
-                    logger.warning("%s: a sample not forwarded: %s", reader.topic, err)
+            counts = self.counts[reader.topic]
+            writer = self.writers[reader.topic]
+            with reader.taken() as samples:  # copied from Cyclone's buffer into the slot
+                for sample in samples:
+                    counts[0] += 1
+                    try:
+                        with writer.loan(
+                            sample.nbytes,
+                            stamp_ns=time.time_ns(),
+                            kind=KIND_CDR,
+                            timeout_s=self.timeout_s,
+                        ) as slot:
+                            sample.copy_into(slot)
+                    except (TransportError, ReaderGoneError) as err:
+                        counts[1] += 1
+                        logger.warning("%s: a sample not forwarded: %s", reader.topic, err)
 
     def report(self) -> None:
         for reader in self.readers:
