@@ -180,7 +180,10 @@ class McapWriter:
         *,
         publish_time_ns: int | None = None,
     ) -> None:
-        """Write one already-serialised ROS 2 CDR message of type ``msgtype`` (``pkg/msg/Type``)."""
+        """Write one already-serialised ROS 2 CDR message of type ``msgtype`` (``pkg/msg/Type``).
+
+        ``cdr_bytes`` may be a view into a buffer that is reused afterwards (a shared-memory slot):
+        it is copied into the chunk before this returns, once."""
         self._check_open()
         channel_id = self._channel_id(topic, msgtype)
         sequence = self._sequences[channel_id]
@@ -188,7 +191,7 @@ class McapWriter:
         self._writer.add_message(
             channel_id=channel_id,
             log_time=int(log_time_ns),
-            data=bytes(cdr_bytes),
+            data=cdr_bytes,  # type: ignore[arg-type]  # mcap writes it into its chunk at once
             publish_time=int(log_time_ns if publish_time_ns is None else publish_time_ns),
             sequence=sequence,
         )

@@ -7,8 +7,9 @@ Each topic gets a DDS reader of its type (built from the ROS 2 definitions,
 publisher offers (a reliable reader would not match a best-effort sensor; a transient-local one
 receives a latched ``/tf_static``) with a deep history, so nothing is dropped while this process
 is scheduled out. Samples are taken as CDR bytes — never deserialised here, and copied once, from
-Cyclone's buffer straight into a shared-memory slot — and published into the topic's stream as :data:`~redrive.transport.codec.KIND_CDR` messages (the receive time as
-their stamp); the core decodes them with redrive's decoders and records them as they came.
+Cyclone's buffer straight into a shared-memory slot — and published into the topic's stream as
+:data:`~redrive.transport.codec.KIND_CDR` messages (the receive time as their stamp); the core
+decodes them with redrive's decoders and records them as they came.
 
 While it runs it reports on its stdout (one JSON object a line, read by
 :class:`redrive.live.scraper_state.Ros2Reports`):
