@@ -183,7 +183,10 @@ class McapWriter:
         *,
         publish_time_ns: int | None = None,
     ) -> None:
-        """Write one already-serialised ROS 2 CDR message of type ``msgtype`` (``pkg/msg/Type``)."""
+        """Write one already-serialised ROS 2 CDR message of type ``msgtype`` (``pkg/msg/Type``).
+
+        ``cdr_bytes`` may be a view into a buffer that is reused afterwards (a shared-memory slot):
+        it is copied into the chunk before this returns, once."""
         self._check_open()
         channel_id = self._channel_id(topic, msgtype)
         sequence = self._sequences[channel_id]

@@ -6,9 +6,10 @@ Each topic gets a DDS reader of its type (built from the ROS 2 definitions,
 :func:`redrive.live.ros2_dds.idl_struct`) whose reliability and durability follow what the
 publisher offers (a reliable reader would not match a best-effort sensor; a transient-local one
 receives a latched ``/tf_static``) with a deep history, so nothing is dropped while this process
-is scheduled out. Samples are taken as CDR bytes — never deserialised here — and published into
-the topic's stream as :data:`~redrive.transport.codec.KIND_CDR` messages (the receive time as
-their stamp); the core decodes them with redrive's decoders and records them as they came.
+is scheduled out. Samples are taken as CDR bytes — never deserialised here, and copied once, from
+Cyclone's buffer straight into a shared-memory slot — and published into the topic's stream as
+:data:`~redrive.transport.codec.KIND_CDR` messages (the receive time as their stamp); the core
+decodes them with redrive's decoders and records them as they came.
 
 While it runs it reports on its stdout (one JSON object a line, read by
 :class:`redrive.live.scraper_state.Ros2Reports`):
@@ -152,16 +153,22 @@ class _Scraper:
         from redrive.transport.codec import KIND_CDR
 
         for reader in self.readers:
-            for cdr, _source_ns in reader.take():
-                counts = self.counts[reader.topic]
-                counts[0] += 1
-                try:
-                    self.writers[reader.topic].publish(
-                        cdr, stamp_ns=time.time_ns(), kind=KIND_CDR, timeout_s=self.timeout_s
-                    )
-                except (TransportError, ReaderGoneError) as err:
-                    counts[1] += 1
-                    logger.warning("%s: a sample not forwarded: %s", reader.topic, err)
+            counts = self.counts[reader.topic]
+            writer = self.writers[reader.topic]
+            with reader.taken() as samples:  # copied from Cyclone's buffer into the slot
+                for sample in samples:
+                    counts[0] += 1
+                    try:
+                        with writer.loan(
+                            sample.nbytes,
+                            stamp_ns=time.time_ns(),
+                            kind=KIND_CDR,
+                            timeout_s=self.timeout_s,
+                        ) as slot:
+                            sample.copy_into(slot)
+                    except (TransportError, ReaderGoneError) as err:
+                        counts[1] += 1
+                        logger.warning("%s: a sample not forwarded: %s", reader.topic, err)
 
     def report(self) -> None:
         for reader in self.readers:
@@ -202,8 +209,13 @@ def _offered(discovery: Any, seen: set[str]) -> None:
 def main(argv: list[str] | None = None) -> int:
     from cyclonedds.core import WaitSet
 
-    from redrive.live.ros2_dds import participant
+    from redrive.live.ros2_dds import participant, receiving_config
+    from redrive.transport.heap import keep_freed_memory
 
+    # Cyclone allocates (and zeroes) each sample twice, and the take copies it into a Python
+    # bytes: ~2 MB blocks that glibc would otherwise map, fault in and give back every time
+    keep_freed_memory()
+    os.environ["CYCLONEDDS_URI"] = receiving_config(os.environ.get("CYCLONEDDS_URI"))
     parser = argparse.ArgumentParser(prog="ros2_scraper", description=__doc__)
     parser.add_argument("--domain", type=int, required=True)
     parser.add_argument("--spec", required=True, help="the topics, JSON (see the module text)")
