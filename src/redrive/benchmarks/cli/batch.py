@@ -4,9 +4,9 @@ cost per cell."""
 from __future__ import annotations
 
 import argparse
-import json
-import sys
 from typing import Any
+
+from redrive.benchmarks.cli._console import print_json, report_console, spinner
 
 __all__ = ["add_batch_parser", "add_fleet_parser"]
 
@@ -27,8 +27,6 @@ def _verdict(ok: bool) -> str:
 
 
 def _run_batch(args: argparse.Namespace) -> int:
-    from rich.console import Console
-
     from redrive.benchmarks.batch import (
         TARGET_RAY_CELL_S,
         TARGET_RAY_RATIO,
@@ -36,12 +34,7 @@ def _run_batch(args: argparse.Namespace) -> int:
         bench_batch,
     )
 
-    status = Console(stderr=True)
-    with status.status("benchmarking") as spinner:
-
-        def progress(text: str) -> None:
-            spinner.update(f"benchmarking: {text}")
-
+    with spinner() as progress:
         r = bench_batch(
             logs=args.logs,
             log_duration_s=args.duration,
@@ -51,10 +44,9 @@ def _run_batch(args: argparse.Namespace) -> int:
             progress=progress,
         )
     if args.json:
-        json.dump(r.to_json(), sys.stdout, indent=2)
-        sys.stdout.write("\n")
+        print_json(r.to_json())
         return 0
-    c = Console(width=None if sys.stdout.isatty() else 120)
+    c = report_console()
     c.print(
         f"[bold]{r.logs} logs[/] × {r.log_duration_s:g} s (~{r.frames} frames), pipeline "
         f"{' -> '.join(r.pipeline)}; {r.cpus} cores; medians of {r.repeats} passes; load "
@@ -116,24 +108,20 @@ def add_batch_parser(bench_sub: Any) -> None:
 
 
 def _run_fleet(args: argparse.Namespace) -> int:
-    from rich.console import Console
-
     from redrive.benchmarks.fleet import bench_fleet
 
-    status = Console(stderr=True)
-    with status.status("benchmarking") as spinner:
+    with spinner() as progress:
         r = bench_fleet(
             cells=args.cells,
             log_duration_s=args.duration,
             executor=args.executor,
             workers=args.workers,
-            progress=lambda text: spinner.update(f"benchmarking: {text}"),
+            progress=progress,
         )
     if args.json:
-        json.dump(r.to_json(), sys.stdout, indent=2)
-        sys.stdout.write("\n")
+        print_json(r.to_json())
         return 0
-    c = Console(width=None if sys.stdout.isatty() else 120)
+    c = report_console()
     c.print(
         f"[bold]{r.cells} cells[/] ({r.log_duration_s:g}-s logs, cluster detector) on "
         f"{r.executor}{f' {r.ray_version}' if r.ray_version else ''} with {r.workers} workers "

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import json
-import sys
 from typing import Any
+
+from redrive.benchmarks.cli._console import print_json, report_console, spinner
 
 __all__ = ["LEVELS", "add_closed_loop_parser"]
 
@@ -36,16 +36,9 @@ def _verdict(ok: bool) -> str:
 
 
 def _run_closed_loop(args: argparse.Namespace) -> int:
-    from rich.console import Console
-
     from redrive.benchmarks.closed_loop import bench_closed_loop
 
-    status = Console(stderr=True)
-    with status.status("benchmarking") as spinner:
-
-        def progress(text: str) -> None:
-            spinner.update(f"benchmarking: {text}")
-
+    with spinner() as progress:
         result = bench_closed_loop(
             scenario=args.scenario,
             duration_s=args.duration,
@@ -55,10 +48,9 @@ def _run_closed_loop(args: argparse.Namespace) -> int:
             progress=progress,
         )
     if args.json:
-        json.dump(result.to_json(), sys.stdout, indent=2)
-        sys.stdout.write("\n")
+        print_json(result.to_json())
         return 0
-    console = Console(width=None if sys.stdout.isatty() else 120)
+    console = report_console()
     lidar = f" ({result.lidar} LiDAR)" if result.lidar else ""
     console.print(
         f"[bold]{result.scenario}[/], {result.level} level{lidar}, {result.duration_s:g} s "

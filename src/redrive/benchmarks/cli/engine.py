@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import json
-import sys
 from pathlib import Path
 from typing import Any
+
+from redrive.benchmarks.cli._console import print_json, report_console, spinner
 
 __all__ = ["add_engine_parser"]
 
@@ -29,8 +29,6 @@ def _verdict(ok: bool) -> str:
 
 
 def _run_engine(args: argparse.Namespace) -> int:
-    from rich.console import Console
-
     from redrive.benchmarks.engine import (
         OVERHEAD_TARGET_US,
         PIPELINED_TARGET,
@@ -43,12 +41,7 @@ def _run_engine(args: argparse.Namespace) -> int:
     if args.repeat < 1 or args.frames < 1:
         msg = "--repeat and --frames must be at least 1"
         raise ConfigError(msg)
-    status = Console(stderr=True)
-    with status.status("benchmarking") as spinner:
-
-        def progress(text: str) -> None:
-            spinner.update(f"benchmarking: {text}")
-
+    with spinner() as progress:
         result = bench_engine(
             frames=args.frames, work_ms=args.work_ms, repeats=args.repeat, progress=progress
         )
@@ -57,10 +50,9 @@ def _run_engine(args: argparse.Namespace) -> int:
         out: dict[str, Any] = {"engine": result.to_json()}
         if pipeline is not None:
             out["reference_pipeline"] = pipeline.to_json()
-        json.dump(out, sys.stdout, indent=2)
-        sys.stdout.write("\n")
+        print_json(out)
         return 0
-    console = Console(width=None if sys.stdout.isatty() else 120)
+    console = report_console()
     console.print(
         f"[bold]frames[/] {result.frames}, 3 stages × {result.work_ms:g} ms of numpy work "
         f"({result.work_elements:,} float64 elements), medians of {args.repeat} passes"

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import json
-import sys
 from typing import Any
+
+from redrive.benchmarks.cli._console import print_json, report_console, spinner
 
 __all__ = ["add_eval_parser"]
 
@@ -23,25 +23,17 @@ def _verdict(ok: bool) -> str:
 
 
 def _run_eval(args: argparse.Namespace) -> int:
-    from rich.console import Console
-
     from redrive.benchmarks.eval import TARGET_RATIO, bench_eval
 
-    status = Console(stderr=True)
-    with status.status("benchmarking") as spinner:
-
-        def progress(text: str) -> None:
-            spinner.update(f"benchmarking: {text}")
-
+    with spinner() as progress:
         result = bench_eval(
             args.frames, args.boxes, seed=args.seed, repeats=args.repeat, progress=progress
         )
     same = result.max_abs_diff <= 1e-9
     if args.json:
-        json.dump(result.to_json(), sys.stdout, indent=2)
-        sys.stdout.write("\n")
+        print_json(result.to_json())
         return 0 if same else 1
-    console = Console(width=None if sys.stdout.isatty() else 120)
+    console = report_console()
     console.print(
         f"[bold]data[/] {result.frames:,} frames, {result.gt_objects:,} ground-truth objects, "
         f"{result.detections:,} detections (seed {args.seed}); mAP {result.mean_ap:.4f}"

@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import json
-import sys
 from pathlib import Path
 from typing import Any
+
+from redrive.benchmarks.cli._console import print_json, report_console, spinner
 
 __all__ = ["add_export_parser"]
 
@@ -22,16 +22,9 @@ machine's other work slows both sides).
 
 
 def _run_export(args: argparse.Namespace) -> int:
-    from rich.console import Console
-
     from redrive.benchmarks.export import TARGET_REALTIME, bench_export
 
-    status = Console(stderr=True)
-    with status.status("benchmarking") as spinner:
-
-        def progress(text: str) -> None:
-            spinner.update(f"benchmarking: {text}")
-
+    with spinner() as progress:
         result = bench_export(
             run=args.run,
             workdir=args.workdir,
@@ -40,10 +33,9 @@ def _run_export(args: argparse.Namespace) -> int:
             progress=progress,
         )
     if args.json:
-        json.dump(result.to_json(), sys.stdout, indent=2)
-        sys.stdout.write("\n")
+        print_json(result.to_json())
         return 0
-    console = Console(width=None if sys.stdout.isatty() else 120)
+    console = report_console()
     ok = result.export_realtime >= TARGET_REALTIME
     verdict = "[green]meets[/]" if ok else "[red]misses[/]"
     console.print(

@@ -4,12 +4,11 @@ against pyqtgraph's own ceiling measured in the same run (needs the ``gui`` extr
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import sys
 from pathlib import Path
 from typing import Any
 
+from redrive.benchmarks.cli._console import print_json, report_console, spinner
 from redrive.errors import ConfigError
 
 __all__ = ["add_gui_parser"]
@@ -48,10 +47,9 @@ def _verdict(met: bool) -> str:
 
 
 def _print_report(result: Any) -> None:
-    from rich.console import Console
     from rich.table import Table
 
-    console = Console(width=None if sys.stdout.isatty() else 140)
+    console = report_console(140)
     m = result.machine
     console.print(
         f"[bold]machine[/] {m['cpu']}, {m['cpus']} CPUs, {m['system']}, Python {m['python']}, "
@@ -179,26 +177,22 @@ def _run_gui(args: argparse.Namespace) -> int:
         raise ConfigError(msg)
     import logging
 
-    from rich.console import Console
-
     from redrive.benchmarks.gui import bench_gui
 
     # The main window logs every open at INFO; the report says it all.
     logging.getLogger("redrive").setLevel(logging.WARNING)
 
-    status = Console(stderr=True)
-    with status.status("benchmarking") as spinner:
+    with spinner() as progress:
         result = bench_gui(
             seconds=args.seconds,
             cache=args.cache,
             big=not args.skip_big,
             points=args.points,
             boxes=args.boxes,
-            progress=lambda text: spinner.update(f"benchmarking: {text}"),
+            progress=progress,
         )
     if args.json:
-        json.dump(result.to_json(), sys.stdout, indent=2)
-        sys.stdout.write("\n")
+        print_json(result.to_json())
     else:
         _print_report(result)
     return 0

@@ -4,9 +4,9 @@ frames/s."""
 from __future__ import annotations
 
 import argparse
-import json
-import sys
 from typing import Any
+
+from redrive.benchmarks.cli._console import print_json, report_console, spinner
 
 __all__ = ["add_lidar_parser"]
 
@@ -19,12 +19,9 @@ importable, and the ratio redrive/Open3D is printed (target >= 0.5). Also 1280x7
 
 
 def _run_lidar(args: argparse.Namespace) -> int:
-    from rich.console import Console
-
     from redrive.benchmarks.lidar import TARGET_RATIO, bench_lidar
 
-    status = Console(stderr=True)
-    with status.status("benchmarking") as spinner:
+    with spinner() as progress:
         result = bench_lidar(
             scans=args.scans,
             camera_frames=args.frames,
@@ -32,13 +29,12 @@ def _run_lidar(args: argparse.Namespace) -> int:
             num_boxes=args.boxes,
             one_core=not args.all_cores,
             open3d=not args.no_open3d,
-            progress=lambda text: spinner.update(f"benchmarking: {text}"),
+            progress=progress,
         )
     if args.json:
-        json.dump(result.to_json(), sys.stdout, indent=2)
-        sys.stdout.write("\n")
+        print_json(result.to_json())
         return 0
-    console = Console(width=None if sys.stdout.isatty() else 120)
+    console = report_console()
     core = "one core (pinned)" if result.one_core else "all cores"
     console.print(
         f"[bold]LiDAR[/]:   {result.preset}, {result.rays_per_scan:,} rays/sweep, "

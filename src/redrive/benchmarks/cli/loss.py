@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import json
-import sys
 from pathlib import Path
 from typing import Any
+
+from redrive.benchmarks.cli._console import print_json, report_console, spinner
 
 __all__ = ["add_loss_parser"]
 
@@ -59,10 +59,9 @@ def _verdict(ok: bool | None) -> str:
 
 
 def _print_report(result: Any, paths: dict[str, Path]) -> None:
-    from rich.console import Console
     from rich.table import Table
 
-    console = Console(width=None if sys.stdout.isatty() else 140)
+    console = report_console(140)
     m = result.machine
     console.print(
         f"[bold]machine[/] {m['cpu']}, {m['cpus']} CPUs, {m['system']}, Python {m['python']}; "
@@ -108,26 +107,22 @@ def _print_report(result: Any, paths: dict[str, Path]) -> None:
 
 
 def _run_loss(args: argparse.Namespace) -> int:
-    from rich.console import Console
-
     from redrive.benchmarks.loss import SLOTS, bench_loss, write_outputs
 
-    status = Console(stderr=True)
-    with status.status("benchmarking") as spinner:
+    with spinner() as progress:
         result = bench_loss(
             seconds=args.seconds,
             rate_factors=args.rates,
             chains=args.chains,
             slots=SLOTS if args.slots is None else args.slots,
-            progress=lambda text: spinner.update(f"benchmarking: {text}"),
+            progress=progress,
         )
     paths = write_outputs(result, args.out)
     failed = any(c.error is not None for c in result.configs)
     if args.json:
         out = result.to_json(series=False)
         out["files"] = {kind: str(path) for kind, path in paths.items()}
-        json.dump(out, sys.stdout, indent=2)
-        sys.stdout.write("\n")
+        print_json(out)
     else:
         _print_report(result, paths)
     return 1 if failed else 0

@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import json
-import sys
 from pathlib import Path
 from typing import Any
+
+from redrive.benchmarks.cli._console import print_json, report_console, spinner
 
 __all__ = ["EPILOG", "add_read_parser"]
 
@@ -35,10 +35,9 @@ def _mb(n: float) -> str:
 
 
 def _print_report(result: Any, *, synth: Any | None) -> None:
-    from rich.console import Console
     from rich.table import Table
 
-    console = Console(width=None if sys.stdout.isatty() else 120)
+    console = report_console()
     raw, ours = result.raw, result.redrive
     repeats = len(result.redrive_passes)
     console.print(
@@ -106,11 +105,7 @@ def _run_read(args: argparse.Namespace) -> int:
     synth = None
     if args.synth is not None:
         synth = _write_synth(args, status)
-    with status.status("benchmarking") as spinner:
-
-        def progress(text: str) -> None:
-            spinner.update(f"benchmarking: {text}")
-
+    with spinner() as progress:
         result = bench_read(
             args.log,
             topics=args.topic,
@@ -129,8 +124,7 @@ def _run_read(args: argparse.Namespace) -> int:
                 "layout": args.layout,
                 "compression": args.compression,
             }
-        json.dump(out, sys.stdout, indent=2)
-        sys.stdout.write("\n")
+        print_json(out)
     else:
         _print_report(result, synth=synth)
     return 0

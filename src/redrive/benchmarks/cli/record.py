@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import sys
 from pathlib import Path
 from typing import Any
 
+from redrive.benchmarks.cli._console import print_json, report_console, spinner
 from redrive.benchmarks.record import DEFAULT_RATE
 
 __all__ = ["add_record_parser"]
@@ -38,12 +37,9 @@ def _default_data() -> Path:
 
 
 def _run_record(args: argparse.Namespace) -> int:
-    from rich.console import Console
-
     from redrive.benchmarks.record import TARGET_CPU_RATIO, bench_record
 
-    status = Console(stderr=True)
-    with status.status("benchmarking") as spinner:
+    with spinner() as progress:
         r = bench_record(
             data_dir=args.data,
             rate=args.rate,
@@ -51,13 +47,12 @@ def _run_record(args: argparse.Namespace) -> int:
             topics=args.topics or None,
             compression=args.compression,
             workdir=args.keep,
-            progress=lambda text: spinner.update(f"benchmarking: {text}"),
+            progress=progress,
         )
     if args.json:
-        json.dump(r.to_json(), sys.stdout, indent=2)
-        sys.stdout.write("\n")
+        print_json(r.to_json())
         return 0
-    c = Console(width=None if sys.stdout.isatty() else 120)
+    c = report_console()
     c.print(
         f"[bold]{r.bag}[/] played with -l -r {r.rate:g} for {r.window_s:.1f} s, recorded with "
         f"{r.compression} compression; {r.cpus} cores; "

@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import json
-import sys
 from pathlib import Path
 from typing import Any
+
+from redrive.benchmarks.cli._console import print_json, report_console, spinner
 
 __all__ = ["add_record_ros2_parser"]
 
@@ -29,24 +29,20 @@ def _verdict(ok: bool) -> str:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from rich.console import Console
-
     from redrive.benchmarks.record_ros2 import TARGET_EXTRA_CPU_PERCENT, bench_record_ros2
 
-    status = Console(stderr=True)
-    with status.status("benchmarking") as spinner:
+    with spinner() as progress:
         r = bench_record_ros2(
             points=args.points,
             rate=args.rate,
             window_s=args.duration,
             workdir=args.keep,
-            progress=lambda text: spinner.update(f"benchmarking: {text}"),
+            progress=progress,
         )
     if args.json:
-        json.dump(r.to_json(), sys.stdout, indent=2)
-        sys.stdout.write("\n")
+        print_json(r.to_json())
         return 0
-    c = Console(width=None if sys.stdout.isatty() else 120)
+    c = report_console()
     c.print(
         f"[bold]{r.points} points at {r.rate:g} Hz[/] for {r.window_s:g} s; {r.cpus} cores; "
         f"load {r.load_before[0]:.2f} before, {r.load_after[0]:.2f} after"

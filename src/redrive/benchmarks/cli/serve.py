@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import json
-import sys
 from pathlib import Path
 from typing import Any
+
+from redrive.benchmarks.cli._console import print_json, report_console, spinner
 
 __all__ = ["add_serve_parser"]
 
@@ -21,17 +21,11 @@ p99, max), the server's CPU over the playback and the load average.
 
 
 def _run_serve(args: argparse.Namespace) -> int:
-    from rich.console import Console
     from rich.table import Table
 
     from redrive.benchmarks.serve import bench_serve
 
-    status = Console(stderr=True)
-    with status.status("benchmarking") as spinner:
-
-        def progress(text: str) -> None:
-            spinner.update(f"benchmarking: {text}")
-
+    with spinner() as progress:
         result = bench_serve(
             log=args.log,
             workdir=args.workdir,
@@ -40,10 +34,9 @@ def _run_serve(args: argparse.Namespace) -> int:
             progress=progress,
         )
     if args.json:
-        json.dump(result.to_json(), sys.stdout, indent=2)
-        sys.stdout.write("\n")
+        print_json(result.to_json())
         return 0
-    console = Console(width=None if sys.stdout.isatty() else 120)
+    console = report_console()
     table = Table(title=f"redrive serve {result.log} at {result.rate:g}x", title_justify="left")
     for col in ("channel", "schema", "sent", "received", "dropped"):
         table.add_column(col, justify="left" if col in ("channel", "schema") else "right")

@@ -9,6 +9,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from redrive.benchmarks.cli._console import spinner
+
 __all__ = ["add_all_parser"]
 
 _DESCRIPTION = """\
@@ -29,8 +31,6 @@ def _loadavg() -> str:
 
 
 def _run_all(args: argparse.Namespace) -> int:
-    from rich.console import Console
-
     from redrive.benchmarks.suite import SUITE, run_suite, summary_markdown
     from redrive.errors import ConfigError
 
@@ -44,12 +44,7 @@ def _run_all(args: argparse.Namespace) -> int:
         msg = "--budget must be greater than 0 seconds"
         raise ConfigError(msg)
     load = _loadavg()
-    status = Console(stderr=True)
-    with status.status("benchmarking") as spinner:
-
-        def progress(name: str) -> None:
-            spinner.update(f"benchmarking: {name}")
-
+    with spinner() as progress:
         rows = run_suite(
             [e for e in SUITE if e.name in only], budget_s=args.budget, progress=progress
         )
@@ -59,7 +54,7 @@ def _run_all(args: argparse.Namespace) -> int:
         tmp = args.out.with_name(args.out.name + ".tmp")
         tmp.write_text(text, encoding="utf-8")
         tmp.replace(args.out)
-        status.print(f"summary written to {args.out}")
+        print(f"summary written to {args.out}", file=sys.stderr)
     sys.stdout.write(text)
     return 0 if all(r.status == "ok" or r.status.startswith("skipped") for r in rows) else 1
 

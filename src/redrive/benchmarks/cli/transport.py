@@ -4,10 +4,10 @@ large messages between two processes, and against memcpy."""
 from __future__ import annotations
 
 import argparse
-import json
 import math
-import sys
 from typing import Any
+
+from redrive.benchmarks.cli._console import print_json, report_console, spinner
 
 __all__ = ["add_transport_parser"]
 
@@ -55,12 +55,11 @@ def _loss(sent: int, lost: int) -> str:
 
 
 def _print_report(result: Any) -> None:
-    from rich.console import Console
     from rich.table import Table
 
     from redrive.benchmarks.transport import SIDES, size_label
 
-    console = Console(width=None if sys.stdout.isatty() else 140)
+    console = report_console(140)
     m = result.machine
     console.print(
         f"[bold]machine[/]: {m.get('cpu', '?')}, {m.get('cpus', '?')} CPUs, "
@@ -149,8 +148,6 @@ def _print_report(result: Any) -> None:
 
 
 def _run_transport(args: argparse.Namespace) -> int:
-    from rich.console import Console
-
     from redrive.benchmarks.transport import (
         DEFAULT_SIDES,
         SIDES,
@@ -172,14 +169,13 @@ def _run_transport(args: argparse.Namespace) -> int:
     if args.repeat < 1:
         msg = "--repeat must be at least 1"
         raise ConfigError(msg)
-    status = Console(stderr=True)
     results = []
-    with status.status("benchmarking") as spinner:
+    with spinner() as say:
         for rep in range(args.repeat):
             prefix = f"repetition {rep + 1}/{args.repeat}: " if args.repeat > 1 else ""
 
             def progress(text: str, prefix: str = prefix) -> None:
-                spinner.update(f"benchmarking: {prefix}{text}")
+                say(f"{prefix}{text}")
 
             results.append(
                 bench_transport(
@@ -206,8 +202,7 @@ def _run_transport(args: argparse.Namespace) -> int:
                 "spread": [t.to_json() for t in spreads],
             }
         )
-        json.dump(out, sys.stdout, indent=2)
-        sys.stdout.write("\n")
+        print_json(out)
     else:
         _print_report(results[-1])
         if args.repeat > 1:
@@ -216,7 +211,6 @@ def _run_transport(args: argparse.Namespace) -> int:
 
 
 def _print_spread(spreads: Any, repeats: int) -> None:
-    from rich.console import Console
     from rich.table import Table
 
     from redrive.benchmarks.transport import SIDES, size_label
@@ -234,7 +228,7 @@ def _print_spread(spreads: Any, repeats: int) -> None:
             t.target,
             _verdict(t.met),
         )
-    Console(width=None if sys.stdout.isatty() else 140).print(table)
+    report_console(140).print(table)
 
 
 def add_transport_parser(bench_sub: Any) -> None:
