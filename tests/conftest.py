@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+import signal
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -52,3 +54,16 @@ def demo_run(demo_log: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("demo_run") / "run"
     assert main(["run", str(demo_log), "--out", str(out), "--no-progress"]) == 0
     return out
+
+
+@pytest.fixture(autouse=True)
+def _signal_handlers_restored() -> Iterator[None]:
+    """A command run in the test process must give back the SIGINT/SIGTERM handlers it set,
+    however it ends: a `redrive live` refused at start once left its Ctrl-C handler behind, and
+    a later test's Ctrl-C then did nothing."""
+    before = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    yield
+    changed = [sig.name for sig, handler in before.items() if signal.getsignal(sig) is not handler]
+    for sig, handler in before.items():
+        signal.signal(sig, handler)
+    assert not changed, f"the test left its {' and '.join(changed)} handler set"

@@ -123,7 +123,6 @@ def _run(args: argparse.Namespace) -> int:
     out = args.out or Path("runs") / f"live-{time.strftime('%Y%m%d-%H%M%S')}"
     console = Console(stderr=True)
     stop = threading.Event()
-    previous = signal.signal(signal.SIGINT, lambda *_: stop.set())
     recorder = None
     log = None
     publisher = None
@@ -168,6 +167,9 @@ def _run(args: argparse.Namespace) -> int:
     if args.record is not None:
         warn_orphans(args.record, console)
     with session_cm as session:
+        # Ctrl-C ends the frames from here on; restored however the session ends (a refused
+        # start before this point leaves the caller's handler untouched)
+        previous = signal.signal(signal.SIGINT, lambda *_: stop.set())
         try:
             if args.record is not None:
                 recorder = DataLogger(
