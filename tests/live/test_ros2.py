@@ -23,6 +23,7 @@ import pytest
 
 pytest.importorskip("cyclonedds", reason="the ros2 extra (cyclonedds) is not installed")
 
+from redrive.io import open_log
 from redrive.io.typestore import typestore_for
 from redrive.live.ros2_dds import (
     DEFAULT,
@@ -331,10 +332,22 @@ def test_record_regex_and_exclude_on_ros2_pick_their_topics(
                        "--points", "100", "--match", "/camera/image_raw", "--exit")  # fmt: skip
     out = tmp_path / "rec.mcap"
     argv = ["live", "--ros2", "--domain", str(domain), "-e", "/camera/.*", "-e", "/im.*",
-            "-x", "/imu", "--record", str(out), "--idle-timeout", "1", "--duration", "120"]  # fmt: skip
+            "-x", "/imu", "--record", str(out), "--idle-timeout", "1", "--duration", "120",
+            "--split-size", "4K"]  # fmt: skip
     assert main(argv) == 0
     assert peer.wait(timeout=10) == 0
-    assert _counts(out) == {"/camera/image_raw": 10}
+    # split as ROS 1 recordings split: numbered files, each complete with the channel and its
+    # QoS, together every message once; redrive reads the set as one log
+    files = sorted(tmp_path.glob("rec_*.mcap"))
+    assert len(files) > 1
+    per_file = [_counts(f) for f in files]
+    assert all(set(c) == {"/camera/image_raw"} for c in per_file)
+    assert sum(c["/camera/image_raw"] for c in per_file) == 10
+    with open_log(tmp_path / "rec_*.mcap") as log:
+        stamps = [m.log_time_ns for m in log.messages()]
+    assert len(stamps) == 10
+    assert stamps == sorted(stamps)
+    assert not list(tmp_path.glob(".*.part"))
 
 
 def test_the_scraper_ends_when_redrive_live_is_killed(

@@ -56,7 +56,7 @@ appear later on the DDS domain too), -x; it ends on the same conditions, a publi
 while the scraper's DDS reader is matched with its writer (a killed publisher leaves when its
 DDS lease expires, 10 s by default; the /rosout and /parameter_events publishers every node has
 do not count). Unlike ROS 1, a type redrive has no definition of cannot be recorded (ROS 2 sends
-none): it is named and left out; --split-size/--split-duration are ROS 1 only.
+none): it is named and left out.
 
 --foxglove also streams the session to Foxglove (foxglove-sdk's WebSocket server, on
 127.0.0.1:8765 unless --foxglove-host/--foxglove-port say otherwise): every topic as it arrives,

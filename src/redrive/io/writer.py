@@ -163,6 +163,17 @@ class McapWriter:
 
     # -- writing -------------------------------------------------------------------------------
 
+    @property
+    def chunks(self) -> tuple[int, int]:
+        """Chunks written so far: (all, those written uncompressed because a live recording's
+        compressor was behind)."""
+        return int(self._writer.chunks), int(self._writer.uncompressed_chunks)
+
+    @property
+    def size_estimate(self) -> int:
+        """Bytes of the file so far (written chunks and the open chunk's messages)."""
+        return int(self._writer.size_estimate)
+
     def _check_open(self) -> None:
         if self._fd is None:
             msg = f"{self.path}: the writer is closed"

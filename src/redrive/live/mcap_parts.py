@@ -19,7 +19,7 @@ from redrive.errors import LogError
 from redrive.io.mcap_stream import McapStream
 from redrive.io.partfiles import create_part
 from redrive.io.writer import COMPRESSION as _COMPRESSION
-from redrive.io.writer import Compression
+from redrive.io.writer import Compression, McapWriter
 
 __all__ = ["Ros1Schema", "SplitMcapWriter", "split_name"]
 
@@ -206,3 +206,123 @@ class SplitMcapWriter:
             with contextlib.suppress(OSError):
                 os.close(fd)
             self._tmp.unlink(missing_ok=True)
+
+
+class SplitNativeWriter:
+    """A ROS 2 recording (CDR as it came off the wire, or data-model values serialised as ROS 2
+    messages) to ``path`` — or, with a split limit, to numbered files as
+    :class:`SplitMcapWriter` writes ROS 1 ones: each a complete :class:`~redrive.io.writer.McapWriter`
+    file, every channel (with the QoS its publishers offer) declared again in each.
+
+    Args:
+        path, split_size_bytes, split_duration_s, compression: as :class:`SplitMcapWriter`.
+
+    Raises:
+        LogError: the folder cannot be written.
+    """
+
+    def __init__(
+        self,
+        path: Path,
+        *,
+        split_size_bytes: int | None = None,
+        split_duration_s: float | None = None,
+        compression: Compression = "zstd",
+    ) -> None:
+        self.path = path
+        self.compression: Compression = compression
+        self.split_size_bytes = split_size_bytes
+        self.split_duration_s = split_duration_s
+        self.split = split_size_bytes is not None or split_duration_s is not None
+        #: the files finished so far, in order
+        self.finished: list[Path] = []
+        self._channels: dict[str, tuple[str, str]] = {}  # topic: (type, offered QoS)
+        self._chunks_done = (0, 0)  # chunks of the finished files: all, written uncompressed
+        self._index = 0
+        self._current: McapWriter | None = None
+        self._open()
+
+    def _open(self) -> None:
+        chunk = 4 << 20
+        if self.split_size_bytes is not None:
+            chunk = max(4 << 10, min(chunk, self.split_size_bytes // 4))
+        target = split_name(self.path, self._index) if self.split else self.path
+        self._current = McapWriter(
+            target, compression=self.compression, chunk_size_bytes=chunk, live=True
+        )
+        self._opened_s = time.monotonic()
+        for topic, (msgtype, qos) in self._channels.items():
+            self._current.add_channel(topic, msgtype, offered_qos=qos)
+
+    @property
+    def chunks(self) -> tuple[int, int]:
+        """Chunks written so far, every file: (all, written uncompressed), as
+        :attr:`SplitMcapWriter.chunks`."""
+        done, behind = self._chunks_done
+        if self._current is not None:
+            now, now_behind = self._current.chunks
+            done, behind = done + now, behind + now_behind
+        return done, behind
+
+    def add_channel(self, topic: str, msgtype: str, *, offered_qos: str = "") -> None:
+        """Declare a ROS 2 topic before its first message (in this file and every later one)."""
+        self._channels[topic] = (msgtype, offered_qos)
+        self._writer().add_channel(topic, msgtype, offered_qos=offered_qos)
+
+    def _writer(self) -> McapWriter:
+        if self._current is None:
+            msg = f"{self.path}: the recording is closed"
+            raise LogError(msg)
+        if self.split and self._current.message_count and self._full(self._current):
+            self._finish_current()
+            self._index += 1
+            self._open()
+            assert self._current is not None
+        return self._current
+
+    def _full(self, writer: McapWriter) -> bool:
+        if self.split_size_bytes is not None and writer.size_estimate >= self.split_size_bytes:
+            return True
+        return (
+            self.split_duration_s is not None
+            and time.monotonic() - self._opened_s >= self.split_duration_s
+        )
+
+    def write_raw(
+        self, topic: str, msgtype: str, log_time_ns: int, cdr_bytes: bytes | memoryview
+    ) -> None:
+        """One ROS 2 CDR message, as :meth:`McapWriter.write_raw <redrive.io.writer.McapWriter.write_raw>`."""
+        self._writer().write_raw(topic, msgtype, log_time_ns, cdr_bytes)
+
+    def write(
+        self,
+        topic: str,
+        log_time_ns: int,
+        value: object,
+        *,
+        frame_id: str | None = None,
+        stamp_ns: int | None = None,
+    ) -> None:
+        """A data-model value, as :meth:`McapWriter.write <redrive.io.writer.McapWriter.write>`."""
+        self._writer().write(topic, log_time_ns, value, frame_id=frame_id, stamp_ns=stamp_ns)
+
+    def close(self) -> list[Path]:
+        """Finish the current file; returns every file written, in order."""
+        if self._current is not None:
+            self._finish_current()
+        return list(self.finished)
+
+    def _finish_current(self) -> None:
+        current, self._current = self._current, None
+        assert current is not None
+        current.close()
+        self.finished.append(current.path)
+        done, behind = self._chunks_done
+        now, now_behind = current.chunks
+        self._chunks_done = (done + now, behind + now_behind)
+
+    def abort(self) -> None:
+        """Drop the file being written (files already finished stay)."""
+        if self._current is not None:
+            self._current.abort()
+            self._current = None

@@ -13,7 +13,7 @@ it has not recorded) in its own thread, so the algorithm pipeline never waits fo
   with ROS 1 topics) it is redrive's native format (:class:`redrive.io.writer.McapWriter`: ROS 2
   CDR of standard types); ROS 2 messages are written byte for byte as DDS delivered them, with
   the QoS their publishers offer as ``offered_qos_profiles``; ROS 1 messages are decoded and
-  re-encoded as their standard type.
+  re-encoded as their standard type. It may be split too, each file declaring every channel.
 
 The file appears atomically when the logger stops (temporary ``.part`` file + rename); an error
 removes the part; a process killed outright leaves it, and the next recording in that folder
@@ -28,12 +28,12 @@ import threading
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from redrive.errors import ConfigError, LogError, TransportError, UnsupportedMessageError
+from redrive.errors import LogError, TransportError, UnsupportedMessageError
 from redrive.io.base import LogMessage
 from redrive.io.decoders import decode
 from redrive.io.typestore import typestore_for
-from redrive.io.writer import Compression, McapWriter
-from redrive.live.mcap_parts import Ros1Schema, SplitMcapWriter
+from redrive.io.writer import Compression
+from redrive.live.mcap_parts import Ros1Schema, SplitMcapWriter, SplitNativeWriter
 from redrive.live.scraper_state import Ros1Definition
 from redrive.live.streams import StreamSpec, ros1_type
 from redrive.transport import Message, Policy, ProducerGoneError, Reader
@@ -56,7 +56,7 @@ class DataLogger:
         path: the MCAP file (with a split limit: the name the numbered files are made from).
         definitions: topic → the type's full definition from the publisher (ROS 1 sessions:
             :meth:`redrive.live.session.LiveSession.definition`); without one, ROS Noetic's.
-        split_size_bytes, split_duration_s: split a ROS 1 recording into numbered files.
+        split_size_bytes, split_duration_s: split the recording into numbered files.
         max_size_bytes: :attr:`full` is set once this many bytes of messages are recorded.
         compression: chunk compression, ``zstd`` (default), ``lz4`` or ``none`` (as ``rosbag
             record`` writes by default: the cheapest in CPU).
@@ -66,7 +66,6 @@ class DataLogger:
     Raises:
         ProducerGoneError: a stream has no writer within ``attach_timeout_s``.
         LogError: the file cannot be created.
-        ConfigError: a split limit for a recording of typed samples (only ROS 1 recordings split).
     """
 
     def __init__(
@@ -102,12 +101,6 @@ class DataLogger:
         self._pending: list[tuple[StreamSpec, Reader]] = []
         self._lock = threading.Lock()
         self._stop = threading.Event()
-        if (split_size_bytes is not None or split_duration_s is not None) and not self.raw_ros1:
-            msg = (
-                "--split-size/--split-duration split recordings of ROS 1 topics; ROS 2 topics "
-                "(--ros2) and a --replay or --synthetic source are recorded to one file"
-            )
-            raise ConfigError(msg)
         try:
             for spec in specs:
                 self._readers[spec.topic] = Reader(
@@ -120,7 +113,7 @@ class DataLogger:
         self._ros1_store = (
             typestore_for(1, needed=ros1_types)[0] if ros1_types and not self.raw_ros1 else None
         )
-        self._native: McapWriter | None = None
+        self._native: SplitNativeWriter | None = None
         self._files: SplitMcapWriter | None = None
         try:
             if self.raw_ros1:
@@ -131,7 +124,12 @@ class DataLogger:
                     compression=compression,
                 )
             else:
-                self._native = McapWriter(self.path, compression=compression, live=True)
+                self._native = SplitNativeWriter(
+                    self.path,
+                    split_size_bytes=split_size_bytes,
+                    split_duration_s=split_duration_s,
+                    compression=compression,
+                )
                 for spec in self.specs:
                     if spec.payload == "cdr":  # ROS 2 topics: the QoS their publishers offer
                         self._native.add_channel(spec.topic, spec.msgtype, offered_qos=spec.qos)
@@ -166,9 +164,11 @@ class DataLogger:
 
     @property
     def chunks(self) -> tuple[int, int]:
-        """MCAP chunks of a ROS 1 recording: (written, written uncompressed because the
-        compressor was behind); (0, 0) for other recordings."""
-        return self._files.chunks if self._files is not None else (0, 0)
+        """MCAP chunks of the recording: (written, written uncompressed because the compressor
+        was behind)."""
+        if self._files is not None:
+            return self._files.chunks
+        return self._native.chunks if self._native is not None else (0, 0)
 
     # -- the thread --------------------------------------------------------------------------
     def _run(self) -> None:
@@ -289,8 +289,7 @@ class DataLogger:
         self._thread.join(timeout=timeout_s)
         self._close_readers()
         if self._native is not None:
-            self._native.close()
-            self.files = [self.path]
+            self.files = self._native.close()
         else:
             assert self._files is not None
             self.files = self._files.close()
