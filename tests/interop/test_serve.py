@@ -118,7 +118,9 @@ def test_a_client_sees_the_channels_and_the_first_messages_in_order(
 
     async def session() -> tuple[_Client, list[OutMessage]]:
         url = f"ws://127.0.0.1:{port}"
-        async with websockets.connect(url, subprotocols=[_SUBPROTOCOL], max_size=None) as ws:
+        async with websockets.connect(
+            url, subprotocols=[_SUBPROTOCOL], max_size=None, close_timeout=1
+        ) as ws:  # the SDK server does not answer the close handshake: do not wait 10 s
             client = _Client(ws)
             await client.handshake(len(stream.channels))
             await client.subscribe_all()
@@ -158,7 +160,9 @@ def test_the_app_seeks_and_the_stream_restarts_there(
 
     async def session() -> tuple[list[OutMessage], tuple[int, int, bool, str]]:
         url = f"ws://127.0.0.1:{port}"
-        async with websockets.connect(url, subprotocols=[_SUBPROTOCOL], max_size=None) as ws:
+        async with websockets.connect(
+            url, subprotocols=[_SUBPROTOCOL], max_size=None, close_timeout=1
+        ) as ws:  # the SDK server does not answer the close handshake: do not wait 10 s
             client = _Client(ws)
             await client.handshake(len(stream.channels))
             await client.subscribe_all()
