@@ -243,7 +243,8 @@ class SplitNativeWriter:
         self._open()
 
     def _open(self) -> None:
-        chunk = 4 << 20
+        # as SplitMcapWriter: a message bigger than a chunk goes to the file without a copy
+        chunk = 1 << 20
         if self.split_size_bytes is not None:
             chunk = max(4 << 10, min(chunk, self.split_size_bytes // 4))
         target = split_name(self.path, self._index) if self.split else self.path
