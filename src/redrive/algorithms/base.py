@@ -333,29 +333,8 @@ class Algorithm(ABC):
         """:meth:`run_step` as a plain tuple ``(status, output, latency_ns, cpu_ns, error)``:
         what the engine calls on every frame (no result object to build and take apart)."""
         cpu0 = _thread_time_ns()
-        t0 = _perf_counter_ns()
-        try:
-            value = self.step(frame, upstream)
-        except Exception as err:  # recorded, never swallowed: the engine stores it per frame
-            t1 = _perf_counter_ns()
-            cpu_ns = _thread_time_ns() - cpu0
-            return _ERROR, None, t1 - t0, cpu_ns, StepError.from_exception(err)
-        t1 = _perf_counter_ns()
-        cpu_ns = _thread_time_ns() - cpu0
-        # the common outputs checked inline (check_output says the same, one call later)
-        kind, role = type(value), self.role
-        if (
-            (kind is PlannedPath and role is _PLANNING)
-            or (kind is ControlCommands and role is _CONTROL)
-            or (kind is tuple and role is _PERCEPTION and not value)
-        ):
-            return _OK, value, t1 - t0, cpu_ns, None
-        try:
-            output = check_output(role, value, where=self.name)
-        except AlgorithmError as err:
-            error = StepError(type=type(err).__name__, message=f"frame {frame.index}: {err}")
-            return _ERROR, None, t1 - t0, cpu_ns, error
-        return _OK, output, t1 - t0, cpu_ns, None
+        status, output, latency_ns, cpu1, error = self.timed_step_from(frame, upstream, cpu0)
+        return status, output, latency_ns, cpu1 - cpu0, error
 
     def timed_step_from(
         self, frame: Frame, upstream: StageOutputs, cpu0_ns: int
@@ -376,6 +355,7 @@ class Algorithm(ABC):
             return _ERROR, None, t1 - t0, _thread_time_ns(), StepError.from_exception(err)
         t1 = _perf_counter_ns()
         cpu1 = _thread_time_ns()
+        # the common outputs checked inline (check_output says the same, one call later)
         kind, role = type(value), self.role
         if (
             (kind is PlannedPath and role is _PLANNING)
