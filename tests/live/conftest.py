@@ -14,50 +14,23 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import http.client
 import os
 import signal
-import socket
 import subprocess
 import threading
-import time
-import xmlrpc.client
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
 
+from redrive.testing import ros1
 from redrive.testing.processes import stop_group
 
 ROS_PYTHON = Path("/usr/bin/python3")
-ROSCORE = Path("/usr/bin/roscore")
-ROSMASTER = Path("/usr/bin/rosmaster")
-_HOST = "127.0.0.1"
+ROSCORE = ros1.ROSCORE
+ROSMASTER = ros1.ROSMASTER
 _INSTALL_HINT = "run `make system-test-deps` (as root) to install Debian's ROS 1"
-
-
-def free_port() -> int:
-    """A TCP port on 127.0.0.1 that nothing listens on (free when asked; may be taken later)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
-        sock.bind((_HOST, 0))
-        port: int = sock.getsockname()[1]
-        return port
-
-
-def _ros_env(port: int, home: Path) -> dict[str, str]:
-    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME")}
-    env.update(
-        ROS_MASTER_URI=f"http://{_HOST}:{port}",
-        ROS_IP=_HOST,
-        ROS_HOSTNAME=_HOST,
-        ROS_HOME=str(home),
-        ROS_LOG_DIR=str(home / "log"),
-        # ROS scripts started by name must find Debian's python3 first, not a pyenv shim.
-        PATH=f"/usr/bin:/bin:{os.environ.get('PATH', '')}",
-        PYTHONUNBUFFERED="1",
-    )
-    return env
 
 
 @functools.cache
@@ -196,54 +169,17 @@ class RosCore:
             reader.join(timeout=5)
 
 
-def _answers(port: int) -> bool:
-    """True when the master on ``port`` answers ``getSystemState`` (1 s timeout)."""
-    body = xmlrpc.client.dumps(("/redrive_tests",), "getSystemState")
-    conn = http.client.HTTPConnection(_HOST, port, timeout=1.0)
-    try:
-        conn.request("POST", "/RPC2", body, {"Content-Type": "text/xml"})
-        ((code, _status, _state),), _method = xmlrpc.client.loads(conn.getresponse().read())
-    except (OSError, http.client.HTTPException, xmlrpc.client.Error):
-        return False
-    finally:
-        conn.close()
-    return bool(code == 1)
-
-
 def start_master(
     home: Path, *, full: bool = False, timeout_s: float = 20.0
 ) -> tuple[RosCore, subprocess.Popen[str]]:
-    """Start ``rosmaster --core`` (``roscore`` when ``full``) on a free port; wait until it answers.
-
-    Tries another port when the master dies at start (the free port was taken in between).
-    """
-    (home / "log").mkdir(parents=True, exist_ok=True)
-    problems: list[str] = []
-    for _attempt in range(3):
-        port = free_port()
-        env = _ros_env(port, home)
-        cmd = (
-            [str(ROSCORE), "-p", str(port)] if full else [str(ROSMASTER), "--core", "-p", str(port)]
-        )
-        log_path = home / f"master-{port}.out"
-        with log_path.open("w") as log:
-            proc: subprocess.Popen[str] = subprocess.Popen(
-                cmd,
-                env=env,
-                stdout=log,
-                stderr=subprocess.STDOUT,
-                text=True,
-                start_new_session=True,
-            )
-        core = RosCore(uri=env["ROS_MASTER_URI"], port=port, env=env, home=home, pid=proc.pid)
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline and proc.poll() is None:
-            if _answers(port):
-                return core, proc
-            time.sleep(0.02)
-        _stop_group(proc, wait_s=5)
-        problems.append(f"{' '.join(cmd)}: {log_path.read_text().strip()[-2000:] or 'no output'}")
-    pytest.fail("the ROS master did not come up:\n" + "\n".join(problems))
+    """Start ``rosmaster --core`` (``roscore`` when ``full``) on a free port; wait until it answers
+    (:func:`redrive.testing.ros1.start_master`); the test fails with what it printed otherwise."""
+    try:
+        master = ros1.start_master(home, full=full, timeout_s=timeout_s)
+    except ros1.MasterError as exc:
+        pytest.fail(str(exc))
+    core = RosCore(uri=master.uri, port=master.port, env=master.env, home=home, pid=master.proc.pid)
+    return core, master.proc
 
 
 @pytest.fixture(scope="session")
@@ -263,4 +199,4 @@ def roscore(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RosCore]:
 @pytest.fixture
 def dead_master_uri() -> str:
     """``http://127.0.0.1:PORT`` with nothing listening on PORT."""
-    return f"http://{_HOST}:{free_port()}"
+    return f"http://{ros1.HOST}:{ros1.free_port()}"

@@ -9,8 +9,9 @@ from pathlib import Path
 import pytest
 
 from redrive.live.session import LiveSession
+from redrive.testing.ros1 import master_answers
 from redrive.transport import Policy, Reader
-from tests.live.conftest import ROSMASTER, _answers, _stop_group, ros1_missing, start_master
+from tests.live.conftest import ROSMASTER, _stop_group, ros1_missing, start_master
 
 pytestmark = pytest.mark.skipif(ros1_missing() is not None, reason=str(ros1_missing()))
 
@@ -51,7 +52,7 @@ def test_scraper_subscribes_again_after_a_master_restart(tmp_path: Path) -> None
             start_new_session=True,
         )
         deadline = time.monotonic() + 20
-        while not _answers(core.port) and time.monotonic() < deadline:
+        while not master_answers(core.port) and time.monotonic() < deadline:
             time.sleep(0.05)
         with core.python_process(IMU_PUBLISHER):  # registers with the new master
             assert _messages_within(reader, 15.0) == 5

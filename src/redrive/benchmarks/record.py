@@ -32,6 +32,7 @@ from typing import Any
 
 from redrive.errors import ConfigError, TransportError
 from redrive.testing.processes import stop_group, wait_group
+from redrive.testing.ros1 import MasterError, start_master
 
 __all__ = [
     "DEFAULT_RATE",
@@ -55,7 +56,6 @@ TARGET_CPU_RATIO = 1.0
 #: ``redrive live --compression`` → ``rosbag record``'s option for it (it has no zstd: with
 #: ``zstd`` it writes uncompressed, and the comparison says what zstd costs redrive)
 _ROSBAG_COMPRESSION: dict[str, list[str]] = {"none": [], "lz4": ["--lz4"], "zstd": []}
-_HOST = "127.0.0.1"
 _REFERENCE_NODE = "/bench_reference_recorder"
 _PLAYER_NODE = "/bench_player"
 
@@ -202,27 +202,6 @@ class RecordResult:
 # -- the ROS 1 side --------------------------------------------------------------------------
 
 
-def _ros_env(port: int, home: Path) -> dict[str, str]:
-    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME")}
-    env.update(
-        ROS_MASTER_URI=f"http://{_HOST}:{port}",
-        ROS_IP=_HOST,
-        ROS_HOSTNAME=_HOST,
-        ROS_HOME=str(home),
-        ROS_LOG_DIR=str(home / "log"),
-        PATH=f"/usr/bin:/bin:{os.environ.get('PATH', '')}",
-        PYTHONUNBUFFERED="1",
-    )
-    return env
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
-        sock.bind((_HOST, 0))
-        port: int = sock.getsockname()[1]
-        return port
-
-
 def _missing_tools() -> str | None:
     for tool in ("rosmaster", "rosbag"):
         if shutil.which(tool, path="/usr/bin:/bin") is None:
@@ -235,32 +214,16 @@ def _missing_tools() -> str | None:
 
 @contextlib.contextmanager
 def _master(home: Path) -> Iterator[tuple[str, dict[str, str]]]:
-    (home / "log").mkdir(parents=True, exist_ok=True)
-    port = _free_port()
-    env = _ros_env(port, home)
-    uri = env["ROS_MASTER_URI"]
-    with (home / "master.out").open("w") as log:
-        proc = subprocess.Popen(
-            ["rosmaster", "--core", "-p", str(port)],
-            env=env,
-            stdout=log,
-            stderr=subprocess.STDOUT,
-            start_new_session=True,
-        )
+    """A ``rosmaster --core`` of our own for the ``with`` block: its URI and its clients'
+    environment; stopped with its whole process group at exit."""
     try:
-        deadline = time.monotonic() + 30
-        while True:
-            with contextlib.suppress(OSError, xmlrpc.client.Error):
-                xmlrpc.client.ServerProxy(uri).getSystemState("/bench")
-                break
-            if proc.poll() is not None or time.monotonic() > deadline:
-                text = (home / "master.out").read_text()[-1000:]
-                msg = f"the ROS master did not start on port {port}: {text or 'no output'}"
-                raise TransportError(msg)
-            time.sleep(0.05)
-        yield uri, env
+        master = start_master(home, timeout_s=30.0)
+    except MasterError as exc:
+        raise TransportError(str(exc)) from None
+    try:
+        yield master.uri, master.env
     finally:
-        stop_group(proc)
+        master.stop()
 
 
 def _outbound_connections(uri: str, node: str) -> int:
