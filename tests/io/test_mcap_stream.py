@@ -134,10 +134,12 @@ def test_a_failed_write_in_the_compression_thread_reaches_the_caller(tmp_path: P
     out.abandon()
 
 
-def test_chunks_the_compressor_cannot_take_are_written_uncompressed(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """A compressor that is behind (its queue full) never holds up the recording."""
+def _record_behind(
+    path: Path, monkeypatch: pytest.MonkeyPatch
+) -> tuple[McapStream, list[tuple[int, int, bytes]]]:
+    """A live zstd recording whose compressor gets stuck after the first chunk until every
+    message is handed over, then finishes: the chunks written meanwhile go to the file
+    uncompressed, before the compressed ones that come earlier in time."""
     import threading
 
     from redrive.io import mcap_stream
@@ -159,7 +161,6 @@ def test_chunks_the_compressor_cannot_take_are_written_uncompressed(
 
     monkeypatch.setattr(mcap_stream, "_compressor", held)
     messages = _messages(11)
-    path = tmp_path / "behind.mcap"
     fd, out = _start(path, "zstd", live=True)
     for seq, (channel, log_ns, data) in enumerate(messages):
         out.add_message(channel, log_time=log_ns, publish_time=log_ns, sequence=seq, data=data)
@@ -167,6 +168,15 @@ def test_chunks_the_compressor_cannot_take_are_written_uncompressed(
     gate.set()
     out.finish()
     os.close(fd)
+    return out, messages
+
+
+def test_chunks_the_compressor_cannot_take_are_written_uncompressed(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A compressor that is behind (its queue full) never holds up the recording."""
+    path = tmp_path / "behind.mcap"
+    out, messages = _record_behind(path, monkeypatch)
     with path.open("rb") as fh:
         reader = make_reader(fh, validate_crcs=True)
         summary = reader.get_summary()
@@ -176,3 +186,27 @@ def test_chunks_the_compressor_cannot_take_are_written_uncompressed(
         assert kinds.count("zstd") >= 3
         got = [(m.channel_id, m.log_time, m.data) for _, _, m in reader.iter_messages()]
     assert got == sorted(messages, key=lambda m: m[1])
+
+
+def test_a_scan_without_summary_restores_time_order_across_chunks_written_out_of_order(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The recording of a compressor that was behind, killed before its summary: read by a
+    forward scan, its messages still come in log-time order, every one of them."""
+    from redrive.io.mcap_scan import McapScan
+
+    path = tmp_path / "behind.mcap"
+    _, messages = _record_behind(path, monkeypatch)
+    data = path.read_bytes()
+    # the footer (opcode, length, summary start, summary offset start, crc) before the magic
+    (summary_start,) = struct.unpack_from("<Q", data, len(data) - 8 - 29 + 9)
+    path.write_bytes(data[:summary_start])  # what a recorder killed after its last chunk leaves
+    in_file = [
+        item[2]
+        for kind, item in McapScan(memoryview(path.read_bytes())).events()
+        if kind == "message" and isinstance(item, tuple)
+    ]
+    assert in_file != sorted(in_file)  # the case at hand: chunks out of time order in the file
+    with open_log(path, strict=False) as log:
+        got = [(m.log_time_ns, bytes(m.raw)) for m in log.messages()]
+    assert got == sorted((t, d) for _, t, d in messages)

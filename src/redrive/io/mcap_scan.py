@@ -365,6 +365,8 @@ class McapScan:
     def events(self, *, counts_only: bool = False) -> Iterator[ScanEvent]:
         """Every intact record's content and every damage, in file order.
 
+        A whole chunk record is announced by ("chunk", :class:`ChunkHead`) before what it holds.
+
         ``counts_only``: a chunk whose message index records name only channels already seen is
         not decompressed; ("counts", (channel id → messages, first time, last time)) from its
         index and header stands for its messages (a quick pass to open a file without a
@@ -417,6 +419,7 @@ class McapScan:
                 if op == OP_CHUNK:
                     self.chunked = True
                     head = chunk_head(buf, pos, size)
+                    yield "chunk", head
                     listed = self._listed(stop) if counts_only else None
                     if listed is not None:
                         yield "counts", (listed, head.start_time, head.end_time)

@@ -29,6 +29,7 @@ from redrive.io.base import Encoding, LogMessage, TopicInfo, normalize_msgtype
 from redrive.io.damage import DamageLog, LogDamage
 from redrive.io.mcap_scan import (
     OP_CHUNK,
+    ChunkHead,
     McapChannel,
     McapMetadata,
     McapScan,
@@ -95,6 +96,9 @@ class McapFileReader(RosReaderBase):
         self.indexed = self._summary is not None and bool(self._summary.chunk_indexes)
         self._channels: dict[int, tuple[str, str, Encoding]] = {}
         self._counts: dict[int, int] = {}
+        # a file read by a forward scan: chunk position → the earliest start time of it and of
+        # every chunk after it in the file (how a scan restores log-time order)
+        self._chunk_floors: dict[int, int] = {}
         self._sizes: dict[int, int] = {}
         self._metadata: list[McapMetadata] | None = None
         self._start_ns = self._end_ns = 0
@@ -211,8 +215,12 @@ class McapFileReader(RosReaderBase):
         self._metadata = []
         unsized: set[int] = set()
         first = True
+        starts: list[tuple[int, int]] = []  # (position, start time) of each chunk, file order
         for kind, item in McapScan(self._buf).events(counts_only=True):
-            if kind == "message":
+            if kind == "chunk":
+                head = cast("ChunkHead", item)
+                starts.append((head.pos, head.start_time))
+            elif kind == "message":
                 cid, _, t, _, data = cast("Message", item)
                 self._counts[cid] = self._counts.get(cid, 0) + 1
                 self._sizes[cid] = self._sizes.get(cid, 0) + len(data)
@@ -243,6 +251,10 @@ class McapFileReader(RosReaderBase):
             elif kind == "damage":
                 assert isinstance(item, LogDamage)
                 self._damage.add(item)
+        floor = None
+        for pos, start in reversed(starts):
+            floor = start if floor is None else min(floor, start)
+            self._chunk_floors[pos] = floor
         for cid in unsized:  # bytes unknown without decompressing (-1 in the topic info)
             self._sizes.pop(cid, None)
         for cid in list(self._counts):
@@ -298,8 +310,18 @@ class McapFileReader(RosReaderBase):
     def _scanned(
         self, ids: set[int], start_ns: int | None, stop_ns: int | None
     ) -> Iterator[tuple[int, int, memoryview]]:
-        """Messages in file order, from a forward scan (no summary)."""
-        count = 0
+        """Messages from a forward scan (no summary), in log-time order.
+
+        A file's chunks need not be in time order: a recorder compressing on a thread writes a
+        chunk uncompressed while earlier ones still wait for the compressor
+        (:class:`~redrive.io.mcap_stream.McapStream`), and a killed one leaves no summary. At
+        each chunk the messages read so far that are earlier than any chunk still to come
+        (:attr:`_chunk_floors`, from the pass that opened the file) are yielded, in time order;
+        the rest wait for the chunks that may hold earlier ones.
+        """
+        floors = self._chunk_floors
+        heap: list[tuple[int, int, int, memoryview]] = []
+        order = count = 0
         for kind, item in McapScan(self._buf).events():
             if kind == "message":
                 cid, _, t, _, data = cast("Message", item)
@@ -308,11 +330,27 @@ class McapFileReader(RosReaderBase):
                     and (start_ns is None or t >= start_ns)
                     and (stop_ns is None or t < stop_ns)
                 ):
+                    heapq.heappush(heap, (t, order, cid, data))
+                    order += 1
+            elif kind == "chunk":
+                head = cast("ChunkHead", item)
+                floor = floors.get(head.pos, head.start_time)
+                while heap and heap[0][0] < floor:
+                    t, _, cid, data = heapq.heappop(heap)
                     count += 1
                     yield cid, t, data
             elif kind == "damage":
                 assert isinstance(item, LogDamage)
+                if self._damage.strict:  # reading stops here: what was read before it comes first
+                    while heap:
+                        t, _, cid, data = heapq.heappop(heap)
+                        count += 1
+                        yield cid, t, data
                 self._damage.hit(item, messages_read=count)
+        while heap:
+            t, _, cid, data = heapq.heappop(heap)
+            count += 1
+            yield cid, t, data
 
     def _indexed(
         self, ids: set[int], start_ns: int | None, stop_ns: int | None
