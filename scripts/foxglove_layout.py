@@ -1,10 +1,12 @@
 """Write docs/foxglove_layout.json: the Foxglove layout that shows an exported run.
 
 Built with foxglove-sdk's own layout model (``foxglove.layouts``), so the file is what the app
-imports (Layout → Import from file).  A 3D panel following ``base_link`` with the LiDAR cloud,
-ground truth, the tracker's boxes, the planner's path, the ego and its ghost, and the
-bookmarks; the front camera beside it; the transform tree below.  Topics of algorithms with
-other names appear in the 3D panel's topic list, off until switched on.
+imports (Layout → Import from file).  A 3D panel following ``base_link`` with the log's own
+LiDAR cloud (``sensor_msgs/PointCloud2``, which Foxglove draws; the ``/foxglove/…`` copies of
+``export --sensor-copies`` are not needed), ground truth, the tracker's boxes, the planner's
+path, the ego and its ghost, and the bookmarks; the front camera (the log's
+``sensor_msgs/Image``) beside it; the transform tree below.  Topics of algorithms with other
+names appear in the 3D panel's topic list, off until switched on.
 
     python scripts/foxglove_layout.py [-o docs/foxglove_layout.json]
 """
@@ -34,7 +36,7 @@ def layout() -> fl.Layout:
     topics: dict[str, fl.BaseRendererTopicSettings] = {
         topic: fl.BaseRendererSceneUpdateTopicSettings(visible=True) for topic in SCENE_TOPICS
     }
-    topics["/foxglove/lidar_top"] = fl.BaseRendererPointCloudTopicSettings(
+    topics["/lidar_top"] = fl.BaseRendererPointCloudTopicSettings(
         visible=True, point_size=2.0, color_mode="colormap", color_field="intensity"
     )
     three_d = fl.ThreeDeePanel(
@@ -45,9 +47,7 @@ def layout() -> fl.Layout:
     )
     camera = fl.ImagePanel(
         title="front camera",
-        config=fl.ImageConfig(
-            image_mode=fl.ImageModeConfig(image_topic="/foxglove/camera_front/image_raw")
-        ),
+        config=fl.ImageConfig(image_mode=fl.ImageModeConfig(image_topic="/camera_front/image_raw")),
     )
     return fl.Layout(
         content=fl.SplitContainer(

@@ -11,37 +11,66 @@ from typing import Any
 
 import pytest
 from mcap.reader import make_reader
-from mcap.stream_reader import StreamReader
+from mcap.records import Chunk, Message, MessageIndex
+from mcap.stream_reader import StreamReader, breakup_chunk, get_chunk_data_stream
 from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoders
 from mcap_ros2.decoder import DecoderFactory as Ros2Decoders
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from redrive.cli.main import main
+from redrive.interop.stream import find_run_log
 from redrive.io import open_log
 from redrive.results import open_run
 
 
-@pytest.fixture(scope="module")
-def exported(short_run: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    out = tmp_path_factory.mktemp("fg_export")
-    assert main(["export", str(short_run), "--format", "mcap", "-o", str(out)]) == 0
-    path = out / "run.mcap"
+def _export(run: Path, out: Path, *extra: str) -> Path:
+    assert main(["export", str(run), "--format", "mcap", "-o", str(out), *extra]) == 0
+    path = out / f"{run.name}.mcap"
     assert path.is_file()
     return path
 
 
 @pytest.fixture(scope="module")
-def decoded(exported: Path) -> dict[str, list[tuple[int, Any]]]:
+def exported(short_run: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The default export: the log's chunks copied, the run's scene beside them."""
+    return _export(short_run, tmp_path_factory.mktemp("fg_export"))
+
+
+@pytest.fixture(scope="module")
+def exported_copies(short_run: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """``--sensor-copies``: foxglove.PointCloud / CompressedImage copies of the sensor data too."""
+    return _export(short_run, tmp_path_factory.mktemp("fg_copies"), "--sensor-copies")
+
+
+@pytest.fixture(scope="module", params=["default", "sensor-copies"])
+def either(request: pytest.FixtureRequest) -> Path:
+    name = "exported" if request.param == "default" else "exported_copies"
+    path: Path = request.getfixturevalue(name)
+    return path
+
+
+def _decode(path: Path) -> dict[str, list[tuple[int, Any]]]:
     """topic → [(log_time_ns, decoded message)] of every message (protobuf and ROS 2 CDR)."""
     out: dict[str, list[tuple[int, Any]]] = defaultdict(list)
-    with exported.open("rb") as fh:
+    with path.open("rb") as fh:
         reader = make_reader(fh, decoder_factories=[ProtobufDecoders(), Ros2Decoders()])
         for _, channel, message, value in reader.iter_decoded_messages(log_time_order=True):
             out[channel.topic].append((message.log_time, value))
     return dict(out)
 
 
-def test_the_file_passes_mcap_validation(exported: Path) -> None:
+@pytest.fixture(scope="module")
+def decoded(exported: Path) -> dict[str, list[tuple[int, Any]]]:
+    return _decode(exported)
+
+
+@pytest.fixture(scope="module")
+def decoded_either(either: Path) -> dict[str, list[tuple[int, Any]]]:
+    return _decode(either)
+
+
+def test_the_file_passes_mcap_validation(either: Path) -> None:
+    exported = either
     with exported.open("rb") as fh:
         records = list(StreamReader(fh, validate_crcs=True).records)  # chunk + data section CRCs
     assert records
@@ -59,14 +88,114 @@ def test_the_file_passes_mcap_validation(exported: Path) -> None:
     assert count == summary.statistics.message_count
 
 
-def test_the_log_channels_are_there_byte_for_byte(short_log: Path, exported: Path) -> None:
-    with open_log(short_log) as src, open_log(exported) as out:
-        # the run's ego places base_link: the log's /tf is left out (one parent per frame)
-        assert set(src.topics) - set(out.topics) == {"/tf"}
-        for topic in ("/lidar_top", "/tf_static", "/ground_truth/objects"):
-            a = [(m.log_time_ns, bytes(m.raw)) for m in src.messages(topics=[topic])]
-            b = [(m.log_time_ns, bytes(m.raw)) for m in out.messages(topics=[topic])]
-            assert a == b, topic
+def _messages(path: Path, topics: set[str] | None = None) -> list[tuple[str, int, int, int, bytes]]:
+    """(topic, log time, publish time, sequence, data) of every message, in log-time order."""
+    with path.open("rb") as fh:
+        return [
+            (c.topic, m.log_time, m.publish_time, m.sequence, m.data)
+            for _, c, m in make_reader(fh).iter_messages(log_time_order=True)
+            if topics is None or c.topic in topics
+        ]
+
+
+def test_the_logs_messages_are_copied_byte_for_byte(short_log: Path, either: Path) -> None:
+    source = _messages(short_log)
+    topics = {m[0] for m in source}
+    # an open-loop run keeps every log topic, /tf too: its ego is the logged ego
+    assert {"/tf", "/lidar_top", "/camera_front/image_raw"} <= topics
+    assert _messages(either, topics) == source
+    with short_log.open("rb") as a, either.open("rb") as b:
+        src, out = make_reader(a).get_summary(), make_reader(b).get_summary()
+    assert src is not None
+    assert out is not None
+    # the log's channels and schemas keep their ids and records (so its chunks need no rewrite)
+    for channel in src.channels.values():
+        assert out.channels[channel.id] == channel
+        assert out.schemas[channel.schema_id] == src.schemas[channel.schema_id]
+    with open_log(short_log) as log, open_log(either) as back:
+        assert set(log.topics) <= set(back.topics)
+
+
+def test_the_index_reads_what_a_linear_read_reads(either: Path) -> None:
+    """The summary's chunk indexes, message indexes and statistics describe the file: an
+    indexed read (log-time order) gives the messages a linear read of every record gives."""
+    with either.open("rb") as fh:
+        linear = [
+            (r.channel_id, r.log_time, r.publish_time, r.sequence, r.data)
+            for r in StreamReader(fh, skip_magic=False).records
+            if isinstance(r, Message)
+        ]
+    with either.open("rb") as fh:
+        reader = make_reader(fh)
+        summary = reader.get_summary()
+        assert summary is not None
+        indexed = [
+            (c.id, m.log_time, m.publish_time, m.sequence, m.data)
+            for _, c, m in reader.iter_messages(log_time_order=True)
+        ]
+    times = [m[1] for m in indexed]
+    assert times == sorted(times)
+    assert sorted(indexed) == sorted(linear)
+    stats = summary.statistics
+    assert stats is not None
+    assert stats.message_count == len(linear)
+    assert stats.chunk_count == len(summary.chunk_indexes)
+    assert (stats.message_start_time, stats.message_end_time) == (times[0], times[-1])
+    counts: dict[int, int] = defaultdict(int)
+    for m in linear:
+        counts[m[0]] += 1
+    assert {c: n for c, n in stats.channel_message_counts.items() if n} == dict(counts)
+    assert set(stats.channel_message_counts) == set(summary.channels)
+    # each chunk: its times are its messages' and every message index entry points at a
+    # message of its channel and log time; the summary indexes every chunk once
+    chunks: list[tuple[int, int, int, int]] = []
+    entries = 0
+    with either.open("rb") as fh:
+        records = list(StreamReader(fh, emit_chunks=True).records)
+    for k, record in enumerate(records):
+        if not isinstance(record, Chunk):
+            continue
+        data = get_chunk_data_stream(record, validate_crc=True)[0].read(record.uncompressed_size)
+        inner = [m for m in breakup_chunk(record) if isinstance(m, Message)]
+        assert record.message_start_time == min(m.log_time for m in inner)
+        assert record.message_end_time == max(m.log_time for m in inner)
+        chunks.append(
+            (
+                record.message_start_time,
+                record.message_end_time,
+                record.uncompressed_size,
+                len(inner),
+            )
+        )
+        indexes = []  # the message indexes right after the chunk
+        for r in records[k + 1 :]:
+            if not isinstance(r, MessageIndex):
+                break
+            indexes.append(r)
+        assert sum(len(i.records) for i in indexes) == len(inner)
+        for index in indexes:
+            for log_time, offset in index.records:
+                opcode, _, channel_id, _, at_time = struct.unpack_from("<BQHIQ", data, offset)
+                assert (opcode, channel_id, at_time) == (0x05, index.channel_id, log_time)
+                entries += 1
+    assert entries == len(linear)
+    assert sorted(chunks) == sorted(
+        (c.message_start_time, c.message_end_time, c.uncompressed_size, n)
+        for c, n in zip(summary.chunk_indexes, _chunk_counts(either, summary), strict=True)
+    )
+
+
+def _chunk_counts(path: Path, summary: Any) -> list[int]:
+    """Messages per chunk, from the message indexes the summary's chunk indexes point at."""
+    out = []
+    data = path.read_bytes()
+    for c in summary.chunk_indexes:
+        n = 0
+        for offset in c.message_index_offsets.values():
+            _, _, _, length = struct.unpack_from("<BQHI", data, offset)
+            n += length // 16
+        out.append(n)
+    return out
 
 
 def _stamp_ns(ts: Any) -> int:
@@ -78,14 +207,25 @@ def _yaw(q: Any) -> float:
 
 
 def test_every_entity_frame_is_in_the_transforms_at_its_stamp(
-    short_run: Path, decoded: dict[str, list[tuple[int, Any]]]
+    short_run: Path, decoded_either: dict[str, list[tuple[int, Any]]]
 ) -> None:
+    decoded = decoded_either
     tree: dict[int, dict[str, str]] = {}  # stamp → child → parent
     for t_ns, msg in decoded["/redrive/transforms"]:
         parents = tree.setdefault(t_ns, {})
         for tf in msg.transforms:
             assert _stamp_ns(tf.timestamp) == t_ns
             parents[tf.child_frame_id] = tf.parent_frame_id
+    # the log's /tf (kept: an open-loop run's ego is the logged ego) at or before each stamp
+    log_tf = [
+        (t, {tf.child_frame_id: tf.header.frame_id for tf in m.transforms})
+        for t, m in decoded["/tf"]
+    ]
+    for t_ns, parents in tree.items():
+        for at, found in log_tf:
+            if at <= t_ns:
+                for child, parent in found.items():
+                    assert parents.setdefault(child, parent) == parent
 
     # one parent per frame over every transform topic of the file (Foxglove merges them)
     parent_of: dict[str, set[str]] = defaultdict(set)
@@ -97,7 +237,8 @@ def test_every_entity_frame_is_in_the_transforms_at_its_stamp(
             for tf in msg.transforms:
                 parent_of[tf.child_frame_id].add(tf.header.frame_id)
     assert all(len(p) == 1 for p in parent_of.values()), dict(parent_of)
-    assert parent_of["base_link"] == {"map"}
+    assert parent_of["base_link"] == {"odom"}  # the log's map → odom → base_link
+    assert parent_of["odom"] == {"map"}
 
     def root(frame: str, parents: dict[str, str]) -> str:
         seen = set()
@@ -125,15 +266,25 @@ def test_every_entity_frame_is_in_the_transforms_at_its_stamp(
                 assert root(entity.frame_id, parents) == "map", (topic, entity.id)
     assert entities > 100
     sensor_frames = {f for p in tree.values() for f in p}
-    for topic in ("/foxglove/lidar_top", "/foxglove/camera_front/image_raw"):
+    for topic in ("/lidar_top", "/camera_front/image_raw"):  # the log's own, drawn by Foxglove
         assert decoded[topic], topic
+        for _, msg in decoded[topic]:
+            assert msg.header.frame_id in sensor_frames
+    copies = ("/foxglove/lidar_top", "/foxglove/camera_front/image_raw")
+    if "/foxglove/lidar_top" not in decoded:  # the default export: no copies
+        assert not set(copies) & set(decoded)
+        return
+    for topic in copies:
+        stamps = [_stamp_ns(msg.timestamp) for _, msg in decoded[topic]]
+        assert stamps == [t for t, _ in decoded[topic.removeprefix("/foxglove")]], topic
         for _, msg in decoded[topic]:
             assert msg.frame_id in sensor_frames
 
 
 def test_boxes_equal_the_stored_results(
-    short_run: Path, decoded: dict[str, list[tuple[int, Any]]]
+    short_run: Path, decoded_either: dict[str, list[tuple[int, Any]]]
 ) -> None:
+    decoded = decoded_either
     run = open_run(short_run)
     stamps = dict(
         zip(
@@ -258,7 +409,8 @@ def test_the_docs_layout_is_the_scripts_and_shows_exported_topics(
     topics = _layout_topics(json.loads(committed))
     # the ghost exists in closed-loop runs only; everything else is in this open-loop export
     assert topics - {"/redrive/ego_logged"} <= set(decoded)
-    assert "/foxglove/camera_front/image_raw" in topics
+    assert "/camera_front/image_raw" in topics  # the log's own image, not a copy
+    assert not {t for t in topics if t.startswith("/foxglove/")}
 
 
 def test_a_closed_loop_export_shows_the_ghost_where_the_log_drove(
@@ -286,6 +438,7 @@ def test_a_closed_loop_export_shows_the_ghost_where_the_log_drove(
         reader = make_reader(fh, decoder_factories=[ProtobufDecoders()])
         topics = {c.topic for c in reader.get_summary().channels.values()}  # type: ignore[union-attr]
         assert "/tf" not in topics  # the log's tf moves the logged ego, not the driven one
+        assert not {t for t in topics if t.startswith("/foxglove/")}
         wanted = ["/redrive/ego_logged", "/redrive/transforms"]
         for _, channel, message, value in reader.iter_decoded_messages(topics=wanted):
             if channel.topic == "/redrive/ego_logged":
@@ -293,6 +446,13 @@ def test_a_closed_loop_export_shows_the_ghost_where_the_log_drove(
             else:
                 (tf,) = [t for t in value.transforms if t.child_frame_id == "base_link"]
                 base_link[message.log_time] = tf
+    # the chunks holding /tf were decompressed and written again without it: the other
+    # messages are the log's, byte for byte, with their publish times and sequences
+    log = find_run_log(run)
+    assert log is not None
+    source = [m for m in _messages(log) if m[0] != "/tf"]
+    assert source
+    assert _messages(tmp_path / "closed.mcap", {m[0] for m in source}) == source
     offset = EgoGeometry().center_offset_m
     for frame, state in logged.items():
         (entity,) = ghosts[stamps[frame]].entities

@@ -4,9 +4,11 @@ The demo (``redrive synth urban --duration 20``, then ``redrive run`` of it) run
 process, unless a run is given.  Then, interleaved for each repeat and in this process (the
 interpreter and the imports are not timed; the log is read once first so the page cache is warm):
 
-* **export** — :func:`redrive.interop.export_mcap` of the run: the log's messages re-written, every
-  LiDAR cloud and camera image converted (``foxglove.PointCloud``, JPEG), the run's scenes as
-  SceneUpdates and MarkerArrays;
+* **export** — :func:`redrive.interop.export_mcap` of the run: the log's chunks copied as they
+  are (an MCAP log; other logs re-written), the run's scenes as SceneUpdates and MarkerArrays;
+  with ``sensor_copies`` also every LiDAR cloud and camera image converted
+  (``foxglove.PointCloud``, JPEG ``foxglove.CompressedImage``).  The previous pass's output is
+  deleted before the timer starts (freeing a file's blocks is not the export's work);
 * **copy** — the log's messages read and written again with the ``mcap`` library alone (its
   reader, its writer with LZ4 chunks as the export writes them), no decoding, no conversion: the
   floor of any export that reads the log and writes it out.
@@ -48,6 +50,7 @@ class ExportBenchResult:
         export_cpu_s, copy_cpu_s: the same passes' CPU seconds of this process (user + system,
             every thread): less moved by the machine's other work than the wall clock.
         load_before, load_after: 1-minute load average before the first and after the last pass.
+        sensor_copies: the export wrote ``foxglove.PointCloud`` / ``CompressedImage`` copies.
     """
 
     run: Path
@@ -64,6 +67,7 @@ class ExportBenchResult:
     copy_cpu_s: tuple[float, ...]
     load_before: float
     load_after: float
+    sensor_copies: bool = False
 
     @property
     def export_median_s(self) -> float:
@@ -185,6 +189,7 @@ def bench_export(
     workdir: Path | None = None,
     duration_s: float = 20.0,
     repeats: int = 3,
+    sensor_copies: bool = False,
     progress: Callable[[str], None] | None = None,
 ) -> ExportBenchResult:
     """Time :func:`~redrive.interop.export_mcap` of ``run`` (the demo, made in ``workdir`` or a
@@ -230,12 +235,14 @@ def bench_export(
         export_messages = copy_messages = 0
         for i in range(repeats):
             say(f"repeat {i + 1}/{repeats}: export")
+            export_path.unlink(missing_ok=True)
             t0, c0 = time.perf_counter(), time.process_time()
-            export_path = export_mcap(run, out=tmp / "export")
+            export_path = export_mcap(run, out=tmp / "export", sensor_copies=sensor_copies)
             export_s.append(time.perf_counter() - t0)
             export_cpu.append(time.process_time() - c0)
             say(f"repeat {i + 1}/{repeats}: copy")
             copy_path = tmp / "copy.mcap"
+            copy_path.unlink(missing_ok=True)
             t0, c0 = time.perf_counter(), time.process_time()
             copy_messages = copy_mcap(log, copy_path)
             copy_s.append(time.perf_counter() - t0)
@@ -257,4 +264,5 @@ def bench_export(
             copy_cpu_s=tuple(copy_cpu),
             load_before=load_before,
             load_after=load_after,
+            sensor_copies=sensor_copies,
         )

@@ -4,6 +4,7 @@ tools, or (``mcap``) the run over its log as one MCAP for Foxglove and RViz."""
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -21,12 +22,16 @@ Only tables with rows are written. In CSV and Excel, text cells that a spreadshe
 formula (starting with = + - @, tab or CR) get a leading ' ; Excel cells are cut at 32,767
 characters and a table longer than 1,048,576 rows continues on sheets "name (2)", "name (3)" ….
 
-mcap (needs `pip install 'redrive[foxglove]'`): the log's own channels, its LiDAR clouds and
-camera images again as foxglove.PointCloud / foxglove.CompressedImage on /foxglove/<topic>, and the
-run's results at each frame — ground truth, every perception algorithm's boxes (ids, velocity
-arrows), planned paths, the ego (and, closed loop, the logged ego as a ghost), the evaluation's
-bookmarks — as foxglove.SceneUpdate on /redrive/… and visualization_msgs/MarkerArray on
-/redrive/markers/…, placed by foxglove.FrameTransforms on /redrive/transforms.  See docs/foxglove.md.
+mcap (needs `pip install 'redrive[foxglove]'`): the log's own channels as they are (Foxglove and
+Lichtblick draw sensor_msgs/PointCloud2, Image and CompressedImage themselves; an MCAP log's
+chunks are copied without decoding them) and the run's results at each frame — ground truth,
+every perception algorithm's boxes (ids, velocity arrows), planned paths, the ego (and, closed
+loop, the logged ego as a ghost), the evaluation's bookmarks — as foxglove.SceneUpdate on
+/redrive/… and visualization_msgs/MarkerArray on /redrive/markers/…, placed by
+foxglove.FrameTransforms on /redrive/transforms (an open-loop run keeps the log's /tf, a
+closed-loop run's ego replaces it).  --sensor-copies adds every LiDAR cloud and camera image
+again as foxglove.PointCloud / foxglove.CompressedImage on /foxglove/<topic> (several times
+slower, a larger file).  See docs/foxglove.md.
 """
 
 
@@ -36,7 +41,7 @@ def _export_mcap(args: argparse.Namespace, out: Path) -> int:
     require_foxglove()
     from redrive.interop.mcap_export import export_mcap
 
-    print(export_mcap(args.run, out=out))
+    print(export_mcap(args.run, out=out, sensor_copies=args.sensor_copies))
     return 0
 
 
@@ -47,6 +52,9 @@ def _run(args: argparse.Namespace) -> int:
     out = args.output if args.output is not None else run.path / "export"
     if args.format == "mcap":
         return _export_mcap(args, out)
+    if args.sensor_copies:
+        print("redrive export: --sensor-copies goes with --format mcap only", file=sys.stderr)
+        return 2
     for path in export_run(run, fmt=args.format, out=out):
         print(path)
     return 0
@@ -81,5 +89,15 @@ def register(sub: Any) -> None:
         type=Path,
         default=None,
         help="directory to write into (created; default: RUN/export/)",
+    )
+    parser.add_argument(
+        "--sensor-copies",
+        action="store_true",
+        help=(
+            "mcap: also write every LiDAR cloud as foxglove.PointCloud and every camera image as "
+            "a JPEG foxglove.CompressedImage on /foxglove/<topic>, for viewers that read only "
+            "Foxglove schemas (Foxglove and Lichtblick draw the log's own ROS sensor messages; "
+            "the copies make the export several times slower and the file larger)"
+        ),
     )
     parser.set_defaults(func=_run)

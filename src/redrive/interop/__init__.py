@@ -1,9 +1,10 @@
 """Interoperation with the viewers robotics people already use (L5: reads logs and runs).
 
 * :mod:`.mcap_export` — ``redrive export RUN --format mcap``: the log and the run's results in
-  one MCAP with Foxglove's scene schemas (``foxglove.SceneUpdate``, ``FrameTransforms``,
-  ``PointCloud``, ``CompressedImage``) and ``visualization_msgs/MarkerArray`` for RViz, next to
-  the log's own ROS channels;
+  one MCAP with Foxglove's scene schemas (``foxglove.SceneUpdate``, ``FrameTransforms``; with
+  ``--sensor-copies`` also ``PointCloud``, ``CompressedImage``) and
+  ``visualization_msgs/MarkerArray`` for RViz, next to the log's own ROS channels (an MCAP log's
+  chunks copied as they are by :mod:`.mcap_splice`);
 * :mod:`.serve` — ``redrive serve RUN|LOG``: the same stream live on Foxglove's WebSocket
   protocol, paced at the log's rate, with the app's play / pause / seek / speed.
 * :mod:`.live_view` — ``redrive live … --foxglove``: a live session's topics as they arrive and

@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import pyarrow as pa
 import pyarrow.compute as pc
 
 from redrive.errors import ConfigError
@@ -97,10 +98,10 @@ def scene_topics(run: Run) -> tuple[str, ...]:
 Row = dict[str, Any]
 
 
-def _rows_by_frame(run: Run, name: str, algorithm: str | None = None) -> dict[int, list[Row]]:
-    if name not in run.tables():
+def _rows_by_frame(table: pa.Table | None, algorithm: str | None = None) -> dict[int, list[Row]]:
+    """frame index → the rows of ``table`` (of ``algorithm`` only when given), in order."""
+    if table is None:
         return {}
-    table = run.table(name)
     if algorithm is not None:
         if "algorithm" not in table.column_names:
             return {}
@@ -224,21 +225,31 @@ def run_scenes(
     *,
     static_transforms: Sequence[Transform] = (),
     geometry: EgoGeometry | None = None,
+    ego_transform: bool = True,
 ) -> Iterator[FrameScene]:
     """One :class:`FrameScene` per processed frame of ``run``, in frame order.
 
     ``static_transforms``: the log's static transforms (sensors on the vehicle), repeated in
     every frame's transforms so a viewer that starts anywhere finds them.  ``geometry``: the ego
-    box (default: the synthetic ego's dimensions, rear-axle reference).
+    box (default: the synthetic ego's dimensions, rear-axle reference).  ``ego_transform``: give
+    the ego's ``frame_id → base_link`` in each frame's transforms (leave it out when the log's
+    own ``/tf`` places ``base_link``, as in an open-loop run: a frame has one parent).
     """
     geometry = geometry or EgoGeometry()
     frames = run.table("frames").select(["frame_index", "stamp_ns"]).to_pylist()
-    gt = _rows_by_frame(run, "ground_truth")
-    ego = {f: rows[0] for f, rows in _rows_by_frame(run, "ego").items()}
-    ghost = {f: rows[0] for f, rows in _rows_by_frame(run, "ego_logged").items()}
-    has_ghost = "ego_logged" in run.tables()
-    detections = {a: _rows_by_frame(run, "detections", a) for a in _algorithms(run, "perception")}
-    paths = {a: _rows_by_frame(run, "paths", a) for a in _algorithms(run, "planning")}
+    present = set(run.tables())  # each table is read once (its parts are Parquet files)
+
+    def read(name: str) -> pa.Table | None:
+        return run.table(name) if name in present else None
+
+    gt = _rows_by_frame(read("ground_truth"))
+    ego = {f: rows[0] for f, rows in _rows_by_frame(read("ego")).items()}
+    ghost = {f: rows[0] for f, rows in _rows_by_frame(read("ego_logged")).items()}
+    has_ghost = "ego_logged" in present
+    found = read("detections")
+    detections = {a: _rows_by_frame(found, a) for a in _algorithms(run, "perception")}
+    found = read("paths")
+    paths = {a: _rows_by_frame(found, a) for a in _algorithms(run, "planning")}
     bookmarks = _bookmarks(run)
     static = tuple(static_transforms)
     for frame in frames:
@@ -267,7 +278,8 @@ def run_scenes(
         transforms = static
         own = ego.get(index)
         if own is not None:
-            transforms = (*static, _ego_transform(own, stamp))
+            if ego_transform:
+                transforms = (*static, _ego_transform(own, stamp))
             shapes[_EGO_TOPIC] = ShapeSet(
                 stamp_ns=stamp,
                 frame_id=str(own["frame_id"]) or "map",

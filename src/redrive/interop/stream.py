@@ -10,9 +10,13 @@ What a stream holds:
 * the log's own messages, as they are, on their own topics (ROS 2 ``cdr`` with ``ros2msg``
   schemas; a ROS 1 log's ``ros1`` with ``ros1msg``) — except, for a run, the log's ``/tf``:
   the run's ego places ``base_link`` (``/redrive/transforms``), and a frame has one parent (in
-  a closed loop the log's ``/tf`` moves the logged ego, not the driven one);
-* every LiDAR cloud again as ``foxglove.PointCloud`` and every camera image as
-  ``foxglove.CompressedImage`` on ``/foxglove/<topic>``;
+  a closed loop the log's ``/tf`` moves the logged ego, not the driven one).  With
+  ``log_tf=True`` (the MCAP export) an open-loop run, whose ego is the logged ego, keeps the
+  log's ``/tf`` when it places ``base_link`` under the ego's frame, and ``/redrive/transforms``
+  then holds the static transforms only (:attr:`SceneStream.log_tf`);
+* with ``sensor_copies`` (``redrive serve``; ``export --sensor-copies``) every LiDAR cloud
+  again as ``foxglove.PointCloud`` and every camera image as ``foxglove.CompressedImage`` on
+  ``/foxglove/<topic>``;
 * for a run: ``/redrive/transforms`` (``foxglove.FrameTransforms``) and the SceneUpdate topics
   of :mod:`.run_scene` at each frame's stamp, each also as a MarkerArray on
   ``/redrive/markers/<topic without /redrive/>``;
@@ -127,11 +131,14 @@ class TopicRoute:
     channels: tuple[ChannelSpec, ...]
 
 
-def route_topic(info: TopicInfo, stores: Mapping[str, Any], *, objects: bool) -> TopicRoute:
+def route_topic(
+    info: TopicInfo, stores: Mapping[str, Any], *, objects: bool, sensor_copies: bool = True
+) -> TopicRoute:
     """The channels of a log topic: its own (ROS 1 ``ros1msg`` / ROS 2 ``ros2msg`` schema, when
-    its type is known to the log's typestore in ``stores``), a ``foxglove.PointCloud`` of a
-    LiDAR, a ``foxglove.CompressedImage`` of a camera and — when ``objects`` — a
-    ``foxglove.SceneUpdate`` of an object topic (ground truth or detections)."""
+    its type is known to the log's typestore in ``stores``), when ``sensor_copies`` a
+    ``foxglove.PointCloud`` of a LiDAR and a ``foxglove.CompressedImage`` of a camera, and —
+    when ``objects`` — a ``foxglove.SceneUpdate`` of an object topic (ground truth or
+    detections)."""
     topic = info.topic
     channels: list[ChannelSpec] = []
     store = stores.get(info.encoding) if info.encoding != "native" else None
@@ -163,9 +170,9 @@ def route_topic(info: TopicInfo, stores: Mapping[str, Any], *, objects: bool) ->
     if kind is not None:
         message_type: Any = None
         if kind[0] == DecodedKind.SENSOR and kind[1] == SensorType.LIDAR:
-            message_type = fm.PointCloud
+            message_type = fm.PointCloud if sensor_copies else None
         elif kind[0] == DecodedKind.SENSOR and kind[1] == SensorType.CAMERA:
-            message_type = fm.CompressedImage
+            message_type = fm.CompressedImage if sensor_copies else None
         elif kind[0] == DecodedKind.OBJECTS and objects:
             message_type = fm.SceneUpdate
         elif kind[0] == DecodedKind.TRANSFORMS and topic.endswith("tf_static"):
@@ -253,13 +260,88 @@ def find_run_log(run: Run) -> Path | None:
     return Path(named) if named and Path(named).exists() else None
 
 
-class SceneStream:
-    """A log and (optionally) a run as Foxglove channels; a context manager (closes the log)."""
+def _is_open_loop(run: Run) -> bool:
+    return not run.manifest.closed_loop and "ego_logged" not in run.tables()
 
-    def __init__(self, *, reader: LogReader | None, run: Run | None) -> None:
+
+def _tf_topics(reader: LogReader) -> list[str]:
+    return [t for t in reader.topics if t.rstrip("/").endswith("/tf") or t == "tf"]
+
+
+def _first_message(reader: LogReader, topic: str) -> LogMessage | None:
+    """The first message of ``topic``, looked for in the log's first 10 ms, then its first
+    second, then all of it (a reader decompresses the chunks of the span asked for)."""
+    start = reader.start_ns
+    for stop in (start + 10_000_000, start + 1_000_000_000, None):
+        for message in reader.messages(topics=[topic], stop_ns=stop):
+            return message
+    return None
+
+
+def _log_places_ego(reader: LogReader, run: Run) -> bool:
+    """Whether the first message of the log's ``/tf`` places ``base_link`` under the frame of
+    the run's ego (so the log's ``/tf`` moves the run's ego, as in an open-loop run)."""
+    ego = run.table("ego").slice(0, 1).to_pylist() if "ego" in run.tables() else []
+    ego_frame = (str(ego[0]["frame_id"]) or "map") if ego else None
+    parents: dict[str, str] = {}
+    for topic in _tf_topics(reader):
+        message = _first_message(reader, topic)
+        if message is None:
+            continue
+        try:
+            value = decode(message, reader.deserialize).value
+        except UnsupportedMessageError:
+            return False
+        if isinstance(value, tuple):
+            parents.update(
+                (t.child_frame, t.parent_frame) for t in value if isinstance(t, Transform)
+            )
+    if BODY_FRAME not in parents:
+        return False
+    frame, seen = BODY_FRAME, set()
+    while frame in parents and frame not in seen:
+        seen.add(frame)
+        frame = parents[frame]
+        if frame == ego_frame:
+            return True
+    return ego_frame is None
+
+
+class SceneStream:
+    """A log and (optionally) a run as Foxglove channels; a context manager (closes the log).
+
+    Args:
+        reader: the log (None: the run's results only).
+        run: the run (None: the log only).
+        sensor_copies: also ``foxglove.PointCloud`` / ``foxglove.CompressedImage`` copies of
+            the log's LiDAR clouds and camera images on ``/foxglove/<topic>``.
+        log_tf: keep the log's ``/tf`` for an open-loop run when it places ``base_link`` under
+            the ego's frame (:attr:`log_tf` says whether it was kept); the run's ego transform
+            is then left out of ``/redrive/transforms``.
+    """
+
+    def __init__(
+        self,
+        *,
+        reader: LogReader | None,
+        run: Run | None,
+        sensor_copies: bool = True,
+        log_tf: bool = False,
+    ) -> None:
         self.reader = reader
         self.run = run
+        self.sensor_copies = sensor_copies
+        #: the log's ``/tf`` is passed on and places the run's ego (an open-loop run)
+        self.log_tf = (
+            log_tf
+            and reader is not None
+            and run is not None
+            and _is_open_loop(run)
+            and _log_places_ego(reader, run)
+        )
         self.channels: dict[str, ChannelSpec] = {}
+        #: log topics left out of the stream (a run's ``/tf`` unless :attr:`log_tf`)
+        self.dropped_topics: frozenset[str] = frozenset()
         self._raw: dict[str, str] = {}  # log topic → how to pass it on
         self._decoded: dict[str, tuple[DecodedKind, SensorType | None]] = {}
         self._static: tuple[Transform, ...] = ()
@@ -274,10 +356,15 @@ class SceneStream:
 
     def _add_log_channels(self, reader: LogReader) -> None:
         stores: Mapping[str, Any] = getattr(reader, "typestores", {})
+        if self.run is not None and not self.log_tf:
+            # the run's ego places base_link (/redrive/transforms): one parent
+            self.dropped_topics = frozenset(_tf_topics(reader))
         for topic, info in sorted(reader.topics.items()):
-            if self.run is not None and topic.rstrip("/").endswith("/tf"):
-                continue  # the run's ego places base_link (/redrive/transforms): one parent
-            route = route_topic(info, stores, objects=self.run is None)
+            if topic in self.dropped_topics:
+                continue
+            route = route_topic(
+                info, stores, objects=self.run is None, sensor_copies=self.sensor_copies
+            )
             self.channels.update((c.topic, c) for c in route.channels)
             if route.raw:
                 self._raw[topic] = info.encoding
@@ -330,11 +417,17 @@ class SceneStream:
                 ends.append(int(frames[-1].as_py()))
         return max(ends, default=0)
 
-    def messages(self, *, start_ns: int | None = None) -> Iterator[OutMessage]:
-        """Every message with log time ≥ ``start_ns`` (all when None), in log-time order."""
+    @property
+    def log_topics(self) -> frozenset[str]:
+        """The log topics passed on as they are (their messages' own bytes)."""
+        return frozenset(self._raw)
+
+    def messages(self, *, start_ns: int | None = None, raw: bool = True) -> Iterator[OutMessage]:
+        """Every message with log time ≥ ``start_ns`` (all when None), in log-time order;
+        without the log's own messages (:attr:`log_topics`) when ``raw`` is False."""
         parts: list[Iterator[OutMessage]] = []
-        if self.reader is not None:
-            parts.append(self._log_messages(start_ns))
+        if self.reader is not None and (raw or self._decoded):
+            parts.append(self._log_messages(start_ns, raw=raw))
         if self.run is not None:
             parts.append(self._run_messages(start_ns))
         elif self._static:
@@ -342,12 +435,13 @@ class SceneStream:
             parts.append(iter([transforms_message(self._static, t0)]))
         return heapq.merge(*parts, key=lambda m: m.log_time_ns)
 
-    def _log_messages(self, start_ns: int | None) -> Iterator[OutMessage]:
+    def _log_messages(self, start_ns: int | None, *, raw: bool) -> Iterator[OutMessage]:
         assert self.reader is not None
         reader = self.reader
-        wanted = set(self._raw) | set(self._decoded)
+        passed = set(self._raw) if raw else set()
+        wanted = passed | set(self._decoded)
         for message in reader.messages(topics=wanted, start_ns=start_ns):
-            if message.topic in self._raw:
+            if message.topic in passed:
                 yield OutMessage(message.topic, message.log_time_ns, bytes(message.raw))
             if message.topic in self._decoded:
                 out = self._decoded_message(reader, message)
@@ -364,7 +458,8 @@ class SceneStream:
 
     def _run_messages(self, start_ns: int | None) -> Iterator[OutMessage]:
         assert self.run is not None
-        for scene in run_scenes(self.run, static_transforms=self._static):
+        scenes = run_scenes(self.run, static_transforms=self._static, ego_transform=not self.log_tf)
+        for scene in scenes:
             if start_ns is not None and scene.stamp_ns < start_ns:
                 continue
             yield from scene_messages(scene)
@@ -391,9 +486,11 @@ def _is_run_dir(path: Path) -> bool:
     return path.is_dir() and (path / "manifest.json").is_file() and (path / "frames").is_dir()
 
 
-def open_scene_stream(path: str | Path) -> SceneStream:
+def open_scene_stream(
+    path: str | Path, *, sensor_copies: bool = True, log_tf: bool = False
+) -> SceneStream:
     """The stream of a run directory (its log, found as the GUI finds it, plus its results) or
-    of a log alone.
+    of a log alone; ``sensor_copies`` and ``log_tf`` as :class:`SceneStream` takes them.
 
     Raises:
         LogError: the log cannot be opened (the message names the file and what to do).
@@ -409,9 +506,14 @@ def open_scene_stream(path: str | Path) -> SceneStream:
                 path,
                 run.manifest.closed_loop.get("sensor_log") or run.manifest.log.path,
             )
-            return SceneStream(reader=None, run=run)
-        return SceneStream(reader=open_log(log), run=run)
+            return SceneStream(reader=None, run=run, sensor_copies=sensor_copies)
+        reader = open_log(log)
+        try:
+            return SceneStream(reader=reader, run=run, sensor_copies=sensor_copies, log_tf=log_tf)
+        except BaseException:
+            reader.close()
+            raise
     if not path.exists():
         msg = f"{path}: no such log or run directory; give a log file or the --out of a run"
         raise LogError(msg)
-    return SceneStream(reader=open_log(path), run=None)
+    return SceneStream(reader=open_log(path), run=None, sensor_copies=sensor_copies)

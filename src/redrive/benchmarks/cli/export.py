@@ -13,9 +13,10 @@ __all__ = ["add_export_parser"]
 _DESCRIPTION = """\
 Make the demo run once (`redrive synth urban --duration 20`, then `redrive run` of it; --run
 takes an existing run instead), then time, in this process and interleaved, `redrive export RUN
---format mcap` (the log re-written, every cloud and image converted, the run's SceneUpdates and
-MarkerArrays) against copying the log's messages with the `mcap` library alone (read + write with
-LZ4 chunks, no conversion). Reports seconds (median of --repeat), x real time (target >= 20x, issue
+--format mcap` (the log's chunks copied as they are, the run's SceneUpdates and MarkerArrays; with
+--sensor-copies also every cloud and image converted to foxglove.PointCloud / CompressedImage)
+against copying the log's messages with the `mcap` library alone (read + write with LZ4 chunks, no
+conversion). Reports seconds (median of --repeat), x real time (target >= 20x, issue
 18), the ratio export / copy in wall-clock and in CPU seconds, and the load average (the
 machine's other work slows both sides).
 """
@@ -30,6 +31,7 @@ def _run_export(args: argparse.Namespace) -> int:
             workdir=args.workdir,
             duration_s=args.duration,
             repeats=args.repeat,
+            sensor_copies=args.sensor_copies,
             progress=progress,
         )
     if args.json:
@@ -41,6 +43,7 @@ def _run_export(args: argparse.Namespace) -> int:
     console.print(
         f"[bold]log[/] {result.log}: {result.log_span_s:.1f} s, {result.log_bytes / 1e6:.0f} MB, "
         f"{result.copy_messages} messages; medians of {len(result.export_s)} passes"
+        + ("; export with --sensor-copies" if result.sensor_copies else "")
     )
     console.print(
         f"[bold]export[/] {result.export_median_s:.2f} s = {result.export_realtime:.1f}x real time "
@@ -65,7 +68,8 @@ def add_export_parser(bench_sub: Any) -> None:
         description=_DESCRIPTION,
         epilog=(
             "examples:\n  redrive bench export\n"
-            "  redrive bench export --run runs/urban --repeat 5 --json"
+            "  redrive bench export --run runs/urban --repeat 5 --json\n"
+            "  redrive bench export --run runs/urban --sensor-copies"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -87,6 +91,12 @@ def add_export_parser(bench_sub: Any) -> None:
     )
     parser.add_argument(
         "--repeat", type=int, default=3, metavar="N", help="passes of each side (default 3)"
+    )
+    parser.add_argument(
+        "--sensor-copies",
+        action="store_true",
+        help="time `redrive export --format mcap --sensor-copies` (foxglove.PointCloud and "
+        "CompressedImage copies of the sensor data)",
     )
     parser.add_argument("--json", action="store_true", help="print JSON instead of text")
     parser.set_defaults(func=_run_export)

@@ -1,0 +1,401 @@
+"""An MCAP made of a log's chunks, copied as they are, and new messages in chunks of their own.
+
+The Foxglove export of a run over an MCAP log (:mod:`.mcap_export`) does not decode the log:
+each of its chunk records — compressed bytes, CRC — and the message indexes after it are
+copied byte for byte (``os.copy_file_range``: the kernel copies, no byte passes through Python),
+and the output's chunk indexes and statistics are built from the log's summary and those
+message indexes.  The log's schema and channel records keep their ids, so the copied chunks need
+no rewrite; the export's own channels get ids the log does not use.  A chunk that must change
+(it holds a channel the export leaves out) is decompressed and its other messages are written
+again, with their log time, publish time and sequence.  The new messages (the run's scenes,
+Foxglove copies of sensor data) are written as LZ4 chunks beside the copied ones; MCAP allows
+chunks that overlap in time, and readers of the summary read messages in log-time order over
+all chunks.
+
+:class:`SpliceWriter` writes the file; :func:`read_layout` reads what a log's summary says.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import struct
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import lz4.frame
+from isal.isal_zlib import crc32
+from mcap.data_stream import ReadDataStream, RecordBuilder
+from mcap.exceptions import McapError
+from mcap.opcode import Opcode
+from mcap.reader import make_reader
+from mcap.records import (
+    Channel,
+    Chunk,
+    ChunkIndex,
+    DataEnd,
+    Footer,
+    Header,
+    McapRecord,
+    Message,
+    Schema,
+    Statistics,
+    SummaryOffset,
+)
+from mcap.stream_reader import breakup_chunk
+
+from redrive.errors import LogError
+
+__all__ = ["MAGIC", "LogLayout", "SpliceWriter", "is_mcap_file", "read_layout"]
+
+MAGIC = b"\x89MCAP0\r\n"
+_MESSAGE = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, log, publish
+_CHUNK_HEAD = struct.Struct("<BQQQQI")  # opcode, length, start, end, uncompressed size, crc
+_RECORD_HEAD = struct.Struct("<BQ")  # opcode, length
+_INDEX_HEAD = struct.Struct("<BQHI")  # opcode, length, channel, records length
+_U32 = struct.Struct("<I")
+_U64 = struct.Struct("<Q")
+_COPY_PIECE = 64 << 20
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class LogLayout:
+    """What an MCAP log's summary says: its profile, schemas and channels by id, and its chunk
+    indexes in the order of their first message."""
+
+    path: Path
+    profile: str
+    schemas: Mapping[int, Schema]
+    channels: Mapping[int, Channel]
+    chunks: tuple[ChunkIndex, ...]
+
+
+def is_mcap_file(path: Path) -> bool:
+    """Whether ``path`` is a file that starts with the MCAP magic."""
+    try:
+        with path.open("rb") as fh:
+            return fh.read(len(MAGIC)) == MAGIC
+    except OSError:
+        return False
+
+
+def read_layout(path: Path) -> LogLayout | None:
+    """The layout of the MCAP file at ``path`` from its summary; None when it has no summary
+    or no chunk index (a file cut short, or written without chunks): such a log is decoded."""
+    try:
+        with path.open("rb") as fh:
+            reader = make_reader(fh)
+            header = reader.get_header()
+            summary = reader.get_summary()
+    except (McapError, OSError, ValueError, struct.error):
+        return None
+    if summary is None or not summary.chunk_indexes:
+        return None
+    chunks = sorted(
+        summary.chunk_indexes, key=lambda c: (c.message_start_time, c.chunk_start_offset)
+    )
+    return LogLayout(
+        path=path,
+        profile=header.profile,
+        schemas=dict(summary.schemas),
+        channels=dict(summary.channels),
+        chunks=tuple(chunks),
+    )
+
+
+def _record(record: McapRecord) -> bytes:
+    builder = RecordBuilder()
+    record.write(builder)
+    data: bytes = builder.end()  # type: ignore[no-untyped-call]
+    return data
+
+
+def _index_counts(data: bytes, *, where: str) -> dict[int, int]:
+    """channel → messages, from the message index records after a chunk."""
+    counts: dict[int, int] = {}
+    at = 0
+    while at < len(data):
+        if len(data) - at < _INDEX_HEAD.size:
+            msg = f"{where}: a message index is cut short; repair the log (`redrive repair`)"
+            raise LogError(msg)
+        opcode, length, channel, records = _INDEX_HEAD.unpack_from(data, at)
+        if opcode != Opcode.MESSAGE_INDEX or records % 16 or 6 + records > length:
+            msg = f"{where}: not a message index; repair the log (`redrive repair`)"
+            raise LogError(msg)
+        counts[channel] = counts.get(channel, 0) + records // 16
+        at += _RECORD_HEAD.size + length
+    return counts
+
+
+def _copy_range(src_fd: int, dst_fd: int, offset: int, size: int, *, where: str) -> None:
+    """``size`` bytes of ``src_fd`` from ``offset`` appended at ``dst_fd``'s position."""
+    done = 0
+    try:
+        while done < size:
+            n = os.copy_file_range(src_fd, dst_fd, min(size - done, _COPY_PIECE), offset + done)
+            if n == 0:
+                break
+            done += n
+    except OSError:  # a file system or kernel without copy_file_range: copy through memory
+        pass
+    while done < size:
+        piece = os.pread(src_fd, min(size - done, _COPY_PIECE), offset + done)
+        if not piece:
+            msg = f"{where}: the file ends inside a chunk; repair the log (`redrive repair`)"
+            raise LogError(msg)
+        _write_all(dst_fd, piece)
+        done += len(piece)
+
+
+def _write_all(fd: int, data: bytes | bytearray | memoryview) -> int:
+    view = memoryview(data).cast("B")
+    total = view.nbytes
+    while view.nbytes:
+        view = view[os.write(fd, view) :]
+    return total
+
+
+class SpliceWriter:
+    """Write one MCAP to ``fd`` (positioned at 0; the caller closes it): schemas and channels
+    with the ids given, chunks copied from a log (:meth:`copy_chunk`), new messages in LZ4
+    chunks of about ``chunk_size_bytes`` (:meth:`add_message`), then the summary."""
+
+    def __init__(self, fd: int, *, chunk_size_bytes: int = 1 << 20) -> None:
+        self._fd = fd
+        self._chunk_size = max(1024, chunk_size_bytes)
+        self.position = 0
+        self._schemas: dict[int, Schema] = {}
+        self._channels: dict[int, Channel] = {}
+        self._chunk_indexes: list[ChunkIndex] = []
+        self._counts: dict[int, int] = {}
+        self._messages = 0
+        self._start_ns = 0
+        self._end_ns = 0
+        self._records = bytearray()
+        self._index: dict[int, list[int]] = {}
+        self._chunk_start_ns = 0
+        self._chunk_end_ns = 0
+        self._chunk_messages = 0
+
+    def _put(self, data: bytes | bytearray | memoryview) -> int:
+        start = self.position
+        self.position += _write_all(self._fd, data)
+        return start
+
+    def _count(self, channel_id: int, n: int, start_ns: int, end_ns: int) -> None:
+        if not n:
+            return
+        self._counts[channel_id] = self._counts.get(channel_id, 0) + n
+        if self._messages == 0:
+            self._start_ns, self._end_ns = start_ns, end_ns
+        else:
+            self._start_ns = min(self._start_ns, start_ns)
+            self._end_ns = max(self._end_ns, end_ns)
+        self._messages += n
+
+    # -- records outside chunks -----------------------------------------------------------------
+    def start(self, *, profile: str, library: str) -> None:
+        """The magic and the header record."""
+        self._put(MAGIC + _record(Header(profile=profile, library=library)))
+
+    def add_schema(self, schema: Schema) -> None:
+        """A schema record, with its own id, in the data section (before any chunk needs it)."""
+        self._schemas[schema.id] = schema
+        self._put(_record(schema))
+
+    def add_channel(self, channel: Channel) -> None:
+        """A channel record, with its own id, in the data section."""
+        self._channels[channel.id] = channel
+        self._counts.setdefault(channel.id, 0)
+        self._put(_record(channel))
+
+    # -- copied chunks ---------------------------------------------------------------------------
+    def copy_chunk(self, src_fd: int, index: ChunkIndex, *, where: str) -> int:
+        """Append the chunk of ``index`` (of the file ``src_fd``) and its message indexes as
+        they are; returns its message count.  ``where`` names the log in errors.
+
+        Raises:
+            LogError: the bytes are not what the log's summary says (repair the log)."""
+        self.end_chunk()
+        start = index.chunk_start_offset
+        head = os.pread(src_fd, _RECORD_HEAD.size, start)
+        opcode, length = _RECORD_HEAD.unpack(head) if len(head) == 9 else (0, 0)
+        if opcode != Opcode.CHUNK or _RECORD_HEAD.size + length != index.chunk_length:
+            msg = (
+                f"{where}: no chunk at offset {start} where its summary says; repair the log "
+                "(`redrive repair`)"
+            )
+            raise LogError(msg)
+        counts = _index_counts(
+            os.pread(src_fd, index.message_index_length, start + index.chunk_length),
+            where=f"{where} (chunk at offset {start})",
+        )
+        if set(counts) != set(index.message_index_offsets):
+            msg = f"{where}: the chunk at offset {start} does not match its index; repair the log"
+            raise LogError(msg)
+        new_start = self.position
+        _copy_range(
+            src_fd,
+            self._fd,
+            start,
+            index.chunk_length + index.message_index_length,
+            where=where,
+        )
+        self.position += index.chunk_length + index.message_index_length
+        shift = new_start - start
+        self._chunk_indexes.append(
+            ChunkIndex(
+                message_start_time=index.message_start_time,
+                message_end_time=index.message_end_time,
+                chunk_start_offset=new_start,
+                chunk_length=index.chunk_length,
+                message_index_offsets={
+                    c: at + shift for c, at in index.message_index_offsets.items()
+                },
+                message_index_length=index.message_index_length,
+                compression=index.compression,
+                compressed_size=index.compressed_size,
+                uncompressed_size=index.uncompressed_size,
+            )
+        )
+        for channel_id, n in counts.items():
+            self._count(channel_id, n, index.message_start_time, index.message_end_time)
+        return sum(counts.values())
+
+    @staticmethod
+    def chunk_messages(src_fd: int, index: ChunkIndex, *, where: str) -> list[Message]:
+        """The messages of the chunk of ``index`` (decompressed), in their order in it."""
+        data = os.pread(src_fd, index.chunk_length, index.chunk_start_offset)
+        if len(data) != index.chunk_length or data[0] != Opcode.CHUNK:
+            msg = f"{where}: no chunk at offset {index.chunk_start_offset}; repair the log"
+            raise LogError(msg)
+        try:
+            chunk = Chunk.read(ReadDataStream(io.BytesIO(data[_RECORD_HEAD.size :])))
+            records = breakup_chunk(chunk, validate_crc=True)
+        except (McapError, ValueError, RuntimeError) as err:
+            msg = f"{where}: the chunk at offset {index.chunk_start_offset}: {err}"
+            raise LogError(msg) from err
+        return [r for r in records if isinstance(r, Message)]
+
+    # -- new messages ----------------------------------------------------------------------------
+    def add_message(
+        self,
+        channel_id: int,
+        *,
+        log_time: int,
+        publish_time: int,
+        sequence: int,
+        data: bytes | bytearray | memoryview,
+    ) -> None:
+        """One message into the open chunk (finished once it reaches the chunk size)."""
+        size = len(data) if isinstance(data, bytes | bytearray) else memoryview(data).nbytes
+        if self._chunk_messages == 0:
+            self._chunk_start_ns = self._chunk_end_ns = log_time
+        else:
+            self._chunk_start_ns = min(self._chunk_start_ns, log_time)
+            self._chunk_end_ns = max(self._chunk_end_ns, log_time)
+        self._chunk_messages += 1
+        self._index.setdefault(channel_id, []).extend((log_time, len(self._records)))
+        self._count(channel_id, 1, log_time, log_time)
+        self._records += _MESSAGE.pack(
+            Opcode.MESSAGE,
+            22 + size,
+            channel_id,
+            sequence & 0xFFFFFFFF,
+            log_time,
+            publish_time,
+        )
+        self._records += data
+        if len(self._records) >= self._chunk_size:
+            self.end_chunk()
+
+    def end_chunk(self) -> None:
+        """Write the open chunk (LZ4) and its message indexes, if it holds a message."""
+        if not self._chunk_messages:
+            return
+        records = self._records
+        body = lz4.frame.compress(bytes(records))
+        head = (
+            _CHUNK_HEAD.pack(
+                Opcode.CHUNK,
+                8 + 8 + 8 + 4 + 4 + 3 + 8 + len(body),
+                self._chunk_start_ns,
+                self._chunk_end_ns,
+                len(records),
+                crc32(records),
+            )
+            + _U32.pack(3)
+            + b"lz4"
+            + _U64.pack(len(body))
+        )
+        relative: dict[int, int] = {}
+        indexes = bytearray()
+        for channel_id, entries in self._index.items():
+            relative[channel_id] = len(indexes)
+            pairs = len(entries) // 2
+            indexes += _INDEX_HEAD.pack(
+                Opcode.MESSAGE_INDEX, 6 + 16 * pairs, channel_id, 16 * pairs
+            )
+            indexes += struct.pack(f"<{len(entries)}Q", *entries)
+        chunk_start = self._put(head + body + indexes)
+        index_start = chunk_start + len(head) + len(body)
+        self._chunk_indexes.append(
+            ChunkIndex(
+                message_start_time=self._chunk_start_ns,
+                message_end_time=self._chunk_end_ns,
+                chunk_start_offset=chunk_start,
+                chunk_length=len(head) + len(body),
+                message_index_offsets={c: index_start + at for c, at in relative.items()},
+                message_index_length=len(indexes),
+                compression="lz4",
+                compressed_size=len(body),
+                uncompressed_size=len(records),
+            )
+        )
+        self._records = bytearray()
+        self._index = {}
+        self._chunk_messages = 0
+
+    # -- the end ---------------------------------------------------------------------------------
+    def finish(self) -> None:
+        """The open chunk, the data end, the summary (schemas, channels, statistics, chunk
+        indexes, summary offsets) and the footer with the summary's CRC."""
+        self.end_chunk()
+        self._put(_record(DataEnd(data_section_crc=0)))
+        summary_start = self.position
+        summary = RecordBuilder()
+        offsets: list[SummaryOffset] = []
+
+        def group(opcode: Opcode, records: Sequence[McapRecord]) -> None:
+            start = summary.count
+            for record in records:
+                record.write(summary)
+            if records:
+                offsets.append(SummaryOffset(opcode, summary_start + start, summary.count - start))
+
+        statistics = Statistics(
+            message_count=self._messages,
+            schema_count=len(self._schemas),
+            channel_count=len(self._channels),
+            attachment_count=0,
+            metadata_count=0,
+            chunk_count=len(self._chunk_indexes),
+            message_start_time=self._start_ns,
+            message_end_time=self._end_ns,
+            channel_message_counts=dict(self._counts),
+        )
+        group(Opcode.SCHEMA, list(self._schemas.values()))
+        group(Opcode.CHANNEL, list(self._channels.values()))
+        group(Opcode.STATISTICS, [statistics])
+        group(Opcode.CHUNK_INDEX, self._chunk_indexes)
+        offset_start = summary_start + summary.count
+        for offset in offsets:
+            offset.write(summary)
+        data: bytes = summary.end()  # type: ignore[no-untyped-call]
+        footer_head = struct.pack("<BQQQ", Opcode.FOOTER, 20, summary_start, offset_start)
+        crc = crc32(footer_head, crc32(data))
+        footer = Footer(
+            summary_start=summary_start, summary_offset_start=offset_start, summary_crc=crc
+        )
+        self._put(data + _record(footer) + MAGIC)
