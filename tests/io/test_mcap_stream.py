@@ -146,8 +146,8 @@ def test_chunks_the_compressor_cannot_take_are_written_uncompressed(
     gate = threading.Event()
     calls: list[int] = []
 
-    def held(compression: StreamCompression, *, live: bool) -> object:
-        compress = real(compression, live=live)
+    def held(compression: StreamCompression, *, live: bool, zstd_level: int | None) -> object:
+        compress = real(compression, live=live, zstd_level=zstd_level)
 
         def slow(data: bytes) -> bytes:
             calls.append(len(data))
