@@ -342,6 +342,7 @@ class CameraModel:
             out.append((int(i), z_min, (u0, v0, u1, v1)))
         return out
 
+
 class _Buffers(NamedTuple):
     """The frame being drawn (H × W): colour (sky) float32 (H, W, 3), depth float32, the
     object index or −1, what each pixel shows (:data:`~redrive.sim.camera_kernels.KIND_SKY`,
