@@ -148,8 +148,8 @@ def _record_behind(
     gate = threading.Event()
     calls: list[int] = []
 
-    def held(compression: StreamCompression, *, live: bool) -> object:
-        compress = real(compression, live=live)
+    def held(compression: StreamCompression, *, live: bool, zstd_level: int | None) -> object:
+        compress = real(compression, live=live, zstd_level=zstd_level)
 
         def slow(data: bytes) -> bytes:
             calls.append(len(data))

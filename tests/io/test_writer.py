@@ -360,3 +360,23 @@ def test_ground_truth_round_trip_with_velocity_points_and_visibility(tmp_path: P
     assert list(msg.num_lidar_points) == [312, -1]
     assert list(msg.visible) == [1, 0]
     assert msg.velocities[0].x == 7.0
+
+
+def test_zstd_level_changes_the_bytes_not_what_reads_back(tmp_path: Path) -> None:
+    """``zstd_level`` reaches the compressor (level 1 and 19 give different chunks) and any
+    level reads back the same values (closed-loop ``sensors.mcap`` is written at level 1)."""
+    rng = np.random.default_rng(3)
+    image = Image(
+        pixels=np.repeat(rng.integers(0, 8, size=(64, 256, 1), dtype=np.uint8), 3, axis=2),
+        encoding="rgb8",
+    )
+    sizes = {}
+    for level in (1, 19):
+        path = tmp_path / f"level{level}.mcap"
+        with McapWriter(path, zstd_level=level) as out:
+            for i in range(4):
+                out.write("/image", 1_000 + i, image, frame_id="camera")
+        sizes[level] = path.stat().st_size
+        got = _read_back(path)
+        np.testing.assert_array_equal(got["/image"].value.pixels, image.pixels)  # type: ignore[union-attr]
+    assert sizes[1] != sizes[19]

@@ -97,7 +97,9 @@ class _ChunkJob:
     defines: bool
 
 
-def _compressor(compression: StreamCompression, *, live: bool) -> Callable[[bytes], bytes]:
+def _compressor(
+    compression: StreamCompression, *, live: bool, zstd_level: int | None = None
+) -> Callable[[bytes], bytes]:
     if compression == "lz4":
         import lz4.frame
 
@@ -107,7 +109,8 @@ def _compressor(compression: StreamCompression, *, live: bool) -> Callable[[byte
 
         # live: level 1, ~2x the speed of the default level 3 at a few % larger chunks (a
         # recording must keep up with its sensors)
-        return zstandard.ZstdCompressor(level=1 if live else 3).compress
+        level = zstd_level if zstd_level is not None else (1 if live else 3)
+        return zstandard.ZstdCompressor(level=level).compress
     msg = f"compression must be zstd, lz4 or none, got {compression!r}"
     raise ValueError(msg)
 
@@ -145,6 +148,7 @@ class McapStream:
         live: a live recording: zstd at level 1 (else 3), and when ``queue_chunks`` wait for the
             compression thread the next chunk is written uncompressed rather than waiting
             (:attr:`uncompressed_chunks`); otherwise :meth:`add_message` waits for the thread.
+        zstd_level: the zstd level (default: 1 live, else 3); any zstd reader reads any level.
 
     Raises:
         ValueError: an unknown compression.
@@ -158,10 +162,15 @@ class McapStream:
         chunk_size_bytes: int = 1 << 20,
         queue_chunks: int = 8,
         live: bool = False,
+        zstd_level: int | None = None,
     ) -> None:
         self._fd = fd
         self.compression: StreamCompression = compression
-        self._compress = None if compression == "none" else _compressor(compression, live=live)
+        self._compress = (
+            None
+            if compression == "none"
+            else _compressor(compression, live=live, zstd_level=zstd_level)
+        )
         self._live = live
         self._chunk_size = max(1024, chunk_size_bytes)
         self._buffer = bytearray(2 * self._chunk_size + 4096)

@@ -1,6 +1,7 @@
 """A simulated pinhole camera: sky, textured ground and shaded boxes, with a depth buffer.
 
-Rendering is analytic and vectorised (no GPU, no Embree): every pixel's ray is intersected with
+Rendering is analytic, in compiled loops over the pixels (:mod:`redrive.sim.camera_kernels`; no
+GPU, no Embree): every pixel's ray is intersected with
 the ground plane z = 0 (colour looked up in the :class:`~redrive.sim.scene.GroundMap`) or, above
 the horizon, coloured by a sky gradient; then every box is ray-traced (slab test) over the pixels
 of its projected 2D bounds only, and kept where it is nearer than what the depth buffer holds —
@@ -27,9 +28,10 @@ import numpy.typing as npt
 
 from redrive.errors import SimulationError
 from redrive.geometry import compose, invert
+from redrive.sim import camera_kernels as kernels
 from redrive.sim.mesh import box_vertices
 from redrive.sim.rig import CameraIntrinsics, SensorSpec
-from redrive.sim.scene import GroundLabel, GroundMap, Scene
+from redrive.sim.scene import GroundLabel, Scene
 from redrive.types import Image, SensorType
 from redrive.types._arrays import frozen_array
 
@@ -48,8 +50,6 @@ GROUND_COLORS: Mapping[GroundLabel, tuple[int, int, int]] = MappingProxyType(
 _GROUND_LUT = np.zeros((256, 3), dtype=np.float32)
 for _label, _rgb in GROUND_COLORS.items():
     _GROUND_LUT[int(_label)] = _rgb
-
-_GROUND_LUT_BY_CHANNEL = tuple(np.ascontiguousarray(_GROUND_LUT[:, ch]) for ch in range(3))
 
 _SKY_HORIZON = np.array([205.0, 222.0, 236.0], dtype=np.float32)
 _SKY_ZENITH = np.array([78.0, 130.0, 205.0], dtype=np.float32)
@@ -129,7 +129,7 @@ class CameraModel:
         self.rays = rays
         self._x = u.astype(np.float32)
         self._y = v.astype(np.float32)
-        self._ray_len = np.linalg.norm(rays, axis=2)
+        self._ray_len = np.ascontiguousarray(np.linalg.norm(rays, axis=2), dtype=np.float32)
 
     @classmethod
     def from_spec(cls, spec: SensorSpec) -> CameraModel:
@@ -152,19 +152,26 @@ class CameraModel:
     def render(self, scene: Scene, *, map_from_base: npt.ArrayLike | None = None) -> CameraFrame:
         """Render ``scene`` from the ego pose ``map_from_base`` (default: the scene's).
 
-        The image is drawn in bands of rows, on :attr:`workers` threads when more than one
-        (numpy releases the GIL in its loops); every pixel is computed by the same arithmetic
-        whichever band holds it, so the image does not depend on the number of threads.
+        The image is drawn by compiled loops (:mod:`redrive.sim.camera_kernels`) in bands of
+        rows, on :attr:`workers` threads when more than one (the loops release the GIL); every
+        pixel is computed by the same arithmetic whichever band holds it, so the image does not
+        depend on the number of threads.
         """
         pose = scene.map_from_base if map_from_base is None else np.asarray(map_from_base)
         map_from_opt = self.map_from_optical(pose)
         k = self.intrinsics
         h, w = k.height, k.width
-        color = np.empty((h, w, 3), dtype=np.float32)
-        depth = np.full((h, w), np.inf, dtype=np.float32)
-        owner = np.full((h, w), -1, dtype=np.int32)
-        bufs = _Buffers(color=color, depth=depth, owner=owner)
-        boxes = self._box_rects(scene, map_from_opt)
+        bufs = _Buffers(
+            color=np.empty((h, w, 3), dtype=np.float32),
+            depth=np.empty((h, w), dtype=np.float32),
+            owner=np.empty((h, w), dtype=np.int32),
+            kind=np.empty((h, w), dtype=np.uint8),
+            label=np.empty((h, w), dtype=np.uint8),
+            face=np.empty((h, w), dtype=np.uint8),
+            fog=np.empty((h, w), dtype=np.float32),
+            pixels=np.empty((h, w, 3), dtype=np.uint8),
+        )
+        boxes = self._box_table(scene, map_from_opt)
         bands = _bands(h, self.workers)
         if len(bands) == 1:
             self._render_rows(scene, map_from_opt, boxes, rows=bands[0], bufs=bufs)
@@ -176,17 +183,15 @@ class CameraModel:
             ]
             for future in futures:
                 future.result()
-        np.add(color, 0.5, out=color)
-        np.clip(color, 0, 255, out=color)
-        pixels = color.astype(np.uint8)
+        owner = bufs.owner
         ids = scene.objects.object_ids
         counts = np.bincount(owner[owner >= 0], minlength=len(ids))
         per_object = MappingProxyType({int(i): int(c) for i, c in zip(ids, counts, strict=True)})
         return CameraFrame(
             stamp_ns=scene.stamp_ns,
             frame_id=self.frame_id,
-            image=Image(pixels=pixels, encoding="rgb8"),
-            depth_m=depth,
+            image=Image(pixels=bufs.pixels, encoding="rgb8"),
+            depth_m=bufs.depth,
             pixels_per_object=per_object,
         )
 
@@ -199,61 +204,109 @@ class CameraModel:
         self,
         scene: Scene,
         map_from_opt: npt.NDArray[np.float64],
-        boxes: list[tuple[int, float, tuple[int, int, int, int]]],
+        boxes: _BoxTable,
         *,
         rows: tuple[int, int],
         bufs: _Buffers,
     ) -> None:
-        """Sky, ground, then the boxes, for the image rows ``rows`` = [r0, r1)."""
+        """Sky and ground, the boxes, the haze, the pixels, for the image rows [r0, r1)."""
         r0, r1 = rows
-        w = self.intrinsics.width
-        n = (r1 - r0) * w
-        rot = map_from_opt[:3, :3].astype(np.float32)
-        cam = map_from_opt[:3, 3]
-        # map-frame rays (optical z = 1) per component, from the pixel grid: R @ (x, y, 1)
-        x, y = self._x[None, :], self._y[r0:r1, None]
-        dz = (rot[2, 0] * x + rot[2, 1] * y + rot[2, 2]).reshape(-1)
-        ray_len = self._ray_len[r0:r1].reshape(-1)
-        color = bufs.color[r0:r1].reshape(n, 3)
-        depth = bufs.depth[r0:r1].reshape(n)
-        ground = (dz < -1e-6) if cam[2] > 0 else np.zeros(n, dtype=bool)
-        # sky: gradient by elevation
-        sky = _selection(~ground)
-        elev = dz[sky] / ray_len[sky]
-        np.maximum(elev, 0.0, out=elev)
-        np.minimum(elev, 1.0, out=elev)
-        np.sqrt(elev, out=elev)
-        sky_color = color[sky]  # a view when the sky is one run of pixels
-        for ch in range(3):  # one channel at a time: no (N, 3) temporaries
-            np.multiply(elev, _SKY_SPAN[ch], out=sky_color[:, ch])
-            sky_color[:, ch] += _SKY_HORIZON[ch]
-        if not isinstance(sky, slice):
-            color[sky] = sky_color
-        # ground: ray / plane z = 0, label colour, haze with distance
-        g = _selection(ground)
-        if np.any(ground):
-            dx = (rot[0, 0] * x + rot[0, 1] * y + rot[0, 2]).reshape(-1)
-            dy = (rot[1, 0] * x + rot[1, 1] * y + rot[1, 2]).reshape(-1)
-            t = (-cam[2] / dz[g]).astype(np.float32)
-            labels = _ground_labels(scene.ground, cam[0] + dx[g] * t, cam[1] + dy[g] * t)
-            fog = np.exp(t * ray_len[g] * np.float32(-1.0 / self.fog_distance_m))
-            haze = np.float32(1.0) - fog
-            ground_color = color[g]
-            for ch in range(3):  # albedo · fog + horizon · (1 − fog), a channel at a time
-                np.multiply(
-                    np.take(_GROUND_LUT_BY_CHANNEL[ch], labels), fog, out=ground_color[:, ch]
-                )
-                ground_color[:, ch] += _SKY_HORIZON[ch] * haze
-            if not isinstance(g, slice):
-                color[g] = ground_color
-            depth[g] = t
-        for i, z_min, (u0, box_v0, u1, box_v1) in boxes:
-            v0, v1 = max(box_v0, r0), min(box_v1, r1)
-            if v0 >= v1:
-                continue
-            if not np.any(bufs.depth[v0:v1, u0:u1] > z_min):
-                continue  # everything in the rectangle is nearer than the box can be
-            self._draw_box(scene, i, map_from_opt=map_from_opt, rect=(u0, v0, u1, v1), bufs=bufs)
+        ground = scene.ground
+        rot = np.ascontiguousarray(map_from_opt[:3, :3], dtype=np.float32)
+        cam = np.ascontiguousarray(map_from_opt[:3, 3], dtype=np.float64)
+        kernels.draw_ground_and_sky(
+            r0,
+            r1,
+            self._x,
+            self._y,
+            rot,
+            cam,
+            self._ray_len,
+            ground.labels,
+            ground.origin_xy,
+            float(ground.resolution_m),
+            int(GroundLabel.GRASS),
+            np.float32(-1.0 / self.fog_distance_m),
+            _SKY_HORIZON,
+            _SKY_SPAN,
+            bufs.color,
+            bufs.depth,
+            bufs.fog,
+            bufs.kind,
+            bufs.label,
+            bufs.owner,
+        )
+        if boxes.rects.shape[0]:
+            kernels.draw_boxes(
+                r0,
+                r1,
+                self._x,
+                self._y,
+                boxes.rects,
+                boxes.z_min,
+                boxes.r_local,
+                boxes.slab_lo,
+                boxes.slab_hi,
+                np.float32(_NEAR_M),
+                self._ray_len,
+                np.float32(self.fog_distance_m),
+                bufs.depth,
+                bufs.owner,
+                bufs.face,
+                bufs.kind,
+                bufs.fog,
+            )
+        # numpy's float32 exp, as the haze has always been computed (numba's rounds otherwise)
+        np.exp(bufs.fog[r0:r1], out=bufs.fog[r0:r1])
+        kernels.shade(
+            r0,
+            r1,
+            bufs.kind,
+            bufs.fog,
+            bufs.label,
+            _GROUND_LUT,
+            bufs.owner,
+            bufs.face,
+            boxes.rgb,
+            _SKY_HORIZON,
+            bufs.color,
+            bufs.pixels,
+        )
+
+    def _box_table(self, scene: Scene, map_from_opt: npt.NDArray[np.float64]) -> _BoxTable:
+        """What the box kernel needs of the boxes to draw (nearest first, :meth:`_box_rects`)
+        and every box's colour per face (albedo × Lambert + ambient shade, clipped)."""
+        objs = scene.objects
+        rects = self._box_rects(scene, map_from_opt)
+        n = len(rects)
+        table = _BoxTable(
+            rects=np.empty((n, 5), dtype=np.int64),
+            z_min=np.empty(n, dtype=np.float32),
+            r_local=np.empty((n, 3, 3), dtype=np.float32),
+            slab_lo=np.empty((n, 3), dtype=np.float32),
+            slab_hi=np.empty((n, 3), dtype=np.float32),
+            rgb=np.zeros((len(objs), 6, 3), dtype=np.float32),
+        )
+        rot, origin = map_from_opt[:3, :3], map_from_opt[:3, 3]
+        for b, (i, z_min, (u0, v0, u1, v1)) in enumerate(rects):
+            yaw = float(objs.yaws_rad[i])
+            c, s = math.cos(yaw), math.sin(yaw)
+            box_from_map = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+            o_local = box_from_map @ (origin - objs.centers[i])
+            half = 0.5 * objs.sizes[i]
+            table.rects[b] = (i, u0, v0, u1, v1)
+            table.z_min[b] = z_min
+            table.r_local[b] = box_from_map @ rot  # box frame from optical
+            table.slab_lo[b] = -half - o_local
+            table.slab_hi[b] = half - o_local
+            # the faces: +x, +y, +z, −x, −y, −z of the box (the normal facing the camera)
+            normals = np.concatenate([box_from_map, -box_from_map])
+            lambert = np.clip(normals @ self.sun, 0.0, 1.0)
+            ambient = 0.35 + 0.15 * normals[:, 2]  # the sky lights the tops a little more
+            shade = (ambient + 0.65 * lambert).astype(np.float32)
+            albedo = objs.colors[i].astype(np.float32)
+            table.rgb[i] = np.clip(albedo * shade[:, None], 0.0, 255.0)
+        return table
 
     def _box_rects(
         self, scene: Scene, map_from_opt: npt.NDArray[np.float64]
@@ -289,77 +342,34 @@ class CameraModel:
             out.append((int(i), z_min, (u0, v0, u1, v1)))
         return out
 
-    def _draw_box(
-        self,
-        scene: Scene,
-        i: int,
-        *,
-        map_from_opt: npt.NDArray[np.float64],
-        rect: tuple[int, int, int, int],
-        bufs: _Buffers,
-    ) -> None:
-        """Slab-test the rays of ``rect`` against box ``i``; keep the hits nearer than ``depth``."""
-        objs = scene.objects
-        k = self.intrinsics
-        u0, v0, u1, v1 = rect
-        yaw = float(objs.yaws_rad[i])
-        c, s = math.cos(yaw), math.sin(yaw)
-        box_from_map = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-        r_local = box_from_map @ map_from_opt[:3, :3]  # box frame from optical
-        o_local = box_from_map @ (map_from_opt[:3, 3] - objs.centers[i])
-        half = 0.5 * objs.sizes[i]
-        x = ((np.arange(u0, u1) - k.cx) / k.fx).astype(np.float32)[None, :]
-        y = ((np.arange(v0, v1) - k.cy) / k.fy).astype(np.float32)[:, None]
-        near_axis = []
-        far_axis = []
-        inverses = []  # 1 / the ray component along each box axis: its sign picks the face
-        for a in range(3):
-            r = r_local[a].astype(np.float32)
-            inv = r[0] * x + r[1] * y  # (h, w) ray component along box axis a ...
-            inv += r[2]
-            inv[inv == 0.0] = np.float32(1e-12)
-            np.divide(np.float32(1.0), inv, out=inv)  # ... inverted in place (same sign)
-            t1 = np.float32(-half[a] - o_local[a]) * inv
-            t2 = np.float32(half[a] - o_local[a]) * inv
-            near_axis.append(np.minimum(t1, t2))
-            far_axis.append(np.maximum(t1, t2, out=t1))
-            inverses.append(inv)
-        tmin = np.maximum(near_axis[0], near_axis[1])
-        np.maximum(tmin, near_axis[2], out=tmin)
-        tmax = np.minimum(far_axis[0], far_axis[1], out=far_axis[0])
-        np.minimum(tmax, far_axis[2], out=tmax)
-        region = bufs.depth[v0:v1, u0:u1]
-        hit = tmax >= tmin
-        hit &= tmin > _NEAR_M
-        hit &= tmin < region
-        if not hit.any():
-            return
-        t = tmin[hit]
-        # which slab was entered last = the face hit; its normal faces the camera
-        axis = np.zeros(t.shape[0], dtype=np.int64)
-        axis[near_axis[1][hit] == t] = 1
-        axis[near_axis[2][hit] == t] = 2
-        d_axis = np.choose(axis, [inv[hit] for inv in inverses])
-        face_normals = np.concatenate([box_from_map, -box_from_map])  # rows: +x, +y, +z, -x, ...
-        face = np.where(d_axis > 0, axis + 3, axis)
-        normals = face_normals[face]
-        lambert = np.clip(normals @ self.sun, 0.0, 1.0)
-        ambient = 0.35 + 0.15 * normals[:, 2]  # the sky lights the tops a little more
-        shade = (ambient + 0.65 * lambert).astype(np.float32)
-        fog = np.exp(-(t * self._ray_len[v0:v1, u0:u1][hit]) / self.fog_distance_m)[:, None]
-        albedo = objs.colors[i].astype(np.float32)
-        rgb = np.clip(albedo * shade[:, None], 0.0, 255.0) * fog + _SKY_HORIZON * (1.0 - fog)
-        bufs.color[v0:v1, u0:u1][hit] = rgb
-        region[hit] = t
-        bufs.owner[v0:v1, u0:u1][hit] = i
-
 
 class _Buffers(NamedTuple):
-    """The frame being drawn: colour (H, W, 3) float32, depth (H, W) float32, owner (H, W)."""
+    """The frame being drawn (H × W): colour (sky) float32 (H, W, 3), depth float32, the
+    object index or −1, what each pixel shows (:data:`~redrive.sim.camera_kernels.KIND_SKY`,
+    …), the ground label, the box face, the fog (its argument until ``exp``), the pixels."""
 
     color: npt.NDArray[np.float32]
     depth: npt.NDArray[np.float32]
     owner: npt.NDArray[np.int32]
+    kind: npt.NDArray[np.uint8]
+    label: npt.NDArray[np.uint8]
+    face: npt.NDArray[np.uint8]
+    fog: npt.NDArray[np.float32]
+    pixels: npt.NDArray[np.uint8]
+
+
+class _BoxTable(NamedTuple):
+    """The boxes to draw, nearest first (B of them): (B, 5) int64 object index and pixel
+    rectangle u0, v0, u1, v1; (B,) float32 nearest depth; (B, 3, 3) float32 box frame from the
+    optical frame; (B, 3) float32 slab bounds relative to the camera; and (N, 6, 3) float32
+    colour per object and face."""
+
+    rects: npt.NDArray[np.int64]
+    z_min: npt.NDArray[np.float32]
+    r_local: npt.NDArray[np.float32]
+    slab_lo: npt.NDArray[np.float32]
+    slab_hi: npt.NDArray[np.float32]
+    rgb: npt.NDArray[np.float32]
 
 
 def _bands(height: int, workers: int) -> list[tuple[int, int]]:
@@ -368,31 +378,6 @@ def _bands(height: int, workers: int) -> list[tuple[int, int]]:
     count = 1 if workers <= 1 else min(2 * workers, height)
     edges = [round(height * b / count) for b in range(count + 1)]
     return [(edges[b], edges[b + 1]) for b in range(count) if edges[b] < edges[b + 1]]
-
-
-def _selection(mask: npt.NDArray[np.bool_]) -> slice | npt.NDArray[np.intp]:
-    """The indices where ``mask`` holds: a slice when they are one run (the ground and the sky
-    of an upright camera are), which reads and writes without gathering."""
-    idx = np.flatnonzero(mask)
-    if idx.size == 0:
-        return slice(0, 0)
-    first, last = int(idx[0]), int(idx[-1])
-    if last - first + 1 == idx.size:
-        return slice(first, last + 1)
-    return idx
-
-
-def _ground_labels(
-    ground: GroundMap, x: npt.NDArray[np.float64], y: npt.NDArray[np.float64]
-) -> npt.NDArray[np.uint8]:
-    """:meth:`GroundMap.label_at` (same arithmetic) for points given as two 1-D arrays."""
-    h, w = ground.labels.shape
-    col = np.floor((x - ground.origin_xy[0]) / ground.resolution_m).astype(np.int64)
-    row = np.floor((y - ground.origin_xy[1]) / ground.resolution_m).astype(np.int64)
-    inside = (col >= 0) & (col < w) & (row >= 0) & (row < h)
-    labels = np.take(ground.labels.reshape(-1), np.where(inside, row * w + col, 0))
-    out: npt.NDArray[np.uint8] = np.where(inside, labels, np.uint8(GroundLabel.GRASS))
-    return out
 
 
 _EDGES = np.array(

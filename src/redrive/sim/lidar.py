@@ -13,7 +13,9 @@ is intersected analytically.
 
 Per point: Gaussian range noise, dropout, intensity = 255 · reflectivity · cos(incidence)
 (objects' ``reflectivity``; the ground's from its :class:`~redrive.sim.scene.GroundLabel`),
-``ring`` (uint16, lowest beam 0) and ``t_offset_ns`` (uint32 from the sweep start).
+``ring`` (uint16, lowest beam 0) and ``t_offset_ns`` (uint32 from the sweep start).  The rays
+are cast by Embree; the kept returns are assembled in one compiled loop
+(:mod:`redrive.sim.lidar_kernels`).
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ import numpy as np
 import numpy.typing as npt
 
 from redrive.errors import SimulationError
+from redrive.sim import lidar_kernels
 from redrive.sim.lidar_presets import LidarPreset, lidar_preset
 from redrive.sim.mesh import BoxMesh
 from redrive.sim.rig import SensorSpec
@@ -323,41 +326,52 @@ class LidarModel:
         r = dist[idx]
         if self.range_std_m > 0:
             r = r + rng.standard_normal(idx.size, dtype=np.float32) * np.float32(self.range_std_m)
+        n_sel = sel.size
+        where_in_sel = np.empty(dz.size if n_sel else 0, dtype=np.int64)
+        if n_sel:  # where each ray sits in ``sel`` (its Embree normal)
+            where_in_sel[sel] = np.arange(n_sel)
+            normals = np.ascontiguousarray(normal_sel, dtype=np.float32)
+        else:
+            normals = np.zeros((0, 3), dtype=np.float32)
         xyz = np.empty((idx.size, 3), dtype=np.float32)
-        for axis in range(3):
-            np.multiply(np.take(self._dirs_flat[axis], idx), r, out=xyz[:, axis])
-        dxf, dyf, dzf = dx.reshape(-1), dy.reshape(-1), dz.reshape(-1)
-        # intensity: reflectivity × |cos(incidence)|
-        refl = np.empty(idx.size, dtype=np.float32)
-        cos_i = np.empty(idx.size, dtype=np.float32)
-        kb = np.take(hit_box, idx)
-        ib = idx[kb]
-        bi = np.take(box, ib)
-        refl[kb] = np.take(scene.objects.reflectivity, bi)
-        if ib.size:
-            # normals of the box hits: where each kept box point sits in ``sel``
-            where_in_sel = np.empty(dz.size, dtype=np.int64)
-            where_in_sel[sel] = np.arange(sel.size)
-            ng = normal_sel[np.take(where_in_sel, ib)].astype(np.float32)
-            nx, ny, nz = ng[:, 0], ng[:, 1], ng[:, 2]
-            dot = nx * np.take(dxf, ib) + ny * np.take(dyf, ib) + nz * np.take(dzf, ib)
-            norm = np.sqrt(nx * nx + ny * ny + nz * nz)
-            cos_i[kb] = np.abs(dot) / np.maximum(norm, np.float32(1e-12))
-        kg = ~kb
-        gi = idx[kg]
-        col = gi // p.num_lasers
-        dist_g = np.take(dist, gi)
-        gx = np.take(pos[:, 0], col) + np.take(dxf, gi) * dist_g
-        gy = np.take(pos[:, 1], col) + np.take(dyf, gi) * dist_g
-        refl[kg] = _GROUND_LUT[_ground_labels(scene.ground, gx, gy)]
-        cos_i[kg] = np.abs(np.take(dzf, gi))
-        intensity = np.minimum(np.float32(255.0) * refl * cos_i, np.float32(255.0))
-        ring = np.take(self._ring_flat, idx)
-        t_off = np.take(self._t_off_flat, idx)
+        intensity = np.empty(idx.size, dtype=np.float32)
+        ring = np.empty(idx.size, dtype=np.uint16)
+        t_off = np.empty(idx.size, dtype=np.uint32)
+        point_ids = np.empty(idx.size, dtype=np.int64)
         ids_all = scene.objects.object_ids
-        point_ids = np.full(idx.size, -1, dtype=np.int64)
-        point_ids[kb] = np.take(ids_all, bi)
-        counts = np.bincount(bi, minlength=len(ids_all))
+        counts = np.zeros(len(ids_all), dtype=np.int64)
+        ground = scene.ground
+        lidar_kernels.returns(
+            idx,
+            np.ascontiguousarray(r, dtype=np.float32),
+            p.num_lasers,
+            self._dirs_flat[0],
+            self._dirs_flat[1],
+            self._dirs_flat[2],
+            box,
+            dist,
+            np.ascontiguousarray(dx.reshape(-1)),
+            np.ascontiguousarray(dy.reshape(-1)),
+            np.ascontiguousarray(dz.reshape(-1)),
+            where_in_sel,
+            normals,
+            scene.objects.reflectivity,
+            ids_all,
+            np.ascontiguousarray(pos, dtype=np.float64),
+            ground.labels,
+            ground.origin_xy,
+            1.0 / ground.resolution_m,
+            int(GroundLabel.GRASS),
+            _GROUND_LUT,
+            self._ring_flat,
+            self._t_off_flat,
+            xyz,
+            intensity,
+            ring,
+            t_off,
+            point_ids,
+            counts,
+        )
         hits = MappingProxyType({int(i): int(c) for i, c in zip(ids_all, counts, strict=True)})
         cloud = PointCloud(
             xyz=xyz, channels={"intensity": intensity, "ring": ring, "t_offset_ns": t_off}
