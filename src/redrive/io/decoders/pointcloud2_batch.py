@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
+from redrive.io._byte_rows import byte_rows
 from redrive.io.base import MessageBatch
 from redrive.io.decoders._common import buffer_is_immutable
 from redrive.io.decoders.base import Decoded
@@ -95,12 +96,11 @@ def decode_batch(
         or data_size < n * step
     ):
         return out
-    u8 = np.frombuffer(buf, dtype=np.uint8)
     # Everything from the frame id to the point data must be the first message's.
-    same = u8[starts[:, None] + np.arange(_SAME_FROM, data_offset, dtype=np.int64)]
+    same = byte_rows(buf, starts + _SAME_FROM, data_offset - _SAME_FROM)
     if not (same == same[0]).all():
         return out
-    stamp = u8[(starts + 4)[:, None] + np.arange(8, dtype=np.int64)].view(_U32)
+    stamp = byte_rows(buf, starts + 4, 8).view(_U32)
     stamps = stamp[:, 0].astype(np.int64) * 1_000_000_000 + stamp[:, 1]
     gaps = np.diff(starts)
     if count == 1 or (int(gaps[0]) >= size and (gaps == gaps[0]).all()):
