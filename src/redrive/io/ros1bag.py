@@ -22,6 +22,7 @@ import contextlib
 import logging
 import mmap
 from collections.abc import Collection, Iterator
+from itertools import repeat
 from pathlib import Path
 from typing import Any
 
@@ -295,14 +296,13 @@ class Ros1BagReader(RosReaderBase):
                     chunk, offsets[lo:hi], times[lo:hi], conn_ids[lo:hi]
                 )
                 good = len(starts)
-                for message in _batched(
+                yield from _batched(
                     chunk,
                     (starts, stops, times[lo : lo + good]),
                     conn_ids[lo : lo + good].tolist(),
                     heads,
-                ):
-                    yielded += 1
-                    yield message
+                )
+                yielded += good
                 if damage is not None:
                     self._chunk_damage(pos, damage, yielded)
             finally:
@@ -481,16 +481,19 @@ def _batched(
     does, at half its cost: this runs for every message of the log).
     """
     start_at, stop_at, time_at = spans
-    members: dict[int, list[int]] = {}
-    for i, cid in enumerate(conn_ids):
-        members.setdefault(cid, []).append(i)
-    slot_of: list[tuple[MessageBatch, int] | None] = [None] * len(conn_ids)
-    for rows in members.values():
-        if len(members) == 1:
-            batch = MessageBatch(
-                chunk, starts=start_at, stops=stop_at, log_times_ns=time_at, encoding="ros1"
-            )
-        else:
+    count = len(conn_ids)
+    slot_of: list[tuple[MessageBatch, int] | None]
+    if len(set(conn_ids)) == 1:  # one topic in the chunk: the common case, no loop in Python
+        batch = MessageBatch(
+            chunk, starts=start_at, stops=stop_at, log_times_ns=time_at, encoding="ros1"
+        )
+        slot_of = list(zip(repeat(batch, count), range(count), strict=True))
+    else:
+        slot_of = [None] * count
+        members: dict[int, list[int]] = {}
+        for i, cid in enumerate(conn_ids):
+            members.setdefault(cid, []).append(i)
+        for rows in members.values():
             picked = np.asarray(rows, dtype=np.int64)
             batch = MessageBatch(
                 chunk,
@@ -499,8 +502,8 @@ def _batched(
                 log_times_ns=time_at[picked],
                 encoding="ros1",
             )
-        for j, i in enumerate(rows):
-            slot_of[i] = (batch, j)
+            for j, i in enumerate(rows):
+                slot_of[i] = (batch, j)
     starts, stops, times = start_at.tolist(), stop_at.tolist(), time_at.tolist()
     set_topic, set_type, set_time, set_encoding, set_raw, set_payload, set_batch = _SET
     for i, start in enumerate(starts):
