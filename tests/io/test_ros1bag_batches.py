@@ -235,3 +235,37 @@ def test_a_record_that_is_not_the_index_s_is_damage_at_that_message(
     with pytest.raises(LogTruncatedError, match="another message"):
         read_all()
     assert read == [m[2] for m in regular[:k]]
+
+
+def test_clouds_of_a_damaged_bag_read_together_equal_the_one_message_decode(
+    tmp_path: Path,
+) -> None:
+    """The chunk with a damaged record is read up to it; every cloud read, before and after,
+    decodes (together with its chunk's) to the one-message decode and the values written."""
+    path = tmp_path / "clouds.bag"
+    sent = _write(path)
+    k = _damage_record(path, b"time")
+    alone = PointCloud2Decoder()
+    together = 0
+    with open_log(path, strict=False) as log:
+        messages = list(log.messages(topics=["/regular", "/varied", "/unstamped"]))
+        assert len(log.damage_report) == 1
+        for message in messages:
+            decoded = decode(message, log.deserialize)
+            single = alone.decode(dataclasses.replace(message), log.deserialize)
+            assert (decoded.stamp_ns, decoded.frame_id) == (single.stamp_ns, single.frame_id)
+            assert isinstance(decoded.value, PointCloud)
+            assert isinstance(single.value, PointCloud)
+            _same_cloud(decoded.value, single.value)
+            points = sent[message.topic, message.log_time_ns]
+            np.testing.assert_array_equal(
+                decoded.value.xyz, np.stack([points[a] for a in "xyz"], axis=1)
+            )
+            for name in ("intensity", "ring", "time"):
+                np.testing.assert_array_equal(decoded.value.channels[name], points[name])
+            assert message.batch is not None
+            batch, index = message.batch
+            together += batch.memo[next(iter(batch.memo))][index] is not None
+    regular = [m for m in messages if m.topic == "/regular"]
+    assert k < len(regular) < 60
+    assert together >= len(regular) - 14  # the chunks after the damage are read together too

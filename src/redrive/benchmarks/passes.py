@@ -9,8 +9,9 @@ Passes:
 * ``raw``: the baseline — iterate the messages of ``topics`` with the third-party reader and no
   deserialisation (``rosbags.rosbag1.Reader.messages``, ``rosbags.rosbag2.Reader.messages``, or
   ``mcap``'s ``iter_messages``);
-* ``redrive``: ``open_log`` + ``decode`` of every message to a ``PointCloud``; ``xyz.shape`` and
-  every channel are touched so nothing is skipped lazily.
+* ``redrive``: ``open_log`` + ``decode`` of every message to a ``PointCloud``; each cloud's
+  ``xyz`` is read (its point count).  The decoder builds xyz and every channel array eagerly,
+  so nothing is skipped by not reading the channels.
 """
 
 from __future__ import annotations

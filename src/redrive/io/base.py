@@ -15,6 +15,9 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any, Literal, Protocol, Self, runtime_checkable
 
+import numpy as np
+import numpy.typing as npt
+
 from redrive.types import SensorType
 
 __all__ = [
@@ -95,8 +98,9 @@ class MessageBatch:
     Attributes:
         buffer: the bytes the messages lie in (immutable, or a read-only file map).
         starts, stops: each message's byte span in ``buffer`` (``raw`` is
-            ``buffer[starts[i]:stops[i]]``), in the order they are yielded.
-        log_times_ns: each message's log time.
+            ``buffer[starts[i]:stops[i]]``), in the order they are yielded; int sequences or
+            int64 arrays (the ROS 1 reader hands over its arrays, no list per chunk).
+        log_times_ns: each message's log time (same kinds).
         encoding: the messages' encoding (all the same).
         memo: per-decoder results (keyed by the decoder object); empty until one decodes.
     """
@@ -107,9 +111,9 @@ class MessageBatch:
         self,
         buffer: bytes | memoryview,
         *,
-        starts: Sequence[int],
-        stops: Sequence[int],
-        log_times_ns: Sequence[int],
+        starts: Sequence[int] | npt.NDArray[np.int64],
+        stops: Sequence[int] | npt.NDArray[np.int64],
+        log_times_ns: Sequence[int] | npt.NDArray[np.int64],
         encoding: Encoding,
     ) -> None:
         self.buffer = buffer

@@ -22,6 +22,7 @@ import contextlib
 import logging
 import mmap
 from collections.abc import Collection, Iterator
+from itertools import repeat
 from pathlib import Path
 from typing import Any
 
@@ -295,16 +296,13 @@ class Ros1BagReader(RosReaderBase):
                     chunk, offsets[lo:hi], times[lo:hi], conn_ids[lo:hi]
                 )
                 good = len(starts)
-                for message in _batched(
+                yield from _batched(
                     chunk,
-                    starts.tolist(),
-                    stops.tolist(),
-                    times[lo : lo + good].tolist(),
+                    (starts, stops, times[lo : lo + good]),
                     conn_ids[lo : lo + good].tolist(),
                     heads,
-                ):
-                    yielded += 1
-                    yield message
+                )
+                yielded += good
                 if damage is not None:
                     self._chunk_damage(pos, damage, yielded)
             finally:
@@ -470,33 +468,43 @@ _SET = tuple(
 )
 
 
-def _batched(  # noqa: PLR0917 (the chunk's columns, one call per chunk)
+def _batched(
     chunk: memoryview,
-    starts: list[int],
-    stops: list[int],
-    times: list[int],
+    spans: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64]],
     conn_ids: list[int],
     heads: dict[int, tuple[str, str]],
 ) -> Iterator[LogMessage]:
-    """The checked messages of one chunk, those of each connection linked as one batch.
+    """The checked messages of one chunk (``spans``: their starts, stops and log times), those
+    of each connection linked as one batch, whose starts, stops and times stay arrays.
 
     The messages are built through their slots' setters (what the dataclass's ``__init__``
     does, at half its cost: this runs for every message of the log).
     """
-    members: dict[int, list[int]] = {}
-    for i, cid in enumerate(conn_ids):
-        members.setdefault(cid, []).append(i)
-    slot_of: list[tuple[MessageBatch, int] | None] = [None] * len(starts)
-    for rows in members.values():
+    start_at, stop_at, time_at = spans
+    count = len(conn_ids)
+    slot_of: list[tuple[MessageBatch, int] | None]
+    if len(set(conn_ids)) == 1:  # one topic in the chunk: the common case, no loop in Python
         batch = MessageBatch(
-            chunk,
-            starts=[starts[i] for i in rows],
-            stops=[stops[i] for i in rows],
-            log_times_ns=[times[i] for i in rows],
-            encoding="ros1",
+            chunk, starts=start_at, stops=stop_at, log_times_ns=time_at, encoding="ros1"
         )
-        for j, i in enumerate(rows):
-            slot_of[i] = (batch, j)
+        slot_of = list(zip(repeat(batch, count), range(count), strict=True))
+    else:
+        slot_of = [None] * count
+        members: dict[int, list[int]] = {}
+        for i, cid in enumerate(conn_ids):
+            members.setdefault(cid, []).append(i)
+        for rows in members.values():
+            picked = np.asarray(rows, dtype=np.int64)
+            batch = MessageBatch(
+                chunk,
+                starts=start_at[picked],
+                stops=stop_at[picked],
+                log_times_ns=time_at[picked],
+                encoding="ros1",
+            )
+            for j, i in enumerate(rows):
+                slot_of[i] = (batch, j)
+    starts, stops, times = start_at.tolist(), stop_at.tolist(), time_at.tolist()
     set_topic, set_type, set_time, set_encoding, set_raw, set_payload, set_batch = _SET
     for i, start in enumerate(starts):
         topic, msgtype = heads[conn_ids[i]]

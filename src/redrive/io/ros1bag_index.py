@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from redrive.io._byte_rows import byte_rows
 from redrive.io.ros1bag_records import OP_MSGDATA, U32, DamageError, record_op
 
 __all__ = ["IndexArrays", "chunk_spans", "merged_index"]
@@ -122,7 +123,7 @@ def chunk_spans(
     if last + 8 + size > end:
         return None
     # One gather: per message its header length, header and data length.
-    rows = np.frombuffer(chunk, dtype=np.uint8)[offsets[:, None] + np.arange(size + 8)]
+    rows = byte_rows(chunk, offsets, size + 8)
     same = (rows == rows[0]).all(axis=0)
     same[4 + conn_span[0] : 4 + conn_span[1]] = True
     same[4 + time_span[0] : 4 + time_span[1]] = True

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from itertools import repeat
 from types import MappingProxyType
 from typing import Any
 
@@ -76,6 +77,59 @@ class PointCloud:
         object.__setattr__(cloud, "channels", MappingProxyType(channels))
         return cloud
 
+    @classmethod
+    def many_from_rows(
+        cls,
+        xyz: npt.NDArray[np.float32],
+        channels: Sequence[tuple[str, npt.NDArray[Any]]],
+    ) -> list[PointCloud]:
+        """B clouds of N points each, cloud i being ``xyz[i]`` and row i of every channel.
+
+        For decoders that decode many clouds of one layout at once: ``xyz`` must be a read-only
+        float32 (B, N, 3) ``ndarray`` and every channel a read-only, non-structured (B, N)
+        ``ndarray`` (ValueError otherwise) — checked here once for the B clouds, so the clouds
+        are what ``PointCloud(xyz=xyz[i], channels={name: rows[i], …})`` would make (read-only
+        row views, shapes (N, 3) and (N,)) without checking each of them again.  The objects
+        are built by C-level iteration (``map``), no Python step per cloud.
+        """
+        if not (
+            type(xyz) is np.ndarray
+            and xyz.dtype == _F32
+            and xyz.ndim == 3
+            and xyz.shape[2] == 3
+            and not xyz.flags.writeable
+        ):
+            have = f"{getattr(xyz, 'dtype', type(xyz).__name__)} {getattr(xyz, 'shape', '')}"
+            msg = f"PointCloud.many_from_rows: xyz must be read-only float32 (B, N, 3), not {have}"
+            raise ValueError(msg)
+        shape = xyz.shape[:2]
+        names: list[str] = []
+        for name, rows in channels:
+            if (
+                type(rows) is not np.ndarray
+                or rows.dtype.fields is not None
+                or rows.shape != shape
+                or rows.flags.writeable
+                or name in names
+            ):
+                msg = (
+                    f"PointCloud.many_from_rows: channel {name!r} must be a read-only, "
+                    f"non-structured array of shape {shape}, named once"
+                )
+                raise ValueError(msg)
+            names.append(name)
+        count = shape[0]
+        clouds: list[PointCloud] = list(map(object.__new__, repeat(cls, count)))
+        # Iterating an array in C yields its rows as views, read-only as the array is.
+        any(map(_SET_XYZ, clouds, list(xyz)))
+        if names:
+            per_cloud = zip(*(list(rows) for _, rows in channels), strict=True)
+            dicts = map(dict, map(zip, repeat(tuple(names)), per_cloud))
+        else:
+            dicts = map(dict, repeat((), count))
+        any(map(_SET_CHANNELS, clouds, map(MappingProxyType, dicts)))
+        return clouds
+
     def __len__(self) -> int:
         return int(self.xyz.shape[0])
 
@@ -85,6 +139,11 @@ class PointCloud:
 
     def __reduce__(self) -> tuple[Any, ...]:
         return reduce_dataclass(self)
+
+
+# The slots' own setters: what ``object.__setattr__`` ends in, without its lookup.
+_SET_XYZ = PointCloud.__dict__["xyz"].__set__
+_SET_CHANNELS = PointCloud.__dict__["channels"].__set__
 
 
 #: Image encodings the data model knows, with (dtype, channels).

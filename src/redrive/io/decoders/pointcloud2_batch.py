@@ -12,11 +12,13 @@ layout the one-message fast path does not take) are left to that path.
 from __future__ import annotations
 
 from collections.abc import Callable
+from itertools import repeat
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 
+from redrive.io._byte_rows import byte_rows
 from redrive.io.base import MessageBatch
 from redrive.io.decoders._common import buffer_is_immutable
 from redrive.io.decoders.base import Decoded
@@ -94,13 +96,12 @@ def decode_batch(
         or data_size < n * step
     ):
         return out
-    u8 = np.frombuffer(buf, dtype=np.uint8)
     # Everything from the frame id to the point data must be the first message's.
-    same = u8[starts[:, None] + np.arange(_SAME_FROM, data_offset, dtype=np.int64)]
+    same = byte_rows(buf, starts + _SAME_FROM, data_offset - _SAME_FROM)
     if not (same == same[0]).all():
         return out
-    stamp = u8[(starts + 4)[:, None] + np.arange(8, dtype=np.int64)].view(_U32)
-    stamps_ns = (stamp[:, 0].astype(np.int64) * 1_000_000_000 + stamp[:, 1]).tolist()
+    stamp = byte_rows(buf, starts + 4, 8).view(_U32)
+    stamps = stamp[:, 0].astype(np.int64) * 1_000_000_000 + stamp[:, 1]
     gaps = np.diff(starts)
     if count == 1 or (int(gaps[0]) >= size and (gaps == gaps[0]).all()):
         # At a fixed distance (a chunk of one topic): one strided view of all their points.
@@ -119,13 +120,13 @@ def decode_batch(
         channels = [(name, _gather(buf, at, members[name])) for name in plan.channels]
     xyz = xyz.view(_F32).reshape(count, n, 3)
     xyz.flags.writeable = False
+    # A zero stamp means "unset": the message's log time stands in for it.
+    stamps_ns = np.where(stamps == 0, batch.log_times_ns, stamps).tolist()
+    clouds = PointCloud.many_from_rows(xyz, channels)
+    # The Decoded objects built by C-level iteration too (their slots' setters, as ``__init__``).
+    decoded: list[Decoded | None] = list(map(_new, repeat(Decoded, count)))
     set_stamp, set_frame, set_value = _SET_DECODED
-    from_frozen = PointCloud.from_frozen
-    log_times = batch.log_times_ns
-    for i in range(count):
-        decoded = _new(Decoded)
-        set_stamp(decoded, stamps_ns[i] or log_times[i])
-        set_frame(decoded, frame_id)
-        set_value(decoded, from_frozen(xyz[i], {name: rows[i] for name, rows in channels}))
-        out[i] = decoded
-    return out
+    any(map(set_stamp, decoded, stamps_ns))
+    any(map(set_frame, decoded, repeat(frame_id, count)))
+    any(map(set_value, decoded, clouds))
+    return decoded
