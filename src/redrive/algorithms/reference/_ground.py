@@ -1,8 +1,8 @@
 """Ground estimation for the reference LiDAR detector: a height field on a bird's-eye-view grid.
 
 Two methods, both working on the **lowest z per ground cell** (square cells of ``cell_m``,
-typically 1 m), which is computed without per-point Python: a stable radix sort of the uint16
-cell keys and :func:`numpy.minimum.reduceat`.
+typically 1 m), which the detector takes in its one pass over the points
+(:func:`._kernels.crop_cell_minima`).
 
 ``"grid"`` (the default)
     Ground height of a cell = the lowest point in its 3 × 3 neighbourhood.  A local minimum follows
@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["GroundGrid", "cell_minima", "fit_plane", "ground_heights"]
+__all__ = ["GroundGrid", "fit_plane", "ground_heights"]
 
 _F32 = npt.NDArray[np.float32]
 _F64 = npt.NDArray[np.float64]
@@ -60,32 +60,9 @@ class GroundGrid:
         included."""
         return self.half_extent_m - 1e-3 * self.cell_m
 
-    def keys(self, x: _F32, y: _F32) -> npt.NDArray[np.intp]:
-        """Flat cell keys of points within ±:attr:`crop_m` (x, y in metres, base_link)."""
-        inv = np.float32(1.0 / self.cell_m)
-        half = np.float32(self.half_extent_m)
-        i = ((x + half) * inv).astype(np.intp)
-        j = ((y + half) * inv).astype(np.intp)
-        i *= self.n
-        i += j
-        return i
-
     def centres(self) -> tuple[_F64, _F64]:
         """(n, n) x and y of the cell centres, metres (read-only)."""
         return self._centres
-
-
-def cell_minima(keys: npt.NDArray[np.intp], z: _F32, *, n_cells: int) -> _F32:
-    """Lowest z per cell (metres), ``+inf`` where a cell has no point.  Shape (n_cells,)."""
-    out = np.full(n_cells, np.inf, dtype=np.float32)
-    if keys.size == 0:
-        return out
-    small = keys.astype(np.uint16 if n_cells <= 1 << 16 else np.uint32)
-    order = np.argsort(small, kind="stable")  # radix sort for 16-bit keys: O(n)
-    sorted_keys = small[order]
-    starts = np.flatnonzero(np.r_[True, sorted_keys[1:] != sorted_keys[:-1]])
-    out[sorted_keys[starts]] = np.minimum.reduceat(z[order], starts)
-    return out
 
 
 def _min3x3(grid: _F32) -> _F32:
@@ -145,7 +122,7 @@ def ground_heights(
 
     Args:
         grid: the ground grid.
-        minima: lowest z per cell from :func:`cell_minima` (+inf when empty).
+        minima: lowest z per cell, (n·n,) float32 (+inf when empty).
         method: ``"grid"`` or ``"plane"`` (see the module docstring).
         max_step_m: ``grid`` only: a local minimum more than this above the plane is not ground.
         fallback_z_m: ground height when nothing can be fitted (fewer than 3 occupied cells).

@@ -77,7 +77,8 @@ import numpy.typing as npt
 from redrive.algorithms.base import Algorithm, Input, Role, StageOutputs
 from redrive.algorithms.reference._box_fit import collinear_walls, complete_boxes, fit_boxes
 from redrive.algorithms.reference._clusters import Clusters, cluster_points
-from redrive.algorithms.reference._ground import GroundGrid, cell_minima, ground_heights
+from redrive.algorithms.reference._ground import GroundGrid, ground_heights
+from redrive.algorithms.reference._kernels import crop_cell_minima, split_obstacles
 from redrive.errors import AlgorithmError, ConfigError
 from redrive.types import Box3D, DetectedObject, Frame, ObjectClass, PointCloud, SensorType
 
@@ -257,20 +258,21 @@ class ClusterDetector(Algorithm):
         if xyz.shape[0] == 0:
             return []
         sx, sy, sz = (np.float32(v) for v in sensor_location)
-        x, y, z = np.ascontiguousarray(xyz.T, dtype=np.float32)
-        x, y, z = x + sx, y + sy, z + sz
-        r = np.float32(self._ground_grid.crop_m)
+        grid = self._ground_grid
         r0 = np.float32(cfg["min_range_m"])
-        dx, dy = x - sx, y - sy
-        keep = (np.abs(x) < r) & (np.abs(y) < r) & (dx * dx + dy * dy > r0 * r0)
-        keep &= np.isfinite(z)
-        x, y, z = x[keep], y[keep], z[keep]
+        x, y, z, keys, minima = crop_cell_minima(
+            np.ascontiguousarray(xyz, dtype=np.float32),
+            sx,
+            sy,
+            sz,
+            np.float32(grid.crop_m),
+            r0 * r0,
+            np.float32(grid.half_extent_m),
+            np.float32(1.0 / grid.cell_m),
+            grid.n,
+        )
         if x.size == 0:
             return []
-
-        grid = self._ground_grid
-        keys = grid.keys(x, y)
-        minima = cell_minima(keys, z, n_cells=grid.n * grid.n)
         ground = ground_heights(
             grid,
             minima,
@@ -278,14 +280,17 @@ class ClusterDetector(Algorithm):
             max_step_m=float(cfg["ground_max_step_m"]),
             fallback_z_m=float(sz) - 1.8,
         ).ravel()
-        gz = ground[keys]
-        above = z - gz
-        obstacle = (above > np.float32(cfg["ground_threshold_m"])) & (
-            above < np.float32(cfg["max_height_m"])
-        )
         max_h = np.float32(cfg["max_height_m"])
-        tall = (above >= max_h) & (above < max_h + np.float32(self._drop["tall_band_m"]))
-        ox, oy, oz, og = x[obstacle], y[obstacle], z[obstacle], gz[obstacle]
+        ox, oy, oz, og, tall_x, tall_y = split_obstacles(
+            x,
+            y,
+            z,
+            keys,
+            ground,
+            np.float32(cfg["ground_threshold_m"]),
+            max_h,
+            max_h + np.float32(self._drop["tall_band_m"]),
+        )
         clusters = cluster_points(
             ox,
             oy,
@@ -293,7 +298,7 @@ class ClusterDetector(Algorithm):
             cell_m=float(cfg["cluster_tolerance_m"]),
             min_points=int(cfg["min_points"]),
             max_points=int(cfg["max_points"]),
-            tall_xy=(x[tall], y[tall]),
+            tall_xy=(tall_x, tall_y),
         )
         if clusters.starts.size == 0:
             return []

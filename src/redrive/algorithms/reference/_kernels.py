@@ -1,0 +1,228 @@
+"""The reference detector's per-point loops as numba kernels (compiled once, cached on disk).
+
+Each kernel is one pass over the points doing what a chain of numpy calls did before, with the
+same float32 operations in the same order, so the outputs are bit for bit the ones of the numpy
+version (numba compiles without ``fastmath``: no reassociation, no fused multiply-add).  They
+release the GIL (``nogil``), so a detector step can overlap another thread's work.
+
+* :func:`crop_cell_minima` — move the sweep to base_link, crop it, key it on the ground grid and
+  take the lowest z per ground cell.
+* :func:`split_obstacles` — classify each point against the ground height of its cell
+  (obstacle band, tall band) and gather the obstacle points and the tall points' x, y.
+* :func:`label_clusters` — 8-connected components of the occupied cells of the BEV clustering
+  grid, numbered in raster order of their first cell as :func:`scipy.ndimage.label` numbers
+  them, filtered by size and tall points, with the points grouped by cluster in index order.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, TypeVar, cast
+
+import numba
+import numpy as np
+import numpy.typing as npt
+
+__all__ = ["crop_cell_minima", "label_clusters", "split_obstacles"]
+
+_F = TypeVar("_F", bound=Callable[..., Any])
+_F32 = npt.NDArray[np.float32]
+_I64 = npt.NDArray[np.int64]
+
+
+def _jit(fn: _F) -> _F:
+    return cast(_F, numba.njit(cache=True, nogil=True)(fn))
+
+
+@_jit
+def crop_cell_minima(  # noqa: PLR0917 - numba takes no keyword-only parameters
+    xyz: _F32,
+    sx: np.float32,
+    sy: np.float32,
+    sz: np.float32,
+    crop: np.float32,
+    min_range_sq: np.float32,
+    half: np.float32,
+    inv_cell: np.float32,
+    n: int,
+) -> tuple[_F32, _F32, _F32, _I64, _F32]:
+    """Points (N, 3) float32 of the sensor moved by (sx, sy, sz) to base_link, kept when
+    |x|, |y| < ``crop``, farther than √``min_range_sq`` from the sensor in x-y and z finite.
+
+    Returns x, y, z of the kept points (in order), their flat ground-cell keys
+    ``int((x + half) · inv_cell) · n + int((y + half) · inv_cell)``, and the lowest z per cell
+    (n·n,) (+inf where empty).
+    """
+    m = xyz.shape[0]
+    ox = np.empty(m, dtype=np.float32)
+    oy = np.empty(m, dtype=np.float32)
+    oz = np.empty(m, dtype=np.float32)
+    keys = np.empty(m, dtype=np.int64)
+    minima = np.full(n * n, np.inf, dtype=np.float32)
+    k = 0
+    for p in range(m):
+        x = xyz[p, 0] + sx
+        y = xyz[p, 1] + sy
+        z = xyz[p, 2] + sz
+        dx = x - sx
+        dy = y - sy
+        if not (abs(x) < crop and abs(y) < crop and dx * dx + dy * dy > min_range_sq):
+            continue
+        if not np.isfinite(z):
+            continue
+        key = np.int64((x + half) * inv_cell) * n + np.int64((y + half) * inv_cell)
+        ox[k] = x
+        oy[k] = y
+        oz[k] = z
+        keys[k] = key
+        minima[key] = min(minima[key], z)
+        k += 1
+    return ox[:k], oy[:k], oz[:k], keys[:k], minima
+
+
+@_jit
+def split_obstacles(  # noqa: PLR0917
+    x: _F32,
+    y: _F32,
+    z: _F32,
+    keys: _I64,
+    ground: _F32,
+    low: np.float32,
+    high: np.float32,
+    tall_high: np.float32,
+) -> tuple[_F32, _F32, _F32, _F32, _F32, _F32]:
+    """Obstacle points (``low`` < z - ground < ``high``): their x, y, z and ground z; and the
+    x, y of the tall points (``high`` ≤ z - ground < ``tall_high``).  ``ground`` is the flat
+    ground height per cell, indexed by ``keys``."""
+    m = x.shape[0]
+    ox = np.empty(m, dtype=np.float32)
+    oy = np.empty(m, dtype=np.float32)
+    oz = np.empty(m, dtype=np.float32)
+    og = np.empty(m, dtype=np.float32)
+    tx = np.empty(m, dtype=np.float32)
+    ty = np.empty(m, dtype=np.float32)
+    k = 0
+    t = 0
+    for p in range(m):
+        g = ground[keys[p]]
+        above = z[p] - g
+        if above > low and above < high:
+            ox[k] = x[p]
+            oy[k] = y[p]
+            oz[k] = z[p]
+            og[k] = g
+            k += 1
+        elif above >= high and above < tall_high:
+            tx[t] = x[p]
+            ty[t] = y[p]
+            t += 1
+    return ox[:k], oy[:k], oz[:k], og[:k], tx[:t], ty[:t]
+
+
+@_jit
+def _find(parent: _I64, i: int) -> int:
+    root = i
+    while parent[root] != root:
+        root = parent[root]
+    while parent[i] != root:  # path compression
+        nxt = parent[i]
+        parent[i] = root
+        i = nxt
+    return root
+
+
+@_jit
+def label_clusters(  # noqa: PLR0917
+    x: _F32,
+    y: _F32,
+    tall_x: _F32,
+    tall_y: _F32,
+    half: np.float32,
+    inv_cell: np.float32,
+    n: int,
+    min_points: int,
+    max_points: int,
+    scratch: _I64,
+) -> tuple[_I64, _I64, _I64]:
+    """Clusters of points (metres, strictly inside the n × n grid of cells ``1 / inv_cell``
+    centred on the origin): 8-connected components of the occupied cells, in raster order of
+    each component's first cell; kept when they hold ``min_points`` … ``max_points`` points and
+    no tall point falls in their cells.
+
+    ``scratch`` is an (n·n,) int64 array of -1; it is left as it was found.  Returns the point
+    indices grouped by kept cluster (in index order within a cluster), the clusters' starts in
+    that array and their point counts.
+    """
+    m = x.shape[0]
+    point_cell = np.empty(m, dtype=np.int64)
+    cell_key = np.empty(m, dtype=np.int64)
+    n_cells = 0
+    for p in range(m):
+        key = np.int64((x[p] + half) * inv_cell) * n + np.int64((y[p] + half) * inv_cell)
+        c = scratch[key]
+        if c < 0:
+            c = n_cells
+            scratch[key] = c
+            cell_key[c] = key
+            n_cells += 1
+        point_cell[p] = c
+    parent = np.arange(n_cells)
+    for c in range(n_cells):
+        key = cell_key[c]
+        i = key // n
+        j = key - i * n
+        for di, dj in ((-1, -1), (-1, 0), (-1, 1), (0, -1)):
+            ii = i + di
+            jj = j + dj
+            if ii < 0 or jj < 0 or jj >= n:
+                continue
+            other = scratch[ii * n + jj]
+            if other >= 0:
+                ra = _find(parent, c)
+                rb = _find(parent, other)
+                if ra != rb:
+                    # the root keeps the component's smallest key: its first cell in raster order
+                    if cell_key[ra] < cell_key[rb]:
+                        parent[rb] = ra
+                    else:
+                        parent[ra] = rb
+    # components → counts and tall marks (indexed by root cell)
+    counts = np.zeros(n_cells, dtype=np.int64)
+    for p in range(m):
+        counts[_find(parent, point_cell[p])] += 1
+    tall = np.zeros(n_cells, dtype=np.bool_)
+    for p in range(tall_x.shape[0]):
+        key = np.int64((tall_x[p] + half) * inv_cell) * n + np.int64((tall_y[p] + half) * inv_cell)
+        c = scratch[key]
+        if c >= 0:
+            tall[_find(parent, c)] = True
+    for c in range(n_cells):
+        scratch[cell_key[c]] = -1
+    # kept roots in raster order of their first cell
+    roots = np.empty(n_cells, dtype=np.int64)
+    r = 0
+    for c in range(n_cells):
+        if parent[c] == c and not tall[c] and min_points <= counts[c] <= max_points:
+            roots[r] = c
+            r += 1
+    roots = roots[:r]
+    order = np.argsort(cell_key[roots], kind="mergesort")
+    cluster_of_root = np.full(n_cells, -1, dtype=np.int64)
+    kept_counts = np.empty(r, dtype=np.int64)
+    for k in range(r):
+        root = roots[order[k]]
+        cluster_of_root[root] = k
+        kept_counts[k] = counts[root]
+    starts = np.empty(r, dtype=np.int64)
+    total = 0
+    for k in range(r):
+        starts[k] = total
+        total += kept_counts[k]
+    fill = starts.copy()
+    index = np.empty(total, dtype=np.int64)
+    for p in range(m):
+        k = cluster_of_root[parent[point_cell[p]]]
+        if k >= 0:
+            index[fill[k]] = p
+            fill[k] += 1
+    return index, starts, kept_counts

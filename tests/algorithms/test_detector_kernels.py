@@ -1,0 +1,166 @@
+"""The detector's numba kernels give what the numpy/scipy steps they replaced gave, bit for bit.
+
+The reference below is the detector's former front end (crop, ground-cell minima, obstacle split,
+:func:`scipy.ndimage.label` clustering), kept here as the specification of the kernels.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+import pytest
+from scipy import ndimage
+
+from redrive.algorithms.reference._clusters import Clusters, cluster_points
+from redrive.algorithms.reference._ground import ground_heights
+from redrive.algorithms.reference._kernels import label_clusters
+from redrive.algorithms.reference.detector import ClusterDetector
+
+_F32 = npt.NDArray[np.float32]
+
+
+def _sweep(seed: int) -> _F32:
+    """A sweep-like cloud in the sensor frame (1.9 m above a sloped, noisy ground): ground rings,
+    boxes, poles and walls, some points out of range, some NaN."""
+    rng = np.random.default_rng(seed)
+    r = rng.uniform(1.0, 90.0, 20000)
+    a = rng.uniform(-np.pi, np.pi, r.size)
+    gx, gy = r * np.cos(a), r * np.sin(a)
+    ground = np.column_stack([gx, gy, 0.01 * gx + rng.normal(0.0, 0.03, r.size)])
+    parts = [ground]
+    for _ in range(int(rng.integers(10, 30))):
+        cx, cy = rng.uniform(-60.0, 60.0, 2)
+        length, width = rng.uniform(0.3, 12.0), rng.uniform(0.1, 3.0)
+        height = rng.choice([1.5, 2.2, 3.5, 6.0])
+        yaw = rng.uniform(-np.pi, np.pi)
+        n = int(rng.integers(5, 800))
+        u, v = rng.uniform(-0.5, 0.5, (2, n))
+        px = cx + length * u * np.cos(yaw) - width * v * np.sin(yaw)
+        py = cy + length * u * np.sin(yaw) + width * v * np.cos(yaw)
+        parts.append(np.column_stack([px, py, 0.01 * px + rng.uniform(0.0, height, n)]))
+    xyz = np.concatenate(parts) - np.array([1.2, 0.0, 1.9])
+    xyz[rng.integers(0, len(xyz), 20), rng.integers(0, 3, 20)] = np.nan
+    out: _F32 = xyz.astype(np.float32)
+    return out
+
+
+def _reference_front_end(
+    det: ClusterDetector, xyz: _F32, sensor_location: tuple[float, float, float]
+) -> tuple[tuple[_F32, _F32, _F32, _F32], Clusters]:
+    """The former numpy version of ClusterDetector.detect up to the box fit."""
+    cfg = det.config
+    sx, sy, sz = (np.float32(v) for v in sensor_location)
+    x, y, z = np.ascontiguousarray(xyz.T, dtype=np.float32)
+    x, y, z = x + sx, y + sy, z + sz
+    grid = det._ground_grid
+    r, r0 = np.float32(grid.crop_m), np.float32(cfg["min_range_m"])
+    dx, dy = x - sx, y - sy
+    keep = (np.abs(x) < r) & (np.abs(y) < r) & (dx * dx + dy * dy > r0 * r0) & np.isfinite(z)
+    x, y, z = x[keep], y[keep], z[keep]
+    inv, half = np.float32(1.0 / grid.cell_m), np.float32(grid.half_extent_m)
+    keys = ((x + half) * inv).astype(np.intp) * grid.n + ((y + half) * inv).astype(np.intp)
+    minima = np.full(grid.n * grid.n, np.inf, dtype=np.float32)
+    np.minimum.at(minima, keys, z)
+    ground = ground_heights(
+        grid,
+        minima,
+        method=str(cfg["ground_method"]),
+        max_step_m=float(cfg["ground_max_step_m"]),
+        fallback_z_m=float(sz) - 1.8,
+    ).ravel()
+    gz = ground[keys]
+    above = z - gz
+    max_h = np.float32(cfg["max_height_m"])
+    obstacle = (above > np.float32(cfg["ground_threshold_m"])) & (above < max_h)
+    tall = (above >= max_h) & (above < max_h + np.float32(det._drop["tall_band_m"]))
+    ox, oy = x[obstacle], y[obstacle]
+    # clustering with scipy.ndimage.label, as _clusters.cluster_points did
+    cell = float(cfg["cluster_tolerance_m"])
+    n = int(np.ceil(2.0 * grid.half_extent_m / cell))
+    c_inv, c_half = np.float32(1.0 / cell), np.float32(0.5 * n * cell)
+
+    def cell_keys(px: _F32, py: _F32) -> npt.NDArray[np.intp]:
+        return ((px + c_half) * c_inv).astype(np.intp) * n + ((py + c_half) * c_inv).astype(np.intp)
+
+    ckeys = cell_keys(ox, oy)
+    occupied = np.zeros(n * n, dtype=bool)
+    occupied[ckeys] = True
+    labels, n_labels = ndimage.label(occupied.reshape(n, n), structure=np.ones((3, 3), bool))
+    point_label = labels.ravel()[ckeys]
+    counts = np.bincount(point_label, minlength=n_labels + 1)
+    counts[0] = 0
+    kept = (counts >= int(cfg["min_points"])) & (counts <= int(cfg["max_points"]))
+    if np.any(tall):
+        kept[labels.ravel()[cell_keys(x[tall], y[tall])]] = False
+    ids = np.flatnonzero(kept)
+    new_id = np.full(n_labels + 1, -1)
+    new_id[ids] = np.arange(ids.size)
+    pid = new_id[point_label]
+    chosen = np.flatnonzero(pid >= 0)
+    order = np.argsort(pid[chosen], kind="stable")
+    kept_counts = counts[ids].astype(np.intp)
+    starts = np.r_[0, np.cumsum(kept_counts)[:-1]].astype(np.intp)
+    clusters = Clusters(index=chosen[order], starts=starts[: ids.size], counts=kept_counts)
+    return (ox, oy, z[obstacle], gz[obstacle]), clusters
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_detect_equals_the_former_numpy_steps(seed: int) -> None:
+    det = ClusterDetector()
+    xyz = _sweep(seed)
+    location = (1.2, 0.0, 1.9)
+    points, clusters = _reference_front_end(det, xyz, location)
+    assert clusters.starts.size > 3  # the sweep has something to find
+    expected = det._boxes(points, clusters, sensor_xy=(1.2, 0.0))
+    got = det.detect(xyz, sensor_location=location)
+    assert len(got) == len(expected) > 0
+    for a, b in zip(got, expected, strict=True):
+        assert a.object_class is b.object_class
+        assert a.confidence == b.confidence
+        assert a.box.yaw_rad == b.box.yaw_rad
+        np.testing.assert_array_equal(a.box.center, b.box.center)
+        np.testing.assert_array_equal(a.box.size, b.box.size)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_label_clusters_numbers_components_as_ndimage_label(seed: int) -> None:
+    rng = np.random.default_rng(100 + seed)
+    n = int(rng.integers(3, 40))
+    cell = 0.5
+    half = 0.5 * n * cell
+    m = int(rng.integers(0, 6 * n))
+    x = rng.uniform(-half + 1e-3, half - 1e-3, m).astype(np.float32)
+    y = rng.uniform(-half + 1e-3, half - 1e-3, m).astype(np.float32)
+    tall = rng.uniform(-half + 1e-3, half - 1e-3, (2, int(rng.integers(0, 4)))).astype(np.float32)
+    got = cluster_points(
+        x, y, half_extent_m=half, cell_m=cell, min_points=1, max_points=10**6, tall_xy=(*tall,)
+    )
+    i = ((x + np.float32(half)) * np.float32(1 / cell)).astype(np.intp)
+    j = ((y + np.float32(half)) * np.float32(1 / cell)).astype(np.intp)
+    grid = np.zeros((n, n), dtype=bool)
+    grid[i, j] = True
+    labels, count = ndimage.label(grid, structure=np.ones((3, 3), bool))
+    ti = ((tall[0] + np.float32(half)) * np.float32(1 / cell)).astype(np.intp)
+    tj = ((tall[1] + np.float32(half)) * np.float32(1 / cell)).astype(np.intp)
+    dropped = set(labels[ti, tj].tolist())
+    point_label = labels[i, j]
+    want = [np.flatnonzero(point_label == k) for k in range(1, count + 1) if k not in dropped]
+    got_groups = [
+        got.index[s : s + c] for s, c in zip(got.starts.tolist(), got.counts.tolist(), strict=True)
+    ]
+    assert len(got_groups) == len(want)
+    for a, b in zip(got_groups, want, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_label_clusters_leaves_its_scratch_grid_as_it_found_it() -> None:
+    scratch = np.full(100, -1, dtype=np.int64)
+    xy = np.array([0.1, 0.2, 3.0], dtype=np.float32)
+    none = np.zeros(0, dtype=np.float32)
+    index, starts, counts = label_clusters(
+        xy, xy, none, none, np.float32(5.0), np.float32(1.0), 10, 1, 10, scratch
+    )
+    assert index.tolist() == [0, 1, 2]
+    assert starts.tolist() == [0, 2]
+    assert counts.tolist() == [2, 1]
+    assert np.all(scratch == -1)
