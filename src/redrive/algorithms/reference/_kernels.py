@@ -1,4 +1,4 @@
-"""The reference detector's per-point loops as numba kernels (compiled once, cached on disk).
+"""The reference algorithms' hot loops as numba kernels (compiled once, cached on disk).
 
 Each kernel is one pass over the points doing what a chain of numpy calls did before, with the
 same float32 operations in the same order, so the outputs are bit for bit the ones of the numpy
@@ -12,6 +12,7 @@ release the GIL (``nogil``), so a detector step can overlap another thread's wor
 * :func:`label_clusters` — 8-connected components of the occupied cells of the BEV clustering
   grid, numbered in raster order of their first cell as :func:`scipy.ndimage.label` numbers
   them, filtered by size and tall points, with the points grouped by cluster in index order.
+* :func:`project_on_segments` — the planner's projection of points onto its path.
 """
 
 from __future__ import annotations
@@ -23,11 +24,12 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["crop_cell_minima", "label_clusters", "split_obstacles"]
+__all__ = ["crop_cell_minima", "label_clusters", "project_on_segments", "split_obstacles"]
 
 _F = TypeVar("_F", bound=Callable[..., Any])
 _F32 = npt.NDArray[np.float32]
 _I64 = npt.NDArray[np.int64]
+_F64 = npt.NDArray[np.float64]
 
 
 def _jit(fn: _F) -> _F:
@@ -226,3 +228,53 @@ def label_clusters(  # noqa: PLR0917
             index[fill[k]] = p
             fill[k] += 1
     return index, starts, kept_counts
+
+
+@_jit
+def project_on_segments(
+    p: _F64,
+    a: _F64,
+    ab: _F64,
+    seg_len: _F64,
+    s_start: _F64,
+) -> tuple[_F64, _F64, _F64]:
+    """Nearest points of ``p`` (P, 2) on the segments ``a + t·ab`` (S ≥ 1; lengths ``seg_len``,
+    arc length ``s_start`` at ``a``), metres: arc length of the foot, signed lateral offset (left
+    positive) and distance, each (P,).  The numpy broadcasting of :meth:`Polyline.project` as a
+    loop: the same float64 operations in the same order (numpy's sum over two elements starts
+    from +0.0; ``clip`` keeps -0.0 and NaN; the first minimum wins, a NaN before it).
+    """
+    n_p = p.shape[0]
+    n_s = a.shape[0]
+    s_out = np.empty(n_p)
+    lateral = np.empty(n_p)
+    dist = np.empty(n_p)
+    for i in range(n_p):
+        px = p[i, 0]
+        py = p[i, 1]
+        best = 0
+        best_d2 = np.inf
+        best_t = 0.0
+        for k in range(n_s):
+            apx = px - a[k, 0]
+            apy = py - a[k, 1]
+            t = ((0.0 + apx * ab[k, 0]) + apy * ab[k, 1]) / (seg_len[k] * seg_len[k])
+            # numpy's clip: -0.0 and NaN pass (min/max would not promise that)
+            if t < 0.0:  # noqa: PLR1730
+                t = 0.0
+            if t > 1.0:  # noqa: PLR1730
+                t = 1.0
+            ex = px - (a[k, 0] + t * ab[k, 0])
+            ey = py - (a[k, 1] + t * ab[k, 1])
+            d2 = (0.0 + ex * ex) + ey * ey
+            if np.isnan(d2):
+                if not np.isnan(best_d2):
+                    best, best_d2, best_t = k, d2, t
+                break
+            if k == 0 or d2 < best_d2:
+                best, best_d2, best_t = k, d2, t
+        s_out[i] = s_start[best] + best_t * seg_len[best]
+        cross = ab[best, 0] * (py - a[best, 1]) - ab[best, 1] * (px - a[best, 0])
+        lateral[i] = cross / seg_len[best]
+        dist[i] = np.sqrt(best_d2)
+    return s_out, lateral, dist

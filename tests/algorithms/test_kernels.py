@@ -1,7 +1,9 @@
-"""The detector's numba kernels give what the numpy/scipy steps they replaced gave, bit for bit.
+"""The reference algorithms' numba kernels give what the numpy/scipy code they replaced gave,
+bit for bit.
 
-The reference below is the detector's former front end (crop, ground-cell minima, obstacle split,
-:func:`scipy.ndimage.label` clustering), kept here as the specification of the kernels.
+The references below are that former code — the detector's front end (crop, ground-cell minima,
+obstacle split, :func:`scipy.ndimage.label` clustering) and the planner's projection onto its
+path — kept here as the specification of the kernels.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from redrive.algorithms.reference._clusters import Clusters, cluster_points
 from redrive.algorithms.reference._ground import ground_heights
 from redrive.algorithms.reference._kernels import label_clusters
 from redrive.algorithms.reference.detector import ClusterDetector
+from redrive.algorithms.reference.planner import Polyline
 
 _F32 = npt.NDArray[np.float32]
 
@@ -164,3 +167,38 @@ def test_label_clusters_leaves_its_scratch_grid_as_it_found_it() -> None:
     assert starts.tolist() == [0, 2]
     assert counts.tolist() == [2, 1]
     assert np.all(scratch == -1)
+
+
+def _reference_project(
+    line: Polyline, p: npt.NDArray[np.float64]
+) -> tuple[npt.NDArray[np.float64], ...]:
+    """The former numpy broadcasting of Polyline.project (all segments)."""
+    a = line.xy[:-1]
+    ab = line.xy[1:] - a
+    seg_len = np.hypot(ab[:, 0], ab[:, 1])
+    ap = p[:, None, :] - a[None, :, :]
+    t = np.clip((ap * ab[None]).sum(axis=2) / seg_len**2, 0.0, 1.0)
+    foot = a[None] + t[..., None] * ab[None]
+    d2 = ((p[:, None, :] - foot) ** 2).sum(axis=2)
+    j = np.argmin(d2, axis=1)
+    rows = np.arange(len(p))
+    s = line.s[j] + t[rows, j] * seg_len[j]
+    lateral = (ab[j, 0] * ap[rows, j, 1] - ab[j, 1] * ap[rows, j, 0]) / seg_len[j]
+    return s, lateral, np.sqrt(d2[rows, j])
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_project_equals_the_former_numpy_broadcasting(seed: int) -> None:
+    rng = np.random.default_rng(200 + seed)
+    k = int(rng.integers(2, 300))
+    heading = np.cumsum(rng.normal(0.0, 0.2, k))
+    xy = np.cumsum(np.column_stack([np.cos(heading), np.sin(heading)]) * 0.5, axis=0)
+    line = Polyline(xy)
+    p = rng.uniform(-20.0, 80.0, (int(rng.integers(0, 40)), 2))
+    p[: min(2, len(p))] = line.xy[rng.integers(0, len(line.xy), min(2, len(p)))]  # on a vertex
+    if seed % 3 == 0 and len(p):
+        p[-1, 0] = np.nan
+    got = line.project(p)
+    for a, b in zip(got, _reference_project(line, p), strict=True):
+        np.testing.assert_array_equal(a, b)
+        assert np.array_equal(np.signbit(a), np.signbit(b))
