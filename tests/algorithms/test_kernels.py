@@ -14,7 +14,7 @@ import pytest
 from scipy import ndimage
 
 from redrive.algorithms.reference._clusters import Clusters, cluster_points
-from redrive.algorithms.reference._ground import ground_heights
+from redrive.algorithms.reference._ground import GroundGrid
 from redrive.algorithms.reference._kernels import label_clusters
 from redrive.algorithms.reference.detector import ClusterDetector
 from redrive.algorithms.reference.planner import Polyline
@@ -47,6 +47,49 @@ def _sweep(seed: int) -> _F32:
     return out
 
 
+def _reference_ground(
+    grid: GroundGrid, minima: _F32, *, method: str, max_step_m: float, fallback_z_m: float
+) -> _F32:
+    """The former numpy version of _ground.ground_heights and fit_plane."""
+    low = minima.reshape(grid.n, grid.n)
+    padded = np.pad(low, 1, constant_values=np.inf)
+    local = low.copy()
+    for di in (0, 1, 2):
+        for dj in (0, 1, 2):
+            np.minimum(local, padded[di : di + grid.n, dj : dj + grid.n], out=local)
+    cx, cy = grid.centres()
+    sample = np.isfinite(low) & (low <= local + np.float32(0.05))
+    x, y, z = cx[sample], cy[sample], low[sample].astype(np.float64)
+    if z.size < 3:
+        return np.full((grid.n, grid.n), fallback_z_m, dtype=np.float32)
+    tri = np.random.default_rng(0).integers(0, z.size, size=(32, 3))
+    every = max(1, z.size // 800)
+    xs, ys, zs = x[::every], y[::every], z[::every]
+    p = np.stack([x[tri], y[tri], z[tri]], axis=-1)
+    normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    ok = np.abs(normal[:, 2]) > 0.9 * np.maximum(np.linalg.norm(normal, axis=1), 1e-12)
+    if not np.any(ok):
+        a, b, c = 0.0, 0.0, float(np.median(z))
+    else:
+        normal, p0 = normal[ok], p[ok, 0]
+        a_h = -normal[:, 0] / normal[:, 2]
+        b_h = -normal[:, 1] / normal[:, 2]
+        c_h = p0[:, 2] - a_h * p0[:, 0] - b_h * p0[:, 1]
+        resid = np.abs(zs[None, :] - (a_h[:, None] * xs + b_h[:, None] * ys + c_h[:, None]))
+        best = int(np.argmax((resid < 0.15).sum(axis=1)))
+        a, b, c = float(a_h[best]), float(b_h[best]), float(c_h[best])
+    inliers = np.abs(z - (a * x + b * y + c)) < 0.15
+    if int(inliers.sum()) >= 3:
+        design = np.stack([x[inliers], y[inliers], np.ones(int(inliers.sum()))], axis=1)
+        a, b, c = (float(v) for v in np.linalg.lstsq(design, z[inliers], rcond=None)[0])
+    plane_z = (a * cx + b * cy + c).astype(np.float32)
+    if method == "plane":
+        return plane_z
+    usable = np.isfinite(local) & (local <= plane_z + np.float32(max_step_m))
+    out: _F32 = np.where(usable, local, plane_z).astype(np.float32)
+    return out
+
+
 def _reference_front_end(
     det: ClusterDetector, xyz: _F32, sensor_location: tuple[float, float, float]
 ) -> tuple[tuple[_F32, _F32, _F32, _F32], Clusters]:
@@ -64,7 +107,7 @@ def _reference_front_end(
     keys = ((x + half) * inv).astype(np.intp) * grid.n + ((y + half) * inv).astype(np.intp)
     minima = np.full(grid.n * grid.n, np.inf, dtype=np.float32)
     np.minimum.at(minima, keys, z)
-    ground = ground_heights(
+    ground = _reference_ground(
         grid,
         minima,
         method=str(cfg["ground_method"]),
@@ -107,9 +150,10 @@ def _reference_front_end(
     return (ox, oy, z[obstacle], gz[obstacle]), clusters
 
 
-@pytest.mark.parametrize("seed", range(6))
-def test_detect_equals_the_former_numpy_steps(seed: int) -> None:
+@pytest.mark.parametrize(("seed", "method"), [(s, "grid") for s in range(6)] + [(6, "plane")])
+def test_detect_equals_the_former_numpy_steps(seed: int, method: str) -> None:
     det = ClusterDetector()
+    det.configure({"ground_method": method})
     xyz = _sweep(seed)
     location = (1.2, 0.0, 1.9)
     points, clusters = _reference_front_end(det, xyz, location)

@@ -278,3 +278,87 @@ def project_on_segments(
         lateral[i] = cross / seg_len[best]
         dist[i] = np.sqrt(best_d2)
     return s_out, lateral, dist
+
+
+@_jit
+def ground_sample(
+    low: _F32, cx: _F64, cy: _F64, margin: np.float32
+) -> tuple[_F32, _F64, _F64, _F64]:
+    """The lowest z of each cell's 3 × 3 neighbourhood (``low`` (n, n) float32, +inf outside and
+    where empty), and the x, y, z of the occupied cells whose own minimum is within ``margin`` of
+    it (the plane's sample points, in row-major order; x, y the cell centres ``cx``, ``cy``)."""
+    n0, n1 = low.shape
+    local = np.empty((n0, n1), dtype=np.float32)
+    sx = np.empty(n0 * n1)
+    sy = np.empty(n0 * n1)
+    sz = np.empty(n0 * n1)
+    k = 0
+    for i in range(n0):
+        for j in range(n1):
+            m = low[i, j]
+            for ii in range(max(i - 1, 0), min(i + 2, n0)):
+                for jj in range(max(j - 1, 0), min(j + 2, n1)):
+                    m = min(m, low[ii, jj])
+            local[i, j] = m
+            v = low[i, j]
+            if np.isfinite(v) and v <= m + margin:
+                sx[k] = cx[i, j]
+                sy[k] = cy[i, j]
+                sz[k] = np.float64(v)
+                k += 1
+    return local, sx[:k], sy[:k], sz[:k]
+
+
+@_jit
+def ground_fill(  # noqa: PLR0917 - numba takes no keyword-only parameters
+    local: _F32,
+    cx: _F64,
+    cy: _F64,
+    plane: tuple[float, float, float],
+    max_step: np.float32,
+    plane_only: bool,
+) -> _F32:
+    """Ground height per cell (n, n) float32: the plane ``a·x + b·y + c`` at the cell centre,
+    or (unless ``plane_only``) the neighbourhood minimum ``local`` where it is finite and at most
+    ``max_step`` above the plane."""
+    a, b, c = plane
+    n0, n1 = local.shape
+    out = np.empty((n0, n1), dtype=np.float32)
+    for i in range(n0):
+        for j in range(n1):
+            plane_z = np.float32(a * cx[i, j] + b * cy[i, j] + c)
+            v = local[i, j]
+            if not plane_only and np.isfinite(v) and v <= plane_z + max_step:
+                out[i, j] = v
+            else:
+                out[i, j] = plane_z
+    return out
+
+
+@_jit
+def ransac_best(  # noqa: PLR0917
+    a_h: _F64, b_h: _F64, c_h: _F64, xs: _F64, ys: _F64, zs: _F64, band: float
+) -> int:
+    """Index of the plane hypothesis ``z = a·x + b·y + c`` with the most sample points within
+    ``band`` of it (the first of equals)."""
+    best = 0
+    best_count = -1
+    for h in range(a_h.shape[0]):
+        count = 0
+        for k in range(xs.shape[0]):
+            if abs(zs[k] - (a_h[h] * xs[k] + b_h[h] * ys[k] + c_h[h])) < band:
+                count += 1
+        if count > best_count:
+            best, best_count = h, count
+    return best
+
+
+@_jit
+def plane_inliers(  # noqa: PLR0917
+    x: _F64, y: _F64, z: _F64, a: float, b: float, c: float, band: float
+) -> npt.NDArray[np.bool_]:
+    """Which points lie within ``band`` of the plane ``z = a·x + b·y + c``."""
+    out = np.empty(x.shape[0], dtype=np.bool_)
+    for k in range(x.shape[0]):
+        out[k] = abs(z[k] - (a * x[k] + b * y[k] + c)) < band
+    return out
