@@ -22,6 +22,8 @@ Both return the ground height per cell of the grid; points are classified by the
 from __future__ import annotations
 
 import threading
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -78,10 +80,10 @@ class GroundGrid:
 def _generator() -> np.random.Generator:
     """The RANSAC generator at its seed: made once per thread, its state reset on every use
     (making one costs more than the rest of the hypothesis sampling)."""
-    cached: tuple[np.random.Generator, dict[str, object]] | None = getattr(_RNG, "pair", None)
+    cached: tuple[np.random.Generator, Mapping[str, Any]] | None = getattr(_RNG, "pair", None)
     if cached is None:
-        rng = np.random.default_rng(_RANSAC_SEED)
-        cached = (rng, rng.bit_generator.state)
+        made = np.random.default_rng(_RANSAC_SEED)
+        cached = (made, made.bit_generator.state)
         _RNG.pair = cached
     rng, state = cached
     rng.bit_generator.state = state
