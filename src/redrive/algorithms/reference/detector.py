@@ -1,6 +1,8 @@
 """The reference LiDAR detector: ground removal, BEV clustering, L-shape boxes, size classes.
 
-Pipeline (all numpy/scipy, no Python loop over points or clusters):
+Pipeline (numpy/scipy over clusters; the passes over points and grid cells — crop, ground,
+obstacle split, clustering — are numba kernels in :mod:`._kernels` that release the GIL, no
+Python loop over points or clusters):
 
 1. **Frame.**  Points are moved from the sensor frame to base_link by the translation
    ``SensorData.sensor_location`` (the data model has no mount rotation, so the sensor's axes are
@@ -57,11 +59,13 @@ Synthetic logs (``redrive.sim``, 2.5 s; objects with ≥ 50 LiDAR points within 
 recall 74/75, 107 of 125 detections have ground truth within 2 m; cut_in (highway) recall
 25/25, 26/33 — the rest are pieces of the highway's noise walls that look like a truck's flank.
 
-Speed (one core of the 2-core build machine, whole ``.demo/urban.mcap``, 200 sweeps of ~54k
-points): median 3.2-3.6 ms per sweep over runs (min 2.7, p95 4.0-4.2); KITTI (~121k points, ~44 objects) median
-6.2-6.4 ms, of which ~1.3 ms is building the ``DetectedObject`` values.  Read + detect runs at
-103-108 frames/s against 180-196 frames/s for reading alone.  The BEV labelling (~0.7 ms for
-467 × 467 cells) and the ground step (~0.6 ms) are the largest parts.
+Speed: on the demo log (``redrive synth urban --duration 20``, 200 sweeps of ~54k points) the
+numba kernels brought a step from 11.5 to ≈ 4.4 ms of thread CPU (shared machine, load ≈ 15;
+BENCHMARKS.md, "Open loop, 2026-11-26 (branch h-openloop3)"); the outputs are bit for bit
+those of the former numpy/scipy steps (``tests/algorithms/test_kernels.py`` keeps them as the
+reference).  What is left is mostly the box search (:mod:`._box_fit`, ≈ 1.2 ms), the plane's
+least squares and building the ``DetectedObject`` values.  The kernels compile on the first
+sweep after an install and are cached on disk (``__pycache__``) for later processes.
 """
 
 from __future__ import annotations
