@@ -13,6 +13,7 @@ import numpy.typing as npt
 import pytest
 from scipy import ndimage
 
+from redrive.algorithms.reference import _box_fit
 from redrive.algorithms.reference._clusters import Clusters, cluster_points
 from redrive.algorithms.reference._ground import GroundGrid
 from redrive.algorithms.reference._kernels import label_clusters
@@ -246,3 +247,31 @@ def test_project_equals_the_former_numpy_broadcasting(seed: int) -> None:
     for a, b in zip(got, _reference_project(line, p), strict=True):
         np.testing.assert_array_equal(a, b)
         assert np.array_equal(np.signbit(a), np.signbit(b))
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_closeness_scores_equal_the_former_numpy_broadcasting(seed: int) -> None:
+    rng = np.random.default_rng(300 + seed)
+    counts = rng.integers(1, 120, int(rng.integers(1, 15)))
+    starts = np.r_[0, np.cumsum(counts)[:-1]].astype(np.intp)
+    xy = rng.normal(0.0, 2.0, (int(counts.sum()), 2))
+    xy[rng.integers(0, len(xy), 3)] = xy[0]  # repeated points
+    cid = np.repeat(np.arange(counts.size), counts)
+    coarse = np.arange(0.0, 0.5 * np.pi, np.deg2rad(5.0))
+    for theta in (
+        np.broadcast_to(coarse, (counts.size, coarse.size)),
+        rng.uniform(0.0, np.pi, (counts.size, 11)),
+    ):
+        cos, sin = np.cos(theta)[cid], np.sin(theta)[cid]
+        c1 = xy[:, 0:1] * cos + xy[:, 1:2] * sin
+        c2 = xy[:, 1:2] * cos - xy[:, 0:1] * sin
+        lo1, hi1 = np.minimum.reduceat(c1, starts), np.maximum.reduceat(c1, starts)
+        lo2, hi2 = np.minimum.reduceat(c2, starts), np.maximum.reduceat(c2, starts)
+        d = np.minimum(
+            np.minimum(hi1[cid] - c1, c1 - lo1[cid]), np.minimum(hi2[cid] - c2, c2 - lo2[cid])
+        )
+        np.maximum(d, 0.01, out=d)
+        expected = np.add.reduceat(1.0 / d, starts, axis=0)
+        np.testing.assert_array_equal(
+            _box_fit._scores(xy, cid, starts, theta, "closeness"), expected
+        )

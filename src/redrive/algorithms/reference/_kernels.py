@@ -12,6 +12,9 @@ release the GIL (``nogil``), so a detector step can overlap another thread's wor
 * :func:`label_clusters` — 8-connected components of the occupied cells of the BEV clustering
   grid, numbered in raster order of their first cell as :func:`scipy.ndimage.label` numbers
   them, filtered by size and tall points, with the points grouped by cluster in index order.
+* :func:`ground_sample`, :func:`ground_fill`, :func:`ransac_best`, :func:`plane_inliers` — the
+  ground step (:mod:`._ground`).
+* :func:`closeness_terms` — the box search's per-point criterion terms (:mod:`._box_fit`).
 * :func:`project_on_segments` — the planner's projection of points onto its path.
 """
 
@@ -24,7 +27,17 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["crop_cell_minima", "label_clusters", "project_on_segments", "split_obstacles"]
+__all__ = [
+    "closeness_terms",
+    "crop_cell_minima",
+    "ground_fill",
+    "ground_sample",
+    "label_clusters",
+    "plane_inliers",
+    "project_on_segments",
+    "ransac_best",
+    "split_obstacles",
+]
 
 _F = TypeVar("_F", bound=Callable[..., Any])
 _F32 = npt.NDArray[np.float32]
@@ -361,4 +374,33 @@ def plane_inliers(  # noqa: PLR0917
     out = np.empty(x.shape[0], dtype=np.bool_)
     for k in range(x.shape[0]):
         out[k] = abs(z[k] - (a * x[k] + b * y[k] + c)) < band
+    return out
+
+
+@_jit
+def closeness_terms(xy: _F64, starts: _I64, cos: _F64, sin: _F64, d0: float) -> _F64:
+    """The closeness criterion's per-point terms 1 / max(d, d0), (M, A): d is a point's distance
+    to the nearer edge of its cluster's rectangle at each candidate heading (``cos``, ``sin``
+    (K, A) of the headings; ``xy`` (M, 2) sorted by cluster, clusters starting at ``starts``).
+    The caller sums them per cluster (numpy's order of summation stays the caller's)."""
+    m = xy.shape[0]
+    k_n, a_n = cos.shape
+    out = np.empty((m, a_n))
+    for k in range(k_n):
+        begin = starts[k]
+        end = starts[k + 1] if k + 1 < k_n else m
+        for a in range(a_n):
+            c, s = cos[k, a], sin[k, a]
+            lo1 = hi1 = xy[begin, 0] * c + xy[begin, 1] * s
+            lo2 = hi2 = xy[begin, 1] * c - xy[begin, 0] * s
+            for p in range(begin + 1, end):
+                c1 = xy[p, 0] * c + xy[p, 1] * s
+                c2 = xy[p, 1] * c - xy[p, 0] * s
+                lo1, hi1 = min(lo1, c1), max(hi1, c1)
+                lo2, hi2 = min(lo2, c2), max(hi2, c2)
+            for p in range(begin, end):
+                c1 = xy[p, 0] * c + xy[p, 1] * s
+                c2 = xy[p, 1] * c - xy[p, 0] * s
+                d = min(hi1 - c1, c1 - lo1, hi2 - c2, c2 - lo2)
+                out[p, a] = 1.0 / max(d, d0)
     return out
