@@ -60,12 +60,13 @@ recall 74/75, 107 of 125 detections have ground truth within 2 m; cut_in (highwa
 25/25, 26/33 — the rest are pieces of the highway's noise walls that look like a truck's flank.
 
 Speed: on the demo log (``redrive synth urban --duration 20``, 200 sweeps of ~54k points) the
-numba kernels brought a step from 11.5 to ≈ 4.4 ms of thread CPU (shared machine, load ≈ 15;
-BENCHMARKS.md, "Open loop, 2026-11-26 (branch h-openloop3)"); the outputs are bit for bit
-those of the former numpy/scipy steps (``tests/algorithms/test_kernels.py`` keeps them as the
-reference).  What is left is mostly the box search (:mod:`._box_fit`, ≈ 1.2 ms), the plane's
-least squares and building the ``DetectedObject`` values.  The kernels compile on the first
-sweep after an install and are cached on disk (``__pycache__``) for later processes.
+numba kernels brought a step from ≈ 8.5 to ≈ 4.8 ms of thread CPU, interleaved on the shared
+build machine at load ≈ 22 (BENCHMARKS.md, "Open loop, 2026-11-26 07:45–08:35 (branch
+h-openloop3)"); the outputs are bit for bit those of the former
+numpy/scipy steps (``tests/algorithms/test_kernels.py`` keeps them as the reference).  What is
+left is mostly the plane's least squares, building the ``DetectedObject`` values and the box
+search's numpy parts.  The kernels compile on the first sweep after an install and are cached
+on disk (``__pycache__``) for later processes.
 """
 
 from __future__ import annotations
