@@ -28,6 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from redrive.algorithms.reference._kernels import closeness_terms
+
 __all__ = ["BoxFit", "collinear_walls", "complete_boxes", "fit_boxes"]
 
 _F64 = npt.NDArray[np.float64]
@@ -84,14 +86,16 @@ def _edge_distance(
 
 def _scores(xy: _F64, cid: _I, starts: _I, theta: _F64, criterion: str) -> _F64:
     """Criterion value of every (cluster, candidate heading): (K, A), larger is better."""
-    c1, c2 = _project(xy, cid, theta)
     if criterion == "area":
+        c1, c2 = _project(xy, cid, theta)
         lo1, hi1 = _extents(c1, starts)
         lo2, hi2 = _extents(c2, starts)
         return -((hi1 - lo1) * (hi2 - lo2))
-    d, _ = _edge_distance(c1, c2, cid, starts)
-    np.maximum(d, _D0_M, out=d)
-    return np.add.reduceat(1.0 / d, starts, axis=0)
+    # the per-point terms in one pass (a numba kernel); their sums stay numpy's
+    terms = closeness_terms(
+        xy, starts.astype(np.int64, copy=False), np.cos(theta), np.sin(theta), _D0_M
+    )
+    return np.add.reduceat(terms, starts, axis=0)
 
 
 def fit_boxes(

@@ -1,8 +1,8 @@
 """Ground estimation for the reference LiDAR detector: a height field on a bird's-eye-view grid.
 
 Two methods, both working on the **lowest z per ground cell** (square cells of ``cell_m``,
-typically 1 m), which is computed without per-point Python: a stable radix sort of the uint16
-cell keys and :func:`numpy.minimum.reduceat`.
+typically 1 m), which the detector takes in its one pass over the points
+(:func:`._kernels.crop_cell_minima`).
 
 ``"grid"`` (the default)
     Ground height of a cell = the lowest point in its 3 × 3 neighbourhood.  A local minimum follows
@@ -21,10 +21,21 @@ Both return the ground height per cell of the grid; points are classified by the
 
 from __future__ import annotations
 
+import threading
+from collections.abc import Mapping
+from typing import Any
+
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["GroundGrid", "cell_minima", "fit_plane", "ground_heights"]
+from redrive.algorithms.reference._kernels import (
+    ground_fill,
+    ground_sample,
+    plane_inliers,
+    ransac_best,
+)
+
+__all__ = ["GroundGrid", "fit_plane", "ground_heights"]
 
 _F32 = npt.NDArray[np.float32]
 _F64 = npt.NDArray[np.float64]
@@ -35,6 +46,7 @@ _RANSAC_HYPOTHESES = 32
 _RANSAC_MAX_SAMPLES = 800
 _RANSAC_INLIER_M = 0.15
 _RANSAC_SEED = 0
+_RNG = threading.local()
 
 
 class GroundGrid:
@@ -60,44 +72,22 @@ class GroundGrid:
         included."""
         return self.half_extent_m - 1e-3 * self.cell_m
 
-    def keys(self, x: _F32, y: _F32) -> npt.NDArray[np.intp]:
-        """Flat cell keys of points within ±:attr:`crop_m` (x, y in metres, base_link)."""
-        inv = np.float32(1.0 / self.cell_m)
-        half = np.float32(self.half_extent_m)
-        i = ((x + half) * inv).astype(np.intp)
-        j = ((y + half) * inv).astype(np.intp)
-        i *= self.n
-        i += j
-        return i
-
     def centres(self) -> tuple[_F64, _F64]:
         """(n, n) x and y of the cell centres, metres (read-only)."""
         return self._centres
 
 
-def cell_minima(keys: npt.NDArray[np.intp], z: _F32, *, n_cells: int) -> _F32:
-    """Lowest z per cell (metres), ``+inf`` where a cell has no point.  Shape (n_cells,)."""
-    out = np.full(n_cells, np.inf, dtype=np.float32)
-    if keys.size == 0:
-        return out
-    small = keys.astype(np.uint16 if n_cells <= 1 << 16 else np.uint32)
-    order = np.argsort(small, kind="stable")  # radix sort for 16-bit keys: O(n)
-    sorted_keys = small[order]
-    starts = np.flatnonzero(np.r_[True, sorted_keys[1:] != sorted_keys[:-1]])
-    out[sorted_keys[starts]] = np.minimum.reduceat(z[order], starts)
-    return out
-
-
-def _min3x3(grid: _F32) -> _F32:
-    """3 × 3 minimum filter with +inf outside (numpy slices; faster than ndimage at this size)."""
-    padded = np.pad(grid, 1, constant_values=np.inf)
-    n0, n1 = grid.shape
-    out = padded[1 : n0 + 1, 1 : n1 + 1].copy()
-    for di in (0, 1, 2):
-        for dj in (0, 1, 2):
-            if di != 1 or dj != 1:
-                np.minimum(out, padded[di : di + n0, dj : dj + n1], out=out)
-    return out
+def _generator() -> np.random.Generator:
+    """The RANSAC generator at its seed: made once per thread, its state reset on every use
+    (making one costs more than the rest of the hypothesis sampling)."""
+    cached: tuple[np.random.Generator, Mapping[str, Any]] | None = getattr(_RNG, "pair", None)
+    if cached is None:
+        made = np.random.default_rng(_RANSAC_SEED)
+        cached = (made, made.bit_generator.state)
+        _RNG.pair = cached
+    rng, state = cached
+    rng.bit_generator.state = state
+    return rng
 
 
 def fit_plane(x: _F64, y: _F64, z: _F64) -> tuple[float, float, float] | None:
@@ -106,8 +96,7 @@ def fit_plane(x: _F64, y: _F64, z: _F64) -> tuple[float, float, float] | None:
     n = z.size
     if n < 3:
         return None
-    rng = np.random.default_rng(_RANSAC_SEED)
-    tri = rng.integers(0, n, size=(_RANSAC_HYPOTHESES, 3))
+    tri = _generator().integers(0, n, size=(_RANSAC_HYPOTHESES, 3))
     every = max(1, n // _RANSAC_MAX_SAMPLES)
     xs, ys, zs = x[::every], y[::every], z[::every]
     p = np.stack([x[tri], y[tri], z[tri]], axis=-1)  # (H, 3, 3)
@@ -122,10 +111,9 @@ def fit_plane(x: _F64, y: _F64, z: _F64) -> tuple[float, float, float] | None:
         a_h = -normal[:, 0] / normal[:, 2]
         b_h = -normal[:, 1] / normal[:, 2]
         c_h = p0[:, 2] - a_h * p0[:, 0] - b_h * p0[:, 1]
-        resid = np.abs(zs[None, :] - (a_h[:, None] * xs + b_h[:, None] * ys + c_h[:, None]))
-        best = int(np.argmax((resid < _RANSAC_INLIER_M).sum(axis=1)))
+        best = ransac_best(a_h, b_h, c_h, xs, ys, zs, _RANSAC_INLIER_M)
         a, b, c = float(a_h[best]), float(b_h[best]), float(c_h[best])
-    inliers = np.abs(z - (a * x + b * y + c)) < _RANSAC_INLIER_M
+    inliers = plane_inliers(x, y, z, a, b, c, _RANSAC_INLIER_M)
     if int(inliers.sum()) >= 3:
         design = np.stack([x[inliers], y[inliers], np.ones(int(inliers.sum()))], axis=1)
         sol = np.linalg.lstsq(design, z[inliers], rcond=None)[0]
@@ -145,24 +133,17 @@ def ground_heights(
 
     Args:
         grid: the ground grid.
-        minima: lowest z per cell from :func:`cell_minima` (+inf when empty).
+        minima: lowest z per cell, (n·n,) float32 (+inf when empty).
         method: ``"grid"`` or ``"plane"`` (see the module docstring).
         max_step_m: ``grid`` only: a local minimum more than this above the plane is not ground.
         fallback_z_m: ground height when nothing can be fitted (fewer than 3 occupied cells).
     """
     low = minima.reshape(grid.n, grid.n)
-    occupied = np.isfinite(low)
     cx, cy = grid.centres()
     # The plane is fitted to the cell minima that are local minima of their 3 × 3 neighbourhood:
     # most are ground, few are the flank of a car or a wall.
-    local = _min3x3(low)
-    sample = occupied & (low <= local + np.float32(0.05))
-    plane = fit_plane(cx[sample], cy[sample], low[sample].astype(np.float64))
+    local, sx, sy, sz = ground_sample(low, cx, cy, np.float32(0.05))
+    plane = fit_plane(sx, sy, sz)
     if plane is None:
         return np.full((grid.n, grid.n), fallback_z_m, dtype=np.float32)
-    a, b, c = plane
-    plane_z = (a * cx + b * cy + c).astype(np.float32)
-    if method == "plane":
-        return plane_z
-    usable = np.isfinite(local) & (local <= plane_z + np.float32(max_step_m))
-    return np.where(usable, local, plane_z).astype(np.float32)
+    return ground_fill(local, cx, cy, plane, np.float32(max_step_m), method == "plane")

@@ -8,6 +8,7 @@ acceleration of standard deviation ``σ_a`` (m/s²), constant over a step, on ea
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,35 +39,50 @@ def initial_state(
     return KalmanState(x=x, p=p)
 
 
-def _transition(dt_s: float) -> Array:
+_EYE2: Array = np.eye(2)
+_EYE4: Array = np.eye(4)
+for _a in (_H, _EYE2, _EYE4):
+    _a.flags.writeable = False
+
+
+@functools.lru_cache(maxsize=16)
+def _motion(dt_s: float, accel_std_mps2: float) -> tuple[Array, Array, Array]:
+    """Transition F, its transpose and process noise Q of a step (read-only; a tracker's steps
+    mostly share one dt, so they are built once)."""
     f = np.eye(4)
     f[0, 2] = f[1, 3] = dt_s
-    return f
-
-
-def _process_noise(dt_s: float, accel_std_mps2: float) -> Array:
     q1 = np.array([[dt_s**4 / 4.0, dt_s**3 / 2.0], [dt_s**3 / 2.0, dt_s**2]], dtype=np.float64) * (
         accel_std_mps2**2
     )
     q = np.zeros((4, 4))
     q[np.ix_([0, 2], [0, 2])] = q1
     q[np.ix_([1, 3], [1, 3])] = q1
-    return q
+    f_t = f.T
+    for a in (f, f_t, q):
+        a.flags.writeable = False
+    return f, f_t, q
+
+
+@functools.lru_cache(maxsize=16)
+def _measurement_noise(meas_std_m: float) -> Array:
+    r = _EYE2 * meas_std_m**2
+    r.flags.writeable = False
+    return r
 
 
 def predict(state: KalmanState, dt_s: float, *, accel_std_mps2: float) -> None:
     """Advance ``state`` by ``dt_s`` seconds in place (no-op for ``dt_s == 0``)."""
     if dt_s == 0.0:
         return
-    f = _transition(dt_s)
+    f, f_t, q = _motion(dt_s, accel_std_mps2)
     state.x = f @ state.x
-    state.p = f @ state.p @ f.T + _process_noise(dt_s, accel_std_mps2)
+    state.p = f @ state.p @ f_t + q
 
 
 def mahalanobis_sq(state: KalmanState, z_m: Array, *, meas_std_m: float) -> Array:
     """Squared Mahalanobis distances (M,) of positions ``z_m`` (M, 2) from the predicted
     measurement, under the innovation covariance ``S = H P Hᵀ + R``."""
-    s = state.p[:2, :2] + np.eye(2) * meas_std_m**2
+    s = state.p[:2, :2] + _measurement_noise(meas_std_m)
     d = z_m - state.x[:2]
     out: Array = np.einsum("mi,ij,mj->m", d, np.linalg.inv(s), d)
     return out
@@ -75,10 +91,10 @@ def mahalanobis_sq(state: KalmanState, z_m: Array, *, meas_std_m: float) -> Arra
 def update(state: KalmanState, z_m: Array, *, meas_std_m: float) -> None:
     """Correct ``state`` in place with the position measurement ``z_m`` (2,) (Joseph form, so
     ``P`` stays symmetric positive definite)."""
-    r = np.eye(2) * meas_std_m**2
+    r = _measurement_noise(meas_std_m)
     s = _H @ state.p @ _H.T + r
     k = state.p @ _H.T @ np.linalg.inv(s)
     state.x = state.x + k @ (z_m - _H @ state.x)
-    i_kh = np.eye(4) - k @ _H
+    i_kh = _EYE4 - k @ _H
     p = i_kh @ state.p @ i_kh.T + k @ r @ k.T
     state.p = 0.5 * (p + p.T)

@@ -1,6 +1,8 @@
 """The reference LiDAR detector: ground removal, BEV clustering, L-shape boxes, size classes.
 
-Pipeline (all numpy/scipy, no Python loop over points or clusters):
+Pipeline (numpy/scipy over clusters; the passes over points and grid cells — crop, ground,
+obstacle split, clustering — are numba kernels in :mod:`._kernels` that release the GIL, no
+Python loop over points or clusters):
 
 1. **Frame.**  Points are moved from the sensor frame to base_link by the translation
    ``SensorData.sensor_location`` (the data model has no mount rotation, so the sensor's axes are
@@ -57,11 +59,14 @@ Synthetic logs (``redrive.sim``, 2.5 s; objects with ≥ 50 LiDAR points within 
 recall 74/75, 107 of 125 detections have ground truth within 2 m; cut_in (highway) recall
 25/25, 26/33 — the rest are pieces of the highway's noise walls that look like a truck's flank.
 
-Speed (one core of the 2-core build machine, whole ``.demo/urban.mcap``, 200 sweeps of ~54k
-points): median 3.2-3.6 ms per sweep over runs (min 2.7, p95 4.0-4.2); KITTI (~121k points, ~44 objects) median
-6.2-6.4 ms, of which ~1.3 ms is building the ``DetectedObject`` values.  Read + detect runs at
-103-108 frames/s against 180-196 frames/s for reading alone.  The BEV labelling (~0.7 ms for
-467 × 467 cells) and the ground step (~0.6 ms) are the largest parts.
+Speed: on the demo log (``redrive synth urban --duration 20``, 200 sweeps of ~54k points) the
+numba kernels brought a step from ≈ 8.5 to ≈ 4.8 ms of thread CPU, interleaved on the shared
+build machine at load ≈ 22 (BENCHMARKS.md, "Open loop, 2026-11-26 07:45–08:35 (branch
+h-openloop3)"); the outputs are bit for bit those of the former
+numpy/scipy steps (``tests/algorithms/test_kernels.py`` keeps them as the reference).  What is
+left is mostly the plane's least squares, building the ``DetectedObject`` values and the box
+search's numpy parts.  The kernels compile on the first sweep after an install and are cached
+on disk (``__pycache__``) for later processes.
 """
 
 from __future__ import annotations
@@ -77,7 +82,8 @@ import numpy.typing as npt
 from redrive.algorithms.base import Algorithm, Input, Role, StageOutputs
 from redrive.algorithms.reference._box_fit import collinear_walls, complete_boxes, fit_boxes
 from redrive.algorithms.reference._clusters import Clusters, cluster_points
-from redrive.algorithms.reference._ground import GroundGrid, cell_minima, ground_heights
+from redrive.algorithms.reference._ground import GroundGrid, ground_heights
+from redrive.algorithms.reference._kernels import crop_cell_minima, split_obstacles
 from redrive.errors import AlgorithmError, ConfigError
 from redrive.types import Box3D, DetectedObject, Frame, ObjectClass, PointCloud, SensorType
 
@@ -257,20 +263,21 @@ class ClusterDetector(Algorithm):
         if xyz.shape[0] == 0:
             return []
         sx, sy, sz = (np.float32(v) for v in sensor_location)
-        x, y, z = np.ascontiguousarray(xyz.T, dtype=np.float32)
-        x, y, z = x + sx, y + sy, z + sz
-        r = np.float32(self._ground_grid.crop_m)
+        grid = self._ground_grid
         r0 = np.float32(cfg["min_range_m"])
-        dx, dy = x - sx, y - sy
-        keep = (np.abs(x) < r) & (np.abs(y) < r) & (dx * dx + dy * dy > r0 * r0)
-        keep &= np.isfinite(z)
-        x, y, z = x[keep], y[keep], z[keep]
+        x, y, z, keys, minima = crop_cell_minima(
+            np.ascontiguousarray(xyz, dtype=np.float32),
+            sx,
+            sy,
+            sz,
+            np.float32(grid.crop_m),
+            r0 * r0,
+            np.float32(grid.half_extent_m),
+            np.float32(1.0 / grid.cell_m),
+            grid.n,
+        )
         if x.size == 0:
             return []
-
-        grid = self._ground_grid
-        keys = grid.keys(x, y)
-        minima = cell_minima(keys, z, n_cells=grid.n * grid.n)
         ground = ground_heights(
             grid,
             minima,
@@ -278,14 +285,17 @@ class ClusterDetector(Algorithm):
             max_step_m=float(cfg["ground_max_step_m"]),
             fallback_z_m=float(sz) - 1.8,
         ).ravel()
-        gz = ground[keys]
-        above = z - gz
-        obstacle = (above > np.float32(cfg["ground_threshold_m"])) & (
-            above < np.float32(cfg["max_height_m"])
-        )
         max_h = np.float32(cfg["max_height_m"])
-        tall = (above >= max_h) & (above < max_h + np.float32(self._drop["tall_band_m"]))
-        ox, oy, oz, og = x[obstacle], y[obstacle], z[obstacle], gz[obstacle]
+        ox, oy, oz, og, tall_x, tall_y = split_obstacles(
+            x,
+            y,
+            z,
+            keys,
+            ground,
+            np.float32(cfg["ground_threshold_m"]),
+            max_h,
+            max_h + np.float32(self._drop["tall_band_m"]),
+        )
         clusters = cluster_points(
             ox,
             oy,
@@ -293,7 +303,7 @@ class ClusterDetector(Algorithm):
             cell_m=float(cfg["cluster_tolerance_m"]),
             min_points=int(cfg["min_points"]),
             max_points=int(cfg["max_points"]),
-            tall_xy=(x[tall], y[tall]),
+            tall_xy=(tall_x, tall_y),
         )
         if clusters.starts.size == 0:
             return []

@@ -68,6 +68,7 @@ import numpy as np
 import numpy.typing as npt
 
 from redrive.algorithms.base import VEHICLE_STATE, Algorithm, Input, Role, StageOutputs
+from redrive.algorithms.reference._kernels import project_on_segments
 from redrive.errors import AlgorithmError, ConfigError
 from redrive.geometry.boxes import box_corners
 from redrive.types import DetectedObject, Frame, PlannedPath, VehicleState
@@ -158,17 +159,7 @@ class Polyline:
         a = self.xy[idx]
         ab = self.xy[idx + 1] - a
         seg_len = np.hypot(ab[:, 0], ab[:, 1])
-        ap = p[:, None, :] - a[None, :, :]  # (P, S, 2)
-        t = np.clip((ap * ab[None]).sum(axis=2) / seg_len**2, 0.0, 1.0)
-        foot = a[None] + t[..., None] * ab[None]
-        d2 = ((p[:, None, :] - foot) ** 2).sum(axis=2)
-        j = np.argmin(d2, axis=1)
-        rows = np.arange(len(p))
-        tj = t[rows, j]
-        s = self.s[idx[j]] + tj * seg_len[j]
-        cross = ab[j, 0] * ap[rows, j, 1] - ab[j, 1] * ap[rows, j, 0]
-        lateral = cross / seg_len[j]
-        return s, lateral, np.sqrt(d2[rows, j])
+        return project_on_segments(np.ascontiguousarray(p), a, ab, seg_len, self.s[idx])
 
     def cut(self, s_start_m: float, s_end_m: float) -> Polyline:
         """The part between two arc lengths (clipped to the polyline) as a new polyline."""
