@@ -58,14 +58,19 @@ class GapSearch:
         self.horizon_m = horizon_m
         self.margin_m = margin_m
         self._offset: dict[int, int] = {}
-        points, s_m = [], []
+        #: the distinct routes, in the order of their samples in :attr:`net`
+        self.routes: list[Route] = []
+        points, s_m, heading, norms = [], [], [], []
         n = 0
         for route in routes:
             if id(route) in self._offset:
                 continue
             self._offset[id(route)] = n
+            self.routes.append(route)
             points.append(route.points)
             s_m.append(route.s_m)
+            heading.append(route.heading_rad)
+            norms.append([*route.segment_norms(), 1.0])
             n += len(route.s_m)
         pts = np.concatenate(points) if points else np.zeros((0, 2))
         s = np.concatenate(s_m) if s_m else np.zeros(0)
@@ -74,49 +79,75 @@ class GapSearch:
         seg = pts[1:] - pts[:-1] if n else np.zeros((0, 2))
         seg_len = np.append(s[1:] - s[:-1], 0.0) if n else np.zeros(0)
         seg = np.concatenate([seg, np.zeros((1 if n else 0, 2))])
-        #: (7, samples): s, x, y, segment x, segment y, segment length and its square
-        self._net: F64 = np.ascontiguousarray(
-            np.stack([s, pts[:, 0], pts[:, 1], seg[:, 0], seg[:, 1], seg_len, seg_len**2])
+        #: (9, samples): s, x, y, segment x, segment y, segment length and its square, heading,
+        #: and ``math.hypot`` of the segment's unit tangent as ``Route.pose_at`` takes it
+        self.net: F64 = np.ascontiguousarray(
+            np.stack(
+                [
+                    s,
+                    pts[:, 0],
+                    pts[:, 1],
+                    seg[:, 0],
+                    seg[:, 1],
+                    seg_len,
+                    seg_len**2,
+                    np.concatenate(heading) if heading else np.zeros(0),
+                    np.array([v for part in norms for v in part], dtype=np.float64),
+                ]
+            )
         )
+        #: (2, routes): each route's first sample in :attr:`net` and its sample count
+        self.route_table: I64 = np.array(
+            [[self._offset[id(r)] for r in self.routes], [len(r.s_m) for r in self.routes]],
+            dtype=np.int64,
+        ).reshape(2, -1)
+
+    def route_row(self, route: Route) -> tuple[int, int]:
+        """``route``'s first sample in :attr:`net` and its sample count."""
+        return self._offset[id(route)], len(route.s_m)
 
     def gaps(self, queries: Sequence[GapQuery], obstacles: Obstacles) -> list[tuple[float, float]]:
         """For each query: the gap (metres, inf if none) and the leader's speed along the route
         (m/s), equal to ``gap_ahead(q.route, obstacles, ...)`` of that query."""
-        nq = len(queries)
-        none = [(math.inf, 0.0)] * nq
-        if nq == 0 or len(obstacles.ids) == 0:
-            return none
-        horizon = self.horizon_m
-        offset = self._offset
+        if not queries:
+            return []
         q_int = np.array(
-            [(offset[id(q.route)], len(q.route.s_m), q.self_id) for q in queries], dtype=np.int64
+            [(self._offset[id(q.route)], len(q.route.s_m), q.self_id) for q in queries],
+            dtype=np.int64,
         ).T
         q_float = np.array(
-            [(q.s_center_m, q.s_front_m, q.s_front_m + horizon, q.width_m) for q in queries],
+            [(q.s_center_m, q.s_front_m, q.s_front_m + self.horizon_m, q.width_m) for q in queries],
             dtype=np.float64,
         ).T
+        gap, speed = self.gaps_of(q_int, q_float, obstacles)
+        return list(zip(gap.tolist(), speed.tolist(), strict=True))
+
+    def gaps_of(self, q_int: I64, q_float: F64, obstacles: Obstacles) -> tuple[F64, F64]:
+        """:meth:`gaps` of queries given as arrays: ``q_int`` (3, Q) the route's first sample in
+        :attr:`net`, its sample count (:attr:`route_table`) and the agent's id; ``q_float``
+        (4, Q) the arclength of its box centre, of its front, the front plus the horizon, and
+        its width.  Returns the gaps (inf: none) and the leaders' speeds (0 where none)."""
+        nq = q_int.shape[1]
+        if nq == 0 or len(obstacles.ids) == 0:
+            return np.full(nq, np.inf), np.zeros(nq)
         obst = np.stack(
-            [obstacles.centers[:, 0], obstacles.centers[:, 1], obstacles.lengths, obstacles.widths]
+            [
+                obstacles.centers[:, 0],
+                obstacles.centers[:, 1],
+                obstacles.lengths,
+                obstacles.widths,
+                obstacles.velocities[:, 0],
+                obstacles.velocities[:, 1],
+            ]
         )
-        gap, leader, s_lead = _gap_kernel(
-            np.ascontiguousarray(q_int),
-            np.ascontiguousarray(q_float),
+        return _gap_kernel(
+            np.ascontiguousarray(q_int, dtype=np.int64),
+            np.ascontiguousarray(q_float, dtype=np.float64),
             self.margin_m,
             np.ascontiguousarray(obstacles.ids, dtype=np.int64),
             np.ascontiguousarray(obst, dtype=np.float64),
-            self._net,
+            self.net,
         )
-        out = none.copy()
-        for k, m in enumerate(leader.tolist()):
-            if m < 0:
-                continue
-            _, _, heading = queries[k].route.pose_at(float(s_lead[k]))
-            vx, vy = obstacles.velocities[m]
-            out[k] = (
-                float(gap[k]),
-                float(vx * math.cos(heading) + vy * math.sin(heading)),
-            )
-        return out
 
 
 @numba.njit(cache=True, nogil=True)
@@ -148,15 +179,15 @@ def _bisect_left(a: F64, lo: int, hi: int, x: float) -> int:  # pragma: no cover
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _gap_kernel(  # noqa: PLR0917 (one batch's arrays; numba has no keyword-only parameters)
     q_int: I64, q_float: F64, margin: float, ids: I64, obst: F64, net: F64
-) -> tuple[F64, I64, F64]:  # pragma: no cover - compiled
-    """Per query: the gap, the leader's index (-1: none) and its arclength on the query's route.
+) -> tuple[F64, F64]:  # pragma: no cover - compiled
+    """Per query: the gap and the leader's speed along the route (inf and 0: none).
 
     What ``gap_ahead`` computes, pair by pair: ``Route._piece``, ``Route.near``,
     ``Route.project`` and the nearest obstacle ahead (first minimum, as ``np.argmin``).
 
     ``q_int``: (3, Q) the route's first sample in ``net``, its sample count, the agent's id;
     ``q_float``: (4, Q) arclength of the box centre, of the front, the horizon's end, the width;
-    ``obst``: (4, M) centre x, y, length, width; ``net``: (7, N) as ``GapSearch._net``.
+    ``obst``: (6, M) centre x, y, length, width, velocity x, y; ``net``: ``GapSearch.net``.
     """
     route_off, route_n, self_ids = q_int[0], q_int[1], q_int[2]
     s_center, s_front, s_max, widths = q_float[0], q_float[1], q_float[2], q_float[3]
@@ -165,8 +196,8 @@ def _gap_kernel(  # noqa: PLR0917 (one batch's arrays; numba has no keyword-only
     seg_x, seg_y, seg_len, seg_len2 = net[3], net[4], net[5], net[6]
     nq, nm = len(s_center), len(ids)
     gap_out = np.full(nq, np.inf)
-    leader_out = np.full(nq, -1, dtype=np.int64)
-    s_out = np.zeros(nq)
+    speed_out = np.zeros(nq)
+    net_h = net[7]
     for q in range(nq):
         off, n = route_off[q], route_n[q]
         last = n - 1
@@ -216,5 +247,11 @@ def _gap_kernel(  # noqa: PLR0917 (one batch's arrays; numba has no keyword-only
                 if gap < best_gap:
                     best_gap, best_m, best_s = gap, m, s
         if best_m >= 0:
-            gap_out[q], leader_out[q], s_out[q] = best_gap, best_m, best_s
-    return gap_out, leader_out, s_out
+            # the leader's velocity along the route's heading there (Route.pose_at's)
+            j = min(max(_bisect_right(net_s, off, off + n, best_s) - 1, 0), n - 2) + off
+            t = (best_s - net_s[j]) / (net_s[j + 1] - net_s[j])
+            heading = net_h[j] + min(max(t, 0.0), 1.0) * (net_h[j + 1] - net_h[j])
+            vx, vy = obst[4, best_m], obst[5, best_m]
+            gap_out[q] = best_gap
+            speed_out[q] = vx * math.cos(heading) + vy * math.sin(heading)
+    return gap_out, speed_out

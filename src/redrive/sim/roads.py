@@ -236,6 +236,20 @@ class Route:
         y = y0 + t * ds * ty + d_m * tx / norm
         return float(x), float(y), heading
 
+    def segment_norms(self) -> list[float]:
+        """Per segment (sample i to i + 1): the length of the unit tangent as :meth:`pose_at`
+        computes it (``math.hypot`` of the differences over the arclength step; 1 up to
+        rounding), for kernels that must give :meth:`pose_at`'s values bit for bit."""
+        s_arr, xs, ys = self._s_list, self._x_list, self._y_list
+        out = []
+        for i in range(len(s_arr) - 1):
+            ds = s_arr[i + 1] - s_arr[i]
+            if ds == 0.0:  # a repeated sample (pose_at raises there)
+                out.append(math.nan)
+                continue
+            out.append(math.hypot((xs[i + 1] - xs[i]) / ds, (ys[i + 1] - ys[i]) / ds))
+        return out
+
     def curvature_at(self, s_m: float) -> float:
         """Signed curvature (1/m) at ``s_m`` (of the sample before it)."""
         i = int(np.clip(np.searchsorted(self.s_m, s_m, side="right") - 1, 0, len(self.s_m) - 1))
