@@ -22,11 +22,12 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
+from redrive.sim import kernels
 from redrive.sim.agents import LaneFollower
 from redrive.sim.gaps import GapSearch
 from redrive.sim.lights import TrafficLights
 from redrive.sim.roads import Route
-from redrive.types import LightState, ObjectClass
+from redrive.types import ObjectClass
 
 __all__ = ["LaneFleet"]
 
@@ -34,8 +35,6 @@ F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
 B = npt.NDArray[np.bool_]
 
-_LIGHT_CODE = {LightState.GREEN: 0, LightState.YELLOW: 1, LightState.RED: 2}
-_UNKNOWN = 3
 #: exponents handed to the kernels at run time: a literal would let the compiler turn
 #: ``pow(x, 2.0)`` into ``x * x``, which libm's ``pow`` (Python's ``**``) need not equal
 _POWERS = np.array([2.0, 3.0, 4.0, 5.0])
@@ -117,9 +116,16 @@ class LaneFleet:
             for k, stop in enumerate(route.stop_lines):
                 self._stop_s[r, k], self._stop_light[r, k] = stop.s_m, stop.light_id
         self._committed = np.zeros((n, max(k_max, 1)), dtype=bool)
+        # the signals' phase groups by light id (-1: no such signal, its state UNKNOWN) and the
+        # timing, for TrafficLights.state in the kernel
         n_lights = max([s.light_id for s in lights.signals] + [int(self._stop_light.max())]) + 1
-        self._light_codes = np.full(n_lights, _UNKNOWN, dtype=np.int64)
+        self._light_group = np.full(n_lights, -1, dtype=np.int64)
+        for sig in lights.signals:
+            self._light_group[sig.light_id] = sig.phase_group
+        tm = lights.timing
+        self._timing = np.array([tm.green_s, tm.yellow_s, tm.offset_s, tm.cycle_s])
         self._route_len = np.array([r.length_m for r in self._routes], dtype=np.float64)
+        self._clock = np.zeros(3)
 
     def __len__(self) -> int:
         return len(self._f)
@@ -157,6 +163,15 @@ class LaneFleet:
         search = self._search
         return _poses(self._f, self._i, self._time_s, search.net, search.route_table, _POWERS)
 
+    def snapshot(self, ids: I64, rows: F64) -> tuple[I64, F64]:
+        """The obstacles of a physics step with the followers after the first of ``rows``
+        ((K, 6): centre x, y, length, width, velocity x, y; ``ids`` (K,)): ids (M,) and the
+        rows transposed, (6, M), as :meth:`GapSearch.gaps_of` takes them."""
+        search = self._search
+        return _snapshot(
+            self._f, self._i, self._time_s, search.net, search.route_table, _POWERS, ids, rows
+        )
+
     def start_plan(self, time_s: float) -> None:
         """:meth:`LaneFollower.start_plan` of all: lane changes that start now (rare: in Python,
         the follower's pose then :meth:`Route.project` onto the target, as the follower does)."""
@@ -178,14 +193,19 @@ class LaneFleet:
             self._next_lc = float(f[pending, LC_START].min()) if pending.any() else math.inf
         self._time_s = time_s
 
-    def queries(self, horizon_m: float) -> tuple[I64, F64]:
-        """The gap-search queries of all followers (``GapSearch.gaps_of``'s arrays)."""
-        f, i = self._f, self._i
-        table = self._search.route_table
-        route = i[:, ROUTE]
-        s_front = f[:, S] + f[:, LENGTH] / 2.0
-        q_int = np.stack([table[0, route], table[1, route], i[:, ID]])
-        q_float = np.stack([f[:, S], s_front, s_front + horizon_m, f[:, WIDTH]])
+    def queries(
+        self, horizon_m: float, extra: tuple[int, int, int, float, float, float, float] | None
+    ) -> tuple[I64, F64]:
+        """The gap-search queries of all followers (``GapSearch.gaps_of``'s arrays), then
+        ``extra`` (route's first sample, sample count, id, centre, front, front + horizon,
+        width: the scripted ego's) when given."""
+        search = self._search
+        q_int, q_float = _queries(
+            self._f, self._i, search.route_table, horizon_m, extra is not None
+        )
+        if extra is not None:
+            q_int[0, -1], q_int[1, -1], q_int[2, -1] = extra[0], extra[1], extra[2]
+            q_float[0, -1], q_float[1, -1], q_float[2, -1], q_float[3, -1] = extra[3:]
         return q_int, q_float
 
     def finish_and_advance(
@@ -193,22 +213,21 @@ class LaneFleet:
     ) -> None:
         """:meth:`LaneFollower.finish_plan` then :meth:`~LaneFollower.advance` of all; those
         who left the end of their route are removed."""
-        lights = self._lights
-        codes = self._light_codes
-        for sig in lights.signals:
-            codes[sig.light_id] = _LIGHT_CODE.get(lights.state(sig.light_id, time_s), _UNKNOWN)
+        clock = self._clock
+        clock[0], clock[1], clock[2] = time_s, dt_s, 1.0 if self._lights.signals else 0.0
         _plan_advance(
             self._f,
             self._i,
             self._committed,
-            np.array([time_s, dt_s, 1.0 if lights.signals else 0.0]),
+            clock,
             gap_m,
             leader_speed_mps,
             self._has_brake,
             self._stop_s,
             self._stop_light,
             self._n_stops,
-            codes,
+            self._light_group,
+            self._timing,
             self._route_len,
             _POWERS,
         )
@@ -230,34 +249,11 @@ def _pose(  # noqa: PLR0917 (numba has no keyword-only parameters)  # pragma: no
         fade = 1.0 - (10.0 * p3 - 15.0 * p4 + 6.0 * p5)
         r = -(30.0 * p2 - 60.0 * p3 + 30.0 * p4) / dur
         off, rate = f[k, LC_OFF0] * fade, f[k, LC_OFF0] * r
-    x, y, heading = _route_pose(net, table, i[k, ROUTE], f[k, S], f[k, LAT] + off)
+    route = i[k, ROUTE]
+    x, y, heading = kernels.route_pose(
+        net, table[0, route], table[1, route], f[k, S], f[k, LAT] + off
+    )
     return x, y, heading + math.atan2(rate, max(f[k, SPEED], 0.5))
-
-
-@numba.njit(cache=True, nogil=True)
-def _route_pose(  # pragma: no cover - compiled
-    net: F64, table: I64, route: int, s_m: float, d_m: float
-) -> tuple[float, float, float]:
-    """:meth:`Route.pose_at` on the concatenated routes (``GapSearch.net``)."""
-    off, n = table[0, route], table[1, route]
-    s_arr, xs, ys, hs, norms = net[0], net[1], net[2], net[7], net[8]
-    left, right = off, off + n
-    while left < right:  # bisect_right
-        mid = (left + right) // 2
-        if s_m < s_arr[mid]:
-            right = mid
-        else:
-            left = mid + 1
-    j = min(max(left - off - 1, 0), n - 2) + off
-    ds = s_arr[j + 1] - s_arr[j]
-    t = (s_m - s_arr[j]) / ds
-    x0, y0 = xs[j], ys[j]
-    tx, ty = (xs[j + 1] - x0) / ds, (ys[j + 1] - y0) / ds
-    norm = norms[j]
-    heading = hs[j] + min(max(t, 0.0), 1.0) * (hs[j + 1] - hs[j])
-    x = x0 + t * ds * tx - d_m * ty / norm
-    y = y0 + t * ds * ty + d_m * tx / norm
-    return x, y, heading
 
 
 @numba.njit(cache=True, nogil=True)
@@ -274,6 +270,61 @@ def _poses(  # noqa: PLR0917 (numba has no keyword-only parameters)
 
 
 @numba.njit(cache=True, nogil=True)
+def _snapshot(  # noqa: PLR0917 (numba has no keyword-only parameters)
+    f: F64, i: I64, time_s: float, net: F64, table: I64, powers: F64, ids: I64, rows: F64
+) -> tuple[I64, F64]:  # pragma: no cover - compiled
+    n, k = len(f), len(ids)
+    out_ids = np.empty(n + k, dtype=np.int64)
+    out = np.empty((6, n + k))
+    for r in range(k):
+        at = r if r == 0 else r + n
+        out_ids[at] = ids[r]
+        for c in range(6):
+            out[c, at] = rows[r, c]
+    for a in range(n):
+        x, y, yaw = _pose(f, i, a, time_s, net, table, powers)
+        v = f[a, SPEED]
+        out_ids[1 + a] = i[a, ID]
+        out[0, 1 + a], out[1, 1 + a] = x, y
+        out[2, 1 + a], out[3, 1 + a] = f[a, LENGTH], f[a, WIDTH]
+        out[4, 1 + a], out[5, 1 + a] = v * math.cos(yaw), v * math.sin(yaw)
+    return out_ids, out
+
+
+@numba.njit(cache=True, nogil=True)
+def _queries(
+    f: F64, i: I64, table: I64, horizon_m: float, extra: bool
+) -> tuple[I64, F64]:  # pragma: no cover - compiled
+    n = len(f)
+    q_int = np.empty((3, n + 1 if extra else n), dtype=np.int64)
+    q_float = np.empty((4, n + 1 if extra else n))
+    for k in range(n):
+        route = i[k, ROUTE]
+        s_front = f[k, S] + f[k, LENGTH] / 2.0
+        q_int[0, k], q_int[1, k], q_int[2, k] = table[0, route], table[1, route], i[k, ID]
+        q_float[0, k], q_float[1, k] = f[k, S], s_front
+        q_float[2, k], q_float[3, k] = s_front + horizon_m, f[k, WIDTH]
+    return q_int, q_float
+
+
+@numba.njit(cache=True, nogil=True)
+def _light_state(group: I64, timing: F64, light: int, time_s: float) -> int:  # pragma: no cover
+    """TrafficLights.state as a code: 0 green, 1 yellow, 2 red, 3 unknown."""
+    if light >= len(group) or group[light] < 0:
+        return 3
+    green, yellow, offset, cycle = timing[0], timing[1], timing[2], timing[3]
+    half = cycle / 2.0
+    tau = np.fmod(time_s + offset - group[light] * half, cycle)  # exact, as math.fmod
+    if tau < 0.0:
+        tau += cycle
+    if tau < green:
+        return 0
+    if tau < green + yellow:
+        return 1
+    return 2
+
+
+@numba.njit(cache=True, nogil=True)
 def _plan_advance(  # noqa: PLR0917 (the fleet's arrays; numba has no keyword-only parameters)
     f: F64,
     i: I64,
@@ -285,7 +336,8 @@ def _plan_advance(  # noqa: PLR0917 (the fleet's arrays; numba has no keyword-on
     stop_s: F64,
     stop_light: I64,
     n_stops: I64,
-    codes: I64,
+    light_group: I64,
+    timing: F64,
     route_len: F64,
     powers: F64,
 ) -> None:  # pragma: no cover - compiled
@@ -304,8 +356,7 @@ def _plan_advance(  # noqa: PLR0917 (the fleet's arrays; numba has no keyword-on
                 g = stop_s[route, j] - s_front
                 if g < -0.5 or committed[k, j]:
                     continue
-                light = stop_light[route, j]
-                state = codes[light] if light < len(codes) else 3
+                state = _light_state(light_group, timing, stop_light[route, j], time_s)
                 if state == 0:
                     break
                 if state == 1 and v**two / (2.0 * f[k, B_COMF]) > g:

@@ -23,6 +23,7 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
+from redrive.sim import kernels
 from redrive.sim.agents import Obstacles
 from redrive.sim.roads import Route
 
@@ -119,17 +120,6 @@ class GapSearch:
             [(q.s_center_m, q.s_front_m, q.s_front_m + self.horizon_m, q.width_m) for q in queries],
             dtype=np.float64,
         ).T
-        gap, speed = self.gaps_of(q_int, q_float, obstacles)
-        return list(zip(gap.tolist(), speed.tolist(), strict=True))
-
-    def gaps_of(self, q_int: I64, q_float: F64, obstacles: Obstacles) -> tuple[F64, F64]:
-        """:meth:`gaps` of queries given as arrays: ``q_int`` (3, Q) the route's first sample in
-        :attr:`net`, its sample count (:attr:`route_table`) and the agent's id; ``q_float``
-        (4, Q) the arclength of its box centre, of its front, the front plus the horizon, and
-        its width.  Returns the gaps (inf: none) and the leaders' speeds (0 where none)."""
-        nq = q_int.shape[1]
-        if nq == 0 or len(obstacles.ids) == 0:
-            return np.full(nq, np.inf), np.zeros(nq)
         obst = np.stack(
             [
                 obstacles.centers[:, 0],
@@ -139,41 +129,28 @@ class GapSearch:
                 obstacles.velocities[:, 0],
                 obstacles.velocities[:, 1],
             ]
-        )
+        ).reshape(6, -1)
+        gap, speed = self.gaps_of(q_int, q_float, np.asarray(obstacles.ids, np.int64), obst)
+        return list(zip(gap.tolist(), speed.tolist(), strict=True))
+
+    def gaps_of(self, q_int: I64, q_float: F64, ids: I64, obst: F64) -> tuple[F64, F64]:
+        """:meth:`gaps` of queries and obstacles given as arrays: ``q_int`` (3, Q) the route's
+        first sample in :attr:`net` and its sample count (:meth:`route_row`) and the agent's id;
+        ``q_float`` (4, Q) the arclength of its box centre, of its front, the front plus the
+        horizon, and its width; ``ids`` (M,) and ``obst`` (6, M) the obstacles' ids, centre
+        x, y, length, width and velocity x, y.  Returns the gaps (inf: none) and the leaders'
+        speeds (0 where none)."""
+        nq = q_int.shape[1]
+        if nq == 0 or len(ids) == 0:
+            return np.full(nq, np.inf), np.zeros(nq)
         return _gap_kernel(
             np.ascontiguousarray(q_int, dtype=np.int64),
             np.ascontiguousarray(q_float, dtype=np.float64),
             self.margin_m,
-            np.ascontiguousarray(obstacles.ids, dtype=np.int64),
+            np.ascontiguousarray(ids, dtype=np.int64),
             np.ascontiguousarray(obst, dtype=np.float64),
             self.net,
         )
-
-
-@numba.njit(cache=True, nogil=True)
-def _bisect_right(a: F64, lo: int, hi: int, x: float) -> int:  # pragma: no cover - compiled
-    """``bisect.bisect_right(a[lo:hi], x)`` (an index into the slice)."""
-    left, right = lo, hi
-    while left < right:
-        mid = (left + right) // 2
-        if x < a[mid]:
-            right = mid
-        else:
-            left = mid + 1
-    return left - lo
-
-
-@numba.njit(cache=True, nogil=True)
-def _bisect_left(a: F64, lo: int, hi: int, x: float) -> int:  # pragma: no cover - compiled
-    """``bisect.bisect_left(a[lo:hi], x)`` (an index into the slice)."""
-    left, right = lo, hi
-    while left < right:
-        mid = (left + right) // 2
-        if a[mid] < x:
-            left = mid + 1
-        else:
-            right = mid
-    return left - lo
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
@@ -202,8 +179,8 @@ def _gap_kernel(  # noqa: PLR0917 (one batch's arrays; numba has no keyword-only
         off, n = route_off[q], route_n[q]
         last = n - 1
         # Route._piece(s_center, s_max): segments lo … hi - 1 of the route
-        lo = min(max(_bisect_right(net_s, off, off + n, s_center[q]) - 1, 0), last - 1)
-        hi = min(_bisect_left(net_s, off, off + n, s_max[q]) + 1, last)
+        lo = min(max(kernels.bisect_right(net_s, off, off + n, s_center[q]) - 1, 0), last - 1)
+        hi = min(kernels.bisect_left(net_s, off, off + n, s_max[q]) + 1, last)
         hi = max(hi, lo + 1)
         g0, g1 = off + lo, off + hi  # global samples of the piece: g0 … g1
         low_x, low_y = net_x[g0], net_y[g0]
@@ -248,7 +225,7 @@ def _gap_kernel(  # noqa: PLR0917 (one batch's arrays; numba has no keyword-only
                     best_gap, best_m, best_s = gap, m, s
         if best_m >= 0:
             # the leader's velocity along the route's heading there (Route.pose_at's)
-            j = min(max(_bisect_right(net_s, off, off + n, best_s) - 1, 0), n - 2) + off
+            j = min(max(kernels.bisect_right(net_s, off, off + n, best_s) - 1, 0), n - 2) + off
             t = (best_s - net_s[j]) / (net_s[j + 1] - net_s[j])
             heading = net_h[j] + min(max(t, 0.0), 1.0) * (net_h[j + 1] - net_h[j])
             vx, vy = obst[4, best_m], obst[5, best_m]

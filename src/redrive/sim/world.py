@@ -17,7 +17,7 @@ import numpy as np
 import numpy.typing as npt
 
 from redrive.errors import SimulationError
-from redrive.sim.agents import IdmParams, LaneChange, LaneFollower, Obstacles, ParkedObject, Walker
+from redrive.sim.agents import IdmParams, LaneChange, LaneFollower, ParkedObject, Walker
 from redrive.sim.ego import BicycleModel, EgoDriver, EgoGeometry, pose_matrix
 from redrive.sim.fleet import LaneFleet
 from redrive.sim.gaps import GapSearch
@@ -294,26 +294,29 @@ class World:
                 walker.start(t)
         fleet.start_plan(t)
         search = self._gaps
-        q_int, q_float = fleet.queries(search.horizon_m)
+        ego_query = None
         if scripted:
             g, driver = self.ego_geometry, self._driver
             steer = driver.steer(self._ego)
             off, n = search.route_row(driver.route)
             s_front = driver.s_m + g.front_offset_m
-            q_int = np.concatenate([q_int, [[off], [n], [driver.ego_id]]], axis=1)
-            ego_float = (driver.s_m + g.center_offset_m, s_front, s_front + search.horizon_m)
-            q_float = np.concatenate(
-                [q_float, np.array([*ego_float, g.width_m], dtype=np.float64)[:, None]], axis=1
+            ego_query = (
+                off,
+                n,
+                driver.ego_id,
+                driver.s_m + g.center_offset_m,
+                s_front,
+                s_front + search.horizon_m,
+                g.width_m,
             )
         else:
             self._track_route()
         if obstacles is not None:
-            gaps, speeds = search.gaps_of(q_int, q_float, obstacles)
+            q_int, q_float = fleet.queries(search.horizon_m, ego_query)
+            gaps, speeds = search.gaps_of(q_int, q_float, *obstacles)
             # the followers plan (stop lines, IDM, braking) and move; the ego's plan does not
             # read them
-            fleet.finish_and_advance(
-                t, dt_s, gap_m=gaps[: len(fleet)], leader_speed_mps=speeds[: len(fleet)]
-            )
+            fleet.finish_and_advance(t, dt_s, gap_m=gaps, leader_speed_mps=speeds)
         if scripted:
             accel = self._driver.accelerate(
                 self._ego,
@@ -397,42 +400,31 @@ class World:
         order after them."""
         return [*self._walkers, *self._parked]
 
-    def _obstacles(self) -> Obstacles:
+    def _obstacles(self) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]:
+        """The snapshot every agent plans from: ids (M,) and (6, M) centre x, y, length,
+        width, velocity x, y (``GapSearch.gaps_of``'s obstacles) — the ego, the lane
+        followers, the pedestrians, the parked vehicles."""
         g, ego = self.ego_geometry, self._ego
         c, s = math.cos(ego.yaw_rad), math.sin(ego.yaw_rad)
-        fleet = self._fleet
-        poses = fleet.poses()
-        ids, centers, lengths, widths, vels = [], [], [], [], []
-        for agent in self._others():
-            ids.append(agent.agent_id)
-            lengths.append(agent.size_lwh_m[0])
-            widths.append(agent.size_lwh_m[1])
-            if isinstance(agent, ParkedObject):
-                centers.append(agent.center_xy)
-                vels.append((0.0, 0.0))
-            else:
-                x, y, _ = agent.pose()
-                centers.append((x, y))
-                vels.append(agent.velocity())
-        k = len(ids)
-        ego_center = (ego.x_m + g.center_offset_m * c, ego.y_m + g.center_offset_m * s)
-        return Obstacles(
-            ids=np.concatenate([[EGO_ID], fleet.ids, np.array(ids, dtype=np.int64)]).astype(
-                np.int64
-            ),
-            centers=np.concatenate(
-                [[ego_center], poses[0:2].T, np.array(centers, dtype=np.float64).reshape(k, 2)]
-            ),
-            lengths=np.concatenate([[g.length_m], fleet.lengths, np.array(lengths, np.float64)]),
-            widths=np.concatenate([[g.width_m], fleet.widths, np.array(widths, np.float64)]),
-            velocities=np.concatenate(
-                [
-                    [(ego.speed_mps * c, ego.speed_mps * s)],
-                    poses[3:5].T,
-                    np.array(vels, dtype=np.float64).reshape(k, 2),
-                ]
-            ),
-        )
+        ids = [EGO_ID]
+        rows = [
+            (
+                ego.x_m + g.center_offset_m * c,
+                ego.y_m + g.center_offset_m * s,
+                g.length_m,
+                g.width_m,
+                ego.speed_mps * c,
+                ego.speed_mps * s,
+            )
+        ]
+        for walker in self._walkers:
+            x, y, _ = walker.pose()
+            ids.append(walker.agent_id)
+            rows.append((x, y, walker.size_lwh_m[0], walker.size_lwh_m[1], *walker.velocity()))
+        for parked in self._parked:
+            ids.append(parked.agent_id)
+            rows.append((*parked.center_xy, *parked.size_lwh_m[:2], 0.0, 0.0))
+        return self._fleet.snapshot(np.array(ids, dtype=np.int64), np.array(rows, dtype=np.float64))
 
     def ego_state(self) -> VehicleState:
         """The ego's true state (rear-axle centre, map frame) at :attr:`time_ns`."""
