@@ -63,6 +63,25 @@ _PALETTE = np.array(
 )
 
 
+_kernels_loaded = False
+
+
+def _load_kernels(scenario: Scenario) -> None:
+    """Once per process, when the first world is built: step a throwaway world of the same
+    scenario once, so that loading the physics step's compiled kernels (numba's cache; compiling
+    them on a cold cache) is part of building a world, not of its first step — a closed loop's
+    first frame or a live run's."""
+    global _kernels_loaded  # noqa: PLW0603 (one flag per process)
+    if _kernels_loaded:
+        return
+    _kernels_loaded = True
+    probe = World(scenario)
+    probe.objects()
+    probe.step_to(probe.time_ns + probe._dt_ns)
+    probe.drive_ego(lambda model, dt_s: None)
+    probe.step_to(probe.time_ns + probe._dt_ns)
+
+
 class World:
     """The synthetic world of one :class:`Scenario`; call :meth:`step` to advance it."""
 
@@ -105,6 +124,7 @@ class World:
         #: the lane followers' state as arrays, stepped by compiled kernels
         self._fleet = LaneFleet(self._followers, self._gaps, self.lights)
         self._followers = []  # their state lives in the fleet from here on
+        _load_kernels(scenario)
         self._record_pose()
 
     # -- construction -------------------------------------------------------------------------
