@@ -4,6 +4,11 @@
 with ``scenario.seed`` (scenery first, then agents in file order), so the same seed gives the same
 states bit for bit.  Time is int nanoseconds since the epoch; physics runs at the scenario's
 ``physics_dt_s``; :meth:`World.scene` is the :class:`~redrive.sim.scene.Scene` the sensors render.
+
+The lane followers are built as :class:`~redrive.sim.agents.LaneFollower` objects and then kept
+as arrays (:class:`~redrive.sim.fleet.LaneFleet`): a physics step is the obstacle snapshot, the
+gap search of every agent and the followers' plan and motion in compiled calls, with the
+results the objects would give, bit for bit.
 """
 
 from __future__ import annotations
