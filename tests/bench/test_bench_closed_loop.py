@@ -28,6 +28,9 @@ def test_bench_closed_loop_split_adds_up() -> None:
     assert parts == pytest.approx(result.wall_s)
     assert result.total_s >= result.wall_s
     assert result.cpu_s > 0
+    # the CPU split: parts of the process's CPU, the world alone's apart
+    assert 0 < result.simulation_cpu_s + result.algorithms_cpu_s <= result.cpu_s
+    assert result.baseline_cpu_s > 0
     assert set(result.algorithm_ms) == {"noisy-oracle", "idm-planner", "pure-pursuit-pid"}
     # the closed loop steps two worlds and runs three algorithms: never cheaper than one world
     assert result.ratio > 1.0

@@ -108,7 +108,7 @@ def test_raster_labels() -> None:
 
 
 def test_project_point_equals_project_bit_for_bit() -> None:
-    """Route.project_point (pure Python, the ego's tracking every physics step) answers what
+    """Route.project_point (compiled, the ego's tracking every physics step) answers what
     Route.project does, exactly: random points near and far, short and whole-route pieces,
     points on sample positions (ties between segments) and beyond the ends."""
     rng = np.random.default_rng(11)

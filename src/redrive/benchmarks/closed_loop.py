@@ -83,11 +83,13 @@ def closed_loop_pipeline(level: str = "object") -> PipelineConfig:
 
 class TimedSimulator:
     """Delegates to a :class:`~redrive.closedloop.simulator.Simulator`, adding the wall time of
-    every ``observe`` and ``step`` to :attr:`seconds`."""
+    every ``observe`` and ``step`` to :attr:`seconds` and their CPU time (the calling thread's,
+    where the frame loop runs them) to :attr:`cpu_seconds`."""
 
     def __init__(self, inner: Simulator) -> None:
         self.inner = inner
         self.seconds = 0.0
+        self.cpu_seconds = 0.0
         self.sensors = inner.sensors
         self.has_vehicle_state = inner.has_vehicle_state
         self.has_ground_truth = inner.has_ground_truth
@@ -97,15 +99,17 @@ class TimedSimulator:
         self.inner.reset(seed)
 
     def observe(self) -> Frame:
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.thread_time()
         frame = self.inner.observe()
         self.seconds += time.perf_counter() - t0
+        self.cpu_seconds += time.thread_time() - c0
         return frame
 
     def step(self, outputs: StageOutputs, dt_s: float) -> EgoCommand:
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.thread_time()
         command = self.inner.step(outputs, dt_s)
         self.seconds += time.perf_counter() - t0
+        self.cpu_seconds += time.thread_time() - c0
         return command
 
     @property
@@ -137,6 +141,10 @@ class ClosedLoopBenchResult:
             is 0 at object level).
         baseline_s: one world stepped alone with its scripted driver to the same end.
         algorithm_ms: mean step latency per algorithm (ms), of the median pass.
+        simulation_cpu_s, algorithms_cpu_s, baseline_cpu_s: CPU seconds of the simulation
+            (the frame loop thread's, in ``observe`` and ``step``; rendering included), of the
+            algorithms (the steps table's ``cpu_ns``) and of the world alone: on a shared
+            machine these tell the code's cost apart from the load, as ``cpu_s`` does.
     """
 
     scenario: str
@@ -155,6 +163,9 @@ class ClosedLoopBenchResult:
     baseline_s: float
     algorithm_ms: Mapping[str, float]
     passes: Mapping[str, list[float]]
+    simulation_cpu_s: float = 0.0
+    algorithms_cpu_s: float = 0.0
+    baseline_cpu_s: float = 0.0
 
     @property
     def realtime_factor(self) -> float:
@@ -199,7 +210,12 @@ class ClosedLoopBenchResult:
                 "algorithms": self.algorithms_s,
                 "other": self.other_s,
             },
+            "cpu_split_s": {
+                "simulation": self.simulation_cpu_s,
+                "algorithms": self.algorithms_cpu_s,
+            },
             "baseline_s": self.baseline_s,
+            "baseline_cpu_s": self.baseline_cpu_s,
             "baseline_realtime_factor": self.baseline_realtime_factor,
             "ratio_to_baseline": self.ratio,
             "algorithm_ms": dict(self.algorithm_ms),
@@ -207,18 +223,19 @@ class ClosedLoopBenchResult:
         }
 
 
-def _world_alone(scenario_name: str, duration_s: float, rate_hz: float) -> float:
-    """Step one world with its scripted driver frame by frame to the closed loop's end."""
+def _world_alone(scenario_name: str, duration_s: float, rate_hz: float) -> tuple[float, float]:
+    """Step one world with its scripted driver frame by frame to the closed loop's end: wall
+    and CPU seconds."""
     scenario = dataclasses.replace(load_scenario(scenario_name), duration_s=duration_s)
     world = World(scenario)
     dt_ns = round(1e9 / rate_hz)
     end_ns = scenario.start_stamp_ns + round(duration_s * 1e9)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.thread_time()
     while world.time_ns + dt_ns <= end_ns:
         world.objects()  # what a frame is made of: the objects and the ego state
         world.ego_state()
         world.step_to(world.time_ns + dt_ns)
-    return time.perf_counter() - t0
+    return time.perf_counter() - t0, time.thread_time() - c0
 
 
 def _closed_loop(
@@ -242,6 +259,7 @@ def _closed_loop(
     total, cpu = time.perf_counter() - t0, time.process_time() - cpu0
     steps = open_run(out).table("steps")
     algorithms_s = int(pc.sum(steps.column("latency_ns")).as_py() or 0) / 1e9
+    algorithms_cpu_s = int(pc.sum(steps.column("cpu_ns")).as_py() or 0) / 1e9
     inner = timed[0].inner
     rendering_s = inner.rendering_s if isinstance(inner, SyntheticSimulator) else 0.0
     return {
@@ -252,13 +270,25 @@ def _closed_loop(
         "simulation": timed[0].seconds - rendering_s,
         "algorithms": algorithms_s,
         "other": report.wall_s - timed[0].seconds - algorithms_s,
+        "simulation_cpu": timed[0].cpu_seconds,
+        "algorithms_cpu": algorithms_cpu_s,
         "frames": report.frames,
         "span": report.log_span_s,
         "algorithm_ms": {a.name: a.latency_mean_ms for a in report.algorithms},
     }
 
 
-_PARTS = ("wall", "total", "cpu", "rendering", "simulation", "algorithms", "other")
+_PARTS = (
+    "wall",
+    "total",
+    "cpu",
+    "rendering",
+    "simulation",
+    "algorithms",
+    "other",
+    "simulation_cpu",
+    "algorithms_cpu",
+)
 
 
 def scenario_with_lidar(scenario: str, preset: str, folder: Path) -> Path:
@@ -319,7 +349,7 @@ def bench_closed_loop(
         msg = "--lidar applies to the sensor level (nothing is rendered at object level)"
         raise ConfigError(msg)
     pipeline = pipeline or closed_loop_pipeline(level)
-    passes: dict[str, list[float]] = {k: [] for k in (*_PARTS, "baseline")}
+    passes: dict[str, list[float]] = {k: [] for k in (*_PARTS, "baseline", "baseline_cpu")}
     runs: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory(prefix="redrive-bench-closed-loop-") as tmp:
         run_scenario, preset = scenario, None
@@ -334,10 +364,15 @@ def bench_closed_loop(
                 )
             else:
                 run_scenario = str(scenario_with_lidar(scenario, preset, Path(tmp)))
+        # the world's compiled kernels are loaded (compiled, on a cold cache) once per process:
+        # not a cost of the first pass
+        _world_alone(scenario, 0.2, 10.0)
         for r in range(repeats):
             if progress is not None:
                 progress(f"pass {r + 1}/{repeats}: world alone")
-            passes["baseline"].append(_world_alone(scenario, duration_s, 10.0))
+            alone_s, alone_cpu_s = _world_alone(scenario, duration_s, 10.0)
+            passes["baseline"].append(alone_s)
+            passes["baseline_cpu"].append(alone_cpu_s)
             if progress is not None:
                 progress(f"pass {r + 1}/{repeats}: closed loop")
             run = _closed_loop(run_scenario, duration_s, Path(tmp) / f"run{r}", pipeline, level)
@@ -363,4 +398,7 @@ def bench_closed_loop(
         baseline_s=med["baseline"],
         algorithm_ms=dict(middle["algorithm_ms"]),
         passes=passes,
+        simulation_cpu_s=med["simulation_cpu"],
+        algorithms_cpu_s=med["algorithms_cpu"],
+        baseline_cpu_s=med["baseline_cpu"],
     )

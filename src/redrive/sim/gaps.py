@@ -1,15 +1,16 @@
-"""Every agent's gap to its leader in one batch: :func:`redrive.sim.agents.gap_ahead` vectorised.
+"""Every agent's gap to its leader in one batch: :func:`redrive.sim.agents.gap_ahead` compiled.
 
 The world asks, every physics step, for each lane follower and the scripted ego: the nearest
 obstacle ahead on its route (bumper-to-bumper gap and the leader's speed along the route).  One
 :func:`gap_ahead` per agent costs a dozen small numpy calls each; :meth:`GapSearch.gaps` answers
-all agents' :class:`GapQuery` with one set of numpy calls on arrays of (query, obstacle, route
-sample), over the routes of one network concatenated once (:class:`GapSearch`).
+all agents' :class:`GapQuery` with one call of a numba kernel over the routes of one network
+concatenated once (:class:`GapSearch`): per query, the route piece found by bisection, the
+bounding-box filter of :meth:`~redrive.sim.roads.Route.near`, the projection of each nearby
+obstacle onto the piece and the nearest one ahead, in loops.
 
 The answers are bit for bit those of :func:`gap_ahead`: every value is computed with the same
-elementwise float64 operations in the same order (a route piece is the same samples, padded
-with segments that can never be the closest), and ties go to the same (first) segment and the
-same (first) obstacle.
+float64 operations in the same order (the kernel is compiled without ``fastmath``, so nothing is
+reassociated or fused), and ties go to the same (first) segment and the same (first) obstacle.
 """
 
 from __future__ import annotations
@@ -18,9 +19,11 @@ import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 import numpy.typing as npt
 
+from redrive.sim import kernels
 from redrive.sim.agents import Obstacles
 from redrive.sim.roads import Route
 
@@ -56,114 +59,176 @@ class GapSearch:
         self.horizon_m = horizon_m
         self.margin_m = margin_m
         self._offset: dict[int, int] = {}
-        points, s_m = [], []
+        #: the distinct routes, in the order of their samples in :attr:`net`
+        self.routes: list[Route] = []
+        points, s_m, heading, norms = [], [], [], []
         n = 0
         for route in routes:
             if id(route) in self._offset:
                 continue
             self._offset[id(route)] = n
+            self.routes.append(route)
             points.append(route.points)
             s_m.append(route.s_m)
+            heading.append(route.heading_rad)
+            norms.append([*route.segment_norms(), 1.0])
             n += len(route.s_m)
         pts = np.concatenate(points) if points else np.zeros((0, 2))
         s = np.concatenate(s_m) if s_m else np.zeros(0)
-        self._points: F64 = pts
-        self._s: F64 = s
         # per sample i: the segment to sample i + 1 (meaningless at a route's last sample, which
         # no piece uses); the same subtraction as Route.project does on its slices
-        self._seg: F64 = pts[1:] - pts[:-1] if n else np.zeros((0, 2))
-        self._seg_len: F64 = s[1:] - s[:-1] if n else np.zeros(0)
-        self._seg_len2: F64 = self._seg_len**2
-        self._x, self._y = pts[:, 0].copy(), pts[:, 1].copy()
-        self._seg_x, self._seg_y = self._seg[:, 0].copy(), self._seg[:, 1].copy()
-        # sparse tables of the samples' running min and max: level k holds, at sample i, the
-        # bounding box of samples i … i + 2^k - 1 (a piece's box is two look-ups of one level)
-        low, high = [pts], [pts]
-        while 2 ** len(low) <= n:
-            half = 2 ** (len(low) - 1)
-            low.append(np.minimum(low[-1][:-half], low[-1][half:]))
-            high.append(np.maximum(high[-1][:-half], high[-1][half:]))
-        # (levels, samples, 2), the tail of each level (no full run there) never read
-        self._low: F64 = np.stack([np.concatenate([lv, np.zeros((n - len(lv), 2))]) for lv in low])
-        self._high: F64 = np.stack(
-            [np.concatenate([lv, np.zeros((n - len(lv), 2))]) for lv in high]
+        seg = pts[1:] - pts[:-1] if n else np.zeros((0, 2))
+        seg_len = np.append(s[1:] - s[:-1], 0.0) if n else np.zeros(0)
+        seg = np.concatenate([seg, np.zeros((1 if n else 0, 2))])
+        #: (9, samples): s, x, y, segment x, segment y, segment length and its square, heading,
+        #: and ``math.hypot`` of the segment's unit tangent as ``Route.pose_at`` takes it
+        self.net: F64 = np.ascontiguousarray(
+            np.stack(
+                [
+                    s,
+                    pts[:, 0],
+                    pts[:, 1],
+                    seg[:, 0],
+                    seg[:, 1],
+                    seg_len,
+                    seg_len**2,
+                    np.concatenate(heading) if heading else np.zeros(0),
+                    np.array([v for part in norms for v in part], dtype=np.float64),
+                ]
+            )
         )
+        #: (2, routes): each route's first sample in :attr:`net` and its sample count
+        self.route_table: I64 = np.array(
+            [[self._offset[id(r)] for r in self.routes], [len(r.s_m) for r in self.routes]],
+            dtype=np.int64,
+        ).reshape(2, -1)
+
+    def route_row(self, route: Route) -> tuple[int, int]:
+        """``route``'s first sample in :attr:`net` and its sample count."""
+        return self._offset[id(route)], len(route.s_m)
 
     def gaps(self, queries: Sequence[GapQuery], obstacles: Obstacles) -> list[tuple[float, float]]:
         """For each query: the gap (metres, inf if none) and the leader's speed along the route
         (m/s), equal to ``gap_ahead(q.route, obstacles, ...)`` of that query."""
-        nq = len(queries)
-        none = [(math.inf, 0.0)] * nq
-        if nq == 0 or len(obstacles.ids) == 0:
-            return none
-        horizon = self.horizon_m
-        pieces = [q.route._piece(q.s_center_m, q.s_front_m + horizon) for q in queries]
-        lo_g = np.array(
-            [self._offset[id(q.route)] + lo for q, (lo, _) in zip(queries, pieces, strict=True)],
+        if not queries:
+            return []
+        q_int = np.array(
+            [(self._offset[id(q.route)], len(q.route.s_m), q.self_id) for q in queries],
             dtype=np.int64,
+        ).T
+        q_float = np.array(
+            [(q.s_center_m, q.s_front_m, q.s_front_m + self.horizon_m, q.width_m) for q in queries],
+            dtype=np.float64,
+        ).T
+        obst = np.stack(
+            [
+                obstacles.centers[:, 0],
+                obstacles.centers[:, 1],
+                obstacles.lengths,
+                obstacles.widths,
+                obstacles.velocities[:, 0],
+                obstacles.velocities[:, 1],
+            ]
+        ).reshape(6, -1)
+        gap, speed = self.gaps_of(q_int, q_float, np.asarray(obstacles.ids, np.int64), obst)
+        return list(zip(gap.tolist(), speed.tolist(), strict=True))
+
+    def gaps_of(self, q_int: I64, q_float: F64, ids: I64, obst: F64) -> tuple[F64, F64]:
+        """:meth:`gaps` of queries and obstacles given as arrays: ``q_int`` (3, Q) the route's
+        first sample in :attr:`net` and its sample count (:meth:`route_row`) and the agent's id;
+        ``q_float`` (4, Q) the arclength of its box centre, of its front, the front plus the
+        horizon, and its width; ``ids`` (M,) and ``obst`` (6, M) the obstacles' ids, centre
+        x, y, length, width and velocity x, y.  Returns the gaps (inf: none) and the leaders'
+        speeds (0 where none)."""
+        nq = q_int.shape[1]
+        if nq == 0 or len(ids) == 0:
+            return np.full(nq, np.inf), np.zeros(nq)
+        return _gap_kernel(
+            np.ascontiguousarray(q_int, dtype=np.int64),
+            np.ascontiguousarray(q_float, dtype=np.float64),
+            self.margin_m,
+            np.ascontiguousarray(ids, dtype=np.int64),
+            np.ascontiguousarray(obst, dtype=np.float64),
+            self.net,
         )
-        n_seg = np.array([hi - lo for lo, hi in pieces], dtype=np.int64)
-        s_center = np.array([q.s_center_m for q in queries])
-        s_front = np.array([q.s_front_m for q in queries])
-        s_max = np.array([q.s_front_m + horizon for q in queries])
-        widths = np.array([q.width_m for q in queries])
-        self_ids = np.array([q.self_id for q in queries], dtype=np.int64)
-        centers = obstacles.centers
-        span = int(n_seg.max())
-        cols = np.arange(span)
-        # the bounding box of each piece's samples lo … hi (hi - lo + 1 of them)
-        level = np.frexp(n_seg + 1)[1] - 1  # floor(log2(hi - lo + 1)), exactly
-        last = lo_g + n_seg + 1 - np.left_shift(1, level)
-        low = np.minimum(self._low[level, lo_g], self._low[level, last])
-        high = np.maximum(self._high[level, lo_g], self._high[level, last])
-        reach = (widths[:, None] + obstacles.widths[None, :]) / 2.0 + self.margin_m  # (Q, M)
-        # Route.near: what lies outside every piece's bounding box grown by the reach can never
-        # be in the lane; project only the rest (a superset of what is ahead)
-        outside = np.maximum(
-            np.maximum(low[:, None, :] - centers[None], centers[None] - high[:, None, :]), 0.0
-        )
-        near = ((outside**2).sum(axis=2) < (reach + 1e-6) ** 2) & (
-            obstacles.ids[None, :] != self_ids[:, None]
-        )
-        qk, mk = np.nonzero(near)
-        if len(qk) == 0:
-            return none
-        # Route.project of each (query, obstacle) pair onto the query's piece
-        valid = cols[None, :] < n_seg[qk][:, None]  # segment j of the piece: j < hi - lo
-        # (P, span) segment indices (segment i runs from sample i to i + 1), padded with the first
-        first_seg = lo_g[qk][:, None]
-        seg_idx = np.where(valid, first_seg + cols[None, :], first_seg)
-        # x and y apart: the sums over the two coordinates written out are several times
-        # faster than .sum(-1) and equal to it (+ 0.0 makes a sum of two -0.0 the +0.0 that
-        # numpy's reduction, which starts from +0.0, gives)
-        rel_x = centers[mk, 0:1] - self._x[seg_idx]
-        rel_y = centers[mk, 1:2] - self._y[seg_idx]
-        seg_x, seg_y = self._seg_x[seg_idx], self._seg_y[seg_idx]
-        seg_len = self._seg_len[seg_idx]
-        t = np.clip(((rel_x * seg_x + rel_y * seg_y) + 0.0) / self._seg_len2[seg_idx], 0.0, 1.0)
-        diff_x, diff_y = rel_x - t * seg_x, rel_y - t * seg_y
-        dist2 = np.where(valid, diff_x**2 + diff_y**2, np.inf)
-        j = np.argmin(dist2, axis=1)
-        rows = np.arange(len(qk))
-        s = self._s[lo_g[qk] + j] + t[rows, j] * seg_len[rows, j]
-        cross = seg_x[rows, j] * rel_y[rows, j] - seg_y[rows, j] * rel_x[rows, j]
-        lateral = np.where(cross < 0.0, -1.0, 1.0) * np.sqrt(dist2[rows, j])
-        ahead = (
-            (s > s_center[qk] + 1e-6) & (s < s_max[qk] - 1e-6) & (np.abs(lateral) < reach[qk, mk])
-        )
-        pair_gaps = np.where(ahead, s - obstacles.lengths[mk] / 2.0 - s_front[qk], np.inf)
-        gap_matrix = np.full(near.shape, np.inf)
-        gap_matrix[qk, mk] = pair_gaps
-        s_matrix = np.zeros(near.shape)
-        s_matrix[qk, mk] = s
-        leaders = np.argmin(gap_matrix, axis=1)
-        out = none.copy()
-        for k in np.flatnonzero(np.isfinite(gap_matrix[np.arange(nq), leaders])).tolist():
-            m = int(leaders[k])
-            _, _, heading = queries[k].route.pose_at(float(s_matrix[k, m]))
-            vx, vy = obstacles.velocities[m]
-            out[k] = (
-                float(gap_matrix[k, m]),
-                float(vx * math.cos(heading) + vy * math.sin(heading)),
-            )
-        return out
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _gap_kernel(  # noqa: PLR0917 (one batch's arrays; numba has no keyword-only parameters)
+    q_int: I64, q_float: F64, margin: float, ids: I64, obst: F64, net: F64
+) -> tuple[F64, F64]:  # pragma: no cover - compiled
+    """Per query: the gap and the leader's speed along the route (inf and 0: none).
+
+    What ``gap_ahead`` computes, pair by pair: ``Route._piece``, ``Route.near``,
+    ``Route.project`` and the nearest obstacle ahead (first minimum, as ``np.argmin``).
+
+    ``q_int``: (3, Q) the route's first sample in ``net``, its sample count, the agent's id;
+    ``q_float``: (4, Q) arclength of the box centre, of the front, the horizon's end, the width;
+    ``obst``: (6, M) centre x, y, length, width, velocity x, y; ``net``: ``GapSearch.net``.
+    """
+    route_off, route_n, self_ids = q_int[0], q_int[1], q_int[2]
+    s_center, s_front, s_max, widths = q_float[0], q_float[1], q_float[2], q_float[3]
+    obst_x, obst_y, lengths, obst_widths = obst[0], obst[1], obst[2], obst[3]
+    net_s, net_x, net_y = net[0], net[1], net[2]
+    seg_x, seg_y, seg_len, seg_len2 = net[3], net[4], net[5], net[6]
+    nq, nm = len(s_center), len(ids)
+    gap_out = np.full(nq, np.inf)
+    speed_out = np.zeros(nq)
+    net_h = net[7]
+    for q in range(nq):
+        off, n = route_off[q], route_n[q]
+        last = n - 1
+        # Route._piece(s_center, s_max): segments lo … hi - 1 of the route
+        lo = min(max(kernels.bisect_right(net_s, off, off + n, s_center[q]) - 1, 0), last - 1)
+        hi = min(kernels.bisect_left(net_s, off, off + n, s_max[q]) + 1, last)
+        hi = max(hi, lo + 1)
+        g0, g1 = off + lo, off + hi  # global samples of the piece: g0 … g1
+        low_x, low_y = net_x[g0], net_y[g0]
+        high_x, high_y = low_x, low_y
+        for i in range(g0 + 1, g1 + 1):
+            low_x = min(low_x, net_x[i])
+            low_y = min(low_y, net_y[i])
+            high_x = max(high_x, net_x[i])
+            high_y = max(high_y, net_y[i])
+        best_gap = np.inf
+        best_m = -1
+        best_s = 0.0
+        for m in range(nm):
+            reach = (widths[q] + obst_widths[m]) / 2.0 + margin
+            if ids[m] == self_ids[q]:
+                continue
+            cx, cy = obst_x[m], obst_y[m]
+            # Route.near: outside the piece's bounding box grown by the reach
+            ox = max(low_x - cx, cx - high_x, 0.0)
+            oy = max(low_y - cy, cy - high_y, 0.0)
+            r = reach + 1e-6
+            if not (ox * ox + oy * oy) < r * r:
+                continue
+            # Route.project onto segments g0 … g1 - 1: the first closest one
+            best_d2 = np.inf
+            bj = g0
+            bt = brx = bry = 0.0
+            for i in range(g0, g1):
+                rx, ry = cx - net_x[i], cy - net_y[i]
+                t = ((rx * seg_x[i] + ry * seg_y[i]) + 0.0) / seg_len2[i]
+                t = min(max(t, 0.0), 1.0)
+                dx, dy = rx - t * seg_x[i], ry - t * seg_y[i]
+                d2 = dx * dx + dy * dy
+                if i == g0 or d2 < best_d2:
+                    best_d2, bj, bt, brx, bry = d2, i, t, rx, ry
+            s = net_s[bj] + bt * seg_len[bj]
+            cross = seg_x[bj] * bry - seg_y[bj] * brx
+            lateral = (-1.0 if cross < 0.0 else 1.0) * math.sqrt(best_d2)
+            if s > s_center[q] + 1e-6 and s < s_max[q] - 1e-6 and abs(lateral) < reach:
+                gap = s - lengths[m] / 2.0 - s_front[q]
+                if gap < best_gap:
+                    best_gap, best_m, best_s = gap, m, s
+        if best_m >= 0:
+            # the leader's velocity along the route's heading there (Route.pose_at's)
+            j = min(max(kernels.bisect_right(net_s, off, off + n, best_s) - 1, 0), n - 2) + off
+            t = (best_s - net_s[j]) / (net_s[j + 1] - net_s[j])
+            heading = net_h[j] + min(max(t, 0.0), 1.0) * (net_h[j + 1] - net_h[j])
+            vx, vy = obst[4, best_m], obst[5, best_m]
+            gap_out[q] = best_gap
+            speed_out[q] = vx * math.cos(heading) + vy * math.sin(heading)
+    return gap_out, speed_out

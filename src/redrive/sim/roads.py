@@ -21,6 +21,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 import numpy.typing as npt
 
+from redrive.sim import kernels
+
 __all__ = [
     "HighwayLayout",
     "Lane",
@@ -213,6 +215,8 @@ class Route:
         self._x_list: list[float] = self.points[:, 0].tolist()
         self._y_list: list[float] = self.points[:, 1].tolist()
         self._heading_list: list[float] = self.heading_rad.tolist()
+        self._x: F64 = np.ascontiguousarray(self.points[:, 0])
+        self._y: F64 = np.ascontiguousarray(self.points[:, 1])
 
     @property
     def length_m(self) -> float:
@@ -235,6 +239,20 @@ class Route:
         x = x0 + t * ds * tx - d_m * ty / norm
         y = y0 + t * ds * ty + d_m * tx / norm
         return float(x), float(y), heading
+
+    def segment_norms(self) -> list[float]:
+        """Per segment (sample i to i + 1): the length of the unit tangent as :meth:`pose_at`
+        computes it (``math.hypot`` of the differences over the arclength step; 1 up to
+        rounding), for kernels that must give :meth:`pose_at`'s values bit for bit."""
+        s_arr, xs, ys = self._s_list, self._x_list, self._y_list
+        out = []
+        for i in range(len(s_arr) - 1):
+            ds = s_arr[i + 1] - s_arr[i]
+            if ds == 0.0:  # a repeated sample (pose_at raises there)
+                out.append(math.nan)
+                continue
+            out.append(math.hypot((xs[i + 1] - xs[i]) / ds, (ys[i + 1] - ys[i]) / ds))
+        return out
 
     def curvature_at(self, s_m: float) -> float:
         """Signed curvature (1/m) at ``s_m`` (of the sample before it)."""
@@ -292,38 +310,15 @@ class Route:
         self, x_m: float, y_m: float, *, s_min_m: float, s_max_m: float
     ) -> tuple[float, float]:
         """:meth:`project` of one point, in Python floats: equal to it bit for bit (the same
-        float64 operations in the same order, ties to the first segment), several times faster
-        on the short pieces the ego's route tracking asks for every physics step."""
+        float64 operations in the same order, ties to the first segment), compiled
+        (:func:`redrive.sim.kernels.project_point`): many times faster on the short pieces the
+        ego's route tracking asks for every physics step."""
         lo, hi = self._piece(s_min_m, s_max_m)
-        s_arr, xs, ys = self._s_list, self._x_list, self._y_list
-        best = math.inf
-        best_t = best_rx = best_ry = best_sx = best_sy = 0.0
-        best_j = lo
-        for i in range(lo, hi):
-            ax, ay = xs[i], ys[i]
-            sx, sy = xs[i + 1] - ax, ys[i + 1] - ay
-            seg_len = s_arr[i + 1] - s_arr[i]
-            rx, ry = x_m - ax, y_m - ay
-            # numpy's sum over the two coordinates starts from +0.0
-            try:
-                t = ((rx * sx + ry * sy) + 0.0) / (seg_len * seg_len)
-            except ZeroDivisionError:  # a repeated sample: numpy's inf and nan, as project has
-                s_np, lat_np = self.project([[x_m, y_m]], s_min_m=s_min_m, s_max_m=s_max_m)
-                return float(s_np[0]), float(lat_np[0])
-            if t < 0.0:  # np.clip: a nan stays nan
-                t = 0.0
-            elif t > 1.0:
-                t = 1.0
-            dx, dy = rx - t * sx, ry - t * sy
-            dist2 = dx * dx + dy * dy
-            # np.argmin: the first minimum, or the first nan if there is one
-            # (not >= : a nan is involved; checked only then)
-            if i == lo or dist2 < best or (not dist2 >= best and not math.isnan(best)):
-                best, best_j, best_t = dist2, i, t
-                best_rx, best_ry, best_sx, best_sy = rx, ry, sx, sy
-        s = s_arr[best_j] + best_t * (s_arr[best_j + 1] - s_arr[best_j])
-        cross = best_sx * best_ry - best_sy * best_rx
-        return s, (-1.0 if cross < 0.0 else 1.0) * math.sqrt(best)
+        s, lateral, ok = kernels.project_point(self.s_m, self._x, self._y, lo, hi, x_m, y_m)
+        if not ok:  # a repeated sample: numpy's inf and nan, as project has
+            s_np, lat_np = self.project([[x_m, y_m]], s_min_m=s_min_m, s_max_m=s_max_m)
+            return float(s_np[0]), float(lat_np[0])
+        return s, lateral
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -4,6 +4,11 @@
 with ``scenario.seed`` (scenery first, then agents in file order), so the same seed gives the same
 states bit for bit.  Time is int nanoseconds since the epoch; physics runs at the scenario's
 ``physics_dt_s``; :meth:`World.scene` is the :class:`~redrive.sim.scene.Scene` the sensors render.
+
+The lane followers are built as :class:`~redrive.sim.agents.LaneFollower` objects and then kept
+as arrays (:class:`~redrive.sim.fleet.LaneFleet`): a physics step is the obstacle snapshot, the
+gap search of every agent and the followers' plan and motion in compiled calls, with the
+results the objects would give, bit for bit.
 """
 
 from __future__ import annotations
@@ -17,9 +22,10 @@ import numpy as np
 import numpy.typing as npt
 
 from redrive.errors import SimulationError
-from redrive.sim.agents import IdmParams, LaneChange, LaneFollower, Obstacles, ParkedObject, Walker
+from redrive.sim.agents import IdmParams, LaneChange, LaneFollower, ParkedObject, Walker
 from redrive.sim.ego import BicycleModel, EgoDriver, EgoGeometry, pose_matrix
-from redrive.sim.gaps import GapQuery, GapSearch
+from redrive.sim.fleet import LaneFleet
+from redrive.sim.gaps import GapSearch
 from redrive.sim.ground import rasterize
 from redrive.sim.lights import TrafficLights
 from redrive.sim.roads import RoadNetwork, RoadSegment, build_network
@@ -62,6 +68,25 @@ _PALETTE = np.array(
 )
 
 
+_kernels_loaded = False
+
+
+def _load_kernels(scenario: Scenario) -> None:
+    """Once per process, when the first world is built: step a throwaway world of the same
+    scenario once, so that loading the physics step's compiled kernels (numba's cache; compiling
+    them on a cold cache) is part of building a world, not of its first step — a closed loop's
+    first frame or a live run's."""
+    global _kernels_loaded  # noqa: PLW0603 (one flag per process)
+    if _kernels_loaded:
+        return
+    _kernels_loaded = True
+    probe = World(scenario)
+    probe.objects()
+    probe.step_to(probe.time_ns + probe._dt_ns)
+    probe.drive_ego(lambda model, dt_s: None)
+    probe.step_to(probe.time_ns + probe._dt_ns)
+
+
 class World:
     """The synthetic world of one :class:`Scenario`; call :meth:`step` to advance it."""
 
@@ -101,6 +126,10 @@ class World:
         self._ego_step: Callable[[BicycleModel, float], None] | None = None
         #: every lane follower's and the scripted ego's gap search, batched per physics step
         self._gaps = GapSearch(self.network.routes.values())
+        #: the lane followers' state as arrays, stepped by compiled kernels
+        self._fleet = LaneFleet(self._followers, self._gaps, self.lights)
+        self._followers = []  # their state lives in the fleet from here on
+        _load_kernels(scenario)
         self._record_pose()
 
     # -- construction -------------------------------------------------------------------------
@@ -280,50 +309,47 @@ class World:
         dt_s = dt_ns / 1e9
         ego_step = self._ego_step
         scripted = ego_step is None
+        fleet = self._fleet
         # every agent plans from one snapshot (taken before any moves or changes lane), their
         # gap searches in one batch; a driven ego with nobody around needs none
-        obstacles = self._obstacles() if scripted or self._followers else None
+        obstacles = self._obstacles() if scripted or len(fleet) else None
         front = self._driver.s_m + self.ego_geometry.front_offset_m
         for walker, s_cross, distance in self._triggers:
             if s_cross - front <= distance:
                 walker.start(t)
-        queries: list[GapQuery] = []
-        for follower in self._followers:
-            follower.start_plan(t)
-            half_l = follower.size_lwh_m[0] / 2.0
-            queries.append(
-                GapQuery(
-                    route=follower.route,
-                    s_center_m=follower.s_m,
-                    s_front_m=follower.s_m + half_l,
-                    width_m=follower.size_lwh_m[1],
-                    self_id=follower.agent_id,
-                )
-            )
+        fleet.start_plan(t)
+        search = self._gaps
+        ego_query = None
         if scripted:
             g, driver = self.ego_geometry, self._driver
             steer = driver.steer(self._ego)
-            queries.append(
-                GapQuery(
-                    route=driver.route,
-                    s_center_m=driver.s_m + g.center_offset_m,
-                    s_front_m=driver.s_m + g.front_offset_m,
-                    width_m=g.width_m,
-                    self_id=driver.ego_id,
-                )
+            off, n = search.route_row(driver.route)
+            s_front = driver.s_m + g.front_offset_m
+            ego_query = (
+                off,
+                n,
+                driver.ego_id,
+                driver.s_m + g.center_offset_m,
+                s_front,
+                s_front + search.horizon_m,
+                g.width_m,
             )
         else:
             self._track_route()
-        gaps = self._gaps.gaps(queries, obstacles) if obstacles is not None else []
-        for follower, (gap, v_lead) in zip(self._followers, gaps, strict=False):
-            follower.finish_plan(t, self.lights, gap_m=gap, leader_speed_mps=v_lead)
+        if obstacles is not None:
+            q_int, q_float = fleet.queries(search.horizon_m, ego_query)
+            gaps, speeds = search.gaps_of(q_int, q_float, *obstacles)
+            # the followers plan (stop lines, IDM, braking) and move; the ego's plan does not
+            # read them
+            fleet.finish_and_advance(t, dt_s, gap_m=gaps, leader_speed_mps=speeds)
         if scripted:
-            gap, v_lead = gaps[-1]
             accel = self._driver.accelerate(
-                self._ego, t, self.lights, gap_m=gap, leader_speed_mps=v_lead
+                self._ego,
+                t,
+                self.lights,
+                gap_m=float(gaps[-1]),
+                leader_speed_mps=float(speeds[-1]),
             )
-        for follower in self._followers:
-            follower.advance(dt_s)
         if ego_step is None:
             self._ego.step(dt_s, accel_mps2=accel, steer_rad=steer)
         else:
@@ -332,7 +358,6 @@ class World:
         t_new = self.time_s
         for walker in self._walkers:
             walker.set_time(t_new)
-        self._followers = [f for f in self._followers if f.active]
         self._record_pose()
 
     def drive_ego(self, step: Callable[[BicycleModel, float], None] | None) -> None:
@@ -352,7 +377,8 @@ class World:
         agents do what the scripted world's do, whatever the driven ego does): stepping this
         world then moves only its ego.
         """
-        self._followers, self._walkers, self._triggers, self._parked = [], [], [], []
+        self._fleet.drop()
+        self._walkers, self._triggers, self._parked = [], [], []
 
     def place_ego(self, *, x_m: float, y_m: float, yaw_rad: float) -> None:
         """Start the ego at another pose (map frame, rear-axle centre) — before the first step
@@ -394,38 +420,36 @@ class World:
             self._history.popleft()
 
     # -- state --------------------------------------------------------------------------------
-    def _agents(self) -> list[LaneFollower | Walker | ParkedObject]:
-        return [*self._followers, *self._walkers, *self._parked]
+    def _others(self) -> list[Walker | ParkedObject]:
+        """The agents that are not lane followers (those are :attr:`_fleet`), in the world's
+        order after them."""
+        return [*self._walkers, *self._parked]
 
-    def _obstacles(self) -> Obstacles:
+    def _obstacles(self) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]:
+        """The snapshot every agent plans from: ids (M,) and (6, M) centre x, y, length,
+        width, velocity x, y (``GapSearch.gaps_of``'s obstacles) — the ego, the lane
+        followers, the pedestrians, the parked vehicles."""
         g, ego = self.ego_geometry, self._ego
         c, s = math.cos(ego.yaw_rad), math.sin(ego.yaw_rad)
-        ids, centers, lengths, widths, vels = [EGO_ID], [], [g.length_m], [g.width_m], []
-        centers.append((ego.x_m + g.center_offset_m * c, ego.y_m + g.center_offset_m * s))
-        vels.append((ego.speed_mps * c, ego.speed_mps * s))
-        for agent in self._agents():
-            ids.append(agent.agent_id)
-            lengths.append(agent.size_lwh_m[0])
-            widths.append(agent.size_lwh_m[1])
-            if isinstance(agent, ParkedObject):
-                centers.append(agent.center_xy)
-                vels.append((0.0, 0.0))
-            elif isinstance(agent, LaneFollower):  # its velocity() without a second pose()
-                x, y, yaw = agent.pose()
-                centers.append((x, y))
-                v = agent.speed_mps
-                vels.append((v * math.cos(yaw), v * math.sin(yaw)))
-            else:
-                x, y, _ = agent.pose()
-                centers.append((x, y))
-                vels.append(agent.velocity())
-        return Obstacles(
-            ids=np.array(ids, dtype=np.int64),
-            centers=np.array(centers, dtype=np.float64),
-            lengths=np.array(lengths, dtype=np.float64),
-            widths=np.array(widths, dtype=np.float64),
-            velocities=np.array(vels, dtype=np.float64),
-        )
+        ids = [EGO_ID]
+        rows = [
+            (
+                ego.x_m + g.center_offset_m * c,
+                ego.y_m + g.center_offset_m * s,
+                g.length_m,
+                g.width_m,
+                ego.speed_mps * c,
+                ego.speed_mps * s,
+            )
+        ]
+        for walker in self._walkers:
+            x, y, _ = walker.pose()
+            ids.append(walker.agent_id)
+            rows.append((x, y, walker.size_lwh_m[0], walker.size_lwh_m[1], *walker.velocity()))
+        for parked in self._parked:
+            ids.append(parked.agent_id)
+            rows.append((*parked.center_xy, *parked.size_lwh_m[:2], 0.0, 0.0))
+        return self._fleet.snapshot(np.array(ids, dtype=np.int64), np.array(rows, dtype=np.float64))
 
     def ego_state(self) -> VehicleState:
         """The ego's true state (rear-axle centre, map frame) at :attr:`time_ns`."""
@@ -463,15 +487,24 @@ class World:
 
     def objects(self) -> SceneObjects:
         """Agents and parked vehicles (ground truth) followed by the scenery, map frame."""
-        agents = self._agents()
-        n = len(agents)
+        fleet = self._fleet
+        nf = len(fleet)
+        others = self._others()
+        n = nf + len(others)
         centers, sizes, yaws, vels = (
             np.zeros((n, 3)),
             np.zeros((n, 3)),
             np.zeros(n),
             np.zeros((n, 3)),
         )
-        for k, agent in enumerate(agents):
+        if nf:
+            poses = fleet.poses()
+            sizes[:nf] = fleet.sizes
+            centers[:nf, 0], centers[:nf, 1] = poses[0], poses[1]
+            centers[:nf, 2] = fleet.heights / 2
+            yaws[:nf] = poses[2]
+            vels[:nf, 0], vels[:nf, 1] = poses[3], poses[4]
+        for k, agent in enumerate(others, start=nf):
             sizes[k] = agent.size_lwh_m
             if isinstance(agent, ParkedObject):
                 x, y, yaw = agent.center_xy[0], agent.center_xy[1], agent.yaw_rad
@@ -483,21 +516,32 @@ class World:
         static = self._static[0]
         return SceneObjects(
             object_ids=np.concatenate(
-                [np.array([a.agent_id for a in agents], dtype=np.int64), static.object_ids]
+                [
+                    fleet.ids,
+                    np.array([a.agent_id for a in others], dtype=np.int64),
+                    static.object_ids,
+                ]
             ),
-            classes=tuple(a.object_class for a in agents) + static.classes,
+            classes=(*fleet.classes, *(a.object_class for a in others), *static.classes),
             centers=np.concatenate([centers, static.centers]),
             sizes=np.concatenate([sizes, static.sizes]),
             yaws_rad=np.concatenate([yaws, static.yaws_rad]),
             velocities=np.concatenate([vels, static.velocities]),
             colors=np.concatenate(
                 [
-                    np.array([a.color_rgb for a in agents], dtype=np.uint8).reshape(-1, 3),
+                    np.array(
+                        [*fleet.colors, *(a.color_rgb for a in others)], dtype=np.uint8
+                    ).reshape(-1, 3),
                     static.colors,
                 ]
             ),
             reflectivity=np.concatenate(
-                [np.array([a.reflectivity for a in agents], dtype=np.float32), static.reflectivity]
+                [
+                    np.array(
+                        [*fleet.reflectivity, *(a.reflectivity for a in others)], dtype=np.float32
+                    ),
+                    static.reflectivity,
+                ]
             ),
             is_ground_truth=np.concatenate([np.ones(n, dtype=bool), static.is_ground_truth]),
         )

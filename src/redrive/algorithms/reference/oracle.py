@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
 from collections.abc import Mapping
@@ -179,31 +178,37 @@ class NoisyOracle(Algorithm):
         d_vel = rng.normal(0.0, 1.0, (n, 2)) * self._vel_std
         confused = rng.random(n) < self._p_confuse
         pick = rng.random(n)  # which other class, as a fraction of the choices
+        if n == 0:
+            return []
+        # the arithmetic of all objects at once (the same elementwise operations as object by
+        # object); then one DetectedObject each, built directly (no dataclasses.replace)
+        centers = np.array([obj.box.center for obj in objects]) + d_center
+        true_sizes = np.array([obj.box.size for obj in objects])
+        sizes = np.maximum(true_sizes * (1.0 + d_size), 0.1 * true_sizes)
+        velocities = np.array([obj.velocity for obj in objects])
+        velocities[:, :2] += d_vel
+        orientations = np.array([obj.orientation for obj in objects])
+        d_yaws = d_yaw.tolist()
+        keep_ids = self._keep_ids
         out = []
         for i, obj in enumerate(objects):
             if missed[i]:
                 continue
-            yaw = normalize_angle(obj.box.yaw_rad + float(d_yaw[i]))
-            size = np.maximum(obj.box.size * (1.0 + d_size[i]), 0.1 * obj.box.size)
-            velocity = obj.velocity.copy()
-            velocity[:2] += d_vel[i]
-            orientation = obj.orientation.copy()
-            orientation[0] = normalize_angle(float(orientation[0]) + float(d_yaw[i]))
+            yaw = normalize_angle(obj.box.yaw_rad + d_yaws[i])
+            orientations[i, 0] = normalize_angle(float(orientations[i, 0]) + d_yaws[i])
             cls = obj.object_class
             if confused[i]:
                 choices = [c for c in CONFUSABLE_CLASSES if c is not cls]
                 cls = choices[min(int(pick[i] * len(choices)), len(choices) - 1)]
             out.append(
-                dataclasses.replace(
-                    obj,
-                    object_id=obj.object_id if self._keep_ids else -1,
+                DetectedObject(
+                    object_id=obj.object_id if keep_ids else -1,
                     object_class=cls,
-                    box=Box3D(center=obj.box.center + d_center[i], size=size, yaw_rad=yaw),
-                    velocity=velocity,
-                    orientation=orientation,
-                    bbox_2d=None,
-                    num_lidar_points=None,
-                    visible=None,
+                    confidence=obj.confidence,
+                    box=Box3D(center=centers[i], size=sizes[i], yaw_rad=yaw),
+                    velocity=velocities[i],
+                    acceleration=obj.acceleration,
+                    orientation=orientations[i],
                 )
             )
         return out

@@ -21,7 +21,9 @@ the split of the wall time between simulation (the simulator's observe and step)
 step latencies of the run's steps table) and other (engine records, results writer). Baseline,
 in the same run and interleaved: the scenario's world stepped alone with its scripted driver to
 the same end, the cost floor of the simulation (the closed loop steps two worlds: the expert one
-and the driven one). Medians of --repeat passes.
+and the driven one). CPU seconds beside the wall times (the process's over the call, the
+simulation's and the algorithms', the world alone's): on a shared machine they are the figures
+that tell the code's cost from the load. Medians of --repeat passes.
 
 --level sensor runs the reference pipeline (cluster-detector -> kalman-tracker -> idm-planner ->
 pure-pursuit-pid) on the scenario's rig re-rendered from the driven ego every step, its first 3D
@@ -70,6 +72,10 @@ def _run_closed_loop(args: argparse.Namespace) -> int:
             for part in ("rendering", "simulation", "algorithms", "other")
             if part != "rendering" or result.level == "sensor"
         )
+    )
+    console.print(
+        f"  CPU: simulation {result.simulation_cpu_s:.3f} s, algorithms "
+        f"{result.algorithms_cpu_s:.3f} s; the world alone {result.baseline_cpu_s:.3f} s"
     )
     console.print(
         "  algorithms, mean ms per step: "
