@@ -59,6 +59,7 @@ from redrive.transport.stream import (
     ProducerGoneError,
     channel_stats,
     drain,
+    new_message,
     socket_name,
     wait_fd,
 )
@@ -325,14 +326,8 @@ class Reader:
         if meta_len:
             off = base * 8 + META_OFFSET
             meta = bytes(self._raw[off : off + meta_len])
-        return Message(
-            seq=seq,
-            stamp_ns=w[base + S_STAMP],
-            publish_ns=w[base + S_PUBLISH],
-            kind=w[base + S_KIND],
-            meta=meta,
-            payload=payload,
-            dropped_before=dropped,
+        return new_message(
+            seq, w[base + S_STAMP], w[base + S_PUBLISH], w[base + S_KIND], meta, payload, dropped
         )
 
     def _release(self, slot: int, seq: int, dropped: int, msg: Message) -> bool:
