@@ -90,9 +90,11 @@ class _View:
         self._slot, self._seq, self._dropped = slot, seq, dropped
         if slot < 0:
             return None
-        base = rd._slot_words[slot]
-        msg = self._msg = rd._message(
-            slot, seq, dropped, rd._payload[slot][: rd._w[base + S_NBYTES]]
+        w, base = rd._w, rd._slot_words[slot]
+        meta = rd._meta(base) if w[base + S_META_LEN] else b""
+        payload = rd._payload[slot][: w[base + S_NBYTES]]
+        msg = self._msg = new_message(
+            seq, w[base + S_STAMP], w[base + S_PUBLISH], w[base + S_KIND], meta, payload, dropped
         )
         return msg
 
@@ -321,14 +323,15 @@ class Reader:
         self, slot: int, seq: int, dropped: int, payload: npt.NDArray[np.uint8]
     ) -> Message:
         w, base = self._w, self._slot_words[slot]
-        meta_len = w[base + S_META_LEN]
-        meta = b""
-        if meta_len:
-            off = base * 8 + META_OFFSET
-            meta = bytes(self._raw[off : off + meta_len])
+        meta = self._meta(base) if w[base + S_META_LEN] else b""
         return new_message(
             seq, w[base + S_STAMP], w[base + S_PUBLISH], w[base + S_KIND], meta, payload, dropped
         )
+
+    def _meta(self, base: int) -> bytes:
+        """The meta bytes of the slot whose header starts at word ``base``."""
+        off = base * 8 + META_OFFSET
+        return bytes(self._raw[off : off + self._w[base + S_META_LEN]])
 
     def _release(self, slot: int, seq: int, dropped: int, msg: Message) -> bool:
         """Re-check the slot (ⓗⓘ), unpin it (ⓙ), count; False if the message was torn.

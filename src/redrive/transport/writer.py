@@ -72,11 +72,10 @@ class _Loan:
 
     __slots__ = ("_kind", "_meta", "_nbytes", "_slot", "_stamp_ns", "_timeout_s", "_writer")
 
-    def __init__(
+    def __init__(  # noqa: PLR0917 — built once per message: positional is the cheaper call
         self,
         writer: Writer,
         nbytes: int,
-        *,
         stamp_ns: int,
         kind: int,
         meta: bytes,
@@ -91,7 +90,13 @@ class _Loan:
         if self._slot >= 0:
             msg = f"stream {wr.name!r}: a loan is entered once; call writer.loan() again"
             raise TransportError(msg)
-        wr._check(self._nbytes, self._meta)
+        if (
+            wr._closed
+            or wr._loaned
+            or self._nbytes > wr._capacity
+            or len(self._meta) > META_CAPACITY
+        ):
+            wr._check(self._nbytes, self._meta)  # raises the error that applies
         slot = self._slot = wr._claim(self._timeout_s)
         wr._loaned = True
         return wr._payload[slot][: self._nbytes]
@@ -145,6 +150,7 @@ class Writer:
         self._seg = Segment.create(name, layout, policy=policy.value)
         self._w = self._seg.words
         self._layout = layout
+        self._capacity = capacity_bytes
         self._slot_seq = [0] * slots  # message each slot holds
         self._slot_words = [layout.slot_offset(s) // 8 for s in range(slots)]
         mm = self._seg.mm
@@ -415,7 +421,7 @@ class Writer:
             with writer.loan(n, stamp_ns=t) as out:   # out: uint8 (n,), the slot's memory
                 out[:] = ...
         """
-        return _Loan(self, nbytes, stamp_ns=stamp_ns, kind=kind, meta=meta, timeout_s=timeout_s)
+        return _Loan(self, nbytes, stamp_ns, kind, meta, timeout_s)
 
     def publish_sample(self, sample: SensorData, *, timeout_s: float | None = 5.0) -> int:
         """Publish a ``SensorData`` (typed, see :mod:`redrive.transport.codec`); returns its
