@@ -12,7 +12,8 @@ subscriber's touch are the same on every path and left out):
   store and load through a ``memoryview`` (slot claim, header, ``write_seq``, the reader's pin,
   the sequence checks before and after, ``read_seq``), the two fences per side its memory-ordering
   argument needs (``redrive.transport._fence``), one clock reading per side and the payload as a
-  numpy view — no error checks, no policies, no counters, no wake-up bookkeeping, no objects.
+  numpy view — no error checks, no policies, no counters, no wake-up bookkeeping, no objects;
+* ``none``: empty steps, the cost of the measuring loop itself (to subtract).
 
 Prints instructions per message of each side when run under callgrind (``--callgrind``: the
 instrumentation is switched on around each side's calls only, through a tiny C library built
@@ -180,7 +181,16 @@ def _floor() -> tuple[Step, Step, Callable[[], None]]:
     return pub, sub, close
 
 
-PATHS = {"redrive": _redrive, "iceoryx2": _iceoryx2, "floor": _floor}
+def _none() -> tuple[Step, Step, Callable[[], None]]:
+    """Empty steps: what the measuring loop itself costs (subtract it from the others)."""
+
+    def step(i: int) -> None:
+        return None
+
+    return step, step, lambda: None
+
+
+PATHS = {"redrive": _redrive, "iceoryx2": _iceoryx2, "floor": _floor, "none": _none}
 
 
 def main() -> None:
