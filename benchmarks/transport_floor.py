@@ -17,9 +17,11 @@ subscriber's touch are the same on every path and left out):
 
 Prints instructions per message of each side when run under callgrind (``--callgrind``: the
 instrumentation is switched on around each side's calls only, through a tiny C library built
-with ``cc``), else thread CPU ns per message (noisy on a shared machine)::
+with ``cc``; run valgrind with ``--instr-atstart=no --collect-atstart=no``), else thread CPU ns
+per message (noisy on a shared machine)::
 
-    valgrind --tool=callgrind --instr-atstart=no --callgrind-out-file=/tmp/cg.%p \\
+    valgrind --tool=callgrind --instr-atstart=no --collect-atstart=no \\
+        --callgrind-out-file=/tmp/cg.%p \\
         python benchmarks/transport_floor.py --path redrive --side pub --callgrind
     python benchmarks/transport_floor.py --path floor        # CPU ns per message, both sides
 
@@ -45,9 +47,12 @@ import numpy as np
 SIZE = 64
 Step = Callable[[int], Any]
 
+# instrumentation is switched on once (switching it discards valgrind's translations: slow);
+# the events of the instrumented side are collected by toggling collection around its calls
 _CALLGRIND_C = """#include <valgrind/callgrind.h>
 void start(void) { CALLGRIND_START_INSTRUMENTATION; }
 void stop(void) { CALLGRIND_STOP_INSTRUMENTATION; }
+void toggle(void) { CALLGRIND_TOGGLE_COLLECT; }
 """
 
 
@@ -216,12 +221,14 @@ def main() -> None:
     if lib is not None:
         first, second = (pub, sub) if args.side == "pub" else (sub, pub)
         if args.side == "sub":
-            pub(-1)
+            pub(0)  # one message in flight
+        lib.start()
         for i in range(args.count):
-            lib.start()
+            lib.toggle()
             first(i)
-            lib.stop()
+            lib.toggle()
             second(i)
+        lib.stop()
         if args.side == "sub":
             sub(-1)
         close()
