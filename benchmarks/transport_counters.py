@@ -11,6 +11,12 @@ wrapper command, so the counters of each side are its own::
     python benchmarks/transport_counters.py ... --wrap 'valgrind --tool=callgrind \
         --callgrind-out-file={out}'
 
+Without ``--wrap``, ``--times`` prints what each process's message loop took per message: its
+thread CPU time (``time.thread_time_ns``: the work, less sensitive to other load than wall time),
+its wall time and its voluntary context switches (sleeps)::
+
+    python benchmarks/transport_counters.py --side iceoryx2 --size 4M --count 2000 --times
+
 ``{out}`` becomes ``OUTDIR/<side>.<size>.<count>.<role>.txt`` (``--outdir``, default a temporary
 directory, printed). Counts per message are taken as the difference between a run of ``2N`` and one
 of ``N`` messages, divided by ``N`` (``--per-message``): start-up, imports and segment creation
@@ -25,6 +31,7 @@ import argparse
 import ctypes
 import os
 import re
+import resource
 import shlex
 import shutil
 import subprocess
@@ -59,6 +66,29 @@ class _Instrumentation:
             self.lib.stop()
 
 
+class _LoopClocks:
+    """Thread CPU, wall time and voluntary context switches of the message loop (``--times``)."""
+
+    def __init__(self, label: str, count: int, *, show: bool) -> None:
+        self.label, self.count, self.show = label, count, show
+        self.cpu = self.wall = self.sleeps = 0
+
+    def start(self) -> None:
+        self.cpu, self.wall = time.thread_time_ns(), time.monotonic_ns()
+        self.sleeps = resource.getrusage(resource.RUSAGE_THREAD).ru_nvcsw
+
+    def stop(self) -> None:
+        cpu, wall = time.thread_time_ns() - self.cpu, time.monotonic_ns() - self.wall
+        sleeps = resource.getrusage(resource.RUSAGE_THREAD).ru_nvcsw - self.sleeps
+        if self.show:
+            n = self.count + 1
+            print(
+                f"{self.label}\tcpu_us_per_msg\t{cpu / n / 1e3:.1f}\twall_us_per_msg\t"
+                f"{wall / n / 1e3:.1f}\tsleeps_per_msg\t{sleeps / n:.2f}",
+                flush=True,
+            )
+
+
 def _build_toggle(where: Path) -> None:
     src = where / "cgtoggle.c"
     src.write_text(_CALLGRIND_C)
@@ -83,6 +113,7 @@ def _role_main(args: argparse.Namespace) -> None:
     )
     start, done = Path(args.fifo_dir) / "start", Path(args.fifo_dir) / "done"
     instr = _Instrumentation(args.fifo_dir if args.callgrind else None)
+    clocks = _LoopClocks(f"{args.side}\t{args.size}\t{args.role}", args.count, show=args.times)
     if args.role == "pub":
         tx = spec.make_sender(cfg, None)
         with start.open("rb") as f:  # blocks until the subscriber is attached
@@ -90,9 +121,11 @@ def _role_main(args: argparse.Namespace) -> None:
         tx.wait_connected(20.0)
         clock = time.monotonic_ns
         instr.start()
+        clocks.start()
         for seq in range(args.count):
             tx.send(seq, clock())
         tx.send(END_SEQ, clock())
+        clocks.stop()
         instr.stop()
         with done.open("rb") as f:  # the subscriber has everything
             f.read()
@@ -104,8 +137,10 @@ def _role_main(args: argparse.Namespace) -> None:
         f.write(b"go")
     deadline = time.monotonic() + 600.0
     instr.start()
+    clocks.start()
     while not tally.ended and time.monotonic() < deadline:
         rx.recv(1.0)
+    clocks.stop()
     instr.stop()
     got = len(tally.seen)
     with done.open("wb") as f:
@@ -115,7 +150,9 @@ def _role_main(args: argparse.Namespace) -> None:
         sys.exit(f"subscriber: {got} of {args.count} messages, {tally.corrupt} corrupt")
 
 
-def run_pair(side: str, size: int, count: int, wrap: str, outdir: Path) -> dict[str, Path]:
+def run_pair(  # noqa: PLR0917
+    side: str, size: int, count: int, wrap: str, outdir: Path, times: bool = False
+) -> dict[str, Path]:
     """Run publisher and subscriber of ``side`` for ``count`` messages; returns the out files."""
     fifo_dir = Path(tempfile.mkdtemp(prefix="redrive-counters-"))
     os.mkfifo(fifo_dir / "start")
@@ -135,6 +172,7 @@ def run_pair(side: str, size: int, count: int, wrap: str, outdir: Path) -> dict[
         cmd = [*prefix, sys.executable, str(HERE), "--role", role, "--side", side]
         cmd += ["--size", str(size), "--count", str(count), "--endpoint", endpoint]
         cmd += ["--fifo-dir", str(fifo_dir)] + (["--callgrind"] if callgrind else [])
+        cmd += ["--times"] if times else []
         procs.append(subprocess.Popen(cmd))
         if role == "pub":
             time.sleep(
@@ -190,6 +228,9 @@ def main() -> None:
     ap.add_argument(
         "--per-message", action="store_true", help="runs of count and 2×count; prints Δ/count"
     )
+    ap.add_argument(
+        "--times", action="store_true", help="print each loop's CPU/wall µs and sleeps per message"
+    )
     ap.add_argument("--role", choices=("pub", "sub"), help=argparse.SUPPRESS)
     ap.add_argument("--endpoint", help=argparse.SUPPRESS)
     ap.add_argument("--fifo-dir", help=argparse.SUPPRESS)
@@ -206,7 +247,7 @@ def main() -> None:
     outdir.mkdir(parents=True, exist_ok=True)
     callgrind = "callgrind" in args.wrap  # counts only the message loop: no difference needed
     counts = (args.count, 2 * args.count) if args.per_message and not callgrind else (args.count,)
-    results = {n: run_pair(args.side, size, n, args.wrap, outdir) for n in counts}
+    results = {n: run_pair(args.side, size, n, args.wrap, outdir, args.times) for n in counts}
     print(f"# outputs in {outdir}")
     if not args.per_message:
         return

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import signal
 import stat
@@ -20,6 +21,7 @@ from hypothesis import strategies as st
 
 from redrive.errors import TransportError
 from redrive.transport import (
+    Message,
     Policy,
     ProducerGoneError,
     Reader,
@@ -29,6 +31,7 @@ from redrive.transport import (
     segment_path,
     stale_segments,
 )
+from redrive.transport.stream import new_message
 from tests.transport._peer import payload
 
 SRC = Path(__file__).resolve().parents[2] / "src"
@@ -121,6 +124,54 @@ def test_round_trip_copy_and_view(name: str) -> None:
             assert stats.published == 4
             assert stats.readers[0].delivered == 3
             assert stats.readers[0].dropped == 0
+
+
+def _fill_then_fail(w: Writer) -> None:
+    with w.loan(8) as buf:
+        buf[:] = 7
+        raise ValueError("fill failed")
+
+
+def test_loan_and_view_abandon_on_error_and_are_entered_once(name: str) -> None:
+    w = Writer(name, capacity_bytes=64, slots=3, max_readers=1, policy=Policy.LOSSLESS)
+    with w, Reader(name) as r:
+        with pytest.raises(ValueError, match="fill failed"):
+            _fill_then_fail(w)
+        assert w.seq == 0  # abandoned: nothing published
+        assert r.read(timeout_s=0.01) is None
+        loan = w.loan(3, stamp_ns=5)
+        with loan as buf:
+            buf[:] = np.frombuffer(b"abc", np.uint8)
+        with pytest.raises(TransportError, match="entered once"), loan:
+            pass
+        view = r.view(timeout_s=1.0)
+        with view as msg:
+            assert msg is not None
+            assert (msg.seq, msg.stamp_ns, msg.payload.tobytes()) == (1, 5, b"abc")
+            with pytest.raises(dataclasses.FrozenInstanceError):
+                msg.seq = 2  # type: ignore[misc]
+        with pytest.raises(TransportError, match="entered once"), view:
+            pass
+        for i in range(2, 6):
+            w.publish(bytes([i]), stamp_ns=i)
+            got = r.read(timeout_s=1.0)
+            assert got is not None
+            assert (got.seq, got.payload.tobytes()) == (i, bytes([i]))
+        (stats,) = w.stats().readers
+        assert (stats.read_seq, stats.delivered, stats.dropped, stats.torn) == (5, 5, 0, 0)
+        assert 0 < stats.lag_last_ns <= stats.lag_max_ns
+        assert 0 < stats.lag_mean_ns <= stats.lag_max_ns
+
+
+def test_new_message_is_the_dataclass_message() -> None:
+    payload = np.arange(4, dtype=np.uint8)
+    fast = new_message(3, 11, 12, 2, b"m", payload, 1)
+    slow = Message(
+        seq=3, stamp_ns=11, publish_ns=12, kind=2, meta=b"m", payload=payload, dropped_before=1
+    )
+    assert type(fast) is Message
+    for field in dataclasses.fields(Message):
+        assert getattr(fast, field.name) is getattr(slow, field.name), field.name
 
 
 def test_a_pinned_view_is_never_overwritten(name: str) -> None:

@@ -10,14 +10,13 @@ import logging
 import os
 import socket
 import time
-from collections.abc import Iterator
 from types import TracebackType
 
 import numpy as np
 import numpy.typing as npt
 
 from redrive.errors import TransportError
-from redrive.transport._fence import fence, ordered
+from redrive.transport._fence import WEAK_ORDERING, fence
 from redrive.transport.segment import (
     HEADER_BYTES,
     META_OFFSET,
@@ -60,6 +59,7 @@ from redrive.transport.stream import (
     ProducerGoneError,
     channel_stats,
     drain,
+    new_message,
     socket_name,
     wait_fd,
 )
@@ -68,6 +68,44 @@ from redrive.types import SensorData
 __all__ = ["Reader"]
 
 logger = logging.getLogger(__name__)
+
+
+class _View:
+    """What :meth:`Reader.view` returns: pins the next message on ``__enter__``, re-checks and
+    unpins it on ``__exit__`` (a class, not a generator: no generator frame per message)."""
+
+    __slots__ = ("_dropped", "_latest", "_msg", "_reader", "_seq", "_slot", "_timeout_s")
+
+    def __init__(self, reader: Reader, timeout_s: float | None, latest: bool) -> None:
+        self._reader, self._timeout_s, self._latest = reader, timeout_s, latest
+        self._slot = -2  # not entered yet
+        self._msg: Message | None = None
+
+    def __enter__(self) -> Message | None:
+        rd = self._reader
+        if self._slot != -2:
+            err = f"stream {rd.name!r}: a view is entered once; call reader.view() again"
+            raise TransportError(err)
+        slot, seq, dropped = rd._next(self._timeout_s, self._latest)
+        self._slot, self._seq, self._dropped = slot, seq, dropped
+        if slot < 0:
+            return None
+        w, base = rd._w, rd._slot_words[slot]
+        meta = rd._meta(base) if w[base + S_META_LEN] else b""
+        payload = rd._payload[slot][: w[base + S_NBYTES]]
+        msg = self._msg = new_message(
+            seq, w[base + S_STAMP], w[base + S_PUBLISH], w[base + S_KIND], meta, payload, dropped
+        )
+        return msg
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        if self._msg is not None:
+            self._reader._release(self._slot, self._seq, self._dropped, self._msg)
 
 
 class Reader:
@@ -152,7 +190,10 @@ class Reader:
             fence()
             w[base + R_STATE] = 1
         self._seg, self._w, self._lay = seg, w, lay
+        self._n_slots = lay.n_slots
         self.policy = policy
+        self._lossless = policy is Policy.LOSSLESS
+        self._delivered = self._lag_sum = self._lag_max = 0  # this entry's counters (zeroed above)
         self._base = base
         self._read_seq = start_seq
         self._slot_words = [lay.slot_offset(s) // 8 for s in range(lay.n_slots)]
@@ -215,25 +256,30 @@ class Reader:
 
     # -- reading -------------------------------------------------------------------------------
     def _next(self, timeout_s: float | None, latest: bool) -> tuple[int, int, int]:
-        """Pin the next message: (slot, seq, dropped before it)."""
+        """Pin the next message: (slot, seq, dropped before it).
+
+        A message already there costs no clock reading: the deadline (``timeout_s`` from now)
+        starts when there is none.
+        """
         if self._closed:
             msg = f"reader of stream {self.name!r} is closed"
             raise TransportError(msg)
         if self._seg is None:
             self._attach(time.monotonic() + (timeout_s or 0.0))
-        deadline = None if timeout_s is None else time.monotonic() + timeout_s
-        last_check = time.monotonic()
+        deadline: float | None = None
+        last_check = 0.0
         jump = latest
         skip_to = 0  # a lossless reader's first message still held (see below)
         spin_until = 0
         while True:
-            w, lay = self._w, self._lay
+            w, n_slots = self._w, self._n_slots
             ws = w[W_WRITE_SEQ]  # ⓐ
-            ordered()  # ⓑ
+            if WEAK_ORDERING:
+                fence()  # ⓑ
             rs = self._read_seq
             if ws > rs:
-                want = ws if jump or ws - rs > lay.n_slots else max(rs + 1, skip_to)
-                slot = w[W_ORDER + want % lay.n_slots]  # ⓒ
+                want = ws if jump or ws - rs > n_slots else max(rs + 1, skip_to)
+                slot = w[W_ORDER + want % n_slots]  # ⓒ
                 pin = self._base + R_PIN
                 w[pin] = slot  # ⓓ
                 fence()  # ⓔ
@@ -241,7 +287,7 @@ class Reader:
                 if w[base + S_BEGIN] == want and w[base + S_END] == want:  # ⓕ
                     return slot, want, want - rs - 1
                 w[pin] = -1
-                if self.policy is Policy.KEEP_LATEST:
+                if not self._lossless:
                     jump = True  # overwritten meanwhile: newest
                 elif w[base + S_END] > want:
                     # overwritten before this reader's position was seen (it joined while the
@@ -249,6 +295,9 @@ class Reader:
                     skip_to = want + 1
                 continue
             now = time.monotonic()
+            if not last_check:
+                last_check = now
+                deadline = None if timeout_s is None else now + timeout_s
             if now - last_check >= CHECK_S or (deadline is not None and now >= deadline):
                 last_check = now
                 if self._seg is not None and not self._seg.owner_alive():
@@ -274,25 +323,26 @@ class Reader:
         self, slot: int, seq: int, dropped: int, payload: npt.NDArray[np.uint8]
     ) -> Message:
         w, base = self._w, self._slot_words[slot]
-        meta_len = w[base + S_META_LEN]
-        meta = b""
-        if meta_len:
-            off = base * 8 + META_OFFSET
-            meta = bytes(self._raw[off : off + meta_len])
-        return Message(
-            seq=seq,
-            stamp_ns=int(w[base + S_STAMP]),
-            publish_ns=int(w[base + S_PUBLISH]),
-            kind=int(w[base + S_KIND]),
-            meta=meta,
-            payload=payload,
-            dropped_before=dropped,
+        meta = self._meta(base) if w[base + S_META_LEN] else b""
+        return new_message(
+            seq, w[base + S_STAMP], w[base + S_PUBLISH], w[base + S_KIND], meta, payload, dropped
         )
 
+    def _meta(self, base: int) -> bytes:
+        """The meta bytes of the slot whose header starts at word ``base``."""
+        off = base * 8 + META_OFFSET
+        return bytes(self._raw[off : off + self._w[base + S_META_LEN]])
+
     def _release(self, slot: int, seq: int, dropped: int, msg: Message) -> bool:
-        """Re-check the slot (ⓗⓘ), unpin it (ⓙ), count; False if the message was torn."""
+        """Re-check the slot (ⓗⓘ), unpin it (ⓙ), count; False if the message was torn.
+
+        This reader is the only writer of its entry's counters (the writer only frees the entry
+        of a dead reader): it keeps their running values here and stores them, without loading
+        them back from shared memory.
+        """
         w, me = self._w, self._base
-        ordered()  # ⓗ
+        if WEAK_ORDERING:
+            fence()  # ⓗ
         base = self._slot_words[slot]
         intact = w[base + S_BEGIN] == seq and w[base + S_END] == seq  # ⓘ
         w[me + R_PIN] = -1  # ⓙ
@@ -305,12 +355,15 @@ class Reader:
             return False
         now = time.time_ns()
         lag = now - msg.publish_ns
-        w[me + R_DELIVERED] += 1
+        self._delivered += 1
+        self._lag_sum += lag
+        w[me + R_DELIVERED] = self._delivered
         w[me + R_CAPTURE_LAG] = now - msg.stamp_ns if msg.stamp_ns else lag
         w[me + R_LAG_LAST] = lag
-        w[me + R_LAG_SUM] += lag
-        w[me + R_LAG_MAX] = max(w[me + R_LAG_MAX], lag)
-        if self.policy is Policy.LOSSLESS and self._space_fd >= 0:
+        w[me + R_LAG_SUM] = self._lag_sum
+        if lag > self._lag_max:
+            self._lag_max = w[me + R_LAG_MAX] = lag
+        if self._lossless and self._space_fd >= 0:
             fence()  # read_seq is seen by a writer before it sleeps, or its flag is seen here
             if w[W_WRITER_WAITING]:
                 os.eventfd_write(self._space_fd, 1)
@@ -372,22 +425,14 @@ class Reader:
             raise TransportError(err)
         return msg, decode_sample(msg.meta, msg.payload)
 
-    @contextlib.contextmanager
-    def view(
-        self, timeout_s: float | None = None, *, latest: bool = False
-    ) -> Iterator[Message | None]:
+    def view(self, timeout_s: float | None = None, *, latest: bool = False) -> _View:
         """The next message as a read-only view into shared memory, valid inside the block
-        (the slot is pinned: the writer does not reuse it meanwhile). Yields None on timeout."""
-        slot, seq, dropped = self._next(timeout_s, latest)
-        if slot < 0:
-            yield None
-            return
-        nbytes = self._w[self._slot_words[slot] + S_NBYTES]
-        msg = self._message(slot, seq, dropped, self._payload[slot][:nbytes])
-        try:
-            yield msg
-        finally:
-            self._release(slot, seq, dropped, msg)
+        (the slot is pinned: the writer does not reuse it meanwhile). Gives None on timeout::
+
+            with reader.view(timeout_s=1.0) as msg:   # msg: Message | None
+                ...
+        """
+        return _View(self, timeout_s, latest)
 
     def stats(self) -> ChannelStats:
         if self._seg is None:

@@ -9,7 +9,7 @@ import contextlib
 import enum
 import os
 import select
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 import numpy.typing as npt
@@ -42,6 +42,7 @@ __all__ = [
     "ReaderStats",
     "channel_stats",
     "drain",
+    "new_message",
     "socket_name",
     "wait_fd",
 ]
@@ -90,6 +91,41 @@ class Message:
     meta: bytes
     payload: npt.NDArray[np.uint8]
     dropped_before: int = 0
+
+
+_new_object = object.__new__
+(
+    _set_seq,
+    _set_stamp_ns,
+    _set_publish_ns,
+    _set_kind,
+    _set_meta,
+    _set_payload,
+    _set_dropped_before,
+) = (getattr(Message, f.name).__set__ for f in fields(Message))
+
+
+def new_message(  # noqa: PLR0917 — the per-message path: positional, in field order
+    seq: int,
+    stamp_ns: int,
+    publish_ns: int,
+    kind: int,
+    meta: bytes,
+    payload: npt.NDArray[np.uint8],
+    dropped_before: int,
+) -> Message:
+    """``Message(seq=…, …)`` at a third of the cost (the reader builds one per message): the
+    frozen dataclass's ``__init__`` sets each field through ``object.__setattr__`` by name; this
+    sets the slots through their descriptors. The result is the same frozen ``Message``."""
+    msg: Message = _new_object(Message)
+    _set_seq(msg, seq)
+    _set_stamp_ns(msg, stamp_ns)
+    _set_publish_ns(msg, publish_ns)
+    _set_kind(msg, kind)
+    _set_meta(msg, meta)
+    _set_payload(msg, payload)
+    _set_dropped_before(msg, dropped_before)
+    return msg
 
 
 @dataclass(frozen=True, slots=True)

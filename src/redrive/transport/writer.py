@@ -10,7 +10,6 @@ import os
 import socket
 import threading
 import time
-from collections.abc import Iterator
 from types import TracebackType
 from typing import Any
 
@@ -18,7 +17,7 @@ import numpy as np
 import numpy.typing as npt
 
 from redrive.errors import TransportError
-from redrive.transport._fence import fence, ordered
+from redrive.transport._fence import WEAK_ORDERING, fence
 from redrive.transport.segment import (
     HEADER_BYTES,
     META_CAPACITY,
@@ -63,6 +62,58 @@ __all__ = ["Writer"]
 
 logger = logging.getLogger(__name__)
 
+_LOSSLESS = Policy.LOSSLESS.value
+
+
+class _Loan:
+    """What :meth:`Writer.loan` returns: claims the slot on ``__enter__``, publishes it on a clean
+    ``__exit__`` and abandons it on an exception (a class, not a generator: no generator frame
+    per message)."""
+
+    __slots__ = ("_kind", "_meta", "_nbytes", "_slot", "_stamp_ns", "_timeout_s", "_writer")
+
+    def __init__(  # noqa: PLR0917 — built once per message: positional is the cheaper call
+        self,
+        writer: Writer,
+        nbytes: int,
+        stamp_ns: int,
+        kind: int,
+        meta: bytes,
+        timeout_s: float | None,
+    ) -> None:
+        self._writer, self._nbytes, self._stamp_ns = writer, nbytes, stamp_ns
+        self._kind, self._meta, self._timeout_s = kind, meta, timeout_s
+        self._slot = -1
+
+    def __enter__(self) -> npt.NDArray[np.uint8]:
+        wr = self._writer
+        if self._slot >= 0:
+            msg = f"stream {wr.name!r}: a loan is entered once; call writer.loan() again"
+            raise TransportError(msg)
+        if (
+            wr._closed
+            or wr._loaned
+            or self._nbytes > wr._capacity
+            or len(self._meta) > META_CAPACITY
+        ):
+            wr._check(self._nbytes, self._meta)  # raises the error that applies
+        slot = self._slot = wr._claim(self._timeout_s)
+        wr._loaned = True
+        return wr._payload[slot][: self._nbytes]
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        wr, slot = self._writer, self._slot
+        wr._loaned = False
+        if exc_type is not None:  # abandoned: the slot holds its old message again
+            wr._w[wr._slot_words[slot] + S_BEGIN] = wr._slot_seq[slot]
+            return
+        wr._commit(slot, self._nbytes, self._stamp_ns, self._kind, self._meta)
+
 
 class Writer:
     """The one writer of stream ``name``; creates (and on close unlinks) its segment.
@@ -99,6 +150,7 @@ class Writer:
         self._seg = Segment.create(name, layout, policy=policy.value)
         self._w = self._seg.words
         self._layout = layout
+        self._capacity = capacity_bytes
         self._slot_seq = [0] * slots  # message each slot holds
         self._slot_words = [layout.slot_offset(s) // 8 for s in range(slots)]
         mm = self._seg.mm
@@ -108,6 +160,9 @@ class Writer:
         ]
         self._raw = memoryview(mm)
         self._readers = [layout.reader_word(r) for r in range(max_readers)]
+        self._waiting_words = [b + R_WAITING for b in self._readers]
+        self._n_slots = slots
+        self._lossless = policy is Policy.LOSSLESS
         self._reader_fd = [-1] * max_readers
         self._fd_lock = threading.Lock()
         self._space_fd = os.eventfd(0, os.EFD_NONBLOCK | os.EFD_CLOEXEC)
@@ -155,41 +210,44 @@ class Writer:
     def capacity(self) -> int:
         return self._layout.capacity
 
-    def _claim(self, deadline: float | None) -> int:
-        """A slot to write message ``self._seq + 1`` into, marked as being written."""
-        w = self._w
+    def _claim(self, timeout_s: float | None) -> int:
+        """A slot to write message ``self._seq + 1`` into, marked as being written.
+
+        The first pass takes no clock reading: the deadline (``timeout_s`` from now) starts when
+        no slot is free, which is also the only case that waits.
+        """
+        w, slot_seq, lru = self._w, self._slot_seq, self._lru
         nxt = self._seq + 1
-        last_check = time.monotonic()
+        lossless = self._lossless
+        deadline: float | None = None
+        last_check = 0.0
         spin_until = 0
-        lossless = self.policy is Policy.LOSSLESS
-        lossless_value = Policy.LOSSLESS.value
         while True:
             # one pass over the reader entries: the live ones, their pins, the lowest read
-            # position of all and of the lossless ones (None: no such reader)
+            # position of all and of the lossless ones (-1: no such reader; positions are ≥ 0)
             readers: list[int] = []
-            pinned: set[int] = set()
-            read_by_all = need_free = None
+            pinned: list[int] = []
+            read_by_all = need_free = -1
             for b in self._readers:
                 if w[b + R_STATE] != 1:
                     continue
                 readers.append(b)
-                pinned.add(w[b + R_PIN])
+                pinned.append(w[b + R_PIN])
                 seq = w[b + R_READ_SEQ]
-                if read_by_all is None or seq < read_by_all:
+                if read_by_all < 0 or seq < read_by_all:
                     read_by_all = seq
-                if lossless and w[b + R_POLICY] == lossless_value:
-                    need_free = seq if need_free is None or seq < need_free else need_free
-            if read_by_all is not None:
+                if lossless and w[b + R_POLICY] == _LOSSLESS and (need_free < 0 or seq < need_free):
+                    need_free = seq
+            if read_by_all >= 0:
                 # a slot whose message every reader has read is of use to nobody: take the one
                 # written last (just read, still in cache) rather than walking the whole ring
-                for slot in reversed(self._lru):
-                    if self._slot_seq[slot] > read_by_all or slot in pinned:
+                for slot in reversed(lru):
+                    if slot_seq[slot] > read_by_all or slot in pinned:
                         continue
                     if self._try_claim(slot, nxt, readers):
                         return slot
-            for slot in self._lru:  # least recently written first
-                held = self._slot_seq[slot]
-                if need_free is not None and held > need_free:
+            for slot in lru:  # least recently written first
+                if need_free >= 0 and slot_seq[slot] > need_free:
                     break  # the newer slots all hold unread lossless messages too
                 if slot in pinned:
                     continue
@@ -197,6 +255,9 @@ class Writer:
                     return slot
             # no slot: only lossless back-pressure (or pins of dead readers) gets here
             now = time.monotonic()
+            if not last_check:
+                last_check = now
+                deadline = None if timeout_s is None else now + timeout_s
             if deadline is not None and now >= deadline:
                 behind = ", ".join(
                     f"pid {w[b + R_PID]} at message {w[b + R_READ_SEQ]}"
@@ -218,18 +279,20 @@ class Writer:
             wait = CHECK_S if deadline is None else min(CHECK_S, deadline - now)
             w[W_WRITER_WAITING] = 1
             fence()  # the readers' read_seq stores are seen after this, or they see the flag
-            if self._lossless_floor() == need_free and wait_fd(self._space_fd, wait):
+            floor = self._lossless_floor()
+            if (-1 if floor is None else floor) == need_free and wait_fd(self._space_fd, wait):
                 drain(self._space_fd)
             w[W_WRITER_WAITING] = 0
 
     def _try_claim(self, slot: int, nxt: int, readers: list[int]) -> bool:
         """Mark ``slot`` as being written (①②③); False (and unmarked) if a reader pins it."""
-        w, base_w = self._w, self._slot_words[slot]
-        w[base_w + S_BEGIN] = nxt  # ① the slot is being written
+        w, begin = self._w, self._slot_words[slot] + S_BEGIN
+        w[begin] = nxt  # ① the slot is being written
         fence()  # ②
-        if any(w[b + R_PIN] == slot for b in readers):  # ③
-            w[base_w + S_BEGIN] = self._slot_seq[slot]
-            return False
+        for b in readers:  # ③
+            if w[b + R_PIN] == slot:
+                w[begin] = self._slot_seq[slot]
+                return False
         return True
 
     def _live_readers(self) -> list[int]:
@@ -273,27 +336,32 @@ class Writer:
         if meta:
             off = base * 8 + META_OFFSET
             self._raw[off : off + len(meta)] = meta
-        w[base + S_STAMP] = stamp_ns
         now = time.time_ns()
+        w[base + S_STAMP] = stamp_ns
         w[base + S_PUBLISH] = now
         w[base + S_KIND] = kind
         w[base + S_NBYTES] = nbytes
         w[base + S_META_LEN] = len(meta)
-        ordered()  # ⑤
+        if WEAK_ORDERING:
+            fence()  # ⑤
         w[base + S_END] = seq  # ⑥
-        w[W_ORDER + seq % self._layout.n_slots] = slot  # ⑦
+        w[W_ORDER + seq % self._n_slots] = slot  # ⑦
         w[W_WRITE_SEQ] = seq  # ⑧
         w[W_PUBLISHED] = seq
         w[W_HEARTBEAT] = now
         self._seq = seq
         self._slot_seq[slot] = seq
-        self._lru.remove(slot)
-        self._lru.append(slot)
+        lru = self._lru
+        if lru[-1] != slot:
+            lru.remove(slot)
+            lru.append(slot)
         fence()  # write_seq is seen by a reader before it sleeps, or its waiting flag is seen here
-        with self._fd_lock:
-            for base_r, fd in zip(self._readers, self._reader_fd, strict=True):
-                if fd >= 0 and w[base_r + R_WAITING]:
-                    os.eventfd_write(fd, 1)
+        for i, flag in enumerate(self._waiting_words):
+            if w[flag]:  # a reader sleeps (or is about to): wake it
+                with self._fd_lock:  # the attach thread may be replacing the descriptor
+                    fd = self._reader_fd[i]
+                    if fd >= 0:
+                        os.eventfd_write(fd, 1)
         return seq
 
     def _check(self, nbytes: int, meta: bytes) -> None:
@@ -334,11 +402,10 @@ class Writer:
             src = src.reshape(-1).view(np.uint8)
         nbytes = src.shape[0]
         self._check(nbytes, meta)
-        slot = self._claim(None if timeout_s is None else time.monotonic() + timeout_s)
+        slot = self._claim(timeout_s)
         np.copyto(self._payload[slot][:nbytes], src)  # ④
         return self._commit(slot, nbytes, stamp_ns, kind, meta)
 
-    @contextlib.contextmanager
     def loan(
         self,
         nbytes: int,
@@ -347,20 +414,14 @@ class Writer:
         kind: int = 0,
         meta: bytes = b"",
         timeout_s: float | None = 5.0,
-    ) -> Iterator[npt.NDArray[np.uint8]]:
+    ) -> _Loan:
         """The next slot itself, ``nbytes`` long, to fill in place; published when the block
-        ends without an exception (an exception abandons the slot, nothing is published)."""
-        self._check(nbytes, meta)
-        slot = self._claim(None if timeout_s is None else time.monotonic() + timeout_s)
-        self._loaned = True
-        try:
-            yield self._payload[slot][:nbytes]
-        except BaseException:
-            self._w[self._slot_words[slot] + S_BEGIN] = self._slot_seq[slot]
-            raise
-        finally:
-            self._loaned = False
-        self._commit(slot, nbytes, stamp_ns, kind, meta)
+        ends without an exception (an exception abandons the slot, nothing is published)::
+
+            with writer.loan(n, stamp_ns=t) as out:   # out: uint8 (n,), the slot's memory
+                out[:] = ...
+        """
+        return _Loan(self, nbytes, stamp_ns, kind, meta, timeout_s)
 
     def publish_sample(self, sample: SensorData, *, timeout_s: float | None = 5.0) -> int:
         """Publish a ``SensorData`` (typed, see :mod:`redrive.transport.codec`); returns its
