@@ -291,12 +291,10 @@ class RunWriter:
         self._last_flush = time.monotonic()
         tables = self._buffers.take()
         self._kept_late.append(tables["frames"].select(("late",)))
-        if tables["steps"].num_rows:
+        if "steps" in tables:
             self._kept_steps.append(tables["steps"].select(_SUMMARY_STEP_COLUMNS))
         number = self._next_part
         for name, table in tables.items():  # SCHEMAS order: frames last
-            if table.num_rows == 0 and name != "frames":
-                continue
             write_part(self.path / name / part_name(number), table)
         self._next_part += 1
         self._done |= self._buffered
