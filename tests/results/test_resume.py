@@ -72,6 +72,12 @@ def test_resume_after_kill(tmp_path: Path) -> None:
     dets = run.detections("det")
     assert sorted(dets) == list(range(200))
     assert [len(dets[i]) for i in range(200)] == [i % 3 for i in range(200)]
+    # the summary written at close (the parts from before the resume read back, this writer's
+    # flushes kept in memory) is the one all the run's parts give when read back
+    summary = run.manifest.summary
+    assert summary is not None
+    assert (summary.frames, summary.late_frames) == (200, 1)
+    assert [dict(a) for a in summary.algorithms] == run.summary().to_pylist()
 
 
 def test_resume_of_missing_directory_starts_a_run(tmp_path: Path) -> None:

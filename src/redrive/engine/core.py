@@ -459,10 +459,15 @@ class Engine:
             failed: tuple[int, StepRecord] | None = None
             steps = []
             for single, status, output, latency_ns, cpu_ns, error in raw:
-                step = _step_record(single, status, output, latency_ns, cpu_ns, error)
+                if status is _OK and output is not None:  # the common step, built inline
+                    step = step_record_unchecked(
+                        single[2], single[3], single[4], "ok", latency_ns, cpu_ns, output
+                    )
+                else:
+                    step = _step_record(single, status, output, latency_ns, cpu_ns, error)
+                    if failed is None:
+                        failed = (frame.index, step)
                 steps.append(step)
-                if failed is None and (status is not _OK or output is None):
-                    failed = (frame.index, step)
             raw.clear()
             record = frame_record_unchecked(  # Frame and the graph keep its invariants
                 int(frame.index),

@@ -171,10 +171,13 @@ class TableBuffers:
     # -- emptying ----------------------------------------------------------------------------
 
     def take(self) -> dict[str, pa.Table]:
-        """The buffered rows as one Arrow table per table name (empty ones included); clears."""
+        """The buffered rows as one Arrow table per table name that has rows, and ``frames``
+        always (empty when no frame is buffered), in :data:`SCHEMAS` order; clears."""
         out = {}
         for name, schema in SCHEMAS.items():
             rows = self._rows[name]
+            if not rows and name != "frames":
+                continue
             columns = list(zip(*rows, strict=True)) if rows else [() for _ in schema.names]
             out[name] = pa.Table.from_pydict(
                 dict(zip(schema.names, columns, strict=True)), schema=schema

@@ -11,7 +11,6 @@ from __future__ import annotations
 import json
 import logging
 import os
-import re
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
@@ -21,10 +20,10 @@ from typing import Any
 
 import pyarrow as pa
 import pyarrow.compute as pc
-import pyarrow.parquet as pq
 
 from redrive.errors import ConfigError
 from redrive.results._buffers import TableBuffers
+from redrive.results._parts import PART_RE, part_name, parts_on_disk, read_part, write_part
 from redrive.results.manifest import (
     MANIFEST_NAME,
     ResumeRecord,
@@ -37,18 +36,13 @@ from redrive.results.manifest import (
     read_manifest,
     write_manifest,
 )
-from redrive.results.readers import (
-    commands_by_frame,
-    ego_by_frame,
-    objects_by_frame,
-    paths_by_frame,
-)
 from redrive.results.records import FrameRecord, ResourceSample
 from redrive.results.resume import resume_mismatches, with_resume
-from redrive.results.roadmap import read_road_map, write_road_map
-from redrive.results.schema import SCHEMAS, SORT_KEYS, TABLES
+from redrive.results.roadmap import write_road_map
+from redrive.results.run import Run, open_run
+from redrive.results.schema import SCHEMAS, TABLES
 from redrive.results.summary import summarize_steps
-from redrive.types import ControlCommands, DetectedObject, PlannedPath, RoadMap, VehicleState
+from redrive.types import RoadMap
 
 try:  # POSIX: an advisory lock keeps two writers out of one run directory
     import fcntl
@@ -61,51 +55,9 @@ logger = logging.getLogger(__name__)
 
 #: the statuses :meth:`RunWriter.close` accepts.
 FINAL_STATUSES = (RunStatus.COMPLETE, RunStatus.INTERRUPTED, RunStatus.FAILED)
-_PART_RE = re.compile(r"^part-(\d{5,})\.parquet$")
 _LOCK_NAME = ".lock"
 #: entries a directory may hold and still count as empty (what a writer leaves before its manifest)
 _IGNORABLE = {_LOCK_NAME, MANIFEST_NAME + ".tmp"}
-#: Parquet writer options: fixed, so equal tables give equal bytes.
-_PARQUET_OPTIONS: dict[str, Any] = {"compression": "zstd", "use_dictionary": True}
-
-
-def _part_name(number: int) -> str:
-    return f"part-{number:05d}.parquet"
-
-
-def _parts_on_disk(run_dir: Path, table: str) -> dict[int, Path]:
-    """Part number → path of the complete parts of ``table`` (temp files are not parts)."""
-    folder = run_dir / table
-    if not folder.is_dir():
-        return {}
-    out = {}
-    for entry in folder.iterdir():
-        m = _PART_RE.match(entry.name)
-        if m:
-            out[int(m.group(1))] = entry
-    return dict(sorted(out.items()))
-
-
-def _read_part(path: Path, schema: pa.Schema, columns: Sequence[str] | None = None) -> pa.Table:
-    try:
-        table = pq.read_table(path, columns=list(columns) if columns else None, schema=schema)
-    except (OSError, pa.ArrowException) as err:
-        msg = (
-            f"{path}: cannot read this part of the run ({err}); delete it and resume the run "
-            "(`--resume`) to redo its frames"
-        )
-        raise ConfigError(msg) from err
-    return table
-
-
-def _write_part(path: Path, table: pa.Table) -> None:
-    """Write ``table`` to ``path`` atomically (temp file, fsync, rename)."""
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "wb") as fh:
-        pq.write_table(table, fh, **_PARQUET_OPTIONS)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
 
 
 class _DirLock:
@@ -202,6 +154,10 @@ class RunWriter:
         self._done: set[int] = set()
         self._next_part = 0
         self._closed = False
+        # what the summary at close reads, kept from this writer's flushes instead of read back
+        # from its parts: the summary columns of ``steps`` and ``frames.late`` of each flush
+        self._kept_steps: list[pa.Table] = []
+        self._kept_late: list[pa.Table] = []
         try:
             if is_run:
                 self._manifest = self._open_existing(setup)
@@ -210,6 +166,7 @@ class RunWriter:
         except BaseException:
             self._lock.release()
             raise
+        self._parts_before = self._next_part  # parts a resumed run had before this writer
 
     # -- opening -----------------------------------------------------------------------------
 
@@ -232,13 +189,13 @@ class RunWriter:
                 "to another --out"
             )
             raise ConfigError(msg)
-        committed = _parts_on_disk(self.path, "frames")
+        committed = parts_on_disk(self.path, "frames")
         removed = 0
         for name in TABLES:
             folder = self.path / name
             folder.mkdir(exist_ok=True)
             for entry in folder.iterdir():
-                m = _PART_RE.match(entry.name)
+                m = PART_RE.match(entry.name)
                 orphan = m is not None and int(m.group(1)) not in committed
                 if entry.name.endswith(".tmp") or orphan:
                     entry.unlink()
@@ -248,7 +205,7 @@ class RunWriter:
             removed += 1
         done: set[int] = set()
         for part in committed.values():
-            col = _read_part(part, SCHEMAS["frames"], ["frame_index"]).column("frame_index")
+            col = read_part(part, SCHEMAS["frames"], ["frame_index"]).column("frame_index")
             done.update(col.to_pylist())
         self._done = done
         self._next_part = max(committed, default=-1) + 1
@@ -333,11 +290,12 @@ class RunWriter:
             return
         self._last_flush = time.monotonic()
         tables = self._buffers.take()
+        self._kept_late.append(tables["frames"].select(("late",)))
+        if "steps" in tables:
+            self._kept_steps.append(tables["steps"].select(_SUMMARY_STEP_COLUMNS))
         number = self._next_part
         for name, table in tables.items():  # SCHEMAS order: frames last
-            if table.num_rows == 0 and name != "frames":
-                continue
-            _write_part(self.path / name / _part_name(number), table)
+            write_part(self.path / name / part_name(number), table)
         self._next_part += 1
         self._done |= self._buffered
         logger.debug("%s: part %d, %d frames", self.path, number, len(self._buffered))
@@ -368,7 +326,10 @@ class RunWriter:
         self._summary({"frames": 0, "late_frames": 0, **extra})  # refused before closing
         try:
             self._flush(manifest=False)
-            computed = _computed_summary(Run(self.path, self._manifest))
+            computed = _computed_summary(
+                self._columns("frames", ("late",), self._kept_late),
+                self._columns("steps", _SUMMARY_STEP_COLUMNS, self._kept_steps),
+            )
             self._manifest = replace(
                 self._manifest,
                 summary=self._summary({**computed, **extra}),
@@ -402,6 +363,24 @@ class RunWriter:
         except Exception:  # never hide the exception that ended the run
             logger.exception("could not close the run in %s after %s", self.path, exc_type)
 
+    def _columns(self, name: str, columns: Sequence[str], kept: list[pa.Table]) -> pa.Table:
+        """``columns`` of table ``name`` over the whole run, in part order, as
+        :meth:`Run.raw_columns` reads them: the parts a resumed run had before this writer
+        read back, then the tables this writer flushed (kept in memory, not read back)."""
+        schema = SCHEMAS[name]
+        tables = []
+        if self._parts_before:
+            committed = parts_on_disk(self.path, "frames")
+            tables = [
+                read_part(path, schema, columns)
+                for number, path in parts_on_disk(self.path, name).items()
+                if number < self._parts_before and number in committed
+            ]
+        tables += kept
+        if tables:
+            return pa.concat_tables(tables)
+        return pa.schema([schema.field(c) for c in columns]).empty_table()
+
     def _summary(self, data: dict[str, Any]) -> RunSummary:
         unknown = sorted(set(data) - set(RunSummary.__dataclass_fields__))
         if unknown:
@@ -424,11 +403,11 @@ def _jsonable(data: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
-def _computed_summary(run: Run) -> dict[str, Any]:
-    # only the columns the summary reads (what Run.table("frames") and Run.summary() give)
-    late_column = run.raw_columns("frames", ("late",)).column("late")
+def _computed_summary(frames: pa.Table, steps: pa.Table) -> dict[str, Any]:
+    """The summary of a run from its ``frames.late`` and the summary columns of its ``steps``
+    (what ``Run.table("frames")`` and :meth:`Run.summary` give)."""
+    late_column = frames.column("late")
     late = int(pc.sum(late_column).as_py() or 0)
-    steps = run.raw_columns("steps", _SUMMARY_STEP_COLUMNS)
     algorithms = summarize_steps(steps).to_pylist()
     return {"frames": len(late_column), "late_frames": late, "algorithms": algorithms}
 
@@ -437,143 +416,3 @@ def _computed_summary(run: Run) -> dict[str, Any]:
 _SUMMARY_STEP_COLUMNS = (
     "algorithm", "stage", "role", "status", "latency_ns", "cpu_ns", "n_outputs",
 )  # fmt: skip
-
-
-def open_run(run_dir: str | Path) -> Run:
-    """Open a run directory for reading.
-
-    Raises:
-        ConfigError: ``run_dir`` does not exist, is not a run, or its manifest is unreadable.
-    """
-    path = Path(run_dir)
-    if not path.is_dir():
-        msg = f"{path}: no such run directory (give the --out of a `redrive run`)"
-        raise ConfigError(msg)
-    return Run(path, read_manifest(path))
-
-
-class Run:
-    """A run directory, read side.  Reads the parts on disk at each call (a live run grows).
-
-    Attributes:
-        path: the run directory.
-        manifest: ``manifest.json`` as read (and validated) by :func:`open_run`.
-    """
-
-    def __init__(self, path: Path, manifest: RunManifest) -> None:
-        self.path = path
-        self.manifest = manifest
-
-    def __repr__(self) -> str:
-        return f"Run({str(self.path)!r}, status={self.manifest.status.value!r})"
-
-    def part_paths(self, name: str) -> list[Path]:
-        """The committed parts of table ``name``, in write order."""
-        _check_table(name)
-        committed = _parts_on_disk(self.path, "frames")
-        if name == "frames":
-            return list(committed.values())
-        return [p for n, p in _parts_on_disk(self.path, name).items() if n in committed]
-
-    def tables(self) -> tuple[str, ...]:
-        """The tables with at least one row, in :data:`~redrive.results.schema.TABLES` order."""
-        out = []
-        for name in TABLES:
-            for part in self.part_paths(name):
-                try:
-                    rows = pq.ParquetFile(part).metadata.num_rows
-                except (OSError, pa.ArrowException) as err:
-                    msg = f"{part}: cannot read this part of the run ({err})"
-                    raise ConfigError(msg) from err
-                if rows:
-                    out.append(name)
-                    break
-        return tuple(out)
-
-    def _raw(self, name: str) -> pa.Table:
-        schema = SCHEMAS[name]
-        parts = [_read_part(p, schema) for p in self.part_paths(name)]
-        return pa.concat_tables(parts) if parts else schema.empty_table()
-
-    def raw_columns(self, name: str, columns: Sequence[str]) -> pa.Table:
-        """``columns`` of all parts of ``name`` in write order (unsorted, as read)."""
-        _check_table(name)
-        schema = SCHEMAS[name]
-        parts = [_read_part(p, schema, columns) for p in self.part_paths(name)]
-        if parts:
-            return pa.concat_tables(parts)
-        return pa.schema([schema.field(c) for c in columns]).empty_table()
-
-    def table(self, name: str) -> pa.Table:
-        """All parts of ``name`` concatenated, stably sorted by ``SORT_KEYS[name]``."""
-        _check_table(name)
-        table = self._raw(name)
-        return table.sort_by([(key, "ascending") for key in SORT_KEYS[name]])
-
-    def summary(self) -> pa.Table:
-        """Per algorithm, in pipeline order: frames, statuses, outputs, latency and CPU (ms).
-
-        See :func:`redrive.results.summary.summarize_steps` for the columns.
-        """
-        return summarize_steps(self._raw("steps"))
-
-    def _ok_frames(self, algorithm: str) -> list[int]:
-        steps = self._raw("steps")
-        mine = steps.filter(pc.equal(steps.column("algorithm"), algorithm))
-        if mine.num_rows == 0:
-            have = sorted(set(steps.column("algorithm").to_pylist()))
-            msg = f"{self.path}: no algorithm {algorithm!r} in this run (it has {have})"
-            raise ValueError(msg)
-        ok = mine.filter(pc.equal(mine.column("status"), "ok"))
-        return sorted(ok.column("frame_index").to_pylist())
-
-    def _of(self, name: str, algorithm: str) -> pa.Table:
-        table = self.table(name)
-        return table.filter(pc.equal(table.column("algorithm"), algorithm))
-
-    def detections(self, algorithm: str) -> dict[int, tuple[DetectedObject, ...]]:
-        """frame_index → objects ``algorithm`` returned, for every frame its step was ``ok``
-        (an empty tuple when it found nothing); frames where it failed are absent."""
-        frames = self._ok_frames(algorithm)
-        return objects_by_frame(self._of("detections", algorithm), frames=frames)
-
-    def ground_truth(self) -> dict[int, tuple[DetectedObject, ...]]:
-        """frame_index → ground-truth objects, for every frame that had ground truth."""
-        frames = self.table("frames")
-        has = frames.filter(pc.is_valid(frames.column("n_ground_truth")))
-        return objects_by_frame(
-            self.table("ground_truth"), frames=has.column("frame_index").to_pylist()
-        )
-
-    def paths(self, algorithm: str) -> dict[int, PlannedPath]:
-        """frame_index → the path ``algorithm`` planned (frames with a non-empty path)."""
-        self._ok_frames(algorithm)
-        return paths_by_frame(self._of("paths", algorithm))
-
-    def commands(self, algorithm: str) -> dict[int, ControlCommands]:
-        """frame_index → the commands ``algorithm`` gave."""
-        self._ok_frames(algorithm)
-        return commands_by_frame(self._of("commands", algorithm))
-
-    def ego(self) -> dict[int, VehicleState]:
-        """frame_index → the ego state of the frame (frame ``map``/``odom`` as recorded)."""
-        return ego_by_frame(self.table("ego"))
-
-    def logged_ego(self) -> dict[int, VehicleState]:
-        """frame_index → the ego state the log recorded, where the run stored it apart from the
-        driven ego (closed loop); empty otherwise (open loop: :meth:`ego` *is* the logged ego)."""
-        return ego_by_frame(self.table("ego_logged"))
-
-    def road_map(self) -> RoadMap | None:
-        """The run's road map (``RUN/map.json``), None when the run has none.
-
-        Raises:
-            ConfigError: the file exists but is not a valid map (the message says where).
-        """
-        return read_road_map(self.path)
-
-
-def _check_table(name: str) -> None:
-    if name not in SCHEMAS:
-        msg = f"no table {name!r} in a run; tables are {', '.join(TABLES)}"
-        raise ValueError(msg)

@@ -1,0 +1,63 @@
+"""The parts of a run directory: one Parquet file per table per flush, written atomically.
+
+``RUN/<table>/part-NNNNN.parquet``; a part of any table counts only when the ``frames`` part
+of the same number exists (see :mod:`redrive.results.store`).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from redrive.errors import ConfigError
+
+__all__ = ["PART_RE", "part_name", "parts_on_disk", "read_part", "write_part"]
+
+PART_RE = re.compile(r"^part-(\d{5,})\.parquet$")
+#: Parquet writer options: fixed, so equal tables give equal bytes.
+_PARQUET_OPTIONS: dict[str, Any] = {"compression": "zstd", "use_dictionary": True}
+
+
+def part_name(number: int) -> str:
+    return f"part-{number:05d}.parquet"
+
+
+def parts_on_disk(run_dir: Path, table: str) -> dict[int, Path]:
+    """Part number → path of the complete parts of ``table`` (temp files are not parts)."""
+    folder = run_dir / table
+    if not folder.is_dir():
+        return {}
+    out = {}
+    for entry in folder.iterdir():
+        m = PART_RE.match(entry.name)
+        if m:
+            out[int(m.group(1))] = entry
+    return dict(sorted(out.items()))
+
+
+def read_part(path: Path, schema: pa.Schema, columns: Sequence[str] | None = None) -> pa.Table:
+    try:
+        table = pq.read_table(path, columns=list(columns) if columns else None, schema=schema)
+    except (OSError, pa.ArrowException) as err:
+        msg = (
+            f"{path}: cannot read this part of the run ({err}); delete it and resume the run "
+            "(`--resume`) to redo its frames"
+        )
+        raise ConfigError(msg) from err
+    return table
+
+
+def write_part(path: Path, table: pa.Table) -> None:
+    """Write ``table`` to ``path`` atomically (temp file, fsync, rename)."""
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "wb") as fh:
+        pq.write_table(table, fh, **_PARQUET_OPTIONS)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
