@@ -42,8 +42,15 @@ def parts_on_disk(run_dir: Path, table: str) -> dict[int, Path]:
 
 
 def read_part(path: Path, schema: pa.Schema, columns: Sequence[str] | None = None) -> pa.Table:
+    wanted = list(columns) if columns else None
     try:
-        table = pq.read_table(path, columns=list(columns) if columns else None, schema=schema)
+        # one file: ParquetFile reads it without the dataset machinery of read_table(schema=…),
+        # ≈ 2.5× less CPU a part; a part whose schema is not the table's (written by an older
+        # redrive) still goes through read_table, which fits it to ``schema``
+        table = pq.ParquetFile(path).read(columns=wanted, use_threads=False)
+        expected = schema if wanted is None else pa.schema([schema.field(c) for c in wanted])
+        if not table.schema.equals(expected):
+            table = pq.read_table(path, columns=wanted, schema=schema)
     except (OSError, pa.ArrowException) as err:
         msg = (
             f"{path}: cannot read this part of the run ({err}); delete it and resume the run "
