@@ -20,7 +20,7 @@ from __future__ import annotations
 import io
 import os
 import struct
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -35,17 +35,16 @@ from mcap.records import (
     Chunk,
     ChunkIndex,
     DataEnd,
-    Footer,
     Header,
     McapRecord,
     Message,
     Schema,
     Statistics,
-    SummaryOffset,
 )
 from mcap.stream_reader import breakup_chunk
 
 from redrive.errors import LogError
+from redrive.io.mcap_stream import summary_section
 
 __all__ = ["MAGIC", "LogLayout", "SpliceWriter", "is_mcap_file", "read_layout"]
 
@@ -363,17 +362,6 @@ class SpliceWriter:
         indexes, summary offsets) and the footer with the summary's CRC."""
         self.end_chunk()
         self._put(_record(DataEnd(data_section_crc=0)))
-        summary_start = self.position
-        summary = RecordBuilder()
-        offsets: list[SummaryOffset] = []
-
-        def group(opcode: Opcode, records: Sequence[McapRecord]) -> None:
-            start = summary.count
-            for record in records:
-                record.write(summary)
-            if records:
-                offsets.append(SummaryOffset(opcode, summary_start + start, summary.count - start))
-
         statistics = Statistics(
             message_count=self._messages,
             schema_count=len(self._schemas),
@@ -385,17 +373,12 @@ class SpliceWriter:
             message_end_time=self._end_ns,
             channel_message_counts=dict(self._counts),
         )
-        group(Opcode.SCHEMA, list(self._schemas.values()))
-        group(Opcode.CHANNEL, list(self._channels.values()))
-        group(Opcode.STATISTICS, [statistics])
-        group(Opcode.CHUNK_INDEX, self._chunk_indexes)
-        offset_start = summary_start + summary.count
-        for offset in offsets:
-            offset.write(summary)
-        data: bytes = summary.end()  # type: ignore[no-untyped-call]
-        footer_head = struct.pack("<BQQQ", Opcode.FOOTER, 20, summary_start, offset_start)
-        crc = crc32(footer_head, crc32(data))
-        footer = Footer(
-            summary_start=summary_start, summary_offset_start=offset_start, summary_crc=crc
+        self._put(
+            summary_section(
+                self.position,
+                schemas=list(self._schemas.values()),
+                channels=list(self._channels.values()),
+                statistics=statistics,
+                chunk_indexes=self._chunk_indexes,
+            )
         )
-        self._put(data + _record(footer) + MAGIC)

@@ -59,7 +59,7 @@ from mcap.records import (
     SummaryOffset,
 )
 
-__all__ = ["MAGIC", "McapStream", "StreamCompression"]
+__all__ = ["MAGIC", "McapStream", "StreamCompression", "summary_section"]
 
 StreamCompression = Literal["zstd", "lz4", "none"]
 
@@ -135,6 +135,46 @@ def _write_all(fd: int, pieces: Sequence[bytes | bytearray | memoryview]) -> int
         if written:
             views[0] = views[0][written:]
     return total
+
+
+def summary_section(
+    summary_start: int,
+    *,
+    schemas: Sequence[Schema],
+    channels: Sequence[Channel],
+    statistics: Statistics,
+    chunk_indexes: Sequence[ChunkIndex],
+    metadata_indexes: Sequence[MetadataIndex] = (),
+) -> bytes:
+    """The bytes from the summary section to the end of a file whose summary starts at byte
+    ``summary_start``: schemas, channels, statistics, chunk and metadata indexes, a summary
+    offset record for each group that has records, the footer with the summary's CRC, and the
+    closing magic."""
+    summary = RecordBuilder()
+    offsets: list[SummaryOffset] = []
+    groups: list[
+        tuple[Opcode, Sequence[Schema | Channel | Statistics | ChunkIndex | MetadataIndex]]
+    ] = [
+        (Opcode.SCHEMA, schemas),
+        (Opcode.CHANNEL, channels),
+        (Opcode.STATISTICS, [statistics]),
+        (Opcode.CHUNK_INDEX, chunk_indexes),
+        (Opcode.METADATA_INDEX, metadata_indexes),
+    ]
+    for opcode, records in groups:
+        start = summary.count
+        for record in records:
+            record.write(summary)
+        if records:
+            offsets.append(SummaryOffset(opcode, summary_start + start, summary.count - start))
+    offset_start = summary_start + summary.count
+    for offset in offsets:
+        offset.write(summary)
+    data: bytes = summary.end()  # type: ignore[no-untyped-call]
+    footer_head = struct.pack("<BQQQ", Opcode.FOOTER, 20, summary_start, offset_start)
+    crc = crc32(footer_head, crc32(data))
+    footer = Footer(summary_start=summary_start, summary_offset_start=offset_start, summary_crc=crc)
+    return b"".join((data, _record(footer), MAGIC))
 
 
 class McapStream:
@@ -464,19 +504,6 @@ class McapStream:
         self.end_chunk()
         self._drain()
         self.position += _write_all(self._fd, [_record(DataEnd(data_section_crc=0))])
-        summary_start = self.position
-        summary = RecordBuilder()
-        offsets: list[SummaryOffset] = []
-
-        def group(
-            opcode: Opcode,
-            records: Sequence[Schema | Channel | Statistics | ChunkIndex | MetadataIndex],
-        ) -> None:
-            start = summary.count
-            for record in records:
-                record.write(summary)
-            offsets.append(SummaryOffset(opcode, summary_start + start, summary.count - start))
-
         statistics = Statistics(
             message_count=self._messages,
             schema_count=len(self._schemas),
@@ -488,21 +515,15 @@ class McapStream:
             message_end_time=self._end_ns,
             channel_message_counts=dict(self._counts),
         )
-        group(Opcode.SCHEMA, list(self._schemas.values()))
-        group(Opcode.CHANNEL, list(self._channels.values()))
-        group(Opcode.STATISTICS, [statistics])
-        group(Opcode.CHUNK_INDEX, self._chunk_indexes)
-        group(Opcode.METADATA_INDEX, self._metadata_indexes)
-        offset_start = summary_start + summary.count
-        for offset in offsets:
-            offset.write(summary)
-        data: bytes = summary.end()  # type: ignore[no-untyped-call]
-        footer_head = struct.pack("<BQQQ", Opcode.FOOTER, 20, summary_start, offset_start)
-        crc = crc32(footer_head, crc32(data))
-        footer = Footer(
-            summary_start=summary_start, summary_offset_start=offset_start, summary_crc=crc
+        tail = summary_section(
+            self.position,
+            schemas=list(self._schemas.values()),
+            channels=list(self._channels.values()),
+            statistics=statistics,
+            chunk_indexes=self._chunk_indexes,
+            metadata_indexes=self._metadata_indexes,
         )
-        self.position += _write_all(self._fd, [data, _record(footer), MAGIC])
+        self.position += _write_all(self._fd, [tail])
 
     def abandon(self) -> None:
         """Stop the compression thread without writing what it still holds (an aborted file)."""
