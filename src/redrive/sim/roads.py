@@ -21,8 +21,6 @@ from dataclasses import dataclass, replace
 import numpy as np
 import numpy.typing as npt
 
-from redrive.sim import kernels
-
 __all__ = [
     "HighwayLayout",
     "Lane",
@@ -313,6 +311,8 @@ class Route:
         float64 operations in the same order, ties to the first segment), compiled
         (:func:`redrive.sim.kernels.project_point`): many times faster on the short pieces the
         ego's route tracking asks for every physics step."""
+        from redrive.sim import kernels  # numba: imported by what steps a world, not by readers
+
         lo, hi = self._piece(s_min_m, s_max_m)
         s, lateral, ok = kernels.project_point(self.s_m, self._x, self._y, lo, hi, x_m, y_m)
         if not ok:  # a repeated sample: numpy's inf and nan, as project has
