@@ -65,8 +65,9 @@ build machine at load ≈ 22 (BENCHMARKS.md, "Open loop, 2026-11-26 07:45–08:3
 h-openloop3)"); the outputs are bit for bit those of the former
 numpy/scipy steps (``tests/algorithms/test_kernels.py`` keeps them as the reference).  What is
 left is mostly the plane's least squares, building the ``DetectedObject`` values and the box
-search's numpy parts.  The kernels compile on the first sweep after an install and are cached
-on disk (``__pycache__``) for later processes.
+search's numpy parts.  The kernels compile once after an install and are cached on disk
+(``__pycache__``); a process loads them when the detector is bound to a log (:meth:`bind` runs a
+small made-up sweep), not in its first frame.
 """
 
 from __future__ import annotations
