@@ -79,14 +79,15 @@ def _splice(src: Path, dst: Path, *, drop: set[int], extra: list[tuple[int, byte
                 t, data = pending.pop(0)
                 out.add_message(new_id, log_time=t, publish_time=t, sequence=0, data=data)
             if drop & set(index.message_index_offsets):
-                for m in SpliceWriter.chunk_messages(fin.fileno(), index, where=str(src)):
-                    if m.channel_id not in drop:
+                messages = SpliceWriter.chunk_messages(fin.fileno(), index, where=str(src))
+                for cid, seq, log_time, publish_time, data in messages:
+                    if cid not in drop:
                         out.add_message(
-                            m.channel_id,
-                            log_time=m.log_time,
-                            publish_time=m.publish_time,
-                            sequence=m.sequence,
-                            data=m.data,
+                            cid,
+                            log_time=log_time,
+                            publish_time=publish_time,
+                            sequence=seq,
+                            data=data,
                         )
                 out.end_chunk()
             else:

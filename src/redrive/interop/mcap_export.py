@@ -126,14 +126,16 @@ def splice_stream(
                     count += 1
                     pending = next(added, None)
                 if dropped & set(index.message_index_offsets):
-                    for m in SpliceWriter.chunk_messages(src.fileno(), index, where=where):
-                        if m.channel_id not in dropped:
+                    for cid, seq, log_time, publish_time, data in SpliceWriter.chunk_messages(
+                        src.fileno(), index, where=where
+                    ):
+                        if cid not in dropped:
                             out.add_message(
-                                m.channel_id,
-                                log_time=m.log_time,
-                                publish_time=m.publish_time,
-                                sequence=m.sequence,
-                                data=m.data,
+                                cid,
+                                log_time=log_time,
+                                publish_time=publish_time,
+                                sequence=seq,
+                                data=data,
                             )
                             count += 1
                     out.end_chunk()

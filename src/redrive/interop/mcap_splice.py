@@ -17,7 +17,6 @@ all chunks.
 
 from __future__ import annotations
 
-import io
 import os
 import struct
 from collections.abc import Mapping
@@ -25,36 +24,28 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import lz4.frame
-from isal.isal_zlib import crc32
-from mcap.data_stream import ReadDataStream, RecordBuilder
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
 from mcap.reader import make_reader
 from mcap.records import (
     Channel,
-    Chunk,
     ChunkIndex,
     DataEnd,
     Header,
-    McapRecord,
-    Message,
     Schema,
     Statistics,
 )
-from mcap.stream_reader import breakup_chunk
 
 from redrive.errors import LogError
-from redrive.io.mcap_stream import summary_section
+from redrive.io.mcap_scan import MAGIC, Message, RecordError, chunk_head, read_chunk
+from redrive.io.mcap_stream import encode_chunk, record_bytes, summary_section, write_all
+from redrive.io.recognise import starts_with
 
 __all__ = ["MAGIC", "LogLayout", "SpliceWriter", "is_mcap_file", "read_layout"]
 
-MAGIC = b"\x89MCAP0\r\n"
 _MESSAGE = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, log, publish
-_CHUNK_HEAD = struct.Struct("<BQQQQI")  # opcode, length, start, end, uncompressed size, crc
 _RECORD_HEAD = struct.Struct("<BQ")  # opcode, length
 _INDEX_HEAD = struct.Struct("<BQHI")  # opcode, length, channel, records length
-_U32 = struct.Struct("<I")
-_U64 = struct.Struct("<Q")
 _COPY_PIECE = 64 << 20
 
 
@@ -72,11 +63,7 @@ class LogLayout:
 
 def is_mcap_file(path: Path) -> bool:
     """Whether ``path`` is a file that starts with the MCAP magic."""
-    try:
-        with path.open("rb") as fh:
-            return fh.read(len(MAGIC)) == MAGIC
-    except OSError:
-        return False
+    return starts_with(path, MAGIC)
 
 
 def read_layout(path: Path) -> LogLayout | None:
@@ -101,13 +88,6 @@ def read_layout(path: Path) -> LogLayout | None:
         channels=dict(summary.channels),
         chunks=tuple(chunks),
     )
-
-
-def _record(record: McapRecord) -> bytes:
-    builder = RecordBuilder()
-    record.write(builder)
-    data: bytes = builder.end()  # type: ignore[no-untyped-call]
-    return data
 
 
 def _index_counts(data: bytes, *, where: str) -> dict[int, int]:
@@ -143,16 +123,8 @@ def _copy_range(src_fd: int, dst_fd: int, offset: int, size: int, *, where: str)
         if not piece:
             msg = f"{where}: the file ends inside a chunk; repair the log (`redrive repair`)"
             raise LogError(msg)
-        _write_all(dst_fd, piece)
+        write_all(dst_fd, [piece])
         done += len(piece)
-
-
-def _write_all(fd: int, data: bytes | bytearray | memoryview) -> int:
-    view = memoryview(data).cast("B")
-    total = view.nbytes
-    while view.nbytes:
-        view = view[os.write(fd, view) :]
-    return total
 
 
 class SpliceWriter:
@@ -177,9 +149,9 @@ class SpliceWriter:
         self._chunk_end_ns = 0
         self._chunk_messages = 0
 
-    def _put(self, data: bytes | bytearray | memoryview) -> int:
+    def _put(self, *pieces: bytes | bytearray | memoryview) -> int:
         start = self.position
-        self.position += _write_all(self._fd, data)
+        self.position += write_all(self._fd, pieces)
         return start
 
     def _count(self, channel_id: int, n: int, start_ns: int, end_ns: int) -> None:
@@ -196,18 +168,18 @@ class SpliceWriter:
     # -- records outside chunks -----------------------------------------------------------------
     def start(self, *, profile: str, library: str) -> None:
         """The magic and the header record."""
-        self._put(MAGIC + _record(Header(profile=profile, library=library)))
+        self._put(MAGIC + record_bytes(Header(profile=profile, library=library)))
 
     def add_schema(self, schema: Schema) -> None:
         """A schema record, with its own id, in the data section (before any chunk needs it)."""
         self._schemas[schema.id] = schema
-        self._put(_record(schema))
+        self._put(record_bytes(schema))
 
     def add_channel(self, channel: Channel) -> None:
         """A channel record, with its own id, in the data section."""
         self._channels[channel.id] = channel
         self._counts.setdefault(channel.id, 0)
-        self._put(_record(channel))
+        self._put(record_bytes(channel))
 
     # -- copied chunks ---------------------------------------------------------------------------
     def copy_chunk(self, src_fd: int, index: ChunkIndex, *, where: str) -> int:
@@ -264,18 +236,19 @@ class SpliceWriter:
 
     @staticmethod
     def chunk_messages(src_fd: int, index: ChunkIndex, *, where: str) -> list[Message]:
-        """The messages of the chunk of ``index`` (decompressed), in their order in it."""
-        data = os.pread(src_fd, index.chunk_length, index.chunk_start_offset)
-        if len(data) != index.chunk_length or data[0] != Opcode.CHUNK:
-            msg = f"{where}: no chunk at offset {index.chunk_start_offset}; repair the log"
-            raise LogError(msg)
+        """The messages of the chunk of ``index`` (decompressed, CRC checked), in their order in
+        it: (channel id, sequence, log time, publish time, data)."""
+        data = memoryview(os.pread(src_fd, index.chunk_length, index.chunk_start_offset))
         try:
-            chunk = Chunk.read(ReadDataStream(io.BytesIO(data[_RECORD_HEAD.size :])))
-            records = breakup_chunk(chunk, validate_crc=True)
-        except (McapError, ValueError, RuntimeError) as err:
-            msg = f"{where}: the chunk at offset {index.chunk_start_offset}: {err}"
+            head = chunk_head(data, 0, len(data))
+        except RecordError as err:
+            msg = f"{where}: the chunk at offset {index.chunk_start_offset}: {err}; repair the log"
             raise LogError(msg) from err
-        return [r for r in records if isinstance(r, Message)]
+        messages, _, why = read_chunk(data, head)
+        if why is not None:
+            msg = f"{where}: the chunk at offset {index.chunk_start_offset}: {why}; repair the log"
+            raise LogError(msg)
+        return messages
 
     # -- new messages ----------------------------------------------------------------------------
     def add_message(
@@ -313,45 +286,15 @@ class SpliceWriter:
         """Write the open chunk (LZ4) and its message indexes, if it holds a message."""
         if not self._chunk_messages:
             return
-        records = self._records
-        body = lz4.frame.compress(bytes(records))
-        head = (
-            _CHUNK_HEAD.pack(
-                Opcode.CHUNK,
-                8 + 8 + 8 + 4 + 4 + 3 + 8 + len(body),
-                self._chunk_start_ns,
-                self._chunk_end_ns,
-                len(records),
-                crc32(records),
-            )
-            + _U32.pack(3)
-            + b"lz4"
-            + _U64.pack(len(body))
+        records = bytes(self._records)
+        chunk = encode_chunk(
+            [records],
+            self._chunk_start_ns,
+            self._chunk_end_ns,
+            self._index,
+            ("lz4", lz4.frame.compress(records)),
         )
-        relative: dict[int, int] = {}
-        indexes = bytearray()
-        for channel_id, entries in self._index.items():
-            relative[channel_id] = len(indexes)
-            pairs = len(entries) // 2
-            indexes += _INDEX_HEAD.pack(
-                Opcode.MESSAGE_INDEX, 6 + 16 * pairs, channel_id, 16 * pairs
-            )
-            indexes += struct.pack(f"<{len(entries)}Q", *entries)
-        chunk_start = self._put(head + body + indexes)
-        index_start = chunk_start + len(head) + len(body)
-        self._chunk_indexes.append(
-            ChunkIndex(
-                message_start_time=self._chunk_start_ns,
-                message_end_time=self._chunk_end_ns,
-                chunk_start_offset=chunk_start,
-                chunk_length=len(head) + len(body),
-                message_index_offsets={c: index_start + at for c, at in relative.items()},
-                message_index_length=len(indexes),
-                compression="lz4",
-                compressed_size=len(body),
-                uncompressed_size=len(records),
-            )
-        )
+        self._chunk_indexes.append(chunk.index_at(self._put(*chunk.pieces)))
         self._records = bytearray()
         self._index = {}
         self._chunk_messages = 0
@@ -361,7 +304,7 @@ class SpliceWriter:
         """The open chunk, the data end, the summary (schemas, channels, statistics, chunk
         indexes, summary offsets) and the footer with the summary's CRC."""
         self.end_chunk()
-        self._put(_record(DataEnd(data_section_crc=0)))
+        self._put(record_bytes(DataEnd(data_section_crc=0)))
         statistics = Statistics(
             message_count=self._messages,
             schema_count=len(self._schemas),

@@ -59,11 +59,21 @@ from mcap.records import (
     SummaryOffset,
 )
 
-__all__ = ["MAGIC", "McapStream", "StreamCompression", "summary_section"]
+from redrive.io.mcap_scan import MAGIC
+
+__all__ = [
+    "MAGIC",
+    "EncodedChunk",
+    "McapStream",
+    "StreamCompression",
+    "encode_chunk",
+    "record_bytes",
+    "summary_section",
+    "write_all",
+]
 
 StreamCompression = Literal["zstd", "lz4", "none"]
 
-MAGIC = b"\x89MCAP0\r\n"
 _MESSAGE = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, log, publish
 _CHUNK_HEAD = struct.Struct("<BQQQQI")  # opcode, length, start, end, uncompressed size, crc
 _U32 = struct.Struct("<I")
@@ -115,7 +125,7 @@ def _compressor(
     raise ValueError(msg)
 
 
-def _record(record: McapRecord) -> bytes:
+def record_bytes(record: McapRecord) -> bytes:
     """One record's bytes, as the mcap library writes it."""
     builder = RecordBuilder()
     record.write(builder)
@@ -123,7 +133,7 @@ def _record(record: McapRecord) -> bytes:
     return data
 
 
-def _write_all(fd: int, pieces: Sequence[bytes | bytearray | memoryview]) -> int:
+def write_all(fd: int, pieces: Sequence[bytes | bytearray | memoryview]) -> int:
     """``os.writev`` until every byte of ``pieces`` is written; returns their length."""
     views = [memoryview(p).cast("B") for p in pieces if len(p)]
     total = sum(v.nbytes for v in views)
@@ -135,6 +145,82 @@ def _write_all(fd: int, pieces: Sequence[bytes | bytearray | memoryview]) -> int
         if written:
             views[0] = views[0][written:]
     return total
+
+
+@dataclass(frozen=True, slots=True)
+class EncodedChunk:
+    """A chunk record and the message index records after it, ready to write: ``pieces`` in
+    order, then :meth:`index_at` the offset they were written at for the summary."""
+
+    pieces: list[bytes | bytearray | memoryview]
+    start_ns: int
+    end_ns: int
+    chunk_length: int  # the chunk record, opcode and length included
+    index_length: int  # its message index records
+    index_offsets: dict[int, int]  # channel → its message index record, from the chunk's end
+    compression: str
+    compressed_size: int
+    uncompressed_size: int
+
+    def index_at(self, chunk_start: int) -> ChunkIndex:
+        """The summary's chunk index of this chunk written at byte ``chunk_start``."""
+        index_start = chunk_start + self.chunk_length
+        return ChunkIndex(
+            message_start_time=self.start_ns,
+            message_end_time=self.end_ns,
+            chunk_start_offset=chunk_start,
+            chunk_length=self.chunk_length,
+            message_index_offsets={c: index_start + at for c, at in self.index_offsets.items()},
+            message_index_length=self.index_length,
+            compression=self.compression,
+            compressed_size=self.compressed_size,
+            uncompressed_size=self.uncompressed_size,
+        )
+
+
+def encode_chunk(
+    records: Sequence[bytes | bytearray | memoryview],
+    start_ns: int,
+    end_ns: int,
+    index: Mapping[int, list[int]],
+    compressed: tuple[str, bytes] | None,
+) -> EncodedChunk:
+    """A chunk of the message records ``records`` (their CRC is taken here), stored as they are
+    or as ``compressed`` (compression name, compressed bytes), and the message index records of
+    ``index`` (channel → [log time, offset in the records, …])."""
+    crc = 0
+    size = 0
+    for piece in records:
+        crc = crc32(piece, crc)
+        size += len(piece)
+    name, body = ("", list(records)) if compressed is None else (compressed[0], [compressed[1]])
+    body_size = size if compressed is None else len(compressed[1])
+    name_bytes = name.encode()
+    record_length = 8 + 8 + 8 + 4 + 4 + len(name_bytes) + 8 + body_size
+    head = (
+        _CHUNK_HEAD.pack(Opcode.CHUNK, record_length, start_ns, end_ns, size, crc)
+        + _U32.pack(len(name_bytes))
+        + name_bytes
+        + _U64.pack(body_size)
+    )
+    relative: dict[int, int] = {}
+    indexes = bytearray()
+    for channel_id, entries in index.items():
+        relative[channel_id] = len(indexes)
+        pairs = len(entries) // 2
+        indexes += _INDEX_HEAD.pack(Opcode.MESSAGE_INDEX, 6 + 16 * pairs, channel_id, 16 * pairs)
+        indexes += struct.pack(f"<{len(entries)}Q", *entries)
+    return EncodedChunk(
+        pieces=[head, *body, indexes],
+        start_ns=start_ns,
+        end_ns=end_ns,
+        chunk_length=len(head) + body_size,
+        index_length=len(indexes),
+        index_offsets=relative,
+        compression=name,
+        compressed_size=body_size,
+        uncompressed_size=size,
+    )
 
 
 def summary_section(
@@ -174,7 +260,7 @@ def summary_section(
     footer_head = struct.pack("<BQQQ", Opcode.FOOTER, 20, summary_start, offset_start)
     crc = crc32(footer_head, crc32(data))
     footer = Footer(summary_start=summary_start, summary_offset_start=offset_start, summary_crc=crc)
-    return b"".join((data, _record(footer), MAGIC))
+    return b"".join((data, record_bytes(footer), MAGIC))
 
 
 class McapStream:
@@ -247,7 +333,7 @@ class McapStream:
     # -- records before and between chunks -------------------------------------------------
     def start(self, *, profile: str, library: str) -> None:
         """The magic and the header record."""
-        self._put(MAGIC + _record(Header(profile=profile, library=library)))
+        self._put(MAGIC + record_bytes(Header(profile=profile, library=library)))
 
     def register_schema(self, name: str, encoding: str, data: bytes) -> int:
         """A new schema (written into the open chunk); returns its id."""
@@ -275,13 +361,13 @@ class McapStream:
     def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
         """A metadata record (after the open chunk, which is finished first)."""
         self.end_chunk()
-        record = _record(Metadata(name=name, metadata=dict(data)))
+        record = record_bytes(Metadata(name=name, metadata=dict(data)))
         self._metadata_indexes.append(
             MetadataIndex(offset=self._put(record), length=len(record), name=name)
         )
 
     def _append_record(self, record: Schema | Channel) -> None:
-        data = _record(record)
+        data = record_bytes(record)
         self._chunk.defines = True
         self._reserve(len(data))
         self._view[self._used : self._used + len(data)] = data
@@ -382,47 +468,11 @@ class McapStream:
         compressed: tuple[str, bytes] | None,
     ) -> None:
         """Chunk record + its message indexes at :attr:`position` (one ``writev``)."""
-        crc = 0
-        size = 0
-        for piece in records:
-            crc = crc32(piece, crc)
-            size += len(piece)
-        name, body = ("", records) if compressed is None else (compressed[0], [compressed[1]])
-        body_size = size if compressed is None else len(compressed[1])
-        name_bytes = name.encode()
-        record_length = 8 + 8 + 8 + 4 + 4 + len(name_bytes) + 8 + body_size
-        head = (
-            _CHUNK_HEAD.pack(Opcode.CHUNK, record_length, start_ns, end_ns, size, crc)
-            + _U32.pack(len(name_bytes))
-            + name_bytes
-            + _U64.pack(body_size)
-        )
-        relative: dict[int, int] = {}  # channel → its message index, from the chunk's end
-        indexes = bytearray()
-        for channel_id, entries in index.items():
-            relative[channel_id] = len(indexes)
-            pairs = len(entries) // 2
-            indexes += _INDEX_HEAD.pack(
-                Opcode.MESSAGE_INDEX, 6 + 16 * pairs, channel_id, 16 * pairs
-            )
-            indexes += struct.pack(f"<{len(entries)}Q", *entries)
+        chunk = encode_chunk(records, start_ns, end_ns, index, compressed)
         with self._lock:  # the compression thread and the caller may both write chunks
             chunk_start = self.position
-            index_start = chunk_start + len(head) + body_size
-            self.position += _write_all(self._fd, [head, *body, indexes])
-            self._chunk_indexes.append(
-                ChunkIndex(
-                    message_start_time=start_ns,
-                    message_end_time=end_ns,
-                    chunk_start_offset=chunk_start,
-                    chunk_length=len(head) + body_size,
-                    message_index_offsets={c: index_start + at for c, at in relative.items()},
-                    message_index_length=len(indexes),
-                    compression=name,
-                    compressed_size=body_size,
-                    uncompressed_size=size,
-                )
-            )
+            self.position += write_all(self._fd, chunk.pieces)
+            self._chunk_indexes.append(chunk.index_at(chunk_start))
 
     # -- the compression thread ----------------------------------------------------------------
     def _submit(self, job: _ChunkJob | None) -> None:
@@ -484,7 +534,7 @@ class McapStream:
             self._raise_failure()
         with self._lock:
             start = self.position
-            self.position += _write_all(self._fd, [record])
+            self.position += write_all(self._fd, [record])
         return start
 
     def _drain(self) -> None:
@@ -503,7 +553,7 @@ class McapStream:
         and syncs ``fd``)."""
         self.end_chunk()
         self._drain()
-        self.position += _write_all(self._fd, [_record(DataEnd(data_section_crc=0))])
+        self.position += write_all(self._fd, [record_bytes(DataEnd(data_section_crc=0))])
         statistics = Statistics(
             message_count=self._messages,
             schema_count=len(self._schemas),
@@ -523,7 +573,7 @@ class McapStream:
             chunk_indexes=self._chunk_indexes,
             metadata_indexes=self._metadata_indexes,
         )
-        self.position += _write_all(self._fd, [tail])
+        self.position += write_all(self._fd, [tail])
 
     def abandon(self) -> None:
         """Stop the compression thread without writing what it still holds (an aborted file)."""
