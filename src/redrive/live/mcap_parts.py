@@ -41,7 +41,64 @@ def split_name(path: Path, index: int) -> Path:
     return path.with_name(f"{path.stem}_{index:04d}{path.suffix or '.mcap'}")
 
 
-class SplitMcapWriter:
+class _SplitParts:
+    """What both split writers share: the file the current part goes to, when it is full, the
+    chunk size a split limit allows, and the chunk counts of the parts finished so far."""
+
+    def __init__(
+        self,
+        path: Path,
+        *,
+        split_size_bytes: int | None,
+        split_duration_s: float | None,
+        compression: Compression,
+    ) -> None:
+        self.path = path
+        if compression not in _COMPRESSION:
+            msg = f"compression must be one of {sorted(_COMPRESSION)}, got {compression!r}"
+            raise ValueError(msg)
+        self.compression: Compression = compression
+        self.split_size_bytes = split_size_bytes
+        self.split_duration_s = split_duration_s
+        self.split = split_size_bytes is not None or split_duration_s is not None
+        #: the files finished so far, in order
+        self.finished: list[Path] = []
+        self._chunks_done = (0, 0)  # chunks of the finished files: all, written uncompressed
+        self._index = 0
+        self._opened_s = 0.0
+
+    def _target(self) -> Path:
+        return split_name(self.path, self._index) if self.split else self.path
+
+    def _chunk_size(self) -> int:
+        """1 MiB chunks (a message bigger than a chunk goes to the file without a copy), smaller
+        when a split size asks for it."""
+        chunk = 1 << 20
+        if self.split_size_bytes is not None:
+            chunk = max(4 << 10, min(chunk, self.split_size_bytes // 4))
+        return chunk
+
+    def _full(self, size_estimate: int) -> bool:
+        if self.split_size_bytes is not None and size_estimate >= self.split_size_bytes:
+            return True
+        return (
+            self.split_duration_s is not None
+            and time.monotonic() - self._opened_s >= self.split_duration_s
+        )
+
+    def _chunks_with(self, current: tuple[int, int] | None) -> tuple[int, int]:
+        """The finished parts' chunk counts (all, written uncompressed) plus ``current``'s."""
+        done, behind = self._chunks_done
+        if current is not None:
+            done, behind = done + current[0], behind + current[1]
+        return done, behind
+
+    def _part_finished(self, path: Path, chunks: tuple[int, int]) -> None:
+        self.finished.append(path)
+        self._chunks_done = self._chunks_with(chunks)
+
+
+class SplitMcapWriter(_SplitParts):
     """Write ROS 1 messages to ``path`` — or, when a split limit is given, to numbered files.
 
     Args:
@@ -62,20 +119,14 @@ class SplitMcapWriter:
         split_duration_s: float | None = None,
         compression: Compression = "zstd",
     ) -> None:
-        self.path = path
-        if compression not in _COMPRESSION:
-            msg = f"compression must be one of {sorted(_COMPRESSION)}, got {compression!r}"
-            raise ValueError(msg)
-        self.compression: Compression = compression
-        self.split_size_bytes = split_size_bytes
-        self.split_duration_s = split_duration_s
-        self.split = split_size_bytes is not None or split_duration_s is not None
-        #: the files finished so far, in order
-        self.finished: list[Path] = []
+        super().__init__(
+            path,
+            split_size_bytes=split_size_bytes,
+            split_duration_s=split_duration_s,
+            compression=compression,
+        )
         #: bytes of the finished files
         self.finished_bytes = 0
-        self._chunks_done = (0, 0)  # chunks of the finished files: all, written uncompressed
-        self._index = 0
         self._fd: int | None = None
         self._open()
 
@@ -89,13 +140,8 @@ class SplitMcapWriter:
     def chunks(self) -> tuple[int, int]:
         """Chunks written so far, every file: (all, those written uncompressed because the
         compressor was behind — see :class:`~redrive.io.mcap_stream.McapStream`)."""
-        done, behind = self._chunks_done
-        if self._fd is not None:
-            done, behind = done + self._writer.chunks, behind + self._writer.uncompressed_chunks
-        return done, behind
-
-    def _target(self) -> Path:
-        return split_name(self.path, self._index) if self.split else self.path
+        current = (self._writer.chunks, self._writer.uncompressed_chunks)
+        return self._chunks_with(current if self._fd is not None else None)
 
     def _open(self) -> None:
         target = self._target()
@@ -105,11 +151,8 @@ class SplitMcapWriter:
             msg = f"{target}: cannot create a file in {target.parent} ({err.strerror}); check the folder exists and is writable"
             raise LogError(msg) from err
         self._fd = fd
-        chunk = 1 << 20
-        if self.split_size_bytes is not None:
-            chunk = max(4 << 10, min(chunk, self.split_size_bytes // 4))
         self._writer = McapStream(
-            fd, chunk_size_bytes=chunk, compression=self.compression, live=True
+            fd, chunk_size_bytes=self._chunk_size(), compression=self.compression, live=True
         )
         self._writer.start(profile="ros1", library="redrive")
         self._schemas: dict[str, int] = {}
@@ -131,7 +174,7 @@ class SplitMcapWriter:
         if self._fd is None:
             msg = f"{self.path}: the recording is closed"
             raise LogError(msg)
-        if self.split and self._channels and self._full():
+        if self.split and self._channels and self._full(self._writer.size_estimate):
             self._finish_current()
             self._index += 1
             self._open()
@@ -156,18 +199,6 @@ class SplitMcapWriter:
             channel, log_time=log_ns, publish_time=publish_ns, sequence=seq, data=data
         )
 
-    def _full(self) -> bool:
-        assert self._fd is not None
-        if (
-            self.split_size_bytes is not None
-            and self._writer.size_estimate >= self.split_size_bytes
-        ):
-            return True
-        return (
-            self.split_duration_s is not None
-            and time.monotonic() - self._opened_s >= self.split_duration_s
-        )
-
     def _finish_current(self) -> None:
         fd, self._fd = self._fd, None
         assert fd is not None
@@ -186,9 +217,7 @@ class SplitMcapWriter:
                     os.close(fd)
             self._tmp.unlink(missing_ok=True)
             raise
-        self.finished.append(target)
-        done, behind = self._chunks_done
-        self._chunks_done = (done + self._writer.chunks, behind + self._writer.uncompressed_chunks)
+        self._part_finished(target, (self._writer.chunks, self._writer.uncompressed_chunks))
         self.finished_bytes += target.stat().st_size
         logger.debug("recorded %s", target)
 
@@ -208,7 +237,7 @@ class SplitMcapWriter:
             self._tmp.unlink(missing_ok=True)
 
 
-class SplitNativeWriter:
+class SplitNativeWriter(_SplitParts):
     """A ROS 2 recording (CDR as it came off the wire, or data-model values serialised as ROS 2
     messages) to ``path`` — or, with a split limit, to numbered files as
     :class:`SplitMcapWriter` writes ROS 1 ones: each a complete :class:`~redrive.io.writer.McapWriter`
@@ -229,27 +258,22 @@ class SplitNativeWriter:
         split_duration_s: float | None = None,
         compression: Compression = "zstd",
     ) -> None:
-        self.path = path
-        self.compression: Compression = compression
-        self.split_size_bytes = split_size_bytes
-        self.split_duration_s = split_duration_s
-        self.split = split_size_bytes is not None or split_duration_s is not None
-        #: the files finished so far, in order
-        self.finished: list[Path] = []
+        super().__init__(
+            path,
+            split_size_bytes=split_size_bytes,
+            split_duration_s=split_duration_s,
+            compression=compression,
+        )
         self._channels: dict[str, tuple[str, str]] = {}  # topic: (type, offered QoS)
-        self._chunks_done = (0, 0)  # chunks of the finished files: all, written uncompressed
-        self._index = 0
         self._current: McapWriter | None = None
         self._open()
 
     def _open(self) -> None:
-        # as SplitMcapWriter: a message bigger than a chunk goes to the file without a copy
-        chunk = 1 << 20
-        if self.split_size_bytes is not None:
-            chunk = max(4 << 10, min(chunk, self.split_size_bytes // 4))
-        target = split_name(self.path, self._index) if self.split else self.path
         self._current = McapWriter(
-            target, compression=self.compression, chunk_size_bytes=chunk, live=True
+            self._target(),
+            compression=self.compression,
+            chunk_size_bytes=self._chunk_size(),
+            live=True,
         )
         self._opened_s = time.monotonic()
         for topic, (msgtype, qos) in self._channels.items():
@@ -259,11 +283,7 @@ class SplitNativeWriter:
     def chunks(self) -> tuple[int, int]:
         """Chunks written so far, every file: (all, written uncompressed), as
         :attr:`SplitMcapWriter.chunks`."""
-        done, behind = self._chunks_done
-        if self._current is not None:
-            now, now_behind = self._current.chunks
-            done, behind = done + now, behind + now_behind
-        return done, behind
+        return self._chunks_with(None if self._current is None else self._current.chunks)
 
     def add_channel(self, topic: str, msgtype: str, *, offered_qos: str = "") -> None:
         """Declare a ROS 2 topic before its first message (in this file and every later one)."""
@@ -274,20 +294,12 @@ class SplitNativeWriter:
         if self._current is None:
             msg = f"{self.path}: the recording is closed"
             raise LogError(msg)
-        if self.split and self._current.message_count and self._full(self._current):
+        if self.split and self._current.message_count and self._full(self._current.size_estimate):
             self._finish_current()
             self._index += 1
             self._open()
             assert self._current is not None
         return self._current
-
-    def _full(self, writer: McapWriter) -> bool:
-        if self.split_size_bytes is not None and writer.size_estimate >= self.split_size_bytes:
-            return True
-        return (
-            self.split_duration_s is not None
-            and time.monotonic() - self._opened_s >= self.split_duration_s
-        )
 
     def write_raw(
         self, topic: str, msgtype: str, log_time_ns: int, cdr_bytes: bytes | memoryview
@@ -317,10 +329,7 @@ class SplitNativeWriter:
         current, self._current = self._current, None
         assert current is not None
         current.close()
-        self.finished.append(current.path)
-        done, behind = self._chunks_done
-        now, now_behind = current.chunks
-        self._chunks_done = (done + now, behind + now_behind)
+        self._part_finished(current.path, current.chunks)
 
     def abort(self) -> None:
         """Drop the file being written (files already finished stay)."""
