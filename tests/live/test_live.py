@@ -199,9 +199,18 @@ def test_live_replay_source_recorded_exactly(demo_log: Path, tmp_path: Path) -> 
     assert int(found[1]) == 20, done.stdout
     assert frames == 20 - int(found[2]) >= 1, done.stdout
     steps = run.table("steps").to_pylist()
-    planner_ok = [s for s in steps if s["algorithm"] == "idm-planner" and s["status"] == "ok"]
-    # ego states arrive with the sweeps (the first frame may come before the first state)
-    assert len(planner_ok) >= 0.8 * frames - 1
+    planner = {s["frame_index"]: s for s in steps if s["algorithm"] == "idm-planner"}
+    # how many frames find an ego state within the tolerance depends on how busy the machine is
+    # (a keep-latest stream, a skipped frame); what does not: the planner runs on every frame,
+    # succeeds on each that has one, and fails only on those without, which the frames table says
+    without_state = {
+        f["frame_index"]
+        for f in run.table("frames").to_pylist()
+        if "vehicle_state" in (f["missing_inputs"] or "")
+    }
+    assert len(planner) == frames
+    for index, step in planner.items():
+        assert (step["status"] == "ok") == (index not in without_state), step
     with open_log(demo_log) as original, open_log(tmp_path / "copy.mcap") as copy:
         got = [decode(m, copy.deserialize) for m in copy.messages(topics=["/lidar_top"])]
         assert len(got) >= frames
