@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from itertools import repeat
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -89,3 +92,139 @@ class DetectedObject:
                 msg = f"DetectedObject.bbox_2d must be (x, y, w, h), got {self.bbox_2d!r}"
                 raise ValueError(msg)
             object.__setattr__(self, "bbox_2d", tuple(float(v) for v in self.bbox_2d))
+
+    @classmethod
+    def many(
+        cls,
+        *,
+        object_classes: Sequence[ObjectClass],
+        centers: npt.ArrayLike,
+        sizes: npt.ArrayLike,
+        yaws_rad: npt.ArrayLike,
+        object_ids: Sequence[int] | None = None,
+        confidences: npt.ArrayLike | None = None,
+        velocities: npt.ArrayLike | None = None,
+        accelerations: npt.ArrayLike | None = None,
+        orientations: npt.ArrayLike | None = None,
+        num_lidar_points: Sequence[int | None] | None = None,
+        visible: Sequence[bool | None] | None = None,
+    ) -> list[DetectedObject]:
+        """N objects from columns: object i has ``object_classes[i]``, ``Box3D(center=centers[i],
+        size=sizes[i], yaw_rad=yaws_rad[i])``, ``velocities[i]`` … (a column left out takes the
+        field's default for every object).
+
+        For code that makes many objects per frame (decoders, simulators, perception): the
+        columns are checked once, with the checks ``DetectedObject(...)`` and ``Box3D(...)`` make
+        (ValueError naming the column and the object's index), and the objects are the ones those
+        constructors would give — float64, read-only (3,) row views of one frozen copy of each
+        column — built without a Python ``__post_init__`` per object.
+        """
+        n = len(object_classes)
+        centers_a = _column3(centers, "centers", n)
+        sizes_a = _column3(sizes, "sizes", n)
+        bad = ~np.isfinite(sizes_a).all(axis=1) | (sizes_a < 0).any(axis=1)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            msg = f"DetectedObject.many: sizes[{i}] must be finite and non-negative, got {sizes_a[i].tolist()}"
+            raise ValueError(msg)
+        yaws = _column1(yaws_rad, "yaws_rad", n)
+        if not np.isfinite(yaws).all():
+            i = int(np.flatnonzero(~np.isfinite(yaws))[0])
+            msg = f"DetectedObject.many: yaws_rad[{i}] must be finite, got {yaws[i]}"
+            raise ValueError(msg)
+        ids: Any = repeat(-1, n)
+        if object_ids is not None:
+            if len(object_ids) != n:
+                raise ValueError(_length_msg("object_ids", len(object_ids), n))
+            ids = [int(i) for i in object_ids]
+        conf: Any = repeat(1.0, n)
+        if confidences is not None:
+            c = _column1(confidences, "confidences", n)
+            bad = ~((c >= 0.0) & (c <= 1.0))
+            if bad.any():
+                i = int(np.flatnonzero(bad)[0])
+                msg = f"DetectedObject.many: confidences[{i}] must lie in [0, 1], got {c[i]}"
+                raise ValueError(msg)
+            conf = c.tolist()
+        points: Any = repeat(None, n)
+        if num_lidar_points is not None:
+            if len(num_lidar_points) != n:
+                raise ValueError(_length_msg("num_lidar_points", len(num_lidar_points), n))
+            points = [None if p is None else int(p) for p in num_lidar_points]
+            for i, p in enumerate(points):
+                if p is not None and p < 0:
+                    msg = f"DetectedObject.many: num_lidar_points[{i}] must be ≥ 0, got {p}"
+                    raise ValueError(msg)
+        seen: Any = repeat(None, n)
+        if visible is not None:
+            if len(visible) != n:
+                raise ValueError(_length_msg("visible", len(visible), n))
+            seen = list(visible)
+        boxes: list[Box3D] = list(map(object.__new__, repeat(Box3D, n)))
+        any(map(_SET_BOX_CENTER, boxes, list(centers_a)))
+        any(map(_SET_BOX_SIZE, boxes, list(sizes_a)))
+        any(map(_SET_BOX_YAW, boxes, yaws.tolist()))
+        objects: list[DetectedObject] = list(map(object.__new__, repeat(cls, n)))
+        setters = _OBJECT_SETTERS
+        any(map(setters["object_id"], objects, ids))
+        any(map(setters["object_class"], objects, object_classes))
+        any(map(setters["confidence"], objects, conf))
+        any(map(setters["box"], objects, boxes))
+        for name, column_name, column in (
+            ("velocity", "velocities", velocities),
+            ("acceleration", "accelerations", accelerations),
+            ("orientation", "orientations", orientations),
+        ):
+            rows: Any = (
+                repeat(_ZEROS3, n) if column is None else list(_column3(column, column_name, n))
+            )
+            any(map(setters[name], objects, rows))
+        any(map(setters["bbox_2d"], objects, repeat(None, n)))
+        any(map(setters["num_lidar_points"], objects, points))
+        any(map(setters["visible"], objects, seen))
+        return objects
+
+
+def _length_msg(name: str, have: int, n: int) -> str:
+    return f"DetectedObject.many: {name} has {have} values for {n} objects"
+
+
+def _column3(value: Any, name: str, n: int) -> npt.NDArray[np.float64]:
+    """``value`` as one read-only float64 (n, 3) array (a copy: the caller keeps its own)."""
+    arr = np.array(value, dtype=np.float64)
+    if arr.shape != (n, 3):
+        msg = f"DetectedObject.many: {name} must have shape ({n}, 3), got {arr.shape}"
+        raise ValueError(msg)
+    arr.flags.writeable = False
+    return arr
+
+
+def _column1(value: Any, name: str, n: int) -> npt.NDArray[np.float64]:
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.shape != (n,):
+        msg = f"DetectedObject.many: {name} must have shape ({n},), got {arr.shape}"
+        raise ValueError(msg)
+    return arr
+
+
+# The slots' own setters: what ``object.__setattr__`` ends in, without its lookup.
+_SET_BOX_CENTER = Box3D.__dict__["center"].__set__
+_SET_BOX_SIZE = Box3D.__dict__["size"].__set__
+_SET_BOX_YAW = Box3D.__dict__["yaw_rad"].__set__
+_OBJECT_SETTERS = {
+    name: DetectedObject.__dict__[name].__set__
+    for name in (
+        "object_id",
+        "object_class",
+        "confidence",
+        "box",
+        "velocity",
+        "acceleration",
+        "orientation",
+        "bbox_2d",
+        "num_lidar_points",
+        "visible",
+    )
+}
+_ZEROS3 = np.zeros(3, dtype=np.float64)
+_ZEROS3.flags.writeable = False
