@@ -153,8 +153,19 @@ def test_rospy_publisher_at_sensor_rates(roscore: RosCore, tmp_path: Path) -> No
 def test_rosbag_play_of_a_real_bag(roscore: RosCore, tmp_path: Path, shared_data: Path) -> None:
     bag = shared_data / KITTI_BAG
     live = _live(roscore, tmp_path, KITTI_TOPICS, "--duration", "14")
+    # publishing starts once every played topic has a connected subscriber (redrive's scrapers),
+    # not after a fixed delay that a loaded machine may outlast
     play = subprocess.run(
-        ["rosbag", "play", "-d", "5", "-r", "0.2", str(bag)],
+        [
+            "rosbag",
+            "play",
+            "--wait-for-subscribers",
+            "-r",
+            "0.2",
+            str(bag),
+            "--topics",
+            *KITTI_TOPICS,
+        ],
         env=roscore.env,
         capture_output=True,
         text=True,

@@ -35,10 +35,10 @@ from redrive.live.sources import (
     run_synthetic_source,
     synthetic_streams,
 )
-from redrive.live.streams import PAYLOAD_MSGTYPE, StreamSpec, stream_name
+from redrive.live.streams import PAYLOAD_MSGTYPE, StreamSpec, ring_slots, stream_name
 from redrive.sim.scenario import Scenario, load_scenario
 from redrive.sim.synth import synthesize
-from redrive.transport import Policy, ProducerGoneError, Reader
+from redrive.transport import Policy, ProducerGoneError, Reader, Writer
 from redrive.transport.codec import encoded_size
 from redrive.types import PointCloud, SensorData, SensorType, VehicleState
 
@@ -514,3 +514,47 @@ def test_process_reports_errors_without_traceback(session: str, tmp_path: Path) 
     assert proc.returncode == 1
     assert "missing.mcap" in err
     assert "Traceback" not in err
+
+
+# -- rings of small streams --------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("slots", "kept"), [(8, 1), (ring_slots(4096, 8), 200)])
+def test_a_burst_of_ego_states_reaches_the_dispatcher_when_the_ring_holds_it(
+    session: str, slots: int, kept: int
+) -> None:
+    """A source that fell behind publishes its backlog at once: 200 odometry messages before the
+    Sensor Dispatcher (a keep-latest reader) reads again. A ring of 8 slots laps it (the newest
+    only arrives, 199 are missed); the ring a small stream gets (ring_slots) holds them all."""
+    from redrive.live.dispatcher import LiveLog
+
+    assert ring_slots(4096, 8) >= 200
+    assert ring_slots(32 << 20, 8) == 8  # big messages: the slots asked for
+    spec = StreamSpec(
+        topic="/odom",
+        msgtype=PAYLOAD_MSGTYPE["VehicleState"],
+        stream=stream_name(session, "/odom"),
+        payload="sensor",
+        capacity_bytes=4096,
+    )
+    stamps = [1_700_000_000_000_000_000 + i * 10_000_000 for i in range(200)]
+    with Writer(spec.stream, capacity_bytes=4096, slots=slots, max_readers=2) as writer:
+        stop = threading.Event()
+        with LiveLog([spec], session, stop=stop) as log:
+            for stamp in stamps:
+                state = VehicleState(stamp_ns=stamp, velocity=np.array([5.0, 0.0, 0.0]))
+                writer.publish_sample(
+                    SensorData(
+                        sensor_id="odom",
+                        sensor_type=SensorType.ODOMETRY,
+                        stamp_ns=stamp,
+                        data=state,
+                    )
+                )
+            got = []
+            for message in log.messages():
+                got.append(message)
+                if message.payload.stamp_ns == stamps[-1]:  # type: ignore[union-attr]
+                    break
+            assert [m.payload.stamp_ns for m in got] == stamps[-kept:]  # type: ignore[union-attr]
+            assert log.dropped["/odom"] == 200 - kept

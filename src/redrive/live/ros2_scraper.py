@@ -90,12 +90,13 @@ class _Scraper:
         self._said: dict[str, str] = {}
 
     def stream(self, spec: dict[str, Any]) -> None:
+        from redrive.live.streams import ring_slots
         from redrive.transport import Policy, Writer
 
         self.writers[spec["topic"]] = Writer(
             spec["stream"],
             capacity_bytes=int(spec["capacity"]),
-            slots=self.slots,
+            slots=ring_slots(int(spec["capacity"]), self.slots),
             policy=Policy.LOSSLESS,
             max_readers=3,  # the dispatcher, the recorder, the Foxglove view
         )

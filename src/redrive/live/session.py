@@ -27,7 +27,7 @@ from types import TracebackType
 from redrive.errors import ConfigError, TransportError
 from redrive.live.ros1 import list_topics
 from redrive.live.scraper_state import Ros1Definition, ScraperState
-from redrive.live.streams import StreamSpec, ros2_type, stream_name
+from redrive.live.streams import StreamSpec, ring_slots, ros2_type, stream_name
 from redrive.transport import remove_stale
 
 __all__ = [
@@ -44,12 +44,20 @@ ROS_PYTHON = Path("/usr/bin/python3")
 _SCRAPER = Path(__file__).with_name("ros1_scraper.py")
 
 #: the largest message a stream takes, by ROS 2 type (``--capacity`` overrides per topic):
-#: PointCloud2 fits a 128-beam sweep, Image a 4K rgb8 frame.
+#: PointCloud2 fits a 128-beam sweep, Image a 4K rgb8 frame; the fixed-size ego-state types
+#: (a header's frame id the only string) 64 KiB, so their streams get rings of seconds
+#: (:func:`~redrive.live.streams.ring_slots`).
 DEFAULT_CAPACITY: Mapping[str, int] = {
     "sensor_msgs/msg/PointCloud2": 32 << 20,
     "sensor_msgs/msg/Image": 32 << 20,
     "sensor_msgs/msg/CompressedImage": 16 << 20,
     "sensor_msgs/msg/LaserScan": 1 << 20,
+    "nav_msgs/msg/Odometry": 64 << 10,
+    "sensor_msgs/msg/Imu": 64 << 10,
+    "sensor_msgs/msg/NavSatFix": 64 << 10,
+    "geometry_msgs/msg/PoseStamped": 64 << 10,
+    "geometry_msgs/msg/PoseWithCovarianceStamped": 64 << 10,
+    "geometry_msgs/msg/TwistStamped": 64 << 10,
 }
 _OTHER_CAPACITY = 1 << 20
 
@@ -208,7 +216,8 @@ class LiveSession:
                 )
                 argv = [
                     str(ROS_PYTHON), str(_SCRAPER), "--topic", spec.topic, "--stream", spec.stream,
-                    "--capacity", str(spec.capacity_bytes), "--slots", str(opts.slots),
+                    "--capacity", str(spec.capacity_bytes),
+                    "--slots", str(ring_slots(spec.capacity_bytes, opts.slots)),
                 ]  # fmt: skip
                 if on_stream is not None:
                     argv += ["--await-lossless", str(opts.ready_timeout_s)]

@@ -17,7 +17,14 @@ import re
 from dataclasses import dataclass
 from typing import Literal
 
-__all__ = ["PAYLOAD_MSGTYPE", "StreamSpec", "ros1_type", "ros2_type", "stream_name"]
+__all__ = [
+    "PAYLOAD_MSGTYPE",
+    "StreamSpec",
+    "ring_slots",
+    "ros1_type",
+    "ros2_type",
+    "stream_name",
+]
 
 _BAD = re.compile(r"[^A-Za-z0-9_.-]+")
 
@@ -29,6 +36,27 @@ PAYLOAD_MSGTYPE = {
     "GnssFix": "sensor_msgs/msg/NavSatFix",
     "VehicleState": "nav_msgs/msg/Odometry",
 }
+
+
+#: A stream of small messages gets more slots than ``slots``, up to this many bytes of ring ...
+SMALL_RING_BYTES = 16 << 20
+#: ... and at most this many slots.
+MAX_RING_SLOTS = 256
+
+
+def ring_slots(capacity_bytes: int, slots: int) -> int:
+    """The slots of a stream whose largest message is ``capacity_bytes``: ``slots``, or more for
+    small messages (up to :data:`SMALL_RING_BYTES` of ring, :data:`MAX_RING_SLOTS` slots).
+
+    A keep-latest reader (the Sensor Dispatcher, the Foxglove view) loses what the writer
+    publishes while it is more than a ring behind. A source that falls behind publishes its
+    backlog in a burst — a 100-Hz odometry stream ten messages at once after a sweep — and a ring
+    of a few slots laps the reader within that burst: the frames then miss the ego states on one
+    side of their stamp. Slots of small messages cost little, so those streams hold seconds.
+    """
+    if capacity_bytes <= 0:
+        return slots
+    return max(slots, min(MAX_RING_SLOTS, SMALL_RING_BYTES // capacity_bytes))
 
 
 def stream_name(session: str, topic: str) -> str:

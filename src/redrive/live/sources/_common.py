@@ -11,7 +11,7 @@ from types import TracebackType
 from typing import Protocol
 
 from redrive.errors import ConfigError, TransportError
-from redrive.live.streams import PAYLOAD_MSGTYPE, StreamSpec, stream_name
+from redrive.live.streams import PAYLOAD_MSGTYPE, StreamSpec, ring_slots, stream_name
 from redrive.transport import Policy, ReaderGoneError, Writer
 from redrive.transport.codec import encoded_size
 from redrive.types import GnssFix, Image, Imu, PointCloud, SensorData, SensorType, VehicleState
@@ -182,7 +182,7 @@ class _Publisher:
                 self.writers[topic] = Writer(
                     route.spec.stream,
                     capacity_bytes=route.spec.capacity_bytes,
-                    slots=slots,
+                    slots=ring_slots(route.spec.capacity_bytes, slots),
                     policy=policy,
                     max_readers=max_readers,
                 )
