@@ -45,19 +45,19 @@ _SCRAPER = Path(__file__).with_name("ros1_scraper.py")
 
 #: the largest message a stream takes, by ROS 2 type (``--capacity`` overrides per topic):
 #: PointCloud2 fits a 128-beam sweep, Image a 4K rgb8 frame; the fixed-size ego-state types
-#: (a header's frame id the only string) 64 KiB, so their streams get rings of seconds
+#: (a header's frame id the only string) 16 KiB, so their streams get rings of seconds
 #: (:func:`~redrive.live.streams.ring_slots`).
 DEFAULT_CAPACITY: Mapping[str, int] = {
     "sensor_msgs/msg/PointCloud2": 32 << 20,
     "sensor_msgs/msg/Image": 32 << 20,
     "sensor_msgs/msg/CompressedImage": 16 << 20,
     "sensor_msgs/msg/LaserScan": 1 << 20,
-    "nav_msgs/msg/Odometry": 64 << 10,
-    "sensor_msgs/msg/Imu": 64 << 10,
-    "sensor_msgs/msg/NavSatFix": 64 << 10,
-    "geometry_msgs/msg/PoseStamped": 64 << 10,
-    "geometry_msgs/msg/PoseWithCovarianceStamped": 64 << 10,
-    "geometry_msgs/msg/TwistStamped": 64 << 10,
+    "nav_msgs/msg/Odometry": 16 << 10,
+    "sensor_msgs/msg/Imu": 16 << 10,
+    "sensor_msgs/msg/NavSatFix": 16 << 10,
+    "geometry_msgs/msg/PoseStamped": 16 << 10,
+    "geometry_msgs/msg/PoseWithCovarianceStamped": 16 << 10,
+    "geometry_msgs/msg/TwistStamped": 16 << 10,
 }
 _OTHER_CAPACITY = 1 << 20
 

@@ -39,7 +39,7 @@ PAYLOAD_MSGTYPE = {
 
 
 #: A stream of small messages gets more slots than ``slots``, up to this many bytes of ring ...
-SMALL_RING_BYTES = 16 << 20
+SMALL_RING_BYTES = 4 << 20
 #: ... and at most this many slots.
 MAX_RING_SLOTS = 256
 
