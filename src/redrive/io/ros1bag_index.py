@@ -14,6 +14,7 @@ None and the reader walks each message as before (and reports the damage at the 
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -182,8 +183,11 @@ def _spans_one_by_one(
     for offset, time_ns, conn_id in zip(
         offsets.tolist(), times.tolist(), conns.tolist(), strict=True
     ):
-        conn = U32.pack(conn_id)
-        stamp = TIME.pack(*divmod(time_ns, 1_000_000_000))
+        try:
+            conn = U32.pack(conn_id)
+            stamp = TIME.pack(*divmod(time_ns, 1_000_000_000))
+        except struct.error:  # not a ROS 1 time or connection id: left to the walk, as before
+            return None
         first, second = (conn, stamp) if first_is == "conn" else (stamp, conn)
         if bytes(chunk[offset : offset + 4 + size]) != head + first + middle + second + tail:
             return None
