@@ -457,9 +457,11 @@ class Ros1BagReader(RosReaderBase):
         self._map = None
 
 
-#: Chunks with at least this many selected messages are checked against the index with array
-#: operations (a fixed cost of a few tens of µs); smaller ones are walked message by message.
-_CHECK_AT_ONCE_FROM = 12
+#: Chunks with at least this many selected messages are checked against the index together
+#: (:func:`~redrive.io.ros1bag_index.chunk_spans`: ≈ 10 µs and ≈ 1-2 µs a message, arrays from
+#: :data:`~redrive.io.ros1bag_index.ARRAYS_FROM` on); smaller ones are walked message by message
+#: (≈ 5 µs a message).
+_CHECK_AT_ONCE_FROM = 4
 
 _new_message = object.__new__
 _SET = tuple(
