@@ -60,7 +60,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from types import MappingProxyType
 from typing import Any, ClassVar
 
@@ -72,7 +72,7 @@ from redrive.algorithms.reference._kernels import project_on_segments
 from redrive.algorithms.reference._plan_kernels import idm_profile
 from redrive.errors import AlgorithmError, ConfigError
 from redrive.geometry.boxes import BOX_CORNER_SIGNS
-from redrive.types import DetectedObject, Frame, PlannedPath, VehicleState
+from redrive.types import DetectedObject, Frame, PlannedPath, SensorType, VehicleState
 
 __all__ = ["IdmPlanner", "Polyline"]
 
@@ -277,6 +277,14 @@ class IdmPlanner(Algorithm):
 
     def reset(self) -> None:
         self._route_s_m = None
+
+    def bind(self, sensors: Mapping[str, SensorType], *, extras: Iterable[str] = ()) -> None:
+        """As :meth:`Algorithm.bind`, then one made-up plan's profile and projection, so that
+        numba loads the planner's kernels from the cache (or compiles them after an install)
+        here, before a run's first frame, not inside that frame's latency."""
+        super().bind(sensors, extras=extras)
+        self._profile(1.0, np.array([30.0]), np.array([0.0]))
+        Polyline([[0.0, 0.0], [1.0, 0.0]]).project([[0.5, 0.5]])
 
     # -- the step -----------------------------------------------------------------------------
 
