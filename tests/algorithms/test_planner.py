@@ -302,6 +302,76 @@ def test_polyline_projection() -> None:
     ],
 )
 def test_first_min_chooses_as_numpy_argmin(values: list[float]) -> None:
-    from redrive.algorithms.reference.planner import _first_min
+    from redrive.algorithms.reference._plan_kernels import _first_min
 
-    assert _first_min(values) == int(np.argmin(np.array(values)))
+    assert _first_min(np.array(values), len(values)) == int(np.argmin(np.array(values)))
+
+
+def _first_min_py(values: list[float]) -> int:
+    best = 0
+    for i, value in enumerate(values):
+        if math.isnan(value):
+            return i
+        if value < values[best]:
+            best = i
+    return best
+
+
+def _profile_py(
+    p: IdmPlanner, speed_mps: float, lead_s: list[float], lead_v: list[float]
+) -> list[float]:
+    """The planner's IDM integration as the Python loop it was before the kernel."""
+
+    def idm(v: float, gap_m: float, v_lead: float) -> float:
+        free = 1.0 - (max(v, 0.0) / p.v0_mps) ** p.delta
+        interaction = 0.0
+        if math.isfinite(gap_m):
+            s_star = p.s0_m + max(
+                0.0, v * p.headway_s + v * (v - v_lead) / (2.0 * math.sqrt(p.a_mps2 * p.b_mps2))
+            )
+            interaction = (s_star / max(gap_m, 1e-3)) ** 2
+        return min(max(float(p.a_mps2 * (free - interaction)), -p.max_decel_mps2), p.a_mps2)
+
+    n, dt, front = max(1, round(p.horizon_s / p.dt_s)), p.dt_s, p.front_offset_m
+    out, s, v, ids = [0.0], 0.0, max(speed_mps, 0.0), range(len(lead_s))
+    for k in range(n):
+        t = k * dt
+        gap, v_lead, j = math.inf, 0.0, -1
+        if lead_s:
+            gaps = [lead_s[i] + lead_v[i] * t - (s + front) for i in ids]
+            j = _first_min_py(gaps)
+            gap, v_lead = gaps[j], lead_v[j]
+        accel = idm(v, gap, v_lead)
+        if v + accel * dt < 0.0:
+            s_new, v_new = s - v * v / (2.0 * accel), 0.0
+        else:
+            s_new, v_new = s + v * dt + 0.5 * accel * dt * dt, v + accel * dt
+        if j >= 0:
+            limits = [lead_s[i] + lead_v[i] * (t + dt) - front - p.s0_m for i in ids]
+            jj = _first_min_py(limits)
+            limit = max(limits[jj], s)
+            if s_new > limit:
+                s_new, v_new = limit, min(v_new, lead_v[jj])
+        s, v = s_new, v_new
+        out.append(s)
+    return out
+
+
+def test_compiled_profile_is_the_python_loop_bit_for_bit() -> None:
+    """The kernel gives the plans the per-step Python loop gave, to the last bit: free road,
+    leaders far and close (inside s0), stopped and moving, ties, several configs."""
+    rng = np.random.default_rng(15)
+    configs = [{}, {"delta": 3.0, "T_s": 0.0, "s0_m": 0.0}, {"a_mps2": 3.0, "max_decel_mps2": 2.5}]
+    for config in configs:
+        planner = IdmPlanner()
+        planner.setup({**IdmPlanner.defaults, **config})
+        for _ in range(150):
+            m = int(rng.integers(0, 5))
+            lead_s = rng.uniform(-2.0, 80.0, m)
+            lead_v = np.where(rng.random(m) < 0.4, 0.0, rng.uniform(0.0, 15.0, m))
+            if m > 1 and rng.random() < 0.2:
+                lead_s[1], lead_v[1] = lead_s[0], lead_v[0]
+            speed = float(rng.choice([0.0, -0.0, rng.uniform(0.0, 20.0)]))
+            _, s = planner._profile(speed, lead_s, lead_v)
+            want = _profile_py(planner, speed, lead_s.tolist(), lead_v.tolist())
+            assert s.tolist() == want

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from redrive.errors import SimulationError
+from redrive.sim import world as world_module
 from redrive.sim.scenario import Scenario, list_scenarios, load_scenario
 from redrive.sim.scene import Scene
 from redrive.sim.world import World
@@ -138,3 +139,23 @@ def test_ego_keeps_a_gap_to_cut_in_and_braking_leads(name: str) -> None:
             gaps = ahead[in_lane] - objs.sizes[in_lane, 0] / 2 - geo.front_offset_m
             min_gap = min(min_gap, float(gaps.min()))
     assert 1.0 < min_gap < 15.0
+
+
+def test_ground_truth_objects_are_the_ground_truth_rows_of_objects() -> None:
+    """ground_truth_objects() (the object-level observation's source) lists exactly the
+    ground-truth rows of objects(), in order — also with scenery marked as ground truth."""
+    world = _run(load_scenario("urban"), 1.0)
+    for marked in (False, True):
+        if marked:  # mark two scenery boxes as ground truth, as a scenario could
+            static, looks = world._static
+            flags = static.is_ground_truth.copy()
+            flags[[3, 7]] = True
+            world._static = (dataclasses.replace(static, is_ground_truth=flags), looks)
+            world._static_truth = world_module._subset(world._static[0], flags)
+        full, truth = world.objects(), world.ground_truth_objects()
+        keep = np.flatnonzero(full.is_ground_truth)
+        assert len(truth) == len(keep) > 0
+        assert truth.classes == tuple(full.classes[i] for i in keep)
+        for name in ("object_ids", "centers", "sizes", "yaws_rad", "velocities", "colors"):
+            assert np.array_equal(getattr(truth, name), getattr(full, name)[keep])
+        assert truth.is_ground_truth.all()

@@ -11,7 +11,7 @@ import numpy.typing as npt
 from redrive.geometry import invert, transform_points
 from redrive.geometry.se3 import transform_vectors, yaw_from_rotation_matrix
 from redrive.sim.scene import Scene, SceneObjects
-from redrive.types import Box3D, DetectedObject
+from redrive.types import DetectedObject
 
 __all__ = ["GROUND_TRUTH_RANGE_M", "ground_truth_objects", "objects_in_base"]
 
@@ -54,25 +54,34 @@ def objects_in_base(
     yaw_ego = yaw_from_rotation_matrix(map_from_base[:3, :3])
     centers = transform_points(base_from_map, objs.centers)
     velocities = transform_vectors(base_from_map, objs.velocities)
-    out = []
-    for i in np.flatnonzero(objs.is_ground_truth):
-        if float(np.hypot(centers[i, 0], centers[i, 1])) > range_m:
-            continue
-        object_id = int(objs.object_ids[i])
-        points = None if lidar_hits is None else int(lidar_hits.get(object_id, 0))
-        pixels = 0 if camera_pixels is None else int(camera_pixels.get(object_id, 0))
-        visible = None if lidar_hits is None and camera_pixels is None else (points or pixels) > 0
-        yaw = math.remainder(float(objs.yaws_rad[i]) - yaw_ego, math.tau)
-        out.append(
-            DetectedObject(
-                object_id=object_id,
-                object_class=objs.classes[i],
-                confidence=1.0,
-                box=Box3D(center=centers[i], size=objs.sizes[i], yaw_rad=yaw),
-                velocity=velocities[i],
-                orientation=np.array([yaw, 0.0, 0.0]),
-                num_lidar_points=points,
-                visible=visible,
-            )
+    idx = np.flatnonzero(objs.is_ground_truth)
+    idx = idx[~(np.hypot(centers[idx, 0], centers[idx, 1]) > range_m)]
+    object_ids = objs.object_ids[idx].tolist()
+    if lidar_hits is None:
+        points: list[int | None] = [None] * len(idx)
+    else:
+        points = [int(lidar_hits.get(object_id, 0)) for object_id in object_ids]
+    if lidar_hits is None and camera_pixels is None:
+        visible: list[bool | None] = [None] * len(idx)
+    else:
+        pixels = [
+            0 if camera_pixels is None else int(camera_pixels.get(object_id, 0))
+            for object_id in object_ids
+        ]
+        visible = [(p or q) > 0 for p, q in zip(points, pixels, strict=True)]
+    yaws = [math.remainder(yaw - yaw_ego, math.tau) for yaw in objs.yaws_rad[idx].tolist()]
+    orientations = np.zeros((len(idx), 3))
+    orientations[:, 0] = yaws
+    return tuple(
+        DetectedObject.many(
+            object_ids=object_ids,
+            object_classes=[objs.classes[i] for i in idx.tolist()],
+            centers=centers[idx],
+            sizes=objs.sizes[idx],
+            yaws_rad=yaws,
+            velocities=velocities[idx],
+            orientations=orientations,
+            num_lidar_points=points,
+            visible=visible,
         )
-    return tuple(out)
+    )

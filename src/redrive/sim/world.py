@@ -101,6 +101,8 @@ class World:
         self._dt_ns = round(scenario.physics_dt_s * 1e9)
         self._ground: GroundMap | None = None
         self._static = self._build_scenery()
+        #: the scenery's ground-truth part (usually none), for :meth:`ground_truth_objects`
+        self._static_truth = _subset(self._static[0], self._static[0].is_ground_truth)
         self._followers: list[LaneFollower] = []
         self._walkers: list[Walker] = []
         self._triggers: list[tuple[Walker, float, float]] = []  # walker, s on ego route, distance
@@ -487,6 +489,16 @@ class World:
 
     def objects(self) -> SceneObjects:
         """Agents and parked vehicles (ground truth) followed by the scenery, map frame."""
+        return self._objects(self._static[0])
+
+    def ground_truth_objects(self) -> SceneObjects:
+        """The ground-truth ones of :meth:`objects` (agents, parked vehicles and any scenery
+        marked as ground truth), in the same order, without the rest of the scenery — what an
+        object-level observation needs, at a fraction of the cost."""
+        return self._objects(self._static_truth)
+
+    def _objects(self, static: SceneObjects) -> SceneObjects:
+        """The agents' boxes, map frame, followed by ``static``."""
         fleet = self._fleet
         nf = len(fleet)
         others = self._others()
@@ -513,7 +525,6 @@ class World:
                 vels[k, :2] = agent.velocity()
             centers[k] = (x, y, agent.size_lwh_m[2] / 2)
             yaws[k] = yaw
-        static = self._static[0]
         return SceneObjects(
             object_ids=np.concatenate(
                 [
@@ -555,3 +566,19 @@ class World:
             traffic_lights=self.lights.states(self.time_s),
             map_from_base=self.map_from_base(),
         )
+
+
+def _subset(objs: SceneObjects, keep: npt.NDArray[np.bool_]) -> SceneObjects:
+    """The rows of ``objs`` where ``keep`` is true, in order."""
+    idx = np.flatnonzero(keep)
+    return SceneObjects(
+        object_ids=objs.object_ids[idx],
+        classes=tuple(objs.classes[i] for i in idx.tolist()),
+        centers=objs.centers[idx],
+        sizes=objs.sizes[idx],
+        yaws_rad=objs.yaws_rad[idx],
+        velocities=objs.velocities[idx],
+        colors=objs.colors[idx],
+        reflectivity=objs.reflectivity[idx],
+        is_ground_truth=objs.is_ground_truth[idx],
+    )

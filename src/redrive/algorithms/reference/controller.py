@@ -111,19 +111,32 @@ def path_speed_mps(path: PlannedPath, t_s: float) -> float:
     """The speed (m/s) the waypoints imply around ``t_s`` (seconds after ``path.stamp_ns``):
     arc length over time across one waypoint step centred on ``t_s`` (clipped to the path's
     times); 0 for a path of fewer than two distinct times."""
+    return _path_speeds_mps(path, (t_s,))[0]
+
+
+def _path_speeds_mps(path: PlannedPath, times_s: tuple[float, ...]) -> list[float]:
+    """:func:`path_speed_mps` at each of ``times_s``: the path's arc lengths and step worked out
+    once, one interpolation for all the times (the same values, time by time)."""
     wp = path.waypoints
     if len(wp) < 2 or wp[-1, 3] - wp[0, 3] <= 0.0:
-        return 0.0
+        return [0.0] * len(times_s)
     times = wp[:, 3]
     seg = np.linalg.norm(np.diff(wp[:, :3], axis=0), axis=1)
     s = np.concatenate([[0.0], np.cumsum(seg)])
     steps = np.diff(times)
     half = 0.5 * float(np.median(steps[steps > 0]))
-    t0 = min(max(t_s - half, times[0]), times[-1] - 2.0 * half)
-    t0 = max(t0, times[0])
-    t1 = min(t0 + 2.0 * half, times[-1])
-    s0, s1 = np.interp([t0, t1], times, s)
-    return float((s1 - s0) / (t1 - t0)) if t1 > t0 else 0.0
+    first, last = times[0], times[-1]
+    ends = []
+    for t_s in times_s:
+        t0 = min(max(t_s - half, first), last - 2.0 * half)
+        t0 = max(t0, first)
+        ends += [t0, min(t0 + 2.0 * half, last)]
+    s_at = np.interp(ends, times, s)
+    out = []
+    for i in range(0, len(ends), 2):
+        t0, t1 = ends[i], ends[i + 1]
+        out.append(float((s_at[i + 1] - s_at[i]) / (t1 - t0)) if t1 > t0 else 0.0)
+    return out
 
 
 class PurePursuitPid(Algorithm):
@@ -244,11 +257,11 @@ class PurePursuitPid(Algorithm):
         )
         age_s = (frame.stamp_ns - path.stamp_ns) * 1e-9
         t_preview_s = self.speed_preview_s + age_s
-        target_mps = path_speed_mps(path, t_preview_s)
-        # the plan's acceleration around the preview time (m/s², over one second)
-        plan_accel_mps2 = path_speed_mps(path, t_preview_s + 0.5) - path_speed_mps(
-            path, t_preview_s - 0.5
+        target_mps, ahead_mps, behind_mps = _path_speeds_mps(
+            path, (t_preview_s, t_preview_s + 0.5, t_preview_s - 0.5)
         )
+        # the plan's acceleration around the preview time (m/s², over one second)
+        plan_accel_mps2 = ahead_mps - behind_mps
         steady = abs(plan_accel_mps2) <= self.integrate_below_mps2
         throttle, brake = self._longitudinal(
             frame.stamp_ns, target_mps, speed_mps, integrate=steady

@@ -60,7 +60,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from types import MappingProxyType
 from typing import Any, ClassVar
 
@@ -69,9 +69,10 @@ import numpy.typing as npt
 
 from redrive.algorithms.base import VEHICLE_STATE, Algorithm, Input, Role, StageOutputs
 from redrive.algorithms.reference._kernels import project_on_segments
+from redrive.algorithms.reference._plan_kernels import idm_profile
 from redrive.errors import AlgorithmError, ConfigError
-from redrive.geometry.boxes import box_corners
-from redrive.types import DetectedObject, Frame, PlannedPath, VehicleState
+from redrive.geometry.boxes import BOX_CORNER_SIGNS
+from redrive.types import DetectedObject, Frame, PlannedPath, SensorType, VehicleState
 
 __all__ = ["IdmPlanner", "Polyline"]
 
@@ -277,6 +278,14 @@ class IdmPlanner(Algorithm):
     def reset(self) -> None:
         self._route_s_m = None
 
+    def bind(self, sensors: Mapping[str, SensorType], *, extras: Iterable[str] = ()) -> None:
+        """As :meth:`Algorithm.bind`, then one made-up plan's profile and projection, so that
+        numba loads the planner's kernels from the cache (or compiles them after an install)
+        here, before a run's first frame, not inside that frame's latency."""
+        super().bind(sensors, extras=extras)
+        self._profile(1.0, np.array([30.0]), np.array([0.0]))
+        Polyline([[0.0, 0.0], [1.0, 0.0]]).project([[0.5, 0.5]])
+
     # -- the step -----------------------------------------------------------------------------
 
     def step(self, frame: Frame, upstream: StageOutputs) -> PlannedPath:
@@ -374,10 +383,27 @@ class IdmPlanner(Algorithm):
         the corridor ahead of the front bumper."""
         if not objects or path.length_m <= 0.0:
             return np.zeros(0), np.zeros(0)
-        corners = np.concatenate([box_corners(o.box)[:4, :2] for o in objects])
-        s, lat, _ = path.project(corners)
-        s = s.reshape(-1, 4)
-        lat = lat.reshape(-1, 4)
+        n = len(objects)
+        boxes = [o.box for o in objects]
+        # every box's corners in one stacked matmul (box_corners' product, slice by slice: the
+        # same values), then the 4·n bottom corners and the n centres projected in one call
+        rotations = np.zeros((n, 3, 3))
+        for i, box in enumerate(boxes):
+            c, sn = math.cos(box.yaw_rad), math.sin(box.yaw_rad)
+            rotations[i, 0, 0], rotations[i, 0, 1], rotations[i, 1, 0], rotations[i, 1, 1] = (
+                c,
+                sn,
+                -sn,
+                c,
+            )
+        rotations[:, 2, 2] = 1.0
+        centers = np.array([box.center for box in boxes])
+        local = BOX_CORNER_SIGNS * (0.5 * np.array([box.size for box in boxes]))[:, None, :]
+        corners = (local @ rotations + centers[:, None, :])[:, :4, :2]
+        points = np.concatenate([corners.reshape(-1, 2), centers[:, :2]])
+        s_all, lat_all, _ = path.project(points)
+        s = s_all[: 4 * n].reshape(-1, 4)
+        lat = lat_all[: 4 * n].reshape(-1, 4)
         s_lo, s_hi = s.min(axis=1), s.max(axis=1)
         in_corridor = (lat.min(axis=1) < self.corridor_half_width_m) & (
             lat.max(axis=1) > -self.corridor_half_width_m
@@ -386,69 +412,32 @@ class IdmPlanner(Algorithm):
         keep = np.flatnonzero(in_corridor & ahead)
         if len(keep) == 0:
             return np.zeros(0), np.zeros(0)
-        centers = np.array([objects[i].box.center[:2] for i in keep])
-        s_c, _, _ = path.project(centers)
-        tangents = path.tangents_at(s_c)
+        tangents = path.tangents_at(s_all[4 * n :][keep])
         vel = np.array([objects[i].velocity[:2] for i in keep])
         speed = np.maximum((vel * tangents).sum(axis=1), 0.0)
         logger.debug("%s: %d object(s) in the path corridor", self.name, len(keep))
         return s_lo[keep], speed
 
-    def _idm(self, v: float, gap_m: float, v_lead: float) -> float:
-        free = 1.0 - (max(v, 0.0) / self.v0_mps) ** self.delta
-        interaction = 0.0
-        if math.isfinite(gap_m):
-            s_star = self.s0_m + max(
-                0.0,
-                v * self.headway_s
-                + v * (v - v_lead) / (2.0 * math.sqrt(self.a_mps2 * self.b_mps2)),
-            )
-            interaction = (s_star / max(gap_m, 1e-3)) ** 2
-        accel = float(self.a_mps2 * (free - interaction))
-        return min(max(accel, -self.max_decel_mps2), self.a_mps2)
-
     def _profile(self, speed_mps: float, leaders_s: F64, leaders_v: F64) -> tuple[F64, F64]:
-        """Times (s) and arc lengths of the rear axle along the path (m) of the IDM plan."""
+        """Times (s) and arc lengths of the rear axle along the path (m) of the IDM plan: the
+        forward integration is one compiled call (:func:`._plan_kernels.idm_profile`)."""
         n = max(1, round(self.horizon_s / self.dt_s))
         dt = self.dt_s
         t_out = np.arange(n + 1, dtype=np.float64) * dt
-        s_out = np.zeros(n + 1)
-        s, v = 0.0, max(speed_mps, 0.0)
-        # the few leaders as Python floats: two numpy calls per step on (≤ a handful of) leaders
-        # cost more than the arithmetic; the same float64 operations in the same order, and
-        # _first_min chooses as np.argmin does
-        lead_s, lead_v = leaders_s.tolist(), leaders_v.tolist()
-        ids = range(len(lead_s))
-        front = self.front_offset_m
-        for k in range(n):
-            t = k * dt
-            gap, v_lead, j = math.inf, 0.0, -1
-            if lead_s:
-                gaps = [lead_s[i] + lead_v[i] * t - (s + front) for i in ids]
-                j = _first_min(gaps)
-                gap, v_lead = gaps[j], lead_v[j]
-            accel = self._idm(v, gap, v_lead)
-            if v + accel * dt < 0.0:  # stops within the step
-                s_new, v_new = s - v * v / (2.0 * accel), 0.0
-            else:
-                s_new, v_new = s + v * dt + 0.5 * accel * dt * dt, v + accel * dt
-            if j >= 0:  # never closer than s0 to any obstacle
-                limits = [lead_s[i] + lead_v[i] * (t + dt) - front - self.s0_m for i in ids]
-                jj = _first_min(limits)
-                limit = max(limits[jj], s)
-                if s_new > limit:
-                    s_new, v_new = limit, min(v_new, lead_v[jj])
-            s, v = s_new, v_new
-            s_out[k + 1] = s
+        s_out = idm_profile(
+            float(speed_mps),
+            np.ascontiguousarray(leaders_s, dtype=np.float64),
+            np.ascontiguousarray(leaders_v, dtype=np.float64),
+            n,
+            dt,
+            self.front_offset_m,
+            self.s0_m,
+            self.v0_mps,
+            self.delta,
+            self.headway_s,
+            self.a_mps2,
+            self.b_mps2,
+            self.max_decel_mps2,
+            2.0,
+        )
         return t_out, s_out
-
-
-def _first_min(values: list[float]) -> int:
-    """The index np.argmin gives: the first NaN if there is one, else the first minimum."""
-    best = 0
-    for i, value in enumerate(values):
-        if math.isnan(value):
-            return i
-        if value < values[best]:
-            best = i
-    return best
