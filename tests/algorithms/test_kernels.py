@@ -16,7 +16,7 @@ from scipy import ndimage
 from redrive.algorithms.reference import _box_fit
 from redrive.algorithms.reference._clusters import Clusters, cluster_points
 from redrive.algorithms.reference._ground import GroundGrid
-from redrive.algorithms.reference._kernels import label_clusters
+from redrive.algorithms.reference._kernels import label_clusters, plane_hypotheses
 from redrive.algorithms.reference.detector import ClusterDetector
 from redrive.algorithms.reference.planner import Polyline
 
@@ -275,3 +275,26 @@ def test_closeness_scores_equal_the_former_numpy_broadcasting(seed: int) -> None
         np.testing.assert_array_equal(
             _box_fit._scores(xy, cid, starts, theta, "closeness"), expected
         )
+
+
+def test_plane_hypotheses_equal_the_former_numpy_steps() -> None:
+    """Random triples, repeated points (no plane) and steep planes included."""
+    rng = np.random.default_rng(42)
+    kept = []
+    for n in (3, 50, 1200):
+        x, y = rng.normal(0.0, 30.0, (2, n))
+        z = np.where(rng.random(n) < 0.2, rng.normal(0.0, 30.0, n), rng.normal(0.0, 0.3, n))
+        tri = rng.integers(0, n, size=(64, 3))
+        tri[:4, 1] = tri[:4, 0]
+        p = np.stack([x[tri], y[tri], z[tri]], axis=-1)
+        normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        ok = np.abs(normal[:, 2]) > 0.9 * np.maximum(np.linalg.norm(normal, axis=1), 1e-12)
+        normal, p0 = normal[ok], p[ok, 0]
+        a_h = -normal[:, 0] / normal[:, 2]
+        b_h = -normal[:, 1] / normal[:, 2]
+        c_h = p0[:, 2] - a_h * p0[:, 0] - b_h * p0[:, 1]
+        got = plane_hypotheses(x, y, z, tri)
+        kept.append(got[0].size)
+        for have, want in zip(got, (a_h, b_h, c_h), strict=True):
+            np.testing.assert_array_equal(have, want)
+    assert 0 < kept[-1] < 64  # some planes kept, some refused

@@ -86,7 +86,7 @@ from redrive.algorithms.reference._clusters import Clusters, cluster_points
 from redrive.algorithms.reference._ground import GroundGrid, ground_heights
 from redrive.algorithms.reference._kernels import crop_cell_minima, split_obstacles
 from redrive.errors import AlgorithmError, ConfigError
-from redrive.types import Box3D, DetectedObject, Frame, ObjectClass, PointCloud, SensorType
+from redrive.types import DetectedObject, Frame, ObjectClass, PointCloud, SensorType
 
 __all__ = ["ClusterDetector"]
 
@@ -391,21 +391,17 @@ class ClusterDetector(Algorithm):
         )
         classes = [*self._classes, ObjectClass.UNKNOWN]
         z_mid = 0.5 * (z_top + z_ground)
-        out: list[DetectedObject] = []
-        for i in np.flatnonzero(~scenery).tolist():
-            yaw_i = float(yaw[i])
-            out.append(
-                DetectedObject(
-                    object_id=-1,
-                    object_class=classes[int(which[i])],
-                    confidence=float(np.clip(confidence[i], 0.0, 1.0)),
-                    box=Box3D(
-                        center=np.array([center[i, 0], center[i, 1], z_mid[i]]),
-                        size=np.array([length[i], width[i], height[i]]),
-                        yaw_rad=yaw_i,
-                    ),
-                    orientation=np.array([yaw_i, 0.0, 0.0]),
-                )
-            )
+        keep = np.flatnonzero(~scenery)
+        yaw_kept = yaw[keep]
+        out = DetectedObject.many(
+            object_classes=[classes[w] for w in which[keep].tolist()],
+            confidences=np.clip(confidence[keep], 0.0, 1.0),
+            centers=np.stack([center[keep, 0], center[keep, 1], z_mid[keep]], axis=1),
+            sizes=np.stack([length[keep], width[keep], height[keep]], axis=1),
+            yaws_rad=yaw_kept,
+            orientations=np.stack(
+                [yaw_kept, np.zeros_like(yaw_kept), np.zeros_like(yaw_kept)], axis=1
+            ),
+        )
         logger.debug("ClusterDetector: %d clusters, %d objects", k, len(out))
         return out
