@@ -16,7 +16,11 @@ from scipy import ndimage
 from redrive.algorithms.reference import _box_fit
 from redrive.algorithms.reference._clusters import Clusters, cluster_points
 from redrive.algorithms.reference._ground import GroundGrid
-from redrive.algorithms.reference._kernels import label_clusters, plane_hypotheses
+from redrive.algorithms.reference._kernels import (
+    label_clusters,
+    plane_hypotheses,
+    subsample_clusters,
+)
 from redrive.algorithms.reference.detector import ClusterDetector
 from redrive.algorithms.reference.planner import Polyline
 
@@ -298,3 +302,25 @@ def test_plane_hypotheses_equal_the_former_numpy_steps() -> None:
         for have, want in zip(got, (a_h, b_h, c_h), strict=True):
             np.testing.assert_array_equal(have, want)
     assert 0 < kept[-1] < 64  # some planes kept, some refused
+
+
+def test_subsample_clusters_equals_the_former_numpy_steps() -> None:
+    rng = np.random.default_rng(7)
+    counts = rng.integers(1, 400, 30).astype(np.intp)
+    counts[:3] = (96, 97, 192)
+    starts = np.r_[0, np.cumsum(counts)[:-1]].astype(np.intp)
+    m = int(counts.sum()) + 50
+    index = rng.permutation(m)[: counts.sum()].astype(np.intp)
+    ox, oy = rng.normal(0.0, 20.0, (2, m)).astype(np.float32)
+    cid = np.repeat(np.arange(counts.size), counts)
+    rank = np.arange(index.size) - starts[cid]
+    stride = np.maximum(1, -(-counts // 96))
+    sub = index[rank % stride[cid] == 0]
+    sub_counts = -(-counts // stride)
+    want_starts = np.r_[0, np.cumsum(sub_counts)[:-1]].astype(np.intp)
+    want_xy = np.stack([ox[sub], oy[sub]], axis=1).astype(np.float64)
+    xy, sub_starts = subsample_clusters(ox, oy, index, starts, counts, 96)
+    np.testing.assert_array_equal(xy, want_xy)
+    np.testing.assert_array_equal(sub_starts, want_starts)
+    assert xy.dtype == np.float64
+    assert xy.shape[0] < index.size  # some clusters were thinned

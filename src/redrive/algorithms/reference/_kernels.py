@@ -14,6 +14,7 @@ release the GIL (``nogil``), so a detector step can overlap another thread's wor
   them, filtered by size and tall points, with the points grouped by cluster in index order.
 * :func:`ground_sample`, :func:`ground_fill`, :func:`plane_hypotheses`, :func:`ransac_best`,
   :func:`plane_inliers` — the ground step (:mod:`._ground`).
+* :func:`subsample_clusters` — the even subsample of each cluster the box search fits.
 * :func:`closeness_terms` — the box search's per-point criterion terms (:mod:`._box_fit`).
 * :func:`project_on_segments` — the planner's projection of points onto its path.
 """
@@ -38,12 +39,14 @@ __all__ = [
     "project_on_segments",
     "ransac_best",
     "split_obstacles",
+    "subsample_clusters",
 ]
 
 _F = TypeVar("_F", bound=Callable[..., Any])
 _F32 = npt.NDArray[np.float32]
 _I64 = npt.NDArray[np.int64]
 _F64 = npt.NDArray[np.float64]
+_IP = npt.NDArray[np.intp]
 
 
 def _jit(fn: _F) -> _F:
@@ -419,6 +422,36 @@ def plane_inliers(  # noqa: PLR0917
     for k in range(x.shape[0]):
         out[k] = abs(z[k] - (a * x[k] + b * y[k] + c)) < band
     return out
+
+
+@_jit
+def subsample_clusters(  # noqa: PLR0917
+    x: _F32, y: _F32, index: _IP, starts: _IP, counts: _IP, max_points: int
+) -> tuple[_F64, _IP]:
+    """An even subsample of at most ``max_points`` points per cluster: every ``stride``-th point
+    of cluster ``c`` (``stride = max(1, ceil(counts[c] / max_points))``; its points are
+    ``index[p]`` for the positions ``p`` of the cluster, ranked from ``starts[c]``), as float64
+    x, y (S, 2) grouped by cluster, and each cluster's first row."""
+    k = counts.shape[0]
+    total = 0
+    for c in range(k):
+        stride = max(1, -(-counts[c] // max_points))
+        total += -(-counts[c] // stride)
+    xy = np.empty((total, 2))
+    sub_starts = np.empty(k, dtype=np.intp)
+    p = 0
+    s = 0
+    for c in range(k):
+        stride = max(1, -(-counts[c] // max_points))
+        sub_starts[c] = s
+        for _ in range(counts[c]):
+            if (p - starts[c]) % stride == 0:
+                i = index[p]
+                xy[s, 0] = np.float64(x[i])
+                xy[s, 1] = np.float64(y[i])
+                s += 1
+            p += 1
+    return xy, sub_starts
 
 
 @_jit

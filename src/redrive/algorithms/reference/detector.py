@@ -84,7 +84,11 @@ from redrive.algorithms.base import Algorithm, Input, Role, StageOutputs
 from redrive.algorithms.reference._box_fit import collinear_walls, complete_boxes, fit_boxes
 from redrive.algorithms.reference._clusters import Clusters, cluster_points
 from redrive.algorithms.reference._ground import GroundGrid, ground_heights
-from redrive.algorithms.reference._kernels import crop_cell_minima, split_obstacles
+from redrive.algorithms.reference._kernels import (
+    crop_cell_minima,
+    split_obstacles,
+    subsample_clusters,
+)
 from redrive.errors import AlgorithmError, ConfigError
 from redrive.types import DetectedObject, Frame, ObjectClass, PointCloud, SensorType
 
@@ -352,13 +356,9 @@ class ClusterDetector(Algorithm):
         height = z_top - z_ground
         # An even subsample of at most fit_max_points per cluster for the box search.
         k = starts.size
-        cid = np.repeat(np.arange(k), counts)
-        rank = np.arange(index.size) - starts[cid]
-        stride = np.maximum(1, -(-counts // int(self.config["fit_max_points"])))
-        sub = index[rank % stride[cid] == 0]
-        sub_counts = -(-counts // stride)
-        sub_starts = np.r_[0, np.cumsum(sub_counts)[:-1]].astype(np.intp)
-        xy = np.stack([ox[sub], oy[sub]], axis=1).astype(np.float64)
+        xy, sub_starts = subsample_clusters(
+            ox, oy, index, starts, counts, int(self.config["fit_max_points"])
+        )
         fit = fit_boxes(xy, sub_starts, criterion=str(self.config["box_criterion"]))
 
         length, width = fit.length_m, fit.width_m
