@@ -15,7 +15,8 @@ release the GIL (``nogil``), so a detector step can overlap another thread's wor
 * :func:`ground_sample`, :func:`ground_fill`, :func:`plane_hypotheses`, :func:`ransac_best`,
   :func:`plane_inliers` — the ground step (:mod:`._ground`).
 * :func:`subsample_clusters` — the even subsample of each cluster the box search fits.
-* :func:`closeness_terms` — the box search's per-point criterion terms (:mod:`._box_fit`).
+* :func:`closeness_terms` — the box search's per-point criterion terms, and :func:`grow_boxes`,
+  the growing of partly seen boxes to their class's size (:mod:`._box_fit`).
 * :func:`project_on_segments` — the planner's projection of points onto its path.
 """
 
@@ -33,6 +34,7 @@ __all__ = [
     "crop_cell_minima",
     "ground_fill",
     "ground_sample",
+    "grow_boxes",
     "label_clusters",
     "plane_hypotheses",
     "plane_inliers",
@@ -452,6 +454,60 @@ def subsample_clusters(  # noqa: PLR0917
                 s += 1
             p += 1
     return xy, sub_starts
+
+
+@_jit
+def grow_boxes(  # noqa: PLR0917
+    center_xy: _F64,
+    length_m: _F64,
+    width_m: _F64,
+    yaw_rad: _F64,
+    prior_length_m: _F64,
+    prior_width_m: _F64,
+    away: _F64,
+    cos: _F64,
+    sin: _F64,
+    distance: _F64,
+) -> tuple[_F64, _F64, _F64, _F64]:
+    """:func:`._box_fit.complete_boxes`' arithmetic per box, in the numpy version's order
+    (``away`` = centre − sensor, ``cos``/``sin`` of the yaw and ``distance`` = max(|away|, 1e-9)
+    come from numpy)."""
+    k = length_m.shape[0]
+    center = center_xy.copy()
+    length = length_m.copy()
+    width = width_m.copy()
+    turned = yaw_rad.copy()
+    half_pi = 0.5 * np.pi
+    for i in range(k):
+        pl, pw = prior_length_m[i], prior_width_m[i]
+        seen_l, seen_w = length_m[i], width_m[i]
+        has = np.isfinite(pl) and np.isfinite(pw)
+        end_view = has and seen_l <= pw + 0.4 and pl > seen_l
+        side_view = has and not end_view and seen_w < pw
+        ax, ay = away[i, 0], away[i, 1]
+        c, s = cos[i], sin[i]
+        n0 = -s
+        sign = 1.0 if (n0 * ax) + (c * ay) >= 0.0 else -1.0
+        grow_end = pl - seen_w if end_view else 0.0
+        grow_side = pw - seen_w if side_view else 0.0
+        grow = 0.5 * (grow_end + grow_side)
+        center[i, 0] += (sign * n0) * grow
+        center[i, 1] += (sign * c) * grow
+        along = (c * ax) + (s * ay)
+        oblique = has and not end_view and seen_l < pl and abs(along) >= 0.5 * distance[i]
+        grow_len = 0.5 * (pl - seen_l if oblique else 0.0)
+        ahead = 1.0 if along >= 0.0 else -1.0
+        center[i, 0] += (ahead * c) * grow_len
+        center[i, 1] += (ahead * s) * grow_len
+        if end_view or oblique:
+            length[i] = pl
+        if end_view:
+            width[i] = seen_l
+        elif side_view:
+            width[i] = pw
+        t = yaw_rad[i] + half_pi if end_view else yaw_rad[i]
+        turned[i] = t - np.pi if t > half_pi else t
+    return center, length, width, turned
 
 
 @_jit
