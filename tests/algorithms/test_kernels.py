@@ -16,7 +16,11 @@ from scipy import ndimage
 from redrive.algorithms.reference import _box_fit
 from redrive.algorithms.reference._clusters import Clusters, cluster_points
 from redrive.algorithms.reference._ground import GroundGrid
-from redrive.algorithms.reference._kernels import label_clusters
+from redrive.algorithms.reference._kernels import (
+    label_clusters,
+    plane_hypotheses,
+    subsample_clusters,
+)
 from redrive.algorithms.reference.detector import ClusterDetector
 from redrive.algorithms.reference.planner import Polyline
 
@@ -275,3 +279,117 @@ def test_closeness_scores_equal_the_former_numpy_broadcasting(seed: int) -> None
         np.testing.assert_array_equal(
             _box_fit._scores(xy, cid, starts, theta, "closeness"), expected
         )
+
+
+def test_plane_hypotheses_equal_the_former_numpy_steps() -> None:
+    """Random triples, repeated points (no plane) and steep planes included."""
+    rng = np.random.default_rng(42)
+    kept = []
+    for n in (3, 50, 1200):
+        x, y = rng.normal(0.0, 30.0, (2, n))
+        z = np.where(rng.random(n) < 0.2, rng.normal(0.0, 30.0, n), rng.normal(0.0, 0.3, n))
+        tri = rng.integers(0, n, size=(64, 3))
+        tri[:4, 1] = tri[:4, 0]
+        p = np.stack([x[tri], y[tri], z[tri]], axis=-1)
+        normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        ok = np.abs(normal[:, 2]) > 0.9 * np.maximum(np.linalg.norm(normal, axis=1), 1e-12)
+        normal, p0 = normal[ok], p[ok, 0]
+        a_h = -normal[:, 0] / normal[:, 2]
+        b_h = -normal[:, 1] / normal[:, 2]
+        c_h = p0[:, 2] - a_h * p0[:, 0] - b_h * p0[:, 1]
+        got = plane_hypotheses(x, y, z, tri)
+        kept.append(got[0].size)
+        for have, want in zip(got, (a_h, b_h, c_h), strict=True):
+            np.testing.assert_array_equal(have, want)
+    assert 0 < kept[-1] < 64  # some planes kept, some refused
+
+
+def test_subsample_clusters_equals_the_former_numpy_steps() -> None:
+    rng = np.random.default_rng(7)
+    counts = rng.integers(1, 400, 30).astype(np.intp)
+    counts[:3] = (96, 97, 192)
+    starts = np.r_[0, np.cumsum(counts)[:-1]].astype(np.intp)
+    m = int(counts.sum()) + 50
+    index = rng.permutation(m)[: counts.sum()].astype(np.intp)
+    ox, oy = rng.normal(0.0, 20.0, (2, m)).astype(np.float32)
+    cid = np.repeat(np.arange(counts.size), counts)
+    rank = np.arange(index.size) - starts[cid]
+    stride = np.maximum(1, -(-counts // 96))
+    sub = index[rank % stride[cid] == 0]
+    sub_counts = -(-counts // stride)
+    want_starts = np.r_[0, np.cumsum(sub_counts)[:-1]].astype(np.intp)
+    want_xy = np.stack([ox[sub], oy[sub]], axis=1).astype(np.float64)
+    xy, sub_starts = subsample_clusters(ox, oy, index, starts, counts, 96)
+    np.testing.assert_array_equal(xy, want_xy)
+    np.testing.assert_array_equal(sub_starts, want_starts)
+    assert xy.dtype == np.float64
+    assert xy.shape[0] < index.size  # some clusters were thinned
+
+
+def _reference_complete_boxes(
+    center_xy: npt.NDArray[np.float64],
+    length_m: npt.NDArray[np.float64],
+    width_m: npt.NDArray[np.float64],
+    yaw_rad: npt.NDArray[np.float64],
+    *,
+    prior_length_m: npt.NDArray[np.float64],
+    prior_width_m: npt.NDArray[np.float64],
+    sensor_xy: tuple[float, float],
+) -> tuple[npt.NDArray[np.float64], ...]:
+    """The former numpy version of _box_fit.complete_boxes."""
+    center = center_xy.copy()
+    length, width, yaw = length_m.copy(), width_m.copy(), yaw_rad.copy()
+    has = np.isfinite(prior_length_m) & np.isfinite(prior_width_m)
+    end_view = has & (length_m <= prior_width_m + 0.4) & (prior_length_m > length_m)
+    side_view = has & ~end_view & (width_m < prior_width_m)
+    away = center_xy - np.asarray(sensor_xy, dtype=np.float64)
+    normal = np.stack([-np.sin(yaw_rad), np.cos(yaw_rad)], axis=1)
+    sign = np.where(np.sum(normal * away, axis=1) >= 0.0, 1.0, -1.0)[:, None]
+    grow_end = np.where(end_view, prior_length_m - width_m, 0.0)
+    grow_side = np.where(side_view, prior_width_m - width_m, 0.0)
+    center += sign * normal * (0.5 * (grow_end + grow_side))[:, None]
+    axis = np.stack([np.cos(yaw_rad), np.sin(yaw_rad)], axis=1)
+    along = np.sum(axis * away, axis=1)
+    distance = np.maximum(np.hypot(away[:, 0], away[:, 1]), 1e-9)
+    oblique = has & ~end_view & (length_m < prior_length_m) & (np.abs(along) >= 0.5 * distance)
+    grow_len = np.where(oblique, prior_length_m - length_m, 0.0)
+    center += np.where(along >= 0.0, 1.0, -1.0)[:, None] * axis * (0.5 * grow_len)[:, None]
+    length = np.where(end_view | oblique, prior_length_m, length)
+    width = np.where(end_view, length_m, np.where(side_view, prior_width_m, width))
+    turned = np.where(end_view, yaw + 0.5 * np.pi, yaw)
+    turned = np.where(turned > 0.5 * np.pi, turned - np.pi, turned)
+    return center, length, width, turned
+
+
+def test_complete_boxes_equals_the_former_numpy_steps() -> None:
+    rng = np.random.default_rng(11)
+    k = 400
+    center = rng.normal(0.0, 30.0, (k, 2))
+    length = rng.uniform(0.1, 12.0, k)
+    width = np.minimum(length, rng.uniform(0.05, 3.0, k))
+    yaw = rng.uniform(-0.5 * np.pi, 0.5 * np.pi, k)
+    prior = np.array([[4.5, 1.8], [10.0, 2.5], [np.nan, np.nan]])[rng.integers(0, 3, k)]
+    center[:4] = (1.2, 0.0)  # at the sensor
+    sensor = (1.2, 0.0)
+    got = _box_fit.complete_boxes(
+        center,
+        length,
+        width,
+        yaw,
+        prior_length_m=prior[:, 0],
+        prior_width_m=prior[:, 1],
+        sensor_xy=sensor,
+    )
+    want = _reference_complete_boxes(
+        center,
+        length,
+        width,
+        yaw,
+        prior_length_m=prior[:, 0],
+        prior_width_m=prior[:, 1],
+        sensor_xy=sensor,
+    )
+    for have, ref in zip(got, want, strict=True):
+        np.testing.assert_array_equal(have, ref)
+    assert (got[1] != length).sum() > 20  # some boxes grew
+    assert (got[3] != yaw).sum() > 5  # some turned

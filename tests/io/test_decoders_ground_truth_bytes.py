@@ -132,3 +132,34 @@ def test_unusual_bytes_are_deserialised_and_broken_arrays_refused(
         GroundTruthObjectArrayDecoder().decode(unparallel, DESERIALIZE)
     with pytest.raises(UnsupportedMessageError, match="1 detections but 0 velocities"):
         _deserialised(unparallel, monkeypatch)
+
+
+def test_columns_equal_deserialisation_for_any_quaternion(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The byte path builds its objects as columns (its own Euler angles): bit-equal to the
+    deserialised path's ``euler_from_quaternion`` for random, gimbal-locked and unnormalised
+    quaternions; an unusable box is refused with the same error either way."""
+    rng = np.random.default_rng(15)
+    quats = [tuple(q) for q in rng.normal(size=(60, 4)).tolist()]
+    h = 0.5**0.5
+    quats += [
+        (0.0, h, 0.0, h),
+        (0.0, -h, 0.0, h),
+        (0.1, 0.7, -0.1, 0.7),
+        (0, 0, 0, 0),
+        (0, 0, 0, 3),
+    ]
+    one = {"frame": "", "results": [("car", 0.5), ("truck", 0.9)], "id": "car-3"}
+    one |= {"position": (1.0, 2.0, 3.0), "velocity": (1.0, 0.0, -2.0), "points": 3, "visible": 0}
+    objects = [one | {"orientation": q, "size": (4.0, -2.0, 1.5)} for q in quats]
+    message = _message(objects, little_endian=True, stamp_ns=5)
+    got = GroundTruthObjectArrayDecoder().decode(message, lambda m: pytest.fail("deserialised"))
+    assert _flat(got) == _flat(_deserialised(message, monkeypatch))
+    assert got.value[-1].orientation.flags.writeable is False
+    for bad in ({"orientation": (0.0, 0.0, 1e-13, 0.0)}, {"size": (1.0, float("inf"), 1.0)}):
+        broken = _message([objects[0], objects[1] | bad], little_endian=True, stamp_ns=5)
+        with pytest.raises(UnsupportedMessageError) as by_bytes:
+            GroundTruthObjectArrayDecoder().decode(broken, lambda m: pytest.fail("deserialised"))
+        with pytest.raises(UnsupportedMessageError) as by_rosbags:
+            _deserialised(broken, monkeypatch)
+        assert "object box is invalid" in str(by_bytes.value)
+        assert str(by_bytes.value) == str(by_rosbags.value)

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from redrive.algorithms.reference._kernels import closeness_terms
+from redrive.algorithms.reference._kernels import closeness_terms, grow_boxes
 
 __all__ = ["BoxFit", "collinear_walls", "complete_boxes", "fit_boxes"]
 
@@ -189,29 +189,21 @@ def complete_boxes(
 
     Returns centre (K, 2), length, width, yaw (-π/2, π/2], in the input's frame and units.
     """
-    center = center_xy.copy()
-    length, width, yaw = length_m.copy(), width_m.copy(), yaw_rad.copy()
-    has = np.isfinite(prior_length_m) & np.isfinite(prior_width_m)
-    end_view = has & (length_m <= prior_width_m + 0.4) & (prior_length_m > length_m)
-    side_view = has & ~end_view & (width_m < prior_width_m)
     away = center_xy - np.asarray(sensor_xy, dtype=np.float64)
-    # Unit normal to the long side (direction of the short side), pointing away from the sensor.
-    normal = np.stack([-np.sin(yaw_rad), np.cos(yaw_rad)], axis=1)
-    sign = np.where(np.sum(normal * away, axis=1) >= 0.0, 1.0, -1.0)[:, None]
-    grow_end = np.where(end_view, prior_length_m - width_m, 0.0)
-    grow_side = np.where(side_view, prior_width_m - width_m, 0.0)
-    center += sign * normal * (0.5 * (grow_end + grow_side))[:, None]
-    axis = np.stack([np.cos(yaw_rad), np.sin(yaw_rad)], axis=1)
-    along = np.sum(axis * away, axis=1)
+    # sin, cos and hypot stay numpy's (a kernel's libm could round them otherwise)
     distance = np.maximum(np.hypot(away[:, 0], away[:, 1]), 1e-9)
-    oblique = has & ~end_view & (length_m < prior_length_m) & (np.abs(along) >= 0.5 * distance)
-    grow_len = np.where(oblique, prior_length_m - length_m, 0.0)
-    center += np.where(along >= 0.0, 1.0, -1.0)[:, None] * axis * (0.5 * grow_len)[:, None]
-    length = np.where(end_view | oblique, prior_length_m, length)
-    width = np.where(end_view, length_m, np.where(side_view, prior_width_m, width))
-    turned = np.where(end_view, yaw + 0.5 * np.pi, yaw)
-    turned = np.where(turned > 0.5 * np.pi, turned - np.pi, turned)
-    return center, length, width, turned
+    return grow_boxes(
+        center_xy,
+        length_m,
+        width_m,
+        yaw_rad,
+        np.ascontiguousarray(prior_length_m, dtype=np.float64),
+        np.ascontiguousarray(prior_width_m, dtype=np.float64),
+        away,
+        np.cos(yaw_rad),
+        np.sin(yaw_rad),
+        distance,
+    )
 
 
 def collinear_walls(

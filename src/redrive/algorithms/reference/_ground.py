@@ -31,6 +31,7 @@ import numpy.typing as npt
 from redrive.algorithms.reference._kernels import (
     ground_fill,
     ground_sample,
+    plane_hypotheses,
     plane_inliers,
     ransac_best,
 )
@@ -99,18 +100,11 @@ def fit_plane(x: _F64, y: _F64, z: _F64) -> tuple[float, float, float] | None:
     tri = _generator().integers(0, n, size=(_RANSAC_HYPOTHESES, 3))
     every = max(1, n // _RANSAC_MAX_SAMPLES)
     xs, ys, zs = x[::every], y[::every], z[::every]
-    p = np.stack([x[tri], y[tri], z[tri]], axis=-1)  # (H, 3, 3)
-    normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])  # (H, 3)
     # Only near-horizontal planes can be ground (normal within ~25° of +z).
-    norm = np.linalg.norm(normal, axis=1)
-    ok = np.abs(normal[:, 2]) > 0.9 * np.maximum(norm, 1e-12)
-    if not np.any(ok):
+    a_h, b_h, c_h = plane_hypotheses(x, y, z, tri)
+    if a_h.size == 0:
         a, b, c = 0.0, 0.0, float(np.median(z))
     else:
-        normal, p0 = normal[ok], p[ok, 0]
-        a_h = -normal[:, 0] / normal[:, 2]
-        b_h = -normal[:, 1] / normal[:, 2]
-        c_h = p0[:, 2] - a_h * p0[:, 0] - b_h * p0[:, 1]
         best = ransac_best(a_h, b_h, c_h, xs, ys, zs, _RANSAC_INLIER_M)
         a, b, c = float(a_h[best]), float(b_h[best]), float(c_h[best])
     inliers = plane_inliers(x, y, z, a, b, c, _RANSAC_INLIER_M)

@@ -12,9 +12,11 @@ release the GIL (``nogil``), so a detector step can overlap another thread's wor
 * :func:`label_clusters` — 8-connected components of the occupied cells of the BEV clustering
   grid, numbered in raster order of their first cell as :func:`scipy.ndimage.label` numbers
   them, filtered by size and tall points, with the points grouped by cluster in index order.
-* :func:`ground_sample`, :func:`ground_fill`, :func:`ransac_best`, :func:`plane_inliers` — the
-  ground step (:mod:`._ground`).
-* :func:`closeness_terms` — the box search's per-point criterion terms (:mod:`._box_fit`).
+* :func:`ground_sample`, :func:`ground_fill`, :func:`plane_hypotheses`, :func:`ransac_best`,
+  :func:`plane_inliers` — the ground step (:mod:`._ground`).
+* :func:`subsample_clusters` — the even subsample of each cluster the box search fits.
+* :func:`closeness_terms` — the box search's per-point criterion terms, and :func:`grow_boxes`,
+  the growing of partly seen boxes to their class's size (:mod:`._box_fit`).
 * :func:`project_on_segments` — the planner's projection of points onto its path.
 """
 
@@ -32,17 +34,21 @@ __all__ = [
     "crop_cell_minima",
     "ground_fill",
     "ground_sample",
+    "grow_boxes",
     "label_clusters",
+    "plane_hypotheses",
     "plane_inliers",
     "project_on_segments",
     "ransac_best",
     "split_obstacles",
+    "subsample_clusters",
 ]
 
 _F = TypeVar("_F", bound=Callable[..., Any])
 _F32 = npt.NDArray[np.float32]
 _I64 = npt.NDArray[np.int64]
 _F64 = npt.NDArray[np.float64]
+_IP = npt.NDArray[np.intp]
 
 
 def _jit(fn: _F) -> _F:
@@ -301,6 +307,17 @@ def ground_sample(
     where empty), and the x, y, z of the occupied cells whose own minimum is within ``margin`` of
     it (the plane's sample points, in row-major order; x, y the cell centres ``cx``, ``cy``)."""
     n0, n1 = low.shape
+    # the 3 × 3 minimum as a minimum over rows of the minimum over columns: the same set of
+    # values (no NaN: +inf where empty), so the same value, in 6 comparisons a cell, not 9
+    row = np.empty((n0, n1), dtype=np.float32)
+    for i in range(n0):
+        for j in range(n1):
+            m = low[i, j]
+            if j > 0:
+                m = min(m, low[i, j - 1])
+            if j + 1 < n1:
+                m = min(m, low[i, j + 1])
+            row[i, j] = m
     local = np.empty((n0, n1), dtype=np.float32)
     sx = np.empty(n0 * n1)
     sy = np.empty(n0 * n1)
@@ -308,10 +325,11 @@ def ground_sample(
     k = 0
     for i in range(n0):
         for j in range(n1):
-            m = low[i, j]
-            for ii in range(max(i - 1, 0), min(i + 2, n0)):
-                for jj in range(max(j - 1, 0), min(j + 2, n1)):
-                    m = min(m, low[ii, jj])
+            m = row[i, j]
+            if i > 0:
+                m = min(m, row[i - 1, j])
+            if i + 1 < n0:
+                m = min(m, row[i + 1, j])
             local[i, j] = m
             v = low[i, j]
             if np.isfinite(v) and v <= m + margin:
@@ -349,6 +367,37 @@ def ground_fill(  # noqa: PLR0917 - numba takes no keyword-only parameters
 
 
 @_jit
+def plane_hypotheses(x: _F64, y: _F64, z: _F64, tri: _I64) -> tuple[_F64, _F64, _F64]:
+    """The planes ``z = a·x + b·y + c`` through the point triples ``tri`` (H, 3) whose normal is
+    within ~25° of +z, in order: ``a``, ``b``, ``c`` (each ≤ H,).  The numpy steps they replace,
+    operation for operation: ``np.cross`` of the two edge vectors (each component a difference
+    of two rounded products), ``np.linalg.norm`` of the normal ((n0² + n1²) + n2²), the test
+    ``|n2| > 0.9·max(norm, 1e-12)``, ``a = -n0/n2``, ``b = -n1/n2``, ``c = (z0 - a·x0) - b·y0``."""
+    h = tri.shape[0]
+    a_h = np.empty(h)
+    b_h = np.empty(h)
+    c_h = np.empty(h)
+    k = 0
+    for i in range(h):
+        i0, i1, i2 = tri[i, 0], tri[i, 1], tri[i, 2]
+        x0, y0, z0 = x[i0], y[i0], z[i0]
+        ux, uy, uz = x[i1] - x0, y[i1] - y0, z[i1] - z0
+        vx, vy, vz = x[i2] - x0, y[i2] - y0, z[i2] - z0
+        n0 = uy * vz - uz * vy
+        n1 = uz * vx - ux * vz
+        n2 = ux * vy - uy * vx
+        norm = np.sqrt((n0 * n0 + n1 * n1) + n2 * n2)
+        if abs(n2) > 0.9 * (norm if norm > 1e-12 else 1e-12):
+            a = -n0 / n2
+            b = -n1 / n2
+            a_h[k] = a
+            b_h[k] = b
+            c_h[k] = (z0 - a * x0) - b * y0
+            k += 1
+    return a_h[:k], b_h[:k], c_h[:k]
+
+
+@_jit
 def ransac_best(  # noqa: PLR0917
     a_h: _F64, b_h: _F64, c_h: _F64, xs: _F64, ys: _F64, zs: _F64, band: float
 ) -> int:
@@ -375,6 +424,90 @@ def plane_inliers(  # noqa: PLR0917
     for k in range(x.shape[0]):
         out[k] = abs(z[k] - (a * x[k] + b * y[k] + c)) < band
     return out
+
+
+@_jit
+def subsample_clusters(  # noqa: PLR0917
+    x: _F32, y: _F32, index: _IP, starts: _IP, counts: _IP, max_points: int
+) -> tuple[_F64, _IP]:
+    """An even subsample of at most ``max_points`` points per cluster: every ``stride``-th point
+    of cluster ``c`` (``stride = max(1, ceil(counts[c] / max_points))``; its points are
+    ``index[p]`` for the positions ``p`` of the cluster, ranked from ``starts[c]``), as float64
+    x, y (S, 2) grouped by cluster, and each cluster's first row."""
+    k = counts.shape[0]
+    total = 0
+    for c in range(k):
+        stride = max(1, -(-counts[c] // max_points))
+        total += -(-counts[c] // stride)
+    xy = np.empty((total, 2))
+    sub_starts = np.empty(k, dtype=np.intp)
+    p = 0
+    s = 0
+    for c in range(k):
+        stride = max(1, -(-counts[c] // max_points))
+        sub_starts[c] = s
+        for _ in range(counts[c]):
+            if (p - starts[c]) % stride == 0:
+                i = index[p]
+                xy[s, 0] = np.float64(x[i])
+                xy[s, 1] = np.float64(y[i])
+                s += 1
+            p += 1
+    return xy, sub_starts
+
+
+@_jit
+def grow_boxes(  # noqa: PLR0917
+    center_xy: _F64,
+    length_m: _F64,
+    width_m: _F64,
+    yaw_rad: _F64,
+    prior_length_m: _F64,
+    prior_width_m: _F64,
+    away: _F64,
+    cos: _F64,
+    sin: _F64,
+    distance: _F64,
+) -> tuple[_F64, _F64, _F64, _F64]:
+    """:func:`._box_fit.complete_boxes`' arithmetic per box, in the numpy version's order
+    (``away`` = centre − sensor, ``cos``/``sin`` of the yaw and ``distance`` = max(|away|, 1e-9)
+    come from numpy)."""
+    k = length_m.shape[0]
+    center = center_xy.copy()
+    length = length_m.copy()
+    width = width_m.copy()
+    turned = yaw_rad.copy()
+    half_pi = 0.5 * np.pi
+    for i in range(k):
+        pl, pw = prior_length_m[i], prior_width_m[i]
+        seen_l, seen_w = length_m[i], width_m[i]
+        has = np.isfinite(pl) and np.isfinite(pw)
+        end_view = has and seen_l <= pw + 0.4 and pl > seen_l
+        side_view = has and not end_view and seen_w < pw
+        ax, ay = away[i, 0], away[i, 1]
+        c, s = cos[i], sin[i]
+        n0 = -s
+        sign = 1.0 if (n0 * ax) + (c * ay) >= 0.0 else -1.0
+        grow_end = pl - seen_w if end_view else 0.0
+        grow_side = pw - seen_w if side_view else 0.0
+        grow = 0.5 * (grow_end + grow_side)
+        center[i, 0] += (sign * n0) * grow
+        center[i, 1] += (sign * c) * grow
+        along = (c * ax) + (s * ay)
+        oblique = has and not end_view and seen_l < pl and abs(along) >= 0.5 * distance[i]
+        grow_len = 0.5 * (pl - seen_l if oblique else 0.0)
+        ahead = 1.0 if along >= 0.0 else -1.0
+        center[i, 0] += (ahead * c) * grow_len
+        center[i, 1] += (ahead * s) * grow_len
+        if end_view or oblique:
+            length[i] = pl
+        if end_view:
+            width[i] = seen_l
+        elif side_view:
+            width[i] = pw
+        t = yaw_rad[i] + half_pi if end_view else yaw_rad[i]
+        turned[i] = t - np.pi if t > half_pi else t
+    return center, length, width, turned
 
 
 @_jit

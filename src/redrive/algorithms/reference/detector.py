@@ -84,9 +84,13 @@ from redrive.algorithms.base import Algorithm, Input, Role, StageOutputs
 from redrive.algorithms.reference._box_fit import collinear_walls, complete_boxes, fit_boxes
 from redrive.algorithms.reference._clusters import Clusters, cluster_points
 from redrive.algorithms.reference._ground import GroundGrid, ground_heights
-from redrive.algorithms.reference._kernels import crop_cell_minima, split_obstacles
+from redrive.algorithms.reference._kernels import (
+    crop_cell_minima,
+    split_obstacles,
+    subsample_clusters,
+)
 from redrive.errors import AlgorithmError, ConfigError
-from redrive.types import Box3D, DetectedObject, Frame, ObjectClass, PointCloud, SensorType
+from redrive.types import DetectedObject, Frame, ObjectClass, PointCloud, SensorType
 
 __all__ = ["ClusterDetector"]
 
@@ -352,13 +356,9 @@ class ClusterDetector(Algorithm):
         height = z_top - z_ground
         # An even subsample of at most fit_max_points per cluster for the box search.
         k = starts.size
-        cid = np.repeat(np.arange(k), counts)
-        rank = np.arange(index.size) - starts[cid]
-        stride = np.maximum(1, -(-counts // int(self.config["fit_max_points"])))
-        sub = index[rank % stride[cid] == 0]
-        sub_counts = -(-counts // stride)
-        sub_starts = np.r_[0, np.cumsum(sub_counts)[:-1]].astype(np.intp)
-        xy = np.stack([ox[sub], oy[sub]], axis=1).astype(np.float64)
+        xy, sub_starts = subsample_clusters(
+            ox, oy, index, starts, counts, int(self.config["fit_max_points"])
+        )
         fit = fit_boxes(xy, sub_starts, criterion=str(self.config["box_criterion"]))
 
         length, width = fit.length_m, fit.width_m
@@ -391,21 +391,17 @@ class ClusterDetector(Algorithm):
         )
         classes = [*self._classes, ObjectClass.UNKNOWN]
         z_mid = 0.5 * (z_top + z_ground)
-        out: list[DetectedObject] = []
-        for i in np.flatnonzero(~scenery).tolist():
-            yaw_i = float(yaw[i])
-            out.append(
-                DetectedObject(
-                    object_id=-1,
-                    object_class=classes[int(which[i])],
-                    confidence=float(np.clip(confidence[i], 0.0, 1.0)),
-                    box=Box3D(
-                        center=np.array([center[i, 0], center[i, 1], z_mid[i]]),
-                        size=np.array([length[i], width[i], height[i]]),
-                        yaw_rad=yaw_i,
-                    ),
-                    orientation=np.array([yaw_i, 0.0, 0.0]),
-                )
-            )
+        keep = np.flatnonzero(~scenery)
+        yaw_kept = yaw[keep]
+        out = DetectedObject.many(
+            object_classes=[classes[w] for w in which[keep].tolist()],
+            confidences=np.clip(confidence[keep], 0.0, 1.0),
+            centers=np.stack([center[keep, 0], center[keep, 1], z_mid[keep]], axis=1),
+            sizes=np.stack([length[keep], width[keep], height[keep]], axis=1),
+            yaws_rad=yaw_kept,
+            orientations=np.stack(
+                [yaw_kept, np.zeros_like(yaw_kept), np.zeros_like(yaw_kept)], axis=1
+            ),
+        )
         logger.debug("ClusterDetector: %d clusters, %d objects", k, len(out))
         return out

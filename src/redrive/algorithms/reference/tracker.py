@@ -15,15 +15,14 @@ from scipy.optimize import linear_sum_assignment
 
 from redrive.algorithms.base import Algorithm, Role, StageOutputs
 from redrive.algorithms.reference._kalman import (
-    KalmanState,
     initial_state,
-    mahalanobis_sq,
-    predict,
-    update,
+    mahalanobis_sq_all,
+    predict_all,
+    update_all,
 )
 from redrive.errors import AlgorithmError, ConfigError
 from redrive.geometry.se3 import normalize_angle
-from redrive.types import Box3D, DetectedObject, Frame, ObjectClass
+from redrive.types import DetectedObject, Frame, ObjectClass
 
 __all__ = ["KalmanTracker"]
 
@@ -39,8 +38,10 @@ _BASE_LINK = "base_link"
 
 @dataclass(slots=True)
 class _Track:
+    """A track's values besides its Kalman state (row ``i`` of the tracker's ``_x``, ``_p`` for
+    ``_tracks[i]``)."""
+
     track_id: int
-    kf: KalmanState
     z_m: float  # box-centre height in the tracking frame, smoothed
     size_m: Array  # (3,) l, w, h, smoothed
     yaw_rad: float  # heading in the tracking frame, from the last matched detection
@@ -144,6 +145,8 @@ class KalmanTracker(Algorithm):
     def __init__(self, *, name: str | None = None) -> None:
         super().__init__(name=name)
         self._tracks: list[_Track] = []
+        self._x: Array = _NO_X
+        self._p: Array = _NO_P
         self._next_id = 1
         self._last_stamp_ns: int | None = None
         self._frame_id: str | None = None
@@ -187,7 +190,7 @@ class KalmanTracker(Algorithm):
 
     def reset(self) -> None:
         """Forget every track and restart ids at 1."""
-        self._tracks = []
+        self._drop_tracks()
         self._next_id = 1
         self._last_stamp_ns = None
         self._frame_id = None
@@ -208,27 +211,43 @@ class KalmanTracker(Algorithm):
         pose = self._pose(frame)
         centers, yaws = self._to_tracking_frame(detections, pose)
 
-        for track in self._tracks:
-            predict(track.kf, dt_s, accel_std_mps2=self._accel_std)
+        if self._tracks:
+            self._x, self._p = predict_all(self._x, self._p, dt_s, accel_std_mps2=self._accel_std)
         matches, unmatched_tracks, unmatched_dets = self._associate(centers)
 
-        for ti, di in matches:
-            self._absorb(self._tracks[ti], detections[di], centers[di], yaws[di], frame.index)
-        for ti in unmatched_tracks:
-            self._tracks[ti].misses += 1
-        self._tracks = [
-            t
+        if matches:
+            ti = np.array([t for t, _ in matches], dtype=np.intp)
+            di = np.array([d for _, d in matches], dtype=np.intp)
+            self._x[ti], self._p[ti] = update_all(
+                self._x[ti], self._p[ti], centers[di, :2], meas_std_m=self._meas_std_m
+            )
+        for t, d in matches:
+            self._absorb(self._tracks[t], detections[d], centers[d], yaws[d], frame.index)
+        for t in unmatched_tracks:
+            self._tracks[t].misses += 1
+        keep = [
+            (t.confirmed and t.misses <= self._max_misses) or (not t.confirmed and t.misses == 0)
             for t in self._tracks
-            if (t.confirmed and t.misses <= self._max_misses) or (not t.confirmed and t.misses == 0)
         ]
-        for di in unmatched_dets:
-            self._tracks.append(self._birth(detections[di], centers[di], yaws[di], frame.index))
+        if not all(keep):
+            self._tracks = [t for t, k in zip(self._tracks, keep, strict=True) if k]
+            self._x, self._p = self._x[keep], self._p[keep]
+        if unmatched_dets:
+            self._births(
+                [detections[d] for d in unmatched_dets],
+                centers[unmatched_dets],
+                yaws[unmatched_dets],
+                frame.index,
+            )
 
-        out = [
-            self._output(t, pose)
-            for t in self._tracks
-            if t.confirmed and (t.misses == 0 or self._coasting)
-        ]
+        out = self._outputs(
+            [
+                i
+                for i, t in enumerate(self._tracks)
+                if t.confirmed and (t.misses == 0 or self._coasting)
+            ],
+            pose,
+        )
         logger.debug(
             "%s frame %d: %d detections, %d tracks, %d returned",
             self.name,
@@ -264,7 +283,7 @@ class KalmanTracker(Algorithm):
                 frame_id,
                 len(self._tracks),
             )
-            self._tracks = []
+            self._drop_tracks()
         self._frame_id = frame_id
         if state is None:
             return None
@@ -287,14 +306,11 @@ class KalmanTracker(Algorithm):
         n_t, n_d = len(self._tracks), len(centers)
         if n_t == 0 or n_d == 0:
             return [], list(range(n_t)), list(range(n_d))
-        cost = np.empty((n_t, n_d))
-        xy = centers[:, :2]
-        for i, track in enumerate(self._tracks):
-            d2 = mahalanobis_sq(track.kf, xy, meas_std_m=self._meas_std_m)
-            dist = np.hypot(*(xy - track.kf.x[:2]).T)
-            cost[i] = np.where(
-                (d2 <= self._gate_chi2) & (dist <= self._max_distance_m), d2, _INFEASIBLE
-            )
+        xy = np.ascontiguousarray(centers[:, :2])
+        d2 = mahalanobis_sq_all(self._x, self._p, xy, meas_std_m=self._meas_std_m)
+        d = xy[None, :, :] - self._x[:, None, :2]
+        dist = np.hypot(d[:, :, 0], d[:, :, 1])
+        cost = np.where((d2 <= self._gate_chi2) & (dist <= self._max_distance_m), d2, _INFEASIBLE)
         rows, cols = linear_sum_assignment(cost)
         matches = [
             (int(r), int(c)) for r, c in zip(rows, cols, strict=True) if cost[r, c] < _INFEASIBLE
@@ -310,7 +326,6 @@ class KalmanTracker(Algorithm):
     def _absorb(
         self, track: _Track, det: DetectedObject, center: Array, yaw_rad: float, index: int
     ) -> None:
-        update(track.kf, center[:2], meas_std_m=self._meas_std_m)
         a = self._alpha
         track.z_m = (1.0 - a) * track.z_m + a * float(center[2])
         track.size_m = (1.0 - a) * track.size_m + a * det.box.size
@@ -323,39 +338,70 @@ class KalmanTracker(Algorithm):
         if track.hits >= self._min_hits:
             track.confirmed = True
 
-    def _birth(self, det: DetectedObject, center: Array, yaw_rad: float, index: int) -> _Track:
-        track = _Track(
-            track_id=self._next_id,
-            kf=initial_state(
+    def _births(self, dets: list[DetectedObject], centers: Array, yaws: Array, index: int) -> None:
+        """New tentative tracks, one per detection (ids in their order)."""
+        xs, ps = [], []
+        for det, center, yaw_rad in zip(dets, centers, yaws, strict=True):
+            kf = initial_state(
                 center[:2], position_std_m=self._meas_std_m, velocity_std_mps=self._vel0_std
-            ),
-            z_m=float(center[2]),
-            size_m=det.box.size.astype(np.float64),
-            yaw_rad=normalize_angle(float(yaw_rad)),
-            pitch_roll_rad=(float(det.orientation[1]), float(det.orientation[2])),
-            confidence=det.confidence,
-            confirmed=self._min_hits <= 1,
-        )
-        track.vote(det.object_class, index)
-        self._next_id += 1
-        return track
+            )
+            xs.append(kf.x)
+            ps.append(kf.p)
+            track = _Track(
+                track_id=self._next_id,
+                z_m=float(center[2]),
+                size_m=det.box.size.astype(np.float64),
+                yaw_rad=normalize_angle(float(yaw_rad)),
+                pitch_roll_rad=(float(det.orientation[1]), float(det.orientation[2])),
+                confidence=det.confidence,
+                confirmed=self._min_hits <= 1,
+            )
+            track.vote(det.object_class, index)
+            self._next_id += 1
+            self._tracks.append(track)
+        self._x = np.concatenate([self._x, np.array(xs)])
+        self._p = np.concatenate([self._p, np.array(ps)])
 
-    @staticmethod
-    def _output(track: _Track, pose: _Pose2D | None) -> DetectedObject:
-        x = track.kf.x
-        xy, v_xy, z, yaw = x[:2].copy(), x[2:].copy(), track.z_m, track.yaw_rad
-        if pose is not None:  # tracking frame → base_link of this frame
-            rot_t = pose.rotation.T
-            xy = rot_t @ (xy - pose.xyz_m[:2])
-            v_xy = rot_t @ v_xy
-            z -= float(pose.xyz_m[2])
-            yaw = normalize_angle(yaw - pose.heading_rad)
-        pitch, roll = track.pitch_roll_rad
-        return DetectedObject(
-            object_id=track.track_id,
-            object_class=track.object_class,
-            confidence=track.confidence,
-            box=Box3D(center=np.array([xy[0], xy[1], z]), size=track.size_m.copy(), yaw_rad=yaw),
-            velocity=np.array([v_xy[0], v_xy[1], 0.0]),
-            orientation=np.array([yaw, pitch, roll]),
+    def _drop_tracks(self) -> None:
+        self._tracks = []
+        self._x, self._p = _NO_X, _NO_P
+
+    def _outputs(self, which: list[int], pose: _Pose2D | None) -> list[DetectedObject]:
+        """Tracks ``which`` as DetectedObjects in base_link of this frame."""
+        if not which:
+            return []
+        tracks = [self._tracks[i] for i in which]
+        xy, v_xy = to_base_link(self._x[which], pose)
+        zs = [t.z_m for t in tracks]
+        yaws = [t.yaw_rad for t in tracks]
+        if pose is not None:
+            dz = float(pose.xyz_m[2])
+            zs = [z - dz for z in zs]
+            yaws = [normalize_angle(yaw - pose.heading_rad) for yaw in yaws]
+        return DetectedObject.many(
+            object_ids=[t.track_id for t in tracks],
+            object_classes=[t.object_class for t in tracks],
+            confidences=[t.confidence for t in tracks],
+            centers=np.column_stack((xy, zs)),
+            sizes=[t.size_m for t in tracks],
+            yaws_rad=yaws,
+            velocities=np.column_stack((v_xy, np.zeros(len(tracks)))),
+            orientations=[(yaw, *t.pitch_roll_rad) for yaw, t in zip(yaws, tracks, strict=True)],
         )
+
+
+def to_base_link(x: Array, pose: _Pose2D | None) -> tuple[Array, Array]:
+    """Positions (T, 2) and velocities (T, 2) of stacked Kalman states ``x`` (T, 4) in base_link
+    of the frame whose ``track_from_base`` is ``pose`` (as they are when ``pose`` is None);
+    each row bit-equal to ``rotation.T @ (x[:2] - xyz[:2])`` and ``rotation.T @ x[2:]``."""
+    xy, v_xy = x[:, :2].copy(), x[:, 2:].copy()
+    if pose is None:
+        return xy, v_xy
+    rot_t = pose.rotation.T
+    xy = (rot_t @ (xy - pose.xyz_m[:2])[:, :, None])[:, :, 0]
+    v_xy = (rot_t @ v_xy[:, :, None])[:, :, 0]
+    return xy, v_xy
+
+
+_NO_X: Array = np.empty((0, 4))
+_NO_P: Array = np.empty((0, 4, 4))

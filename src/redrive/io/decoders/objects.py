@@ -259,28 +259,81 @@ class GroundTruthObjectArrayDecoder:
             raise _not_parallel(
                 message, n, len(read.velocities), len(read.num_lidar_points), len(read.visible)
             )
-        out = [
-            _detected(
-                message,
-                results=obj.results,
-                position=obj.position,
-                orientation=obj.orientation,
-                size=obj.size,
-                raw_id=obj.raw_id,
-                velocity=np.array(vel),
-                num_lidar_points=None if points < 0 else int(points),
-                visible=None if visible < 0 else bool(visible),
-            )
-            for obj, vel, points, visible in zip(
-                read.objects, read.velocities, read.num_lidar_points, read.visible, strict=True
-            )
-        ]
+        out = _ground_truth_objects(read) if n else []
+        if out is None:  # a box _detected refuses: its error, for the first such object
+            out = [
+                _detected(
+                    message,
+                    results=obj.results,
+                    position=obj.position,
+                    orientation=obj.orientation,
+                    size=obj.size,
+                    raw_id=obj.raw_id,
+                    velocity=np.array(vel),
+                    num_lidar_points=None if points < 0 else int(points),
+                    visible=None if visible < 0 else bool(visible),
+                )
+                for obj, vel, points, visible in zip(
+                    read.objects, read.velocities, read.num_lidar_points, read.visible, strict=True
+                )
+            ]
         stamp_ns = read.stamp_sec * 1_000_000_000 + read.stamp_nanosec
         return Decoded(
             stamp_ns=stamp_ns if stamp_ns != 0 else message.log_time_ns,
             frame_id=read.frame_id,
             value=tuple(out),
         )
+
+
+def _ground_truth_objects(read: GroundTruthBytes) -> list[DetectedObject] | None:
+    """The objects ``_detected`` makes of ``read``'s detections, the same values, built as
+    columns by :meth:`DetectedObject.many`; None when a box is not usable (a quaternion without
+    a finite non-zero norm, a size that is not finite), for ``_detected`` to refuse as before."""
+    objects = read.objects
+    quats = np.array([obj.orientation for obj in objects], dtype=np.float64)
+    quats[~quats.any(axis=1)] = (0.0, 0.0, 0.0, 1.0)
+    # ``quaternion_normalized``'s norm, row by row: ``np.linalg.norm`` of a vector is
+    # sqrt(q.dot(q)), and a vectorised sum of squares could round differently.
+    norms = np.sqrt([q.dot(q) for q in quats])
+    sizes = np.abs(np.array([obj.size for obj in objects], dtype=np.float64))
+    if not (np.isfinite(norms).all() and (norms >= _QUAT_EPS).all() and np.isfinite(sizes).all()):
+        return None
+    eulers = [_euler(*q) for q in (quats / norms[:, None]).tolist()]
+    classes = []
+    confidences = []
+    for obj in objects:
+        best_class, best_score = "", None
+        for class_id, score in obj.results:
+            if best_score is None or score > best_score:
+                best_class, best_score = class_id, score
+        classes.append(object_class_from_text(best_class))
+        confidences.append(1.0 if best_score is None else _confidence(best_score))
+    return DetectedObject.many(
+        object_ids=[object_id_from_text(obj.raw_id) for obj in objects],
+        object_classes=classes,
+        confidences=confidences,
+        centers=[obj.position for obj in objects],
+        sizes=sizes,
+        yaws_rad=[e[0] for e in eulers],
+        velocities=read.velocities,
+        orientations=eulers,
+        num_lidar_points=[None if p < 0 else p for p in read.num_lidar_points],
+        visible=[None if v < 0 else bool(v) for v in read.visible],
+    )
+
+
+def _euler(x: float, y: float, z: float, w: float) -> tuple[float, float, float]:
+    """(yaw, pitch, roll) of a unit quaternion, the arithmetic of ``euler_from_quaternion``."""
+    sin_pitch = max(-1.0, min(1.0, 2 * (w * y - z * x)))
+    pitch_rad = math.asin(sin_pitch)
+    if abs(sin_pitch) > 1.0 - 1e-10:
+        return math.atan2(2 * (w * z - x * y), 1 - 2 * (x * x + z * z)), pitch_rad, 0.0
+    roll_rad = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    yaw_rad = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return yaw_rad, pitch_rad, roll_rad
+
+
+_QUAT_EPS = 1e-12  # quaternion_normalized's smallest norm
 
 
 def _not_parallel(
