@@ -132,3 +132,13 @@ def test_many_refuses_what_the_constructor_refuses(change: dict[str, object], wo
     with pytest.raises(ValueError, match=r"DetectedObject\.many") as err:
         DetectedObject.many(**kwargs)  # type: ignore[arg-type]
     assert words in str(err.value)
+
+
+def test_many_accepts_finite_values_whose_sum_overflows() -> None:
+    (obj,) = DetectedObject.many(
+        object_classes=[ObjectClass.VEHICLE],
+        centers=[[0.0, 0.0, 0.0]],
+        sizes=[[1e308, 1e308, 1e308]],
+        yaws_rad=[0.0],
+    )
+    assert obj.box.size.tolist() == [1e308, 1e308, 1e308]

@@ -122,16 +122,24 @@ class DetectedObject:
         n = len(object_classes)
         centers_a = _column3(centers, "centers", n)
         sizes_a = _column3(sizes, "sizes", n)
-        bad = ~np.isfinite(sizes_a).all(axis=1) | (sizes_a < 0).any(axis=1)
-        if bad.any():
-            i = int(np.flatnonzero(bad)[0])
-            msg = f"DetectedObject.many: sizes[{i}] must be finite and non-negative, got {sizes_a[i].tolist()}"
-            raise ValueError(msg)
+        # The common case in two C-level reductions (no numpy Python wrappers); the rows are
+        # looked at only when they may hold a bad value (a sum of finite values can overflow).
+        if n and not (math.isfinite(_SUM(sizes_a, axis=None)) and _MIN(sizes_a, axis=None) >= 0.0):
+            bad = ~np.isfinite(sizes_a).all(axis=1) | (sizes_a < 0).any(axis=1)
+            if bad.any():
+                i = int(np.flatnonzero(bad)[0])
+                msg = (
+                    f"DetectedObject.many: sizes[{i}] must be finite and non-negative, "
+                    f"got {sizes_a[i].tolist()}"
+                )
+                raise ValueError(msg)
         yaws = _column1(yaws_rad, "yaws_rad", n)
-        if not np.isfinite(yaws).all():
-            i = int(np.flatnonzero(~np.isfinite(yaws))[0])
-            msg = f"DetectedObject.many: yaws_rad[{i}] must be finite, got {yaws[i]}"
-            raise ValueError(msg)
+        if n and not math.isfinite(_SUM(yaws)):
+            bad = ~np.isfinite(yaws)
+            if bad.any():
+                i = int(np.flatnonzero(bad)[0])
+                msg = f"DetectedObject.many: yaws_rad[{i}] must be finite, got {yaws[i]}"
+                raise ValueError(msg)
         ids: Any = repeat(-1, n)
         if object_ids is not None:
             if len(object_ids) != n:
@@ -140,8 +148,8 @@ class DetectedObject:
         conf: Any = repeat(1.0, n)
         if confidences is not None:
             c = _column1(confidences, "confidences", n)
-            bad = ~((c >= 0.0) & (c <= 1.0))
-            if bad.any():
+            if n and not (_MIN(c) >= 0.0 and _MAX(c) <= 1.0):  # NaN fails both
+                bad = ~((c >= 0.0) & (c <= 1.0))
                 i = int(np.flatnonzero(bad)[0])
                 msg = f"DetectedObject.many: confidences[{i}] must lie in [0, 1], got {c[i]}"
                 raise ValueError(msg)
@@ -226,5 +234,6 @@ _OBJECT_SETTERS = {
         "visible",
     )
 }
+_SUM, _MIN, _MAX = np.add.reduce, np.minimum.reduce, np.maximum.reduce
 _ZEROS3 = np.zeros(3, dtype=np.float64)
 _ZEROS3.flags.writeable = False
