@@ -122,9 +122,9 @@ class DetectedObject:
         n = len(object_classes)
         centers_a = _column3(centers, "centers", n)
         sizes_a = _column3(sizes, "sizes", n)
-        # The common case in two C-level reductions (no numpy Python wrappers); the rows are
-        # looked at only when they may hold a bad value (a sum of finite values can overflow).
-        if n and not (math.isfinite(_SUM(sizes_a, axis=None)) and _MIN(sizes_a, axis=None) >= 0.0):
+        # The common case in C-level reductions (no numpy Python wrappers); the rows are looked
+        # at only when there is a bad value, to name the first.
+        if n and not (_ALL(np.isfinite(sizes_a), axis=None) and _MIN(sizes_a, axis=None) >= 0.0):
             bad = ~np.isfinite(sizes_a).all(axis=1) | (sizes_a < 0).any(axis=1)
             if bad.any():
                 i = int(np.flatnonzero(bad)[0])
@@ -134,7 +134,7 @@ class DetectedObject:
                 )
                 raise ValueError(msg)
         yaws = _column1(yaws_rad, "yaws_rad", n)
-        if n and not math.isfinite(_SUM(yaws)):
+        if n and not _ALL(np.isfinite(yaws)):
             bad = ~np.isfinite(yaws)
             if bad.any():
                 i = int(np.flatnonzero(bad)[0])
@@ -234,6 +234,6 @@ _OBJECT_SETTERS = {
         "visible",
     )
 }
-_SUM, _MIN, _MAX = np.add.reduce, np.minimum.reduce, np.maximum.reduce
+_ALL, _MIN, _MAX = np.logical_and.reduce, np.minimum.reduce, np.maximum.reduce
 _ZEROS3 = np.zeros(3, dtype=np.float64)
 _ZEROS3.flags.writeable = False
