@@ -14,7 +14,8 @@ is intersected analytically.
 Per point: Gaussian range noise, dropout, intensity = 255 · reflectivity · cos(incidence)
 (objects' ``reflectivity``; the ground's from its :class:`~redrive.sim.scene.GroundLabel`),
 ``ring`` (uint16, lowest beam 0) and ``t_offset_ns`` (uint32 from the sweep start).  The rays
-are cast by Embree; the kept returns are assembled in one compiled loop
+in the map frame, their ground distance and the ones that may meet a box are worked out in one
+compiled loop, Embree casts those, and the kept returns are chosen and assembled in two more
 (:mod:`redrive.sim.lidar_kernels`).
 """
 
@@ -34,6 +35,7 @@ from redrive.sim.lidar_presets import LidarPreset, lidar_preset
 from redrive.sim.mesh import TRIANGLES_PER_BOX, BoxMesh
 from redrive.sim.rig import SensorSpec
 from redrive.sim.scene import GroundLabel, GroundMap, Scene
+from redrive.sim.scratch import Scratch
 from redrive.types import PointCloud, SensorType
 from redrive.types._arrays import frozen_array
 
@@ -184,6 +186,7 @@ class LidarModel:
         self._local_y = np.ascontiguousarray(local32[..., 1])
         self._local_z = np.ascontiguousarray(local32[..., 2])
         self._no_reach = np.zeros(cols)  # the cull's per-column figures when every ray is cast
+        self._scratch = Scratch()  # the sweep's work arrays, kept between sweeps
         self._ring_flat = np.tile(self.rings, cols)
         self._t_off_flat = np.repeat(self.col_offset_ns, p.num_lasers).astype(np.uint32)
 
@@ -288,13 +291,14 @@ class LidarModel:
         mesh = BoxMesh.from_objects(scene.objects, origin=origin)
         n_rays = p.columns * p.num_lasers
         # ray directions in the map frame, where they meet the ground, which Embree casts
-        dx, dy, dz = (np.empty(n_rays, np.float32) for _ in range(3))
-        t_ground = np.empty(n_rays, np.float32)
-        limit = np.empty(n_rays, np.float32)
-        sel_all = np.empty(n_rays, np.int64)
-        sel_orig = np.empty((n_rays, 3), np.float32)
-        sel_dirs = np.empty((n_rays, 3), np.float32)
-        sel_limit = np.empty(n_rays, np.float32)
+        work = self._scratch
+        dx, dy, dz = (work.array(name, (n_rays,), np.float32) for name in ("dx", "dy", "dz"))
+        t_ground = work.array("t_ground", (n_rays,), np.float32)
+        limit = work.array("limit", (n_rays,), np.float32)
+        sel_all = work.array("sel", (n_rays,), np.int64)
+        sel_orig = work.array("sel_orig", (n_rays, 3), np.float32)
+        sel_dirs = work.array("sel_dirs", (n_rays, 3), np.float32)
+        sel_limit = work.array("sel_limit", (n_rays,), np.float32)
         reach = self._box_reach(scene, rot, pos)
         r_col, top_col, margin = (self._no_reach, self._no_reach, 0.0) if reach is None else reach
         n_sel = lidar_kernels.rays(
@@ -328,9 +332,9 @@ class LidarModel:
             sel_orig[:n_sel], sel_dirs[:n_sel], sel_limit[:n_sel]
         )
         dist = limit  # each ray's limit, then Embree's distance where it hit a box
-        box = np.empty(n_rays, dtype=np.int64)
-        where_in_sel = np.empty(n_rays, dtype=np.int64)  # each cast ray's place in ``sel``
-        keep = np.empty(n_rays, dtype=np.bool_)
+        box = work.array("box", (n_rays,), np.int64)
+        where_in_sel = work.array("where_in_sel", (n_rays,), np.int64)  # place in ``sel``
+        keep = work.array("keep", (n_rays,), np.bool_)
         lidar_kernels.kept(
             sel,
             sel_dist,
