@@ -3,6 +3,7 @@ never shows in the next, and threads do not share them."""
 
 from __future__ import annotations
 
+import pickle
 import threading
 
 import numpy as np
@@ -71,3 +72,11 @@ def test_each_thread_gets_its_own_arrays() -> None:
     thread.start()
     thread.join()
     assert seen[0] is not scratch.array("a", (5,), np.float32)
+
+
+def test_a_model_with_work_arrays_still_pickles() -> None:
+    model = LidarModel("VLP-16", base_from_sensor=_mount())
+    sweep = model.scan(make_scene(_SPARSE), np.random.default_rng(2))
+    copy = pickle.loads(pickle.dumps(model))
+    again = copy.scan(make_scene(_SPARSE), np.random.default_rng(2))
+    assert np.array_equal(again.cloud.xyz, sweep.cloud.xyz)

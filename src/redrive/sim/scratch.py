@@ -24,6 +24,12 @@ class Scratch:
     def __init__(self) -> None:
         self._local = threading.local()
 
+    def __getstate__(self) -> dict[str, object]:
+        return {}  # a copied or unpickled model starts with no work arrays
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        self._local = threading.local()
+
     def array(self, name: str, shape: tuple[int, ...], dtype: type[np.generic]) -> npt.NDArray:  # type: ignore[type-arg]
         """The array ``name`` of this thread with ``shape`` and ``dtype`` (new when either
         changed), its contents left from the last use."""
