@@ -32,6 +32,7 @@ from redrive.sim import camera_kernels as kernels
 from redrive.sim.mesh import box_vertices
 from redrive.sim.rig import CameraIntrinsics, SensorSpec
 from redrive.sim.scene import GroundLabel, Scene
+from redrive.sim.scratch import Scratch
 from redrive.types import Image, SensorType
 from redrive.types._arrays import frozen_array
 
@@ -113,6 +114,7 @@ class CameraModel:
         self.intrinsics = intrinsics
         self.workers = workers if workers is not None else max(1, min(2, os.cpu_count() or 1))
         self._pool: ThreadPoolExecutor | None = None
+        self._scratch = Scratch()  # an image's work arrays, per drawing thread
         self.base_from_optical = np.asarray(base_from_optical, dtype=np.float64)
         self.fog_distance_m = float(fog_distance_m)
         sun = np.asarray(sun_direction, dtype=np.float64)
@@ -161,14 +163,15 @@ class CameraModel:
         map_from_opt = self.map_from_optical(pose)
         k = self.intrinsics
         h, w = k.height, k.width
+        work = self._scratch  # kept between images; the depth map and the pixels are handed out
         bufs = _Buffers(
-            color=np.empty((h, w, 3), dtype=np.float32),
+            color=work.array("color", (h, w, 3), np.float32),
             depth=np.empty((h, w), dtype=np.float32),
-            owner=np.empty((h, w), dtype=np.int32),
-            kind=np.empty((h, w), dtype=np.uint8),
-            label=np.empty((h, w), dtype=np.uint8),
-            face=np.empty((h, w), dtype=np.uint8),
-            fog=np.empty((h, w), dtype=np.float32),
+            owner=work.array("owner", (h, w), np.int32),
+            kind=work.array("kind", (h, w), np.uint8),
+            label=work.array("label", (h, w), np.uint8),
+            face=work.array("face", (h, w), np.uint8),
+            fog=work.array("fog", (h, w), np.float32),
             pixels=np.empty((h, w, 3), dtype=np.uint8),
         )
         boxes = self._box_table(scene, map_from_opt)

@@ -14,7 +14,8 @@ is intersected analytically.
 Per point: Gaussian range noise, dropout, intensity = 255 · reflectivity · cos(incidence)
 (objects' ``reflectivity``; the ground's from its :class:`~redrive.sim.scene.GroundLabel`),
 ``ring`` (uint16, lowest beam 0) and ``t_offset_ns`` (uint32 from the sweep start).  The rays
-are cast by Embree; the kept returns are assembled in one compiled loop
+in the map frame, their ground distance and the ones that may meet a box are worked out in one
+compiled loop, Embree casts those, and the kept returns are chosen and assembled in two more
 (:mod:`redrive.sim.lidar_kernels`).
 """
 
@@ -31,9 +32,10 @@ import numpy.typing as npt
 from redrive.errors import SimulationError
 from redrive.sim import lidar_kernels
 from redrive.sim.lidar_presets import LidarPreset, lidar_preset
-from redrive.sim.mesh import BoxMesh
+from redrive.sim.mesh import TRIANGLES_PER_BOX, BoxMesh
 from redrive.sim.rig import SensorSpec
 from redrive.sim.scene import GroundLabel, GroundMap, Scene
+from redrive.sim.scratch import Scratch
 from redrive.types import PointCloud, SensorType
 from redrive.types._arrays import frozen_array
 
@@ -180,7 +182,11 @@ class LidarModel:
         flat32 = dirs.reshape(-1, 3).astype(np.float32)
         self._dirs_flat = tuple(np.ascontiguousarray(flat32[:, a]) for a in range(3))
         local32 = dirs.astype(np.float32)
-        self._local_xyz = (local32[..., 0], local32[..., 1], local32[..., 2])
+        self._local_x = np.ascontiguousarray(local32[..., 0])
+        self._local_y = np.ascontiguousarray(local32[..., 1])
+        self._local_z = np.ascontiguousarray(local32[..., 2])
+        self._no_reach = np.zeros(cols)  # the cull's per-column figures when every ray is cast
+        self._scratch = Scratch()  # the sweep's work arrays, kept between sweeps
         self._ring_flat = np.tile(self.rings, cols)
         self._t_off_flat = np.repeat(self.col_offset_ns, p.num_lasers).astype(np.uint32)
 
@@ -223,21 +229,20 @@ class LidarModel:
         pos = poses[s, :3, 3] * (1.0 - f) + poses[s + 1, :3, 3] * f
         return poses[:slices, :3, :3], pos
 
-    def _may_hit_a_box(
-        self,
-        scene: Scene,
-        rot: npt.NDArray[np.float64],
-        pos: npt.NDArray[np.float64],
-        limit: npt.NDArray[np.float32],
-    ) -> npt.NDArray[np.bool_] | None:
-        """(C, L) bool: rays that can reach a box before ``limit`` — a conservative cull.
+    def _box_reach(
+        self, scene: Scene, rot: npt.NDArray[np.float64], pos: npt.NDArray[np.float64]
+    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], float] | None:
+        """Per column, how near a box may come and how high it may reach — a conservative cull.
 
         Per slice, each box's azimuth interval (the angle its footprint's circumscribed circle
         subtends) and nearest horizontal distance are computed from the slice's first origin,
         grown by a margin covering the sensor's travel within the slice.  A ray needs Embree
         only if some box overlaps its slice, is nearer than where the ray meets the ground, and
-        (for upward rays) is not already below the ray where the ray reaches it.  Only for an
-        upright sensor (a ray's azimuth is its column's); ``None`` means cast every ray.
+        (for upward rays) is not already below the ray where the ray reaches it
+        (:func:`~redrive.sim.lidar_kernels.rays` applies it).  Returns ``(r_col, top_col,
+        margin)``: (C,) float64 nearest horizontal distance of a box overlapping the column's
+        slice (+inf: none) and (C,) float64 highest top among them.  Only for an upright sensor
+        (a ray's azimuth is its column's); ``None`` means cast every ray.
         """
         objs = scene.objects
         if len(objs) == 0 or np.any(rot[:, 2, 2] < 1.0 - 1e-9):
@@ -261,16 +266,7 @@ class LidarModel:
         r_slice = np.where(covers, r_min, np.inf).min(axis=1)  # (S,)
         top = objs.centers[:, 2] + 0.5 * objs.sizes[:, 2]  # (B,)
         top_slice = np.where(covers, top[None, :], -np.inf).max(axis=1)
-        r_col = r_slice[self._slice_of_col][:, None]  # (C, 1)
-        top_col = top_slice[self._slice_of_col][:, None]
-        horiz = limit * self._cos_elev32[None, :]
-        need: npt.NDArray[np.bool_] = horiz >= r_col  # False where no box (r = inf)
-        up = self._tan_elev > 0.0
-        if up.any():
-            r_fin = np.where(np.isfinite(r_col), r_col, 0.0)
-            rise = self._tan_elev[None, up] * r_fin + pos[:, 2:3]
-            need[:, up] &= rise <= top_col + margin
-        return need
+        return r_slice[self._slice_of_col], top_slice[self._slice_of_col], margin
 
     def scan(
         self,
@@ -289,50 +285,76 @@ class LidarModel:
         """
         p = self.preset
         rot, pos = self._sensor_poses(scene, map_from_base_at)
+        rot = np.ascontiguousarray(rot)
+        pos = np.ascontiguousarray(pos, dtype=np.float64)
         origin = pos[0].copy()
         mesh = BoxMesh.from_objects(scene.objects, origin=origin)
-        # ray directions in the map frame, (C, L) per component, float32
-        r_col = rot[self._slice_of_col].astype(np.float32)  # (C, 3, 3)
-        lx, ly, lz = self._local_xyz
-        dx = r_col[:, 0, 0:1] * lx + r_col[:, 0, 1:2] * ly + r_col[:, 0, 2:3] * lz
-        dy = r_col[:, 1, 0:1] * lx + r_col[:, 1, 1:2] * ly + r_col[:, 1, 2:3] * lz
-        if np.all(rot[:, 2, :] == (0.0, 0.0, 1.0)):
-            dz = lz  # upright sensor (the usual mount): heights need no rotation
-        else:
-            dz = r_col[:, 2, 0:1] * lx + r_col[:, 2, 1:2] * ly + r_col[:, 2, 2:3] * lz
-        oz = pos[:, 2:3].astype(np.float32)  # (C, 1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t_ground = np.where((dz < 0.0) & (oz > 0.0), -oz / dz, np.float32(np.inf))
-        limit = np.minimum(t_ground, np.float32(p.max_range_m * 1.01))
-        cast = self._may_hit_a_box(scene, rot, pos, limit)
-        sel = np.arange(dz.size) if cast is None else np.flatnonzero(cast)
-        dist = limit.reshape(-1).copy()
-        box = np.full(dz.size, -1, dtype=np.int64)
-        if sel.size:
-            dirs = np.empty((sel.size, 3), dtype=np.float32)
-            dirs[:, 0] = dx.reshape(-1)[sel]
-            dirs[:, 1] = dy.reshape(-1)[sel]
-            dirs[:, 2] = dz.reshape(-1)[sel]
-            orig = (pos - origin).astype(np.float32)[sel // p.num_lasers]
-            dist_sel, box_sel, normal_sel = mesh.intersect(orig, dirs, limit.reshape(-1)[sel])
-            dist[sel] = dist_sel
-            box[sel] = box_sel
-        hit_box = box >= 0
-        keep = hit_box | (t_ground.reshape(-1) <= p.max_range_m)
-        keep &= (dist >= p.min_range_m) & (dist <= p.max_range_m)
+        n_rays = p.columns * p.num_lasers
+        # ray directions in the map frame, where they meet the ground, which Embree casts
+        work = self._scratch
+        dx, dy, dz = (work.array(name, (n_rays,), np.float32) for name in ("dx", "dy", "dz"))
+        t_ground = work.array("t_ground", (n_rays,), np.float32)
+        limit = work.array("limit", (n_rays,), np.float32)
+        sel_all = work.array("sel", (n_rays,), np.int64)
+        sel_orig = work.array("sel_orig", (n_rays, 3), np.float32)
+        sel_dirs = work.array("sel_dirs", (n_rays, 3), np.float32)
+        sel_limit = work.array("sel_limit", (n_rays,), np.float32)
+        reach = self._box_reach(scene, rot, pos)
+        r_col, top_col, margin = (self._no_reach, self._no_reach, 0.0) if reach is None else reach
+        n_sel = lidar_kernels.rays(
+            self._slice_of_col,
+            rot,
+            self._local_x,
+            self._local_y,
+            self._local_z,
+            pos,
+            origin,
+            bool(np.all(rot[:, 2, :] == (0.0, 0.0, 1.0))),  # upright: heights need no rotation
+            np.float32(p.max_range_m * 1.01),
+            reach is not None,
+            self._cos_elev32,
+            self._tan_elev,
+            np.ascontiguousarray(r_col, dtype=np.float64),
+            np.ascontiguousarray(top_col, dtype=np.float64),
+            margin,
+            dx,
+            dy,
+            dz,
+            t_ground,
+            limit,
+            sel_all,
+            sel_orig,
+            sel_dirs,
+            sel_limit,
+        )
+        sel = sel_all[:n_sel]
+        sel_dist, sel_prim, normal_sel = mesh.cast(
+            sel_orig[:n_sel], sel_dirs[:n_sel], sel_limit[:n_sel]
+        )
+        dist = limit  # each ray's limit, then Embree's distance where it hit a box
+        box = work.array("box", (n_rays,), np.int64)
+        where_in_sel = work.array("where_in_sel", (n_rays,), np.int64)  # place in ``sel``
+        keep = work.array("keep", (n_rays,), np.bool_)
+        lidar_kernels.kept(
+            sel,
+            sel_dist,
+            sel_prim,
+            TRIANGLES_PER_BOX,
+            t_ground,
+            np.float32(p.min_range_m),
+            np.float32(p.max_range_m),
+            dist,
+            box,
+            where_in_sel,
+            keep,
+        )
         if self.dropout > 0:
             keep &= rng.random(keep.size) >= self.dropout
         idx = np.flatnonzero(keep)
         r = dist[idx]
         if self.range_std_m > 0:
             r = r + rng.standard_normal(idx.size, dtype=np.float32) * np.float32(self.range_std_m)
-        n_sel = sel.size
-        where_in_sel = np.empty(dz.size if n_sel else 0, dtype=np.int64)
-        if n_sel:  # where each ray sits in ``sel`` (its Embree normal)
-            where_in_sel[sel] = np.arange(n_sel)
-            normals = np.ascontiguousarray(normal_sel, dtype=np.float32)
-        else:
-            normals = np.zeros((0, 3), dtype=np.float32)
+        normals = np.ascontiguousarray(normal_sel, dtype=np.float32)
         xyz = np.empty((idx.size, 3), dtype=np.float32)
         intensity = np.empty(idx.size, dtype=np.float32)
         ring = np.empty(idx.size, dtype=np.uint16)
@@ -350,14 +372,14 @@ class LidarModel:
             self._dirs_flat[2],
             box,
             dist,
-            np.ascontiguousarray(dx.reshape(-1)),
-            np.ascontiguousarray(dy.reshape(-1)),
-            np.ascontiguousarray(dz.reshape(-1)),
+            dx,
+            dy,
+            dz,
             where_in_sel,
             normals,
             scene.objects.reflectivity,
             ids_all,
-            np.ascontiguousarray(pos, dtype=np.float64),
+            pos,
             ground.labels,
             ground.origin_xy,
             1.0 / ground.resolution_m,

@@ -1,5 +1,7 @@
-"""Compiled per-point loop of :meth:`LidarModel.scan <redrive.sim.lidar.LidarModel.scan>`
-(numba, ``nogil``): the kept returns' points, intensity, ring, time offset and object.
+"""Compiled loops of :meth:`LidarModel.scan <redrive.sim.lidar.LidarModel.scan>` (numba,
+``nogil``): the rays in the map frame, where they meet the ground and which of them Embree must
+cast (:func:`rays`); which returns are kept (:func:`kept`); the kept returns' points, intensity,
+ring, time offset and object (:func:`returns`).
 
 The arithmetic is the one the numpy code did, in the same precision and order (float32 where it
 was float32; the ground point's map x, y in float64 as numpy promoted them), so a sweep is the
@@ -14,7 +16,119 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["returns"]
+__all__ = ["kept", "rays", "returns"]
+
+
+@numba.njit(cache=True, nogil=True)
+def rays(  # noqa: PLR0917  # pragma: no cover - compiled
+    slice_of_col: npt.NDArray[np.int64],
+    rot: npt.NDArray[np.float64],
+    local_x: npt.NDArray[np.float32],
+    local_y: npt.NDArray[np.float32],
+    local_z: npt.NDArray[np.float32],
+    pos: npt.NDArray[np.float64],
+    origin: npt.NDArray[np.float64],
+    upright: bool,
+    max_limit: np.float32,
+    cull: bool,
+    cos_elev: npt.NDArray[np.float32],
+    tan_elev: npt.NDArray[np.float64],
+    r_col: npt.NDArray[np.float64],
+    top_col: npt.NDArray[np.float64],
+    margin: float,
+    dx: npt.NDArray[np.float32],
+    dy: npt.NDArray[np.float32],
+    dz: npt.NDArray[np.float32],
+    t_ground: npt.NDArray[np.float32],
+    limit: npt.NDArray[np.float32],
+    sel: npt.NDArray[np.int64],
+    sel_orig: npt.NDArray[np.float32],
+    sel_dirs: npt.NDArray[np.float32],
+    sel_limit: npt.NDArray[np.float32],
+) -> int:
+    """Every ray of a sweep (C columns × L lasers, flat index ``c·L + l``) in the map frame.
+
+    Direction = the column's slice rotation (``rot[slice_of_col[c]]`` cast to float32) times the
+    sensor-frame unit vector, summed in the order numpy did (``(r0·x + r1·y) + r2·z``; z taken
+    as it is for an ``upright`` sensor); ``t_ground`` the distance to z = 0 (+inf for rays that
+    do not go down from above it), ``limit`` its minimum with ``max_limit``.  With ``cull``, a
+    ray goes to Embree only if a box may lie on it before ``limit`` (horizontal reach at least
+    ``r_col[c]``; an upward ray also not yet above ``top_col[c] + margin`` there), else every
+    ray does.  The rays cast are written to ``sel`` and gathered into ``sel_orig`` (the column's
+    position relative to ``origin``, float32), ``sel_dirs`` and ``sel_limit``; returns how many.
+    """
+    num_cols, num_lasers = local_x.shape
+    inf32 = np.float32(np.inf)
+    zero32 = np.float32(0.0)
+    n = 0
+    for c in range(num_cols):
+        s = slice_of_col[c]
+        r00, r01, r02 = np.float32(rot[s, 0, 0]), np.float32(rot[s, 0, 1]), np.float32(rot[s, 0, 2])
+        r10, r11, r12 = np.float32(rot[s, 1, 0]), np.float32(rot[s, 1, 1]), np.float32(rot[s, 1, 2])
+        r20, r21, r22 = np.float32(rot[s, 2, 0]), np.float32(rot[s, 2, 1]), np.float32(rot[s, 2, 2])
+        oz = np.float32(pos[c, 2])
+        ox = np.float32(pos[c, 0] - origin[0])
+        oy = np.float32(pos[c, 1] - origin[1])
+        oz_local = np.float32(pos[c, 2] - origin[2])
+        rc = r_col[c]
+        top = top_col[c] + margin
+        r_fin = rc if math.isfinite(rc) else 0.0
+        for ll in range(num_lasers):
+            i = c * num_lasers + ll
+            lx, ly, lz = local_x[c, ll], local_y[c, ll], local_z[c, ll]
+            x = r00 * lx + r01 * ly + r02 * lz
+            y = r10 * lx + r11 * ly + r12 * lz
+            z = lz if upright else r20 * lx + r21 * ly + r22 * lz
+            dx[i], dy[i], dz[i] = x, y, z
+            tg = (-oz) / z if (z < zero32 and oz > zero32) else inf32
+            t_ground[i] = tg
+            lim = tg if tg < max_limit else max_limit
+            limit[i] = lim
+            if cull:
+                if not np.float64(lim * cos_elev[ll]) >= rc:
+                    continue
+                if tan_elev[ll] > 0.0 and not tan_elev[ll] * r_fin + pos[c, 2] <= top:
+                    continue
+            sel[n] = i
+            sel_orig[n, 0], sel_orig[n, 1], sel_orig[n, 2] = ox, oy, oz_local
+            sel_dirs[n, 0], sel_dirs[n, 1], sel_dirs[n, 2] = x, y, z
+            sel_limit[n] = lim
+            n += 1
+    return n
+
+
+@numba.njit(cache=True, nogil=True)
+def kept(  # noqa: PLR0917  # pragma: no cover - compiled
+    sel: npt.NDArray[np.int64],
+    sel_dist: npt.NDArray[np.float32],
+    sel_prim: npt.NDArray[np.int32],
+    triangles_per_box: int,
+    t_ground: npt.NDArray[np.float32],
+    min_range: np.float32,
+    max_range: np.float32,
+    dist: npt.NDArray[np.float32],
+    box: npt.NDArray[np.int64],
+    where_in_sel: npt.NDArray[np.int64],
+    keep: npt.NDArray[np.bool_],
+) -> None:
+    """Embree's answers put back per ray, and which rays return.
+
+    ``dist`` comes in holding each ray's limit; a ray Embree hit (``sel_prim ≥ 0``) gets its
+    distance and box (``prim // triangles_per_box``; −1 elsewhere), ``where_in_sel`` its place
+    in ``sel``.  A ray returns if it hit a box or meets the ground within ``max_range``, and its
+    distance lies in [``min_range``, ``max_range``] (float32 comparisons, as numpy made them).
+    """
+    box[:] = -1
+    for k in range(sel.shape[0]):
+        i = sel[k]
+        where_in_sel[i] = k
+        p = sel_prim[k]
+        if p >= 0:
+            dist[i] = sel_dist[k]
+            box[i] = p // triangles_per_box
+    for i in range(dist.shape[0]):
+        d = dist[i]
+        keep[i] = (box[i] >= 0 or t_ground[i] <= max_range) and d >= min_range and d <= max_range
 
 
 @numba.njit(cache=True, nogil=True)

@@ -95,6 +95,27 @@ class BoxMesh:
         mesh_construction.TriangleMesh(scene, tris)
         return cls(scene, org, len(objects))
 
+    def cast(
+        self,
+        origins: npt.NDArray[np.float32],
+        directions: npt.NDArray[np.float32],
+        tfar: npt.NDArray[np.float32],
+    ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.int32], npt.NDArray[np.float32]]:
+        """Embree's answers as they come (local frame; directions unit length): what
+        :meth:`intersect` is made of, without its per-ray post-processing.
+
+        ``tfar`` (R,) float32 holds each ray's limit and is overwritten.  Returns ``(tfar,
+        primitive, normal)``: (R,) float32 distance (the limit where nothing was hit before it),
+        (R,) int32 primitive index (box ``k // 12``) or −1, (R, 3) float32 geometric normal (not
+        normalised, arbitrary sign; zeros where nothing can be hit, undefined on other misses).
+        """
+        n = origins.shape[0]
+        if self.scene is None or n == 0:
+            return tfar, np.full(n, -1, np.int32), np.zeros((n, 3), np.float32)
+        res = self.scene.run(origins, directions, dists=tfar, output=1)
+        prim: npt.NDArray[np.int32] = res["primID"]
+        return res["tfar"], prim, res["Ng"]
+
     def intersect(
         self,
         origins: npt.NDArray[np.float32],
