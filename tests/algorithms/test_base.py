@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+import pickle
 import time
 from collections.abc import Mapping
 from typing import Any
@@ -132,6 +134,11 @@ def test_upstream_gives_the_latest_output_of_a_role_or_a_named_one() -> None:
     assert Role.PLANNING in up.roles.values()  # a planner ran, and failed
     up = up.merged({"p": path}, {"p": Role.PLANNING})
     assert up.path() is path
+    # merged() builds a real, frozen StageOutputs (another class's instance given its class)
+    assert type(up) is StageOutputs
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        up.roles = {}  # type: ignore[misc]
+    assert pickle.loads(pickle.dumps(up)).roles == up.roles
     with pytest.raises(AlgorithmError, match="is a PERCEPTION algorithm, not PLANNING"):
         up.path("det")
     assert up.commands() is None

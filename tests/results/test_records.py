@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import dataclasses
+import pickle
+
 import numpy as np
+import pytest
 
 from redrive.results import FrameRecord, StepRecord
 from redrive.results.records import frame_record_unchecked, step_record_unchecked
@@ -25,6 +29,12 @@ def test_unchecked_step_record_equals_checked() -> None:
     )
     assert made == failed
     assert repr(made) == repr(failed)
+    # a real, frozen StepRecord (built as another class and given StepRecord's class)
+    assert type(made) is StepRecord
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        made.status = "ok"  # type: ignore[misc]
+    assert pickle.loads(pickle.dumps(made)) == failed
+    assert dataclasses.replace(made, status="timeout").status == "timeout"
 
 
 def test_unchecked_frame_record_equals_checked() -> None:
@@ -42,3 +52,9 @@ def test_unchecked_frame_record_equals_checked() -> None:
     assert made == checked
     assert made.closed_loop is None
     assert made.logged_vehicle_state is None
+    assert type(made) is FrameRecord
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        made.late = False  # type: ignore[misc]
+    restored = pickle.loads(pickle.dumps(made))  # the ego's arrays are copied: not ==
+    assert type(restored) is FrameRecord
+    assert (restored.steps, restored.wall_ns, restored.missing) == (steps, 11, ("cam",))

@@ -208,12 +208,14 @@ class ResourceSample:
 # -- the engine's per-frame path -------------------------------------------------------------
 # A frozen dataclass's __init__ sets every field through object.__setattr__ and then runs
 # __post_init__; for records whose fields the engine has already made what they must be, that
-# was a third of its own cost per frame.  These set the slots directly (same objects, equal to
-# what the checked constructors make) and are for callers that guarantee the invariants.
+# was a third of its own cost per frame.  The functions below fill an instance of a plain
+# builder class with the record's own slots (same names, same order, so the same memory layout)
+# with ordinary attribute stores, then make it the record by assigning ``__class__`` — a layout
+# check CPython does in C.  That is one call per record instead of one descriptor ``__set__``
+# call per field (≈ 6 k instead of ≈ 12 k instructions a step record, callgrind); the result is
+# an ordinary record, equal to what the checked constructors make.  They are for callers that
+# guarantee the invariants.
 
-_new = object.__new__
-_STEP_SETTERS = tuple(StepRecord.__dict__[name].__set__ for name in StepRecord.__slots__)
-_FRAME_SETTERS = tuple(FrameRecord.__dict__[name].__set__ for name in FrameRecord.__slots__)
 assert StepRecord.__slots__ == (
     "algorithm", "stage", "role", "status", "latency_ns", "cpu_ns", "output",
     "error_type", "error_message", "traceback",
@@ -222,6 +224,34 @@ assert FrameRecord.__slots__ == (
     "frame_index", "stamp_ns", "steps", "vehicle_state", "logged_vehicle_state", "closed_loop",
     "ground_truth", "wall_ns", "late", "missing",
 )  # fmt: skip
+
+
+class _StepBuilder:
+    __slots__ = StepRecord.__slots__
+    algorithm: str
+    stage: str
+    role: str
+    status: str
+    latency_ns: int
+    cpu_ns: int
+    output: StepOutput | None
+    error_type: str
+    error_message: str
+    traceback: str
+
+
+class _FrameBuilder:
+    __slots__ = FrameRecord.__slots__
+    frame_index: int
+    stamp_ns: int
+    steps: tuple[StepRecord, ...]
+    vehicle_state: VehicleState | None
+    logged_vehicle_state: VehicleState | None
+    closed_loop: ClosedLoopRecord | None
+    ground_truth: tuple[DetectedObject, ...] | None
+    wall_ns: int
+    late: bool
+    missing: tuple[str, ...]
 
 
 def step_record_unchecked(  # noqa: PLR0917 (per step: positional is cheaper)
@@ -242,19 +272,19 @@ def step_record_unchecked(  # noqa: PLR0917 (per step: positional is cheaper)
     ``status`` in :data:`STATUSES`, int times, and ``output`` None or of the role's type (a
     tuple of :class:`DetectedObject` for perception).
     """
-    record: StepRecord = _new(StepRecord)
-    s = _STEP_SETTERS
-    s[0](record, algorithm)
-    s[1](record, stage)
-    s[2](record, role)
-    s[3](record, status)
-    s[4](record, latency_ns)
-    s[5](record, cpu_ns)
-    s[6](record, output)
-    s[7](record, error_type)
-    s[8](record, error_message)
-    s[9](record, traceback)
-    return record
+    record = _StepBuilder()
+    record.algorithm = algorithm
+    record.stage = stage
+    record.role = role
+    record.status = status
+    record.latency_ns = latency_ns
+    record.cpu_ns = cpu_ns
+    record.output = output
+    record.error_type = error_type
+    record.error_message = error_message
+    record.traceback = traceback
+    record.__class__ = StepRecord  # type: ignore[assignment]
+    return record  # type: ignore[return-value]
 
 
 def frame_record_unchecked(  # noqa: PLR0917 (per frame: positional is cheaper)
@@ -272,16 +302,16 @@ def frame_record_unchecked(  # noqa: PLR0917 (per frame: positional is cheaper)
     The caller guarantees int index ≥ 0, stamp and wall time, a bool ``late``, tuples, and
     steps of distinct algorithms.
     """
-    record: FrameRecord = _new(FrameRecord)
-    s = _FRAME_SETTERS
-    s[0](record, frame_index)
-    s[1](record, stamp_ns)
-    s[2](record, steps)
-    s[3](record, vehicle_state)
-    s[4](record, None)
-    s[5](record, None)
-    s[6](record, ground_truth)
-    s[7](record, wall_ns)
-    s[8](record, late)
-    s[9](record, missing)
-    return record
+    record = _FrameBuilder()
+    record.frame_index = frame_index
+    record.stamp_ns = stamp_ns
+    record.steps = steps
+    record.vehicle_state = vehicle_state
+    record.logged_vehicle_state = None
+    record.closed_loop = None
+    record.ground_truth = ground_truth
+    record.wall_ns = wall_ns
+    record.late = late
+    record.missing = missing
+    record.__class__ = FrameRecord  # type: ignore[assignment]
+    return record  # type: ignore[return-value]
