@@ -9,8 +9,10 @@ import contextlib
 import logging
 import os
 import socket
+import struct
 import time
 from types import TracebackType
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -20,19 +22,12 @@ from redrive.transport._fence import WEAK_ORDERING, fence
 from redrive.transport.segment import (
     HEADER_BYTES,
     META_OFFSET,
-    R_CAPTURE_LAG,
-    R_DELIVERED,
-    R_DROPPED,
-    R_LAG_LAST,
-    R_LAG_MAX,
-    R_LAG_SUM,
     R_PID,
     R_PIN,
     R_POLICY,
     R_READ_SEQ,
     R_START,
     R_STATE,
-    R_TORN,
     R_WAITING,
     READER_WORDS,
     S_BEGIN,
@@ -55,6 +50,7 @@ from redrive.transport.stream import (
     SPIN_NS,
     ChannelStats,
     Message,
+    MessageSlots,
     Policy,
     ProducerGoneError,
     channel_stats,
@@ -69,34 +65,82 @@ __all__ = ["Reader"]
 
 logger = logging.getLogger(__name__)
 
+_time_ns = time.time_ns
+_new_object = object.__new__
+#: a slot's header words stamp_ns, publish_ns, kind, nbytes, meta_len, read with one call
+_HEADER = struct.Struct("5q")
+_HEADER_AT = 8 * S_STAMP
+#: a reader entry's words read_seq, pin, delivered, dropped, torn, lag_last, lag_max, lag_sum,
+#: capture_lag (native int64, each stored whole), written with one call
+_ENTRY = struct.Struct("9q")
+
+
+_PENDING, _DONE = -2, -3  # a view's state when it holds no slot: handed out / finished
+
 
 class _View:
     """What :meth:`Reader.view` returns: pins the next message on ``__enter__``, re-checks and
-    unpins it on ``__exit__`` (a class, not a generator: no generator frame per message)."""
+    unpins it on ``__exit__`` (a class, not a generator: no generator frame per message). The
+    reader hands the same object out again once it is finished; ``_slot`` is the state:
+    ``_PENDING`` (handed out, not entered), the slot (entered; -1 after a timeout),
+    ``_DONE``."""
 
     __slots__ = ("_dropped", "_latest", "_msg", "_reader", "_seq", "_slot", "_timeout_s")
 
     def __init__(self, reader: Reader, timeout_s: float | None, latest: bool) -> None:
         self._reader, self._timeout_s, self._latest = reader, timeout_s, latest
-        self._slot = -2  # not entered yet
+        self._slot = _PENDING
         self._msg: Message | None = None
 
     def __enter__(self) -> Message | None:
         rd = self._reader
-        if self._slot != -2:
+        if self._slot != _PENDING:
             err = f"stream {rd.name!r}: a view is entered once; call reader.view() again"
             raise TransportError(err)
-        slot, seq, dropped = rd._next(self._timeout_s, self._latest)
-        self._slot, self._seq, self._dropped = slot, seq, dropped
+        slot = -1
+        if rd._ready and not self._latest:
+            # the fast path (ⓐ–ⓕ): the next message is there, within a ring of this reader's
+            # position, and its slot still holds it; anything else goes through _next
+            w, rs = rd._w, rd._read_seq
+            ws = w[W_WRITE_SEQ]  # ⓐ
+            if WEAK_ORDERING:
+                fence()  # ⓑ
+            seq = rs + 1
+            if seq <= ws <= rs + rd._n_slots:
+                slot = w[W_ORDER + seq % rd._n_slots]  # ⓒ
+                w[rd._pin_word] = slot  # ⓓ
+                fence()  # ⓔ
+                base = rd._slot_words[slot]
+                if w[base] != seq or w[base + S_END] != seq:  # ⓕ (base + S_BEGIN is base)
+                    w[rd._pin_word] = -1
+                    slot = -1
         if slot < 0:
-            return None
-        w, base = rd._w, rd._slot_words[slot]
-        meta = rd._meta(base) if w[base + S_META_LEN] else b""
-        payload = rd._payload[slot][: w[base + S_NBYTES]]
-        msg = self._msg = new_message(
-            seq, w[base + S_STAMP], w[base + S_PUBLISH], w[base + S_KIND], meta, payload, dropped
+            slot, seq, dropped = rd._next(self._timeout_s, self._latest)
+            self._slot = slot
+            if slot < 0:
+                return None
+        else:
+            dropped = 0
+        self._slot, self._seq, self._dropped = slot, seq, dropped
+        mm, base = rd._mm, rd._slot_words[slot]
+        stamp_ns, publish_ns, kind, nbytes, meta_len = _HEADER.unpack_from(
+            mm, 8 * base + _HEADER_AT
         )
-        return msg
+        if rd._view_n[slot] != nbytes:  # the slot's read-only view of this length, made once
+            rd._view_n[slot] = nbytes
+            rd._views[slot] = rd._payload[slot][:nbytes]
+        msg: Any = _new_object(MessageSlots)  # as new_message, without its call
+        msg.seq = seq
+        msg.stamp_ns = stamp_ns
+        msg.publish_ns = publish_ns
+        msg.kind = kind
+        msg.meta = rd._meta(base) if meta_len else b""
+        msg.payload = rd._views[slot]
+        msg.dropped_before = dropped
+        msg.__class__ = Message
+        done: Message = msg
+        self._msg = done
+        return done
 
     def __exit__(
         self,
@@ -104,8 +148,12 @@ class _View:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
-        if self._msg is not None:
-            self._reader._release(self._slot, self._seq, self._dropped, self._msg)
+        msg, rd, slot = self._msg, self._reader, self._slot
+        self._slot = _DONE
+        rd._free_view = self
+        if msg is not None:
+            self._msg = None
+            rd._release(slot, self._seq, self._dropped, msg)
 
 
 class Reader:
@@ -127,6 +175,8 @@ class Reader:
         self._fd = os.eventfd(0, os.EFD_NONBLOCK | os.EFD_CLOEXEC)
         self._space_fd = -1
         self._closed = False
+        self._ready = False  # attached and open: the fast paths may run
+        self._free_view: _View | None = None  # a finished view, handed out again by view()
         self._attach(time.monotonic() + timeout_s)
 
     # -- attaching ---------------------------------------------------------------------------
@@ -193,8 +243,12 @@ class Reader:
         self._n_slots = lay.n_slots
         self.policy = policy
         self._lossless = policy is Policy.LOSSLESS
-        self._delivered = self._lag_sum = self._lag_max = 0  # this entry's counters (zeroed above)
+        # this entry's counters (zeroed above), kept here and stored whole (see _release)
+        self._delivered = self._dropped = self._torn = self._lag_sum = self._lag_max = 0
+        self._lag_last = self._capture_lag = 0
         self._base = base
+        self._pin_word = base + R_PIN
+        self._counters_at = 8 * (base + R_READ_SEQ)
         self._read_seq = start_seq
         self._slot_words = [lay.slot_offset(s) // 8 for s in range(lay.n_slots)]
         self._payload = [
@@ -203,8 +257,12 @@ class Reader:
         ]
         for arr in self._payload:
             arr.flags.writeable = False
+        self._views = list(self._payload)  # the last view's array of each slot
+        self._view_n = [lay.capacity] * lay.n_slots  # … and its length
+        self._mm = seg.mm
         self._raw = memoryview(seg.mm)
         self._handshake(entry, seg.generation)
+        self._ready = True
 
     def _handshake(self, entry: int, generation: int) -> None:
         with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM | socket.SOCK_CLOEXEC) as sock:
@@ -227,9 +285,10 @@ class Reader:
         seg = self._seg
         if seg is None:
             return
+        self._ready = False
         self._w[self._base + R_PIN] = -1
         self._w[self._base + R_STATE] = 0
-        self._payload = []
+        self._payload = self._views = []
         self._raw.release()
         self._w = memoryview(b"\0" * 8).cast("q")
         seg.close()
@@ -337,37 +396,45 @@ class Reader:
         """Re-check the slot (ⓗⓘ), unpin it (ⓙ), count; False if the message was torn.
 
         This reader is the only writer of its entry's counters (the writer only frees the entry
-        of a dead reader): it keeps their running values here and stores them, without loading
-        them back from shared memory.
+        of a dead reader): it keeps their running values here and stores them, with ``read_seq``
+        and the pin, in one call (ⓙ: the words in address order, read_seq before the pin — a
+        writer that sees the position before the unpin just takes another slot).
         """
-        w, me = self._w, self._base
+        w = self._w
         if WEAK_ORDERING:
             fence()  # ⓗ
         base = self._slot_words[slot]
-        intact = w[base + S_BEGIN] == seq and w[base + S_END] == seq  # ⓘ
-        w[me + R_PIN] = -1  # ⓙ
+        intact = w[base] == seq and w[base + S_END] == seq  # ⓘ (base + S_BEGIN is base)
         self._read_seq = seq
-        w[me + R_READ_SEQ] = seq
-        if dropped:
-            w[me + R_DROPPED] += dropped
-        if not intact:
-            w[me + R_TORN] += 1
-            return False
-        now = time.time_ns()
-        lag = now - msg.publish_ns
-        self._delivered += 1
-        self._lag_sum += lag
-        w[me + R_DELIVERED] = self._delivered
-        w[me + R_CAPTURE_LAG] = now - msg.stamp_ns if msg.stamp_ns else lag
-        w[me + R_LAG_LAST] = lag
-        w[me + R_LAG_SUM] = self._lag_sum
-        if lag > self._lag_max:
-            self._lag_max = w[me + R_LAG_MAX] = lag
+        if intact:
+            now = _time_ns()
+            lag = self._lag_last = now - msg.publish_ns
+            self._delivered += 1
+            self._lag_sum += lag
+            if lag > self._lag_max:  # noqa: PLR1730 — max() is a call per message
+                self._lag_max = lag
+            self._capture_lag = now - msg.stamp_ns if msg.stamp_ns else lag
+        else:
+            self._torn += 1
+        self._dropped += dropped
+        _ENTRY.pack_into(
+            self._mm,
+            self._counters_at,
+            seq,  # read_seq
+            -1,  # pin
+            self._delivered,
+            self._dropped,
+            self._torn,
+            self._lag_last,
+            self._lag_max,
+            self._lag_sum,
+            self._capture_lag,
+        )
         if self._lossless and self._space_fd >= 0:
             fence()  # read_seq is seen by a writer before it sleeps, or its flag is seen here
             if w[W_WRITER_WAITING]:
                 os.eventfd_write(self._space_fd, 1)
-        return True
+        return intact
 
     def read(
         self,
@@ -432,7 +499,12 @@ class Reader:
             with reader.view(timeout_s=1.0) as msg:   # msg: Message | None
                 ...
         """
-        return _View(self, timeout_s, latest)
+        vw = self._free_view
+        if vw is None:  # the last one is still out (entered, or handed out and not entered yet)
+            return _View(self, timeout_s, latest)
+        self._free_view = None
+        vw._timeout_s, vw._latest, vw._slot = timeout_s, latest, _PENDING
+        return vw
 
     def stats(self) -> ChannelStats:
         if self._seg is None:
@@ -452,6 +524,7 @@ class Reader:
         if self._closed:
             return
         self._closed = True
+        self._ready = False
         self._detach()
         os.close(self._fd)
         if self._space_fd >= 0:

@@ -8,6 +8,7 @@ import contextlib
 import logging
 import os
 import socket
+import struct
 import threading
 import time
 from types import TracebackType
@@ -29,12 +30,9 @@ from redrive.transport.segment import (
     R_START,
     R_STATE,
     R_WAITING,
+    READER_WORDS,
     S_BEGIN,
     S_END,
-    S_KIND,
-    S_META_LEN,
-    S_NBYTES,
-    S_PUBLISH,
     S_STAMP,
     W_HEARTBEAT,
     W_ORDER,
@@ -63,16 +61,30 @@ __all__ = ["Writer"]
 logger = logging.getLogger(__name__)
 
 _LOSSLESS = Policy.LOSSLESS.value
+_time_ns = time.time_ns
+#: a slot's header words stamp_ns, publish_ns, kind, nbytes, meta_len (native int64, each stored
+#: whole), written with one call
+_HEADER = struct.Struct("5q")
+_HEADER_AT = 8 * S_STAMP
+#: the control block's published and heartbeat words
+_COUNTERS = struct.Struct("2q")
+_COUNTERS_AT = 8 * W_PUBLISHED
+assert W_HEARTBEAT == W_PUBLISHED + 1
+
+
+_PENDING, _DONE = -1, -2  # a loan's state when it holds no slot: handed out / finished
 
 
 class _Loan:
     """What :meth:`Writer.loan` returns: claims the slot on ``__enter__``, publishes it on a clean
     ``__exit__`` and abandons it on an exception (a class, not a generator: no generator frame
-    per message)."""
+    per message). The writer hands the same object out again once it is finished, so a message
+    allocates nothing here; ``_slot`` is the state: ``_PENDING`` (handed out, not entered), the
+    slot (entered), ``_DONE``."""
 
     __slots__ = ("_kind", "_meta", "_nbytes", "_slot", "_stamp_ns", "_timeout_s", "_writer")
 
-    def __init__(  # noqa: PLR0917 — built once per message: positional is the cheaper call
+    def __init__(  # noqa: PLR0917 — positional, in the order loan() sets them
         self,
         writer: Writer,
         nbytes: int,
@@ -83,23 +95,45 @@ class _Loan:
     ) -> None:
         self._writer, self._nbytes, self._stamp_ns = writer, nbytes, stamp_ns
         self._kind, self._meta, self._timeout_s = kind, meta, timeout_s
-        self._slot = -1
+        self._slot = _PENDING
 
     def __enter__(self) -> npt.NDArray[np.uint8]:
-        wr = self._writer
-        if self._slot >= 0:
+        wr, nbytes, meta = self._writer, self._nbytes, self._meta
+        if self._slot != _PENDING:
             msg = f"stream {wr.name!r}: a loan is entered once; call writer.loan() again"
             raise TransportError(msg)
-        if (
-            wr._closed
-            or wr._loaned
-            or self._nbytes > wr._capacity
-            or len(self._meta) > META_CAPACITY
-        ):
-            wr._check(self._nbytes, self._meta)  # raises the error that applies
-        slot = self._slot = wr._claim(self._timeout_s)
+        if wr._closed or wr._loaned or nbytes > wr._capacity or len(meta) > META_CAPACITY:
+            wr._check(nbytes, meta)  # raises the error that applies
+        # the fast claim (①②③): the slot written last, when there is a live reader, every live
+        # reader has read its message and none pins it — what readers that keep up leave,
+        # message after message (the same slot, still in cache). Anything else goes through
+        # _claim's full pass (without readers it keeps the newest message for one that comes)
+        w, held, slot = wr._w, wr._seq, -1
+        for state, read_seq in wr._entry_words:
+            if w[state] == 1:
+                if w[read_seq] < held:
+                    slot = -1
+                    break
+                slot = wr._last
+        if slot >= 0:
+            begin = wr._slot_words[slot]  # + S_BEGIN
+            w[begin] = held + 1  # ① the slot is being written
+            fence()  # ②
+            # ③ every entry's pin, live or not: a free entry's is -1, and a reader that turned
+            # live after the loop above is checked too
+            for pin in wr._pin_words:
+                if w[pin] == slot:
+                    w[begin] = held  # it holds its message again
+                    slot = -1
+                    break
+        if slot < 0:
+            slot = wr._claim(self._timeout_s)
+        self._slot = slot
         wr._loaned = True
-        return wr._payload[slot][: self._nbytes]
+        if wr._out_n[slot] != nbytes:  # the slot's view of this length, made once
+            wr._out_n[slot] = nbytes
+            wr._out[slot] = wr._payload[slot][:nbytes]
+        return wr._out[slot]
 
     def __exit__(
         self,
@@ -108,7 +142,9 @@ class _Loan:
         tb: TracebackType | None,
     ) -> None:
         wr, slot = self._writer, self._slot
+        self._slot = _DONE
         wr._loaned = False
+        wr._free_loan = self
         if exc_type is not None:  # abandoned: the slot holds its old message again
             wr._w[wr._slot_words[slot] + S_BEGIN] = wr._slot_seq[slot]
             return
@@ -153,7 +189,7 @@ class Writer:
         self._capacity = capacity_bytes
         self._slot_seq = [0] * slots  # message each slot holds
         self._slot_words = [layout.slot_offset(s) // 8 for s in range(slots)]
-        mm = self._seg.mm
+        mm = self._mm = self._seg.mm
         self._payload = [
             np.frombuffer(mm, np.uint8, capacity_bytes, layout.slot_offset(s) + HEADER_BYTES)
             for s in range(slots)
@@ -161,6 +197,17 @@ class Writer:
         self._raw = memoryview(mm)
         self._readers = [layout.reader_word(r) for r in range(max_readers)]
         self._waiting_words = [b + R_WAITING for b in self._readers]
+        # what a message looks at, precomputed: each reader entry's (state, read_seq) words, its
+        # pin word; every entry's waiting flag in one load (see _commit)
+        self._entry_words = tuple((b + R_STATE, b + R_READ_SEQ) for b in self._readers)
+        self._pin_words = tuple(b + R_PIN for b in self._readers)
+        self._waiting = struct.Struct("q" + f"{8 * (READER_WORDS - 1)}xq" * (max_readers - 1))
+        self._waiting_at = 8 * (self._readers[0] + R_WAITING)
+        self._nobody_waits = (0,) * max_readers
+        self._last = -1  # the slot written last (-1: none yet)
+        self._out = [self._payload[s] for s in range(slots)]  # the last loan's view of each slot
+        self._out_n = [capacity_bytes] * slots  # … and its length
+        self._free_loan: _Loan | None = None  # a finished loan, handed out again by loan()
         self._n_slots = slots
         self._lossless = policy is Policy.LOSSLESS
         self._reader_fd = [-1] * max_readers
@@ -331,38 +378,42 @@ class Writer:
                 logger.info("stream %s: reader pid %d is gone; entry freed", self.name, pid)
 
     def _commit(self, slot: int, nbytes: int, stamp_ns: int, kind: int, meta: bytes) -> int:
-        w, seq = self._w, self._seq + 1
+        w, seq, mm = self._w, self._seq + 1, self._mm
         base = self._slot_words[slot]
         if meta:
             off = base * 8 + META_OFFSET
             self._raw[off : off + len(meta)] = meta
-        now = time.time_ns()
-        w[base + S_STAMP] = stamp_ns
-        w[base + S_PUBLISH] = now
-        w[base + S_KIND] = kind
-        w[base + S_NBYTES] = nbytes
-        w[base + S_META_LEN] = len(meta)
+        now = _time_ns()
+        # the header's five words in one call (no other side reads them before ⑥)
+        _HEADER.pack_into(mm, 8 * base + _HEADER_AT, stamp_ns, now, kind, nbytes, len(meta))
         if WEAK_ORDERING:
             fence()  # ⑤
         w[base + S_END] = seq  # ⑥
         w[W_ORDER + seq % self._n_slots] = slot  # ⑦
         w[W_WRITE_SEQ] = seq  # ⑧
-        w[W_PUBLISHED] = seq
-        w[W_HEARTBEAT] = now
+        _COUNTERS.pack_into(mm, _COUNTERS_AT, seq, now)  # published, heartbeat
         self._seq = seq
         self._slot_seq[slot] = seq
-        lru = self._lru
-        if lru[-1] != slot:
+        if slot != self._last:
+            lru = self._lru
             lru.remove(slot)
             lru.append(slot)
+            self._last = slot
         fence()  # write_seq is seen by a reader before it sleeps, or its waiting flag is seen here
+        if self._waiting.unpack_from(mm, self._waiting_at) != self._nobody_waits:
+            self._wake_readers()
+        return seq
+
+    def _wake_readers(self) -> None:
+        """Signal the eventfd of every reader whose waiting flag is up (it sleeps, or is about
+        to)."""
+        w = self._w
         for i, flag in enumerate(self._waiting_words):
-            if w[flag]:  # a reader sleeps (or is about to): wake it
+            if w[flag]:
                 with self._fd_lock:  # the attach thread may be replacing the descriptor
                     fd = self._reader_fd[i]
                     if fd >= 0:
                         os.eventfd_write(fd, 1)
-        return seq
 
     def _check(self, nbytes: int, meta: bytes) -> None:
         if self._closed:
@@ -421,7 +472,13 @@ class Writer:
             with writer.loan(n, stamp_ns=t) as out:   # out: uint8 (n,), the slot's memory
                 out[:] = ...
         """
-        return _Loan(self, nbytes, stamp_ns, kind, meta, timeout_s)
+        ln = self._free_loan
+        if ln is None:  # the last one is still out (entered, or handed out and not entered yet)
+            return _Loan(self, nbytes, stamp_ns, kind, meta, timeout_s)
+        self._free_loan = None
+        ln._nbytes, ln._stamp_ns, ln._kind, ln._meta = nbytes, stamp_ns, kind, meta
+        ln._timeout_s, ln._slot = timeout_s, _PENDING
+        return ln
 
     def publish_sample(self, sample: SensorData, *, timeout_s: float | None = 5.0) -> int:
         """Publish a ``SensorData`` (typed, see :mod:`redrive.transport.codec`); returns its
@@ -452,7 +509,7 @@ class Writer:
                     os.close(fd)
             self._reader_fd = [-1] * len(self._reader_fd)
         os.close(self._space_fd)
-        self._payload = []
+        self._payload = self._out = []
         self._raw.release()
         self._seg.close(unlink=True)
 
