@@ -32,10 +32,7 @@ from redrive.transport.segment import (
     READER_WORDS,
     S_BEGIN,
     S_END,
-    S_KIND,
     S_META_LEN,
-    S_NBYTES,
-    S_PUBLISH,
     S_STAMP,
     W_ORDER,
     W_POLICY,
@@ -85,12 +82,22 @@ class _View:
     ``_PENDING`` (handed out, not entered), the slot (entered; -1 after a timeout),
     ``_DONE``."""
 
-    __slots__ = ("_dropped", "_latest", "_msg", "_reader", "_seq", "_slot", "_timeout_s")
+    __slots__ = (
+        "_dropped",
+        "_intact",
+        "_latest",
+        "_msg",
+        "_reader",
+        "_seq",
+        "_slot",
+        "_timeout_s",
+    )
 
     def __init__(self, reader: Reader, timeout_s: float | None, latest: bool) -> None:
         self._reader, self._timeout_s, self._latest = reader, timeout_s, latest
         self._slot = _PENDING
         self._msg: Message | None = None
+        self._intact = False  # whether the message was whole when it was released
 
     def __enter__(self) -> Message | None:
         rd = self._reader
@@ -148,12 +155,53 @@ class _View:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
-        msg, rd, slot = self._msg, self._reader, self._slot
+        msg, rd, slot, seq = self._msg, self._reader, self._slot, self._seq
         self._slot = _DONE
+        if msg is None:  # timed out: nothing pinned
+            rd._free_view = self
+            return
+        self._msg = None
+        # re-check the slot (ⓗⓘ), unpin it (ⓙ), count. This reader is the only writer of its
+        # entry's counters (the writer only frees the entry of a dead reader): it keeps their
+        # running values and stores them, with read_seq and the pin, in one call (ⓙ: the words
+        # in address order, read_seq before the pin — a writer that sees the position before the
+        # unpin takes another slot)
+        w = rd._w
+        if WEAK_ORDERING:
+            fence()  # ⓗ
+        base = rd._slot_words[slot]
+        intact = self._intact = w[base] == seq and w[base + S_END] == seq  # ⓘ (S_BEGIN: +0)
+        rd._read_seq = seq
+        if intact:
+            now = _time_ns()
+            lag = rd._lag_last = now - msg.publish_ns
+            rd._delivered += 1
+            rd._lag_sum += lag
+            if lag > rd._lag_max:  # noqa: PLR1730 — max() is a call per message
+                rd._lag_max = lag
+            rd._capture_lag = now - msg.stamp_ns if msg.stamp_ns else lag
+        else:
+            rd._torn += 1
+        if self._dropped:
+            rd._dropped += self._dropped
+        _ENTRY.pack_into(
+            rd._mm,
+            rd._counters_at,
+            seq,  # read_seq
+            -1,  # pin
+            rd._delivered,
+            rd._dropped,
+            rd._torn,
+            rd._lag_last,
+            rd._lag_max,
+            rd._lag_sum,
+            rd._capture_lag,
+        )
+        if rd._wake_writer:
+            fence()  # read_seq is seen by a writer before it sleeps, or its flag is seen here
+            if w[W_WRITER_WAITING]:
+                os.eventfd_write(rd._space_fd, 1)
         rd._free_view = self
-        if msg is not None:
-            self._msg = None
-            rd._release(slot, self._seq, self._dropped, msg)
 
 
 class Reader:
@@ -243,11 +291,12 @@ class Reader:
         self._n_slots = lay.n_slots
         self.policy = policy
         self._lossless = policy is Policy.LOSSLESS
-        # this entry's counters (zeroed above), kept here and stored whole (see _release)
+        # this entry's counters (zeroed above), kept here and stored whole (see _View.__exit__)
         self._delivered = self._dropped = self._torn = self._lag_sum = self._lag_max = 0
         self._lag_last = self._capture_lag = 0
         self._base = base
         self._pin_word = base + R_PIN
+        self._wake_writer = False  # set by _handshake, once the writer's eventfd is known
         self._counters_at = 8 * (base + R_READ_SEQ)
         self._read_seq = start_seq
         self._slot_words = [lay.slot_offset(s) // 8 for s in range(lay.n_slots)]
@@ -280,6 +329,7 @@ class Reader:
         if self._space_fd >= 0:
             os.close(self._space_fd)
         self._space_fd = fds[0]
+        self._wake_writer = self._lossless
 
     def _detach(self) -> None:
         seg = self._seg
@@ -378,63 +428,10 @@ class Reader:
                 drain(self._fd)
             w[flag] = 0
 
-    def _message(
-        self, slot: int, seq: int, dropped: int, payload: npt.NDArray[np.uint8]
-    ) -> Message:
-        w, base = self._w, self._slot_words[slot]
-        meta = self._meta(base) if w[base + S_META_LEN] else b""
-        return new_message(
-            seq, w[base + S_STAMP], w[base + S_PUBLISH], w[base + S_KIND], meta, payload, dropped
-        )
-
     def _meta(self, base: int) -> bytes:
         """The meta bytes of the slot whose header starts at word ``base``."""
         off = base * 8 + META_OFFSET
         return bytes(self._raw[off : off + self._w[base + S_META_LEN]])
-
-    def _release(self, slot: int, seq: int, dropped: int, msg: Message) -> bool:
-        """Re-check the slot (ⓗⓘ), unpin it (ⓙ), count; False if the message was torn.
-
-        This reader is the only writer of its entry's counters (the writer only frees the entry
-        of a dead reader): it keeps their running values here and stores them, with ``read_seq``
-        and the pin, in one call (ⓙ: the words in address order, read_seq before the pin — a
-        writer that sees the position before the unpin just takes another slot).
-        """
-        w = self._w
-        if WEAK_ORDERING:
-            fence()  # ⓗ
-        base = self._slot_words[slot]
-        intact = w[base] == seq and w[base + S_END] == seq  # ⓘ (base + S_BEGIN is base)
-        self._read_seq = seq
-        if intact:
-            now = _time_ns()
-            lag = self._lag_last = now - msg.publish_ns
-            self._delivered += 1
-            self._lag_sum += lag
-            if lag > self._lag_max:  # noqa: PLR1730 — max() is a call per message
-                self._lag_max = lag
-            self._capture_lag = now - msg.stamp_ns if msg.stamp_ns else lag
-        else:
-            self._torn += 1
-        self._dropped += dropped
-        _ENTRY.pack_into(
-            self._mm,
-            self._counters_at,
-            seq,  # read_seq
-            -1,  # pin
-            self._delivered,
-            self._dropped,
-            self._torn,
-            self._lag_last,
-            self._lag_max,
-            self._lag_sum,
-            self._capture_lag,
-        )
-        if self._lossless and self._space_fd >= 0:
-            fence()  # read_seq is seen by a writer before it sleeps, or its flag is seen here
-            if w[W_WRITER_WAITING]:
-                os.eventfd_write(self._space_fd, 1)
-        return intact
 
     def read(
         self,
@@ -454,25 +451,34 @@ class Reader:
             ProducerGoneError: the writer is gone and everything it published has been read.
         """
         while True:
-            slot, seq, dropped = self._next(timeout_s, latest)
-            if slot < 0:
+            vw = _View(self, timeout_s, latest)  # its own: a view handed out stays as it is
+            got = vw.__enter__()
+            if got is None:
                 return None
-            nbytes = self._w[self._slot_words[slot] + S_NBYTES]
+            nbytes = got.payload.shape[0]
             if out is None:
                 copy = np.empty(nbytes, np.uint8)
             elif out.dtype == np.uint8 and out.ndim == 1 and out.shape[0] >= nbytes:
                 copy = out[:nbytes]
             else:
-                self._w[self._base + R_PIN] = -1
+                self._w[self._pin_word] = -1  # unread: the next read gives it again
                 msg_text = (
                     f"stream {self.name!r}: read(out=…) needs a 1-D uint8 array of at least "
                     f"{nbytes} bytes"
                 )
                 raise TransportError(msg_text)
-            np.copyto(copy, self._payload[slot][:nbytes])  # ⓖ
-            msg = self._message(slot, seq, dropped, copy)
-            if self._release(slot, seq, dropped, msg):
-                return msg
+            np.copyto(copy, got.payload)  # ⓖ
+            vw.__exit__(None, None, None)
+            if vw._intact:
+                return new_message(
+                    got.seq,
+                    got.stamp_ns,
+                    got.publish_ns,
+                    got.kind,
+                    got.meta,
+                    copy,
+                    got.dropped_before,
+                )
 
     def read_sample(
         self, timeout_s: float | None = None, *, latest: bool = False

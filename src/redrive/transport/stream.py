@@ -28,7 +28,7 @@ from redrive.transport.segment import (
     R_READ_SEQ,
     R_STATE,
     R_TORN,
-    W_PUBLISHED,
+    W_WRITE_SEQ,
     Segment,
 )
 
@@ -207,4 +207,4 @@ def channel_stats(seg: Segment, name: str) -> ChannelStats:
                 capture_lag_ns=int(w[base + R_CAPTURE_LAG]),
             )
         )
-    return ChannelStats(name=name, published=int(w[W_PUBLISHED]), readers=tuple(readers))
+    return ChannelStats(name=name, published=int(w[W_WRITE_SEQ]), readers=tuple(readers))

@@ -34,9 +34,7 @@ from redrive.transport.segment import (
     S_BEGIN,
     S_END,
     S_STAMP,
-    W_HEARTBEAT,
     W_ORDER,
-    W_PUBLISHED,
     W_WRITE_SEQ,
     W_WRITER_WAITING,
     Layout,
@@ -66,10 +64,6 @@ _time_ns = time.time_ns
 #: whole), written with one call
 _HEADER = struct.Struct("5q")
 _HEADER_AT = 8 * S_STAMP
-#: the control block's published and heartbeat words
-_COUNTERS = struct.Struct("2q")
-_COUNTERS_AT = 8 * W_PUBLISHED
-assert W_HEARTBEAT == W_PUBLISHED + 1
 
 
 _PENDING, _DONE = -1, -2  # a loan's state when it holds no slot: handed out / finished
@@ -145,10 +139,39 @@ class _Loan:
         self._slot = _DONE
         wr._loaned = False
         wr._free_loan = self
+        w, base = wr._w, wr._slot_words[slot]
         if exc_type is not None:  # abandoned: the slot holds its old message again
-            wr._w[wr._slot_words[slot] + S_BEGIN] = wr._slot_seq[slot]
+            w[base + S_BEGIN] = wr._slot_seq[slot]
             return
-        wr._commit(slot, self._nbytes, self._stamp_ns, self._kind, self._meta)
+        # publish (④ was the caller's fill)
+        seq, mm, meta = wr._seq + 1, wr._mm, self._meta
+        if meta:
+            off = base * 8 + META_OFFSET
+            wr._raw[off : off + len(meta)] = meta
+        # the header's five words in one call (no other side reads them before ⑥)
+        _HEADER.pack_into(
+            mm,
+            8 * base + _HEADER_AT,
+            self._stamp_ns,
+            _time_ns(),
+            self._kind,
+            self._nbytes,
+            len(meta),
+        )
+        if WEAK_ORDERING:
+            fence()  # ⑤
+        w[base + S_END] = seq  # ⑥
+        w[W_ORDER + seq % wr._n_slots] = slot  # ⑦
+        w[W_WRITE_SEQ] = seq  # ⑧ (also the stream's published count)
+        wr._seq = wr._slot_seq[slot] = seq
+        if slot != wr._last:
+            lru = wr._lru
+            lru.remove(slot)
+            lru.append(slot)
+            wr._last = slot
+        fence()  # write_seq is seen by a reader before it sleeps, or its waiting flag is seen here
+        if wr._waiting.unpack_from(mm, wr._waiting_at) != wr._nobody_waits:
+            wr._wake_readers()
 
 
 class Writer:
@@ -198,7 +221,7 @@ class Writer:
         self._readers = [layout.reader_word(r) for r in range(max_readers)]
         self._waiting_words = [b + R_WAITING for b in self._readers]
         # what a message looks at, precomputed: each reader entry's (state, read_seq) words, its
-        # pin word; every entry's waiting flag in one load (see _commit)
+        # pin word; every entry's waiting flag in one load (see _Loan.__exit__)
         self._entry_words = tuple((b + R_STATE, b + R_READ_SEQ) for b in self._readers)
         self._pin_words = tuple(b + R_PIN for b in self._readers)
         self._waiting = struct.Struct("q" + f"{8 * (READER_WORDS - 1)}xq" * (max_readers - 1))
@@ -377,33 +400,6 @@ class Writer:
                     raise ReaderGoneError(msg)
                 logger.info("stream %s: reader pid %d is gone; entry freed", self.name, pid)
 
-    def _commit(self, slot: int, nbytes: int, stamp_ns: int, kind: int, meta: bytes) -> int:
-        w, seq, mm = self._w, self._seq + 1, self._mm
-        base = self._slot_words[slot]
-        if meta:
-            off = base * 8 + META_OFFSET
-            self._raw[off : off + len(meta)] = meta
-        now = _time_ns()
-        # the header's five words in one call (no other side reads them before ⑥)
-        _HEADER.pack_into(mm, 8 * base + _HEADER_AT, stamp_ns, now, kind, nbytes, len(meta))
-        if WEAK_ORDERING:
-            fence()  # ⑤
-        w[base + S_END] = seq  # ⑥
-        w[W_ORDER + seq % self._n_slots] = slot  # ⑦
-        w[W_WRITE_SEQ] = seq  # ⑧
-        _COUNTERS.pack_into(mm, _COUNTERS_AT, seq, now)  # published, heartbeat
-        self._seq = seq
-        self._slot_seq[slot] = seq
-        if slot != self._last:
-            lru = self._lru
-            lru.remove(slot)
-            lru.append(slot)
-            self._last = slot
-        fence()  # write_seq is seen by a reader before it sleeps, or its waiting flag is seen here
-        if self._waiting.unpack_from(mm, self._waiting_at) != self._nobody_waits:
-            self._wake_readers()
-        return seq
-
     def _wake_readers(self) -> None:
         """Signal the eventfd of every reader whose waiting flag is up (it sleeps, or is about
         to)."""
@@ -451,11 +447,11 @@ class Writer:
         src = np.frombuffer(payload, np.uint8) if not isinstance(payload, np.ndarray) else payload
         if src.dtype != np.uint8 or src.ndim != 1:
             src = src.reshape(-1).view(np.uint8)
-        nbytes = src.shape[0]
-        self._check(nbytes, meta)
-        slot = self._claim(timeout_s)
-        np.copyto(self._payload[slot][:nbytes], src)  # ④
-        return self._commit(slot, nbytes, stamp_ns, kind, meta)
+        with self.loan(
+            src.shape[0], stamp_ns=stamp_ns, kind=kind, meta=meta, timeout_s=timeout_s
+        ) as out:
+            np.copyto(out, src)  # ④
+        return self._seq
 
     def loan(
         self,
