@@ -67,6 +67,8 @@ _new_object = object.__new__
 #: a slot's header words stamp_ns, publish_ns, kind, nbytes, meta_len, read with one call
 _HEADER = struct.Struct("5q")
 _HEADER_AT = 8 * S_STAMP
+#: a slot's seq_begin, seq_end and header words, read with one call (in address order)
+_SLOT_HEAD = struct.Struct(f"q{8 * (S_END - S_BEGIN) - 8}xq{8 * (S_STAMP - S_END) - 8}x5q")
 #: a reader entry's words read_seq, pin, delivered, dropped, torn, lag_last, lag_max, lag_sum,
 #: capture_lag (native int64, each stored whole), written with one call
 _ENTRY = struct.Struct("9q")
@@ -117,22 +119,24 @@ class _View:
                 slot = w[W_ORDER + seq % rd._n_slots]  # ⓒ
                 w[rd._pin_word] = slot  # ⓓ
                 fence()  # ⓔ
-                base = rd._slot_words[slot]
-                if w[base] != seq or w[base + S_END] != seq:  # ⓕ (base + S_BEGIN is base)
+                # ⓕ seq_begin and seq_end, and with them the header (used only if they match)
+                begin, end, stamp_ns, publish_ns, kind, nbytes, meta_len = _SLOT_HEAD.unpack_from(
+                    rd._mm, rd._slot_bytes[slot]
+                )
+                if begin != seq or end != seq:
                     w[rd._pin_word] = -1
                     slot = -1
         if slot < 0:
             slot, seq, dropped = rd._next(self._timeout_s, self._latest)
-            self._slot = slot
             if slot < 0:
+                self._slot = slot
                 return None
+            stamp_ns, publish_ns, kind, nbytes, meta_len = _HEADER.unpack_from(
+                rd._mm, rd._slot_bytes[slot] + _HEADER_AT
+            )
         else:
             dropped = 0
         self._slot, self._seq, self._dropped = slot, seq, dropped
-        mm, base = rd._mm, rd._slot_words[slot]
-        stamp_ns, publish_ns, kind, nbytes, meta_len = _HEADER.unpack_from(
-            mm, 8 * base + _HEADER_AT
-        )
         if rd._view_n[slot] != nbytes:  # the slot's read-only view of this length, made once
             rd._view_n[slot] = nbytes
             rd._views[slot] = rd._payload[slot][:nbytes]
@@ -141,7 +145,7 @@ class _View:
         msg.stamp_ns = stamp_ns
         msg.publish_ns = publish_ns
         msg.kind = kind
-        msg.meta = rd._meta(base) if meta_len else b""
+        msg.meta = rd._meta(rd._slot_words[slot]) if meta_len else b""
         msg.payload = rd._views[slot]
         msg.dropped_before = dropped
         msg.__class__ = Message
@@ -300,6 +304,7 @@ class Reader:
         self._counters_at = 8 * (base + R_READ_SEQ)
         self._read_seq = start_seq
         self._slot_words = [lay.slot_offset(s) // 8 for s in range(lay.n_slots)]
+        self._slot_bytes = [lay.slot_offset(s) for s in range(lay.n_slots)]
         self._payload = [
             np.frombuffer(seg.mm, np.uint8, lay.capacity, lay.slot_offset(s) + HEADER_BYTES)
             for s in range(lay.n_slots)
