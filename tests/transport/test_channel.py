@@ -182,6 +182,8 @@ def test_loans_and_views_handed_out_and_not_entered_keep_their_arguments(name: s
         Writer(name, capacity_bytes=64, slots=4, policy=Policy.LOSSLESS) as w,
         Reader(name) as r,
     ):
+        with r.view(timeout_s=0.0) as nothing:  # a fresh reader's view that times out
+            assert nothing is None
         first, second = w.loan(3, stamp_ns=10), w.loan(5, stamp_ns=20)
         with second as out:
             out[:] = 2

@@ -100,6 +100,7 @@ class _View:
         self._slot = _PENDING
         self._msg: Message | None = None
         self._intact = False  # whether the message was whole when it was released
+        self._seq = self._dropped = 0
 
     def __enter__(self) -> Message | None:
         rd = self._reader
@@ -159,12 +160,12 @@ class _View:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
-        msg, rd, slot, seq = self._msg, self._reader, self._slot, self._seq
+        msg, rd, slot = self._msg, self._reader, self._slot
         self._slot = _DONE
         if msg is None:  # timed out: nothing pinned
             rd._free_view = self
             return
-        self._msg = None
+        self._msg, seq = None, self._seq
         # re-check the slot (ⓗⓘ), unpin it (ⓙ), count. This reader is the only writer of its
         # entry's counters (the writer only frees the entry of a dead reader): it keeps their
         # running values and stores them, with read_seq and the pin, in one call (ⓙ: the words

@@ -60,6 +60,7 @@ logger = logging.getLogger(__name__)
 
 _LOSSLESS = Policy.LOSSLESS.value
 _time_ns = time.time_ns
+_NO_READER = 1 << 62  # the lowest read position when no reader is live
 #: a slot's header words stamp_ns, publish_ns, kind, nbytes, meta_len (native int64, each stored
 #: whole), written with one call
 _HEADER = struct.Struct("5q")
@@ -98,28 +99,32 @@ class _Loan:
             raise TransportError(msg)
         if wr._closed or wr._loaned or nbytes > wr._capacity or len(meta) > META_CAPACITY:
             wr._check(nbytes, meta)  # raises the error that applies
-        # the fast claim (①②③): the slot written last, when there is a live reader, every live
-        # reader has read its message and none pins it — what readers that keep up leave,
-        # message after message (the same slot, still in cache). Anything else goes through
-        # _claim's full pass (without readers it keeps the newest message for one that comes)
-        w, held, slot = wr._w, wr._seq, -1
+        # the fast claim (①②③), _claim's first choice without its lists: the slot of the
+        # newest message every live reader has read (the lowest read position), if it still
+        # holds it and no reader pins it — the slot just read, still in cache: the one written
+        # last when the readers keep up, else the one they left last. Anything else goes
+        # through _claim's full pass (without readers it keeps the newest message for one that
+        # comes)
+        w, floor = wr._w, _NO_READER
         for state, read_seq in wr._entry_words:
             if w[state] == 1:
-                if w[read_seq] < held:
-                    slot = -1
-                    break
-                slot = wr._last
-        if slot >= 0:
+                seq = w[read_seq]
+                if seq < floor:  # noqa: PLR1730 — min() is a call per reader and message
+                    floor = seq
+        slot = wr._order[floor % wr._n_slots] if 0 < floor < _NO_READER else -1
+        if slot >= 0 and wr._slot_seq[slot] == floor:
             begin = wr._slot_words[slot]  # + S_BEGIN
-            w[begin] = held + 1  # ① the slot is being written
+            w[begin] = wr._seq + 1  # ① the slot is being written
             fence()  # ②
             # ③ every entry's pin, live or not: a free entry's is -1, and a reader that turned
             # live after the loop above is checked too
             for pin in wr._pin_words:
                 if w[pin] == slot:
-                    w[begin] = held  # it holds its message again
+                    w[begin] = floor  # it holds its message again
                     slot = -1
                     break
+        else:
+            slot = -1
         if slot < 0:
             slot = wr._claim(self._timeout_s)
         self._slot = slot
@@ -161,7 +166,7 @@ class _Loan:
         if WEAK_ORDERING:
             fence()  # ⑤
         w[base + S_END] = seq  # ⑥
-        w[W_ORDER + seq % wr._n_slots] = slot  # ⑦
+        w[W_ORDER + seq % wr._n_slots] = wr._order[seq % wr._n_slots] = slot  # ⑦
         w[W_WRITE_SEQ] = seq  # ⑧ (also the stream's published count)
         wr._seq = wr._slot_seq[slot] = seq
         if slot != wr._last:
@@ -228,6 +233,7 @@ class Writer:
         self._waiting_at = 8 * (self._readers[0] + R_WAITING)
         self._nobody_waits = (0,) * max_readers
         self._last = -1  # the slot written last (-1: none yet)
+        self._order = [-1] * slots  # the order words as written: message n's slot at n % slots
         self._out = [self._payload[s] for s in range(slots)]  # the last loan's view of each slot
         self._out_n = [capacity_bytes] * slots  # … and its length
         self._free_loan: _Loan | None = None  # a finished loan, handed out again by loan()
