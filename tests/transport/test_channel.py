@@ -8,6 +8,7 @@ import signal
 import stat
 import subprocess
 import sys
+import threading
 import time
 import uuid
 import zlib
@@ -172,6 +173,56 @@ def test_new_message_is_the_dataclass_message() -> None:
     assert type(fast) is Message
     for field in dataclasses.fields(Message):
         assert getattr(fast, field.name) is getattr(slow, field.name), field.name
+
+
+def test_loans_and_views_handed_out_and_not_entered_keep_their_arguments(name: str) -> None:
+    """The writer and the reader hand a finished loan / view out again (no object per message);
+    one that is handed out and not entered yet is never the one handed out again."""
+    with (
+        Writer(name, capacity_bytes=64, slots=4, policy=Policy.LOSSLESS) as w,
+        Reader(name) as r,
+    ):
+        with r.view(timeout_s=0.0) as nothing:  # a fresh reader's view that times out
+            assert nothing is None
+        first, second = w.loan(3, stamp_ns=10), w.loan(5, stamp_ns=20)
+        with second as out:
+            out[:] = 2
+        with first as out:
+            out[:] = 1
+        with w.loan(2, stamp_ns=30) as out:
+            out[:] = 3
+        early, late = r.view(timeout_s=1.0), r.view(timeout_s=1.0)
+        got = []
+        for view in (late, early, r.view(timeout_s=1.0)):
+            with view as msg:
+                assert msg is not None
+                got.append((msg.seq, msg.stamp_ns, msg.payload.tobytes()))
+        assert got == [(1, 20, b"\2" * 5), (2, 10, b"\1" * 3), (3, 30, b"\3" * 2)]
+        w.publish(b"abcd")
+        with pytest.raises(TransportError, match="at least 4 bytes"):
+            r.read(timeout_s=1.0, out=np.zeros(2, np.uint8))
+        again = r.read(timeout_s=1.0)  # the refused read left it unread
+        assert again is not None
+        assert (again.seq, again.payload.tobytes()) == (4, b"abcd")
+
+
+def test_without_readers_the_newest_message_is_kept_for_one_that_joins(name: str) -> None:
+    """The writer reuses the slot written last only when readers have read it: with none
+    attached, a reader that joins while the next message is being written gets the newest."""
+    with Writer(name, capacity_bytes=64, slots=4) as w:
+        w.publish(b"one", stamp_ns=1)
+        with w.loan(3, stamp_ns=2) as out:
+            out[:] = np.frombuffer(b"two", np.uint8)
+            with Reader(name) as r:
+                got: list[Message | None] = []
+                reading = threading.Thread(
+                    target=lambda: got.append(r.read(timeout_s=1.0)), daemon=True
+                )
+                reading.start()
+                reading.join(timeout=5.0)
+                assert got, "the reader never got a message"
+                assert got[0] is not None
+                assert (got[0].seq, got[0].payload.tobytes()) == (1, b"one")
 
 
 def test_a_pinned_view_is_never_overwritten(name: str) -> None:

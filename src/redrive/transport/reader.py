@@ -9,8 +9,10 @@ import contextlib
 import logging
 import os
 import socket
+import struct
 import time
 from types import TracebackType
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -20,27 +22,17 @@ from redrive.transport._fence import WEAK_ORDERING, fence
 from redrive.transport.segment import (
     HEADER_BYTES,
     META_OFFSET,
-    R_CAPTURE_LAG,
-    R_DELIVERED,
-    R_DROPPED,
-    R_LAG_LAST,
-    R_LAG_MAX,
-    R_LAG_SUM,
     R_PID,
     R_PIN,
     R_POLICY,
     R_READ_SEQ,
     R_START,
     R_STATE,
-    R_TORN,
     R_WAITING,
     READER_WORDS,
     S_BEGIN,
     S_END,
-    S_KIND,
     S_META_LEN,
-    S_NBYTES,
-    S_PUBLISH,
     S_STAMP,
     W_ORDER,
     W_POLICY,
@@ -55,6 +47,7 @@ from redrive.transport.stream import (
     SPIN_NS,
     ChannelStats,
     Message,
+    MessageSlots,
     Policy,
     ProducerGoneError,
     channel_stats,
@@ -69,34 +62,97 @@ __all__ = ["Reader"]
 
 logger = logging.getLogger(__name__)
 
+_time_ns = time.time_ns
+_new_object = object.__new__
+#: a slot's header words stamp_ns, publish_ns, kind, nbytes, meta_len, read with one call
+_HEADER = struct.Struct("5q")
+_HEADER_AT = 8 * S_STAMP
+#: a slot's seq_begin, seq_end and header words, read with one call (in address order)
+_SLOT_HEAD = struct.Struct(f"q{8 * (S_END - S_BEGIN) - 8}xq{8 * (S_STAMP - S_END) - 8}x5q")
+#: a reader entry's words read_seq, pin, delivered, dropped, torn, lag_last, lag_max, lag_sum,
+#: capture_lag (native int64, each stored whole), written with one call
+_ENTRY = struct.Struct("9q")
+
+
+_PENDING, _DONE = -2, -3  # a view's state when it holds no slot: handed out / finished
+
 
 class _View:
     """What :meth:`Reader.view` returns: pins the next message on ``__enter__``, re-checks and
-    unpins it on ``__exit__`` (a class, not a generator: no generator frame per message)."""
+    unpins it on ``__exit__`` (a class, not a generator: no generator frame per message). The
+    reader hands the same object out again once it is finished; ``_slot`` is the state:
+    ``_PENDING`` (handed out, not entered), the slot (entered; -1 after a timeout),
+    ``_DONE``."""
 
-    __slots__ = ("_dropped", "_latest", "_msg", "_reader", "_seq", "_slot", "_timeout_s")
+    __slots__ = (
+        "_dropped",
+        "_intact",
+        "_latest",
+        "_msg",
+        "_reader",
+        "_seq",
+        "_slot",
+        "_timeout_s",
+    )
 
     def __init__(self, reader: Reader, timeout_s: float | None, latest: bool) -> None:
         self._reader, self._timeout_s, self._latest = reader, timeout_s, latest
-        self._slot = -2  # not entered yet
+        self._slot = _PENDING
         self._msg: Message | None = None
+        self._intact = False  # whether the message was whole when it was released
+        self._seq = self._dropped = 0
 
     def __enter__(self) -> Message | None:
         rd = self._reader
-        if self._slot != -2:
+        if self._slot != _PENDING:
             err = f"stream {rd.name!r}: a view is entered once; call reader.view() again"
             raise TransportError(err)
-        slot, seq, dropped = rd._next(self._timeout_s, self._latest)
-        self._slot, self._seq, self._dropped = slot, seq, dropped
+        slot = -1
+        if rd._ready and not self._latest:
+            # the fast path (ⓐ–ⓕ): the next message is there, within a ring of this reader's
+            # position, and its slot still holds it; anything else goes through _next
+            w, rs = rd._w, rd._read_seq
+            ws = w[W_WRITE_SEQ]  # ⓐ
+            if WEAK_ORDERING:
+                fence()  # ⓑ
+            seq = rs + 1
+            if seq <= ws <= rs + rd._n_slots:
+                slot = w[W_ORDER + seq % rd._n_slots]  # ⓒ
+                w[rd._pin_word] = slot  # ⓓ
+                fence()  # ⓔ
+                # ⓕ seq_begin and seq_end, and with them the header (used only if they match)
+                begin, end, stamp_ns, publish_ns, kind, nbytes, meta_len = _SLOT_HEAD.unpack_from(
+                    rd._mm, rd._slot_bytes[slot]
+                )
+                if begin != seq or end != seq:
+                    w[rd._pin_word] = -1
+                    slot = -1
         if slot < 0:
-            return None
-        w, base = rd._w, rd._slot_words[slot]
-        meta = rd._meta(base) if w[base + S_META_LEN] else b""
-        payload = rd._payload[slot][: w[base + S_NBYTES]]
-        msg = self._msg = new_message(
-            seq, w[base + S_STAMP], w[base + S_PUBLISH], w[base + S_KIND], meta, payload, dropped
-        )
-        return msg
+            slot, seq, dropped = rd._next(self._timeout_s, self._latest)
+            if slot < 0:
+                self._slot = slot
+                return None
+            stamp_ns, publish_ns, kind, nbytes, meta_len = _HEADER.unpack_from(
+                rd._mm, rd._slot_bytes[slot] + _HEADER_AT
+            )
+        else:
+            dropped = 0
+        self._slot, self._seq, self._dropped = slot, seq, dropped
+        if rd._view_n[slot] != nbytes:  # the slot's read-only view of this length, made once
+            rd._view_n[slot] = nbytes
+            rd._views[slot] = rd._payload[slot][:nbytes]
+        msg: Any = _new_object(MessageSlots)  # as new_message, without its call
+        msg.seq = seq
+        msg.stamp_ns = stamp_ns
+        msg.publish_ns = publish_ns
+        msg.kind = kind
+        msg.meta = rd._meta(rd._slot_words[slot]) if meta_len else b""
+        msg.payload = rd._views[slot]
+        msg.dropped_before = dropped
+        msg.__class__ = Message
+        done: Message = msg
+        self._msg = done
+        return done
 
     def __exit__(
         self,
@@ -104,8 +160,53 @@ class _View:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
-        if self._msg is not None:
-            self._reader._release(self._slot, self._seq, self._dropped, self._msg)
+        msg, rd, slot = self._msg, self._reader, self._slot
+        self._slot = _DONE
+        if msg is None:  # timed out: nothing pinned
+            rd._free_view = self
+            return
+        self._msg, seq = None, self._seq
+        # re-check the slot (ⓗⓘ), unpin it (ⓙ), count. This reader is the only writer of its
+        # entry's counters (the writer only frees the entry of a dead reader): it keeps their
+        # running values and stores them, with read_seq and the pin, in one call (ⓙ: the words
+        # in address order, read_seq before the pin — a writer that sees the position before the
+        # unpin takes another slot)
+        w = rd._w
+        if WEAK_ORDERING:
+            fence()  # ⓗ
+        base = rd._slot_words[slot]
+        intact = self._intact = w[base] == seq and w[base + S_END] == seq  # ⓘ (S_BEGIN: +0)
+        rd._read_seq = seq
+        if intact:
+            now = _time_ns()
+            lag = rd._lag_last = now - msg.publish_ns
+            rd._delivered += 1
+            rd._lag_sum += lag
+            if lag > rd._lag_max:  # noqa: PLR1730 — max() is a call per message
+                rd._lag_max = lag
+            rd._capture_lag = now - msg.stamp_ns if msg.stamp_ns else lag
+        else:
+            rd._torn += 1
+        if self._dropped:
+            rd._dropped += self._dropped
+        _ENTRY.pack_into(
+            rd._mm,
+            rd._counters_at,
+            seq,  # read_seq
+            -1,  # pin
+            rd._delivered,
+            rd._dropped,
+            rd._torn,
+            rd._lag_last,
+            rd._lag_max,
+            rd._lag_sum,
+            rd._capture_lag,
+        )
+        if rd._wake_writer:
+            fence()  # read_seq is seen by a writer before it sleeps, or its flag is seen here
+            if w[W_WRITER_WAITING]:
+                os.eventfd_write(rd._space_fd, 1)
+        rd._free_view = self
 
 
 class Reader:
@@ -127,6 +228,8 @@ class Reader:
         self._fd = os.eventfd(0, os.EFD_NONBLOCK | os.EFD_CLOEXEC)
         self._space_fd = -1
         self._closed = False
+        self._ready = False  # attached and open: the fast paths may run
+        self._free_view: _View | None = None  # a finished view, handed out again by view()
         self._attach(time.monotonic() + timeout_s)
 
     # -- attaching ---------------------------------------------------------------------------
@@ -193,18 +296,28 @@ class Reader:
         self._n_slots = lay.n_slots
         self.policy = policy
         self._lossless = policy is Policy.LOSSLESS
-        self._delivered = self._lag_sum = self._lag_max = 0  # this entry's counters (zeroed above)
+        # this entry's counters (zeroed above), kept here and stored whole (see _View.__exit__)
+        self._delivered = self._dropped = self._torn = self._lag_sum = self._lag_max = 0
+        self._lag_last = self._capture_lag = 0
         self._base = base
+        self._pin_word = base + R_PIN
+        self._wake_writer = False  # set by _handshake, once the writer's eventfd is known
+        self._counters_at = 8 * (base + R_READ_SEQ)
         self._read_seq = start_seq
         self._slot_words = [lay.slot_offset(s) // 8 for s in range(lay.n_slots)]
+        self._slot_bytes = [lay.slot_offset(s) for s in range(lay.n_slots)]
         self._payload = [
             np.frombuffer(seg.mm, np.uint8, lay.capacity, lay.slot_offset(s) + HEADER_BYTES)
             for s in range(lay.n_slots)
         ]
         for arr in self._payload:
             arr.flags.writeable = False
+        self._views = list(self._payload)  # the last view's array of each slot
+        self._view_n = [lay.capacity] * lay.n_slots  # … and its length
+        self._mm = seg.mm
         self._raw = memoryview(seg.mm)
         self._handshake(entry, seg.generation)
+        self._ready = True
 
     def _handshake(self, entry: int, generation: int) -> None:
         with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM | socket.SOCK_CLOEXEC) as sock:
@@ -222,14 +335,16 @@ class Reader:
         if self._space_fd >= 0:
             os.close(self._space_fd)
         self._space_fd = fds[0]
+        self._wake_writer = self._lossless
 
     def _detach(self) -> None:
         seg = self._seg
         if seg is None:
             return
+        self._ready = False
         self._w[self._base + R_PIN] = -1
         self._w[self._base + R_STATE] = 0
-        self._payload = []
+        self._payload = self._views = []
         self._raw.release()
         self._w = memoryview(b"\0" * 8).cast("q")
         seg.close()
@@ -319,55 +434,10 @@ class Reader:
                 drain(self._fd)
             w[flag] = 0
 
-    def _message(
-        self, slot: int, seq: int, dropped: int, payload: npt.NDArray[np.uint8]
-    ) -> Message:
-        w, base = self._w, self._slot_words[slot]
-        meta = self._meta(base) if w[base + S_META_LEN] else b""
-        return new_message(
-            seq, w[base + S_STAMP], w[base + S_PUBLISH], w[base + S_KIND], meta, payload, dropped
-        )
-
     def _meta(self, base: int) -> bytes:
         """The meta bytes of the slot whose header starts at word ``base``."""
         off = base * 8 + META_OFFSET
         return bytes(self._raw[off : off + self._w[base + S_META_LEN]])
-
-    def _release(self, slot: int, seq: int, dropped: int, msg: Message) -> bool:
-        """Re-check the slot (ⓗⓘ), unpin it (ⓙ), count; False if the message was torn.
-
-        This reader is the only writer of its entry's counters (the writer only frees the entry
-        of a dead reader): it keeps their running values here and stores them, without loading
-        them back from shared memory.
-        """
-        w, me = self._w, self._base
-        if WEAK_ORDERING:
-            fence()  # ⓗ
-        base = self._slot_words[slot]
-        intact = w[base + S_BEGIN] == seq and w[base + S_END] == seq  # ⓘ
-        w[me + R_PIN] = -1  # ⓙ
-        self._read_seq = seq
-        w[me + R_READ_SEQ] = seq
-        if dropped:
-            w[me + R_DROPPED] += dropped
-        if not intact:
-            w[me + R_TORN] += 1
-            return False
-        now = time.time_ns()
-        lag = now - msg.publish_ns
-        self._delivered += 1
-        self._lag_sum += lag
-        w[me + R_DELIVERED] = self._delivered
-        w[me + R_CAPTURE_LAG] = now - msg.stamp_ns if msg.stamp_ns else lag
-        w[me + R_LAG_LAST] = lag
-        w[me + R_LAG_SUM] = self._lag_sum
-        if lag > self._lag_max:
-            self._lag_max = w[me + R_LAG_MAX] = lag
-        if self._lossless and self._space_fd >= 0:
-            fence()  # read_seq is seen by a writer before it sleeps, or its flag is seen here
-            if w[W_WRITER_WAITING]:
-                os.eventfd_write(self._space_fd, 1)
-        return True
 
     def read(
         self,
@@ -387,25 +457,34 @@ class Reader:
             ProducerGoneError: the writer is gone and everything it published has been read.
         """
         while True:
-            slot, seq, dropped = self._next(timeout_s, latest)
-            if slot < 0:
+            vw = _View(self, timeout_s, latest)  # its own: a view handed out stays as it is
+            got = vw.__enter__()
+            if got is None:
                 return None
-            nbytes = self._w[self._slot_words[slot] + S_NBYTES]
+            nbytes = got.payload.shape[0]
             if out is None:
                 copy = np.empty(nbytes, np.uint8)
             elif out.dtype == np.uint8 and out.ndim == 1 and out.shape[0] >= nbytes:
                 copy = out[:nbytes]
             else:
-                self._w[self._base + R_PIN] = -1
+                self._w[self._pin_word] = -1  # unread: the next read gives it again
                 msg_text = (
                     f"stream {self.name!r}: read(out=…) needs a 1-D uint8 array of at least "
                     f"{nbytes} bytes"
                 )
                 raise TransportError(msg_text)
-            np.copyto(copy, self._payload[slot][:nbytes])  # ⓖ
-            msg = self._message(slot, seq, dropped, copy)
-            if self._release(slot, seq, dropped, msg):
-                return msg
+            np.copyto(copy, got.payload)  # ⓖ
+            vw.__exit__(None, None, None)
+            if vw._intact:
+                return new_message(
+                    got.seq,
+                    got.stamp_ns,
+                    got.publish_ns,
+                    got.kind,
+                    got.meta,
+                    copy,
+                    got.dropped_before,
+                )
 
     def read_sample(
         self, timeout_s: float | None = None, *, latest: bool = False
@@ -432,7 +511,12 @@ class Reader:
             with reader.view(timeout_s=1.0) as msg:   # msg: Message | None
                 ...
         """
-        return _View(self, timeout_s, latest)
+        vw = self._free_view
+        if vw is None:  # the last one is still out (entered, or handed out and not entered yet)
+            return _View(self, timeout_s, latest)
+        self._free_view = None
+        vw._timeout_s, vw._latest, vw._slot = timeout_s, latest, _PENDING
+        return vw
 
     def stats(self) -> ChannelStats:
         if self._seg is None:
@@ -452,6 +536,7 @@ class Reader:
         if self._closed:
             return
         self._closed = True
+        self._ready = False
         self._detach()
         os.close(self._fd)
         if self._space_fd >= 0:

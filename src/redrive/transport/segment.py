@@ -6,7 +6,7 @@ Layout (all integers little-endian int64 "words"; a *line* is 8 words = 64 bytes
       line 0   magic, version, n_slots, slot_stride, capacity, max_readers, policy, generation
       line 1   owner_pid, owner_start, created_ns, closed
       line 2   write_seq                                  (alone on its line: written per message)
-      line 3   published, heartbeat_ns, writer_waiting
+      line 3   -, -, writer_waiting  (the first two unused: published is write_seq)
       lines    order[n_slots]: slot of message n at order[n % n_slots]
       lines    reader r (2 lines each): pid, start, state, policy, read_seq, pin, delivered,
                dropped | torn, lag_last_ns, lag_max_ns, lag_sum_ns, capture_lag_ns, waiting, -, -
@@ -70,7 +70,7 @@ _NAME = re.compile(r"^[A-Za-z0-9_.-]{1,200}$")
 W_MAGIC, W_VERSION, W_SLOTS, W_STRIDE, W_CAPACITY, W_READERS, W_POLICY, W_GENERATION = range(8)
 W_OWNER_PID, W_OWNER_START, W_CREATED, W_CLOSED = 8, 9, 10, 11
 W_WRITE_SEQ = 16
-W_PUBLISHED, W_HEARTBEAT, W_WRITER_WAITING = 24, 25, 26
+W_WRITER_WAITING = 26
 W_ORDER = 32
 READER_WORDS = 16
 # reader entry fields (offsets inside an entry)

@@ -8,6 +8,7 @@ import contextlib
 import logging
 import os
 import socket
+import struct
 import threading
 import time
 from types import TracebackType
@@ -29,16 +30,11 @@ from redrive.transport.segment import (
     R_START,
     R_STATE,
     R_WAITING,
+    READER_WORDS,
     S_BEGIN,
     S_END,
-    S_KIND,
-    S_META_LEN,
-    S_NBYTES,
-    S_PUBLISH,
     S_STAMP,
-    W_HEARTBEAT,
     W_ORDER,
-    W_PUBLISHED,
     W_WRITE_SEQ,
     W_WRITER_WAITING,
     Layout,
@@ -63,16 +59,27 @@ __all__ = ["Writer"]
 logger = logging.getLogger(__name__)
 
 _LOSSLESS = Policy.LOSSLESS.value
+_time_ns = time.time_ns
+_NO_READER = 1 << 62  # the lowest read position when no reader is live
+#: a slot's header words stamp_ns, publish_ns, kind, nbytes, meta_len (native int64, each stored
+#: whole), written with one call
+_HEADER = struct.Struct("5q")
+_HEADER_AT = 8 * S_STAMP
+
+
+_PENDING, _DONE = -1, -2  # a loan's state when it holds no slot: handed out / finished
 
 
 class _Loan:
     """What :meth:`Writer.loan` returns: claims the slot on ``__enter__``, publishes it on a clean
     ``__exit__`` and abandons it on an exception (a class, not a generator: no generator frame
-    per message)."""
+    per message). The writer hands the same object out again once it is finished, so a message
+    allocates nothing here; ``_slot`` is the state: ``_PENDING`` (handed out, not entered), the
+    slot (entered), ``_DONE``."""
 
     __slots__ = ("_kind", "_meta", "_nbytes", "_slot", "_stamp_ns", "_timeout_s", "_writer")
 
-    def __init__(  # noqa: PLR0917 — built once per message: positional is the cheaper call
+    def __init__(  # noqa: PLR0917 — positional, in the order loan() sets them
         self,
         writer: Writer,
         nbytes: int,
@@ -83,23 +90,49 @@ class _Loan:
     ) -> None:
         self._writer, self._nbytes, self._stamp_ns = writer, nbytes, stamp_ns
         self._kind, self._meta, self._timeout_s = kind, meta, timeout_s
-        self._slot = -1
+        self._slot = _PENDING
 
     def __enter__(self) -> npt.NDArray[np.uint8]:
-        wr = self._writer
-        if self._slot >= 0:
+        wr, nbytes, meta = self._writer, self._nbytes, self._meta
+        if self._slot != _PENDING:
             msg = f"stream {wr.name!r}: a loan is entered once; call writer.loan() again"
             raise TransportError(msg)
-        if (
-            wr._closed
-            or wr._loaned
-            or self._nbytes > wr._capacity
-            or len(self._meta) > META_CAPACITY
-        ):
-            wr._check(self._nbytes, self._meta)  # raises the error that applies
-        slot = self._slot = wr._claim(self._timeout_s)
+        if wr._closed or wr._loaned or nbytes > wr._capacity or len(meta) > META_CAPACITY:
+            wr._check(nbytes, meta)  # raises the error that applies
+        # the fast claim (①②③), _claim's first choice without its lists: the slot of the
+        # newest message every live reader has read (the lowest read position), if it still
+        # holds it and no reader pins it — the slot just read, still in cache: the one written
+        # last when the readers keep up, else the one they left last. Anything else goes
+        # through _claim's full pass (without readers it keeps the newest message for one that
+        # comes)
+        w, floor = wr._w, _NO_READER
+        for state, read_seq in wr._entry_words:
+            if w[state] == 1:
+                seq = w[read_seq]
+                if seq < floor:  # noqa: PLR1730 — min() is a call per reader and message
+                    floor = seq
+        slot = wr._order[floor % wr._n_slots] if 0 < floor < _NO_READER else -1
+        if slot >= 0 and wr._slot_seq[slot] == floor:
+            begin = wr._slot_words[slot]  # + S_BEGIN
+            w[begin] = wr._seq + 1  # ① the slot is being written
+            fence()  # ②
+            # ③ every entry's pin, live or not: a free entry's is -1, and a reader that turned
+            # live after the loop above is checked too
+            for pin in wr._pin_words:
+                if w[pin] == slot:
+                    w[begin] = floor  # it holds its message again
+                    slot = -1
+                    break
+        else:
+            slot = -1
+        if slot < 0:
+            slot = wr._claim(self._timeout_s)
+        self._slot = slot
         wr._loaned = True
-        return wr._payload[slot][: self._nbytes]
+        if wr._out_n[slot] != nbytes:  # the slot's view of this length, made once
+            wr._out_n[slot] = nbytes
+            wr._out[slot] = wr._payload[slot][:nbytes]
+        return wr._out[slot]
 
     def __exit__(
         self,
@@ -108,11 +141,42 @@ class _Loan:
         tb: TracebackType | None,
     ) -> None:
         wr, slot = self._writer, self._slot
+        self._slot = _DONE
         wr._loaned = False
+        wr._free_loan = self
+        w, base = wr._w, wr._slot_words[slot]
         if exc_type is not None:  # abandoned: the slot holds its old message again
-            wr._w[wr._slot_words[slot] + S_BEGIN] = wr._slot_seq[slot]
+            w[base + S_BEGIN] = wr._slot_seq[slot]
             return
-        wr._commit(slot, self._nbytes, self._stamp_ns, self._kind, self._meta)
+        # publish (④ was the caller's fill)
+        seq, mm, meta = wr._seq + 1, wr._mm, self._meta
+        if meta:
+            off = base * 8 + META_OFFSET
+            wr._raw[off : off + len(meta)] = meta
+        # the header's five words in one call (no other side reads them before ⑥)
+        _HEADER.pack_into(
+            mm,
+            8 * base + _HEADER_AT,
+            self._stamp_ns,
+            _time_ns(),
+            self._kind,
+            self._nbytes,
+            len(meta),
+        )
+        if WEAK_ORDERING:
+            fence()  # ⑤
+        w[base + S_END] = seq  # ⑥
+        w[W_ORDER + seq % wr._n_slots] = wr._order[seq % wr._n_slots] = slot  # ⑦
+        w[W_WRITE_SEQ] = seq  # ⑧ (also the stream's published count)
+        wr._seq = wr._slot_seq[slot] = seq
+        if slot != wr._last:
+            lru = wr._lru
+            lru.remove(slot)
+            lru.append(slot)
+            wr._last = slot
+        fence()  # write_seq is seen by a reader before it sleeps, or its waiting flag is seen here
+        if wr._waiting.unpack_from(mm, wr._waiting_at) != wr._nobody_waits:
+            wr._wake_readers()
 
 
 class Writer:
@@ -153,7 +217,7 @@ class Writer:
         self._capacity = capacity_bytes
         self._slot_seq = [0] * slots  # message each slot holds
         self._slot_words = [layout.slot_offset(s) // 8 for s in range(slots)]
-        mm = self._seg.mm
+        mm = self._mm = self._seg.mm
         self._payload = [
             np.frombuffer(mm, np.uint8, capacity_bytes, layout.slot_offset(s) + HEADER_BYTES)
             for s in range(slots)
@@ -161,6 +225,18 @@ class Writer:
         self._raw = memoryview(mm)
         self._readers = [layout.reader_word(r) for r in range(max_readers)]
         self._waiting_words = [b + R_WAITING for b in self._readers]
+        # what a message looks at, precomputed: each reader entry's (state, read_seq) words, its
+        # pin word; every entry's waiting flag in one load (see _Loan.__exit__)
+        self._entry_words = tuple((b + R_STATE, b + R_READ_SEQ) for b in self._readers)
+        self._pin_words = tuple(b + R_PIN for b in self._readers)
+        self._waiting = struct.Struct("q" + f"{8 * (READER_WORDS - 1)}xq" * (max_readers - 1))
+        self._waiting_at = 8 * (self._readers[0] + R_WAITING)
+        self._nobody_waits = (0,) * max_readers
+        self._last = -1  # the slot written last (-1: none yet)
+        self._order = [-1] * slots  # the order words as written: message n's slot at n % slots
+        self._out = [self._payload[s] for s in range(slots)]  # the last loan's view of each slot
+        self._out_n = [capacity_bytes] * slots  # … and its length
+        self._free_loan: _Loan | None = None  # a finished loan, handed out again by loan()
         self._n_slots = slots
         self._lossless = policy is Policy.LOSSLESS
         self._reader_fd = [-1] * max_readers
@@ -330,39 +406,16 @@ class Writer:
                     raise ReaderGoneError(msg)
                 logger.info("stream %s: reader pid %d is gone; entry freed", self.name, pid)
 
-    def _commit(self, slot: int, nbytes: int, stamp_ns: int, kind: int, meta: bytes) -> int:
-        w, seq = self._w, self._seq + 1
-        base = self._slot_words[slot]
-        if meta:
-            off = base * 8 + META_OFFSET
-            self._raw[off : off + len(meta)] = meta
-        now = time.time_ns()
-        w[base + S_STAMP] = stamp_ns
-        w[base + S_PUBLISH] = now
-        w[base + S_KIND] = kind
-        w[base + S_NBYTES] = nbytes
-        w[base + S_META_LEN] = len(meta)
-        if WEAK_ORDERING:
-            fence()  # ⑤
-        w[base + S_END] = seq  # ⑥
-        w[W_ORDER + seq % self._n_slots] = slot  # ⑦
-        w[W_WRITE_SEQ] = seq  # ⑧
-        w[W_PUBLISHED] = seq
-        w[W_HEARTBEAT] = now
-        self._seq = seq
-        self._slot_seq[slot] = seq
-        lru = self._lru
-        if lru[-1] != slot:
-            lru.remove(slot)
-            lru.append(slot)
-        fence()  # write_seq is seen by a reader before it sleeps, or its waiting flag is seen here
+    def _wake_readers(self) -> None:
+        """Signal the eventfd of every reader whose waiting flag is up (it sleeps, or is about
+        to)."""
+        w = self._w
         for i, flag in enumerate(self._waiting_words):
-            if w[flag]:  # a reader sleeps (or is about to): wake it
+            if w[flag]:
                 with self._fd_lock:  # the attach thread may be replacing the descriptor
                     fd = self._reader_fd[i]
                     if fd >= 0:
                         os.eventfd_write(fd, 1)
-        return seq
 
     def _check(self, nbytes: int, meta: bytes) -> None:
         if self._closed:
@@ -400,11 +453,11 @@ class Writer:
         src = np.frombuffer(payload, np.uint8) if not isinstance(payload, np.ndarray) else payload
         if src.dtype != np.uint8 or src.ndim != 1:
             src = src.reshape(-1).view(np.uint8)
-        nbytes = src.shape[0]
-        self._check(nbytes, meta)
-        slot = self._claim(timeout_s)
-        np.copyto(self._payload[slot][:nbytes], src)  # ④
-        return self._commit(slot, nbytes, stamp_ns, kind, meta)
+        with self.loan(
+            src.shape[0], stamp_ns=stamp_ns, kind=kind, meta=meta, timeout_s=timeout_s
+        ) as out:
+            np.copyto(out, src)  # ④
+        return self._seq
 
     def loan(
         self,
@@ -421,7 +474,13 @@ class Writer:
             with writer.loan(n, stamp_ns=t) as out:   # out: uint8 (n,), the slot's memory
                 out[:] = ...
         """
-        return _Loan(self, nbytes, stamp_ns, kind, meta, timeout_s)
+        ln = self._free_loan
+        if ln is None:  # the last one is still out (entered, or handed out and not entered yet)
+            return _Loan(self, nbytes, stamp_ns, kind, meta, timeout_s)
+        self._free_loan = None
+        ln._nbytes, ln._stamp_ns, ln._kind, ln._meta = nbytes, stamp_ns, kind, meta
+        ln._timeout_s, ln._slot = timeout_s, _PENDING
+        return ln
 
     def publish_sample(self, sample: SensorData, *, timeout_s: float | None = 5.0) -> int:
         """Publish a ``SensorData`` (typed, see :mod:`redrive.transport.codec`); returns its
@@ -452,7 +511,7 @@ class Writer:
                     os.close(fd)
             self._reader_fd = [-1] * len(self._reader_fd)
         os.close(self._space_fd)
-        self._payload = []
+        self._payload = self._out = []
         self._raw.release()
         self._seg.close(unlink=True)
 
