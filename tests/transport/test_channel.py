@@ -439,6 +439,37 @@ def test_writer_killed_mid_write_never_yields_a_torn_message(name: str) -> None:
     assert remove_stale(name) == [segment_path(name)]
 
 
+def test_newest_message_torn_by_a_killed_writer_ends_the_read(name: str) -> None:
+    """A keep-latest reader that joins while the writer reuses the slot of the newest message
+    (every reader then had read it) finds that message being rewritten; the writer is killed
+    there. The read must notice the writer is gone, not retry the torn message for ever."""
+    from redrive.transport.segment import S_BEGIN, W_ORDER, W_WRITE_SEQ
+
+    hang = Peer("hang", name)  # message 1 published, message 2 half-written in another slot
+    with Reader(name, policy=Policy.KEEP_LATEST) as r:
+        w = r._w
+        newest = int(w[W_WRITE_SEQ])
+        assert newest == 1
+        slot = int(w[W_ORDER + newest % r._n_slots])
+        w[r._slot_words[slot] + S_BEGIN] = newest + 1  # the writer began rewriting it ...
+        hang.kill()  # ... and died there
+        outcome: list[object] = []
+
+        def read() -> None:
+            try:
+                outcome.append(r.read(timeout_s=5.0))
+            except ProducerGoneError as err:
+                outcome.append(err)
+
+        reader = threading.Thread(target=read, daemon=True)
+        reader.start()
+        reader.join(timeout=10.0)
+        assert not reader.is_alive(), "the read spins on a torn message of a dead writer"
+        assert len(outcome) == 1
+        assert isinstance(outcome[0], ProducerGoneError)
+    remove_stale(name)
+
+
 def test_writer_restart_reattaches_the_reader(name: str) -> None:
     first = Peer("write", name, "5", "1", "LOSSLESS")
     with Reader(name) as r:

@@ -386,13 +386,19 @@ class Reader:
         jump = latest
         skip_to = 0  # a lossless reader's first message still held (see below)
         spin_until = 0
+        # A message this call failed to pin twice in a row: its slot is being written again. A
+        # keep-latest reader that joined while the writer reused the newest message's slot (every
+        # reader then had read it) can want that message; a live writer soon publishes a newer
+        # one, a killed one never does — so it is not retried until write_seq moves, and the
+        # liveness check below runs meanwhile.
+        failed = stuck = -1
         while True:
             w, n_slots = self._w, self._n_slots
             ws = w[W_WRITE_SEQ]  # ⓐ
             if WEAK_ORDERING:
                 fence()  # ⓑ
             rs = self._read_seq
-            if ws > rs:
+            if ws > rs and ws != stuck:
                 want = ws if jump or ws - rs > n_slots else max(rs + 1, skip_to)
                 slot = w[W_ORDER + want % n_slots]  # ⓒ
                 pin = self._base + R_PIN
@@ -408,6 +414,9 @@ class Reader:
                     # overwritten before this reader's position was seen (it joined while the
                     # writer reused a slot every reader then had read): gone, counted as dropped
                     skip_to = want + 1
+                if want == failed:
+                    stuck = ws  # see above
+                failed = want
                 continue
             now = time.monotonic()
             if not last_check:
@@ -416,9 +425,10 @@ class Reader:
             if now - last_check >= CHECK_S or (deadline is not None and now >= deadline):
                 last_check = now
                 if self._seg is not None and not self._seg.owner_alive():
-                    if w[W_WRITE_SEQ] > self._read_seq:
+                    if w[W_WRITE_SEQ] > self._read_seq and stuck < 0:
                         continue  # it left messages behind: deliver them first
                     self._reattach_or_raise()
+                    failed = stuck = -1
                     continue
             if deadline is not None and now >= deadline:
                 return -1, 0, 0
@@ -430,7 +440,7 @@ class Reader:
             flag = self._base + R_WAITING
             w[flag] = 1
             fence()  # the writer sees the flag after this, or its write_seq is seen below
-            if w[W_WRITE_SEQ] == self._read_seq and wait_fd(self._fd, wait):
+            if w[W_WRITE_SEQ] in (self._read_seq, stuck) and wait_fd(self._fd, wait):
                 drain(self._fd)
             w[flag] = 0
 
