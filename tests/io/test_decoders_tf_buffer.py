@@ -130,3 +130,26 @@ def test_chain_composition_property(yaws: list[float], xs: list[float]) -> None:
     expected = matrices[0] @ matrices[1] @ matrices[2]
     np.testing.assert_allclose(tf.lookup("map", "lidar", 123), expected, atol=1e-9)
     np.testing.assert_allclose(tf.lookup("lidar", "map", 123) @ expected, np.eye(4), atol=1e-9)
+
+
+def test_static_lookups_are_reused_until_a_static_transform_or_the_tree_changes() -> None:
+    buf = TransformBuffer()
+    buf.add(_tf("base_link", "lidar", (1.0, 0.0, 2.0)))  # static (stamp 0)
+    buf.add(_tf("map", "base_link", (10.0, 0.0, 0.0), stamp_ns=100))  # dynamic
+    buf.add(_tf("map", "base_link", (20.0, 0.0, 0.0), stamp_ns=200))
+    first = buf.lookup("base_link", "lidar", 150)
+    first[0, 3] = 99.0  # a caller's copy: the next lookup is not changed by it
+    assert buf.lookup("base_link", "lidar", 0)[:3, 3].tolist() == [1.0, 0.0, 2.0]
+    buf.add(_tf("map", "base_link", (30.0, 0.0, 0.0), stamp_ns=300))  # a dynamic sample
+    assert buf.lookup("base_link", "lidar", 0)[:3, 3].tolist() == [1.0, 0.0, 2.0]
+    # a path with a dynamic edge is looked up at its stamp every time
+    assert buf.lookup("map", "lidar", 150)[:3, 3].tolist() == pytest.approx([16.0, 0.0, 2.0])
+    assert buf.lookup("map", "lidar", 250)[:3, 3].tolist() == pytest.approx([26.0, 0.0, 2.0])
+    buf.add(_tf("base_link", "lidar", (1.5, 0.0, 2.0)))  # the static transform changed
+    assert buf.lookup("base_link", "lidar", 0)[:3, 3].tolist() == [1.5, 0.0, 2.0]
+    buf.add(_tf("base_link", "lidar", (1.5, 0.0, 2.0), stamp_ns=400))  # now a dynamic edge
+    buf.add(_tf("base_link", "lidar", (2.5, 0.0, 2.0), stamp_ns=500))
+    assert buf.lookup("base_link", "lidar", 450)[:3, 3].tolist() == pytest.approx([2.0, 0.0, 2.0])
+    buf.add(_tf("mount", "lidar", (0.0, 1.0, 0.0)))  # re-attached to another parent
+    buf.add(_tf("base_link", "mount", (0.0, 0.0, 1.0)))
+    assert buf.lookup("base_link", "lidar", 0)[:3, 3].tolist() == [0.0, 1.0, 1.0]

@@ -67,6 +67,10 @@ class TransformBuffer:
         self.window_ns = window_ns
         self.tolerance_ns = tolerance_ns
         self._edges: dict[str, _Edge] = {}
+        # Lookups along static edges only, by (dst, src): they hold until the tree or a static
+        # transform changes, which bumps the version (a dynamic sample does not).
+        self._version = 0
+        self._static_paths: dict[tuple[str, str], tuple[int, Matrix]] = {}
 
     @property
     def frames(self) -> frozenset[str]:
@@ -87,12 +91,16 @@ class TransformBuffer:
         if edge is None or edge.parent != parent:
             edge = _Edge(parent=parent)
             self._edges[child] = edge
+            self._version += 1
         if is_static:
             edge.static = transform
             edge.stamps_ns.clear()
             edge.samples.clear()
+            self._version += 1
             return
-        edge.static = None
+        if edge.static is not None:
+            edge.static = None
+            self._version += 1
         stamp = transform.stamp_ns
         if edge.stamps_ns and stamp <= edge.stamps_ns[-1]:
             i = bisect.bisect_left(edge.stamps_ns, stamp)
@@ -161,6 +169,9 @@ class TransformBuffer:
         dst, src = _frame(dst), _frame(src)
         if dst == src:
             return np.eye(4)
+        cached = self._static_paths.get((dst, src))
+        if cached is not None and cached[0] == self._version:
+            return cached[1].copy()
         src_chain, dst_chain = self._chain(src), self._chain(dst)
         common = next((f for f in src_chain if f in set(dst_chain)), None)
         if common is None:
@@ -180,4 +191,8 @@ class TransformBuffer:
         rotation_t = common_from_dst[:3, :3].T
         dst_from_common[:3, :3] = rotation_t
         dst_from_common[:3, 3] = -rotation_t @ common_from_dst[:3, 3]
-        return dst_from_common @ common_from_src
+        dst_from_src = dst_from_common @ common_from_src
+        path = src_chain[: src_chain.index(common)] + dst_chain[: dst_chain.index(common)]
+        if all(self._edges[child].static is not None for child in path):
+            self._static_paths[(dst, src)] = (self._version, dst_from_src.copy())
+        return dst_from_src
