@@ -38,6 +38,7 @@ from redrive.algorithms import (
     StepStatus,
 )
 from redrive.config import PipelineConfig
+from redrive.engine._heap import setup_frozen
 from redrive.engine.graph import LogInputs, PlannedAlgorithm, StageGraph
 from redrive.engine.handoff import Handoff, HandoffClosedError
 from redrive.engine.modes import ModeHooks, PacedFrame, ReplayMode
@@ -341,6 +342,18 @@ class Engine:
             ``cancel``) or ``failed`` (``fail_fast`` and a step failed — ``report.failure`` says
             which).
         """
+        with setup_frozen():
+            return self._run(frames, sink=sink, skip=skip, progress=progress, cancel=cancel)
+
+    def _run(
+        self,
+        frames: Iterable[Frame],
+        *,
+        sink: FrameSink,
+        skip: frozenset[int],
+        progress: Callable[[int], None] | None,
+        cancel: threading.Event | None,
+    ) -> RunReport:
         stats = StatsCollector([p for _, planned in self.graph.stages for p in planned])
         pending: Iterator[Frame] = (
             (f for f in frames if f.index not in skip) if skip else iter(frames)

@@ -6,19 +6,18 @@
 
 from __future__ import annotations
 
-import gc
 import hashlib
 import itertools
 import json
 import logging
 import threading
 from collections.abc import Callable, Iterable, Iterator, Mapping
-from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from redrive.config import PipelineConfig
+from redrive.engine._heap import setup_frozen
 from redrive.engine.core import Engine
 from redrive.engine.graph import LogInputs, StageGraph, build_graph
 from redrive.engine.modes import ModeHooks, ReplayMode
@@ -370,7 +369,7 @@ def execute(
         whatever the engine raises; the run directory is closed first (``interrupted`` on
         Ctrl-C, else ``failed`` with the error in the manifest).
     """
-    with _setup_frozen():
+    with setup_frozen():
         return _execute(
             graph,
             pipeline,
@@ -383,29 +382,6 @@ def execute(
             sink=sink,
             summary_extra=summary_extra,
         )
-
-
-@contextmanager
-def _setup_frozen() -> Iterator[None]:
-    """The objects alive when a run starts — imports, plugins and their compiled kernels, the
-    log's index — out of the garbage collector's sight for the run (``gc.freeze``), back after
-    it (``gc.unfreeze``).
-
-    A run allocates many short-lived objects (records, rows, decoded messages); every so often
-    they trigger a full collection, which walks every object of the process — with numba and
-    pyarrow loaded a walk of ≈ 0.1–0.2 s, in the frame loop or in the results writer's last
-    flush. Frozen, those walks see only what the run made. Nothing is leaked: what was garbage
-    at the start is collected after the run. A process that froze its heap itself (a pre-fork
-    server) is left as it is.
-    """
-    if gc.get_freeze_count():
-        yield
-        return
-    gc.freeze()
-    try:
-        yield
-    finally:
-        gc.unfreeze()
 
 
 def _execute(
