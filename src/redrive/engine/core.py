@@ -318,6 +318,7 @@ class Engine:
         for stage in self._stages:
             stage.close()
 
+    @setup_frozen()
     def run(
         self,
         frames: Iterable[Frame],
@@ -342,18 +343,6 @@ class Engine:
             ``cancel``) or ``failed`` (``fail_fast`` and a step failed — ``report.failure`` says
             which).
         """
-        with setup_frozen():
-            return self._run(frames, sink=sink, skip=skip, progress=progress, cancel=cancel)
-
-    def _run(
-        self,
-        frames: Iterable[Frame],
-        *,
-        sink: FrameSink,
-        skip: frozenset[int],
-        progress: Callable[[int], None] | None,
-        cancel: threading.Event | None,
-    ) -> RunReport:
         stats = StatsCollector([p for _, planned in self.graph.stages for p in planned])
         pending: Iterator[Frame] = (
             (f for f in frames if f.index not in skip) if skip else iter(frames)

@@ -345,6 +345,7 @@ def _then(
     return both
 
 
+@setup_frozen()
 def execute(
     graph: StageGraph,
     pipeline: PipelineConfig,
@@ -369,34 +370,6 @@ def execute(
         whatever the engine raises; the run directory is closed first (``interrupted`` on
         Ctrl-C, else ``failed`` with the error in the manifest).
     """
-    with setup_frozen():
-        return _execute(
-            graph,
-            pipeline,
-            inputs=inputs,
-            hooks=hooks,
-            writer=writer,
-            frames=frames,
-            progress=progress,
-            cancel=cancel,
-            sink=sink,
-            summary_extra=summary_extra,
-        )
-
-
-def _execute(
-    graph: StageGraph,
-    pipeline: PipelineConfig,
-    *,
-    inputs: LogInputs,
-    hooks: ModeHooks,
-    writer: RunWriter,
-    frames: Iterable[Frame],
-    progress: Callable[[int], None] | None,
-    cancel: threading.Event | None,
-    sink: Callable[[FrameRecord], None] | None,
-    summary_extra: Callable[[], Mapping[str, Any]] | None,
-) -> RunReport:
     engine = Engine(graph, pipeline, inputs=inputs, hooks=hooks)
     sampler = ResourceSampler(engine.worker_pids, threads=engine.thread_ids).start()
     try:
