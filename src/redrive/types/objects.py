@@ -126,20 +126,17 @@ class DetectedObject:
         # at only when there is a bad value, to name the first.
         if n and not (_ALL(np.isfinite(sizes_a), axis=None) and _MIN(sizes_a, axis=None) >= 0.0):
             bad = ~np.isfinite(sizes_a).all(axis=1) | (sizes_a < 0).any(axis=1)
-            if bad.any():
-                i = int(np.flatnonzero(bad)[0])
-                msg = (
-                    f"DetectedObject.many: sizes[{i}] must be finite and non-negative, "
-                    f"got {sizes_a[i].tolist()}"
-                )
-                raise ValueError(msg)
+            i = int(np.flatnonzero(bad)[0])
+            msg = (
+                f"DetectedObject.many: sizes[{i}] must be finite and non-negative, "
+                f"got {sizes_a[i].tolist()}"
+            )
+            raise ValueError(msg)
         yaws = _column1(yaws_rad, "yaws_rad", n)
         if n and not _ALL(np.isfinite(yaws)):
-            bad = ~np.isfinite(yaws)
-            if bad.any():
-                i = int(np.flatnonzero(bad)[0])
-                msg = f"DetectedObject.many: yaws_rad[{i}] must be finite, got {yaws[i]}"
-                raise ValueError(msg)
+            i = int(np.flatnonzero(~np.isfinite(yaws))[0])
+            msg = f"DetectedObject.many: yaws_rad[{i}] must be finite, got {yaws[i]}"
+            raise ValueError(msg)
         ids: Any = repeat(-1, n)
         if object_ids is not None:
             if len(object_ids) != n:
