@@ -519,13 +519,14 @@ def test_process_reports_errors_without_traceback(session: str, tmp_path: Path) 
 # -- rings of small streams --------------------------------------------------------------------
 
 
-@pytest.mark.parametrize(("slots", "kept"), [(8, 1), (ring_slots(4096, 8), 200)])
+@pytest.mark.parametrize(("slots", "kept"), [(8, 8), (ring_slots(4096, 8), 200)])
 def test_a_burst_of_ego_states_reaches_the_dispatcher_when_the_ring_holds_it(
     session: str, slots: int, kept: int
 ) -> None:
     """A source that fell behind publishes its backlog at once: 200 odometry messages before the
-    Sensor Dispatcher (a keep-latest reader) reads again. A ring of 8 slots laps it (the newest
-    only arrives, 199 are missed); the ring a small stream gets (ring_slots) holds them all."""
+    Sensor Dispatcher (a keep-latest reader, with a backlog for ego states) reads again. A ring
+    of 8 slots laps it (the 8 it still holds arrive, 192 are missed); the ring a small stream
+    gets (ring_slots) holds them all."""
     from redrive.live.dispatcher import LiveLog
 
     assert ring_slots(4096, 8) >= 200
@@ -558,3 +559,64 @@ def test_a_burst_of_ego_states_reaches_the_dispatcher_when_the_ring_holds_it(
                     break
             assert [m.payload.stamp_ns for m in got] == stamps[-kept:]  # type: ignore[union-attr]
             assert log.dropped["/odom"] == 200 - kept
+
+
+def test_the_first_sweep_read_finds_ego_states_on_both_sides_of_its_stamp(session: str) -> None:
+    """A source that published for a second before the dispatcher attached: its LiDAR reader
+    starts at the newest sweep, the ego states' reader at the oldest state the ring holds (not
+    the newest, 40 ms after that sweep), so states before and after the first sweep's stamp
+    arrive and its frame is not without an ego state."""
+    from redrive.live.dispatcher import LiveLog
+
+    lidar = StreamSpec(
+        topic="/points",
+        msgtype=PAYLOAD_MSGTYPE["PointCloud"],
+        stream=stream_name(session, "/points"),
+        payload="sensor",
+        capacity_bytes=1 << 16,
+    )
+    odom = StreamSpec(
+        topic="/odom",
+        msgtype=PAYLOAD_MSGTYPE["VehicleState"],
+        stream=stream_name(session, "/odom"),
+        payload="sensor",
+        capacity_bytes=4096,
+    )
+    t0 = 1_700_000_000_000_000_000
+    cloud = PointCloud(xyz=np.zeros((10, 3), np.float32))
+    with (
+        Writer(lidar.stream, capacity_bytes=1 << 16, slots=4, max_readers=2) as points,
+        Writer(odom.stream, capacity_bytes=4096, slots=ring_slots(4096, 8), max_readers=2) as ego,
+    ):
+        for i in range(105):  # odometry at 100 Hz, a sweep every 10th state
+            stamp = t0 + i * 10_000_000
+            state = VehicleState(stamp_ns=stamp, velocity=np.array([5.0, 0.0, 0.0]))
+            ego.publish_sample(
+                SensorData(
+                    sensor_id="odom", sensor_type=SensorType.ODOMETRY, stamp_ns=stamp, data=state
+                )
+            )
+            if i % 10 == 0:
+                points.publish_sample(
+                    SensorData(
+                        sensor_id="lidar",
+                        sensor_type=SensorType.LIDAR,
+                        stamp_ns=stamp,
+                        data=cloud,
+                    )
+                )
+        stop = threading.Event()
+        with LiveLog([lidar, odom], session, stop=stop) as log:
+            failsafe = threading.Timer(60.0, stop.set)  # a regression ends the read, not the suite
+            failsafe.start()
+            got = []
+            for message in log.messages():
+                got.append(message)
+                if len(got) == 105 + 1:  # every state, and the newest sweep
+                    break
+            failsafe.cancel()
+    sweeps = [m.payload.stamp_ns for m in got if m.topic == "/points"]  # type: ignore[union-attr]
+    states = [m.payload.stamp_ns for m in got if m.topic == "/odom"]  # type: ignore[union-attr]
+    assert sweeps == [t0 + 1_000_000_000]  # the newest
+    assert states == [t0 + i * 10_000_000 for i in range(105)]
+    assert min(states) < sweeps[0] < max(states)

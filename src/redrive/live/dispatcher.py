@@ -14,7 +14,10 @@ a message is therefore its publish time minus the smallest (publish − stamp) o
 the session: arrival on the stamps' clock, with the lowest latency seen counted as zero.
 
 Every stream is read as a *keep-latest observer*: the dispatcher never slows a source down; the
-messages it did not get are counted (:attr:`LiveLog.dropped`). Recording reads the same streams
+messages it did not get are counted (:attr:`LiveLog.dropped`). Ego-state and transform streams
+are read with a backlog (from the oldest message their ring holds, also after being lapped), so
+the first frames, whose sweeps were published before the dispatcher's first read, find the ego
+states around their stamps. Recording reads the same streams
 losslessly on its own (:mod:`redrive.live.recorder`).
 """
 
@@ -34,7 +37,7 @@ from redrive.errors import ConfigError, TransportError
 from redrive.io._deserialize import Deserializer
 from redrive.io.base import LogMessage, ReaderCapabilities, TopicInfo
 from redrive.io.decoders import capabilities_of, decoder_for
-from redrive.io.decoders.base import Decoded
+from redrive.io.decoders.base import Decoded, DecodedKind
 from redrive.io.typestore import typestore_for
 from redrive.live.streams import StreamSpec
 from redrive.transport import Policy, ProducerGoneError, Reader
@@ -45,6 +48,7 @@ __all__ = ["LiveLog"]
 logger = logging.getLogger(__name__)
 
 _POLL_S = 0.1
+_HISTORY_KINDS = frozenset({DecodedKind.VEHICLE_STATE, DecodedKind.TRANSFORMS})
 
 
 def _native_kind(spec: StreamSpec) -> dict[str, Any]:
@@ -56,6 +60,15 @@ def _native_kind(spec: StreamSpec) -> dict[str, Any]:
     if decoder is None:
         return {}
     return {"kind": decoder.kind, "sensor_type": decoder.sensor_type}
+
+
+def _wants_backlog(spec: StreamSpec) -> bool:
+    """Whether ``spec``'s stream is read from the oldest message its ring holds: ego states and
+    transforms, which frames are interpolated in. A sensor stream read newest-first starts at
+    its newest sweep, whose stamp can then lie before the newest ego state; with the ego states'
+    ring read from its oldest, the states on both sides of that stamp are there."""
+    decoder = decoder_for(spec.msgtype)
+    return decoder is not None and decoder.kind in _HISTORY_KINDS
 
 
 class LiveLog:
@@ -98,7 +111,10 @@ class LiveLog:
         try:
             for spec in specs:
                 self._readers[spec.topic] = Reader(
-                    spec.stream, timeout_s=attach_timeout_s, policy=Policy.KEEP_LATEST
+                    spec.stream,
+                    timeout_s=attach_timeout_s,
+                    policy=Policy.KEEP_LATEST,
+                    backlog=_wants_backlog(spec),
                 )
         except BaseException:
             self.close()

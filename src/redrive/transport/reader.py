@@ -215,15 +215,28 @@ class Reader:
     Args:
         policy: how this reader reads: the stream's policy by default; ``KEEP_LATEST`` on a
             lossless stream observes it without back-pressure.
+        backlog: for a keep-latest reader: start at the oldest message the ring still holds,
+            and when the writer laps it, go on from the oldest one still held rather than the
+            newest. It never slows the writer either, and loses only what was overwritten: for a
+            stream whose history matters more than its freshness (a 100-Hz ego state that frames
+            are interpolated in), where the default skips to the newest message.
 
     Raises:
         TransportError: no such stream within ``timeout_s``; every reader entry taken; a
             lossless reader asked of a keep-latest stream.
     """
 
-    def __init__(self, name: str, *, timeout_s: float = 5.0, policy: Policy | None = None) -> None:
+    def __init__(
+        self,
+        name: str,
+        *,
+        timeout_s: float = 5.0,
+        policy: Policy | None = None,
+        backlog: bool = False,
+    ) -> None:
         self.name = name
         self._want_policy = policy
+        self._backlog = backlog
         self._seg: Segment | None = None
         self._fd = os.eventfd(0, os.EFD_NONBLOCK | os.EFD_CLOEXEC)
         self._space_fd = -1
@@ -282,7 +295,7 @@ class Reader:
             base = lay.reader_word(entry)
             w[base + R_STATE] = 0
             ws = int(w[W_WRITE_SEQ])
-            if policy is Policy.LOSSLESS:
+            if policy is Policy.LOSSLESS or self._backlog:
                 start_seq = max(0, ws - (lay.n_slots - 1))  # the oldest messages still held
             else:
                 start_seq = max(0, ws - 1)  # the newest message
@@ -384,7 +397,7 @@ class Reader:
         deadline: float | None = None
         last_check = 0.0
         jump = latest
-        skip_to = 0  # a lossless reader's first message still held (see below)
+        skip_to = 0  # a lossless or backlog reader's first message still held (see below)
         spin_until = 0
         # A message this call failed to pin twice in a row: its slot is being written again. A
         # keep-latest reader that joined while the writer reused the newest message's slot (every
@@ -399,7 +412,12 @@ class Reader:
                 fence()  # ⓑ
             rs = self._read_seq
             if ws > rs and ws != stuck:
-                want = ws if jump or ws - rs > n_slots else max(rs + 1, skip_to)
+                if jump:
+                    want = ws
+                elif ws - rs <= n_slots:
+                    want = max(rs + 1, skip_to)
+                else:  # a ring behind: the newest, or with a backlog the oldest still held
+                    want = max(ws - n_slots + 1, skip_to) if self._backlog else ws
                 slot = w[W_ORDER + want % n_slots]  # ⓒ
                 pin = self._base + R_PIN
                 w[pin] = slot  # ⓓ
@@ -408,7 +426,9 @@ class Reader:
                 if w[base + S_BEGIN] == want and w[base + S_END] == want:  # ⓕ
                     return slot, want, want - rs - 1
                 w[pin] = -1
-                if not self._lossless:
+                if self._backlog and not self._lossless:
+                    skip_to = min(want + 1, ws)  # overwritten meanwhile: the next oldest
+                elif not self._lossless:
                     jump = True  # overwritten meanwhile: newest
                 elif w[base + S_END] > want:
                     # overwritten before this reader's position was seen (it joined while the
