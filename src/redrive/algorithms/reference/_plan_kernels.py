@@ -24,7 +24,9 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["idm_profile"]
+from redrive.algorithms.reference._kernels import project_on_segments
+
+__all__ = ["idm_profile", "leaders_on_path", "points_at", "polyline_arc"]
 
 _F64 = npt.NDArray[np.float64]
 
@@ -121,3 +123,188 @@ def idm_profile(  # noqa: PLR0917 - numba takes no keyword-only parameters
         v = v_new
         s_out[k + 1] = s
     return s_out
+
+
+@numba.njit(cache=True, nogil=True)
+def polyline_arc(xy: _F64) -> tuple[_F64, _F64]:  # pragma: no cover - compiled
+    """:class:`~redrive.algorithms.reference.planner.Polyline`'s vertices and arc lengths from
+    ``xy`` (M, 2), M ≥ 2: a vertex is dropped when it lies within 1 nm (``hypot``) of the
+    vertex before it in ``xy``; the arc lengths are the running sum of the kept segments'
+    ``hypot`` from 0 (as ``np.cumsum``)."""
+    m = xy.shape[0]
+    keep = np.empty(m, dtype=np.bool_)
+    keep[0] = True
+    count = 1
+    for i in range(1, m):
+        keep[i] = math.hypot(xy[i, 0] - xy[i - 1, 0], xy[i, 1] - xy[i - 1, 1]) > 1e-9
+        if keep[i]:
+            count += 1
+    pts = np.empty((count, 2))
+    s = np.empty(count)
+    k = 0
+    total = 0.0
+    for i in range(m):
+        if keep[i]:
+            pts[k, 0] = xy[i, 0]
+            pts[k, 1] = xy[i, 1]
+            if k == 0:
+                s[0] = 0.0
+            else:
+                total = total + math.hypot(pts[k, 0] - pts[k - 1, 0], pts[k, 1] - pts[k - 1, 1])
+                s[k] = total
+            k += 1
+    return pts, s
+
+
+@numba.njit(cache=True, nogil=True)
+def _interp(x: float, xp: _F64, fp: _F64, col: int) -> float:  # pragma: no cover - compiled
+    """``np.interp(x, xp, fp[:, col])`` at one point (``xp`` ascending, ≥ 2 values)."""
+    n = xp.shape[0]
+    if math.isnan(x):
+        return x
+    if x > xp[n - 1]:
+        return float(fp[n - 1, col])
+    if x < xp[0]:
+        return float(fp[0, col])
+    j = 0
+    while j + 1 < n and x >= xp[j + 1]:
+        j += 1
+    if j == n - 1 or xp[j] == x:
+        return float(fp[j, col])
+    slope = (fp[j + 1, col] - fp[j, col]) / (xp[j + 1] - xp[j])
+    out: float = slope * (x - xp[j]) + fp[j, col]
+    if math.isnan(out):
+        out = slope * (x - xp[j + 1]) + fp[j + 1, col]
+        if math.isnan(out) and fp[j, col] == fp[j + 1, col]:
+            out = fp[j, col]
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def points_at(xy: _F64, s: _F64, s_m: _F64) -> _F64:  # pragma: no cover - compiled
+    """:meth:`Polyline.points_at`: (K, 2) points of the polyline (vertices ``xy`` (M, 2), arc
+    lengths ``s``) at arc lengths ``s_m`` (K,) — ``np.interp`` of x and y, and beyond either end
+    the end segment extended straight (its direction ``d / hypot(d)``)."""
+    k_out = s_m.shape[0]
+    m = xy.shape[0]
+    out = np.empty((k_out, 2))
+    if m == 1:
+        for i in range(k_out):
+            out[i, 0] = xy[0, 0]
+            out[i, 1] = xy[0, 1]
+        return out
+    end = s[m - 1]
+    ex = xy[m - 1, 0] - xy[m - 2, 0]
+    ey = xy[m - 1, 1] - xy[m - 2, 1]
+    norm = math.hypot(ex, ey)
+    ex, ey = ex / norm, ey / norm
+    bx = xy[1, 0] - xy[0, 0]
+    by = xy[1, 1] - xy[0, 1]
+    norm = math.hypot(bx, by)
+    bx, by = bx / norm, by / norm
+    for i in range(k_out):
+        v = s_m[i]
+        if v > end:
+            out[i, 0] = xy[m - 1, 0] + (v - end) * ex
+            out[i, 1] = xy[m - 1, 1] + (v - end) * ey
+        elif v < 0.0:
+            out[i, 0] = xy[0, 0] + (v - 0.0) * bx
+            out[i, 1] = xy[0, 1] + (v - 0.0) * by
+        else:
+            out[i, 0] = _interp(v, s, xy, 0)
+            out[i, 1] = _interp(v, s, xy, 1)
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def leaders_on_path(  # noqa: PLR0917 - numba takes no keyword-only parameters
+    corners: _F64,
+    centers: _F64,
+    velocities: _F64,
+    xy: _F64,
+    s: _F64,
+    half_width_m: float,
+    front_m: float,
+    far_m: float,
+) -> tuple[_F64, _F64]:  # pragma: no cover - compiled
+    """:meth:`IdmPlanner._leaders` after the boxes' corners: the objects (corners (n, ≥ 4, ≥ 2):
+    the bottom four first; centres (n, ≥ 2); velocities (n, ≥ 2)) whose corners projected on
+    the path (vertices ``xy`` (M ≥ 2, 2), arc lengths ``s``) overlap the corridor ±
+    ``half_width_m`` and reach past ``front_m`` and before ``far_m``; for each, in order, the
+    arc length of its rear (the least corner's) and its speed along the path tangent at its
+    centre's foot, floored at 0 (``np.maximum``: -0.0 and NaN pass).  The projection is
+    :func:`._kernels.project_on_segments` on every segment; the minimum and maximum of the four
+    corners are numpy's (a NaN wins)."""
+    n = centers.shape[0]
+    m = xy.shape[0]
+    a = np.empty((m - 1, 2))
+    ab = np.empty((m - 1, 2))
+    seg_len = np.empty(m - 1)
+    for k in range(m - 1):
+        a[k, 0] = xy[k, 0]
+        a[k, 1] = xy[k, 1]
+        ab[k, 0] = xy[k + 1, 0] - xy[k, 0]
+        ab[k, 1] = xy[k + 1, 1] - xy[k, 1]
+        seg_len[k] = math.hypot(ab[k, 0], ab[k, 1])
+    points = np.empty((5 * n, 2))
+    for i in range(n):
+        for c in range(4):
+            points[4 * i + c, 0] = corners[i, c, 0]
+            points[4 * i + c, 1] = corners[i, c, 1]
+        points[4 * n + i, 0] = centers[i, 0]
+        points[4 * n + i, 1] = centers[i, 1]
+    s_all, lat_all, _ = project_on_segments(points, a, ab, seg_len, s[: m - 1])
+    out_s = np.empty(n)
+    out_v = np.empty(n)
+    count = 0
+    for i in range(n):
+        s_lo = s_all[4 * i]
+        s_hi = s_lo
+        lat_lo = lat_all[4 * i]
+        lat_hi = lat_lo
+        for c in range(1, 4):
+            v = s_all[4 * i + c]
+            if math.isnan(s_lo) or math.isnan(v):
+                s_lo = math.nan
+                s_hi = math.nan
+            else:
+                if v < s_lo:
+                    s_lo = v
+                if v > s_hi:
+                    s_hi = v
+            w = lat_all[4 * i + c]
+            if math.isnan(lat_lo) or math.isnan(w):
+                lat_lo = math.nan
+                lat_hi = math.nan
+            else:
+                if w < lat_lo:
+                    lat_lo = w
+                if w > lat_hi:
+                    lat_hi = w
+        in_corridor = lat_lo < half_width_m and lat_hi > -half_width_m
+        ahead = s_hi > front_m and s_lo < far_m
+        if not (in_corridor and ahead):
+            continue
+        # the tangent of the segment holding the centre's foot (searchsorted right - 1,
+        # clipped to the segments; a NaN sorts last)
+        foot = s_all[4 * n + i]
+        j = m
+        if not math.isnan(foot):
+            j = 0
+            while j < m and not foot < s[j]:
+                j += 1
+        j -= 1
+        if j < 0:
+            j = 0
+        if j > m - 2:
+            j = m - 2
+        dx = xy[j + 1, 0] - xy[j, 0]
+        dy = xy[j + 1, 1] - xy[j, 1]
+        h = math.hypot(dx, dy)
+        speed = (0.0 + velocities[i, 0] * (dx / h)) + velocities[i, 1] * (dy / h)
+        if not (speed >= 0.0 or math.isnan(speed)):
+            speed = 0.0
+        out_s[count] = s_lo
+        out_v[count] = speed
+        count += 1
+    return out_s[:count].copy(), out_v[:count].copy()
