@@ -10,7 +10,12 @@ import numpy as np
 import numpy.typing as npt
 
 from redrive.algorithms.reference._kernels import project_on_segments
-from redrive.algorithms.reference._plan_kernels import leaders_on_path, points_at, polyline_arc
+from redrive.algorithms.reference._plan_kernels import (
+    leaders_on_path,
+    points_at,
+    polyline_arc,
+    project_pruned,
+)
 from redrive.geometry.boxes import BOX_CORNER_SIGNS
 
 F64 = npt.NDArray[np.float64]
@@ -127,3 +132,22 @@ def test_leaders_on_path_equal_the_numpy_code_bit_for_bit() -> None:
         want_s, want_v = _leaders_numpy(*args)
         assert _bits(got_s) == _bits(want_s)
         assert _bits(got_v) == _bits(want_v)
+
+
+def test_project_pruned_equals_the_full_search_bit_for_bit() -> None:
+    rng = np.random.default_rng(13)
+    for trial in range(150):
+        xy, s_line = polyline_arc(_random_line(rng))
+        if len(xy) < 2:
+            continue
+        a = xy[:-1]
+        ab = xy[1:] - a
+        seg_len = np.hypot(ab[:, 0], ab[:, 1])
+        near = xy[rng.integers(0, len(xy), 30)] + rng.normal(0.0, 0.5, (30, 2))
+        p = np.concatenate([near, rng.uniform(-50.0, 150.0, (30, 2)), xy[:3]])
+        if trial % 25 == 0:
+            p[0] = np.nan  # the full search decides what a NaN gives
+        s_full, lat_full, _ = project_on_segments(p, a, ab, seg_len, s_line[:-1])
+        s_got, lat_got = project_pruned(p, a, ab, seg_len, s_line[:-1], s_line[-1])
+        assert _bits(s_got) == _bits(s_full)
+        assert _bits(lat_got) == _bits(lat_full)

@@ -26,7 +26,7 @@ import numpy.typing as npt
 
 from redrive.algorithms.reference._kernels import project_on_segments
 
-__all__ = ["idm_profile", "leaders_on_path", "points_at", "polyline_arc"]
+__all__ = ["idm_profile", "leaders_on_path", "points_at", "polyline_arc", "project_pruned"]
 
 _F64 = npt.NDArray[np.float64]
 
@@ -216,6 +216,81 @@ def points_at(xy: _F64, s: _F64, s_m: _F64) -> _F64:  # pragma: no cover - compi
     return out
 
 
+#: a segment is skipped only when it is provably farther than the best one by this much (metres,
+#: scaled by 1 + the distance), far above float64 rounding of path coordinates
+_PRUNE_MARGIN = 1e-6
+
+
+@numba.njit(cache=True, nogil=True)
+def project_pruned(  # noqa: PLR0917 - numba takes no keyword-only parameters
+    p: _F64, a: _F64, ab: _F64, seg_len: _F64, s_start: _F64, s_end: float
+) -> tuple[_F64, _F64]:  # pragma: no cover - compiled
+    """Arc length and signed lateral offset of each point ``p`` (P, 2) on the polyline of
+    segments ``a + t·ab`` (arc length ``s_start`` at ``a``; the last ends at ``s_end``): the
+    values :func:`._kernels.project_on_segments` gives, without looking at every segment.
+
+    Along a polyline the straight distance never exceeds the arc length between two points,
+    so a point at distance ``D`` from a vertex is at least ``D − |σ − s|`` from the polyline's
+    point at arc length ``σ``: the segments that end before ``s + D − best − margin`` are
+    farther than the best one found so far and are skipped (strictly farther even after
+    rounding, so the first minimum is the same one).  Non-finite inputs take the full search.
+    """
+    n_p = p.shape[0]
+    n_s = a.shape[0]
+    finite = math.isfinite(s_end)
+    for k in range(n_s):
+        if not (
+            math.isfinite(a[k, 0])
+            and math.isfinite(a[k, 1])
+            and math.isfinite(ab[k, 0])
+            and math.isfinite(ab[k, 1])
+            and math.isfinite(seg_len[k])
+            and math.isfinite(s_start[k])
+        ):
+            finite = False
+    for i in range(n_p):
+        if not (math.isfinite(p[i, 0]) and math.isfinite(p[i, 1])):
+            finite = False
+    if not finite:
+        s_full, lateral_full, _ = project_on_segments(p, a, ab, seg_len, s_start)
+        return s_full, lateral_full
+    s_out = np.empty(n_p)
+    lateral = np.empty(n_p)
+    for i in range(n_p):
+        px = p[i, 0]
+        py = p[i, 1]
+        best = 0
+        best_d2 = np.inf
+        best_t = 0.0
+        k = 0
+        while k < n_s:
+            apx = px - a[k, 0]
+            apy = py - a[k, 1]
+            t = ((0.0 + apx * ab[k, 0]) + apy * ab[k, 1]) / (seg_len[k] * seg_len[k])
+            if t < 0.0:
+                t = 0.0
+            if t > 1.0:
+                t = 1.0
+            ex = px - (a[k, 0] + t * ab[k, 0])
+            ey = py - (a[k, 1] + t * ab[k, 1])
+            d2 = (0.0 + ex * ex) + ey * ey
+            if k == 0 or d2 < best_d2:
+                best, best_d2, best_t = k, d2, t
+            k += 1
+            if k >= n_s:
+                break
+            # skip the segments that lie wholly closer (in arc length) to vertex k than its
+            # distance minus the best distance: every point of them is farther than the best
+            dist_k = math.hypot(px - a[k, 0], py - a[k, 1])
+            limit = s_start[k] + dist_k - math.sqrt(best_d2) - _PRUNE_MARGIN * (1.0 + dist_k)
+            while k < n_s and (s_start[k + 1] if k + 1 < n_s else s_end) < limit:
+                k += 1
+        s_out[i] = s_start[best] + best_t * seg_len[best]
+        cross = ab[best, 0] * (py - a[best, 1]) - ab[best, 1] * (px - a[best, 0])
+        lateral[i] = cross / seg_len[best]
+    return s_out, lateral
+
+
 @numba.njit(cache=True, nogil=True)
 def leaders_on_path(  # noqa: PLR0917 - numba takes no keyword-only parameters
     corners: _F64,
@@ -233,7 +308,7 @@ def leaders_on_path(  # noqa: PLR0917 - numba takes no keyword-only parameters
     ``half_width_m`` and reach past ``front_m`` and before ``far_m``; for each, in order, the
     arc length of its rear (the least corner's) and its speed along the path tangent at its
     centre's foot, floored at 0 (``np.maximum``: -0.0 and NaN pass).  The projection is
-    :func:`._kernels.project_on_segments` on every segment; the minimum and maximum of the four
+    :func:`project_pruned` (what :func:`._kernels.project_on_segments` gives); the minimum and maximum of the four
     corners are numpy's (a NaN wins)."""
     n = centers.shape[0]
     m = xy.shape[0]
@@ -253,7 +328,7 @@ def leaders_on_path(  # noqa: PLR0917 - numba takes no keyword-only parameters
             points[4 * i + c, 1] = corners[i, c, 1]
         points[4 * n + i, 0] = centers[i, 0]
         points[4 * n + i, 1] = centers[i, 1]
-    s_all, lat_all, _ = project_on_segments(points, a, ab, seg_len, s[: m - 1])
+    s_all, lat_all = project_pruned(points, a, ab, seg_len, s[: m - 1], s[m - 1])
     out_s = np.empty(n)
     out_v = np.empty(n)
     count = 0
