@@ -219,6 +219,26 @@ def points_at(xy: _F64, s: _F64, s_m: _F64) -> _F64:  # pragma: no cover - compi
 #: a segment is skipped only when it is provably farther than the best one by this much (metres,
 #: scaled by 1 + the distance), far above float64 rounding of path coordinates
 _PRUNE_MARGIN = 1e-6
+#: every this many segments one gives the first bound of a point's distance
+_PRUNE_STRIDE = 8
+
+
+@numba.njit(cache=True, nogil=True)
+def _segment_d2(  # noqa: PLR0917 - numba takes no keyword-only parameters
+    px: float, py: float, a: _F64, ab: _F64, seg_len: _F64, k: int
+) -> tuple[float, float]:  # pragma: no cover - compiled
+    """Squared distance of (px, py) from segment k and the foot's fraction along it, as
+    :func:`._kernels.project_on_segments` computes them."""
+    apx = px - a[k, 0]
+    apy = py - a[k, 1]
+    t = ((0.0 + apx * ab[k, 0]) + apy * ab[k, 1]) / (seg_len[k] * seg_len[k])
+    if t < 0.0:
+        t = 0.0
+    if t > 1.0:
+        t = 1.0
+    ex = px - (a[k, 0] + t * ab[k, 0])
+    ey = py - (a[k, 1] + t * ab[k, 1])
+    return (0.0 + ex * ex) + ey * ey, t
 
 
 @numba.njit(cache=True, nogil=True)
@@ -229,11 +249,13 @@ def project_pruned(  # noqa: PLR0917 - numba takes no keyword-only parameters
     segments ``a + t·ab`` (arc length ``s_start`` at ``a``; the last ends at ``s_end``): the
     values :func:`._kernels.project_on_segments` gives, without looking at every segment.
 
-    Along a polyline the straight distance never exceeds the arc length between two points,
-    so a point at distance ``D`` from a vertex is at least ``D − |σ − s|`` from the polyline's
-    point at arc length ``σ``: the segments that end before ``s + D − best − margin`` are
-    farther than the best one found so far and are skipped (strictly farther even after
-    rounding, so the first minimum is the same one).  Non-finite inputs take the full search.
+    First every eighth segment's distance gives a bound of the least one.  Along a polyline
+    the straight distance never exceeds the arc length between two points, so a point at
+    distance ``D`` from a vertex (arc length ``s``) is at least ``D − (σ − s)`` from the
+    polyline's point at ``σ ≥ s``: the segments that end before ``s + D − bound − margin`` are
+    farther than the bound and skipped (strictly farther even after rounding, so the first
+    minimum of the segments looked at is the first of all).  Non-finite inputs take the full
+    search.
     """
     n_p = p.shape[0]
     n_s = a.shape[0]
@@ -256,35 +278,36 @@ def project_pruned(  # noqa: PLR0917 - numba takes no keyword-only parameters
         return s_full, lateral_full
     s_out = np.empty(n_p)
     lateral = np.empty(n_p)
+    stride = _PRUNE_STRIDE
     for i in range(n_p):
         px = p[i, 0]
         py = p[i, 1]
+        # an upper bound of the least distance: every stride-th segment's (and the last)
+        ub_d2 = np.inf
+        k = 0
+        while k < n_s:
+            d2, _ = _segment_d2(px, py, a, ab, seg_len, k)
+            if d2 < ub_d2:
+                ub_d2 = d2
+            k = n_s - 1 if stride + k >= n_s and k < n_s - 1 else k + stride
+        bound = math.sqrt(ub_d2)
+        # then every segment in order, but for those that end before s + D − bound − margin
+        # from a vertex at distance D (each of their points is farther than the bound)
         best = 0
         best_d2 = np.inf
         best_t = 0.0
         k = 0
         while k < n_s:
-            apx = px - a[k, 0]
-            apy = py - a[k, 1]
-            t = ((0.0 + apx * ab[k, 0]) + apy * ab[k, 1]) / (seg_len[k] * seg_len[k])
-            if t < 0.0:
-                t = 0.0
-            if t > 1.0:
-                t = 1.0
-            ex = px - (a[k, 0] + t * ab[k, 0])
-            ey = py - (a[k, 1] + t * ab[k, 1])
-            d2 = (0.0 + ex * ex) + ey * ey
-            if k == 0 or d2 < best_d2:
-                best, best_d2, best_t = k, d2, t
-            k += 1
-            if k >= n_s:
-                break
-            # skip the segments that lie wholly closer (in arc length) to vertex k than its
-            # distance minus the best distance: every point of them is farther than the best
             dist_k = math.hypot(px - a[k, 0], py - a[k, 1])
-            limit = s_start[k] + dist_k - math.sqrt(best_d2) - _PRUNE_MARGIN * (1.0 + dist_k)
+            limit = s_start[k] + dist_k - bound - _PRUNE_MARGIN * (1.0 + dist_k)
             while k < n_s and (s_start[k + 1] if k + 1 < n_s else s_end) < limit:
                 k += 1
+            if k >= n_s:
+                break
+            d2, t = _segment_d2(px, py, a, ab, seg_len, k)
+            if d2 < best_d2:
+                best, best_d2, best_t = k, d2, t
+            k += 1
         s_out[i] = s_start[best] + best_t * seg_len[best]
         cross = ab[best, 0] * (py - a[best, 1]) - ab[best, 1] * (px - a[best, 0])
         lateral[i] = cross / seg_len[best]
