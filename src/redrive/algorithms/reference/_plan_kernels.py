@@ -1,4 +1,9 @@
-"""The IDM planner's speed profile as a numba kernel (compiled once, cached on disk).
+"""The IDM planner's speed profile and path geometry as numba kernels (compiled once, cached).
+
+:func:`polyline_arc`, :func:`points_at` and :func:`leaders_on_path` (with :func:`project_pruned`)
+are :class:`~redrive.algorithms.reference.planner.Polyline`'s arc lengths and points and the
+planner's choice of leaders, each one compiled call doing the numpy code's float64 operations
+(``hypot``, ``np.interp`` written out, numpy's minimum, maximum and ``searchsorted`` choices).
 
 :func:`idm_profile` is the planner's forward integration — every leader's gap, the IDM
 acceleration, the ballistic update and the ``s0`` guard, one waypoint per step — as one compiled
