@@ -1,4 +1,9 @@
-"""The IDM planner's speed profile as a numba kernel (compiled once, cached on disk).
+"""The IDM planner's speed profile and path geometry as numba kernels (compiled once, cached).
+
+:func:`polyline_arc`, :func:`points_at` and :func:`leaders_on_path` (with :func:`project_pruned`)
+are :class:`~redrive.algorithms.reference.planner.Polyline`'s arc lengths and points and the
+planner's choice of leaders, each one compiled call doing the numpy code's float64 operations
+(``hypot``, ``np.interp`` written out, numpy's minimum, maximum and ``searchsorted`` choices).
 
 :func:`idm_profile` is the planner's forward integration — every leader's gap, the IDM
 acceleration, the ballistic update and the ``s0`` guard, one waypoint per step — as one compiled
@@ -24,7 +29,9 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["idm_profile"]
+from redrive.algorithms.reference._kernels import project_on_segments
+
+__all__ = ["idm_profile", "leaders_on_path", "points_at", "polyline_arc", "project_pruned"]
 
 _F64 = npt.NDArray[np.float64]
 
@@ -121,3 +128,286 @@ def idm_profile(  # noqa: PLR0917 - numba takes no keyword-only parameters
         v = v_new
         s_out[k + 1] = s
     return s_out
+
+
+@numba.njit(cache=True, nogil=True)
+def polyline_arc(xy: _F64) -> tuple[_F64, _F64]:  # pragma: no cover - compiled
+    """:class:`~redrive.algorithms.reference.planner.Polyline`'s vertices and arc lengths from
+    ``xy`` (M, 2), M ≥ 2: a vertex is dropped when it lies within 1 nm (``hypot``) of the
+    vertex before it in ``xy``; the arc lengths are the running sum of the kept segments'
+    ``hypot`` from 0 (as ``np.cumsum``)."""
+    m = xy.shape[0]
+    keep = np.empty(m, dtype=np.bool_)
+    keep[0] = True
+    count = 1
+    for i in range(1, m):
+        keep[i] = math.hypot(xy[i, 0] - xy[i - 1, 0], xy[i, 1] - xy[i - 1, 1]) > 1e-9
+        if keep[i]:
+            count += 1
+    pts = np.empty((count, 2))
+    s = np.empty(count)
+    k = 0
+    total = 0.0
+    for i in range(m):
+        if keep[i]:
+            pts[k, 0] = xy[i, 0]
+            pts[k, 1] = xy[i, 1]
+            if k == 0:
+                s[0] = 0.0
+            else:
+                total = total + math.hypot(pts[k, 0] - pts[k - 1, 0], pts[k, 1] - pts[k - 1, 1])
+                s[k] = total
+            k += 1
+    return pts, s
+
+
+@numba.njit(cache=True, nogil=True)
+def _interp(x: float, xp: _F64, fp: _F64, col: int) -> float:  # pragma: no cover - compiled
+    """``np.interp(x, xp, fp[:, col])`` at one point (``xp`` ascending, ≥ 2 values)."""
+    n = xp.shape[0]
+    if math.isnan(x):
+        return x
+    if x > xp[n - 1]:
+        return float(fp[n - 1, col])
+    if x < xp[0]:
+        return float(fp[0, col])
+    j = 0
+    while j + 1 < n and x >= xp[j + 1]:
+        j += 1
+    if j == n - 1 or xp[j] == x:
+        return float(fp[j, col])
+    slope = (fp[j + 1, col] - fp[j, col]) / (xp[j + 1] - xp[j])
+    out: float = slope * (x - xp[j]) + fp[j, col]
+    if math.isnan(out):
+        out = slope * (x - xp[j + 1]) + fp[j + 1, col]
+        if math.isnan(out) and fp[j, col] == fp[j + 1, col]:
+            out = fp[j, col]
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def points_at(xy: _F64, s: _F64, s_m: _F64) -> _F64:  # pragma: no cover - compiled
+    """:meth:`Polyline.points_at`: (K, 2) points of the polyline (vertices ``xy`` (M, 2), arc
+    lengths ``s``) at arc lengths ``s_m`` (K,) — ``np.interp`` of x and y, and beyond either end
+    the end segment extended straight (its direction ``d / hypot(d)``)."""
+    k_out = s_m.shape[0]
+    m = xy.shape[0]
+    out = np.empty((k_out, 2))
+    if m == 1:
+        for i in range(k_out):
+            out[i, 0] = xy[0, 0]
+            out[i, 1] = xy[0, 1]
+        return out
+    end = s[m - 1]
+    ex = xy[m - 1, 0] - xy[m - 2, 0]
+    ey = xy[m - 1, 1] - xy[m - 2, 1]
+    norm = math.hypot(ex, ey)
+    ex, ey = ex / norm, ey / norm
+    bx = xy[1, 0] - xy[0, 0]
+    by = xy[1, 1] - xy[0, 1]
+    norm = math.hypot(bx, by)
+    bx, by = bx / norm, by / norm
+    for i in range(k_out):
+        v = s_m[i]
+        if v > end:
+            out[i, 0] = xy[m - 1, 0] + (v - end) * ex
+            out[i, 1] = xy[m - 1, 1] + (v - end) * ey
+        elif v < 0.0:
+            out[i, 0] = xy[0, 0] + (v - 0.0) * bx
+            out[i, 1] = xy[0, 1] + (v - 0.0) * by
+        else:
+            out[i, 0] = _interp(v, s, xy, 0)
+            out[i, 1] = _interp(v, s, xy, 1)
+    return out
+
+
+#: a segment is skipped only when it is provably farther than the best one by this much (metres,
+#: scaled by 1 + the distance), far above float64 rounding of path coordinates
+_PRUNE_MARGIN = 1e-6
+#: every this many segments one gives the first bound of a point's distance
+_PRUNE_STRIDE = 8
+
+
+@numba.njit(cache=True, nogil=True)
+def _segment_d2(  # noqa: PLR0917 - numba takes no keyword-only parameters
+    px: float, py: float, a: _F64, ab: _F64, seg_len: _F64, k: int
+) -> tuple[float, float]:  # pragma: no cover - compiled
+    """Squared distance of (px, py) from segment k and the foot's fraction along it, as
+    :func:`._kernels.project_on_segments` computes them."""
+    apx = px - a[k, 0]
+    apy = py - a[k, 1]
+    t = ((0.0 + apx * ab[k, 0]) + apy * ab[k, 1]) / (seg_len[k] * seg_len[k])
+    if t < 0.0:
+        t = 0.0
+    if t > 1.0:
+        t = 1.0
+    ex = px - (a[k, 0] + t * ab[k, 0])
+    ey = py - (a[k, 1] + t * ab[k, 1])
+    return (0.0 + ex * ex) + ey * ey, t
+
+
+@numba.njit(cache=True, nogil=True)
+def project_pruned(  # noqa: PLR0917 - numba takes no keyword-only parameters
+    p: _F64, a: _F64, ab: _F64, seg_len: _F64, s_start: _F64, s_end: float
+) -> tuple[_F64, _F64]:  # pragma: no cover - compiled
+    """Arc length and signed lateral offset of each point ``p`` (P, 2) on the polyline of
+    segments ``a + t·ab`` (arc length ``s_start`` at ``a``; the last ends at ``s_end``): the
+    values :func:`._kernels.project_on_segments` gives, without looking at every segment.
+
+    First every eighth segment's distance gives a bound of the least one.  Along a polyline
+    the straight distance never exceeds the arc length between two points, so a point at
+    distance ``D`` from a vertex (arc length ``s``) is at least ``D − (σ − s)`` from the
+    polyline's point at ``σ ≥ s``: the segments that end before ``s + D − bound − margin`` are
+    farther than the bound and skipped (strictly farther even after rounding, so the first
+    minimum of the segments looked at is the first of all).  Non-finite inputs take the full
+    search.
+    """
+    n_p = p.shape[0]
+    n_s = a.shape[0]
+    finite = math.isfinite(s_end)
+    for k in range(n_s):
+        if not (
+            math.isfinite(a[k, 0])
+            and math.isfinite(a[k, 1])
+            and math.isfinite(ab[k, 0])
+            and math.isfinite(ab[k, 1])
+            and math.isfinite(seg_len[k])
+            and math.isfinite(s_start[k])
+        ):
+            finite = False
+    for i in range(n_p):
+        if not (math.isfinite(p[i, 0]) and math.isfinite(p[i, 1])):
+            finite = False
+    if not finite:
+        s_full, lateral_full, _ = project_on_segments(p, a, ab, seg_len, s_start)
+        return s_full, lateral_full
+    s_out = np.empty(n_p)
+    lateral = np.empty(n_p)
+    stride = _PRUNE_STRIDE
+    for i in range(n_p):
+        px = p[i, 0]
+        py = p[i, 1]
+        # an upper bound of the least distance: every stride-th segment's (and the last)
+        ub_d2 = np.inf
+        k = 0
+        while k < n_s:
+            d2, _ = _segment_d2(px, py, a, ab, seg_len, k)
+            if d2 < ub_d2:
+                ub_d2 = d2
+            k = n_s - 1 if stride + k >= n_s and k < n_s - 1 else k + stride
+        bound = math.sqrt(ub_d2)
+        # then every segment in order, but for those that end before s + D − bound − margin
+        # from a vertex at distance D (each of their points is farther than the bound)
+        best = 0
+        best_d2 = np.inf
+        best_t = 0.0
+        k = 0
+        while k < n_s:
+            dist_k = math.hypot(px - a[k, 0], py - a[k, 1])
+            limit = s_start[k] + dist_k - bound - _PRUNE_MARGIN * (1.0 + dist_k)
+            while k < n_s and (s_start[k + 1] if k + 1 < n_s else s_end) < limit:
+                k += 1
+            if k >= n_s:
+                break
+            d2, t = _segment_d2(px, py, a, ab, seg_len, k)
+            if d2 < best_d2:
+                best, best_d2, best_t = k, d2, t
+            k += 1
+        s_out[i] = s_start[best] + best_t * seg_len[best]
+        cross = ab[best, 0] * (py - a[best, 1]) - ab[best, 1] * (px - a[best, 0])
+        lateral[i] = cross / seg_len[best]
+    return s_out, lateral
+
+
+@numba.njit(cache=True, nogil=True)
+def leaders_on_path(  # noqa: PLR0917 - numba takes no keyword-only parameters
+    corners: _F64,
+    centers: _F64,
+    velocities: _F64,
+    xy: _F64,
+    s: _F64,
+    half_width_m: float,
+    front_m: float,
+    far_m: float,
+) -> tuple[_F64, _F64]:  # pragma: no cover - compiled
+    """:meth:`IdmPlanner._leaders` after the boxes' corners: the objects (corners (n, ≥ 4, ≥ 2):
+    the bottom four first; centres (n, ≥ 2); velocities (n, ≥ 2)) whose corners projected on
+    the path (vertices ``xy`` (M ≥ 2, 2), arc lengths ``s``) overlap the corridor ±
+    ``half_width_m`` and reach past ``front_m`` and before ``far_m``; for each, in order, the
+    arc length of its rear (the least corner's) and its speed along the path tangent at its
+    centre's foot, floored at 0 (``np.maximum``: -0.0 and NaN pass).  The projection is
+    :func:`project_pruned` (what :func:`._kernels.project_on_segments` gives); the minimum and maximum of the four
+    corners are numpy's (a NaN wins)."""
+    n = centers.shape[0]
+    m = xy.shape[0]
+    a = np.empty((m - 1, 2))
+    ab = np.empty((m - 1, 2))
+    seg_len = np.empty(m - 1)
+    for k in range(m - 1):
+        a[k, 0] = xy[k, 0]
+        a[k, 1] = xy[k, 1]
+        ab[k, 0] = xy[k + 1, 0] - xy[k, 0]
+        ab[k, 1] = xy[k + 1, 1] - xy[k, 1]
+        seg_len[k] = math.hypot(ab[k, 0], ab[k, 1])
+    points = np.empty((5 * n, 2))
+    for i in range(n):
+        for c in range(4):
+            points[4 * i + c, 0] = corners[i, c, 0]
+            points[4 * i + c, 1] = corners[i, c, 1]
+        points[4 * n + i, 0] = centers[i, 0]
+        points[4 * n + i, 1] = centers[i, 1]
+    s_all, lat_all = project_pruned(points, a, ab, seg_len, s[: m - 1], s[m - 1])
+    out_s = np.empty(n)
+    out_v = np.empty(n)
+    count = 0
+    for i in range(n):
+        s_lo = s_all[4 * i]
+        s_hi = s_lo
+        lat_lo = lat_all[4 * i]
+        lat_hi = lat_lo
+        for c in range(1, 4):
+            v = s_all[4 * i + c]
+            if math.isnan(s_lo) or math.isnan(v):
+                s_lo = math.nan
+                s_hi = math.nan
+            else:
+                if v < s_lo:
+                    s_lo = v
+                if v > s_hi:
+                    s_hi = v
+            w = lat_all[4 * i + c]
+            if math.isnan(lat_lo) or math.isnan(w):
+                lat_lo = math.nan
+                lat_hi = math.nan
+            else:
+                if w < lat_lo:
+                    lat_lo = w
+                if w > lat_hi:
+                    lat_hi = w
+        in_corridor = lat_lo < half_width_m and lat_hi > -half_width_m
+        ahead = s_hi > front_m and s_lo < far_m
+        if not (in_corridor and ahead):
+            continue
+        # the tangent of the segment holding the centre's foot (searchsorted right - 1,
+        # clipped to the segments; a NaN sorts last)
+        foot = s_all[4 * n + i]
+        j = m
+        if not math.isnan(foot):
+            j = 0
+            while j < m and not foot < s[j]:
+                j += 1
+        j -= 1
+        if j < 0:
+            j = 0
+        if j > m - 2:
+            j = m - 2
+        dx = xy[j + 1, 0] - xy[j, 0]
+        dy = xy[j + 1, 1] - xy[j, 1]
+        h = math.hypot(dx, dy)
+        speed = (0.0 + velocities[i, 0] * (dx / h)) + velocities[i, 1] * (dy / h)
+        if not (speed >= 0.0 or math.isnan(speed)):
+            speed = 0.0
+        out_s[count] = s_lo
+        out_v[count] = speed
+        count += 1
+    return out_s[:count].copy(), out_v[:count].copy()

@@ -51,7 +51,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from types import MappingProxyType
 from typing import Any, ClassVar
 
@@ -59,8 +59,9 @@ import numpy as np
 import numpy.typing as npt
 
 from redrive.algorithms.base import VEHICLE_STATE, Algorithm, Input, Role, StageOutputs
+from redrive.algorithms.reference._control_kernels import lookahead_point, path_speeds
 from redrive.errors import AlgorithmError, ConfigError
-from redrive.types import ControlCommands, Frame, PlannedPath
+from redrive.types import ControlCommands, Frame, PlannedPath, SensorType
 
 __all__ = ["PurePursuitPid", "path_speed_mps", "pure_pursuit_steer_rad"]
 
@@ -69,36 +70,21 @@ logger = logging.getLogger(__name__)
 F64 = npt.NDArray[np.float64]
 
 
-def _lookahead_point(xy: F64, lookahead_m: float) -> F64 | None:
-    """The point ``lookahead_m`` of arc length along ``xy`` (K, 2) from the foot of the origin on
-    it; None when the path has no length."""
-    seg = np.diff(xy, axis=0)
-    seg_len = np.hypot(seg[:, 0], seg[:, 1]) if len(seg) else np.zeros(0)
-    ok = seg_len > 1e-9
-    if not np.any(ok):
-        return None
-    a, ab, seg_len = xy[:-1][ok], seg[ok], seg_len[ok]
-    s_start = np.concatenate([[0.0], np.cumsum(seg_len)[:-1]])
-    t = np.clip(-(a * ab).sum(axis=1) / seg_len**2, 0.0, 1.0)
-    foot = a + t[:, None] * ab
-    j = int(np.argmin(np.hypot(foot[:, 0], foot[:, 1])))
-    s_target = s_start[j] + t[j] * seg_len[j] + lookahead_m
-    k = int(np.searchsorted(s_start, s_target, side="right") - 1)
-    k = min(max(k, 0), len(seg_len) - 1)
-    out: F64 = a[k] + (s_target - s_start[k]) / seg_len[k] * ab[k]  # extends past the end
-    return out
-
-
 def pure_pursuit_steer_rad(
     xy: npt.ArrayLike, lookahead_m: float, *, wheelbase_m: float, max_steer_rad: float
 ) -> float:
     """Pure-pursuit road-wheel angle (rad, left positive) for a path ``xy`` (K, 2) in base_link
-    (rear axle at the origin); 0 when the path has no length or the target is behind."""
-    pts = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-    target = _lookahead_point(pts, lookahead_m)
-    if target is None:
+    (rear axle at the origin); 0 when the path has no length or the target is behind.  The
+    target point is one compiled pass over the path (:func:`._control_kernels.lookahead_point`)."""
+    pts = np.ascontiguousarray(np.asarray(xy, dtype=np.float64).reshape(-1, 2))
+    return _steer_rad(pts, lookahead_m, wheelbase_m=wheelbase_m, max_steer_rad=max_steer_rad)
+
+
+def _steer_rad(xy: F64, lookahead_m: float, *, wheelbase_m: float, max_steer_rad: float) -> float:
+    """:func:`pure_pursuit_steer_rad` on the first two columns of ``xy`` (K, ≥ 2) float64."""
+    found, x, y = lookahead_point(xy, float(lookahead_m))
+    if not found:
         return 0.0
-    x, y = float(target[0]), float(target[1])
     dist = math.hypot(x, y)
     if dist < 1e-6:
         return 0.0
@@ -111,32 +97,7 @@ def path_speed_mps(path: PlannedPath, t_s: float) -> float:
     """The speed (m/s) the waypoints imply around ``t_s`` (seconds after ``path.stamp_ns``):
     arc length over time across one waypoint step centred on ``t_s`` (clipped to the path's
     times); 0 for a path of fewer than two distinct times."""
-    return _path_speeds_mps(path, (t_s,))[0]
-
-
-def _path_speeds_mps(path: PlannedPath, times_s: tuple[float, ...]) -> list[float]:
-    """:func:`path_speed_mps` at each of ``times_s``: the path's arc lengths and step worked out
-    once, one interpolation for all the times (the same values, time by time)."""
-    wp = path.waypoints
-    if len(wp) < 2 or wp[-1, 3] - wp[0, 3] <= 0.0:
-        return [0.0] * len(times_s)
-    times = wp[:, 3]
-    seg = np.linalg.norm(np.diff(wp[:, :3], axis=0), axis=1)
-    s = np.concatenate([[0.0], np.cumsum(seg)])
-    steps = np.diff(times)
-    half = 0.5 * float(np.median(steps[steps > 0]))
-    first, last = times[0], times[-1]
-    ends = []
-    for t_s in times_s:
-        t0 = min(max(t_s - half, first), last - 2.0 * half)
-        t0 = max(t0, first)
-        ends += [t0, min(t0 + 2.0 * half, last)]
-    s_at = np.interp(ends, times, s)
-    out = []
-    for i in range(0, len(ends), 2):
-        t0, t1 = ends[i], ends[i + 1]
-        out.append(float((s_at[i + 1] - s_at[i]) / (t1 - t0)) if t1 > t0 else 0.0)
-    return out
+    return float(path_speeds(path.waypoints, np.array([float(t_s)]))[0])
 
 
 class PurePursuitPid(Algorithm):
@@ -175,6 +136,8 @@ class PurePursuitPid(Algorithm):
         self._integral = 0.0  # ∫e dt, metres
         self._last_error_mps: float | None = None
         self._last_stamp_ns: int | None = None
+        #: the three preview times of a step (reused: the kernel reads them)
+        self._previews = np.zeros(3)
         self.setup(self.config)
 
     def setup(self, config: Mapping[str, Any]) -> None:
@@ -227,6 +190,15 @@ class PurePursuitPid(Algorithm):
         self.path_from: str | None = path
         self.reset()
 
+    def bind(self, sensors: Mapping[str, SensorType], *, extras: Iterable[str] = ()) -> None:
+        """As :meth:`Algorithm.bind`, then one made-up path's lookups, so that numba loads the
+        controller's kernels from the cache (or compiles them after an install) here, before a
+        run's first frame, not inside that frame's latency."""
+        super().bind(sensors, extras=extras)
+        path = np.array([[0.0, 0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.1]])
+        lookahead_point(np.ascontiguousarray(path[:, :2]), 1.0)
+        path_speeds(path, self._previews)
+
     def reset(self) -> None:
         self._integral = 0.0
         self._last_error_mps = None
@@ -249,17 +221,18 @@ class PurePursuitPid(Algorithm):
             raise AlgorithmError(msg)
         speed_mps = state.speed_mps
         lookahead_m = self.lookahead_gain_s * speed_mps + self.lookahead_min_m
-        steer = pure_pursuit_steer_rad(
-            path.waypoints[:, :2],
+        steer = _steer_rad(
+            path.waypoints,
             lookahead_m,
             wheelbase_m=self.wheelbase_m,
             max_steer_rad=self.max_steer_rad,
         )
         age_s = (frame.stamp_ns - path.stamp_ns) * 1e-9
         t_preview_s = self.speed_preview_s + age_s
-        target_mps, ahead_mps, behind_mps = _path_speeds_mps(
-            path, (t_preview_s, t_preview_s + 0.5, t_preview_s - 0.5)
-        )
+        previews = self._previews
+        previews[0], previews[1], previews[2] = t_preview_s, t_preview_s + 0.5, t_preview_s - 0.5
+        speeds = path_speeds(path.waypoints, previews)
+        target_mps, ahead_mps, behind_mps = float(speeds[0]), float(speeds[1]), float(speeds[2])
         # the plan's acceleration around the preview time (m/s², over one second)
         plan_accel_mps2 = ahead_mps - behind_mps
         steady = abs(plan_accel_mps2) <= self.integrate_below_mps2

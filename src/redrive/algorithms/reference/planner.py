@@ -69,7 +69,12 @@ import numpy.typing as npt
 
 from redrive.algorithms.base import VEHICLE_STATE, Algorithm, Input, Role, StageOutputs
 from redrive.algorithms.reference._kernels import project_on_segments
-from redrive.algorithms.reference._plan_kernels import idm_profile
+from redrive.algorithms.reference._plan_kernels import (
+    idm_profile,
+    leaders_on_path,
+    points_at,
+    polyline_arc,
+)
 from redrive.errors import AlgorithmError, ConfigError
 from redrive.geometry.boxes import BOX_CORNER_SIGNS
 from redrive.types import DetectedObject, Frame, PlannedPath, SensorType, VehicleState
@@ -95,14 +100,12 @@ class Polyline:
     """
 
     def __init__(self, xy: npt.ArrayLike) -> None:
-        pts = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        if len(pts) > 1:
-            keep = np.ones(len(pts), dtype=bool)
-            keep[1:] = np.hypot(*np.diff(pts, axis=0).T) > 1e-9
-            pts = pts[keep]
-        self.xy: F64 = pts
-        seg = np.hypot(*np.diff(pts, axis=0).T) if len(pts) > 1 else np.zeros(0)
-        self.s: F64 = np.concatenate([[0.0], np.cumsum(seg)])
+        pts = np.ascontiguousarray(np.asarray(xy, dtype=np.float64).reshape(-1, 2))
+        if len(pts) > 1:  # one compiled pass: the duplicates dropped, the running hypot
+            self.xy, self.s = polyline_arc(pts)
+        else:
+            self.xy = pts
+            self.s = np.zeros(1)
 
     @property
     def length_m(self) -> float:
@@ -111,22 +114,8 @@ class Polyline:
     def points_at(self, s_m: npt.ArrayLike) -> F64:
         """(K, 2) points at arc lengths ``s_m`` (K,); beyond either end the end segment is
         extended straight."""
-        s = np.asarray(s_m, dtype=np.float64).reshape(-1)
-        if len(self.xy) == 1:
-            return np.repeat(self.xy, len(s), axis=0)
-        out = np.column_stack(
-            [np.interp(s, self.s, self.xy[:, 0]), np.interp(s, self.s, self.xy[:, 1])]
-        )
-        for mask, i0, s_ref in (
-            (s > self.s[-1], len(self.xy) - 2, self.s[-1]),
-            (s < 0.0, 0, 0.0),
-        ):
-            if np.any(mask):
-                d = self.xy[i0 + 1] - self.xy[i0]
-                d = d / np.hypot(*d)
-                base = self.xy[-1] if s_ref > 0.0 else self.xy[0]
-                out[mask] = base + np.outer(s[mask] - s_ref, d)
-        return out
+        s = np.ascontiguousarray(np.asarray(s_m, dtype=np.float64).reshape(-1))
+        return points_at(self.xy, self.s, s)
 
     def tangents_at(self, s_m: npt.ArrayLike) -> F64:
         """(K, 2) unit tangents of the segments holding arc lengths ``s_m``."""
@@ -386,37 +375,33 @@ class IdmPlanner(Algorithm):
         n = len(objects)
         boxes = [o.box for o in objects]
         # every box's corners in one stacked matmul (box_corners' product, slice by slice: the
-        # same values), then the 4·n bottom corners and the n centres projected in one call
+        # same values), then one compiled call projects the 4·n bottom corners and the n
+        # centres on the path and picks the leaders (:func:`._plan_kernels.leaders_on_path`)
+        yaws = [box.yaw_rad for box in boxes]
+        cos = [math.cos(yaw) for yaw in yaws]
+        sin = [math.sin(yaw) for yaw in yaws]
         rotations = np.zeros((n, 3, 3))
-        for i, box in enumerate(boxes):
-            c, sn = math.cos(box.yaw_rad), math.sin(box.yaw_rad)
-            rotations[i, 0, 0], rotations[i, 0, 1], rotations[i, 1, 0], rotations[i, 1, 1] = (
-                c,
-                sn,
-                -sn,
-                c,
-            )
+        rotations[:, 0, 0] = cos
+        rotations[:, 0, 1] = sin
+        rotations[:, 1, 0] = [-v for v in sin]
+        rotations[:, 1, 1] = cos
         rotations[:, 2, 2] = 1.0
         centers = np.array([box.center for box in boxes])
         local = BOX_CORNER_SIGNS * (0.5 * np.array([box.size for box in boxes]))[:, None, :]
-        corners = (local @ rotations + centers[:, None, :])[:, :4, :2]
-        points = np.concatenate([corners.reshape(-1, 2), centers[:, :2]])
-        s_all, lat_all, _ = path.project(points)
-        s = s_all[: 4 * n].reshape(-1, 4)
-        lat = lat_all[: 4 * n].reshape(-1, 4)
-        s_lo, s_hi = s.min(axis=1), s.max(axis=1)
-        in_corridor = (lat.min(axis=1) < self.corridor_half_width_m) & (
-            lat.max(axis=1) > -self.corridor_half_width_m
+        corners = local @ rotations + centers[:, None, :]
+        velocities = np.array([o.velocity for o in objects])
+        leaders_s, leaders_v = leaders_on_path(
+            corners,
+            centers,
+            velocities,
+            path.xy,
+            path.s,
+            self.corridor_half_width_m,
+            self.front_offset_m,
+            min(path.length_m, self.range_m) - 1e-6,
         )
-        ahead = (s_hi > self.front_offset_m) & (s_lo < min(path.length_m, self.range_m) - 1e-6)
-        keep = np.flatnonzero(in_corridor & ahead)
-        if len(keep) == 0:
-            return np.zeros(0), np.zeros(0)
-        tangents = path.tangents_at(s_all[4 * n :][keep])
-        vel = np.array([objects[i].velocity[:2] for i in keep])
-        speed = np.maximum((vel * tangents).sum(axis=1), 0.0)
-        logger.debug("%s: %d object(s) in the path corridor", self.name, len(keep))
-        return s_lo[keep], speed
+        logger.debug("%s: %d object(s) in the path corridor", self.name, len(leaders_s))
+        return leaders_s, leaders_v
 
     def _profile(self, speed_mps: float, leaders_s: F64, leaders_v: F64) -> tuple[F64, F64]:
         """Times (s) and arc lengths of the rear axle along the path (m) of the IDM plan: the

@@ -1,0 +1,153 @@
+"""The planner's compiled path geometry gives, bit for bit, what the numpy code it replaced
+gave (kept here as the reference): a Polyline's vertices and arc lengths, its points at arc
+lengths (inside, past either end), and the leaders picked from boxes' corners and centres."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import numpy.typing as npt
+
+from redrive.algorithms.reference._kernels import project_on_segments
+from redrive.algorithms.reference._plan_kernels import (
+    leaders_on_path,
+    points_at,
+    polyline_arc,
+    project_pruned,
+)
+from redrive.geometry.boxes import BOX_CORNER_SIGNS
+
+F64 = npt.NDArray[np.float64]
+
+
+def _arc_numpy(xy: F64) -> tuple[F64, F64]:
+    pts = xy
+    keep = np.ones(len(pts), dtype=bool)
+    keep[1:] = np.hypot(*np.diff(pts, axis=0).T) > 1e-9
+    pts = pts[keep]
+    seg = np.hypot(*np.diff(pts, axis=0).T) if len(pts) > 1 else np.zeros(0)
+    return pts, np.concatenate([[0.0], np.cumsum(seg)])
+
+
+def _points_at_numpy(xy: F64, s_line: F64, s: F64) -> F64:
+    if len(xy) == 1:
+        return np.repeat(xy, len(s), axis=0)
+    out = np.column_stack([np.interp(s, s_line, xy[:, 0]), np.interp(s, s_line, xy[:, 1])])
+    for mask, i0, s_ref in ((s > s_line[-1], len(xy) - 2, s_line[-1]), (s < 0.0, 0, 0.0)):
+        if np.any(mask):
+            d = xy[i0 + 1] - xy[i0]
+            d = d / np.hypot(*d)
+            base = xy[-1] if s_ref > 0.0 else xy[0]
+            out[mask] = base + np.outer(s[mask] - s_ref, d)
+    return out
+
+
+def _leaders_numpy(  # noqa: PLR0917 - the kernel's parameters, in its order
+    corners: F64,
+    centers: F64,
+    vel: F64,
+    xy: F64,
+    s_line: F64,
+    half: float,
+    front: float,
+    far: float,
+) -> tuple[F64, F64]:
+    n = len(centers)
+    points = np.concatenate([corners[:, :4, :2].reshape(-1, 2), centers[:, :2]])
+    a = xy[:-1]
+    ab = xy[1:] - a
+    s_all, lat_all, _ = project_on_segments(
+        np.ascontiguousarray(points), a, ab, np.hypot(ab[:, 0], ab[:, 1]), s_line[:-1]
+    )
+    s = s_all[: 4 * n].reshape(-1, 4)
+    lat = lat_all[: 4 * n].reshape(-1, 4)
+    s_lo, s_hi = s.min(axis=1), s.max(axis=1)
+    keep = np.flatnonzero(
+        (lat.min(axis=1) < half) & (lat.max(axis=1) > -half) & (s_hi > front) & (s_lo < far)
+    )
+    i = np.clip(np.searchsorted(s_line, s_all[4 * n :][keep], side="right") - 1, 0, len(xy) - 2)
+    d = xy[i + 1] - xy[i]
+    tangents = d / np.hypot(d[:, 0], d[:, 1])[:, None]
+    speed = np.maximum((vel[keep, :2] * tangents).sum(axis=1), 0.0)
+    return s_lo[keep], speed
+
+
+def _bits(values: object) -> bytes:
+    return np.asarray(values, dtype=np.float64).tobytes()
+
+
+def _random_line(rng: np.random.Generator) -> F64:
+    m = int(rng.integers(2, 120))
+    if rng.random() < 0.5:  # a lane arc as the planner samples it
+        kappa = float(rng.choice([0.0, rng.uniform(-0.2, 0.2)]))
+        s = np.linspace(0.0, float(rng.uniform(1.0, 120.0)), m)
+        if kappa == 0.0:
+            return np.column_stack([s, np.zeros_like(s)])
+        return np.column_stack([np.sin(kappa * s) / kappa, (1.0 - np.cos(kappa * s)) / kappa])
+    steps = rng.normal(0.0, 2.0, (m, 2))
+    steps[rng.random(m) < 0.2] = 0.0  # repeated vertices
+    return np.cumsum(steps, axis=0)
+
+
+def test_polyline_arc_and_points_at_equal_the_numpy_code_bit_for_bit() -> None:
+    rng = np.random.default_rng(11)
+    for _ in range(150):
+        raw = _random_line(rng)
+        xy, s_line = polyline_arc(raw)
+        want_xy, want_s = _arc_numpy(raw)
+        assert _bits(xy) == _bits(want_xy)
+        assert _bits(s_line) == _bits(want_s)
+        if len(xy) < 2:
+            continue
+        s = np.concatenate(
+            [rng.uniform(-5.0, s_line[-1] + 5.0, 40), s_line[rng.integers(0, len(s_line), 5)]]
+        )
+        assert _bits(points_at(xy, s_line, s)) == _bits(_points_at_numpy(xy, s_line, s))
+
+
+def test_leaders_on_path_equal_the_numpy_code_bit_for_bit() -> None:
+    rng = np.random.default_rng(12)
+    for _ in range(150):
+        xy, s_line = polyline_arc(_random_line(rng))
+        if len(xy) < 2:
+            continue
+        n = int(rng.integers(1, 25))
+        yaws = rng.uniform(-math.pi, math.pi, n)
+        rotations = np.zeros((n, 3, 3))
+        rotations[:, 0, 0] = rotations[:, 1, 1] = np.cos(yaws)
+        rotations[:, 0, 1] = np.sin(yaws)
+        rotations[:, 1, 0] = -np.sin(yaws)
+        rotations[:, 2, 2] = 1.0
+        centers = np.column_stack([rng.uniform(-10.0, 80.0, (n, 2)), np.full(n, 0.8)])
+        # some boxes right on the path, as leaders are
+        on = rng.random(n) < 0.5
+        centers[on, :2] = xy[rng.integers(0, len(xy), int(on.sum()))]
+        sizes = rng.uniform(0.5, 5.0, (n, 3))
+        corners = BOX_CORNER_SIGNS * (0.5 * sizes)[:, None, :] @ rotations + centers[:, None, :]
+        vel = rng.normal(0.0, 5.0, (n, 3))
+        vel[rng.random(n) < 0.2] = 0.0
+        args = (corners, centers, vel, xy, s_line, 1.5, 3.75, min(s_line[-1], 120.0) - 1e-6)
+        got_s, got_v = leaders_on_path(*args)
+        want_s, want_v = _leaders_numpy(*args)
+        assert _bits(got_s) == _bits(want_s)
+        assert _bits(got_v) == _bits(want_v)
+
+
+def test_project_pruned_equals_the_full_search_bit_for_bit() -> None:
+    rng = np.random.default_rng(13)
+    for trial in range(150):
+        xy, s_line = polyline_arc(_random_line(rng))
+        if len(xy) < 2:
+            continue
+        a = xy[:-1]
+        ab = xy[1:] - a
+        seg_len = np.hypot(ab[:, 0], ab[:, 1])
+        near = xy[rng.integers(0, len(xy), 30)] + rng.normal(0.0, 0.5, (30, 2))
+        p = np.concatenate([near, rng.uniform(-50.0, 150.0, (30, 2)), xy[:3]])
+        if trial % 25 == 0:
+            p[0] = np.nan  # the full search decides what a NaN gives
+        s_full, lat_full, _ = project_on_segments(p, a, ab, seg_len, s_line[:-1])
+        s_got, lat_got = project_pruned(p, a, ab, seg_len, s_line[:-1], s_line[-1])
+        assert _bits(s_got) == _bits(s_full)
+        assert _bits(lat_got) == _bits(lat_full)
