@@ -6,7 +6,7 @@ Two worlds of the same scenario and seed run in lockstep:
   the scripted driver, so its ego track is the logged route that progress and deviation are
   measured against;
 - the *closed-loop* world is the same scenario with the ego handed to the commands
-  (:meth:`redrive.sim.world.World.drive_ego`): every physics step moves it by the actuated
+  (:meth:`redrive.sim.world.World.drive_ego_pedals`): every physics step moves it by the actuated
   bicycle model (:class:`redrive.sim.ego.ActuatedEgo`) under the command of the last frame.
 
 Agents: ``replay`` (non-reactive, as nuPlan's open-loop agents and NAVSIM): what the frames show
@@ -50,7 +50,7 @@ from redrive.closedloop.simulator import (
     choose_command,
 )
 from redrive.errors import ConfigError, SimulationError
-from redrive.sim.ego import ActuatedEgo, BicycleModel, PedalModel
+from redrive.sim.ego import ActuatedEgo, PedalModel
 from redrive.sim.ground_truth import objects_in_base
 from redrive.sim.rig import rig_from_mapping
 from redrive.sim.scenario import Scenario
@@ -229,6 +229,7 @@ class SyntheticSimulator:
             self._acting, self._queued = self._queued, chosen.commands
         else:
             self._acting = chosen.commands
+        self._hand_over()
         target = self._world.time_ns + round(dt_s * 1e9)
         if self._rendering is None:
             self._world.step_to(target)
@@ -276,10 +277,7 @@ class SyntheticSimulator:
     # -- the ego ------------------------------------------------------------------------------
 
     def _hand_over(self) -> None:
-        """Give the closed-loop world's ego to the commands (at the start of a run)."""
-        self._world.drive_ego(self._drive)
-
-    def _drive(self, model: BicycleModel, dt_s: float) -> None:
-        """One physics step of the closed-loop ego under the acting command."""
-        assert model is self._ego.model
-        self._ego.apply(self._acting, dt_s)
+        """Give the closed-loop world's ego to the acting command (at the start of a run and at
+        every step): each physics step is then ``self._ego.apply(self._acting, dt_s)``, in the
+        world's compiled step."""
+        self._world.drive_ego_pedals(self._acting, self._ego.pedals)
