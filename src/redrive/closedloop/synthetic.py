@@ -192,7 +192,7 @@ class SyntheticSimulator:
         world = self._world
         source = self._expert if self.agents == "replay" else world
         if self._rendering is None or self._frame_sensors is None:
-            objects = objects_in_base(source.ground_truth_objects(), world.map_from_base())
+            objects = objects_in_base(source.ground_truth_columns(), world.map_from_base())
             return Frame(
                 stamp_ns=world.time_ns,
                 index=self._index,
@@ -202,7 +202,7 @@ class SyntheticSimulator:
         self._start_rendering()
         lidar_hits, camera_pixels = self._rendering.visibility()
         objects = objects_in_base(
-            source.ground_truth_objects(),
+            source.ground_truth_columns(),
             world.map_from_base(),
             lidar_hits=lidar_hits,
             camera_pixels=camera_pixels,

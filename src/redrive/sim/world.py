@@ -33,6 +33,7 @@ from redrive.sim.scenario import AgentSpec, Scenario
 from redrive.sim.scene import GroundMap, Scene, SceneObjects
 from redrive.sim.scenery import build_scenery
 from redrive.sim.stepper import FrameStepper
+from redrive.sim.truth import TruthColumns, _Constant, truth_columns
 from redrive.types import ControlCommands, ObjectClass, VehicleState
 
 __all__ = ["World"]
@@ -136,6 +137,8 @@ class World:
         self._followers = []  # their state lives in the fleet from here on
         #: a frame's physics steps in one compiled call (the scripted or the pedal-driven ego)
         self._stepper = FrameStepper(self)
+        self._truth_cache: _Constant | None = None
+        self._ego_state: tuple[tuple[float, ...], VehicleState] | None = None
         _load_kernels(scenario)
         self._record_pose()
 
@@ -423,8 +426,13 @@ class World:
         return self._fleet.snapshot(np.array(ids, dtype=np.int64), np.array(rows, dtype=np.float64))
 
     def ego_state(self) -> VehicleState:
-        """The ego's true state (rear-axle centre, map frame) at :attr:`time_ns`."""
-        return self._ego.state(self._time_ns)
+        """The ego's true state (rear-axle centre, map frame) at :attr:`time_ns` (the same
+        immutable object again while neither the time nor the ego's state changed)."""
+        m = self._ego
+        key = (self._time_ns, m.x_m, m.y_m, m.yaw_rad, m.speed_mps, m.steer_rad, m.accel_mps2)
+        if self._ego_state is None or key != self._ego_state[0]:
+            self._ego_state = (key, m.state(self._time_ns))
+        return self._ego_state[1]
 
     def map_from_base(self) -> npt.NDArray[np.float64]:
         """The ego pose at :attr:`time_ns`, 4×4 float64."""
@@ -465,6 +473,12 @@ class World:
         marked as ground truth), in the same order, without the rest of the scenery — what an
         object-level observation needs, at a fraction of the cost."""
         return self._objects(self._static_truth)
+
+    def ground_truth_columns(self) -> TruthColumns:
+        """:meth:`ground_truth_objects`'s rows and values as plain columns (boxes only, not
+        validated again; the constant ones built once) — an object-level observation's input."""
+        columns, self._truth_cache = truth_columns(self, self._truth_cache)
+        return columns
 
     def _objects(self, static: SceneObjects) -> SceneObjects:
         """The agents' boxes, map frame, followed by ``static``."""
