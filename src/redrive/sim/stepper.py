@@ -100,7 +100,26 @@ class FrameStepper:
         self._parked = np.array(
             [(*a.center_xy, *a.size_lwh_m[:2], 0.0, 0.0) for a in parked], dtype=np.float64
         ).reshape(-1, 6)
-        self._walk = np.zeros((0, _NW))
+        # the walkers and triggers are fixed for the stepper's life (drop_agents builds a new
+        # one): their constant columns once, their clocks copied in and out each call
+        walkers = w._walkers
+        self._walk = np.zeros((len(walkers), _NW))
+        for k, a in enumerate(walkers):
+            self._walk[k] = (
+                *a.start_xy,
+                *a.end_xy,
+                a.speed_mps,
+                math.nan,
+                a.distance_m,
+                a.yaw_rad,
+                0.0,
+                *a.size_lwh_m[:2],
+            )
+        self._walk_ids = np.array([a.agent_id for a in walkers], dtype=np.int64)
+        self._trig = np.array([(s, d) for _, s, d in w._triggers], dtype=np.float64).reshape(-1, 2)
+        self._trig_walker = np.array(
+            [walkers.index(a) for a, _, _ in w._triggers], dtype=np.int64
+        ).reshape(-1)
 
     def run(self, world: World, stamp_ns: int, pedals: bool) -> bool:
         """Step ``world`` towards ``stamp_ns`` in compiled calls, with the scripted driver or
@@ -130,30 +149,14 @@ class FrameStepper:
                 pm.drag_coefficient_1pm,
             )
         committed = self._ego_committed
-        committed[:] = False
-        for index in driver._committed:
-            committed[index] = True
-        walkers = w._walkers
-        if len(self._walk) != len(walkers):
-            self._walk = np.zeros((len(walkers), _NW))
-        walk = self._walk
+        if self._n_ego_stops:
+            committed[:] = False
+            for index in driver._committed:
+                committed[index] = True
+        walkers, walk = w._walkers, self._walk
         for k, a in enumerate(walkers):
-            start = math.nan if a.start_time_s is None else a.start_time_s
-            walk[k] = (
-                *a.start_xy,
-                *a.end_xy,
-                a.speed_mps,
-                start,
-                a.distance_m,
-                a.yaw_rad,
-                a._time_s,
-                *a.size_lwh_m[:2],
-            )
-        walk_ids = np.array([a.agent_id for a in walkers], dtype=np.int64)
-        trig = np.array([(s, d) for _, s, d in w._triggers], dtype=np.float64).reshape(-1, 2)
-        trig_walker = np.array(
-            [walkers.index(a) for a, _, _ in w._triggers], dtype=np.int64
-        ).reshape(-1)
+            walk[k, WSTART] = math.nan if a.start_time_s is None else a.start_time_s
+            walk[k, WTIME] = a._time_s
         dt_ns = w._dt_ns
         max_steps = -(-(stamp_ns - w._time_ns) // dt_ns)
         if len(self._hist_t) < max_steps:
@@ -162,7 +165,7 @@ class FrameStepper:
         clock = self._clock
         clock[:] = (w._time_ns, w._start_ns, dt_ns, stamp_ns, 1 if pedals else 0, 0)
         search = w._gaps
-        done, fleet_t, lc_due = _frame(
+        done, fleet_t, lc_due, left = _frame(
             clock,
             fleet._time_s,
             fleet._next_lc,
@@ -186,9 +189,9 @@ class FrameStepper:
             self._n_ego_stops,
             committed,
             walk,
-            walk_ids,
-            trig,
-            trig_walker,
+            self._walk_ids,
+            self._trig,
+            self._trig_walker,
             self._parked_ids,
             self._parked,
             self._hist_t,
@@ -213,9 +216,8 @@ class FrameStepper:
             ):
                 history.append((t_ns, x, y, yaw))
             w._trim_history()
-            active = fleet._i[:, fl.ACTIVE] == 1
-            if not active.all():
-                fleet._keep(active)
+            if left:
+                fleet._keep(fleet._i[:, fl.ACTIVE] == 1)
         return not lc_due
 
 
@@ -289,22 +291,23 @@ def _frame(  # noqa: PLR0917 (the world's columns; numba has no keyword-only par
     parked: F64,
     hist_t: I64,
     hist: F64,
-) -> tuple[int, float, bool]:  # pragma: no cover - compiled
-    """World._substep until ``clock[3]``; returns the steps taken, the fleet's plan time and
-    whether a lane change is due (the next step is then Python's).  Stops after a step in
-    which a follower left its route."""
+) -> tuple[int, float, bool, bool]:  # pragma: no cover - compiled
+    """World._substep until ``clock[3]``; returns the steps taken, the fleet's plan time,
+    whether a lane change is due (the next step is then Python's) and whether a follower left
+    its route (it stops after that step)."""
     time_ns, start_ns, dt_full, stamp_ns, pedals = clock[0], clock[1], clock[2], clock[3], clock[4]
     two = powers[0]
     off, n_route = table[0, ego_route], table[1, ego_route]
     net_s, net_x, net_y = net[0], net[1], net[2]
     nf, nw, npk = len(f), len(walk), len(parked)
     steps = 0
+    left = False
     while time_ns < stamp_ns:
         dt_ns = min(dt_full, stamp_ns - time_ns)
         t = (time_ns - start_ns) / 1e9
         if t >= next_lc:
             clock[0] = time_ns
-            return steps, fleet_t, True
+            return steps, fleet_t, True, False
         dt_s = dt_ns / 1e9
         scripted = pedals == 0
         plan = scripted or nf > 0
@@ -436,14 +439,13 @@ def _frame(  # noqa: PLR0917 (the world's columns; numba has no keyword-only par
         hist_t[steps] = time_ns
         hist[steps, 0], hist[steps, 1], hist[steps, 2] = e[EX], e[EY], e[EYAW]
         steps += 1
-        left = False
         for k in range(nf):
             if i[k, fl.ACTIVE] == 0:
                 left = True
         if left:
             break
     clock[0] = time_ns
-    return steps, fleet_t, False
+    return steps, fleet_t, False, left
 
 
 @numba.njit(cache=True, nogil=True)
