@@ -126,6 +126,7 @@ class SyntheticSimulator:
         neutral = ControlCommands(steering_angle_rad=self._world.ego_model.steer_rad)
         self._acting: ControlCommands = neutral  # the command the ego moves under now
         self._queued: ControlCommands = neutral  # with a one-frame delay: the next one
+        self._commanding = False  # whether the commands move the ego (_hand_over)
         self._hand_over()
         self._index = 0
         self._end_ns = scenario.start_stamp_ns + round(scenario.duration_s * 1e9)
@@ -229,7 +230,8 @@ class SyntheticSimulator:
             self._acting, self._queued = self._queued, chosen.commands
         else:
             self._acting = chosen.commands
-        self._hand_over()
+        if self._commanding:  # the ego was handed over (a subclass may keep the driver)
+            self._command_ego()
         target = self._world.time_ns + round(dt_s * 1e9)
         if self._rendering is None:
             self._world.step_to(target)
@@ -277,7 +279,11 @@ class SyntheticSimulator:
     # -- the ego ------------------------------------------------------------------------------
 
     def _hand_over(self) -> None:
-        """Give the closed-loop world's ego to the acting command (at the start of a run and at
-        every step): each physics step is then ``self._ego.apply(self._acting, dt_s)``, in the
-        world's compiled step."""
+        """Give the closed-loop world's ego to the commands (at the start of a run)."""
+        self._command_ego()
+
+    def _command_ego(self) -> None:
+        """Move the closed-loop world's ego under the acting command from now on: each physics
+        step is ``self._ego.apply(self._acting, dt_s)``, in the world's compiled step."""
+        self._commanding = True
         self._world.drive_ego_pedals(self._acting, self._ego.pedals)
