@@ -159,3 +159,38 @@ def test_ground_truth_objects_are_the_ground_truth_rows_of_objects() -> None:
         for name in ("object_ids", "centers", "sizes", "yaws_rad", "velocities", "colors"):
             assert np.array_equal(getattr(truth, name), getattr(full, name)[keep])
         assert truth.is_ground_truth.all()
+
+
+@pytest.mark.parametrize(
+    ("name", "start_s", "end_s"), [("pedestrian_from_occlusion", 0.0, 6.0), ("highway", 21.5, 22.5)]
+)
+def test_ground_truth_columns_equal_ground_truth_objects(
+    name: str, start_s: float, end_s: float
+) -> None:
+    """ground_truth_columns() (the closed loop's observation) has ground_truth_objects()'s
+    rows and values every frame: walkers starting, parked cars, followers leaving, scenery
+    marked as ground truth, the agents dropped."""
+    sc = load_scenario(name)
+    world = World(sc)
+    world.step(start_s)
+    names = ("object_ids", "centers", "sizes", "yaws_rad", "velocities", "is_ground_truth")
+    frame = 0
+    while world.time_s < end_s:
+        if frame == 3:  # scenery marked as ground truth joins the columns
+            static, looks = world._static
+            flags = static.is_ground_truth.copy()
+            flags[[2, 5]] = True
+            world._static = (dataclasses.replace(static, is_ground_truth=flags), looks)
+            world._static_truth = world_module._subset(world._static[0], flags)
+            world._truth_cache = None
+        truth, columns = world.ground_truth_objects(), world.ground_truth_columns()
+        assert columns.classes == truth.classes
+        for attr in names:
+            assert np.array_equal(getattr(columns, attr), getattr(truth, attr)), attr
+        world.step(0.1)
+        frame += 1
+    world.drop_agents()
+    truth, columns = world.ground_truth_objects(), world.ground_truth_columns()
+    assert len(columns) == len(truth) == 2
+    for attr in names:
+        assert np.array_equal(getattr(columns, attr), getattr(truth, attr)), attr

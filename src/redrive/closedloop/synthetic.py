@@ -6,7 +6,7 @@ Two worlds of the same scenario and seed run in lockstep:
   the scripted driver, so its ego track is the logged route that progress and deviation are
   measured against;
 - the *closed-loop* world is the same scenario with the ego handed to the commands
-  (:meth:`redrive.sim.world.World.drive_ego`): every physics step moves it by the actuated
+  (:meth:`redrive.sim.world.World.drive_ego_pedals`): every physics step moves it by the actuated
   bicycle model (:class:`redrive.sim.ego.ActuatedEgo`) under the command of the last frame.
 
 Agents: ``replay`` (non-reactive, as nuPlan's open-loop agents and NAVSIM): what the frames show
@@ -50,7 +50,7 @@ from redrive.closedloop.simulator import (
     choose_command,
 )
 from redrive.errors import ConfigError, SimulationError
-from redrive.sim.ego import ActuatedEgo, BicycleModel, PedalModel
+from redrive.sim.ego import ActuatedEgo, PedalModel
 from redrive.sim.ground_truth import objects_in_base
 from redrive.sim.rig import rig_from_mapping
 from redrive.sim.scenario import Scenario
@@ -126,6 +126,7 @@ class SyntheticSimulator:
         neutral = ControlCommands(steering_angle_rad=self._world.ego_model.steer_rad)
         self._acting: ControlCommands = neutral  # the command the ego moves under now
         self._queued: ControlCommands = neutral  # with a one-frame delay: the next one
+        self._commanding = False  # whether the commands move the ego (_hand_over)
         self._hand_over()
         self._index = 0
         self._end_ns = scenario.start_stamp_ns + round(scenario.duration_s * 1e9)
@@ -192,7 +193,7 @@ class SyntheticSimulator:
         world = self._world
         source = self._expert if self.agents == "replay" else world
         if self._rendering is None or self._frame_sensors is None:
-            objects = objects_in_base(source.ground_truth_objects(), world.map_from_base())
+            objects = objects_in_base(source.ground_truth_columns(), world.map_from_base())
             return Frame(
                 stamp_ns=world.time_ns,
                 index=self._index,
@@ -202,7 +203,7 @@ class SyntheticSimulator:
         self._start_rendering()
         lidar_hits, camera_pixels = self._rendering.visibility()
         objects = objects_in_base(
-            source.ground_truth_objects(),
+            source.ground_truth_columns(),
             world.map_from_base(),
             lidar_hits=lidar_hits,
             camera_pixels=camera_pixels,
@@ -229,6 +230,8 @@ class SyntheticSimulator:
             self._acting, self._queued = self._queued, chosen.commands
         else:
             self._acting = chosen.commands
+        if self._commanding:  # the ego was handed over (a subclass may keep the driver)
+            self._command_ego()
         target = self._world.time_ns + round(dt_s * 1e9)
         if self._rendering is None:
             self._world.step_to(target)
@@ -277,9 +280,10 @@ class SyntheticSimulator:
 
     def _hand_over(self) -> None:
         """Give the closed-loop world's ego to the commands (at the start of a run)."""
-        self._world.drive_ego(self._drive)
+        self._command_ego()
 
-    def _drive(self, model: BicycleModel, dt_s: float) -> None:
-        """One physics step of the closed-loop ego under the acting command."""
-        assert model is self._ego.model
-        self._ego.apply(self._acting, dt_s)
+    def _command_ego(self) -> None:
+        """Move the closed-loop world's ego under the acting command from now on: each physics
+        step is ``self._ego.apply(self._acting, dt_s)``, in the world's compiled step."""
+        self._commanding = True
+        self._world.drive_ego_pedals(self._acting, self._ego.pedals)

@@ -11,6 +11,7 @@ import numpy.typing as npt
 from redrive.geometry import invert, transform_points
 from redrive.geometry.se3 import transform_vectors, yaw_from_rotation_matrix
 from redrive.sim.scene import Scene, SceneObjects
+from redrive.sim.truth import TruthColumns
 from redrive.types import DetectedObject
 
 __all__ = ["GROUND_TRUTH_RANGE_M", "ground_truth_objects", "objects_in_base"]
@@ -41,14 +42,15 @@ def ground_truth_objects(
 
 
 def objects_in_base(
-    objs: SceneObjects,
+    objs: SceneObjects | TruthColumns,
     map_from_base: npt.NDArray[np.float64],
     *,
     lidar_hits: dict[int, int] | None = None,
     camera_pixels: dict[int, int] | None = None,
     range_m: float = GROUND_TRUTH_RANGE_M,
 ) -> tuple[DetectedObject, ...]:
-    """The ground-truth ones of ``objs`` (map frame) within ``range_m`` of an ego at
+    """The ground-truth ones of ``objs`` (map frame; a world's scene objects or its
+    :meth:`~redrive.sim.world.World.ground_truth_columns`) within ``range_m`` of an ego at
     ``map_from_base``, in its base_link (see :func:`ground_truth_objects`)."""
     base_from_map = invert(map_from_base)
     yaw_ego = yaw_from_rotation_matrix(map_from_base[:3, :3])

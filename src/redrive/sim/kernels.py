@@ -14,7 +14,7 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["bisect_left", "bisect_right", "project_point", "route_pose"]
+__all__ = ["bisect_left", "bisect_right", "hypot", "project_point", "route_pose"]
 
 F64 = npt.NDArray[np.float64]
 
@@ -92,3 +92,52 @@ def project_point(  # noqa: PLR0917 (numba has no keyword-only parameters)
     s = s_arr[best_j] + best_t * (s_arr[best_j + 1] - s_arr[best_j])
     cross = best_sx * best_ry - best_sy * best_rx
     return s, (-1.0 if cross < 0.0 else 1.0) * math.sqrt(best), True
+
+
+@numba.njit(cache=True, nogil=True)
+def _dl_mul(x: float, y: float) -> tuple[float, float]:  # pragma: no cover - compiled
+    """``x * y`` as a sum of two floats, exactly (Dekker's product with Veltkamp's split)."""
+    t = x * 134217729.0
+    xh = t - (t - x)
+    xl = x - xh
+    t = y * 134217729.0
+    yh = t - (t - y)
+    yl = y - yh
+    p = xh * yh
+    q = xh * yl + xl * yh
+    z = p + q
+    return z, p - z + q + xl * yl
+
+
+@numba.njit(cache=True, nogil=True)
+def hypot(a: float, b: float) -> float:  # pragma: no cover - compiled
+    """Python's ``math.hypot(a, b)`` bit for bit (CPython 3.11's ``vector_norm``: scaled,
+    lossless squares, a corrected square root) — libm's ``hypot``, which numba calls, differs
+    from it in the last bit for about one pair in 200."""
+    x, y = abs(a), abs(b)
+    m = max(x, y)
+    if math.isinf(m):
+        return m
+    if math.isnan(x) or math.isnan(y):
+        return math.nan
+    if m == 0.0:
+        return m
+    _, e = math.frexp(m)
+    if e < -1023:  # deep in the subnormals: never for metres (CPython rescales by DBL_MIN)
+        return math.sqrt(x * x + y * y)
+    scale = math.ldexp(1.0, -e)
+    csum, frac1, frac2 = 1.0, 0.0, 0.0
+    for v in (a * scale, b * scale):
+        hi, lo = _dl_mul(v, v)
+        s = csum + hi
+        frac2 += hi - (s - csum)
+        csum = s
+        frac1 += lo
+    h = math.sqrt(csum - 1.0 + (frac1 + frac2))
+    hi, lo = _dl_mul(-h, h)
+    s = csum + hi
+    frac2 += hi - (s - csum)
+    csum = s
+    frac1 += lo
+    h += (csum - 1.0 + (frac1 + frac2)) / (2.0 * h)
+    return h / scale

@@ -23,20 +23,22 @@ import numpy.typing as npt
 
 from redrive.errors import SimulationError
 from redrive.sim.agents import IdmParams, LaneChange, LaneFollower, ParkedObject, Walker
-from redrive.sim.ego import BicycleModel, EgoDriver, EgoGeometry, pose_matrix
+from redrive.sim.ego import BicycleModel, EgoDriver, EgoGeometry, PedalModel, pose_matrix
 from redrive.sim.fleet import LaneFleet
 from redrive.sim.gaps import GapSearch
 from redrive.sim.ground import rasterize
 from redrive.sim.lights import TrafficLights
-from redrive.sim.roads import RoadNetwork, RoadSegment, build_network
+from redrive.sim.roads import RoadNetwork, build_network
 from redrive.sim.scenario import AgentSpec, Scenario
 from redrive.sim.scene import GroundMap, Scene, SceneObjects
-from redrive.types import ObjectClass, VehicleState
+from redrive.sim.scenery import build_scenery
+from redrive.sim.stepper import FrameStepper
+from redrive.sim.truth import TruthColumns, _Constant, truth_columns
+from redrive.types import ControlCommands, ObjectClass, VehicleState
 
 __all__ = ["World"]
 
 EGO_ID = 0
-_SCENERY_ID0 = 100_000
 _HISTORY_S = 0.3
 _SIZES = {
     "vehicle": (4.5, 1.85, 1.5),
@@ -83,7 +85,7 @@ def _load_kernels(scenario: Scenario) -> None:
     probe = World(scenario)
     probe.objects()
     probe.step_to(probe.time_ns + probe._dt_ns)
-    probe.drive_ego(lambda model, dt_s: None)
+    probe.drive_ego_pedals(ControlCommands(), PedalModel())
     probe.step_to(probe.time_ns + probe._dt_ns)
 
 
@@ -100,7 +102,7 @@ class World:
         self._time_ns = self._start_ns
         self._dt_ns = round(scenario.physics_dt_s * 1e9)
         self._ground: GroundMap | None = None
-        self._static = self._build_scenery()
+        self._static = build_scenery(self.network, scenario, self._rng)
         #: the scenery's ground-truth part (usually none), for :meth:`ground_truth_objects`
         self._static_truth = _subset(self._static[0], self._static[0].is_ground_truth)
         self._followers: list[LaneFollower] = []
@@ -126,11 +128,17 @@ class World:
         self._history: deque[tuple[int, float, float, float]] = deque()
         #: steps the ego instead of the scripted driver (closed loop): ``step(model, dt_s)``
         self._ego_step: Callable[[BicycleModel, float], None] | None = None
+        #: the command and pedals the ego moves under (:meth:`drive_ego_pedals`), or None
+        self._ego_pedals: tuple[ControlCommands, PedalModel] | None = None
         #: every lane follower's and the scripted ego's gap search, batched per physics step
         self._gaps = GapSearch(self.network.routes.values())
         #: the lane followers' state as arrays, stepped by compiled kernels
         self._fleet = LaneFleet(self._followers, self._gaps, self.lights)
         self._followers = []  # their state lives in the fleet from here on
+        #: a frame's physics steps in one compiled call (the scripted or the pedal-driven ego)
+        self._stepper = FrameStepper(self)
+        self._truth_cache: _Constant | None = None
+        self._ego_state: tuple[tuple[float, ...], VehicleState] | None = None
         _load_kernels(scenario)
         self._record_pose()
 
@@ -221,65 +229,6 @@ class World:
         r, g, b = (int(c) for c in _PALETTE[self._rng.integers(len(_PALETTE))])
         return r, g, b
 
-    def _build_scenery(
-        self,
-    ) -> tuple[SceneObjects, list[tuple[float, float, float, float, float, float, float]]]:
-        """Buildings (urban) or walls (highway), poles and light posts as STATIC boxes."""
-        boxes: list[tuple[float, float, float, float, float, float, float]] = []  # x y z l w h yaw
-        looks: list[tuple[int, int, int, float]] = []
-        rng = self._rng
-        urban = self.network.intersection_half_m is not None
-        for seg in self.network.segments:
-            for side in (-1.0, 1.0):
-                edge = seg.right_edge_m if side < 0 else seg.left_edge_m
-                if self.scenario.scenery and urban:
-                    s = 5.0
-                    while s < seg.length_m - 22.0:
-                        length, depth = rng.uniform(10.0, 25.0), rng.uniform(8.0, 14.0)
-                        length = min(length, seg.length_m - 22.0 - s)
-                        height = rng.uniform(6.0, 20.0)
-                        d = edge + side * (seg.sidewalk_width_m + 1.0 + depth / 2)
-                        self._box(boxes, seg, s + length / 2, d, (length, depth, height))
-                        grey = int(rng.integers(90, 200))
-                        looks.append((grey, grey - 10, grey - 25, float(rng.uniform(0.2, 0.5))))
-                        s += length + rng.uniform(2.0, 8.0)
-                elif self.scenario.scenery:
-                    for s in np.arange(5.0, seg.length_m - 5.0, 10.0):
-                        d = edge + side * (seg.sidewalk_width_m + 0.5)
-                        self._box(boxes, seg, float(s), d, (10.0, 0.3, 3.5))
-                        looks.append((150, 150, 140, 0.35))
-                for s in np.arange(10.0, seg.length_m - 5.0, 30.0):
-                    self._box(boxes, seg, float(s), edge + side * 0.5, (0.25, 0.25, 7.0))
-                    looks.append((110, 110, 110, 0.6))
-        for sig in self.network.signals:
-            boxes.append((sig.position[0], sig.position[1], 2.6, 0.3, 0.3, 5.2, 0.0))
-            looks.append((60, 60, 60, 0.6))
-        arr = np.array(boxes, dtype=np.float64).reshape(-1, 7)
-        n = len(arr)
-        objects = SceneObjects(
-            object_ids=_SCENERY_ID0 + np.arange(n, dtype=np.int64),
-            classes=(ObjectClass.STATIC,) * n,
-            centers=arr[:, 0:3].copy(),
-            sizes=arr[:, 3:6].copy(),
-            yaws_rad=arr[:, 6].copy(),
-            velocities=np.zeros((n, 3)),
-            colors=np.array([lk[:3] for lk in looks], dtype=np.uint8).reshape(-1, 3),
-            reflectivity=np.array([lk[3] for lk in looks], dtype=np.float32),
-            is_ground_truth=np.zeros(n, dtype=bool),
-        )
-        return objects, boxes
-
-    @staticmethod
-    def _box(
-        boxes: list[tuple[float, float, float, float, float, float, float]],
-        seg: RoadSegment,
-        s_m: float,
-        d_m: float,
-        size: tuple[float, float, float],
-    ) -> None:
-        x, y, heading = seg.pose_at(s_m, d_m)
-        boxes.append((float(x), float(y), size[2] / 2, size[0], size[1], size[2], float(heading)))
-
     # -- time ---------------------------------------------------------------------------------
     @property
     def time_ns(self) -> int:
@@ -303,7 +252,12 @@ class World:
         if stamp_ns < self._time_ns:
             msg = f"World.step_to: {stamp_ns} ns is before the current time {self._time_ns} ns; the world only moves forward"
             raise SimulationError(msg)
+        stepper = self._stepper
+        compiled = stepper.usable and (self._ego_step is None or self._ego_pedals is not None)
         while self._time_ns < stamp_ns:
+            # the compiled steps stop before a lane change starts: that step is Python's
+            if compiled and stepper.run(self, stamp_ns, self._ego_pedals is not None):
+                continue
             self._substep(min(self._dt_ns, stamp_ns - self._time_ns))
 
     def _substep(self, dt_ns: int) -> None:
@@ -370,6 +324,20 @@ class World:
         pedestrian triggers), and the other agents see the ego wherever it is.
         """
         self._ego_step = step
+        self._ego_pedals = None
+
+    def drive_ego_pedals(self, commands: ControlCommands, pedals: PedalModel) -> None:
+        """Move the ego, every physics step from now on, under ``commands`` through ``pedals`` —
+        what :meth:`drive_ego` with ``ActuatedEgo(model, pedals=pedals).apply(commands, dt_s)``
+        does, in the compiled physics step (call it again for each new command)."""
+        self._ego_step = self._pedal_step
+        self._ego_pedals = (commands, pedals)
+
+    def _pedal_step(self, model: BicycleModel, dt_s: float) -> None:
+        assert self._ego_pedals is not None
+        commands, pedals = self._ego_pedals
+        accel = pedals.acceleration(commands, model.speed_mps)
+        model.step(dt_s, accel_mps2=accel, steer_rad=commands.steering_angle_rad)
 
     def drop_agents(self) -> None:
         """Remove every agent — lane followers, pedestrians, parked vehicles — for good: the world
@@ -381,6 +349,7 @@ class World:
         """
         self._fleet.drop()
         self._walkers, self._triggers, self._parked = [], [], []
+        self._stepper = FrameStepper(self)
 
     def place_ego(self, *, x_m: float, y_m: float, yaw_rad: float) -> None:
         """Start the ego at another pose (map frame, rear-axle centre) — before the first step
@@ -417,6 +386,9 @@ class World:
 
     def _record_pose(self) -> None:
         self._history.append((self._time_ns, self._ego.x_m, self._ego.y_m, self._ego.yaw_rad))
+        self._trim_history()
+
+    def _trim_history(self) -> None:
         oldest_ns = self._time_ns - round(_HISTORY_S * 1e9)
         while len(self._history) > 2 and self._history[1][0] <= oldest_ns:
             self._history.popleft()
@@ -454,8 +426,13 @@ class World:
         return self._fleet.snapshot(np.array(ids, dtype=np.int64), np.array(rows, dtype=np.float64))
 
     def ego_state(self) -> VehicleState:
-        """The ego's true state (rear-axle centre, map frame) at :attr:`time_ns`."""
-        return self._ego.state(self._time_ns)
+        """The ego's true state (rear-axle centre, map frame) at :attr:`time_ns` (the same
+        immutable object again while neither the time nor the ego's state changed)."""
+        m = self._ego
+        key = (self._time_ns, m.x_m, m.y_m, m.yaw_rad, m.speed_mps, m.steer_rad, m.accel_mps2)
+        if self._ego_state is None or key != self._ego_state[0]:
+            self._ego_state = (key, m.state(self._time_ns))
+        return self._ego_state[1]
 
     def map_from_base(self) -> npt.NDArray[np.float64]:
         """The ego pose at :attr:`time_ns`, 4×4 float64."""
@@ -496,6 +473,12 @@ class World:
         marked as ground truth), in the same order, without the rest of the scenery — what an
         object-level observation needs, at a fraction of the cost."""
         return self._objects(self._static_truth)
+
+    def ground_truth_columns(self) -> TruthColumns:
+        """:meth:`ground_truth_objects`'s rows and values as plain columns (boxes only, not
+        validated again; the constant ones built once) — an object-level observation's input."""
+        columns, self._truth_cache = truth_columns(self, self._truth_cache)
+        return columns
 
     def _objects(self, static: SceneObjects) -> SceneObjects:
         """The agents' boxes, map frame, followed by ``static``."""

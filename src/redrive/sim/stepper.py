@@ -1,0 +1,514 @@
+"""A frame's physics steps as one compiled call: the world's state as columns, Python at the ends.
+
+:meth:`World._substep <redrive.sim.world.World>` is the reference: one 100-Hz physics step of
+the obstacle snapshot, the pedestrians' triggers, the lane followers' and the scripted ego's
+gap search, stop lines and IDM, the ego's pure pursuit (or its pedals under a held command),
+the bicycle model and the walkers' clocks — a few dozen Python calls around the fleet's kernels.
+:class:`FrameStepper` copies the state that lives in Python objects (the ego's
+:class:`~redrive.sim.ego.BicycleModel` and driver, the walkers) into arrays, runs every physics
+step up to a stamp in :func:`_frame` and copies it back; the lane followers' arrays
+(:class:`~redrive.sim.fleet.LaneFleet`) are stepped in place.
+
+Every value is the one the Python step gives, bit for bit: the same float64 operations in the
+same order (no ``fastmath``; powers through ``pow`` with a run-time exponent; ``math.hypot`` as
+CPython computes it, :func:`redrive.sim.kernels.hypot`).  What the kernel does not do it hands
+back to Python: a lane change that starts (the follower's :meth:`Route.project`), and the
+removal of a follower that left its route — :func:`_frame` stops at such a step and the world
+does it, then calls again.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numba
+import numpy as np
+import numpy.typing as npt
+
+from redrive.sim import fleet as fl
+from redrive.sim import kernels
+from redrive.sim.gaps import _gap_kernel
+
+if TYPE_CHECKING:
+    from redrive.sim.world import World
+
+__all__ = ["FrameStepper"]
+
+F64 = npt.NDArray[np.float64]
+I64 = npt.NDArray[np.int64]
+B = npt.NDArray[np.bool_]
+
+# the ego's state columns (FrameStepper._ego) and its parameters (FrameStepper._ego_p)
+(EX, EY, EYAW, ESPEED, ESTEER, EACCEL, ES) = range(7)
+(WB, CENTER, FRONT, ELEN, EWID, MAX_STEER, STEER_RATE, MAX_ACC, MAX_DEC, JERK) = range(10)
+(LOOK_T, LOOK_MIN, LOOK_MAX, V0, HEADWAY, MIN_GAP, A_MAX, B_COMF, DELTA, IDM_DEC) = range(10, 20)
+(THROTTLE, BRAKE, STEER_CMD, P_ACC, P_BRK, ROLL, DRAG, HORIZON, MARGIN) = range(20, 29)
+_NP = 29
+# a walker's columns: start x, y, end x, y, speed, start time (nan: not started), distance,
+# yaw, clock, length, width
+(WSX, WSY, WEX, WEY, WSPD, WSTART, WDIST, WYAW, WTIME, WLEN, WWID) = range(11)
+_NW = 11
+
+
+class FrameStepper:
+    """The compiled physics steps of one world (built with it; see the module text)."""
+
+    def __init__(self, world: World) -> None:
+        w = world
+        search, driver, g = w._gaps, w._driver, w.ego_geometry
+        #: no route has a zero-length segment (the Python step's numpy fallback is not compiled)
+        seg_len = search.net[5][_segment_starts(search.route_table)]
+        self.usable = bool(np.all(seg_len * seg_len != 0.0))
+        self._route = search.routes.index(driver.route)
+        idm = driver.idm
+        p = np.zeros(_NP)
+        p[WB:JERK] = (
+            g.wheelbase_m,
+            g.center_offset_m,
+            g.front_offset_m,
+            g.length_m,
+            g.width_m,
+            g.max_steer_rad,
+            g.max_steer_rate_rad_s,
+            g.max_accel_mps2,
+            g.max_decel_mps2,
+        )
+        p[JERK] = math.nan if g.max_jerk_mps3 is None else g.max_jerk_mps3
+        p[LOOK_T:THROTTLE] = (
+            driver.lookahead_time_s,
+            driver.min_lookahead_m,
+            driver.max_lookahead_m,
+            idm.desired_speed_mps,
+            idm.time_headway_s,
+            idm.min_gap_m,
+            idm.max_accel_mps2,
+            idm.comfort_decel_mps2,
+            idm.delta,
+            idm.max_decel_mps2,
+        )
+        p[HORIZON], p[MARGIN] = search.horizon_m, search.margin_m
+        self._p = p
+        self._ego = np.zeros(7)
+        self._clock = np.zeros(6, dtype=np.int64)
+        self._hist_t = np.zeros(0, dtype=np.int64)
+        self._hist = np.zeros((0, 3))
+        self._n_ego_stops = len(driver.route.stop_lines)
+        self._ego_committed = np.zeros(max(self._n_ego_stops, 1), dtype=bool)
+        parked = w._parked
+        self._parked_ids = np.array([a.agent_id for a in parked], dtype=np.int64)
+        self._parked = np.array(
+            [(*a.center_xy, *a.size_lwh_m[:2], 0.0, 0.0) for a in parked], dtype=np.float64
+        ).reshape(-1, 6)
+        # the walkers and triggers are fixed for the stepper's life (drop_agents builds a new
+        # one): their constant columns once, their clocks copied in and out each call
+        walkers = w._walkers
+        self._walk = np.zeros((len(walkers), _NW))
+        for k, a in enumerate(walkers):
+            self._walk[k] = (
+                *a.start_xy,
+                *a.end_xy,
+                a.speed_mps,
+                math.nan,
+                a.distance_m,
+                a.yaw_rad,
+                0.0,
+                *a.size_lwh_m[:2],
+            )
+        self._walk_ids = np.array([a.agent_id for a in walkers], dtype=np.int64)
+        self._trig = np.array([(s, d) for _, s, d in w._triggers], dtype=np.float64).reshape(-1, 2)
+        self._trig_walker = np.array(
+            [walkers.index(a) for a, _, _ in w._triggers], dtype=np.int64
+        ).reshape(-1)
+
+    def run(self, world: World, stamp_ns: int, pedals: bool) -> bool:
+        """Step ``world`` towards ``stamp_ns`` in compiled calls, with the scripted driver or
+        (``pedals``) the held command of :meth:`World.drive_ego_pedals`; False when it stopped
+        early and the world must take the next step in Python (a lane change starts)."""
+        w, fleet, model, driver = world, world._fleet, world._ego, world._driver
+        e, p = self._ego, self._p
+        e[:] = (
+            model.x_m,
+            model.y_m,
+            model.yaw_rad,
+            model.speed_mps,
+            model.steer_rad,
+            model.accel_mps2,
+            driver.s_m,
+        )
+        if pedals:
+            assert w._ego_pedals is not None
+            cmd, pm = w._ego_pedals
+            p[THROTTLE:HORIZON] = (
+                cmd.throttle,
+                cmd.brake,
+                cmd.steering_angle_rad,
+                pm.max_accel_mps2,
+                pm.max_brake_mps2,
+                pm.rolling_resistance_mps2,
+                pm.drag_coefficient_1pm,
+            )
+        committed = self._ego_committed
+        if self._n_ego_stops:
+            committed[:] = False
+            for index in driver._committed:
+                committed[index] = True
+        walkers, walk = w._walkers, self._walk
+        for k, a in enumerate(walkers):
+            walk[k, WSTART] = math.nan if a.start_time_s is None else a.start_time_s
+            walk[k, WTIME] = a._time_s
+        dt_ns = w._dt_ns
+        max_steps = -(-(stamp_ns - w._time_ns) // dt_ns)
+        if len(self._hist_t) < max_steps:
+            self._hist_t = np.zeros(max_steps, dtype=np.int64)
+            self._hist = np.zeros((max_steps, 3))
+        clock = self._clock
+        clock[:] = (w._time_ns, w._start_ns, dt_ns, stamp_ns, 1 if pedals else 0, 0)
+        search = w._gaps
+        done, fleet_t, lc_due, left = _frame(
+            clock,
+            fleet._time_s,
+            fleet._next_lc,
+            fleet._f,
+            fleet._i,
+            fleet._committed,
+            fleet._has_brake,
+            fleet._stop_s,
+            fleet._stop_light,
+            fleet._n_stops,
+            fleet._light_group,
+            fleet._timing,
+            fleet._route_len,
+            1.0 if w.lights.signals else 0.0,
+            fl._POWERS,
+            search.net,
+            search.route_table,
+            e,
+            p,
+            self._route,
+            self._n_ego_stops,
+            committed,
+            walk,
+            self._walk_ids,
+            self._trig,
+            self._trig_walker,
+            self._parked_ids,
+            self._parked,
+            self._hist_t,
+            self._hist,
+        )
+        # copy back: the ego, its driver, the walkers, the fleet's clock, the pose history
+        model.x_m, model.y_m, model.yaw_rad = float(e[EX]), float(e[EY]), float(e[EYAW])
+        model.speed_mps, model.steer_rad = float(e[ESPEED]), float(e[ESTEER])
+        model.accel_mps2, driver.s_m = float(e[EACCEL]), float(e[ES])
+        for index in np.flatnonzero(committed[: self._n_ego_stops]).tolist():
+            driver._committed.add(index)
+        for k, a in enumerate(walkers):
+            if a.start_time_s is None and not math.isnan(walk[k, WSTART]):
+                a.start_time_s = float(walk[k, WSTART])
+            a._time_s = float(walk[k, WTIME])
+        if done:
+            fleet._time_s = fleet_t
+            w._time_ns = int(clock[0])
+            history = w._history
+            for t_ns, (x, y, yaw) in zip(
+                self._hist_t[:done].tolist(), self._hist[:done].tolist(), strict=True
+            ):
+                history.append((t_ns, x, y, yaw))
+            w._trim_history()
+            if left:
+                fleet._keep(fleet._i[:, fl.ACTIVE] == 1)
+        return not lc_due
+
+
+def _segment_starts(table: I64) -> B:
+    """Every sample of ``GapSearch.net`` that starts a segment (not a route's last sample)."""
+    n = int(table[0, -1] + table[1, -1]) if table.shape[1] else 0
+    mask = np.ones(n, dtype=bool)
+    mask[(table[0] + table[1] - 1).tolist()] = False
+    return mask
+
+
+@numba.njit(cache=True, nogil=True)
+def _light_gap(  # noqa: PLR0917 (numba has no keyword-only parameters)
+    stop_s: F64,
+    stop_light: I64,
+    route: int,
+    n_stops: int,
+    committed: B,
+    light_group: I64,
+    timing: F64,
+    s_front: float,
+    v: float,
+    time_s: float,
+    comfort: float,
+    two: float,
+) -> float:  # pragma: no cover - compiled
+    """``agents.light_gap`` of the ego (its committed stop lines in ``committed``)."""
+    for j in range(n_stops):
+        g = stop_s[route, j] - s_front
+        if g < -0.5 or committed[j]:
+            continue
+        state = fl._light_state(light_group, timing, stop_light[route, j], time_s)
+        if state == 0:
+            return np.inf
+        if state == 1 and v**two / (2.0 * comfort) > g:
+            committed[j] = True
+            continue
+        return float(max(g, 0.0))
+    return np.inf
+
+
+@numba.njit(cache=True, nogil=True)
+def _frame(  # noqa: PLR0917 (the world's columns; numba has no keyword-only parameters)
+    clock: I64,
+    fleet_t: float,
+    next_lc: float,
+    f: F64,
+    i: I64,
+    committed: B,
+    has_brake: B,
+    stop_s: F64,
+    stop_light: I64,
+    n_stops: I64,
+    light_group: I64,
+    timing: F64,
+    route_len: F64,
+    any_lights: float,
+    powers: F64,
+    net: F64,
+    table: I64,
+    e: F64,
+    p: F64,
+    ego_route: int,
+    n_ego_stops: int,
+    ego_committed: B,
+    walk: F64,
+    walk_ids: I64,
+    trig: F64,
+    trig_walker: I64,
+    parked_ids: I64,
+    parked: F64,
+    hist_t: I64,
+    hist: F64,
+) -> tuple[int, float, bool, bool]:  # pragma: no cover - compiled
+    """World._substep until ``clock[3]``; returns the steps taken, the fleet's plan time,
+    whether a lane change is due (the next step is then Python's) and whether a follower left
+    its route (it stops after that step)."""
+    time_ns, start_ns, dt_full, stamp_ns, pedals = clock[0], clock[1], clock[2], clock[3], clock[4]
+    two = powers[0]
+    off, n_route = table[0, ego_route], table[1, ego_route]
+    net_s, net_x, net_y = net[0], net[1], net[2]
+    nf, nw, npk = len(f), len(walk), len(parked)
+    steps = 0
+    left = False
+    while time_ns < stamp_ns:
+        dt_ns = min(dt_full, stamp_ns - time_ns)
+        t = (time_ns - start_ns) / 1e9
+        if t >= next_lc:
+            clock[0] = time_ns
+            return steps, fleet_t, True, False
+        dt_s = dt_ns / 1e9
+        scripted = pedals == 0
+        plan = scripted or nf > 0
+        nm = 1 + nf + nw + npk
+        ids = np.empty(nm, dtype=np.int64)
+        obst = np.empty((6, nm))
+        if plan:  # World._obstacles: the ego, the followers, the walkers, the parked
+            c, s = math.cos(e[EYAW]), math.sin(e[EYAW])
+            ids[0] = 0
+            obst[0, 0], obst[1, 0] = e[EX] + p[CENTER] * c, e[EY] + p[CENTER] * s
+            obst[2, 0], obst[3, 0] = p[ELEN], p[EWID]
+            obst[4, 0], obst[5, 0] = e[ESPEED] * c, e[ESPEED] * s
+            for a in range(nf):
+                x, y, yaw = fl._pose(f, i, a, fleet_t, net, table, powers)
+                v = f[a, fl.SPEED]
+                ids[1 + a] = i[a, fl.ID]
+                obst[0, 1 + a], obst[1, 1 + a] = x, y
+                obst[2, 1 + a], obst[3, 1 + a] = f[a, fl.LENGTH], f[a, fl.WIDTH]
+                obst[4, 1 + a], obst[5, 1 + a] = v * math.cos(yaw), v * math.sin(yaw)
+            for k in range(nw):
+                at = 1 + nf + k
+                x, y, vx, vy = _walker(walk, k)
+                ids[at] = walk_ids[k]
+                obst[0, at], obst[1, at] = x, y
+                obst[2, at], obst[3, at] = walk[k, WLEN], walk[k, WWID]
+                obst[4, at], obst[5, at] = vx, vy
+            for k in range(npk):
+                at = 1 + nf + nw + k
+                ids[at] = parked_ids[k]
+                for col in range(6):
+                    obst[col, at] = parked[k, col]
+        front = e[ES] + p[FRONT]
+        for r in range(len(trig)):  # the pedestrians the ego's progress starts
+            k = trig_walker[r]
+            if trig[r, 0] - front <= trig[r, 1] and math.isnan(walk[k, WSTART]):
+                walk[k, WSTART] = t
+        fleet_t = t
+        # the ego on its route again (EgoDriver.steer / World._track_route)
+        s0 = e[ES]
+        lo = min(max(kernels.bisect_right(net_s, off, off + n_route, s0 - 2.0) - 1, 0), n_route - 2)
+        hi = min(kernels.bisect_left(net_s, off, off + n_route, s0 + 10.0) + 1, n_route - 1)
+        hi = max(hi, lo + 1)
+        s_new, _, _ = kernels.project_point(net_s, net_x, net_y, off + lo, off + hi, e[EX], e[EY])
+        e[ES] = s_new
+        steer = 0.0
+        if scripted:  # pure pursuit
+            v = e[ESPEED]
+            look = min(max(p[LOOK_T] * v, p[LOOK_MIN]), p[LOOK_MAX])
+            tx, ty, _ = kernels.route_pose(net, off, n_route, e[ES] + look, 0.0)
+            dx, dy = tx - e[EX], ty - e[EY]
+            c, sn = math.cos(e[EYAW]), math.sin(e[EYAW])
+            lx, ly = c * dx + sn * dy, -sn * dx + c * dy
+            dist = max(kernels.hypot(lx, ly), 1e-6)
+            steer = math.atan2(2.0 * p[WB] * ly, dist * dist)
+        gap_e, lead_e = np.inf, 0.0
+        if plan:
+            nq = nf + 1 if scripted else nf
+            q_int = np.empty((3, nq), dtype=np.int64)
+            q_float = np.empty((4, nq))
+            for k in range(nf):
+                route = i[k, fl.ROUTE]
+                s_front = f[k, fl.S] + f[k, fl.LENGTH] / 2.0
+                q_int[0, k], q_int[1, k], q_int[2, k] = (
+                    table[0, route],
+                    table[1, route],
+                    i[k, fl.ID],
+                )
+                q_float[0, k], q_float[1, k] = f[k, fl.S], s_front
+                q_float[2, k], q_float[3, k] = s_front + p[HORIZON], f[k, fl.WIDTH]
+            if scripted:
+                s_front = e[ES] + p[FRONT]
+                q_int[0, nf], q_int[1, nf], q_int[2, nf] = off, n_route, 0
+                q_float[0, nf], q_float[1, nf] = e[ES] + p[CENTER], s_front
+                q_float[2, nf], q_float[3, nf] = s_front + p[HORIZON], p[EWID]
+            if nq > 0:
+                gaps, speeds = _gap_kernel(q_int, q_float, p[MARGIN], ids, obst, net)
+            else:
+                gaps, speeds = np.full(0, np.inf), np.zeros(0)
+            fclock = np.empty(3)
+            fclock[0], fclock[1], fclock[2] = t, dt_s, any_lights
+            fl._plan_advance(
+                f,
+                i,
+                committed,
+                fclock,
+                gaps,
+                speeds,
+                has_brake,
+                stop_s,
+                stop_light,
+                n_stops,
+                light_group,
+                timing,
+                route_len,
+                powers,
+            )
+            if scripted:
+                gap_e, lead_e = gaps[nf], speeds[nf]
+        if scripted:  # EgoDriver.accelerate: the stop lines, the route's end, IDM
+            v = e[ESPEED]
+            s_front = e[ES] + p[FRONT]
+            stop = _light_gap(
+                stop_s,
+                stop_light,
+                ego_route,
+                n_ego_stops,
+                ego_committed,
+                light_group,
+                timing,
+                s_front,
+                v,
+                t,
+                p[B_COMF],
+                two,
+            )
+            end = route_len[ego_route] - 1.0 - s_front
+            if min(stop, end) < gap_e:
+                gap_e, lead_e = min(stop, end), 0.0
+            accel_cmd = _idm(p, v, gap_e, lead_e, two)
+        else:  # ActuatedEgo.apply: the pedals under the held command
+            v = e[ESPEED]
+            accel_cmd = p[THROTTLE] * p[P_ACC] - p[BRAKE] * p[P_BRK] - (p[ROLL] + p[DRAG] * v * v)
+            steer = p[STEER_CMD]
+        _bicycle(e, p, dt_s, accel_cmd, steer)
+        time_ns += dt_ns
+        t_new = (time_ns - start_ns) / 1e9
+        for k in range(nw):
+            walk[k, WTIME] = t_new
+        hist_t[steps] = time_ns
+        hist[steps, 0], hist[steps, 1], hist[steps, 2] = e[EX], e[EY], e[EYAW]
+        steps += 1
+        for k in range(nf):
+            if i[k, fl.ACTIVE] == 0:
+                left = True
+        if left:
+            break
+    clock[0] = time_ns
+    return steps, fleet_t, False, left
+
+
+@numba.njit(cache=True, nogil=True)
+def _walker(walk: F64, k: int) -> tuple[float, float, float, float]:  # pragma: no cover
+    """Walker.pose's x, y and Walker.velocity of walker ``k``."""
+    start, dist = walk[k, WSTART], walk[k, WDIST]
+    walked = 0.0
+    if not math.isnan(start):
+        walked = min(max(walk[k, WSPD] * (walk[k, WTIME] - start), 0.0), dist)
+    fr = walked / dist if dist > 0 else 0.0
+    x = walk[k, WSX] + fr * (walk[k, WEX] - walk[k, WSX])
+    y = walk[k, WSY] + fr * (walk[k, WEY] - walk[k, WSY])
+    vx = vy = 0.0
+    if not math.isnan(start) and 0.0 < walked < dist:
+        vx = walk[k, WSPD] * math.cos(walk[k, WYAW])
+        vy = walk[k, WSPD] * math.sin(walk[k, WYAW])
+    return x, y, vx, vy
+
+
+@numba.njit(cache=True, nogil=True)
+def _idm(p: F64, v: float, gap: float, v_lead: float, two: float) -> float:  # pragma: no cover
+    """``agents.idm_acceleration`` with the ego driver's parameters."""
+    a_max = p[A_MAX]
+    free = 1.0 - (max(v, 0.0) / max(p[V0], 1e-3)) ** p[DELTA]
+    interaction = 0.0
+    if math.isfinite(gap):
+        dv = v - v_lead
+        s_star = p[MIN_GAP] + max(
+            0.0, v * p[HEADWAY] + v * dv / (2.0 * math.sqrt(a_max * p[B_COMF]))
+        )
+        interaction = (s_star / max(gap, 0.05)) ** two
+    accel = a_max * (free - interaction)
+    return float(min(max(accel, -p[IDM_DEC]), a_max))
+
+
+@numba.njit(cache=True, nogil=True)
+def _bicycle(e: F64, p: F64, dt_s: float, accel_cmd: float, steer_cmd: float) -> None:
+    """``BicycleModel.step`` of the ego's columns, in place."""  # pragma: no cover - compiled
+    max_delta = p[STEER_RATE] * dt_s
+    cmd = min(max(steer_cmd, -p[MAX_STEER]), p[MAX_STEER])
+    e[ESTEER] += min(max(cmd - e[ESTEER], -max_delta), max_delta)
+    accel = min(max(accel_cmd, -p[MAX_DEC]), p[MAX_ACC])
+    if not math.isnan(p[JERK]):
+        max_change = p[JERK] * dt_s
+        accel = min(max(accel, e[EACCEL] - max_change), e[EACCEL] + max_change)
+    e[EACCEL] = accel
+    v = e[ESPEED]
+    v1 = v + accel * dt_s
+    if v1 >= 0.0:
+        dist = 0.0 + v * dt_s + 0.5 * accel * dt_s * dt_s
+        e[ESPEED] = v1
+    else:
+        dist = 0.0 + v * v / (-2.0 * accel)
+        e[ESPEED] = 0.0
+    if e[ESPEED] == 0.0 and e[EACCEL] < 0.0:
+        e[EACCEL] = 0.0
+    kappa = math.tan(e[ESTEER]) / p[WB]
+    dyaw = kappa * dist
+    yaw0 = e[EYAW]
+    if kappa == 0.0:
+        e[EX] += dist * math.cos(yaw0)
+        e[EY] += dist * math.sin(yaw0)
+    else:
+        e[EX] += (math.sin(yaw0 + dyaw) - math.sin(yaw0)) / kappa
+        e[EY] += (math.cos(yaw0) - math.cos(yaw0 + dyaw)) / kappa
+    e[EYAW] = yaw0 + dyaw

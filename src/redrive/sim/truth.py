@@ -1,0 +1,112 @@
+"""The ground-truth boxes of a world as plain columns, for an object-level observation.
+
+:meth:`World.ground_truth_objects <redrive.sim.world.World>` builds a validated
+:class:`~redrive.sim.scene.SceneObjects` (the sensors' input: colours, reflectivity, checks
+of every array) each call; an observation needs only the boxes, and most of them — ids,
+classes, sizes, the parked vehicles — do not change from one frame to the next.
+:class:`TruthColumns` holds the same rows, in the same order, with the same values; the
+constant columns are built once (again when followers leave or the agents are dropped).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+import numpy.typing as npt
+
+from redrive.sim.agents import ParkedObject
+from redrive.types import ObjectClass
+
+if TYPE_CHECKING:
+    from redrive.sim.world import World
+
+__all__ = ["TruthColumns", "truth_columns"]
+
+F64 = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class TruthColumns:
+    """Ground-truth boxes, map frame, as :class:`~redrive.sim.scene.SceneObjects` has them
+    (unvalidated: the world built them).  ``is_ground_truth`` is all True."""
+
+    object_ids: npt.NDArray[np.int64]
+    classes: tuple[ObjectClass, ...]
+    centers: F64
+    sizes: F64
+    yaws_rad: F64
+    velocities: F64
+    is_ground_truth: npt.NDArray[np.bool_]
+
+    def __len__(self) -> int:
+        return len(self.classes)
+
+
+class _Constant:
+    """The columns that do not move, and where the moving ones go."""
+
+    def __init__(self, world: World) -> None:
+        fleet, static = world._fleet, world._static_truth
+        others = world._others()
+        nf, n = len(fleet), len(fleet) + len(others)
+        self.key = (nf, len(others))
+        self.nf = nf
+        self.walkers = [
+            (k, a) for k, a in enumerate(others, start=nf) if not isinstance(a, ParkedObject)
+        ]
+        sizes, centers, yaws = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n)
+        if nf:
+            sizes[:nf] = fleet.sizes
+            centers[:nf, 2] = fleet.heights / 2
+        for k, agent in enumerate(others, start=nf):
+            sizes[k] = agent.size_lwh_m
+            centers[k, 2] = agent.size_lwh_m[2] / 2
+            if isinstance(agent, ParkedObject):
+                centers[k, 0], centers[k, 1] = agent.center_xy
+                yaws[k] = agent.yaw_rad
+        self.n = n
+        self.object_ids = np.concatenate(
+            [fleet.ids, np.array([a.agent_id for a in others], dtype=np.int64), static.object_ids]
+        )
+        self.classes = (*fleet.classes, *(a.object_class for a in others), *static.classes)
+        self.sizes = np.concatenate([sizes, static.sizes])
+        self.centers = np.concatenate([centers, static.centers])
+        self.yaws = np.concatenate([yaws, static.yaws_rad])
+        self.velocities = np.concatenate([np.zeros((n, 3)), static.velocities])
+        self.truth = np.ones(len(self.object_ids), dtype=bool)
+        for a in (self.object_ids, self.sizes, self.truth):
+            a.flags.writeable = False
+
+
+def truth_columns(world: World, cache: _Constant | None) -> tuple[TruthColumns, _Constant]:
+    """``world.ground_truth_objects()``'s rows as :class:`TruthColumns`, and the constant
+    columns to pass back next time."""
+    fleet = world._fleet
+    nf = len(fleet)
+    if cache is None or cache.key != (nf, len(world._walkers) + len(world._parked)):
+        cache = _Constant(world)
+    centers, yaws, vels = cache.centers.copy(), cache.yaws.copy(), cache.velocities.copy()
+    if nf:
+        poses = fleet.poses()
+        centers[:nf, 0], centers[:nf, 1] = poses[0], poses[1]
+        yaws[:nf] = poses[2]
+        vels[:nf, 0], vels[:nf, 1] = poses[3], poses[4]
+    for k, walker in cache.walkers:
+        x, y, yaw = walker.pose()
+        vels[k, :2] = walker.velocity()
+        centers[k, 0], centers[k, 1] = x, y
+        yaws[k] = yaw
+    return (
+        TruthColumns(
+            object_ids=cache.object_ids,
+            classes=cache.classes,
+            centers=centers,
+            sizes=cache.sizes,
+            yaws_rad=yaws,
+            velocities=vels,
+            is_ground_truth=cache.truth,
+        ),
+        cache,
+    )
