@@ -4,6 +4,7 @@ every consumer of ``PointCloud.xyz``: each gives what it gives for a C-contiguou
 from __future__ import annotations
 
 import math
+import pickle
 import uuid
 from pathlib import Path
 
@@ -137,3 +138,12 @@ def test_foxglove_point_cloud_of_a_strided_cloud() -> None:
     want = point_cloud(_contiguous(strided), frame_id="lidar_top", stamp_ns=7)
     assert got.encode() == want.encode()
     assert len(got.encode()) > 500 * 16
+
+
+def test_a_strided_cloud_pickles_to_an_equal_read_only_cloud() -> None:
+    """What a process pool or Ray worker hands back: equal values, still read-only."""
+    strided = _strided(_scene()[:500])
+    back = pickle.loads(pickle.dumps(strided))
+    _same(back, strided)
+    assert not back.xyz.flags.writeable
+    assert not any(values.flags.writeable for values in back.channels.values())
