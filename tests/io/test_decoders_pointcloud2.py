@@ -168,7 +168,7 @@ def test_random_layouts_match_full_deserialisation(layout: dict[str, Any], share
     assert decoded.frame_id == "lidar_top"
     assert decoded.stamp_ns == 1_600_000_000_123_456_789
     assert cloud.xyz.dtype == np.float32
-    assert cloud.xyz.flags.c_contiguous
+    _pins_only_its_own_bytes(cloud, message)
     np.testing.assert_array_equal(cloud.xyz, expected_xyz)
     assert set(cloud.channels) == set(expected_channels)
     for name, values in expected_channels.items():
@@ -189,9 +189,25 @@ def test_random_layouts_match_full_deserialisation(layout: dict[str, Any], share
     assert layout_read.is_bigendian == bool(msg.is_bigendian)
 
 
-@pytest.mark.parametrize("ros_version", [1, 2])
-def test_zero_copy_channels_and_single_xyz_copy(ros_version: int) -> None:
-    n = 1000
+def _root(values: np.ndarray) -> Any:
+    """The object at the end of an array's ``base`` chain (what keeps its memory alive)."""
+    while isinstance(values, np.ndarray) and values.base is not None:
+        values = values.base
+    return values
+
+
+def _pins_only_its_own_bytes(cloud: PointCloud, message: LogMessage) -> None:
+    """xyz and the channels are read-only and hold the message's own ``bytes`` or a copy of
+    the point bytes — never a view of a reader's buffer."""
+    for values in (cloud.xyz, *cloud.channels.values()):
+        assert not values.flags.writeable
+        root = _root(values)
+        if root is not message.raw:
+            assert isinstance(root, bytes | np.ndarray), type(root)
+            assert not np.shares_memory(values, np.frombuffer(message.raw, np.uint8))
+
+
+def _padded_points(n: int) -> tuple[np.ndarray, list[Any]]:
     points = np.zeros(
         n,
         dtype=[
@@ -216,17 +232,54 @@ def test_zero_copy_channels_and_single_xyz_copy(ros_version: int) -> None:
         _field("intensity", 16, 7),
         _field("ring", 20, 4),
     ]
-    message = _cloud_message(
-        ros_version, fields=fields, data=points.tobytes(), width=n, point_step=24
-    )
+    return points, fields
+
+
+def test_a_message_s_own_bytes_are_viewed_strided() -> None:
+    """A message that is its own ``bytes`` (ROS 2 CDR: the points 4-aligned) is not copied:
+    xyz and the channels are strided views of it."""
+    n = 1000
+    points, fields = _padded_points(n)
+    message = _cloud_message(2, fields=fields, data=points.tobytes(), width=n, point_step=24)
+    assert type(message.raw) is bytes
     cloud = PointCloud2Decoder().decode(message, _no_deserialize).value
     raw_array = np.frombuffer(message.raw, dtype=np.uint8)
-    assert np.shares_memory(cloud.channels["intensity"], raw_array)
-    assert np.shares_memory(cloud.channels["ring"], raw_array)
-    assert not np.shares_memory(cloud.xyz, raw_array)
+    for values in (cloud.xyz, *cloud.channels.values()):
+        assert np.shares_memory(values, raw_array)
+        assert not values.flags.writeable
+    assert cloud.xyz.strides == (24, 4)
+    assert not cloud.xyz.flags.c_contiguous
     np.testing.assert_array_equal(cloud.xyz[:, 0], np.arange(n, dtype=np.float32))
+    np.testing.assert_array_equal(cloud.xyz[:, 1], -np.arange(n, dtype=np.float32))
     np.testing.assert_array_equal(cloud.channels["ring"], np.arange(n) % 64)
-    assert not cloud.channels["intensity"].flags.writeable
+
+
+@pytest.mark.parametrize("ros_version", [1, 2])
+def test_a_view_into_a_reader_s_chunk_is_copied_once(ros_version: int) -> None:
+    """A message that is a view into a larger read-only buffer (a ROS 1 chunk, a map): the
+    point bytes are copied once, xyz and the channels are strided views of that copy, and
+    nothing keeps the chunk alive."""
+    n = 1000
+    points, fields = _padded_points(n)
+    message = _cloud_message(
+        ros_version,
+        fields=fields,
+        data=points.tobytes(),
+        width=n,
+        point_step=24,
+        raw_wrapper=lambda b: memoryview(b"chunk before" + b + b"chunk after")[12:-11],
+    )
+    chunk = message.raw.obj
+    cloud = PointCloud2Decoder().decode(message, _no_deserialize).value
+    roots = {id(_root(values)) for values in (cloud.xyz, *cloud.channels.values())}
+    assert len(roots) == 1  # one copy for xyz and every channel
+    root = _root(cloud.xyz)
+    assert root is not chunk
+    assert len(memoryview(root).cast("B")) == n * 24
+    assert cloud.xyz.strides == (24, 4)
+    _pins_only_its_own_bytes(cloud, message)
+    np.testing.assert_array_equal(cloud.xyz[:, 0], np.arange(n, dtype=np.float32))
+    np.testing.assert_array_equal(cloud.channels["intensity"], np.arange(n) * 2)
 
 
 def test_layout_cache_sees_a_changed_layout_on_the_same_topic() -> None:
@@ -412,7 +465,7 @@ def test_fast_and_general_paths_give_the_same_cloud(ros_version: int, raw_wrappe
         cloud = decoded.value
         assert decoded.frame_id == "lidar_top"
         assert cloud.xyz.shape == (n, 3)
-        assert cloud.xyz.flags.c_contiguous
+        _pins_only_its_own_bytes(cloud, message)
         assert not cloud.xyz.flags.writeable
         np.testing.assert_array_equal(cloud.xyz, expected_xyz)
         assert list(cloud.channels) == ["intensity", "ring", "time"]

@@ -19,6 +19,7 @@ import pytest
 from rosbags.rosbag1 import Reader as Bag1Reader
 from rosbags.rosbag1 import Writer as Bag1Writer
 
+import redrive.io.decoders.pointcloud2_batch as pb
 from redrive.errors import LogTruncatedError
 from redrive.io import open_log
 from redrive.io.decoders import decode
@@ -111,11 +112,23 @@ def _rosbags_messages(path: Path, **kw: int) -> list[tuple[str, int, bytes]]:
         return [(c.topic, t, bytes(d)) for c, t, d in reader.messages(**kw)]
 
 
+def _root(values: np.ndarray) -> object:
+    while isinstance(values, np.ndarray) and values.base is not None:
+        values = values.base
+    return values
+
+
 def _same_cloud(a: PointCloud, b: PointCloud) -> None:
+    """Equal values; ``a``'s arrays are read-only views of a copy of point bytes of at most
+    GROUP_BYTES (or of one cloud), never of the reader's chunk or file map."""
     assert a.xyz.dtype == b.xyz.dtype == np.float32
     assert a.xyz.shape == b.xyz.shape
-    assert a.xyz.flags.c_contiguous
     assert not a.xyz.flags.writeable
+    for values in (a.xyz, *a.channels.values()):
+        root = _root(values)
+        assert isinstance(root, bytes | np.ndarray), type(root)
+        size = len(memoryview(root).cast("B"))
+        assert size <= max(pb.GROUP_BYTES, len(a) * POINT.itemsize)
     np.testing.assert_array_equal(a.xyz, b.xyz)
     assert list(a.channels) == list(b.channels)
     for name, values in a.channels.items():
@@ -124,12 +137,23 @@ def _same_cloud(a: PointCloud, b: PointCloud) -> None:
         np.testing.assert_array_equal(values, b.channels[name])
 
 
-@pytest.mark.parametrize(("compression", "mixed"), [("none", True), ("lz4", True), ("none", False)])
+@pytest.mark.parametrize(
+    ("compression", "mixed", "group_bytes"),
+    [
+        ("none", True, pb.GROUP_BYTES),
+        ("lz4", True, pb.GROUP_BYTES),
+        ("none", False, pb.GROUP_BYTES),
+        ("none", False, 3 * 40 * POINT.itemsize),  # groups of 3 /regular clouds and a rest
+        ("none", True, 1),  # every cloud copied alone into its own bytes
+    ],
+)
 def test_chunks_read_together_give_rosbags_messages_and_equal_clouds(
-    tmp_path: Path, compression: str, mixed: bool
+    tmp_path: Path, compression: str, mixed: bool, group_bytes: int, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Mixed: /regular's clouds lie between other topics' messages (gathered); alone: at a
-    fixed distance (one strided view)."""
+    fixed distance (one strided view).  Their point bytes are copied in groups of at most
+    ``group_bytes``."""
+    monkeypatch.setattr(pb, "GROUP_BYTES", group_bytes)
     path = tmp_path / "clouds.bag"
     sent = _write(path, compression=compression, mixed=mixed)
     alone = PointCloud2Decoder()

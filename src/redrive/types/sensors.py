@@ -24,9 +24,15 @@ class PointCloud:
     """A LiDAR sweep (or a 2D scan with z = 0) as one array per field.
 
     Attributes:
-        xyz: float32 (N, 3), metres, in the frame of the sensor that recorded it.
+        xyz: float32 (N, 3), metres, in the frame of the sensor that recorded it; read-only.
+            It owns its memory or pins it (never a buffer that can change), but it need not be
+            C-contiguous: a decoded cloud's xyz is a strided view of the cloud's own copy of
+            the message's point bytes (row stride = the point's size).  Code that needs
+            contiguous points (a compiled kernel with a fixed layout, ``.ctypes``, a raw buffer
+            write) calls ``np.ascontiguousarray(cloud.xyz)``; numpy code needs nothing.
         channels: per-point fields, each an array of shape (N,): ``intensity``, ``ring``,
-            ``t_offset_ns`` … in whatever dtype the source used.  Never a structured array.
+            ``t_offset_ns`` … in whatever dtype the source used, read-only, strided views like
+            xyz when decoded.  Never a structured array.
     """
 
     xyz: npt.NDArray[np.float32]
@@ -69,7 +75,7 @@ class PointCloud:
 
         For decoders, which build the arrays themselves and call this once per message: the
         checks are skipped, so the caller guarantees ``xyz`` is a read-only float32 (N, 3)
-        ``ndarray`` and every channel a read-only, non-structured ``ndarray`` of shape (N,).
+        ``ndarray`` (strided or not) over memory that cannot change, and every channel a read-only, non-structured ``ndarray`` of shape (N,).
         ``channels`` is wrapped as it is (not copied): hand over a dict nothing else holds.
         """
         cloud = object.__new__(cls)
@@ -118,13 +124,29 @@ class PointCloud:
                 )
                 raise ValueError(msg)
             names.append(name)
-        count = shape[0]
-        clouds: list[PointCloud] = list(map(object.__new__, repeat(cls, count)))
         # Iterating an array in C yields its rows as views, read-only as the array is.
-        any(map(_SET_XYZ, clouds, list(xyz)))
-        if names:
-            per_cloud = zip(*(list(rows) for _, rows in channels), strict=True)
-            dicts = map(dict, map(zip, repeat(tuple(names)), per_cloud))
+        return cls.many_from_frozen(list(xyz), [(name, list(rows)) for name, rows in channels])
+
+    @classmethod
+    def many_from_frozen(
+        cls,
+        xyz: Sequence[npt.NDArray[np.float32]],
+        channels: Sequence[tuple[str, Sequence[npt.NDArray[Any]]]],
+    ) -> list[PointCloud]:
+        """B clouds, cloud i being ``xyz[i]`` and element i of every channel's sequence.
+
+        :meth:`from_frozen` for many clouds at once: nothing is checked, so the caller
+        guarantees what :meth:`from_frozen` asks of each cloud's arrays, channel names given
+        once and every sequence of length B.  The objects are built by C-level iteration
+        (``map``), no Python step per cloud.
+        """
+        count = len(xyz)
+        clouds: list[PointCloud] = list(map(object.__new__, repeat(cls, count)))
+        any(map(_SET_XYZ, clouds, xyz))
+        if channels:
+            names = tuple(name for name, _ in channels)
+            per_cloud = zip(*(values for _, values in channels), strict=True)
+            dicts = map(dict, map(zip, repeat(names), per_cloud))
         else:
             dicts = map(dict, repeat((), count))
         any(map(_SET_CHANNELS, clouds, map(MappingProxyType, dicts)))

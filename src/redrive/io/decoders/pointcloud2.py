@@ -4,10 +4,12 @@ The fast path reads only the small message header (stamp, frame, shape, fields, 
 from the serialised bytes — ROS 1, or ROS 2 CDR in either byte order — builds a numpy structured
 dtype from the ``PointField`` list and views the point data in place:
 
-* channels are zero-copy strided views into the message bytes when those bytes are immutable
-  (``bytes``); a reader's reusable buffer is copied once first;
-* ``xyz`` is copied once into a float32 (N, 3) C-contiguous array (float64 or integer x/y/z are
-  cast);
+* when x, y, z are adjacent native float32 (what drivers publish), ``xyz`` and every channel
+  are read-only strided views of the point bytes: of the message itself when it is its own
+  ``bytes`` object (nothing copied), else of one copy of its point bytes (a view into a
+  reader's chunk, file map or reusable buffer is never kept: a cloud pins its own bytes only);
+* any other layout: ``xyz`` is copied once into a float32 (N, 3) C-contiguous array (float64 or
+  integer x/y/z are cast) and the channels view the message's ``bytes`` or a copy as above;
 * ``is_bigendian`` clouds are byte-swapped to native order (channels are then copies);
 * nothing is dropped: N = width × height whatever ``is_dense`` says, NaN points stay NaN;
 * a field with ``count`` k > 1 becomes k channels ``name_0`` … ``name_{k-1}``; ``count`` 0 is read
@@ -25,7 +27,7 @@ import numpy as np
 import numpy.typing as npt
 
 from redrive.io.base import LogMessage
-from redrive.io.decoders._common import raw_is_immutable, unsupported
+from redrive.io.decoders._common import unsupported
 from redrive.io.decoders.base import Decoded, DecodedKind, Deserialize
 from redrive.io.decoders.pointcloud2_batch import decode_batch
 from redrive.types import PointCloud, SensorType
@@ -372,8 +374,10 @@ def _packed_xyz(dtype: np.dtype[Any]) -> np.dtype[Any] | None:
 _F32 = np.dtype(np.float32)
 
 
-#: The member of a plan's view dtype that holds x, y, z as one 12-byte record.
+#: The member of a plan's view dtype that holds x, y, z as a float32 (3,) subarray: the field
+#: of a point array is then the (N, 3) strided xyz itself.
 _XYZ = "xyz"
+_XYZ_MEMBER = np.dtype((np.float32, (3,)))
 
 
 @dataclass(frozen=True, slots=True)
@@ -384,11 +388,12 @@ class _Plan:
         block: the cached field block this plan is for (kept so its id is not reused).
         dtype: the structured point dtype (the general path's).
         missing: coordinate fields the layout lacks (empty when it has x, y and z).
-        view: for the fast path, a dtype of itemsize ``point_step`` with x, y, z as one 12-byte
-            member ``xyz`` and every other member as it is; None when the general path must be
-            taken (a member not in native byte order, x/y/z not adjacent float32, a channel
-            called ``xyz``).
+        view: for the fast path, a dtype of itemsize ``point_step`` with x, y, z as one
+            float32 (3,) member ``xyz`` and every other member as it is; None when the general
+            path must be taken (a member not in native byte order, x/y/z not adjacent float32,
+            a channel called ``xyz``).
         channels: the names of the other members, in order.
+        xyz_offset: the byte offset of x in a point.
     """
 
     block: _FieldBlock
@@ -396,6 +401,7 @@ class _Plan:
     missing: tuple[str, ...]
     view: np.dtype[Any] | None
     channels: tuple[str, ...]
+    xyz_offset: int
 
 
 def _make_plan(block: _FieldBlock) -> _Plan:
@@ -415,22 +421,24 @@ def _make_plan(block: _FieldBlock) -> _Plan:
         view = np.dtype(
             {
                 "names": [_XYZ, *channels],
-                "formats": ["V12", *(members[name][0] for name in channels)],
+                "formats": [_XYZ_MEMBER, *(members[name][0] for name in channels)],
                 "offsets": [members["x"][1], *(members[name][1] for name in channels)],
                 "itemsize": dtype.itemsize,
             }
         )
-    return _Plan(block, dtype, missing, view, channels)
+    xyz_offset = int(members["x"][1]) if not missing else 0
+    return _Plan(block, dtype, missing, view, channels, xyz_offset)
 
 
 class PointCloud2Decoder:
     """``sensor_msgs/msg/PointCloud2`` → PointCloud (any field layout, both encodings).
 
     Every message pays only for its header (the field list is cached, see :class:`LayoutCache`),
-    one copy of xyz and one strided view per channel: a cloud whose members are in native byte
-    order, whose x, y, z are adjacent float32 and whose rows carry no padding (what drivers
-    publish) is cut straight from the message bytes; any other layout takes the general path
-    through a structured view of the points.  Both give the same arrays.
+    at most one copy of its point bytes and one strided view for xyz and each channel: a cloud
+    whose members are in native byte order, whose x, y, z are adjacent float32 and whose rows
+    carry no padding (what drivers publish) is cut that way; any other layout takes the general
+    path through a structured view of the points, with xyz copied C-contiguous.  Both give equal
+    values.
     """
 
     name = "pointcloud2"
@@ -491,16 +499,19 @@ class PointCloud2Decoder:
             and n > 0
             and (height == 1 or block.row_step == width * step)
             and data_size >= n * step
-            and raw_is_immutable(message)
         ):
             # The fast path: one view of the points, no layout object (see the class docstring).
-            points = np.ndarray((n,), view, raw, data_offset)
-            xyz: npt.NDArray[np.float32] = points[_XYZ].copy().view(_F32).reshape(n, 3)
-            xyz.flags.writeable = False
+            if type(raw) is bytes and (data_offset + plan.xyz_offset) % 4 == 0:
+                # The message's own immutable bytes: viewed as they are (the cloud pins them).
+                points = np.ndarray((n,), view, raw, data_offset)
+            else:
+                # A view into a reader's chunk, map or buffer: the point bytes copied once.
+                own = bytes(head[0][data_offset : data_offset + n * step])
+                points = np.ndarray((n,), view, own)
             channels = {name: points[name] for name in plan.channels}
-            # The arrays are what PointCloud's checks would make of them (read-only views of
-            # immutable bytes, shapes (N, 3) and (N,)), so they are not checked again.
-            cloud = PointCloud.from_frozen(xyz, channels)
+            # The arrays are what PointCloud's checks would make of them (read-only strided
+            # views of immutable bytes, shapes (N, 3) and (N,)), so they are not checked again.
+            cloud = PointCloud.from_frozen(points[_XYZ], channels)
             return Decoded(stamp_ns=stamp_ns, frame_id=frame_id, value=cloud)
         layout = CloudLayout(
             stamp_ns=stamp_ns,
@@ -521,10 +532,11 @@ class PointCloud2Decoder:
 
     @staticmethod
     def _general(message: LogMessage, layout: CloudLayout, dtype: np.dtype[Any]) -> PointCloud:
-        """Any layout: a structured view of the points (a copy first when the bytes may change)."""
+        """Any layout: a structured view of the points (their bytes copied first unless the
+        message is its own ``bytes``: a reader's buffer may change, a chunk must not be pinned)."""
         buf: bytes | memoryview = message.raw
         data_offset = layout.data_offset
-        if not raw_is_immutable(message):
+        if type(buf) is not bytes:
             end = data_offset + layout.data_size_bytes
             buf = bytes(memoryview(message.raw).cast("B")[data_offset:end])
             data_offset = 0

@@ -2,10 +2,10 @@
 
 A sensor publishes clouds of one layout, so the messages of one connection in a ROS 1 chunk
 usually have the same size, the same header but for ``seq`` and the stamp, and lie at a fixed
-distance from each other.  Then all their points are one strided array over the chunk: xyz of
-every cloud is copied with one numpy call, each cloud's xyz is its slice of that copy and each
-channel its row of a strided view — the arrays the one-message path makes, for a few numpy calls
-per chunk instead of per message.  Messages that do not fit (another size, another layout, a
+distance from each other.  Then the point bytes of all of them are the rows of one strided view
+of the chunk: each row is copied once into its cloud's own ``bytes`` and xyz and every channel
+are strided views of that copy — the arrays the one-message path makes, by C-level iteration
+over the chunk's clouds instead of a Python step per message.  Messages that do not fit (another size, another layout, a
 layout the one-message fast path does not take) are left to that path.
 """
 
@@ -13,7 +13,8 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from itertools import repeat
-from typing import TYPE_CHECKING, Any
+from operator import getitem
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -27,34 +28,56 @@ from redrive.types import PointCloud
 if TYPE_CHECKING:
     from redrive.io.decoders.pointcloud2 import LayoutCache, _FieldBlock, _Head, _Plan
 
-__all__ = ["BATCH_FROM", "decode_batch"]
+#: The member of a plan's view dtype that holds x, y, z as a float32 (3,) subarray.
+_XYZ = "xyz"
+
+__all__ = ["BATCH_FROM", "GROUP_BYTES", "decode_batch"]
 
 #: Batches of fewer messages are decoded one by one (the batch's few numpy calls cost a
 #: fixed few tens of µs, what one message costs alone).
 BATCH_FROM = 4
 
-_F32 = np.dtype(np.float32)
+#: The largest copy of point bytes the clouds of a chunk share (see ``decode_batch``).
+GROUP_BYTES = 256 << 10
+
 _U32 = np.dtype("<u4")
-_FOUR = np.arange(4, dtype=np.int64)
 #: ROS 1 PointCloud2 bytes: seq (4), stamp sec (4), nsec (4), then the frame id's length.
 _SAME_FROM = 12
 
 _new = object.__new__
+#: ``points[name]``: a field of a structured array, for ``map``.
+_field = cast("Callable[[npt.NDArray[Any], str], npt.NDArray[Any]]", getitem)
 _SET_DECODED = tuple(Decoded.__dict__[n].__set__ for n in ("stamp_ns", "frame_id", "value"))
 
 
-def _gather(
-    buf: bytes | memoryview, at: npt.NDArray[np.int64], member: tuple[Any, ...]
-) -> npt.NDArray[Any]:
-    """The values of one point member at byte positions ``at`` (+ its offset), copied."""
-    dtype, offset = member[0], int(member[1])
-    # Element j of ``every`` is the member's value that would start at byte ``offset + j``.
-    every: npt.NDArray[Any] = np.ndarray(
-        (len(buf) - offset - dtype.itemsize + 1,), dtype, buf, offset, (1,)
-    )
-    values = every[at]
-    values.flags.writeable = False
-    return values
+def _cut(
+    rows: npt.NDArray[np.uint8], nbytes: int, view: np.dtype[Any], names: tuple[str, ...]
+) -> tuple[list[npt.NDArray[np.float32]], list[list[npt.NDArray[Any]]]]:
+    """Each cloud's xyz and channels ``names`` from ``rows``, the (B, ``nbytes``) point bytes
+    of B clouds in the reader's buffer, as strided views of copies (``view``: a plan's).
+
+    The bytes are copied in groups of clouds of at most :data:`GROUP_BYTES` together: one or
+    two numpy calls a group, a copy small enough to stay in the cache while it is cut, and a
+    cloud kept pins its group's copy only, never the reader's chunk or map.  A cloud larger
+    than that is copied alone into its own ``bytes`` (immutable).  All by C-level iteration:
+    no Python step a cloud.
+    """
+    group = GROUP_BYTES // nbytes
+    if group <= 1:
+        points = list(map(np.frombuffer, map(bytes, rows), repeat(view)))
+        return (
+            list(map(_field, points, repeat(_XYZ))),
+            [list(map(_field, points, repeat(name))) for name in names],
+        )
+    xyz: list[npt.NDArray[np.float32]] = []
+    values: list[list[npt.NDArray[Any]]] = [[] for _ in names]
+    for lo in range(0, len(rows), group):
+        block = rows[lo : lo + group].copy().view(view)
+        block.flags.writeable = False
+        xyz.extend(block[_XYZ])  # iterating in C: one read-only (N, 3) view a cloud
+        for name, into in zip(names, values, strict=True):
+            into.extend(block[name])
+    return xyz, values
 
 
 def decode_batch(
@@ -103,26 +126,22 @@ def decode_batch(
     stamp = byte_rows(buf, starts + 4, 8).view(_U32)
     stamps = stamp[:, 0].astype(np.int64) * 1_000_000_000 + stamp[:, 1]
     gaps = np.diff(starts)
+    nbytes = n * step
     if count == 1 or (int(gaps[0]) >= size and (gaps == gaps[0]).all()):
-        # At a fixed distance (a chunk of one topic): one strided view of all their points.
+        # At a fixed distance (a chunk of one topic): the point bytes of every cloud as rows
+        # of one strided view of the chunk, each row copied out below.
         stride = size if count == 1 else int(gaps[0])
-        points: npt.NDArray[Any] = np.ndarray(
-            (count, n), plan.view, buf, first + data_offset, (stride, step)
+        rows: npt.NDArray[np.uint8] = np.ndarray(
+            (count, nbytes), np.uint8, buf, first + data_offset, (stride, 1)
         )
-        xyz = points["xyz"].copy()
-        channels = [(name, points[name]) for name in plan.channels]
     else:
-        # Between other topics' messages: gather each member of every point at once.
-        at = (starts + data_offset)[:, None] + np.arange(0, n * step, step, dtype=np.int64)
-        members = plan.view.fields
-        assert members is not None
-        xyz = _gather(buf, at, members["xyz"])
-        channels = [(name, _gather(buf, at, members[name])) for name in plan.channels]
-    xyz = xyz.view(_F32).reshape(count, n, 3)
-    xyz.flags.writeable = False
+        # Between other topics' messages: gathered row by row.
+        rows = byte_rows(buf, starts + data_offset, nbytes)
+    xyz, values = _cut(rows, nbytes, plan.view, plan.channels)
+    channels = list(zip(plan.channels, values, strict=True))
     # A zero stamp means "unset": the message's log time stands in for it.
     stamps_ns = np.where(stamps == 0, batch.log_times_ns, stamps).tolist()
-    clouds = PointCloud.many_from_rows(xyz, channels)
+    clouds = PointCloud.many_from_frozen(xyz, channels)
     # The Decoded objects built by C-level iteration too (their slots' setters, as ``__init__``).
     decoded: list[Decoded | None] = list(map(_new, repeat(Decoded, count)))
     set_stamp, set_frame, set_value = _SET_DECODED
