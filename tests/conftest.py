@@ -24,6 +24,14 @@ def _shared_data_dir() -> Path | None:
 
 SHARED_DATA = _shared_data_dir()
 
+# A shell starts a background job (`make test &`, nohup, a CI agent's script) with SIGINT ignored;
+# Python then leaves it ignored (it puts its KeyboardInterrupt handler only over SIG_DFL) and every
+# child inherits the ignored signal through exec.  The tests of Ctrl-C need it delivered: a
+# `redrive run` sent SIGINT went on forever and its test timed out, and a batch that interrupts
+# its own driver ran to the end.  A handler (unlike SIG_IGN) is reset to SIG_DFL in a child.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+
 
 @pytest.fixture(scope="session")
 def shared_data() -> Path:

@@ -134,13 +134,18 @@ def test_ctrl_c_leaves_a_run_that_resume_completes(
         text=True,
     )
     manifest = user_dir / "out" / "manifest.json"
-    deadline = time.monotonic() + 120
-    while not (handshake / "reached").exists() and proc.poll() is None:
-        assert time.monotonic() < deadline, "the run never reached frame 10"
-        time.sleep(0.05)
-    assert proc.poll() is None, proc.communicate()
-    proc.send_signal(signal.SIGINT)
-    stdout, stderr = proc.communicate(timeout=60)
+    try:
+        deadline = time.monotonic() + 120
+        while not (handshake / "reached").exists() and proc.poll() is None:
+            assert time.monotonic() < deadline, "the run never reached frame 10"
+            time.sleep(0.05)
+        assert proc.poll() is None, proc.communicate()
+        proc.send_signal(signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:  # a run that did not stop is not left waiting at frame 10 forever
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate(timeout=10)
     assert proc.returncode == 130, stderr
     # the hint is the exact command to paste: the same flags (--perception too) and --resume
     hint = re.search(r"continue with `(.+)`", stdout)

@@ -34,9 +34,12 @@ HUSKY_TOPICS = ["/imu/data", "/husky_velocity_controller/odom", "/fix"]
 ros1 = pytest.mark.skipif(ros1_missing() is not None, reason=str(ros1_missing()))
 
 # A publisher of a type no ROS package and no redrive decoder knows, made at run time from its
-# definition (as rosbag does for the types of a bag); 20 messages once subscribed, then it exits.
+# definition (as rosbag does for the types of a bag); 20 messages once subscribed, then it exits
+# when the test lets it go.  It publishes synchronously (queue_size=None: each message is in the
+# socket when publish returns): with a queue, rospy sends from a daemon thread that a loaded
+# machine can leave behind, and the messages still queued when the process exits are lost.
 CUSTOM_PUBLISHER = r"""
-import os, sys, time
+import os, sys, time, warnings
 import rospy
 from genpy.dynamic import generate_dynamic
 DEFINITION = '''string label
@@ -50,7 +53,8 @@ float32 speed_mps
 Rig = generate_dynamic("redrive_test/Rig", DEFINITION)["redrive_test/Rig"]
 Wheel = generate_dynamic("redrive_test/Rig", DEFINITION)["redrive_test/Wheel"]
 rospy.init_node("custom_rig", anonymous=True)
-pub = rospy.Publisher(sys.argv[1], Rig, queue_size=100)
+warnings.filterwarnings("ignore", "The publisher should be created", SyntaxWarning)
+pub = rospy.Publisher(sys.argv[1], Rig, queue_size=None)
 print("READY", flush=True)
 while pub.get_num_connections() == 0:
     time.sleep(0.05)
@@ -234,7 +238,7 @@ def _read_until(proc: subprocess.Popen[str], text: str) -> None:
 
 
 def _wait_output(process: RosProcess, text: str) -> None:
-    deadline = time.monotonic() + 60
+    deadline = time.monotonic() + 120  # generous: a loaded machine starts rospy slowly
     while text not in process.output:
         assert process.proc.poll() is None, process.output
         assert time.monotonic() < deadline, process.output
@@ -252,7 +256,9 @@ def test_a_type_redrive_does_not_know_is_recorded_with_its_definition(tmp_path: 
     free = tmp_path / "let-go"
     live = None
     try:
-        with core.python_process(CUSTOM_PUBLISHER, "/custom/rig", str(free)) as first:
+        with core.python_process(
+            CUSTOM_PUBLISHER, "/custom/rig", str(free), timeout_s=120
+        ) as first:
             live = _redrive(core, "-e", "/custom/.*", "--record", str(tmp_path / "c.mcap"),
                             "--idle-timeout", "1")  # fmt: skip
             _wait_output(first, "DONE")
@@ -263,7 +269,9 @@ def test_a_type_redrive_does_not_know_is_recorded_with_its_definition(tmp_path: 
                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
             )  # fmt: skip
             _read_until(live, "is back")
-            with core.python_process(CUSTOM_PUBLISHER, "/custom/after", str(free)) as second:
+            with core.python_process(
+                CUSTOM_PUBLISHER, "/custom/after", str(free), timeout_s=120
+            ) as second:
                 _wait_output(second, "DONE")
                 free.touch()
             _finish(live)
