@@ -224,9 +224,9 @@ class LidarModel:
                 msg = f"map_from_base_at returned shape {mat.shape}, expected (4, 4)"
                 raise SimulationError(msg)
             poses[b] = mat @ self.base_from_sensor
-        s = self._slice_of_col
-        f = self._frac_of_col[:, None]
-        pos = poses[s, :3, 3] * (1.0 - f) + poses[s + 1, :3, 3] * f
+        pos = np.empty((cols, 3))
+        slice_pos = np.ascontiguousarray(poses[:, :3, 3])
+        lidar_kernels.columns(slice_pos, self._slice_of_col, self._frac_of_col, pos)
         return poses[:slices, :3, :3], pos
 
     def _box_reach(
@@ -247,26 +247,21 @@ class LidarModel:
         objs = scene.objects
         if len(objs) == 0 or np.any(rot[:, 2, 2] < 1.0 - 1e-9):
             return None
-        starts = self._slice_starts
-        step = np.linalg.norm(np.diff(pos[np.r_[starts, -1]], axis=0), axis=1)
-        margin = 0.05 + float(np.max(step, initial=0.0))
-        rel = objs.centers[None, :, :2] - pos[starts, None, :2]  # (S, B, 2)
-        half_diag = 0.5 * np.hypot(objs.sizes[:, 0], objs.sizes[:, 1]) + margin  # (B,)
-        dist_c = np.hypot(rel[..., 0], rel[..., 1])
-        r_min = np.maximum(dist_c - half_diag, 0.0)
-        az_c = np.arctan2(rel[..., 1], rel[..., 0])
-        with np.errstate(invalid="ignore", divide="ignore"):
-            half_width = np.where(
-                dist_c > half_diag, np.arcsin(np.minimum(half_diag / dist_c, 1.0)), np.pi
-            )
-        yaw = np.arctan2(rot[:, 1, 0], rot[:, 0, 0])  # (S,)
-        az_s = yaw + self._slice_mid_az  # centre of each slice's azimuth span, map frame
-        diff = np.abs((az_s[:, None] - az_c + np.pi) % (2.0 * np.pi) - np.pi)
-        covers = diff <= half_width + self._slice_half_az[:, None] + 1e-3  # (S, B)
-        r_slice = np.where(covers, r_min, np.inf).min(axis=1)  # (S,)
-        top = objs.centers[:, 2] + 0.5 * objs.sizes[:, 2]  # (B,)
-        top_slice = np.where(covers, top[None, :], -np.inf).max(axis=1)
-        return r_slice[self._slice_of_col], top_slice[self._slice_of_col], margin
+        cols = self.preset.columns
+        r_col, top_col = np.empty(cols), np.empty(cols)
+        margin = lidar_kernels.reach(
+            self._slice_starts,
+            pos,
+            rot,
+            objs.centers,
+            objs.sizes,
+            self._slice_mid_az,
+            self._slice_half_az,
+            self._slice_of_col,
+            r_col,
+            top_col,
+        )
+        return r_col, top_col, margin
 
     def scan(
         self,
