@@ -145,7 +145,9 @@ def test_kept_equal_numpy() -> None:
     limit = rng.uniform(0.0, 130.0, n_rays).astype(np.float32)
     t_ground = np.where(rng.random(n_rays) < 0.5, np.float32(np.inf), limit)
     sel = np.sort(rng.choice(n_rays, 200, replace=False)).astype(np.int64)
-    prim = np.where(rng.random(200) < 0.5, -1, rng.integers(0, 120, 200)).astype(np.int32)
+    prim = np.where(rng.random(200) < 0.5, -1, rng.integers(0, 120, 200)).astype(
+        np.int32
+    )  # 10 boxes
     sel_dist = np.where(prim >= 0, limit[sel] * np.float32(0.5), limit[sel]).astype(np.float32)
     sel_dist[:3] = [
         np.float32(0.9),
@@ -153,11 +155,12 @@ def test_kept_equal_numpy() -> None:
         np.float32(120.0),
     ]
     prim[:3] = 5
+    box_of_mesh = np.sort(rng.choice(40, 10, replace=False)).astype(np.int64)  # meshed boxes
     # numpy, as scan did it (min/max range compared in float32, as numpy 2 does with a float)
     dist_np = limit.copy()
     box_np = np.full(n_rays, -1, np.int64)
     dist_np[sel] = np.where(prim >= 0, sel_dist, limit[sel])
-    box_np[sel] = np.where(prim >= 0, prim // 12, -1)
+    box_np[sel] = np.where(prim >= 0, box_of_mesh[prim // 12], -1)
     keep_np = (box_np >= 0) | (t_ground <= 120.0)
     keep_np &= (dist_np >= 0.9) & (dist_np <= 120.0)
     dist, box = limit.copy(), np.empty(n_rays, np.int64)
@@ -167,6 +170,7 @@ def test_kept_equal_numpy() -> None:
         sel_dist,
         prim,
         12,
+        box_of_mesh,
         t_ground,
         np.float32(0.9),
         np.float32(120.0),

@@ -34,7 +34,7 @@ from redrive.sim import lidar_kernels
 from redrive.sim.lidar_presets import LidarPreset, lidar_preset
 from redrive.sim.mesh import TRIANGLES_PER_BOX, BoxMesh
 from redrive.sim.rig import SensorSpec
-from redrive.sim.scene import GroundLabel, GroundMap, Scene
+from redrive.sim.scene import GroundLabel, GroundMap, Scene, SceneObjects
 from redrive.sim.scratch import Scratch
 from redrive.types import PointCloud, SensorType
 from redrive.types._arrays import frozen_array
@@ -229,8 +229,30 @@ class LidarModel:
         lidar_kernels.columns(slice_pos, self._slice_of_col, self._frac_of_col, pos)
         return poses[:slices, :3, :3], pos
 
+    def _boxes_in_range(
+        self, objects: SceneObjects, pos: npt.NDArray[np.float64]
+    ) -> npt.NDArray[np.int64]:
+        """Indices of the boxes a ray of the sweep may reach: the others are not meshed.
+
+        A ray goes no farther than 1.01 × the maximum range, and no farther along the ground
+        than along itself, so a box whose footprint's circumscribed circle lies horizontally
+        beyond that from the sweep's first position, less how far the sensor moves within the
+        sweep (and 5 cm), cannot be hit.  The kept boxes are meshed in the scene's order.
+        """
+        xy0 = pos[0, :2]
+        travel = float(np.max(np.hypot(pos[:, 0] - xy0[0], pos[:, 1] - xy0[1]), initial=0.0))
+        half_diag = 0.5 * np.hypot(objects.sizes[:, 0], objects.sizes[:, 1])
+        rel = objects.centers[:, :2] - xy0
+        gap = np.hypot(rel[:, 0], rel[:, 1]) - half_diag
+        reach_m = self.preset.max_range_m * 1.01 + travel + 0.05
+        return np.flatnonzero(gap <= reach_m)
+
     def _box_reach(
-        self, scene: Scene, rot: npt.NDArray[np.float64], pos: npt.NDArray[np.float64]
+        self,
+        centers: npt.NDArray[np.float64],
+        sizes: npt.NDArray[np.float64],
+        rot: npt.NDArray[np.float64],
+        pos: npt.NDArray[np.float64],
     ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], float] | None:
         """Per column, how near a box may come and how high it may reach — a conservative cull.
 
@@ -244,8 +266,7 @@ class LidarModel:
         slice (+inf: none) and (C,) float64 highest top among them.  Only for an upright sensor
         (a ray's azimuth is its column's); ``None`` means cast every ray.
         """
-        objs = scene.objects
-        if len(objs) == 0 or np.any(rot[:, 2, 2] < 1.0 - 1e-9):
+        if len(centers) == 0 or np.any(rot[:, 2, 2] < 1.0 - 1e-9):
             return None
         cols = self.preset.columns
         r_col, top_col = np.empty(cols), np.empty(cols)
@@ -253,8 +274,8 @@ class LidarModel:
             self._slice_starts,
             pos,
             rot,
-            objs.centers,
-            objs.sizes,
+            centers,
+            sizes,
             self._slice_mid_az,
             self._slice_half_az,
             self._slice_of_col,
@@ -273,7 +294,7 @@ class LidarModel:
         """Cast one sweep starting at ``scene.stamp_ns``.
 
         Args:
-            scene: the world; its boxes are meshed anew for this sweep.
+            scene: the world; its boxes within reach of the sweep are meshed anew for it.
             rng: the only source of randomness (noise, dropout).
             map_from_base_at: ego pose at a time in ns (default: ``scene.map_from_base`` for
                 the whole sweep).
@@ -283,7 +304,10 @@ class LidarModel:
         rot = np.ascontiguousarray(rot)
         pos = np.ascontiguousarray(pos, dtype=np.float64)
         origin = pos[0].copy()
-        mesh = BoxMesh.from_objects(scene.objects, origin=origin)
+        near = self._boxes_in_range(scene.objects, pos)
+        objs = scene.objects
+        centers, sizes = objs.centers[near], objs.sizes[near]
+        mesh = BoxMesh.from_boxes(centers, sizes, objs.yaws_rad[near], origin=origin)
         n_rays = p.columns * p.num_lasers
         # ray directions in the map frame, where they meet the ground, which Embree casts
         work = self._scratch
@@ -294,7 +318,7 @@ class LidarModel:
         sel_orig = work.array("sel_orig", (n_rays, 3), np.float32)
         sel_dirs = work.array("sel_dirs", (n_rays, 3), np.float32)
         sel_limit = work.array("sel_limit", (n_rays,), np.float32)
-        reach = self._box_reach(scene, rot, pos)
+        reach = self._box_reach(centers, sizes, rot, pos)
         r_col, top_col, margin = (self._no_reach, self._no_reach, 0.0) if reach is None else reach
         n_sel = lidar_kernels.rays(
             self._slice_of_col,
@@ -335,6 +359,7 @@ class LidarModel:
             sel_dist,
             sel_prim,
             TRIANGLES_PER_BOX,
+            near,
             t_ground,
             np.float32(p.min_range_m),
             np.float32(p.max_range_m),

@@ -173,6 +173,7 @@ def kept(  # noqa: PLR0917  # pragma: no cover - compiled
     sel_dist: npt.NDArray[np.float32],
     sel_prim: npt.NDArray[np.int32],
     triangles_per_box: int,
+    box_of_mesh: npt.NDArray[np.int64],
     t_ground: npt.NDArray[np.float32],
     min_range: np.float32,
     max_range: np.float32,
@@ -184,7 +185,8 @@ def kept(  # noqa: PLR0917  # pragma: no cover - compiled
     """Embree's answers put back per ray, and which rays return.
 
     ``dist`` comes in holding each ray's limit; a ray Embree hit (``sel_prim ≥ 0``) gets its
-    distance and box (``prim // triangles_per_box``; −1 elsewhere), ``where_in_sel`` its place
+    distance and box (``box_of_mesh[prim // triangles_per_box]``: the scene's index of the
+    meshed box; −1 elsewhere), ``where_in_sel`` its place
     in ``sel``.  A ray returns if it hit a box or meets the ground within ``max_range``, and its
     distance lies in [``min_range``, ``max_range``] (float32 comparisons, as numpy made them).
     """
@@ -195,7 +197,7 @@ def kept(  # noqa: PLR0917  # pragma: no cover - compiled
         p = sel_prim[k]
         if p >= 0:
             dist[i] = sel_dist[k]
-            box[i] = p // triangles_per_box
+            box[i] = box_of_mesh[p // triangles_per_box]
     for i in range(dist.shape[0]):
         d = dist[i]
         keep[i] = (box[i] >= 0 or t_ground[i] <= max_range) and d >= min_range and d <= max_range

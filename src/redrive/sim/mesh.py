@@ -133,17 +133,29 @@ class BoxMesh:
     def from_objects(
         cls, objects: SceneObjects, *, origin: npt.NDArray[np.float64] | None = None
     ) -> BoxMesh:
-        """Build (≈ 1.1 ms for 100 boxes, ≈ 11 µs a box, plus Embree's BVH build on the first
-        cast: rebuild it every sweep).
+        """Every box of ``objects`` (:meth:`from_boxes`)."""
+        return cls.from_boxes(objects.centers, objects.sizes, objects.yaws_rad, origin=origin)
+
+    @classmethod
+    def from_boxes(
+        cls,
+        centers: npt.NDArray[np.float64],
+        sizes: npt.NDArray[np.float64],
+        yaws_rad: npt.NDArray[np.float64],
+        *,
+        origin: npt.NDArray[np.float64] | None = None,
+    ) -> BoxMesh:
+        """Build from N boxes' (N, 3) centres, (N, 3) sizes and (N,) yaws (≈ 1.1 ms for 100
+        boxes, ≈ 11 µs a box, plus Embree's BVH build on the first cast: rebuild it every sweep).
 
         The triangles are :func:`box_triangles`'s: corners relative to ``origin`` rounded to
         float32, triangle ``k`` of box ``k // 12``.
         """
         org = np.zeros(3) if origin is None else np.asarray(origin, dtype=np.float64)
-        n = len(objects)
+        n = len(centers)
         if n == 0:
             return cls(None, org, 0)
-        corners = box_vertices(objects.centers, objects.sizes, objects.yaws_rad) - org
+        corners = box_vertices(centers, sizes, yaws_rad) - org
         scene = rtcore_scene.EmbreeScene(_embree_device())
         mesh_construction.TriangleMesh(scene, corners.reshape(-1, 3), box_triangle_indices(n))
         return cls(scene, org, n)
