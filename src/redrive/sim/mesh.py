@@ -145,8 +145,8 @@ class BoxMesh:
         *,
         origin: npt.NDArray[np.float64] | None = None,
     ) -> BoxMesh:
-        """Build from N boxes' (N, 3) centres, (N, 3) sizes and (N,) yaws (≈ 1.1 ms for 100
-        boxes, ≈ 11 µs a box, plus Embree's BVH build on the first cast: rebuild it every sweep).
+        """Build from N boxes' (N, 3) centres, (N, 3) sizes and (N,) yaws (≈ 1–2 ms for 100
+        boxes, with Embree's BVH build on the first cast: rebuild it every sweep).
 
         The triangles are :func:`box_triangles`'s: corners relative to ``origin`` rounded to
         float32, triangle ``k`` of box ``k // 12``.
