@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from embreex import mesh_construction, rtcore_scene
 
 from redrive.sim.mesh import (
@@ -65,3 +66,35 @@ def test_indexed_mesh_casts_as_the_flat_one_bit_for_bit() -> None:
     np.testing.assert_array_equal(prim, ref["primID"])
     np.testing.assert_array_equal(dist, ref["tfar"])
     np.testing.assert_array_equal(normal[hit], ref["Ng"][hit])
+
+
+def test_an_embreex_with_typed_indices_gets_an_integer_array(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    rng = np.random.default_rng(5)
+    objs = _boxes(30, rng)
+    origin = np.array([3118.0, -841.0, 0.0])
+    real = mesh_construction.TriangleMesh
+    seen: list[np.dtype] = []
+
+    def typed(scene: object, vertices: np.ndarray, indices: np.ndarray) -> object:
+        seen.append(indices.dtype)
+        if indices.dtype == object:
+            msg = "Buffer dtype mismatch, expected 'uint32_t' but got Python object"
+            raise ValueError(msg)
+        return real(scene, vertices, indices)
+
+    monkeypatch.setattr("redrive.sim.mesh.mesh_construction.TriangleMesh", typed)
+    mesh = BoxMesh.from_objects(objs, origin=origin)
+    assert seen == [np.dtype(object), np.dtype(np.uint32)]
+    monkeypatch.undo()
+    ref = BoxMesh.from_objects(objs, origin=origin)
+    n = 5_000
+    dirs = rng.normal(size=(n, 3))
+    dirs = (dirs / np.linalg.norm(dirs, axis=1)[:, None]).astype(np.float32)
+    origins = rng.uniform(-3.0, 3.0, (n, 3)).astype(np.float32)
+    got = mesh.cast(origins, dirs, np.full(n, 120.0, np.float32))
+    want = ref.cast(origins, dirs, np.full(n, 120.0, np.float32))
+    assert (got[1] >= 0).any()
+    for a, b in zip(got[:2], want[:2], strict=True):
+        np.testing.assert_array_equal(a, b)

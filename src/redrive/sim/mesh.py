@@ -155,9 +155,14 @@ class BoxMesh:
         n = len(centers)
         if n == 0:
             return cls(None, org, 0)
-        corners = box_vertices(centers, sizes, yaws_rad) - org
+        corners = (box_vertices(centers, sizes, yaws_rad) - org).reshape(-1, 3)
         scene = rtcore_scene.EmbreeScene(_embree_device())
-        mesh_construction.TriangleMesh(scene, corners.reshape(-1, 3), box_triangle_indices(n))
+        try:
+            mesh_construction.TriangleMesh(scene, corners, box_triangle_indices(n))
+        except (TypeError, ValueError):  # an embreex whose indices are a typed buffer
+            scene = rtcore_scene.EmbreeScene(_embree_device())
+            rows = np.asarray(box_triangle_indices(n).tolist(), dtype=np.uint32)
+            mesh_construction.TriangleMesh(scene, corners.astype(np.float32), rows)
         return cls(scene, org, n)
 
     def cast(
