@@ -249,3 +249,19 @@ def test_ground_label_lookup_matches_the_scene_contract() -> None:
     ground = GroundMap(origin_xy=np.array([-3.0, 2.0]), resolution_m=0.5, labels=labels)
     xy = np.random.default_rng(1).uniform(-6.0, 8.0, (5000, 2))
     assert np.array_equal(_ground_labels(ground, xy[:, 0], xy[:, 1]), ground.label_at(xy))
+
+
+def test_boxes_out_of_reach_are_left_out_and_change_nothing() -> None:
+    # a wall whose near face is 0.5 m inside the 2D scanner's 30 m range, and boxes beyond it
+    wall = (30.0, 0.0, 1.0, 1.0, 12.0, 2.0, 0.0)
+    beyond = [(36.0, 0.0, 1.0, 2.0, 2.0, 2.0, 0.3), (-5.0, 80.0, 5.0, 10.0, 10.0, 10.0, 0.0)]
+    model = LidarModel("UTM-30LX", base_from_sensor=_mount(0.5), range_std_m=0.0)
+    alone = model.scan(make_scene([wall]), np.random.default_rng(0))
+    scene = make_scene([*beyond, wall])  # the wall is box 3: boxes are mapped back past a gap
+    assert model._boxes_in_range(scene.objects, np.zeros((2, 3))).tolist() == [2]
+    both = model.scan(scene, np.random.default_rng(0))
+    assert alone.hits_per_object[1] > 20
+    assert both.hits_per_object == {1: 0, 2: 0, 3: alone.hits_per_object[1]}
+    assert np.array_equal(both.cloud.xyz, alone.cloud.xyz)
+    assert np.array_equal(both.cloud.channels["intensity"], alone.cloud.channels["intensity"])
+    assert np.array_equal(both.object_ids, np.where(alone.object_ids == 1, 3, -1))

@@ -145,7 +145,9 @@ def test_kept_equal_numpy() -> None:
     limit = rng.uniform(0.0, 130.0, n_rays).astype(np.float32)
     t_ground = np.where(rng.random(n_rays) < 0.5, np.float32(np.inf), limit)
     sel = np.sort(rng.choice(n_rays, 200, replace=False)).astype(np.int64)
-    prim = np.where(rng.random(200) < 0.5, -1, rng.integers(0, 120, 200)).astype(np.int32)
+    prim = np.where(rng.random(200) < 0.5, -1, rng.integers(0, 120, 200)).astype(
+        np.int32
+    )  # 10 boxes
     sel_dist = np.where(prim >= 0, limit[sel] * np.float32(0.5), limit[sel]).astype(np.float32)
     sel_dist[:3] = [
         np.float32(0.9),
@@ -153,11 +155,12 @@ def test_kept_equal_numpy() -> None:
         np.float32(120.0),
     ]
     prim[:3] = 5
+    box_of_mesh = np.sort(rng.choice(40, 10, replace=False)).astype(np.int64)  # meshed boxes
     # numpy, as scan did it (min/max range compared in float32, as numpy 2 does with a float)
     dist_np = limit.copy()
     box_np = np.full(n_rays, -1, np.int64)
     dist_np[sel] = np.where(prim >= 0, sel_dist, limit[sel])
-    box_np[sel] = np.where(prim >= 0, prim // 12, -1)
+    box_np[sel] = np.where(prim >= 0, box_of_mesh[prim // 12], -1)
     keep_np = (box_np >= 0) | (t_ground <= 120.0)
     keep_np &= (dist_np >= 0.9) & (dist_np <= 120.0)
     dist, box = limit.copy(), np.empty(n_rays, np.int64)
@@ -167,6 +170,7 @@ def test_kept_equal_numpy() -> None:
         sel_dist,
         prim,
         12,
+        box_of_mesh,
         t_ground,
         np.float32(0.9),
         np.float32(120.0),
@@ -179,3 +183,59 @@ def test_kept_equal_numpy() -> None:
     assert np.array_equal(box, box_np)
     assert np.array_equal(keep, keep_np)
     assert np.array_equal(where[sel], np.arange(sel.size))
+
+
+def test_columns_and_reach_equal_numpy() -> None:
+    """The slice poses mixed per column and the cull's figures, as ``scan`` made them in numpy."""
+    rng = np.random.default_rng(11)
+    slice_of_col = np.repeat(np.arange(SLICES), COLS // SLICES).astype(np.int64)
+    frac = np.tile(np.arange(COLS // SLICES) / (COLS // SLICES), SLICES)
+    start = np.array([512.3, -77.1, 1.8])
+    slice_pos = start + np.cumsum(rng.uniform(0.0, 0.8, (SLICES + 1, 3)), axis=0)
+    pos = np.empty((COLS, 3))
+    lidar_kernels.columns(slice_pos, slice_of_col, frac, pos)
+    f = frac[:, None]
+    want = slice_pos[slice_of_col] * (1.0 - f) + slice_pos[slice_of_col + 1] * f
+    assert np.array_equal(pos, want)
+
+    rot = _rotations(rng, upright=True)
+    n_box = 60
+    centers = np.c_[pos[0, :2] + rng.uniform(-30.0, 30.0, (n_box, 2)), rng.uniform(0, 4, n_box)]
+    centers[:3, :2] = pos[0, :2] + [0.5, -0.4]  # boxes around the sensor: every azimuth
+    sizes = rng.uniform(0.3, 9.0, (n_box, 3))
+    starts = np.arange(0, COLS, COLS // SLICES, dtype=np.int64)
+    mid_az = rng.uniform(-np.pi, np.pi, SLICES)
+    half_az = np.full(SLICES, 0.4)
+    # numpy, as LidarModel._box_reach did it
+    step = np.linalg.norm(np.diff(pos[np.r_[starts, -1]], axis=0), axis=1)
+    margin_np = 0.05 + float(np.max(step, initial=0.0))
+    rel = centers[None, :, :2] - pos[starts, None, :2]
+    half_diag = 0.5 * np.hypot(sizes[:, 0], sizes[:, 1]) + margin_np
+    dist_c = np.hypot(rel[..., 0], rel[..., 1])
+    r_min = np.maximum(dist_c - half_diag, 0.0)
+    az_c = np.arctan2(rel[..., 1], rel[..., 0])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        half_width = np.where(
+            dist_c > half_diag, np.arcsin(np.minimum(half_diag / dist_c, 1.0)), np.pi
+        )
+    az_s = np.arctan2(rot[:, 1, 0], rot[:, 0, 0]) + mid_az
+    diff = np.abs((az_s[:, None] - az_c + np.pi) % (2.0 * np.pi) - np.pi)
+    covers = diff <= half_width + half_az[:, None] + 1e-3
+    assert 0 < covers.sum() < covers.size
+    r_np = np.where(covers, r_min, np.inf).min(axis=1)[slice_of_col]
+    top = centers[:, 2] + 0.5 * sizes[:, 2]
+    top_np = np.where(covers, top[None, :], -np.inf).max(axis=1)[slice_of_col]
+    r_col, top_col = np.empty(COLS), np.empty(COLS)
+    margin = lidar_kernels.reach(
+        starts, pos, rot, centers, sizes, mid_az, half_az, slice_of_col, r_col, top_col
+    )
+    assert margin == margin_np
+    assert np.array_equal(r_col, r_np)
+    assert np.array_equal(top_col, top_np)
+    # nothing near: no slice is covered
+    far = lidar_kernels.reach(
+        starts, pos, rot, centers[:0], sizes[:0], mid_az, half_az, slice_of_col, r_col, top_col
+    )
+    assert far == margin_np
+    assert np.all(r_col == np.inf)
+    assert np.all(top_col == -np.inf)

@@ -34,7 +34,7 @@ from redrive.sim import lidar_kernels
 from redrive.sim.lidar_presets import LidarPreset, lidar_preset
 from redrive.sim.mesh import TRIANGLES_PER_BOX, BoxMesh
 from redrive.sim.rig import SensorSpec
-from redrive.sim.scene import GroundLabel, GroundMap, Scene
+from redrive.sim.scene import GroundLabel, GroundMap, Scene, SceneObjects
 from redrive.sim.scratch import Scratch
 from redrive.types import PointCloud, SensorType
 from redrive.types._arrays import frozen_array
@@ -224,13 +224,35 @@ class LidarModel:
                 msg = f"map_from_base_at returned shape {mat.shape}, expected (4, 4)"
                 raise SimulationError(msg)
             poses[b] = mat @ self.base_from_sensor
-        s = self._slice_of_col
-        f = self._frac_of_col[:, None]
-        pos = poses[s, :3, 3] * (1.0 - f) + poses[s + 1, :3, 3] * f
+        pos = np.empty((cols, 3))
+        slice_pos = np.ascontiguousarray(poses[:, :3, 3])
+        lidar_kernels.columns(slice_pos, self._slice_of_col, self._frac_of_col, pos)
         return poses[:slices, :3, :3], pos
 
+    def _boxes_in_range(
+        self, objects: SceneObjects, pos: npt.NDArray[np.float64]
+    ) -> npt.NDArray[np.int64]:
+        """Indices of the boxes a ray of the sweep may reach: the others are not meshed.
+
+        A ray goes no farther than 1.01 × the maximum range, and no farther along the ground
+        than along itself, so a box whose footprint's circumscribed circle lies horizontally
+        beyond that from the sweep's first position, less how far the sensor moves within the
+        sweep (and 5 cm), cannot be hit.  The kept boxes are meshed in the scene's order.
+        """
+        xy0 = pos[0, :2]
+        travel = float(np.max(np.hypot(pos[:, 0] - xy0[0], pos[:, 1] - xy0[1]), initial=0.0))
+        half_diag = 0.5 * np.hypot(objects.sizes[:, 0], objects.sizes[:, 1])
+        rel = objects.centers[:, :2] - xy0
+        gap = np.hypot(rel[:, 0], rel[:, 1]) - half_diag
+        reach_m = self.preset.max_range_m * 1.01 + travel + 0.05
+        return np.flatnonzero(gap <= reach_m)
+
     def _box_reach(
-        self, scene: Scene, rot: npt.NDArray[np.float64], pos: npt.NDArray[np.float64]
+        self,
+        centers: npt.NDArray[np.float64],
+        sizes: npt.NDArray[np.float64],
+        rot: npt.NDArray[np.float64],
+        pos: npt.NDArray[np.float64],
     ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], float] | None:
         """Per column, how near a box may come and how high it may reach — a conservative cull.
 
@@ -244,29 +266,23 @@ class LidarModel:
         slice (+inf: none) and (C,) float64 highest top among them.  Only for an upright sensor
         (a ray's azimuth is its column's); ``None`` means cast every ray.
         """
-        objs = scene.objects
-        if len(objs) == 0 or np.any(rot[:, 2, 2] < 1.0 - 1e-9):
+        if len(centers) == 0 or np.any(rot[:, 2, 2] < 1.0 - 1e-9):
             return None
-        starts = self._slice_starts
-        step = np.linalg.norm(np.diff(pos[np.r_[starts, -1]], axis=0), axis=1)
-        margin = 0.05 + float(np.max(step, initial=0.0))
-        rel = objs.centers[None, :, :2] - pos[starts, None, :2]  # (S, B, 2)
-        half_diag = 0.5 * np.hypot(objs.sizes[:, 0], objs.sizes[:, 1]) + margin  # (B,)
-        dist_c = np.hypot(rel[..., 0], rel[..., 1])
-        r_min = np.maximum(dist_c - half_diag, 0.0)
-        az_c = np.arctan2(rel[..., 1], rel[..., 0])
-        with np.errstate(invalid="ignore", divide="ignore"):
-            half_width = np.where(
-                dist_c > half_diag, np.arcsin(np.minimum(half_diag / dist_c, 1.0)), np.pi
-            )
-        yaw = np.arctan2(rot[:, 1, 0], rot[:, 0, 0])  # (S,)
-        az_s = yaw + self._slice_mid_az  # centre of each slice's azimuth span, map frame
-        diff = np.abs((az_s[:, None] - az_c + np.pi) % (2.0 * np.pi) - np.pi)
-        covers = diff <= half_width + self._slice_half_az[:, None] + 1e-3  # (S, B)
-        r_slice = np.where(covers, r_min, np.inf).min(axis=1)  # (S,)
-        top = objs.centers[:, 2] + 0.5 * objs.sizes[:, 2]  # (B,)
-        top_slice = np.where(covers, top[None, :], -np.inf).max(axis=1)
-        return r_slice[self._slice_of_col], top_slice[self._slice_of_col], margin
+        cols = self.preset.columns
+        r_col, top_col = np.empty(cols), np.empty(cols)
+        margin = lidar_kernels.reach(
+            self._slice_starts,
+            pos,
+            rot,
+            centers,
+            sizes,
+            self._slice_mid_az,
+            self._slice_half_az,
+            self._slice_of_col,
+            r_col,
+            top_col,
+        )
+        return r_col, top_col, margin
 
     def scan(
         self,
@@ -278,7 +294,7 @@ class LidarModel:
         """Cast one sweep starting at ``scene.stamp_ns``.
 
         Args:
-            scene: the world; its boxes are meshed anew for this sweep.
+            scene: the world; its boxes within reach of the sweep are meshed anew for it.
             rng: the only source of randomness (noise, dropout).
             map_from_base_at: ego pose at a time in ns (default: ``scene.map_from_base`` for
                 the whole sweep).
@@ -288,7 +304,10 @@ class LidarModel:
         rot = np.ascontiguousarray(rot)
         pos = np.ascontiguousarray(pos, dtype=np.float64)
         origin = pos[0].copy()
-        mesh = BoxMesh.from_objects(scene.objects, origin=origin)
+        near = self._boxes_in_range(scene.objects, pos)
+        objs = scene.objects
+        centers, sizes = objs.centers[near], objs.sizes[near]
+        mesh = BoxMesh.from_boxes(centers, sizes, objs.yaws_rad[near], origin=origin)
         n_rays = p.columns * p.num_lasers
         # ray directions in the map frame, where they meet the ground, which Embree casts
         work = self._scratch
@@ -299,7 +318,7 @@ class LidarModel:
         sel_orig = work.array("sel_orig", (n_rays, 3), np.float32)
         sel_dirs = work.array("sel_dirs", (n_rays, 3), np.float32)
         sel_limit = work.array("sel_limit", (n_rays,), np.float32)
-        reach = self._box_reach(scene, rot, pos)
+        reach = self._box_reach(centers, sizes, rot, pos)
         r_col, top_col, margin = (self._no_reach, self._no_reach, 0.0) if reach is None else reach
         n_sel = lidar_kernels.rays(
             self._slice_of_col,
@@ -340,6 +359,7 @@ class LidarModel:
             sel_dist,
             sel_prim,
             TRIANGLES_PER_BOX,
+            near,
             t_ground,
             np.float32(p.min_range_m),
             np.float32(p.max_range_m),

@@ -1,7 +1,8 @@
 """Compiled loops of :meth:`LidarModel.scan <redrive.sim.lidar.LidarModel.scan>` (numba,
-``nogil``): the rays in the map frame, where they meet the ground and which of them Embree must
-cast (:func:`rays`); which returns are kept (:func:`kept`); the kept returns' points, intensity,
-ring, time offset and object (:func:`returns`).
+``nogil``): the columns' positions between the slice poses and how near a box may come to each
+(:func:`columns`, :func:`reach`); the rays in the map frame, where they meet the ground and which
+of them Embree must cast (:func:`rays`); which returns are kept (:func:`kept`); the kept
+returns' points, intensity, ring, time offset and object (:func:`returns`).
 
 The arithmetic is the one the numpy code did, in the same precision and order (float32 where it
 was float32; the ground point's map x, y in float64 as numpy promoted them), so a sweep is the
@@ -16,7 +17,76 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["kept", "rays", "returns"]
+__all__ = ["columns", "kept", "rays", "reach", "returns"]
+
+
+@numba.njit(cache=True, nogil=True)
+def columns(  # pragma: no cover - compiled
+    slice_pos: npt.NDArray[np.float64],
+    slice_of_col: npt.NDArray[np.int64],
+    frac_of_col: npt.NDArray[np.float64],
+    pos: npt.NDArray[np.float64],
+) -> None:
+    """Each column's sensor position (C, 3): its slice's start and end positions
+    ``slice_pos`` (S + 1, 3) mixed as ``start·(1 − f) + end·f`` (numpy's float64 order)."""
+    for c in range(pos.shape[0]):
+        s = slice_of_col[c]
+        f = frac_of_col[c]
+        g = 1.0 - f
+        for a in range(3):
+            pos[c, a] = slice_pos[s, a] * g + slice_pos[s + 1, a] * f
+
+
+@numba.njit(cache=True, nogil=True)
+def reach(  # noqa: PLR0917  # pragma: no cover - compiled
+    starts: npt.NDArray[np.int64],
+    pos: npt.NDArray[np.float64],
+    rot: npt.NDArray[np.float64],
+    centers: npt.NDArray[np.float64],
+    sizes: npt.NDArray[np.float64],
+    slice_mid_az: npt.NDArray[np.float64],
+    slice_half_az: npt.NDArray[np.float64],
+    slice_of_col: npt.NDArray[np.int64],
+    r_col: npt.NDArray[np.float64],
+    top_col: npt.NDArray[np.float64],
+) -> float:
+    """The LiDAR's cull figures (:meth:`LidarModel._box_reach
+    <redrive.sim.lidar.LidarModel._box_reach>`), per slice × box in one loop: writes each
+    column's nearest horizontal distance of a box overlapping its slice (+inf: none) to
+    ``r_col`` and the highest top among them (−inf) to ``top_col``; returns the margin (0.05 m +
+    the sensor's longest travel within a slice).  ``starts`` are the slices' first columns."""
+    num_slices = starts.shape[0]
+    last = pos.shape[0] - 1
+    margin = 0.0
+    for s in range(num_slices):
+        a = starts[s]
+        b = starts[s + 1] if s + 1 < num_slices else last
+        d0 = pos[b, 0] - pos[a, 0]
+        d1 = pos[b, 1] - pos[a, 1]
+        d2 = pos[b, 2] - pos[a, 2]
+        margin = max(margin, math.sqrt(d0 * d0 + d1 * d1 + d2 * d2))
+    margin += 0.05
+    r_slice = np.full(num_slices, np.inf)
+    top_slice = np.full(num_slices, -np.inf)
+    for s in range(num_slices):
+        a = starts[s]
+        az_s = math.atan2(rot[s, 1, 0], rot[s, 0, 0]) + slice_mid_az[s]
+        for k in range(centers.shape[0]):
+            rx = centers[k, 0] - pos[a, 0]
+            ry = centers[k, 1] - pos[a, 1]
+            half_diag = 0.5 * math.hypot(sizes[k, 0], sizes[k, 1]) + margin
+            dist_c = math.hypot(rx, ry)
+            half_width = math.pi  # the sensor stands in the box's circle: every azimuth
+            if dist_c > half_diag:
+                half_width = math.asin(min(half_diag / dist_c, 1.0))
+            diff = abs((az_s - math.atan2(ry, rx) + math.pi) % (2.0 * math.pi) - math.pi)
+            if diff <= half_width + slice_half_az[s] + 1e-3:
+                r_slice[s] = min(r_slice[s], max(dist_c - half_diag, 0.0))
+                top_slice[s] = max(top_slice[s], centers[k, 2] + 0.5 * sizes[k, 2])
+    for c in range(slice_of_col.shape[0]):
+        r_col[c] = r_slice[slice_of_col[c]]
+        top_col[c] = top_slice[slice_of_col[c]]
+    return margin
 
 
 @numba.njit(cache=True, nogil=True)
@@ -103,6 +173,7 @@ def kept(  # noqa: PLR0917  # pragma: no cover - compiled
     sel_dist: npt.NDArray[np.float32],
     sel_prim: npt.NDArray[np.int32],
     triangles_per_box: int,
+    box_of_mesh: npt.NDArray[np.int64],
     t_ground: npt.NDArray[np.float32],
     min_range: np.float32,
     max_range: np.float32,
@@ -114,7 +185,8 @@ def kept(  # noqa: PLR0917  # pragma: no cover - compiled
     """Embree's answers put back per ray, and which rays return.
 
     ``dist`` comes in holding each ray's limit; a ray Embree hit (``sel_prim ≥ 0``) gets its
-    distance and box (``prim // triangles_per_box``; −1 elsewhere), ``where_in_sel`` its place
+    distance and box (``box_of_mesh[prim // triangles_per_box]``: the scene's index of the
+    meshed box; −1 elsewhere), ``where_in_sel`` its place
     in ``sel``.  A ray returns if it hit a box or meets the ground within ``max_range``, and its
     distance lies in [``min_range``, ``max_range``] (float32 comparisons, as numpy made them).
     """
@@ -125,7 +197,7 @@ def kept(  # noqa: PLR0917  # pragma: no cover - compiled
         p = sel_prim[k]
         if p >= 0:
             dist[i] = sel_dist[k]
-            box[i] = p // triangles_per_box
+            box[i] = box_of_mesh[p // triangles_per_box]
     for i in range(dist.shape[0]):
         d = dist[i]
         keep[i] = (box[i] >= 0 or t_ground[i] <= max_range) and d >= min_range and d <= max_range

@@ -3,20 +3,34 @@
 Every box becomes 12 triangles (two per face), built for all boxes at once; triangle ``k``
 belongs to box ``k // 12``.  The ground plane z = 0 is not meshed: sensors intersect it
 analytically (exact, and it bounds every downward ray before Embree sees it).
+
+Embree gets each box's 8 corners once and the triangles as indices into them (its indexed
+triangle mesh): the same triangles, vertex for vertex, as 36 corners a box, hence the same hits,
+for a third of the vertices embreex copies one element at a time.  The index rows are handed over
+as a cached object array of tuples — embreex reads them as ``indices[i][k]`` on an untyped
+array, and a tuple answers that without a numpy view a row — and the corners as float64, which
+embreex casts to float32 as numpy would (round to nearest).  Every scene shares one Embree device.
 """
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from embreex import mesh_construction, rtcore_scene
+from embreex import mesh_construction, rtcore, rtcore_scene
 
 from redrive.geometry.boxes import BOX_CORNER_SIGNS
 from redrive.sim.scene import SceneObjects
 
-__all__ = ["TRIANGLES_PER_BOX", "BoxMesh", "box_triangles", "box_vertices"]
+__all__ = [
+    "TRIANGLES_PER_BOX",
+    "BoxMesh",
+    "box_triangle_indices",
+    "box_triangles",
+    "box_vertices",
+]
 
 TRIANGLES_PER_BOX = 12
 
@@ -32,6 +46,39 @@ _FACES = np.array(
     ],
     dtype=np.int64,
 )  # fmt: skip
+
+
+_cache_lock = threading.Lock()
+_device: rtcore.EmbreeDevice | None = None
+_index_rows: npt.NDArray[np.object_] = np.empty(0, dtype=object)
+
+
+def _embree_device() -> rtcore.EmbreeDevice:
+    """The Embree device every :class:`BoxMesh` is built on (made on first use)."""
+    global _device  # noqa: PLW0603 -- one device for the process, made lazily
+    with _cache_lock:
+        if _device is None:
+            _device = rtcore.EmbreeDevice()
+        return _device
+
+
+def box_triangle_indices(num_boxes: int) -> npt.NDArray[np.object_]:
+    """(num_boxes·12,) object array: triangle ``k``'s three corner indices as a tuple of ints.
+
+    Corner ``j`` of box ``b`` is vertex ``8·b + j`` of :func:`box_vertices` flattened; the rows
+    are those of :func:`box_triangles`, in its order.  Cached (and grown on demand): a view of
+    the first ``num_boxes`` boxes' rows is returned, never to be written.
+    """
+    global _index_rows  # noqa: PLW0603 -- grown in place of a per-call build
+    need = num_boxes * TRIANGLES_PER_BOX
+    with _cache_lock:
+        if len(_index_rows) < need:
+            size = max(need, 2 * len(_index_rows), 64 * TRIANGLES_PER_BOX)
+            rows = _FACES[None, :, :] + 8 * np.arange(size // TRIANGLES_PER_BOX)[:, None, None]
+            grown = np.empty(size, dtype=object)
+            grown[:] = [tuple(r) for r in rows.reshape(-1, 3).tolist()]
+            _index_rows = grown
+        return _index_rows[:need]
 
 
 def box_vertices(
@@ -86,14 +133,37 @@ class BoxMesh:
     def from_objects(
         cls, objects: SceneObjects, *, origin: npt.NDArray[np.float64] | None = None
     ) -> BoxMesh:
-        """Build (the cost is ~1 ms for hundreds of boxes: rebuild it every sweep)."""
+        """Every box of ``objects`` (:meth:`from_boxes`)."""
+        return cls.from_boxes(objects.centers, objects.sizes, objects.yaws_rad, origin=origin)
+
+    @classmethod
+    def from_boxes(
+        cls,
+        centers: npt.NDArray[np.float64],
+        sizes: npt.NDArray[np.float64],
+        yaws_rad: npt.NDArray[np.float64],
+        *,
+        origin: npt.NDArray[np.float64] | None = None,
+    ) -> BoxMesh:
+        """Build from N boxes' (N, 3) centres, (N, 3) sizes and (N,) yaws (≈ 1–2 ms for 100
+        boxes, with Embree's BVH build on the first cast: rebuild it every sweep).
+
+        The triangles are :func:`box_triangles`'s: corners relative to ``origin`` rounded to
+        float32, triangle ``k`` of box ``k // 12``.
+        """
         org = np.zeros(3) if origin is None else np.asarray(origin, dtype=np.float64)
-        if len(objects) == 0:
+        n = len(centers)
+        if n == 0:
             return cls(None, org, 0)
-        tris = box_triangles(objects.centers, objects.sizes, objects.yaws_rad, origin=org)
-        scene = rtcore_scene.EmbreeScene()
-        mesh_construction.TriangleMesh(scene, tris)
-        return cls(scene, org, len(objects))
+        corners = (box_vertices(centers, sizes, yaws_rad) - org).reshape(-1, 3)
+        scene = rtcore_scene.EmbreeScene(_embree_device())
+        try:
+            mesh_construction.TriangleMesh(scene, corners, box_triangle_indices(n))
+        except (TypeError, ValueError):  # an embreex whose indices are a typed buffer
+            scene = rtcore_scene.EmbreeScene(_embree_device())
+            rows = np.asarray(box_triangle_indices(n).tolist(), dtype=np.uint32)
+            mesh_construction.TriangleMesh(scene, corners.astype(np.float32), rows)
+        return cls(scene, org, n)
 
     def cast(
         self,
