@@ -1,11 +1,13 @@
 """Files of a run directory written atomically and durably: a temp file, fsync, rename.
 
 :func:`write_files` writes several at once (a flush: one Parquet part per table, then the
-manifest): every temp file is written first, then all are fsynced *concurrently*, then renamed
-into place in the order given.  Each file is still fsynced before it is renamed, exactly as when
-they were written one after another; fsyncs issued together let the filesystem commit them in one
-journal transaction (ext4 groups them) instead of one commit per file — four parts and a manifest
-cost about one commit's wait instead of five (BENCHMARKS.md, branch h-engine5).
+manifest): each temp file is written and fsynced on a thread of its own, all at the same time,
+and only when every one is durable are they renamed into place, in the order given.  Each file is
+still fsynced before it is renamed, exactly as when they were written one after another; fsyncs
+issued together let the filesystem commit them in one journal transaction (ext4 groups them)
+instead of one commit per file — four parts and a manifest cost about one commit's wait instead
+of five — and Arrow encodes the parts side by side with the GIL released (BENCHMARKS.md, branch
+h-engine5).
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import os
 from collections.abc import Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any
 
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -29,11 +31,11 @@ _POOL: tuple[int, ThreadPoolExecutor] | None = None
 
 
 def _pool() -> ThreadPoolExecutor:
-    """The threads the concurrent fsyncs run on (made again in a forked child, whose copy of
-    the parent's pool has no threads)."""
+    """The threads a flush's files are written and fsynced on (made again in a forked child,
+    whose copy of the parent's pool has no threads)."""
     global _POOL  # noqa: PLW0603 (one pool per process, made on first use)
     if _POOL is None or _POOL[0] != os.getpid():
-        _POOL = (os.getpid(), ThreadPoolExecutor(8, thread_name_prefix="redrive-fsync"))
+        _POOL = (os.getpid(), ThreadPoolExecutor(8, thread_name_prefix="redrive-write"))
     return _POOL[1]
 
 
@@ -47,40 +49,46 @@ def write_json_atomic(path: Path, data: Mapping[str, Any]) -> None:
     write_files([(path, json_bytes(data))])
 
 
-def _write(fh: BinaryIO, payload: pa.Table | bytes) -> None:
+def _write_synced(tmp: Path, payload: pa.Table | bytes) -> None:
+    """``payload`` into ``tmp``, fsynced.  A table is encoded and written by Arrow's own file
+    (the GIL released throughout: several parts encode at once on the pool's threads)."""
     if isinstance(payload, pa.Table):
-        pq.write_table(payload, fh, **PARQUET_OPTIONS)
+        with pa.OSFile(str(tmp), mode="wb") as sink:  # a plain path, never parsed as a URI
+            pq.write_table(payload, sink, **PARQUET_OPTIONS)
+        fd = os.open(tmp, os.O_RDONLY)
     else:
-        fh.write(payload)
-    fh.flush()
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        try:
+            view = memoryview(payload)
+            while view:
+                view = view[os.write(fd, view) :]
+        except BaseException:
+            os.close(fd)
+            raise
+    try:
+        os.fsync(fd)  # the file's data and size, whichever descriptor asks
+    finally:
+        os.close(fd)
 
 
 def write_files(files: Sequence[tuple[Path, pa.Table | bytes]]) -> None:
     """Write each ``(path, payload)`` — a table as a Parquet file, bytes as they are — to
-    ``path.tmp``, fsync them all (concurrently), then rename each into place, in order.
+    ``path.tmp`` and fsync it, all at once (the first on this thread, the others on a pool's),
+    then, once every one is durable, rename each into place, in the order given.
 
     A failure before the renames leaves only temp files (which readers ignore and a resume
     deletes); the renames happen in the order given, so the file that commits a flush goes last.
     """
     tmps = [path.with_name(path.name + ".tmp") for path, _ in files]
-    handles: list[BinaryIO] = []
+    others = [
+        _pool().submit(_write_synced, tmp, payload)
+        for tmp, (_, payload) in zip(tmps[1:], files[1:], strict=True)
+    ]
     try:
-        for tmp, (_, payload) in zip(tmps, files, strict=True):
-            out = open(tmp, "wb")  # noqa: SIM115 (closed below, after the fsyncs)
-            handles.append(out)
-            _write(out, payload)
-        fds = [fh.fileno() for fh in handles]
-        if len(fds) == 1:
-            os.fsync(fds[0])
-        else:
-            others = [_pool().submit(os.fsync, fd) for fd in fds[1:]]
-            try:
-                os.fsync(fds[0])
-            finally:
-                for future in others:
-                    future.result()  # every fsync done (or its error raised) before closing
+        if files:
+            _write_synced(tmps[0], files[0][1])
     finally:
-        for fh in handles:
-            fh.close()
+        for future in others:
+            future.result()  # every write done (or its error raised) before any rename
     for tmp, (path, _) in zip(tmps, files, strict=True):
         os.replace(tmp, path)
