@@ -1,4 +1,5 @@
-"""A flush's files: written, fsynced together, then renamed in order; nothing renamed on failure."""
+"""A flush's files: written and fsynced at once, then renamed in order (the one ``last`` makes
+after the others); nothing renamed on failure."""
 
 from __future__ import annotations
 
@@ -31,7 +32,8 @@ def test_every_file_is_fsynced_before_any_is_renamed_in_order(
     table = pa.table({"x": pa.array([1, 2, 3], type=pa.int64())})
     names = ["b.parquet", "a.parquet", "manifest.json"]
     write_files(
-        [(tmp_path / names[0], table), (tmp_path / names[1], table), (tmp_path / names[2], b"{}")]
+        [(tmp_path / names[0], table), (tmp_path / names[1], table)],
+        last=lambda: (tmp_path / names[2], b"{}"),  # made while the others are written
     )
     assert sorted(calls[:3]) == sorted(("fsync", n + ".tmp") for n in names)
     assert calls[3:] == [("rename", n) for n in names]

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
@@ -71,24 +71,35 @@ def _write_synced(tmp: Path, payload: pa.Table | bytes) -> None:
         os.close(fd)
 
 
-def write_files(files: Sequence[tuple[Path, pa.Table | bytes]]) -> None:
+def write_files(
+    files: Sequence[tuple[Path, pa.Table | bytes]],
+    *,
+    last: Callable[[], tuple[Path, bytes]] | None = None,
+) -> None:
     """Write each ``(path, payload)`` — a table as a Parquet file, bytes as they are — to
-    ``path.tmp`` and fsync it, all at once (the first on this thread, the others on a pool's),
-    then, once every one is durable, rename each into place, in the order given.
+    ``path.tmp`` and fsync it, all at once on a pool's threads; meanwhile call ``last`` on this
+    thread and write the file it returns (a flush's manifest, whose summary is computed while
+    the parts are encoded) the same way; once every one is durable, rename each into place in
+    the order given, ``last``'s file after them.
 
     A failure before the renames leaves only temp files (which readers ignore and a resume
     deletes); the renames happen in the order given, so the file that commits a flush goes last.
     """
     tmps = [path.with_name(path.name + ".tmp") for path, _ in files]
-    others = [
+    pending = [
         _pool().submit(_write_synced, tmp, payload)
-        for tmp, (_, payload) in zip(tmps[1:], files[1:], strict=True)
+        for tmp, (_, payload) in zip(tmps, files, strict=True)
     ]
+    final: tuple[Path, Path] | None = None
     try:
-        if files:
-            _write_synced(tmps[0], files[0][1])
+        if last is not None:
+            path, payload = last()
+            final = (path.with_name(path.name + ".tmp"), path)
+            _write_synced(final[0], payload)
     finally:
-        for future in others:
+        for future in pending:
             future.result()  # every write done (or its error raised) before any rename
     for tmp, (path, _) in zip(tmps, files, strict=True):
         os.replace(tmp, path)
+    if final is not None:
+        os.replace(*final)

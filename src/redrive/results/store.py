@@ -14,7 +14,7 @@ import json
 import logging
 import os
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 from types import TracebackType
@@ -288,8 +288,7 @@ class RunWriter:
         if parts is None:
             return
         files, done = parts
-        manifest = replace(self._manifest, frames_done=len(done))
-        self._commit(files, done, manifest)
+        self._commit(files, done, lambda: replace(self._manifest, frames_done=len(done)))
 
     def _take_parts(self) -> tuple[list[tuple[Path, pa.Table | bytes]], set[int]] | None:
         """The buffered frames as the next flush's parts (``frames`` last) and the frames done
@@ -309,18 +308,28 @@ class RunWriter:
         return files, self._done | self._buffered
 
     def _commit(
-        self, files: list[tuple[Path, pa.Table | bytes]], done: set[int], manifest: RunManifest
+        self,
+        files: list[tuple[Path, pa.Table | bytes]],
+        done: set[int],
+        manifest: Callable[[], RunManifest],
     ) -> None:
-        """Write a flush's parts and then ``manifest`` (all fsynced together, renamed in order:
-        the parts, ``frames`` last, then the manifest), and count the flush as done."""
-        write_files([*files, (self.path / MANIFEST_NAME, json_bytes(manifest.to_json()))])
+        """Write a flush's parts and then the manifest ``manifest()`` makes (made while the
+        parts are encoded; all fsynced, then renamed in order: the parts, ``frames`` last, then
+        the manifest), and count the flush as done."""
+        made: list[RunManifest] = []
+
+        def manifest_file() -> tuple[Path, bytes]:
+            made.append(manifest())
+            return self.path / MANIFEST_NAME, json_bytes(made[0].to_json())
+
+        write_files(files, last=manifest_file)
         if files:
             logger.debug("%s: part %d, %d frames", self.path, self._next_part, len(self._buffered))
             self._next_part += 1
         self._done = done
         self._buffered = set()
         self._has_resources = False
-        self._manifest = manifest
+        self._manifest = made[0]
 
     def close(self, *, status: RunStatus, summary: Mapping[str, Any] | None = None) -> None:
         """Flush, then mark the run ``complete``, ``interrupted`` or ``failed``.
@@ -345,18 +354,21 @@ class RunWriter:
             # the last flush's parts and the closing manifest are written together; its summary
             # is computed from the tables kept in memory, this flush's included
             files, done = self._take_parts() or ([], self._done)
-            computed = _computed_summary(
-                self._columns("frames", ("late",), self._kept_late),
-                self._columns("steps", _SUMMARY_STEP_COLUMNS, self._kept_steps),
-            )
-            manifest = replace(
-                self._manifest,
-                frames_done=len(done),
-                summary=self._summary({**computed, **extra}),
-                status=RunStatus(status),
-                finished=now_iso(),
-            )
-            self._commit(files, done, manifest)
+
+            def closing() -> RunManifest:
+                computed = _computed_summary(
+                    self._columns("frames", ("late",), self._kept_late),
+                    self._columns("steps", _SUMMARY_STEP_COLUMNS, self._kept_steps),
+                )
+                return replace(
+                    self._manifest,
+                    frames_done=len(done),
+                    summary=self._summary({**computed, **extra}),
+                    status=RunStatus(status),
+                    finished=now_iso(),
+                )
+
+            self._commit(files, done, closing)
         finally:
             self._closed = True
             self._lock.release()
