@@ -6,8 +6,10 @@ interleaved rounds, each side in a fresh process.
 Per side and round, one interpreter with ``PYTHONPATH`` at that tree runs 5 passes of: the bare
 loop of three no-op calls, the sequential engine with three no-op stages (records kept in a
 list), and the same with the Parquet results writer (``redrive bench engine``'s variants, from
-``redrive.benchmarks.engine``).  It prints the median and minimum over the passes of the thread
-CPU per frame beyond the bare loop's (what a loaded machine inflates least), then the same in
+``redrive.benchmarks.engine``).  It prints the median and minimum over the passes of the CPU
+per frame beyond the bare loop's (what a loaded machine inflates least: the engine's thread, and
+with the writer the whole process — since h-engine5 the writer encodes its parts on a pool's
+threads; a tree from before has them on the one thread), then the same in
 wall time (what the target is judged on; it holds the writer's fsyncs, which are no CPU time of
 this thread), with the load average.  Used for BENCHMARKS.md's "Engine overhead, third pass" (issue 20).
 """

@@ -1,6 +1,7 @@
 """The results writer alone: 500 no-op frames' records written and the run closed (its one
-flush: four Parquet parts and the manifest, fsynced), wall and thread CPU per frame, median and
-minimum of ``--passes`` after a warm-up, in this process.  Alternate two trees in fresh
+flush: four Parquet parts and the manifest, fsynced), wall, thread CPU and process CPU (every
+thread: the parts are written on a pool's threads) per frame, median and minimum of
+``--passes`` after a warm-up, in this process.  Alternate two trees in fresh
 processes to compare them (BENCHMARKS.md, branch h-engine5)::
 
     for i in 1 2 3; do for s in /tmp/base/src src; do
@@ -34,20 +35,22 @@ def main() -> None:
     engine.close()
     setup = RunSetup(log=SourceLog(path="(in memory)", format="bench", sha256=None))
     tmp = Path(tempfile.mkdtemp(prefix="redrive-writer-close-"))
-    wall, cpu = [], []
+    wall, cpu, proc = [], [], []
     for r in range(args.passes + 1):
         writer = RunWriter(tmp / f"r{r}", setup=setup)
-        t0, c0 = time.perf_counter(), time.thread_time()
+        t0, c0, p0 = time.perf_counter(), time.thread_time(), time.process_time()
         for record in records:
             writer.write_frame(record)
         writer.close(status=RunStatus.COMPLETE)
         if r:  # the first pass warms up
             wall.append((time.perf_counter() - t0) / args.frames * 1e6)
             cpu.append((time.thread_time() - c0) / args.frames * 1e6)
+            proc.append((time.process_time() - p0) / args.frames * 1e6)
     load = Path("/proc/loadavg").read_text().split()[0]
     print(
         f"writer µs/frame: wall {statistics.median(wall):.1f} (min {min(wall):.1f}), "
-        f"thread CPU {statistics.median(cpu):.1f} (min {min(cpu):.1f}); load {load}"
+        f"thread CPU {statistics.median(cpu):.1f} (min {min(cpu):.1f}), "
+        f"process CPU {statistics.median(proc):.1f} (min {min(proc):.1f}); load {load}"
     )
 
 
