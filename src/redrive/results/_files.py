@@ -16,6 +16,7 @@ import json
 import os
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import wait as futures_wait
 from pathlib import Path
 from typing import Any
 
@@ -97,8 +98,11 @@ def write_files(
             final = (path.with_name(path.name + ".tmp"), path)
             _write_synced(final[0], payload)
     finally:
-        for future in pending:
-            future.result()  # every write done (or its error raised) before any rename
+        # even on an error or Ctrl-C here: once this returns nothing writes these temp files
+        # any more (a retry of the same flush writes the same names)
+        futures_wait(pending)
+    for future in pending:
+        future.result()  # every write done, or its error raised, before any rename
     for tmp, (path, _) in zip(tmps, files, strict=True):
         os.replace(tmp, path)
     if final is not None:
