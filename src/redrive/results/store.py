@@ -129,7 +129,6 @@ class RunWriter:
         self.path = Path(run_dir)
         self.flush_every = int(flush_every)
         self.flush_interval_s = float(flush_interval_s)
-        self._last_flush = time.monotonic()
         path = self.path
         if path.exists() and not path.is_dir():
             msg = f"{path} is a file, not a run directory; choose another --out"
@@ -170,6 +169,9 @@ class RunWriter:
             self._lock.release()
             raise
         self._parts_before = self._next_part  # parts a resumed run had before this writer
+        # the flush interval counts from here: opening (pyarrow's first conversion, the manifest's
+        # fsync) can take seconds on a loaded machine and is no flush
+        self._last_flush = time.monotonic()
 
     # -- opening -----------------------------------------------------------------------------
 
