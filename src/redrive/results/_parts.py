@@ -1,4 +1,5 @@
-"""The parts of a run directory: one Parquet file per table per flush, written atomically.
+"""The parts of a run directory: one Parquet file per table per flush (written atomically by
+:func:`redrive.results._files.write_files`).
 
 ``RUN/<table>/part-NNNNN.parquet``; a part of any table counts only when the ``frames`` part
 of the same number exists (see :mod:`redrive.results.store`).
@@ -6,22 +7,18 @@ of the same number exists (see :mod:`redrive.results.store`).
 
 from __future__ import annotations
 
-import os
 import re
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 import pyarrow as pa
 import pyarrow.parquet as pq
 
 from redrive.errors import ConfigError
 
-__all__ = ["PART_RE", "part_name", "parts_on_disk", "read_part", "write_part"]
+__all__ = ["PART_RE", "part_name", "parts_on_disk", "read_part"]
 
 PART_RE = re.compile(r"^part-(\d{5,})\.parquet$")
-#: Parquet writer options: fixed, so equal tables give equal bytes.
-_PARQUET_OPTIONS: dict[str, Any] = {"compression": "zstd", "use_dictionary": True}
 
 
 def part_name(number: int) -> str:
@@ -58,13 +55,3 @@ def read_part(path: Path, schema: pa.Schema, columns: Sequence[str] | None = Non
         )
         raise ConfigError(msg) from err
     return table
-
-
-def write_part(path: Path, table: pa.Table) -> None:
-    """Write ``table`` to ``path`` atomically (temp file, fsync, rename)."""
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "wb") as fh:
-        pq.write_table(table, fh, **_PARQUET_OPTIONS)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)

@@ -38,6 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from redrive.results._fields import DAMAGED_ADVICE, Fields, manifest_error
+from redrive.results._files import write_json_atomic
 from redrive.types import Role, SensorType, to_jsonable
 
 __all__ = [
@@ -543,17 +544,6 @@ def upgrade_v1(data: Mapping[str, Any]) -> dict[str, Any]:
     if out.get("summary") == {}:
         out["summary"] = None
     return out
-
-
-def write_json_atomic(path: Path, data: Mapping[str, Any]) -> None:
-    """Write ``data`` as indented JSON to ``path`` through a temp file and ``os.replace``."""
-    text = json.dumps(data, indent=2, sort_keys=False, allow_nan=False) + "\n"
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", encoding="utf-8") as fh:
-        fh.write(text)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
 
 
 def write_manifest(run_dir: Path, manifest: RunManifest) -> None:

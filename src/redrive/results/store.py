@@ -1,8 +1,10 @@
 """Writing and reading a run directory (layout: see :mod:`redrive.results`).
 
-Crash safety: every part is written to a ``*.tmp`` file and renamed into place; within one flush
-the ``frames`` part is renamed last, so a part of any table counts only when the ``frames`` part of
-the same number exists.  A killed writer therefore leaves complete flushes plus, at most, orphan
+Crash safety: every part is written to a ``*.tmp`` file, fsynced and renamed into place (a
+flush's files are fsynced together, then renamed in order:
+:func:`~redrive.results._files.write_files`); within one flush the ``frames`` part is renamed
+last (then the manifest), so a part of any table counts only when the ``frames`` part of the
+same number exists.  A killed writer therefore leaves complete flushes plus, at most, orphan
 parts and temp files of the flush it was in: readers ignore them, a resume deletes them.
 """
 
@@ -12,7 +14,7 @@ import json
 import logging
 import os
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 from types import TracebackType
@@ -23,7 +25,8 @@ import pyarrow.compute as pc
 
 from redrive.errors import ConfigError
 from redrive.results._buffers import TableBuffers
-from redrive.results._parts import PART_RE, part_name, parts_on_disk, read_part, write_part
+from redrive.results._files import json_bytes, write_files
+from redrive.results._parts import PART_RE, part_name, parts_on_disk, read_part
 from redrive.results.manifest import (
     MANIFEST_NAME,
     ResumeRecord,
@@ -126,7 +129,6 @@ class RunWriter:
         self.path = Path(run_dir)
         self.flush_every = int(flush_every)
         self.flush_interval_s = float(flush_interval_s)
-        self._last_flush = time.monotonic()
         path = self.path
         if path.exists() and not path.is_dir():
             msg = f"{path} is a file, not a run directory; choose another --out"
@@ -167,6 +169,9 @@ class RunWriter:
             self._lock.release()
             raise
         self._parts_before = self._next_part  # parts a resumed run had before this writer
+        # the flush interval counts from here: opening (pyarrow's first conversion, the manifest's
+        # fsync) can take seconds on a loaded machine and is no flush
+        self._last_flush = time.monotonic()
 
     # -- opening -----------------------------------------------------------------------------
 
@@ -280,30 +285,53 @@ class RunWriter:
 
     def flush(self) -> None:
         """Write what is buffered as one new part per table (``frames`` last), then the manifest."""
-        self._flush(manifest=True)
-
-    def _flush(self, *, manifest: bool) -> None:
-        """:meth:`flush`; without the manifest's ``frames_done`` when the caller writes the
-        manifest next (:meth:`close`: a resume counts the frames from the parts anyway)."""
         self._check_open()
-        if not self._buffered and not self._has_resources:
+        parts = self._take_parts()
+        if parts is None:
             return
+        files, done = parts
+        self._commit(files, done, lambda: replace(self._manifest, frames_done=len(done)))
+
+    def _take_parts(self) -> tuple[list[tuple[Path, pa.Table | bytes]], set[int]] | None:
+        """The buffered frames as the next flush's parts (``frames`` last) and the frames done
+        once they are written; None when nothing is buffered."""
+        if not self._buffered and not self._has_resources:
+            return None
         self._last_flush = time.monotonic()
         tables = self._buffers.take()
         self._kept_late.append(tables["frames"].select(("late",)))
         if "steps" in tables:
             self._kept_steps.append(tables["steps"].select(_SUMMARY_STEP_COLUMNS))
         number = self._next_part
-        for name, table in tables.items():  # SCHEMAS order: frames last
-            write_part(self.path / name / part_name(number), table)
-        self._next_part += 1
-        self._done |= self._buffered
-        logger.debug("%s: part %d, %d frames", self.path, number, len(self._buffered))
+        files: list[tuple[Path, pa.Table | bytes]] = [
+            (self.path / name / part_name(number), table)  # SCHEMAS order: frames last
+            for name, table in tables.items()
+        ]
+        return files, self._done | self._buffered
+
+    def _commit(
+        self,
+        files: list[tuple[Path, pa.Table | bytes]],
+        done: set[int],
+        manifest: Callable[[], RunManifest],
+    ) -> None:
+        """Write a flush's parts and then the manifest ``manifest()`` makes (made while the
+        parts are encoded; all fsynced, then renamed in order: the parts, ``frames`` last, then
+        the manifest), and count the flush as done."""
+        made: list[RunManifest] = []
+
+        def manifest_file() -> tuple[Path, bytes]:
+            made.append(manifest())
+            return self.path / MANIFEST_NAME, json_bytes(made[0].to_json())
+
+        write_files(files, last=manifest_file)
+        if files:
+            logger.debug("%s: part %d, %d frames", self.path, self._next_part, len(self._buffered))
+            self._next_part += 1
+        self._done = done
         self._buffered = set()
         self._has_resources = False
-        self._manifest = replace(self._manifest, frames_done=len(self._done))
-        if manifest:
-            write_manifest(self.path, self._manifest)
+        self._manifest = made[0]
 
     def close(self, *, status: RunStatus, summary: Mapping[str, Any] | None = None) -> None:
         """Flush, then mark the run ``complete``, ``interrupted`` or ``failed``.
@@ -325,18 +353,24 @@ class RunWriter:
         extra = _jsonable(summary or {})
         self._summary({"frames": 0, "late_frames": 0, **extra})  # refused before closing
         try:
-            self._flush(manifest=False)
-            computed = _computed_summary(
-                self._columns("frames", ("late",), self._kept_late),
-                self._columns("steps", _SUMMARY_STEP_COLUMNS, self._kept_steps),
-            )
-            self._manifest = replace(
-                self._manifest,
-                summary=self._summary({**computed, **extra}),
-                status=RunStatus(status),
-                finished=now_iso(),
-            )
-            write_manifest(self.path, self._manifest)
+            # the last flush's parts and the closing manifest are written together; its summary
+            # is computed from the tables kept in memory, this flush's included
+            files, done = self._take_parts() or ([], self._done)
+
+            def closing() -> RunManifest:
+                computed = _computed_summary(
+                    self._columns("frames", ("late",), self._kept_late),
+                    self._columns("steps", _SUMMARY_STEP_COLUMNS, self._kept_steps),
+                )
+                return replace(
+                    self._manifest,
+                    frames_done=len(done),
+                    summary=self._summary({**computed, **extra}),
+                    status=RunStatus(status),
+                    finished=now_iso(),
+                )
+
+            self._commit(files, done, closing)
         finally:
             self._closed = True
             self._lock.release()
