@@ -256,3 +256,31 @@ def test_closed_loop_stops_behind_a_stopped_car() -> None:
     assert speed[-20:].max() == 0.0  # stopped, and held
     assert gaps[-1] == pytest.approx(2.0, abs=0.8)
     assert np.abs(xy[:, 1]).max() < 0.05  # straight on, no swerving
+
+
+def test_bind_loads_every_kernel_a_step_uses() -> None:
+    """numba loads (or compiles) a kernel per argument types on first call: bind makes those
+    calls with the types a run gives (read-only waypoints, stacked corners), so a run's first
+    frame does not pay for it inside its latency."""
+    import numba
+
+    from redrive.algorithms import VEHICLE_STATE
+    from redrive.algorithms.reference import _control_kernels, _plan_kernels
+
+    planner, controller = IdmPlanner(), PurePursuitPid()
+    planner.bind({}, extras=[VEHICLE_STATE])
+    controller.bind({}, extras=[VEHICLE_STATE])
+    kernels = [
+        f
+        for module in (_plan_kernels, _control_kernels)
+        for f in vars(module).values()
+        if isinstance(f, numba.core.registry.CPUDispatcher)
+    ]
+    loaded = {f: list(f.signatures) for f in kernels}
+    parked = DetectedObject(
+        object_class=ObjectClass.VEHICLE,
+        box=Box3D(center=np.array([30.0, 0.2, 0.8]), size=np.array([4.5, 1.8, 1.6])),
+    )
+    model = BicycleModel(EgoGeometry(), speed_mps=8.0)
+    drive(planner, controller, model, seconds=1.0, obstacles_map=[parked])
+    assert {f: list(f.signatures) for f in kernels} == loaded

@@ -198,6 +198,9 @@ class PurePursuitPid(Algorithm):
         path = np.array([[0.0, 0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.1]])
         lookahead_point(np.ascontiguousarray(path[:, :2]), 1.0)
         path_speeds(path, self._previews)
+        path.flags.writeable = False  # as a PlannedPath's waypoints (numba types them apart)
+        lookahead_point(path, 1.0)
+        path_speeds(path, self._previews)
 
     def reset(self) -> None:
         self._integral = 0.0

@@ -273,7 +273,13 @@ class IdmPlanner(Algorithm):
         here, before a run's first frame, not inside that frame's latency."""
         super().bind(sensors, extras=extras)
         self._profile(1.0, np.array([30.0]), np.array([0.0]))
-        Polyline([[0.0, 0.0], [1.0, 0.0]]).project([[0.5, 0.5]])
+        line = Polyline([[0.0, 0.0], [1.0, 0.0]])
+        line.project([[0.5, 0.5]])
+        line.points_at([0.5])
+        # the leaders' kernel with the argument types _leaders gives it
+        leaders_on_path(
+            np.zeros((1, 8, 3)), np.zeros((1, 3)), np.zeros((1, 3)), line.xy, line.s, 1.0, 0.0, 1.0
+        )
 
     # -- the step -----------------------------------------------------------------------------
 
