@@ -14,6 +14,10 @@ Loops (medians over the rounds, ms a pass over the bag):
 
 ``read + xyz copy`` − ``read`` is what the copy costs in the loop (cold source), to compare with
 the same copy repeated on one hot chunk (printed last).
+
+The ``V12`` gather is what the decoder did until branch h-read5; it now copies each cloud's
+whole point bytes (in groups of at most 256 KiB) and views xyz in them, strided: the ``read +
+decode`` loop measures that, and ``benchmarks/read_cpu.py`` compares two trees.
 """
 
 from __future__ import annotations
