@@ -11,6 +11,7 @@ import socket
 import struct
 import subprocess
 import sys
+import threading
 import time
 import xmlrpc.client
 from collections.abc import Iterator
@@ -227,14 +228,22 @@ def test_records_what_rosbag_record_records(
     assert not list(tmp_path.rglob(".*.part"))
 
 
-def _read_until(proc: subprocess.Popen[str], text: str) -> None:
+def _read_until(proc: subprocess.Popen[str], text: str, timeout_s: float = 180.0) -> None:
+    """Read ``proc``'s stderr until a line has ``text``; a process that never says it (but
+    goes on running) is killed after ``timeout_s`` — generous, for a loaded machine — so the
+    test fails with what it said instead of hanging."""
     assert proc.stderr is not None
     seen = []
-    for line in proc.stderr:
-        seen.append(line)
-        if text in line:
-            return
-    pytest.fail(f"redrive live never said {text!r}:\n{''.join(seen)}")
+    watchdog = threading.Timer(timeout_s, proc.kill)
+    watchdog.start()
+    try:
+        for line in proc.stderr:
+            seen.append(line)
+            if text in line:
+                return
+    finally:
+        watchdog.cancel()
+    pytest.fail(f"redrive live never said {text!r} (killed after {timeout_s} s):\n{''.join(seen)}")
 
 
 def _wait_output(process: RosProcess, text: str) -> None:
