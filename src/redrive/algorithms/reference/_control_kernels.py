@@ -29,6 +29,8 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
+from redrive.algorithms.reference._numeric_kernels import interp_at, segment_at
+
 __all__ = ["lookahead_point", "path_speeds"]
 
 _F = TypeVar("_F", bound=Callable[..., Any])
@@ -94,42 +96,9 @@ def lookahead_point(
             best, best_d, best_t = i, d, t
     s_target = s_start[best] + best_t * seg_len[best] + lookahead_m
     # searchsorted(side="right") - 1, clipped to the segments; a NaN key sorts last
-    k = m
-    if not math.isnan(s_target):
-        k = 0
-        while k < m and not s_target < s_start[k]:
-            k += 1
-    k -= 1
-    if k < 0:
-        k = 0
-    if k > m - 1:
-        k = m - 1
+    k = segment_at(s_target, s_start, m, m - 1)
     f = (s_target - s_start[k]) / seg_len[k]
     return True, ax[k] + f * abx[k], ay[k] + f * aby[k]
-
-
-@_jit
-def _interp(x: float, xp: _F64, fp: _F64) -> float:  # pragma: no cover - compiled
-    """``np.interp`` at one point (``xp`` ascending)."""
-    n = xp.shape[0]
-    if math.isnan(x):
-        return x
-    if x > xp[n - 1]:
-        return float(fp[n - 1])
-    if x < xp[0]:
-        return float(fp[0])
-    j = 0
-    while j + 1 < n and x >= xp[j + 1]:
-        j += 1
-    if j == n - 1 or xp[j] == x:
-        return float(fp[j])
-    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
-    out: float = slope * (x - xp[j]) + fp[j]
-    if math.isnan(out):
-        out = slope * (x - xp[j + 1]) + fp[j + 1]
-        if math.isnan(out) and fp[j] == fp[j + 1]:
-            out = fp[j]
-    return out
 
 
 @_jit
@@ -183,5 +152,5 @@ def path_speeds(waypoints: _F64, times_s: _F64) -> _F64:  # pragma: no cover - c
         if last < t1:
             t1 = last
         if t1 > t0:
-            out[i] = (_interp(t1, times, s) - _interp(t0, times, s)) / (t1 - t0)
+            out[i] = (interp_at(t1, times, s) - interp_at(t0, times, s)) / (t1 - t0)
     return out

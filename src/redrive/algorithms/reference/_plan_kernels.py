@@ -30,6 +30,7 @@ import numpy as np
 import numpy.typing as npt
 
 from redrive.algorithms.reference._kernels import project_on_segments
+from redrive.algorithms.reference._numeric_kernels import interp_at, nan_span, segment_at
 
 __all__ = ["idm_profile", "leaders_on_path", "points_at", "polyline_arc", "project_pruned"]
 
@@ -162,30 +163,6 @@ def polyline_arc(xy: _F64) -> tuple[_F64, _F64]:  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def _interp(x: float, xp: _F64, fp: _F64, col: int) -> float:  # pragma: no cover - compiled
-    """``np.interp(x, xp, fp[:, col])`` at one point (``xp`` ascending, ≥ 2 values)."""
-    n = xp.shape[0]
-    if math.isnan(x):
-        return x
-    if x > xp[n - 1]:
-        return float(fp[n - 1, col])
-    if x < xp[0]:
-        return float(fp[0, col])
-    j = 0
-    while j + 1 < n and x >= xp[j + 1]:
-        j += 1
-    if j == n - 1 or xp[j] == x:
-        return float(fp[j, col])
-    slope = (fp[j + 1, col] - fp[j, col]) / (xp[j + 1] - xp[j])
-    out: float = slope * (x - xp[j]) + fp[j, col]
-    if math.isnan(out):
-        out = slope * (x - xp[j + 1]) + fp[j + 1, col]
-        if math.isnan(out) and fp[j, col] == fp[j + 1, col]:
-            out = fp[j, col]
-    return out
-
-
-@numba.njit(cache=True, nogil=True)
 def points_at(xy: _F64, s: _F64, s_m: _F64) -> _F64:  # pragma: no cover - compiled
     """:meth:`Polyline.points_at`: (K, 2) points of the polyline (vertices ``xy`` (M, 2), arc
     lengths ``s``) at arc lengths ``s_m`` (K,) — ``np.interp`` of x and y, and beyond either end
@@ -216,8 +193,8 @@ def points_at(xy: _F64, s: _F64, s_m: _F64) -> _F64:  # pragma: no cover - compi
             out[i, 0] = xy[0, 0] + (v - 0.0) * bx
             out[i, 1] = xy[0, 1] + (v - 0.0) * by
         else:
-            out[i, 0] = _interp(v, s, xy, 0)
-            out[i, 1] = _interp(v, s, xy, 1)
+            out[i, 0] = interp_at(v, s, xy[:, 0])
+            out[i, 1] = interp_at(v, s, xy[:, 1])
     return out
 
 
@@ -361,29 +338,8 @@ def leaders_on_path(  # noqa: PLR0917 - numba takes no keyword-only parameters
     out_v = np.empty(n)
     count = 0
     for i in range(n):
-        s_lo = s_all[4 * i]
-        s_hi = s_lo
-        lat_lo = lat_all[4 * i]
-        lat_hi = lat_lo
-        for c in range(1, 4):
-            v = s_all[4 * i + c]
-            if math.isnan(s_lo) or math.isnan(v):
-                s_lo = math.nan
-                s_hi = math.nan
-            else:
-                if v < s_lo:
-                    s_lo = v
-                if v > s_hi:
-                    s_hi = v
-            w = lat_all[4 * i + c]
-            if math.isnan(lat_lo) or math.isnan(w):
-                lat_lo = math.nan
-                lat_hi = math.nan
-            else:
-                if w < lat_lo:
-                    lat_lo = w
-                if w > lat_hi:
-                    lat_hi = w
+        s_lo, s_hi = nan_span(s_all, 4 * i, 4)
+        lat_lo, lat_hi = nan_span(lat_all, 4 * i, 4)
         in_corridor = lat_lo < half_width_m and lat_hi > -half_width_m
         ahead = s_hi > front_m and s_lo < far_m
         if not (in_corridor and ahead):
@@ -391,16 +347,7 @@ def leaders_on_path(  # noqa: PLR0917 - numba takes no keyword-only parameters
         # the tangent of the segment holding the centre's foot (searchsorted right - 1,
         # clipped to the segments; a NaN sorts last)
         foot = s_all[4 * n + i]
-        j = m
-        if not math.isnan(foot):
-            j = 0
-            while j < m and not foot < s[j]:
-                j += 1
-        j -= 1
-        if j < 0:
-            j = 0
-        if j > m - 2:
-            j = m - 2
+        j = segment_at(foot, s, m, m - 2)
         dx = xy[j + 1, 0] - xy[j, 0]
         dy = xy[j + 1, 1] - xy[j, 1]
         h = math.hypot(dx, dy)

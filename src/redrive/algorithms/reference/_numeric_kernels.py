@@ -1,0 +1,78 @@
+"""numpy's scalar special cases written out for the planner's and controller's numba kernels
+(``_plan_kernels``, ``_control_kernels``): the same float64 operations in the same order, so the
+kernels stay bit for bit equal to the numpy code they replaced."""
+
+# clip written out, the first argument kept as numpy's clip does
+# ruff: noqa: PLR1730
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+import numpy.typing as npt
+
+__all__ = ["interp_at", "nan_span", "segment_at"]
+
+_F64 = npt.NDArray[np.float64]
+
+
+@numba.njit(cache=True, nogil=True)
+def interp_at(x: float, xp: _F64, fp: _F64) -> float:  # pragma: no cover - compiled
+    """``np.interp`` at one point (``xp`` ascending): an end point, a knot hit exactly, a NaN
+    slope product retried from the right knot."""
+    n = xp.shape[0]
+    if math.isnan(x):
+        return x
+    if x > xp[n - 1]:
+        return float(fp[n - 1])
+    if x < xp[0]:
+        return float(fp[0])
+    j = 0
+    while j + 1 < n and x >= xp[j + 1]:
+        j += 1
+    if j == n - 1 or xp[j] == x:
+        return float(fp[j])
+    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
+    out: float = slope * (x - xp[j]) + fp[j]
+    if math.isnan(out):
+        out = slope * (x - xp[j + 1]) + fp[j + 1]
+        if math.isnan(out) and fp[j] == fp[j + 1]:
+            out = fp[j]
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def segment_at(v: float, starts: _F64, m: int, last: int) -> int:  # pragma: no cover - compiled
+    """``np.searchsorted(starts[:m], v, side="right") - 1`` clipped to ``[0, last]`` (a NaN
+    key sorts last)."""
+    k = m
+    if not math.isnan(v):
+        k = 0
+        while k < m and not v < starts[k]:
+            k += 1
+    k -= 1
+    if k < 0:
+        k = 0
+    if k > last:
+        k = last
+    return k
+
+
+@numba.njit(cache=True, nogil=True)
+def nan_span(values: _F64, start: int, count: int) -> tuple[float, float]:  # pragma: no cover
+    """``values[start:start + count]``'s minimum and maximum as numpy's (a NaN wins both)."""
+    lo = values[start]
+    hi = lo
+    for c in range(1, count):
+        v = values[start + c]
+        if math.isnan(lo) or math.isnan(v):
+            lo = math.nan
+            hi = math.nan
+        else:
+            if v < lo:
+                lo = v
+            if v > hi:
+                hi = v
+    return lo, hi
