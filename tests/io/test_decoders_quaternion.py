@@ -38,6 +38,7 @@ def test_rotation_matrix_is_orthonormal_and_matches_transform(q: list[float]) ->
 @example(q=[1.0, 0.0, 1.0, 0.0])  # gimbal lock, pitch -90°
 @example(q=[-0.2090, 0.6755, 0.2090, 0.6755])  # yaw 0.6 then pitch +90°: gimbal lock
 @example(q=[1.0, 0.0, 1.0, 1e-06])  # just off the lock: roll and yaw are ill-conditioned there
+@example(q=[1.0, 0.0, 0.99999, 0.0])  # sin(pitch) 2.5e-11 from the lock: no longer snapped to it
 def test_euler_angles_rebuild_the_rotation(q: list[float]) -> None:
     roll, pitch, yaw = euler_from_quaternion(q)
     cr, sr, cp, sp, cy, sy = (

@@ -53,7 +53,7 @@ def euler_from_quaternion(q_xyzw: npt.ArrayLike) -> tuple[float, float, float]:
     x, y, z, w = quaternion_normalized(q_xyzw)
     sin_pitch = max(-1.0, min(1.0, 2 * (w * y - z * x)))
     pitch_rad = math.asin(sin_pitch)
-    if abs(sin_pitch) > 1.0 - 1e-10:  # gimbal lock: only yaw - roll is defined; roll := 0
+    if abs(sin_pitch) > 1.0 - 1e-14:  # gimbal lock: only yaw - roll is defined; roll := 0
         return 0.0, pitch_rad, math.atan2(2 * (w * z - x * y), 1 - 2 * (x * x + z * z))
     roll_rad = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
     yaw_rad = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
