@@ -55,6 +55,7 @@ from redrive.transport.stream import (
     new_message,
     socket_name,
     wait_fd,
+    yield_cpu,
 )
 from redrive.types import SensorData
 
@@ -455,6 +456,7 @@ class Reader:
             if not spin_until:
                 spin_until = time.perf_counter_ns() + SPIN_NS
             if time.perf_counter_ns() < spin_until:
+                yield_cpu()  # see SPIN_NS
                 continue  # poll write_seq a little before sleeping
             wait = CHECK_S if deadline is None else min(CHECK_S, deadline - now)
             flag = self._base + R_WAITING

@@ -47,13 +47,19 @@ __all__ = [
     "new_message",
     "socket_name",
     "wait_fd",
+    "yield_cpu",
 ]
 
 CHECK_S = 0.05  # how often a waiting side checks that the other side is alive
 #: how long a side that finds nothing to do polls shared memory before it sleeps on its eventfd:
-#: a message (or a free slot) that comes within it costs no system call on either side (the sleep,
-#: the other side's wake-up write) and no context switch
+#: a message (or a free slot) that comes within it costs no sleep, no wake-up write by the other
+#: side and no context switch. Each poll that finds nothing yields the CPU (``sched_yield``,
+#: which returns at once when nothing else wants the core): where the two sides share a core
+#: (a loaded machine) the other side runs instead of the poll — without it, under load the two
+#: sides of a flat-out lossless stream each slept about once per turn of the ring
 SPIN_NS = 20_000
+#: what a poll calls between two looks at shared memory (see SPIN_NS)
+yield_cpu = os.sched_yield
 
 
 class Policy(enum.Enum):
