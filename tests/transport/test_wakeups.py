@@ -1,7 +1,11 @@
-"""Waiting on a stream: a polling side yields the CPU, a sleeping reader is woken by the publish."""
+"""Waiting on a stream (a polling side yields the CPU, a sleeping reader is woken by the publish)
+and the memory fence both sides call per message."""
 
 from __future__ import annotations
 
+import ctypes
+import functools
+import platform
 import threading
 import time
 import uuid
@@ -11,7 +15,7 @@ from typing import Any
 import pytest
 
 from redrive.errors import TransportError
-from redrive.transport import Policy, Reader, Writer, segment_path
+from redrive.transport import Policy, Reader, Writer, _fence, segment_path
 from redrive.transport import reader as reader_module
 from redrive.transport import writer as writer_module
 from redrive.transport.segment import R_WAITING
@@ -105,3 +109,36 @@ def test_a_sleeping_reader_in_any_entry_is_woken_by_the_publish(
                     r.close()
         assert got == [1]
         assert woken[0] == 1
+
+
+def _code(hex_bytes: str) -> tuple[Any, Any]:
+    buf = ctypes.create_string_buffer(bytes.fromhex(hex_bytes), 32)
+    return buf, ctypes.cast(buf, ctypes.CFUNCTYPE(None))  # read, never called
+
+
+@pytest.mark.parametrize(
+    ("code", "ignores"),
+    [
+        ("f30f1efa f048830c2400 c3", True),  # endbr64; lock orq $0,(%rsp); ret (GCC's libatomic)
+        ("0faef0 c3", True),  # mfence; ret
+        ("f0830c2400 c3", True),  # lock orl $0,(%rsp); ret
+        ("83ff00 7405 f048830c2400 c3", False),  # cmp $0,%edi; je …: looks at the order
+        ("c3", False),  # ret: no fence at all
+    ],
+)
+def test_the_fence_is_called_without_its_order_only_where_its_code_ignores_it(
+    code: str, ignores: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(_fence.platform, "machine", lambda: "x86_64")
+    buf, func = _code(code.replace(" ", ""))
+    assert _fence.ignores_its_order(func) is ignores
+    monkeypatch.setattr(_fence.platform, "machine", lambda: "aarch64")
+    assert not _fence.ignores_its_order(func)
+    del buf
+
+
+@pytest.mark.skipif(platform.machine() != "x86_64", reason="the code read is x86-64's")
+def test_the_installed_libatomic_fence_is_called_without_an_argument() -> None:
+    assert _fence.fence is not None
+    assert not isinstance(_fence.fence, functools.partial)
+    _fence.fence()
