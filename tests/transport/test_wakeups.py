@@ -36,6 +36,7 @@ def _counting(monkeypatch: pytest.MonkeyPatch, module: Any) -> list[int]:
 
     monkeypatch.setattr(module, "yield_cpu", count)
     monkeypatch.setattr(module, "SPIN_NS", 10**12)  # poll until the deadline
+    monkeypatch.setattr(module, "POLL_NS", 0)  # yielding from the first poll
     return calls
 
 
@@ -51,6 +52,20 @@ def test_a_reader_polling_for_a_message_yields_the_cpu(
         with r.view(timeout_s=1.0) as msg:  # there already: no poll
             assert msg is not None
         assert r.read(timeout_s=0.0) is None
+
+
+def test_within_its_first_poll_ns_a_reader_polls_without_yielding(
+    name: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    calls = _counting(monkeypatch, reader_module)
+    monkeypatch.setattr(reader_module, "POLL_NS", 10**12)
+    with (
+        Writer(name, capacity_bytes=8, max_readers=1),
+        Reader(name) as r,
+        r.view(timeout_s=0.02) as msg,
+    ):
+        assert msg is None
+    assert calls[0] == 0
 
 
 def test_a_writer_waiting_for_a_lossless_reader_yields_the_cpu(

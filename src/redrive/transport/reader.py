@@ -44,6 +44,7 @@ from redrive.transport.segment import (
 )
 from redrive.transport.stream import (
     CHECK_S,
+    POLL_NS,
     SPIN_NS,
     ChannelStats,
     Message,
@@ -399,7 +400,7 @@ class Reader:
         last_check = 0.0
         jump = latest
         skip_to = 0  # a lossless or backlog reader's first message still held (see below)
-        spin_until = 0
+        spin_until = yield_from = 0
         # A message this call failed to pin twice in a row: its slot is being written again. A
         # keep-latest reader that joined while the writer reused the newest message's slot (every
         # reader then had read it) can want that message; a live writer soon publishes a newer
@@ -453,10 +454,12 @@ class Reader:
                     continue
             if deadline is not None and now >= deadline:
                 return -1, 0, 0
+            t_ns = time.perf_counter_ns()
             if not spin_until:
-                spin_until = time.perf_counter_ns() + SPIN_NS
-            if time.perf_counter_ns() < spin_until:
-                yield_cpu()  # see SPIN_NS
+                spin_until, yield_from = t_ns + SPIN_NS, t_ns + POLL_NS
+            if t_ns < spin_until:
+                if t_ns >= yield_from:
+                    yield_cpu()  # see SPIN_NS
                 continue  # poll write_seq a little before sleeping
             wait = CHECK_S if deadline is None else min(CHECK_S, deadline - now)
             flag = self._base + R_WAITING

@@ -34,6 +34,7 @@ from redrive.transport.segment import (
 
 __all__ = [
     "CHECK_S",
+    "POLL_NS",
     "SPIN_NS",
     "ChannelStats",
     "Message",
@@ -53,11 +54,14 @@ __all__ = [
 CHECK_S = 0.05  # how often a waiting side checks that the other side is alive
 #: how long a side that finds nothing to do polls shared memory before it sleeps on its eventfd:
 #: a message (or a free slot) that comes within it costs no sleep, no wake-up write by the other
-#: side and no context switch. Each poll that finds nothing yields the CPU (``sched_yield``,
-#: which returns at once when nothing else wants the core): where the two sides share a core
-#: (a loaded machine) the other side runs instead of the poll — without it, under load the two
-#: sides of a flat-out lossless stream each slept about once per turn of the ring
+#: side and no context switch. After the first POLL_NS of it, each poll that finds nothing yields
+#: the CPU (``sched_yield``, which returns at once when nothing else wants the core): where the
+#: two sides share a core (a loaded machine) the other side runs instead of the poll — without
+#: it, under load the two sides of a flat-out lossless stream each slept about once per turn of
+#: the ring — while what comes within POLL_NS (the other side on its own core) is seen without
+#: a system call in between
 SPIN_NS = 20_000
+POLL_NS = 5_000
 #: what a poll calls between two looks at shared memory (see SPIN_NS)
 yield_cpu = os.sched_yield
 

@@ -43,6 +43,7 @@ from redrive.transport.segment import (
 )
 from redrive.transport.stream import (
     CHECK_S,
+    POLL_NS,
     SPIN_NS,
     ChannelStats,
     Policy,
@@ -311,7 +312,7 @@ class Writer:
         lossless = self._lossless
         deadline: float | None = None
         last_check = 0.0
-        spin_until = 0
+        spin_until = yield_from = 0
         while True:
             # one pass over the reader entries: the live ones, their pins, the lowest read
             # position of all and of the lossless ones (-1: no such reader; positions are ≥ 0)
@@ -362,10 +363,12 @@ class Writer:
             if now - last_check >= CHECK_S:
                 last_check = now
                 self._reap_dead_readers()
+            t_ns = time.perf_counter_ns()
             if not spin_until:
-                spin_until = time.perf_counter_ns() + SPIN_NS
-            if time.perf_counter_ns() < spin_until:
-                yield_cpu()  # see SPIN_NS
+                spin_until, yield_from = t_ns + SPIN_NS, t_ns + POLL_NS
+            if t_ns < spin_until:
+                if t_ns >= yield_from:
+                    yield_cpu()  # see SPIN_NS
                 continue  # poll the readers' positions a little before sleeping
             wait = CHECK_S if deadline is None else min(CHECK_S, deadline - now)
             w[W_WRITER_WAITING] = 1
