@@ -117,9 +117,16 @@ def ignores_its_order(func: Any) -> bool:
     address = ctypes.cast(func, ctypes.c_void_p).value
     if not address:
         return False
-    code = ctypes.string_at(address, 16)
-    code = code.removeprefix(_ENDBR64)
-    return code.startswith(_X86_64_FENCES)
+    # byte by byte, each read only while the bytes before match a pattern: nothing past the
+    # function's own instructions is read (a short function at the end of its mapping)
+    return any(
+        _starts_with(address, pattern) or _starts_with(address, _ENDBR64 + pattern)
+        for pattern in _X86_64_FENCES
+    )
+
+
+def _starts_with(address: int, pattern: bytes) -> bool:
+    return all(ctypes.string_at(address + i, 1)[0] == byte for i, byte in enumerate(pattern))
 
 
 #: a full (sequentially consistent) memory fence.
