@@ -54,8 +54,9 @@ for readers that are busy. Lossless back-pressure mirrors it: the writer stores
 The fence is C11 ``atomic_thread_fence(memory_order_seq_cst)``, exported as a function by GCC's
 ``libatomic`` (``mfence``/``lock or`` on x86-64, ``dmb ish`` on AArch64), called through ctypes
 without releasing the GIL (≈ 0.15 µs; on x86-64, where the library's code is read to be a fence
-whatever the order, without the argument — see :func:`ignores_its_order`). The fences that only weakly ordered CPUs need are written
-``if WEAK_ORDERING: fence()`` on the per-message paths, so x86-64 pays no call for them.
+whatever the order, without the argument — see :func:`ignores_its_order`). The fences that only
+weakly ordered CPUs need are written ``if WEAK_ORDERING: fence()`` on the per-message paths, so
+x86-64 pays no call for them.
 """
 
 from __future__ import annotations
