@@ -201,8 +201,10 @@ class FrameStepper:
         model.x_m, model.y_m, model.yaw_rad = float(e[EX]), float(e[EY]), float(e[EYAW])
         model.speed_mps, model.steer_rad = float(e[ESPEED]), float(e[ESTEER])
         model.accel_mps2, driver.s_m = float(e[EACCEL]), float(e[ES])
-        for index in np.flatnonzero(committed[: self._n_ego_stops]).tolist():
-            driver._committed.add(index)
+        if self._n_ego_stops:
+            for index, flag in enumerate(committed[: self._n_ego_stops].tolist()):
+                if flag:
+                    driver._committed.add(index)
         for k, a in enumerate(walkers):
             if a.start_time_s is None and not math.isnan(walk[k, WSTART]):
                 a.start_time_s = float(walk[k, WSTART])
@@ -210,11 +212,9 @@ class FrameStepper:
         if done:
             fleet._time_s = fleet_t
             w._time_ns = int(clock[0])
-            history = w._history
-            for t_ns, (x, y, yaw) in zip(
-                self._hist_t[:done].tolist(), self._hist[:done].tolist(), strict=True
-            ):
-                history.append((t_ns, x, y, yaw))
+            # (t_ns, x, y, yaw) a step, as World._record_pose appends them
+            xs, ys, yaws = self._hist[:done].T.tolist()
+            w._history.extend(zip(self._hist_t[:done].tolist(), xs, ys, yaws, strict=True))
             w._trim_history()
             if left:
                 fleet._keep(fleet._i[:, fl.ACTIVE] == 1)
