@@ -182,6 +182,7 @@ class FrameStepper:
             1.0 if w.lights.signals else 0.0,
             fl._POWERS,
             search.net,
+            search.blocks,
             search.route_table,
             e,
             p,
@@ -277,6 +278,7 @@ def _frame(  # noqa: PLR0917 (the world's columns; numba has no keyword-only par
     any_lights: float,
     powers: F64,
     net: F64,
+    blocks: F64,
     table: I64,
     e: F64,
     p: F64,
@@ -383,7 +385,7 @@ def _frame(  # noqa: PLR0917 (the world's columns; numba has no keyword-only par
                 q_float[0, nf], q_float[1, nf] = e[ES] + p[CENTER], s_front
                 q_float[2, nf], q_float[3, nf] = s_front + p[HORIZON], p[EWID]
             if nq > 0:
-                gaps, speeds = _gap_kernel(q_int, q_float, p[MARGIN], ids, obst, net)
+                gaps, speeds = _gap_kernel(q_int, q_float, p[MARGIN], ids, obst, net, blocks)
             else:
                 gaps, speeds = np.full(0, np.inf), np.zeros(0)
             fclock = np.empty(3)
