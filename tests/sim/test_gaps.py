@@ -71,6 +71,39 @@ def test_batch_equals_gap_ahead_per_query(layout: str) -> None:
     assert found > 50  # the cases cover leaders found, not only free roads
 
 
+def test_block_skipping_keeps_the_first_closest_segment() -> None:
+    """Obstacles on the route's samples (two segments at distance 0: the first one wins) and on
+    block boundaries, on a curved route: the projection that skips far blocks of segments
+    (``GapSearch.blocks``) picks what gap_ahead's over every segment picks."""
+    net = urban_network(UrbanLayout())
+    routes = [r for r in net.routes.values() if abs(r.heading_rad[-1] - r.heading_rad[0]) > 0.5]
+    assert routes  # a turning route: blocks' boxes overlap, distances tie
+    route = routes[0]
+    search = GapSearch([route])
+    picks = range(1, len(route.s_m) - 1, 3)
+    centers = np.array([route.points[i] for i in picks])
+    n = len(centers)
+    obstacles = Obstacles(
+        ids=np.arange(1, n + 1, dtype=np.int64),
+        centers=centers,
+        lengths=np.full(n, 0.5),
+        widths=np.full(n, 0.5),
+        velocities=np.ones((n, 2)),
+    )
+    queries = [
+        GapQuery(route=route, s_center_m=s, s_front_m=s + 2.0, width_m=1.8, self_id=0)
+        for s in np.arange(0.0, route.length_m, 3.7).tolist()
+    ]
+    found = 0
+    for q, got in zip(queries, search.gaps(queries, obstacles), strict=True):
+        want = gap_ahead(
+            route, obstacles, s_center_m=q.s_center_m, s_front_m=q.s_front_m, width_m=1.8, self_id=0
+        )
+        assert got == want
+        found += math.isfinite(want[0])
+    assert found > 10
+
+
 def test_no_obstacles_or_no_queries() -> None:
     route = urban_network(UrbanLayout()).routes["west_east_0"]
     search = GapSearch([route])

@@ -28,6 +28,10 @@ from redrive.types import Frame, Role, VehicleState
 
 __all__ = ["DEFAULT_DEVIATION_M", "DEFAULT_DEVIATION_RAD", "ClosedLoopMode", "ClosedLoopStep"]
 
+_OK = StepStatus.OK.value
+#: a step record's role (its value) → the Role
+_ROLES = {r.value: r for r in Role}
+
 #: a frame whose driven ego is farther than this from the logged one is flagged ``deviated``.
 DEFAULT_DEVIATION_M = 2.0
 DEFAULT_DEVIATION_RAD = math.radians(10.0)
@@ -86,6 +90,7 @@ class ClosedLoopStep:
         threshold)."""
         dist, dyaw = self.deviation
         command = self.command
+        deviated = None if math.isnan(dist) else (dist > threshold_m or dyaw > threshold_rad)
         return ClosedLoopRecord(
             source=command.source,
             algorithm=command.algorithm,
@@ -95,7 +100,7 @@ class ClosedLoopStep:
             steering_angle_rad=command.commands.steering_angle_rad,
             deviation_m=dist,
             deviation_yaw_rad=dyaw,
-            deviated=self.deviated(threshold_m=threshold_m, threshold_rad=threshold_rad),
+            deviated=deviated,  # as deviated() says, from the deviation computed once
         )
 
 
@@ -151,13 +156,14 @@ class ClosedLoopMode:
 
     def after_frame(self, record: FrameRecord) -> None:
         frame, logged = self._observed.pop(record.frame_index)
+        ok = _OK
         outputs = StageOutputs(
             outputs={
                 s.algorithm: s.output
                 for s in record.steps
-                if s.status == StepStatus.OK.value and s.output is not None
+                if s.status == ok and s.output is not None
             },
-            roles={s.algorithm: Role(s.role) for s in record.steps},
+            roles={s.algorithm: _ROLES[s.role] for s in record.steps},
         )
         command = self.simulator.step(outputs, self.simulator.dt_s)
         self._stepped = True

@@ -129,14 +129,28 @@ class BicycleModel:
         c, s = math.cos(self.yaw_rad), math.sin(self.yaw_rad)
         v, kappa = self.speed_mps, self.curvature_1pm
         lateral = v * v * kappa
+        # one read-only array, its three rows the vectors (VehicleState keeps read-only views
+        # as they are: no copy, no view of each made writeable-less again)
+        rows = np.array(
+            [
+                self.x_m,
+                self.y_m,
+                0.0,
+                v * c,
+                v * s,
+                0.0,
+                self.accel_mps2 * c - lateral * s,
+                self.accel_mps2 * s + lateral * c,
+                0.0,
+            ]
+        )
+        rows.flags.writeable = False
         return VehicleState(
             stamp_ns=stamp_ns,
             frame_id="map",
-            position=np.array([self.x_m, self.y_m, 0.0]),
-            velocity=np.array([v * c, v * s, 0.0]),
-            acceleration=np.array(
-                [self.accel_mps2 * c - lateral * s, self.accel_mps2 * s + lateral * c, 0.0]
-            ),
+            position=rows[0:3],
+            velocity=rows[3:6],
+            acceleration=rows[6:9],
             heading_rad=math.atan2(s, c),
             yaw_rate_rad_s=v * kappa,
         )

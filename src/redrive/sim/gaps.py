@@ -11,6 +11,9 @@ obstacle onto the piece and the nearest one ahead, in loops.
 The answers are bit for bit those of :func:`gap_ahead`: every value is computed with the same
 float64 operations in the same order (the kernel is compiled without ``fastmath``, so nothing is
 reassociated or fused), and ties go to the same (first) segment and the same (first) obstacle.
+The projection skips a block of :data:`BLOCK` segments whose bounding box (:attr:`GapSearch.blocks`)
+lies farther from the obstacle than the closest segment so far, by more than rounding could
+explain: no segment of it could have been the (first) closest one, so the answer is the same.
 """
 
 from __future__ import annotations
@@ -27,10 +30,16 @@ from redrive.sim import kernels
 from redrive.sim.agents import Obstacles
 from redrive.sim.roads import Route
 
-__all__ = ["GapQuery", "GapSearch"]
+__all__ = ["BLOCK", "GapQuery", "GapSearch"]
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
+
+#: segments per block of :attr:`GapSearch.blocks` (the projection's coarse test)
+BLOCK = 16
+#: a block is skipped when its box is farther (squared, m²) than the closest segment so far by
+#: more than this plus a relative 1e-9: far above the rounding of either distance
+_SKIP_MARGIN_M2 = 1e-6
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -97,6 +106,10 @@ class GapSearch:
                 ]
             )
         )
+        #: (4, ceil(samples / BLOCK)): per block of BLOCK samples of :attr:`net`, the bounding
+        #: box (min x, min y, max x, max y) of its samples and the next block's first one —
+        #: every point of the segments that start in the block
+        self.blocks: F64 = _block_boxes(pts)
         #: (2, routes): each route's first sample in :attr:`net` and its sample count
         self.route_table: I64 = np.array(
             [[self._offset[id(r)] for r in self.routes], [len(r.s_m) for r in self.routes]],
@@ -150,12 +163,25 @@ class GapSearch:
             np.ascontiguousarray(ids, dtype=np.int64),
             np.ascontiguousarray(obst, dtype=np.float64),
             self.net,
+            self.blocks,
         )
+
+
+def _block_boxes(pts: F64) -> F64:
+    """:attr:`GapSearch.blocks` of the samples ``pts`` (N, 2)."""
+    n = len(pts)
+    nb = -(-n // BLOCK)
+    out = np.zeros((4, nb))
+    for b in range(nb):
+        part = pts[b * BLOCK : min((b + 1) * BLOCK + 1, n)]
+        out[0, b], out[1, b] = part[:, 0].min(), part[:, 1].min()
+        out[2, b], out[3, b] = part[:, 0].max(), part[:, 1].max()
+    return np.ascontiguousarray(out)
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _gap_kernel(  # noqa: PLR0917 (one batch's arrays; numba has no keyword-only parameters)
-    q_int: I64, q_float: F64, margin: float, ids: I64, obst: F64, net: F64
+    q_int: I64, q_float: F64, margin: float, ids: I64, obst: F64, net: F64, blocks: F64
 ) -> tuple[F64, F64]:  # pragma: no cover - compiled
     """Per query: the gap and the leader's speed along the route (inf and 0: none).
 
@@ -164,7 +190,8 @@ def _gap_kernel(  # noqa: PLR0917 (one batch's arrays; numba has no keyword-only
 
     ``q_int``: (3, Q) the route's first sample in ``net``, its sample count, the agent's id;
     ``q_float``: (4, Q) arclength of the box centre, of the front, the horizon's end, the width;
-    ``obst``: (6, M) centre x, y, length, width, velocity x, y; ``net``: ``GapSearch.net``.
+    ``obst``: (6, M) centre x, y, length, width, velocity x, y; ``net``: ``GapSearch.net``;
+    ``blocks``: ``GapSearch.blocks``.
     """
     route_off, route_n, self_ids = q_int[0], q_int[1], q_int[2]
     s_center, s_front, s_max, widths = q_float[0], q_float[1], q_float[2], q_float[3]
@@ -208,14 +235,25 @@ def _gap_kernel(  # noqa: PLR0917 (one batch's arrays; numba has no keyword-only
             best_d2 = np.inf
             bj = g0
             bt = brx = bry = 0.0
-            for i in range(g0, g1):
-                rx, ry = cx - net_x[i], cy - net_y[i]
-                t = ((rx * seg_x[i] + ry * seg_y[i]) + 0.0) / seg_len2[i]
-                t = min(max(t, 0.0), 1.0)
-                dx, dy = rx - t * seg_x[i], ry - t * seg_y[i]
-                d2 = dx * dx + dy * dy
-                if i == g0 or d2 < best_d2:
-                    best_d2, bj, bt, brx, bry = d2, i, t, rx, ry
+            start = g0
+            while start < g1:
+                b = start // BLOCK
+                stop = min((b + 1) * BLOCK, g1)
+                if start > g0:  # the first segment always counts (a tie keeps it)
+                    bx = max(blocks[0, b] - cx, cx - blocks[2, b], 0.0)
+                    by = max(blocks[1, b] - cy, cy - blocks[3, b], 0.0)
+                    if bx * bx + by * by > best_d2 * (1.0 + 1e-9) + _SKIP_MARGIN_M2:
+                        start = stop
+                        continue
+                for i in range(start, stop):
+                    rx, ry = cx - net_x[i], cy - net_y[i]
+                    t = ((rx * seg_x[i] + ry * seg_y[i]) + 0.0) / seg_len2[i]
+                    t = min(max(t, 0.0), 1.0)
+                    dx, dy = rx - t * seg_x[i], ry - t * seg_y[i]
+                    d2 = dx * dx + dy * dy
+                    if i == g0 or d2 < best_d2:
+                        best_d2, bj, bt, brx, bry = d2, i, t, rx, ry
+                start = stop
             s = net_s[bj] + bt * seg_len[bj]
             cross = seg_x[bj] * bry - seg_y[bj] * brx
             lateral = (-1.0 if cross < 0.0 else 1.0) * math.sqrt(best_d2)

@@ -182,6 +182,7 @@ class FrameStepper:
             1.0 if w.lights.signals else 0.0,
             fl._POWERS,
             search.net,
+            search.blocks,
             search.route_table,
             e,
             p,
@@ -201,8 +202,10 @@ class FrameStepper:
         model.x_m, model.y_m, model.yaw_rad = float(e[EX]), float(e[EY]), float(e[EYAW])
         model.speed_mps, model.steer_rad = float(e[ESPEED]), float(e[ESTEER])
         model.accel_mps2, driver.s_m = float(e[EACCEL]), float(e[ES])
-        for index in np.flatnonzero(committed[: self._n_ego_stops]).tolist():
-            driver._committed.add(index)
+        if self._n_ego_stops:
+            for index, flag in enumerate(committed[: self._n_ego_stops].tolist()):
+                if flag:
+                    driver._committed.add(index)
         for k, a in enumerate(walkers):
             if a.start_time_s is None and not math.isnan(walk[k, WSTART]):
                 a.start_time_s = float(walk[k, WSTART])
@@ -210,11 +213,9 @@ class FrameStepper:
         if done:
             fleet._time_s = fleet_t
             w._time_ns = int(clock[0])
-            history = w._history
-            for t_ns, (x, y, yaw) in zip(
-                self._hist_t[:done].tolist(), self._hist[:done].tolist(), strict=True
-            ):
-                history.append((t_ns, x, y, yaw))
+            # (t_ns, x, y, yaw) a step, as World._record_pose appends them
+            xs, ys, yaws = self._hist[:done].T.tolist()
+            w._history.extend(zip(self._hist_t[:done].tolist(), xs, ys, yaws, strict=True))
             w._trim_history()
             if left:
                 fleet._keep(fleet._i[:, fl.ACTIVE] == 1)
@@ -277,6 +278,7 @@ def _frame(  # noqa: PLR0917 (the world's columns; numba has no keyword-only par
     any_lights: float,
     powers: F64,
     net: F64,
+    blocks: F64,
     table: I64,
     e: F64,
     p: F64,
@@ -383,7 +385,7 @@ def _frame(  # noqa: PLR0917 (the world's columns; numba has no keyword-only par
                 q_float[0, nf], q_float[1, nf] = e[ES] + p[CENTER], s_front
                 q_float[2, nf], q_float[3, nf] = s_front + p[HORIZON], p[EWID]
             if nq > 0:
-                gaps, speeds = _gap_kernel(q_int, q_float, p[MARGIN], ids, obst, net)
+                gaps, speeds = _gap_kernel(q_int, q_float, p[MARGIN], ids, obst, net, blocks)
             else:
                 gaps, speeds = np.full(0, np.inf), np.zeros(0)
             fclock = np.empty(3)
