@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 DEMO_DIR := .demo
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: demo test lint venv clean bench bench-read system-test-deps gui screenshots
+.PHONY: demo test lint venv clean clean-kernels bench bench-read system-test-deps gui screenshots
 
 # Debian's python3 ships without venv/ensurepip: install python3-venv when it is missing.
 $(BIN)/python:
@@ -114,5 +114,11 @@ bench: $(VENV)/.installed-test
 bench-read: $(VENV)/.installed
 	$(BIN)/redrive bench read --help
 
-clean:
+clean: clean-kernels
 	rm -rf $(VENV) $(DEMO_DIR) .mypy_cache .ruff_cache .pytest_cache
+
+## clean-kernels: drop numba's cached compiled kernels (next to the sources, in __pycache__);
+## numba checks only a kernel's own file, so after editing a kernel that another module's
+## kernels call (sim/gaps.py, called by sim/stepper.py), the callers' caches are stale
+clean-kernels:
+	find src -path '*__pycache__*' \( -name '*.nbi' -o -name '*.nbc' \) -delete
