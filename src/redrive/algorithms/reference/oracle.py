@@ -4,16 +4,16 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from types import MappingProxyType
 from typing import Any, ClassVar, NoReturn
 
 import numpy as np
 
 from redrive.algorithms.base import GROUND_TRUTH, Algorithm, Role, StageOutputs
+from redrive.algorithms.reference._oracle_kernels import perturb_rows
 from redrive.errors import AlgorithmError, ConfigError
-from redrive.geometry.se3 import normalize_angle
-from redrive.types import DetectedObject, Frame, ObjectClass, ObjectColumns
+from redrive.types import DetectedObject, Frame, ObjectClass, ObjectColumns, SensorType
 
 __all__ = ["CONFUSABLE_CLASSES", "FALSE_POSITIVE_SHAPES", "NoisyOracle"]
 
@@ -115,6 +115,7 @@ class NoisyOracle(Algorithm):
         self._fp_rate = self._number(config, "false_positive_rate")
         self._fp_conf = self._number(config, "false_positive_confidence", upper=1.0)
         self._p_confuse = self._number(config, "class_confusion_probability", upper=1.0)
+        self._stds = np.array([self._center_std, self._size_std, self._yaw_std, self._vel_std])
         self._visible_only = bool(config["visible_only"])
         self._keep_ids = bool(config["keep_ids"])
         max_range = config["max_range_m"]
@@ -124,6 +125,28 @@ class NoisyOracle(Algorithm):
             self._max_range_m = self._number(config, "max_range_m")
             if self._max_range_m <= FALSE_POSITIVE_MIN_RANGE_M:
                 self._bad("max_range_m", max_range, f"None or > {FALSE_POSITIVE_MIN_RANGE_M} m")
+
+    def bind(self, sensors: Mapping[str, SensorType], *, extras: Iterable[str] = ()) -> None:
+        """As :meth:`Algorithm.bind`, then one made-up perturbation, so that numba loads the
+        oracle's kernel from the cache (or compiles it after an install) here, before a run's
+        first frame, not inside that frame's latency."""
+        super().bind(sensors, extras=extras)
+        frozen3, frozen1 = np.zeros((1, 3)), np.zeros(1)  # ObjectColumns' arrays are read-only
+        frozen3.flags.writeable = frozen1.flags.writeable = False
+        normal3 = np.zeros((1, 3))
+        perturb_rows(
+            frozen3,
+            frozen1,
+            frozen3,
+            frozen3,
+            np.zeros(1, dtype=np.int64),
+            np.zeros(1, dtype=np.bool_),
+            normal3,
+            normal3,
+            np.zeros(1),
+            np.zeros((1, 2)),
+            self._stds,
+        )
 
     def _bad(self, key: str, value: object, wanted: str) -> NoReturn:
         msg = f"algorithm {self.name!r}: config {key} = {value!r}; expected {wanted}"
@@ -186,50 +209,58 @@ class NoisyOracle(Algorithm):
         n = len(rows)
         # every draw is made for every object, in a fixed order, whatever the config
         missed = rng.random(n) < self._p_miss
-        d_center = rng.normal(0.0, 1.0, (n, 3)) * self._center_std
-        d_size = rng.normal(0.0, 1.0, (n, 3)) * self._size_std
-        d_yaw = rng.normal(0.0, 1.0, n) * self._yaw_std
-        d_vel = rng.normal(0.0, 1.0, (n, 2)) * self._vel_std
+        n_center = rng.normal(0.0, 1.0, (n, 3))
+        n_size = rng.normal(0.0, 1.0, (n, 3))
+        n_yaw = rng.normal(0.0, 1.0, n)
+        n_vel = rng.normal(0.0, 1.0, (n, 2))
         confused = rng.random(n) < self._p_confuse
         pick = rng.random(n)  # which other class, as a fraction of the choices
         if n == 0:
             return []
-        # the arithmetic of all objects at once (the same elementwise operations as object by
-        # object), on the ground truth's columns
-        centers = truth.centers[rows] + d_center
-        true_sizes = truth.sizes[rows]
-        sizes = np.maximum(true_sizes * (1.0 + d_size), 0.1 * true_sizes)
-        velocities = truth.velocities[rows]
-        velocities[:, :2] += d_vel
-        orientations = truth.orientations[rows]
-        d_yaws = d_yaw.tolist()
-        true_yaws = truth.yaws_rad[rows].tolist()
-        true_classes = truth.object_classes
-        kept = np.flatnonzero(~missed).tolist()
+        # the arithmetic of the kept objects in one compiled call on the ground truth's
+        # columns (numpy's elementwise operations, bit for bit: ._oracle_kernels), but for
+        # the sizes' np.maximum (see there)
+        index = np.array(rows, dtype=np.int64)
+        true_sizes = truth.sizes[index]
+        d_size = n_size * self._size_std
+        sizes_all = np.maximum(true_sizes * (1.0 + d_size), 0.1 * true_sizes)
+        kept_at, centers, sizes, yaws, velocities, orientations = perturb_rows(
+            truth.centers,
+            truth.yaws_rad,
+            truth.velocities,
+            truth.orientations,
+            index,
+            missed,
+            n_center,
+            sizes_all,
+            n_yaw,
+            n_vel,
+            self._stds,
+        )
+        kept = kept_at.tolist()
         if not kept:
             return []
-        yaws, classes = [], []
-        for i in kept:
-            yaws.append(normalize_angle(true_yaws[i] + d_yaws[i]))
-            orientations[i, 0] = normalize_angle(float(orientations[i, 0]) + d_yaws[i])
-            cls = true_classes[rows[i]]
-            if confused[i]:
-                choices = [c for c in CONFUSABLE_CLASSES if c is not cls]
-                cls = choices[min(int(pick[i] * len(choices)), len(choices) - 1)]
-            classes.append(cls)
         picked = [rows[i] for i in kept]
+        true_classes = truth.object_classes
+        classes = [true_classes[r] for r in picked]
+        if self._p_confuse > 0.0:
+            for j, i in enumerate(kept):
+                if confused[i]:
+                    cls = classes[j]
+                    choices = [c for c in CONFUSABLE_CLASSES if c is not cls]
+                    classes[j] = choices[min(int(pick[i] * len(choices)), len(choices) - 1)]
         ids = truth.object_ids
         return [
             {
-                "object_ids": [ids[i] for i in picked] if self._keep_ids else [-1] * len(kept),
+                "object_ids": [ids[r] for r in picked] if self._keep_ids else [-1] * len(kept),
                 "object_classes": classes,
                 "confidences": truth.confidences[picked],
-                "centers": centers[kept],
-                "sizes": sizes[kept],
+                "centers": centers,
+                "sizes": sizes,
                 "yaws_rad": yaws,
-                "velocities": velocities[kept],
+                "velocities": velocities,
                 "accelerations": truth.accelerations[picked],
-                "orientations": orientations[kept],
+                "orientations": orientations,
             }
         ]
 
