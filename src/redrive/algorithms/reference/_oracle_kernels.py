@@ -23,7 +23,7 @@ _BOOL = npt.NDArray[np.bool_]
 
 @numba.njit(cache=True, nogil=True)
 def _normalize_angle(angle_rad: float) -> float:  # pragma: no cover - compiled
-    wrapped = np.fmod(angle_rad + math.pi, 2.0 * math.pi)  # exact: any fmod gives these bits
+    wrapped: float = np.fmod(angle_rad + math.pi, 2.0 * math.pi)  # exact: any fmod, these bits
     if wrapped < 0.0:
         wrapped += 2.0 * math.pi
     return wrapped - math.pi
