@@ -14,7 +14,7 @@ from redrive.algorithms.reference.oracle import (
     NoisyOracle,
 )
 from redrive.errors import AlgorithmError, ConfigError
-from redrive.types import Box3D, DetectedObject, Frame, ObjectClass, SensorType
+from redrive.types import Box3D, DetectedObject, Frame, ObjectClass, ObjectColumns, SensorType
 
 T0_NS = 1_700_000_000_000_000_000
 QUIET = {
@@ -173,3 +173,36 @@ def test_frame_without_ground_truth_is_an_error_and_binding_needs_it() -> None:
 def test_bad_config_is_refused(config: dict[str, object]) -> None:
     with pytest.raises(ConfigError):
         NoisyOracle().configure(config)
+
+
+def test_ground_truth_sharing_columns_gives_the_output_of_constructed_objects() -> None:
+    """From ground truth built with DetectedObject.many (read as columns) or object by object:
+    the same detections, bit for bit; the output is one batch of shared columns."""
+    made = list(truth(40))
+    made[3] = dataclasses.replace(made[3], num_lidar_points=0)
+    made[5] = dataclasses.replace(made[5], visible=False)
+    made[8] = dataclasses.replace(made[8], num_lidar_points=None, visible=None)
+    batch = DetectedObject.many(
+        object_ids=[o.object_id for o in made],
+        object_classes=[o.object_class for o in made],
+        centers=[o.box.center for o in made],
+        sizes=[o.box.size for o in made],
+        yaws_rad=[o.box.yaw_rad for o in made],
+        velocities=[o.velocity for o in made],
+        orientations=[o.orientation for o in made],
+        num_lidar_points=[o.num_lidar_points for o in made],
+        visible=[o.visible for o in made],
+    )
+    config = {"false_positive_rate": 3.0, "miss_probability": 0.2, "max_range_m": 40.0}
+    config["class_confusion_probability"] = 0.3
+    for index in range(5):
+        want = oracle(**config).step(frame(index, tuple(made)), StageOutputs())
+        got = oracle(**config).step(frame(index, tuple(batch)), StageOutputs())
+        assert ObjectColumns.shared_by(got) is not None
+        assert [repr(o) for o in got] == [repr(o) for o in want]
+        assert len(got) > 0
+        for a, b in zip(got, want, strict=True):
+            for name in ("velocity", "acceleration", "orientation"):
+                assert getattr(a, name).tobytes() == getattr(b, name).tobytes()
+            assert a.box.center.tobytes() == b.box.center.tobytes()
+            assert a.box.size.tobytes() == b.box.size.tobytes()

@@ -10,11 +10,12 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+import numpy as np
 import pyarrow as pa
 
 from redrive.results.records import FrameRecord, ResourceSample, StepRecord
 from redrive.results.schema import SCHEMAS
-from redrive.types import ControlCommands, DetectedObject, PlannedPath, VehicleState
+from redrive.types import ControlCommands, DetectedObject, ObjectColumns, PlannedPath, VehicleState
 
 __all__ = ["TableBuffers"]
 
@@ -76,7 +77,7 @@ class TableBuffers:
         self._steps = rows["steps"].append
         self._commands = rows["commands"].append
         self._paths = rows["paths"].extend
-        self._detections = rows["detections"].append
+        self._detections = rows["detections"].extend
         self.n_frames = 0
 
     # -- filling -----------------------------------------------------------------------------
@@ -97,9 +98,7 @@ class TableBuffers:
         for step in rec.steps:
             self._add_step(fi, stamp, step)
         if gt:
-            add = self._rows["ground_truth"].append
-            for obj in gt:
-                add((fi, stamp, *_object_columns(obj), obj.num_lidar_points, obj.visible))
+            self._rows["ground_truth"].extend(_object_rows((fi, stamp), gt, ground_truth=True))
         if rec.vehicle_state is not None:
             self._rows["ego"].append(_state_row(fi, rec.vehicle_state))
         if rec.logged_vehicle_state is not None:
@@ -140,10 +139,7 @@ class TableBuffers:
             )
         elif isinstance(out, tuple):
             n_outputs = len(out)
-            add = self._detections
-            for obj in out:
-                cols = _object_columns(obj)
-                add((name, fi, stamp, cols[0], cols[1], obj.confidence, *cols[2:]))
+            self._detections(_object_rows((name, fi, stamp), out, ground_truth=False))
         else:
             n_outputs = 0
         self._steps(
@@ -202,6 +198,64 @@ def _state_row(fi: int, vs: VehicleState) -> tuple[Any, ...]:
         vs.heading_rad,
         vs.yaw_rate_rad_s,
     )
+
+
+def _object_rows(
+    head: tuple[Any, ...], objects: Sequence[DetectedObject], *, ground_truth: bool
+) -> list[tuple[Any, ...]]:
+    """The ``detections`` rows (``head`` = algorithm, frame index, stamp; then id, class,
+    confidence, x … az, bbox_x … bbox_h) or ``ground_truth`` rows (``head`` = frame index,
+    stamp; then id, class, x … bbox_h, num_lidar_points, visible) of ``objects``: from their
+    columns when they share them (:meth:`ObjectColumns.shared_by`: no object is built), else
+    object by object — the same values either way."""
+    columns = ObjectColumns.shared_by(objects)
+    if columns is None:
+        if ground_truth:
+            return [
+                (*head, *_object_columns(obj), obj.num_lidar_points, obj.visible) for obj in objects
+            ]
+        rows = []
+        for obj in objects:
+            cols = _object_columns(obj)
+            rows.append((*head, cols[0], cols[1], obj.confidence, *cols[2:]))
+        return rows
+    # x, y, z, l, w, h, yaw, vx … az of every object in one C pass: the floats tolist gives
+    # the objects' arrays, row by row
+    numbers = np.hstack(
+        [
+            columns.centers,
+            columns.sizes,
+            columns.yaws_rad[:, None],
+            columns.velocities,
+            columns.accelerations,
+        ]
+    ).tolist()
+    classes = [c.value for c in columns.object_classes]
+    boxes = [_NO_BBOX if b is None else b for b in columns.bbox_2d]
+    if ground_truth:
+        return [
+            (*head, i, c, *x, *b, p, v)
+            for i, c, x, b, p, v in zip(
+                columns.object_ids,
+                classes,
+                numbers,
+                boxes,
+                columns.num_lidar_points,
+                columns.visible,
+                strict=True,
+            )
+        ]
+    return [
+        (*head, i, c, q, *x, *b)
+        for i, c, q, x, b in zip(
+            columns.object_ids,
+            classes,
+            columns.confidences.tolist(),
+            numbers,
+            boxes,
+            strict=True,
+        )
+    ]
 
 
 def _object_columns(obj: DetectedObject) -> tuple[Any, ...]:

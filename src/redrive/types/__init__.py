@@ -18,7 +18,7 @@ from redrive.types.enums import (
 from redrive.types.environment import EnvironmentData, TrafficData, TrafficLight
 from redrive.types.frame import ExtensionPayload, Frame, SensorData, SensorPayload
 from redrive.types.jsonable import to_jsonable
-from redrive.types.objects import Box3D, DetectedObject
+from redrive.types.objects import Box3D, DetectedObject, ObjectColumns
 from redrive.types.roadmap import DrivableArea, MapLane, RoadMap
 from redrive.types.sensors import IMAGE_ENCODINGS, CameraInfo, GnssFix, Image, Imu, PointCloud
 from redrive.types.transforms import Transform
@@ -41,6 +41,7 @@ __all__ = [
     "Lighting",
     "MapLane",
     "ObjectClass",
+    "ObjectColumns",
     "PlannedPath",
     "PointCloud",
     "RoadCondition",

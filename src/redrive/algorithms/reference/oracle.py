@@ -4,16 +4,16 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from types import MappingProxyType
 from typing import Any, ClassVar, NoReturn
 
 import numpy as np
 
 from redrive.algorithms.base import GROUND_TRUTH, Algorithm, Role, StageOutputs
+from redrive.algorithms.reference._oracle_kernels import perturb_rows
 from redrive.errors import AlgorithmError, ConfigError
-from redrive.geometry.se3 import normalize_angle
-from redrive.types import Box3D, DetectedObject, Frame, ObjectClass
+from redrive.types import DetectedObject, Frame, ObjectClass, ObjectColumns, SensorType
 
 __all__ = ["CONFUSABLE_CLASSES", "FALSE_POSITIVE_SHAPES", "NoisyOracle"]
 
@@ -115,6 +115,7 @@ class NoisyOracle(Algorithm):
         self._fp_rate = self._number(config, "false_positive_rate")
         self._fp_conf = self._number(config, "false_positive_confidence", upper=1.0)
         self._p_confuse = self._number(config, "class_confusion_probability", upper=1.0)
+        self._stds = np.array([self._center_std, self._size_std, self._yaw_std, self._vel_std])
         self._visible_only = bool(config["visible_only"])
         self._keep_ids = bool(config["keep_ids"])
         max_range = config["max_range_m"]
@@ -124,6 +125,28 @@ class NoisyOracle(Algorithm):
             self._max_range_m = self._number(config, "max_range_m")
             if self._max_range_m <= FALSE_POSITIVE_MIN_RANGE_M:
                 self._bad("max_range_m", max_range, f"None or > {FALSE_POSITIVE_MIN_RANGE_M} m")
+
+    def bind(self, sensors: Mapping[str, SensorType], *, extras: Iterable[str] = ()) -> None:
+        """As :meth:`Algorithm.bind`, then one made-up perturbation, so that numba loads the
+        oracle's kernel from the cache (or compiles it after an install) here, before a run's
+        first frame, not inside that frame's latency."""
+        super().bind(sensors, extras=extras)
+        frozen3, frozen1 = np.zeros((1, 3)), np.zeros(1)  # ObjectColumns' arrays are read-only
+        frozen3.flags.writeable = frozen1.flags.writeable = False
+        normal3 = np.zeros((1, 3))
+        perturb_rows(
+            frozen3,
+            frozen1,
+            frozen3,
+            frozen3,
+            np.zeros(1, dtype=np.int64),
+            np.zeros(1, dtype=np.bool_),
+            normal3,
+            normal3,
+            np.zeros(1),
+            np.zeros((1, 2)),
+            self._stds,
+        )
 
     def _bad(self, key: str, value: object, wanted: str) -> NoReturn:
         msg = f"algorithm {self.name!r}: config {key} = {value!r}; expected {wanted}"
@@ -148,9 +171,13 @@ class NoisyOracle(Algorithm):
             )
             raise AlgorithmError(msg)
         rng = np.random.default_rng([self._seed, frame.index])
-        kept = [o for o in truth if self._eligible(o)]
-        out = self._perturb(kept, rng)
-        out += self._false_positives(rng)
+        # the ground truth as columns (no pass over the objects when they came from
+        # DetectedObject.many, as a simulator's and the decoders' do)
+        truth_columns = ObjectColumns.from_objects(truth)
+        kept = self._eligible(truth_columns)
+        columns = self._perturb(truth_columns, kept, rng)
+        columns += self._false_positives(rng)
+        out = [] if not columns else DetectedObject.many(**_concatenated(columns))
         logger.debug(
             "%s frame %d: %d ground-truth objects, %d eligible, %d returned",
             self.name,
@@ -161,60 +188,84 @@ class NoisyOracle(Algorithm):
         )
         return out
 
-    def _eligible(self, obj: DetectedObject) -> bool:
-        if self._visible_only and (obj.num_lidar_points == 0 or obj.visible is False):
-            return False
-        return float(np.hypot(obj.box.center[0], obj.box.center[1])) <= self._max_range_m
+    def _eligible(self, truth: ObjectColumns) -> list[int]:
+        """The rows of the objects seen (when ``visible_only``) and within ``max_range_m``."""
+        near = (np.hypot(truth.centers[:, 0], truth.centers[:, 1]) <= self._max_range_m).tolist()
+        if not self._visible_only:
+            return [i for i, ok in enumerate(near) if ok]
+        return [
+            i
+            for i, (ok, points, seen) in enumerate(
+                zip(near, truth.num_lidar_points, truth.visible, strict=True)
+            )
+            if ok and points != 0 and seen is not False
+        ]
 
     def _perturb(
-        self, objects: list[DetectedObject], rng: np.random.Generator
-    ) -> list[DetectedObject]:
-        n = len(objects)
+        self, truth: ObjectColumns, rows: list[int], rng: np.random.Generator
+    ) -> list[dict[str, Any]]:
+        """The kept detections of ground-truth rows ``rows`` as ``DetectedObject.many``'s
+        columns (an empty list when none is kept)."""
+        n = len(rows)
         # every draw is made for every object, in a fixed order, whatever the config
         missed = rng.random(n) < self._p_miss
-        d_center = rng.normal(0.0, 1.0, (n, 3)) * self._center_std
-        d_size = rng.normal(0.0, 1.0, (n, 3)) * self._size_std
-        d_yaw = rng.normal(0.0, 1.0, n) * self._yaw_std
-        d_vel = rng.normal(0.0, 1.0, (n, 2)) * self._vel_std
+        n_center = rng.normal(0.0, 1.0, (n, 3))
+        n_size = rng.normal(0.0, 1.0, (n, 3))
+        n_yaw = rng.normal(0.0, 1.0, n)
+        n_vel = rng.normal(0.0, 1.0, (n, 2))
         confused = rng.random(n) < self._p_confuse
         pick = rng.random(n)  # which other class, as a fraction of the choices
         if n == 0:
             return []
-        # the arithmetic of all objects at once (the same elementwise operations as object by
-        # object); then the kept ones built together from columns (DetectedObject.many)
-        centers = np.array([obj.box.center for obj in objects]) + d_center
-        true_sizes = np.array([obj.box.size for obj in objects])
-        sizes = np.maximum(true_sizes * (1.0 + d_size), 0.1 * true_sizes)
-        velocities = np.array([obj.velocity for obj in objects])
-        velocities[:, :2] += d_vel
-        orientations = np.array([obj.orientation for obj in objects])
-        d_yaws = d_yaw.tolist()
-        kept = np.flatnonzero(~missed).tolist()
-        yaws, classes = [], []
-        for i in kept:
-            obj = objects[i]
-            yaws.append(normalize_angle(obj.box.yaw_rad + d_yaws[i]))
-            orientations[i, 0] = normalize_angle(float(orientations[i, 0]) + d_yaws[i])
-            cls = obj.object_class
-            if confused[i]:
-                choices = [c for c in CONFUSABLE_CLASSES if c is not cls]
-                cls = choices[min(int(pick[i] * len(choices)), len(choices) - 1)]
-            classes.append(cls)
+        # the arithmetic of the kept objects in one compiled call on the ground truth's
+        # columns (numpy's elementwise operations, bit for bit: ._oracle_kernels), but for
+        # the sizes' np.maximum (see there)
+        index = np.array(rows, dtype=np.int64)
+        true_sizes = truth.sizes[index]
+        d_size = n_size * self._size_std
+        sizes_all = np.maximum(true_sizes * (1.0 + d_size), 0.1 * true_sizes)
+        kept_at, centers, sizes, yaws, velocities, orientations = perturb_rows(
+            truth.centers,
+            truth.yaws_rad,
+            truth.velocities,
+            truth.orientations,
+            index,
+            missed,
+            n_center,
+            sizes_all,
+            n_yaw,
+            n_vel,
+            self._stds,
+        )
+        kept = kept_at.tolist()
         if not kept:
             return []
-        return DetectedObject.many(
-            object_ids=[objects[i].object_id for i in kept] if self._keep_ids else None,
-            object_classes=classes,
-            confidences=[objects[i].confidence for i in kept],
-            centers=centers[kept],
-            sizes=sizes[kept],
-            yaws_rad=yaws,
-            velocities=velocities[kept],
-            accelerations=[objects[i].acceleration for i in kept],
-            orientations=orientations[kept],
-        )
+        picked = [rows[i] for i in kept]
+        true_classes = truth.object_classes
+        classes = [true_classes[r] for r in picked]
+        if self._p_confuse > 0.0:
+            for j, i in enumerate(kept):
+                if confused[i]:
+                    cls = classes[j]
+                    choices = [c for c in CONFUSABLE_CLASSES if c is not cls]
+                    classes[j] = choices[min(int(pick[i] * len(choices)), len(choices) - 1)]
+        ids = truth.object_ids
+        return [
+            {
+                "object_ids": [ids[r] for r in picked] if self._keep_ids else [-1] * len(kept),
+                "object_classes": classes,
+                "confidences": truth.confidences[picked],
+                "centers": centers,
+                "sizes": sizes,
+                "yaws_rad": yaws,
+                "velocities": velocities,
+                "accelerations": truth.accelerations[picked],
+                "orientations": orientations,
+            }
+        ]
 
-    def _false_positives(self, rng: np.random.Generator) -> list[DetectedObject]:
+    def _false_positives(self, rng: np.random.Generator) -> list[dict[str, Any]]:
+        """The false positives as ``DetectedObject.many``'s columns (an empty list for none)."""
         count = int(rng.poisson(self._fp_rate)) if self._fp_rate > 0 else 0
         if count == 0:
             return []
@@ -226,26 +277,46 @@ class NoisyOracle(Algorithm):
         bearings = rng.uniform(-math.pi, math.pi, count)
         yaws = rng.uniform(-math.pi, math.pi, count)
         d_size = rng.normal(0.0, 1.0, (count, 3)) * self._size_std
-        out = []
+        fp_classes, centers, sizes = [], [], []
         for k in range(count):
             cls = classes[int(picks[k])]
             typical = np.array(FALSE_POSITIVE_SHAPES[cls][1])
             size = np.maximum(typical * (1.0 + d_size[k]), 0.1 * typical)
-            center = np.array(
+            centers.append(
                 [
                     ranges_m[k] * math.cos(bearings[k]),
                     ranges_m[k] * math.sin(bearings[k]),
                     0.5 * size[2],
                 ]
             )
-            yaw = float(yaws[k])
-            out.append(
-                DetectedObject(
-                    object_id=-1,
-                    object_class=cls,
-                    confidence=self._fp_conf,
-                    box=Box3D(center=center, size=size, yaw_rad=yaw),
-                    orientation=np.array([yaw, 0.0, 0.0]),
-                )
-            )
-        return out
+            fp_classes.append(cls)
+            sizes.append(size)
+        orientations = np.zeros((count, 3))
+        orientations[:, 0] = yaws
+        return [
+            {
+                "object_ids": [-1] * count,
+                "object_classes": fp_classes,
+                "confidences": np.full(count, self._fp_conf),
+                "centers": np.array(centers, dtype=np.float64),
+                "sizes": np.array(sizes, dtype=np.float64),
+                "yaws_rad": yaws,
+                "velocities": np.zeros((count, 3)),
+                "accelerations": np.zeros((count, 3)),
+                "orientations": orientations,
+            }
+        ]
+
+
+def _concatenated(parts: list[dict[str, Any]]) -> dict[str, Any]:
+    """``DetectedObject.many``'s keyword arguments for the rows of ``parts`` one after another."""
+    if len(parts) == 1:
+        return parts[0]
+    out: dict[str, Any] = {}
+    for key, first in parts[0].items():
+        columns = [part[key] for part in parts]
+        if isinstance(first, list):
+            out[key] = [v for column in columns for v in column]
+        else:
+            out[key] = np.concatenate(columns)
+    return out

@@ -77,7 +77,14 @@ from redrive.algorithms.reference._plan_kernels import (
 )
 from redrive.errors import AlgorithmError, ConfigError
 from redrive.geometry.boxes import BOX_CORNER_SIGNS
-from redrive.types import DetectedObject, Frame, PlannedPath, SensorType, VehicleState
+from redrive.types import (
+    DetectedObject,
+    Frame,
+    ObjectColumns,
+    PlannedPath,
+    SensorType,
+    VehicleState,
+)
 
 __all__ = ["IdmPlanner", "Polyline"]
 
@@ -276,10 +283,11 @@ class IdmPlanner(Algorithm):
         line = Polyline([[0.0, 0.0], [1.0, 0.0]])
         line.project([[0.5, 0.5]])
         line.points_at([0.5])
-        # the leaders' kernel with the argument types _leaders gives it
-        leaders_on_path(
-            np.zeros((1, 8, 3)), np.zeros((1, 3)), np.zeros((1, 3)), line.xy, line.s, 1.0, 0.0, 1.0
-        )
+        # the leaders' kernel with the argument types _leaders gives it (the objects' centres
+        # and velocities are read-only ObjectColumns arrays)
+        frozen = np.zeros((1, 3))
+        frozen.flags.writeable = False
+        leaders_on_path(np.zeros((1, 8, 3)), frozen, frozen, line.xy, line.s, 1.0, 0.0, 1.0)
 
     # -- the step -----------------------------------------------------------------------------
 
@@ -379,11 +387,13 @@ class IdmPlanner(Algorithm):
         if not objects or path.length_m <= 0.0:
             return np.zeros(0), np.zeros(0)
         n = len(objects)
-        boxes = [o.box for o in objects]
-        # every box's corners in one stacked matmul (box_corners' product, slice by slice: the
-        # same values), then one compiled call projects the 4·n bottom corners and the n
-        # centres on the path and picks the leaders (:func:`._plan_kernels.leaders_on_path`)
-        yaws = [box.yaw_rad for box in boxes]
+        # the objects' columns (shared with the perception that built them with
+        # DetectedObject.many: no pass over the objects), every box's corners in one stacked
+        # matmul (box_corners' product, slice by slice: the same values), then one compiled
+        # call projects the 4·n bottom corners and the n centres on the path and picks the
+        # leaders (:func:`._plan_kernels.leaders_on_path`)
+        columns = ObjectColumns.from_objects(objects)
+        yaws = columns.yaws_rad.tolist()
         cos = [math.cos(yaw) for yaw in yaws]
         sin = [math.sin(yaw) for yaw in yaws]
         rotations = np.zeros((n, 3, 3))
@@ -392,10 +402,10 @@ class IdmPlanner(Algorithm):
         rotations[:, 1, 0] = [-v for v in sin]
         rotations[:, 1, 1] = cos
         rotations[:, 2, 2] = 1.0
-        centers = np.array([box.center for box in boxes])
-        local = BOX_CORNER_SIGNS * (0.5 * np.array([box.size for box in boxes]))[:, None, :]
+        centers = columns.centers
+        local = BOX_CORNER_SIGNS * (0.5 * columns.sizes)[:, None, :]
         corners = local @ rotations + centers[:, None, :]
-        velocities = np.array([o.velocity for o in objects])
+        velocities = columns.velocities
         leaders_s, leaders_v = leaders_on_path(
             corners,
             centers,
