@@ -128,13 +128,10 @@ class TableBuffers:
     def _add_step(self, fi: int, stamp: int, step: StepRecord) -> None:
         out = step.output
         name = step.algorithm
-        kind = type(out)
-        if kind is ControlCommands or (
-            kind is not PlannedPath and isinstance(out, ControlCommands)
-        ):
+        if isinstance(out, ControlCommands):
             n_outputs = 1
             self._commands((name, fi, stamp, out.throttle, out.brake, out.steering_angle_rad))
-        elif kind is PlannedPath or isinstance(out, PlannedPath):
+        elif isinstance(out, PlannedPath):
             n_outputs = 1
             fid, pstamp = out.frame_id, out.stamp_ns
             waypoints = out.waypoints.tolist()
