@@ -84,7 +84,6 @@ class TableBuffers:
     def add_frame(self, rec: FrameRecord) -> None:
         fi, stamp = rec.frame_index, rec.stamp_ns
         gt = rec.ground_truth
-        missing = rec.missing
         self._frames(
             (
                 fi,
@@ -92,12 +91,11 @@ class TableBuffers:
                 rec.wall_ns,
                 rec.late,
                 None if gt is None else len(gt),
-                ",".join(missing) if missing else "",
+                ",".join(rec.missing),
             )
         )
-        add_step = self._add_step
         for step in rec.steps:
-            add_step(fi, stamp, step)
+            self._add_step(fi, stamp, step)
         if gt:
             add = self._rows["ground_truth"].append
             for obj in gt:
@@ -134,17 +132,12 @@ class TableBuffers:
         elif isinstance(out, PlannedPath):
             n_outputs = 1
             fid, pstamp = out.frame_id, out.stamp_ns
-            waypoints = out.waypoints.tolist()
-            if len(waypoints) == 1:  # a one-point path: no list comprehension's frame
-                x, y, z, t = waypoints[0]
-                self._paths(((name, fi, pstamp, fid, 0, x, y, z, t),))
-            else:
-                self._paths(
-                    [
-                        (name, fi, pstamp, fid, j, x, y, z, t)
-                        for j, (x, y, z, t) in enumerate(waypoints)
-                    ]
-                )
+            self._paths(
+                [
+                    (name, fi, pstamp, fid, j, x, y, z, t)
+                    for j, (x, y, z, t) in enumerate(out.waypoints.tolist())
+                ]
+            )
         elif isinstance(out, tuple):
             n_outputs = len(out)
             add = self._detections

@@ -253,8 +253,7 @@ class RunWriter:
         Raises:
             ValueError: the frame index was already written in this run.
         """
-        if self._closed:
-            self._check_open()
+        self._check_open()
         index = record.frame_index
         if index in self._done or index in self._buffered:
             msg = (
