@@ -18,7 +18,7 @@ outputs, the next frame of the batch: ≈ 1 µs), as ``docs/results.md`` says of
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator
 from time import perf_counter_ns
 from types import MappingProxyType
 from typing import Any
@@ -79,7 +79,7 @@ def single_step_record(  # noqa: PLR0917 (per step: positional is cheaper)
 
 
 def run_short(
-    stages: list[tuple[Single, Mapping[str, Role], bool]],
+    stages: list[tuple[Single, MappingProxyType[str, Role], bool]],
     frames: Iterator[Frame],
     *,
     sink: Callable[[FrameRecord], None],
