@@ -95,6 +95,11 @@ def run_short(
     """
     add = stats.add
     done = 0
+    # per stage: (algorithm, its sensors, single, roles after it, last, algorithm name)
+    steps = [
+        (single[0], single[1], single, roles, last, single[0].name)
+        for single, roles, last in stages
+    ]
     # the frames a chain ran: (frame, wall ns, raw steps), raw = (single, status, output,
     # latency, cpu, error) per step
     ran: list[tuple[Frame, int, list[tuple[Any, ...]]]] = []
@@ -145,20 +150,18 @@ def run_short(
                 break
         if not batch:
             return None
-        pos, n = 0, len(batch)
-        while pos < n:
-            stop = False
+        todo = iter(batch)
+        more = True
+        while more:  # chains of at most CHAIN_NS over the batch
+            more = stop = False
             try:
                 cpu = _thread_time_ns()
                 start = perf_counter_ns()
-                while pos < n:
-                    frame = batch[pos]
-                    pos += 1
+                for frame in todo:
                     t0_ns = perf_counter_ns()
                     raw: list[tuple[Any, ...]] = []
                     upstream = _NO_UPSTREAM
-                    for single, roles_after, last in stages:
-                        algo, sensors = single[0], single[1]
+                    for algo, sensors, single, roles_after, last, name in steps:
                         seen = frame
                         if frame.sensors and not frame.sensors.keys() <= sensors:
                             seen = frame_for(frame, sensors)
@@ -167,20 +170,25 @@ def run_short(
                         )
                         raw.append((single, status, output, latency_ns, cpu1 - cpu, error))
                         cpu = cpu1
-                        ok = status is _OK and output is not None
-                        if not ok:
-                            stop = fail_fast
-                        if not last:  # nobody reads the upstream after the last stage
-                            outputs = upstream.outputs
-                            if ok:
-                                outputs = MappingProxyType({**outputs, algo.name: output})
+                        if status is _OK and output is not None:
+                            if not last:  # nobody reads the upstream after the last stage
+                                upstream = StageOutputs.of_proxies(
+                                    MappingProxyType({**upstream.outputs, name: output}),
+                                    roles_after,
+                                )
+                            continue
+                        stop = stop or fail_fast
+                        if not last:
                             upstream = StageOutputs.of_proxies(
-                                outputs,  # type: ignore[arg-type]
+                                upstream.outputs,  # type: ignore[arg-type]
                                 roles_after,
                             )
                     t1_ns = perf_counter_ns()
                     ran.append((frame, t1_ns - t0_ns, raw))
-                    if stop or t1_ns - start >= CHAIN_NS:
+                    if stop:
+                        break
+                    if t1_ns - start >= CHAIN_NS:
+                        more = True
                         break
             except KeyboardInterrupt:
                 hand_on()  # the frames that ran, as a frame-by-frame loop would have
