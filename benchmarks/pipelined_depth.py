@@ -1,7 +1,7 @@
 """``redrive bench engine``'s pipelined variant at several hand-off depths, against the bare
 loop, interleaved in this process: the median ratio, the ratio two free cores would allow by
 CPU time (2 × the bare loop's CPU ÷ the pipelined run's, all threads: load-robust) and the
-context switches per frame for each depth (the engine's ``_QUEUE_DEPTH``, 2 in the code).  For a quiet machine: on a
+context switches per frame for each depth (the engine's ``_QUEUE_DEPTH``, 4 in the code).  For a quiet machine: on a
 loaded one the ratios swing past any difference the depth makes (BENCHMARKS.md, branch
 h-engine5)::
 
