@@ -1,6 +1,7 @@
 """``redrive bench engine``'s pipelined variant at several hand-off depths, against the bare
-loop, interleaved in this process: the median ratio and the voluntary context switches per
-frame for each depth (the engine's ``_QUEUE_DEPTH``, 2 in the code).  For a quiet machine: on a
+loop, interleaved in this process: the median ratio, the ratio two free cores would allow by
+CPU time (2 × the bare loop's CPU ÷ the pipelined run's, all threads: load-robust) and the
+context switches per frame for each depth (the engine's ``_QUEUE_DEPTH``, 4 in the code).  For a quiet machine: on a
 loaded one the ratios swing past any difference the depth makes (BENCHMARKS.md, branch
 h-engine5)::
 
@@ -29,21 +30,30 @@ def main() -> None:
     frames = [Frame(stamp_ns=i * 100_000_000, index=i) for i in range(args.frames)]
     ratios: dict[int, list[float]] = {d: [] for d in args.depths}
     switches: dict[int, list[float]] = {d: [] for d in args.depths}
+    involuntary: dict[int, list[float]] = {d: [] for d in args.depths}
+    cpu_bound: dict[int, list[float]] = {d: [] for d in args.depths}
     for _ in range(args.passes):
         for depth in args.depths:
             core._QUEUE_DEPTH = depth
-            bare = bench._bare(frames, (bench._work,) * 3)[0]
-            before = resource.getrusage(resource.RUSAGE_SELF).ru_nvcsw
-            t0 = time.perf_counter()
+            bare, bare_cpu = bench._bare(frames, (bench._work,) * 3)
+            before = resource.getrusage(resource.RUSAGE_SELF)
+            c0, t0 = time.process_time(), time.perf_counter()
             bench._engine(frames, "busy", "pipelined")
             ratios[depth].append(bare / (time.perf_counter() - t0))
-            after = resource.getrusage(resource.RUSAGE_SELF).ru_nvcsw
-            switches[depth].append((after - before) / args.frames)
+            cpu = time.process_time() - c0
+            after = resource.getrusage(resource.RUSAGE_SELF)
+            switches[depth].append((after.ru_nvcsw - before.ru_nvcsw) / args.frames)
+            involuntary[depth].append((after.ru_nivcsw - before.ru_nivcsw) / args.frames)
+            # what two free cores would allow: the bare loop's CPU over the pipelined run's
+            # CPU (all threads), times two — load-robust, unlike the wall ratio
+            cpu_bound[depth].append(2 * bare_cpu / cpu)
     for depth in args.depths:
         shown = " ".join(f"{r:.2f}" for r in ratios[depth])
         print(
             f"depth {depth}: pipelined ÷ bare {statistics.median(ratios[depth]):.2f} ({shown}); "
-            f"voluntary context switches a frame {statistics.median(switches[depth]):.1f}"
+            f"2 × bare CPU ÷ pipelined CPU {statistics.median(cpu_bound[depth]):.2f}; "
+            f"context switches a frame: voluntary {statistics.median(switches[depth]):.1f}, "
+            f"involuntary {statistics.median(involuntary[depth]):.1f}"
         )
     print("load", open("/proc/loadavg").read().split()[0])  # noqa: SIM115
 

@@ -3,12 +3,16 @@ general path records, and leaves an algorithm that overrides ``run_step`` on tha
 
 from __future__ import annotations
 
+import time
+from collections.abc import Iterator
+
 import pytest
 
+from redrive.algorithms import Algorithm, Role, StageOutputs
 from redrive.config import AlgorithmSpec, PipelineConfig, StageSpec
-from redrive.engine import Engine, LogInputs, build_graph
-from redrive.results import FrameRecord
-from redrive.types import Frame
+from redrive.engine import Engine, LogInputs, _short, build_graph
+from redrive.results import FrameRecord, RunStatus
+from redrive.types import ControlCommands, Frame
 
 P = "tests.engine.plugins:"
 
@@ -129,3 +133,92 @@ def test_the_short_path_stops_a_fail_fast_run_at_the_first_failure() -> None:
     assert failure is not None
     index, step = failure  # type: ignore[misc]
     assert (index, step.algorithm, step.status) == (0, "p", "error")
+
+
+class InterruptOn7(Algorithm):
+    """Ctrl-C arrives while frame 7 is in this step."""
+
+    role = Role.CONTROL
+
+    def step(self, frame: Frame, upstream: StageOutputs) -> ControlCommands:
+        if frame.index == 7:
+            raise KeyboardInterrupt
+        return ControlCommands()
+
+
+def _burn(seconds: float) -> None:
+    """Spend ``seconds`` of this thread's CPU time."""
+    end = time.thread_time() + seconds
+    while time.thread_time() < end:
+        pass
+
+
+def _noop_engine(*last: str) -> Engine:
+    noop = "redrive.benchmarks.engine:"
+    names = (noop + "NoopPerception", noop + "NoopPlanning", *(last or (noop + "NoopControl",)))
+    pipeline = PipelineConfig(
+        stages=tuple(
+            StageSpec(name=f"s{i}", algorithms=(AlgorithmSpec(name=f"a{i}", plugin=cls),))
+            for i, cls in enumerate(names)
+        )
+    )
+    return Engine(build_graph(pipeline, LogInputs()), pipeline, inputs=LogInputs())
+
+
+def test_the_short_path_keeps_log_reading_and_the_sink_out_of_the_steps_cpu() -> None:
+    # the thread CPU clock is chained from step to step across frames: what the engine does
+    # between two frames (reading the log, handing the record on) must not land in a step
+    def frames() -> Iterator[Frame]:
+        for i in range(3 * _short.READ_AHEAD):
+            if i in {5, 20}:
+                _burn(0.02)  # a slow frame to read
+            yield Frame(stamp_ns=i * 10, index=i)
+
+    kept: list[FrameRecord] = []
+
+    def sink(record: FrameRecord) -> None:
+        if record.frame_index in {3, 30}:
+            _burn(0.02)  # a slow write
+        kept.append(record)
+
+    engine = _noop_engine()
+    try:
+        report = engine.run(frames(), sink=sink)
+    finally:
+        engine.close()
+    assert report.frames == len(kept) == 3 * _short.READ_AHEAD
+    assert [r.frame_index for r in kept] == list(range(3 * _short.READ_AHEAD))
+    assert max(s.cpu_ns for r in kept for s in r.steps) < 10_000_000  # ns; each burn is 20 ms
+
+
+def test_the_short_path_hands_on_each_frame_before_reading_past_its_chain(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr(_short, "CHAIN_NS", 0)  # every chain ends after its first frame
+    kept: list[FrameRecord] = []
+    seen: list[int] = []
+
+    def frames() -> Iterator[Frame]:
+        for i in range(6):
+            seen.append(len(kept))  # records handed on when frame i is read
+            yield Frame(stamp_ns=i * 10, index=i)
+
+    engine = _noop_engine()
+    try:
+        engine.run(frames(), sink=kept.append)
+    finally:
+        engine.close()
+    assert seen == [0, 1, 2, 3, 4, 5]
+    assert [r.frame_index for r in kept] == [0, 1, 2, 3, 4, 5]
+
+
+def test_ctrl_c_in_a_short_path_step_hands_on_the_frames_before_it() -> None:
+    kept: list[FrameRecord] = []
+    engine = _noop_engine(f"{__name__}:InterruptOn7")
+    try:
+        report = engine.run([Frame(stamp_ns=i * 10, index=i) for i in range(12)], sink=kept.append)
+    finally:
+        engine.close()
+    assert report.status is RunStatus.INTERRUPTED
+    assert [r.frame_index for r in kept] == list(range(7))
+    assert report.frames == 7

@@ -31,37 +31,35 @@ from typing import Any
 
 from redrive.algorithms import (
     Algorithm,
-    AlgorithmOutput,
     StageOutputs,
-    StepError,
     StepResult,
     StepStatus,
 )
 from redrive.config import PipelineConfig
 from redrive.engine._heap import setup_frozen
+from redrive.engine._short import Single, run_short, single_step_record
 from redrive.engine.graph import LogInputs, PlannedAlgorithm, StageGraph
 from redrive.engine.handoff import Handoff, HandoffClosedError
 from redrive.engine.modes import ModeHooks, PacedFrame, ReplayMode
 from redrive.engine.stats import RunReport, StatsCollector
 from redrive.engine.worker import AlgorithmRunner, InlineRunner, ProcessRunner, frame_for
 from redrive.results import FrameRecord, RunStatus, StepRecord
-from redrive.results.records import frame_record_unchecked, step_record_unchecked
+from redrive.results.records import frame_record_unchecked
 from redrive.types import Frame, Role
 
 __all__ = ["Engine", "FrameSink"]
 
 logger = logging.getLogger(__name__)
 
-_QUEUE_DEPTH = 2
+#: frames each hand-off of the pipelined mode holds: 4 (was 2) — its threads wait and wake less
+#: often and the run spends ≈ 8–9 % less CPU a frame (BENCHMARKS.md, h-engine6), for at most 16
+#: frames in flight in a three-stage pipeline instead of 8
+_QUEUE_DEPTH = 4
 
 FrameSink = Callable[[FrameRecord], None]
 
 
 _NO_UPSTREAM = StageOutputs()  # immutable: every frame starts from it
-_thread_time_ns = time.thread_time_ns
-
-#: a stage of one in-process algorithm: (algorithm, its sensors, name, stage, role value)
-_Single = tuple[Algorithm, frozenset[str], str, str, str]
 
 
 class _Item:
@@ -99,7 +97,7 @@ class _Stage:
         self._role_values = [p.role.value for p in planned]
         self.last = False
         self._inline = all(isinstance(r, InlineRunner) for r in runners)
-        self._single: _Single | None = None
+        self._single: Single | None = None
         # the short path calls Algorithm.timed_step; an algorithm that overrides run_step keeps
         # being run through it (the general path below)
         if (
@@ -128,7 +126,7 @@ class _Stage:
             if frame.sensors and not frame.sensors.keys() <= sensors:
                 frame = frame_for(frame, sensors)
             status, output, latency_ns, cpu_ns, error = algo.timed_step(frame, item.upstream)
-            record = _step_record(self._single, status, output, latency_ns, cpu_ns, error)
+            record = single_step_record(self._single, status, output, latency_ns, cpu_ns, error)
             item.steps.append(record)
             ok = status is _OK and output is not None
             if not ok and item.failed is None:
@@ -166,7 +164,7 @@ class _Stage:
         item.upstream = item.upstream.merged(outputs, self.roles)
 
     @property
-    def single(self) -> _Single | None:
+    def single(self) -> Single | None:
         """``(algorithm, its sensors, name, stage, role)`` of a stage of one in-process
         algorithm run through :meth:`Algorithm.timed_step` (the short paths); else None."""
         return self._single
@@ -198,39 +196,6 @@ def _run_inline(runner: AlgorithmRunner, frame: Frame, upstream: StageOutputs) -
 
 _OK = StepStatus.OK
 _STATUS_VALUES = {s: s.value for s in StepStatus}
-
-
-def _step_record(  # noqa: PLR0917 (per step: positional is cheaper)
-    single: _Single,
-    status: StepStatus,
-    output: AlgorithmOutput | None,
-    latency_ns: int,
-    cpu_ns: int,
-    error: StepError | None,
-) -> StepRecord:
-    """The record of a step of a single-algorithm stage (see :attr:`_Stage.single`)."""
-    if error is None:
-        return step_record_unchecked(
-            single[2],
-            single[3],
-            single[4],
-            "ok" if status is _OK else status.value,
-            latency_ns,
-            cpu_ns,
-            output,
-        )
-    return step_record_unchecked(
-        single[2],
-        single[3],
-        single[4],
-        status.value,
-        latency_ns,
-        cpu_ns,
-        output,
-        error.type,
-        error.message,
-        error.traceback,
-    )
 
 
 def _record(planned: PlannedAlgorithm, role: str, result: StepResult) -> StepRecord:
@@ -387,8 +352,17 @@ class Engine:
         status = RunStatus.COMPLETE
         try:
             if paced is None:
-                failure = self._sequential_short(
-                    pending, sink=sink, stats=stats, progress=progress, fail_fast=fail_fast
+                failure = run_short(
+                    [
+                        (stage.single, stage.roles_after, stage.last)
+                        for stage in self._stages
+                        if stage.single is not None
+                    ],
+                    pending,
+                    sink=sink,
+                    stats=stats,
+                    progress=progress,
+                    fail_fast=fail_fast,
                 )
             elif pipelined:
                 failure = self._pipelined(paced, finish)
@@ -414,78 +388,6 @@ class Engine:
                 stage.run(item)
             failed = finish(item)
             if failed is not None:
-                return failed
-        return None
-
-    def _sequential_short(
-        self,
-        frames: Iterator[Frame],
-        *,
-        sink: FrameSink,
-        stats: StatsCollector,
-        progress: Callable[[int], None] | None,
-        fail_fast: bool,
-    ) -> tuple[int, StepRecord] | None:
-        """:meth:`_sequential` for single-algorithm in-process stages replayed as fast as
-        possible (no pacing, nothing to do after a frame): the same records, with the thread
-        CPU clock read once per step and once per frame instead of twice per step (see
-        :meth:`Algorithm.timed_step_from`), and the step records built after the frame's last
-        step, so that only the hand-off of the upstream outputs falls between two readings."""
-        stages = [
-            (stage.single, stage.roles_after, stage.last)
-            for stage in self._stages
-            if stage.single is not None
-        ]
-        add = stats.add
-        raw: list[tuple[Any, ...]] = []
-        for done, frame in enumerate(frames, 1):
-            t0_ns = perf_counter_ns()
-            cpu = _thread_time_ns()
-            upstream = _NO_UPSTREAM
-            for single, roles_after, last in stages:
-                algo, sensors = single[0], single[1]
-                seen = frame
-                if frame.sensors and not frame.sensors.keys() <= sensors:
-                    seen = frame_for(frame, sensors)
-                status, output, latency_ns, cpu1, error = algo.timed_step_from(seen, upstream, cpu)
-                raw.append((single, status, output, latency_ns, cpu1 - cpu, error))
-                cpu = cpu1
-                if not last:  # nobody reads the upstream after the last stage
-                    outputs = upstream.outputs
-                    if status is _OK and output is not None:
-                        outputs = MappingProxyType({**outputs, algo.name: output})
-                    upstream = StageOutputs.of_proxies(
-                        outputs,  # type: ignore[arg-type]
-                        roles_after,
-                    )
-            failed: tuple[int, StepRecord] | None = None
-            steps = []
-            for single, status, output, latency_ns, cpu_ns, error in raw:
-                if status is _OK and output is not None:  # the common step, built inline
-                    step = step_record_unchecked(
-                        single[2], single[3], single[4], "ok", latency_ns, cpu_ns, output
-                    )
-                else:
-                    step = _step_record(single, status, output, latency_ns, cpu_ns, error)
-                    if failed is None:
-                        failed = (frame.index, step)
-                steps.append(step)
-            raw.clear()
-            record = frame_record_unchecked(  # Frame and the graph keep its invariants
-                int(frame.index),
-                frame.stamp_ns,
-                tuple(steps),
-                frame.vehicle_state,
-                frame.ground_truth,
-                perf_counter_ns() - t0_ns,
-                False,
-                frame.missing,
-            )
-            sink(record)
-            add(record)
-            if progress is not None:
-                progress(done)
-            if fail_fast and failed is not None:
                 return failed
         return None
 

@@ -110,10 +110,13 @@ class StatsCollector:
     def __init__(self, planned: Sequence[PlannedAlgorithm]) -> None:
         self._planned = list(planned)
         self._status: dict[str, dict[str, int]] = {p.name: {} for p in planned}
-        self._ok: dict[str, int] = {p.name: 0 for p in planned}
-        self._outputs: dict[str, int] = {p.name: 0 for p in planned}
         self._latency: dict[str, list[int]] = {p.name: [] for p in planned}
         self._cpu: dict[str, list[int]] = {p.name: [] for p in planned}
+        # per algorithm, what an ok step updates, found by one lookup: [ok steps, outputs,
+        # latency_list.append, cpu_list.append]
+        self._acc: dict[str, list[Any]] = {
+            p.name: [0, 0, self._latency[p.name].append, self._cpu[p.name].append] for p in planned
+        }
         self._first_error: dict[str, str] = {}
         self.frames = 0
         self.failed_frames = 0
@@ -126,29 +129,39 @@ class StatsCollector:
         if self._first_stamp is None:
             self._first_stamp = record.stamp_ns
         self._last_stamp = record.stamp_ns
-        for name in record.missing:
-            self.missing_inputs[name] = self.missing_inputs.get(name, 0) + 1
+        if record.missing:
+            for name in record.missing:
+                self.missing_inputs[name] = self.missing_inputs.get(name, 0) + 1
         failed = False
+        acc_of = self._acc
         for step in record.steps:
-            name, status = step.algorithm, step.status
-            if status == "ok":
-                self._ok[name] += 1
+            acc = acc_of[step.algorithm]
+            if step.status == "ok":
+                acc[0] += 1
                 output = step.output
-                self._outputs[name] += len(output) if type(output) is tuple else 1
-            else:
-                counts = self._status[name]
-                counts[status] = counts.get(status, 0) + 1
-                if name not in self._first_error:
-                    self._first_error[name] = (
-                        f"frame {record.frame_index}: {step.error_type}: {step.error_message}"
-                    )
-                if status == "skipped":
-                    continue
+                acc[1] += len(output) if type(output) is tuple else 1
+                acc[2](step.latency_ns)
+                acc[3](step.cpu_ns)
+                continue
+            if self._not_ok(record.frame_index, step):
                 failed = True  # error or timeout
-            self._latency[name].append(step.latency_ns)
-            self._cpu[name].append(step.cpu_ns)
         if failed:
             self.failed_frames += 1
+
+    def _not_ok(self, frame_index: int, step: StepRecord) -> bool:
+        """Count a step that did not succeed; True for an error or timeout (not skipped)."""
+        name, status = step.algorithm, step.status
+        counts = self._status[name]
+        counts[status] = counts.get(status, 0) + 1
+        if name not in self._first_error:
+            self._first_error[name] = (
+                f"frame {frame_index}: {step.error_type}: {step.error_message}"
+            )
+        if status == "skipped":
+            return False
+        self._latency[name].append(step.latency_ns)
+        self._cpu[name].append(step.cpu_ns)
+        return True
 
     def report(
         self,
@@ -163,25 +176,30 @@ class StatsCollector:
             span = self._last_stamp - self._first_stamp
             period = span / (self.frames - 1) if self.frames > 1 else 0.0
             span_s = (span + period) / 1e9
+        names = [p.name for p in self._planned]
+        lat_ms, cpu_ms = (
+            _per_algorithm_ms([self._latency[n] for n in names]),
+            _per_algorithm_ms([self._cpu[n] for n in names]),
+        )
+        quantiles = _p50_p95(lat_ms)
         algos = []
-        for p in self._planned:
-            lat = np.asarray(self._latency[p.name], dtype=np.float64) / 1e6
-            cpu = np.asarray(self._cpu[p.name], dtype=np.float64) / 1e6
+        for k, p in enumerate(self._planned):
+            lat, cpu = lat_ms[k], cpu_ms[k]
             counts = self._status[p.name]
-            q = np.percentile(lat, [50, 95]) if lat.size else np.zeros(2)
+            acc = self._acc[p.name]
             algos.append(
                 AlgorithmStats(
                     name=p.name,
                     stage=p.stage,
                     role=p.role.value,
-                    ok=self._ok[p.name],
+                    ok=acc[0],
                     error=counts.get("error", 0),
                     timeout=counts.get("timeout", 0),
                     skipped=counts.get("skipped", 0),
-                    outputs=self._outputs[p.name],
+                    outputs=acc[1],
                     latency_mean_ms=float(lat.mean()) if lat.size else 0.0,
-                    latency_p50_ms=float(q[0]),
-                    latency_p95_ms=float(q[1]),
+                    latency_p50_ms=quantiles[k][0],
+                    latency_p95_ms=quantiles[k][1],
                     latency_max_ms=float(lat.max()) if lat.size else 0.0,
                     cpu_mean_ms=float(cpu.mean()) if cpu.size else 0.0,
                     first_error=self._first_error.get(p.name, ""),
@@ -198,3 +216,24 @@ class StatsCollector:
             failed_frames=self.failed_frames,
             missing_inputs=dict(self.missing_inputs),
         )
+
+
+def _per_algorithm_ms(values: list[list[int]]) -> list[np.ndarray]:
+    """Each algorithm's ns values as float64 ms; one conversion for all of them when they have
+    as many values each (the common case: every step ran), else one per algorithm."""
+    if values and len({len(v) for v in values}) == 1:
+        return list(np.asarray(values, dtype=np.float64) / 1e6)
+    return [np.asarray(v, dtype=np.float64) / 1e6 for v in values]
+
+
+def _p50_p95(lat_ms: list[np.ndarray]) -> list[tuple[float, float]]:
+    """The 50th and 95th percentiles of each array (0 for an empty one): one
+    ``np.percentile`` call along the rows when they have one length (the same values as one
+    call per array: each row is partitioned and interpolated alike)."""
+    if lat_ms and lat_ms[0].size and len({a.size for a in lat_ms}) == 1:
+        q = np.percentile(np.stack(lat_ms), [50, 95], axis=1)  # shape (2, algorithms)
+        return [(float(a), float(b)) for a, b in zip(q[0], q[1], strict=True)]
+    return [
+        (float(q[0]), float(q[1]))
+        for q in (np.percentile(a, [50, 95]) if a.size else np.zeros(2) for a in lat_ms)
+    ]

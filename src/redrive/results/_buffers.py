@@ -179,11 +179,25 @@ class TableBuffers:
             # Table.from_pydict(..., schema=schema), ≈ 30 % less CPU (no per-column
             # dict and schema matching)
             out[name] = pa.Table.from_arrays(
-                [pa.array(c, type=f.type) for c, f in zip(columns, schema, strict=True)],
+                [_array(c, f.type) for c, f in zip(columns, schema, strict=True)],
                 schema=schema,
             )
         self.clear()
         return out
+
+
+_STRING = pa.string()
+
+
+def _array(values: Sequence[Any], kind: pa.DataType) -> pa.Array:
+    """``values`` as an Arrow array of type ``kind``: ``pa.array``, except for a string column
+    of one value throughout (a step's status, its empty error columns, an algorithm's name in
+    its own table): that value repeated, the same array (the same buffers) ≈ 15× faster."""
+    if kind == _STRING and values:
+        first = values[0]
+        if type(first) is str and values.count(first) == len(values):
+            return pa.repeat(pa.scalar(first, type=kind), len(values))
+    return pa.array(values, type=kind)
 
 
 def _state_row(fi: int, vs: VehicleState) -> tuple[Any, ...]:
