@@ -80,3 +80,29 @@ def test_clouds_from_rows_refuse_what_the_checks_would_refuse() -> None:
         PointCloud.many_from_rows(xyz, [("s", structured)])
     with pytest.raises(ValueError, match="channel 'i'"):
         PointCloud.many_from_rows(xyz, [channels[0], channels[0]])
+
+
+@pytest.mark.parametrize("arity", [0, 1, 3, 32, 33, 40])
+def test_many_from_frozen_maps_every_cloud_s_channels_in_order(arity: int) -> None:
+    """Each cloud's channels are its own read-only mapping, the names in the given order, for
+    the arities built with a dict display (up to 32) and the general path past them."""
+    xyz, _ = _rows(3, 5)
+    names = [f"c{k:02d}" for k in range(arity)]
+    columns = [
+        [_frozen(np.full(5, 10 * i + k, dtype=np.int32)) for i in range(3)] for k in range(arity)
+    ]
+    clouds = PointCloud.many_from_frozen(list(xyz), list(zip(names, columns, strict=True)))
+    assert len(clouds) == 3
+    for i, cloud in enumerate(clouds):
+        assert list(cloud.channels) == names
+        for k, name in enumerate(names):
+            assert cloud.channels[name] is columns[k][i]
+        with pytest.raises(TypeError):
+            cloud.channels["new"] = columns[0][0] if arity else xyz[0]  # type: ignore[index]
+    assert clouds[0].channels is not clouds[1].channels
+    if arity >= 2:
+        # One channel a cloud short: refused, not silently cut.
+        short = list(zip(names, columns, strict=True))
+        short[-1] = (names[-1], columns[-1][:2])
+        with pytest.raises(ValueError, match="zip"):
+            PointCloud.many_from_frozen(list(xyz), short)

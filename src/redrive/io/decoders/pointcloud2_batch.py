@@ -12,7 +12,7 @@ layout the one-message fast path does not take) are left to that path.
 from __future__ import annotations
 
 from collections.abc import Callable
-from itertools import repeat
+from itertools import islice, repeat
 from operator import getitem
 from typing import TYPE_CHECKING, Any, cast
 
@@ -74,9 +74,13 @@ def _cut(
     for lo in range(0, len(rows), group):
         block = rows[lo : lo + group].copy().view(view)
         block.flags.writeable = False
-        xyz.extend(block[_XYZ])  # iterating in C: one read-only (N, 3) view a cloud
+        # Iterating in C: one read-only (N, 3) view a cloud.  ``islice`` stops at the last
+        # cloud: iterating an array to its end costs numpy a formatted IndexError (≈ 2,400
+        # instructions, more than a cloud's view).
+        count = len(block)
+        xyz.extend(islice(block[_XYZ], count))
         for name, into in zip(names, values, strict=True):
-            into.extend(block[name])
+            into.extend(islice(block[name], count))
     return xyz, values
 
 
