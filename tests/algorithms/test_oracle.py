@@ -15,6 +15,7 @@ from redrive.algorithms.reference.oracle import (
 )
 from redrive.errors import AlgorithmError, ConfigError
 from redrive.types import Box3D, DetectedObject, Frame, ObjectClass, ObjectColumns, SensorType
+from tests._objects import one_batch
 
 T0_NS = 1_700_000_000_000_000_000
 QUIET = {
@@ -182,17 +183,7 @@ def test_ground_truth_sharing_columns_gives_the_output_of_constructed_objects() 
     made[3] = dataclasses.replace(made[3], num_lidar_points=0)
     made[5] = dataclasses.replace(made[5], visible=False)
     made[8] = dataclasses.replace(made[8], num_lidar_points=None, visible=None)
-    batch = DetectedObject.many(
-        object_ids=[o.object_id for o in made],
-        object_classes=[o.object_class for o in made],
-        centers=[o.box.center for o in made],
-        sizes=[o.box.size for o in made],
-        yaws_rad=[o.box.yaw_rad for o in made],
-        velocities=[o.velocity for o in made],
-        orientations=[o.orientation for o in made],
-        num_lidar_points=[o.num_lidar_points for o in made],
-        visible=[o.visible for o in made],
-    )
+    batch = one_batch(made)
     config = {"false_positive_rate": 3.0, "miss_probability": 0.2, "max_range_m": 40.0}
     config["class_confusion_probability"] = 0.3
     for index in range(5):

@@ -12,6 +12,7 @@ from redrive.algorithms import Role, StageOutputs
 from redrive.algorithms.reference.planner import IdmPlanner, Polyline
 from redrive.errors import AlgorithmError, ConfigError
 from redrive.types import Box3D, DetectedObject, Frame, ObjectClass, PlannedPath, VehicleState
+from tests._objects import one_batch
 
 STAMP_NS = 1_700_000_000_000_000_000
 FRONT_M = 4.7 - 0.95  # rear axle to front bumper with the default ego size
@@ -381,14 +382,7 @@ def test_objects_sharing_columns_give_the_path_of_constructed_objects() -> None:
     """The leaders read the objects' shared columns (DetectedObject.many) or gather them from
     the objects: the same path, bit for bit, in any order or subset of a batch."""
     objects = [car(25.0, 0.4, speed_mps=3.0, yaw_rad=0.1), car(14.0, -3.0), car(40.0, 1.0)]
-    batch = DetectedObject.many(
-        object_ids=[o.object_id for o in objects],
-        object_classes=[o.object_class for o in objects],
-        centers=[o.box.center for o in objects],
-        sizes=[o.box.size for o in objects],
-        yaws_rad=[o.box.yaw_rad for o in objects],
-        velocities=[o.velocity for o in objects],
-    )
+    batch = one_batch(objects)
     frame = make_frame(8.0, yaw_rate_rad_s=0.05)
     for order in ([0, 1, 2], [2, 0], [1]):
         want = IdmPlanner().step(frame, perceived(*(objects[i] for i in order)))

@@ -5,26 +5,13 @@ from __future__ import annotations
 import numpy as np
 
 from redrive.results._buffers import _object_rows
-from redrive.types import Box3D, DetectedObject, ObjectClass, ObjectColumns
+from redrive.types import DetectedObject, ObjectClass, ObjectColumns
+from tests._objects import plain
 
 
 def _rows_of_objects(objects: list[DetectedObject], *, ground_truth: bool) -> list[tuple]:  # type: ignore[type-arg]
     """The rows of constructor-made copies (no shared columns: the per-object path)."""
-    copies = [
-        DetectedObject(
-            object_id=o.object_id,
-            object_class=o.object_class,
-            confidence=o.confidence,
-            box=Box3D(center=o.box.center, size=o.box.size, yaw_rad=o.box.yaw_rad),
-            velocity=o.velocity,
-            acceleration=o.acceleration,
-            orientation=o.orientation,
-            bbox_2d=o.bbox_2d,
-            num_lidar_points=o.num_lidar_points,
-            visible=o.visible,
-        )
-        for o in objects
-    ]
+    copies = [plain(o) for o in objects]
     assert ObjectColumns.shared_by(copies) is None
     return _object_rows((3, 42), copies, ground_truth=ground_truth)
 

@@ -10,7 +10,8 @@ import pickle
 import numpy as np
 import pytest
 
-from redrive.types import Box3D, DetectedObject, ObjectClass, ObjectColumns
+from redrive.types import DetectedObject, ObjectClass, ObjectColumns
+from tests._objects import plain
 
 CLASSES = [ObjectClass.VEHICLE, ObjectClass.PEDESTRIAN, ObjectClass.BICYCLE, ObjectClass.TRUCK]
 
@@ -29,22 +30,6 @@ def batch(n: int = 4, seed: int = 1) -> list[DetectedObject]:
         orientations=rng.normal(size=(n, 3)),
         num_lidar_points=[3, None, 0, 9][:n],
         visible=[True, None, False, True][:n],
-    )
-
-
-def plain(obj: DetectedObject) -> DetectedObject:
-    """The same object made by the constructor."""
-    return DetectedObject(
-        object_id=obj.object_id,
-        object_class=obj.object_class,
-        confidence=obj.confidence,
-        box=Box3D(center=obj.box.center, size=obj.box.size, yaw_rad=obj.box.yaw_rad),
-        velocity=obj.velocity,
-        acceleration=obj.acceleration,
-        orientation=obj.orientation,
-        bbox_2d=obj.bbox_2d,
-        num_lidar_points=obj.num_lidar_points,
-        visible=obj.visible,
     )
 
 
