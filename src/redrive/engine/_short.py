@@ -108,7 +108,7 @@ def run_short(
         nonlocal done
         for frame, wall_ns, raw in ran:
             failed: tuple[int, StepRecord] | None = None
-            steps = []
+            records = []
             for single, status, output, latency_ns, cpu_ns, error in raw:
                 if status is _OK and output is not None:  # the common step, built inline
                     step = step_record_unchecked(
@@ -118,11 +118,11 @@ def run_short(
                     step = single_step_record(single, status, output, latency_ns, cpu_ns, error)
                     if failed is None:
                         failed = (frame.index, step)
-                steps.append(step)
+                records.append(step)
             record = frame_record_unchecked(  # Frame and the graph keep its invariants
                 int(frame.index),
                 frame.stamp_ns,
-                tuple(steps),
+                tuple(records),
                 frame.vehicle_state,
                 frame.ground_truth,
                 wall_ns,
@@ -150,14 +150,14 @@ def run_short(
                 break
         if not batch:
             return None
-        todo = iter(batch)
+        unrun = iter(batch)  # the batch's frames no chain has run yet
         more = True
         while more:  # chains of at most CHAIN_NS over the batch
             more = stop = False
             try:
                 cpu = _thread_time_ns()
                 start = perf_counter_ns()
-                for frame in todo:
+                for frame in unrun:
                     t0_ns = perf_counter_ns()
                     raw: list[tuple[Any, ...]] = []
                     upstream = _NO_UPSTREAM

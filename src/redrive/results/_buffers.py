@@ -235,14 +235,15 @@ def _object_rows(
         return rows
     # x, y, z, l, w, h, yaw, vx … az of every object in one C pass: the floats tolist gives
     # the objects' arrays, row by row
-    numbers = np.hstack(
-        [
+    numbers = np.concatenate(
+        (
             columns.centers,
             columns.sizes,
             columns.yaws_rad[:, None],
             columns.velocities,
             columns.accelerations,
-        ]
+        ),
+        axis=1,
     ).tolist()
     classes = [c.value for c in columns.object_classes]
     boxes = [_NO_BBOX if b is None else b for b in columns.bbox_2d]
