@@ -17,6 +17,7 @@ outputs, the next frame of the batch: ≈ 1 µs), as ``docs/results.md`` says of
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable, Iterator
 from time import perf_counter_ns
@@ -86,12 +87,16 @@ def run_short(
     stats: StatsCollector,
     progress: Callable[[int], None] | None,
     fail_fast: bool,
+    cancel: threading.Event | None = None,
 ) -> tuple[int, StepRecord] | None:
     """Run ``frames`` through ``stages`` (``(single, roles after it, last)`` each); hand each
     finished frame's record to ``sink`` and ``stats`` in order.  Returns the first failed
     step with ``fail_fast`` (no frame after it is handed on), else None.
 
     On KeyboardInterrupt the frames whose steps all ran are handed on before it propagates.
+    With ``cancel``, each frame is handed on before the next one runs, and no frame runs once
+    it is set (the frames read ahead and not run are dropped): a Cancel pressed at frame n's
+    progress leaves frames 0 … n − 1, as the frame-by-frame loop does.
     """
     add = stats.add
     done = 0
@@ -158,6 +163,8 @@ def run_short(
                 cpu = _thread_time_ns()
                 start = perf_counter_ns()
                 for frame in unrun:
+                    if cancel is not None and cancel.is_set():
+                        return hand_on()
                     t0_ns = perf_counter_ns()
                     raw: list[tuple[Any, ...]] = []
                     upstream = _NO_UPSTREAM
@@ -187,7 +194,7 @@ def run_short(
                     ran.append((frame, t1_ns - t0_ns, raw))
                     if stop:
                         break
-                    if t1_ns - start >= CHAIN_NS:
+                    if t1_ns - start >= CHAIN_NS or cancel is not None:
                         more = True
                         break
             except KeyboardInterrupt:

@@ -15,7 +15,8 @@ Every step is recorded (output, latency, CPU time, error); an algorithm's except
 run unless ``fail_fast`` is set.  Ctrl-C stops reading, lets nothing half-done be written, and
 closes the run directory as ``interrupted``: ``redrive run … --resume`` continues it.  Setting the
 ``cancel`` event given to :meth:`Engine.run` (the GUI's Cancel button) does the same from another
-thread: no frame is read after it is set, the frames already read are finished and written.
+thread: no frame is read or started after it is set, the frames in flight are finished and
+written.
 """
 
 from __future__ import annotations
@@ -300,8 +301,8 @@ class Engine:
             sink: receives each finished frame (the results writer).
             skip: frame indices already done (a resumed run); they are read and not processed.
             progress: called with the number of frames finished so far.
-            cancel: once set (from any thread), no further frame is read; the frames already
-                read are finished and the run ends ``interrupted``, as on Ctrl-C.
+            cancel: once set (from any thread), no further frame is read or started; the
+                frames in flight are finished and the run ends ``interrupted``, as on Ctrl-C.
 
         Returns:
             what happened; ``report.status`` is ``complete``, ``interrupted`` (Ctrl-C or
@@ -363,6 +364,7 @@ class Engine:
                     stats=stats,
                     progress=progress,
                     fail_fast=fail_fast,
+                    cancel=cancel,
                 )
             elif pipelined:
                 failure = self._pipelined(paced, finish)
@@ -372,8 +374,8 @@ class Engine:
             status, failure = RunStatus.INTERRUPTED, None
         if failure is not None:
             status = RunStatus.FAILED
-        elif cancelled[0]:
-            status = RunStatus.INTERRUPTED
+        elif cancelled[0] or (paced is None and cancel is not None and cancel.is_set()):
+            status = RunStatus.INTERRUPTED  # (the short path stops without reading on)
         late = getattr(self.hooks, "late_frames", 0)
         return stats.report(
             status=status, wall_s=time.perf_counter() - t0, late_frames=late, failure=failure
