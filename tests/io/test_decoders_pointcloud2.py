@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import dataclasses
+import mmap
 import struct
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -13,6 +16,7 @@ from hypothesis import strategies as st
 from redrive.errors import UnsupportedMessageError
 from redrive.io.base import LogMessage
 from redrive.io.decoders import PointCloud2Decoder, read_cloud_layout
+from redrive.io.decoders.pointcloud2_batch import VIEW_SHARE
 from redrive.types import PointCloud
 from tests.io._decoder_helpers import deserializer, header, log_message
 
@@ -189,11 +193,12 @@ def test_random_layouts_match_full_deserialisation(layout: dict[str, Any], share
     assert layout_read.is_bigendian == bool(msg.is_bigendian)
 
 
-def _root(values: np.ndarray) -> Any:
-    """The object at the end of an array's ``base`` chain (what keeps its memory alive)."""
+def _root(values: Any) -> Any:
+    """The object at the end of an array's ``base`` chain (what keeps its memory alive),
+    through a memoryview to what it views."""
     while isinstance(values, np.ndarray) and values.base is not None:
         values = values.base
-    return values
+    return values.obj if isinstance(values, memoryview) else values
 
 
 def _pins_only_its_own_bytes(cloud: PointCloud, message: LogMessage) -> None:
@@ -255,19 +260,20 @@ def test_a_message_s_own_bytes_are_viewed_strided() -> None:
 
 
 @pytest.mark.parametrize("ros_version", [1, 2])
-def test_a_view_into_a_reader_s_chunk_is_copied_once(ros_version: int) -> None:
-    """A message that is a view into a larger read-only buffer (a ROS 1 chunk, a map): the
-    point bytes are copied once, xyz and the channels are strided views of that copy, and
-    nothing keeps the chunk alive."""
+def test_a_small_part_of_a_reader_s_chunk_is_copied_once(ros_version: int) -> None:
+    """A message that is a small part of a larger immutable buffer (a ROS 1 chunk of other
+    topics' messages): the point bytes are copied once, xyz and the channels are strided views
+    of that copy, and nothing keeps the chunk alive."""
     n = 1000
     points, fields = _padded_points(n)
+    other = bytes(range(256)) * (2 * n * 24 // 256)  # other topics' bytes: 2x the cloud's
     message = _cloud_message(
         ros_version,
         fields=fields,
         data=points.tobytes(),
         width=n,
         point_step=24,
-        raw_wrapper=lambda b: memoryview(b"chunk before" + b + b"chunk after")[12:-11],
+        raw_wrapper=lambda b: memoryview(b"chunk before" + b + other)[12 : 12 + len(b)],
     )
     chunk = message.raw.obj
     cloud = PointCloud2Decoder().decode(message, _no_deserialize).value
@@ -280,6 +286,60 @@ def test_a_view_into_a_reader_s_chunk_is_copied_once(ros_version: int) -> None:
     _pins_only_its_own_bytes(cloud, message)
     np.testing.assert_array_equal(cloud.xyz[:, 0], np.arange(n, dtype=np.float32))
     np.testing.assert_array_equal(cloud.channels["intensity"], np.arange(n) * 2)
+
+
+@pytest.mark.parametrize("ros_version", [1, 2])
+@pytest.mark.parametrize("shift", [0, 1, 3])  # the points' alignment in the chunk
+def test_a_cloud_that_fills_most_of_a_private_chunk_views_it(ros_version: int, shift: int) -> None:
+    """A message whose points are at least VIEW_SHARE of the immutable ``bytes`` it lies in
+    (a ROS 1 chunk read into its own buffer, holding mostly this cloud): xyz and the channels
+    are read-only strided views of that buffer (which the cloud then pins: at most
+    1 / VIEW_SHARE times its own point bytes), at whatever alignment, with the same values."""
+    n = 1000
+    points, fields = _padded_points(n)
+    head = b"c" * (12 + shift)
+    message = _cloud_message(
+        ros_version,
+        fields=fields,
+        data=points.tobytes(),
+        width=n,
+        point_step=24,
+        raw_wrapper=lambda b: memoryview(head + b + b"chunk after")[len(head) : len(head) + len(b)],
+    )
+    chunk = message.raw.obj
+    assert type(chunk) is bytes
+    cloud = PointCloud2Decoder().decode(message, _no_deserialize).value
+    for values in (cloud.xyz, *cloud.channels.values()):
+        assert _root(values) is chunk
+        assert not values.flags.writeable
+    assert n * 24 >= len(chunk) * VIEW_SHARE
+    assert cloud.xyz.strides == (24, 4)
+    np.testing.assert_array_equal(cloud.xyz[:, 0], np.arange(n, dtype=np.float32))
+    np.testing.assert_array_equal(cloud.xyz[:, 1], -np.arange(n, dtype=np.float32))
+    np.testing.assert_array_equal(cloud.xyz[:, 2], np.float32(0.5))
+    np.testing.assert_array_equal(cloud.channels["intensity"], np.arange(n) * 2)
+    np.testing.assert_array_equal(cloud.channels["ring"], np.arange(n) % 64)
+
+
+def test_a_cloud_in_a_read_only_file_map_is_copied(tmp_path: Path) -> None:
+    """A message in a read-only map of a file is copied however much of the map it fills:
+    a cloud never pins a file map (the file may be cut or rewritten after it is closed)."""
+    n = 1000
+    points, fields = _padded_points(n)
+    plain = _cloud_message(1, fields=fields, data=points.tobytes(), width=n, point_step=24)
+    path = tmp_path / "message.bin"
+    path.write_bytes(plain.raw)
+    with path.open("rb") as fh:
+        mapped = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
+    message = dataclasses.replace(plain, raw=memoryview(mapped))
+    cloud = PointCloud2Decoder().decode(message, _no_deserialize).value
+    root = _root(cloud.xyz)
+    assert root is not mapped
+    assert isinstance(root, bytes)
+    assert len(root) == n * 24
+    del message
+    mapped.close()
+    np.testing.assert_array_equal(cloud.xyz[:, 0], np.arange(n, dtype=np.float32))
 
 
 def test_layout_cache_sees_a_changed_layout_on_the_same_topic() -> None:

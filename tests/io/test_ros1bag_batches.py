@@ -11,6 +11,7 @@ message with every message before it read.
 from __future__ import annotations
 
 import dataclasses
+import gc
 import struct
 from pathlib import Path
 
@@ -112,23 +113,27 @@ def _rosbags_messages(path: Path, **kw: int) -> list[tuple[str, int, bytes]]:
         return [(c.topic, t, bytes(d)) for c, t, d in reader.messages(**kw)]
 
 
-def _root(values: np.ndarray) -> object:
+def _root(values: object) -> object:
+    """What keeps an array's memory alive: the end of its ``base`` chain, through a
+    memoryview to what it views."""
     while isinstance(values, np.ndarray) and values.base is not None:
         values = values.base
-    return values
+    return values.obj if isinstance(values, memoryview) else values
 
 
-def _same_cloud(a: PointCloud, b: PointCloud) -> None:
-    """Equal values; ``a``'s arrays are read-only views of a copy of point bytes of at most
-    GROUP_BYTES (or of one cloud), never of the reader's chunk or file map."""
+def _same_cloud(a: PointCloud, b: PointCloud, *, batch_size: int = 1) -> None:
+    """Equal values; ``a``'s arrays are read-only views of immutable bytes: a copy of point
+    bytes of at most GROUP_BYTES (or of one cloud), or a reader's private chunk that the
+    ``batch_size`` clouds of its batch fill to at least VIEW_SHARE — never a file map."""
     assert a.xyz.dtype == b.xyz.dtype == np.float32
     assert a.xyz.shape == b.xyz.shape
     assert not a.xyz.flags.writeable
+    own = len(a) * POINT.itemsize
     for values in (a.xyz, *a.channels.values()):
         root = _root(values)
         assert isinstance(root, bytes | np.ndarray), type(root)
         size = len(memoryview(root).cast("B"))
-        assert size <= max(pb.GROUP_BYTES, len(a) * POINT.itemsize)
+        assert size <= max(pb.GROUP_BYTES, own, own * batch_size / pb.VIEW_SHARE)
     np.testing.assert_array_equal(a.xyz, b.xyz)
     assert list(a.channels) == list(b.channels)
     for name, values in a.channels.items():
@@ -172,7 +177,8 @@ def test_chunks_read_together_give_rosbags_messages_and_equal_clouds(
             assert (decoded.stamp_ns, decoded.frame_id) == (single.stamp_ns, single.frame_id)
             assert isinstance(decoded.value, PointCloud)
             assert isinstance(single.value, PointCloud)
-            _same_cloud(decoded.value, single.value)
+            assert message.batch is not None
+            _same_cloud(decoded.value, single.value, batch_size=len(message.batch[0]))
             points = sent[message.topic, message.log_time_ns]
             xyz = np.stack([points[a] for a in "xyz"], axis=1)
             np.testing.assert_array_equal(decoded.value.xyz, xyz)
@@ -280,7 +286,8 @@ def test_clouds_of_a_damaged_bag_read_together_equal_the_one_message_decode(
             assert (decoded.stamp_ns, decoded.frame_id) == (single.stamp_ns, single.frame_id)
             assert isinstance(decoded.value, PointCloud)
             assert isinstance(single.value, PointCloud)
-            _same_cloud(decoded.value, single.value)
+            assert message.batch is not None
+            _same_cloud(decoded.value, single.value, batch_size=len(message.batch[0]))
             points = sent[message.topic, message.log_time_ns]
             np.testing.assert_array_equal(
                 decoded.value.xyz, np.stack([points[a] for a in "xyz"], axis=1)
@@ -293,3 +300,77 @@ def test_clouds_of_a_damaged_bag_read_together_equal_the_one_message_decode(
     regular = [m for m in messages if m.topic == "/regular"]
     assert k < len(regular) < 60
     assert together >= len(regular) - 14  # the chunks after the damage are read together too
+
+
+@pytest.mark.parametrize("compression", ["none", "lz4"])
+def test_clouds_outlive_their_reader_and_their_file(tmp_path: Path, compression: str) -> None:
+    """Clouds that view their chunk's buffer keep it, not the file: after the reader is
+    closed and the bag truncated and deleted, every kept cloud still has the values written."""
+    path = tmp_path / "clouds.bag"
+    sent = _write(path, compression=compression, mixed=False)
+    kept: list[tuple[tuple[str, int], PointCloud]] = []
+    viewed = 0
+    with open_log(path) as log:
+        for message in log.messages():
+            cloud = decode(message, log.deserialize).value
+            assert isinstance(cloud, PointCloud)
+            kept.append(((message.topic, message.log_time_ns), cloud))
+            chunk = message.raw.obj
+            viewed += _root(cloud.xyz) is chunk and type(chunk) is bytes
+    assert viewed >= 50  # the /regular clouds fill their chunks: views of them
+    with path.open("r+b") as fh:
+        fh.truncate(0)
+    path.unlink()
+    gc.collect()
+    assert len(kept) == len(sent) == 60
+    for key, cloud in kept:
+        points = sent[key]
+        np.testing.assert_array_equal(cloud.xyz, np.stack([points[a] for a in "xyz"], axis=1))
+        for name in ("intensity", "ring", "time"):
+            np.testing.assert_array_equal(cloud.channels[name], points[name])
+
+
+def _write_sparse(path: Path) -> dict[tuple[str, int], np.ndarray]:
+    """/big: 2,000-point clouds; /small: a 40-point cloud before each, in chunks of ≈ 512 KiB
+    (8 of each a chunk, a /big message last): /small's point bytes are 2 % of every chunk."""
+    writer = Bag1Writer(path)
+    writer.chunk_threshold = 512 * 1024
+    sent: dict[tuple[str, int], np.ndarray] = {}
+    with writer:
+        conns = {t: writer.add_connection(t, TYPE, typestore=store(1)) for t in ("/big", "/small")}
+        for i in range(40):
+            for k, (topic, n) in enumerate((("/small", 40), ("/big", 2000))):
+                t = T0 + i * 10_000_000 + k
+                points = _points(n, seed=i * 2 + k)
+                writer.write(conns[topic], t, _cloud(points, t))
+                sent[topic, t] = points
+    return sent
+
+
+@pytest.mark.parametrize("topics", [["/small"], ["/small", "/big"]])
+def test_a_sparse_selection_copies_its_clouds_rather_than_pin_the_chunk(
+    tmp_path: Path, topics: list[str]
+) -> None:
+    """A topic whose clouds are a small part of their chunks (one small topic among a large
+    one) is copied out (at most GROUP_BYTES a copy), never pins the chunk; the topic that
+    fills the chunks views it.  Values are the ones written either way."""
+    path = tmp_path / "sparse.bag"
+    sent = _write_sparse(path)
+    roots: dict[str, list[tuple[object, object]]] = {"/big": [], "/small": []}
+    with open_log(path) as log:
+        for message in log.messages(topics=topics):
+            assert message.batch is not None
+            cloud = decode(message, log.deserialize).value
+            assert isinstance(cloud, PointCloud)
+            points = sent[message.topic, message.log_time_ns]
+            np.testing.assert_array_equal(cloud.xyz, np.stack([points[a] for a in "xyz"], axis=1))
+            np.testing.assert_array_equal(cloud.channels["time"], points["time"])
+            for values in (cloud.xyz, *cloud.channels.values()):
+                roots[message.topic].append((_root(values), message.raw.obj))
+    assert len(roots["/small"]) == 40 * 4
+    for root, chunk in roots["/small"]:
+        assert root is not chunk
+        assert len(memoryview(root).cast("B")) <= pb.GROUP_BYTES  # type: ignore[arg-type]
+    if "/big" in topics:
+        assert len(roots["/big"]) == 40 * 4
+        assert all(root is chunk and type(chunk) is bytes for root, chunk in roots["/big"])

@@ -29,7 +29,7 @@ import numpy.typing as npt
 from redrive.io.base import LogMessage
 from redrive.io.decoders._common import unsupported
 from redrive.io.decoders.base import Decoded, DecodedKind, Deserialize
-from redrive.io.decoders.pointcloud2_batch import decode_batch
+from redrive.io.decoders.pointcloud2_batch import decode_batch, views_buffer
 from redrive.types import PointCloud, SensorType
 
 __all__ = [
@@ -501,11 +501,12 @@ class PointCloud2Decoder:
             and data_size >= n * step
         ):
             # The fast path: one view of the points, no layout object (see the class docstring).
-            if type(raw) is bytes and (data_offset + plan.xyz_offset) % 4 == 0:
-                # The message's own immutable bytes: viewed as they are (the cloud pins them).
+            if views_buffer(raw, n * step):
+                # Most of immutable bytes (the message's own, or a reader's private chunk it
+                # fills): viewed as they are (the cloud pins them).
                 points = np.ndarray((n,), view, raw, data_offset)
             else:
-                # A view into a reader's chunk, map or buffer: the point bytes copied once.
+                # A small part of a reader's chunk, or a map or buffer: the points copied once.
                 own = bytes(head[0][data_offset : data_offset + n * step])
                 points = np.ndarray((n,), view, own)
             channels = {name: points[name] for name in plan.channels}

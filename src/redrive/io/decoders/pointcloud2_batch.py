@@ -31,7 +31,7 @@ if TYPE_CHECKING:
 #: The member of a plan's view dtype that holds x, y, z as a float32 (3,) subarray.
 _XYZ = "xyz"
 
-__all__ = ["BATCH_FROM", "GROUP_BYTES", "decode_batch"]
+__all__ = ["BATCH_FROM", "GROUP_BYTES", "VIEW_SHARE", "decode_batch", "views_buffer"]
 
 #: Batches of fewer messages are decoded one by one (the batch's few numpy calls cost a
 #: fixed few tens of µs, what one message costs alone).
@@ -39,6 +39,10 @@ BATCH_FROM = 4
 
 #: The largest copy of point bytes the clouds of a chunk share (see ``decode_batch``).
 GROUP_BYTES = 256 << 10
+
+#: Clouds view a reader's private chunk buffer (no copy) when their point bytes are at least
+#: this share of it: a kept chunk is then at most 1 / VIEW_SHARE times the clouds it holds.
+VIEW_SHARE = 0.5
 
 _U32 = np.dtype("<u4")
 #: ROS 1 PointCloud2 bytes: seq (4), stamp sec (4), nsec (4), then the frame id's length.
@@ -82,6 +86,41 @@ def _cut(
         for name, into in zip(names, values, strict=True):
             into.extend(islice(block[name], count))
     return xyz, values
+
+
+def views_buffer(buf: bytes | memoryview, nbytes: int) -> bool:
+    """True when clouds of ``nbytes`` point bytes may view ``buf`` instead of a copy: it is
+    immutable and private (a ``bytes``, or a view of one; never a file map) and the clouds are
+    at least :data:`VIEW_SHARE` of it."""
+    owner = buf.obj if isinstance(buf, memoryview) else buf
+    return type(owner) is bytes and nbytes >= len(owner) * VIEW_SHARE
+
+
+def _view(
+    buf: bytes | memoryview,
+    offsets: npt.NDArray[np.int64],
+    n: int,
+    view: np.dtype[Any],
+    names: tuple[str, ...],
+) -> tuple[list[npt.NDArray[np.float32]], list[list[npt.NDArray[Any]]]]:
+    """Each cloud's xyz and channels ``names`` as read-only strided views of ``buf`` (``n``
+    points of dtype ``view`` at each of ``offsets``), by C-level iteration."""
+    count = len(offsets)
+    gaps = np.diff(offsets)
+    if count > 1 and (gaps == gaps[0]).all():
+        # At a fixed distance: one (count, n) array over the buffer, a row a cloud.
+        block = np.ndarray(
+            (count, n), view, buf, int(offsets[0]), (int(gaps[0]), view.itemsize)
+        )
+        return (
+            list(islice(block[_XYZ], count)),
+            [list(islice(block[name], count)) for name in names],
+        )
+    points = list(map(np.frombuffer, repeat(buf), repeat(view), repeat(n), offsets.tolist()))
+    return (
+        list(map(_field, points, repeat(_XYZ))),
+        [list(map(_field, points, repeat(name))) for name in names],
+    )
 
 
 def decode_batch(
@@ -131,17 +170,21 @@ def decode_batch(
     stamps = stamp[:, 0].astype(np.int64) * 1_000_000_000 + stamp[:, 1]
     gaps = np.diff(starts)
     nbytes = n * step
-    if count == 1 or (int(gaps[0]) >= size and (gaps == gaps[0]).all()):
-        # At a fixed distance (a chunk of one topic): the point bytes of every cloud as rows
-        # of one strided view of the chunk, each row copied out below.
-        stride = size if count == 1 else int(gaps[0])
-        rows: npt.NDArray[np.uint8] = np.ndarray(
-            (count, nbytes), np.uint8, buf, first + data_offset, (stride, 1)
-        )
+    if views_buffer(buf, count * nbytes):
+        # The clouds are most of a private chunk buffer: views of it, nothing copied.
+        xyz, values = _view(buf, starts + data_offset, n, plan.view, plan.channels)
     else:
-        # Between other topics' messages: gathered row by row.
-        rows = byte_rows(buf, starts + data_offset, nbytes)
-    xyz, values = _cut(rows, nbytes, plan.view, plan.channels)
+        if count == 1 or (int(gaps[0]) >= size and (gaps == gaps[0]).all()):
+            # At a fixed distance (a chunk of one topic): the point bytes of every cloud as
+            # rows of one strided view of the chunk, each row copied out below.
+            stride = size if count == 1 else int(gaps[0])
+            rows: npt.NDArray[np.uint8] = np.ndarray(
+                (count, nbytes), np.uint8, buf, first + data_offset, (stride, 1)
+            )
+        else:
+            # Between other topics' messages: gathered row by row.
+            rows = byte_rows(buf, starts + data_offset, nbytes)
+        xyz, values = _cut(rows, nbytes, plan.view, plan.channels)
     channels = list(zip(plan.channels, values, strict=True))
     # A zero stamp means "unset": the message's log time stands in for it.
     stamps_ns = np.where(stamps == 0, batch.log_times_ns, stamps).tolist()
