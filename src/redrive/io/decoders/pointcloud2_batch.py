@@ -46,6 +46,7 @@ VIEW_SHARE = 0.5
 
 _U32 = np.dtype("<u4")
 #: ROS 1 PointCloud2 bytes: seq (4), stamp sec (4), nsec (4), then the frame id's length.
+_STAMP_AT = 4
 _SAME_FROM = 12
 
 _new = object.__new__
@@ -99,19 +100,18 @@ def views_buffer(buf: bytes | memoryview, nbytes: int) -> bool:
 def _view(
     buf: bytes | memoryview,
     offsets: npt.NDArray[np.int64],
+    stride: int | None,
     n: int,
-    view: np.dtype[Any],
-    names: tuple[str, ...],
+    plan: tuple[np.dtype[Any], tuple[str, ...]],
 ) -> tuple[list[npt.NDArray[np.float32]], list[list[npt.NDArray[Any]]]]:
-    """Each cloud's xyz and channels ``names`` as read-only strided views of ``buf`` (``n``
-    points of dtype ``view`` at each of ``offsets``), by C-level iteration."""
+    """Each cloud's xyz and channels as read-only strided views of ``buf``: ``n`` points of
+    the plan's view dtype at each of ``offsets`` (``stride`` apart, or None when they are not
+    at a fixed distance), by C-level iteration."""
+    view, names = plan
     count = len(offsets)
-    gaps = np.diff(offsets)
-    if count > 1 and (gaps == gaps[0]).all():
+    if stride is not None:
         # At a fixed distance: one (count, n) array over the buffer, a row a cloud.
-        block = np.ndarray(
-            (count, n), view, buf, int(offsets[0]), (int(gaps[0]), view.itemsize)
-        )
+        block = np.ndarray((count, n), view, buf, int(offsets[0]), (stride, view.itemsize))
         return (
             list(islice(block[_XYZ], count)),
             [list(islice(block[name], count)) for name in names],
@@ -162,27 +162,33 @@ def decode_batch(
         or data_size < n * step
     ):
         return out
-    # Everything from the frame id to the point data must be the first message's.
-    same = byte_rows(buf, starts + _SAME_FROM, data_offset - _SAME_FROM)
+    # Each message's stamp and everything after it up to the point data, in one gather:
+    # everything from the frame id on must be the first message's.
+    heads = byte_rows(buf, starts + _STAMP_AT, data_offset - _STAMP_AT)
+    same = heads[:, _SAME_FROM - _STAMP_AT :]
     if not (same == same[0]).all():
         return out
-    stamp = byte_rows(buf, starts + 4, 8).view(_U32)
+    stamp = heads[:, : _SAME_FROM - _STAMP_AT].view(_U32)
     stamps = stamp[:, 0].astype(np.int64) * 1_000_000_000 + stamp[:, 1]
-    gaps = np.diff(starts)
+    gaps = starts[1:] - starts[:-1]
     nbytes = n * step
+    # At a fixed distance (a chunk of one topic), or between other topics' messages.
+    stride = size if count == 1 else int(gaps[0])
+    regular = count == 1 or (stride >= size and (gaps == stride).all())
     if views_buffer(buf, count * nbytes):
         # The clouds are most of a private chunk buffer: views of it, nothing copied.
-        xyz, values = _view(buf, starts + data_offset, n, plan.view, plan.channels)
+        xyz, values = _view(
+            buf, starts + data_offset, stride if regular else None, n, (plan.view, plan.channels)
+        )
     else:
-        if count == 1 or (int(gaps[0]) >= size and (gaps == gaps[0]).all()):
-            # At a fixed distance (a chunk of one topic): the point bytes of every cloud as
-            # rows of one strided view of the chunk, each row copied out below.
-            stride = size if count == 1 else int(gaps[0])
+        if regular:
+            # The point bytes of every cloud as rows of one strided view of the chunk, each
+            # row copied out below.
             rows: npt.NDArray[np.uint8] = np.ndarray(
                 (count, nbytes), np.uint8, buf, first + data_offset, (stride, 1)
             )
         else:
-            # Between other topics' messages: gathered row by row.
+            # Gathered row by row.
             rows = byte_rows(buf, starts + data_offset, nbytes)
         xyz, values = _cut(rows, nbytes, plan.view, plan.channels)
     channels = list(zip(plan.channels, values, strict=True))
