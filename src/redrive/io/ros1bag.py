@@ -272,8 +272,9 @@ class Ros1BagReader(RosReaderBase):
         and those of one connection are linked as one :class:`~redrive.io.base.MessageBatch`."""
         reader = self._rosbags
         assert reader is not None
+        selected = self._selected_ids(topics)
         times, chunk_pos, offsets, conn_ids = merged_index(
-            self._index_arrays(), sorted(self._selected_ids(topics)), start_ns
+            self._index_arrays(), sorted(selected), start_ns
         )
         if stop_ns is not None:
             times_stop = int(np.searchsorted(times, stop_ns, "left"))
@@ -285,7 +286,7 @@ class Ros1BagReader(RosReaderBase):
         heads = {cid: (c.topic, c.msgtype) for cid, c in self._conns.items()}
         # Chunks holding any of these connections' messages are read into their own bytes.
         own_ids = {cid for cid, c in self._conns.items() if c.msgtype in READ_INTO_BYTES}
-        all_own = own_ids.issuperset(np.unique(conn_ids).tolist())
+        all_own = own_ids.issuperset(selected)
         yielded = 0
         for k in range(len(bounds) - 1):
             lo, hi = bounds[k], bounds[k + 1]
