@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import gc
+import mmap
 import struct
 from pathlib import Path
 
@@ -374,3 +375,17 @@ def test_a_sparse_selection_copies_its_clouds_rather_than_pin_the_chunk(
     if "/big" in topics:
         assert len(roots["/big"]) == 40 * 4
         assert all(root is chunk and type(chunk) is bytes for root, chunk in roots["/big"])
+
+
+def test_only_chunks_read_for_clouds_are_read_into_bytes(tmp_path: Path) -> None:
+    """An uncompressed chunk is read into its own ``bytes`` when it holds selected PointCloud2
+    messages; a selection without clouds reads the same chunks through the file map."""
+    path = tmp_path / "clouds.bag"
+    _write(path)
+    with open_log(path) as log:
+        text = list(log.messages(topics=["/text"]))
+        clouds = list(log.messages(topics=["/regular", "/text"]))
+        assert text and clouds
+        assert all(isinstance(m.raw.obj, mmap.mmap) for m in text)
+        assert all(type(m.raw.obj) is bytes for m in clouds)
+        assert [bytes(m.raw) for m in text] == [bytes(m.raw) for m in clouds if m.topic == "/text"]

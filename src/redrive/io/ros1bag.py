@@ -346,7 +346,7 @@ class Ros1BagReader(RosReaderBase):
         return (np.array(starts, dtype=np.int64), np.array(stops, dtype=np.int64)), damage
 
     def _chunk_bytes(
-        self, header: Any, *, own: bool
+        self, header: Any, *, own: bool = False
     ) -> tuple[memoryview, tuple[int, int] | None]:
         """The decompressed records of one chunk, and the map span they occupy (if mapped).
 
