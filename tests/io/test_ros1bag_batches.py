@@ -385,7 +385,8 @@ def test_only_chunks_read_for_clouds_are_read_into_bytes(tmp_path: Path) -> None
     with open_log(path) as log:
         text = list(log.messages(topics=["/text"]))
         clouds = list(log.messages(topics=["/regular", "/text"]))
-        assert text and clouds
+        assert text
+        assert clouds
         assert all(isinstance(m.raw.obj, mmap.mmap) for m in text)
         assert all(type(m.raw.obj) is bytes for m in clouds)
         assert [bytes(m.raw) for m in text] == [bytes(m.raw) for m in clouds if m.topic == "/text"]

@@ -147,3 +147,23 @@ def test_a_strided_cloud_pickles_to_an_equal_read_only_cloud() -> None:
     _same(back, strided)
     assert not back.xyz.flags.writeable
     assert not any(values.flags.writeable for values in back.channels.values())
+
+
+def test_detector_gives_the_same_objects_for_an_unaligned_contiguous_cloud() -> None:
+    """A 12-byte-a-point cloud viewing a reader's chunk: xyz C-contiguous but not 4-aligned
+    (the points start wherever the message puts them).  The detector's kernels get an aligned
+    copy; the objects are those of an aligned cloud."""
+    points = np.ascontiguousarray(_scene(), dtype=np.float32)
+    raw = b"\x00" + points.tobytes()
+    xyz = np.ndarray(points.shape, np.float32, raw, 1)
+    assert xyz.flags.c_contiguous
+    assert not xyz.flags.aligned
+    cloud = PointCloud(xyz=xyz)
+    det = ClusterDetector()
+    det.configure({})
+    det.bind({"lidar_top": SensorType.LIDAR})
+    got = det.detect(cloud.xyz, sensor_location=SENSOR)
+    want = det.detect(points, sensor_location=SENSOR)
+    assert len(got) == len(want) == 1
+    np.testing.assert_array_equal(got[0].box.center, want[0].box.center)
+    np.testing.assert_array_equal(got[0].box.size, want[0].box.size)

@@ -27,10 +27,12 @@ class PointCloud:
     Attributes:
         xyz: float32 (N, 3), metres, in the frame of the sensor that recorded it; read-only.
             It owns its memory or pins it (never a buffer that can change), but it need not be
-            C-contiguous: a decoded cloud's xyz is a strided view of the cloud's own copy of
-            the message's point bytes (row stride = the point's size).  Code that needs
-            contiguous points (a compiled kernel with a fixed layout, ``.ctypes``, a raw buffer
-            write) calls ``np.ascontiguousarray(cloud.xyz)``; numpy code needs nothing.
+            C-contiguous nor aligned: a decoded cloud's xyz is a strided view (row stride = the
+            point's size) of the cloud's own copy of the message's point bytes or of the
+            immutable chunk the reader read them into.  Code that needs contiguous, aligned
+            points (a compiled kernel with a fixed layout, ``.ctypes``, a raw buffer write)
+            calls ``np.require(cloud.xyz, np.float32, ("C", "A"))`` (``np.ascontiguousarray`` keeps
+            a contiguous unaligned array as it is); numpy code needs nothing.
         channels: per-point fields, each an array of shape (N,): ``intensity``, ``ring``,
             ``t_offset_ns`` … in whatever dtype the source used, read-only, strided views like
             xyz when decoded.  Never a structured array.

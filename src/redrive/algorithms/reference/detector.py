@@ -298,7 +298,7 @@ class ClusterDetector(Algorithm):
         grid = self._ground_grid
         r0 = np.float32(cfg["min_range_m"])
         x, y, z, keys, minima = crop_cell_minima(
-            np.ascontiguousarray(xyz, dtype=np.float32),
+            np.require(xyz, np.float32, ("C", "A")),  # a decoded xyz may be strided or unaligned
             sx,
             sy,
             sz,

@@ -5,9 +5,11 @@ from the serialised bytes — ROS 1, or ROS 2 CDR in either byte order — build
 dtype from the ``PointField`` list and views the point data in place:
 
 * when x, y, z are adjacent native float32 (what drivers publish), ``xyz`` and every channel
-  are read-only strided views of the point bytes: of the message itself when it is its own
-  ``bytes`` object (nothing copied), else of one copy of its point bytes (a view into a
-  reader's chunk, file map or reusable buffer is never kept: a cloud pins its own bytes only);
+  are read-only strided views of the point bytes: of the immutable ``bytes`` the message lies
+  in when its points are at least half of them (its own ``bytes``, or a reader's private chunk
+  it fills: nothing copied, the cloud pins at most twice its point bytes; the arrays may then
+  be unaligned), else of one copy of its point bytes (a view into a file map, a reusable
+  buffer or a chunk mostly of other messages is never kept);
 * any other layout: ``xyz`` is copied once into a float32 (N, 3) C-contiguous array (float64 or
   integer x/y/z are cast) and the channels view the message's ``bytes`` or a copy as above;
 * ``is_bigendian`` clouds are byte-swapped to native order (channels are then copies);

@@ -3,10 +3,19 @@
 A sensor publishes clouds of one layout, so the messages of one connection in a ROS 1 chunk
 usually have the same size, the same header but for ``seq`` and the stamp, and lie at a fixed
 distance from each other.  Then the point bytes of all of them are the rows of one strided view
-of the chunk: each row is copied once into its cloud's own ``bytes`` and xyz and every channel
-are strided views of that copy — the arrays the one-message path makes, by C-level iteration
-over the chunk's clouds instead of a Python step per message.  Messages that do not fit (another size, another layout, a
-layout the one-message fast path does not take) are left to that path.
+of the chunk, and xyz and every channel of every cloud are strided views — the arrays the
+one-message path makes, by C-level iteration over the chunk's clouds instead of a Python step
+per message.  What they view:
+
+* the chunk itself, when it is a private immutable ``bytes`` (the ROS 1 reader reads a chunk of
+  clouds into one; a decompressed chunk is one) and the batch's clouds are at least
+  :data:`VIEW_SHARE` of it: nothing is copied, and the clouds kept pin at most
+  1 / :data:`VIEW_SHARE` times their own bytes (one cloud kept pins its whole chunk);
+* otherwise (a file map, a sparse selection: one small topic in chunks of another) a copy of
+  their point bytes, in groups of at most :data:`GROUP_BYTES`.
+
+Messages that do not fit (another size, another layout, a layout the one-message fast path does
+not take) are left to that path.
 """
 
 from __future__ import annotations
@@ -41,7 +50,10 @@ BATCH_FROM = 4
 GROUP_BYTES = 256 << 10
 
 #: Clouds view a reader's private chunk buffer (no copy) when their point bytes are at least
-#: this share of it: a kept chunk is then at most 1 / VIEW_SHARE times the clouds it holds.
+#: this share of it: a chunk kept alive by its clouds is then at most 1 / VIEW_SHARE = 2 times
+#: their bytes; a sparse selection is copied instead, so that it never pins a chunk of others'
+#: bytes.  (A single cloud kept pins its chunk: a few hundred KiB to a few MiB as recorders cut
+#: them, or ≈ its own size for a cloud that fills one.)
 VIEW_SHARE = 0.5
 
 _U32 = np.dtype("<u4")
@@ -63,7 +75,8 @@ def _cut(
 
     The bytes are copied in groups of clouds of at most :data:`GROUP_BYTES` together: one or
     two numpy calls a group, a copy small enough to stay in the cache while it is cut, and a
-    cloud kept pins its group's copy only, never the reader's chunk or map.  A cloud larger
+    cloud kept pins its group's copy only, never the reader's chunk or map (the path for
+    clouds that may not view their buffer: see :func:`views_buffer`).  A cloud larger
     than that is copied alone into its own ``bytes`` (immutable).  All by C-level iteration:
     no Python step a cloud.
     """
