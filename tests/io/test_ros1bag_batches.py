@@ -390,3 +390,23 @@ def test_only_chunks_read_for_clouds_are_read_into_bytes(tmp_path: Path) -> None
         assert all(isinstance(m.raw.obj, mmap.mmap) for m in text)
         assert all(type(m.raw.obj) is bytes for m in clouds)
         assert [bytes(m.raw) for m in text] == [bytes(m.raw) for m in clouds if m.topic == "/text"]
+
+
+def test_clouds_of_a_chunk_larger_than_view_max_bytes_are_copied(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Clouds that fill a chunk together but are each a small part of it view it only while it
+    is at most VIEW_MAX_BYTES: one cloud kept must not pin a chunk of any size a recorder
+    chose.  Past that they are copied (values equal)."""
+    path = tmp_path / "clouds.bag"
+    sent = _write(path, mixed=False)
+    monkeypatch.setattr(pb, "VIEW_MAX_BYTES", 8 * 1024)  # the bag's chunks are ≈ 48 KiB
+    with open_log(path) as log:
+        for message in log.messages():
+            cloud = decode(message, log.deserialize).value
+            assert isinstance(cloud, PointCloud)
+            assert _root(cloud.xyz) is not message.raw.obj
+            size = len(memoryview(_root(cloud.xyz)).cast("B"))  # type: ignore[arg-type]
+            assert size <= pb.GROUP_BYTES
+            points = sent[message.topic, message.log_time_ns]
+            np.testing.assert_array_equal(cloud.xyz, np.stack([points[a] for a in "xyz"], axis=1))

@@ -10,7 +10,8 @@ per message.  What they view:
 * the chunk itself, when it is a private immutable ``bytes`` (the ROS 1 reader reads a chunk of
   clouds into one; a decompressed chunk is one) and the batch's clouds are at least
   :data:`VIEW_SHARE` of it: nothing is copied, and the clouds kept pin at most
-  1 / :data:`VIEW_SHARE` times their own bytes (one cloud kept pins its whole chunk);
+  1 / :data:`VIEW_SHARE` times their own bytes (one cloud kept pins its whole chunk, at most
+  :data:`VIEW_MAX_BYTES` unless it fills half of it alone);
 * otherwise (a file map, a sparse selection: one small topic in chunks of another) a copy of
   their point bytes, in groups of at most :data:`GROUP_BYTES`.
 
@@ -40,7 +41,14 @@ if TYPE_CHECKING:
 #: The member of a plan's view dtype that holds x, y, z as a float32 (3,) subarray.
 _XYZ = "xyz"
 
-__all__ = ["BATCH_FROM", "GROUP_BYTES", "VIEW_SHARE", "decode_batch", "views_buffer"]
+__all__ = [
+    "BATCH_FROM",
+    "GROUP_BYTES",
+    "VIEW_MAX_BYTES",
+    "VIEW_SHARE",
+    "decode_batch",
+    "views_buffer",
+]
 
 #: Batches of fewer messages are decoded one by one (the batch's few numpy calls cost a
 #: fixed few tens of µs, what one message costs alone).
@@ -53,8 +61,14 @@ GROUP_BYTES = 256 << 10
 #: this share of it: a chunk kept alive by its clouds is then at most 1 / VIEW_SHARE = 2 times
 #: their bytes; a sparse selection is copied instead, so that it never pins a chunk of others'
 #: bytes.  (A single cloud kept pins its chunk: a few hundred KiB to a few MiB as recorders cut
-#: them, or ≈ its own size for a cloud that fills one.)
+#: them, or ≈ its own size for a cloud that fills one; never more than VIEW_MAX_BYTES unless
+#: it fills the chunk itself.)
 VIEW_SHARE = 0.5
+
+#: Clouds sharing a chunk view it only when it is at most this large (a recorder's chunks are
+#: ≈ 1 MiB: rosbag's default is 768 KiB), so one cloud kept never pins more than this or twice
+#: its own bytes, whatever chunk size the bag was recorded with.
+VIEW_MAX_BYTES = 4 << 20
 
 _U32 = np.dtype("<u4")
 #: ROS 1 PointCloud2 bytes: seq (4), stamp sec (4), nsec (4), then the frame id's length.
@@ -102,12 +116,19 @@ def _cut(
     return xyz, values
 
 
-def views_buffer(buf: bytes | memoryview, nbytes: int) -> bool:
-    """True when clouds of ``nbytes`` point bytes may view ``buf`` instead of a copy: it is
-    immutable and private (a ``bytes``, or a view of one; never a file map) and the clouds are
-    at least :data:`VIEW_SHARE` of it."""
+def views_buffer(buf: bytes | memoryview, nbytes: int, *, each: int | None = None) -> bool:
+    """True when clouds of ``nbytes`` point bytes (``each``: a cloud's; all of them when
+    None) may view ``buf`` instead of a copy: it is immutable and private (a ``bytes``, or a
+    view of one; never a file map), the clouds are at least :data:`VIEW_SHARE` of it, and one
+    of them kept alone pins at most :data:`VIEW_MAX_BYTES` or 1 / :data:`VIEW_SHARE` times
+    its own bytes."""
     owner = buf.obj if isinstance(buf, memoryview) else buf
-    return type(owner) is bytes and nbytes >= len(owner) * VIEW_SHARE
+    if type(owner) is not bytes:
+        return False
+    size = len(owner)
+    return nbytes >= size * VIEW_SHARE and (
+        size <= VIEW_MAX_BYTES or (nbytes if each is None else each) >= size * VIEW_SHARE
+    )
 
 
 def _view(
@@ -188,7 +209,7 @@ def decode_batch(
     # At a fixed distance (a chunk of one topic), or between other topics' messages.
     stride = size if count == 1 else int(gaps[0])
     regular = count == 1 or (stride >= size and (gaps == stride).all())
-    if views_buffer(buf, count * nbytes):
+    if views_buffer(buf, count * nbytes, each=nbytes):
         # The clouds are most of a private chunk buffer: views of it, nothing copied.
         xyz, values = _view(
             buf, starts + data_offset, stride if regular else None, n, (plan.view, plan.channels)
