@@ -153,7 +153,8 @@ def _lidar_in_base(
                 xyz = transform_xyz(mat, xyz)
             elif not known and any(data.sensor_location):
                 xyz = xyz + np.asarray(data.sensor_location, dtype=np.float32)
-            return np.ascontiguousarray(xyz, dtype=np.float32), data.data.channels.get("intensity")
+            # aligned too: a decoded xyz may be an unaligned view of its chunk
+            return np.require(xyz, np.float32, ("C", "A")), data.data.channels.get("intensity")
     return np.zeros((0, 3), np.float32), None
 
 

@@ -32,7 +32,10 @@ class PointCloud:
             immutable chunk the reader read them into.  Code that needs contiguous, aligned
             points (a compiled kernel with a fixed layout, ``.ctypes``, a raw buffer write)
             calls ``np.require(cloud.xyz, np.float32, ("C", "A"))`` (``np.ascontiguousarray`` keeps
-            a contiguous unaligned array as it is); numpy code needs nothing.
+            a contiguous unaligned array as it is); numpy code needs nothing.  A cloud viewing
+            its chunk keeps the whole chunk alive (at most 4 MiB, or twice its own bytes):
+            code that keeps a few clouds out of many for long (every 100th sweep, say) keeps
+            ``cloud.xyz.copy()`` instead.
         channels: per-point fields, each an array of shape (N,): ``intensity``, ``ring``,
             ``t_offset_ns`` … in whatever dtype the source used, read-only, strided views like
             xyz when decoded.  Never a structured array.
