@@ -68,8 +68,8 @@ POLL_NS = 5_000
 #: yielding, then sleeps on its eventfd — one wake-up by the other side, a small cost against such
 #: a message. A yield hands the core to another process for up to its time slice, while the
 #: message (or the free slot) comes; measured on the 2-vCPU VM under load ≈ 4 (BENCHMARKS.md,
-#: h-shm7): the yields made a 4 MiB stream's publisher use 109–131 µs of CPU a message against
-#: 82–90 without them, and a 1 MiB one's 25–27 against 30–32 (2 MiB: a tie)
+#: h-shm7): the yields made a 4 MiB stream's publisher use 108–136 µs of CPU a message against
+#: 81–95 without them, and a 1 MiB one's 25–27 against 30–32 (in 3 of 4 rounds; 2 MiB: a tie)
 LONG_WAIT_BYTES = 2 << 20
 #: what a poll calls between two looks at shared memory (see SPIN_NS)
 yield_cpu = os.sched_yield
