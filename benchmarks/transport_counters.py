@@ -67,24 +67,29 @@ class _Instrumentation:
 
 
 class _LoopClocks:
-    """Thread CPU, wall time and voluntary context switches of the message loop (``--times``)."""
+    """Thread CPU, wall time, voluntary context switches (sleeps) and involuntary ones (the core
+    taken away: a preemption, or a ``sched_yield`` that let another task run) of the message
+    loop (``--times``)."""
 
     def __init__(self, label: str, count: int, *, show: bool) -> None:
         self.label, self.count, self.show = label, count, show
-        self.cpu = self.wall = self.sleeps = 0
+        self.cpu = self.wall = self.sleeps = self.taken = 0
 
     def start(self) -> None:
         self.cpu, self.wall = time.thread_time_ns(), time.monotonic_ns()
-        self.sleeps = resource.getrusage(resource.RUSAGE_THREAD).ru_nvcsw
+        usage = resource.getrusage(resource.RUSAGE_THREAD)
+        self.sleeps, self.taken = usage.ru_nvcsw, usage.ru_nivcsw
 
     def stop(self) -> None:
         cpu, wall = time.thread_time_ns() - self.cpu, time.monotonic_ns() - self.wall
-        sleeps = resource.getrusage(resource.RUSAGE_THREAD).ru_nvcsw - self.sleeps
+        usage = resource.getrusage(resource.RUSAGE_THREAD)
+        sleeps, taken = usage.ru_nvcsw - self.sleeps, usage.ru_nivcsw - self.taken
         if self.show:
             n = self.count + 1
             print(
                 f"{self.label}\tcpu_us_per_msg\t{cpu / n / 1e3:.1f}\twall_us_per_msg\t"
-                f"{wall / n / 1e3:.1f}\tsleeps_per_msg\t{sleeps / n:.2f}",
+                f"{wall / n / 1e3:.1f}\tsleeps_per_msg\t{sleeps / n:.2f}\t"
+                f"switched_out_per_msg\t{taken / n:.2f}",
                 flush=True,
             )
 

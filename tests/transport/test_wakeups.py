@@ -85,6 +85,49 @@ def test_a_writer_waiting_for_a_lossless_reader_yields_the_cpu(
         assert r.read(timeout_s=0.0) is not None
 
 
+def test_after_a_large_message_a_polling_reader_does_not_yield(
+    name: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Yields only when the last message was at most LONG_WAIT_BYTES (here 4 bytes): after a
+    larger one the next wait polls, then sleeps."""
+    calls = _counting(monkeypatch, reader_module)
+    monkeypatch.setattr(reader_module, "LONG_WAIT_BYTES", 4)
+    with Writer(name, capacity_bytes=8, max_readers=1) as w, Reader(name) as r:
+        w.publish(b"12345")  # 5 bytes: large
+        with r.view(timeout_s=1.0) as msg:
+            assert msg is not None
+            assert bytes(msg.payload) == b"12345"
+        with r.view(timeout_s=0.02) as msg:
+            assert msg is None
+        assert calls[0] == 0
+        w.publish(b"1234")  # 4 bytes: small
+        with r.view(timeout_s=1.0) as msg:
+            assert msg is not None
+        with r.view(timeout_s=0.02) as msg:
+            assert msg is None
+        assert calls[0] >= 1
+
+
+@pytest.mark.parametrize(("nbytes", "yields"), [(4, True), (5, False)])
+def test_a_writer_yields_only_before_a_small_message(
+    name: str, monkeypatch: pytest.MonkeyPatch, nbytes: int, *, yields: bool
+) -> None:
+    calls = _counting(monkeypatch, writer_module)
+    monkeypatch.setattr(writer_module, "LONG_WAIT_BYTES", 4)
+    with (
+        Writer(name, capacity_bytes=8, slots=3, max_readers=1, policy=Policy.LOSSLESS) as w,
+        Reader(name) as r,
+    ):
+        for _ in range(3):
+            w.publish(b"x" * nbytes)
+        with pytest.raises(TransportError, match="lossless reader has not read"):
+            w.publish(b"x" * nbytes, timeout_s=0.02)
+        assert (calls[0] >= 1) is yields
+        got = r.read(timeout_s=0.0)
+        assert got is not None
+        assert bytes(got.payload) == b"x" * nbytes
+
+
 @pytest.mark.parametrize("max_readers", [1, 2, 3])
 def test_a_sleeping_reader_in_any_entry_is_woken_by_the_publish(
     name: str, max_readers: int

@@ -33,6 +33,7 @@ from redrive.transport.segment import (
     S_BEGIN,
     S_END,
     S_META_LEN,
+    S_NBYTES,
     S_STAMP,
     W_ORDER,
     W_POLICY,
@@ -44,6 +45,7 @@ from redrive.transport.segment import (
 )
 from redrive.transport.stream import (
     CHECK_S,
+    LONG_WAIT_BYTES,
     POLL_NS,
     SPIN_NS,
     ChannelStats,
@@ -456,7 +458,11 @@ class Reader:
                 return -1, 0, 0
             t_ns = time.perf_counter_ns()
             if not spin_until:
-                spin_until, yield_from = t_ns + SPIN_NS, t_ns + POLL_NS
+                last = w[W_ORDER + rs % n_slots] if rs > 0 else -1  # rs's slot (or its next's)
+                if last >= 0 and w[self._slot_words[last] + S_NBYTES] > LONG_WAIT_BYTES:
+                    spin_until = yield_from = t_ns + POLL_NS  # see LONG_WAIT_BYTES
+                else:
+                    spin_until, yield_from = t_ns + SPIN_NS, t_ns + POLL_NS
             if t_ns < spin_until:
                 if t_ns >= yield_from:
                     yield_cpu()  # see SPIN_NS

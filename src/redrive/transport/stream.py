@@ -34,6 +34,7 @@ from redrive.transport.segment import (
 
 __all__ = [
     "CHECK_S",
+    "LONG_WAIT_BYTES",
     "POLL_NS",
     "SPIN_NS",
     "ChannelStats",
@@ -62,6 +63,14 @@ CHECK_S = 0.05  # how often a waiting side checks that the other side is alive
 #: a system call in between
 SPIN_NS = 20_000
 POLL_NS = 5_000
+#: a message larger than this is long to write (and to read): a side waiting for the next one (a
+#: reader, after a message of that size; a writer, to write one) polls for POLL_NS only, without
+#: yielding, then sleeps on its eventfd — one wake-up by the other side, a small cost against such
+#: a message. A yield hands the core to another process for up to its time slice, while the
+#: message (or the free slot) comes; measured on the 2-vCPU VM under load ≈ 4 (BENCHMARKS.md,
+#: h-shm7): the yields made a 4 MiB stream's publisher use 108–136 µs of CPU a message against
+#: 81–95 without them, and a 1 MiB one's 25–27 against 30–32 (in 3 of 4 rounds; 2 MiB: a tie)
+LONG_WAIT_BYTES = 2 << 20
 #: what a poll calls between two looks at shared memory (see SPIN_NS)
 yield_cpu = os.sched_yield
 

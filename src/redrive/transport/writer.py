@@ -43,6 +43,7 @@ from redrive.transport.segment import (
 )
 from redrive.transport.stream import (
     CHECK_S,
+    LONG_WAIT_BYTES,
     POLL_NS,
     SPIN_NS,
     ChannelStats,
@@ -133,7 +134,7 @@ class _Loan:
         else:
             slot = -1
         if slot < 0:
-            slot = wr._claim(self._timeout_s)
+            slot = wr._claim(self._timeout_s, nbytes)
         self._slot = slot
         wr._loaned = True
         if wr._out_n[slot] != nbytes:  # the slot's view of this length, made once
@@ -301,8 +302,8 @@ class Writer:
     def capacity(self) -> int:
         return self._layout.capacity
 
-    def _claim(self, timeout_s: float | None) -> int:
-        """A slot to write message ``self._seq + 1`` into, marked as being written.
+    def _claim(self, timeout_s: float | None, nbytes: int = 0) -> int:
+        """A slot to write message ``self._seq + 1`` (``nbytes``) into, marked as being written.
 
         The first pass takes no clock reading: the deadline (``timeout_s`` from now) starts when
         no slot is free, which is also the only case that waits.
@@ -364,7 +365,9 @@ class Writer:
                 last_check = now
                 self._reap_dead_readers()
             t_ns = time.perf_counter_ns()
-            if not spin_until:
+            if not spin_until and nbytes > LONG_WAIT_BYTES:
+                spin_until = yield_from = t_ns + POLL_NS  # see LONG_WAIT_BYTES
+            elif not spin_until:
                 spin_until, yield_from = t_ns + SPIN_NS, t_ns + POLL_NS
             if t_ns < spin_until:
                 if t_ns >= yield_from:
