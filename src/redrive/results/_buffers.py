@@ -139,7 +139,8 @@ class TableBuffers:
             )
         elif isinstance(out, tuple):
             n_outputs = len(out)
-            self._detections(_object_rows((name, fi, stamp), out, ground_truth=False))
+            if n_outputs:  # no rows for no objects (and no column building to find that out)
+                self._detections(_object_rows((name, fi, stamp), out, ground_truth=False))
         else:
             n_outputs = 0
         self._steps(
