@@ -11,6 +11,7 @@ import pytest
 from redrive.algorithms import Algorithm, Role, StageOutputs
 from redrive.config import AlgorithmSpec, PipelineConfig, StageSpec
 from redrive.engine import Engine, LogInputs, _short, build_graph
+from redrive.engine.stats import StatsCollector
 from redrive.results import FrameRecord, RunStatus
 from redrive.types import ControlCommands, Frame
 
@@ -222,3 +223,52 @@ def test_ctrl_c_in_a_short_path_step_hands_on_the_frames_before_it() -> None:
     assert report.status is RunStatus.INTERRUPTED
     assert [r.frame_index for r in kept] == list(range(7))
     assert report.frames == 7
+
+
+def _counted_one_by_one(engine: Engine, records: list[FrameRecord]) -> StatsCollector:
+    stats = StatsCollector([p for _, planned in engine.graph.stages for p in planned])
+    for record in records:
+        stats.add(record)
+    return stats
+
+
+@pytest.mark.parametrize("stop_at", [None, 13])
+def test_the_short_path_counts_what_it_hands_on(stop_at: int | None) -> None:
+    # the short path counts its statistics a chain at a time: the report must be what counting
+    # the frames handed on one by one gives — also when Ctrl-C lands in the sink mid-chain
+    noop = "redrive.benchmarks.engine:"
+    pipeline = PipelineConfig(
+        stages=(
+            StageSpec(name="p", algorithms=(AlgorithmSpec(name="p", plugin=P + "FailEvery10th"),)),
+            StageSpec(
+                name="l", algorithms=(AlgorithmSpec(name="l", plugin=noop + "NoopPlanning"),)
+            ),
+            StageSpec(name="c", algorithms=(AlgorithmSpec(name="c", plugin=P + "FollowSpeed"),)),
+        )
+    )
+    engine = Engine(build_graph(pipeline, LogInputs()), pipeline, inputs=LogInputs())
+    kept: list[FrameRecord] = []
+
+    def sink(record: FrameRecord) -> None:
+        if record.frame_index == stop_at:
+            raise KeyboardInterrupt
+        kept.append(record)
+
+    try:
+        report = engine.run(
+            [Frame(stamp_ns=i * 10, index=i, missing=("gnss",) * (i % 3 == 0)) for i in range(25)],
+            sink=sink,
+        )
+    finally:
+        engine.close()
+    assert [r.frame_index for r in kept] == list(range(25 if stop_at is None else stop_at))
+    expected = _counted_one_by_one(engine, kept).report(
+        status=report.status, wall_s=report.wall_s, late_frames=0, failure=None
+    )
+    assert report.frames == expected.frames == len(kept)
+    assert report.failed_frames == expected.failed_frames == len(range(0, len(kept), 10))
+    assert report.log_span_s == expected.log_span_s
+    assert dict(report.missing_inputs) == dict(expected.missing_inputs)
+    assert report.algorithms == expected.algorithms
+    n = len(kept)
+    assert [a.ok for a in report.algorithms] == [n - len(range(0, n, 10)), n, n]

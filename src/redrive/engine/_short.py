@@ -24,12 +24,19 @@ from time import perf_counter_ns
 from types import MappingProxyType
 from typing import Any
 
-from redrive.algorithms import AlgorithmOutput, StageOutputs, StepError, StepStatus
+from redrive.algorithms import (
+    AlgorithmOutput,
+    StageOutputs,
+    StepError,
+    StepStatus,
+    check_output,
+)
 from redrive.engine.stats import StatsCollector
 from redrive.engine.worker import frame_for
+from redrive.errors import AlgorithmError
 from redrive.results import FrameRecord, StepRecord
 from redrive.results.records import frame_record_unchecked, step_record_unchecked
-from redrive.types import Frame, Role
+from redrive.types import ControlCommands, Frame, PlannedPath, Role
 
 __all__ = ["CHAIN_NS", "READ_AHEAD", "Single", "run_short", "single_step_record"]
 
@@ -42,7 +49,7 @@ CHAIN_NS = 1_000_000
 Single = tuple[Any, frozenset[str], str, str, str]
 
 _NO_UPSTREAM = StageOutputs()  # immutable: every frame starts from it
-_OK = StepStatus.OK
+_OK, _ERROR = StepStatus.OK, StepStatus.ERROR
 _thread_time_ns = time.thread_time_ns
 
 
@@ -79,6 +86,44 @@ def single_step_record(  # noqa: PLR0917 (per step: positional is cheaper)
     )
 
 
+def _not_ok(stats: StatsCollector, record: FrameRecord) -> bool:
+    """Count the steps of ``record`` that were not ok; True when one failed (error, timeout)."""
+    failed = False
+    for step in record.steps:
+        if step.status != "ok" and stats.add_step(record.frame_index, step):
+            failed = True
+    return failed
+
+
+#: the output each role's step may return unchecked (a perception tuple only when empty)
+_FAST_TYPES = {Role.PERCEPTION: tuple, Role.PLANNING: PlannedPath, Role.CONTROL: ControlCommands}
+
+
+def _checked(
+    value: object, role: Role, name: str, frame: Frame
+) -> tuple[StepStatus, AlgorithmOutput | None, StepError | None]:
+    """A step's return value other than the common ones (:data:`_FAST_TYPES`) as ``(status,
+    output, error)``, checked as :meth:`Algorithm.timed_step_from` checks it."""
+    try:
+        output = check_output(role, value, where=name)
+    except AlgorithmError as err:
+        error = StepError(type=type(err).__name__, message=f"frame {frame.index}: {err}")
+        return _ERROR, None, error
+    return _OK, output, None
+
+
+def _uncount(stats: StatsCollector, raw: list[tuple[Any, ...]]) -> None:
+    """Take back what a frame's steps ``raw`` added to the chain's counts and the statistics'
+    lists (the frame was not handed on after all)."""
+    for (single, _lat, _cpu, objects, counts), status, output, *_ in raw:
+        if status is _OK and output is not None:
+            stats.take_back_ok(single[2])
+            if objects:
+                counts[1] -= len(output)
+        else:
+            counts[0] -= 1
+
+
 def run_short(
     stages: list[tuple[Single, MappingProxyType[str, Role], bool]],
     frames: Iterator[Frame],
@@ -98,51 +143,114 @@ def run_short(
     it is set (the frames read ahead and not run are dropped): a Cancel pressed at frame n's
     progress leaves frames 0 … n − 1, as the frame-by-frame loop does.
     """
-    add = stats.add
     done = 0
-    # per stage: (algorithm, its sensors, single, roles after it, last, algorithm name)
-    steps = [
-        (single[0], single[1], single, roles, last, single[0].name)
-        for single, roles, last in stages
+    of_proxies = StageOutputs.of_proxies
+    # per stage, for the records and the statistics: (single, the stats' latency and CPU
+    # appends, a perception stage (outputs counted as objects), [steps not ok, objects] of the
+    # chain being handed on)
+    tally = [
+        (single, *stats.ok_lists(single[2]), single[4] == "perception", [0, 0])
+        for single, _roles, _last in stages
     ]
-    # the frames a chain ran: (frame, wall ns, raw steps), raw = (single, status, output,
-    # latency, cpu, error) per step
+    # per stage: (its algorithm's step, its sensors, roles after it, last, algorithm name,
+    # the output type accepted without check_output, role, its tally)
+    steps = [
+        (
+            single[0].step,
+            single[1],
+            roles,
+            last,
+            single[0].name,
+            _FAST_TYPES[single[0].role],
+            single[0].role,
+            tally[k],
+        )
+        for k, (single, roles, last) in enumerate(stages)
+    ]
+    # the frames a chain ran: (frame, wall ns, raw steps), raw = (tally, status, output,
+    # latency, cpu, error) per stage
     ran: list[tuple[Frame, int, list[tuple[Any, ...]]]] = []
+    first: list[int | None] = [None]  # the first stamp handed on
 
     def hand_on() -> tuple[int, StepRecord] | None:
         nonlocal done
-        for frame, wall_ns, raw in ran:
-            failed: tuple[int, StepRecord] | None = None
-            records = []
-            for single, status, output, latency_ns, cpu_ns, error in raw:
-                if status is _OK and output is not None:  # the common step, built inline
-                    step = step_record_unchecked(
-                        single[2], single[3], single[4], "ok", latency_ns, cpu_ns, output
-                    )
-                else:
+        handed = failed_frames = 0
+        last: Frame | None = None
+        try:
+            for frame, wall_ns, raw in ran:
+                failed: tuple[int, StepRecord] | None = None
+                records = []
+                for (
+                    single,
+                    lat,
+                    cpu,
+                    objects,
+                    counts,
+                ), status, output, latency_ns, cpu_ns, error in raw:
+                    if status is _OK and output is not None:  # the common step, built inline
+                        records.append(
+                            step_record_unchecked(
+                                single[2], single[3], single[4], "ok", latency_ns, cpu_ns, output
+                            )
+                        )
+                        lat(latency_ns)
+                        cpu(cpu_ns)
+                        if objects:
+                            counts[1] += len(output)
+                        continue
                     step = single_step_record(single, status, output, latency_ns, cpu_ns, error)
+                    records.append(step)
+                    counts[0] += 1
                     if failed is None:
                         failed = (frame.index, step)
-                records.append(step)
-            record = frame_record_unchecked(  # Frame and the graph keep its invariants
-                int(frame.index),
-                frame.stamp_ns,
-                tuple(records),
-                frame.vehicle_state,
-                frame.ground_truth,
-                wall_ns,
-                False,
-                frame.missing,
-            )
-            sink(record)
-            add(record)
-            done += 1
-            if progress is not None:
-                progress(done)
-            if fail_fast and failed is not None:
-                return failed
-        ran.clear()
-        return None
+                record = frame_record_unchecked(  # Frame and the graph keep its invariants
+                    int(frame.index),
+                    frame.stamp_ns,
+                    tuple(records),
+                    frame.vehicle_state,
+                    frame.ground_truth,
+                    wall_ns,
+                    False,
+                    frame.missing,
+                )
+                try:
+                    sink(record)
+                except BaseException:  # not handed on: take back what was counted of it
+                    _uncount(stats, raw)
+                    raise
+                if first[0] is None:
+                    first[0] = frame.stamp_ns
+                last = frame
+                handed += 1
+                if failed is not None and _not_ok(stats, record):
+                    failed_frames += 1
+                if frame.missing:
+                    stats.add_missing(frame.missing)
+                done += 1
+                if progress is not None:
+                    progress(done)
+                if fail_fast and failed is not None:
+                    return failed
+            return None
+        finally:  # what was handed on is counted, also when the sink or progress raised
+            if last is not None:
+                stats.add_counted(
+                    first_stamp_ns=first[0],  # type: ignore[arg-type]
+                    last_stamp_ns=last.stamp_ns,
+                    frames=handed,
+                    failed_frames=failed_frames,
+                    ok=[
+                        (
+                            single[2],
+                            handed - counts[0],
+                            counts[1] if objects else handed - counts[0],
+                        )
+                        for single, _lat, _cpu, objects, counts in tally
+                    ],
+                )
+            for *_, counts in tally:
+                counts[0] = counts[1] = 0
+            ran.clear()
 
     batch: list[Frame] = []
     while True:
@@ -165,32 +273,47 @@ def run_short(
                 for frame in unrun:
                     if cancel is not None and cancel.is_set():
                         return hand_on()
-                    t0_ns = perf_counter_ns()
+                    t0_ns = 0  # the first step's start: a frame's wall time runs from it
                     raw: list[tuple[Any, ...]] = []
                     upstream = _NO_UPSTREAM
-                    for algo, sensors, single, roles_after, last, name in steps:
+                    outputs: dict[str, Any] = {}  # the dict behind upstream's outputs view
+                    for step, sensors, roles_after, last, name, fast, role, kept in steps:
                         seen = frame
                         if frame.sensors and not frame.sensors.keys() <= sensors:
                             seen = frame_for(frame, sensors)
-                        status, output, latency_ns, cpu1, error = algo.timed_step_from(
-                            seen, upstream, cpu
-                        )
-                        raw.append((single, status, output, latency_ns, cpu1 - cpu, error))
+                        # Algorithm.timed_step_from, inline (one Python call less a step)
+                        t0 = perf_counter_ns()
+                        if not t0_ns:
+                            t0_ns = t0
+                        try:
+                            value = step(seen, upstream)
+                        except Exception as err:  # recorded, never swallowed
+                            t1 = perf_counter_ns()
+                            cpu1 = _thread_time_ns()
+                            status, output = _ERROR, None
+                            error: StepError | None = StepError.from_exception(err)
+                        else:
+                            t1 = perf_counter_ns()
+                            cpu1 = _thread_time_ns()
+                            if type(value) is fast and (fast is not tuple or not value):
+                                status, output, error = _OK, value, None
+                            else:
+                                status, output, error = _checked(value, role, name, seen)
+                        raw.append((kept, status, output, t1 - t0, cpu1 - cpu, error))
                         cpu = cpu1
                         if status is _OK and output is not None:
                             if not last:  # nobody reads the upstream after the last stage
-                                upstream = StageOutputs.of_proxies(
-                                    MappingProxyType({**upstream.outputs, name: output}),
-                                    roles_after,
-                                )
+                                # a new dict each stage: the views handed on never change
+                                outputs = {**outputs, name: output}
+                                upstream = of_proxies(MappingProxyType(outputs), roles_after)
                             continue
                         stop = stop or fail_fast
                         if not last:
-                            upstream = StageOutputs.of_proxies(
+                            upstream = of_proxies(
                                 upstream.outputs,  # type: ignore[arg-type]
                                 roles_after,
                             )
-                    t1_ns = perf_counter_ns()
+                    t1_ns = t1  # the last step's end
                     ran.append((frame, t1_ns - t0_ns, raw))
                     if stop:
                         break

@@ -99,12 +99,16 @@ class _Stage:
         self.last = False
         self._inline = all(isinstance(r, InlineRunner) for r in runners)
         self._single: Single | None = None
-        # the short path calls Algorithm.timed_step; an algorithm that overrides run_step keeps
-        # being run through it (the general path below)
+        # the short paths call Algorithm.timed_step (or do what timed_step_from does, inline);
+        # an algorithm that overrides run_step or those keeps being run through run_step (the
+        # general path below)
+        kind = type(planned[0].instance)
         if (
             self._inline
             and len(runners) == 1
-            and type(planned[0].instance).run_step is Algorithm.run_step
+            and kind.run_step is Algorithm.run_step
+            and kind.timed_step is Algorithm.timed_step
+            and kind.timed_step_from is Algorithm.timed_step_from
         ):
             algo = planned[0].instance
             self._single = (

@@ -7,13 +7,14 @@ row instead of one append per column through a dict of lists.
 
 from __future__ import annotations
 
+import gc
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 import pyarrow as pa
 
-from redrive.results.records import FrameRecord, ResourceSample, StepRecord
+from redrive.results.records import FrameRecord, ResourceSample
 from redrive.results.schema import SCHEMAS
 from redrive.types import ControlCommands, DetectedObject, ObjectColumns, PlannedPath, VehicleState
 
@@ -60,6 +61,9 @@ if {k: tuple(v) for k, v in _ORDER.items()} != {k: tuple(s.names) for k, s in SC
     raise RuntimeError(msg)
 
 _NO_BBOX = (None, None, None, None)
+#: the fields of a buffered ``steps`` row: frame_index and stamp_ns are taken from its frame's
+_STEP_FIELDS = tuple(SCHEMAS["steps"])[2:]
+assert _ORDER["steps"][:2] == _ORDER["frames"][:2] == ("frame_index", "stamp_ns")
 
 
 class TableBuffers:
@@ -74,9 +78,11 @@ class TableBuffers:
         self._rows = {name: [] for name in SCHEMAS}
         rows = self._rows
         self._frames = rows["frames"].append
-        self._steps = rows["steps"].append
+        self._steps = rows["steps"].append  # rows of _STEP_FIELDS: the frame's columns apart
+        self._steps_per_frame: list[int] = []
         self._commands = rows["commands"].append
         self._paths = rows["paths"].extend
+        self._paths_append = rows["paths"].append
         self._detections = rows["detections"].extend
         self.n_frames = 0
 
@@ -85,6 +91,7 @@ class TableBuffers:
     def add_frame(self, rec: FrameRecord) -> None:
         fi, stamp = rec.frame_index, rec.stamp_ns
         gt = rec.ground_truth
+        missing = rec.missing
         self._frames(
             (
                 fi,
@@ -92,11 +99,44 @@ class TableBuffers:
                 rec.wall_ns,
                 rec.late,
                 None if gt is None else len(gt),
-                ",".join(rec.missing),
+                ",".join(missing) if missing else "",
             )
         )
-        for step in rec.steps:
-            self._add_step(fi, stamp, step)
+        steps = rec.steps
+        self._steps_per_frame.append(len(steps))
+        add_step = self._steps
+        for step in steps:
+            # the outputs the engine makes, told apart by their type (one test each, no call);
+            # anything else (a subclass) by the isinstance tests of _add_output
+            out = step.output
+            name = step.algorithm
+            kind = type(out)
+            if kind is tuple:
+                n_outputs = len(out)  # type: ignore[arg-type]
+                if n_outputs:  # no rows for no objects (and no column building to find that out)
+                    self._detections(_object_rows((name, fi, stamp), out, ground_truth=False))  # type: ignore[arg-type]
+            elif kind is PlannedPath:
+                n_outputs = 1
+                self._add_path(name, fi, out)  # type: ignore[arg-type]
+            elif kind is ControlCommands:
+                n_outputs = 1
+                self._commands((name, fi, stamp, out.throttle, out.brake, out.steering_angle_rad))  # type: ignore[union-attr]
+            else:
+                n_outputs = self._add_output(name, fi, stamp, out)
+            add_step(
+                (
+                    name,
+                    step.stage,
+                    step.role,
+                    step.status,
+                    step.latency_ns,
+                    step.cpu_ns,
+                    n_outputs,
+                    step.error_type,
+                    step.error_message,
+                    step.traceback,
+                )
+            )
         if gt:
             self._rows["ground_truth"].extend(_object_rows((fi, stamp), gt, ground_truth=True))
         if rec.vehicle_state is not None:
@@ -122,42 +162,30 @@ class TableBuffers:
             )
         self.n_frames += 1
 
-    def _add_step(self, fi: int, stamp: int, step: StepRecord) -> None:
-        out = step.output
-        name = step.algorithm
-        if isinstance(out, ControlCommands):
-            n_outputs = 1
-            self._commands((name, fi, stamp, out.throttle, out.brake, out.steering_angle_rad))
-        elif isinstance(out, PlannedPath):
-            n_outputs = 1
-            fid, pstamp = out.frame_id, out.stamp_ns
-            self._paths(
-                [
-                    (name, fi, pstamp, fid, j, x, y, z, t)
-                    for j, (x, y, z, t) in enumerate(out.waypoints.tolist())
-                ]
-            )
-        elif isinstance(out, tuple):
-            n_outputs = len(out)
-            self._detections(_object_rows((name, fi, stamp), out, ground_truth=False))
-        else:
-            n_outputs = 0
-        self._steps(
-            (
-                fi,
-                stamp,
-                name,
-                step.stage,
-                step.role,
-                step.status,
-                step.latency_ns,
-                step.cpu_ns,
-                n_outputs,
-                step.error_type,
-                step.error_message,
-                step.traceback,
-            )
+    def _add_path(self, name: str, fi: int, out: PlannedPath) -> None:
+        fid, pstamp = out.frame_id, out.stamp_ns
+        points = out.waypoints.tolist()
+        if len(points) == 1:  # one waypoint: its row, without a comprehension
+            self._paths_append((name, fi, pstamp, fid, 0, *points[0]))
+            return
+        self._paths(
+            [(name, fi, pstamp, fid, j, x, y, z, t) for j, (x, y, z, t) in enumerate(points)]
         )
+
+    def _add_output(self, name: str, fi: int, stamp: int, out: object) -> int:
+        """The rows of an output that is not exactly a tuple, PlannedPath or ControlCommands
+        (a subclass, or None); its ``n_outputs``."""
+        if isinstance(out, ControlCommands):
+            self._commands((name, fi, stamp, out.throttle, out.brake, out.steering_angle_rad))
+            return 1
+        if isinstance(out, PlannedPath):
+            self._add_path(name, fi, out)
+            return 1
+        if isinstance(out, tuple):
+            if out:
+                self._detections(_object_rows((name, fi, stamp), out, ground_truth=False))
+            return len(out)
+        return 0
 
     def add_resources(self, samples: Sequence[ResourceSample]) -> None:
         add = self._rows["resources"].append
@@ -169,20 +197,53 @@ class TableBuffers:
     def take(self) -> dict[str, pa.Table]:
         """The buffered rows as one Arrow table per table name that has rows, and ``frames``
         always (empty when no frame is buffered), in :data:`SCHEMAS` order; clears."""
+        # the collector paused meanwhile: the rows' transposition allocates an iterator per row
+        # and a tuple per column, all alive until the tables are built, so the collections
+        # they would set off (walking every buffered row) could free nothing
+        paused = gc.isenabled()
+        if paused:
+            gc.disable()
+        try:
+            out = self._tables()
+        finally:
+            if paused:
+                gc.enable()
+        self.clear()
+        return out
+
+    def _tables(self) -> dict[str, pa.Table]:
+        # the frames' columns first: the steps' frame_index and stamp_ns are their frame's,
+        # taken from them (a step row does not carry them: one Python int conversion a frame,
+        # not one a step)
+        frames = self._rows["frames"]
+        schema = SCHEMAS["frames"]
+        columns = list(zip(*frames, strict=True)) if frames else [() for _ in schema.names]
+        frame_arrays = [_array(c, f.type) for c, f in zip(columns, schema, strict=True)]
         out = {}
         for name, schema in SCHEMAS.items():
             rows = self._rows[name]
-            if not rows and name != "frames":
+            if name == "frames":
+                arrays = frame_arrays
+            elif not rows:
                 continue
-            columns = list(zip(*rows, strict=True)) if rows else [() for _ in schema.names]
-            # one pa.array per column at its field's type: the same table as
-            # Table.from_pydict(..., schema=schema), ≈ 30 % less CPU (no per-column
-            # dict and schema matching)
-            out[name] = pa.Table.from_arrays(
-                [_array(c, f.type) for c, f in zip(columns, schema, strict=True)],
-                schema=schema,
-            )
-        self.clear()
+            elif name == "steps":
+                of_frame = np.repeat(np.arange(len(frames)), self._steps_per_frame)
+                arrays = [
+                    frame_arrays[0].take(of_frame),  # frame_index
+                    frame_arrays[1].take(of_frame),  # stamp_ns
+                    *(
+                        _array(c, f.type)
+                        for c, f in zip(zip(*rows, strict=True), _STEP_FIELDS, strict=True)
+                    ),
+                ]
+            else:
+                # one pa.array per column at its field's type: the same table as
+                # Table.from_pydict(..., schema=schema), ≈ 30 % less CPU (no per-column
+                # dict and schema matching)
+                arrays = [
+                    _array(c, f.type) for c, f in zip(zip(*rows, strict=True), schema, strict=True)
+                ]
+            out[name] = pa.Table.from_arrays(arrays, schema=schema)
         return out
 
 

@@ -253,7 +253,8 @@ class RunWriter:
         Raises:
             ValueError: the frame index was already written in this run.
         """
-        self._check_open()
+        if self._closed:  # (_check_open, inline: this is called per frame)
+            self._check_open()
         index = record.frame_index
         if index in self._done or index in self._buffered:
             msg = (
