@@ -84,9 +84,10 @@ def _steps_of(records: list[FrameRecord]) -> list[tuple[object, ...]]:
     ]
 
 
-def _run_in(mode: str, *, fail_fast: bool = False) -> tuple[list[FrameRecord], object]:
+def _three_stages(mode: str = "sequential", *, fail_fast: bool = False) -> PipelineConfig:
+    """Perception failing every 10th frame, a no-op planner, a controller following speed."""
     noop = "redrive.benchmarks.engine:"
-    pipeline = PipelineConfig(
+    return PipelineConfig(
         stages=(
             StageSpec(name="p", algorithms=(AlgorithmSpec(name="p", plugin=P + "FailEvery10th"),)),
             StageSpec(
@@ -97,6 +98,10 @@ def _run_in(mode: str, *, fail_fast: bool = False) -> tuple[list[FrameRecord], o
         mode=mode,  # type: ignore[arg-type]
         fail_fast=fail_fast,
     )
+
+
+def _run_in(mode: str, *, fail_fast: bool = False) -> tuple[list[FrameRecord], object]:
+    pipeline = _three_stages(mode, fail_fast=fail_fast)
     engine = Engine(build_graph(pipeline, LogInputs()), pipeline, inputs=LogInputs())
     kept: list[FrameRecord] = []
     try:
@@ -236,16 +241,7 @@ def _counted_one_by_one(engine: Engine, records: list[FrameRecord]) -> StatsColl
 def test_the_short_path_counts_what_it_hands_on(stop_at: int | None) -> None:
     # the short path counts its statistics a chain at a time: the report must be what counting
     # the frames handed on one by one gives — also when Ctrl-C lands in the sink mid-chain
-    noop = "redrive.benchmarks.engine:"
-    pipeline = PipelineConfig(
-        stages=(
-            StageSpec(name="p", algorithms=(AlgorithmSpec(name="p", plugin=P + "FailEvery10th"),)),
-            StageSpec(
-                name="l", algorithms=(AlgorithmSpec(name="l", plugin=noop + "NoopPlanning"),)
-            ),
-            StageSpec(name="c", algorithms=(AlgorithmSpec(name="c", plugin=P + "FollowSpeed"),)),
-        )
-    )
+    pipeline = _three_stages()
     engine = Engine(build_graph(pipeline, LogInputs()), pipeline, inputs=LogInputs())
     kept: list[FrameRecord] = []
 
