@@ -282,10 +282,20 @@ def project_pruned(  # noqa: PLR0917 - numba takes no keyword-only parameters
         while k < n_s:
             dist_k = math.hypot(px - a[k, 0], py - a[k, 1])
             limit = s_start[k] + dist_k - bound - _PRUNE_MARGIN * (1.0 + dist_k)
-            while k < n_s and (s_start[k + 1] if k + 1 < n_s else s_end) < limit:
-                k += 1
-            if k >= n_s:
-                break
+            if (s_start[k + 1] if k + 1 < n_s else s_end) < limit:
+                # the segments k … j - 2 end before the limit (the arc lengths increase):
+                # j = the first vertex after k at or past it (bisection), or the last segment
+                # when none is
+                lo, hi = k + 1, n_s
+                while lo < hi:
+                    mid = (lo + hi) // 2
+                    if s_start[mid] < limit:
+                        lo = mid + 1
+                    else:
+                        hi = mid
+                k = lo - 1
+                if k == n_s - 1 and s_end < limit:
+                    break
             d2, t = _segment_d2(px, py, a, ab, seg_len, k)
             if d2 < best_d2:
                 best, best_d2, best_t = k, d2, t
