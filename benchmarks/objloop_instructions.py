@@ -34,9 +34,9 @@ from pathlib import Path
 from typing import Any
 
 import redrive.closedloop.run as closed_loop_run
-from redrive.results import RunWriter
 from redrive.benchmarks.closed_loop import closed_loop_pipeline
 from redrive.closedloop.run import ClosedLoopRequest, run_closed_loop
+from redrive.results import RunWriter
 
 
 def _one_pass(out: Path) -> None:

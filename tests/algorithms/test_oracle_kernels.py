@@ -57,7 +57,8 @@ def _scene(n: int) -> tuple[np.ndarray, ...]:  # type: ignore[type-arg]
 def test_uniforms_and_normals_have_their_distributions() -> None:
     key = frame_key(7, 123)
     u = np.array([uniform_at(key, c) for c in range(200_000)])
-    assert u.min() >= 0.0 and u.max() < 1.0
+    assert u.min() >= 0.0
+    assert u.max() < 1.0
     assert u.mean() == pytest.approx(0.5, abs=0.003)
     assert u.var() == pytest.approx(1 / 12, rel=0.01)
     # consecutive draws uncorrelated
@@ -92,7 +93,7 @@ def test_a_rows_noise_does_not_depend_on_the_other_rows() -> None:
 
 def test_arithmetic_range_and_misses() -> None:
     cols = _scene(2000)
-    centers, sizes, yaws, velocities, orientations = cols
+    centers, sizes, _, velocities, orientations = cols
     everyone = _frozen(np.ones(2000, dtype=np.bool_))
     rows, _, c, s, y, v, o, *_ = oracle_frame(
         1, 0, *cols, everyone, _params(range=30.0), FP_PROBS, FP_SIZES

@@ -191,7 +191,7 @@ class NoisyOracle(Algorithm):
         # DetectedObject.many, as a simulator's and the decoders' do)
         columns = ObjectColumns.from_objects(truth)
         # every draw and the arithmetic of the frame in one compiled call (._oracle_kernels)
-        rows, confuse, centers, sizes, yaws, velocities, orientations, *fps = oracle_frame(
+        (rows, confuse, centers, sizes, yaws, velocities, orientations, *fp) = oracle_frame(
             self._seed,
             frame.index,
             columns.centers,
@@ -211,8 +211,9 @@ class NoisyOracle(Algorithm):
                     columns, rows, confuse, centers, sizes, yaws, velocities, orientations
                 )
             )
-        if len(fps[0]):
-            parts.append(self._false_positives(*fps))
+        fp_picks, fp_centers, fp_sizes, fp_yaws = fp
+        if len(fp_picks):
+            parts.append(self._false_positives(fp_picks, fp_centers, fp_sizes, fp_yaws))
         out = [] if not parts else DetectedObject.many(**_concatenated(parts))
         logger.debug(
             "%s frame %d: %d ground-truth objects, %d returned",
@@ -275,10 +276,10 @@ class NoisyOracle(Algorithm):
 
     def _false_positives(
         self,
-        picks: npt.NDArray[np.int64],
-        centers: npt.NDArray[np.float64],
-        sizes: npt.NDArray[np.float64],
-        yaws: npt.NDArray[np.float64],
+        picks: npt.NDArray[Any],
+        centers: npt.NDArray[Any],
+        sizes: npt.NDArray[Any],
+        yaws: npt.NDArray[Any],
     ) -> dict[str, Any]:
         """The kernel's false positives as ``DetectedObject.many``'s columns."""
         count = len(picks)
