@@ -37,7 +37,7 @@ F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
 
 #: segments per block of :attr:`GapSearch.blocks` (the projection's coarse test)
-BLOCK = 16
+BLOCK = 8
 #: a block is skipped when its box is farther (squared, m²) than the closest segment so far by
 #: more than this plus a relative 1e-9: far above the rounding of either distance
 _SKIP_MARGIN_M2 = 1e-6

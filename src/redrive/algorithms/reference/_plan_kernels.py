@@ -202,7 +202,7 @@ def points_at(xy: _F64, s: _F64, s_m: _F64) -> _F64:  # pragma: no cover - compi
 #: scaled by 1 + the distance), far above float64 rounding of path coordinates
 _PRUNE_MARGIN = 1e-6
 #: every this many segments one gives the first bound of a point's distance
-_PRUNE_STRIDE = 8
+_PRUNE_STRIDE = 16
 
 
 @numba.njit(cache=True, nogil=True)
