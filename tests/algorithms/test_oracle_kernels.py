@@ -1,69 +1,124 @@
-"""The noisy oracle's compiled perturbation against the numpy code it replaced, bit for bit."""
+"""The noisy oracle's compiled frame: its counter-based draws (distributions, determinism,
+independence of rows) and its arithmetic."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
+import pytest
 
-from redrive.algorithms.reference._oracle_kernels import perturb_rows
-from redrive.geometry.se3 import normalize_angle
+from redrive.algorithms.reference._oracle_kernels import (
+    frame_key,
+    normal_at,
+    oracle_frame,
+    uniform_at,
+)
 
 
 def _frozen(a: np.ndarray) -> np.ndarray:  # type: ignore[type-arg]
-    a = np.ascontiguousarray(a, dtype=np.float64)
+    a = np.ascontiguousarray(a)
     a.flags.writeable = False
     return a
 
 
-def test_perturb_rows_is_the_numpy_code_bit_for_bit() -> None:
-    rng = np.random.default_rng(11)
-    for trial in range(40):
-        m = int(rng.integers(1, 30))
-        centers = rng.normal(0, 50, (m, 3))
-        centers[rng.random((m, 3)) < 0.05] = np.nan
-        centers[rng.random((m, 3)) < 0.03] = np.inf
-        sizes = rng.uniform(0, 6, (m, 3))
-        sizes[rng.random((m, 3)) < 0.1] = 0.0
-        yaws = rng.choice([math.pi, -math.pi, 1e3, -7.5, 0.0, 3.14159], m) + rng.normal(0, 1e-9, m)
-        velocities = rng.normal(0, 5, (m, 3))
-        orientations = rng.normal(0, 3, (m, 3))
-        orientations[:, 0] = yaws
-        rows = rng.choice(m, int(rng.integers(0, m + 1)), replace=bool(trial % 2))
-        n = len(rows)
-        missed = rng.random(n) < 0.3
-        n_center, n_size = rng.normal(size=(n, 3)), rng.normal(size=(n, 3)) * 30
-        n_yaw, n_vel = rng.normal(size=n), rng.normal(size=(n, 2))
-        stds = np.array([0.2, 0.05, 0.05 if trial % 3 else 4.0, 0.3])
-        d_size = n_size * stds[1]
-        noisy_sizes = np.maximum(sizes[rows] * (1.0 + d_size), 0.1 * sizes[rows])
-        got = perturb_rows(
-            _frozen(centers),
-            _frozen(yaws),
-            _frozen(velocities),
-            _frozen(orientations),
-            rows.astype(np.int64),
-            missed,
-            n_center,
-            noisy_sizes,
-            n_yaw,
-            n_vel,
-            stds,
-        )
-        # the numpy code of NoisyOracle._perturb before the kernel
-        d_center = n_center * stds[0]
-        d_yaw, d_vel = n_yaw * stds[2], n_vel * stds[3]
-        c = centers[rows] + d_center
-        s = np.maximum(sizes[rows] * (1.0 + d_size), 0.1 * sizes[rows])
-        v = velocities[rows]
-        v[:, :2] += d_vel
-        o = orientations[rows]
-        kept = np.flatnonzero(~missed).tolist()
-        y = [normalize_angle(yaws[rows[i]].item() + d_yaw.tolist()[i]) for i in kept]
-        for i in kept:
-            o[i, 0] = normalize_angle(float(o[i, 0]) + d_yaw.tolist()[i])
-        assert got[0].tolist() == kept
-        for have, want in zip(
-            got[1:], (c[kept], s[kept], np.array(y), v[kept], o[kept]), strict=True
-        ):
-            assert have.tobytes() == np.asarray(want, dtype=np.float64).tobytes(), trial
+def _params(**kw: float) -> np.ndarray:  # type: ignore[type-arg]
+    base = {
+        "center": 0.2,
+        "size": 0.05,
+        "yaw": 0.05,
+        "vel": 0.3,
+        "miss": 0.0,
+        "confuse": 0.0,
+        "fp_rate": 0.0,
+        "near": 3.0,
+        "far": 60.0,
+        "range": math.inf,
+    }
+    base.update(kw)
+    return np.array(list(base.values()))
+
+
+FP_PROBS = np.array([0.6, 0.25, 0.15])
+FP_SIZES = np.array([[4.5, 1.9, 1.5], [0.6, 0.6, 1.75], [1.8, 0.6, 1.6]])
+
+
+def _scene(n: int) -> tuple[np.ndarray, ...]:  # type: ignore[type-arg]
+    rng = np.random.default_rng(3)
+    centers = rng.uniform(-40, 40, (n, 3))
+    sizes = rng.uniform(0.5, 5, (n, 3))
+    yaws = rng.uniform(-math.pi, math.pi, n)
+    velocities = rng.normal(0, 5, (n, 3))
+    orientations = np.zeros((n, 3))
+    orientations[:, 0] = yaws
+    return tuple(_frozen(a) for a in (centers, sizes, yaws, velocities, orientations))
+
+
+def test_uniforms_and_normals_have_their_distributions() -> None:
+    key = frame_key(7, 123)
+    u = np.array([uniform_at(key, c) for c in range(200_000)])
+    assert u.min() >= 0.0
+    assert u.max() < 1.0
+    assert u.mean() == pytest.approx(0.5, abs=0.003)
+    assert u.var() == pytest.approx(1 / 12, rel=0.01)
+    # consecutive draws uncorrelated
+    assert abs(np.corrcoef(u[:-1], u[1:])[0, 1]) < 0.01
+    z = np.array([normal_at(key, 2 * c) for c in range(100_000)])
+    assert z.mean() == pytest.approx(0.0, abs=0.015)
+    assert z.std() == pytest.approx(1.0, rel=0.01)
+    assert np.mean(np.abs(z) < 1.0) == pytest.approx(0.6827, abs=0.005)
+
+
+def test_keys_differ_by_seed_and_frame_and_draws_are_pure_functions() -> None:
+    keys = {frame_key(s, i) for s in range(20) for i in range(200)}
+    assert len(keys) == 20 * 200
+    assert uniform_at(frame_key(1, 2), 5) == uniform_at(frame_key(1, 2), 5)
+    assert uniform_at(frame_key(1, 2), 5) != uniform_at(frame_key(2, 1), 5)
+
+
+def test_a_rows_noise_does_not_depend_on_the_other_rows() -> None:
+    cols = _scene(12)
+    everyone = _frozen(np.ones(12, dtype=np.bool_))
+    some = np.ones(12, dtype=np.bool_)
+    some[[0, 5, 6]] = False
+    a = oracle_frame(4, 9, *cols, everyone, _params(), FP_PROBS, FP_SIZES)
+    b = oracle_frame(4, 9, *cols, _frozen(some), _params(), FP_PROBS, FP_SIZES)
+    assert a[0].tolist() == list(range(12))
+    assert b[0].tolist() == np.flatnonzero(some).tolist()
+    for have, full in zip(b[1:7], a[1:7], strict=True):
+        assert have.tobytes() == full[some].tobytes()
+    again = oracle_frame(4, 9, *cols, everyone, _params(), FP_PROBS, FP_SIZES)
+    assert all(x.tobytes() == y.tobytes() for x, y in zip(a, again, strict=True))
+
+
+def test_arithmetic_range_and_misses() -> None:
+    cols = _scene(2000)
+    centers, sizes, _, velocities, orientations = cols
+    everyone = _frozen(np.ones(2000, dtype=np.bool_))
+    rows, _, c, s, y, v, o, *_ = oracle_frame(
+        1, 0, *cols, everyone, _params(range=30.0), FP_PROBS, FP_SIZES
+    )
+    near = np.hypot(centers[:, 0], centers[:, 1]) <= 30.0
+    assert rows.tolist() == np.flatnonzero(near).tolist()
+    assert np.all(s >= 0.1 * sizes[rows])
+    assert np.all((y >= -math.pi) & (y < math.pi))
+    assert o[:, 0].tobytes() == y.tobytes()
+    assert np.array_equal(v[:, 2], velocities[rows, 2])
+    assert np.array_equal(o[:, 1:], orientations[rows, 1:])
+    assert (c - centers[rows]).std() == pytest.approx(0.2, rel=0.08)
+    kept = oracle_frame(1, 0, *cols, everyone, _params(miss=0.3), FP_PROBS, FP_SIZES)[0]
+    assert 1 - len(kept) / 2000 == pytest.approx(0.3, abs=0.04)
+
+
+def test_false_positive_count_is_poisson() -> None:
+    cols = _scene(1)
+    nobody = _frozen(np.zeros(1, dtype=np.bool_))
+    counts = np.array(
+        [
+            len(oracle_frame(0, i, *cols, nobody, _params(fp_rate=2.0), FP_PROBS, FP_SIZES)[7])
+            for i in range(4000)
+        ]
+    )
+    assert counts.mean() == pytest.approx(2.0, abs=0.08)
+    assert counts.var() == pytest.approx(2.0, rel=0.1)
+    assert np.mean(counts == 0) == pytest.approx(math.exp(-2.0), abs=0.015)

@@ -140,3 +140,19 @@ def test_an_extension_payload_is_carried_by_the_sensor_types_it_names() -> None:
     assert isinstance(points, ExtensionPayload)
     with pytest.raises(ValueError, match="a LIDAR sensor carries PointCloud or a payload class"):
         SensorData(sensor_id="lidar", sensor_type=SensorType.LIDAR, stamp_ns=1, data=points)
+
+
+def test_planned_path_time_check_is_np_diffs_on_special_values() -> None:
+    """A path is refused exactly when ``np.diff(t) < 0`` somewhere (NaN, ±inf, ±0.0 included)."""
+    values = [0.0, -0.0, 1.0, -1.0, np.inf, -np.inf, np.nan, 5e-324, -5e-324, 1e308, -1e308]
+    for a in values:
+        for b in values:
+            wp = np.array([[0, 0, 0, a], [1, 0, 0, b]], dtype=np.float64)
+            with np.errstate(all="ignore"):  # inf - inf, 1e308 - -1e308
+                refused = bool(np.any(np.diff(wp[:, 3]) < 0))
+            try:
+                PlannedPath(stamp_ns=0, waypoints=wp)
+            except ValueError:
+                assert refused, (a, b)
+            else:
+                assert not refused, (a, b)

@@ -12,8 +12,9 @@ The answers are bit for bit those of :func:`gap_ahead`: every value is computed 
 float64 operations in the same order (the kernel is compiled without ``fastmath``, so nothing is
 reassociated or fused), and ties go to the same (first) segment and the same (first) obstacle.
 The projection skips a block of :data:`BLOCK` segments whose bounding box (:attr:`GapSearch.blocks`)
-lies farther from the obstacle than the closest segment so far, by more than rounding could
-explain: no segment of it could have been the (first) closest one, so the answer is the same.
+lies farther from the obstacle than the closest segment so far — or than the closest segment of
+the block whose box is nearest, looked at first — by more than rounding could explain: no
+segment of it could have been the (first) closest one, so the answer is the same.
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
 
 #: segments per block of :attr:`GapSearch.blocks` (the projection's coarse test)
-BLOCK = 16
+BLOCK = 8
 #: a block is skipped when its box is farther (squared, m²) than the closest segment so far by
 #: more than this plus a relative 1e-9: far above the rounding of either distance
 _SKIP_MARGIN_M2 = 1e-6
@@ -231,7 +232,23 @@ def _gap_kernel(  # noqa: PLR0917 (one batch's arrays; numba has no keyword-only
             r = reach + 1e-6
             if not (ox * ox + oy * oy) < r * r:
                 continue
-            # Route.project onto segments g0 … g1 - 1: the first closest one
+            # Route.project onto segments g0 … g1 - 1: the first closest one.  A bound of the
+            # least distance first: the least of the segments of the block whose box is
+            # nearest (a distance some segment has, so no block farther than it can hold the
+            # first closest segment: the blocks before that one are skipped too)
+            near_b, near_d2 = g0 // BLOCK, np.inf
+            for b in range(g0 // BLOCK, (g1 - 1) // BLOCK + 1):
+                bx = max(blocks[0, b] - cx, cx - blocks[2, b], 0.0)
+                by = max(blocks[1, b] - cy, cy - blocks[3, b], 0.0)
+                if bx * bx + by * by < near_d2:
+                    near_b, near_d2 = b, bx * bx + by * by
+            bound_d2 = np.inf
+            for i in range(max(near_b * BLOCK, g0), min((near_b + 1) * BLOCK, g1)):
+                rx, ry = cx - net_x[i], cy - net_y[i]
+                t = ((rx * seg_x[i] + ry * seg_y[i]) + 0.0) / seg_len2[i]
+                t = min(max(t, 0.0), 1.0)
+                dx, dy = rx - t * seg_x[i], ry - t * seg_y[i]
+                bound_d2 = min(bound_d2, dx * dx + dy * dy)
             best_d2 = np.inf
             bj = g0
             bt = brx = bry = 0.0
@@ -242,7 +259,8 @@ def _gap_kernel(  # noqa: PLR0917 (one batch's arrays; numba has no keyword-only
                 if start > g0:  # the first segment always counts (a tie keeps it)
                     bx = max(blocks[0, b] - cx, cx - blocks[2, b], 0.0)
                     by = max(blocks[1, b] - cy, cy - blocks[3, b], 0.0)
-                    if bx * bx + by * by > best_d2 * (1.0 + 1e-9) + _SKIP_MARGIN_M2:
+                    least = min(best_d2, bound_d2)
+                    if bx * bx + by * by > least * (1.0 + 1e-9) + _SKIP_MARGIN_M2:
                         start = stop
                         continue
                 for i in range(start, stop):

@@ -28,7 +28,10 @@ import numpy.typing as npt
 
 from redrive.sim import fleet as fl
 from redrive.sim import kernels
-from redrive.sim.gaps import _gap_kernel
+from redrive.sim.gaps import _gap_kernel  # compiled into _frame, with gaps.BLOCK (8 since h-obj7)
+
+# numba keys _frame's cache by this file alone: an edit of gaps.py's kernel or BLOCK must change
+# this file too (or run `make clean-kernels`), else a cached _frame keeps the old gap search
 
 if TYPE_CHECKING:
     from redrive.sim.world import World

@@ -337,15 +337,16 @@ def _checked_columns(
     n = len(object_classes)
     centers_a = _column3(centers, "centers", n, where)
     sizes_a = _column3(sizes, "sizes", n, where)
-    # The common case in C-level reductions (no numpy Python wrappers); the rows are looked
+    # The common case in C-level reductions (no numpy Python wrappers; a few objects' values
+    # as Python floats, cheaper than numpy's reductions on tiny arrays); the rows are looked
     # at only when there is a bad value, to name the first.
-    if n and not (_ALL(np.isfinite(sizes_a), axis=None) and _MIN(sizes_a, axis=None) >= 0.0):
+    if n and not _finite_nonnegative(sizes_a):
         bad = ~np.isfinite(sizes_a).all(axis=1) | (sizes_a < 0).any(axis=1)
         i = int(np.flatnonzero(bad)[0])
         msg = f"{where}: sizes[{i}] must be finite and non-negative, got {sizes_a[i].tolist()}"
         raise ValueError(msg)
     yaws = _column1(yaws_rad, "yaws_rad", n, where)
-    if n and not _ALL(np.isfinite(yaws)):
+    if n and not _finite(yaws):
         i = int(np.flatnonzero(~np.isfinite(yaws))[0])
         msg = f"{where}: yaws_rad[{i}] must be finite, got {yaws[i]}"
         raise ValueError(msg)
@@ -357,7 +358,7 @@ def _checked_columns(
     conf = _ones(n)
     if confidences is not None:
         conf = _column1(confidences, "confidences", n, where)
-        if n and not (_MIN(conf) >= 0.0 and _MAX(conf) <= 1.0):  # NaN fails both
+        if n and not _in_unit(conf):
             bad = ~((conf >= 0.0) & (conf <= 1.0))
             i = int(np.flatnonzero(bad)[0])
             msg = f"{where}: confidences[{i}] must lie in [0, 1], got {conf[i]}"
@@ -396,6 +397,33 @@ def _checked_columns(
         points,
         seen,
     )
+
+
+#: up to this many values a check reads them as Python floats; beyond, numpy's reductions
+_SMALL = 96
+
+
+def _finite_nonnegative(values: npt.NDArray[np.float64]) -> bool:
+    """Whether every value is finite and ≥ 0 (-0.0 counts)."""
+    if values.size <= _SMALL:
+        flat = values.ravel().tolist()
+        return all(map(math.isfinite, flat)) and min(flat) >= 0.0  # min after: no NaN left
+    return bool(_ALL(np.isfinite(values), axis=None) and _MIN(values, axis=None) >= 0.0)
+
+
+def _finite(values: npt.NDArray[np.float64]) -> bool:
+    """Whether every value is finite."""
+    if values.size <= _SMALL:
+        return all(map(math.isfinite, values.ravel().tolist()))
+    return bool(_ALL(np.isfinite(values), axis=None))
+
+
+def _in_unit(values: npt.NDArray[np.float64]) -> bool:
+    """Whether every value lies in [0, 1] (NaN does not)."""
+    if values.size <= _SMALL:
+        flat = values.tolist()
+        return all(0.0 <= v <= 1.0 for v in flat)
+    return bool(_MIN(values) >= 0.0 and _MAX(values) <= 1.0)  # NaN fails both
 
 
 def _columns_unchecked(*values: Any) -> ObjectColumns:

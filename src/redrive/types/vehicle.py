@@ -72,7 +72,10 @@ class PlannedPath:
         if isinstance(wp, np.ndarray) and wp.dtype != np.float64:
             wp = wp.astype(np.float64)
         wp = frozen_array(wp, name="PlannedPath.waypoints", dtype=np.float64, shape=(None, 4))
-        if wp.shape[0] > 1 and np.any(np.diff(wp[:, 3]) < 0):
+        t_s = wp[:, 3]
+        # t[i+1] < t[i] exactly when np.diff's t[i+1] - t[i] < 0 (IEEE subtraction keeps the
+        # sign; NaN and inf - inf fail both): one ufunc, not np.diff's Python wrapper
+        if wp.shape[0] > 1 and (t_s[1:] < t_s[:-1]).any():
             msg = "PlannedPath.waypoints: t_s (column 3) must not decrease"
             raise ValueError(msg)
         object.__setattr__(self, "waypoints", wp)

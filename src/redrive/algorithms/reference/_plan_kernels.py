@@ -202,7 +202,7 @@ def points_at(xy: _F64, s: _F64, s_m: _F64) -> _F64:  # pragma: no cover - compi
 #: scaled by 1 + the distance), far above float64 rounding of path coordinates
 _PRUNE_MARGIN = 1e-6
 #: every this many segments one gives the first bound of a point's distance
-_PRUNE_STRIDE = 8
+_PRUNE_STRIDE = 16
 
 
 @numba.njit(cache=True, nogil=True)
@@ -282,10 +282,20 @@ def project_pruned(  # noqa: PLR0917 - numba takes no keyword-only parameters
         while k < n_s:
             dist_k = math.hypot(px - a[k, 0], py - a[k, 1])
             limit = s_start[k] + dist_k - bound - _PRUNE_MARGIN * (1.0 + dist_k)
-            while k < n_s and (s_start[k + 1] if k + 1 < n_s else s_end) < limit:
-                k += 1
-            if k >= n_s:
-                break
+            if (s_start[k + 1] if k + 1 < n_s else s_end) < limit:
+                # the segments k … j - 2 end before the limit (the arc lengths increase):
+                # j = the first vertex after k at or past it (bisection), or the last segment
+                # when none is
+                lo, hi = k + 1, n_s
+                while lo < hi:
+                    mid = (lo + hi) // 2
+                    if s_start[mid] < limit:
+                        lo = mid + 1
+                    else:
+                        hi = mid
+                k = lo - 1
+                if k == n_s - 1 and s_end < limit:
+                    break
             d2, t = _segment_d2(px, py, a, ab, seg_len, k)
             if d2 < best_d2:
                 best, best_d2, best_t = k, d2, t

@@ -9,9 +9,10 @@ from types import MappingProxyType
 from typing import Any, ClassVar, NoReturn
 
 import numpy as np
+import numpy.typing as npt
 
 from redrive.algorithms.base import GROUND_TRUTH, Algorithm, Role, StageOutputs
-from redrive.algorithms.reference._oracle_kernels import perturb_rows
+from redrive.algorithms.reference._oracle_kernels import oracle_frame
 from redrive.errors import AlgorithmError, ConfigError
 from redrive.types import DetectedObject, Frame, ObjectClass, ObjectColumns, SensorType
 
@@ -72,9 +73,12 @@ class NoisyOracle(Algorithm):
     clutter, in the ground-truth velocity convention), confidence ``false_positive_confidence``,
     id -1.
 
-    Determinism: the random generator of a frame is ``numpy.random.default_rng([seed,
-    frame.index])``, so the output depends only on the frame and the config — not on which
-    frames ran before — and pipelined, parallel or resumed runs give identical outputs.
+    Determinism: every draw of a frame is a counter-based random number keyed by ``(seed,
+    frame.index)`` (SplitMix64, :mod:`._oracle_kernels`), and each ground-truth row has its own
+    counters, so the output depends only on the frame and the config — not on which frames ran
+    before — and pipelined, parallel or resumed runs give identical outputs.  (Before issue
+    15's h-obj7 the generator was ``numpy.random.default_rng([seed, frame.index])``: the same
+    distributions, other numbers.)
     Outputs: true detections in ground-truth order, then the false positives.
     """
 
@@ -104,8 +108,8 @@ class NoisyOracle(Algorithm):
 
     def setup(self, config: Mapping[str, Any]) -> None:
         seed = config["seed"]
-        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-            self._bad("seed", seed, "an integer ≥ 0")
+        if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 1 << 63:
+            self._bad("seed", seed, "an integer in [0, 2**63)")
         self._seed = int(seed)
         self._center_std = self._number(config, "center_std_m")
         self._size_std = self._number(config, "size_std_rel")
@@ -115,7 +119,6 @@ class NoisyOracle(Algorithm):
         self._fp_rate = self._number(config, "false_positive_rate")
         self._fp_conf = self._number(config, "false_positive_confidence", upper=1.0)
         self._p_confuse = self._number(config, "class_confusion_probability", upper=1.0)
-        self._stds = np.array([self._center_std, self._size_std, self._yaw_std, self._vel_std])
         self._visible_only = bool(config["visible_only"])
         self._keep_ids = bool(config["keep_ids"])
         max_range = config["max_range_m"]
@@ -125,27 +128,41 @@ class NoisyOracle(Algorithm):
             self._max_range_m = self._number(config, "max_range_m")
             if self._max_range_m <= FALSE_POSITIVE_MIN_RANGE_M:
                 self._bad("max_range_m", max_range, f"None or > {FALSE_POSITIVE_MIN_RANGE_M} m")
+        far_m = min(self._max_range_m, FALSE_POSITIVE_MAX_RANGE_M)
+        self._params = np.array(
+            [
+                self._center_std,
+                self._size_std,
+                self._yaw_std,
+                self._vel_std,
+                self._p_miss,
+                self._p_confuse,
+                self._fp_rate,
+                FALSE_POSITIVE_MIN_RANGE_M,
+                far_m,
+                self._max_range_m,
+            ]
+        )
 
     def bind(self, sensors: Mapping[str, SensorType], *, extras: Iterable[str] = ()) -> None:
-        """As :meth:`Algorithm.bind`, then one made-up perturbation, so that numba loads the
-        oracle's kernel from the cache (or compiles it after an install) here, before a run's
-        first frame, not inside that frame's latency."""
+        """As :meth:`Algorithm.bind`, then one made-up frame, so that numba loads the oracle's
+        kernel from the cache (or compiles it after an install) here, before a run's first
+        frame, not inside that frame's latency."""
         super().bind(sensors, extras=extras)
         frozen3, frozen1 = np.zeros((1, 3)), np.zeros(1)  # ObjectColumns' arrays are read-only
         frozen3.flags.writeable = frozen1.flags.writeable = False
-        normal3 = np.zeros((1, 3))
-        perturb_rows(
+        oracle_frame(
+            self._seed,
+            0,
+            frozen3,
             frozen3,
             frozen1,
             frozen3,
             frozen3,
-            np.zeros(1, dtype=np.int64),
-            np.zeros(1, dtype=np.bool_),
-            normal3,
-            normal3,
-            np.zeros(1),
-            np.zeros((1, 2)),
-            self._stds,
+            _all_true(1),
+            self._params,
+            _FP_PROBS,
+            _FP_SIZES,
         )
 
     def _bad(self, key: str, value: object, wanted: str) -> NoReturn:
@@ -170,142 +187,132 @@ class NoisyOracle(Algorithm):
                 "ground truth; the noisy oracle needs a log with ground-truth objects"
             )
             raise AlgorithmError(msg)
-        rng = np.random.default_rng([self._seed, frame.index])
         # the ground truth as columns (no pass over the objects when they came from
         # DetectedObject.many, as a simulator's and the decoders' do)
-        truth_columns = ObjectColumns.from_objects(truth)
-        kept = self._eligible(truth_columns)
-        columns = self._perturb(truth_columns, kept, rng)
-        columns += self._false_positives(rng)
-        out = [] if not columns else DetectedObject.many(**_concatenated(columns))
+        columns = ObjectColumns.from_objects(truth)
+        # every draw and the arithmetic of the frame in one compiled call (._oracle_kernels)
+        (rows, confuse, centers, sizes, yaws, velocities, orientations, *fp) = oracle_frame(
+            self._seed,
+            frame.index,
+            columns.centers,
+            columns.sizes,
+            columns.yaws_rad,
+            columns.velocities,
+            columns.orientations,
+            self._seen(columns),
+            self._params,
+            _FP_PROBS,
+            _FP_SIZES,
+        )
+        parts = []
+        if len(rows):
+            parts.append(
+                self._detections(
+                    columns, rows, confuse, centers, sizes, yaws, velocities, orientations
+                )
+            )
+        fp_picks, fp_centers, fp_sizes, fp_yaws = fp
+        if len(fp_picks):
+            parts.append(self._false_positives(fp_picks, fp_centers, fp_sizes, fp_yaws))
+        out = [] if not parts else DetectedObject.many(**_concatenated(parts))
         logger.debug(
-            "%s frame %d: %d ground-truth objects, %d eligible, %d returned",
+            "%s frame %d: %d ground-truth objects, %d returned",
             self.name,
             frame.index,
             len(truth),
-            len(kept),
             len(out),
         )
         return out
 
-    def _eligible(self, truth: ObjectColumns) -> list[int]:
-        """The rows of the objects seen (when ``visible_only``) and within ``max_range_m``."""
-        near = (np.hypot(truth.centers[:, 0], truth.centers[:, 1]) <= self._max_range_m).tolist()
-        if not self._visible_only:
-            return [i for i, ok in enumerate(near) if ok]
-        return [
-            i
-            for i, (ok, points, seen) in enumerate(
-                zip(near, truth.num_lidar_points, truth.visible, strict=True)
-            )
-            if ok and points != 0 and seen is not False
-        ]
-
-    def _perturb(
-        self, truth: ObjectColumns, rows: list[int], rng: np.random.Generator
-    ) -> list[dict[str, Any]]:
-        """The kept detections of ground-truth rows ``rows`` as ``DetectedObject.many``'s
-        columns (an empty list when none is kept)."""
-        n = len(rows)
-        # every draw is made for every object, in a fixed order, whatever the config
-        missed = rng.random(n) < self._p_miss
-        n_center = rng.normal(0.0, 1.0, (n, 3))
-        n_size = rng.normal(0.0, 1.0, (n, 3))
-        n_yaw = rng.normal(0.0, 1.0, n)
-        n_vel = rng.normal(0.0, 1.0, (n, 2))
-        confused = rng.random(n) < self._p_confuse
-        pick = rng.random(n)  # which other class, as a fraction of the choices
-        if n == 0:
-            return []
-        # the arithmetic of the kept objects in one compiled call on the ground truth's
-        # columns (numpy's elementwise operations, bit for bit: ._oracle_kernels), but for
-        # the sizes' np.maximum (see there)
-        index = np.array(rows, dtype=np.int64)
-        true_sizes = truth.sizes[index]
-        d_size = n_size * self._size_std
-        sizes_all = np.maximum(true_sizes * (1.0 + d_size), 0.1 * true_sizes)
-        kept_at, centers, sizes, yaws, velocities, orientations = perturb_rows(
-            truth.centers,
-            truth.yaws_rad,
-            truth.velocities,
-            truth.orientations,
-            index,
-            missed,
-            n_center,
-            sizes_all,
-            n_yaw,
-            n_vel,
-            self._stds,
+    def _seen(self, truth: ObjectColumns) -> npt.NDArray[np.bool_]:
+        """Which rows count as seen: all unless ``visible_only``, else those with LiDAR points
+        (≠ 0) and not ``visible is False`` (None counts as seen); the range is the kernel's."""
+        n = len(truth)
+        points, visible = truth.num_lidar_points, truth.visible
+        if not self._visible_only or (points.count(None) == n and visible.count(None) == n):
+            return _all_true(n)
+        seen = np.array(
+            [p != 0 and v is not False for p, v in zip(points, visible, strict=True)],
+            dtype=np.bool_,
         )
-        kept = kept_at.tolist()
-        if not kept:
-            return []
-        picked = [rows[i] for i in kept]
+        seen.flags.writeable = False  # the kernel's one signature: read-only columns
+        return seen
+
+    def _detections(  # noqa: PLR0917
+        self,
+        truth: ObjectColumns,
+        rows_a: npt.NDArray[np.int64],
+        confuse: npt.NDArray[np.float64],
+        centers: npt.NDArray[np.float64],
+        sizes: npt.NDArray[np.float64],
+        yaws: npt.NDArray[np.float64],
+        velocities: npt.NDArray[np.float64],
+        orientations: npt.NDArray[np.float64],
+    ) -> dict[str, Any]:
+        """The kept ground-truth rows ``rows_a`` with their noisy columns as
+        ``DetectedObject.many``'s columns (classes confused here)."""
+        rows = rows_a.tolist()
         true_classes = truth.object_classes
-        classes = [true_classes[r] for r in picked]
-        if self._p_confuse > 0.0:
-            for j, i in enumerate(kept):
-                if confused[i]:
+        classes = [true_classes[r] for r in rows]
+        p = self._p_confuse
+        if p > 0.0:
+            for j, u in enumerate(confuse.tolist()):
+                if u < p:  # then u / p is uniform in [0, 1): which other class
                     cls = classes[j]
                     choices = [c for c in CONFUSABLE_CLASSES if c is not cls]
-                    classes[j] = choices[min(int(pick[i] * len(choices)), len(choices) - 1)]
+                    classes[j] = choices[min(int(u / p * len(choices)), len(choices) - 1)]
         ids = truth.object_ids
-        return [
-            {
-                "object_ids": [ids[r] for r in picked] if self._keep_ids else [-1] * len(kept),
-                "object_classes": classes,
-                "confidences": truth.confidences[picked],
-                "centers": centers,
-                "sizes": sizes,
-                "yaws_rad": yaws,
-                "velocities": velocities,
-                "accelerations": truth.accelerations[picked],
-                "orientations": orientations,
-            }
-        ]
+        return {
+            "object_ids": [ids[r] for r in rows] if self._keep_ids else [-1] * len(rows),
+            "object_classes": classes,
+            "confidences": truth.confidences[rows_a],
+            "centers": centers,
+            "sizes": sizes,
+            "yaws_rad": yaws,
+            "velocities": velocities,
+            "accelerations": truth.accelerations[rows_a],
+            "orientations": orientations,
+        }
 
-    def _false_positives(self, rng: np.random.Generator) -> list[dict[str, Any]]:
-        """The false positives as ``DetectedObject.many``'s columns (an empty list for none)."""
-        count = int(rng.poisson(self._fp_rate)) if self._fp_rate > 0 else 0
-        if count == 0:
-            return []
-        classes = list(FALSE_POSITIVE_SHAPES)
-        probs = np.array([FALSE_POSITIVE_SHAPES[c][0] for c in classes])
-        picks = rng.choice(len(classes), size=count, p=probs / probs.sum())
-        far_m = min(self._max_range_m, FALSE_POSITIVE_MAX_RANGE_M)
-        ranges_m = rng.uniform(FALSE_POSITIVE_MIN_RANGE_M, far_m, count)
-        bearings = rng.uniform(-math.pi, math.pi, count)
-        yaws = rng.uniform(-math.pi, math.pi, count)
-        d_size = rng.normal(0.0, 1.0, (count, 3)) * self._size_std
-        fp_classes, centers, sizes = [], [], []
-        for k in range(count):
-            cls = classes[int(picks[k])]
-            typical = np.array(FALSE_POSITIVE_SHAPES[cls][1])
-            size = np.maximum(typical * (1.0 + d_size[k]), 0.1 * typical)
-            centers.append(
-                [
-                    ranges_m[k] * math.cos(bearings[k]),
-                    ranges_m[k] * math.sin(bearings[k]),
-                    0.5 * size[2],
-                ]
-            )
-            fp_classes.append(cls)
-            sizes.append(size)
+    def _false_positives(
+        self,
+        picks: npt.NDArray[Any],
+        centers: npt.NDArray[Any],
+        sizes: npt.NDArray[Any],
+        yaws: npt.NDArray[Any],
+    ) -> dict[str, Any]:
+        """The kernel's false positives as ``DetectedObject.many``'s columns."""
+        count = len(picks)
         orientations = np.zeros((count, 3))
         orientations[:, 0] = yaws
-        return [
-            {
-                "object_ids": [-1] * count,
-                "object_classes": fp_classes,
-                "confidences": np.full(count, self._fp_conf),
-                "centers": np.array(centers, dtype=np.float64),
-                "sizes": np.array(sizes, dtype=np.float64),
-                "yaws_rad": yaws,
-                "velocities": np.zeros((count, 3)),
-                "accelerations": np.zeros((count, 3)),
-                "orientations": orientations,
-            }
-        ]
+        return {
+            "object_ids": [-1] * count,
+            "object_classes": [_FP_CLASSES[k] for k in picks.tolist()],
+            "confidences": np.full(count, self._fp_conf),
+            "centers": centers,
+            "sizes": sizes,
+            "yaws_rad": yaws,
+            "velocities": np.zeros((count, 3)),
+            "accelerations": np.zeros((count, 3)),
+            "orientations": orientations,
+        }
+
+
+_FP_CLASSES = tuple(FALSE_POSITIVE_SHAPES)
+_FP_PROBS = np.array([FALSE_POSITIVE_SHAPES[c][0] for c in _FP_CLASSES])
+_FP_PROBS /= _FP_PROBS.sum()
+_FP_SIZES = np.array([FALSE_POSITIVE_SHAPES[c][1] for c in _FP_CLASSES], dtype=np.float64)
+_ALL_TRUE: dict[int, npt.NDArray[np.bool_]] = {}
+
+
+def _all_true(n: int) -> npt.NDArray[np.bool_]:
+    """A read-only (n,) column of True (one per n)."""
+    arr = _ALL_TRUE.get(n)
+    if arr is None:
+        arr = np.ones(n, dtype=np.bool_)
+        arr.flags.writeable = False
+        _ALL_TRUE[n] = arr
+    return arr
 
 
 def _concatenated(parts: list[dict[str, Any]]) -> dict[str, Any]:
