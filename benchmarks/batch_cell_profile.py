@@ -90,8 +90,10 @@ def main() -> None:
         os.waitpid(pid, 0)
         first, second = json.loads(data)
         rows.append((first, second))
-        print(f"fork {k}: first cell cpu {first[0]:.1f} ms wall {first[1]:.1f} ms; "
-              f"second cell cpu {second[0]:.1f} ms wall {second[1]:.1f} ms")
+        print(
+            f"fork {k}: first cell cpu {first[0]:.1f} ms wall {first[1]:.1f} ms; "
+            f"second cell cpu {second[0]:.1f} ms wall {second[1]:.1f} ms"
+        )
     print(
         f"median: first cpu {median(r[0][0] for r in rows):.1f} ms wall "
         f"{median(r[0][1] for r in rows):.1f} ms; second cpu {median(r[1][0] for r in rows):.1f} "

@@ -5,9 +5,11 @@ reaches through its readers).  Without it each cell paid ~2 s of imports (``redr
 batch``); the server pays them once.  Optional dependencies that are missing are left out.
 
 Then the reference algorithms' numba kernels are loaded here (each algorithm's
-``warm_kernels``, what its ``bind`` does before a run): numba's on-disk cache and its CPU target
-(registries, the NRT) were the largest cost a fresh fork still paid per cell, ≈ 0.36 s of thread
-CPU of a 2-frame cell (``benchmarks/batch_cell_profile.py``).  A forked cell's ``bind`` then finds
+``warm_kernels``, what its ``bind`` does before a run), and a few per-process caches filled
+(:data:`CACHES`): numba's on-disk cache and its CPU target (registries, the NRT) were the largest
+cost a fresh fork still paid per cell — a 2-frame cell forked from the server took 334–351 ms of
+thread CPU before, 71–73 ms after; a second cell in one process takes 46–52 ms
+(``benchmarks/batch_cell_profile.py``, BENCHMARKS.md).  A forked cell's ``bind`` then finds
 the compiled kernels in its dispatchers, the same machine code, so results do not change.  This is
 safe across ``fork`` because the kernels are plain ``njit`` (no ``parallel=True``: numba's
 threading layer is never started) and loading them starts no thread; a test checks both.  A
