@@ -7,8 +7,9 @@ to ``retries`` times; a cell that fails on its own (a corrupt log, a pipeline th
 is not retried: it would fail the same way.
 
 ``local`` starts one process per cell from a ``forkserver`` (redrive, its readers and reference
-algorithms are imported once, in the server — :mod:`redrive.batch.preload`; each cell is a fresh
-fork of it), so one dead process is one failed cell — unlike a
+algorithms are imported once, in the server, and the algorithms' compiled kernels loaded —
+:mod:`redrive.batch.preload`; each cell is a fresh fork of it), so one dead process is one
+failed cell — unlike a
 ``concurrent.futures`` pool, which breaks as a whole.  ``ray`` submits one task per cell with
 ``num_cpus`` per task and Ray's own ``max_retries`` for dead workers; Ray is imported only here,
 only when asked for.

@@ -195,6 +195,11 @@ class PurePursuitPid(Algorithm):
         controller's kernels from the cache (or compiles them after an install) here, before a
         run's first frame, not inside that frame's latency."""
         super().bind(sensors, extras=extras)
+        self.warm_kernels()
+
+    def warm_kernels(self) -> None:
+        """The made-up path of :meth:`bind` (configured, not bound, is enough): numba's kernels
+        loaded in this process (also by :mod:`redrive.batch.preload`)."""
         path = np.array([[0.0, 0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.1]])
         lookahead_point(np.ascontiguousarray(path[:, :2]), 1.0)
         path_speeds(path, self._previews)

@@ -270,6 +270,12 @@ class ClusterDetector(Algorithm):
         numba loads its kernels from the cache (or compiles them after an install) here, before
         a run's first frame, not inside that frame's latency (≈ 0.4–0.7 s once a process)."""
         super().bind(sensors, extras=extras)
+        self.warm_kernels()
+
+    def warm_kernels(self) -> None:
+        """One made-up sweep through :meth:`detect` (configured, not bound, is enough): numba's
+        kernels loaded in this process (also by :mod:`redrive.batch.preload` in the local
+        executor's forkserver, so that its forked cells find them loaded)."""
         self.detect(_warm_up_sweep(), sensor_location=(0.0, 0.0, 1.8))
 
     def step(self, frame: Frame, upstream: StageOutputs) -> list[DetectedObject]:

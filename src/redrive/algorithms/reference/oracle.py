@@ -149,6 +149,11 @@ class NoisyOracle(Algorithm):
         kernel from the cache (or compiles it after an install) here, before a run's first
         frame, not inside that frame's latency."""
         super().bind(sensors, extras=extras)
+        self.warm_kernels()
+
+    def warm_kernels(self) -> None:
+        """The made-up frame of :meth:`bind` (configured, not bound, is enough): numba's kernel
+        loaded in this process (also by :mod:`redrive.batch.preload`)."""
         frozen3, frozen1 = np.zeros((1, 3)), np.zeros(1)  # ObjectColumns' arrays are read-only
         frozen3.flags.writeable = frozen1.flags.writeable = False
         oracle_frame(

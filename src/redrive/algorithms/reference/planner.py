@@ -279,6 +279,11 @@ class IdmPlanner(Algorithm):
         numba loads the planner's kernels from the cache (or compiles them after an install)
         here, before a run's first frame, not inside that frame's latency."""
         super().bind(sensors, extras=extras)
+        self.warm_kernels()
+
+    def warm_kernels(self) -> None:
+        """The made-up plan of :meth:`bind` (configured, not bound, is enough): numba's kernels
+        loaded in this process (also by :mod:`redrive.batch.preload`)."""
         self._profile(1.0, np.array([30.0]), np.array([0.0]))
         line = Polyline([[0.0, 0.0], [1.0, 0.0]])
         line.project([[0.5, 0.5]])
