@@ -83,6 +83,7 @@ def normal_at(key: np.uint64, counter: int) -> float:  # pragma: no cover - comp
 
 @numba.njit(cache=True, nogil=True)
 def _normalize_angle(angle_rad: float) -> float:  # pragma: no cover - compiled
+    # redrive.geometry.normalize_angle, compiled: numba has no math.fmod, so not njit(that)
     wrapped: float = np.fmod(angle_rad + math.pi, 2.0 * math.pi)  # exact: any fmod, these bits
     if wrapped < 0.0:
         wrapped += 2.0 * math.pi
