@@ -27,8 +27,8 @@ from redrive.config import PipelineConfig
 from redrive.engine.run import RunRequest, run_log
 from redrive.engine.stats import RunReport
 from redrive.errors import ConfigError
-from redrive.results import RunStatus
-from redrive.results.manifest import now_iso
+from redrive.results import TABLES, RunStatus
+from redrive.results.manifest import MANIFEST_NAME, now_iso
 
 __all__ = ["CellRunner", "CellTask", "ClosedLoopRunner", "run_cell", "synthetic_log_path"]
 
@@ -132,10 +132,8 @@ def run_cell(task: CellTask, *, closed_loop: ClosedLoopRunner | None = None) -> 
     record's ``error``; only Ctrl-C (``interrupted``) and the process dying escape."""
     started = time.perf_counter()
     run_dir = task.run_dir
-    if run_dir.exists():
-        shutil.rmtree(run_dir)
-    run_dir.parent.mkdir(parents=True, exist_ok=True)
     try:
+        _clear_run_dir(task)
         report = _run(task, run_dir, closed_loop)
     except KeyboardInterrupt:
         record = task.record(
@@ -155,6 +153,40 @@ def run_cell(task: CellTask, *, closed_loop: ClosedLoopRunner | None = None) -> 
         record = _record_of(task, report, time.perf_counter() - started)
     write_cell_record(task.record_path, record)
     return record
+
+
+#: what a run directory holds before its manifest is written (a cell killed while starting)
+_RUN_START = frozenset({*TABLES, ".lock", MANIFEST_NAME + ".tmp"})
+
+
+def _clear_run_dir(task: CellTask) -> None:
+    """Empty the cell's run directory for a fresh run — only if it is this cell's own
+    (``BATCH/runs/PIPELINE/LOOP/LOG_ID``, no link) and holds nothing but a run: nothing a batch
+    did not create is ever removed.
+
+    Raises:
+        ConfigError: the directory is elsewhere, a link, or holds something that is no run.
+    """
+    runs = Path(task.batch_dir, "runs")
+    parts = task.cell_id.split("/")
+    run_dir = task.run_dir
+    if len(parts) != 3 or any(not p or p.startswith(".") for p in parts):
+        msg = f"cell {task.cell_id!r}: not a PIPELINE/LOOP/LOG name of a cell directory"
+        raise ConfigError(msg)
+    for folder in (runs, *(runs.joinpath(*parts[: i + 1]) for i in range(3))):
+        if folder.is_symlink():
+            msg = f"{folder} is a symbolic link: a batch writes its cells only into its own runs/"
+            raise ConfigError(msg)
+    if run_dir.exists():
+        entries = {entry.name for entry in run_dir.iterdir()}
+        if MANIFEST_NAME not in entries and not entries <= _RUN_START:
+            msg = (
+                f"{run_dir} holds files that are no redrive run ({', '.join(sorted(entries)[:3])}"
+                "…): the batch removes only the run directories it made; move them away"
+            )
+            raise ConfigError(msg)
+        shutil.rmtree(run_dir)
+    run_dir.parent.mkdir(parents=True, exist_ok=True)
 
 
 def _run(task: CellTask, run_dir: Path, closed_loop: ClosedLoopRunner | None) -> RunReport:

@@ -54,6 +54,7 @@ __all__ = [
     "make_pipeline_item",
     "parse_seeds",
     "pipeline_hash",
+    "safe_name",
     "unique_pipelines",
 ]
 
@@ -199,7 +200,7 @@ def _expand_one(entry: str, base: Path, seeds: Sequence[int], depth: int) -> lis
     if scenario is None and name.endswith(".toml") and _is_scenario(str(base / name)):
         scenario = str(base / name)
     if scenario is not None:
-        stem = Path(scenario).stem if scenario.endswith(".toml") else scenario
+        stem = safe_name(Path(scenario).stem) if scenario.endswith(".toml") else scenario
         if seed_text:
             chosen: Sequence[int | None] = parse_seeds(seed_text)
         else:
@@ -239,8 +240,9 @@ def expand_logs(
     entries: Sequence[str], *, base: Path = Path(), seeds: Sequence[int] = ()
 ) -> tuple[LogItem, ...]:
     """The logs of ``entries`` (paths, globs, directories, ``.txt`` lists, scenarios with seeds),
-    each once, in the order given; each gets a unique ``log_id`` (the file's stem, with a short
-    hash of its path when two stems collide).
+    each once, in the order given; each gets a unique ``log_id``: the file's stem made a safe
+    directory name (:func:`safe_name`), with a short hash of its path when it equals another
+    log's or scenario's id (case aside).
 
     Raises:
         ConfigError: an entry matches nothing, or no log at all.
@@ -255,32 +257,43 @@ def expand_logs(
         if key not in seen:
             seen.add(key)
             unique.append(item)
-    stems = [_stem(x) for x in unique if isinstance(x, Path)]
+    names = [_stem(x) if isinstance(x, Path) else x.log_id for x in unique]
+    folded = [n.casefold() for n in names]
     logs: list[LogItem] = []
-    for item in unique:
+    for item, stem in zip(unique, names, strict=True):
         if isinstance(item, LogItem):
             logs.append(item)
             continue
         resolved = str(item.resolve())
-        stem = _stem(item)
-        if stems.count(stem) > 1:
+        # two logs never share a cell directory: a stem that another log's (or scenario's) name
+        # equals — case aside, for case-insensitive file systems — gets a hash of its path
+        if folded.count(stem.casefold()) > 1:
             stem = f"{stem}-{hashlib.sha256(resolved.encode()).hexdigest()[:8]}"
         logs.append(LogItem(log_id=stem, path=resolved))
     if not logs:
         raise ConfigError("the batch has no logs: give paths, globs, directories or scenarios")
-    ids = [x.log_id for x in logs]
-    clash = sorted({i for i in ids if ids.count(i) > 1})
+    ids = [x.log_id.casefold() for x in logs]
+    clash = sorted({x.log_id for x in logs if ids.count(x.log_id.casefold()) > 1})
     if clash:
-        msg = f"two logs are both named {clash[0]!r} in the batch (a log and a scenario?)"
+        msg = f"two logs are both named {clash[0]!r} in the batch (two scenarios?)"
         raise ConfigError(msg)
     return tuple(logs)
+
+
+def safe_name(text: str) -> str:
+    """``text`` as one directory name: a character outside ``A-Z a-z 0-9 _ . @ + -`` becomes
+    ``_``, and so does every leading dot — ``.``, ``..`` and hidden names never name a cell's
+    directory (a log ``..mcap`` is ``_``, ``...mcap`` is ``__``)."""
+    name = _ID_CHARS.sub("_", text)
+    bare = name.lstrip(".")
+    return "_" * (len(name) - len(bare)) + bare if name else "log"
 
 
 def _stem(path: Path) -> str:
     stem = path.name
     for suffix in _LOG_SUFFIXES:
         stem = stem.removesuffix(suffix)
-    return _ID_CHARS.sub("_", stem) or "log"
+    return safe_name(stem)
 
 
 def pipeline_hash(config: PipelineConfig) -> str:
@@ -352,11 +365,14 @@ def make_pipeline_item(
     no plugin at all)."""
     if name is None:
         if file is not None:
-            name = Path(file).stem
+            name = safe_name(Path(file).stem)
         else:
             name = "flags" if (perception or planning or control) else "reference"
-    if not name or _ID_CHARS.search(name):
-        msg = f"pipeline name {name!r}: use letters, digits, '.', '_', '-' (it names directories)"
+    if not name or _ID_CHARS.search(name) or name.startswith("."):
+        msg = (
+            f"pipeline name {name!r}: use letters, digits, '.', '_', '-', not starting with '.' "
+            "(it names the directory of its cells)"
+        )
         raise ConfigError(msg)
     return PipelineItem(
         name=name,
@@ -369,8 +385,8 @@ def make_pipeline_item(
 
 def unique_pipelines(items: Sequence[PipelineItem]) -> tuple[PipelineItem, ...]:
     """``items``, refusing two with one name (their run directories would collide)."""
-    names = [p.name for p in items]
-    clash = sorted({n for n in names if names.count(n) > 1})
+    names = [p.name.casefold() for p in items]
+    clash = sorted({p.name for p in items if names.count(p.name.casefold()) > 1})
     if clash:
         msg = (
             f"two pipelines are named {clash[0]!r}: give each a `name` (spec) or rename a file "
