@@ -81,9 +81,7 @@ def test_a_batch_over_hostile_names_keeps_every_cells_results(
     assert all(read_manifest(out / c.run_dir).status is RunStatus.COMPLETE for c in again.cells)
 
 
-def test_a_cell_never_removes_what_the_batch_did_not_make(
-    logs: list[Path], tmp_path: Path
-) -> None:
+def test_a_cell_never_removes_what_the_batch_did_not_make(logs: list[Path], tmp_path: Path) -> None:
     out = tmp_path / "batch"
     pipeline = tmp_path / "a.toml"
     pipeline.write_text(PIPELINE_A, encoding="utf-8")

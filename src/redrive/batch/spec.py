@@ -267,9 +267,10 @@ def expand_logs(
         resolved = str(item.resolve())
         # two logs never share a cell directory: a stem that another log's (or scenario's) name
         # equals — case aside, for case-insensitive file systems — gets a hash of its path
+        log_id = stem
         if folded.count(stem.casefold()) > 1:
-            stem = f"{stem}-{hashlib.sha256(resolved.encode()).hexdigest()[:8]}"
-        logs.append(LogItem(log_id=stem, path=resolved))
+            log_id = f"{stem}-{hashlib.sha256(resolved.encode()).hexdigest()[:8]}"
+        logs.append(LogItem(log_id=log_id, path=resolved))
     if not logs:
         raise ConfigError("the batch has no logs: give paths, globs, directories or scenarios")
     ids = [x.log_id.casefold() for x in logs]
