@@ -10,6 +10,7 @@ from __future__ import annotations
 __all__ = [
     "AlgorithmError",
     "ConfigError",
+    "DiskFullError",
     "LogDamagedError",
     "LogError",
     "LogTruncatedError",
@@ -56,6 +57,23 @@ class LogDamagedError(LogTruncatedError):
     def __init__(self, msg: str, *, messages_read: int = 0, offset: int | None = None) -> None:
         super().__init__(msg, messages_read=messages_read)
         self.offset = offset
+
+
+class DiskFullError(RedriveError):
+    """A file could not be written to its end: the disk (or a quota, or a file-size limit) is
+    full.  What was written before is kept and reads back intact (the message says where).
+
+    Attributes:
+        path: the file that was being written.
+        kept: where what was written is now (None when nothing could be kept).
+        written_bytes: its size.
+    """
+
+    def __init__(self, msg: str, *, path: str, kept: str | None = None, written_bytes: int = 0):
+        super().__init__(msg)
+        self.path = path
+        self.kept = kept
+        self.written_bytes = written_bytes
 
 
 class UnsupportedMessageError(RedriveError):

@@ -90,7 +90,7 @@ def _run(args: argparse.Namespace) -> int:
     from rich.console import Console
 
     from redrive.cli.live_foxglove import both, open_feed
-    from redrive.cli.live_record import record_only, warn_orphans
+    from redrive.cli.live_record import record_only, recording_status, warn_orphans
     from redrive.cli.run import pipeline_from_args, print_run_report
     from redrive.engine import RealtimeMode, RunRequest, run_reader
     from redrive.live import default_master_uri
@@ -177,6 +177,7 @@ def _run(args: argparse.Namespace) -> int:
                     args.record,
                     definitions=session.definition if session.scrapers else None,
                     compression=args.compression,
+                    on_failure=stop.set,
                 )
             log = LiveLog(session.specs, session.name, stop=stop)
             feed = open_feed(args, session.name, session.specs, pipeline=pipeline)
@@ -215,7 +216,7 @@ def _run(args: argparse.Namespace) -> int:
             )
         except BaseException:
             if recorder is not None:
-                recorder.abort()  # a refused start or an error leaves no part behind
+                recorder.abort()  # what was recorded stays; an empty part does not
             raise
         finally:
             stop.set()
@@ -248,9 +249,11 @@ def _run(args: argparse.Namespace) -> int:
     if feed is not None:
         console.print(feed.summary(), highlight=False)
     if recorded is not None and recorder is not None:
-        console.print(f"recorded: {recorded}")
+        for path in recorder.files or [recorded]:
+            console.print(f"recorded: {path}", highlight=False)
         for err in recorder.errors[:5]:
             console.print(f"[yellow]recording: {err}[/]")
+        return recording_status(recorder)
     return 0
 
 

@@ -192,6 +192,7 @@ def record_only(args: argparse.Namespace, master: str) -> int:
                 max_size_bytes=max_size,
                 compression=args.compression,
                 native=ros2,
+                on_failure=stop.set,
             )
             try:
                 if ros:  # each scraper subscribes once the recorder reads its stream
@@ -218,6 +219,8 @@ def record_only(args: argparse.Namespace, master: str) -> int:
                 status = _Status(recording, console)
                 try:
                     while not stop.wait(0.25):
+                        if recorder.failed.is_set():
+                            break
                         if deadline is not None and time.monotonic() >= deadline:
                             reason = f"--duration {args.duration:g} s"
                             break
@@ -241,10 +244,23 @@ def record_only(args: argparse.Namespace, master: str) -> int:
         for sig, previous in handlers.items():
             signal.signal(sig, previous)
     recorder.stop()
+    if recorder.failure is not None:
+        reason = "the recording could not go on (below)"
     _summary(recording, recorder, wall_s=wall_s, reason=reason)
     if feed is not None:
         print(feed.summary())
-    return 0
+    return recording_status(recorder)
+
+
+def recording_status(recorder: Any) -> int:
+    """0, or — a recording ended by a full disk — :data:`EXIT_DISK_FULL` after saying why on
+    stderr (what was recorded is kept; the message says where)."""
+    from redrive.cli.main import EXIT_DISK_FULL
+
+    if recorder.failure is None:
+        return 0
+    print(f"redrive: error: {recorder.failure}", file=sys.stderr)
+    return EXIT_DISK_FULL
 
 
 def _summary(recording: Any, recorder: Any, *, wall_s: float, reason: str) -> None:

@@ -4,15 +4,20 @@
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import logging
 import sys
 from collections.abc import Sequence
 
 from redrive import __version__
-from redrive.errors import RedriveError
+from redrive.errors import DiskFullError, RedriveError
 
-__all__ = ["main"]
+__all__ = ["EXIT_DISK_FULL", "main"]
+
+#: the exit status of a command that ran out of disk space (docs/exit_status.md)
+EXIT_DISK_FULL = 6
+_NO_SPACE = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
 
 #: subcommand modules under redrive.cli, in --help order; each has register(subparsers).
 _COMMANDS = (
@@ -94,6 +99,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     try:
         status: int = args.func(args)
+    except DiskFullError as err:
+        print(f"redrive: error: {err}", file=sys.stderr)
+        return EXIT_DISK_FULL
     except RedriveError as err:
         if args.verbose:
             logging.getLogger("redrive").debug("the error, with its traceback", exc_info=True)
@@ -102,14 +110,29 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("redrive: interrupted", file=sys.stderr)
         return 130
-    except Exception as err:  # a bug, or an error nothing translated: no traceback without -v
-        if args.verbose:
-            raise
+    except OSError as err:
+        if err.errno not in _NO_SPACE or args.verbose:
+            return _internal_error(args, err)
+        where = f" writing {err.filename}" if err.filename else ""
         print(
-            f"redrive: internal error: {type(err).__name__}: {err}\n"
-            f"  (in `redrive {args.command}`; run it again with -v for the traceback and "
-            "report it with that output)",
+            f"redrive: error: no space left{where} ({err.strerror}) in `redrive "
+            f"{args.command}`: files it finished before are intact; free some space and run it "
+            "again",
             file=sys.stderr,
         )
-        return 1
+        return EXIT_DISK_FULL
+    except Exception as err:  # a bug, or an error nothing translated: no traceback without -v
+        return _internal_error(args, err)
     return status
+
+
+def _internal_error(args: argparse.Namespace, err: Exception) -> int:
+    if args.verbose:
+        raise err
+    print(
+        f"redrive: internal error: {type(err).__name__}: {err}\n"
+        f"  (in `redrive {args.command}`; run it again with -v for the traceback and "
+        "report it with that output)",
+        file=sys.stderr,
+    )
+    return 1

@@ -34,6 +34,7 @@ Use (``fd`` from ``os.open``; the caller fsyncs and closes it)::
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import queue
 import struct
@@ -63,6 +64,7 @@ from redrive.io.mcap_scan import MAGIC
 
 __all__ = [
     "MAGIC",
+    "NO_SPACE",
     "EncodedChunk",
     "McapStream",
     "StreamCompression",
@@ -83,6 +85,8 @@ _IOV_MAX = 512  # os.writev takes at most IOV_MAX (1024 on Linux) pieces at once
 #: live recordings: the compression thread's niceness (above the receiving threads' 0, so on a
 #: busy machine compression yields and more chunks are written uncompressed, no message lost)
 _COMPRESS_NICE = 10
+#: ``errno`` values that mean a file cannot grow: a full disk, a full quota, a file-size limit
+NO_SPACE = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG})
 
 
 @dataclass(slots=True)
@@ -316,10 +320,11 @@ class McapStream:
         self._channels: dict[int, Channel] = {}
         self._chunk_indexes: list[ChunkIndex] = []
         self._metadata_indexes: list[MetadataIndex] = []
-        self._counts: dict[int, int] = {}
-        self._messages = 0
-        self._start_ns = 0
-        self._end_ns = 0
+        #: what the file holds (the chunks written whole): messages, per channel, first and last
+        #: log time — a file cut short by a full disk is closed with these (:meth:`salvage`)
+        self.written_messages = 0
+        self._written_counts: dict[int, int] = {}
+        self._written_span: tuple[int, int] | None = None
         self._failed: BaseException | None = None
         self._jobs: queue.Queue[_ChunkJob | None] | None = None
         self._thread: threading.Thread | None = None
@@ -354,7 +359,6 @@ class McapStream:
             metadata=dict(metadata),
         )
         self._channels[channel.id] = channel
-        self._counts[channel.id] = 0
         self._append_record(channel)
         return channel.id
 
@@ -395,13 +399,6 @@ class McapStream:
             chunk.end_ns = max(chunk.end_ns, log_time)
         chunk.messages += 1
         chunk.index.setdefault(channel_id, []).extend((log_time, self._used))
-        if self._messages == 0:
-            self._start_ns = self._end_ns = log_time
-        else:
-            self._start_ns = min(self._start_ns, log_time)
-            self._end_ns = max(self._end_ns, log_time)
-        self._messages += 1
-        self._counts[channel_id] += 1
         self._reserve(_MESSAGE.size)
         _MESSAGE.pack_into(
             self._buffer,
@@ -470,9 +467,25 @@ class McapStream:
         """Chunk record + its message indexes at :attr:`position` (one ``writev``)."""
         chunk = encode_chunk(records, start_ns, end_ns, index, compressed)
         with self._lock:  # the compression thread and the caller may both write chunks
+            if self._failed is not None:  # nothing after a failed write: it may be cut in two
+                raise self._failed
             chunk_start = self.position
-            self.position += write_all(self._fd, chunk.pieces)
+            try:
+                self.position += write_all(self._fd, chunk.pieces)
+            except BaseException as err:
+                self._failed = err
+                raise
             self._chunk_indexes.append(chunk.index_at(chunk_start))
+            counts = self._written_counts
+            for channel_id, entries in index.items():
+                counts[channel_id] = counts.get(channel_id, 0) + len(entries) // 2
+                self.written_messages += len(entries) // 2
+            span = self._written_span
+            self._written_span = (
+                (start_ns, end_ns)
+                if span is None
+                else (min(span[0], start_ns), max(span[1], end_ns))
+            )
 
     # -- the compression thread ----------------------------------------------------------------
     def _submit(self, job: _ChunkJob | None) -> None:
@@ -533,8 +546,14 @@ class McapStream:
             self._jobs.join()  # the thread wrote every chunk queued before it
             self._raise_failure()
         with self._lock:
+            if self._failed is not None:
+                raise self._failed
             start = self.position
-            self.position += write_all(self._fd, [record])
+            try:
+                self.position += write_all(self._fd, [record])
+            except BaseException as err:
+                self._failed = err
+                raise
         return start
 
     def _drain(self) -> None:
@@ -553,27 +572,62 @@ class McapStream:
         and syncs ``fd``)."""
         self.end_chunk()
         self._drain()
-        self.position += write_all(self._fd, [record_bytes(DataEnd(data_section_crc=0))])
+        self._put(self._tail(self.position))
+
+    def _tail(self, start: int) -> bytes:
+        """The data end, summary and footer of a file whose data section ends at ``start``: the
+        schemas, channels and chunks written so far and the statistics of their messages."""
+        data_end = record_bytes(DataEnd(data_section_crc=0))
+        first, last = self._written_span or (0, 0)
         statistics = Statistics(
-            message_count=self._messages,
+            message_count=self.written_messages,
             schema_count=len(self._schemas),
             channel_count=len(self._channels),
             attachment_count=0,
             metadata_count=len(self._metadata_indexes),
             chunk_count=len(self._chunk_indexes),
-            message_start_time=self._start_ns,
-            message_end_time=self._end_ns,
-            channel_message_counts=dict(self._counts),
+            message_start_time=first,
+            message_end_time=last,
+            channel_message_counts={c: self._written_counts.get(c, 0) for c in self._channels},
         )
-        tail = summary_section(
-            self.position,
+        return data_end + summary_section(
+            start + len(data_end),
             schemas=list(self._schemas.values()),
             channels=list(self._channels.values()),
             statistics=statistics,
             chunk_indexes=self._chunk_indexes,
             metadata_indexes=self._metadata_indexes,
         )
-        self.position += write_all(self._fd, [tail])
+
+    @property
+    def failed_for_space(self) -> bool:
+        """Whether a write failed because the file cannot grow (:data:`NO_SPACE`)."""
+        failed = self._failed
+        return isinstance(failed, OSError) and failed.errno in NO_SPACE
+
+    def salvage(self) -> bool:
+        """After a write failed (a full disk): drop what did not reach the file whole — the
+        record being written, the open chunk, the chunks queued for compression — cut the file
+        back to its last whole record, and close it with the summary of the chunks it holds
+        when there is room for that. Returns whether the summary was written; without it the
+        file reads as one cut off after its last chunk (``redrive info`` and ``run`` read it,
+        ``redrive repair`` indexes it). The caller syncs and closes ``fd``."""
+        self.abandon()
+        with self._lock:
+            end = self.position
+            self._failed = None
+        os.ftruncate(self._fd, end)
+        os.lseek(self._fd, end, os.SEEK_SET)
+        tail = self._tail(end)
+        try:
+            write_all(self._fd, [tail])
+            os.fsync(self._fd)
+        except OSError:
+            with contextlib.suppress(OSError):
+                os.ftruncate(self._fd, end)
+            return False
+        self.position = end + len(tail)
+        return True
 
     def abandon(self) -> None:
         """Stop the compression thread without writing what it still holds (an aborted file)."""

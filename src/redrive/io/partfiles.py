@@ -1,7 +1,8 @@
 """The temporary ``.part`` files a log is written to before it is moved into place.
 
 A writer creates ``.<name>.<pid>-<random>.part`` beside its target and renames it when it finishes;
-an error removes it. A writer killed outright (SIGKILL, power loss) cannot: its part stays. The
+an error removes it — except a full disk, after which what reached the part is kept
+(:func:`keep_part`). A writer killed outright (SIGKILL, power loss) cannot: its part stays. The
 pid in the name tells a part whose writer is gone (an *orphan*, worth recovering with ``redrive
 repair PART -o FIXED.mcap``) from one another process is still writing.
 
@@ -17,7 +18,7 @@ import re
 import tempfile
 from pathlib import Path
 
-__all__ = ["create_part", "orphaned_parts", "part_target"]
+__all__ = ["create_part", "keep_part", "orphaned_parts", "part_target"]
 
 _PART = re.compile(r"^\.(?P<name>.+)\.(?:(?P<pid>\d+)-)?[^.]+\.part$")
 
@@ -33,6 +34,27 @@ def create_part(path: Path) -> tuple[int, Path]:
     )
     os.chmod(tmp, 0o644)  # mkstemp makes it 0600; a recording is a normal file
     return fd, Path(tmp)
+
+
+def keep_part(part: Path, target: Path) -> Path:
+    """Put an unfinished part that holds data someone needs (a recording cut short by a full
+    disk) in view, never over an existing file: at ``target`` when nothing is there, else at
+    ``NAME.incomplete.mcap`` (``NAME.incomplete-2.mcap`` …).  Returns where it is (the part
+    itself when no name could be made, e.g. a folder too full for one more entry)."""
+    names = [target, target.with_name(f"{target.stem}.incomplete{target.suffix}")]
+    names += [
+        target.with_name(f"{target.stem}.incomplete-{i}{target.suffix}") for i in range(2, 100)
+    ]
+    for name in names:
+        try:
+            os.link(part, name)  # never replaces a file, unlike a rename
+        except FileExistsError:
+            continue
+        except OSError:
+            return part
+        part.unlink()
+        return name
+    return part
 
 
 def part_target(part: Path) -> str | None:

@@ -8,7 +8,10 @@ play`` replays it latched; every other topic reliable and volatile.
 
 Writes are atomic: everything goes to a hidden temporary file in the target directory, which is
 renamed over ``path`` only when the writer closes normally; an exception inside the ``with``
-block (or :meth:`McapWriter.abort`) removes it, so no half-written file is ever left.
+block (or :meth:`McapWriter.abort`) removes it, so no half-written file is ever left — except
+when the disk is full: then every chunk that reached the file is kept, closed with its index
+when there is room, at ``path`` (or beside it, never over an existing file), and
+:class:`~redrive.errors.DiskFullError` says where (:mod:`redrive.io.mcap_part`).
 
 Writes survive a crash: each chunk is written to the file (and the file flushed) as soon as it
 is complete — at ``chunk_size_bytes`` of messages, or once it spans ``chunk_span_s`` of log
@@ -23,8 +26,8 @@ last, which ``redrive info`` / ``run`` read and ``redrive repair`` turns into a 
 from __future__ import annotations
 
 import logging
-import os
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from pathlib import Path
 from types import MappingProxyType, TracebackType
 from typing import Literal, Self
@@ -34,8 +37,7 @@ from rosbags.typesys.store import Typestore
 
 from redrive.errors import LogError, UnsupportedMessageError
 from redrive.io.decoders.base import Decoded
-from redrive.io.mcap_stream import McapStream
-from redrive.io.partfiles import create_part
+from redrive.io.mcap_part import McapPart, is_no_space
 from redrive.io.qos import offered_qos_profiles
 from redrive.io.ros_encode import encode_value
 from redrive.io.typestore import typestore_for
@@ -89,20 +91,15 @@ class McapWriter:
         self.path = Path(path)
         self.typestore = typestore if typestore is not None else typestore_for(2)[0]
         self.message_count = 0
-        try:
-            fd, self._tmp_path = create_part(self.path)
-        except OSError as err:
-            msg = f"{self.path}: cannot create a file in {self.path.parent} ({err.strerror}); check the directory exists and is writable"
-            raise LogError(msg) from err
-        self._fd: int | None = fd
-        self._writer = McapStream(
-            fd,
+        self._part = McapPart(
+            self.path,
+            profile="ros2",
             compression=compression,
             chunk_size_bytes=chunk_size_bytes,
             live=live,
             zstd_level=zstd_level,
         )
-        self._writer.start(profile="ros2", library="redrive")
+        self._writer = self._part.stream
         self._chunk_span_ns = round(chunk_span_s * 1e9)
         self._chunk_first_ns: int | None = None  # log time of the open chunk's first message
         self._finished = 0  # chunks finished so far
@@ -182,15 +179,27 @@ class McapWriter:
         return int(self._writer.size_estimate)
 
     def _check_open(self) -> None:
-        if self._fd is None:
+        if not self._part.is_open:
             msg = f"{self.path}: the writer is closed"
             raise LogError(msg)
+
+    @contextmanager
+    def _space(self) -> Iterator[None]:
+        """Writes to the file: a full disk ends the file with what reached it, kept
+        (:meth:`McapPart.out_of_space`), and raises :class:`~redrive.errors.DiskFullError`."""
+        try:
+            yield
+        except OSError as err:
+            if is_no_space(err) and self._part.is_open:
+                raise self._part.out_of_space(err) from err
+            raise
 
     def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
         """A named metadata record of string pairs (MCAP ``Metadata``): facts about the whole log
         that are no message stream, e.g. the road map of a synthetic scenario."""
         self._check_open()
-        self._writer.add_metadata(name=name, data=dict(data))
+        with self._space():
+            self._writer.add_metadata(name=name, data=dict(data))
 
     def write_raw(
         self,
@@ -209,15 +218,20 @@ class McapWriter:
         channel_id = self._channel_id(topic, msgtype)
         sequence = self._sequences[channel_id]
         self._sequences[channel_id] = sequence + 1
-        self._writer.add_message(  # written or copied before it returns
-            channel_id,
-            log_time=int(log_time_ns),
-            publish_time=int(log_time_ns if publish_time_ns is None else publish_time_ns),
-            sequence=sequence,
-            data=cdr_bytes,
-        )
-        self.message_count += 1
-        self._keep_chunks_on_disk(int(log_time_ns))
+        try:
+            self._writer.add_message(  # written or copied before it returns
+                channel_id,
+                log_time=int(log_time_ns),
+                publish_time=int(log_time_ns if publish_time_ns is None else publish_time_ns),
+                sequence=sequence,
+                data=cdr_bytes,
+            )
+            self.message_count += 1
+            self._keep_chunks_on_disk(int(log_time_ns))
+        except OSError as err:  # not `with self._space()`: this is the per-message path
+            if is_no_space(err) and self._part.is_open:
+                raise self._part.out_of_space(err) from err
+            raise
 
     def _keep_chunks_on_disk(self, log_time_ns: int) -> None:
         """Close a chunk that spans ``chunk_span_s`` (each finished chunk goes to the file at
@@ -309,33 +323,19 @@ class McapWriter:
     # -- finishing -----------------------------------------------------------------------------
 
     def close(self) -> None:
-        """Finish the file (summary, indexes) and move it into place.  Idempotent."""
-        if self._fd is None:
+        """Finish the file (summary, indexes) and move it into place.  Idempotent.
+
+        Raises:
+            DiskFullError: the disk filled (what was written is kept; the error says where).
+        """
+        if not self._part.is_open:
             return
-        fd, self._fd = self._fd, None
-        closed = False
-        try:
-            self._writer.finish()
-            os.fsync(fd)
-            closed = True
-            os.close(fd)
-            os.replace(self._tmp_path, self.path)
-        except BaseException:
-            self._writer.abandon()
-            if not closed:
-                os.close(fd)
-            self._tmp_path.unlink(missing_ok=True)
-            raise
+        self._part.close()
         logger.debug("%s: %d messages written", self.path, self.message_count)
 
     def abort(self) -> None:
         """Drop the file being written (nothing appears at ``path``).  Idempotent."""
-        if self._fd is None:
-            return
-        fd, self._fd = self._fd, None
-        self._writer.abandon()
-        os.close(fd)
-        self._tmp_path.unlink(missing_ok=True)
+        self._part.abort()
 
     def __enter__(self) -> Self:
         return self
@@ -353,5 +353,6 @@ class McapWriter:
 
     def __del__(self) -> None:
         # A writer dropped without close() leaves no temporary file behind.
-        if getattr(self, "_fd", None) is not None:
-            self.abort()
+        part = getattr(self, "_part", None)
+        if part is not None:
+            part.abort()

@@ -8,16 +8,13 @@ channels of the topics it has messages of. Together they hold exactly what one u
 
 from __future__ import annotations
 
-import contextlib
 import logging
-import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from redrive.errors import LogError
-from redrive.io.mcap_stream import McapStream
-from redrive.io.partfiles import create_part
+from redrive.errors import DiskFullError, LogError
+from redrive.io.mcap_part import McapPart, is_no_space
 from redrive.io.writer import COMPRESSION as _COMPRESSION
 from redrive.io.writer import Compression, McapWriter
 
@@ -97,6 +94,12 @@ class _SplitParts:
         self.finished.append(path)
         self._chunks_done = self._chunks_with(chunks)
 
+    def _cut_short(self, err: DiskFullError, chunks: tuple[int, int]) -> DiskFullError:
+        """The current file ended by a full disk: what it holds is kept where ``err`` says."""
+        if err.kept is not None and Path(err.kept) not in self.finished:
+            self._part_finished(Path(err.kept), chunks)
+        return err
+
 
 class SplitMcapWriter(_SplitParts):
     """Write ROS 1 messages to ``path`` — or, when a split limit is given, to numbered files.
@@ -127,34 +130,32 @@ class SplitMcapWriter(_SplitParts):
         )
         #: bytes of the finished files
         self.finished_bytes = 0
-        self._fd: int | None = None
+        self._part: McapPart | None = None
         self._open()
 
     @property
     def bytes_written(self) -> int:
         """Bytes on disk so far, every file (the current one up to its last written chunk)."""
-        current = self._writer.size_estimate if self._fd is not None else 0
+        current = self._part.stream.size_estimate if self._part is not None else 0
         return self.finished_bytes + current
 
     @property
     def chunks(self) -> tuple[int, int]:
         """Chunks written so far, every file: (all, those written uncompressed because the
         compressor was behind — see :class:`~redrive.io.mcap_stream.McapStream`)."""
-        current = (self._writer.chunks, self._writer.uncompressed_chunks)
-        return self._chunks_with(current if self._fd is not None else None)
+        part = self._part
+        current = None if part is None else (part.stream.chunks, part.stream.uncompressed_chunks)
+        return self._chunks_with(current)
 
     def _open(self) -> None:
-        target = self._target()
-        try:
-            fd, self._tmp = create_part(target)
-        except OSError as err:
-            msg = f"{target}: cannot create a file in {target.parent} ({err.strerror}); check the folder exists and is writable"
-            raise LogError(msg) from err
-        self._fd = fd
-        self._writer = McapStream(
-            fd, chunk_size_bytes=self._chunk_size(), compression=self.compression, live=True
+        self._part = McapPart(
+            self._target(),
+            profile="ros1",
+            compression=self.compression,
+            chunk_size_bytes=self._chunk_size(),
+            live=True,
         )
-        self._writer.start(profile="ros1", library="redrive")
+        self._writer = self._part.stream
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         self._sequence: dict[str, int] = {}
@@ -170,10 +171,37 @@ class SplitMcapWriter(_SplitParts):
         data: bytes | memoryview,
     ) -> None:
         """Add one message (its bytes as published) to the current file, splitting first when the
-        current file is full. ``data`` is copied before this returns (a view may be released)."""
-        if self._fd is None:
+        current file is full. ``data`` is copied before this returns (a view may be released).
+
+        Raises:
+            DiskFullError: the disk is full: the current file ends with what reached it (kept,
+                in :attr:`finished`), and the recording is closed.
+        """
+        if self._part is None:
             msg = f"{self.path}: the recording is closed"
             raise LogError(msg)
+        try:
+            self._write(topic, schema, log_ns=log_ns, publish_ns=publish_ns, data=data)
+        except OSError as err:
+            part, self._part = self._part, None
+            if part is None or not is_no_space(err):
+                raise
+            stream = part.stream
+            full = part.out_of_space(err)
+            raise self._cut_short(full, (stream.chunks, stream.uncompressed_chunks)) from err
+        except DiskFullError as err:  # a split's next file found no space
+            self._part = None
+            raise self._cut_short(err, (0, 0)) from err
+
+    def _write(
+        self,
+        topic: str,
+        schema: Ros1Schema,
+        *,
+        log_ns: int,
+        publish_ns: int,
+        data: bytes | memoryview,
+    ) -> None:
         if self.split and self._channels and self._full(self._writer.size_estimate):
             self._finish_current()
             self._index += 1
@@ -200,41 +228,32 @@ class SplitMcapWriter(_SplitParts):
         )
 
     def _finish_current(self) -> None:
-        fd, self._fd = self._fd, None
-        assert fd is not None
-        closed = False
+        part, self._part = self._part, None
+        assert part is not None
+        stream = part.stream
         try:
-            self._writer.finish()
-            os.fsync(fd)
-            closed = True
-            os.close(fd)
-            target = self._target()
-            os.replace(self._tmp, target)
-        except BaseException:
-            self._writer.abandon()
-            if not closed:
-                with contextlib.suppress(OSError):
-                    os.close(fd)
-            self._tmp.unlink(missing_ok=True)
-            raise
-        self._part_finished(target, (self._writer.chunks, self._writer.uncompressed_chunks))
+            target = part.close()
+        except DiskFullError as err:
+            raise self._cut_short(err, (stream.chunks, stream.uncompressed_chunks)) from err
+        self._part_finished(target, (stream.chunks, stream.uncompressed_chunks))
         self.finished_bytes += target.stat().st_size
         logger.debug("recorded %s", target)
 
     def close(self) -> list[Path]:
-        """Finish the current file; returns every file written, in order."""
-        if self._fd is not None:
+        """Finish the current file; returns every file written, in order.
+
+        Raises:
+            DiskFullError: the disk filled while finishing it (it is kept, in the list).
+        """
+        if self._part is not None:
             self._finish_current()
         return list(self.finished)
 
     def abort(self) -> None:
         """Drop the file being written (files already finished stay)."""
-        fd, self._fd = self._fd, None
-        if fd is not None:
-            self._writer.abandon()
-            with contextlib.suppress(OSError):
-                os.close(fd)
-            self._tmp.unlink(missing_ok=True)
+        part, self._part = self._part, None
+        if part is not None:
+            part.abort()
 
 
 class SplitNativeWriter(_SplitParts):
@@ -301,11 +320,22 @@ class SplitNativeWriter(_SplitParts):
             assert self._current is not None
         return self._current
 
+    def _no_space(self, err: DiskFullError) -> DiskFullError:
+        current, self._current = self._current, None
+        return self._cut_short(err, (0, 0) if current is None else current.chunks)
+
     def write_raw(
         self, topic: str, msgtype: str, log_time_ns: int, cdr_bytes: bytes | memoryview
     ) -> None:
-        """One ROS 2 CDR message, as :meth:`McapWriter.write_raw <redrive.io.writer.McapWriter.write_raw>`."""
-        self._writer().write_raw(topic, msgtype, log_time_ns, cdr_bytes)
+        """One ROS 2 CDR message, as :meth:`McapWriter.write_raw <redrive.io.writer.McapWriter.write_raw>`.
+
+        Raises:
+            DiskFullError: as :meth:`SplitMcapWriter.write`.
+        """
+        try:
+            self._writer().write_raw(topic, msgtype, log_time_ns, cdr_bytes)
+        except DiskFullError as err:
+            raise self._no_space(err) from err
 
     def write(
         self,
@@ -317,7 +347,10 @@ class SplitNativeWriter(_SplitParts):
         stamp_ns: int | None = None,
     ) -> None:
         """A data-model value, as :meth:`McapWriter.write <redrive.io.writer.McapWriter.write>`."""
-        self._writer().write(topic, log_time_ns, value, frame_id=frame_id, stamp_ns=stamp_ns)
+        try:
+            self._writer().write(topic, log_time_ns, value, frame_id=frame_id, stamp_ns=stamp_ns)
+        except DiskFullError as err:
+            raise self._no_space(err) from err
 
     def close(self) -> list[Path]:
         """Finish the current file; returns every file written, in order."""
@@ -326,9 +359,13 @@ class SplitNativeWriter(_SplitParts):
         return list(self.finished)
 
     def _finish_current(self) -> None:
-        current, self._current = self._current, None
+        current = self._current
         assert current is not None
-        current.close()
+        try:
+            current.close()
+        except DiskFullError as err:
+            raise self._no_space(err) from err
+        self._current = None
         self._part_finished(current.path, current.chunks)
 
     def abort(self) -> None:

@@ -15,9 +15,12 @@ it has not recorded) in its own thread, so the algorithm pipeline never waits fo
   the QoS their publishers offer as ``offered_qos_profiles``; ROS 1 messages are decoded and
   re-encoded as their standard type. It may be split too, each file declaring every channel.
 
-The file appears atomically when the logger stops (temporary ``.part`` file + rename); an error
-removes the part; a process killed outright leaves it, and the next recording in that folder
-names it (:func:`redrive.io.partfiles.orphaned_parts`).
+The file appears atomically when the logger stops (temporary ``.part`` file + rename). What was
+recorded is never dropped: an error in the session keeps it (:meth:`DataLogger.abort` drops only
+a recording that holds no message), and a full disk ends the recording with every chunk that
+reached the file, closed with its index when there is room (:attr:`DataLogger.failure` says so;
+the session's ``on_failure`` ends it). A process killed outright leaves the part, and the next
+recording in that folder names it (:func:`redrive.io.partfiles.orphaned_parts`).
 """
 
 from __future__ import annotations
@@ -28,7 +31,7 @@ import threading
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from redrive.errors import LogError, TransportError, UnsupportedMessageError
+from redrive.errors import DiskFullError, LogError, TransportError, UnsupportedMessageError
 from redrive.io.base import LogMessage
 from redrive.io.decoders import decode
 from redrive.io.typestore import typestore_for
@@ -62,6 +65,8 @@ class DataLogger:
             record`` writes by default: the cheapest in CPU).
         native: write redrive's native format (ROS 2 CDR) even when ``specs`` is empty — a ROS 2
             recording whose topics all join later through :meth:`add`.
+        on_failure: called (from the recorder's thread) when the recording had to end — the
+            disk is full: the session should end too, since its lossless sources now wait.
 
     Raises:
         ProducerGoneError: a stream has no writer within ``attach_timeout_s``.
@@ -80,8 +85,14 @@ class DataLogger:
         max_size_bytes: int | None = None,
         compression: Compression = "zstd",
         native: bool = False,
+        on_failure: Callable[[], None] | None = None,
     ) -> None:
         self.path = Path(path)
+        #: why the recording ended before :meth:`stop` (a full disk), else None
+        self.failure: str | None = None
+        #: set with :attr:`failure`
+        self.failed = threading.Event()
+        self._on_failure = on_failure
         self.specs = list(specs)
         self.recorded: dict[str, int] = {s.topic: 0 for s in specs}
         #: bytes of message data recorded per topic
@@ -205,6 +216,12 @@ class DataLogger:
                                 break
                             idle = False
                             self._write(topic, msg)
+                except DiskFullError as err:
+                    self._fail(str(err))
+                    return
+                except OSError as err:  # the disk itself failed: end with the reason
+                    self._fail(f"{self.path}: cannot write: {err}")
+                    return
                 except ProducerGoneError:
                     gone.add(topic)
                 except (TransportError, LogError, UnsupportedMessageError) as err:
@@ -218,6 +235,15 @@ class DataLogger:
                 self.full.set()
             if stopping and idle:
                 return
+
+    def _fail(self, reason: str) -> None:
+        """The recording cannot go on: say why, and end the session (its sources wait)."""
+        if self.failure is None:
+            self.failure = reason
+            logger.info("recording stopped: %s", reason)
+        self.failed.set()
+        if self._on_failure is not None:
+            self._on_failure()
 
     def _schema(self, topic: str, msg_type: str, md5sum: str) -> Ros1Schema:
         schema = self._schemas.get(topic)
@@ -284,19 +310,46 @@ class DataLogger:
     # -- stopping ----------------------------------------------------------------------------
     def stop(self, *, timeout_s: float = 30.0) -> Path:
         """Record what the streams still hold, close the file; returns its path (the first of
-        split files: :attr:`files` has them all)."""
+        split files: :attr:`files` has them all). A full disk while closing it keeps what was
+        written (:attr:`failure` says so) rather than raising."""
         self._stop.set()
         self._thread.join(timeout=timeout_s)
         self._close_readers()
-        if self._native is not None:
-            self.files = self._native.close()
-        else:
-            assert self._files is not None
-            self.files = self._files.close()
+        writer: SplitNativeWriter | SplitMcapWriter | None = self._native or self._files
+        assert writer is not None
+        try:
+            self.files = writer.close()
+        except DiskFullError as err:
+            self._fail(str(err))
+            self.files = list(writer.finished)
+        if self.failure is not None:
+            self._count_files()
         return self.files[0] if self.files else self.path
 
+    def _count_files(self) -> None:
+        """After a failure: what the files hold, read back from them (the counts of messages
+        received include those the disk had no room for), and a check that they read."""
+        from redrive.io import open_log
+
+        recorded = dict.fromkeys(self.recorded, 0)
+        sizes = dict.fromkeys(self.recorded, 0)
+        for path in self.files:
+            try:
+                with open_log(path) as log:
+                    for topic, info in log.topics.items():
+                        recorded[topic] = recorded.get(topic, 0) + info.count
+                        sizes[topic] = sizes.get(topic, 0) + max(info.size_bytes, 0)
+            except LogError as err:
+                self.errors.append(f"{path}: does not read back: {err}")
+        self.recorded, self.recorded_bytes = recorded, sizes
+
     def abort(self) -> None:
-        """Stop without keeping the file being written (split files finished before stay)."""
+        """Stop after an error. What was recorded is kept (a recording is the only copy of what
+        its sources sent, :meth:`stop`); a file that holds no message yet is dropped (split
+        files finished before stay)."""
+        if any(self.recorded.values()):
+            self.stop(timeout_s=5.0)
+            return
         self._stop.set()
         self._thread.join(timeout=5.0)
         self._close_readers()
