@@ -89,15 +89,11 @@ def _capacities(items: list[str] | None) -> dict[str, int]:
 def _run(args: argparse.Namespace) -> int:
     from rich.console import Console
 
-    from redrive.cli.live_foxglove import both, open_feed
+    from redrive.cli.live_foxglove import open_feed
     from redrive.cli.live_record import record_only, recording_status, warn_orphans
     from redrive.cli.run import pipeline_from_args, print_run_report
-    from redrive.engine import RealtimeMode, RunRequest, run_reader
     from redrive.live import default_master_uri
-    from redrive.live.dispatcher import LiveLog
-    from redrive.live.recorder import DataLogger
-    from redrive.live.session import LiveSession
-    from redrive.results import SourceLog
+    from redrive.live.run import LiveRequest, LiveSource, SourceKind, run_live
 
     master = args.master or default_master_uri()
     args.topics = [*(args.topic or ()), *(args.topics or ())] or None
@@ -119,142 +115,97 @@ def _run(args: argparse.Namespace) -> int:
                 "a pipeline session takes named topics and records them to one file"
             )
             return 2
-    pipeline = pipeline_from_args(args)
-    out = args.out or Path("runs") / f"live-{time.strftime('%Y%m%d-%H%M%S')}"
-    console = Console(stderr=True)
-    stop = threading.Event()
-    recorder = None
-    log = None
-    publisher = None
-    feed = None
-    if args.replay is not None or args.synthetic is not None:
-        kind = "replay" if args.replay is not None else "synthetic"
-        session_cm = LiveSession.source(
-            kind,
-            args.replay if args.replay is not None else args.synthetic,
-            rate=args.rate,
-            topics=args.topics,
-            duration_s=args.duration,
-            lossless=args.record is not None,
-        )
-        source_text = f"{kind} source {args.replay or args.synthetic}"
-    elif args.ros2:
-        from redrive.live.ros2 import ros2_session
-        from redrive.live.ros2_dds import default_domain_id
-
-        if not args.topics:
-            print("redrive live --ros2: give --topics")
-            return 2
-        domain = default_domain_id() if args.domain is None else args.domain
-        session_cm = ros2_session(
-            args.topics,
-            domain_id=domain,
-            capacity=_capacities(args.capacity),
-            wait_for_topics_s=args.wait,
-        )
-        source_text = f"ROS 2 (DDS domain {domain})"
+    kind: SourceKind
+    if args.replay is not None:
+        kind = "replay"
+    elif args.synthetic is not None:
+        kind = "synthetic"
     else:
+        kind = "ros2" if args.ros2 else "ros1"
         if not args.topics:
-            print("redrive live: give --topics (ROS 1), --replay LOG or --synthetic SCENARIO")
+            hint = (
+                "--topics"
+                if args.ros2
+                else "--topics (ROS 1), --replay LOG or --synthetic SCENARIO"
+            )
+            print(f"redrive live{' --ros2' if args.ros2 else ''}: give {hint}")
             return 2
-        session_cm = LiveSession.ros1(
-            args.topics,
-            master_uri=master,
-            capacity=args.capacities,
-            wait_for_topics_s=args.wait,
-        )
-        source_text = master
+    source = LiveSource(
+        kind=kind,
+        topics=tuple(args.topics or ()),
+        target=args.replay if args.replay is not None else args.synthetic,
+        master_uri=master,
+        domain_id=args.domain,
+        rate=args.rate,
+        duration_s=args.duration,
+        capacities=args.capacities,
+        wait_s=args.wait,
+    )
+    pipeline = pipeline_from_args(args)
+    request = LiveRequest(
+        source=source,
+        pipeline=pipeline,
+        out=args.out or Path("runs") / f"live-{time.strftime('%Y%m%d-%H%M%S')}",
+        frames=args.frames,
+        duration_s=args.duration,
+        record=args.record,
+        compression=args.compression,
+        sensor_map=args.sensor_map,
+        publish_ros2=not args.no_publish,
+    )
+    console = Console(stderr=True)
     if args.record is not None:
         warn_orphans(args.record, console)
-    with session_cm as session:
+    stop = threading.Event()
+    previous: list[Any] = []
+
+    def receiving(session: Any) -> None:
         # Ctrl-C ends the frames from here on; restored however the session ends (a refused
         # start before this point leaves the caller's handler untouched)
-        previous = signal.signal(signal.SIGINT, lambda *_: stop.set())
-        try:
-            if args.record is not None:
-                recorder = DataLogger(
-                    session.specs,
-                    args.record,
-                    definitions=session.definition if session.scrapers else None,
-                    compression=args.compression,
-                    on_failure=stop.set,
-                )
-            log = LiveLog(session.specs, session.name, stop=stop)
-            feed = open_feed(args, session.name, session.specs, pipeline=pipeline)
-            if args.duration is not None:
-                timer = threading.Timer(args.duration, stop.set)
-                timer.daemon = True
-                timer.start()
-            console.print(
-                f"live: session {session.name}, {len(session.specs)} topic(s) from {source_text}; "
-                "receiving (Ctrl-C stops)",
-                highlight=False,
-            )
-            hooks = RealtimeMode()
-            request = RunRequest(
-                log=log.path,
-                pipeline=pipeline,
-                out=out,
-                stop_frame=args.frames,
-                sensor_map=args.sensor_map,
-            )
-            info = SourceLog(
-                path=str(log.path),
-                format="live",
-                sha256=None,
-                source=source_text,
-                topics={s.topic: s.msgtype for s in session.specs},
-                record=None if args.record is None else str(args.record),
-            )
-            if args.ros2 and not args.no_publish:
-                from redrive.live.ros2 import ResultPublisher
+        previous.append(signal.signal(signal.SIGINT, lambda *_: stop.set()))
+        console.print(
+            f"live: session {session.name}, {len(session.specs)} topic(s) from "
+            f"{source.describe()}; receiving (Ctrl-C stops)",
+            highlight=False,
+        )
 
-                publisher = ResultPublisher(domain)
-            on_frame = both(publisher, None if feed is None else feed.on_frame)
-            report = run_reader(
-                request, log, hooks=hooks, log_info=info, lookahead_ns=0, on_frame=on_frame
-            )
-        except BaseException:
-            if recorder is not None:
-                recorder.abort()  # what was recorded stays; an empty part does not
-            raise
-        finally:
-            stop.set()
-            signal.signal(signal.SIGINT, previous)
-            if log is not None:
-                log.close()
-            if publisher is not None:
-                publisher.close()
-            if feed is not None:
-                feed.close()
-    recorded = recorder.stop() if recorder is not None else None
-    print_run_report(report, out, live=True)
-    console = Console(width=None if sys.stdout.isatty() else 120)
-    console.print(
-        f"frames: {hooks.received_frames} assembled, {hooks.skipped_frames} skipped "
+    feeds: list[Any] = []
+
+    def feed(name: str, specs: Any) -> Any:
+        feeds.append(open_feed(args, name, specs, pipeline=pipeline))
+        return feeds[-1]
+
+    try:
+        report = run_live(request, stop=stop, on_receiving=receiving, feed=feed)
+    finally:
+        if previous:
+            signal.signal(signal.SIGINT, previous[0])
+    print_run_report(report.run, request.out, live=True)
+    out = Console(width=None if sys.stdout.isatty() else 120)
+    out.print(
+        f"frames: {report.received_frames} assembled, {report.skipped_frames} skipped "
         "(pipeline slower than the sensor)"
     )
-    assert log is not None
-    for topic in log.received:
+    for topic, count in report.received.items():
+        missed = report.dropped.get(topic, 0)
         used = (
-            f"{log.received[topic]} to the pipeline, {log.dropped[topic]} missed"
-            if log.received[topic] or log.dropped[topic]
+            f"{count} to the pipeline, {missed} missed"
+            if count or missed
             else "not used by the pipeline"
         )
-        kept = f", {recorder.recorded[topic]} recorded" if recorder else ""
-        console.print(f"  {topic}: {used}{kept}")
-    if publisher is not None:
-        for topic, count in sorted(publisher.published.items()):
-            console.print(f"  published {topic}: {count}")
-    if feed is not None:
-        console.print(feed.summary(), highlight=False)
-    if recorded is not None and recorder is not None:
-        for path in recorder.files or [recorded]:
-            console.print(f"recorded: {path}", highlight=False)
-        for err in recorder.errors[:5]:
-            console.print(f"[yellow]recording: {err}[/]")
-        return recording_status(recorder)
-    return 0
+        kept = f", {report.recorded.get(topic, 0)} recorded" if report.recorded is not None else ""
+        out.print(f"  {topic}: {used}{kept}")
+    for topic, count in sorted(report.published.items()):
+        out.print(f"  published {topic}: {count}")
+    if feeds and feeds[0] is not None:
+        out.print(feeds[0].summary(), highlight=False)
+    if report.recorded is None:
+        return 0
+    for path in report.files or (request.record,):
+        out.print(f"recorded: {path}", highlight=False)
+    for err in report.recording_errors[:5]:
+        out.print(f"[yellow]recording: {err}[/]")
+    return recording_status(report.failure)
 
 
 def register(sub: Any) -> None:

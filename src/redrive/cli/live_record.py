@@ -249,17 +249,17 @@ def record_only(args: argparse.Namespace, master: str) -> int:
     _summary(recording, recorder, wall_s=wall_s, reason=reason)
     if feed is not None:
         print(feed.summary())
-    return recording_status(recorder)
+    return recording_status(recorder.failure)
 
 
-def recording_status(recorder: Any) -> int:
-    """0, or — a recording ended by a full disk — :data:`EXIT_DISK_FULL` after saying why on
-    stderr (what was recorded is kept; the message says where)."""
+def recording_status(failure: str | None) -> int:
+    """0, or — a recording ended by a full disk (``failure``) — :data:`EXIT_DISK_FULL` after
+    saying why on stderr (what was recorded is kept; the message says where)."""
     from redrive.cli.main import EXIT_DISK_FULL
 
-    if recorder.failure is None:
+    if failure is None:
         return 0
-    print(f"redrive: error: {recorder.failure}", file=sys.stderr)
+    print(f"redrive: error: {failure}", file=sys.stderr)
     return EXIT_DISK_FULL
 
 
