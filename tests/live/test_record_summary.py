@@ -3,35 +3,36 @@
 from __future__ import annotations
 
 from pathlib import Path
-from types import SimpleNamespace
 
 import pytest
 
 from redrive.cli.live_record import _summary
+from redrive.live.record import RecordReport
 from redrive.live.recording import TopicStatus
 
 
-def _session(chunks: tuple[int, int]) -> tuple[SimpleNamespace, SimpleNamespace]:
+def _report(chunks: tuple[int, int]) -> RecordReport:
     status = TopicStatus(
         topic="/cloud", msg_type="sensor_msgs/PointCloud2", recorded=10, recorded_bytes=19_000_000,
         dropped=0, publishers=1,
     )  # fmt: skip
-    recording = SimpleNamespace(status=lambda: [status])
-    recorder = SimpleNamespace(files=[Path("rec.mcap")], errors=[], chunks=chunks)
-    return recording, recorder
+    return RecordReport(
+        topics=(status,), files=(Path("rec.mcap"),), wall_s=3.0, reason="Ctrl-C", chunks=chunks
+    )
 
 
 def test_the_summary_says_how_many_chunks_were_written_uncompressed(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
-    _summary(*_session((40, 31)), wall_s=3.0, reason="Ctrl-C")
+    _summary(_report((40, 31)))
     out = capsys.readouterr().out
     assert "31 of 40 chunks were written uncompressed" in out
     assert "recorded: rec.mcap" in out
+    assert "stopped: Ctrl-C" in out
 
 
 def test_nothing_is_said_when_every_chunk_was_compressed(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
-    _summary(*_session((40, 0)), wall_s=3.0, reason="Ctrl-C")
+    _summary(_report((40, 0)))
     assert "uncompressed" not in capsys.readouterr().out

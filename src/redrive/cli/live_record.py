@@ -117,11 +117,9 @@ def record_only(args: argparse.Namespace, master: str) -> int:
 
     from redrive.cli.live_foxglove import open_feed
     from redrive.errors import ConfigError
-    from redrive.live.recorder import DataLogger
-    from redrive.live.recording import Recording, TopicSelection
-    from redrive.live.ros1 import list_topics
-    from redrive.live.ros2 import Ros2Session
-    from redrive.live.session import LiveSession, wait_for_topics
+    from redrive.live.record import RecordRequest, record_live
+    from redrive.live.recording import TopicSelection
+    from redrive.live.run import LiveSource, SourceKind
 
     console = Console(stderr=True)
     if args.frames is not None:
@@ -136,141 +134,98 @@ def record_only(args: argparse.Namespace, master: str) -> int:
         regex=tuple(args.regex or ()),
         exclude=args.exclude,
     )
-    split_size = (
-        None if args.split_size is None else parse_size(args.split_size, option="--split-size")
-    )
-    max_size = None if args.max_size is None else parse_size(args.max_size, option="--max-size")
-    ros2 = bool(getattr(args, "ros2", False))
-    ros = args.replay is None and args.synthetic is None and not ros2
-    if (ros or ros2) and selection.empty:
-        print("redrive live: name topics, or give -a/--all or -e/--regex (or --replay/--synthetic)")
-        return 2
-    warn_orphans(args.record, console)
-    session: LiveSession
-    if ros2:
-        from redrive.live.ros2 import find_publications, ros2_session
-        from redrive.live.ros2_dds import default_domain_id
-
-        domain = default_domain_id() if args.domain is None else args.domain
-        publications = find_publications(
-            list(selection.topics), domain_id=domain, wait_for_topics_s=args.wait
-        )
-        # the scraper starts reading nothing; each topic is added once the recorder reads it
-        session = ros2_session(
-            [], domain_id=domain, capacity=args.capacities, discover_new=selection.grows
-        )
-        source_text = f"ROS 2 (DDS domain {domain})"
-    elif ros:
-        types = wait_for_topics(list(selection.topics), master_uri=master, wait_s=args.wait)
-        if selection.grows:
-            types.update(selection.chosen(list_topics(master)))
-        session = LiveSession.ros1([], master_uri=master, capacity=args.capacities)
-        source_text = master
+    kind: SourceKind
+    if args.replay is not None:
+        kind = "replay"
+    elif args.synthetic is not None:
+        kind = "synthetic"
     else:
-        kind = "replay" if args.replay is not None else "synthetic"
-        session = LiveSession.source(
-            kind,
-            args.replay if args.replay is not None else args.synthetic,
-            rate=args.rate,
-            topics=args.topics,
-            duration_s=args.duration,
-            lossless=True,
-        )
-        source_text = f"{kind} source {args.replay or args.synthetic}"
-    stop = threading.Event()
-    handlers = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
-    reason = "Ctrl-C"
-    feed = None
-    try:
-        with session:
-            recorder = DataLogger(
-                session.specs,
-                args.record,
-                definitions=session.definition if ros else None,
-                split_size_bytes=split_size,
-                split_duration_s=args.split_duration,
-                max_size_bytes=max_size,
-                compression=args.compression,
-                native=ros2,
-                on_failure=stop.set,
+        kind = "ros2" if getattr(args, "ros2", False) else "ros1"
+        if selection.empty:
+            print(
+                "redrive live: name topics, or give -a/--all or -e/--regex (or "
+                "--replay/--synthetic)"
             )
-            try:
-                if ros:  # each scraper subscribes once the recorder reads its stream
-                    session.add_ros1(types, on_stream=recorder.add)
-                elif isinstance(session, Ros2Session):  # the same: the scraper reads it then
-                    session.add_ros2(publications, on_stream=recorder.add)
-                feed = open_feed(args, session.name, session.specs)
-                recording = Recording(
-                    session,
-                    recorder,
-                    selection=selection,
-                    master_uri=master if ros else None,
-                    idle_timeout_s=args.idle_timeout,
-                    say=lambda text: console.print(
-                        f"[yellow]{text}[/]", highlight=False, soft_wrap=True
-                    ),
-                )
-                console.print(
-                    f"live: recording {len(session.specs)} topic(s) from {source_text} to "
-                    f"{args.record}; Ctrl-C stops",
-                    highlight=False,
-                )
-                deadline = None if args.duration is None else time.monotonic() + args.duration
-                status = _Status(recording, console)
-                try:
-                    while not stop.wait(0.25):
-                        if recorder.failed.is_set():
-                            break
-                        if deadline is not None and time.monotonic() >= deadline:
-                            reason = f"--duration {args.duration:g} s"
-                            break
-                        found = recording.step()
-                        if found is not None:
-                            reason = found
-                            break
-                        if feed is not None:
-                            feed.follow(session.specs)  # topics that appeared (-a/-e)
-                        status.update()
-                finally:
-                    status.close()
-            except BaseException:
-                recorder.abort()
-                raise
-            finally:
-                if feed is not None:
-                    feed.close()
-            wall_s = recording.wall_s
+            return 2
+    request = RecordRequest(
+        source=LiveSource(
+            kind=kind,
+            topics=tuple(args.topics or ()) if kind in ("replay", "synthetic") else (),
+            target=args.replay if args.replay is not None else args.synthetic,
+            master_uri=master,
+            domain_id=args.domain,
+            rate=args.rate,
+            duration_s=args.duration,
+            capacities=args.capacities,
+            wait_s=args.wait,
+        ),
+        path=args.record,
+        selection=selection,
+        duration_s=args.duration,
+        max_size_bytes=None
+        if args.max_size is None
+        else parse_size(args.max_size, option="--max-size"),
+        idle_timeout_s=args.idle_timeout,
+        split_size_bytes=None
+        if args.split_size is None
+        else parse_size(args.split_size, option="--split-size"),
+        split_duration_s=args.split_duration,
+        compression=args.compression,
+    )
+    warn_orphans(args.record, console)
+    stop = threading.Event()
+    handlers: dict[int, Any] = {}
+    status: list[_Status] = []
+    feeds: list[Any] = []
+
+    def on_session(session: Any) -> None:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            handlers[sig] = signal.signal(sig, lambda *_: stop.set())
+
+    def on_tick(recording: Any) -> None:
+        if not status:
+            console.print(
+                f"live: recording {len(recording.session.specs)} topic(s) from "
+                f"{request.source.describe()} to {args.record}; Ctrl-C stops",
+                highlight=False,
+            )
+            status.append(_Status(recording, console))
+        status[0].update()
+
+    def follower(name: str, specs: Any) -> Any:
+        feeds.append(open_feed(args, name, specs))
+        return feeds[-1]
+
+    try:
+        report = record_live(
+            request,
+            stop=stop,
+            on_session=on_session,
+            on_tick=on_tick,
+            follower=follower,
+            say=lambda text: console.print(f"[yellow]{text}[/]", highlight=False, soft_wrap=True),
+            stop_reason="Ctrl-C",
+        )
     finally:
+        if status:
+            status[0].close()
         for sig, previous in handlers.items():
             signal.signal(sig, previous)
-    recorder.stop()
-    if recorder.failure is not None:
-        reason = "the recording could not go on (below)"
-    _summary(recording, recorder, wall_s=wall_s, reason=reason)
-    if feed is not None:
-        print(feed.summary())
-    return recording_status(recorder.failure)
+    _summary(report)
+    if feeds and feeds[0] is not None:
+        print(feeds[0].summary())
+    return recording_status(report.failure)
 
 
-def recording_status(failure: str | None) -> int:
-    """0, or — a recording ended by a full disk (``failure``) — :data:`EXIT_DISK_FULL` after
-    saying why on stderr (what was recorded is kept; the message says where)."""
-    from redrive.cli.main import EXIT_DISK_FULL
-
-    if failure is None:
-        return 0
-    print(f"redrive: error: {failure}", file=sys.stderr)
-    return EXIT_DISK_FULL
-
-
-def _summary(recording: Any, recorder: Any, *, wall_s: float, reason: str) -> None:
+def _summary(report: Any) -> None:
     from rich.console import Console
     from rich.table import Table
 
     console = Console(width=None if sys.stdout.isatty() else 120)
-    rows = recording.status()
+    rows = report.topics
     table = Table(
-        title=f"recorded {wall_s:.1f} s of wall time; stopped: {reason}", title_justify="left"
+        title=f"recorded {report.wall_s:.1f} s of wall time; stopped: {report.reason}",
+        title_justify="left",
     )
     for col in ("topic", "type", "messages", "MB", "dropped"):
         table.add_column(col, justify="left" if col in ("topic", "type") else "right")
@@ -286,9 +241,9 @@ def _summary(recording: Any, recorder: Any, *, wall_s: float, reason: str) -> No
         str(sum(s.dropped for s in rows)),
     )
     console.print(table)
-    for path in recorder.files:
+    for path in report.files:
         console.print(f"recorded: {path}", highlight=False)
-    chunks, behind = recorder.chunks
+    chunks, behind = report.chunks
     if behind:
         console.print(
             f"[yellow]{behind} of {chunks} chunks were written uncompressed: the compressor "
@@ -296,5 +251,16 @@ def _summary(recording: Any, recorder: Any, *, wall_s: float, reason: str) -> No
             "less CPU, none the least[/]",
             highlight=False,
         )
-    for err in recorder.errors[:5]:
+    for err in report.errors[:5]:
         console.print(f"[yellow]recording: {err}[/]", highlight=False)
+
+
+def recording_status(failure: str | None) -> int:
+    """0, or — a recording ended by a full disk (``failure``) — :data:`EXIT_DISK_FULL` after
+    saying why on stderr (what was recorded is kept; the message says where)."""
+    from redrive.cli.main import EXIT_DISK_FULL
+
+    if failure is None:
+        return 0
+    print(f"redrive: error: {failure}", file=sys.stderr)
+    return EXIT_DISK_FULL
