@@ -1,4 +1,4 @@
-"""``redrive bench batch``: a batch of small logs on the local pool with 1 and 2 workers, on Ray
+"""``python -m benchmarks batch``: a batch of small logs on the local pool with 1 and 2 workers, on Ray
 at the same worker count, and Ray's cost per cell.
 
 Each pass runs :func:`redrive.batch.run_batch` on ``logs`` demo bags (ROS 1, LiDAR + odometry +

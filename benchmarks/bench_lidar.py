@@ -2,7 +2,7 @@
 
     .venv/bin/python benchmarks/bench_lidar.py [--runs 5] [--scans 100] [--json]
 
-Runs ``redrive.benchmarks.lidar.bench_lidar`` (the code behind ``redrive bench lidar``) ``--runs``
+Runs ``benchmarks.lidar.bench_lidar`` (the code behind ``redrive bench lidar``) ``--runs``
 times, each in this process and pinned to one core, and prints one line per run plus the
 median; the machine is shared, so single runs vary.  Open3D is the baseline when importable.
 """
@@ -13,7 +13,7 @@ import argparse
 import json
 import statistics
 
-from redrive.benchmarks.lidar import LidarBenchResult, bench_lidar
+from benchmarks.lidar import LidarBenchResult, bench_lidar
 
 
 def _line(i: int, r: LidarBenchResult) -> str:

@@ -15,8 +15,8 @@ import json
 import tempfile
 from pathlib import Path
 
+from benchmarks.synth_log import Layout, write_synthetic_bag
 from redrive.benchmarks.read import TUNED_MALLOC_ENV, ReadBenchResult, bench_read
-from redrive.benchmarks.synth_log import Layout, write_synthetic_bag
 
 _SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 _REAL = (

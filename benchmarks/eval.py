@@ -1,4 +1,4 @@
-"""``redrive bench eval``: nuScenes detection evaluation, vectorised against a plain Python loop.
+"""``python -m benchmarks eval``: nuScenes detection evaluation, vectorised against a plain Python loop.
 
 A synthetic, seeded data set (``frames`` frames × about ``boxes`` ground-truth objects of the five
 mapped classes, with as many detections: noisy copies of most objects and false positives, with

@@ -1,4 +1,4 @@
-"""``redrive bench export``: the Foxglove MCAP export of the demo run against a plain MCAP copy.
+"""``python -m benchmarks export``: the Foxglove MCAP export of the demo run against a plain MCAP copy.
 
 The demo (``redrive synth urban --duration 20``, then ``redrive run`` of it) runs once, in this
 process, unless a run is given.  Then, interleaved for each repeat and in this process (the

@@ -1,4 +1,4 @@
-"""``redrive bench fleet``: many small logs through one executor (Ray by default) with the
+"""``python -m benchmarks fleet``: many small logs through one executor (Ray by default) with the
 driver's memory sampled at every cell event — does the process that runs ``redrive batch`` stay
 flat as the fleet grows?
 

@@ -1,4 +1,4 @@
-"""``redrive bench record``: redrive's recorder against ``rosbag record`` on the same playback.
+"""``python -m benchmarks record``: redrive's recorder against ``rosbag record`` on the same playback.
 
 One ROS 1 master (``rosmaster --core`` on a free port), one ``rosbag play -l -r RATE --pause`` of a
 bag, and side by side the real ``rosbag record`` (C++, started through its Python wrapper) and
@@ -206,7 +206,7 @@ def _missing_tools() -> str | None:
     for tool in ("rosmaster", "rosbag"):
         if shutil.which(tool, path="/usr/bin:/bin") is None:
             return (
-                f"`{tool}` is not installed: `redrive bench record` needs Debian's ROS 1 "
+                f"`{tool}` is not installed: `python -m benchmarks record` needs Debian's ROS 1 "
                 "(`make system-test-deps`, as root)"
             )
     return None

@@ -1,4 +1,4 @@
-"""``redrive bench record-ros2``: recording a 10 Hz 120k-point cloud over ROS 2 against ROS 1.
+"""``python -m benchmarks record-ros2``: recording a 10 Hz 120k-point cloud over ROS 2 against ROS 1.
 
 Issue 18: "ROS 2 recording keeps up with a 10 Hz 120k-point cloud with ≤ 1 % CPU more than the
 ROS 1 path". One synthetic ``PointCloud2`` of ``points`` points (x, y, z, intensity float32:
@@ -32,7 +32,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from redrive.benchmarks.record import (
+from benchmarks.record import (
     _count_mcap,
     _Lines,
     _master,

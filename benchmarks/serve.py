@@ -1,4 +1,4 @@
-"""``redrive bench serve``: ``redrive serve`` of the demo log at 1× to a client on loopback.
+"""``python -m benchmarks serve``: ``redrive serve`` of the demo log at 1× to a client on loopback.
 
 The demo log (``redrive synth urban --duration 20``) is made once, unless a log is given.  What
 the server will send is counted first from the same stream (:func:`~redrive.interop.stream.
@@ -123,7 +123,7 @@ class ServeBenchResult:
             frames=self.frames,
             dropped_frames=self.dropped_frames,
             server_cpu_percent=self.server_cpu_percent,
-            # the figures `redrive bench all` puts in its summary (1.0: nothing dropped)
+            # the figures `python -m benchmarks all` puts in its summary (1.0: nothing dropped)
             received_ratio=self.received / self.sent if self.sent else 0.0,
             frames_received_ratio=(
                 (self.frames - self.dropped_frames) / self.frames if self.frames else 0.0

@@ -1,7 +1,8 @@
-"""``redrive bench all`` (``make bench``): every benchmark once, each in a small documented
+"""``python -m benchmarks all`` (``make bench``): every benchmark once, each in a small documented
 configuration and its own process, under a time budget; one markdown summary table.
 
-Each benchmark runs as ``redrive bench NAME … --json`` in a child process with a timeout of its
+Each benchmark runs as ``redrive bench NAME … --json`` (the package's own: engine, closed loop)
+or ``python -m benchmarks NAME … --json`` (this package's) in a child process with a timeout of its
 own; a benchmark that fails, times out or cannot run here (a missing extra, no display) is a row
 saying so, never the end of the suite.  The summary lists, per benchmark, the command, its wall
 time, and its figures: the targets' min / median / max and verdict where the benchmark reports a
@@ -34,14 +35,21 @@ _MAX_FIGURES = 6
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class SuiteEntry:
-    """One benchmark of the suite: ``args`` after ``redrive bench`` (``{tmp}`` is a scratch
-    directory of its own), why this configuration, its time limit."""
+    """One benchmark of the suite: ``args`` after ``redrive bench`` (``redrive=True``) or after
+    ``python -m benchmarks`` (``{tmp}`` is a scratch directory of its own), why this
+    configuration, its time limit."""
 
     name: str
     args: tuple[str, ...]
     why: str
     timeout_s: float
     display: bool = False  # needs an X display (run under xvfb-run when there is none)
+    redrive: bool = False  # a `redrive bench` command, not one of python -m benchmarks
+
+    @property
+    def prefix(self) -> str:
+        """What the shown command starts with."""
+        return "redrive bench" if self.redrive else "python -m benchmarks"
 
 
 #: the whole set, in a configuration that takes ~10 minutes on 2 cores (limit: 14.5)
@@ -51,6 +59,7 @@ SUITE: tuple[SuiteEntry, ...] = (
         args=("engine", "--frames", "1000", "--repeat", "5"),
         why="5 interleaved passes of 1000 frames: the issue's medians of 5",
         timeout_s=150,
+        redrive=True,
     ),
     SuiteEntry(
         name="transport",
@@ -70,7 +79,7 @@ SUITE: tuple[SuiteEntry, ...] = (
     ),
     SuiteEntry(
         name="read",
-        args=("read", "--synth", "0.1", "--points", "50000", "--repeat", "3", "{tmp}/synth.bag"),
+        args=("read-synth", "0.1", "--points", "50000", "--repeat", "3", "{tmp}/synth.bag"),
         why="a 0.1 GB synthetic ROS 1 bag of 50k-point sweeps, 3 passes per side",
         timeout_s=120,
     ),
@@ -85,6 +94,7 @@ SUITE: tuple[SuiteEntry, ...] = (
         args=("closed-loop", "--duration", "5", "--repeat", "3"),
         why="5 s of the urban scenario, object level, 3 passes",
         timeout_s=90,
+        redrive=True,
     ),
     SuiteEntry(
         name="eval",
@@ -206,10 +216,19 @@ def figures(result: Mapping[str, Any]) -> tuple[str, ...]:
 
 def _command(entry: SuiteEntry, tmp: Path) -> list[str]:
     args = [a.replace("{tmp}", str(tmp)) for a in entry.args]
-    cmd = [sys.executable, "-m", "redrive", "bench", *args, "--json"]
+    head = ["-m", "redrive", "bench"] if entry.redrive else ["-m", "benchmarks"]
+    cmd = [sys.executable, *head, *args, "--json"]
     if entry.display and not os.environ.get("DISPLAY") and shutil.which("xvfb-run"):
         cmd = ["xvfb-run", "-a", "-s", "-screen 0 1600x1000x24", *cmd]
     return cmd
+
+
+def _child_env() -> dict[str, str]:
+    """The environment of a child: this one, with the repository root (where ``benchmarks``
+    is) and ``src`` ahead on ``PYTHONPATH``."""
+    root = Path(__file__).resolve().parents[1]
+    paths = [str(root), str(root / "src"), *filter(None, [os.environ.get("PYTHONPATH")])]
+    return {**os.environ, "PYTHONPATH": os.pathsep.join(paths)}
 
 
 def run_one(
@@ -219,14 +238,20 @@ def run_one(
     run = runner or subprocess.run
     with tempfile.TemporaryDirectory(prefix=f"redrive-bench-{entry.name}-") as tmp:
         cmd = _command(entry, Path(tmp))
-        shown = "redrive bench " + " ".join(
-            a.replace(tmp, "TMP") for a in cmd[cmd.index("bench") + 1 :]
-        )
+        first = cmd.index("bench" if entry.redrive else "benchmarks") + 1
+        shown = f"{entry.prefix} " + " ".join(a.replace(tmp, "TMP") for a in cmd[first:])
         if entry.display and not os.environ.get("DISPLAY") and not shutil.which("xvfb-run"):
             return SuiteRow(entry=entry, command=shown, status="skipped (no display)", seconds=0.0)
         t0 = time.perf_counter()
         try:
-            proc = run(cmd, capture_output=True, text=True, timeout=entry.timeout_s, check=False)
+            proc = run(
+                cmd,
+                capture_output=True,
+                text=True,
+                timeout=entry.timeout_s,
+                check=False,
+                env=_child_env(),
+            )
         except subprocess.TimeoutExpired:
             seconds = time.perf_counter() - t0
             return SuiteRow(entry=entry, command=shown, status="timeout", seconds=seconds)
@@ -266,7 +291,7 @@ def run_suite(
             rows.append(
                 SuiteRow(
                     entry=entry,
-                    command="redrive bench " + " ".join(entry.args),
+                    command=f"{entry.prefix} " + " ".join(entry.args),
                     status=f"skipped (its limit of {entry.timeout_s:g} s would pass the budget)",
                     seconds=0.0,
                 )

@@ -1,4 +1,4 @@
-"""``redrive bench batch`` — a batch of small logs: 1 vs 2 local workers, Ray vs local, Ray's
+"""``python -m benchmarks batch`` — a batch of small logs: 1 vs 2 local workers, Ray vs local, Ray's
 cost per cell."""
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ def _verdict(ok: bool) -> str:
 
 
 def _run_batch(args: argparse.Namespace) -> int:
-    from redrive.benchmarks.batch import (
+    from benchmarks.batch import (
         TARGET_RAY_CELL_S,
         TARGET_RAY_RATIO,
         TARGET_SCALING,
@@ -82,9 +82,9 @@ def add_batch_parser(bench_sub: Any) -> None:
         help="batch scaling: 2 local workers vs 1, Ray vs local, Ray's cost per cell",
         description=_DESCRIPTION,
         epilog=(
-            "examples:\n  redrive bench batch\n"
-            "  redrive bench batch --logs 8 --duration 6 --repeat 3 --json\n"
-            "  redrive bench batch --no-ray"
+            "examples:\n  python -m benchmarks batch\n"
+            "  python -m benchmarks batch --logs 8 --duration 6 --repeat 3 --json\n"
+            "  python -m benchmarks batch --no-ray"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -108,7 +108,7 @@ def add_batch_parser(bench_sub: Any) -> None:
 
 
 def _run_fleet(args: argparse.Namespace) -> int:
-    from redrive.benchmarks.fleet import bench_fleet
+    from benchmarks.fleet import bench_fleet
 
     with spinner() as progress:
         r = bench_fleet(
@@ -147,7 +147,7 @@ def add_fleet_parser(bench_sub: Any) -> None:
             "after a quarter, at the end, the maximum, and the slope over the last three quarters "
             "(MB per 100 cells)."
         ),
-        epilog="examples:\n  redrive bench fleet\n  redrive bench fleet --cells 1000 --json",
+        epilog="examples:\n  python -m benchmarks fleet\n  python -m benchmarks fleet --cells 1000 --json",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--cells", type=int, default=200, metavar="N", help="cells (default 200)")

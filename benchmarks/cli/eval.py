@@ -1,4 +1,4 @@
-"""``redrive bench eval`` — nuScenes detection evaluation, vectorised against a Python loop."""
+"""``python -m benchmarks eval`` — nuScenes detection evaluation, vectorised against a Python loop."""
 
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ def _verdict(ok: bool) -> str:
 
 
 def _run_eval(args: argparse.Namespace) -> int:
-    from redrive.benchmarks.eval import TARGET_RATIO, bench_eval
+    from benchmarks.eval import TARGET_RATIO, bench_eval
 
     with spinner() as progress:
         result = bench_eval(
@@ -56,7 +56,7 @@ def add_eval_parser(bench_sub: Any) -> None:
         "eval",
         help="detection evaluation (nuScenes): vectorised against a per-frame Python loop",
         description=_DESCRIPTION,
-        epilog="examples:\n  redrive bench eval\n  redrive bench eval --frames 1000 --json",
+        epilog="examples:\n  python -m benchmarks eval\n  python -m benchmarks eval --frames 1000 --json",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument(

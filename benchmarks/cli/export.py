@@ -1,4 +1,4 @@
-"""``redrive bench export`` — the Foxglove MCAP export of the demo run against a plain MCAP copy."""
+"""``python -m benchmarks export`` — the Foxglove MCAP export of the demo run against a plain MCAP copy."""
 
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ machine's other work slows both sides).
 
 
 def _run_export(args: argparse.Namespace) -> int:
-    from redrive.benchmarks.export import TARGET_REALTIME, bench_export
+    from benchmarks.export import TARGET_REALTIME, bench_export
 
     with spinner() as progress:
         result = bench_export(
@@ -67,9 +67,9 @@ def add_export_parser(bench_sub: Any) -> None:
         help="Foxglove MCAP export of the demo run against an mcap copy of its log",
         description=_DESCRIPTION,
         epilog=(
-            "examples:\n  redrive bench export\n"
-            "  redrive bench export --run runs/urban --repeat 5 --json\n"
-            "  redrive bench export --run runs/urban --sensor-copies"
+            "examples:\n  python -m benchmarks export\n"
+            "  python -m benchmarks export --run runs/urban --repeat 5 --json\n"
+            "  python -m benchmarks export --run runs/urban --sensor-copies"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

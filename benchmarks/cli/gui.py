@@ -1,4 +1,4 @@
-"""``redrive bench gui`` — the main window's playback frame rate and open → first frame time,
+"""``python -m benchmarks gui`` — the main window's playback frame rate and open → first frame time,
 against pyqtgraph's own ceiling measured in the same run (needs the ``gui`` extra and a display)."""
 
 from __future__ import annotations
@@ -24,14 +24,14 @@ time from opening a ~1 GB log to its first frame (page cache warm), against one 
 Per frame it also reports where the time goes: the loader thread (read + decode, build_scene), the
 GUI thread (show, the planview's and the camera's paint, the window's updates), CPU time.
 Targets (issue 7): >= 15 FPS in 3D, >= 30 FPS in 2D, open -> first frame <= 1 s. Run it under
-Xvfb for the software-GL figure: xvfb-run -a -s "-screen 0 1600x1000x24" redrive bench gui.
+Xvfb for the software-GL figure: xvfb-run -a -s "-screen 0 1600x1000x24" python -m benchmarks gui.
 """
 
 _EPILOG = """\
 examples:
-  xvfb-run -a -s "-screen 0 1600x1000x24" redrive bench gui
-  xvfb-run -a -s "-screen 0 1600x1000x24" redrive bench gui --seconds 5 --skip-big --json
-  redrive bench gui --cache ~/.cache/redrive-bench-gui     on a desktop; logs kept between runs
+  xvfb-run -a -s "-screen 0 1600x1000x24" python -m benchmarks gui
+  xvfb-run -a -s "-screen 0 1600x1000x24" python -m benchmarks gui --seconds 5 --skip-big --json
+  python -m benchmarks gui --cache ~/.cache/redrive-bench-gui     on a desktop; logs kept between runs
 
 The logs (about 0.4 GB and 1 GB) are written once into the cache directory (default
 $TMPDIR/redrive-bench-gui) and reused. Takes about 2 minutes with the logs cached.
@@ -165,8 +165,8 @@ def _run_gui(args: argparse.Namespace) -> int:
     require_gui()
     if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
         msg = (
-            "redrive bench gui needs a display: run it under Xvfb, "
-            'xvfb-run -a -s "-screen 0 1600x1000x24" redrive bench gui'
+            "python -m benchmarks gui needs a display: run it under Xvfb, "
+            'xvfb-run -a -s "-screen 0 1600x1000x24" python -m benchmarks gui'
         )
         raise ConfigError(msg)
     if args.seconds <= 0 or args.points < 1 or args.boxes < 0:
@@ -177,7 +177,7 @@ def _run_gui(args: argparse.Namespace) -> int:
         raise ConfigError(msg)
     import logging
 
-    from redrive.benchmarks.gui import bench_gui
+    from benchmarks.gui import bench_gui
 
     # The main window logs every open at INFO; the report says it all.
     logging.getLogger("redrive").setLevel(logging.WARNING)

@@ -1,4 +1,4 @@
-"""``redrive bench lidar`` — the simulated LiDAR's sweeps/s against Open3D ray casting; camera
+"""``python -m benchmarks lidar`` — the simulated LiDAR's sweeps/s against Open3D ray casting; camera
 frames/s."""
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ importable, and the ratio redrive/Open3D is printed (target >= 0.5). Also 1280x7
 
 
 def _run_lidar(args: argparse.Namespace) -> int:
-    from redrive.benchmarks.lidar import TARGET_RATIO, bench_lidar
+    from benchmarks.lidar import TARGET_RATIO, bench_lidar
 
     with spinner() as progress:
         result = bench_lidar(
@@ -66,7 +66,7 @@ def add_lidar_parser(bench_sub: Any) -> None:
         "lidar",
         help="simulated LiDAR sweeps/s against Open3D ray casting; camera frames/s",
         description=_LIDAR_DESCRIPTION,
-        epilog="examples:\n  redrive bench lidar\n  redrive bench lidar --scans 100 --json",
+        epilog="examples:\n  python -m benchmarks lidar\n  python -m benchmarks lidar --scans 100 --json",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     lidar.add_argument("--scans", type=int, default=50, metavar="N", help="sweeps (default 50)")

@@ -1,4 +1,4 @@
-"""``redrive bench loss`` — the paper's loss experiment: legacy pipes + pickle against redrive."""
+"""``python -m benchmarks loss`` — the paper's loss experiment: legacy pipes + pickle against redrive."""
 
 from __future__ import annotations
 
@@ -26,9 +26,9 @@ nothing lost, at 1x and 10x.
 
 _EPILOG = """\
 examples:
-  redrive bench loss                                   30 minutes per configuration (2 hours)
-  redrive bench loss --seconds 300 --out /tmp/loss
-  redrive bench loss --seconds 20 --rates 1 --chains legacy,redrive,redrive-lossless --json
+  python -m benchmarks loss                                   30 minutes per configuration (2 hours)
+  python -m benchmarks loss --seconds 300 --out /tmp/loss
+  python -m benchmarks loss --seconds 20 --rates 1 --chains legacy,redrive,redrive-lossless --json
 """
 
 
@@ -44,7 +44,7 @@ def _floats(text: str) -> tuple[float, ...]:
 
 
 def _chains(text: str) -> tuple[str, ...]:
-    from redrive.benchmarks.loss import CHAINS
+    from benchmarks.loss import CHAINS
 
     values = tuple(x.strip() for x in text.split(",") if x.strip())
     bad = [v for v in values if v not in CHAINS]
@@ -107,7 +107,7 @@ def _print_report(result: Any, paths: dict[str, Path]) -> None:
 
 
 def _run_loss(args: argparse.Namespace) -> int:
-    from redrive.benchmarks.loss import SLOTS, bench_loss, write_outputs
+    from benchmarks.loss import SLOTS, bench_loss, write_outputs
 
     with spinner() as progress:
         result = bench_loss(

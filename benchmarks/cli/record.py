@@ -1,4 +1,4 @@
-"""``redrive bench record`` — redrive's recorder against ``rosbag record`` on the same playback."""
+"""``python -m benchmarks record`` — redrive's recorder against ``rosbag record`` on the same playback."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import os
 from pathlib import Path
 from typing import Any
 
+from benchmarks.record import DEFAULT_RATE
 from redrive.benchmarks.cli._console import print_json, report_console, spinner
-from redrive.benchmarks.record import DEFAULT_RATE
 
 __all__ = ["add_record_parser"]
 
@@ -37,7 +37,7 @@ def _default_data() -> Path:
 
 
 def _run_record(args: argparse.Namespace) -> int:
-    from redrive.benchmarks.record import TARGET_CPU_RATIO, bench_record
+    from benchmarks.record import TARGET_CPU_RATIO, bench_record
 
     with spinner() as progress:
         r = bench_record(
@@ -102,8 +102,8 @@ def add_record_parser(bench_sub: Any) -> None:
         help="redrive live --record against rosbag record: messages lost, CPU",
         description=_DESCRIPTION,
         epilog=(
-            "examples:\n  redrive bench record --data ../shared/data\n"
-            "  redrive bench record --rate 14 --duration 20 --keep /tmp/rec --json"
+            "examples:\n  python -m benchmarks record --data ../shared/data\n"
+            "  python -m benchmarks record --rate 14 --duration 20 --keep /tmp/rec --json"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

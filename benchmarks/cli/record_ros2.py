@@ -1,4 +1,4 @@
-"""``redrive bench record-ros2`` — a 10 Hz 120k-point cloud recorded over ROS 2 and over ROS 1."""
+"""``python -m benchmarks record-ros2`` — a 10 Hz 120k-point cloud recorded over ROS 2 and over ROS 1."""
 
 from __future__ import annotations
 
@@ -29,7 +29,7 @@ def _verdict(ok: bool) -> str:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from redrive.benchmarks.record_ros2 import TARGET_EXTRA_CPU_PERCENT, bench_record_ros2
+    from benchmarks.record_ros2 import TARGET_EXTRA_CPU_PERCENT, bench_record_ros2
 
     with spinner() as progress:
         r = bench_record_ros2(
@@ -73,8 +73,8 @@ def add_record_ros2_parser(bench_sub: Any) -> None:
         help="a 10 Hz 120k-point cloud recorded over ROS 2 against ROS 1: lost, CPU",
         description=_DESCRIPTION,
         epilog=(
-            "examples:\n  redrive bench record-ros2\n"
-            "  redrive bench record-ros2 --duration 30 --keep /tmp/r2 --json"
+            "examples:\n  python -m benchmarks record-ros2\n"
+            "  python -m benchmarks record-ros2 --duration 30 --keep /tmp/r2 --json"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

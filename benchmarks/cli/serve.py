@@ -1,4 +1,4 @@
-"""``redrive bench serve`` — ``redrive serve`` of the demo log at 1x to a client on loopback."""
+"""``python -m benchmarks serve`` — ``redrive serve`` of the demo log at 1x to a client on loopback."""
 
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ p99, max), the server's CPU over the playback and the load average.
 def _run_serve(args: argparse.Namespace) -> int:
     from rich.table import Table
 
-    from redrive.benchmarks.serve import bench_serve
+    from benchmarks.serve import bench_serve
 
     with spinner() as progress:
         result = bench_serve(
@@ -67,7 +67,7 @@ def add_serve_parser(bench_sub: Any) -> None:
         "serve",
         help="redrive serve of the demo log at 1x to a WebSocket client: dropped frames, lag, CPU",
         description=_DESCRIPTION,
-        epilog="examples:\n  redrive bench serve\n  redrive bench serve --log urban.mcap --json",
+        epilog="examples:\n  python -m benchmarks serve\n  python -m benchmarks serve --log urban.mcap --json",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--log", type=Path, metavar="LOG", help="serve this log, not the demo")

@@ -1,4 +1,4 @@
-"""``redrive bench all`` — every benchmark once in a small configuration; one markdown table."""
+"""``python -m benchmarks all`` — every benchmark once in a small configuration; one markdown table."""
 
 from __future__ import annotations
 
@@ -31,7 +31,7 @@ def _loadavg() -> str:
 
 
 def _run_all(args: argparse.Namespace) -> int:
-    from redrive.benchmarks.suite import SUITE, run_suite, summary_markdown
+    from benchmarks.suite import SUITE, run_suite, summary_markdown
     from redrive.errors import ConfigError
 
     names = [e.name for e in SUITE]
@@ -60,17 +60,17 @@ def _run_all(args: argparse.Namespace) -> int:
 
 
 def _epilog() -> str:
-    from redrive.benchmarks.suite import SUITE
+    from benchmarks.suite import SUITE
 
     lines = ["the set (limit in seconds; TMP is a scratch directory of its own):"]
     for e in SUITE:
-        lines.append(f"  {e.name:12s} redrive bench {' '.join(e.args).replace('{tmp}', 'TMP')}")
+        lines.append(f"  {e.name:12s} {e.prefix} {' '.join(e.args).replace('{tmp}', 'TMP')}")
         lines.append(f"  {'':12s} {e.why} ({e.timeout_s:g} s)")
     lines += [
         "",
         "examples:",
-        "  redrive bench all --out bench-summary.md",
-        "  redrive bench all --only engine,eval",
+        "  python -m benchmarks all --out bench-summary.md",
+        "  python -m benchmarks all --only engine,eval",
     ]
     return "\n".join(lines)
 

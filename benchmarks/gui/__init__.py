@@ -1,4 +1,4 @@
-"""``redrive bench gui``: how fast the main window plays a log and opens a big one, against
+"""``python -m benchmarks gui``: how fast the main window plays a log and opens a big one, against
 pyqtgraph's own ceiling measured in the same run (issue 7).
 
 The logs are written by redrive's own :class:`~redrive.io.writer.McapWriter` (ROS 2 CDR, zstd
@@ -62,9 +62,9 @@ time of the GUI thread and of the process, and the machine's busy share (``/proc
 
 from __future__ import annotations
 
-from redrive.benchmarks.gui.logs import BenchLog, bench_log, write_bench_log
-from redrive.benchmarks.gui.logs import default_cache as default_cache
-from redrive.benchmarks.gui.result import (
+from benchmarks.gui.logs import BenchLog, bench_log, write_bench_log
+from benchmarks.gui.logs import default_cache as default_cache
+from benchmarks.gui.result import (
     TARGET_FPS_2D,
     TARGET_FPS_3D,
     TARGET_OPEN_S,
@@ -73,7 +73,7 @@ from redrive.benchmarks.gui.result import (
     OpenResult,
     PlaybackResult,
 )
-from redrive.benchmarks.gui.run import bench_gui
+from benchmarks.gui.run import bench_gui
 
 __all__ = [
     "TARGET_FPS_2D",

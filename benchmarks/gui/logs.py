@@ -1,4 +1,4 @@
-"""The benchmark logs (see :mod:`redrive.benchmarks.gui`): written by redrive's own McapWriter, one
+"""The benchmark logs (see :mod:`benchmarks.gui`): written by redrive's own McapWriter, one
 frame at a time, and cached in a directory by their parameters."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from redrive.benchmarks.synth_log import _SweepMaker
+from benchmarks.synth_log import _SweepMaker
 from redrive.geometry.se3 import quaternion_from_rotation_matrix
 from redrive.io.writer import McapWriter
 from redrive.types import (
@@ -61,7 +61,7 @@ def write_bench_log(
     seed: int = 0,
     progress: Callable[[int, int], None] | None = None,
 ) -> BenchLog:
-    """Write the benchmark log (see :mod:`redrive.benchmarks.gui`) to ``path`` (atomically: a failure
+    """Write the benchmark log (see :mod:`benchmarks.gui`) to ``path`` (atomically: a failure
     leaves nothing).  Memory stays bounded: one frame at a time."""
     if frames < 1 or points < 1 or boxes < 0:
         msg = f"frames ({frames}) and points ({points}) must be ≥ 1, boxes ({boxes}) ≥ 0"

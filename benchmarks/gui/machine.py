@@ -7,7 +7,7 @@ from typing import Any
 
 from PySide6 import QtWidgets
 
-from redrive.benchmarks.loss.machine import _machine as _machine_base
+from benchmarks.loss.machine import _machine as _machine_base
 
 
 def _gl_renderer(view: Any) -> str:
@@ -26,7 +26,7 @@ def _machine(app: QtWidgets.QApplication) -> dict[str, str]:
     import pyqtgraph as pg
     import PySide6
 
-    # cpu, cpus, system, python, numpy and load_average_at_start, as ``redrive bench loss``
+    # cpu, cpus, system, python, numpy and load_average_at_start, as ``python -m benchmarks loss``
     # describes the machine; the load average stays the last key.
     base = _machine_base()
     load = base.pop("load_average_at_start")

@@ -14,10 +14,10 @@ import numpy as np
 import numpy.typing as npt
 from PySide6 import QtCore, QtGui, QtWidgets
 
-from redrive.benchmarks.gui.logs import BenchLog
-from redrive.benchmarks.gui.machine import _gl_renderer
-from redrive.benchmarks.gui.probe import _WAIT_S, _Cpu, _Probe, _Pump, _size, _wrap, _wrap_event
-from redrive.benchmarks.gui.result import (
+from benchmarks.gui.logs import BenchLog
+from benchmarks.gui.machine import _gl_renderer
+from benchmarks.gui.probe import _WAIT_S, _Cpu, _Probe, _Pump, _size, _wrap, _wrap_event
+from benchmarks.gui.result import (
     CeilingResult,
     OpenResult,
     PlaybackResult,

@@ -1,4 +1,4 @@
-"""What :func:`~redrive.benchmarks.gui.bench_gui` measured: the results of each measure (a playback
+"""What :func:`~benchmarks.gui.bench_gui` measured: the results of each measure (a playback
 result made from the probe's samples), the targets and verdicts, and the JSON."""
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from redrive.benchmarks.gui.logs import BenchLog
-from redrive.benchmarks.gui.probe import _CpuUsed
+from benchmarks.gui.logs import BenchLog
+from benchmarks.gui.probe import _CpuUsed
 
 __all__ = [
     "TARGET_FPS_2D",

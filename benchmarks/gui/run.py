@@ -6,10 +6,10 @@ import math
 from collections.abc import Callable
 from pathlib import Path
 
-from redrive.benchmarks.gui.logs import bench_log, default_cache
-from redrive.benchmarks.gui.machine import _machine
-from redrive.benchmarks.gui.measures import _TIMER_SPEED, Progress, _Bench
-from redrive.benchmarks.gui.result import GuiBenchResult
+from benchmarks.gui.logs import bench_log, default_cache
+from benchmarks.gui.machine import _machine
+from benchmarks.gui.measures import _TIMER_SPEED, Progress, _Bench
+from benchmarks.gui.result import GuiBenchResult
 
 __all__ = ["bench_gui"]
 
@@ -28,7 +28,7 @@ def bench_gui(
     window_size: tuple[int, int] = (1600, 1000),
     progress: Progress | None = None,
 ) -> GuiBenchResult:
-    """Run the GUI benchmark (see :mod:`redrive.benchmarks.gui`) in this process's QApplication
+    """Run the GUI benchmark (see :mod:`benchmarks.gui`) in this process's QApplication
     (created if there is none; it needs a display — Xvfb under ``xvfb-run``).
 
     Args:

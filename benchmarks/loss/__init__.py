@@ -1,4 +1,4 @@
-"""``redrive bench loss``: the paper's loss experiment, legacy pipes + pickle against redrive.
+"""``python -m benchmarks loss``: the paper's loss experiment, legacy pipes + pickle against redrive.
 
 Four sensor streams are produced by a *collector* process, paced by the wall clock, and handed to
 a *core* process (sizes: bytes of sensor data, plus a 16-byte header and an 8-byte trailer):
@@ -83,13 +83,13 @@ run one after the other — for each rate factor, every chain in turn — never 
 
 from __future__ import annotations
 
-from redrive.benchmarks.loss.machine import wakeup_probe
-from redrive.benchmarks.loss.measures import StreamLoss, measure_stream
-from redrive.benchmarks.loss.outputs import plot_loss, table_markdown, write_outputs
-from redrive.benchmarks.loss.results import ConfigResult, LossBenchResult
-from redrive.benchmarks.loss.run import bench_loss, run_configuration
-from redrive.benchmarks.loss.streams import CHAINS, STREAMS, StreamSpec, due_times
-from redrive.benchmarks.loss.streams import SLOTS as SLOTS
+from benchmarks.loss.machine import wakeup_probe
+from benchmarks.loss.measures import StreamLoss, measure_stream
+from benchmarks.loss.outputs import plot_loss, table_markdown, write_outputs
+from benchmarks.loss.results import ConfigResult, LossBenchResult
+from benchmarks.loss.run import bench_loss, run_configuration
+from benchmarks.loss.streams import CHAINS, STREAMS, StreamSpec, due_times
+from benchmarks.loss.streams import SLOTS as SLOTS
 
 __all__ = [
     "CHAINS",

@@ -7,9 +7,9 @@ import traceback
 from collections.abc import Callable
 from typing import Any
 
-from redrive.benchmarks.loss.legacy_chain import _bridge_legacy, _collector_legacy, _core_legacy
-from redrive.benchmarks.loss.process import _raise_exit, _RunSpec, _watch_parent
-from redrive.benchmarks.loss.redrive_chain import _collector_redrive, _core_redrive
+from benchmarks.loss.legacy_chain import _bridge_legacy, _collector_legacy, _core_legacy
+from benchmarks.loss.process import _raise_exit, _RunSpec, _watch_parent
+from benchmarks.loss.redrive_chain import _collector_redrive, _core_redrive
 
 _ROLES: dict[str, Callable[[_RunSpec, dict[str, Any]], None]] = {
     "collector-legacy": _collector_legacy,

@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from redrive.benchmarks.loss.process import _POLL_S, _collect, _CoreRecord, _RunSpec, _wait_go
-from redrive.benchmarks.loss.streams import DRAIN_S, STREAMS, _stamp, _template
+from benchmarks.loss.process import _POLL_S, _collect, _CoreRecord, _RunSpec, _wait_go
+from benchmarks.loss.streams import DRAIN_S, STREAMS, _stamp, _template
 
 
 def _collector_legacy(spec: _RunSpec, ipc: dict[str, Any]) -> None:

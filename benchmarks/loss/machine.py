@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from redrive.benchmarks.loss.measures import _pct
+from benchmarks.loss.measures import _pct
 
 __all__ = ["wakeup_probe"]
 

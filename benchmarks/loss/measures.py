@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from redrive.benchmarks.loss.streams import _NS, _SKIPPED, I64
+from benchmarks.loss.streams import _NS, _SKIPPED, I64
 
 __all__ = ["StreamLoss", "measure_stream"]
 

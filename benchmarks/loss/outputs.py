@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from redrive.benchmarks.loss.results import LossBenchResult
+from benchmarks.loss.results import LossBenchResult
 
 __all__ = ["plot_loss", "table_markdown", "write_outputs"]
 

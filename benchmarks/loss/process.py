@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from redrive.benchmarks.loss.streams import (
+from benchmarks.loss.streams import (
     _NS,
     _SKIPPED,
     DRAIN_S,

@@ -5,8 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from redrive.benchmarks.loss.measures import StreamLoss
-from redrive.benchmarks.loss.streams import DRAIN_S, QUEUE_DEPTH, SENSOR_BUFFER_S, SLOTS, STREAMS
+from benchmarks.loss.measures import StreamLoss
+from benchmarks.loss.streams import DRAIN_S, QUEUE_DEPTH, SENSOR_BUFFER_S, SLOTS, STREAMS
 
 __all__ = ["ConfigResult", "LossBenchResult"]
 

@@ -15,12 +15,12 @@ from typing import Any
 
 import numpy as np
 
-from redrive.benchmarks.loss.child import _child_main
-from redrive.benchmarks.loss.machine import _machine, wakeup_probe
-from redrive.benchmarks.loss.measures import measure_stream
-from redrive.benchmarks.loss.process import _START_TIMEOUT_S, _RunSpec
-from redrive.benchmarks.loss.results import ConfigResult, LossBenchResult
-from redrive.benchmarks.loss.streams import _NS, CHAINS, DRAIN_S, QUEUE_DEPTH, SLOTS, STREAMS
+from benchmarks.loss.child import _child_main
+from benchmarks.loss.machine import _machine, wakeup_probe
+from benchmarks.loss.measures import measure_stream
+from benchmarks.loss.process import _START_TIMEOUT_S, _RunSpec
+from benchmarks.loss.results import ConfigResult, LossBenchResult
+from benchmarks.loss.streams import _NS, CHAINS, DRAIN_S, QUEUE_DEPTH, SLOTS, STREAMS
 from redrive.errors import TransportError
 
 __all__ = ["bench_loss", "run_configuration"]

@@ -1,4 +1,4 @@
-"""`redrive bench batch` runs tiny batches and reports consistent numbers (no timing asserts:
+"""`python -m benchmarks batch` runs tiny batches and reports consistent numbers (no timing asserts:
 speed targets are met in the benchmark, BENCHMARKS.md)."""
 
 from __future__ import annotations
@@ -7,8 +7,8 @@ import json
 
 import pytest
 
-from redrive.benchmarks.batch import bench_batch
-from redrive.cli.main import main
+from benchmarks.batch import bench_batch
+from benchmarks.cli import main
 from redrive.errors import ConfigError
 
 
@@ -36,7 +36,7 @@ def test_bench_batch_refuses_no_logs() -> None:
 
 
 def test_bench_batch_cli_json(capsys: pytest.CaptureFixture[str]) -> None:
-    argv = ["bench", "batch", "--logs", "1", "--duration", "0.3", "--empty-cells", "1"]
+    argv = ["batch", "--logs", "1", "--duration", "0.3", "--empty-cells", "1"]
     assert main([*argv, "--no-ray", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["logs"] == 1
@@ -45,7 +45,7 @@ def test_bench_batch_cli_json(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 def test_bench_fleet_slope_and_rss() -> None:
-    from redrive.benchmarks.fleet import _slope, rss_bytes
+    from benchmarks.fleet import _slope, rss_bytes
 
     assert rss_bytes() > 10_000_000  # this process: Python, numpy, pyarrow
     assert _slope([(0, 1.0), (100, 3.0), (200, 5.0)]) == pytest.approx(2.0)
@@ -54,7 +54,7 @@ def test_bench_fleet_slope_and_rss() -> None:
 
 @pytest.mark.slow  # four cells, each a process: ~20 s on a loaded 2-core machine
 def test_bench_fleet_samples_the_driver_at_every_finished_cell() -> None:
-    from redrive.benchmarks.fleet import bench_fleet
+    from benchmarks.fleet import bench_fleet
 
     r = bench_fleet(cells=4, log_duration_s=0.2, executor="local", workers=1)
     assert r.failed == 0

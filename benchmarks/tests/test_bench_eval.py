@@ -1,4 +1,4 @@
-"""redrive bench eval: both implementations agree on a tiny data set; the CLI module prints."""
+"""python -m benchmarks eval: both implementations agree on a tiny data set; the CLI module prints."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import math
 
 import pytest
 
-from redrive.benchmarks.cli.eval import add_eval_parser
-from redrive.benchmarks.eval import baseline_nuscenes, bench_eval, synthetic_detections
+from benchmarks.cli.eval import add_eval_parser
+from benchmarks.eval import baseline_nuscenes, bench_eval, synthetic_detections
 from redrive.evaluation.detection import evaluate_nuscenes
 from redrive.evaluation.detection.classes import NUSCENES_CLASS_RANGE_M, NUSCENES_CLASSES
 

@@ -1,23 +1,20 @@
-"""``redrive bench export``: a run exported and its log copied once (no timings asserted); the
+"""``python -m benchmarks export``: a run exported and its log copied once (no timings asserted); the
 copy holds the log's messages as they are; the demo itself (synth + run) only in a slow test."""
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
 
 import pytest
 
-from redrive.benchmarks import cli as bench
+from benchmarks.cli import build_parser
 
 pytest.importorskip("foxglove", reason="needs foxglove-sdk (pip install 'redrive[foxglove]')")
 
 
 def _run(argv: list[str]) -> int:
-    parser = argparse.ArgumentParser(prog="redrive")
-    bench.register(parser.add_subparsers(dest="command"))
-    args = parser.parse_args(argv)
+    args = build_parser().parse_args(argv)
     status: int = args.func(args)
     return status
 
@@ -26,7 +23,7 @@ def test_copy_holds_the_logs_messages(tmp_path: Path) -> None:
     from mcap.reader import make_reader
     from mcap.writer import Writer
 
-    from redrive.benchmarks.export import copy_mcap
+    from benchmarks.export import copy_mcap
 
     src, dst = tmp_path / "in.mcap", tmp_path / "out.mcap"
     with src.open("wb") as f:
@@ -53,7 +50,7 @@ def test_copy_holds_the_logs_messages(tmp_path: Path) -> None:
 def test_run_exported_and_copied(
     short_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    argv = ["bench", "export", "--run", str(short_run), "--repeat", "1", "--workdir", str(tmp_path)]
+    argv = ["export", "--run", str(short_run), "--repeat", "1", "--workdir", str(tmp_path)]
     assert _run([*argv, "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
     assert data["copy_messages"] > 0
@@ -69,7 +66,7 @@ def test_run_exported_and_copied(
 
 @pytest.mark.slow
 def test_demo_made_exported_and_copied(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    argv = ["bench", "export", "--duration", "0.3", "--repeat", "1", "--workdir", str(tmp_path)]
+    argv = ["export", "--duration", "0.3", "--repeat", "1", "--workdir", str(tmp_path)]
     assert _run([*argv, "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
     assert data["log_span_s"] == pytest.approx(0.29, abs=0.02)
@@ -77,7 +74,7 @@ def test_demo_made_exported_and_copied(tmp_path: Path, capsys: pytest.CaptureFix
 
 
 def test_missing_run_log_says_so(tmp_path: Path) -> None:
-    from redrive.benchmarks.export import bench_export
+    from benchmarks.export import bench_export
     from redrive.errors import ConfigError
 
     with pytest.raises(ConfigError, match="no such run directory"):

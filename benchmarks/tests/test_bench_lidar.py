@@ -1,21 +1,18 @@
-"""``redrive bench lidar``: runs end to end on a tiny configuration (no timings asserted)."""
+"""``python -m benchmarks lidar``: runs end to end on a tiny configuration (no timings asserted)."""
 
 from __future__ import annotations
 
-import argparse
 import json
 
 import numpy as np
 import pytest
 
-from redrive.benchmarks import cli as bench
-from redrive.benchmarks.lidar import bench_lidar, bench_scene
+from benchmarks.cli import build_parser
+from benchmarks.lidar import bench_lidar, bench_scene
 
 
 def _run(argv: list[str]) -> int:
-    parser = argparse.ArgumentParser(prog="redrive")
-    bench.register(parser.add_subparsers(dest="command"))
-    args = parser.parse_args(argv)
+    args = build_parser().parse_args(argv)
     status: int = args.func(args)
     return status
 
@@ -38,7 +35,7 @@ def test_bench_lidar_small() -> None:
 
 
 def test_cli_json_and_text(capsys: pytest.CaptureFixture[str]) -> None:
-    argv = ["bench", "lidar", "--scans", "2", "--frames", "1", "--boxes", "5", "--no-open3d"]
+    argv = ["lidar", "--scans", "2", "--frames", "1", "--boxes", "5", "--no-open3d"]
     assert _run([*argv, "--preset", "VLP-16", "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
     assert data["preset"] == "VLP-16"
@@ -48,5 +45,5 @@ def test_cli_json_and_text(capsys: pytest.CaptureFixture[str]) -> None:
     assert "sweeps/s" in out
     assert "frames/s" in out
     with pytest.raises(SystemExit):
-        _run(["bench", "lidar", "--help"])
-    assert "redrive bench lidar" in capsys.readouterr().out
+        _run(["lidar", "--help"])
+    assert "python -m benchmarks lidar" in capsys.readouterr().out

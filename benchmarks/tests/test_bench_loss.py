@@ -1,4 +1,4 @@
-"""redrive bench loss: the measures on hand-made records, and a short real run of every chain.
+"""python -m benchmarks loss: the measures on hand-made records, and a short real run of every chain.
 
 The short run (3 s per configuration, ≈ 25 s in all) checks that the chains run, deliver, stop
 every process and leave nothing in /dev/shm, and that the JSON / PNG / table are written and
@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from redrive.benchmarks.cli.loss import add_loss_parser
-from redrive.benchmarks.loss import (
+from benchmarks.cli.loss import add_loss_parser
+from benchmarks.loss import (
     STREAMS,
     LossBenchResult,
     bench_loss,
@@ -98,8 +98,8 @@ def test_nothing_received() -> None:
 
 
 def test_text_report(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    from redrive.benchmarks.cli.loss import _print_report
-    from redrive.benchmarks.loss import ConfigResult
+    from benchmarks.cli.loss import _print_report
+    from benchmarks.loss import ConfigResult
 
     due, produced, recv = _records(60.0, 2.0)
     stream = measure_stream(
@@ -147,7 +147,7 @@ def _leftovers() -> list[Path]:
 
 
 def _check_config(c: object, seconds: float) -> None:
-    from redrive.benchmarks.loss import ConfigResult
+    from benchmarks.loss import ConfigResult
 
     assert isinstance(c, ConfigResult)
     assert c.error is None, c.error

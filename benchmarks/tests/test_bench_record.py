@@ -1,4 +1,4 @@
-"""`redrive bench record`: its arithmetic on fixed numbers, the CPU of a real process tree, and one
+"""`python -m benchmarks record`: its arithmetic on fixed numbers, the CPU of a real process tree, and one
 short run against `rosbag record` whose numbers are those of the files it wrote (no timing asserts:
 the targets are checked by the benchmark, BENCHMARKS.md)."""
 
@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from redrive.benchmarks.record import (
+from benchmarks.record import (
     KITTI_BAG,
     RecordResult,
     TopicCount,

@@ -1,16 +1,15 @@
-"""``redrive bench serve``: its arithmetic, and (slow) one whole run on the 1-s log — every
+"""``python -m benchmarks serve``: its arithmetic, and (slow) one whole run on the 1-s log — every
 channel's count is what the stream holds, and what arrived is no more than that."""
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
 
 import pytest
 
-from redrive.benchmarks import cli as bench
-from redrive.benchmarks.serve import ChannelCount, ServeBenchResult
+from benchmarks.cli import build_parser
+from benchmarks.serve import ChannelCount, ServeBenchResult
 
 
 def _result(*channels: ChannelCount) -> ServeBenchResult:
@@ -58,9 +57,7 @@ def test_dropped_frames_count_the_cloud_and_image_channels_only() -> None:
 def test_bench_serve_of_a_short_log(short_log: Path, capsys: pytest.CaptureFixture[str]) -> None:
     from redrive.interop.stream import open_scene_stream
 
-    parser = argparse.ArgumentParser(prog="redrive")
-    bench.register(parser.add_subparsers(dest="command"))
-    args = parser.parse_args(["bench", "serve", "--log", str(short_log), "--rate", "4", "--json"])
+    args = build_parser().parse_args(["serve", "--log", str(short_log), "--rate", "4", "--json"])
     assert args.func(args) == 0
     out = json.loads(capsys.readouterr().out)
     with open_scene_stream(short_log) as stream:

@@ -1,4 +1,4 @@
-"""`redrive bench all`: each benchmark's outcome becomes a row of one markdown table (run here
+"""`python -m benchmarks all`: each benchmark's outcome becomes a row of one markdown table (run here
 with a stand-in for the child processes: the benchmarks themselves are not run)."""
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ from typing import Any
 
 import pytest
 
-from redrive.benchmarks.suite import SUITE, SuiteEntry, run_suite, summary_markdown
-from redrive.cli.main import main
+from benchmarks.cli import main
+from benchmarks.suite import SUITE, SuiteEntry, run_suite, summary_markdown
 
 _ENGINE_JSON = {
     "engine": {
@@ -33,7 +33,7 @@ _EVAL_JSON = {
 
 def _fake(outcomes: dict[str, Any]) -> Any:
     def run(cmd: list[str], **kwargs: Any) -> subprocess.CompletedProcess[str]:
-        name = cmd[cmd.index("bench") + 1]
+        name = cmd[cmd.index("bench" if "redrive" in cmd else "benchmarks") + 1]
         outcome = outcomes[name]
         if outcome == "timeout":
             raise subprocess.TimeoutExpired(cmd, kwargs["timeout"])
@@ -45,7 +45,7 @@ def _fake(outcomes: dict[str, Any]) -> Any:
 
 def test_rows_say_what_each_benchmark_did() -> None:
     entries = [
-        SuiteEntry(name="engine", args=("engine",), why="small", timeout_s=10),
+        SuiteEntry(name="engine", args=("engine",), why="small", timeout_s=10, redrive=True),
         SuiteEntry(name="eval", args=("eval",), why="tiny", timeout_s=10),
         SuiteEntry(name="lidar", args=("lidar",), why="x", timeout_s=10),
         SuiteEntry(name="gui", args=("gui",), why="y", timeout_s=10),
@@ -78,16 +78,21 @@ def test_rows_say_what_each_benchmark_did() -> None:
 
 
 def test_every_suite_entry_parses_with_a_unique_name() -> None:
+    from benchmarks.cli import build_parser as benchmarks_parser
     from redrive.cli.main import build_parser
 
-    parser = build_parser()
+    redrive, benchmarks = build_parser(), benchmarks_parser()
     for entry in SUITE:
-        args = parser.parse_args(["bench", *(a.replace("{tmp}", "/t") for a in entry.args)])
+        argv = [a.replace("{tmp}", "/t") for a in entry.args]
+        if entry.redrive:
+            args = redrive.parse_args(["bench", *argv])
+        else:
+            args = benchmarks.parse_args(argv)
         assert callable(args.func), entry.name
     names = [e.name for e in SUITE]
     assert len(set(names)) == len(names)
 
 
 def test_cli_rejects_an_unknown_benchmark(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["bench", "all", "--only", "engine,nope"]) != 0
+    assert main(["all", "--only", "engine,nope"]) != 0
     assert "--only: unknown nope" in capsys.readouterr().err

@@ -1,4 +1,4 @@
-"""``redrive bench gui`` on tiny sizes: it runs, and its JSON has every figure.  No speed is
+"""``python -m benchmarks gui`` on tiny sizes: it runs, and its JSON has every figure.  No speed is
 asserted (a benchmark is not a timed unit test)."""
 
 from __future__ import annotations
@@ -12,15 +12,15 @@ import pytest
 pytest.importorskip("PySide6")
 pytest.importorskip("pyqtgraph")
 
-from redrive.benchmarks.cli.gui import _print_report
-from redrive.benchmarks.gui import bench_gui, bench_log
-from redrive.cli.main import main
+from benchmarks.cli import main
+from benchmarks.cli.gui import _print_report
+from benchmarks.gui import bench_gui, bench_log
 from redrive.io import open_log
 
 
 def test_help_has_examples(capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit) as exit_info:
-        main(["bench", "gui", "--help"])
+        main(["gui", "--help"])
     assert exit_info.value.code == 0
     text = capsys.readouterr().out
     assert "examples:" in text
@@ -41,7 +41,7 @@ def test_bench_log_is_cached_and_readable(tmp_path: Path) -> None:
         assert log.topics["/camera_front/image_raw"].count == 3
 
 
-@pytest.mark.slow  # ~30 s: the whole `redrive bench gui`; `make bench` runs it
+@pytest.mark.slow  # ~30 s: the whole `python -m benchmarks gui`; `make bench` runs it
 def test_bench_gui_json(qapp: Any, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     del qapp  # pytest-qt's QApplication; bench_gui uses it
     lines: list[str] = []
