@@ -105,7 +105,7 @@ def _build_toggle(where: Path) -> None:
 
 def _role_main(args: argparse.Namespace) -> None:
     from redrive.benchmarks.transport.payload import END_SEQ, CellConfig, _Tally
-    from redrive.benchmarks.transport.sides import SIDES
+    from benchmarks.transport_peers import SIDES
 
     spec = SIDES[args.side]
     cfg = CellConfig(
