@@ -102,7 +102,7 @@ def _print_spread(spreads: Any, repeats: int, console: Any) -> None:
 def add_engine_parser(bench_sub: Any) -> None:
     engine = bench_sub.add_parser(
         "engine",
-        help="engine throughput and cost per frame against a bare loop; reference pipeline",
+        help="engine throughput and cost per frame against a bare loop",
         description=_DESCRIPTION,
         epilog=(
             "examples:\n  redrive bench engine\n  redrive bench engine --repeat 5 --frames 2000\n"
