@@ -106,10 +106,11 @@ gui: $(VENV)/.installed
 	@test -f $(DEMO_DIR)/urban.mcap || $(BIN)/redrive synth urban --duration 20 -o $(DEMO_DIR)/urban.mcap
 	$(BIN)/redrive gui $$( [ -d $(DEMO_DIR)/run ] && echo $(DEMO_DIR)/run || echo $(DEMO_DIR)/urban.mcap )
 
-## bench: every benchmark once in a small configuration (under 15 minutes; `redrive bench all
-## --help` lists them), one markdown summary table in bench-summary.md
+## bench: every benchmark once in a small configuration (under 15 minutes): `redrive bench engine`
+## and `closed-loop`, and benchmarks/ at the root (peers, soak, fleet, GUI, …; `PYTHONPATH=src
+## python -m benchmarks all --help` lists the set), one markdown summary table in bench-summary.md
 bench: $(VENV)/.installed-test
-	$(BIN)/redrive bench all --out bench-summary.md
+	PYTHONPATH=src $(BIN)/python -m benchmarks all --out bench-summary.md
 
 bench-read: $(VENV)/.installed
 	$(BIN)/redrive bench read --help

@@ -1,6 +1,6 @@
 """Where a local batch cell's time goes: what the local executor's forkserver does (import
 ``redrive.batch.preload`` and ``redrive.batch.cell``), then a fork that runs one open-loop cell
-of a 0.2-s demo bag (2 frames; ``redrive bench batch``'s "empty-ish" cell) — under cProfile
+of a 0.2-s demo bag (2 frames; ``python -m benchmarks batch``'s "empty-ish" cell) — under cProfile
 (``--profile``, the top entries by cumulative time) or timed (thread CPU and wall of the cell in
 the fork, and of a second cell in the same fork: what a warm process would pay).
 

@@ -1,8 +1,8 @@
 """Run the LiDAR / camera simulation benchmark recorded in BENCHMARKS.md, several times.
 
-    .venv/bin/python benchmarks/bench_lidar.py [--runs 5] [--scans 100] [--json]
+    PYTHONPATH=src .venv/bin/python -m benchmarks.bench_lidar [--runs 5] [--scans 100] [--json]
 
-Runs ``redrive.benchmarks.lidar.bench_lidar`` (the code behind ``redrive bench lidar``) ``--runs``
+Runs ``benchmarks.lidar.bench_lidar`` (the code behind ``python -m benchmarks lidar``) ``--runs``
 times, each in this process and pinned to one core, and prints one line per run plus the
 median; the machine is shared, so single runs vary.  Open3D is the baseline when importable.
 """
@@ -13,7 +13,7 @@ import argparse
 import json
 import statistics
 
-from redrive.benchmarks.lidar import LidarBenchResult, bench_lidar
+from benchmarks.lidar import LidarBenchResult, bench_lidar
 
 
 def _line(i: int, r: LidarBenchResult) -> str:

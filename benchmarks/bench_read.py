@@ -1,6 +1,6 @@
 """Run the read benchmarks recorded in BENCHMARKS.md and print one summary line per case.
 
-    .venv/bin/python benchmarks/bench_read.py [--big] [--scratch /tmp] [--json-dir DIR]
+    PYTHONPATH=src .venv/bin/python -m benchmarks.bench_read [--big] [--scratch /tmp] [--json-dir DIR]
 
 Runs ``redrive.benchmarks.read.bench_read`` (the code behind ``redrive bench read``) on the real bags
 in ../shared/data (when present) and on synthetic bags written to ``--scratch`` and deleted
@@ -15,8 +15,8 @@ import json
 import tempfile
 from pathlib import Path
 
+from benchmarks.synth_log import Layout, write_synthetic_bag
 from redrive.benchmarks.read import TUNED_MALLOC_ENV, ReadBenchResult, bench_read
-from redrive.benchmarks.synth_log import Layout, write_synthetic_bag
 
 _SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 _REAL = (

@@ -1,23 +1,24 @@
 #!/bin/bash
 # The quiet-machine script of BENCHMARKS.md: every speed target of issues 15, 16 and 20 once.
 # Run from the repository root: O=DIR [SRC=tree/src] [FULL=1] [DATA=DIR] bash benchmarks/quiet_run.sh
-# (FULL=1 adds the whole transport set and `bench batch --repeat 2`). Logs with load and steal
+# (FULL=1 adds the whole transport set, peers included, and `python -m benchmarks batch --repeat 2`). Logs with load and steal
 # ticks go to DIR/log; the bags and the demo log are written once into DATA.
 set -u
 O=${O:?set O}; mkdir -p "$O"
 PY=${PY:-.venv/bin/python}
-export PYTHONPATH=${SRC:-src}
+export PYTHONPATH=${SRC:-src}:.  # the tree measured, then benchmarks/ (python -m benchmarks)
 steal() { awk '/^cpu /{print "steal ticks", $9}' /proc/stat; }
 log() { echo "== $(date -u +%T) load $(cut -d' ' -f1-3 /proc/loadavg) $(steal) :: $*" | tee -a "$O/log"; }
 D=${DATA:-/tmp/redrive-quiet}; mkdir -p $D
 [ -f $D/urban.mcap ] || $PY -m redrive synth urban --duration 20 -o $D/urban.mcap > /dev/null
+# the bags: written once by `python -m benchmarks read-synth` (one pass each, output discarded)
 for n in 200 2000; do
-  if [ -f $D/p$n.bag ]; then a=""; else a="--synth 0.1 --points $n"; fi
-  log "read $n"; $PY -m redrive bench read $a $D/p$n.bag --repeat 5 --tune-malloc --json > $O/read$n.json 2> $O/read$n.err
+  [ -f $D/p$n.bag ] || $PY -m benchmarks read-synth 0.1 --points $n --repeat 1 $D/p$n.bag > /dev/null 2>&1
+  log "read $n"; $PY -m redrive bench read $D/p$n.bag --repeat 5 --tune-malloc --json > $O/read$n.json 2> $O/read$n.err
 done
-if [ -f $D/xyzi.bag ]; then a=""; else a="--synth 0.32 --layout xyzi"; fi
-log "read xyzi"; $PY -m redrive bench read $a $D/xyzi.bag --repeat 5 --tune-malloc --json > $O/readxyzi.json 2> $O/readxyzi.err
-log transport; $PY -m redrive bench transport --sizes 64K,1M,4M --sides redrive-inplace,iceoryx2 --repeat 3 --no-paced --no-memcpy > $O/transport.txt 2>&1
+[ -f $D/xyzi.bag ] || $PY -m benchmarks read-synth 0.32 --layout xyzi --repeat 1 $D/xyzi.bag > /dev/null 2>&1
+log "read xyzi"; $PY -m redrive bench read $D/xyzi.bag --repeat 5 --tune-malloc --json > $O/readxyzi.json 2> $O/readxyzi.err
+log transport; $PY -m benchmarks transport --sizes 64K,1M,4M --sides redrive-inplace,iceoryx2 --repeat 3 --no-paced --no-memcpy > $O/transport.txt 2>&1
 log engine; $PY -m redrive bench engine --repeat 5 > $O/engine.txt 2>&1
 for m in sequential sequential pipelined pipelined; do
   log "run $m"; rm -rf $O/run; $PY -m redrive run $D/urban.mcap --out $O/run --mode $m > $O/run-$m.txt 2>&1; grep -i "real time\|×" $O/run-$m.txt | tail -2 >> $O/log
@@ -26,7 +27,7 @@ log closed-loop; $PY -m redrive bench closed-loop --repeat 3 > $O/closed.txt 2>&
 log sensor; $PY -m redrive bench closed-loop --level sensor --repeat 1 > $O/sensor.txt 2>&1
 log "done main set"
 if [ "${FULL:-0}" = 1 ]; then
-  log "transport full"; $PY -m redrive bench transport > $O/transport-full.txt 2>&1
-  log batch; $PY -m redrive bench batch --repeat 2 > $O/batch.txt 2>&1
+  log "transport full"; $PY -m benchmarks transport > $O/transport-full.txt 2>&1
+  log batch; $PY -m benchmarks batch --repeat 2 > $O/batch.txt 2>&1
   log "done full"
 fi

@@ -23,10 +23,15 @@ import sys
 import tempfile
 from pathlib import Path
 
+# a tree with the peers outside its package (catalogue=) runs iceoryx2 from this repository's
+# benchmarks/transport_peers.py; an older tree has every side in its own package
 _CELL = """
-import json, sys
+import inspect, json, sys
 from redrive.benchmarks.transport.cell import run_cell
-r = run_cell(sys.argv[1], int(sys.argv[2]), seconds=float(sys.argv[3]))
+kw = {}
+if "catalogue" in inspect.signature(run_cell).parameters:
+    kw["catalogue"] = "benchmarks.transport_peers"
+r = run_cell(sys.argv[1], int(sys.argv[2]), seconds=float(sys.argv[3]), **kw)
 print(json.dumps({"gb_per_s": r.gb_per_s, "sent": r.sent, "received": r.received,
                   "lost": r.lost, "corrupt": r.corrupt}))
 """
@@ -40,7 +45,8 @@ def _size(text: str) -> int:
 
 
 def _cell(src: str, side: str, size: int, seconds: float, perf: bool) -> dict[str, float]:
-    env = {**os.environ, "PYTHONPATH": src}
+    root = str(Path(__file__).resolve().parents[1])  # benchmarks/ for the peers
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([src, root])}
     cmd = [sys.executable, "-c", _CELL, side, str(size), str(seconds)]
     with tempfile.NamedTemporaryFile(suffix=".perf", delete=False) as tmp:
         out = tmp.name

@@ -1,5 +1,6 @@
-"""redrive bench transport: tiny runs of every installed side deliver exactly what was sent (every
-byte compared); the result types, targets and CLI. No timing is asserted."""
+"""redrive bench transport: tiny runs of every side deliver exactly what was sent (every byte
+compared); the result types, targets and CLI. No timing is asserted.  (The peers' sides:
+benchmarks/tests/test_transport_peers.py.)"""
 
 from __future__ import annotations
 
@@ -7,9 +8,6 @@ import argparse
 import dataclasses
 import json
 import math
-import shutil
-from collections.abc import Iterator
-from pathlib import Path
 
 import pytest
 
@@ -33,23 +31,6 @@ from redrive.benchmarks.transport import (
 from redrive.errors import TransportError
 
 SIZE = 64 << 10
-IOX2_ROOT = Path("/tmp/iceoryx2")  # iceoryx2's default root for node and service files
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _no_iceoryx2_leftovers() -> Iterator[None]:
-    """iceoryx2 keeps a global management segment in /dev/shm (and /tmp/iceoryx2) after its last
-    node is gone; remove what these tests created when no iceoryx2 node is alive any more."""
-    shm = Path("/dev/shm")
-    before = set(shm.glob("iox2_*"))
-    root_existed = IOX2_ROOT.exists()
-    yield
-    if any((IOX2_ROOT / "nodes").glob("*")):
-        return  # someone's iceoryx2 node is alive: leave its files alone
-    for path in set(shm.glob("iox2_*")) - before:
-        path.unlink(missing_ok=True)
-    if not root_existed:
-        shutil.rmtree(IOX2_ROOT, ignore_errors=True)
 
 
 def _needs(side: str) -> None:

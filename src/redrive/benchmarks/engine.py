@@ -46,9 +46,7 @@ __all__ = [
     "SEQUENTIAL_TARGET",
     "WRITER_TARGET_US",
     "EngineBenchResult",
-    "PipelineBenchResult",
     "bench_engine",
-    "bench_reference_pipeline",
     "calibrate_work",
 ]
 
@@ -390,66 +388,4 @@ def bench_engine(
         noop_engine_cpu_s=med["noop_engine_cpu"],
         writer_cpu_s=med.get("writer_cpu"),
         passes=passes,
-    )
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class PipelineBenchResult:
-    """The reference pipeline on a log: one run per mode."""
-
-    log: str
-    frames: int
-    log_span_s: float
-    frames_per_s: Mapping[str, float]
-    realtime_factor: Mapping[str, float]
-    stage_ms: Mapping[str, Mapping[str, float]]  # mode → algorithm → mean step ms
-
-    def to_json(self) -> dict[str, Any]:
-        return {
-            "log": self.log,
-            "frames": self.frames,
-            "log_span_s": self.log_span_s,
-            "frames_per_s": dict(self.frames_per_s),
-            "realtime_factor": dict(self.realtime_factor),
-            "stage_ms": {k: dict(v) for k, v in self.stage_ms.items()},
-        }
-
-
-def bench_reference_pipeline(
-    log: Path,
-    *,
-    modes: tuple[tuple[str, str], ...] = (
-        ("sequential", "threads"),
-        ("pipelined", "threads"),
-        ("pipelined", "processes"),
-    ),
-    progress: Callable[[str], None] | None = None,
-) -> PipelineBenchResult:
-    """Replay ``log`` through the reference pipeline once per (mode, executor), results written
-    to a temporary run directory as ``redrive run`` does."""
-    from redrive.config import reference_pipeline
-    from redrive.engine import RunRequest, run_log
-
-    fps: dict[str, float] = {}
-    rtf: dict[str, float] = {}
-    stage_ms: dict[str, dict[str, float]] = {}
-    frames, span = 0, 0.0
-    with tempfile.TemporaryDirectory(prefix="redrive-bench-pipeline-") as tmp:
-        for mode, executor in modes:
-            key = f"{mode}/{executor}"
-            if progress is not None:
-                progress(key)
-            pipeline = reference_pipeline().with_options(mode=mode, executor=executor)
-            report = run_log(RunRequest(log=log, pipeline=pipeline, out=Path(tmp) / key))
-            fps[key] = report.frames_per_s
-            rtf[key] = report.realtime_factor
-            stage_ms[key] = {a.name: a.latency_mean_ms for a in report.algorithms}
-            frames, span = report.frames, report.log_span_s
-    return PipelineBenchResult(
-        log=str(log),
-        frames=frames,
-        log_span_s=span,
-        frames_per_s=fps,
-        realtime_factor=rtf,
-        stage_ms=stage_ms,
     )

@@ -10,6 +10,8 @@ import statistics
 from dataclasses import dataclass
 from typing import Any
 
+from redrive.benchmarks._json import fields_json
+
 __all__ = ["Spread"]
 
 
@@ -48,13 +50,4 @@ class Spread:
         return m <= self.bound if self.at_most else m >= self.bound
 
     def to_json(self) -> dict[str, Any]:
-        return {
-            "name": self.name,
-            "bound": self.bound,
-            "at_most": self.at_most,
-            "values": list(self.values),
-            "min": self.min,
-            "median": self.median,
-            "max": self.max,
-            "met": self.met,
-        }
+        return fields_json(self, min=self.min, median=self.median, max=self.max, met=self.met)

@@ -1,7 +1,7 @@
 """The desktop GUI (layer L6): ``redrive gui [LOG_OR_RUN]``.
 
 PySide6 + pyqtgraph (+ PyOpenGL for the 3D planview).  This is the only package that imports Qt
-(with :mod:`redrive.benchmarks.gui`, which measures it); install it with
+(with the repository's benchmarks/gui, which measures it); install it with
 ``pip install 'redrive[gui]'``.  Nothing here blocks the GUI thread: logs are decoded, algorithms
 run and runs are evaluated in worker threads.
 """

@@ -1,9 +1,8 @@
-"""``redrive bench engine`` — the engine against a bare loop; the reference pipeline on a log."""
+"""``redrive bench engine`` — the engine against a bare loop."""
 
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 from typing import Any
 
 from redrive.benchmarks.cli._console import print_json, report_console, spinner
@@ -20,8 +19,8 @@ sequential, >= 1.5 pipelined on 2 cores). With no-op stages, the engine's own co
 writer of the whole process, whose pool threads write the Parquet parts (a loaded machine
 inflates wall time far more). Every variant runs once per pass, passes interleaved; the figures
 are medians, and with --repeat N > 1 a table gives each target's min / median / max over the
-N passes (verdict on the median).
-With --log, also the reference pipeline on that log in each mode: frames/s and real-time factor.
+N passes (verdict on the median). (The reference pipeline on a log of yours: `redrive run LOG
+--mode sequential|pipelined` reports its frames/s and real-time factor.)
 """
 
 
@@ -35,7 +34,6 @@ def _run_engine(args: argparse.Namespace) -> int:
         PIPELINED_TARGET,
         SEQUENTIAL_TARGET,
         bench_engine,
-        bench_reference_pipeline,
     )
     from redrive.errors import ConfigError
 
@@ -46,12 +44,8 @@ def _run_engine(args: argparse.Namespace) -> int:
         result = bench_engine(
             frames=args.frames, work_ms=args.work_ms, repeats=args.repeat, progress=progress
         )
-        pipeline = bench_reference_pipeline(args.log, progress=progress) if args.log else None
     if args.json:
-        out: dict[str, Any] = {"engine": result.to_json()}
-        if pipeline is not None:
-            out["reference_pipeline"] = pipeline.to_json()
-        print_json(out)
+        print_json({"engine": result.to_json()})
         return 0
     console = report_console()
     console.print(
@@ -84,18 +78,6 @@ def _run_engine(args: argparse.Namespace) -> int:
     )
     if args.repeat > 1:
         _print_spread(result.spreads(), args.repeat, console)
-    if pipeline is not None:
-        console.print(
-            f"[bold]reference pipeline[/] on {pipeline.log}: {pipeline.frames} frames, "
-            f"{pipeline.log_span_s:.1f} s of log"
-        )
-        for key, fps in pipeline.frames_per_s.items():
-            rtf = pipeline.realtime_factor[key]
-            stages = ", ".join(f"{k} {v:.1f}" for k, v in pipeline.stage_ms[key].items())
-            console.print(
-                f"  {key:22s} {fps:6.1f} frames/s = {rtf:5.1f}x real time "
-                f"{_verdict(rtf >= 10.0)} 10x  (mean ms: {stages})"
-            )
     return 0
 
 
@@ -120,11 +102,11 @@ def _print_spread(spreads: Any, repeats: int, console: Any) -> None:
 def add_engine_parser(bench_sub: Any) -> None:
     engine = bench_sub.add_parser(
         "engine",
-        help="engine throughput and cost per frame against a bare loop; reference pipeline",
+        help="engine throughput and cost per frame against a bare loop",
         description=_DESCRIPTION,
         epilog=(
             "examples:\n  redrive bench engine\n  redrive bench engine --repeat 5 --frames 2000\n"
-            "  redrive bench engine --log .demo/urban.mcap --json"
+            "  redrive bench engine --json"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -140,9 +122,6 @@ def add_engine_parser(bench_sub: Any) -> None:
         default=5,
         metavar="N",
         help="interleaved passes per variant; medians, and min/median/max when N > 1 (default 5)",
-    )
-    engine.add_argument(
-        "--log", type=Path, metavar="LOG", help="also run the reference pipeline on LOG"
     )
     engine.add_argument("--json", action="store_true", help="print JSON instead of text")
     engine.set_defaults(func=_run_engine)

@@ -8,14 +8,13 @@ from typing import Any
 
 from redrive.benchmarks.cli._console import print_json, report_console, spinner
 
-__all__ = ["EPILOG", "add_read_parser"]
+__all__ = ["EPILOG", "add_read_arguments", "add_read_parser", "run_read"]
 
 EPILOG = """\
 examples:
   redrive bench read drive.bag                       all PointCloud2 topics, 3 repeats
   redrive bench read drive.bag --topic /velodyne_points --repeat 5 --json
-  redrive bench read --synth 2 /tmp/big.bag          write a 2 GB bag of 100k-point sweeps, bench it
-  redrive bench read --synth 0.3 --compression lz4 --points 50000 /tmp/small.bag
+  redrive bench read recording.mcap --tune-malloc    multi-MB clouds: no allocator page faults
 
 Every pass runs in a fresh Python process (so peak RSS is per pass); the page cache is warmed by
 reading the log once first. Only the message loop is timed: imports and redrive's once-a-process
@@ -27,8 +26,8 @@ _READ_DESCRIPTION = """\
 Time reading every sensor_msgs/PointCloud2 message of a log two ways, in the same run: raw
 (rosbags for ROS 1 / ROS 2 bags, mcap for .mcap files, no deserialisation) and redrive (open_log +
 decode to a PointCloud). Prints messages/s, MB/s of payload, the redrive/raw ratio and the peak
-resident memory of each pass. With --synth, first write a synthetic ROS 1 bag of LiDAR sweeps to
-LOG (streamed: bounded memory whatever its size) and benchmark that.
+resident memory of each pass. (A synthetic bag of any size to run it on:
+`PYTHONPATH=src python -m benchmarks read-synth SIZE_GB OUT.bag` in a checkout.)
 """
 
 
@@ -98,15 +97,13 @@ def _print_report(result: Any, *, synth: Any | None) -> None:
     )
 
 
-def _run_read(args: argparse.Namespace) -> int:
-    from rich.console import Console
-
+def run_read(
+    args: argparse.Namespace, *, synth: Any | None = None, synth_json: dict[str, Any] | None = None
+) -> int:
+    """Benchmark ``args.log`` and print the report or JSON; ``synth``: the synthetic log it was
+    written as (``python -m benchmarks read-synth``), shown and put in the JSON as ``synth_json``."""
     from redrive.benchmarks.read import TUNED_MALLOC_ENV, bench_read
 
-    status = Console(stderr=True)
-    synth = None
-    if args.synth is not None:
-        synth = _write_synth(args, status)
     with spinner() as progress:
         result = bench_read(
             args.log,
@@ -118,66 +115,16 @@ def _run_read(args: argparse.Namespace) -> int:
         )
     if args.json:
         out = result.to_json()
-        if synth is not None:
-            out["synthetic"] = {
-                "messages": synth.messages,
-                "points_per_message": synth.points_per_message,
-                "payload_bytes": synth.payload_bytes,
-                "layout": args.layout,
-                "compression": args.compression,
-            }
+        if synth_json is not None:
+            out["synthetic"] = synth_json
         print_json(out)
     else:
         _print_report(result, synth=synth)
     return 0
 
 
-def _write_synth(args: argparse.Namespace, status: Any) -> Any:
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-
-    from redrive.benchmarks.synth_log import write_synthetic_bag
-    from redrive.errors import LogError
-
-    if args.synth <= 0:
-        msg = f"--synth takes a size in GB greater than 0, not {args.synth}"
-        raise LogError(msg)
-    with Progress(
-        TextColumn(f"[bold]writing {args.log}"),
-        BarColumn(),
-        TextColumn("{task.completed}/{task.total} messages"),
-        TimeElapsedColumn(),
-        console=status,
-        transient=True,
-    ) as bar:
-        task = bar.add_task("synth", total=None)
-
-        def progress(done: int, total: int) -> None:
-            bar.update(task, completed=done, total=total)
-
-        return write_synthetic_bag(
-            args.log,
-            size_bytes=round(args.synth * 1e9),
-            points=args.points,
-            layout=args.layout,
-            compression=args.compression,
-            progress=progress,
-        )
-
-
-def add_read_parser(bench_sub: Any) -> None:
-    read = bench_sub.add_parser(
-        "read",
-        help="read + decode PointCloud2 messages against a raw rosbags/mcap read",
-        description=_READ_DESCRIPTION,
-        epilog=EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    read.add_argument(
-        "log",
-        type=Path,
-        metavar="LOG",
-        help="a .bag, .mcap or ROS 2 bag directory; with --synth, the new .bag to write",
-    )
+def add_read_arguments(read: Any) -> None:
+    """The options of a read benchmark (``redrive bench read`` and ``read-synth``)."""
     read.add_argument(
         "--topic",
         action="append",
@@ -200,28 +147,16 @@ def add_read_parser(bench_sub: Any) -> None:
         help="run both passes with glibc MALLOC_MMAP_THRESHOLD_=64MiB, MALLOC_TRIM_THRESHOLD_=256MiB "
         "(no page-fault churn on multi-MB messages: measures CPU work, not the allocator)",
     )
-    synth = read.add_argument_group("synthetic log")
-    synth.add_argument(
-        "--synth",
-        type=float,
-        default=None,
-        metavar="SIZE_GB",
-        help="write a ROS 1 bag of about SIZE_GB GB (10⁹ bytes) of PointCloud2 to LOG first",
+
+
+def add_read_parser(bench_sub: Any) -> None:
+    read = bench_sub.add_parser(
+        "read",
+        help="read + decode PointCloud2 messages against a raw rosbags/mcap read",
+        description=_READ_DESCRIPTION,
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    synth.add_argument(
-        "--points", type=int, default=100_000, metavar="N", help="points per sweep (default 100000)"
-    )
-    synth.add_argument(
-        "--compression",
-        choices=("none", "lz4", "bz2"),
-        default="none",
-        help="chunk compression of the synthetic bag (default none)",
-    )
-    synth.add_argument(
-        "--layout",
-        choices=("velodyne", "xyzi"),
-        default="velodyne",
-        help="velodyne: x,y,z,intensity f32 + ring u16 + time f64, 32 B/point (default); "
-        "xyzi: 16 B/point",
-    )
-    read.set_defaults(func=_run_read)
+    read.add_argument("log", type=Path, metavar="LOG", help="a .bag, .mcap or ROS 2 bag directory")
+    add_read_arguments(read)
+    read.set_defaults(func=run_read)

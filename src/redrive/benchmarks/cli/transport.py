@@ -1,5 +1,5 @@
-"""``redrive bench transport`` — redrive's shared-memory channel against other ways of moving
-large messages between two processes, and against memcpy."""
+"""``redrive bench transport`` — redrive's shared-memory channel against pipe + pickle and against
+memcpy, between two processes (``python -m benchmarks transport`` adds the peers)."""
 
 from __future__ import annotations
 
@@ -9,32 +9,29 @@ from typing import Any
 
 from redrive.benchmarks.cli._console import print_json, report_console, spinner
 
-__all__ = ["add_transport_parser"]
+__all__ = ["DESCRIPTION", "add_transport_parser"]
 
-_DESCRIPTION = """\
-Move messages of each size between two fresh processes (multiprocessing spawn) with every
-transport side: redrive's channel copy-out (Writer.publish -> Reader.read) and in place
-(Writer.loan -> Reader.view), pipe + pickle (the legacy path), multiprocessing.Queue, ZeroMQ ipc
-with copy=False, eCAL shared memory (default settings: lossy, no back-pressure) and iceoryx2 (in
-place), each run flat out (throughput the subscriber received, after a 10 % warm-up) and paced
-(one-way latency p50/p99 from a CLOCK_MONOTONIC stamp in the payload). Every subscriber checks the
-header and sums one byte per 4 KiB page; copy sides do it on the copy they were handed, in-place
-sides on the shared memory. Also single-thread np.copyto, cache-hot and from memory (256 MiB pools).
-Sides whose package is missing show "not installed". Targets (issues 6, 20): redrive in place
->= 1.0x iceoryx2 at 64 KiB, 1 and 4 MiB; >= 10x pipe + pickle at 4 MiB; >= 50 % of the
-from-memory copy at 16 MiB; paced 4 MiB p99 <= 2 ms. --repeat N runs the whole set N times,
-interleaved (every side at every size once per repetition), and prints min / median / max of each
-target's ratio over the repetitions, judged on the median.
+DESCRIPTION = """\
+Move messages of each size between two fresh processes (multiprocessing spawn) with each transport
+side: redrive's channel copy-out (Writer.publish -> Reader.read) and in place (Writer.loan ->
+Reader.view), and pipe + pickle (the legacy path), each run flat out (throughput the subscriber
+received, after a 10 % warm-up) and paced (one-way latency p50/p99 from a CLOCK_MONOTONIC stamp in
+the payload). Every subscriber checks the header and sums one byte per 4 KiB page; copy sides do
+it on the copy they were handed, in-place sides on the shared memory. Also single-thread
+np.copyto, cache-hot and from memory (256 MiB pools): the ceiling of any copy on this machine.
+Targets (issue 6): >= 10x pipe + pickle at 4 MiB; >= 50 % of the from-memory copy at 16 MiB; paced
+4 MiB p99 <= 2 ms. --repeat N runs the whole set N times, interleaved (every side at every size
+once per repetition), and prints min / median / max of each target's ratio over the repetitions,
+judged on the median. (Against ZeroMQ, eCAL and iceoryx2: `PYTHONPATH=src python -m benchmarks
+transport` in a checkout, benchmarks/README.md.)
 """
 
 _EPILOG = """\
 examples:
   redrive bench transport                                   every side, 64K 1M 4M 16M, 2 s a run
-  redrive bench transport --sizes 4M --sides redrive-inplace,iceoryx2 --seconds 5
+  redrive bench transport --sizes 4M --sides redrive-inplace,pipe-pickle --seconds 5
   redrive bench transport --json > transport.json
-  redrive bench transport --sizes 64K,1M,4M --sides redrive-inplace,iceoryx2 --repeat 3 --no-paced
-
-sides: redrive-copy, redrive-inplace, pipe-pickle, mp-queue, zmq, ecal, iceoryx2
+  redrive bench transport --sizes 64K,1M,4M --repeat 3 --no-paced
 """
 
 
@@ -54,10 +51,10 @@ def _loss(sent: int, lost: int) -> str:
     return "0" if lost == 0 else f"{lost} ({100 * lost / sent:.0f} %)"
 
 
-def _print_report(result: Any) -> None:
+def _print_report(result: Any, SIDES: Any) -> None:
     from rich.table import Table
 
-    from redrive.benchmarks.transport import SIDES, size_label
+    from redrive.benchmarks.transport import size_label
 
     console = report_console(140)
     m = result.machine
@@ -129,7 +126,7 @@ def _print_report(result: Any) -> None:
             )
     if not result.targets:
         return
-    targets = Table(title="targets (issue 6)")
+    targets = Table(title="targets (issues 6, 20)")
     for col in ("target", "side", "size", "value", "against", "ratio", "bound", "verdict"):
         targets.add_column(col, justify="left" if col in ("target", "side", "verdict") else "right")
     for t in result.targets:
@@ -148,17 +145,13 @@ def _print_report(result: Any) -> None:
 
 
 def _run_transport(args: argparse.Namespace) -> int:
-    from redrive.benchmarks.transport import (
-        DEFAULT_SIDES,
-        SIDES,
-        bench_transport,
-        parse_size,
-        target_spreads,
-    )
+    from redrive.benchmarks.transport import bench_transport, parse_size, target_spreads
+    from redrive.benchmarks.transport.sides import catalogue_sides
     from redrive.errors import ConfigError
 
+    SIDES = catalogue_sides(args.catalogue)
     sizes = [parse_size(s) for s in args.sizes.split(",") if s.strip()]
-    sides = [s.strip() for s in args.sides.split(",") if s.strip()] if args.sides else DEFAULT_SIDES
+    sides = [s.strip() for s in args.sides.split(",") if s.strip()] if args.sides else list(SIDES)
     unknown = [s for s in sides if s not in SIDES]
     if unknown:
         msg = f"--sides: unknown {', '.join(unknown)} (choose from {', '.join(SIDES)})"
@@ -181,6 +174,7 @@ def _run_transport(args: argparse.Namespace) -> int:
                 bench_transport(
                     sizes,
                     sides=sides,
+                    catalogue=args.catalogue,
                     seconds=args.seconds,
                     paced_hz=args.paced_hz,
                     paced=not args.no_paced,
@@ -204,16 +198,16 @@ def _run_transport(args: argparse.Namespace) -> int:
         )
         print_json(out)
     else:
-        _print_report(results[-1])
+        _print_report(results[-1], SIDES)
         if args.repeat > 1:
-            _print_spread(spreads, len(results))
+            _print_spread(spreads, len(results), SIDES)
     return 1 if corrupt else 0
 
 
-def _print_spread(spreads: Any, repeats: int) -> None:
+def _print_spread(spreads: Any, repeats: int, SIDES: Any) -> None:
     from rich.table import Table
 
-    from redrive.benchmarks.transport import SIDES, size_label
+    from redrive.benchmarks.transport import size_label
 
     table = Table(title=f"targets over {repeats} interleaved repetitions (verdict on the median)")
     for col in ("target", "side", "size", "min", "median", "max", "bound", "verdict"):
@@ -231,13 +225,22 @@ def _print_spread(spreads: Any, repeats: int) -> None:
     report_console(140).print(table)
 
 
-def add_transport_parser(bench_sub: Any) -> None:
+def add_transport_parser(
+    bench_sub: Any,
+    *,
+    catalogue: str = "redrive.benchmarks.transport.sides",
+    help: str = "two-process throughput and latency: redrive's channel, pipe+pickle, memcpy",
+    description: str = DESCRIPTION,
+    epilog: str = _EPILOG,
+) -> None:
+    """``transport`` with the sides of ``catalogue`` (a module with ``SIDES``)."""
+    from redrive.benchmarks.transport.sides import catalogue_sides
+
     parser = bench_sub.add_parser(
         "transport",
-        help="two-process throughput and latency: redrive's channel, pipe+pickle, ZeroMQ, eCAL, "
-        "iceoryx2, memcpy",
-        description=_DESCRIPTION,
-        epilog=_EPILOG,
+        help=help,
+        description=description,
+        epilog=epilog + "\nsides: " + ", ".join(catalogue_sides(catalogue)) + "\n",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument(
@@ -278,4 +281,4 @@ def add_transport_parser(bench_sub: Any) -> None:
         "(default 1)",
     )
     parser.add_argument("--json", action="store_true", help="print JSON instead of tables")
-    parser.set_defaults(func=_run_transport)
+    parser.set_defaults(func=_run_transport, catalogue=catalogue)

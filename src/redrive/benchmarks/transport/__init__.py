@@ -1,26 +1,14 @@
-"""``redrive bench transport``: moving large messages between two processes, every way at hand.
+"""``redrive bench transport``: moving large messages between two processes.
 
 Each *side* is one transport, run as a publisher process and a subscriber process started with
 ``multiprocessing`` ``spawn`` (fresh interpreters, nothing inherited but the arguments):
-
-===================  ==========================================================================
-side                 publisher → subscriber
-===================  ==========================================================================
-``redrive-copy``     :class:`redrive.transport.Writer` ``publish`` (copies in) → ``Reader.read``
-                     (copies out into an owned array: the copy is the receiver's work)
-``redrive-inplace``  ``Writer.loan`` (the payload is written straight into the slot) →
-                     ``Reader.view`` (read-only view into the slot, no copy)
-``pipe-pickle``      ``multiprocessing.Pipe`` ``send(ndarray)`` → ``recv()``: pickle through a
-                     pipe, the legacy path of the paper
-``mp-queue``         ``multiprocessing.Queue(maxsize=4)`` ``put(ndarray)`` → ``get()``
-``zmq``              ZeroMQ PUSH → PULL over ``ipc://``, ``send(copy=False)`` /
-                     ``recv(copy=False)`` (no copy in Python; the kernel copies through the socket)
-``ecal``             eCAL 6 ``Publisher.send(bytes)`` → ``Subscriber`` receive callback, default
-                     configuration (shared memory on one host; *lossy*: no back-pressure)
-``iceoryx2``         iceoryx2 publish-subscribe of ``Slice[c_uint8]``: ``loan_slice_uninit``
-                     (written in place) → ``receive`` (a view into shared memory), one event
-                     notification per message to wake the subscriber
-===================  ==========================================================================
+``redrive-copy`` (:class:`redrive.transport.Writer` ``publish``, copies in → ``Reader.read``, copies
+out into an owned array: the copy is the receiver's work), ``redrive-inplace`` (``Writer.loan``,
+the payload written straight into the slot → ``Reader.view``, a read-only view into the slot) and
+``pipe-pickle`` (``multiprocessing.Pipe`` ``send(ndarray)`` → ``recv()``: pickle through a pipe,
+the legacy path of the paper).  The sides come from a *catalogue*, a module with ``SIDES``
+(:mod:`~redrive.benchmarks.transport.sides`); the repository's ``benchmarks/transport_peers.py``
+is one with ZeroMQ, eCAL, iceoryx2 and ``multiprocessing.Queue`` added.
 
 What every side does per message, so the numbers compare like with like:
 
@@ -29,17 +17,14 @@ What every side does per message, so the numbers compare like with like:
   pattern (``verify=True``: the pattern XOR ``seq % 256``, different in every message).
 - **publisher**: takes the stamp *before* any work on the message, then: copy sides write the
   16-byte header into a preallocated source array and hand it to the transport, which copies or
-  serialises it; in-place sides (``redrive-inplace``, ``iceoryx2``) loan a slot and write the whole
-  payload into it (``np.copyto`` from the preallocated pattern: the one write of ``size`` bytes a
-  copy side's transport does for it), then commit. ``mp-queue`` and ``zmq`` hand over a reference
-  and serialise later, so they rotate over ``slots + 1`` source arrays (``zmq`` also waits on the
-  send tracker before reusing one). eCAL's Python ``send`` takes only ``bytes``: the publisher
-  passes ``array.tobytes()`` (one more copy, which its API imposes).
+  serialises it; in-place sides loan a slot and write the whole payload into it (``np.copyto``
+  from the preallocated pattern: the one write of ``size`` bytes a copy side's transport does for
+  it), then commit.
 - **subscriber** ("consume"): unpacks the header and sums one byte per 4 KiB page
   (``np.add.reduce`` over ``payload[4095::4096]``), compares the sum with the pattern's (a
   mismatch counts as ``corrupt``; ``verify=True`` compares every byte instead), then stamps
-  ``now``. Copy sides do this on the copy the transport delivered (the copy is their work); in-place
-  sides on the shared-memory view. One-way latency is ``now − stamp``.
+  ``now``. Copy sides do this on the copy the transport delivered; in-place sides on the
+  shared-memory view. One-way latency is ``now − stamp``.
 - **flat out**: the publisher sends as fast as the transport takes messages for ``seconds``; the
   lossless sides block when the subscriber is ``slots`` (4) messages behind. Throughput is what the
   subscriber received per second, measured by the subscriber from arrival times after a warm-up
@@ -51,15 +36,9 @@ The memcpy ceiling is single-thread ``np.copyto`` between preallocated, pre-touc
 *cache-hot* (the same two ``size``-byte buffers every time) and *from memory* (source and
 destination rotate over two 256 MiB pools, so every copy reads and writes memory, not cache).
 Sides whose package is not installed are reported so, never left out silently or faked; a side
-that fails reports its error and the others still run.
-
-Set-up details that change the numbers: every side has 4 slots / a queue depth of 4 (redrive
-``slots=4``, iceoryx2 ``subscriber_max_buffer_size(4)``, ZeroMQ high-water marks 4, ``Queue(4)``);
-lossless sides are lossless (redrive ``Policy.LOSSLESS``; iceoryx2 without safe overflow and
-``RetryUntilDelivered``, its publisher created before the subscriber — the other order lost a
-block of samples after the first four in about one run in ten); eCAL's publisher waits until it
-sees the subscriber, plus 0.2 s, and still usually loses the first message. Children are started
-with ``spawn``: a script calling :func:`run_cell` needs the ``if __name__ == "__main__":`` guard.
+that fails reports its error and the others still run.  Every side has 4 slots (redrive
+``slots=4``, ``Policy.LOSSLESS``).  Children are started with ``spawn``: a script calling
+:func:`run_cell` needs the ``if __name__ == "__main__":`` guard.
 """
 
 from __future__ import annotations
@@ -81,7 +60,13 @@ from redrive.benchmarks.transport.run import (
     side_available,
     size_label,
 )
-from redrive.benchmarks.transport.sides import DEFAULT_SIDES, SIDES, SideSpec
+from redrive.benchmarks.transport.sides import (
+    CATALOGUE,
+    DEFAULT_SIDES,
+    SIDES,
+    SideSpec,
+    catalogue_sides,
+)
 from redrive.benchmarks.transport.spread import TargetSpread, target_spreads
 from redrive.benchmarks.transport.targets import (
     INPLACE_VS_ICEORYX2_TARGET,
@@ -92,6 +77,7 @@ from redrive.benchmarks.transport.targets import (
 )
 
 __all__ = [
+    "CATALOGUE",
     "DEFAULT_SIDES",
     "DEFAULT_SIZES",
     "INPLACE_VS_ICEORYX2_TARGET",
@@ -111,6 +97,7 @@ __all__ = [
     "TransportBenchResult",
     "bench_memcpy",
     "bench_transport",
+    "catalogue_sides",
     "check_targets",
     "parse_size",
     "run_cell",

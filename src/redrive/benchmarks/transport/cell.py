@@ -14,7 +14,12 @@ from typing import Any
 
 from redrive.benchmarks.transport.payload import END_SEQ, MIN_SIZE, SLOTS, CellConfig, _Tally
 from redrive.benchmarks.transport.results import RunResult
-from redrive.benchmarks.transport.sides import _CONNECT_TIMEOUT_S, SIDES, SideSpec, _queue_shared
+from redrive.benchmarks.transport.sides import (
+    _CONNECT_TIMEOUT_S,
+    CATALOGUE,
+    SideSpec,
+    catalogue_sides,
+)
 from redrive.errors import TransportError
 
 __all__ = ["run_cell"]
@@ -98,7 +103,7 @@ def _child_main(role: str, side: str, cfg: CellConfig, shared: Any, conn: Any) -
     os.dup2(devnull, 2)
     os.close(devnull)
     try:
-        spec = SIDES[side]
+        spec = catalogue_sides(cfg.catalogue)[side]
         main = _publisher_main if role == "pub" else _receiver_main
         conn.send(("result", main(spec, cfg, shared, conn)))
     except BaseException as err:  # reported to the parent, which owns the error handling
@@ -136,10 +141,12 @@ def run_cell(
     paced_hz: float | None = None,
     verify: bool = False,
     slots: int = SLOTS,
+    catalogue: str = CATALOGUE,
 ) -> RunResult:
-    """One run of ``side`` at ``size_bytes`` (flat out, or paced at ``paced_hz``) in two fresh
-    processes; raises :class:`TransportError` when the side fails."""
-    spec = SIDES[side]
+    """One run of ``side`` (of the module ``catalogue``'s ``SIDES``) at ``size_bytes`` (flat out,
+    or paced at ``paced_hz``) in two fresh processes; raises :class:`TransportError` when the
+    side fails."""
+    spec = catalogue_sides(catalogue)[side]
     if size_bytes < MIN_SIZE:
         msg = f"message size {size_bytes} B is below the {MIN_SIZE} B minimum of the benchmark"
         raise TransportError(msg)
@@ -151,6 +158,7 @@ def run_cell(
         verify=verify,
         endpoint=f"{os.getpid()}-{uuid.uuid4().hex[:10]}",
         slots=slots,
+        catalogue=catalogue,
     )
     ctx = multiprocessing.get_context("spawn")
     shared = spec.make_shared(ctx, cfg) if spec.make_shared is not None else None
@@ -198,8 +206,9 @@ def run_cell(
                 proc.join(5.0)
         for c in (pub_conn, rx_conn, pub_child, rx_child):
             c.close()
-        if spec.make_shared is _queue_shared and shared is not None:
-            shared.close()
+        close_shared = getattr(shared, "close", None)  # a queue; a pipe pair has none
+        if callable(close_shared):
+            close_shared()
         if spec.cleanup is not None:
             try:
                 spec.cleanup(cfg)

@@ -37,6 +37,7 @@ class CellConfig:
     verify: bool
     endpoint: str  # a name unique to this run (segment, socket, topic, service)
     slots: int = SLOTS
+    catalogue: str = "redrive.benchmarks.transport.sides"  # the module the side is looked up in
 
 
 def _pattern(size: int) -> U8:

@@ -8,6 +8,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from redrive.benchmarks._json import fields_json
+
 __all__ = ["CellResult", "MemcpyResult", "RunResult", "TargetCheck", "TransportBenchResult"]
 
 
@@ -38,22 +40,7 @@ class RunResult:
         return self.lost / self.sent if self.sent else 0.0
 
     def to_json(self) -> dict[str, Any]:
-        return {
-            "mode": self.mode,
-            "seconds": self.seconds,
-            "sent": self.sent,
-            "received": self.received,
-            "lost": self.lost,
-            "lost_fraction": self.lost_fraction,
-            "corrupt": self.corrupt,
-            "out_of_order": self.out_of_order,
-            "msgs_per_s": _finite(self.msgs_per_s),
-            "gb_per_s": _finite(self.gb_per_s),
-            "sent_per_s": _finite(self.sent_per_s),
-            "latency_p50_ms": _finite(self.latency_p50_ms),
-            "latency_p99_ms": _finite(self.latency_p99_ms),
-            "latency_max_ms": _finite(self.latency_max_ms),
-        }
+        return fields_json(self, lost=self.lost, lost_fraction=self.lost_fraction)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -68,14 +55,7 @@ class CellResult:
     paced: RunResult | None = None
 
     def to_json(self) -> dict[str, Any]:
-        return {
-            "side": self.side,
-            "size_bytes": self.size_bytes,
-            "status": self.status,
-            "error": self.error,
-            "flat": None if self.flat is None else self.flat.to_json(),
-            "paced": None if self.paced is None else self.paced.to_json(),
-        }
+        return fields_json(self)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -88,12 +68,7 @@ class MemcpyResult:
     pool_bytes: int
 
     def to_json(self) -> dict[str, Any]:
-        return {
-            "size_bytes": self.size_bytes,
-            "hot_gb_per_s": self.hot_gb_per_s,
-            "from_memory_gb_per_s": self.from_memory_gb_per_s,
-            "pool_bytes": self.pool_bytes,
-        }
+        return fields_json(self)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -117,17 +92,7 @@ class TargetCheck:
         return self.value / self.reference
 
     def to_json(self) -> dict[str, Any]:
-        return {
-            "name": self.name,
-            "side": self.side,
-            "size_bytes": self.size_bytes,
-            "value": self.value,
-            "reference": self.reference,
-            "ratio": self.ratio,
-            "target": self.target,
-            "met": self.met,
-            "note": self.note,
-        }
+        return fields_json(self, ratio=self.ratio)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -149,17 +114,7 @@ class TransportBenchResult:
         return None
 
     def to_json(self) -> dict[str, Any]:
-        return {
-            "sizes": list(self.sizes),
-            "seconds": self.seconds,
-            "paced_hz": self.paced_hz,
-            "slots": self.slots,
-            "machine": dict(self.machine),
-            "versions": dict(self.versions),
-            "cells": [c.to_json() for c in self.cells],
-            "memcpy": [m.to_json() for m in self.memcpy],
-            "targets": [t.to_json() for t in self.targets],
-        }
+        return fields_json(self)
 
 
 def _finite(x: float) -> float | None:

@@ -18,7 +18,7 @@ from redrive.benchmarks.transport.cell import run_cell
 from redrive.benchmarks.transport.memcpy import bench_memcpy
 from redrive.benchmarks.transport.payload import MIN_SIZE, SLOTS
 from redrive.benchmarks.transport.results import CellResult, MemcpyResult, TransportBenchResult
-from redrive.benchmarks.transport.sides import DEFAULT_SIDES, SIDES
+from redrive.benchmarks.transport.sides import CATALOGUE, catalogue_sides
 from redrive.benchmarks.transport.targets import check_targets
 from redrive.errors import TransportError
 
@@ -29,17 +29,20 @@ logger = logging.getLogger(__name__)
 DEFAULT_SIZES = (64 << 10, 1 << 20, 4 << 20, 16 << 20)
 
 
-def side_available(side: str) -> bool:
-    module = SIDES[side].module
+def side_available(side: str, catalogue: str = CATALOGUE) -> bool:
+    """Whether the package ``side`` needs imports here."""
+    module = catalogue_sides(catalogue)[side].module
     try:
         return importlib.util.find_spec(module) is not None
     except ModuleNotFoundError:  # a parent package is missing
         return False
 
 
-def _versions() -> dict[str, str]:
+def _versions(packages: Sequence[str]) -> dict[str, str]:
     out = {"python": platform.python_version(), "numpy": np.__version__}
-    for dist in ("pyzmq", "eclipse-ecal", "iceoryx2", "redrive"):
+    for dist in dict.fromkeys([*packages, "redrive"]):
+        if dist.startswith("("):  # "(standard library)"
+            continue
         with contextlib.suppress(importlib.metadata.PackageNotFoundError):
             out[dist] = importlib.metadata.version(dist)
     return out
@@ -67,7 +70,8 @@ def _machine() -> dict[str, str]:
 def bench_transport(
     sizes: Sequence[int] = DEFAULT_SIZES,
     *,
-    sides: Sequence[str] = DEFAULT_SIDES,
+    sides: Sequence[str] | None = None,
+    catalogue: str = CATALOGUE,
     seconds: float = 2.0,
     paced_hz: float = 100.0,
     paced: bool = True,
@@ -75,15 +79,18 @@ def bench_transport(
     verify: bool = False,
     progress: Callable[[str], None] | None = None,
 ) -> TransportBenchResult:
-    """Every side at every size, flat out and paced, plus the memcpy ceiling.
+    """Every side (default: every one of ``catalogue``, a module with ``SIDES``) at every size,
+    flat out and paced, plus the memcpy ceiling.
 
     Each run lasts about ``seconds`` (plus process start-up); a side that is not installed or
     fails is recorded as such and the benchmark goes on.
     """
     say = progress or (lambda _text: None)
-    unknown = [s for s in sides if s not in SIDES]
+    known = catalogue_sides(catalogue)
+    sides = tuple(known) if sides is None else sides
+    unknown = [s for s in sides if s not in known]
     if unknown:
-        msg = f"unknown transport side(s) {', '.join(unknown)}; known: {', '.join(SIDES)}"
+        msg = f"unknown transport side(s) {', '.join(unknown)}; known: {', '.join(known)}"
         raise TransportError(msg)
     for size in sizes:
         if size < MIN_SIZE:
@@ -91,8 +98,8 @@ def bench_transport(
             raise TransportError(msg)
     cells: list[CellResult] = []
     for side in sides:
-        spec = SIDES[side]
-        if not side_available(side):
+        spec = known[side]
+        if not side_available(side, catalogue):
             cells.extend(
                 CellResult(
                     side=side,
@@ -107,11 +114,16 @@ def bench_transport(
             flat_run = paced_run = None
             try:
                 say(f"{spec.label}, {size_label(size)}, flat out")
-                flat_run = run_cell(side, size, seconds=seconds, verify=verify)
+                flat_run = run_cell(side, size, seconds=seconds, verify=verify, catalogue=catalogue)
                 if paced:
                     say(f"{spec.label}, {size_label(size)}, paced at {paced_hz:g} Hz")
                     paced_run = run_cell(
-                        side, size, seconds=seconds, paced_hz=paced_hz, verify=verify
+                        side,
+                        size,
+                        seconds=seconds,
+                        paced_hz=paced_hz,
+                        verify=verify,
+                        catalogue=catalogue,
                     )
             except TransportError as err:
                 logger.warning("%s at %s failed: %s", side, size_label(size), err)
@@ -142,7 +154,7 @@ def bench_transport(
         memcpy=mem,
         targets=(),
         machine=_machine(),
-        versions=_versions(),
+        versions=_versions([known[s].package for s in sides]),
     )
     return TransportBenchResult(
         sizes=partial.sizes,

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
 
 from redrive.benchmarks.spread import Spread
 from redrive.benchmarks.transport.results import TargetCheck, TransportBenchResult
@@ -22,19 +21,6 @@ class TargetSpread(Spread):
     side: str
     size_bytes: int
     target: str
-
-    def to_json(self) -> dict[str, Any]:
-        return {
-            "name": self.name,
-            "side": self.side,
-            "size_bytes": self.size_bytes,
-            "target": self.target,
-            "values": list(self.values),
-            "min": self.min,
-            "median": self.median,
-            "max": self.max,
-            "met": self.met,
-        }
 
 
 def _value(t: TargetCheck) -> float | None:
