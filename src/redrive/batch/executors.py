@@ -81,7 +81,7 @@ def _threads(count: int) -> Iterator[None]:
     """While the forkserver starts: ``count`` threads for OpenMP/OpenBLAS/MKL (variables the
     user set are kept), as Ray does for its workers (``num_cpus``).  Otherwise every cell's
     BLAS would start one thread per core and ``workers`` cells would fight over the cores (2
-    workers were slower than 1 on 2 cores: ``redrive bench batch``)."""
+    workers were slower than 1 on 2 cores: ``python -m benchmarks batch``)."""
     saved = {name: os.environ.get(name) for name in THREAD_VARIABLES}
     for name in THREAD_VARIABLES:
         os.environ.setdefault(name, str(count))

@@ -432,7 +432,7 @@ class MainWindow(QtWidgets.QMainWindow):
         origin = self.time_origin_ns
         assert origin is not None
         self.timeline.show_frame(scene.index, scene.stamp_ns, start_ns=origin)
-        # The plots repaint in passes of their own (``redrive bench gui``: moving their cursor
+        # The plots repaint in passes of their own (``python -m benchmarks gui``: moving their cursor
         # every frame cost 3-4 window updates per frame): coalesce it to ≤ 5 moves a second,
         # always ending on the frame shown.
         self._cursor_stamp = scene.stamp_ns

@@ -4,7 +4,7 @@ ids, the ego vehicle and the planned path.
 The 3D view is pyqtgraph's GL view (orbit: left drag, pan: middle drag or ctrl+left, zoom:
 wheel) as a ``QOpenGLWindow`` in a window container, not a ``QOpenGLWidget``: a window holding a
 ``QOpenGLWidget`` composites *everything* through GL, which under llvmpipe made every repaint of
-the 1600×1000 window cost 28–42 ms (``redrive bench gui``); the native GL window keeps the rest on
+the 1600×1000 window cost 28–42 ms (``python -m benchmarks gui``); the native GL window keeps the rest on
 Qt's raster backing store.  The 2D view is an ``ImageItem`` raster plus line items in a ``PlotWidget`` (pan:
 drag, zoom: wheel) — fast on software GL, where the 3D view is not (NOTES.md: 13–17 FPS at 120k
 points under llvmpipe against 25–36 for the raster).  Both are in base_link: x forward, y left.

@@ -1,5 +1,5 @@
 """Checks made before Qt starts (this module imports no Qt): the ``gui`` extra is installed and
-there is a display.  ``redrive gui`` and ``redrive bench gui`` call them so a missing package or a
+there is a display.  ``redrive gui`` and ``python -m benchmarks gui`` call them so a missing package or a
 headless machine is a clear error instead of an ImportError or Qt aborting the process."""
 
 from __future__ import annotations

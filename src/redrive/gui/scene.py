@@ -132,7 +132,7 @@ class Scene:
 def transform_xyz(mat: npt.NDArray[np.float64], xyz: npt.NDArray[np.float32]) -> Float:
     """``mat`` (3×4 or 4×4; rows used: 3) applied to (N, 3) points, column by column — not a
     matmul: numpy hands N×3 @ 3×3 to OpenBLAS, whose threads then spin on the second core the
-    GUI and the loader need (``redrive bench gui``)."""
+    GUI and the loader need (``python -m benchmarks gui``)."""
     x, y, z = (xyz[:, i].astype(np.float64) for i in range(3))
     out = np.empty((len(xyz), 3), dtype=np.float64)
     for row in range(3):

@@ -1,4 +1,4 @@
-"""A ROS 1 master of our own for the tests and ``redrive bench record``/``record-ros2``.
+"""A ROS 1 master of our own for the tests and ``python -m benchmarks record``/``record-ros2``.
 
 Debian's ROS 1 (``make system-test-deps``) on a free port of 127.0.0.1, with its environment
 (``ROS_MASTER_URI``, ``ROS_HOME`` …) in a folder of the caller's. The master is ``rosmaster
