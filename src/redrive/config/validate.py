@@ -79,7 +79,7 @@ class Table:
 
     # --- messages -----------------------------------------------------------------------------
 
-    def path(self, key: str) -> str:
+    def at(self, key: str) -> str:
         """The dotted path of ``key`` (``agents[0].speed``)."""
         return f"{self.where}.{key}" if self.where else key
 
@@ -100,7 +100,7 @@ class Table:
 
     def fail(self, key: str, problem: str, fix: str) -> ConfigError:
         """A ConfigError about ``key`` of this table (a rule the getters do not know)."""
-        return self._fail_at(self.path(key) if key else self.where, problem, fix)
+        return self._fail_at(self.at(key) if key else self.where, problem, fix)
 
     def wrong(self, key: str, value: Any, expected: str, fix: str | None = None) -> ConfigError:
         """``key`` holds ``value``, which is not ``expected``."""
@@ -273,12 +273,12 @@ class Table:
     def table(self, key: str, default: Any = REQUIRED, *, fix: str | None = None) -> Table:
         """The sub-table ``key`` as a Table (``default``: a mapping used when absent)."""
         data = self.mapping(key, default, fix=fix)
-        return self.child(data, self.path(key))
+        return self.child(data, self.at(key))
 
     def tables(self, key: str, default: Any = REQUIRED, *, fix: str | None = None) -> list[Table]:
         """An array of tables (``[[key]]``), each a Table at ``key[i]``."""
         items = self.value(key, lambda v: isinstance(v, list | tuple), "a list", default, fix=fix)
-        return [self.child(item, f"{self.path(key)}[{i}]") for i, item in enumerate(items)]
+        return [self.child(item, f"{self.at(key)}[{i}]") for i, item in enumerate(items)]
 
     def child(self, data: Any, where: str) -> Table:
         """A Table of the same kind, file and style at ``where``."""
