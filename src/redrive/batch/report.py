@@ -28,6 +28,7 @@ from redrive.errors import ConfigError, RedriveError
 from redrive.evaluation import html as h
 from redrive.evaluation.pooling import rule_text
 from redrive.evaluation.report import write_report
+from redrive.output.atomic import atomic_path, write_atomic
 from redrive.results.evaluation import read_evaluation
 from redrive.results.export import neutralize_cell
 
@@ -98,9 +99,8 @@ def _xlsx(path: Path, sheets: dict[str, Callable[[], Iterator[list[Any]]]]) -> N
         ws = wb.create_sheet(name)
         for row in rows():
             ws.append([cell(x) for x in row])
-    tmp = path.with_name(path.name + ".tmp")
-    wb.save(tmp)
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        wb.save(tmp)
 
 
 def write_batch_report(
@@ -300,9 +300,7 @@ def write_batch_report(
         body=h.Markup("".join(body)),
     )
     html_path = folder / "report.html"
-    tmp = html_path.with_name("report.html.tmp")
-    tmp.write_text(page, encoding="utf-8")
-    os.replace(tmp, html_path)
+    write_atomic(html_path, page)
 
     def rows_of(items: list[dict[str, Any]]) -> Iterator[list[Any]]:
         if items:

@@ -33,7 +33,6 @@ from __future__ import annotations
 import json
 import logging
 import math
-import os
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -48,6 +47,7 @@ from redrive.evaluation import plots
 from redrive.evaluation.beside import REPORT_RESAMPLES, Beside, beside_rows, beside_section
 from redrive.evaluation.compare import compare_runs
 from redrive.evaluation.store import Evaluation, read_evaluation
+from redrive.output.atomic import atomic_path
 from redrive.results import Run, open_run
 from redrive.results.export import EXCEL_MAX_CHARS, neutralize_cell
 
@@ -354,15 +354,13 @@ def _neutralized(table: pa.Table) -> pa.Table:
 
 
 def _write_csv(path: Path, table: pa.Table) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    pacsv.write_csv(table, tmp)
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        pacsv.write_csv(table, tmp)
 
 
 def _atomic(path: Path, write: Callable[[Path], object]) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    write(tmp)
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        write(tmp)
 
 
 def write_report(

@@ -12,7 +12,6 @@ from __future__ import annotations
 import json
 import logging
 import math
-import os
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
@@ -23,6 +22,7 @@ import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
 
 from redrive.errors import ConfigError
+from redrive.output.atomic import atomic_path
 from redrive.results.store import Run
 
 __all__ = [
@@ -62,20 +62,14 @@ def _neutralize_strings(table: pa.Table) -> pa.Table:
     return table
 
 
-def _atomic_target(path: Path) -> Path:
-    return path.with_name(path.name + ".tmp")
-
-
 def _write_parquet(path: Path, table: pa.Table) -> None:
-    tmp = _atomic_target(path)
-    pq.write_table(table, tmp, compression="zstd")
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        pq.write_table(table, tmp, compression="zstd")
 
 
 def _write_csv(path: Path, table: pa.Table) -> None:
-    tmp = _atomic_target(path)
-    pacsv.write_csv(_neutralize_strings(table), tmp)
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        pacsv.write_csv(_neutralize_strings(table), tmp)
 
 
 def export_run(run: Run, *, fmt: str, out: Path) -> list[Path]:
@@ -184,6 +178,5 @@ def _write_xlsx(path: Path, run: Run, names: tuple[str, ...]) -> None:
             sheet.append(header)
             for row in _table_rows(table.slice(k * per_sheet, per_sheet)):
                 sheet.append(list(row))
-    tmp = _atomic_target(path)
-    wb.save(tmp)
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        wb.save(tmp)
