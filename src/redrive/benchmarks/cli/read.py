@@ -133,26 +133,17 @@ def _run_read(args: argparse.Namespace) -> int:
 
 
 def _write_synth(args: argparse.Namespace, status: Any) -> Any:
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-
     from redrive.benchmarks.synth_log import write_synthetic_bag
     from redrive.errors import LogError
+    from redrive.output.progress import ProgressBar
 
     if args.synth <= 0:
         msg = f"--synth takes a size in GB greater than 0, not {args.synth}"
         raise LogError(msg)
-    with Progress(
-        TextColumn(f"[bold]writing {args.log}"),
-        BarColumn(),
-        TextColumn("{task.completed}/{task.total} messages"),
-        TimeElapsedColumn(),
-        console=status,
-        transient=True,
-    ) as bar:
-        task = bar.add_task("synth", total=None)
+    with ProgressBar(f"writing {args.log}", unit="messages", console=status) as bar:
 
         def progress(done: int, total: int) -> None:
-            bar.update(task, completed=done, total=total)
+            bar.update(done, total=total)
 
         return write_synthetic_bag(
             args.log,
