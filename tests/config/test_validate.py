@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import pytest
 
-from redrive.config.validate import REQUIRED, Table
+from redrive.config.validate import REQUIRED, Table, read_toml
 from redrive.errors import ConfigError
 
 
@@ -74,3 +75,17 @@ def test_not_a_mapping_is_refused() -> None:
     with pytest.raises(ConfigError, match="expected a table"):
         Table([1], source="f.toml")
     assert REQUIRED is not None
+
+
+def test_toml_files_missing_unreadable_or_broken(tmp_path: Path) -> None:
+    good = tmp_path / "good.toml"
+    good.write_text("a = 1\n", encoding="utf-8")
+    assert read_toml(good, what="spec") == {"a": 1}
+    with pytest.raises(ConfigError, match=r"nope.toml: spec not found; check the path"):
+        read_toml(tmp_path / "nope.toml", what="spec")
+    bad = tmp_path / "bad.toml"
+    bad.write_text("a = = 1\n", encoding="utf-8")
+    with pytest.raises(ConfigError, match=r"bad.toml: not valid TOML \(.*\); fix the syntax"):
+        read_toml(bad, what="spec")
+    with pytest.raises(ConfigError, match="cannot read the spec"):
+        read_toml(tmp_path, what="spec")  # a folder

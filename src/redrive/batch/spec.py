@@ -33,14 +33,13 @@ import glob
 import hashlib
 import json
 import re
-import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
 from redrive.config import PipelineConfig, load_pipeline, pipeline_from_plugins, reference_pipeline
-from redrive.config.validate import Table, is_integer
+from redrive.config.validate import Table, is_integer, read_toml
 from redrive.errors import ConfigError
 from redrive.sim.scenario import list_scenarios
 
@@ -397,13 +396,7 @@ def load_batch_spec(path: Path) -> dict[str, Any]:
     Raises:
         ConfigError: the file is missing, not TOML, or a key is unknown or of the wrong type.
     """
-    try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError as err:
-        raise ConfigError(f"{path}: batch spec not found") from err
-    except tomllib.TOMLDecodeError as err:
-        raise ConfigError(f"{path}: not valid TOML: {err}") from err
-    doc = Table(raw, source=str(path))
+    doc = Table(read_toml(path, what="batch spec"), source=str(path))
     doc.check_keys(_SPEC_KEYS)
     base = path.parent
     out: dict[str, Any] = {}

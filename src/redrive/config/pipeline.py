@@ -28,14 +28,13 @@ the outputs of every earlier stage.
 from __future__ import annotations
 
 import re
-import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Literal
 
-from redrive.config.validate import Table
+from redrive.config.validate import Table, read_toml
 from redrive.errors import ConfigError
 
 __all__ = [
@@ -222,15 +221,7 @@ def load_pipeline(path: str | Path) -> PipelineConfig:
             the file and the key).
     """
     path = Path(path)
-    try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError as err:
-        msg = f"{path}: pipeline file not found"
-        raise ConfigError(msg) from err
-    except tomllib.TOMLDecodeError as err:
-        msg = f"{path}: not valid TOML: {err}"
-        raise ConfigError(msg) from err
-    top = Table(raw, source=str(path))
+    top = Table(read_toml(path, what="pipeline file"), source=str(path))
     top.check_keys({"mode", "executor", "seed", "step_timeout_s", "fail_fast", "stage"})
     stages: list[StageSpec] = []
     for i, stage in enumerate(top.tables("stage", [], fix="write each stage as [[stage]]")):

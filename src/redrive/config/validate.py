@@ -21,12 +21,23 @@ from __future__ import annotations
 
 import difflib
 import math
+import tomllib
 from collections.abc import Callable, Collection, Iterator, Mapping
+from pathlib import Path
 from typing import Any, Final
 
 from redrive.errors import ConfigError
 
-__all__ = ["REQUIRED", "Style", "Table", "default_style", "is_integer", "is_number"]
+__all__ = [
+    "REQUIRED",
+    "Style",
+    "Table",
+    "default_style",
+    "is_integer",
+    "is_number",
+    "parse_toml",
+    "read_toml",
+]
 
 #: The default of a read that has no default: the key must be there.
 REQUIRED: Final = object()
@@ -39,6 +50,28 @@ def default_style(source: str, path: str, problem: str, fix: str) -> str:
     """``SOURCE: PATH: PROBLEM; FIX`` (no path: ``SOURCE: PROBLEM; FIX``)."""
     where = f"{source}: {path}" if path else source
     return f"{where}: {problem}; {fix}"
+
+
+def parse_toml(text: str, *, source: str) -> dict[str, Any]:
+    """The TOML document ``text`` (``source`` names it in the error)."""
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        msg = f"{source}: not valid TOML ({err}); fix the syntax at that line"
+        raise ConfigError(msg) from err
+
+
+def read_toml(path: str | Path, *, what: str) -> dict[str, Any]:
+    """The TOML file at ``path``, ``what`` it is named in errors ("pipeline file")."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except FileNotFoundError as err:
+        msg = f"{path}: {what} not found; check the path"
+        raise ConfigError(msg) from err
+    except (OSError, UnicodeDecodeError) as err:
+        msg = f"{path}: cannot read the {what} ({err})"
+        raise ConfigError(msg) from err
+    return parse_toml(text, source=str(path))
 
 
 def is_number(value: Any) -> bool:

@@ -18,13 +18,12 @@ A sensor map file (all keys optional)::
 from __future__ import annotations
 
 import re
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from redrive.config.validate import Table
+from redrive.config.validate import Table, read_toml
 from redrive.errors import ConfigError
 from redrive.io.base import TopicInfo
 from redrive.io.decoders import topic_kind
@@ -123,13 +122,7 @@ def load_sensor_map_overrides(path: str | Path) -> SensorMapOverrides:
     Raises:
         ConfigError: unreadable file, unknown key, or a value of the wrong kind.
     """
-    path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
-        msg = f"{path}: cannot read the sensor map ({err})"
-        raise ConfigError(msg) from err
-    doc = Table(data, source=str(path))
+    doc = Table(read_toml(path, what="sensor map"), source=str(path))
     doc.check_keys({"driver", "tolerance_ms", "vehicle_state", "ground_truth", "ignore", "sensors"})
     types = tuple(t.value for t in SensorType)
     sensors: dict[str, Mapping[str, Any]] = {}

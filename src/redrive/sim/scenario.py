@@ -10,7 +10,6 @@ is kept raw (:mod:`redrive.sim.rig` parses it); each sensor's ``rate_hz`` is als
 from __future__ import annotations
 
 import dataclasses
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from importlib import resources
@@ -18,7 +17,7 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
-from redrive.config.validate import Table, is_number
+from redrive.config.validate import Table, is_number, parse_toml
 from redrive.errors import ConfigError
 from redrive.sim.lights import LightTiming
 from redrive.sim.roads import HighwayLayout, UrbanLayout, build_network
@@ -284,9 +283,4 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
             msg = f"unknown scenario {str(name_or_path)!r}; use one of {', '.join(list_scenarios())} or a path to a .toml file"
             raise ConfigError(msg)
         text, source = entry.read_text(encoding="utf-8"), f"{name_or_path}.toml (catalogue)"
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as err:
-        msg = f"{source}: not valid TOML ({err}); fix the syntax at that line"
-        raise ConfigError(msg) from err
-    return parse_scenario(data, source=source)
+    return parse_scenario(parse_toml(text, source=source), source=source)
