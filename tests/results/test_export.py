@@ -180,6 +180,9 @@ def test_cli_main_when_wired(run_dir: Path, tmp_path: Path) -> None:
 def test_excel_cells_without_nan() -> None:
     import pyarrow as pa
 
+    from redrive.output.xlsx import excel_value
+
     col = pa.array([1.5, float("nan"), None, float("-inf")])
-    assert export_mod._excel_column(col) == [1.5, None, None, None]
-    assert export_mod._excel_column(pa.array(["-x", None, "ok"])) == ["'-x", None, "ok"]
+    assert [excel_value(v) for v in col.to_pylist()] == [1.5, None, None, None]
+    strings = pa.array(["-x", None, "ok"]).to_pylist()
+    assert [excel_value(v) for v in strings] == ["'-x", None, "ok"]

@@ -36,7 +36,8 @@ def test_every_file_is_fsynced_before_any_is_renamed_in_order(
         last=lambda: (tmp_path / names[2], b"{}"),  # made while the others are written
     )
     assert sorted(calls[:3]) == sorted(("fsync", n + ".tmp") for n in names)
-    assert calls[3:] == [("rename", n) for n in names]
+    assert calls[3:6] == [("rename", n) for n in names]
+    assert calls[6:] == [("fsync", tmp_path.name)]  # then the folder, so the names are durable
     assert pq.read_table(tmp_path / "a.parquet").equals(table)
     assert (tmp_path / "manifest.json").read_bytes() == b"{}"
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(names)

@@ -27,6 +27,7 @@ from redrive.config import PipelineConfig
 from redrive.engine.run import RunRequest, run_log
 from redrive.engine.stats import RunReport
 from redrive.errors import ConfigError
+from redrive.output.atomic import atomic_path
 from redrive.results import TABLES, RunStatus
 from redrive.results.manifest import MANIFEST_NAME, now_iso
 
@@ -117,12 +118,11 @@ def _synthesize(task: CellTask) -> Path:
     if path.is_file():
         return path
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.{os.getpid()}.mcap")
     assert task.log.scenario is not None
-    synthesize(
-        load_scenario(task.log.scenario), tmp, duration_s=task.duration_s, seed=task.log.seed
-    )
-    os.replace(tmp, path)
+    with atomic_path(path, temp=path.with_name(f".{path.stem}.{os.getpid()}.mcap")) as tmp:
+        synthesize(
+            load_scenario(task.log.scenario), tmp, duration_s=task.duration_s, seed=task.log.seed
+        )
     return path
 
 

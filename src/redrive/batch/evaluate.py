@@ -36,6 +36,7 @@ from redrive.errors import ConfigError
 from redrive.evaluation.base import Metric, MetricResult
 from redrive.evaluation.evaluator import EvaluationSummary, default_metrics, evaluate_run
 from redrive.evaluation.pooling import PooledValues, pool_metric
+from redrive.output.atomic import fsync_dir, sync_tree
 from redrive.results import Run, read_manifest
 from redrive.results.manifest import now_iso, write_json_atomic
 
@@ -275,9 +276,11 @@ def _store(
             },
         )
         old = batch_dir / f".{BATCH_EVALUATION}.{uuid.uuid4().hex[:8]}.old"
+        sync_tree(tmp)
         if final.exists():
             final.rename(old)
         tmp.rename(final)
+        fsync_dir(batch_dir)
         shutil.rmtree(old, ignore_errors=True)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)

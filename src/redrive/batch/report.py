@@ -28,8 +28,9 @@ from redrive.errors import ConfigError, RedriveError
 from redrive.evaluation import html as h
 from redrive.evaluation.pooling import rule_text
 from redrive.evaluation.report import write_report
+from redrive.output.atomic import write_atomic
+from redrive.output.xlsx import Sheet, write_xlsx
 from redrive.results.evaluation import read_evaluation
-from redrive.results.export import neutralize_cell
 
 __all__ = ["BatchReportFiles", "write_batch_report"]
 
@@ -81,26 +82,6 @@ def _box_png(title: str, groups: Sequence[tuple[str, list[float]]]) -> bytes:
 
 def _link(href: str, text: str) -> h.Markup:
     return h.Markup(f'<a href="{h.esc(href)}">{h.esc(text)}</a>')
-
-
-def _xlsx(path: Path, sheets: dict[str, Callable[[], Iterator[list[Any]]]]) -> None:
-    from openpyxl import Workbook
-
-    def cell(x: Any) -> Any:
-        if isinstance(x, str):
-            return neutralize_cell(x)
-        if isinstance(x, float) and not math.isfinite(x):
-            return None
-        return x
-
-    wb = Workbook(write_only=True)
-    for name, rows in sheets.items():
-        ws = wb.create_sheet(name)
-        for row in rows():
-            ws.append([cell(x) for x in row])
-    tmp = path.with_name(path.name + ".tmp")
-    wb.save(tmp)
-    os.replace(tmp, path)
 
 
 def write_batch_report(
@@ -300,9 +281,7 @@ def write_batch_report(
         body=h.Markup("".join(body)),
     )
     html_path = folder / "report.html"
-    tmp = html_path.with_name("report.html.tmp")
-    tmp.write_text(page, encoding="utf-8")
-    os.replace(tmp, html_path)
+    write_atomic(html_path, page)
 
     def rows_of(items: list[dict[str, Any]]) -> Iterator[list[Any]]:
         if items:
@@ -311,9 +290,7 @@ def write_batch_report(
             yield list(r.values())
 
     xlsx_path = folder / "report.xlsx"
-    _xlsx(
-        xlsx_path,
-        {
+    sheets: dict[str, Callable[[], Iterator[list[Any]]]] = {
             "pooled": lambda: rows_of(pooled),
             "cells": lambda: rows_of(cells),
             "worst_logs": lambda: iter(
@@ -341,6 +318,6 @@ def write_batch_report(
                     *([c.cell_id, c.status.value, c.error or ""] for c in left),
                 ]
             ),
-        },
-    )
+        }  # fmt: skip
+    write_xlsx(xlsx_path, [Sheet(name=name, rows=rows) for name, rows in sheets.items()])
     return BatchReportFiles(html=html_path, xlsx=xlsx_path, cell_reports=tuple(written))

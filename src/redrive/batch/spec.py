@@ -33,13 +33,13 @@ import glob
 import hashlib
 import json
 import re
-import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
 from redrive.config import PipelineConfig, load_pipeline, pipeline_from_plugins, reference_pipeline
+from redrive.config.validate import Table, is_integer, read_toml
 from redrive.errors import ConfigError
 from redrive.sim.scenario import list_scenarios
 
@@ -326,31 +326,23 @@ def pipeline_hash(config: PipelineConfig) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def _pipeline_items(raw: Any, base: Path, where: str) -> tuple[PipelineItem, ...]:
-    if not isinstance(raw, list):
-        raise ConfigError(f"{where}: `pipeline` must be [[pipeline]] tables")
+def _pipeline_items(doc: Table, base: Path) -> tuple[PipelineItem, ...]:
     items = []
-    for i, entry in enumerate(raw):
-        here = f"{where}: pipeline {i + 1}"
-        if not isinstance(entry, dict):
-            raise ConfigError(f"{here}: expected a table")
-        unknown = sorted(set(entry) - {"name", "file", "perception", "planning", "control"})
-        if unknown:
-            raise ConfigError(f"{here}: unknown key(s) {', '.join(unknown)}")
-        plugins = {}
-        for role in ("perception", "planning", "control"):
-            value = entry.get(role, [])
-            if isinstance(value, str):
-                value = [value]
-            if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
-                raise ConfigError(f"{here}: `{role}` must be a list of plugin names")
-            plugins[role] = tuple(value)
-        file = entry.get("file")
+    for entry in doc.tables("pipeline", [], fix="write each pipeline as [[pipeline]]"):
+        entry.check_keys({"name", "file", "perception", "planning", "control"})
+        plugins = {
+            role: entry.texts(role, (), one_ok=True, fix=f"give `{role}` a list of plugin names")
+            for role in ("perception", "planning", "control")
+        }
+        file = entry.text("file", None)
         if file is not None and any(plugins.values()):
-            raise ConfigError(f"{here}: give either `file` or plugins, not both")
+            raise entry.fail(
+                "file", "given with plugins", "give either `file` or plugins, not both"
+            )
         if file is not None:
             file = str(Path(file) if Path(file).is_absolute() else base / file)
-        items.append(make_pipeline_item(name=entry.get("name"), file=file, **plugins))
+        name = entry.text("name", None)
+        items.append(make_pipeline_item(name=name, file=file, **plugins))
     return tuple(items)
 
 
@@ -421,44 +413,26 @@ def load_batch_spec(path: Path) -> dict[str, Any]:
     Raises:
         ConfigError: the file is missing, not TOML, or a key is unknown or of the wrong type.
     """
-    try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError as err:
-        raise ConfigError(f"{path}: batch spec not found") from err
-    except tomllib.TOMLDecodeError as err:
-        raise ConfigError(f"{path}: not valid TOML: {err}") from err
-    unknown = sorted(set(raw) - _SPEC_KEYS)
-    if unknown:
-        msg = (
-            f"{path}: unknown key(s) {', '.join(unknown)} (known: {', '.join(sorted(_SPEC_KEYS))})"
-        )
-        raise ConfigError(msg)
+    doc = Table(read_toml(path, what="batch spec"), source=str(path))
+    doc.check_keys(_SPEC_KEYS)
     base = path.parent
     out: dict[str, Any] = {}
-    types: dict[str, tuple[type, ...]] = {
-        "duration_s": (int, float),
-        "loop": (str,),
-        "agents": (str,),
-        "out": (str,),
-        "executor": (str,),
-        "workers": (int,),
-        "retries": (int,),
-        "fail_fast": (bool,),
-        "address": (str,),
-        "seeds": (str, int),
-    }
-    for key, kinds in types.items():
-        if key in raw:
-            value = raw[key]
-            if not isinstance(value, kinds) or (bool not in kinds and isinstance(value, bool)):
-                raise ConfigError(f"{path}: `{key}` has the wrong type ({value!r})")
-            out[key] = value
+    for key in ("loop", "agents", "out", "executor", "address"):
+        if key in doc:
+            out[key] = doc.text(key)
+    for key in ("workers", "retries"):
+        if key in doc:
+            out[key] = doc.integer(key)
+    if "duration_s" in doc:
+        out["duration_s"] = doc.number("duration_s")
+    if "fail_fast" in doc:
+        out["fail_fast"] = doc.flag("fail_fast")
+    if "seeds" in doc:
+        out["seeds"] = doc.value("seeds", lambda v: isinstance(v, str) or is_integer(v), "0-3 or 3")
     if "out" in out:
         out["out"] = Path(out["out"]) if Path(out["out"]).is_absolute() else base / out["out"]
     seeds = parse_seeds(str(out.pop("seeds"))) if "seeds" in out else ()
-    logs = raw.get("logs", [])
-    if not isinstance(logs, list) or not all(isinstance(x, str) for x in logs):
-        raise ConfigError(f"{path}: `logs` must be a list of strings")
+    logs = doc.texts("logs", ())
     out["logs"] = expand_logs(logs, base=base, seeds=seeds) if logs else ()
-    out["pipelines"] = _pipeline_items(raw.get("pipeline", []), base, str(path))
+    out["pipelines"] = _pipeline_items(doc, base)
     return out

@@ -6,20 +6,14 @@ from __future__ import annotations
 import sys
 from typing import TYPE_CHECKING, TextIO
 
+from redrive.output.progress import ProgressBar, fmt_s, is_terminal
+
 if TYPE_CHECKING:
     from rich.console import Console
 
     from redrive.batch import BatchProgress, CellRecord
 
 __all__ = ["BatchBar", "BatchLines", "batch_progress", "fmt_s"]
-
-
-def fmt_s(seconds: float | None) -> str:
-    """``42s``, ``3m05s``; ``?`` when not known yet."""
-    if seconds is None:
-        return "?"
-    whole = round(seconds)
-    return f"{whole // 60}m{whole % 60:02d}s" if whole >= 60 else f"{whole}s"
 
 
 def _rate(counts: BatchProgress) -> str:
@@ -50,34 +44,24 @@ class BatchLines:
 
 
 class BatchBar:
-    """One rich progress bar over the whole batch, redrawn at every cell event; failed cells are
-    also printed above it as they happen, so their reasons stay on screen."""
+    """The one progress bar (:class:`redrive.output.progress.ProgressBar`) over the whole batch,
+    redrawn at every cell event; failed cells are also printed above it as they happen, so
+    their reasons stay on screen."""
 
     def __init__(self, workers: int, total: int, console: Console | None = None) -> None:
-        from rich.console import Console
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
-
         self.workers = workers
-        self.progress = Progress(
-            TextColumn("[bold]batch"),
-            BarColumn(),
-            MofNCompleteColumn(),
-            TextColumn(
-                "cells · {task.fields[states]} · {task.fields[rate]} · ETA {task.fields[eta]}"
-            ),
-            console=console or Console(stderr=True),
-            transient=True,
+        self.bar = ProgressBar(
+            "batch", total=total, unit="cells", fields=("states",), console=console, quiet=False
         )
-        self.task = self.progress.add_task(
-            "batch", total=total, states="0 running", rate="? frames/s", eta="?"
-        )
+        self.progress = self.bar.progress
+        self.bar.update(0, states="0 running", rate="? frames/s")
 
     def __enter__(self) -> BatchBar:
-        self.progress.start()
+        self.bar.start()
         return self
 
     def __exit__(self, *exc: object) -> None:
-        self.progress.stop()
+        self.bar.__exit__(*exc)
 
     def __call__(self, event: str, record: CellRecord, counts: BatchProgress) -> None:
         if event == "failed":
@@ -86,12 +70,11 @@ class BatchBar:
         states = f"{counts.done} done, {counts.failed} failed, {counts.running} running"
         if counts.skipped:
             states += f", {counts.skipped} skipped"
-        self.progress.update(
-            self.task,
-            completed=counts.finished,
+        self.bar.update(
+            counts.finished,
             states=states,
             rate=_rate(counts),
-            eta=fmt_s(counts.eta_s(self.workers)),
+            eta_s=counts.eta_s(self.workers),
         )
 
 
@@ -103,6 +86,6 @@ def batch_progress(
     if quiet:
         return None
     stream = stream or sys.stderr
-    if stream.isatty():
+    if is_terminal(stream):
         return BatchBar(workers, total)
     return BatchLines(workers, stream)

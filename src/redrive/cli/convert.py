@@ -22,27 +22,19 @@ def _seconds_to_ns(value: float | None, origin_ns: int) -> int | None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-
     from redrive.io import open_log
     from redrive.io.convert import convert_log
+    from redrive.output.progress import ProgressBar
 
     with open_log(args.input, strict=not args.skip_damaged) as log:
         origin = log.start_ns
         total = log.message_count
     start_ns = _seconds_to_ns(args.start, origin)
     stop_ns = _seconds_to_ns(args.end, origin)
-    with Progress(
-        TextColumn("[bold]converting"),
-        BarColumn(),
-        TextColumn("{task.completed}/{task.total}"),
-        TimeElapsedColumn(),
-        transient=True,
-    ) as bar:
-        task = bar.add_task("convert", total=total)
+    with ProgressBar("converting", total=total, unit="messages") as bar:
 
         def progress(done: int, total: int) -> None:
-            bar.update(task, completed=done, total=max(total, done))
+            bar.update(done, total=max(total, done))
 
         stats = convert_log(
             args.input,

@@ -206,16 +206,8 @@ def pipeline_from_args(args: argparse.Namespace) -> Any:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from rich.console import Console
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeRemainingColumn,
-    )
-
     from redrive.engine import RunRequest, run_log
+    from redrive.output.progress import ProgressBar, is_terminal
     from redrive.results import RunStatus
 
     if args.pipeline is not None and (args.perception or args.planning or args.control):
@@ -246,38 +238,21 @@ def _run(args: argparse.Namespace) -> int:
         resume=args.resume,
         strict=args.strict,
     )
-    progress_bar = Progress(
-        TextColumn(f"[bold]{args.log.name}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TextColumn("{task.fields[rate]}"),
-        TextColumn("ETA"),
-        TimeRemainingColumn(),
-        transient=True,
-        disable=args.no_progress or not sys.stderr.isatty(),
-        console=Console(stderr=True),
-    )
-    lines = (
-        None
-        if args.no_progress or sys.stderr.isatty()
-        else ProgressLines(args.log.name, sys.stderr)
-    )
+    progress_bar = ProgressBar(args.log.name, unit="frames", quiet=args.no_progress)
+    lines = None if args.no_progress or is_terminal() else ProgressLines(args.log.name, sys.stderr)
     started = [0.0]
     with progress_bar:
-        task = progress_bar.add_task("run", total=None, rate="")
 
         def on_start(total: int | None) -> None:
             started[0] = time.perf_counter()
-            progress_bar.update(task, total=total)
+            progress_bar.start(total)
             if lines is not None:
                 lines.start(total)
 
         def on_progress(done: int) -> None:
-            elapsed = time.perf_counter() - started[0]
-            rate = f"{done / elapsed:.1f} frames/s" if elapsed > 0 else ""
-            progress_bar.update(task, completed=done, rate=rate)
+            progress_bar.update(done)
             if lines is not None:
-                lines.update(done, elapsed)
+                lines.update(done, time.perf_counter() - started[0])
 
         report = run_log(request, on_start=on_start, progress=on_progress)
     print_run_report(report, out)

@@ -24,8 +24,7 @@ byte-identical file.
 
 
 def _run(args: argparse.Namespace) -> int:
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-
+    from redrive.output.progress import ProgressBar
     from redrive.sim.scenario import list_scenarios, load_scenario
     from redrive.sim.synth import synthesize
 
@@ -46,17 +45,13 @@ def _run(args: argparse.Namespace) -> int:
         )
         return 2
     scenario = load_scenario(args.scenario)
-    with Progress(
-        TextColumn(f"[bold]simulating {scenario.name}"),
-        BarColumn(),
-        TextColumn("{task.completed:.1f}/{task.total:.1f} s"),
-        TimeElapsedColumn(),
-        transient=True,
+    total_s = args.duration or scenario.duration_s
+    with ProgressBar(
+        f"simulating {scenario.name}", total=total_s, unit="s", decimals=1, show_rate=False
     ) as bar:
-        task = bar.add_task("synth", total=args.duration or scenario.duration_s)
 
         def progress(done_s: float, total_s: float) -> None:
-            bar.update(task, completed=done_s, total=total_s)
+            bar.update(done_s, total=total_s)
 
         summary = synthesize(
             scenario, args.output, duration_s=args.duration, seed=args.seed, progress=progress

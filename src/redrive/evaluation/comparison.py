@@ -17,6 +17,7 @@ import pyarrow as pa
 from redrive.evaluation.compare_html import render_comparison
 from redrive.evaluation.deltas import SeriesDelta, SkippedMetric, ValueDelta, WorseFrame
 from redrive.evaluation.pairing import Pairing
+from redrive.output.atomic import write_atomic
 
 __all__ = ["Comparison"]
 
@@ -133,7 +134,4 @@ class Comparison:
         atomically (temp + rename). Returns its path."""
         out = Path(path)
         out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = out.with_name(out.name + ".tmp")
-        tmp.write_text(render_comparison(self, worst=worst), encoding="utf-8")
-        os.replace(tmp, out)
-        return out
+        return write_atomic(out, render_comparison(self, worst=worst))

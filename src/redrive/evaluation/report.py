@@ -16,7 +16,7 @@ every value per metric and algorithm with unit, direction, headline flag and def
 one column per algorithm / metric / series), ``curves``, ``bookmarks`` and ``metrics`` (metric
 definitions: versions, parameters, their hash).  CSV files: ``values``, ``per_frame``,
 ``curves``, ``bookmarks`` as stored.  Text cells that a spreadsheet would run as a formula get a
-leading ``'`` (:func:`redrive.results.export.neutralize_cell`).
+leading ``'`` (the one XLSX writer, :mod:`redrive.output.xlsx`).
 
 ``beside=OTHER`` puts another evaluated run of the same log or situation next to this one — an
 open-loop run beside a closed-loop run of the same scenario, seed and pipeline, in either role
@@ -32,8 +32,6 @@ from __future__ import annotations
 
 import json
 import logging
-import math
-import os
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -48,8 +46,9 @@ from redrive.evaluation import plots
 from redrive.evaluation.beside import REPORT_RESAMPLES, Beside, beside_rows, beside_section
 from redrive.evaluation.compare import compare_runs
 from redrive.evaluation.store import Evaluation, read_evaluation
+from redrive.output.atomic import atomic_path, write_atomic
+from redrive.output.xlsx import Sheet, neutralize_cell, write_xlsx
 from redrive.results import Run, open_run
-from redrive.results.export import EXCEL_MAX_CHARS, neutralize_cell
 
 __all__ = [
     "DEFAULT_WORST",
@@ -65,7 +64,6 @@ logger = logging.getLogger(__name__)
 DEFAULT_WORST = 6
 #: rows of the bookmarks table in the HTML page (all of them are in the XLSX and CSV).
 HTML_MAX_BOOKMARKS = 500
-_TRUNCATED = "…[truncated]"
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -245,19 +243,6 @@ def render_html(
 # -- XLSX and CSV --------------------------------------------------------------------------
 
 
-def _cell(value: Any) -> Any:
-    """A value Excel takes: formula-like text quoted (``neutralize_cell``), text cut at
-    ``EXCEL_MAX_CHARS``, NaN and infinities empty."""
-    if isinstance(value, str):
-        text = neutralize_cell(value)
-        if len(text) > EXCEL_MAX_CHARS:
-            text = text[: EXCEL_MAX_CHARS - len(_TRUNCATED)] + _TRUNCATED
-        return text
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
-
-
 def _rows(table: pa.Table) -> Iterator[list[Any]]:
     yield list(table.column_names)
     for row in table.to_pylist():
@@ -306,9 +291,6 @@ def summary_rows(evaluation: Evaluation) -> Iterator[list[Any]]:
 
 
 def _write_xlsx(path: Path, run: Run, evaluation: Evaluation, beside: Beside | None) -> None:
-    from openpyxl import Workbook
-    from openpyxl.utils import get_column_letter
-
     algos = [[a.name, a.role.value, a.version, a.config_hash] for a in run.manifest.algorithms]
     metrics = [[m.get("name"), m.get("version"), m.get("role"), m.get("unit"),
                 m.get("higher_is_better"), json.dumps(m.get("params", {}), sort_keys=True),
@@ -329,17 +311,7 @@ def _write_xlsx(path: Path, run: Run, evaluation: Evaluation, beside: Beside | N
     }  # fmt: skip
     if beside is not None:
         sheets["beside"] = lambda: beside_rows(beside)
-    wb = Workbook(write_only=True)
-    for name, rows in sheets.items():
-        ws = wb.create_sheet(name)
-        ws.freeze_panes = "A2"  # every sheet's first row is its header
-        width = n = 0
-        for row in rows():
-            ws.append([_cell(x) for x in row])
-            width, n = max(width, len(row)), n + 1
-        if width and n > 1:
-            ws.auto_filter.ref = f"A1:{get_column_letter(width)}{n}"
-    _atomic(path, wb.save)
+    write_xlsx(path, [Sheet(name=name, rows=rows) for name, rows in sheets.items()])
 
 
 def _neutralized(table: pa.Table) -> pa.Table:
@@ -354,15 +326,8 @@ def _neutralized(table: pa.Table) -> pa.Table:
 
 
 def _write_csv(path: Path, table: pa.Table) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    pacsv.write_csv(table, tmp)
-    os.replace(tmp, path)
-
-
-def _atomic(path: Path, write: Callable[[Path], object]) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    write(tmp)
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        pacsv.write_csv(table, tmp)
 
 
 def write_report(
@@ -392,7 +357,7 @@ def write_report(
     folder.mkdir(parents=True, exist_ok=True)
     page = render_html(run, evaluation, worst=worst, beside=other, rank_by=rank_by)
     html_path = folder / "report.html"
-    _atomic(html_path, lambda p: p.write_text(page, encoding="utf-8"))
+    write_atomic(html_path, page)
     xlsx_path = folder / "report.xlsx"
     _write_xlsx(xlsx_path, run, evaluation, other)
     csvs = []

@@ -18,12 +18,12 @@ A sensor map file (all keys optional)::
 from __future__ import annotations
 
 import re
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from redrive.config.validate import Table, read_toml
 from redrive.errors import ConfigError
 from redrive.io.base import TopicInfo
 from redrive.io.decoders import topic_kind
@@ -122,48 +122,24 @@ def load_sensor_map_overrides(path: str | Path) -> SensorMapOverrides:
     Raises:
         ConfigError: unreadable file, unknown key, or a value of the wrong kind.
     """
-    path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
-        msg = f"{path}: cannot read the sensor map ({err})"
-        raise ConfigError(msg) from err
-    allowed = {"driver", "tolerance_ms", "vehicle_state", "ground_truth", "ignore", "sensors"}
-    if unknown := sorted(set(data) - allowed):
-        msg = f"{path}: unknown key(s) {unknown}; allowed: {sorted(allowed)}"
-        raise ConfigError(msg)
-    sensors = data.get("sensors", {})
-    if not isinstance(sensors, dict):
-        msg = f"{path}: [sensors] must be a table of tables"
-        raise ConfigError(msg)
-    types = {t.value for t in SensorType}
-    for sid, spec in sensors.items():
-        if not isinstance(spec, dict) or not isinstance(spec.get("topic"), str):
-            msg = f'{path}: [sensors.{sid}] needs topic = "/some/topic"'
-            raise ConfigError(msg)
-        if unknown := sorted(set(spec) - {"topic", "type", "location"}):
-            msg = f"{path}: [sensors.{sid}] has unknown key(s) {unknown}"
-            raise ConfigError(msg)
-        if "type" in spec and spec["type"] not in types:
-            msg = f"{path}: [sensors.{sid}] type {spec['type']!r} is not one of {sorted(types)}"
-            raise ConfigError(msg)
-        loc = spec.get("location")
-        if loc is not None and (not isinstance(loc, list) or len(loc) != 3):
-            msg = f"{path}: [sensors.{sid}] location must be [x, y, z] in metres"
-            raise ConfigError(msg)
-    tol = data.get("tolerance_ms")
-    if tol is not None and (not isinstance(tol, int | float) or tol < 0):
-        msg = f"{path}: tolerance_ms must be a non-negative number"
-        raise ConfigError(msg)
-    ignore = data.get("ignore", [])
-    if not isinstance(ignore, list) or not all(isinstance(t, str) for t in ignore):
-        msg = f"{path}: ignore must be a list of topic names"
-        raise ConfigError(msg)
+    doc = Table(read_toml(path, what="sensor map"), source=str(path))
+    doc.check_keys({"driver", "tolerance_ms", "vehicle_state", "ground_truth", "ignore", "sensors"})
+    types = tuple(t.value for t in SensorType)
+    sensors: dict[str, Mapping[str, Any]] = {}
+    for sid in (table := doc.table("sensors", {}, fix="write each sensor as [sensors.NAME]")):
+        spec = table.table(sid, fix=f'write [sensors.{sid}] with topic = "/some/topic"')
+        spec.check_keys({"topic", "type", "location"})
+        spec.text("topic", fix=f'[sensors.{sid}] needs topic = "/some/topic"')
+        spec.text("type", None, choices=types)
+        spec.numbers("location", None, length=3, fix="write location = [x, y, z] in metres")
+        sensors[sid] = spec.data
+    tol = doc.number("tolerance_ms", None, minimum=0)
+    ignore = doc.texts("ignore", (), fix="write ignore = a list of topic names")
     return SensorMapOverrides(
-        driver=data.get("driver"),
+        driver=doc.text("driver", None),
         tolerance_ns=None if tol is None else int(tol * 1_000_000),
-        vehicle_state_topic=data.get("vehicle_state"),
-        ground_truth_topic=data.get("ground_truth"),
+        vehicle_state_topic=doc.text("vehicle_state", None),
+        ground_truth_topic=doc.text("ground_truth", None),
         ignore=frozenset(ignore),
         sensors=sensors,
     )

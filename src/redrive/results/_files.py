@@ -1,4 +1,5 @@
-"""Files of a run directory written atomically and durably: a temp file, fsync, rename.
+"""Files of a run directory written atomically and durably: a temp file, fsync, rename, fsync of
+the folder (the steps of :mod:`redrive.output.atomic`).
 
 :func:`write_files` writes several at once (a flush: one Parquet part per table, then the
 manifest): each temp file is written and fsynced on a thread of its own, all at the same time,
@@ -23,6 +24,8 @@ from typing import Any
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from redrive.output.atomic import fsync_dir, replace, temp_path
+
 __all__ = ["PARQUET_OPTIONS", "json_bytes", "write_files", "write_json_atomic"]
 
 #: Parquet writer options: fixed, so equal tables give equal bytes.
@@ -46,7 +49,8 @@ def json_bytes(data: Mapping[str, Any]) -> bytes:
 
 
 def write_json_atomic(path: Path, data: Mapping[str, Any]) -> None:
-    """Write ``data`` as indented JSON to ``path`` through a temp file and ``os.replace``."""
+    """Write ``data`` as indented JSON to ``path`` atomically and durably (temp, fsync, rename,
+    fsync of the folder)."""
     write_files([(path, json_bytes(data))])
 
 
@@ -81,12 +85,12 @@ def write_files(
     ``path.tmp`` and fsync it, all at once on a pool's threads; meanwhile call ``last`` on this
     thread and write the file it returns (a flush's manifest, whose summary is computed while
     the parts are encoded) the same way; once every one is durable, rename each into place in
-    the order given, ``last``'s file after them.
+    the order given, ``last``'s file after them, and fsync their folders.
 
     A failure before the renames leaves only temp files (which readers ignore and a resume
     deletes); the renames happen in the order given, so the file that commits a flush goes last.
     """
-    tmps = [path.with_name(path.name + ".tmp") for path, _ in files]
+    tmps = [temp_path(path) for path, _ in files]
     pending = [
         _pool().submit(_write_synced, tmp, payload)
         for tmp, (_, payload) in zip(tmps, files, strict=True)
@@ -95,7 +99,7 @@ def write_files(
     try:
         if last is not None:
             path, payload = last()
-            final = (path.with_name(path.name + ".tmp"), path)
+            final = (temp_path(path), path)
             _write_synced(final[0], payload)
     finally:
         # even on an error or Ctrl-C here: once this returns nothing writes these temp files
@@ -104,6 +108,9 @@ def write_files(
     for future in pending:
         future.result()  # every write done, or its error raised, before any rename
     for tmp, (path, _) in zip(tmps, files, strict=True):
-        os.replace(tmp, path)
+        replace(tmp, path)
     if final is not None:
-        os.replace(*final)
+        replace(*final)
+    folders = [path.parent for path, _ in files] + ([final[1].parent] if final else [])
+    for folder in dict.fromkeys(folders):
+        fsync_dir(folder)  # the new names durable too

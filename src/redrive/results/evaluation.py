@@ -39,6 +39,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from redrive.errors import ConfigError
+from redrive.output.atomic import fsync_dir, sync_tree
 from redrive.results.manifest import write_json_atomic
 
 __all__ = [
@@ -193,8 +194,10 @@ def store_metric(
     for table_name, schema in TABLE_SCHEMAS.items():
         table = tables.get(table_name, schema.empty_table())
         pq.write_table(table.cast(schema), tmp / f"{table_name}.parquet")
+    sync_tree(tmp)
     with _locked(folder):
         tmp.rename(folder / sub)
+        fsync_dir(folder)
         index = _read_index(folder)
         index["metrics"][name] = {**record, "folder": sub}
         write_json_atomic(folder / INDEX_NAME, index)

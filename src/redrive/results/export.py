@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import json
 import logging
-import math
-import os
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
@@ -23,6 +21,15 @@ import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
 
 from redrive.errors import ConfigError
+from redrive.output.atomic import atomic_path
+from redrive.output.xlsx import (
+    EXCEL_MAX_CHARS,
+    EXCEL_MAX_ROWS,
+    Sheet,
+    neutralize_cell,
+    table_rows,
+    write_xlsx,
+)
 from redrive.results.store import Run
 
 __all__ = [
@@ -36,19 +43,7 @@ __all__ = [
 logger = logging.getLogger(__name__)
 
 EXPORT_FORMATS = ("parquet", "csv", "xlsx")
-#: rows of an Excel sheet, header included.
-EXCEL_MAX_ROWS = 1_048_576
-#: characters of an Excel cell.
-EXCEL_MAX_CHARS = 32_767
-_FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
-_FORMULA_RE = r"^[=+\-@\t\r]"
-_TRUNCATED = "…[truncated]"
-_BATCH_ROWS = 65_536
-
-
-def neutralize_cell(text: str) -> str:
-    """``text`` with a leading ``'`` when a spreadsheet would read it as a formula."""
-    return "'" + text if text.startswith(_FORMULA_START) else text
+_FORMULA_RE = r"^[=+\-@\t\r]"  # the cells neutralize_cell quotes (FORMULA_START)
 
 
 def _neutralize_strings(table: pa.Table) -> pa.Table:
@@ -62,20 +57,14 @@ def _neutralize_strings(table: pa.Table) -> pa.Table:
     return table
 
 
-def _atomic_target(path: Path) -> Path:
-    return path.with_name(path.name + ".tmp")
-
-
 def _write_parquet(path: Path, table: pa.Table) -> None:
-    tmp = _atomic_target(path)
-    pq.write_table(table, tmp, compression="zstd")
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        pq.write_table(table, tmp, compression="zstd")
 
 
 def _write_csv(path: Path, table: pa.Table) -> None:
-    tmp = _atomic_target(path)
-    pacsv.write_csv(_neutralize_strings(table), tmp)
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        pacsv.write_csv(_neutralize_strings(table), tmp)
 
 
 def export_run(run: Run, *, fmt: str, out: Path) -> list[Path]:
@@ -112,37 +101,6 @@ def export_run(run: Run, *, fmt: str, out: Path) -> list[Path]:
 # -- Excel ---------------------------------------------------------------------------------
 
 
-def _excel_text(text: str) -> str:
-    text = neutralize_cell(text)
-    if len(text) > EXCEL_MAX_CHARS:
-        text = text[: EXCEL_MAX_CHARS - len(_TRUNCATED)] + _TRUNCATED
-    return text
-
-
-def _excel_value(value: Any) -> Any:
-    if isinstance(value, str):
-        return _excel_text(value)
-    if isinstance(value, float) and not math.isfinite(value):
-        return None  # Excel has no NaN or infinity
-    return value
-
-
-def _excel_column(col: pa.ChunkedArray | pa.Array) -> list[Any]:
-    values: list[Any] = col.to_pylist()
-    if pa.types.is_string(col.type) or pa.types.is_large_string(col.type):
-        return [None if v is None else _excel_text(v) for v in values]
-    if pa.types.is_floating(col.type):
-        return [v if v is None or math.isfinite(v) else None for v in values]
-    return values
-
-
-def _table_rows(table: pa.Table) -> Iterator[tuple[Any, ...]]:
-    for start in range(0, table.num_rows, _BATCH_ROWS):
-        chunk = table.slice(start, _BATCH_ROWS)
-        columns = [_excel_column(chunk.column(i)) for i in range(chunk.num_columns)]
-        yield from zip(*columns, strict=True)
-
-
 def _flatten(prefix: str, value: Any) -> Iterator[tuple[str, Any]]:
     if isinstance(value, Mapping):
         for key, sub in value.items():
@@ -162,28 +120,13 @@ def _run_facts(run: Run) -> list[tuple[str, Any]]:
 
 
 def _write_xlsx(path: Path, run: Run, names: tuple[str, ...]) -> None:
-    from openpyxl import Workbook
+    def summary() -> Iterator[list[Any]]:
+        yield from ([key, value] for key, value in _run_facts(run))
+        yield []
+        yield from table_rows(run.summary())
 
-    wb = Workbook(write_only=True)
-    ws = wb.create_sheet("summary")
-    for key, value in _run_facts(run):
-        ws.append([_excel_text(key), _excel_value(value)])
-    ws.append([])
-    summary = run.summary()
-    ws.append([_excel_text(n) for n in summary.column_names])
-    for row in _table_rows(summary):
-        ws.append(list(row))
-    per_sheet = EXCEL_MAX_ROWS - 1
-    for name in names:
-        table = run.table(name)
-        header = [_excel_text(n) for n in table.column_names]
-        sheets = max(1, math.ceil(table.num_rows / per_sheet))
-        for k in range(sheets):
-            sheet = wb.create_sheet(name if k == 0 else f"{name} ({k + 1})")
-            sheet.freeze_panes = "A2"
-            sheet.append(header)
-            for row in _table_rows(table.slice(k * per_sheet, per_sheet)):
-                sheet.append(list(row))
-    tmp = _atomic_target(path)
-    wb.save(tmp)
-    os.replace(tmp, path)
+    def table_sheet(name: str) -> Sheet:
+        return Sheet(name=name, rows=lambda: table_rows(run.table(name)))
+
+    sheets = [Sheet(name="summary", rows=summary, header=False), *map(table_sheet, names)]
+    write_xlsx(path, sheets, max_rows=EXCEL_MAX_ROWS)

@@ -26,7 +26,6 @@ images live in the optical frame (z forward, x right, y down), see
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -35,6 +34,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from redrive.config.validate import Table
 from redrive.errors import ConfigError
 from redrive.geometry import compose, quaternion_from_euler, se3_from_rotation_translation
 from redrive.geometry.quaternion import rotation_matrix_from_quaternion
@@ -177,104 +177,56 @@ _EXTRA_KEYS: Mapping[SensorType, frozenset[str]] = {
 }
 
 
-class _Reader:
-    """Checks one sensor table and says where the problem is."""
-
-    def __init__(self, source: str, name: str, table: Mapping[str, Any]) -> None:
-        self.source, self.name, self.table = source, name, table
-
-    def fail(self, key: str, problem: str, fix: str) -> ConfigError:
-        return ConfigError(f"{self.source}: [rig.{self.name}] {key}: {problem}; {fix}")
-
-    def number(self, key: str, *, default: float | None = None, positive: bool = False) -> float:
-        value = self.table.get(key, default)
-        if value is None:
-            raise self.fail(key, "missing", f"add {key} = <number>")
-        if (
-            isinstance(value, bool)
-            or not isinstance(value, int | float)
-            or not math.isfinite(value)
-        ):
-            raise self.fail(key, f"{value!r} is not a finite number", f"write {key} = <number>")
-        if positive and value <= 0:
-            raise self.fail(key, f"{value} must be > 0", f"give a positive {key}")
-        return float(value)
-
-    def integer(self, key: str) -> int:
-        value = self.table.get(key)
-        if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
-            raise self.fail(key, f"{value!r} is not a positive integer", f"write {key} = <pixels>")
-        return value
-
-    def triple(self, key: str) -> tuple[float, float, float]:
-        value = self.table.get(key, (0.0, 0.0, 0.0))
-        ok = isinstance(value, list | tuple) and len(value) == 3
-        if not ok or not all(
-            isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
-            for v in value
-        ):
-            raise self.fail(key, f"{value!r} is not three numbers", f"write {key} = [x, y, z]")
-        return (float(value[0]), float(value[1]), float(value[2]))
-
-
 def _sensor_from_table(source: str, name: str, table: Any) -> SensorSpec:
     if not isinstance(table, Mapping):
         msg = f"{source}: rig.{name} is a {type(table).__name__}, not a table; write [rig.{name}] with kind = ..."
         raise ConfigError(msg)
-    r = _Reader(source, name, table)
-    kind_name = table.get("kind")
-    if kind_name not in _KINDS:
-        raise r.fail(
-            "kind", f"{kind_name!r} is not a sensor kind", f"use one of {', '.join(_KINDS)}"
-        )
+
+    def style(source: str, path: str, problem: str, fix: str) -> str:
+        return f"{source}: [rig.{name}] {path}: {problem}; {fix}"
+
+    r = Table(table, source=source, style=style)
+    kind_name = r.text("kind", choices=tuple(_KINDS), fix='use one of them, e.g. kind = "lidar"')
     kind = _KINDS[kind_name]
     allowed = _COMMON_KEYS | _EXTRA_KEYS.get(kind, frozenset())
-    for key in table:
-        if key not in allowed:
-            raise r.fail(key, f"unknown key for a {kind_name}", f"use {', '.join(sorted(allowed))}")
-    noise_table = table.get("noise", {})
-    if not isinstance(noise_table, Mapping):
-        raise r.fail("noise", "is not a table", "write noise = { key = value, ... }")
-    noise: dict[str, float] = {}
-    for key, value in noise_table.items():
-        if key not in NOISE_KEYS[kind]:
-            raise r.fail(
-                f"noise.{key}",
-                f"unknown noise parameter for a {kind_name}",
-                f"use {', '.join(sorted(NOISE_KEYS[kind]))}",
-            )
-        if isinstance(value, bool) or not isinstance(value, int | float) or not value >= 0:
-            raise r.fail(f"noise.{key}", f"{value!r} is not a number ≥ 0", "give a number ≥ 0")
-        noise[key] = float(value)
-    if "dropout" in noise and noise["dropout"] > 1:
-        raise r.fail("noise.dropout", f"{noise['dropout']} > 1", "give a probability in [0, 1]")
+    r.check_keys(allowed, fix=f"a {kind_name} has the keys {', '.join(sorted(allowed))}")
+    noise_t = r.table("noise", {}, fix="write noise = { key = value, ... }")
+    noise_t.check_keys(
+        NOISE_KEYS[kind],
+        fix=f"a {kind_name} has the noise parameters {', '.join(sorted(NOISE_KEYS[kind]))}",
+    )
+    noise = {key: noise_t.number(key, minimum=0, fix="give a number ≥ 0") for key in noise_t}
+    if "dropout" in noise_t:
+        noise_t.number("dropout", maximum=1, fix="give a probability in [0, 1]")
     preset = None
     camera = None
     if kind in (SensorType.LIDAR, SensorType.LIDAR_2D):
-        preset = table.get("preset", "HDL-32E" if kind is SensorType.LIDAR else "UTM-30LX")
-        if preset not in LIDAR_PRESETS:
-            raise r.fail(
-                "preset", f"unknown LiDAR {preset!r}", f"use one of {', '.join(LIDAR_PRESETS)}"
-            )
+        preset = r.text(
+            "preset",
+            "HDL-32E" if kind is SensorType.LIDAR else "UTM-30LX",
+            choices=tuple(LIDAR_PRESETS),
+            fix=f"use one of {', '.join(LIDAR_PRESETS)}",
+        )
         is_2d = LIDAR_PRESETS[preset].is_2d
         if is_2d != (kind is SensorType.LIDAR_2D):
             want = "a 2D preset (UTM-30LX)" if not is_2d else "a 3D preset"
             raise r.fail("preset", f"{preset} does not fit kind {kind_name!r}", f"use {want}")
     if kind is SensorType.CAMERA:
-        width, height = r.integer("width"), r.integer("height")
+        width = r.integer("width", minimum=1, fix="write width = <pixels>")
+        height = r.integer("height", minimum=1, fix="write height = <pixels>")
         camera = CameraIntrinsics(
             width=width,
             height=height,
             fx=r.number("fx", positive=True),
             fy=r.number("fy", positive=True),
-            cx=r.number("cx", default=(width - 1) / 2.0),
-            cy=r.number("cy", default=(height - 1) / 2.0),
+            cx=r.number("cx", (width - 1) / 2.0),
+            cy=r.number("cy", (height - 1) / 2.0),
         )
     return SensorSpec(
         name=name,
         kind=kind,
-        xyz_m=r.triple("xyz"),
-        rpy_rad=r.triple("rpy"),
+        xyz_m=r.numbers("xyz", (0.0, 0.0, 0.0), length=3, fix="write xyz = [x, y, z] in metres"),
+        rpy_rad=r.numbers("rpy", (0.0, 0.0, 0.0), length=3, fix="write rpy = [roll, pitch, yaw]"),
         rate_hz=r.number("rate_hz", positive=True),
         preset=preset,
         camera=camera,

@@ -10,8 +10,6 @@ is kept raw (:mod:`redrive.sim.rig` parses it); each sensor's ``rate_hz`` is als
 from __future__ import annotations
 
 import dataclasses
-import difflib
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from importlib import resources
@@ -19,6 +17,7 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
+from redrive.config.validate import Table, is_number, parse_toml
 from redrive.errors import ConfigError
 from redrive.sim.lights import LightTiming
 from redrive.sim.roads import HighwayLayout, UrbanLayout, build_network
@@ -105,72 +104,44 @@ class Scenario:
         }
 
 
+def _style(source: str, path: str, problem: str, fix: str) -> str:
+    return f"{source}: key '{path}': {problem}; {fix}"
+
+
 def _fail(source: str, key: str, problem: str, advice: str) -> ConfigError:
-    return ConfigError(f"{source}: key '{key}': {problem}; {advice}")
+    return ConfigError(_style(source, key, problem, advice))
 
 
-def _is_num(value: Any) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool)
-
-
-def _convert(value: Any, annotation: str, *, source: str, key: str) -> Any:
-    optional = annotation.endswith(" | None")
+def _read(t: Table, key: str, annotation: str) -> Any:
+    """``key`` of ``t`` read as the dataclass field ``annotation`` says (``float | None``, ...)."""
     base = annotation.removesuffix(" | None")
-    ok = True
     if base == "float":
-        ok, value = _is_num(value), float(value) if _is_num(value) else value
-    elif base == "int":
-        ok = isinstance(value, int) and not isinstance(value, bool)
-    elif base == "bool":
-        ok = isinstance(value, bool)
-    elif base == "str":
-        ok = isinstance(value, str)
-    elif base.startswith("tuple["):
-        kind = base[6:-1].split(",")[0]
-        ok = isinstance(value, list) and len(value) == 3 and all(_is_num(v) for v in value)
-        if ok and kind == "int":
-            ok = all(isinstance(v, int) and 0 <= v <= 255 for v in value)
-        value = tuple(value) if ok else value
-    if not ok:
-        want = base + (" (or leave it out)" if optional else "")
-        raise _fail(source, key, f"expected {want}, got {value!r}", f"write a {base} value")
-    return value
+        return t.number(key)
+    if base == "int":
+        return t.integer(key)
+    if base == "bool":
+        return t.flag(key)
+    if base == "str":
+        return t.text(key)
+    if base.startswith("tuple["):
+        colour = base[6:-1].split(",")[0] == "int"
+        return t.numbers(key, length=3, integers=(0, 255) if colour else None)
+    return t.raw(key)
 
 
-def _build(
-    cls: Any, table: Mapping[str, Any], *, source: str, prefix: str, skip: tuple[str, ...] = ()
-) -> Any:
-    """Instantiate dataclass ``cls`` from ``table``: unknown keys and wrong types are ConfigErrors."""
+def _build(cls: Any, t: Table, *, skip: tuple[str, ...] = ()) -> Any:
+    """Instantiate dataclass ``cls`` from ``t``: unknown keys and wrong types are ConfigErrors."""
     fields = {f.name: f for f in dataclasses.fields(cls) if f.name not in skip}
-    kwargs: dict[str, Any] = {}
-    for key, value in table.items():
-        if key in skip:
-            continue
-        if key not in fields:
-            close = difflib.get_close_matches(key, list(fields), n=1)
-            hint = f"did you mean '{close[0]}'?" if close else f"valid keys: {', '.join(fields)}"
-            raise _fail(source, prefix + key, "unknown key", f"remove it ({hint})")
-        kwargs[key] = _convert(value, str(fields[key].type), source=source, key=prefix + key)
-    missing = [
-        name
-        for name, f in fields.items()
-        if f.default is dataclasses.MISSING
-        and f.default_factory is dataclasses.MISSING
-        and name not in kwargs
-    ]
-    if missing:
-        raise _fail(source, prefix + missing[0], "missing", "add it")
+    t.check_keys(set(fields) | set(skip))
+    kwargs = {key: _read(t, key, str(fields[key].type)) for key in t if key not in skip}
+    for name, f in fields.items():
+        required = f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+        if required and name not in kwargs:
+            raise t.missing(name, "a value", "add it")
     try:
         return cls(**kwargs)
     except ValueError as err:
-        raise _fail(source, prefix.rstrip("."), str(err), "fix the values") from err
-
-
-def _table(data: Mapping[str, Any], key: str, *, source: str) -> Mapping[str, Any]:
-    value = data.get(key, {})
-    if not isinstance(value, Mapping):
-        raise _fail(source, key, "expected a table", f"write it as [{key}]")
-    return value
+        raise t.fail("", str(err), "fix the values") from err
 
 
 def _positive(source: str, key: str, value: float | int | None) -> None:
@@ -180,45 +151,24 @@ def _positive(source: str, key: str, value: float | int | None) -> None:
 
 def parse_scenario(data: Mapping[str, Any], *, source: str = "<memory>") -> Scenario:
     """A :class:`Scenario` from a parsed TOML document (``source`` names it in errors)."""
-    top = {"name", "description", "duration_s", "seed", "physics_dt_s", "start_stamp_ns"}
-    top |= {"speed_jitter_mps", "scenery", "road", "lights", "ego", "agents", "rig"}
-    road_t = dict(_table(data, "road", source=source))
-    layout_name = road_t.pop("layout", "urban")
-    if layout_name not in _LAYOUTS:
-        raise _fail(
-            source,
-            "road.layout",
-            f"unknown layout {layout_name!r}",
-            f"use one of {', '.join(_LAYOUTS)}",
-        )
-    road = _build(_LAYOUTS[layout_name], road_t, source=source, prefix="road.")
-    lights = _build(
-        LightTiming, _table(data, "lights", source=source), source=source, prefix="lights."
-    )
-    if "ego" not in data:
+    doc = Table(data, source=source, style=_style)
+    road_t = doc.table("road", {}, fix="write it as [road]")
+    layout_name = road_t.text("layout", "urban", choices=tuple(_LAYOUTS))
+    road = _build(_LAYOUTS[layout_name], road_t, skip=("layout",))
+    lights = _build(LightTiming, doc.table("lights", {}, fix="write it as [lights]"))
+    if "ego" not in doc:
         raise _fail(source, "ego", "missing", "add an [ego] table with at least route = '...'")
-    ego = _build(EgoSpec, _table(data, "ego", source=source), source=source, prefix="ego.")
-    raw_agents = data.get("agents", [])
-    if not isinstance(raw_agents, list):
-        raise _fail(source, "agents", "expected an array of tables", "write each one as [[agents]]")
-    agents = []
-    for i, entry in enumerate(raw_agents):
-        if not isinstance(entry, Mapping):
-            raise _fail(source, f"agents[{i}]", "expected a table", "write it as [[agents]]")
-        agents.append(_build(AgentSpec, entry, source=source, prefix=f"agents[{i}]."))
-    rig = _table(data, "rig", source=source)
-    top_kwargs: dict[str, Any] = {}
-    for key, value in data.items():
-        if key in {"road", "lights", "ego", "agents", "rig"}:
-            continue
-        if key not in top:
-            close = difflib.get_close_matches(key, sorted(top), n=1)
-            hint = f"did you mean '{close[0]}'?" if close else "see the catalogue scenarios"
-            raise _fail(source, key, "unknown key", f"remove it ({hint})")
-        top_kwargs[key] = value
-    fields = {f.name: str(f.type) for f in dataclasses.fields(Scenario)}
-    for key in list(top_kwargs):
-        top_kwargs[key] = _convert(top_kwargs[key], fields[key], source=source, key=key)
+    ego = _build(EgoSpec, doc.table("ego", fix="write it as [ego]"))
+    agents = [
+        _build(AgentSpec, entry)
+        for entry in doc.tables("agents", [], fix="write each one as [[agents]]")
+    ]
+    rig = doc.mapping("rig", {}, fix="write it as [rig]")
+    tables = ("road", "lights", "ego", "agents", "rig")
+    known = {f.name: str(f.type) for f in dataclasses.fields(Scenario)}
+    known = {k: v for k, v in known.items() if k not in (*tables, "source")}
+    doc.check_keys(set(known) | set(tables))
+    top_kwargs = {key: _read(doc, key, known[key]) for key in doc if key in known}
     if "name" not in top_kwargs:
         top_kwargs["name"] = Path(source).stem
     scenario = Scenario(
@@ -300,7 +250,7 @@ def _validate(sc: Scenario) -> None:
     for name, table in sc.rig.items():
         if not isinstance(table, Mapping):
             raise _fail(src, f"rig.{name}", "expected a table", f"write it as [rig.{name}]")
-        if "rate_hz" in table and not (_is_num(table["rate_hz"]) and table["rate_hz"] > 0):
+        if "rate_hz" in table and not (is_number(table["rate_hz"]) and table["rate_hz"] > 0):
             raise _fail(
                 src,
                 f"rig.{name}.rate_hz",
@@ -333,9 +283,4 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
             msg = f"unknown scenario {str(name_or_path)!r}; use one of {', '.join(list_scenarios())} or a path to a .toml file"
             raise ConfigError(msg)
         text, source = entry.read_text(encoding="utf-8"), f"{name_or_path}.toml (catalogue)"
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as err:
-        msg = f"{source}: not valid TOML ({err}); fix the syntax at that line"
-        raise ConfigError(msg) from err
-    return parse_scenario(data, source=source)
+    return parse_scenario(parse_toml(text, source=source), source=source)

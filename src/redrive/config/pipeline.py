@@ -1,4 +1,4 @@
-"""Run configuration (L4): the pipeline a run executes, as frozen dataclasses loaded from TOML.
+"""The pipeline a run executes (L1), as frozen dataclasses loaded from TOML.
 
 A pipeline file (every key but the stages is optional; the CLI's flags override the file)::
 
@@ -28,13 +28,13 @@ the outputs of every earlier stage.
 from __future__ import annotations
 
 import re
-import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Literal
 
+from redrive.config.validate import Table, read_toml
 from redrive.errors import ConfigError
 
 __all__ = [
@@ -194,30 +194,23 @@ def reference_pipeline() -> PipelineConfig:
     )
 
 
-def _expect(value: Any, kind: type | tuple[type, ...], where: str, what: str) -> Any:
-    if not isinstance(value, kind) or (kind is not bool and isinstance(value, bool)):
-        msg = f"{where}: {what}, got {value!r}"
-        raise ConfigError(msg)
-    return value
-
-
-def _algorithm(raw: Any, where: str, base: Path) -> AlgorithmSpec:
-    _expect(raw, dict, where, "expected a table with `plugin`")
-    unknown = sorted(set(raw) - {"name", "plugin", "config"})
-    if unknown:
-        msg = f"{where}: unknown key(s) {', '.join(unknown)} (known: name, plugin, config)"
-        raise ConfigError(msg)
-    plugin = _expect(raw.get("plugin"), str, where, "`plugin` must be a string")
+def _algorithm(t: Table, base: Path) -> AlgorithmSpec:
+    t.check_keys({"name", "plugin", "config"})
+    if not isinstance(t.data.get("plugin"), str):
+        raise t.fail(
+            "plugin",
+            f"`plugin` must be a string, got {t.data.get('plugin')!r}",
+            'add plugin = "entry-point-name", "package.module:Class" or "file.py:Class"',
+        )
+    plugin: str = t.data["plugin"]
     # file.py:Class paths are relative to the pipeline file
     path_part, sep, cls = plugin.rpartition(":")
     if sep and path_part.endswith(".py") and not Path(path_part).is_absolute():
         plugin = f"{(base / path_part).as_posix()}:{cls}"
-    name = _expect(raw.get("name", _default_name(plugin)), str, where, "`name` must be a string")
+    name = t.text("name", _default_name(plugin))
     if not _NAME.match(name):
-        msg = f"{where}: name {name!r} must be letters, digits, '_', '-' or '.'"
-        raise ConfigError(msg)
-    config = _expect(raw.get("config", {}), dict, where, "`config` must be a table")
-    return AlgorithmSpec(name=name, plugin=plugin, config=config)
+        raise t.fail("name", f"{name!r} is not a name", "use letters, digits, '_', '-' or '.'")
+    return AlgorithmSpec(name=name, plugin=plugin, config=dict(t.mapping("config", {})))
 
 
 def load_pipeline(path: str | Path) -> PipelineConfig:
@@ -228,47 +221,26 @@ def load_pipeline(path: str | Path) -> PipelineConfig:
             the file and the key).
     """
     path = Path(path)
-    try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError as err:
-        msg = f"{path}: pipeline file not found"
-        raise ConfigError(msg) from err
-    except tomllib.TOMLDecodeError as err:
-        msg = f"{path}: not valid TOML: {err}"
-        raise ConfigError(msg) from err
-    known = {"mode", "executor", "seed", "step_timeout_s", "fail_fast", "stage"}
-    unknown = sorted(set(raw) - known)
-    if unknown:
-        msg = f"{path}: unknown key(s) {', '.join(unknown)} (known: {', '.join(sorted(known))})"
-        raise ConfigError(msg)
-    stages_raw = _expect(raw.get("stage", []), list, str(path), "`stage` must be [[stage]] tables")
+    top = Table(read_toml(path, what="pipeline file"), source=str(path))
+    top.check_keys({"mode", "executor", "seed", "step_timeout_s", "fail_fast", "stage"})
     stages: list[StageSpec] = []
-    for i, stage in enumerate(stages_raw):
-        where = f"{path}: stage {i + 1}"
-        _expect(stage, dict, where, "expected a table")
-        name = _expect(stage.get("name", f"stage_{i + 1}"), str, where, "`name` must be a string")
-        algos_raw = _expect(
-            stage.get("algorithm", []), list, where, "`algorithm` must be [[stage.algorithm]]"
-        )
-        algos = tuple(
-            _algorithm(a, f"{where} ({name}), algorithm {j + 1}", path.parent)
-            for j, a in enumerate(algos_raw)
-        )
-        stages.append(StageSpec(name=name, algorithms=algos))
-    timeout = raw.get("step_timeout_s")
-    if timeout is not None:
-        timeout = float(_expect(timeout, (int, float), str(path), "`step_timeout_s` is seconds"))
+    for i, stage in enumerate(top.tables("stage", [], fix="write each stage as [[stage]]")):
+        stage.check_keys({"name", "algorithm"})
+        name = stage.text("name", f"stage_{i + 1}")
+        algos = stage.tables("algorithm", [], fix="write each as [[stage.algorithm]]")
+        specs = tuple(_algorithm(a, path.parent) for a in algos)
+        stages.append(StageSpec(name=name, algorithms=specs))
     try:
         return PipelineConfig(
             stages=tuple(stages),
-            mode=raw.get("mode", "sequential"),
-            executor=raw.get("executor", "threads"),
-            seed=int(_expect(raw.get("seed", 0), int, str(path), "`seed` must be an integer")),
-            step_timeout_s=timeout,
-            fail_fast=bool(
-                _expect(raw.get("fail_fast", False), bool, str(path), "`fail_fast` is true/false")
-            ),
+            mode=top.text("mode", "sequential"),
+            executor=top.text("executor", "threads"),
+            seed=top.integer("seed", 0),
+            step_timeout_s=top.number("step_timeout_s", None),
+            fail_fast=top.flag("fail_fast", False),
         )
     except ConfigError as err:
+        if str(err).startswith(str(path)):
+            raise
         msg = f"{path}: {err}"
         raise ConfigError(msg) from err
