@@ -44,8 +44,10 @@ def _print_table(summary: LogSummary) -> None:
     from rich.console import Console
     from rich.table import Table
 
+    from redrive.output.text import shown
+
     console = Console(width=None if sys.stdout.isatty() else 160)
-    console.print(f"[bold]path[/]:      {summary.path}")
+    console.print(f"[bold]path[/]:      {shown(str(summary.path))}")
     console.print(f"[bold]format[/]:    {summary.format}")
     console.print(f"[bold]provides[/]:  {', '.join(summary.provides)}")
     console.print(f"[bold]duration[/]:  {summary.duration_s:.3f} s")
@@ -66,20 +68,20 @@ def _print_table(summary: LogSummary) -> None:
     for t in summary.topics:
         decoder = t.decoder or ("raw" if t.has_definition else "raw (no definition)")
         table.add_row(
-            t.topic,
-            t.msgtype,
+            shown(t.topic),
+            shown(t.msgtype),
             str(t.count),
             "-" if t.rate_hz is None else f"{t.rate_hz:.2f}",
             _human_bytes(t.size_bytes),
-            decoder,
-            t.maps_to or "",
+            shown(decoder),
+            shown(t.maps_to or ""),
         )
     console.print(table)
     if summary.damage_report or summary.damage:
         lines = damage_lines(summary)
-        console.print(f"[bold red]damaged[/]: {lines[0]}")
+        console.print(f"[bold red]damaged[/]: {shown(lines[0])}")
         for line in lines[1:]:
-            console.print(f"  {line}", highlight=False)
+            console.print(f"  {shown(line)}", highlight=False)
 
 
 def damage_lines(summary: LogSummary) -> list[str]:

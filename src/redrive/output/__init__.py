@@ -5,6 +5,8 @@
 * :mod:`redrive.output.xlsx` — the one XLSX writer (openpyxl, write-only, formula-safe cells).
 * :mod:`redrive.output.progress` — the one progress display (rich, with an ETA; silent when
   the terminal is not a TTY).
+* :mod:`redrive.output.text` — names from a log made safe to show on a terminal (escape
+  sequences and rich markup appear as characters).
 
 Nothing here imports redrive above :mod:`redrive.errors`, so every layer can use it.
 """
