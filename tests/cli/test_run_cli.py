@@ -308,3 +308,11 @@ def test_progress_lines_without_a_total_come_every_100_frames() -> None:
         "x.bag: 100 frames, 50.0 frames/s",
         "x.bag: 200 frames, 50.0 frames/s",
     ]
+
+
+def test_a_run_that_processed_no_frame_exits_3(
+    demo_log: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A frame range past the log's end: no frame processed is a failure, not success (issue 37)."""
+    assert main(["run", str(demo_log), "--frames", "5000:5100", "--out", str(tmp_path / "r")]) == 3
+    assert "no frame was processed" in capsys.readouterr().err

@@ -266,11 +266,25 @@ def _run(args: argparse.Namespace) -> int:
             f"{step.error_type}: {step.error_message}"
         )
         return 1
-    return nothing_succeeded_status(report)
+    return nothing_succeeded_status(report, out)
 
 
-def nothing_succeeded_status(report: Any) -> int:
-    """3 (and why, on stderr) when no step of any algorithm succeeded in any frame, else 0."""
+def nothing_succeeded_status(report: Any, out: Path | None = None) -> int:
+    """3 (and why, on stderr) when no step of any algorithm succeeded in any frame, or when
+    the run directory ``out`` holds no frame at all (none in this invocation, none before it),
+    else 0."""
+    if report.frames == 0 and out is not None:
+        from redrive.results import read_manifest
+
+        if read_manifest(out).frames_done == 0:
+            damaged = " (the log is damaged: see the warnings above)" if report.damage else ""
+            print(
+                f"redrive: error: no frame was processed{damaged}: the log gave no frame in the "
+                "range asked for (`redrive info LOG` shows its topics and time range; "
+                "--frames START:STOP counts frames from 0)",
+                file=sys.stderr,
+            )
+            return 3
     if not report.nothing_succeeded:
         return 0
     print(
@@ -331,7 +345,7 @@ def _run_closed_loop(args: argparse.Namespace, pipeline: Any) -> int:
     if report.status is RunStatus.INTERRUPTED:
         print("interrupted: closed-loop runs do not resume; run it again into a new --out")
         return 130
-    return nothing_succeeded_status(report)
+    return nothing_succeeded_status(report, request.out)
 
 
 def _print_deviation(out: Path) -> None:
