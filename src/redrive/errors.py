@@ -7,7 +7,10 @@ translated at the boundary (``raise LogError(msg) from err``).  Messages say *wh
 
 from __future__ import annotations
 
+import errno
+
 __all__ = [
+    "NO_SPACE",
     "AlgorithmError",
     "ConfigError",
     "DiskFullError",
@@ -19,7 +22,22 @@ __all__ = [
     "SimulationError",
     "TransportError",
     "UnsupportedMessageError",
+    "is_no_space",
 ]
+
+#: ``errno`` values that mean a file cannot grow: a full disk, a full quota, a file-size limit
+NO_SPACE = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG})
+
+
+def is_no_space(err: BaseException) -> bool:
+    """Whether ``err`` says a file cannot grow (a full disk, a quota, a file-size limit) — an
+    ``OSError`` with such an errno, or one from Arrow, which keeps only the text."""
+    if not isinstance(err, OSError):
+        return False
+    if err.errno is not None:
+        return err.errno in NO_SPACE
+    text = str(err)
+    return "No space left on device" in text or "Disk quota exceeded" in text
 
 
 class RedriveError(Exception):

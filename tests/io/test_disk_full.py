@@ -186,3 +186,28 @@ def test_live_pipeline_and_record_on_a_full_disk(
     )  # fmt: skip
     _check_cli(done, target)
     assert read_manifest(tmp_path / "run").status in (RunStatus.COMPLETE, RunStatus.INTERRUPTED)
+
+
+def test_run_on_a_full_disk_keeps_the_frames_stored_and_resumes(
+    demo_log: Path, full_disk: Path
+) -> None:
+    """`redrive run --out FULL/run`: the frames of the flushes before the disk filled read back,
+    the manifest agrees with them, and after room is made `--resume` completes the run."""
+    from redrive.results import RunStatus, open_run, read_manifest
+
+    subprocess.run(["mount", "-o", "remount,size=300k", str(full_disk)], check=True)
+    out = full_disk / "run"
+    argv = ("run", str(demo_log), "--out", str(out))
+    done = _redrive(*argv)
+    assert done.returncode == EXIT_DISK_FULL, done.stderr
+    assert "Traceback" not in done.stderr
+    assert f"{out}: no space left writing {out}/" in done.stderr
+    manifest = read_manifest(out)
+    assert manifest.frames_done == open_run(out).table("frames").num_rows
+    assert f"holds the {manifest.frames_done} frames stored before" in done.stderr
+    subprocess.run(["mount", "-o", "remount,size=64m", str(full_disk)], check=True)
+    again = _redrive(*argv, "--resume")
+    assert again.returncode == 0, again.stderr
+    run = open_run(out)
+    assert run.manifest.status is RunStatus.COMPLETE
+    assert sorted(run.table("frames").column("frame_index").to_pylist()) == list(range(100))

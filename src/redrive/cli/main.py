@@ -4,20 +4,18 @@
 from __future__ import annotations
 
 import argparse
-import errno
 import importlib
 import logging
 import sys
 from collections.abc import Sequence
 
 from redrive import __version__
-from redrive.errors import DiskFullError, RedriveError
+from redrive.errors import DiskFullError, RedriveError, is_no_space
 
 __all__ = ["EXIT_DISK_FULL", "main"]
 
 #: the exit status of a command that ran out of disk space (docs/exit_status.md)
 EXIT_DISK_FULL = 6
-_NO_SPACE = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
 
 #: subcommand modules under redrive.cli, in --help order; each has register(subparsers).
 _COMMANDS = (
@@ -111,7 +109,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("redrive: interrupted", file=sys.stderr)
         return 130
     except OSError as err:
-        if err.errno not in _NO_SPACE or args.verbose:
+        if not is_no_space(err) or args.verbose:
             return _internal_error(args, err)
         where = f" writing {err.filename}" if err.filename else ""
         print(

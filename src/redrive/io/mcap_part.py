@@ -3,7 +3,7 @@ file it goes to (:mod:`redrive.io.partfiles`) and the target it becomes.
 
 :meth:`McapPart.close` finishes the file (summary, footer), syncs it and moves it into place;
 :meth:`McapPart.abort` drops it. A write that fails because the disk is full (or a quota or a
-file-size limit, :data:`~redrive.io.mcap_stream.NO_SPACE`) loses nothing that reached the file:
+file-size limit, :data:`~redrive.errors.NO_SPACE`) loses nothing that reached the file:
 :meth:`McapPart.out_of_space` cuts the part back to its last whole chunk, closes it with the
 summary of what it holds when there is room, puts it at the target (or beside it, never over an
 existing file) and returns the :class:`~redrive.errors.DiskFullError` that says where it is.
@@ -16,18 +16,13 @@ import logging
 import os
 from pathlib import Path
 
-from redrive.errors import DiskFullError, LogError
-from redrive.io.mcap_stream import NO_SPACE, McapStream, StreamCompression
+from redrive.errors import DiskFullError, LogError, is_no_space
+from redrive.io.mcap_stream import McapStream, StreamCompression
 from redrive.io.partfiles import create_part, keep_part
 
-__all__ = ["McapPart", "is_no_space"]
+__all__ = ["McapPart"]
 
 logger = logging.getLogger(__name__)
-
-
-def is_no_space(err: BaseException) -> bool:
-    """Whether ``err`` says a file cannot grow (a full disk, a quota, a file-size limit)."""
-    return isinstance(err, OSError) and err.errno in NO_SPACE
 
 
 class McapPart:

@@ -34,7 +34,6 @@ Use (``fd`` from ``os.open``; the caller fsyncs and closes it)::
 from __future__ import annotations
 
 import contextlib
-import errno
 import os
 import queue
 import struct
@@ -64,7 +63,6 @@ from redrive.io.mcap_scan import MAGIC
 
 __all__ = [
     "MAGIC",
-    "NO_SPACE",
     "EncodedChunk",
     "McapStream",
     "StreamCompression",
@@ -85,8 +83,6 @@ _IOV_MAX = 512  # os.writev takes at most IOV_MAX (1024 on Linux) pieces at once
 #: live recordings: the compression thread's niceness (above the receiving threads' 0, so on a
 #: busy machine compression yields and more chunks are written uncompressed, no message lost)
 _COMPRESS_NICE = 10
-#: ``errno`` values that mean a file cannot grow: a full disk, a full quota, a file-size limit
-NO_SPACE = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG})
 
 
 @dataclass(slots=True)
@@ -598,12 +594,6 @@ class McapStream:
             chunk_indexes=self._chunk_indexes,
             metadata_indexes=self._metadata_indexes,
         )
-
-    @property
-    def failed_for_space(self) -> bool:
-        """Whether a write failed because the file cannot grow (:data:`NO_SPACE`)."""
-        failed = self._failed
-        return isinstance(failed, OSError) and failed.errno in NO_SPACE
 
     def salvage(self) -> bool:
         """After a write failed (a full disk): drop what did not reach the file whole — the

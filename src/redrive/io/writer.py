@@ -35,9 +35,9 @@ from typing import Literal, Self
 from mcap.writer import CompressionType
 from rosbags.typesys.store import Typestore
 
-from redrive.errors import LogError, UnsupportedMessageError
+from redrive.errors import LogError, UnsupportedMessageError, is_no_space
 from redrive.io.decoders.base import Decoded
-from redrive.io.mcap_part import McapPart, is_no_space
+from redrive.io.mcap_part import McapPart
 from redrive.io.qos import offered_qos_profiles
 from redrive.io.ros_encode import encode_value
 from redrive.io.typestore import typestore_for

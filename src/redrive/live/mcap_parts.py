@@ -13,8 +13,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from redrive.errors import DiskFullError, LogError
-from redrive.io.mcap_part import McapPart, is_no_space
+from redrive.errors import DiskFullError, LogError, is_no_space
+from redrive.io.mcap_part import McapPart
 from redrive.io.writer import COMPRESSION as _COMPRESSION
 from redrive.io.writer import Compression, McapWriter
 

@@ -23,7 +23,7 @@ from typing import Any
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from redrive.errors import ConfigError
+from redrive.errors import ConfigError, DiskFullError, is_no_space
 from redrive.results._buffers import TableBuffers
 from redrive.results._files import json_bytes, write_files
 from redrive.results._parts import PART_RE, part_name, parts_on_disk, read_part
@@ -41,7 +41,7 @@ from redrive.results.manifest import (
 )
 from redrive.results.records import FrameRecord, ResourceSample
 from redrive.results.resume import resume_mismatches, with_resume
-from redrive.results.roadmap import write_road_map
+from redrive.results.roadmap import MAP_NAME, write_road_map
 from redrive.results.run import Run, open_run
 from redrive.results.schema import SCHEMAS, TABLES
 from redrive.results.summary import summarize_steps
@@ -276,7 +276,12 @@ class RunWriter:
         speed limits) read it; see :mod:`redrive.results.roadmap` for the format.
         """
         self._check_open()
-        write_road_map(self.path, road_map)
+        try:
+            write_road_map(self.path, road_map)
+        except OSError as err:
+            if not is_no_space(err):
+                raise
+            raise self._out_of_space(err, [(self.path / MAP_NAME, b"")]) from err
 
     def write_resources(self, samples: Sequence[ResourceSample]) -> None:
         """Buffer resource samples; they are written with the next flush."""
@@ -325,7 +330,12 @@ class RunWriter:
             made.append(manifest())
             return self.path / MANIFEST_NAME, json_bytes(made[0].to_json())
 
-        write_files(files, last=manifest_file)
+        try:
+            write_files(files, last=manifest_file)
+        except OSError as err:
+            if not is_no_space(err):
+                raise
+            raise self._out_of_space(err, files) from err
         if files:
             logger.debug("%s: part %d, %d frames", self.path, self._next_part, len(self._buffered))
             self._next_part += 1
@@ -333,6 +343,21 @@ class RunWriter:
         self._buffered = set()
         self._has_resources = False
         self._manifest = made[0]
+
+    def _out_of_space(
+        self, err: OSError, files: list[tuple[Path, pa.Table | bytes]]
+    ) -> DiskFullError:
+        """A flush found the disk full: nothing of it counts (its renames come after every
+        write, the manifest last), so the run holds the frames of the flushes before, intact."""
+        where = err.filename or (files[0][0] if files else self.path / MANIFEST_NAME)
+        frames = len(self._done)
+        msg = (
+            f"{self.path}: no space left writing {where} ({err.strerror or err}): the run holds "
+            f"the {frames} frames stored before, intact; free some space and continue it with "
+            "the same command and --resume"
+        )
+        self._manifest = replace(self._manifest, error="no space left on the disk")
+        return DiskFullError(msg, path=str(where), kept=str(self.path))
 
     def close(self, *, status: RunStatus, summary: Mapping[str, Any] | None = None) -> None:
         """Flush, then mark the run ``complete``, ``interrupted`` or ``failed``.
@@ -395,6 +420,8 @@ class RunWriter:
             self._manifest = replace(self._manifest, error=f"{exc_type.__name__}: {exc}")
         try:
             self.close(status=status)
+        except DiskFullError:  # the disk is still full: the last manifest written stays
+            logger.debug("could not close the run in %s", self.path, exc_info=True)
         except Exception:  # never hide the exception that ended the run
             logger.exception("could not close the run in %s after %s", self.path, exc_type)
 
