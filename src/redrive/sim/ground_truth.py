@@ -76,13 +76,13 @@ def objects_in_base(
     orientations[:, 0] = yaws
     return tuple(
         DetectedObject.many(
-            object_ids=object_ids,
-            object_classes=[objs.classes[i] for i in idx.tolist()],
-            centers=centers[idx],
-            sizes=objs.sizes[idx],
-            yaws_rad=yaws,
-            velocities=velocities[idx],
-            orientations=orientations,
+            object_id=object_ids,
+            object_class=[objs.classes[i] for i in idx.tolist()],
+            center_m=centers[idx],
+            size_m=objs.sizes[idx],
+            yaw_rad=yaws,
+            velocity_mps=velocities[idx],
+            orientation_rad=orientations,
             num_lidar_points=points,
             visible=visible,
         )
