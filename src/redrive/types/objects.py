@@ -359,10 +359,14 @@ class ObjectColumns:
         any(map(_SET_ROW, objects, range(n)))
         return objects
 
-    def take(self, rows: Sequence[int] | npt.NDArray[np.intp | np.int64 | np.bool_]) -> ObjectColumns:
+    def take(
+        self, rows: Sequence[int] | npt.NDArray[np.intp | np.int64 | np.bool_]
+    ) -> ObjectColumns:
         """The columns of these rows, in this order (an index sequence or a boolean mask)."""
         index = np.asarray(rows)
-        index = np.flatnonzero(index) if index.dtype == np.bool_ else index.astype(np.intp).reshape(-1)
+        index = (
+            np.flatnonzero(index) if index.dtype == np.bool_ else index.astype(np.intp).reshape(-1)
+        )
         picked = index.tolist()
         values: list[Any] = []
         for name in _COLUMN_NAMES:
@@ -509,9 +513,7 @@ def _checked_columns(
             raise ValueError(length_msg("visible", len(visible), n, where))
         seen = tuple(visible)
     frames = (
-        minus_ones(n)
-        if frame_index is None
-        else int_column(frame_index, "frame_index", n, where)
+        minus_ones(n) if frame_index is None else int_column(frame_index, "frame_index", n, where)
     )
     vectors = [
         zeros(n) if column is None else column3(column, column_name, n, where)

@@ -236,7 +236,9 @@ class NoisyOracle(Algorithm):
         points, visible = truth.num_lidar_points, truth.visible
         if not self._visible_only or (bool((points == -1).all()) and visible.count(None) == n):
             return _all_true(n)
-        seen = (points != 0) & np.array([v is not False for v in visible], dtype=np.bool_)
+        seen: npt.NDArray[np.bool_] = (points != 0) & np.array(
+            [v is not False for v in visible], dtype=np.bool_
+        )
         seen.flags.writeable = False  # the kernel's one signature: read-only columns
         return seen
 

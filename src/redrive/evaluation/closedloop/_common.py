@@ -112,7 +112,9 @@ def ego_run(data: EvalData, *, minimum: int = 1) -> EgoRun:
     return ego
 
 
-def map_objects(objects: Sequence[DetectedObject], ego_xy: F64, ego_heading: float) -> ObjectColumns:
+def map_objects(
+    objects: Sequence[DetectedObject], ego_xy: F64, ego_heading: float
+) -> ObjectColumns:
     """``objects`` (base_link of a frame whose ego pose is ``ego_xy``, ``ego_heading``) in the
     map frame: centres rotated and shifted, yaws and velocities rotated (planar: z kept)."""
     local = ObjectColumns.from_objects(objects)

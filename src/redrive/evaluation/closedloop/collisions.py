@@ -130,7 +130,8 @@ def time_to_collision_series(
         angle = bearing_rad(xy, h, objs.center_m[:, :2])
         wide = bool(sc.straddling.get(frame)) or (road is not None and road.in_intersection(xy))
         keep = np.array(
-            [collided_at.get(int(o), frame + 1) > frame for o in objs.object_id.tolist()], dtype=bool
+            [collided_at.get(int(o), frame + 1) > frame for o in objs.object_id.tolist()],
+            dtype=bool,
         ) & ((angle <= AHEAD_ANGLE_RAD) | (wide & (angle <= BEHIND_ANGLE_RAD)))
         idx = np.flatnonzero(keep)
         if idx.size == 0 or times.size == 0:
@@ -139,7 +140,9 @@ def time_to_collision_series(
         ego_v = speed * np.array([math.cos(h), math.sin(h)])
         ego_c = sc.corners[i][None] + times[:, None, None] * ego_v  # (T, 4, 2)
         base = corners(objs)[idx]  # (M, 4, 2)
-        obj_c = base[None] + times[:, None, None, None] * objs.velocity_mps[idx, :2][None, :, None, :]
+        obj_c = (
+            base[None] + times[:, None, None, None] * objs.velocity_mps[idx, :2][None, :, None, :]
+        )
         contact = rectangles_overlap(ego_c[:, None], obj_c)  # (T, M)
         first = np.flatnonzero(contact.any(axis=1))
         if first.size == 0:

@@ -10,6 +10,7 @@ pair again.
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -43,9 +44,10 @@ def boxes_by_frame(
     ``num_lidar_points`` -1 when unknown) → checked columns sorted by frame (a stable sort)."""
     frames = np.asarray(frame_index, dtype=np.int64).reshape(-1)
     n = frames.shape[0]
-    classes = list(object_class)  # type: ignore[arg-type]
-    if classes and not isinstance(classes[0], ObjectClass):
-        classes = [_CLASSES[int(c)] for c in classes]
+    given: list[Any] = list(object_class)  # type: ignore[arg-type]
+    classes: list[ObjectClass] = [
+        c if isinstance(c, ObjectClass) else _CLASSES[int(c)] for c in given
+    ]
     columns = ObjectColumns.of(
         frame_index=frames,
         object_class=classes,
