@@ -156,24 +156,12 @@ class DetectedObject(_ColumnRow):
             object.__setattr__(self, "bbox_2d", tuple(float(v) for v in self.bbox_2d))
 
     @classmethod
-    def many(
-        cls,
-        *,
-        object_class: Sequence[ObjectClass],
-        center_m: npt.ArrayLike,
-        size_m: npt.ArrayLike,
-        yaw_rad: npt.ArrayLike,
-        object_id: npt.ArrayLike | None = None,
-        confidence: npt.ArrayLike | None = None,
-        velocity_mps: npt.ArrayLike | None = None,
-        acceleration_mps2: npt.ArrayLike | None = None,
-        orientation_rad: npt.ArrayLike | None = None,
-        num_lidar_points: Sequence[int | None] | npt.NDArray[np.int64] | None = None,
-        visible: Sequence[bool | None] | None = None,
-    ) -> list[DetectedObject]:
-        """N objects from columns (:meth:`ObjectColumns.of`'s): object i has
-        ``object_class[i]``, ``Box3D(center=center_m[i], size=size_m[i], yaw_rad=yaw_rad[i])``,
-        ``velocity_mps[i]`` … (a column left out takes the field's default for every object).
+    def many(cls, **columns: Any) -> list[DetectedObject]:
+        """N objects from columns, given as to :meth:`ObjectColumns.of` (``object_class``,
+        ``center_m``, ``size_m``, ``yaw_rad``, optional ``object_id``, ``confidence``,
+        ``velocity_mps`` …): object i has ``object_class[i]``, ``Box3D(center=center_m[i],
+        size=size_m[i], yaw_rad=yaw_rad[i])``, ``velocity_mps[i]`` … (a column left out takes the
+        field's default for every object).
 
         For code that makes many objects per frame (decoders, simulators, perception): the
         columns are checked once, with the checks ``DetectedObject(...)`` and ``Box3D(...)`` make
@@ -183,21 +171,7 @@ class DetectedObject(_ColumnRow):
         fills its fields from it when one is first read (see the module docstring), so
         :meth:`ObjectColumns.shared_by` gives the columns back without a pass over the objects.
         """
-        return _checked_columns(
-            "DetectedObject.many",
-            object_class=object_class,
-            center_m=center_m,
-            size_m=size_m,
-            yaw_rad=yaw_rad,
-            object_id=object_id,
-            confidence=confidence,
-            velocity_mps=velocity_mps,
-            acceleration_mps2=acceleration_mps2,
-            orientation_rad=orientation_rad,
-            num_lidar_points=num_lidar_points,
-            visible=visible,
-            frame_index=None,
-        ).objects()
+        return _checked_columns("DetectedObject.many", **columns).objects()
 
 
 @dataclass(frozen=True, slots=True, kw_only=True, eq=False)
@@ -455,14 +429,14 @@ def _checked_columns(
     center_m: npt.ArrayLike,
     size_m: npt.ArrayLike,
     yaw_rad: npt.ArrayLike,
-    object_id: npt.ArrayLike | None,
-    confidence: npt.ArrayLike | None,
-    velocity_mps: npt.ArrayLike | None,
-    acceleration_mps2: npt.ArrayLike | None,
-    orientation_rad: npt.ArrayLike | None,
-    num_lidar_points: Sequence[int | None] | npt.NDArray[np.int64] | None,
-    visible: Sequence[bool | None] | None,
-    frame_index: npt.ArrayLike | None,
+    object_id: npt.ArrayLike | None = None,
+    confidence: npt.ArrayLike | None = None,
+    velocity_mps: npt.ArrayLike | None = None,
+    acceleration_mps2: npt.ArrayLike | None = None,
+    orientation_rad: npt.ArrayLike | None = None,
+    num_lidar_points: Sequence[int | None] | npt.NDArray[np.int64] | None = None,
+    visible: Sequence[bool | None] | None = None,
+    frame_index: npt.ArrayLike | None = None,
 ) -> ObjectColumns:
     """The columns checked as ``DetectedObject(...)`` checks one object (ValueError naming
     ``where``, the column and the first bad row), copied and frozen."""
