@@ -386,8 +386,10 @@ class ObjectColumns:
             return columns
         frames = np.array(frame_index, dtype=np.int64).reshape(len(columns))
         frames.flags.writeable = False
-        values = [getattr(columns, name) for name in _COLUMN_NAMES[:-1]]
-        return _columns_unchecked(*values, frames)
+        values = [
+            frames if name == "frame_index" else getattr(columns, name) for name in _COLUMN_NAMES
+        ]
+        return _columns_unchecked(*values)
 
 
 def _gathered(objects: Sequence[DetectedObject]) -> ObjectColumns:
