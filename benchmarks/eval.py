@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from redrive.evaluation.detection.arrays import ObjectArrays, class_codes
+from redrive.evaluation.detection.arrays import boxes_by_frame, class_codes
 from redrive.evaluation.detection.classes import NUSCENES_CLASS_RANGE_M, NUSCENES_CLASSES
 from redrive.evaluation.detection.nuscenes_core import (
     NELEM,
@@ -42,6 +42,7 @@ from redrive.evaluation.detection.nuscenes_core import (
     nd_score_without_attributes,
     thr_name,
 )
+from redrive.types import ObjectColumns
 
 __all__ = ["EvalBenchResult", "baseline_nuscenes", "bench_eval", "synthetic_detections"]
 
@@ -53,7 +54,7 @@ _CLASSES = ("vehicle", "truck", "pedestrian", "bicycle", "motorcycle")
 
 def synthetic_detections(
     frames: int, boxes: int, *, seed: int = 0
-) -> tuple[ObjectArrays, ObjectArrays]:
+) -> tuple[ObjectColumns, ObjectColumns]:
     """Ground truth (``boxes`` ± 20 % per frame, within 60 m) and detections: 85 % of the objects
     found with 0.1–1 m of noise in position, 10 % in size, 0.2 rad in yaw, 1 m/s in velocity, plus
     15 % false positives; confidences rounded to 0.01 (so there are ties)."""
@@ -70,9 +71,9 @@ def synthetic_detections(
     yaw = rng.uniform(-np.pi, np.pi, n)
     vel = np.c_[rng.normal(0, 3, (n, 2)), np.zeros(n)]
     pts = rng.choice(np.array([-1, 0, 3, 50]), size=n, p=[0.5, 0.05, 0.15, 0.3])
-    gt = ObjectArrays.from_columns(
-        frame=frame, object_class=cls, center=center, size=size, yaw_rad=yaw, velocity=vel,
-        num_points=pts,
+    gt = boxes_by_frame(
+        frame_index=frame, object_class=cls, center_m=center, size_m=size, yaw_rad=yaw, velocity_mps=vel,
+        num_lidar_points=pts,
     )  # fmt: skip
     found = rng.uniform(0, 1, n) < 0.85
     k = int(found.sum())
@@ -82,14 +83,14 @@ def synthetic_detections(
     fp_frame = rng.integers(0, frames, n_fp)
     fr = 60.0 * np.sqrt(rng.uniform(0, 1, n_fp))
     fphi = rng.uniform(-np.pi, np.pi, n_fp)
-    pred = ObjectArrays.from_columns(
-        frame=np.r_[frame[found], fp_frame],
+    pred = boxes_by_frame(
+        frame_index=np.r_[frame[found], fp_frame],
         object_class=np.r_[cls[found], codes[rng.integers(0, len(_CLASSES), n_fp)]],
-        center=np.r_[tp_center, np.c_[fr * np.cos(fphi), fr * np.sin(fphi), np.full(n_fp, 0.8)]],
-        size=np.r_[size[found] * rng.uniform(0.9, 1.1, (k, 3)), rng.uniform(0.5, 5, (n_fp, 3))],
+        center_m=np.r_[tp_center, np.c_[fr * np.cos(fphi), fr * np.sin(fphi), np.full(n_fp, 0.8)]],
+        size_m=np.r_[size[found] * rng.uniform(0.9, 1.1, (k, 3)), rng.uniform(0.5, 5, (n_fp, 3))],
         yaw_rad=np.r_[yaw[found] + rng.normal(0, 0.2, k), rng.uniform(-np.pi, np.pi, n_fp)],
-        velocity=np.r_[vel[found] + np.c_[rng.normal(0, 1, (k, 2)), np.zeros(k)], np.zeros((n_fp, 3))],
-        score=np.round(np.r_[rng.uniform(0.3, 1, k), rng.uniform(0, 0.7, n_fp)], 2),
+        velocity_mps=np.r_[vel[found] + np.c_[rng.normal(0, 1, (k, 2)), np.zeros(k)], np.zeros((n_fp, 3))],
+        confidence=np.round(np.r_[rng.uniform(0.3, 1, k), rng.uniform(0, 0.7, n_fp)], 2),
     )  # fmt: skip
     return gt, pred
 
@@ -158,22 +159,23 @@ def _baseline_class(
     )
 
 
-def baseline_nuscenes(gt: ObjectArrays, pred: ObjectArrays) -> dict[str, float]:
+def baseline_nuscenes(gt: ObjectColumns, pred: ObjectColumns) -> dict[str, float]:
     """The nuScenes values of :func:`evaluate_nuscenes` (default parameters) by loops."""
     code_to_name = {int(class_codes([v])[0]): n for v, n in NUSCENES_CLASSES.items()}
     names = list(dict.fromkeys(NUSCENES_CLASSES.values()))
 
-    def rows(a: ObjectArrays) -> list[tuple[str, float, tuple[float, ...]]]:
+    def rows(a: ObjectColumns) -> list[tuple[str, float, tuple[float, ...]]]:
         out: list[tuple[str, float, tuple[float, ...]]] = []
+        codes = a.class_code()
         for i in range(len(a)):
-            name = code_to_name.get(int(a.object_class[i]))
-            x, y = float(a.center[i, 0]), float(a.center[i, 1])
+            name = code_to_name.get(int(codes[i]))
+            x, y = float(a.center_m[i, 0]), float(a.center_m[i, 1])
             dist = math.sqrt(x * x + y * y)
-            if name is None or dist >= NUSCENES_CLASS_RANGE_M[name] or a.num_points[i] == 0:
+            if name is None or dist >= NUSCENES_CLASS_RANGE_M[name] or a.num_lidar_points[i] == 0:
                 continue
-            s = a.size[i]
-            v = a.velocity[i]
-            rec = (float(a.frame[i]), float(a.score[i]), x, y, float(a.yaw_rad[i]),
+            s = a.size_m[i]
+            v = a.velocity_mps[i]
+            rec = (float(a.frame_index[i]), float(a.confidence[i]), x, y, float(a.yaw_rad[i]),
                    float(s[0]), float(s[1]), float(s[2]), float(v[0]), float(v[1]))  # fmt: skip
             out.append((name, dist, rec))
         return out

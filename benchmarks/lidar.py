@@ -14,6 +14,7 @@ builder threads cannot borrow others.  The camera figure is frames/s of
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import math
 import os
@@ -31,8 +32,8 @@ from redrive.sim.camera import CameraModel
 from redrive.sim.lidar import LidarModel
 from redrive.sim.mesh import box_triangles
 from redrive.sim.rig import default_rig
-from redrive.sim.scene import GroundLabel, GroundMap, Scene, SceneObjects
-from redrive.types import ObjectClass
+from redrive.sim.scene import GroundLabel, GroundMap, ObjectLooks, Scene
+from redrive.types import ObjectClass, ObjectColumns
 
 __all__ = ["TARGET_RATIO", "LidarBenchResult", "bench_lidar", "bench_scene"]
 
@@ -111,21 +112,28 @@ def bench_scene(
     velocities[:num_boxes, 1] = speed * np.sin(yaw)
     colors = rng.integers(30, 230, (n, 3)).astype(np.uint8)
     colors[num_boxes:] = (150, 140, 130)
-    objects = SceneObjects(
-        object_ids=np.arange(1, n + 1, dtype=np.int64),
-        classes=(ObjectClass.VEHICLE,) * num_boxes + (ObjectClass.STATIC,) * num_buildings,
-        centers=centers,
-        sizes=np.r_[sizes, b_size],
-        yaws_rad=np.r_[yaw, np.zeros(num_buildings)],
-        velocities=velocities,
-        colors=colors,
+    objects = ObjectColumns.of(
+        object_id=np.arange(1, n + 1, dtype=np.int64),
+        object_class=(ObjectClass.VEHICLE,) * num_boxes + (ObjectClass.STATIC,) * num_buildings,
+        center_m=centers,
+        size_m=np.r_[sizes, b_size],
+        yaw_rad=np.r_[yaw, np.zeros(num_buildings)],
+        velocity_mps=velocities,
+    )
+    looks = ObjectLooks(
+        colors_rgb=colors,
         reflectivity=rng.uniform(0.2, 0.9, n).astype(np.float32),
         is_ground_truth=np.r_[np.ones(num_boxes, bool), np.zeros(num_buildings, bool)],
     )
     pose = np.eye(4)
     pose[1, 3] = -1.75
     return Scene(
-        stamp_ns=stamp_ns, ground=ground, objects=objects, traffic_lights=(), map_from_base=pose
+        stamp_ns=stamp_ns,
+        ground=ground,
+        objects=objects,
+        looks=looks,
+        traffic_lights=(),
+        map_from_base=pose,
     )
 
 
@@ -135,21 +143,12 @@ def _advance(scene: Scene, dt_ns: int) -> Scene:
     dt_s = dt_ns * 1e-9
     pose = scene.map_from_base.copy()
     pose[0, 3] += _EGO_SPEED_MPS * dt_s
-    moved = SceneObjects(
-        object_ids=objs.object_ids,
-        classes=objs.classes,
-        centers=objs.centers + objs.velocities * dt_s,
-        sizes=objs.sizes,
-        yaws_rad=objs.yaws_rad,
-        velocities=objs.velocities,
-        colors=objs.colors,
-        reflectivity=objs.reflectivity,
-        is_ground_truth=objs.is_ground_truth,
-    )
+    moved = dataclasses.replace(objs, center_m=objs.center_m + objs.velocity_mps * dt_s)
     return Scene(
         stamp_ns=scene.stamp_ns + dt_ns,
         ground=scene.ground,
         objects=moved,
+        looks=scene.looks,
         traffic_lights=(),
         map_from_base=pose,
     )
@@ -185,7 +184,7 @@ def _open3d_caster(
     except (ImportError, OSError) as err:
         return None, None, f"open3d not importable ({err}); pip install open3d to compare"
     objs = scene.objects
-    tris = box_triangles(objs.centers, objs.sizes, objs.yaws_rad).reshape(-1, 3)
+    tris = box_triangles(objs.center_m, objs.size_m, objs.yaw_rad).reshape(-1, 3)
     ground = np.array(
         [[-1e3, -1e3, 0], [1e3, -1e3, 0], [1e3, 1e3, 0], [-1e3, 1e3, 0]], dtype=np.float32
     )

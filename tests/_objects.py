@@ -28,15 +28,15 @@ def one_batch(objects: Sequence[DetectedObject]) -> list[DetectedObject]:
     """The same objects (``bbox_2d`` aside, which ``many`` does not take) as rows of one
     ``DetectedObject.many`` call."""
     return DetectedObject.many(
-        object_ids=[o.object_id for o in objects],
-        object_classes=[o.object_class for o in objects],
-        confidences=[o.confidence for o in objects],
-        centers=[o.box.center for o in objects],
-        sizes=[o.box.size for o in objects],
-        yaws_rad=[o.box.yaw_rad for o in objects],
-        velocities=[o.velocity for o in objects],
-        accelerations=[o.acceleration for o in objects],
-        orientations=[o.orientation for o in objects],
+        object_id=[o.object_id for o in objects],
+        object_class=[o.object_class for o in objects],
+        confidence=[o.confidence for o in objects],
+        center_m=[o.box.center for o in objects],
+        size_m=[o.box.size for o in objects],
+        yaw_rad=[o.box.yaw_rad for o in objects],
+        velocity_mps=[o.velocity for o in objects],
+        acceleration_mps2=[o.acceleration for o in objects],
+        orientation_rad=[o.orientation for o in objects],
         num_lidar_points=[o.num_lidar_points for o in objects],
         visible=[o.visible for o in objects],
     )

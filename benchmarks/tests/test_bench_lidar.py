@@ -21,7 +21,7 @@ def test_bench_scene_keeps_the_ego_clear() -> None:
     scene = bench_scene(np.random.default_rng(0), num_boxes=60, num_buildings=4)
     assert len(scene.objects) == 64
     ego_xy = scene.map_from_base[:2, 3]
-    dist = np.linalg.norm(scene.objects.centers[:, :2] - ego_xy, axis=1)
+    dist = np.linalg.norm(scene.objects.center_m[:, :2] - ego_xy, axis=1)
     assert dist.min() > 5.0
 
 

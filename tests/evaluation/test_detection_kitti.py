@@ -14,25 +14,27 @@ import shapely
 
 from redrive.cli.main import main
 from redrive.evaluation import EvalData
-from redrive.evaluation.detection import KittiDetection, NuScenesDetection, ObjectArrays
+from redrive.evaluation.detection import KittiDetection, NuScenesDetection, boxes_by_frame
 from redrive.evaluation.detection.arrays import class_codes
 from redrive.evaluation.detection.iou import bev_corners
 from redrive.evaluation.detection.kitti import get_thresholds
 from redrive.results import open_run
+from redrive.types import ObjectColumns
 
+EMPTY = ObjectColumns.from_objects([])
 CLASSES = ["vehicle", "pedestrian", "bicycle", "truck"]
 
 
-def boxes(rows: Sequence[Sequence[float]]) -> ObjectArrays:
+def boxes(rows: Sequence[Sequence[float]]) -> ObjectColumns:
     """rows: (frame, class index into CLASSES, x, y, z, l, w, h, yaw, score)."""
     a = np.array(rows, dtype=np.float64).reshape(-1, 10)
-    return ObjectArrays.from_columns(
-        frame=a[:, 0],
+    return boxes_by_frame(
+        frame_index=a[:, 0],
         object_class=class_codes(CLASSES)[a[:, 1].astype(int)],
-        center=a[:, 2:5],
-        size=a[:, 5:8],
+        center_m=a[:, 2:5],
+        size_m=a[:, 5:8],
         yaw_rad=a[:, 8],
-        score=a[:, 9],
+        confidence=a[:, 9],
     )
 
 
@@ -41,7 +43,7 @@ def car(frame: int, x: float, y: float = 0.0, score: float = 1.0, yaw: float = 0
 
 
 def evaluate(
-    gt: ObjectArrays, pred: ObjectArrays, frames: Sequence[int], **params: object
+    gt: ObjectColumns, pred: ObjectColumns, frames: Sequence[int], **params: object
 ) -> dict[str, float]:
     return dict(
         KittiDetection(**params).evaluate_arrays(gt, pred, np.array(frames, np.int64)).values
@@ -129,9 +131,9 @@ def test_ignored_classes_and_empty() -> None:
     res = KittiDetection().evaluate_arrays(gt, pred, np.array([0]))
     assert res.per_frame["fp"][1].tolist() == [1.0]
     # no ground truth, detections → 0; neither → NaN; ground truth only → 0
-    assert evaluate(ObjectArrays.empty(), pred, [0])["AP3D/car"] == 0.0
-    assert math.isnan(evaluate(ObjectArrays.empty(), ObjectArrays.empty(), [0])["mAP3D"])
-    assert evaluate(gt, ObjectArrays.empty(), [0])["AP3D/car"] == 0.0
+    assert evaluate(EMPTY, pred, [0])["AP3D/car"] == 0.0
+    assert math.isnan(evaluate(EMPTY, EMPTY, [0])["mAP3D"])
+    assert evaluate(gt, EMPTY, [0])["AP3D/car"] == 0.0
 
 
 def test_yaw_wrap_around_matches() -> None:

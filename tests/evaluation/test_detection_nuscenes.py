@@ -17,7 +17,7 @@ import pytest
 
 from redrive.cli.main import main
 from redrive.evaluation import EvalData
-from redrive.evaluation.detection import NuScenesDetection, ObjectArrays, evaluate_nuscenes
+from redrive.evaluation.detection import NuScenesDetection, boxes_by_frame, evaluate_nuscenes
 from redrive.evaluation.detection.arrays import class_codes
 from redrive.evaluation.detection.classes import NUSCENES_CLASS_RANGE_M, NUSCENES_CLASSES
 from redrive.evaluation.detection.nuscenes_core import MetricData, calc_ap, calc_tp
@@ -31,32 +31,33 @@ from redrive.results import (
     open_run,
 )
 from redrive.results.evaluation import read_evaluation
-from redrive.types import Box3D, DetectedObject, ObjectClass, Role
+from redrive.types import Box3D, DetectedObject, ObjectClass, ObjectColumns, Role
 
+EMPTY = ObjectColumns.from_objects([])
 CLASSES = ["vehicle", "truck", "pedestrian", "bicycle", "motorcycle"]
 NAMES = ["car", "truck", "pedestrian", "bicycle", "motorcycle"]
 
 
-def boxes(rows: Sequence[Sequence[float]]) -> ObjectArrays:
+def boxes(rows: Sequence[Sequence[float]]) -> ObjectColumns:
     """rows: (frame, class index into CLASSES, x, y, yaw, score[, l, w, h, vx, vy, points])."""
     full = []
     for r in rows:
         full.append([*r, *[4.0, 2.0, 1.5, 0.0, 0.0, -1][len(r) - 6 :]])
     a = np.array(full, dtype=np.float64).reshape(-1, 12)
     codes = class_codes(CLASSES)
-    return ObjectArrays.from_columns(
-        frame=a[:, 0],
+    return boxes_by_frame(
+        frame_index=a[:, 0],
         object_class=codes[a[:, 1].astype(int)],
-        center=np.c_[a[:, 2:4], np.zeros(len(a))],
-        size=a[:, 6:9],
+        center_m=np.c_[a[:, 2:4], np.zeros(len(a))],
+        size_m=a[:, 6:9],
         yaw_rad=a[:, 4],
-        velocity=np.c_[a[:, 9:11], np.zeros(len(a))],
-        score=a[:, 5],
-        num_points=a[:, 11],
+        velocity_mps=np.c_[a[:, 9:11], np.zeros(len(a))],
+        confidence=a[:, 5],
+        num_lidar_points=a[:, 11],
     )
 
 
-def run_eval(gt: ObjectArrays, pred: ObjectArrays, **kw: object) -> dict[str, float]:
+def run_eval(gt: ObjectColumns, pred: ObjectColumns, **kw: object) -> dict[str, float]:
     ev = evaluate_nuscenes(
         gt,
         pred,
@@ -229,17 +230,17 @@ def test_calc_ap_and_calc_tp_clipping() -> None:
 def test_empty_ground_truth_and_empty_predictions() -> None:
     # predictions only: the class has no GT → devkit "no predictions": AP 0, TP errors 1;
     # NDS_no_AAE = (5·0 + 4·0) / 9 = 0
-    v = run_eval(ObjectArrays.empty(), boxes([(0, 0, 10.0, 0.0, 0.0, 0.9)]))
+    v = run_eval(EMPTY, boxes([(0, 0, 10.0, 0.0, 0.0, 0.9)]))
     assert v["mAP"] == 0.0
     assert v["mATE"] == 1.0
     assert v["NDS_no_AAE"] == 0.0
     # ground truth only: AP 0, recall 0
-    v = run_eval(boxes([(0, 2, 5.0, 1.0, 0.0, 1.0)]), ObjectArrays.empty())
+    v = run_eval(boxes([(0, 2, 5.0, 1.0, 0.0, 1.0)]), EMPTY)
     assert v["AP/pedestrian/2.0"] == 0.0
     assert v["recall/pedestrian/2.0"] == 0.0
     assert v["mAP"] == 0.0
     # nothing at all: undefined
-    v = run_eval(ObjectArrays.empty(), ObjectArrays.empty())
+    v = run_eval(EMPTY, EMPTY)
     assert math.isnan(v["mAP"])
     assert math.isnan(v["NDS_no_AAE"])
 
@@ -282,11 +283,11 @@ def test_filtering_range_points_and_classes() -> None:
             (0, 0, 10.0, 0.0, 0.0, 1.0, 4, 2, 1.5, 0, 0, 12),
         ]
     )
-    unknown = ObjectArrays.from_columns(
-        frame=[0],
+    unknown = boxes_by_frame(
+        frame_index=[0],
         object_class=class_codes(["unknown"]),
-        center=[[5.0, 0, 0]],
-        size=[[1, 1, 1]],
+        center_m=[[5.0, 0, 0]],
+        size_m=[[1, 1, 1]],
         yaw_rad=[0],
     )
     pred = boxes([(0, 0, 10.0, 0.0, 0.0, 0.8), (0, 0, 55.0, 0.0, 0.0, 0.9)])
@@ -294,11 +295,11 @@ def test_filtering_range_points_and_classes() -> None:
     assert v["gt_objects"] == 1.0
     assert v["detections"] == 1.0
     assert v["AP/car/2.0"] == pytest.approx(1.0, abs=1e-12)
-    assert run_eval(gt, ObjectArrays.from_columns(
-        frame=np.r_[pred.frame, unknown.frame],
-        object_class=np.r_[pred.object_class, unknown.object_class],
-        center=np.r_[pred.center, unknown.center], size=np.r_[pred.size, unknown.size],
-        yaw_rad=np.r_[pred.yaw_rad, unknown.yaw_rad], score=np.r_[pred.score, 0.99],
+    assert run_eval(gt, boxes_by_frame(
+        frame_index=np.r_[pred.frame_index, unknown.frame_index],
+        object_class=np.r_[pred.class_code(), unknown.class_code()],
+        center_m=np.r_[pred.center_m, unknown.center_m], size_m=np.r_[pred.size_m, unknown.size_m],
+        yaw_rad=np.r_[pred.yaw_rad, unknown.yaw_rad], confidence=np.r_[pred.confidence, 0.99],
     ))["detections"] == 1.0  # fmt: skip
 
 

@@ -20,18 +20,19 @@ def test_rows_from_columns_are_the_rows_object_by_object() -> None:
     rng = np.random.default_rng(0)
     n = 5
     columns = ObjectColumns(
-        object_ids=(1, -1, 3, 4, 5),
-        object_classes=(ObjectClass.VEHICLE,) * 3 + (ObjectClass.PEDESTRIAN,) * 2,
-        confidences=rng.uniform(0, 1, n),
-        centers=rng.normal(size=(n, 3)) * 1e3,
-        sizes=rng.uniform(0, 5, (n, 3)),
-        yaws_rad=rng.uniform(-3, 3, n),
-        velocities=rng.normal(size=(n, 3)),
-        accelerations=rng.normal(size=(n, 3)),
-        orientations=rng.normal(size=(n, 3)),
-        bbox_2d=(None, (1.0, 2.0, 30.0, 40.0), None, None, (0.5, 0.5, 1.0, 1.0)),
-        num_lidar_points=(None, 0, 12, None, 3),
+        object_id=np.array([1, -1, 3, 4, 5]),
+        object_class=(ObjectClass.VEHICLE,) * 3 + (ObjectClass.PEDESTRIAN,) * 2,
+        confidence=rng.uniform(0, 1, n),
+        center_m=rng.normal(size=(n, 3)) * 1e3,
+        size_m=rng.uniform(0, 5, (n, 3)),
+        yaw_rad=rng.uniform(-3, 3, n),
+        velocity_mps=rng.normal(size=(n, 3)),
+        acceleration_mps2=rng.normal(size=(n, 3)),
+        orientation_rad=rng.normal(size=(n, 3)),
+        bbox_2d_px=(None, (1.0, 2.0, 30.0, 40.0), None, None, (0.5, 0.5, 1.0, 1.0)),
+        num_lidar_points=np.array([-1, 0, 12, -1, 3]),
         visible=(True, False, None, None, True),
+        frame_index=np.full(n, -1),
     )
     objects = columns.objects()
     for ground_truth in (True, False):

@@ -135,8 +135,9 @@ def test_world_with_dropped_agents_moves_its_driven_ego_alike() -> None:
     bare.step(3.0)
     assert np.array_equal(full.map_from_base(), bare.map_from_base())
     assert full.ego_state().velocity.tolist() == bare.ego_state().velocity.tolist()
-    objects = bare.objects()
-    assert not objects.is_ground_truth.any()
-    assert len(objects.object_ids) == len(full.objects().object_ids) - int(
-        full.objects().is_ground_truth.sum()
+    objects, looks = bare.objects()
+    assert not looks.is_ground_truth.any()
+    full_objects, full_looks = full.objects()
+    assert len(objects.object_id) == len(full_objects.object_id) - int(
+        full_looks.is_ground_truth.sum()
     )

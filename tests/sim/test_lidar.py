@@ -12,8 +12,8 @@ from redrive.sim.lidar import LidarModel
 from redrive.sim.lidar_presets import LIDAR_PRESETS, lidar_preset
 from redrive.sim.mesh import box_triangles
 from redrive.sim.rig import default_rig
-from redrive.sim.scene import GroundLabel, GroundMap, Scene, SceneObjects
-from redrive.types import ObjectClass
+from redrive.sim.scene import GroundLabel, GroundMap, ObjectLooks, Scene
+from redrive.types import ObjectClass, ObjectColumns
 
 
 def make_scene(
@@ -27,14 +27,15 @@ def make_scene(
     """Boxes (cx, cy, cz, length, width, height, yaw) with ids 1.. on a road raster."""
     n = len(boxes)
     arr = np.array(boxes, dtype=np.float64).reshape(n, 7)
-    objects = SceneObjects(
-        object_ids=np.arange(1, n + 1, dtype=np.int64),
-        classes=(ObjectClass.VEHICLE,) * n,
-        centers=arr[:, :3],
-        sizes=arr[:, 3:6],
-        yaws_rad=arr[:, 6],
-        velocities=np.zeros((n, 3)),
-        colors=np.array(colors or [(200, 30, 30)] * n, dtype=np.uint8).reshape(n, 3),
+    objects = ObjectColumns.of(
+        object_id=np.arange(1, n + 1, dtype=np.int64),
+        object_class=(ObjectClass.VEHICLE,) * n,
+        center_m=arr[:, :3],
+        size_m=arr[:, 3:6],
+        yaw_rad=arr[:, 6],
+    )
+    looks = ObjectLooks(
+        colors_rgb=np.array(colors or [(200, 30, 30)] * n, dtype=np.uint8).reshape(n, 3),
         reflectivity=np.full(n, 0.6, dtype=np.float32),
         is_ground_truth=np.ones(n, dtype=bool),
     )
@@ -45,6 +46,7 @@ def make_scene(
         stamp_ns=stamp_ns,
         ground=ground,
         objects=objects,
+        looks=looks,
         traffic_lights=(),
         map_from_base=np.eye(4) if map_from_base is None else map_from_base,
     )

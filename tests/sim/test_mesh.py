@@ -13,23 +13,18 @@ from redrive.sim.mesh import (
     box_triangles,
     box_vertices,
 )
-from redrive.sim.scene import SceneObjects
-from redrive.types import ObjectClass
+from redrive.types import ObjectClass, ObjectColumns
 
 
-def _boxes(n: int, rng: np.random.Generator) -> SceneObjects:
+def _boxes(n: int, rng: np.random.Generator) -> ObjectColumns:
     """N random, often overlapping boxes around a point a few km from the map origin."""
     centers = np.c_[rng.uniform(-40, 40, (n, 2)), rng.uniform(0.3, 3.0, n)] + [3120.7, -845.3, 0]
-    return SceneObjects(
-        object_ids=np.arange(n, dtype=np.int64),
-        classes=(ObjectClass.STATIC,) * n,
-        centers=centers,
-        sizes=rng.uniform(0.2, 12.0, (n, 3)),
-        yaws_rad=rng.uniform(-np.pi, np.pi, n),
-        velocities=np.zeros((n, 3)),
-        colors=np.zeros((n, 3), dtype=np.uint8),
-        reflectivity=np.full(n, 0.5, dtype=np.float32),
-        is_ground_truth=np.zeros(n, dtype=bool),
+    return ObjectColumns.of(
+        object_id=np.arange(n, dtype=np.int64),
+        object_class=(ObjectClass.STATIC,) * n,
+        center_m=centers,
+        size_m=rng.uniform(0.2, 12.0, (n, 3)),
+        yaw_rad=rng.uniform(-np.pi, np.pi, n),
     )
 
 
@@ -40,8 +35,8 @@ def test_index_rows_rebuild_the_flat_triangles() -> None:
     rows = box_triangle_indices(len(objs))
     assert rows.shape == (150 * TRIANGLES_PER_BOX,)
     idx = np.array(rows.tolist(), dtype=np.int64)
-    corners = (box_vertices(objs.centers, objs.sizes, objs.yaws_rad) - origin).reshape(-1, 3)
-    flat = box_triangles(objs.centers, objs.sizes, objs.yaws_rad, origin=origin)
+    corners = (box_vertices(objs.center_m, objs.size_m, objs.yaw_rad) - origin).reshape(-1, 3)
+    flat = box_triangles(objs.center_m, objs.size_m, objs.yaw_rad, origin=origin)
     np.testing.assert_array_equal(corners.astype(np.float32)[idx], flat)
     assert len(box_triangle_indices(2)) == 2 * TRIANGLES_PER_BOX  # a prefix of the cache
 
@@ -52,7 +47,7 @@ def test_indexed_mesh_casts_as_the_flat_one_bit_for_bit() -> None:
     origin = np.array([3118.0, -841.0, 1.7])
     mesh = BoxMesh.from_objects(objs, origin=origin)
     flat = rtcore_scene.EmbreeScene()
-    tris = box_triangles(objs.centers, objs.sizes, objs.yaws_rad, origin=origin)
+    tris = box_triangles(objs.center_m, objs.size_m, objs.yaw_rad, origin=origin)
     mesh_construction.TriangleMesh(flat, tris)
     n = 20_000
     dirs = rng.normal(size=(n, 3))

@@ -21,10 +21,10 @@ def _state(w: World) -> tuple[object, ...]:
     walkers = tuple((a.start_time_s, a._time_s) for a in w._walkers)
     return (
         w.time_ns,
-        o.object_ids.tobytes(),
-        o.centers.tobytes(),
-        o.yaws_rad.tobytes(),
-        o.velocities.tobytes(),
+        o.object_id.tobytes(),
+        o.center_m.tobytes(),
+        o.yaw_rad.tobytes(),
+        o.velocity_mps.tobytes(),
         (m.x_m, m.y_m, m.yaw_rad, m.speed_mps, m.steer_rad, m.accel_mps2),
         w._driver.s_m,
         tuple(sorted(w._driver._committed)),

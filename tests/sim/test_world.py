@@ -18,12 +18,12 @@ from redrive.types import ObjectClass
 def _scene_arrays(scene: Scene) -> list[np.ndarray]:
     o = scene.objects
     return [
-        o.object_ids,
-        o.centers,
-        o.sizes,
-        o.yaws_rad,
-        o.velocities,
-        o.colors,
+        o.object_id,
+        o.center_m,
+        o.size_m,
+        o.yaw_rad,
+        o.velocity_mps,
+        scene.looks.colors_rgb,
         scene.map_from_base,
     ]
 
@@ -62,10 +62,10 @@ def test_catalogue_scenario_runs_two_seconds(name: str) -> None:
     assert scene.stamp_ns == world.time_ns
     objs = scene.objects
     assert len(objs) > 0
-    assert 0 not in objs.object_ids.tolist()  # the ego's own box is not in the scene
-    static = np.array([c is ObjectClass.STATIC for c in objs.classes])
-    assert not np.any(objs.is_ground_truth[static])
-    assert np.all(objs.is_ground_truth[~static])
+    assert 0 not in objs.object_id.tolist()  # the ego's own box is not in the scene
+    static = np.array([c is ObjectClass.STATIC for c in objs.object_class])
+    assert not np.any(scene.looks.is_ground_truth[static])
+    assert np.all(scene.looks.is_ground_truth[~static])
     state = world.ego_state()
     assert state.speed_mps > 1.0
     np.testing.assert_allclose(world.map_from_base()[:2, 3], state.position[:2])
@@ -103,14 +103,14 @@ def test_lights_in_scene_and_red_light_stop() -> None:
 def test_pedestrian_from_occlusion_starts_and_ego_yields() -> None:
     world = World(load_scenario("pedestrian_from_occlusion"))
     scene0 = world.scene()
-    ped = [i for i, c in enumerate(scene0.objects.classes) if c is ObjectClass.PEDESTRIAN]
+    ped = [i for i, c in enumerate(scene0.objects.object_class) if c is ObjectClass.PEDESTRIAN]
     assert len(ped) == 1
-    y0 = scene0.objects.centers[ped[0], 1]
+    y0 = scene0.objects.center_m[ped[0], 1]
     min_speed = np.inf
     for _ in range(100):
         world.step(0.1)
         min_speed = min(min_speed, world.ego_state().speed_mps)
-    y1 = world.scene().objects.centers[ped[0], 1]
+    y1 = world.scene().objects.center_m[ped[0], 1]
     assert y1 - y0 > 5.0  # crossed the lane to the left
     assert min_speed < 5.0  # the ego braked for it
 
@@ -128,15 +128,16 @@ def test_ego_keeps_a_gap_to_cut_in_and_braking_leads(name: str) -> None:
     min_gap = np.inf
     for _ in range(100):  # 10 s
         world.step(0.1)
-        objs = world.scene().objects
+        scene = world.scene()
+        objs = scene.objects
         state = world.ego_state()
         heading = np.array([np.cos(state.heading_rad), np.sin(state.heading_rad)])
-        rel = objs.centers[:, :2] - state.position[:2]
+        rel = objs.center_m[:, :2] - state.position[:2]
         ahead = rel @ heading
         lateral = np.abs(rel @ np.array([-heading[1], heading[0]]))
-        in_lane = objs.is_ground_truth & (lateral < 1.5) & (ahead > 0)
+        in_lane = scene.looks.is_ground_truth & (lateral < 1.5) & (ahead > 0)
         if np.any(in_lane):
-            gaps = ahead[in_lane] - objs.sizes[in_lane, 0] / 2 - geo.front_offset_m
+            gaps = ahead[in_lane] - objs.size_m[in_lane, 0] / 2 - geo.front_offset_m
             min_gap = min(min_gap, float(gaps.min()))
     assert 1.0 < min_gap < 15.0
 
@@ -148,17 +149,16 @@ def test_ground_truth_objects_are_the_ground_truth_rows_of_objects() -> None:
     for marked in (False, True):
         if marked:  # mark two scenery boxes as ground truth, as a scenario could
             static, looks = world._static
-            flags = static.is_ground_truth.copy()
+            flags = looks.is_ground_truth.copy()
             flags[[3, 7]] = True
-            world._static = (dataclasses.replace(static, is_ground_truth=flags), looks)
-            world._static_truth = world_module._subset(world._static[0], flags)
-        full, truth = world.objects(), world.ground_truth_objects()
-        keep = np.flatnonzero(full.is_ground_truth)
+            world._static = (static, dataclasses.replace(looks, is_ground_truth=flags))
+            world._static_truth = world_module._subset(world._static, flags)
+        (full, full_looks), truth = world.objects(), world.ground_truth_objects()
+        keep = np.flatnonzero(full_looks.is_ground_truth)
         assert len(truth) == len(keep) > 0
-        assert truth.classes == tuple(full.classes[i] for i in keep)
-        for name in ("object_ids", "centers", "sizes", "yaws_rad", "velocities", "colors"):
+        assert truth.object_class == tuple(full.object_class[i] for i in keep)
+        for name in ("object_id", "center_m", "size_m", "yaw_rad", "velocity_mps"):
             assert np.array_equal(getattr(truth, name), getattr(full, name)[keep])
-        assert truth.is_ground_truth.all()
 
 
 @pytest.mark.parametrize(
@@ -173,18 +173,18 @@ def test_ground_truth_columns_equal_ground_truth_objects(
     sc = load_scenario(name)
     world = World(sc)
     world.step(start_s)
-    names = ("object_ids", "centers", "sizes", "yaws_rad", "velocities", "is_ground_truth")
+    names = ("object_id", "center_m", "size_m", "yaw_rad", "velocity_mps")
     frame = 0
     while world.time_s < end_s:
         if frame == 3:  # scenery marked as ground truth joins the columns
             static, looks = world._static
-            flags = static.is_ground_truth.copy()
+            flags = looks.is_ground_truth.copy()
             flags[[2, 5]] = True
-            world._static = (dataclasses.replace(static, is_ground_truth=flags), looks)
-            world._static_truth = world_module._subset(world._static[0], flags)
+            world._static = (static, dataclasses.replace(looks, is_ground_truth=flags))
+            world._static_truth = world_module._subset(world._static, flags)
             world._truth_cache = None
         truth, columns = world.ground_truth_objects(), world.ground_truth_columns()
-        assert columns.classes == truth.classes
+        assert columns.object_class == truth.object_class
         for attr in names:
             assert np.array_equal(getattr(columns, attr), getattr(truth, attr)), attr
         world.step(0.1)

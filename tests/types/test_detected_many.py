@@ -41,25 +41,25 @@ def test_many_gives_the_objects_the_constructor_gives() -> None:
     n = 7
     classes = [ObjectClass.VEHICLE, ObjectClass.PEDESTRIAN, ObjectClass.BICYCLE] * 3
     columns = {
-        "centers": rng.normal(size=(n, 3)),
-        "sizes": rng.uniform(0.5, 4.0, size=(n, 3)),
+        "center_m": rng.normal(size=(n, 3)),
+        "size_m": rng.uniform(0.5, 4.0, size=(n, 3)),
         "yaws": rng.uniform(-3, 3, size=n),
-        "velocities": rng.normal(size=(n, 3)),
-        "orientations": rng.normal(size=(n, 3)),
-        "confidences": rng.uniform(0, 1, size=n),
+        "velocity_mps": rng.normal(size=(n, 3)),
+        "orientation_rad": rng.normal(size=(n, 3)),
+        "confidence": rng.uniform(0, 1, size=n),
     }
     ids = list(range(10, 10 + n))
     points = [3, None, 0, 12, None, 1, 5]
     visible = [True, None, False, True, None, True, True]
     many = DetectedObject.many(
-        object_classes=classes[:n],
-        centers=columns["centers"],
-        sizes=columns["sizes"],
-        yaws_rad=columns["yaws"],
-        object_ids=ids,
-        confidences=columns["confidences"],
-        velocities=columns["velocities"],
-        orientations=columns["orientations"],
+        object_class=classes[:n],
+        center_m=columns["center_m"],
+        size_m=columns["size_m"],
+        yaw_rad=columns["yaws"],
+        object_id=ids,
+        confidence=columns["confidence"],
+        velocity_mps=columns["velocity_mps"],
+        orientation_rad=columns["orientation_rad"],
         num_lidar_points=points,
         visible=visible,
     )
@@ -67,14 +67,14 @@ def test_many_gives_the_objects_the_constructor_gives() -> None:
         DetectedObject(
             object_id=ids[i],
             object_class=classes[i],
-            confidence=float(columns["confidences"][i]),
+            confidence=float(columns["confidence"][i]),
             box=Box3D(
-                center=columns["centers"][i],
-                size=columns["sizes"][i],
+                center=columns["center_m"][i],
+                size=columns["size_m"][i],
                 yaw_rad=float(columns["yaws"][i]),
             ),
-            velocity=columns["velocities"][i],
-            orientation=columns["orientations"][i],
+            velocity=columns["velocity_mps"][i],
+            orientation=columns["orientation_rad"][i],
             num_lidar_points=points[i],
             visible=visible[i],
         )
@@ -84,14 +84,14 @@ def test_many_gives_the_objects_the_constructor_gives() -> None:
     for a, b in zip(many, one_by_one, strict=True):
         _fields_equal(a, b)
     # the caller's arrays are copied, not frozen or kept
-    columns["centers"][0, 0] = 99.0
+    columns["center_m"][0, 0] = 99.0
     assert many[0].box.center[0] != 99.0
-    assert columns["centers"].flags.writeable
+    assert columns["center_m"].flags.writeable
 
 
 def test_many_defaults_and_empty() -> None:
     (obj,) = DetectedObject.many(
-        object_classes=[ObjectClass.VEHICLE], centers=[[1, 2, 3]], sizes=[[4, 2, 1.5]], yaws_rad=[0]
+        object_class=[ObjectClass.VEHICLE], center_m=[[1, 2, 3]], size_m=[[4, 2, 1.5]], yaw_rad=[0]
     )
     _fields_equal(
         obj,
@@ -102,7 +102,7 @@ def test_many_defaults_and_empty() -> None:
     )
     assert (
         DetectedObject.many(
-            object_classes=[], centers=np.zeros((0, 3)), sizes=np.zeros((0, 3)), yaws_rad=[]
+            object_class=[], center_m=np.zeros((0, 3)), size_m=np.zeros((0, 3)), yaw_rad=[]
         )
         == []
     )
@@ -111,22 +111,22 @@ def test_many_defaults_and_empty() -> None:
 @pytest.mark.parametrize(
     ("change", "words"),
     [
-        ({"sizes": [[1, 1, 1], [1, -1, 1]]}, "sizes[1] must be finite and non-negative"),
-        ({"sizes": [[1, 1, 1], [1, np.nan, 1]]}, "sizes[1] must be finite"),
-        ({"yaws_rad": [0.0, np.inf]}, "yaws_rad[1] must be finite"),
-        ({"confidences": [0.5, 1.5]}, "confidences[1] must lie in [0, 1]"),
+        ({"size_m": [[1, 1, 1], [1, -1, 1]]}, "size_m[1] must be finite and non-negative"),
+        ({"size_m": [[1, 1, 1], [1, np.nan, 1]]}, "size_m[1] must be finite"),
+        ({"yaw_rad": [0.0, np.inf]}, "yaw_rad[1] must be finite"),
+        ({"confidence": [0.5, 1.5]}, "confidence[1] must lie in [0, 1]"),
         ({"num_lidar_points": [None, -2]}, "num_lidar_points[1] must be ≥ 0"),
-        ({"centers": [[0, 0, 0]]}, "centers must have shape (2, 3)"),
-        ({"object_ids": [1]}, "object_ids has 1 values for 2 objects"),
-        ({"velocities": np.zeros((2, 2))}, "velocities must have shape (2, 3)"),
+        ({"center_m": [[0, 0, 0]]}, "center_m must have shape (2, 3)"),
+        ({"object_id": [1]}, "object_id has 1 values for 2 objects"),
+        ({"velocity_mps": np.zeros((2, 2))}, "velocity_mps must have shape (2, 3)"),
     ],
 )
 def test_many_refuses_what_the_constructor_refuses(change: dict[str, object], words: str) -> None:
     kwargs: dict[str, object] = {
-        "object_classes": [ObjectClass.VEHICLE, ObjectClass.VEHICLE],
-        "centers": np.zeros((2, 3)),
-        "sizes": np.ones((2, 3)),
-        "yaws_rad": [0.0, 0.0],
+        "object_class": [ObjectClass.VEHICLE, ObjectClass.VEHICLE],
+        "center_m": np.zeros((2, 3)),
+        "size_m": np.ones((2, 3)),
+        "yaw_rad": [0.0, 0.0],
     }
     kwargs.update(change)
     with pytest.raises(ValueError, match=r"DetectedObject\.many") as err:
@@ -136,9 +136,9 @@ def test_many_refuses_what_the_constructor_refuses(change: dict[str, object], wo
 
 def test_many_accepts_finite_values_whose_sum_overflows() -> None:
     (obj,) = DetectedObject.many(
-        object_classes=[ObjectClass.VEHICLE],
-        centers=[[0.0, 0.0, 0.0]],
-        sizes=[[1e308, 1e308, 1e308]],
-        yaws_rad=[0.0],
+        object_class=[ObjectClass.VEHICLE],
+        center_m=[[0.0, 0.0, 0.0]],
+        size_m=[[1e308, 1e308, 1e308]],
+        yaw_rad=[0.0],
     )
     assert obj.box.size.tolist() == [1e308, 1e308, 1e308]

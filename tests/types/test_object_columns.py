@@ -19,15 +19,15 @@ CLASSES = [ObjectClass.VEHICLE, ObjectClass.PEDESTRIAN, ObjectClass.BICYCLE, Obj
 def batch(n: int = 4, seed: int = 1) -> list[DetectedObject]:
     rng = np.random.default_rng(seed)
     return DetectedObject.many(
-        object_classes=CLASSES[:n],
-        centers=rng.normal(size=(n, 3)),
-        sizes=rng.uniform(0.5, 4.0, (n, 3)),
-        yaws_rad=rng.uniform(-3, 3, n),
-        object_ids=list(range(7, 7 + n)),
-        confidences=rng.uniform(0, 1, n),
-        velocities=rng.normal(size=(n, 3)),
-        accelerations=rng.normal(size=(n, 3)),
-        orientations=rng.normal(size=(n, 3)),
+        object_class=CLASSES[:n],
+        center_m=rng.normal(size=(n, 3)),
+        size_m=rng.uniform(0.5, 4.0, (n, 3)),
+        yaw_rad=rng.uniform(-3, 3, n),
+        object_id=list(range(7, 7 + n)),
+        confidence=rng.uniform(0, 1, n),
+        velocity_mps=rng.normal(size=(n, 3)),
+        acceleration_mps2=rng.normal(size=(n, 3)),
+        orientation_rad=rng.normal(size=(n, 3)),
         num_lidar_points=[3, None, 0, 9][:n],
         visible=[True, None, False, True][:n],
     )
@@ -37,7 +37,7 @@ def assert_columns_equal(a: ObjectColumns, b: ObjectColumns) -> None:
     for f in dataclasses.fields(ObjectColumns):
         x, y = getattr(a, f.name), getattr(b, f.name)
         if isinstance(x, np.ndarray):
-            assert x.dtype == y.dtype == np.float64, f.name
+            assert x.dtype == y.dtype, f.name
             assert not x.flags.writeable, f.name
             assert x.tobytes() == y.tobytes(), f.name
         else:
@@ -50,13 +50,13 @@ def test_many_shares_its_columns_without_building_the_objects() -> None:
     assert columns is not None
     assert len(columns) == 4
     assert ObjectColumns.shared_by(tuple(objects)) is columns  # as a Frame or stage holds them
-    assert columns.object_ids == (7, 8, 9, 10)
-    assert columns.num_lidar_points == (3, None, 0, 9)
+    assert columns.object_id.tolist() == [7, 8, 9, 10]
+    assert columns.num_lidar_points.tolist() == [3, -1, 0, 9]
     # nothing was filled: the slots are still unset
     with pytest.raises(AttributeError):
         DetectedObject.__dict__["box"].__get__(objects[0])
     # a field read fills the object from its row; the columns stay shared
-    assert objects[1].box.center.tolist() == columns.centers[1].tolist()
+    assert objects[1].box.center.tolist() == columns.center_m[1].tolist()
     assert type(objects[1]) is DetectedObject
     assert ObjectColumns.shared_by(objects) is columns
     # gathered from constructor-made objects: the same columns
@@ -71,13 +71,13 @@ def test_subsets_reorderings_and_mutated_lists_give_the_right_rows() -> None:
     for picked in ([2, 0], [3, 2, 1, 0], [1], [1, 1, 3]):
         sub = ObjectColumns.shared_by([objects[i] for i in picked])
         assert sub is not None
-        assert sub.object_ids == tuple(columns.object_ids[i] for i in picked)
-        assert sub.centers.tolist() == columns.centers[picked].tolist()
-        assert not sub.centers.flags.writeable
+        assert sub.object_id.tolist() == [columns.object_id[i] for i in picked]
+        assert sub.center_m.tolist() == columns.center_m[picked].tolist()
+        assert not sub.center_m.flags.writeable
         assert_columns_equal(sub, ObjectColumns.from_objects([plain(objects[i]) for i in picked]))
     mutated = list(objects)
     mutated[0] = objects[3]
-    assert ObjectColumns.shared_by(mutated).object_ids == (10, 8, 9, 10)  # type: ignore[union-attr]
+    assert ObjectColumns.shared_by(mutated).object_id.tolist() == [10, 8, 9, 10]  # type: ignore[union-attr]
     mutated.append(plain(objects[0]))  # not a row of the batch: no shared columns
     assert ObjectColumns.shared_by(mutated) is None
     assert ObjectColumns.shared_by(objects + batch(2, seed=5)) is None  # two batches
@@ -108,31 +108,32 @@ def test_row_objects_behave_as_constructed_ones() -> None:
 def test_constructor_checks_and_freezes_the_columns() -> None:
     n = 2
     good: dict[str, object] = {
-        "object_ids": (1, 2),
-        "object_classes": (ObjectClass.VEHICLE, ObjectClass.VEHICLE),
-        "confidences": np.ones(n),
-        "centers": np.zeros((n, 3)),
-        "sizes": np.ones((n, 3)),
-        "yaws_rad": np.zeros(n),
-        "velocities": np.zeros((n, 3)),
-        "accelerations": np.zeros((n, 3)),
-        "orientations": np.zeros((n, 3)),
-        "bbox_2d": (None, (1, 2, 3, 4)),
-        "num_lidar_points": (None, 4),
+        "object_id": (1, 2),
+        "object_class": (ObjectClass.VEHICLE, ObjectClass.VEHICLE),
+        "confidence": np.ones(n),
+        "center_m": np.zeros((n, 3)),
+        "size_m": np.ones((n, 3)),
+        "yaw_rad": np.zeros(n),
+        "velocity_mps": np.zeros((n, 3)),
+        "acceleration_mps2": np.zeros((n, 3)),
+        "orientation_rad": np.zeros((n, 3)),
+        "bbox_2d_px": (None, (1, 2, 3, 4)),
+        "num_lidar_points": np.array([-1, 4]),
+        "frame_index": np.array([-1, -1]),
         "visible": (None, True),
     }
     columns = ObjectColumns(**good)  # type: ignore[arg-type]
-    assert columns.centers is not good["centers"]
-    assert not columns.centers.flags.writeable
-    assert columns.bbox_2d == (None, (1.0, 2.0, 3.0, 4.0))
+    assert columns.center_m is not good["center_m"]
+    assert not columns.center_m.flags.writeable
+    assert columns.bbox_2d_px == (None, (1.0, 2.0, 3.0, 4.0))
     objects = columns.objects()
     assert objects[1].bbox_2d == (1.0, 2.0, 3.0, 4.0)
     assert ObjectColumns.shared_by(objects) is columns
     for change, words in (
-        ({"sizes": np.array([[1, 1, 1], [1, -1, 1.0]])}, "sizes[1] must be finite"),
-        ({"confidences": np.array([0.5, 2.0])}, "confidences[1] must lie in [0, 1]"),
-        ({"bbox_2d": (None,)}, "bbox_2d has 1 values for 2 objects"),
-        ({"centers": np.zeros((3, 3))}, "centers must have shape (2, 3)"),
+        ({"size_m": np.array([[1, 1, 1], [1, -1, 1.0]])}, "size_m[1] must be finite"),
+        ({"confidence": np.array([0.5, 2.0])}, "confidence[1] must lie in [0, 1]"),
+        ({"bbox_2d_px": (None,)}, "bbox_2d_px has 1 values for 2 objects"),
+        ({"center_m": np.zeros((3, 3))}, "center_m must have shape (2, 3)"),
     ):
         with pytest.raises(ValueError, match=r"^ObjectColumns: ") as err:
             ObjectColumns(**{**good, **change})  # type: ignore[arg-type]

@@ -99,6 +99,7 @@ class LockstepWorlds:
             stamp_ns=scene.stamp_ns,
             ground=scene.ground,
             objects=scene.objects,
+            looks=scene.looks,
             traffic_lights=scene.traffic_lights,
             map_from_base=self.ego_world.map_from_base(),
         )

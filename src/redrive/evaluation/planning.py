@@ -85,7 +85,7 @@ from redrive.evaluation.base import (
     MetricSkipped,
     Series,
 )
-from redrive.types import DetectedObject, PlannedPath, Role, VehicleState
+from redrive.types import DetectedObject, ObjectColumns, PlannedPath, Role, VehicleState
 
 __all__ = ["COMFORT_BOUNDS", "PlanningMetrics", "time_to_collision_s"]
 
@@ -114,50 +114,12 @@ COMFORT_BOUNDS: Mapping[str, float] = MappingProxyType(
 )
 
 
-@dataclass(frozen=True, slots=True)
-class _Objects:
-    """Ground-truth objects of one frame, planar, as arrays (M,)."""
-
-    ids: npt.NDArray[np.int64]
-    classes: tuple[str, ...]
-    xy: F64
-    yaw: F64
-    length: F64
-    width: F64
-    velocity: F64
-
-    @classmethod
-    def of(cls, objects: Sequence[DetectedObject]) -> _Objects:
-        n = len(objects)
-        return cls(
-            ids=np.array([o.object_id for o in objects], dtype=np.int64),
-            classes=tuple(o.object_class.value for o in objects),
-            xy=np.array([o.box.center[:2] for o in objects], dtype=np.float64).reshape(n, 2),
-            yaw=np.array([o.box.yaw_rad for o in objects], dtype=np.float64),
-            length=np.array([o.box.size[0] for o in objects], dtype=np.float64),
-            width=np.array([o.box.size[1] for o in objects], dtype=np.float64),
-            velocity=np.array([o.velocity[:2] for o in objects], dtype=np.float64).reshape(n, 2),
-        )
-
-    def __len__(self) -> int:
-        return int(self.ids.size)
-
-    def corners_at(self, t_s: F64) -> F64:
-        """Corners (T, M, 4, 2) at times ``t_s`` (T,), constant velocity."""
-        base = rectangle_corners(self.xy, self.yaw, self.length, self.width)
-        shift = t_s[:, None, None] * self.velocity[None, :, :]
-        return base[None] + shift[:, :, None, :]
-
-    def subset(self, keep: npt.NDArray[np.bool_]) -> _Objects:
-        return _Objects(
-            ids=self.ids[keep],
-            classes=tuple(c for c, k in zip(self.classes, keep, strict=True) if k),
-            xy=self.xy[keep],
-            yaw=self.yaw[keep],
-            length=self.length[keep],
-            width=self.width[keep],
-            velocity=self.velocity[keep],
-        )
+def _corners_at(objs: ObjectColumns, t_s: F64) -> F64:
+    """Corners (T, M, 4, 2) of the objects' footprints at times ``t_s`` (T,), constant velocity."""
+    size = objs.size_m
+    base = rectangle_corners(objs.center_m[:, :2], objs.yaw_rad, size[:, 0], size[:, 1])
+    shift = t_s[:, None, None] * objs.velocity_mps[None, :, :2]
+    return base[None] + shift[:, :, None, :]
 
 
 @dataclass(frozen=True, slots=True)
@@ -214,11 +176,11 @@ def time_to_collision_s(
         (TTC in s — 0.0 when already touching, ``inf`` when nothing is hit within
         ``horizon_s`` or the ego is stopped; the object id hit, −1 when none).
     """
-    objs = _Objects.of(objects)
+    objs = ObjectColumns.from_objects(objects)
     if len(objs) == 0:
         return math.inf, -1
-    angle = np.abs(np.arctan2(objs.xy[:, 1], objs.xy[:, 0]))
-    objs = objs.subset(angle <= BEHIND_ANGLE_RAD)
+    angle = np.abs(np.arctan2(objs.center_m[:, 1], objs.center_m[:, 0]))
+    objs = objs.take(angle <= BEHIND_ANGLE_RAD)
     if len(objs) == 0:
         return math.inf, -1
     params = {
@@ -232,11 +194,11 @@ def time_to_collision_s(
         xy, heading = polyline_pose_at(poly, speed_mps * t)
         # the ego's start pose is the plan's first point, heading of the first segment
         ego = _ego_corners(xy, heading, params)  # (T, 4, 2)
-        return rectangles_overlap(ego[:, None], objs.corners_at(t))  # (T, M)
+        return rectangles_overlap(ego[:, None], _corners_at(objs, t))  # (T, M)
 
     now = hits(np.zeros(1))[0]
     if now.any():
-        return 0.0, int(objs.ids[int(np.argmax(now))])
+        return 0.0, int(objs.object_id[int(np.argmax(now))])
     if speed_mps <= TTC_STOPPED_SPEED_MPS:
         return math.inf, -1
     n = math.floor(horizon_s / step_s + 1e-9)
@@ -254,7 +216,7 @@ def time_to_collision_s(
         else:
             lo = mid
     who = hits(np.array([hi]))[0]
-    return hi, int(objs.ids[int(np.argmax(who))]) if who.any() else -1
+    return hi, int(objs.object_id[int(np.argmax(who))]) if who.any() else -1
 
 
 class PlanningMetrics(Metric):
@@ -335,7 +297,7 @@ class PlanningMetrics(Metric):
         fde = float(np.hypot(*(plan_end - base_from_map_xy(log_end, origin, heading)[0])))
         return ade, fde
 
-    def _collisions(self, path: PlannedPath, objs: _Objects) -> list[_Contact]:
+    def _collisions(self, path: PlannedPath, objs: ObjectColumns) -> list[_Contact]:
         """The first contact of the plan with each object it touches, in time order."""
         kin = path_kinematics(path.waypoints)
         if kin is None or len(objs) == 0:
@@ -345,7 +307,7 @@ class PlanningMetrics(Metric):
         xy, heading_rad = kin.xy[sel], kin.heading_rad[sel]
         speed, velocity = kin.speed_mps[sel], kin.velocity_xy[sel]
         ego = _ego_corners(xy, heading_rad, self.params)
-        obj_corners = objs.corners_at(t)  # (K, M, 4, 2)
+        obj_corners = _corners_at(objs, t)  # (K, M, 4, 2)
         contact = rectangles_overlap(ego[:, None], obj_corners)  # (K, M)
         found: list[_Contact] = []
         for m in np.flatnonzero(contact.any(axis=0)):
@@ -355,7 +317,7 @@ class PlanningMetrics(Metric):
             rel_angle = abs(
                 math.remainder(math.atan2(to_obj[1], to_obj[0]) - float(heading_rad[k]), math.tau)
             )
-            obj_speed = float(np.hypot(*objs.velocity[m]))
+            obj_speed = float(np.hypot(*objs.velocity_mps[m, :2]))
             front = shapely.LineString([ego[k, 0], ego[k, 3]])
             if speed[k] <= COLLISION_STOPPED_SPEED_MPS:
                 kind, at_fault = "stopped_ego", False
@@ -370,11 +332,11 @@ class PlanningMetrics(Metric):
             found.append(
                 _Contact(
                     t_s=float(t[k]),
-                    object_id=int(objs.ids[m]),
-                    object_class=objs.classes[m],
+                    object_id=int(objs.object_id[m]),
+                    object_class=objs.object_class[m].value,
                     kind=kind,
                     at_fault=at_fault,
-                    relative_speed_mps=float(np.hypot(*(velocity[k] - objs.velocity[m]))),
+                    relative_speed_mps=float(np.hypot(*(velocity[k] - objs.velocity_mps[m, :2]))),
                 )
             )
         return sorted(found, key=lambda c: (c.t_s, c.object_id))
@@ -463,7 +425,7 @@ class PlanningMetrics(Metric):
                     ok &= val >= bound if key.startswith("min_") else val <= bound
                 add("comfortable", frame, float(ok))
             if frame in truth:
-                objs = _Objects.of(truth[frame])
+                objs = ObjectColumns.from_objects(truth[frame])
                 contacts = self._collisions(path, objs)
                 add("collision", frame, float(bool(contacts)))
                 add("at_fault_collision", frame, float(any(c.at_fault for c in contacts)))

@@ -50,7 +50,7 @@ from redrive.evaluation.base import (
     MetricSkipped,
     Series,
 )
-from redrive.types import DetectedObject, Role
+from redrive.types import DetectedObject, ObjectColumns, Role
 
 __all__ = [
     "ClearMot",
@@ -197,8 +197,8 @@ def bev_centre_distance_m(
     gt: Sequence[DetectedObject], pred: Sequence[DetectedObject]
 ) -> npt.NDArray[np.float64]:
     """(G, P) float64 bird's-eye-view distance between box centres (x, y only), metres."""
-    a = np.array([o.box.center[:2] for o in gt], dtype=np.float64).reshape(-1, 2)
-    b = np.array([o.box.center[:2] for o in pred], dtype=np.float64).reshape(-1, 2)
+    a = ObjectColumns.from_objects(gt).center_m[:, :2]
+    b = ObjectColumns.from_objects(pred).center_m[:, :2]
     out: npt.NDArray[np.float64] = np.linalg.norm(a[:, None, :] - b[None, :, :], axis=2)
     return out
 
@@ -206,9 +206,10 @@ def bev_centre_distance_m(
 def _bev_polygons(objects: Sequence[DetectedObject]) -> npt.NDArray[np.object_]:
     if not objects:
         return np.empty(0, dtype=object)
-    centre = np.array([o.box.center[:2] for o in objects], dtype=np.float64)
-    half = 0.5 * np.array([o.box.size[:2] for o in objects], dtype=np.float64)  # (N,2) l/2, w/2
-    yaw = np.array([o.box.yaw_rad for o in objects], dtype=np.float64)
+    columns = ObjectColumns.from_objects(objects)
+    centre = columns.center_m[:, :2]
+    half = 0.5 * columns.size_m[:, :2]  # (N,2) l/2, w/2
+    yaw = columns.yaw_rad
     signs = np.array([[1.0, 1.0], [-1.0, 1.0], [-1.0, -1.0], [1.0, -1.0]])  # counter-clockwise
     local = signs[None, :, :] * half[:, None, :]  # (N,4,2)
     c, s = np.cos(yaw)[:, None], np.sin(yaw)[:, None]

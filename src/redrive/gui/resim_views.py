@@ -34,7 +34,7 @@ from PySide6 import QtCore
 from redrive.geometry.boxes import BOX_CORNER_SIGNS
 from redrive.gui.session import RunData
 from redrive.results import RunSetup, RunStatus
-from redrive.types import ControlCommands, DetectedObject, PlannedPath
+from redrive.types import ControlCommands, DetectedObject, ObjectColumns, PlannedPath
 
 if TYPE_CHECKING:
     from redrive.config import PipelineConfig
@@ -93,9 +93,10 @@ def box_outline_segments(
     n = len(objects)
     if n == 0:
         return _EMPTY, _EMPTY
-    centers = np.array([o.box.center[:2] for o in objects], dtype=np.float64)  # (n, 2)
-    half = np.array([o.box.size[:2] for o in objects], dtype=np.float64) * 0.5  # (n, 2)
-    yaw = np.array([o.box.yaw_rad for o in objects], dtype=np.float64)
+    columns = ObjectColumns.from_objects(objects)
+    centers = columns.center_m[:, :2]  # (n, 2)
+    half = columns.size_m[:, :2] * 0.5  # (n, 2)
+    yaw = columns.yaw_rad
     cos, sin = np.cos(yaw)[:, None], np.sin(yaw)[:, None]
     local = _FACE[None, :, :] * half[:, None, :]  # (n, 4, 2) in the box frame
     corners = np.empty_like(local)

@@ -47,7 +47,7 @@ from redrive.results import Run
 from redrive.results.evaluation import read_evaluation, stored_metric_names
 from redrive.results.records import FrameRecord
 from redrive.sim.ego import EgoGeometry
-from redrive.types import DetectedObject, PlannedPath, Transform, VehicleState
+from redrive.types import DetectedObject, ObjectColumns, PlannedPath, Transform, VehicleState
 
 __all__ = [
     "BODY_FRAME",
@@ -152,23 +152,33 @@ def _object_shapes(
 
 
 def _object_rows(objects: Sequence[DetectedObject]) -> list[Row]:
+    columns = ObjectColumns.from_objects(objects)
     return [
         {
-            "object_id": o.object_id,
-            "object_class": o.object_class.value,
-            "confidence": o.confidence,
-            "x": o.box.center[0],
-            "y": o.box.center[1],
-            "z": o.box.center[2],
-            "length": o.box.size[0],
-            "width": o.box.size[1],
-            "height": o.box.size[2],
-            "yaw_rad": o.box.yaw_rad,
-            "vx": o.velocity[0],
-            "vy": o.velocity[1],
-            "vz": o.velocity[2],
+            "object_id": i,
+            "object_class": c.value,
+            "confidence": q,
+            "x": x,
+            "y": y,
+            "z": z,
+            "length": length,
+            "width": width,
+            "height": height,
+            "yaw_rad": yaw,
+            "vx": vx,
+            "vy": vy,
+            "vz": vz,
         }
-        for o in objects
+        for i, c, q, (x, y, z), (length, width, height), yaw, (vx, vy, vz) in zip(
+            columns.object_id.tolist(),
+            columns.object_class,
+            columns.confidence.tolist(),
+            columns.center_m.tolist(),
+            columns.size_m.tolist(),
+            columns.yaw_rad.tolist(),
+            columns.velocity_mps.tolist(),
+            strict=True,
+        )
     ]
 
 

@@ -298,25 +298,25 @@ def _object_rows(
     # the objects' arrays, row by row
     numbers = np.concatenate(
         (
-            columns.centers,
-            columns.sizes,
-            columns.yaws_rad[:, None],
-            columns.velocities,
-            columns.accelerations,
+            columns.center_m,
+            columns.size_m,
+            columns.yaw_rad[:, None],
+            columns.velocity_mps,
+            columns.acceleration_mps2,
         ),
         axis=1,
     ).tolist()
-    classes = [c.value for c in columns.object_classes]
-    boxes = [_NO_BBOX if b is None else b for b in columns.bbox_2d]
+    classes = [c.value for c in columns.object_class]
+    boxes = [_NO_BBOX if b is None else b for b in columns.bbox_2d_px]
     if ground_truth:
         return [
             (*head, i, c, *x, *b, p, v)
             for i, c, x, b, p, v in zip(
-                columns.object_ids,
+                columns.object_id.tolist(),
                 classes,
                 numbers,
                 boxes,
-                columns.num_lidar_points,
+                [None if p < 0 else p for p in columns.num_lidar_points.tolist()],
                 columns.visible,
                 strict=True,
             )
@@ -324,9 +324,9 @@ def _object_rows(
     return [
         (*head, i, c, q, *x, *b)
         for i, c, q, x, b in zip(
-            columns.object_ids,
+            columns.object_id.tolist(),
             classes,
-            columns.confidences.tolist(),
+            columns.confidence.tolist(),
             numbers,
             boxes,
             strict=True,

@@ -187,7 +187,7 @@ class CameraModel:
             for future in futures:
                 future.result()
         owner = bufs.owner
-        ids = scene.objects.object_ids
+        ids = scene.objects.object_id
         counts = np.bincount(owner[owner >= 0], minlength=len(ids))
         per_object = MappingProxyType({int(i): int(c) for i, c in zip(ids, counts, strict=True)})
         return CameraFrame(
@@ -279,7 +279,7 @@ class CameraModel:
     def _box_table(self, scene: Scene, map_from_opt: npt.NDArray[np.float64]) -> _BoxTable:
         """What the box kernel needs of the boxes to draw (nearest first, :meth:`_box_rects`)
         and every box's colour per face (albedo × Lambert + ambient shade, clipped)."""
-        objs = scene.objects
+        objs, looks = scene.objects, scene.looks
         rects = self._box_rects(scene, map_from_opt)
         n = len(rects)
         table = _BoxTable(
@@ -292,11 +292,11 @@ class CameraModel:
         )
         rot, origin = map_from_opt[:3, :3], map_from_opt[:3, 3]
         for b, (i, z_min, (u0, v0, u1, v1)) in enumerate(rects):
-            yaw = float(objs.yaws_rad[i])
+            yaw = float(objs.yaw_rad[i])
             c, s = math.cos(yaw), math.sin(yaw)
             box_from_map = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-            o_local = box_from_map @ (origin - objs.centers[i])
-            half = 0.5 * objs.sizes[i]
+            o_local = box_from_map @ (origin - objs.center_m[i])
+            half = 0.5 * objs.size_m[i]
             table.rects[b] = (i, u0, v0, u1, v1)
             table.z_min[b] = z_min
             table.r_local[b] = box_from_map @ rot  # box frame from optical
@@ -307,7 +307,7 @@ class CameraModel:
             lambert = np.clip(normals @ self.sun, 0.0, 1.0)
             ambient = 0.35 + 0.15 * normals[:, 2]  # the sky lights the tops a little more
             shade = (ambient + 0.65 * lambert).astype(np.float32)
-            albedo = objs.colors[i].astype(np.float32)
+            albedo = looks.colors_rgb[i].astype(np.float32)
             table.rgb[i] = np.clip(albedo * shade[:, None], 0.0, 255.0)
         return table
 
@@ -321,11 +321,11 @@ class CameraModel:
             return []
         k = self.intrinsics
         h, w = k.height, k.width
-        corners = box_vertices(objs.centers, objs.sizes, objs.yaws_rad)  # (N, 8, 3)
+        corners = box_vertices(objs.center_m, objs.size_m, objs.yaw_rad)  # (N, 8, 3)
         opt_from_map = invert(map_from_opt)
         local = corners @ opt_from_map[:3, :3].T + opt_from_map[:3, 3]  # (N, 8, 3) optical
         # near boxes first: they fill the depth buffer and reject the pixels of those behind
-        order = np.argsort(np.linalg.norm(objs.centers - map_from_opt[:3, 3], axis=1))
+        order = np.argsort(np.linalg.norm(objs.center_m - map_from_opt[:3, 3], axis=1))
         kmat = k.matrix()
         out = []
         for i in order:

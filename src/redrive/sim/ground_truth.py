@@ -10,9 +10,8 @@ import numpy.typing as npt
 
 from redrive.geometry import invert, transform_points
 from redrive.geometry.se3 import transform_vectors, yaw_from_rotation_matrix
-from redrive.sim.scene import Scene, SceneObjects
-from redrive.sim.truth import TruthColumns
-from redrive.types import DetectedObject
+from redrive.sim.scene import Scene
+from redrive.types import DetectedObject, ObjectColumns
 
 __all__ = ["GROUND_TRUTH_RANGE_M", "ground_truth_objects", "objects_in_base"]
 
@@ -35,6 +34,7 @@ def ground_truth_objects(
     return objects_in_base(
         scene.objects,
         scene.map_from_base,
+        keep=scene.looks.is_ground_truth,
         lidar_hits=lidar_hits,
         camera_pixels=camera_pixels,
         range_m=range_m,
@@ -42,23 +42,24 @@ def ground_truth_objects(
 
 
 def objects_in_base(
-    objs: SceneObjects | TruthColumns,
+    objs: ObjectColumns,
     map_from_base: npt.NDArray[np.float64],
     *,
+    keep: npt.NDArray[np.bool_] | None = None,
     lidar_hits: dict[int, int] | None = None,
     camera_pixels: dict[int, int] | None = None,
     range_m: float = GROUND_TRUTH_RANGE_M,
 ) -> tuple[DetectedObject, ...]:
-    """The ground-truth ones of ``objs`` (map frame; a world's scene objects or its
-    :meth:`~redrive.sim.world.World.ground_truth_columns`) within ``range_m`` of an ego at
-    ``map_from_base``, in its base_link (see :func:`ground_truth_objects`)."""
+    """The rows of ``objs`` (map frame: a world's :meth:`~redrive.sim.world.World.ground_truth_columns`,
+    or its scene's objects with ``keep``, their ground-truth flags) within ``range_m`` of an ego
+    at ``map_from_base``, in its base_link (see :func:`ground_truth_objects`)."""
     base_from_map = invert(map_from_base)
     yaw_ego = yaw_from_rotation_matrix(map_from_base[:3, :3])
-    centers = transform_points(base_from_map, objs.centers)
-    velocities = transform_vectors(base_from_map, objs.velocities)
-    idx = np.flatnonzero(objs.is_ground_truth)
+    centers = transform_points(base_from_map, objs.center_m)
+    velocities = transform_vectors(base_from_map, objs.velocity_mps)
+    idx = np.arange(len(objs)) if keep is None else np.flatnonzero(keep)
     idx = idx[~(np.hypot(centers[idx, 0], centers[idx, 1]) > range_m)]
-    object_ids = objs.object_ids[idx].tolist()
+    object_ids = objs.object_id[idx].tolist()
     if lidar_hits is None:
         points: list[int | None] = [None] * len(idx)
     else:
@@ -71,18 +72,18 @@ def objects_in_base(
             for object_id in object_ids
         ]
         visible = [(p or q) > 0 for p, q in zip(points, pixels, strict=True)]
-    yaws = [math.remainder(yaw - yaw_ego, math.tau) for yaw in objs.yaws_rad[idx].tolist()]
+    yaws = [math.remainder(yaw - yaw_ego, math.tau) for yaw in objs.yaw_rad[idx].tolist()]
     orientations = np.zeros((len(idx), 3))
     orientations[:, 0] = yaws
     return tuple(
         DetectedObject.many(
-            object_ids=object_ids,
-            object_classes=[objs.classes[i] for i in idx.tolist()],
-            centers=centers[idx],
-            sizes=objs.sizes[idx],
-            yaws_rad=yaws,
-            velocities=velocities[idx],
-            orientations=orientations,
+            object_id=object_ids,
+            object_class=[objs.object_class[i] for i in idx.tolist()],
+            center_m=centers[idx],
+            size_m=objs.size_m[idx],
+            yaw_rad=yaws,
+            velocity_mps=velocities[idx],
+            orientation_rad=orientations,
             num_lidar_points=points,
             visible=visible,
         )

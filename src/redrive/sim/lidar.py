@@ -34,9 +34,9 @@ from redrive.sim import lidar_kernels
 from redrive.sim.lidar_presets import LidarPreset, lidar_preset
 from redrive.sim.mesh import TRIANGLES_PER_BOX, BoxMesh
 from redrive.sim.rig import SensorSpec
-from redrive.sim.scene import GroundLabel, GroundMap, Scene, SceneObjects
+from redrive.sim.scene import GroundLabel, GroundMap, Scene
 from redrive.sim.scratch import Scratch
-from redrive.types import PointCloud, SensorType
+from redrive.types import ObjectColumns, PointCloud, SensorType
 from redrive.types._arrays import frozen_array
 
 __all__ = ["GROUND_REFLECTIVITY", "LidarModel", "LidarScan", "PoseAt"]
@@ -230,7 +230,7 @@ class LidarModel:
         return poses[:slices, :3, :3], pos
 
     def _boxes_in_range(
-        self, objects: SceneObjects, pos: npt.NDArray[np.float64]
+        self, objects: ObjectColumns, pos: npt.NDArray[np.float64]
     ) -> npt.NDArray[np.int64]:
         """Indices of the boxes a ray of the sweep may reach: the others are not meshed.
 
@@ -241,8 +241,8 @@ class LidarModel:
         """
         xy0 = pos[0, :2]
         travel = float(np.max(np.hypot(pos[:, 0] - xy0[0], pos[:, 1] - xy0[1]), initial=0.0))
-        half_diag = 0.5 * np.hypot(objects.sizes[:, 0], objects.sizes[:, 1])
-        rel = objects.centers[:, :2] - xy0
+        half_diag = 0.5 * np.hypot(objects.size_m[:, 0], objects.size_m[:, 1])
+        rel = objects.center_m[:, :2] - xy0
         gap = np.hypot(rel[:, 0], rel[:, 1]) - half_diag
         reach_m = self.preset.max_range_m * 1.01 + travel + 0.05
         return np.flatnonzero(gap <= reach_m)
@@ -306,8 +306,8 @@ class LidarModel:
         origin = pos[0].copy()
         near = self._boxes_in_range(scene.objects, pos)
         objs = scene.objects
-        centers, sizes = objs.centers[near], objs.sizes[near]
-        mesh = BoxMesh.from_boxes(centers, sizes, objs.yaws_rad[near], origin=origin)
+        centers, sizes = objs.center_m[near], objs.size_m[near]
+        mesh = BoxMesh.from_boxes(centers, sizes, objs.yaw_rad[near], origin=origin)
         n_rays = p.columns * p.num_lasers
         # ray directions in the map frame, where they meet the ground, which Embree casts
         work = self._scratch
@@ -380,7 +380,7 @@ class LidarModel:
         ring = np.empty(idx.size, dtype=np.uint16)
         t_off = np.empty(idx.size, dtype=np.uint32)
         point_ids = np.empty(idx.size, dtype=np.int64)
-        ids_all = scene.objects.object_ids
+        ids_all = scene.objects.object_id
         counts = np.zeros(len(ids_all), dtype=np.int64)
         ground = scene.ground
         lidar_kernels.returns(
@@ -397,7 +397,7 @@ class LidarModel:
             dz,
             where_in_sel,
             normals,
-            scene.objects.reflectivity,
+            scene.looks.reflectivity,
             ids_all,
             pos,
             ground.labels,

@@ -22,7 +22,7 @@ import numpy.typing as npt
 from embreex import mesh_construction, rtcore, rtcore_scene
 
 from redrive.geometry.boxes import BOX_CORNER_SIGNS
-from redrive.sim.scene import SceneObjects
+from redrive.types import ObjectColumns
 
 __all__ = [
     "TRIANGLES_PER_BOX",
@@ -131,10 +131,10 @@ class BoxMesh:
 
     @classmethod
     def from_objects(
-        cls, objects: SceneObjects, *, origin: npt.NDArray[np.float64] | None = None
+        cls, objects: ObjectColumns, *, origin: npt.NDArray[np.float64] | None = None
     ) -> BoxMesh:
         """Every box of ``objects`` (:meth:`from_boxes`)."""
-        return cls.from_boxes(objects.centers, objects.sizes, objects.yaws_rad, origin=origin)
+        return cls.from_boxes(objects.center_m, objects.size_m, objects.yaw_rad, origin=origin)
 
     @classmethod
     def from_boxes(

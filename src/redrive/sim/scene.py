@@ -9,8 +9,8 @@ Geometry of the synthetic world:
 * the ground is the plane z = 0 of the map frame; what lies on it (grass, road, lane markings,
   sidewalk, stop lines) is a top-down label raster, :class:`GroundMap`;
 * everything that stands on the ground (agents, parked cars, buildings, walls, poles, traffic-light
-  posts) is an oriented box, :class:`SceneObjects`, whose bottom face rests on z = 0 unless its
-  centre says otherwise.
+  posts) is an oriented box, a row of :class:`~redrive.types.ObjectColumns` (with its
+  :class:`ObjectLooks`), whose bottom face rests on z = 0 unless its centre says otherwise.
 """
 
 from __future__ import annotations
@@ -21,10 +21,10 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from redrive.types import LightState, ObjectClass
+from redrive.types import LightState, ObjectColumns
 from redrive.types._arrays import frozen_array
 
-__all__ = ["GroundLabel", "GroundMap", "Scene", "SceneObjects", "TrafficLightState"]
+__all__ = ["GroundLabel", "GroundMap", "ObjectLooks", "Scene", "TrafficLightState"]
 
 
 class GroundLabel(enum.IntEnum):
@@ -81,58 +81,44 @@ class GroundMap:
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class SceneObjects:
-    """N oriented boxes standing in the world, in the map frame (arrays share the first axis).
+class ObjectLooks:
+    """What the sensors need of the N boxes of a scene besides their geometry (row i belongs to
+    row i of the :class:`~redrive.types.ObjectColumns` it goes with; arrays share the first axis).
 
     Attributes:
-        object_ids: (N,) int64, unique; stable over time for the same object.
-        classes: N :class:`ObjectClass` values (buildings, walls and poles are ``STATIC``).
-        centers: (N, 3) float64, metres: geometric box centres.
-        sizes: (N, 3) float64, metres: length (along the heading), width, height.
-        yaws_rad: (N,) float64: heading about +z.
-        velocities: (N, 3) float64, m/s, map frame.
-        colors: (N, 3) uint8: RGB albedo the camera shades.
+        colors_rgb: (N, 3) uint8: RGB albedo the camera shades.
         reflectivity: (N,) float32 in [0, 1]: what the LiDAR intensity scales with.
         is_ground_truth: (N,) bool: whether the object is reported as ground truth (agents and
             parked vehicles are; buildings, walls and poles are scenery).
     """
 
-    object_ids: npt.NDArray[np.int64]
-    classes: tuple[ObjectClass, ...]
-    centers: npt.NDArray[np.float64]
-    sizes: npt.NDArray[np.float64]
-    yaws_rad: npt.NDArray[np.float64]
-    velocities: npt.NDArray[np.float64]
-    colors: npt.NDArray[np.uint8]
+    colors_rgb: npt.NDArray[np.uint8]
     reflectivity: npt.NDArray[np.float32]
     is_ground_truth: npt.NDArray[np.bool_]
 
     def __post_init__(self) -> None:
-        n = len(self.classes)
-        specs: tuple[tuple[str, npt.DTypeLike, tuple[int | None, ...]], ...] = (
-            ("object_ids", np.int64, (n,)),
-            ("centers", np.float64, (n, 3)),
-            ("sizes", np.float64, (n, 3)),
-            ("yaws_rad", np.float64, (n,)),
-            ("velocities", np.float64, (n, 3)),
-            ("colors", np.uint8, (n, 3)),
+        n = len(self.is_ground_truth)
+        specs: tuple[tuple[str, npt.DTypeLike, tuple[int, ...]], ...] = (
+            ("colors_rgb", np.uint8, (n, 3)),
             ("reflectivity", np.float32, (n,)),
             ("is_ground_truth", np.bool_, (n,)),
         )
         for name, dtype, shape in specs:
             value = frozen_array(
-                getattr(self, name), name=f"SceneObjects.{name}", dtype=dtype, shape=shape
+                getattr(self, name), name=f"ObjectLooks.{name}", dtype=dtype, shape=shape
             )
             object.__setattr__(self, name, value)
-        if len(np.unique(self.object_ids)) != n:
-            msg = "SceneObjects.object_ids must be unique"
-            raise ValueError(msg)
-        if np.any(self.sizes <= 0):
-            msg = "SceneObjects.sizes must be > 0"
-            raise ValueError(msg)
 
     def __len__(self) -> int:
-        return len(self.classes)
+        return len(self.is_ground_truth)
+
+    def take(self, rows: npt.NDArray[np.intp | np.int64]) -> ObjectLooks:
+        """The looks of these rows, in this order."""
+        return ObjectLooks(
+            colors_rgb=self.colors_rgb[rows],
+            reflectivity=self.reflectivity[rows],
+            is_ground_truth=self.is_ground_truth[rows],
+        )
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -148,13 +134,17 @@ class TrafficLightState:
 class Scene:
     """The world at ``stamp_ns``: ground, boxes and traffic lights (map frame).
 
-    ``map_from_base`` is the ego's pose (4×4 float64, rear-axle centre, REP-103 axes); the ego's
-    own box is *not* among ``objects`` (sensors would hit their own car).
+    ``objects`` are the N boxes standing in the world (map frame; ids unique and stable over
+    time, sizes > 0; buildings, walls and poles are ``STATIC``), ``looks`` their colours,
+    reflectivity and ground-truth flags.  ``map_from_base`` is the ego's pose (4×4 float64,
+    rear-axle centre, REP-103 axes); the ego's own box is *not* among ``objects`` (sensors would
+    hit their own car).
     """
 
     stamp_ns: int
     ground: GroundMap
-    objects: SceneObjects
+    objects: ObjectColumns
+    looks: ObjectLooks
     traffic_lights: tuple[TrafficLightState, ...]
     map_from_base: npt.NDArray[np.float64]
 
@@ -166,3 +156,13 @@ class Scene:
                 self.map_from_base, name="Scene.map_from_base", dtype=np.float64, shape=(4, 4)
             ),
         )
+        n = len(self.objects)
+        if len(self.looks) != n:
+            msg = f"Scene: {len(self.looks)} looks for {n} objects"
+            raise ValueError(msg)
+        if len(np.unique(self.objects.object_id)) != n:
+            msg = "Scene.objects.object_id must be unique"
+            raise ValueError(msg)
+        if np.any(self.objects.size_m <= 0):
+            msg = "Scene.objects.size_m must be > 0"
+            raise ValueError(msg)

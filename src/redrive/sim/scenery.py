@@ -6,8 +6,8 @@ import numpy as np
 
 from redrive.sim.roads import RoadNetwork, RoadSegment
 from redrive.sim.scenario import Scenario
-from redrive.sim.scene import SceneObjects
-from redrive.types import ObjectClass
+from redrive.sim.scene import ObjectLooks
+from redrive.types import ObjectClass, ObjectColumns
 
 __all__ = ["SCENERY_ID0", "build_scenery"]
 
@@ -17,10 +17,9 @@ SCENERY_ID0 = 100_000
 
 def build_scenery(
     network: RoadNetwork, scenario: Scenario, rng: np.random.Generator
-) -> tuple[SceneObjects, list[tuple[float, float, float, float, float, float, float]]]:
+) -> tuple[ObjectColumns, ObjectLooks]:
     """Buildings (urban) or walls (highway), poles and light posts as STATIC boxes, drawn from
-    ``rng`` (the world's generator, before its agents); also the boxes as rows x, y, z, l, w, h,
-    yaw."""
+    ``rng`` (the world's generator, before its agents), and their looks."""
     boxes: list[tuple[float, float, float, float, float, float, float]] = []  # x y z l w h yaw
     looks: list[tuple[int, int, int, float]] = []
     urban = network.intersection_half_m is not None
@@ -51,18 +50,19 @@ def build_scenery(
         looks.append((60, 60, 60, 0.6))
     arr = np.array(boxes, dtype=np.float64).reshape(-1, 7)
     n = len(arr)
-    objects = SceneObjects(
-        object_ids=SCENERY_ID0 + np.arange(n, dtype=np.int64),
-        classes=(ObjectClass.STATIC,) * n,
-        centers=arr[:, 0:3].copy(),
-        sizes=arr[:, 3:6].copy(),
-        yaws_rad=arr[:, 6].copy(),
-        velocities=np.zeros((n, 3)),
-        colors=np.array([lk[:3] for lk in looks], dtype=np.uint8).reshape(-1, 3),
+    objects = ObjectColumns.of(
+        object_id=SCENERY_ID0 + np.arange(n, dtype=np.int64),
+        object_class=(ObjectClass.STATIC,) * n,
+        center_m=arr[:, 0:3],
+        size_m=arr[:, 3:6],
+        yaw_rad=arr[:, 6],
+    )
+    appearance = ObjectLooks(
+        colors_rgb=np.array([lk[:3] for lk in looks], dtype=np.uint8).reshape(-1, 3),
         reflectivity=np.array([lk[3] for lk in looks], dtype=np.float32),
         is_ground_truth=np.zeros(n, dtype=bool),
     )
-    return objects, boxes
+    return objects, appearance
 
 
 def _box(

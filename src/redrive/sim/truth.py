@@ -1,54 +1,33 @@
-"""The ground-truth boxes of a world as plain columns, for an object-level observation.
+"""The ground-truth boxes of a world as columns, for an object-level observation.
 
-:meth:`World.ground_truth_objects <redrive.sim.world.World>` builds a validated
-:class:`~redrive.sim.scene.SceneObjects` (the sensors' input: colours, reflectivity, checks
-of every array) each call; an observation needs only the boxes, and most of them — ids,
-classes, sizes, the parked vehicles — do not change from one frame to the next.
-:class:`TruthColumns` holds the same rows, in the same order, with the same values; the
-constant columns are built once (again when followers leave or the agents are dropped).
+:meth:`World.ground_truth_objects <redrive.sim.world.World>` builds validated columns and the
+sensors' looks each call; an observation needs only the boxes, and most of them — ids, classes,
+sizes, the parked vehicles — do not change from one frame to the next.  :func:`truth_columns`
+gives the same rows, in the same order, with the same values, as trusted
+:class:`~redrive.types.ObjectColumns`; the constant columns are built once (again when followers
+leave or the agents are dropped).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-import numpy.typing as npt
 
 from redrive.sim.agents import ParkedObject
-from redrive.types import ObjectClass
+from redrive.types import ObjectColumns
 
 if TYPE_CHECKING:
     from redrive.sim.world import World
 
-__all__ = ["TruthColumns", "truth_columns"]
-
-F64 = npt.NDArray[np.float64]
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class TruthColumns:
-    """Ground-truth boxes, map frame, as :class:`~redrive.sim.scene.SceneObjects` has them
-    (unvalidated: the world built them).  ``is_ground_truth`` is all True."""
-
-    object_ids: npt.NDArray[np.int64]
-    classes: tuple[ObjectClass, ...]
-    centers: F64
-    sizes: F64
-    yaws_rad: F64
-    velocities: F64
-    is_ground_truth: npt.NDArray[np.bool_]
-
-    def __len__(self) -> int:
-        return len(self.classes)
+__all__ = ["truth_columns"]
 
 
 class _Constant:
     """The columns that do not move, and where the moving ones go."""
 
     def __init__(self, world: World) -> None:
-        fleet, static = world._fleet, world._static_truth
+        fleet, static = world._fleet, world._static_truth[0]
         others = world._others()
         nf, n = len(fleet), len(fleet) + len(others)
         self.key = (nf, len(others))
@@ -68,20 +47,19 @@ class _Constant:
                 yaws[k] = agent.yaw_rad
         self.n = n
         self.object_ids = np.concatenate(
-            [fleet.ids, np.array([a.agent_id for a in others], dtype=np.int64), static.object_ids]
+            [fleet.ids, np.array([a.agent_id for a in others], dtype=np.int64), static.object_id]
         )
-        self.classes = (*fleet.classes, *(a.object_class for a in others), *static.classes)
-        self.sizes = np.concatenate([sizes, static.sizes])
-        self.centers = np.concatenate([centers, static.centers])
-        self.yaws = np.concatenate([yaws, static.yaws_rad])
-        self.velocities = np.concatenate([np.zeros((n, 3)), static.velocities])
-        self.truth = np.ones(len(self.object_ids), dtype=bool)
-        for a in (self.object_ids, self.sizes, self.truth):
+        self.classes = (*fleet.classes, *(a.object_class for a in others), *static.object_class)
+        self.sizes = np.concatenate([sizes, static.size_m])
+        self.centers = np.concatenate([centers, static.center_m])
+        self.yaws = np.concatenate([yaws, static.yaw_rad])
+        self.velocities = np.concatenate([np.zeros((n, 3)), static.velocity_mps])
+        for a in (self.object_ids, self.sizes):
             a.flags.writeable = False
 
 
-def truth_columns(world: World, cache: _Constant | None) -> tuple[TruthColumns, _Constant]:
-    """``world.ground_truth_objects()``'s rows as :class:`TruthColumns`, and the constant
+def truth_columns(world: World, cache: _Constant | None) -> tuple[ObjectColumns, _Constant]:
+    """``world.ground_truth_objects()``'s rows and values as trusted columns, and the constant
     columns to pass back next time."""
     fleet = world._fleet
     nf = len(fleet)
@@ -99,14 +77,13 @@ def truth_columns(world: World, cache: _Constant | None) -> tuple[TruthColumns, 
         centers[k, 0], centers[k, 1] = x, y
         yaws[k] = yaw
     return (
-        TruthColumns(
-            object_ids=cache.object_ids,
-            classes=cache.classes,
-            centers=centers,
-            sizes=cache.sizes,
-            yaws_rad=yaws,
-            velocities=vels,
-            is_ground_truth=cache.truth,
+        ObjectColumns.trusted(
+            object_id=cache.object_ids,
+            object_class=cache.classes,
+            center_m=centers,
+            size_m=cache.sizes,
+            yaw_rad=yaws,
+            velocity_mps=vels,
         ),
         cache,
     )

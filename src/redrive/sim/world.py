@@ -30,11 +30,11 @@ from redrive.sim.ground import rasterize
 from redrive.sim.lights import TrafficLights
 from redrive.sim.roads import RoadNetwork, build_network
 from redrive.sim.scenario import AgentSpec, Scenario
-from redrive.sim.scene import GroundMap, Scene, SceneObjects
+from redrive.sim.scene import GroundMap, ObjectLooks, Scene
 from redrive.sim.scenery import build_scenery
 from redrive.sim.stepper import FrameStepper
-from redrive.sim.truth import TruthColumns, _Constant, truth_columns
-from redrive.types import ControlCommands, ObjectClass, VehicleState
+from redrive.sim.truth import _Constant, truth_columns
+from redrive.types import ControlCommands, ObjectClass, ObjectColumns, VehicleState
 
 __all__ = ["World"]
 
@@ -104,7 +104,7 @@ class World:
         self._ground: GroundMap | None = None
         self._static = build_scenery(self.network, scenario, self._rng)
         #: the scenery's ground-truth part (usually none), for :meth:`ground_truth_objects`
-        self._static_truth = _subset(self._static[0], self._static[0].is_ground_truth)
+        self._static_truth = _subset(self._static, self._static[1].is_ground_truth)
         self._followers: list[LaneFollower] = []
         self._walkers: list[Walker] = []
         self._triggers: list[tuple[Walker, float, float]] = []  # walker, s on ego route, distance
@@ -464,24 +464,28 @@ class World:
             self._ground = rasterize(self.network)
         return self._ground
 
-    def objects(self) -> SceneObjects:
-        """Agents and parked vehicles (ground truth) followed by the scenery, map frame."""
-        return self._objects(self._static[0])
+    def objects(self) -> tuple[ObjectColumns, ObjectLooks]:
+        """Agents and parked vehicles (ground truth) followed by the scenery, map frame, and
+        their looks."""
+        return self._objects(self._static)
 
-    def ground_truth_objects(self) -> SceneObjects:
+    def ground_truth_objects(self) -> ObjectColumns:
         """The ground-truth ones of :meth:`objects` (agents, parked vehicles and any scenery
         marked as ground truth), in the same order, without the rest of the scenery — what an
         object-level observation needs, at a fraction of the cost."""
-        return self._objects(self._static_truth)
+        return self._objects(self._static_truth)[0]
 
-    def ground_truth_columns(self) -> TruthColumns:
-        """:meth:`ground_truth_objects`'s rows and values as plain columns (boxes only, not
-        validated again; the constant ones built once) — an object-level observation's input."""
+    def ground_truth_columns(self) -> ObjectColumns:
+        """:meth:`ground_truth_objects`'s rows and values (boxes only, not validated again; the
+        constant columns built once) — an object-level observation's input."""
         columns, self._truth_cache = truth_columns(self, self._truth_cache)
         return columns
 
-    def _objects(self, static: SceneObjects) -> SceneObjects:
-        """The agents' boxes, map frame, followed by ``static``."""
+    def _objects(
+        self, static: tuple[ObjectColumns, ObjectLooks]
+    ) -> tuple[ObjectColumns, ObjectLooks]:
+        """The agents' boxes, map frame, followed by ``static``'s."""
+        boxes, looks = static
         fleet = self._fleet
         nf = len(fleet)
         others = self._others()
@@ -508,25 +512,27 @@ class World:
                 vels[k, :2] = agent.velocity()
             centers[k] = (x, y, agent.size_lwh_m[2] / 2)
             yaws[k] = yaw
-        return SceneObjects(
-            object_ids=np.concatenate(
+        columns = ObjectColumns.of(
+            object_id=np.concatenate(
                 [
                     fleet.ids,
                     np.array([a.agent_id for a in others], dtype=np.int64),
-                    static.object_ids,
+                    boxes.object_id,
                 ]
             ),
-            classes=(*fleet.classes, *(a.object_class for a in others), *static.classes),
-            centers=np.concatenate([centers, static.centers]),
-            sizes=np.concatenate([sizes, static.sizes]),
-            yaws_rad=np.concatenate([yaws, static.yaws_rad]),
-            velocities=np.concatenate([vels, static.velocities]),
-            colors=np.concatenate(
+            object_class=(*fleet.classes, *(a.object_class for a in others), *boxes.object_class),
+            center_m=np.concatenate([centers, boxes.center_m]),
+            size_m=np.concatenate([sizes, boxes.size_m]),
+            yaw_rad=np.concatenate([yaws, boxes.yaw_rad]),
+            velocity_mps=np.concatenate([vels, boxes.velocity_mps]),
+        )
+        appearance = ObjectLooks(
+            colors_rgb=np.concatenate(
                 [
                     np.array(
                         [*fleet.colors, *(a.color_rgb for a in others)], dtype=np.uint8
                     ).reshape(-1, 3),
-                    static.colors,
+                    looks.colors_rgb,
                 ]
             ),
             reflectivity=np.concatenate(
@@ -534,34 +540,29 @@ class World:
                     np.array(
                         [*fleet.reflectivity, *(a.reflectivity for a in others)], dtype=np.float32
                     ),
-                    static.reflectivity,
+                    looks.reflectivity,
                 ]
             ),
-            is_ground_truth=np.concatenate([np.ones(n, dtype=bool), static.is_ground_truth]),
+            is_ground_truth=np.concatenate([np.ones(n, dtype=bool), looks.is_ground_truth]),
         )
+        return columns, appearance
 
     def scene(self) -> Scene:
         """The world at :attr:`time_ns`, as the sensors see it (the ego's own box excluded)."""
+        objects, looks = self.objects()
         return Scene(
             stamp_ns=self._time_ns,
             ground=self.ground,
-            objects=self.objects(),
+            objects=objects,
+            looks=looks,
             traffic_lights=self.lights.states(self.time_s),
             map_from_base=self.map_from_base(),
         )
 
 
-def _subset(objs: SceneObjects, keep: npt.NDArray[np.bool_]) -> SceneObjects:
-    """The rows of ``objs`` where ``keep`` is true, in order."""
+def _subset(
+    static: tuple[ObjectColumns, ObjectLooks], keep: npt.NDArray[np.bool_]
+) -> tuple[ObjectColumns, ObjectLooks]:
+    """The rows of ``static`` where ``keep`` is true, in order."""
     idx = np.flatnonzero(keep)
-    return SceneObjects(
-        object_ids=objs.object_ids[idx],
-        classes=tuple(objs.classes[i] for i in idx.tolist()),
-        centers=objs.centers[idx],
-        sizes=objs.sizes[idx],
-        yaws_rad=objs.yaws_rad[idx],
-        velocities=objs.velocities[idx],
-        colors=objs.colors[idx],
-        reflectivity=objs.reflectivity[idx],
-        is_ground_truth=objs.is_ground_truth[idx],
-    )
+    return static[0].take(idx), static[1].take(idx)

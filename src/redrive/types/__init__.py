@@ -18,13 +18,14 @@ from redrive.types.enums import (
 from redrive.types.environment import EnvironmentData, TrafficData, TrafficLight
 from redrive.types.frame import ExtensionPayload, Frame, SensorData, SensorPayload
 from redrive.types.jsonable import to_jsonable
-from redrive.types.objects import Box3D, DetectedObject, ObjectColumns
+from redrive.types.objects import CLASS_CODES, Box3D, DetectedObject, ObjectColumns
 from redrive.types.roadmap import DrivableArea, MapLane, RoadMap
 from redrive.types.sensors import IMAGE_ENCODINGS, CameraInfo, GnssFix, Image, Imu, PointCloud
 from redrive.types.transforms import Transform
 from redrive.types.vehicle import ControlCommands, PlannedPath, VehicleState
 
 __all__ = [
+    "CLASS_CODES",
     "IMAGE_ENCODINGS",
     "Box3D",
     "CameraInfo",

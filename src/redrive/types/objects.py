@@ -1,4 +1,9 @@
-"""Objects: 3D boxes and detected (or ground-truth) objects, and objects as columns.
+"""Objects: 3D boxes, detected (or ground-truth) objects, and objects as columns.
+
+:class:`ObjectColumns` is the one columnar objects type: N objects (of one frame, or of many
+with :attr:`~ObjectColumns.frame_index`), one read-only array per field, units in the names.
+Simulated ground truth, perception, the planner, the results writer and the evaluation all work
+on it.
 
 :meth:`DetectedObject.many` builds N objects from columns.  It checks the columns, keeps them
 as one read-only :class:`ObjectColumns` and returns N ``DetectedObject`` instances that hold
@@ -17,19 +22,37 @@ objects that stay columns from the ground truth to the planner are never built o
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from itertools import repeat
 from operator import attrgetter
+from types import MappingProxyType
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 
-from redrive.types._arrays import frozen_vector
+from redrive.types._arrays import (
+    bbox,
+    column1,
+    column3,
+    finite,
+    finite_nonnegative,
+    frozen_vector,
+    in_unit,
+    int_column,
+    length_msg,
+    minus_ones,
+    ones,
+    zeros,
+)
 from redrive.types.enums import ObjectClass
 
-__all__ = ["Box3D", "DetectedObject", "ObjectColumns"]
+__all__ = ["CLASS_CODES", "Box3D", "DetectedObject", "ObjectColumns"]
+
+#: ObjectClass → small int code (the order of the enum): what :meth:`ObjectColumns.class_code`
+#: gives.
+CLASS_CODES: Mapping[ObjectClass, int] = MappingProxyType({c: i for i, c in enumerate(ObjectClass)})
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -133,23 +156,11 @@ class DetectedObject(_ColumnRow):
             object.__setattr__(self, "bbox_2d", tuple(float(v) for v in self.bbox_2d))
 
     @classmethod
-    def many(
-        cls,
-        *,
-        object_classes: Sequence[ObjectClass],
-        centers: npt.ArrayLike,
-        sizes: npt.ArrayLike,
-        yaws_rad: npt.ArrayLike,
-        object_ids: Sequence[int] | None = None,
-        confidences: npt.ArrayLike | None = None,
-        velocities: npt.ArrayLike | None = None,
-        accelerations: npt.ArrayLike | None = None,
-        orientations: npt.ArrayLike | None = None,
-        num_lidar_points: Sequence[int | None] | None = None,
-        visible: Sequence[bool | None] | None = None,
-    ) -> list[DetectedObject]:
-        """N objects from columns: object i has ``object_classes[i]``, ``Box3D(center=centers[i],
-        size=sizes[i], yaw_rad=yaws_rad[i])``, ``velocities[i]`` … (a column left out takes the
+    def many(cls, **columns: Any) -> list[DetectedObject]:
+        """N objects from columns, given as to :meth:`ObjectColumns.of` (``object_class``,
+        ``center_m``, ``size_m``, ``yaw_rad``, optional ``object_id``, ``confidence``,
+        ``velocity_mps`` …): object i has ``object_class[i]``, ``Box3D(center=center_m[i],
+        size=size_m[i], yaw_rad=yaw_rad[i])``, ``velocity_mps[i]`` … (a column left out takes the
         field's default for every object).
 
         For code that makes many objects per frame (decoders, simulators, perception): the
@@ -160,95 +171,176 @@ class DetectedObject(_ColumnRow):
         fills its fields from it when one is first read (see the module docstring), so
         :meth:`ObjectColumns.shared_by` gives the columns back without a pass over the objects.
         """
-        return _checked_columns(
-            "DetectedObject.many",
-            object_classes=object_classes,
-            centers=centers,
-            sizes=sizes,
-            yaws_rad=yaws_rad,
-            object_ids=object_ids,
-            confidences=confidences,
-            velocities=velocities,
-            accelerations=accelerations,
-            orientations=orientations,
-            num_lidar_points=num_lidar_points,
-            visible=visible,
-        ).objects()
+        return _checked_columns("DetectedObject.many", **columns).objects()
 
 
 @dataclass(frozen=True, slots=True, kw_only=True, eq=False)
 class ObjectColumns:
-    """N objects as columns (row i is object i): what :meth:`DetectedObject.many` keeps.
+    """N objects as columns, row i is object i (arrays share the first axis, all read-only).
 
-    Made by :meth:`DetectedObject.many` (then :meth:`shared_by` gives it back), by
-    :meth:`from_objects`, or directly with every column (checked as ``many`` checks them; the
-    arrays are copied and frozen).  Equality is identity (arrays inside).
+    The one columnar objects type: what :meth:`DetectedObject.many` keeps, a simulator's ground
+    truth, the evaluation's boxes.  The frame of the positions is the frame of whatever holds
+    the columns (a message's, base_link of a frame, or the map for a simulator's world).
+    Made by :meth:`of` (checked, optional columns take their defaults), by
+    :meth:`DetectedObject.many` (then :meth:`shared_by` gives it back), by :meth:`from_objects`,
+    or directly with every column (checked as ``of`` checks them; the arrays are copied and
+    frozen).  Change with :meth:`take` or :func:`dataclasses.replace`.  Equality is identity.
 
     Attributes:
-        object_ids: (N,) ints, -1 when none is known.
-        object_classes: (N,) :class:`ObjectClass`.
-        confidences: (N,) float64 in [0, 1].
-        centers: (N, 3) float64, metres, the boxes' centres.
-        sizes: (N, 3) float64, metres, length, width, height; finite, ≥ 0.
-        yaws_rad: (N,) float64, the boxes' headings, finite.
-        velocities, accelerations: (N, 3) float64, m/s and m/s².
-        orientations: (N, 3) float64, yaw, pitch, roll in radians.
-        bbox_2d: (N,) ``(x, y, w, h)`` pixels or None.
-        num_lidar_points: (N,) int ≥ 0 or None.
-        visible: (N,) bool or None.
+        object_id: (N,) int64 track / label ids, -1 when none is known.
+        object_class: (N,) tuple of :class:`ObjectClass` (:meth:`class_code`: as int codes).
+        confidence: (N,) float64 in [0, 1]; 1 for ground truth.
+        center_m: (N, 3) float64, metres, the boxes' geometric centres.
+        size_m: (N, 3) float64, metres, length (along the heading), width, height; finite, ≥ 0.
+        yaw_rad: (N,) float64, the boxes' headings about +z, counter-clockwise from +x; finite.
+        velocity_mps: (N, 3) float64, m/s.
+        acceleration_mps2: (N, 3) float64, m/s².
+        orientation_rad: (N, 3) float64, yaw, pitch, roll.
+        bbox_2d_px: (N,) tuple of ``(x, y, w, h)`` image boxes in pixels, or None.
+        num_lidar_points: (N,) int64 LiDAR returns on the object (ground truth), -1 when unknown.
+        visible: (N,) tuple of bool, or None when unknown (ground truth).
+        frame_index: (N,) int64 the frame each row belongs to, when the columns gather the
+            objects of several frames (the evaluation's), else -1.
     """
 
-    object_ids: tuple[int, ...]
-    object_classes: tuple[ObjectClass, ...]
-    confidences: npt.NDArray[np.float64]
-    centers: npt.NDArray[np.float64]
-    sizes: npt.NDArray[np.float64]
-    yaws_rad: npt.NDArray[np.float64]
-    velocities: npt.NDArray[np.float64]
-    accelerations: npt.NDArray[np.float64]
-    orientations: npt.NDArray[np.float64]
-    bbox_2d: tuple[tuple[float, float, float, float] | None, ...]
-    num_lidar_points: tuple[int | None, ...]
+    object_id: npt.NDArray[np.int64]
+    object_class: tuple[ObjectClass, ...]
+    confidence: npt.NDArray[np.float64]
+    center_m: npt.NDArray[np.float64]
+    size_m: npt.NDArray[np.float64]
+    yaw_rad: npt.NDArray[np.float64]
+    velocity_mps: npt.NDArray[np.float64]
+    acceleration_mps2: npt.NDArray[np.float64]
+    orientation_rad: npt.NDArray[np.float64]
+    bbox_2d_px: tuple[tuple[float, float, float, float] | None, ...]
+    num_lidar_points: npt.NDArray[np.int64]
     visible: tuple[bool | None, ...]
+    frame_index: npt.NDArray[np.int64]
 
     def __post_init__(self) -> None:
-        n = len(self.object_classes)
-        if len(self.bbox_2d) != n:
-            raise ValueError(_length_msg("bbox_2d", len(self.bbox_2d), n, "ObjectColumns"))
+        n = len(self.object_class)
+        if len(self.bbox_2d_px) != n:
+            raise ValueError(length_msg("bbox_2d_px", len(self.bbox_2d_px), n, "ObjectColumns"))
         checked = _checked_columns(
             "ObjectColumns",
-            object_classes=self.object_classes,
-            centers=self.centers,
-            sizes=self.sizes,
-            yaws_rad=self.yaws_rad,
-            object_ids=self.object_ids,
-            confidences=self.confidences,
-            velocities=self.velocities,
-            accelerations=self.accelerations,
-            orientations=self.orientations,
+            object_class=self.object_class,
+            center_m=self.center_m,
+            size_m=self.size_m,
+            yaw_rad=self.yaw_rad,
+            object_id=self.object_id,
+            confidence=self.confidence,
+            velocity_mps=self.velocity_mps,
+            acceleration_mps2=self.acceleration_mps2,
+            orientation_rad=self.orientation_rad,
             num_lidar_points=self.num_lidar_points,
             visible=self.visible,
+            frame_index=self.frame_index,
         )
         for name in _COLUMN_NAMES:
-            if name != "bbox_2d":
+            if name != "bbox_2d_px":
                 _COLUMN_SETTERS[name](self, getattr(checked, name))
-        boxes = tuple(None if b is None else _bbox(b, "ObjectColumns") for b in self.bbox_2d)
-        _COLUMN_SETTERS["bbox_2d"](self, boxes)
+        boxes = tuple(None if b is None else bbox(b, "ObjectColumns") for b in self.bbox_2d_px)
+        _COLUMN_SETTERS["bbox_2d_px"](self, boxes)
+
+    @classmethod
+    def of(
+        cls,
+        *,
+        object_class: Sequence[ObjectClass],
+        center_m: npt.ArrayLike,
+        size_m: npt.ArrayLike,
+        yaw_rad: npt.ArrayLike,
+        object_id: npt.ArrayLike | None = None,
+        confidence: npt.ArrayLike | None = None,
+        velocity_mps: npt.ArrayLike | None = None,
+        acceleration_mps2: npt.ArrayLike | None = None,
+        orientation_rad: npt.ArrayLike | None = None,
+        num_lidar_points: Sequence[int | None] | npt.NDArray[np.int64] | None = None,
+        visible: Sequence[bool | None] | None = None,
+        frame_index: npt.ArrayLike | None = None,
+    ) -> ObjectColumns:
+        """Columns from these values, checked as ``DetectedObject(...)`` checks one object
+        (ValueError naming the column and the first bad row), copied and frozen; a column left
+        out takes the field's default for every row (``num_lidar_points`` may hold None or -1
+        for unknown).  No ``bbox_2d_px``: pass it to the constructor."""
+        return _checked_columns(
+            "ObjectColumns.of",
+            object_class=object_class,
+            center_m=center_m,
+            size_m=size_m,
+            yaw_rad=yaw_rad,
+            object_id=object_id,
+            confidence=confidence,
+            velocity_mps=velocity_mps,
+            acceleration_mps2=acceleration_mps2,
+            orientation_rad=orientation_rad,
+            num_lidar_points=num_lidar_points,
+            visible=visible,
+            frame_index=frame_index,
+        )
+
+    @classmethod
+    def trusted(
+        cls,
+        *,
+        object_id: npt.NDArray[np.int64],
+        object_class: tuple[ObjectClass, ...],
+        center_m: npt.NDArray[np.float64],
+        size_m: npt.NDArray[np.float64],
+        yaw_rad: npt.NDArray[np.float64],
+        velocity_mps: npt.NDArray[np.float64],
+    ) -> ObjectColumns:
+        """Columns of arrays the caller built and vouches for (a simulator's world: int64 and
+        float64 of the shapes above, nothing to check), neither checked nor copied, made
+        read-only in place; the other columns take their defaults."""
+        n = len(object_class)
+        for arr in (object_id, center_m, size_m, yaw_rad, velocity_mps):
+            arr.flags.writeable = False
+        return _columns_unchecked(
+            object_id,
+            object_class,
+            ones(n),
+            center_m,
+            size_m,
+            yaw_rad,
+            velocity_mps,
+            zeros(n),
+            zeros(n),
+            (None,) * n,
+            minus_ones(n),
+            (None,) * n,
+            minus_ones(n),
+        )
 
     def __len__(self) -> int:
-        return len(self.object_ids)
+        return len(self.object_class)
+
+    def class_code(self) -> npt.NDArray[np.int64]:
+        """(N,) int64 :data:`CLASS_CODES` of the rows' classes."""
+        return np.array([CLASS_CODES[c] for c in self.object_class], dtype=np.int64)
+
+    @property
+    def distance_xy_m(self) -> npt.NDArray[np.float64]:
+        """(N,) distance of each centre from the frame's origin in the x-y plane, metres (in
+        base_link: nuScenes' ``ego_dist``)."""
+        return np.asarray(np.hypot(self.center_m[:, 0], self.center_m[:, 1]), dtype=np.float64)
 
     def objects(self) -> list[DetectedObject]:
         """The N objects (each filled from its row when a field is first read)."""
-        n = len(self.object_ids)
+        n = len(self.object_class)
         objects: list[DetectedObject] = list(map(object.__new__, repeat(DetectedObject, n)))
         any(map(_SET_COLUMNS, objects, repeat(self, n)))
         any(map(_SET_ROW, objects, range(n)))
         return objects
 
-    def take(self, rows: Sequence[int]) -> ObjectColumns:
-        """The columns of these rows, in this order."""
-        index = np.asarray(rows, dtype=np.intp).reshape(-1)
+    def take(
+        self, rows: Sequence[int] | npt.NDArray[np.intp | np.int64 | np.bool_]
+    ) -> ObjectColumns:
+        """The columns of these rows, in this order (an index sequence or a boolean mask)."""
+        index = np.asarray(rows)
+        index = (
+            np.flatnonzero(index) if index.dtype == np.bool_ else index.astype(np.intp).reshape(-1)
+        )
         picked = index.tolist()
         values: list[Any] = []
         for name in _COLUMN_NAMES:
@@ -277,153 +369,149 @@ class ObjectColumns:
         if type(first) is not ObjectColumns or batches.count(first) != n:
             return None
         rows = list(map(_ATTR_ROW, objects))
-        if n == len(first.object_ids) and rows == list(range(n)):
+        if n == len(first.object_class) and rows == list(range(n)):
             return first
         return first.take(rows)
 
     @staticmethod
-    def from_objects(objects: Sequence[DetectedObject]) -> ObjectColumns:
+    def from_objects(
+        objects: Sequence[DetectedObject], *, frame_index: npt.ArrayLike | None = None
+    ) -> ObjectColumns:
         """The columns of ``objects``: :meth:`shared_by`'s when it has them, else gathered from
-        the objects' fields (the same values)."""
-        shared = ObjectColumns.shared_by(objects)
-        if shared is not None:
-            return shared
-        n = len(objects)
-        boxes = [o.box for o in objects]
+        the objects' fields (the same values); with ``frame_index`` (N,) that column set."""
+        columns = ObjectColumns.shared_by(objects)
+        if columns is None:
+            columns = _gathered(objects)
+        if frame_index is None:
+            return columns
+        frames = np.array(frame_index, dtype=np.int64).reshape(len(columns))
+        frames.flags.writeable = False
+        values = [
+            frames if name == "frame_index" else getattr(columns, name) for name in _COLUMN_NAMES
+        ]
+        return _columns_unchecked(*values)
 
-        def rows3(values: list[Any]) -> npt.NDArray[np.float64]:
-            arr = np.array(values, dtype=np.float64).reshape(n, 3)
-            arr.flags.writeable = False
-            return arr
 
-        def rows1(values: list[Any]) -> npt.NDArray[np.float64]:
-            arr = np.array(values, dtype=np.float64).reshape(n)
-            arr.flags.writeable = False
-            return arr
+def _gathered(objects: Sequence[DetectedObject]) -> ObjectColumns:
+    """The columns of ``objects`` read from their fields."""
+    n = len(objects)
+    boxes = [o.box for o in objects]
 
-        return _columns_unchecked(
-            tuple(o.object_id for o in objects),
-            tuple(o.object_class for o in objects),
-            rows1([o.confidence for o in objects]),
-            rows3([b.center for b in boxes]),
-            rows3([b.size for b in boxes]),
-            rows1([b.yaw_rad for b in boxes]),
-            rows3([o.velocity for o in objects]),
-            rows3([o.acceleration for o in objects]),
-            rows3([o.orientation for o in objects]),
-            tuple(o.bbox_2d for o in objects),
-            tuple(o.num_lidar_points for o in objects),
-            tuple(o.visible for o in objects),
-        )
+    def rows3(values: list[Any]) -> npt.NDArray[np.float64]:
+        arr = np.array(values, dtype=np.float64).reshape(n, 3)
+        arr.flags.writeable = False
+        return arr
+
+    def rows1(values: list[Any], dtype: type[Any] = np.float64) -> npt.NDArray[Any]:
+        arr = np.array(values, dtype=dtype).reshape(n)
+        arr.flags.writeable = False
+        return arr
+
+    return _columns_unchecked(
+        rows1([o.object_id for o in objects], np.int64),
+        tuple(o.object_class for o in objects),
+        rows1([o.confidence for o in objects]),
+        rows3([b.center for b in boxes]),
+        rows3([b.size for b in boxes]),
+        rows1([b.yaw_rad for b in boxes]),
+        rows3([o.velocity for o in objects]),
+        rows3([o.acceleration for o in objects]),
+        rows3([o.orientation for o in objects]),
+        tuple(o.bbox_2d for o in objects),
+        rows1([-1 if p is None else p for p in (o.num_lidar_points for o in objects)], np.int64),
+        tuple(o.visible for o in objects),
+        minus_ones(n),
+    )
 
 
 def _checked_columns(
     where: str,
     *,
-    object_classes: Sequence[ObjectClass],
-    centers: npt.ArrayLike,
-    sizes: npt.ArrayLike,
-    yaws_rad: npt.ArrayLike,
-    object_ids: Sequence[int] | None,
-    confidences: npt.ArrayLike | None,
-    velocities: npt.ArrayLike | None,
-    accelerations: npt.ArrayLike | None,
-    orientations: npt.ArrayLike | None,
-    num_lidar_points: Sequence[int | None] | None,
-    visible: Sequence[bool | None] | None,
+    object_class: Sequence[ObjectClass],
+    center_m: npt.ArrayLike,
+    size_m: npt.ArrayLike,
+    yaw_rad: npt.ArrayLike,
+    object_id: npt.ArrayLike | None = None,
+    confidence: npt.ArrayLike | None = None,
+    velocity_mps: npt.ArrayLike | None = None,
+    acceleration_mps2: npt.ArrayLike | None = None,
+    orientation_rad: npt.ArrayLike | None = None,
+    num_lidar_points: Sequence[int | None] | npt.NDArray[np.int64] | None = None,
+    visible: Sequence[bool | None] | None = None,
+    frame_index: npt.ArrayLike | None = None,
 ) -> ObjectColumns:
     """The columns checked as ``DetectedObject(...)`` checks one object (ValueError naming
     ``where``, the column and the first bad row), copied and frozen."""
-    n = len(object_classes)
-    centers_a = _column3(centers, "centers", n, where)
-    sizes_a = _column3(sizes, "sizes", n, where)
+    n = len(object_class)
+    centers = column3(center_m, "center_m", n, where)
+    sizes = column3(size_m, "size_m", n, where)
     # The common case in C-level reductions (no numpy Python wrappers; a few objects' values
     # as Python floats, cheaper than numpy's reductions on tiny arrays); the rows are looked
     # at only when there is a bad value, to name the first.
-    if n and not _finite_nonnegative(sizes_a):
-        bad = ~np.isfinite(sizes_a).all(axis=1) | (sizes_a < 0).any(axis=1)
+    if n and not finite_nonnegative(sizes):
+        bad = ~np.isfinite(sizes).all(axis=1) | (sizes < 0).any(axis=1)
         i = int(np.flatnonzero(bad)[0])
-        msg = f"{where}: sizes[{i}] must be finite and non-negative, got {sizes_a[i].tolist()}"
+        msg = f"{where}: size_m[{i}] must be finite and non-negative, got {sizes[i].tolist()}"
         raise ValueError(msg)
-    yaws = _column1(yaws_rad, "yaws_rad", n, where)
-    if n and not _finite(yaws):
+    yaws = column1(yaw_rad, "yaw_rad", n, where)
+    if n and not finite(yaws):
         i = int(np.flatnonzero(~np.isfinite(yaws))[0])
-        msg = f"{where}: yaws_rad[{i}] must be finite, got {yaws[i]}"
+        msg = f"{where}: yaw_rad[{i}] must be finite, got {yaws[i]}"
         raise ValueError(msg)
-    ids: tuple[int, ...] = (-1,) * n
-    if object_ids is not None:
-        if len(object_ids) != n:
-            raise ValueError(_length_msg("object_ids", len(object_ids), n, where))
-        ids = tuple(map(int, object_ids))
-    conf = _ones(n)
-    if confidences is not None:
-        conf = _column1(confidences, "confidences", n, where)
-        if n and not _in_unit(conf):
+    ids = minus_ones(n) if object_id is None else int_column(object_id, "object_id", n, where)
+    conf = ones(n)
+    if confidence is not None:
+        conf = column1(confidence, "confidence", n, where)
+        if n and not in_unit(conf):
             bad = ~((conf >= 0.0) & (conf <= 1.0))
             i = int(np.flatnonzero(bad)[0])
-            msg = f"{where}: confidences[{i}] must lie in [0, 1], got {conf[i]}"
+            msg = f"{where}: confidence[{i}] must lie in [0, 1], got {conf[i]}"
             raise ValueError(msg)
-    points: tuple[int | None, ...] = (None,) * n
-    if num_lidar_points is not None:
-        if len(num_lidar_points) != n:
-            raise ValueError(_length_msg("num_lidar_points", len(num_lidar_points), n, where))
-        points = tuple(None if p is None else int(p) for p in num_lidar_points)
-        for i, p in enumerate(points):
+    points = minus_ones(n)
+    if isinstance(num_lidar_points, np.ndarray):  # -1: unknown, the column's own convention
+        points = int_column(num_lidar_points, "num_lidar_points", n, where)
+        if n and int(points.min()) < -1:
+            i = int(np.flatnonzero(points < -1)[0])
+            msg = f"{where}: num_lidar_points[{i}] must be ≥ 0, got {points[i]}"
+            raise ValueError(msg)
+    elif num_lidar_points is not None:  # None: unknown
+        raw = list(num_lidar_points)
+        if len(raw) != n:
+            raise ValueError(length_msg("num_lidar_points", len(raw), n, where))
+        for i, p in enumerate(raw):
             if p is not None and p < 0:
                 msg = f"{where}: num_lidar_points[{i}] must be ≥ 0, got {p}"
                 raise ValueError(msg)
+        points = int_column([-1 if p is None else p for p in raw], "num_lidar_points", n, where)
     seen: tuple[bool | None, ...] = (None,) * n
     if visible is not None:
         if len(visible) != n:
-            raise ValueError(_length_msg("visible", len(visible), n, where))
+            raise ValueError(length_msg("visible", len(visible), n, where))
         seen = tuple(visible)
+    frames = (
+        minus_ones(n) if frame_index is None else int_column(frame_index, "frame_index", n, where)
+    )
     vectors = [
-        _zeros(n) if column is None else _column3(column, column_name, n, where)
+        zeros(n) if column is None else column3(column, column_name, n, where)
         for column_name, column in (
-            ("velocities", velocities),
-            ("accelerations", accelerations),
-            ("orientations", orientations),
+            ("velocity_mps", velocity_mps),
+            ("acceleration_mps2", acceleration_mps2),
+            ("orientation_rad", orientation_rad),
         )
     ]
     return _columns_unchecked(
         ids,
-        tuple(object_classes),
+        tuple(object_class),
         conf,
-        centers_a,
-        sizes_a,
+        centers,
+        sizes,
         yaws,
         *vectors,
         (None,) * n,
         points,
         seen,
+        frames,
     )
-
-
-#: up to this many values a check reads them as Python floats; beyond, numpy's reductions
-_SMALL = 96
-
-
-def _finite_nonnegative(values: npt.NDArray[np.float64]) -> bool:
-    """Whether every value is finite and ≥ 0 (-0.0 counts)."""
-    if values.size <= _SMALL:
-        flat = values.ravel().tolist()
-        return all(map(math.isfinite, flat)) and min(flat) >= 0.0  # min after: no NaN left
-    return bool(_ALL(np.isfinite(values), axis=None) and _MIN(values, axis=None) >= 0.0)
-
-
-def _finite(values: npt.NDArray[np.float64]) -> bool:
-    """Whether every value is finite."""
-    if values.size <= _SMALL:
-        return all(map(math.isfinite, values.ravel().tolist()))
-    return bool(_ALL(np.isfinite(values), axis=None))
-
-
-def _in_unit(values: npt.NDArray[np.float64]) -> bool:
-    """Whether every value lies in [0, 1] (NaN does not)."""
-    if values.size <= _SMALL:
-        flat = values.tolist()
-        return all(0.0 <= v <= 1.0 for v in flat)
-    return bool(_MIN(values) >= 0.0 and _MAX(values) <= 1.0)  # NaN fails both
 
 
 def _columns_unchecked(*values: Any) -> ObjectColumns:
@@ -437,80 +525,21 @@ def _columns_unchecked(*values: Any) -> ObjectColumns:
 def _fill(obj: Any, columns: ObjectColumns, row: int) -> None:
     """Set every field of ``obj`` from row ``row`` of ``columns`` (what many's objects hold)."""
     box = object.__new__(Box3D)
-    _SET_BOX_CENTER(box, columns.centers[row])
-    _SET_BOX_SIZE(box, columns.sizes[row])
-    _SET_BOX_YAW(box, float(columns.yaws_rad[row]))
+    _SET_BOX_CENTER(box, columns.center_m[row])
+    _SET_BOX_SIZE(box, columns.size_m[row])
+    _SET_BOX_YAW(box, float(columns.yaw_rad[row]))
+    points = int(columns.num_lidar_points[row])
     set_ = _OBJECT_SETTERS
-    set_["object_id"](obj, columns.object_ids[row])
-    set_["object_class"](obj, columns.object_classes[row])
-    set_["confidence"](obj, float(columns.confidences[row]))
+    set_["object_id"](obj, int(columns.object_id[row]))
+    set_["object_class"](obj, columns.object_class[row])
+    set_["confidence"](obj, float(columns.confidence[row]))
     set_["box"](obj, box)
-    set_["velocity"](obj, columns.velocities[row])
-    set_["acceleration"](obj, columns.accelerations[row])
-    set_["orientation"](obj, columns.orientations[row])
-    set_["bbox_2d"](obj, columns.bbox_2d[row])
-    set_["num_lidar_points"](obj, columns.num_lidar_points[row])
+    set_["velocity"](obj, columns.velocity_mps[row])
+    set_["acceleration"](obj, columns.acceleration_mps2[row])
+    set_["orientation"](obj, columns.orientation_rad[row])
+    set_["bbox_2d"](obj, columns.bbox_2d_px[row])
+    set_["num_lidar_points"](obj, None if points < 0 else points)
     set_["visible"](obj, columns.visible[row])
-
-
-def _bbox(value: Any, where: str) -> tuple[float, float, float, float]:
-    if len(value) != 4:
-        msg = f"{where}: a bbox_2d must be (x, y, w, h), got {value!r}"
-        raise ValueError(msg)
-    x, y, w, h = (float(v) for v in value)
-    return (x, y, w, h)
-
-
-def _ones(n: int) -> npt.NDArray[np.float64]:
-    """A read-only (n,) column of ones (shared: one per n, for the small n)."""
-    arr = _ONES.get(n)
-    if arr is None:
-        arr = np.ones(n, dtype=np.float64)
-        arr.flags.writeable = False
-        if n <= _SHARED_DEFAULTS_MAX:
-            _ONES[n] = arr
-    return arr
-
-
-def _zeros(n: int) -> npt.NDArray[np.float64]:
-    """A read-only (n, 3) column of zeros (shared: one per n, for the small n)."""
-    arr = _ZEROS.get(n)
-    if arr is None:
-        arr = np.zeros((n, 3), dtype=np.float64)
-        arr.flags.writeable = False
-        if n <= _SHARED_DEFAULTS_MAX:
-            _ZEROS[n] = arr
-    return arr
-
-
-# the default columns are read-only, so batches of the same size share them
-_SHARED_DEFAULTS_MAX = 256
-_ONES: dict[int, npt.NDArray[np.float64]] = {}
-_ZEROS: dict[int, npt.NDArray[np.float64]] = {}
-
-
-def _length_msg(name: str, have: int, n: int, where: str) -> str:
-    return f"{where}: {name} has {have} values for {n} objects"
-
-
-def _column3(value: Any, name: str, n: int, where: str) -> npt.NDArray[np.float64]:
-    """``value`` as one read-only float64 (n, 3) array (a copy: the caller keeps its own)."""
-    arr = np.array(value, dtype=np.float64)
-    if arr.shape != (n, 3):
-        msg = f"{where}: {name} must have shape ({n}, 3), got {arr.shape}"
-        raise ValueError(msg)
-    arr.flags.writeable = False
-    return arr
-
-
-def _column1(value: Any, name: str, n: int, where: str) -> npt.NDArray[np.float64]:
-    """``value`` as one read-only float64 (n,) array (a copy)."""
-    arr = np.array(value, dtype=np.float64)
-    if arr.shape != (n,):
-        msg = f"{where}: {name} must have shape ({n},), got {arr.shape}"
-        raise ValueError(msg)
-    arr.flags.writeable = False
-    return arr
 
 
 # The slots' own setters: what ``object.__setattr__`` ends in, without its lookup.
@@ -544,8 +573,18 @@ _COLUMN_SETTERS = {name: ObjectColumns.__dict__[name].__set__ for name in _COLUM
 _COLUMN_SETTER_LIST = tuple(_COLUMN_SETTERS.values())
 
 
-_ALL, _MIN, _MAX = np.logical_and.reduce, np.minimum.reduce, np.maximum.reduce
 _EMPTY = _columns_unchecked(
-    (), (), _ones(0), _zeros(0), _zeros(0), np.zeros(0), _zeros(0), _zeros(0), _zeros(0), (), (), ()
+    minus_ones(0),
+    (),
+    ones(0),
+    zeros(0),
+    zeros(0),
+    ones(0)[:0],
+    zeros(0),
+    zeros(0),
+    zeros(0),
+    (),
+    minus_ones(0),
+    (),
+    minus_ones(0),
 )
-_EMPTY.yaws_rad.flags.writeable = False

@@ -400,12 +400,12 @@ class ClusterDetector(Algorithm):
         keep = np.flatnonzero(~scenery)
         yaw_kept = yaw[keep]
         out = DetectedObject.many(
-            object_classes=[classes[w] for w in which[keep].tolist()],
-            confidences=np.clip(confidence[keep], 0.0, 1.0),
-            centers=np.stack([center[keep, 0], center[keep, 1], z_mid[keep]], axis=1),
-            sizes=np.stack([length[keep], width[keep], height[keep]], axis=1),
-            yaws_rad=yaw_kept,
-            orientations=np.stack(
+            object_class=[classes[w] for w in which[keep].tolist()],
+            confidence=np.clip(confidence[keep], 0.0, 1.0),
+            center_m=np.stack([center[keep, 0], center[keep, 1], z_mid[keep]], axis=1),
+            size_m=np.stack([length[keep], width[keep], height[keep]], axis=1),
+            yaw_rad=yaw_kept,
+            orientation_rad=np.stack(
                 [yaw_kept, np.zeros_like(yaw_kept), np.zeros_like(yaw_kept)], axis=1
             ),
         )

@@ -199,11 +199,11 @@ class NoisyOracle(Algorithm):
         (rows, confuse, centers, sizes, yaws, velocities, orientations, *fp) = oracle_frame(
             self._seed,
             frame.index,
-            columns.centers,
-            columns.sizes,
-            columns.yaws_rad,
-            columns.velocities,
-            columns.orientations,
+            columns.center_m,
+            columns.size_m,
+            columns.yaw_rad,
+            columns.velocity_mps,
+            columns.orientation_rad,
             self._seen(columns),
             self._params,
             _FP_PROBS,
@@ -234,11 +234,10 @@ class NoisyOracle(Algorithm):
         (≠ 0) and not ``visible is False`` (None counts as seen); the range is the kernel's."""
         n = len(truth)
         points, visible = truth.num_lidar_points, truth.visible
-        if not self._visible_only or (points.count(None) == n and visible.count(None) == n):
+        if not self._visible_only or (bool((points == -1).all()) and visible.count(None) == n):
             return _all_true(n)
-        seen = np.array(
-            [p != 0 and v is not False for p, v in zip(points, visible, strict=True)],
-            dtype=np.bool_,
+        seen: npt.NDArray[np.bool_] = (points != 0) & np.array(
+            [v is not False for v in visible], dtype=np.bool_
         )
         seen.flags.writeable = False  # the kernel's one signature: read-only columns
         return seen
@@ -257,7 +256,7 @@ class NoisyOracle(Algorithm):
         """The kept ground-truth rows ``rows_a`` with their noisy columns as
         ``DetectedObject.many``'s columns (classes confused here)."""
         rows = rows_a.tolist()
-        true_classes = truth.object_classes
+        true_classes = truth.object_class
         classes = [true_classes[r] for r in rows]
         p = self._p_confuse
         if p > 0.0:
@@ -266,17 +265,16 @@ class NoisyOracle(Algorithm):
                     cls = classes[j]
                     choices = [c for c in CONFUSABLE_CLASSES if c is not cls]
                     classes[j] = choices[min(int(u / p * len(choices)), len(choices) - 1)]
-        ids = truth.object_ids
         return {
-            "object_ids": [ids[r] for r in rows] if self._keep_ids else [-1] * len(rows),
-            "object_classes": classes,
-            "confidences": truth.confidences[rows_a],
-            "centers": centers,
-            "sizes": sizes,
-            "yaws_rad": yaws,
-            "velocities": velocities,
-            "accelerations": truth.accelerations[rows_a],
-            "orientations": orientations,
+            "object_id": truth.object_id[rows_a] if self._keep_ids else [-1] * len(rows),
+            "object_class": classes,
+            "confidence": truth.confidence[rows_a],
+            "center_m": centers,
+            "size_m": sizes,
+            "yaw_rad": yaws,
+            "velocity_mps": velocities,
+            "acceleration_mps2": truth.acceleration_mps2[rows_a],
+            "orientation_rad": orientations,
         }
 
     def _false_positives(
@@ -291,15 +289,15 @@ class NoisyOracle(Algorithm):
         orientations = np.zeros((count, 3))
         orientations[:, 0] = yaws
         return {
-            "object_ids": [-1] * count,
-            "object_classes": [_FP_CLASSES[k] for k in picks.tolist()],
-            "confidences": np.full(count, self._fp_conf),
-            "centers": centers,
-            "sizes": sizes,
-            "yaws_rad": yaws,
-            "velocities": np.zeros((count, 3)),
-            "accelerations": np.zeros((count, 3)),
-            "orientations": orientations,
+            "object_id": [-1] * count,
+            "object_class": [_FP_CLASSES[k] for k in picks.tolist()],
+            "confidence": np.full(count, self._fp_conf),
+            "center_m": centers,
+            "size_m": sizes,
+            "yaw_rad": yaws,
+            "velocity_mps": np.zeros((count, 3)),
+            "acceleration_mps2": np.zeros((count, 3)),
+            "orientation_rad": orientations,
         }
 
 

@@ -398,7 +398,7 @@ class IdmPlanner(Algorithm):
         # call projects the 4·n bottom corners and the n centres on the path and picks the
         # leaders (:func:`._plan_kernels.leaders_on_path`)
         columns = ObjectColumns.from_objects(objects)
-        yaws = columns.yaws_rad.tolist()
+        yaws = columns.yaw_rad.tolist()
         cos = [math.cos(yaw) for yaw in yaws]
         sin = [math.sin(yaw) for yaw in yaws]
         rotations = np.zeros((n, 3, 3))
@@ -407,10 +407,10 @@ class IdmPlanner(Algorithm):
         rotations[:, 1, 0] = [-v for v in sin]
         rotations[:, 1, 1] = cos
         rotations[:, 2, 2] = 1.0
-        centers = columns.centers
-        local = BOX_CORNER_SIGNS * (0.5 * columns.sizes)[:, None, :]
+        centers = columns.center_m
+        local = BOX_CORNER_SIGNS * (0.5 * columns.size_m)[:, None, :]
         corners = local @ rotations + centers[:, None, :]
-        velocities = columns.velocities
+        velocities = columns.velocity_mps
         leaders_s, leaders_v = leaders_on_path(
             corners,
             centers,

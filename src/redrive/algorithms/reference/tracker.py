@@ -379,14 +379,14 @@ class KalmanTracker(Algorithm):
             zs = [z - dz for z in zs]
             yaws = [normalize_angle(yaw - pose.heading_rad) for yaw in yaws]
         return DetectedObject.many(
-            object_ids=[t.track_id for t in tracks],
-            object_classes=[t.object_class for t in tracks],
-            confidences=[t.confidence for t in tracks],
-            centers=np.column_stack((xy, zs)),
-            sizes=[t.size_m for t in tracks],
-            yaws_rad=yaws,
-            velocities=np.column_stack((v_xy, np.zeros(len(tracks)))),
-            orientations=[(yaw, *t.pitch_roll_rad) for yaw, t in zip(yaws, tracks, strict=True)],
+            object_id=[t.track_id for t in tracks],
+            object_class=[t.object_class for t in tracks],
+            confidence=[t.confidence for t in tracks],
+            center_m=np.column_stack((xy, zs)),
+            size_m=[t.size_m for t in tracks],
+            yaw_rad=yaws,
+            velocity_mps=np.column_stack((v_xy, np.zeros(len(tracks)))),
+            orientation_rad=[(yaw, *t.pitch_roll_rad) for yaw, t in zip(yaws, tracks, strict=True)],
         )
 
 

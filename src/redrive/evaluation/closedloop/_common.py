@@ -6,6 +6,7 @@ Planar throughout: x, y metres in ``map``, headings radians about +z.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -23,7 +24,7 @@ from redrive.evaluation._kinematics import (
     rectangles_overlap,
 )
 from redrive.evaluation.base import EvalData, MetricSkipped, Series
-from redrive.types import DetectedObject, ObjectClass, RoadMap, VehicleState
+from redrive.types import DetectedObject, ObjectClass, ObjectColumns, RoadMap, VehicleState
 
 F64 = npt.NDArray[np.float64]
 
@@ -111,47 +112,33 @@ def ego_run(data: EvalData, *, minimum: int = 1) -> EgoRun:
     return ego
 
 
-@dataclass(frozen=True, slots=True)
-class MapObjects:
-    """Ground-truth objects of one frame in the map frame, as arrays (M,)."""
+def map_objects(
+    objects: Sequence[DetectedObject], ego_xy: F64, ego_heading: float
+) -> ObjectColumns:
+    """``objects`` (base_link of a frame whose ego pose is ``ego_xy``, ``ego_heading``) in the
+    map frame: centres rotated and shifted, yaws and velocities rotated (planar: z kept)."""
+    local = ObjectColumns.from_objects(objects)
+    c, s = math.cos(ego_heading), math.sin(ego_heading)
+    rot = np.array([[c, -s], [s, c]])
+    center = local.center_m.copy()
+    velocity = local.velocity_mps.copy()
+    center[:, :2] = np.ascontiguousarray(local.center_m[:, :2]) @ rot.T + ego_xy
+    velocity[:, :2] = np.ascontiguousarray(local.velocity_mps[:, :2]) @ rot.T
+    return dataclasses.replace(
+        local, center_m=center, yaw_rad=local.yaw_rad + ego_heading, velocity_mps=velocity
+    )
 
-    ids: npt.NDArray[np.int64]
-    classes: tuple[ObjectClass, ...]
-    xy: F64
-    yaw: F64
-    length: F64
-    width: F64
-    velocity: F64
 
-    @classmethod
-    def of(cls, objects: Sequence[DetectedObject], ego_xy: F64, ego_heading: float) -> MapObjects:
-        """``objects`` (base_link of a frame whose ego pose is ``ego_xy``, ``ego_heading``) in
-        the map frame: centres rotated and shifted, yaws and velocities rotated."""
-        n = len(objects)
-        c, s = math.cos(ego_heading), math.sin(ego_heading)
-        rot = np.array([[c, -s], [s, c]])
-        local = np.array([o.box.center[:2] for o in objects], dtype=np.float64).reshape(n, 2)
-        vel = np.array([o.velocity[:2] for o in objects], dtype=np.float64).reshape(n, 2)
-        return cls(
-            ids=np.array([o.object_id for o in objects], dtype=np.int64),
-            classes=tuple(o.object_class for o in objects),
-            xy=local @ rot.T + ego_xy,
-            yaw=np.array([o.box.yaw_rad for o in objects], dtype=np.float64) + ego_heading,
-            length=np.array([o.box.size[0] for o in objects], dtype=np.float64),
-            width=np.array([o.box.size[1] for o in objects], dtype=np.float64),
-            velocity=vel @ rot.T,
-        )
+def corners(objs: ObjectColumns, dt_s: float = 0.0) -> F64:
+    """Footprint corners (M, 4, 2) of ``objs`` after ``dt_s`` at constant velocity."""
+    xy = objs.center_m[:, :2] + dt_s * objs.velocity_mps[:, :2]
+    return rectangle_corners(xy, objs.yaw_rad, objs.size_m[:, 0], objs.size_m[:, 1])
 
-    def __len__(self) -> int:
-        return int(self.ids.size)
 
-    def corners(self, dt_s: float = 0.0) -> F64:
-        """Corners (M, 4, 2) after ``dt_s`` at constant velocity."""
-        return rectangle_corners(self.xy + dt_s * self.velocity, self.yaw, self.length, self.width)
-
-    @property
-    def speed_mps(self) -> F64:
-        return np.asarray(np.hypot(self.velocity[:, 0], self.velocity[:, 1]), dtype=np.float64)
+def speed_mps(objs: ObjectColumns) -> F64:
+    """(M,) planar speed of each object."""
+    v = objs.velocity_mps
+    return np.asarray(np.hypot(v[:, 0], v[:, 1]), dtype=np.float64)
 
 
 def bearing_rad(ego_xy: F64, ego_heading: float, points: F64) -> F64:
@@ -252,7 +239,7 @@ class Collision:
 
 
 def classify(
-    objs: MapObjects,
+    objs: ObjectColumns,
     m: int,
     *,
     ego_xy: F64,
@@ -265,12 +252,12 @@ def classify(
 
     ``straddling``: the ego is in multiple lanes or off the drivable area (None: no map, then a
     lateral collision is never at fault)."""
-    obj_corners = objs.corners()[m]
+    obj_corners = corners(objs)[m]
     if ego_speed <= STOPPED_SPEED_MPS:
         return "stopped_ego", False
-    if float(objs.speed_mps[m]) <= STOPPED_SPEED_MPS:
+    if float(speed_mps(objs)[m]) <= STOPPED_SPEED_MPS:
         return "stopped_track", True
-    if float(bearing_rad(ego_xy, ego_heading, objs.xy[m : m + 1])[0]) > BEHIND_ANGLE_RAD:
+    if float(bearing_rad(ego_xy, ego_heading, objs.center_m[m : m + 1, :2])[0]) > BEHIND_ANGLE_RAD:
         return "active_rear", False
     front = shapely.LineString([ego_corners[0], ego_corners[3]])
     if front.intersects(shapely.Polygon(obj_corners)):
@@ -284,7 +271,7 @@ class SceneData:
 
     ego: EgoRun
     corners: F64
-    objects: dict[int, MapObjects] = field(default_factory=dict)
+    objects: dict[int, ObjectColumns] = field(default_factory=dict)
     straddling: dict[int, bool | None] = field(default_factory=dict)
 
 
@@ -303,7 +290,7 @@ def scene(data: EvalData, params: Mapping[str, Any]) -> SceneData:
         objs = truth.get(frame)
         if objs is None:
             continue
-        out.objects[frame] = MapObjects.of(objs, ego.xy[i], float(ego.heading_rad[i]))
+        out.objects[frame] = map_objects(objs, ego.xy[i], float(ego.heading_rad[i]))
         out.straddling[frame] = (
             None
             if road is None
@@ -323,9 +310,9 @@ def find_collisions(sc: SceneData) -> list[Collision]:
         objs = sc.objects.get(frame)
         if objs is None or len(objs) == 0:
             continue
-        touching = rectangles_overlap(sc.corners[i][None], objs.corners())
+        touching = rectangles_overlap(sc.corners[i][None], corners(objs))
         for m in np.flatnonzero(touching):
-            oid = int(objs.ids[m])
+            oid = int(objs.object_id[m])
             if oid in seen:
                 continue
             seen.add(oid)
@@ -344,10 +331,10 @@ def find_collisions(sc: SceneData) -> list[Collision]:
                 Collision(
                     frame=frame,
                     object_id=oid,
-                    object_class=objs.classes[m],
+                    object_class=objs.object_class[m],
                     kind=kind,
                     at_fault=at_fault,
-                    relative_speed_mps=float(np.hypot(*(ego_v - objs.velocity[m]))),
+                    relative_speed_mps=float(np.hypot(*(ego_v - objs.velocity_mps[m, :2]))),
                 )
             )
     return found

@@ -20,6 +20,7 @@ from redrive.evaluation.closedloop._common import (
     Collision,
     bearing_rad,
     collision_score,
+    corners,
     find_collisions,
     road_index,
     scene,
@@ -126,10 +127,11 @@ def time_to_collision_series(
             values.append(math.inf)
             continue
         xy, h = ego.xy[i], float(ego.heading_rad[i])
-        angle = bearing_rad(xy, h, objs.xy)
+        angle = bearing_rad(xy, h, objs.center_m[:, :2])
         wide = bool(sc.straddling.get(frame)) or (road is not None and road.in_intersection(xy))
         keep = np.array(
-            [collided_at.get(int(o), frame + 1) > frame for o in objs.ids], dtype=bool
+            [collided_at.get(int(o), frame + 1) > frame for o in objs.object_id.tolist()],
+            dtype=bool,
         ) & ((angle <= AHEAD_ANGLE_RAD) | (wide & (angle <= BEHIND_ANGLE_RAD)))
         idx = np.flatnonzero(keep)
         if idx.size == 0 or times.size == 0:
@@ -137,8 +139,10 @@ def time_to_collision_series(
             continue
         ego_v = speed * np.array([math.cos(h), math.sin(h)])
         ego_c = sc.corners[i][None] + times[:, None, None] * ego_v  # (T, 4, 2)
-        base = objs.corners()[idx]  # (M, 4, 2)
-        obj_c = base[None] + times[:, None, None, None] * objs.velocity[idx][None, :, None, :]
+        base = corners(objs)[idx]  # (M, 4, 2)
+        obj_c = (
+            base[None] + times[:, None, None, None] * objs.velocity_mps[idx, :2][None, :, None, :]
+        )
         contact = rectangles_overlap(ego_c[:, None], obj_c)  # (T, M)
         first = np.flatnonzero(contact.any(axis=1))
         if first.size == 0:
@@ -146,7 +150,7 @@ def time_to_collision_series(
             continue
         t = int(first[0])
         values.append(float(times[t]))
-        hit[frame] = int(objs.ids[idx[int(np.argmax(contact[t]))]])
+        hit[frame] = int(objs.object_id[idx[int(np.argmax(contact[t]))]])
     return np.array(frames, dtype=np.int64), np.array(values, dtype=np.float64), hit
 
 

@@ -5,7 +5,7 @@
 
 from __future__ import annotations
 
-from redrive.evaluation.detection.arrays import ObjectArrays, objects_to_arrays
+from redrive.evaluation.detection.arrays import boxes_by_frame, objects_to_arrays
 from redrive.evaluation.detection.kitti import KittiDetection
 from redrive.evaluation.detection.nuscenes import NuScenesDetection
 from redrive.evaluation.detection.nuscenes_core import evaluate_nuscenes
@@ -13,7 +13,7 @@ from redrive.evaluation.detection.nuscenes_core import evaluate_nuscenes
 __all__ = [
     "KittiDetection",
     "NuScenesDetection",
-    "ObjectArrays",
+    "boxes_by_frame",
     "evaluate_nuscenes",
     "objects_to_arrays",
 ]

@@ -44,11 +44,11 @@ import numpy as np
 import numpy.typing as npt
 
 from redrive.evaluation.base import EvalData, Metric, MetricResult
-from redrive.evaluation.detection.arrays import ObjectArrays, class_codes, objects_to_arrays
+from redrive.evaluation.detection.arrays import class_codes, objects_to_arrays
 from redrive.evaluation.detection.classes import KITTI_CLASSES, KITTI_MIN_OVERLAP
 from redrive.evaluation.detection.iou import bev_iou_pairs, iou_3d_pairs
 from redrive.evaluation.detection.matching import PaddedFrames, pad_by_frame
-from redrive.types import Role
+from redrive.types import ObjectColumns, Role
 
 __all__ = [
     "KittiClassResult",
@@ -83,7 +83,7 @@ def get_thresholds(scores: F64, num_gt: int, num_sample_pts: int = N_SAMPLE_PTS)
 
 
 def padded_overlaps(
-    gt: ObjectArrays, pred: ObjectArrays, gp: PaddedFrames, dp: PaddedFrames, *, kind: str
+    gt: ObjectColumns, pred: ObjectColumns, gp: PaddedFrames, dp: PaddedFrames, *, kind: str
 ) -> F64:
     """(F, D, G) overlap of the k-th detection and the g-th ground truth of every frame (0 in
     empty slots); ``kind`` "bev" or "3d"."""
@@ -95,8 +95,8 @@ def padded_overlaps(
     if f.size == 0:
         return out
     pi, gi = dp.index[f, d], gp.index[f, g]
-    p7 = np.c_[pred.center, pred.size, pred.yaw_rad]
-    g7 = np.c_[gt.center, gt.size, gt.yaw_rad]
+    p7 = np.c_[pred.center_m, pred.size_m, pred.yaw_rad]
+    g7 = np.c_[gt.center_m, gt.size_m, gt.yaw_rad]
     if kind == "bev":
         iou = bev_iou_pairs(p7[pi][:, [0, 1, 3, 4, 6]], g7[gi][:, [0, 1, 3, 4, 6]])
     else:
@@ -176,8 +176,8 @@ class KittiClassResult:
 
 
 def evaluate_kitti_class(
-    gt: ObjectArrays,
-    pred: ObjectArrays,
+    gt: ObjectColumns,
+    pred: ObjectColumns,
     frames: I64,
     *,
     gt_state: I64,
@@ -196,12 +196,12 @@ def evaluate_kitti_class(
         kind: "bev" or "3d".
     """
     g_rows, d_rows = np.flatnonzero(gt_state >= 0), np.flatnonzero(det_ok)
-    g_c, p_c = gt.subset(g_rows), pred.subset(d_rows)
+    g_c, p_c = gt.take(g_rows), pred.take(d_rows)
     state_c = gt_state[g_rows]
-    gp, dp = pad_by_frame(g_c.frame, frames), pad_by_frame(p_c.frame, frames)
+    gp, dp = pad_by_frame(g_c.frame_index, frames), pad_by_frame(p_c.frame_index, frames)
     overlap = padded_overlaps(g_c, p_c, gp, dp, kind=kind)
     state = np.where(gp.valid, state_c[np.maximum(gp.index, 0)], -1)
-    score = np.where(dp.valid, p_c.score[np.maximum(dp.index, 0)], -np.inf)
+    score = np.where(dp.valid, p_c.confidence[np.maximum(dp.index, 0)], -np.inf)
     num_gt = int(np.sum(state_c == 0))
     _, _, _, tp_scores = _statistics(
         overlap, dp.valid, score, state, min_overlap=min_overlap, thresh=0.0, compute_fp=False
@@ -236,10 +236,10 @@ def evaluate_kitti_class(
     )
 
 
-def _in_view(boxes: ObjectArrays, max_azimuth_deg: float | None) -> B:
+def _in_view(boxes: ObjectColumns, max_azimuth_deg: float | None) -> B:
     if max_azimuth_deg is None:
         return np.ones(len(boxes), dtype=bool)
-    az = np.degrees(np.abs(np.arctan2(boxes.center[:, 1], boxes.center[:, 0])))
+    az = np.degrees(np.abs(np.arctan2(boxes.center_m[:, 1], boxes.center_m[:, 0])))
     return np.asarray(az <= float(max_azimuth_deg), dtype=bool)
 
 
@@ -284,11 +284,11 @@ class KittiDetection(Metric):
         pred = objects_to_arrays(data.detections(), frames.tolist())
         return self.evaluate_arrays(gt, pred, frames)
 
-    def evaluate_arrays(self, gt: ObjectArrays, pred: ObjectArrays, frames: I64) -> MetricResult:
+    def evaluate_arrays(self, gt: ObjectColumns, pred: ObjectColumns, frames: I64) -> MetricResult:
         """The metric on boxes already in columns (``frames``: the evaluated frames)."""
         p = self.params
-        gt = gt.subset(_in_view(gt, p["max_azimuth_deg"]))
-        pred = pred.subset(_in_view(pred, p["max_azimuth_deg"]))
+        gt = gt.take(_in_view(gt, p["max_azimuth_deg"]))
+        pred = pred.take(_in_view(pred, p["max_azimuth_deg"]))
         classes: Mapping[str, Sequence[str]] = p["classes"]
         ignored: Mapping[str, Sequence[str]] = p["ignored_classes"]
         values: dict[str, float] = {"mAP3D": math.nan, "mAPBEV": math.nan}
@@ -297,11 +297,12 @@ class KittiDetection(Metric):
         n_f = frames.size
         tp_f, fp_f, fn_f = (np.zeros(n_f) for _ in range(3))
         means: dict[str, list[float]] = {"3D": [], "BEV": []}
+        gt_codes, pred_codes = gt.class_code(), pred.class_code()
         for cls, members in classes.items():
             state = np.full(len(gt), -1, dtype=np.int64)
-            state[np.isin(gt.object_class, class_codes(ignored.get(cls, ())))] = 1
-            state[np.isin(gt.object_class, class_codes(members))] = 0
-            det_ok = np.isin(pred.object_class, class_codes(members))
+            state[np.isin(gt_codes, class_codes(ignored.get(cls, ())))] = 1
+            state[np.isin(gt_codes, class_codes(members))] = 0
+            det_ok = np.isin(pred_codes, class_codes(members))
             for label, kind, key in (
                 ("3D", "3d", "min_overlap_3d"),
                 ("BEV", "bev", "min_overlap_bev"),

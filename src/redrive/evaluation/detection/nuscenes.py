@@ -114,8 +114,8 @@ class NuScenesDetection(Metric):
         values["frames_without_output"] = float(np.sum(~np.isin(frames, list(det_by_frame))))
         units = dict(ev.units)
         units["frames"] = units["frames_without_output"] = "frames"
-        slot = np.searchsorted(frames, ev.gt.frame)
-        pslot = np.searchsorted(frames, ev.pred.frame)
+        slot = np.searchsorted(frames, ev.gt.frame_index)
+        pslot = np.searchsorted(frames, ev.pred.frame_index)
         n_f = frames.size
         gt_n = np.bincount(slot, minlength=n_f).astype(np.float64)
         hit = np.bincount(slot[ev.gt_matched], minlength=n_f).astype(np.float64)
@@ -127,11 +127,11 @@ class NuScenesDetection(Metric):
             "missed": (frames, gt_n - hit),
             "gt": (frames, gt_n),
         }
-        rng_m = ev.gt.ego_distance_m
+        rng_m = ev.gt.distance_xy_m
         missed = np.flatnonzero(~ev.gt_matched & (rng_m < float(p["bookmark_range_m"])))
         marks = [
             Bookmark(
-                frame_index=int(ev.gt.frame[i]),
+                frame_index=int(ev.gt.frame_index[i]),
                 kind="missed_object",
                 detail=(
                     f"{ev.class_names[int(ev.gt_label[i])]} at {rng_m[i]:.1f} m not detected "

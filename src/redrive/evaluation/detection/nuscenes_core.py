@@ -1,4 +1,4 @@
-"""The nuScenes detection definition on :class:`ObjectArrays`, vectorised.
+"""The nuScenes detection definition on :class:`~redrive.types.ObjectColumns`, vectorised.
 
 Ported from the nuScenes devkit (``python-sdk/nuscenes/eval/detection/algo.py``: ``accumulate``,
 ``calc_ap``, ``calc_tp``; ``eval/common/utils.py``: ``center_distance``, ``velocity_l2``,
@@ -36,9 +36,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from redrive.evaluation.detection.arrays import CLASS_CODES, ObjectArrays
 from redrive.evaluation.detection.matching import pad_by_frame
-from redrive.types import ObjectClass
+from redrive.types import CLASS_CODES, ObjectClass, ObjectColumns
 
 __all__ = [
     "NELEM",
@@ -137,7 +136,7 @@ def devkit_order(score: F64) -> I64:
 
 
 def center_distance_matching(
-    gt: ObjectArrays, pred: ObjectArrays, *, order: I64, dist_ths_m: Sequence[float]
+    gt: ObjectColumns, pred: ObjectColumns, *, order: I64, dist_ths_m: Sequence[float]
 ) -> I64:
     """Greedy BEV centre-distance matching of one class, for every threshold.
 
@@ -158,20 +157,20 @@ def center_distance_matching(
     out = np.full((n_th, n_pred), -1, dtype=np.int64)
     if n_pred == 0 or len(gt) == 0 or n_th == 0:
         return out
-    frames = np.intersect1d(np.unique(pred.frame), np.unique(gt.frame))
+    frames = np.intersect1d(np.unique(pred.frame_index), np.unique(gt.frame_index))
     if frames.size == 0:
         return out
     max_th = max(float(t) for t in dist_ths_m)
     rank = np.empty(n_pred, dtype=np.int64)
     rank[order] = np.arange(n_pred)
-    pp = pad_by_frame(pred.frame, frames, order_key=rank)
-    gp = pad_by_frame(gt.frame, frames)
+    pp = pad_by_frame(pred.frame_index, frames, order_key=rank)
+    gp = pad_by_frame(gt.frame_index, frames)
     # frames with the most detections first: the frames still busy at step k are a prefix
     busy = np.argsort(-pp.valid.sum(axis=1), kind="stable")
     pi, gi = pp.index[busy], gp.index[busy]
     n_f, width_p = pi.shape
     width_g = gi.shape[1]
-    pxy, gxy = pred.center[:, :2], gt.center[:, :2]
+    pxy, gxy = pred.center_m[:, :2], gt.center_m[:, :2]
     # candidate (frame, det slot, gt slot) triples within the largest threshold
     fs, ks, gs, ds = [], [], [], []
     step = max(1, _CHUNK_CELLS // max(1, width_p * width_g))
@@ -215,11 +214,11 @@ def center_distance_matching(
 
 
 def _errors(
-    gt: ObjectArrays, pred: ObjectArrays, gt_rows: I64, pred_rows: I64, class_name: str
+    gt: ObjectColumns, pred: ObjectColumns, gt_rows: I64, pred_rows: I64, class_name: str
 ) -> dict[str, F64]:
-    d = pred.center[pred_rows, :2] - gt.center[gt_rows, :2]
-    dv = pred.velocity[pred_rows, :2] - gt.velocity[gt_rows, :2]
-    g_size, p_size = gt.size[gt_rows], pred.size[pred_rows]
+    d = pred.center_m[pred_rows, :2] - gt.center_m[gt_rows, :2]
+    dv = pred.velocity_mps[pred_rows, :2] - gt.velocity_mps[gt_rows, :2]
+    g_size, p_size = gt.size_m[gt_rows], pred.size_m[pred_rows]
     inter = np.prod(np.minimum(g_size, p_size), axis=1)
     union = np.prod(g_size, axis=1) + np.prod(p_size, axis=1) - inter
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -234,8 +233,8 @@ def _errors(
 
 
 def accumulate(
-    gt: ObjectArrays,
-    pred: ObjectArrays,
+    gt: ObjectColumns,
+    pred: ObjectColumns,
     *,
     matched: I64,
     order: I64,
@@ -260,7 +259,7 @@ def accumulate(
         return MetricData.no_predictions()
     tp = np.cumsum(is_tp).astype(float)
     fp = np.cumsum(~is_tp).astype(float)
-    conf = pred.score[order]
+    conf = pred.confidence[order]
     prec = tp / (fp + tp)
     rec = tp / float(npos)
     rec_interp = np.linspace(0, 1, NELEM)
@@ -269,7 +268,7 @@ def accumulate(
     if not with_errors:
         return MetricData(recall=rec_interp, precision=prec_i, confidence=conf_i, errors={})
     pred_rows = order[is_tp]
-    match_conf = pred.score[pred_rows]
+    match_conf = pred.confidence[pred_rows]
     errs = _errors(gt, pred, matched[pred_rows], pred_rows, class_name)
     resampled = {
         k: np.interp(conf_i[::-1], match_conf[::-1], cummean(v)[::-1])[::-1]
@@ -325,8 +324,8 @@ class NuScenesEvaluation:
     units: dict[str, str]
     curves: dict[str, tuple[F64, F64]]
     class_names: tuple[str, ...]
-    gt: ObjectArrays
-    pred: ObjectArrays
+    gt: ObjectColumns
+    pred: ObjectColumns
     gt_label: I64
     pred_label: I64
     gt_matched: B
@@ -334,25 +333,25 @@ class NuScenesEvaluation:
     metric_data: dict[tuple[str, float], MetricData] = field(default_factory=dict)
 
 
-def _labels(boxes: ObjectArrays, class_map: Mapping[str, str], names: Sequence[str]) -> I64:
+def _labels(boxes: ObjectColumns, class_map: Mapping[str, str], names: Sequence[str]) -> I64:
     lut = np.full(len(CLASS_CODES), -1, dtype=np.int64)
     for value, name in class_map.items():
         lut[CLASS_CODES[ObjectClass(value)]] = names.index(name)
-    return lut[boxes.object_class] if len(boxes) else np.zeros(0, np.int64)
+    return lut[boxes.class_code()] if len(boxes) else np.zeros(0, np.int64)
 
 
 def _range_mask(
-    boxes: ObjectArrays, label: I64, names: Sequence[str], class_range_m: Mapping[str, float]
+    boxes: ObjectColumns, label: I64, names: Sequence[str], class_range_m: Mapping[str, float]
 ) -> B:
     """``filter_eval_boxes``: mapped class, ``ego_dist < class_range`` and not 0 LiDAR points."""
     rng = np.array([float(class_range_m.get(n, np.inf)) for n in names] + [-np.inf])
-    keep = (label >= 0) & (boxes.ego_distance_m < rng[label]) & (boxes.num_points != 0)
+    keep = (label >= 0) & (boxes.distance_xy_m < rng[label]) & (boxes.num_lidar_points != 0)
     return np.asarray(keep, dtype=bool)
 
 
 def _class_aps(
-    gt: ObjectArrays,
-    pred: ObjectArrays,
+    gt: ObjectColumns,
+    pred: ObjectColumns,
     class_name: str,
     *,
     dist_ths_m: Sequence[float],
@@ -360,7 +359,7 @@ def _class_aps(
     min_precision: float,
     errors_at_m: float | None = None,
 ) -> tuple[dict[float, MetricData], dict[float, float], I64]:
-    order = devkit_order(pred.score)
+    order = devkit_order(pred.confidence)
     matched = center_distance_matching(gt, pred, order=order, dist_ths_m=dist_ths_m)
     mds: dict[float, MetricData] = {}
     aps: dict[float, float] = {}
@@ -375,8 +374,8 @@ def _class_aps(
 
 
 def evaluate_nuscenes(
-    gt: ObjectArrays,
-    pred: ObjectArrays,
+    gt: ObjectColumns,
+    pred: ObjectColumns,
     *,
     class_map: Mapping[str, str],
     class_range_m: Mapping[str, float],
@@ -429,7 +428,7 @@ def evaluate_nuscenes(
     p_label = _labels(pred, class_map, names)
     g_keep = _range_mask(gt, g_label, names, class_range_m)
     p_keep = _range_mask(pred, p_label, names, class_range_m)
-    gt_f, pred_f = gt.subset(g_keep), pred.subset(p_keep)
+    gt_f, pred_f = gt.take(g_keep), pred.take(p_keep)
     g_label, p_label = g_label[g_keep], p_label[p_keep]
     gt_matched = np.zeros(len(gt_f), dtype=bool)
     pred_tp = np.zeros(len(pred_f), dtype=bool)
@@ -457,7 +456,7 @@ def evaluate_nuscenes(
                 class_ap[name] = 0.0
                 class_tp[name] = absent
             continue
-        g_c, p_c = gt_f.subset(g_rows), pred_f.subset(p_rows)
+        g_c, p_c = gt_f.take(g_rows), pred_f.take(p_rows)
         mds, aps, matched = _class_aps(
             g_c, p_c, name, dist_ths_m=ths, min_recall=min_recall, min_precision=min_precision,
             errors_at_m=dist_th_tp_m,
@@ -535,7 +534,7 @@ def evaluate_nuscenes(
 
 def _bands(
     values: dict[str, float],
-    boxes: tuple[ObjectArrays, ObjectArrays],
+    boxes: tuple[ObjectColumns, ObjectColumns],
     *,
     labels: tuple[I64, I64],
     names: Sequence[str],
@@ -548,7 +547,7 @@ def _bands(
     and predictions alike) whose ego distance lies in [lo, hi)."""
     gt, pred = boxes
     g_label, p_label = labels
-    g_dist, p_dist = gt.ego_distance_m, pred.ego_distance_m
+    g_dist, p_dist = gt.distance_xy_m, pred.distance_xy_m
     for lo, hi in bands:
         top = math.inf if hi is None else float(hi)
         bname = band_name(lo, hi)
@@ -561,8 +560,8 @@ def _bands(
             if g_rows.size == 0 and p_rows.size == 0:
                 continue
             _, aps, _ = _class_aps(
-                gt.subset(g_rows),
-                pred.subset(p_rows),
+                gt.take(g_rows),
+                pred.take(p_rows),
                 name,
                 dist_ths_m=dist_ths_m,
                 min_recall=min_recall,

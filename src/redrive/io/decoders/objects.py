@@ -309,14 +309,14 @@ def _ground_truth_objects(read: GroundTruthBytes) -> list[DetectedObject] | None
         classes.append(object_class_from_text(best_class))
         confidences.append(1.0 if best_score is None else _confidence(best_score))
     return DetectedObject.many(
-        object_ids=[object_id_from_text(obj.raw_id) for obj in objects],
-        object_classes=classes,
-        confidences=confidences,
-        centers=[obj.position for obj in objects],
-        sizes=sizes,
-        yaws_rad=[e[0] for e in eulers],
-        velocities=read.velocities,
-        orientations=eulers,
+        object_id=[object_id_from_text(obj.raw_id) for obj in objects],
+        object_class=classes,
+        confidence=confidences,
+        center_m=[obj.position for obj in objects],
+        size_m=sizes,
+        yaw_rad=[e[0] for e in eulers],
+        velocity_mps=read.velocities,
+        orientation_rad=eulers,
         num_lidar_points=[None if p < 0 else p for p in read.num_lidar_points],
         visible=[None if v < 0 else bool(v) for v in read.visible],
     )
