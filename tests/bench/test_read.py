@@ -22,7 +22,7 @@ from redrive.benchmarks.read import bench_read, warm_page_cache
 from redrive.benchmarks.synth_log import point_dtype, write_synthetic_bag
 from redrive.errors import LogError
 from redrive.io import open_log
-from redrive.io.decoders import decode
+from redrive.io.ros.decoders import decode
 from redrive.types import PointCloud
 
 _POINTS = 2_000

@@ -166,8 +166,8 @@ def _is_scenario(name: str) -> bool:
 def _is_log_dir(path: Path) -> bool:
     """A directory that is one log: a ROS 2 bag (metadata.yaml), a KITTI object folder, a
     nuScenes data root or a folder holding an mmdetection3d info file."""
-    from redrive.io.mmdet3d_info import Mmdet3dInfoReader
-    from redrive.io.nuscenes import NuScenesReader
+    from redrive.io.datasets.mmdet3d_info import Mmdet3dInfoReader
+    from redrive.io.datasets.nuscenes import NuScenesReader
 
     return (
         (path / "metadata.yaml").is_file()

@@ -36,6 +36,7 @@ from typing import Any
 
 from redrive.algorithms import GROUND_TRUTH, VEHICLE_STATE
 from redrive.algorithms.discovery import load_algorithm_class
+from redrive.assembly.sensor_map import load_sensor_map_overrides
 from redrive.closedloop.logreplay import LogSimulator
 from redrive.closedloop.mode import DEFAULT_DEVIATION_M, DEFAULT_DEVIATION_RAD, ClosedLoopMode
 from redrive.closedloop.sensors import RecordingThread
@@ -48,8 +49,7 @@ from redrive.engine.run import execute, log_fingerprint, log_road_map, run_setup
 from redrive.engine.stats import RunReport
 from redrive.errors import ConfigError
 from redrive.io import LogReader, open_log
-from redrive.io.sensor_map import load_sensor_map_overrides
-from redrive.io.writer import McapWriter
+from redrive.io.mcap.writer import McapWriter
 from redrive.results import (
     FrameRecord,
     RunWriter,

@@ -16,6 +16,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from redrive.assembly.frames import FrameAssembler
+from redrive.assembly.sensor_map import load_sensor_map_overrides
 from redrive.config import PipelineConfig
 from redrive.engine._heap import setup_frozen
 from redrive.engine.core import Engine
@@ -26,8 +28,6 @@ from redrive.engine.stats import RunReport
 from redrive.errors import ConfigError
 from redrive.io import LogReader, open_log
 from redrive.io.damage import damage_report
-from redrive.io.frames import FrameAssembler
-from redrive.io.sensor_map import load_sensor_map_overrides
 from redrive.results import (
     FrameRecord,
     PipelineInfo,
@@ -87,7 +87,7 @@ class RunRequest:
 def log_fingerprint(path: Path, *, format: str) -> SourceLog:
     """Path, size and sha256 of a log file (or of every file of a log directory, in name order);
     ``format`` is the reader's format name."""
-    from redrive.io.mcapset import expand_log_set
+    from redrive.io.mcap.fileset import expand_log_set
 
     digest = hashlib.sha256()
     if path.is_file():

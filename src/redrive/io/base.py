@@ -2,7 +2,7 @@
 
 A reader yields :class:`LogMessage` records in log-time order.  Messages from ROS logs carry their
 serialised bytes (``encoding`` ``ros1`` or ``cdr``) and are decoded on demand by
-:mod:`redrive.io.decoders`; readers of non-ROS layouts (KITTI) yield already-decoded payloads
+:mod:`redrive.io.ros.decoders`; readers of non-ROS layouts (KITTI) yield already-decoded payloads
 (``encoding == "native"``).
 """
 
@@ -72,7 +72,7 @@ class TopicInfo:
             none either (its messages pass through raw and cannot be deserialised).
         kind: for a ``native`` topic, how its values are used (its reader says; it has no ROS
             type a decoder could tell it from); None for message-typed topics, whose decoder
-            says (:func:`redrive.io.decoders.topic_kind` answers for both).
+            says (:func:`redrive.io.ros.decoders.topic_kind` answers for both).
         sensor_type: for a ``native`` topic of kind SENSOR, the sensor it feeds.
     """
 
@@ -167,7 +167,7 @@ class ReaderCapabilities:
     Attributes:
         message_typed: its messages are serialised ROS messages (``deserialize`` gives ROS
             message objects, topics have ROS types); False: it yields redrive data-model values
-            directly (``native`` messages holding a :class:`~redrive.io.decoders.Decoded`).
+            directly (``native`` messages holding a :class:`~redrive.io.ros.decoders.Decoded`).
         has_tf: it carries transforms (``/tf_static``, ``/tf`` or a calibration the reader turns
             into them): sensors can be placed on the vehicle.
         has_ground_truth: it carries ground-truth objects (labels, a simulator's objects).

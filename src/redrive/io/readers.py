@@ -72,13 +72,13 @@ def _check_reader(obj: object) -> str | None:
 
 def _builtin() -> list[type[ReaderFormat]]:
     # imported here: each pulls in its own dependencies (rosbags, mcap, PIL)
-    from redrive.io.kitti import KittiReader
-    from redrive.io.mcapfile import McapFileReader
-    from redrive.io.mcapset import McapSetReader
-    from redrive.io.mmdet3d_info import Mmdet3dInfoReader
-    from redrive.io.nuscenes import NuScenesReader
-    from redrive.io.ros1bag import Ros1BagReader
-    from redrive.io.ros2bag import Ros2BagReader
+    from redrive.io.datasets.kitti import KittiReader
+    from redrive.io.datasets.mmdet3d_info import Mmdet3dInfoReader
+    from redrive.io.datasets.nuscenes import NuScenesReader
+    from redrive.io.mcap.fileset import McapSetReader
+    from redrive.io.mcap.reader import McapFileReader
+    from redrive.io.rosbag1.reader import Ros1BagReader
+    from redrive.io.rosbag2.reader import Ros2BagReader
 
     # a ROS 2 bag before MCAP: a bag directory's .mcap storage is read through its metadata.yaml;
     # a folder of .mcap files without one is a set of split files
@@ -170,7 +170,7 @@ def detect_format(path: Path) -> str:
     """
     path = Path(path)
     if not path.exists():
-        from redrive.io.mcapset import expand_log_set, is_glob
+        from redrive.io.mcap.fileset import expand_log_set, is_glob
 
         if is_glob(path) and expand_log_set(path):
             return _recognising(path).format

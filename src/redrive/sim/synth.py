@@ -63,7 +63,7 @@ from redrive.geometry import invert
 from redrive.geometry.se3 import (
     quaternion_from_rotation_matrix,
 )
-from redrive.io.writer import McapWriter
+from redrive.io.mcap.writer import McapWriter
 from redrive.results.manifest import SCENARIO_METADATA
 from redrive.results.roadmap import MAP_METADATA, road_map_to_json
 from redrive.sim.camera import CameraFrame, CameraModel
