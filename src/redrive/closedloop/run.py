@@ -45,10 +45,11 @@ from redrive.closedloop.synthetic import AgentMode, Level, SyntheticSimulator
 from redrive.closedloop.tracker import LqrPidTracker
 from redrive.config import PipelineConfig
 from redrive.engine.graph import LogInputs, build_graph
-from redrive.engine.run import execute, log_fingerprint, log_road_map, run_setup
+from redrive.engine.run import execute, run_setup, source_log
 from redrive.engine.stats import RunReport
 from redrive.errors import ConfigError
 from redrive.io import LogReader, open_log
+from redrive.io.content import log_road_map
 from redrive.io.mcap.writer import McapWriter
 from redrive.results import (
     FrameRecord,
@@ -225,7 +226,7 @@ def _run_log(
     return _drive(
         request,
         simulator,
-        source=log_fingerprint(Path(request.scenario), format=log.format),
+        source=source_log(Path(request.scenario), format=log.format),
         described=simulator.describe(),
         road_map=log_road_map(log),  # a redrive synth log's: the map metrics apply
         total=None,

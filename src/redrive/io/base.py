@@ -174,6 +174,10 @@ class ReaderCapabilities:
         has_ego_pose: it carries the ego vehicle's motion (odometry, poses).
         calibration_per_frame: its sensor calibration may change from frame to frame (KITTI's
             object set: every frame its own calib file), so calibrations are looked up by stamp.
+        road_map: the reader can be asked for the log's road map (it has ``road_map()``, which
+            gives None when this log holds none): :func:`redrive.io.content.log_road_map`.
+        scenario: the reader can say what the log was synthesized from (``scenario()``):
+            :func:`redrive.io.content.log_scenario`.
     """
 
     message_typed: bool
@@ -181,6 +185,8 @@ class ReaderCapabilities:
     has_ground_truth: bool
     has_ego_pose: bool
     calibration_per_frame: bool = False
+    road_map: bool = False
+    scenario: bool = False
 
 
 @runtime_checkable

@@ -15,6 +15,7 @@ import heapq
 import logging
 import mmap
 from collections.abc import Collection, Iterator, Mapping
+from dataclasses import replace
 from pathlib import Path
 from typing import IO, Any, Literal, cast
 
@@ -22,9 +23,11 @@ from mcap.reader import make_reader
 from mcap.summary import Summary
 
 from redrive.errors import LogError
-from redrive.io.base import Encoding, LogMessage, TopicInfo, normalize_msgtype
+from redrive.io.base import Encoding, LogMessage, ReaderCapabilities, TopicInfo, normalize_msgtype
+from redrive.io.content import LogScenario
 from redrive.io.damage import DamageLog, LogDamage
 from redrive.io.mcap._prefetch import prefetched
+from redrive.io.mcap.metadata import MAP_METADATA, SCENARIO_METADATA, road_map_in, scenario_in
 from redrive.io.mcap.scan import (
     OP_CHUNK,
     ChunkHead,
@@ -44,6 +47,7 @@ from redrive.io.recognise import starts_with
 from redrive.io.ros._reader_base import RosReaderBase
 from redrive.io.ros.deserialize import Deserializer
 from redrive.io.ros.typestore import typestore_for
+from redrive.types import RoadMap
 
 __all__ = ["McapFileReader"]
 
@@ -433,12 +437,23 @@ class McapFileReader(RosReaderBase):
             )
         return messages
 
-    def metadata(self, name: str) -> Mapping[str, str] | None:
-        """The first metadata record called ``name`` (MCAP ``Metadata``: string pairs), or None.
+    @property
+    def capabilities(self) -> ReaderCapabilities:
+        """As every ROS log's (from the topics), and a road map and a scenario: the metadata
+        records a ``redrive synth`` log carries (:mod:`redrive.io.mcap.metadata`)."""
+        return replace(super().capabilities, road_map=True, scenario=True)
 
-        A reader of a format without named metadata has no such method (callers use
-        ``getattr``); a damaged file's unreadable records count as absent.
-        """
+    def road_map(self) -> RoadMap | None:
+        """The road map of the log's :data:`~redrive.io.mcap.metadata.MAP_METADATA` record."""
+        return road_map_in(self.metadata(MAP_METADATA), path=self.path)
+
+    def scenario(self) -> LogScenario | None:
+        """What the log was synthesized from (its ``SCENARIO_METADATA`` record)."""
+        return scenario_in(self.metadata(SCENARIO_METADATA), path=self.path)
+
+    def metadata(self, name: str) -> Mapping[str, str] | None:
+        """The first metadata record called ``name`` (MCAP ``Metadata``: string pairs), or None;
+        a damaged file's unreadable records count as absent."""
         if self._metadata is not None:  # read by the forward scan
             return next((dict(m.metadata) for m in self._metadata if m.name == name), None)
         try:
