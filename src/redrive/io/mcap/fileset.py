@@ -48,6 +48,8 @@ class McapSetReader:
 
     format = "mcap-set"
     description = "several MCAP files of one recording (a folder of them, or a quoted glob)"
+    #: each of its files is a log too: `redrive batch DIR` takes them one by one
+    reads_a_set = True
 
     @classmethod
     def recognises(cls, path: Path) -> bool:
