@@ -27,7 +27,7 @@ _RUNNER = r"""
 import contextlib, dataclasses, io, json, shutil, sys, time
 from redrive.cli.main import main
 from redrive.io import open_log
-from redrive.io.frames import FrameAssembler
+from redrive.assembly.frames import FrameAssembler
 
 log_path, out = sys.argv[1], sys.argv[2]
 with open_log(log_path) as log:

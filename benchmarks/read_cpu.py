@@ -22,8 +22,8 @@ from pathlib import Path
 from rosbags.rosbag1 import Reader
 
 from redrive.io import open_log
-from redrive.io.decoders import decode
-from redrive.io.decoders.registry import active_decoders
+from redrive.io.ros.decoders import decode
+from redrive.io.ros.decoders.registry import active_decoders
 from redrive.types import PointCloud
 
 

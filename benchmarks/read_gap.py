@@ -33,8 +33,8 @@ import numpy as np
 from rosbags.rosbag1 import Reader
 
 from redrive.io import open_log
-from redrive.io.decoders import decode
-from redrive.io.decoders.pointcloud2 import read_cloud_layout
+from redrive.io.ros.decoders import decode
+from redrive.io.ros.decoders.pointcloud2 import read_cloud_layout
 
 
 def _xyz_view(message: Any) -> np.ndarray[Any, Any] | None:

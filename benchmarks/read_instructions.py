@@ -27,8 +27,8 @@ from typing import Any
 from rosbags.rosbag1 import Reader
 
 from redrive.io import open_log
-from redrive.io.decoders import decode
-from redrive.io.decoders.registry import active_decoders
+from redrive.io.ros.decoders import decode
+from redrive.io.ros.decoders.registry import active_decoders
 
 
 def _raw(log: Any) -> None:

@@ -86,7 +86,7 @@ stop.wait()
 _ROS2_PUBLISHER = """
 import signal, sys, threading, time
 import numpy as np
-from redrive.io.typestore import typestore_for
+from redrive.io.ros.typestore import typestore_for
 from redrive.live.ros2_dds import DEFAULT, RawWriter, participant
 points, rate, count, domain = int(sys.argv[1]), float(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])
 store = typestore_for(2)[0]

@@ -7,12 +7,12 @@ with it, a real nuScenes data root (``v1.0-mini`` …) is checked.
 
 For every sample the devkit's boxes (``get_sample_data`` on the LIDAR_TOP keyframe: global →
 ego → sensor, then moved back into the ego frame through the calibrated sensor) are compared
-with what :class:`redrive.io.nuscenes.NuScenesReader` gives in base_link: centre, size, yaw
+with what :class:`redrive.io.datasets.nuscenes.NuScenesReader` gives in base_link: centre, size, yaw
 (the devkit evaluation's ``quaternion_yaw``: the heading of the box's x axis — pyquaternion's
 ``yaw_pitch_roll[0]`` differs from it by up to ~2e-4 rad when the ego is pitched or rolled),
 velocity (``box_velocity``, which ``get_sample_data`` boxes do not carry, turned into the ego
 frame), class; and the LiDAR point count, the ego pose and the camera intrinsics.  The first sample of the generated set is compared with
-:class:`redrive.io.mmdet3d_info.Mmdet3dInfoReader` on the info file too.
+:class:`redrive.io.datasets.mmdet3d_info.Mmdet3dInfoReader` on the info file too.
 
     python3 -m venv /tmp/nusc-venv && /tmp/nusc-venv/bin/pip install nuscenes-devkit
     PYTHONPATH=src python scripts/check_nuscenes_reader.py --devkit-python /tmp/nusc-venv/bin/python
@@ -105,8 +105,8 @@ def _angle(a: float, b: float) -> float:
 
 def _compare(dataroot: Path, devkit: dict[str, Any]) -> dict[str, float]:
     from redrive.geometry.se3 import yaw_from_rotation_matrix
-    from redrive.io.nuscenes import NuScenesReader
-    from redrive.io.nuscenes_common import object_class_of, read_lidar_bin
+    from redrive.io.datasets.nuscenes import NuScenesReader
+    from redrive.io.datasets.nuscenes_common import object_class_of, read_lidar_bin
 
     worst = {
         "samples missing": 0.0,
@@ -168,8 +168,8 @@ def _compare(dataroot: Path, devkit: dict[str, Any]) -> dict[str, float]:
 
 def _compare_info(dataroot: Path, info_dir: Path) -> dict[str, float]:
     """The generated set's first sample against the info file it was written from."""
-    from redrive.io.mmdet3d_info import Mmdet3dInfoReader
-    from redrive.io.nuscenes import NuScenesReader
+    from redrive.io.datasets.mmdet3d_info import Mmdet3dInfoReader
+    from redrive.io.datasets.nuscenes import NuScenesReader
 
     with NuScenesReader(dataroot) as tables, Mmdet3dInfoReader(info_dir) as info:
         got, want = tables.samples[0], info.samples[0]

@@ -1,7 +1,7 @@
 """``python -m benchmarks gui``: how fast the main window plays a log and opens a big one, against
 pyqtgraph's own ceiling measured in the same run (issue 7).
 
-The logs are written by redrive's own :class:`~redrive.io.writer.McapWriter` (ROS 2 CDR, zstd
+The logs are written by redrive's own :class:`~redrive.io.mcap.writer.McapWriter` (ROS 2 CDR, zstd
 chunks, as ``redrive synth`` writes them), one frame every 100 ms (10 Hz):
 
 =============================  ==========================================  ========================

@@ -14,7 +14,7 @@ import numpy as np
 
 from benchmarks.synth_log import _SweepMaker
 from redrive.geometry.se3 import quaternion_from_rotation_matrix
-from redrive.io.writer import McapWriter
+from redrive.io.mcap.writer import McapWriter
 from redrive.types import (
     Box3D,
     CameraInfo,

@@ -12,7 +12,7 @@ import pytest
 from benchmarks.synth_log import point_dtype, write_synthetic_bag
 from redrive.errors import LogError
 from redrive.io import open_log
-from redrive.io.decoders import decode
+from redrive.io.ros.decoders import decode
 from redrive.types import PointCloud
 
 

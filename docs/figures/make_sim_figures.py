@@ -21,9 +21,9 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw
 
+from redrive.assembly.frames import iter_frames
 from redrive.geometry import transform_points
 from redrive.io import open_log
-from redrive.io.frames import iter_frames
 from redrive.sim.rig import rig_from_mapping
 from redrive.sim.scenario import load_scenario
 from redrive.sim.synth import synthesize

@@ -16,7 +16,7 @@ group                  value                                           kind
 =====================  ==============================================  =========================
 ``redrive.algorithms`` an :class:`~redrive.algorithms.Algorithm` class  :data:`ALGORITHMS`
 ``redrive.metrics``    a :class:`~redrive.evaluation.Metric` class      :data:`METRICS`
-``redrive.decoders``   a :class:`~redrive.io.decoders.Decoder` class    :data:`DECODERS`
+``redrive.decoders``   a :class:`~redrive.io.ros.decoders.Decoder` class    :data:`DECODERS`
 ``redrive.readers``    a :class:`~redrive.io.readers.ReaderFormat` class :data:`READERS`
 =====================  ==============================================  =========================
 
@@ -108,7 +108,7 @@ ALGORITHMS = PluginKind(
 METRICS = PluginKind(
     "metric", "redrive.metrics", "redrive.evaluation.Metric", "redrive evaluate --list"
 )
-DECODERS = PluginKind("decoder", "redrive.decoders", "redrive.io.decoders.Decoder")
+DECODERS = PluginKind("decoder", "redrive.decoders", "redrive.io.ros.decoders.Decoder")
 READERS = PluginKind("reader", "redrive.readers", "redrive.io.readers.ReaderFormat")
 
 #: Checks a candidate: returns None when it is a usable plugin, else what is wrong with it, to

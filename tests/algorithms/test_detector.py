@@ -12,9 +12,9 @@ import pytest
 from redrive.algorithms import StageOutputs, StepStatus
 from redrive.algorithms.reference._box_fit import complete_boxes, fit_boxes
 from redrive.algorithms.reference.detector import ClusterDetector
+from redrive.assembly.frames import iter_frames
 from redrive.errors import ConfigError
 from redrive.io import open_log
-from redrive.io.frames import iter_frames
 from redrive.sim.scenario import load_scenario
 from redrive.sim.synth import synthesize
 from redrive.types import DetectedObject, Frame, ObjectClass, PointCloud, SensorData, SensorType

@@ -14,9 +14,9 @@ import pytest
 from redrive.algorithms.base import Role, StageOutputs, StepStatus
 from redrive.algorithms.reference.oracle import NoisyOracle
 from redrive.algorithms.reference.tracker import KalmanTracker
+from redrive.assembly.frames import iter_frames
 from redrive.errors import AlgorithmError, ConfigError
 from redrive.io import open_log
-from redrive.io.frames import iter_frames
 from redrive.sim.scenario import load_scenario
 from redrive.sim.synth import synthesize
 from redrive.types import Box3D, DetectedObject, Frame, ObjectClass, VehicleState

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from redrive.io.writer import McapWriter
+from redrive.io.mcap.writer import McapWriter
 from redrive.testing.demo_log import write_demo_bag
 from redrive.types import (
     Box3D,

@@ -164,8 +164,8 @@ def test_generated_code_passes_ruff(tmp_path: Path) -> None:
 def test_the_perception_template_finds_cars_in_a_synthetic_log(
     tmp_path: Path, demo_log: Path
 ) -> None:
+    from redrive.assembly.frames import iter_frames
     from redrive.io import open_log
-    from redrive.io.frames import iter_frames
 
     algo_path, _ = write_algorithm("demo_blobs", Role.PERCEPTION, directory=tmp_path)
     algo = load_algorithm_class(f"{algo_path}:DemoBlobs")()

@@ -92,9 +92,9 @@ class LoggedPathFollower(Algorithm):
     defaults = MappingProxyType({"log": "", "horizon_s": 4.0})
 
     def setup(self, config: Mapping[str, Any]) -> None:
+        from redrive.assembly.sensor_map import infer_sensor_map
         from redrive.io import open_log
-        from redrive.io.decoders import decode
-        from redrive.io.sensor_map import infer_sensor_map
+        from redrive.io.ros.decoders import decode
         from redrive.types import VehicleState
 
         self.horizon_ns = round(float(config["horizon_s"]) * 1e9)

@@ -12,6 +12,7 @@ import pyarrow as pa
 import pytest
 
 from redrive.algorithms import StageOutputs
+from redrive.assembly.frames import FrameAssembler
 from redrive.cli.main import main
 from redrive.closedloop.logreplay import LogSimulator, driven_from_logged, reexpress_cloud
 from redrive.closedloop.run import ClosedLoopRequest, run_closed_loop
@@ -21,7 +22,6 @@ from redrive.errors import ConfigError
 from redrive.evaluation.closedloop import AtFaultCollisions
 from redrive.evaluation.evaluator import evaluate_run
 from redrive.io import open_log
-from redrive.io.frames import FrameAssembler
 from redrive.results import Run, RunStatus, open_run
 from redrive.types import ControlCommands, Imu, PointCloud, Role, VehicleState
 

@@ -10,7 +10,7 @@ import pytest
 
 from redrive.closedloop.sensors import RecordingThread
 from redrive.errors import RedriveError, SimulationError
-from redrive.io.writer import McapWriter
+from redrive.io.mcap.writer import McapWriter
 from redrive.types import Image, PointCloud, VehicleState
 
 

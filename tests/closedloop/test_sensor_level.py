@@ -15,6 +15,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from redrive.algorithms import StageOutputs
+from redrive.assembly.frames import FrameAssembler
 from redrive.cli.main import main
 from redrive.closedloop.run import ClosedLoopRequest, run_closed_loop
 from redrive.closedloop.synthetic import SyntheticSimulator
@@ -22,9 +23,8 @@ from redrive.closedloop.tracker import LqrPidTracker
 from redrive.config import pipeline_from_plugins, reference_pipeline
 from redrive.errors import ConfigError, SimulationError
 from redrive.io import open_log
-from redrive.io.decoders import decode
-from redrive.io.frames import FrameAssembler
-from redrive.io.writer import McapWriter
+from redrive.io.mcap.writer import McapWriter
+from redrive.io.ros.decoders import decode
 from redrive.results import RunStatus, open_run
 from redrive.sim.rig import rig_from_mapping
 from redrive.sim.scenario import Scenario, load_scenario

@@ -11,8 +11,8 @@ from redrive.engine import RunRequest, run_log
 from redrive.evaluation.closedloop import DrivableAreaCompliance
 from redrive.evaluation.evaluator import evaluate_run
 from redrive.io import open_log
+from redrive.io.content import LogScenario, log_road_map, log_scenario
 from redrive.results import open_run
-from redrive.results.roadmap import MAP_METADATA
 from redrive.sim.roadmap import scenario_road_map
 from redrive.sim.scenario import load_scenario
 from redrive.sim.synth import synthesize
@@ -23,7 +23,10 @@ def test_a_replayed_synthetic_log_brings_its_road_map(tmp_path: Path) -> None:
     log = tmp_path / "cut_in.mcap"
     synthesize(load_scenario("cut_in"), log, duration_s=1.0)
     with open_log(log) as reader:
-        assert "road_map" in (reader.metadata(MAP_METADATA) or {})  # type: ignore[attr-defined]
+        assert reader.capabilities.road_map
+        assert reader.capabilities.scenario
+        assert log_road_map(reader) is not None
+        assert log_scenario(reader) == LogScenario(name="cut_in", seed=3, duration_s=1.0)
     out = tmp_path / "run"
     pipeline = pipeline_from_plugins(perception=["noisy-oracle"], planning=["idm-planner"])
     run_log(RunRequest(log=log, pipeline=pipeline, out=out))
@@ -55,6 +58,10 @@ def test_a_closed_loop_on_a_synthetic_log_brings_its_road_map(tmp_path: Path) ->
 
 def test_a_log_without_a_map_gives_a_run_without_one(tmp_path: Path) -> None:
     bag = write_demo_bag(tmp_path / "demo.bag")  # a ROS 1 bag: no named metadata at all
+    with open_log(bag) as reader:
+        assert not reader.capabilities.road_map
+        assert log_road_map(reader) is None
+        assert log_scenario(reader) is None
     out = tmp_path / "run"
     run_log(RunRequest(log=bag, pipeline=pipeline_from_plugins(planning=["idm-planner"]), out=out))
     assert open_run(out).road_map() is None

@@ -21,7 +21,7 @@ from redrive.gui import live
 from redrive.gui.live import LiveFeed
 from redrive.gui.mainwindow import MainWindow
 from redrive.io import open_log
-from redrive.io.decoders import decode
+from redrive.io.ros.decoders import decode
 from redrive.types import PointCloud
 from tests.live.conftest import RosCore, dead_master_uri, roscore  # noqa: F401  (fixtures)
 

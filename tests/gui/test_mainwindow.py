@@ -202,10 +202,10 @@ def test_camera_shows_boxes_where_their_projection_says(
 ) -> None:
     """The camera panel draws each ground-truth box corner at the pixel the log's calibration
     (camera_info + tf_static, read independently here) projects it to."""
+    from redrive.assembly.calibration import camera_calibrations
     from redrive.geometry.boxes import box_corners
     from redrive.geometry.projection import project_points
     from redrive.io import open_log
-    from redrive.io.calibration import camera_calibrations
 
     _open(qtbot, window, demo_log)
     assert window.camera.camera == "camera_front_image_raw"

@@ -22,7 +22,7 @@ from redrive.gui.topics import (
     rospy_problem,
 )
 from redrive.io import open_log
-from redrive.io.writer import McapWriter
+from redrive.io.mcap.writer import McapWriter
 from tests.live.conftest import RosCore, dead_master_uri, roscore  # noqa: F401  (fixtures)
 
 LEFT = QtCore.Qt.MouseButton.LeftButton

@@ -9,7 +9,7 @@ import pytest
 
 from redrive.interop.markers import MARKER_ARRAY, marker_array, marker_array_cdr
 from redrive.interop.shapes import BoxShape, LabelShape, LineShape, ShapeSet
-from redrive.io.typestore import typestore_for
+from redrive.io.ros.typestore import typestore_for
 
 _BOXES = (
     BoxShape(

@@ -11,7 +11,7 @@ from rosbags.interfaces import Nodetype
 from rosbags.typesys.store import Typestore
 
 from redrive.io.base import LogMessage
-from redrive.io.typestore import typestore_for
+from redrive.io.ros.typestore import typestore_for
 
 RosVersion = Literal[1, 2]
 

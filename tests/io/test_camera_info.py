@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 from rosbags.rosbag1 import Writer as Bag1Writer
 
+from redrive.assembly.sensor_map import infer_sensor_map
+from redrive.assembly.summary import summarize_log
 from redrive.io import open_log
 from redrive.io.base import TopicInfo
 from redrive.io.convert import convert_log
-from redrive.io.decoders import CameraInfoDecoder, Decoded, DecodedKind, decode, decoder_for
-from redrive.io.sensor_map import infer_sensor_map
-from redrive.io.summary import summarize_log
-from redrive.io.writer import McapWriter
+from redrive.io.mcap.writer import McapWriter
+from redrive.io.ros.decoders import CameraInfoDecoder, Decoded, DecodedKind, decode, decoder_for
 from redrive.types import CameraInfo, Image
 from tests.io._decoder_helpers import deserializer, header, log_message, store
 

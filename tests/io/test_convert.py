@@ -13,9 +13,7 @@ import pytest
 from redrive.errors import LogError
 from redrive.io import open_log
 from redrive.io.convert import convert_log
-from redrive.io.decoders import decode
-from redrive.io.decoders.base import Decoded
-from redrive.io.kitti import (
+from redrive.io.datasets.kitti import (
     TOPIC_CAMERA_INFO,
     TOPIC_IMAGE_2,
     TOPIC_LABEL_2,
@@ -23,6 +21,8 @@ from redrive.io.kitti import (
     TOPIC_VELODYNE,
     KittiReader,
 )
+from redrive.io.ros.decoders import decode
+from redrive.io.ros.decoders.base import Decoded
 from redrive.types import CameraInfo, DetectedObject, Image, PointCloud, Transform
 
 pytestmark = pytest.mark.shared_data

@@ -3,7 +3,7 @@
 PointCloud2 whose point_step, row_step, width, height or field offsets do not fit its data;
 images whose step, size or encoding do not fit; any message whose CDR / ROS 1 bytes are cut or
 have a length field changed.  Decoded through the reader's deserialiser
-(:class:`redrive.io._deserialize.Deserializer`), as every reader does.
+(:class:`redrive.io.ros.deserialize.Deserializer`), as every reader does.
 """
 
 from __future__ import annotations
@@ -17,9 +17,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from redrive.errors import RedriveError
-from redrive.io._deserialize import Deserializer
 from redrive.io.base import LogMessage
-from redrive.io.decoders import decode
+from redrive.io.ros.decoders import decode
+from redrive.io.ros.deserialize import Deserializer
 
 from ._decoder_helpers import header, log_message, store
 

@@ -12,9 +12,9 @@ from hypothesis import strategies as st
 
 from redrive.errors import UnsupportedMessageError
 from redrive.io.base import LogMessage
-from redrive.io.decoders import GroundTruthObjectArrayDecoder
-from redrive.io.decoders import objects as objects_module
-from redrive.io.decoders._gt_bytes import read_ground_truth
+from redrive.io.ros.decoders import GroundTruthObjectArrayDecoder
+from redrive.io.ros.decoders import objects as objects_module
+from redrive.io.ros.decoders._gt_bytes import read_ground_truth
 from tests.io._decoder_helpers import deserializer, header, log_message
 
 DESERIALIZE = deserializer()

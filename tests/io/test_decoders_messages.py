@@ -11,7 +11,7 @@ import pytest
 from PIL import Image as PILImage
 
 from redrive.errors import UnsupportedMessageError
-from redrive.io.decoders import (
+from redrive.io.ros.decoders import (
     CompressedImageDecoder,
     Detection3DArrayDecoder,
     ImageDecoder,
@@ -26,7 +26,7 @@ from redrive.io.decoders import (
     TwistDecoder,
     object_class_from_text,
 )
-from redrive.io.typestore import typestore_for
+from redrive.io.ros.typestore import typestore_for
 from redrive.types import ObjectClass
 from tests.io._decoder_helpers import deserializer, header, log_message
 

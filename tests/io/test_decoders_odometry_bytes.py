@@ -11,8 +11,8 @@ from hypothesis import strategies as st
 
 from redrive.errors import UnsupportedMessageError
 from redrive.io.base import LogMessage
-from redrive.io.decoders import OdometryDecoder
-from redrive.io.decoders.motion import _read_odometry, _state
+from redrive.io.ros.decoders import OdometryDecoder
+from redrive.io.ros.decoders.motion import _read_odometry, _state
 from tests.io._decoder_helpers import deserializer, header, log_message
 
 DESERIALIZE = deserializer()

@@ -15,8 +15,8 @@ from hypothesis import strategies as st
 
 from redrive.errors import UnsupportedMessageError
 from redrive.io.base import LogMessage
-from redrive.io.decoders import PointCloud2Decoder, read_cloud_layout
-from redrive.io.decoders.pointcloud2_batch import VIEW_SHARE
+from redrive.io.ros.decoders import PointCloud2Decoder, read_cloud_layout
+from redrive.io.ros.decoders.pointcloud2_batch import VIEW_SHARE
 from redrive.types import PointCloud
 from tests.io._decoder_helpers import deserializer, header, log_message
 

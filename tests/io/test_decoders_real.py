@@ -13,11 +13,11 @@ from PIL import Image as PILImage
 from rosbags.rosbag1 import Reader as Reader1
 from rosbags.rosbag2 import Reader as Reader2
 
+from redrive.assembly.tf_buffer import TransformBuffer, TransformLookupError
 from redrive.errors import UnsupportedMessageError
 from redrive.io.base import LogMessage
-from redrive.io.decoders import Deserialize, decode, decoder_for
-from redrive.io.tf_buffer import TransformBuffer, TransformLookupError
-from redrive.io.typestore import typestore_for
+from redrive.io.ros.decoders import Deserialize, decode, decoder_for
+from redrive.io.ros.typestore import typestore_for
 from redrive.types import GnssFix, Image, Imu, PointCloud, SensorType, VehicleState
 
 pytestmark = pytest.mark.shared_data
@@ -265,7 +265,7 @@ def test_pass_through_and_velodyne_definitions(
 
 
 def test_sensor_types_of_real_decoders(shared_data: Path) -> None:
-    from redrive.io.decoders import decoder_for
+    from redrive.io.ros.decoders import decoder_for
 
     expected = {
         "sensor_msgs/PointCloud2": SensorType.LIDAR,

@@ -6,7 +6,7 @@ import pytest
 
 from redrive.errors import PluginError, UnsupportedMessageError
 from redrive.io.base import LogMessage
-from redrive.io.decoders import (
+from redrive.io.ros.decoders import (
     DEFAULT_DECODERS,
     Decoded,
     DecodedKind,
@@ -21,7 +21,7 @@ from redrive.io.decoders import (
 from redrive.types import GnssFix
 from tests.io._decoder_helpers import deserializer, log_message
 
-LOGGER = "redrive.io.decoders.registry"
+LOGGER = "redrive.io.ros.decoders.registry"
 
 
 @pytest.mark.parametrize(

@@ -19,8 +19,9 @@ import numpy as np
 import pytest
 
 from redrive.errors import DiskFullError
-from redrive.io import mcap_stream, open_log
-from redrive.io.writer import McapWriter
+from redrive.io import open_log
+from redrive.io.mcap import stream as mcap_stream
+from redrive.io.mcap.writer import McapWriter
 from redrive.types import Imu, PointCloud
 
 EXIT_DISK_FULL = 6

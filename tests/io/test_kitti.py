@@ -14,9 +14,7 @@ from redrive.geometry.boxes import points_in_box, transform_box
 from redrive.geometry.projection import project_points
 from redrive.geometry.se3 import compose, matrix_from_transform, transform_points
 from redrive.io.base import LogReader
-from redrive.io.decoders import DecodedKind, decoder_for, topic_kind
-from redrive.io.decoders.base import Decoded
-from redrive.io.kitti import (
+from redrive.io.datasets.kitti import (
     TOPIC_CAMERA_INFO,
     TOPIC_IMAGE_2,
     TOPIC_LABEL_2,
@@ -24,6 +22,8 @@ from redrive.io.kitti import (
     TOPIC_VELODYNE,
     KittiReader,
 )
+from redrive.io.ros.decoders import DecodedKind, decoder_for, topic_kind
+from redrive.io.ros.decoders.base import Decoded
 from redrive.types import DetectedObject, Image, ObjectClass, PointCloud, SensorType, Transform
 
 pytestmark = pytest.mark.shared_data

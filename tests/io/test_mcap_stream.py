@@ -14,7 +14,7 @@ from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
 
 from redrive.io import open_log
-from redrive.io.mcap_stream import McapStream, StreamCompression
+from redrive.io.mcap.stream import McapStream, StreamCompression
 
 _CHUNK = 64 << 10
 
@@ -142,7 +142,7 @@ def _record_behind(
     uncompressed, before the compressed ones that come earlier in time."""
     import threading
 
-    from redrive.io import mcap_stream
+    from redrive.io.mcap import stream as mcap_stream
 
     real = mcap_stream._compressor
     gate = threading.Event()
@@ -193,7 +193,7 @@ def test_a_scan_without_summary_restores_time_order_across_chunks_written_out_of
 ) -> None:
     """The recording of a compressor that was behind, killed before its summary: read by a
     forward scan, its messages still come in log-time order, every one of them."""
-    from redrive.io.mcap_scan import McapScan
+    from redrive.io.mcap.scan import McapScan
 
     path = tmp_path / "behind.mcap"
     _, messages = _record_behind(path, monkeypatch)

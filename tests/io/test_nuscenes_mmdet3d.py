@@ -12,15 +12,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from redrive.assembly.calibration import camera_calibrations
+from redrive.assembly.frames import iter_frames
 from redrive.errors import LogError
 from redrive.geometry.boxes import points_in_box
 from redrive.geometry.projection import project_points
 from redrive.geometry.se3 import invert, transform_points
 from redrive.io import detect_format, open_log
-from redrive.io.calibration import camera_calibrations
-from redrive.io.frames import iter_frames
-from redrive.io.mmdet3d_info import Mmdet3dInfoReader, restricted_loads
-from redrive.io.nuscenes_common import LIDAR_AXES_FRAME, TOPIC_ANNOTATIONS, TOPIC_LIDAR
+from redrive.io.datasets.mmdet3d_info import Mmdet3dInfoReader, restricted_loads
+from redrive.io.datasets.nuscenes_common import LIDAR_AXES_FRAME, TOPIC_ANNOTATIONS, TOPIC_LIDAR
 from redrive.types import ObjectClass, PointCloud, SensorType
 
 pytestmark = pytest.mark.shared_data

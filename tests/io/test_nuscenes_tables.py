@@ -12,11 +12,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from redrive.assembly.frames import iter_frames
 from redrive.errors import LogError
 from redrive.io import detect_format, open_log
-from redrive.io.frames import iter_frames
-from redrive.io.mmdet3d_info import Mmdet3dInfoReader
-from redrive.io.nuscenes import NuScenesReader
+from redrive.io.datasets.mmdet3d_info import Mmdet3dInfoReader
+from redrive.io.datasets.nuscenes import NuScenesReader
 from redrive.testing.nuscenes_tables import write_mini_tables
 from redrive.types import Frame
 

@@ -20,7 +20,7 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Bag2Writer
 
 from redrive.io import open_log
-from redrive.io.decoders import decode
+from redrive.io.ros.decoders import decode
 from redrive.types import PointCloud
 from tests.io._decoder_helpers import header, make, serialize, store
 

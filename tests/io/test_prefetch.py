@@ -7,7 +7,7 @@ import threading
 
 import pytest
 
-from redrive.io._prefetch import prefetched
+from redrive.io.mcap._prefetch import prefetched
 
 
 def _prefetch_threads() -> list[threading.Thread]:

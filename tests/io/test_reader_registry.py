@@ -10,8 +10,8 @@ import pytest
 
 from redrive.errors import LogError
 from redrive.io import detect_format, open_log, reader_formats
-from redrive.io.decoders import DecodedKind, decode, topic_kind
 from redrive.io.readers import reader_format, reload_readers
+from redrive.io.ros.decoders import DecodedKind, decode, topic_kind
 from redrive.types import PointCloud, SensorType
 from tests.algorithms.test_discovery import site, unique, write_dist  # noqa: F401 (fixture)
 
@@ -81,7 +81,7 @@ from types import MappingProxyType
 import numpy as np
 
 from redrive.io.base import DecodedKind, LogMessage, ReaderCapabilities, TopicInfo
-from redrive.io.decoders import Decoded
+from redrive.io.ros.decoders import Decoded
 from redrive.types import PointCloud, SensorType
 
 MAGIC = b"#XYZLOG 1\\n"

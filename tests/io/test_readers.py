@@ -10,7 +10,7 @@ import pytest
 
 from redrive.errors import LogError, LogTruncatedError
 from redrive.io import LogReader, detect_format, open_log
-from redrive.io.decoders import decode
+from redrive.io.ros.decoders import decode
 from redrive.types import PointCloud
 
 # (relative path, format, {topic: count}) — counts from ../shared/data/README.md

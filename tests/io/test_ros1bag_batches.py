@@ -21,11 +21,11 @@ import pytest
 from rosbags.rosbag1 import Reader as Bag1Reader
 from rosbags.rosbag1 import Writer as Bag1Writer
 
-import redrive.io.decoders.pointcloud2_batch as pb
+import redrive.io.ros.decoders.pointcloud2_batch as pb
 from redrive.errors import LogTruncatedError
 from redrive.io import open_log
-from redrive.io.decoders import decode
-from redrive.io.decoders.pointcloud2 import PointCloud2Decoder
+from redrive.io.ros.decoders import decode
+from redrive.io.ros.decoders.pointcloud2 import PointCloud2Decoder
 from redrive.types import PointCloud
 from tests.io._decoder_helpers import header, make, serialize, store
 

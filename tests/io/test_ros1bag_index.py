@@ -1,4 +1,4 @@
-"""The two ways :func:`~redrive.io.ros1bag_index.chunk_spans` checks a chunk's messages against
+"""The two ways :func:`~redrive.io.rosbag1.index.chunk_spans` checks a chunk's messages against
 the index — as one array (many messages) and one ``bytes`` at a time (few) — accept and refuse
 the same chunks and give the same spans, on intact and on damaged record headers, and what they
 accept is what the reader's walk of each header finds."""
@@ -9,10 +9,11 @@ from pathlib import Path
 
 import numpy as np
 
-from redrive.io import open_log, ros1bag_index
-from redrive.io.ros1bag import Ros1BagReader
-from redrive.io.ros1bag_index import chunk_spans, merged_index
-from redrive.io.ros1bag_records import DamageError
+from redrive.io import open_log
+from redrive.io.rosbag1 import index as ros1bag_index
+from redrive.io.rosbag1.index import chunk_spans, merged_index
+from redrive.io.rosbag1.reader import Ros1BagReader
+from redrive.io.rosbag1.records import DamageError
 from tests.io.test_ros1bag_batches import _write
 
 

@@ -7,7 +7,7 @@ import struct
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from redrive.io.ros1bag_records import DamageError, op_of, parse_header, record_op
+from redrive.io.rosbag1.records import DamageError, op_of, parse_header, record_op
 
 
 def _field(key: bytes, value: bytes) -> bytes:

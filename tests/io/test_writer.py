@@ -13,9 +13,9 @@ from mcap.reader import make_reader
 
 from redrive.errors import LogError, UnsupportedMessageError
 from redrive.io import open_log
-from redrive.io.decoders import decode
-from redrive.io.decoders.base import Decoded
-from redrive.io.writer import McapWriter
+from redrive.io.mcap.writer import McapWriter
+from redrive.io.ros.decoders import decode
+from redrive.io.ros.decoders.base import Decoded
 from redrive.types import (
     Box3D,
     DetectedObject,

@@ -189,7 +189,7 @@ def main() -> int:
         if not args.match or name in args.match
     ]
     if args.listen:
-        from redrive.io.typestore import typestore_for
+        from redrive.io.ros.typestore import typestore_for
         from redrive.live.ros2_dds import idl_struct
 
         result_type = idl_struct(typestore_for(2)[0], args.listen[1])

@@ -28,7 +28,7 @@ import numpy as np
 import pytest
 
 from redrive.io import open_log
-from redrive.io.typestore import typestore_for
+from redrive.io.ros.typestore import typestore_for
 from tests.live.conftest import RosCore, ros1_missing
 
 pytestmark = [

@@ -191,7 +191,7 @@ def test_live_replay_source_recorded_exactly(demo_log: Path, tmp_path: Path) -> 
     through a detector and a planner, every message recorded (lossless) equal to the log's."""
     import numpy as np
 
-    from redrive.io.decoders import decode
+    from redrive.io.ros.decoders import decode
 
     argv = [
         sys.executable, "-m", "redrive", "live", "--replay", str(demo_log), "--rate", "2",

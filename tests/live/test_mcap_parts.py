@@ -1,4 +1,4 @@
-"""Split MCAP files (redrive.live.mcap_parts) and reading them back as one log (redrive.io.mcapset),
+"""Split MCAP files (redrive.live.mcap_parts) and reading them back as one log (redrive.io.mcap.fileset),
 without ROS: real ROS 1 messages serialised with rosbags, written by the writer redrive live uses."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import pytest
 
 from redrive.errors import LogError
 from redrive.io import open_log
-from redrive.io.typestore import typestore_for
+from redrive.io.ros.typestore import typestore_for
 from redrive.live.mcap_parts import Ros1Schema, SplitMcapWriter
 
 

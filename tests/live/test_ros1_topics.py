@@ -13,7 +13,7 @@ import pytest
 
 from redrive.cli.main import main
 from redrive.errors import ConfigError, TransportError
-from redrive.io.decoders import DecodedKind
+from redrive.io.ros.decoders import DecodedKind
 from redrive.live import TopicInfo, list_topics, master_alive
 from redrive.live.ros1 import DEFAULT_MASTER_URI, default_master_uri
 from redrive.types import SensorType

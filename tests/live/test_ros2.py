@@ -24,7 +24,7 @@ import pytest
 pytest.importorskip("cyclonedds", reason="the ros2 extra (cyclonedds) is not installed")
 
 from redrive.io import open_log
-from redrive.io.typestore import typestore_for
+from redrive.io.ros.typestore import typestore_for
 from redrive.live.ros2_dds import (
     DEFAULT,
     SENSOR_DATA,

@@ -14,7 +14,7 @@ import pytest
 
 pytest.importorskip("cyclonedds", reason="the ros2 extra (cyclonedds) is not installed")
 
-from redrive.io.typestore import typestore_for
+from redrive.io.ros.typestore import typestore_for
 from redrive.live.ros2_dds import (
     DEFAULT,
     RECEIVE_BUFFER_BYTES,

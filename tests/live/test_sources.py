@@ -22,9 +22,9 @@ import pytest
 
 from redrive.errors import ConfigError, TransportError
 from redrive.io import open_log
-from redrive.io.decoders import decode
-from redrive.io.decoders.base import Decoded
-from redrive.io.writer import McapWriter
+from redrive.io.mcap.writer import McapWriter
+from redrive.io.ros.decoders import decode
+from redrive.io.ros.decoders.base import Decoded
 from redrive.live import sources
 from redrive.live.sources import (
     LOOP_GAP_NS,

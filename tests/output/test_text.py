@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from redrive.io.writer import McapWriter
+from redrive.io.mcap.writer import McapWriter
 from redrive.output.text import printable, shown
 from redrive.types import Imu
 

@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 from rosbags.typesys import get_types_from_msg
 
+from redrive.assembly.frames import FrameAssembler
 from redrive.io import open_log
-from redrive.io.decoders import active_decoders, decoder_for, reload_decoders
-from redrive.io.frames import FrameAssembler
-from redrive.io.typestore import typestore_for
-from redrive.io.writer import McapWriter
+from redrive.io.mcap.writer import McapWriter
+from redrive.io.ros.decoders import active_decoders, decoder_for, reload_decoders
+from redrive.io.ros.typestore import typestore_for
 from redrive.types import SensorData, SensorType
 from tests.algorithms.test_discovery import site, unique, write_dist  # noqa: F401 (fixture)
 
@@ -52,7 +52,7 @@ class RadarPointList:
 DECODER = """
 import numpy as np
 
-from redrive.io.decoders import Decoded, DecodedKind
+from redrive.io.ros.decoders import Decoded, DecodedKind
 from redrive.types import SensorType
 
 from {pkg}.payload import RadarPointList
@@ -159,7 +159,7 @@ def test_a_plugin_decoder_that_claims_a_builtin_type_is_left_out(
     )
     reload_decoders()
     try:
-        with caplog.at_level("WARNING", logger="redrive.io.decoders.registry"):
+        with caplog.at_level("WARNING", logger="redrive.io.ros.decoders.registry"):
             pc2 = decoder_for("sensor_msgs/msg/PointCloud2")
         assert pc2 is not None
         assert pc2.name != "radar-point-list"

@@ -11,8 +11,8 @@ from mcap.reader import make_reader
 
 from redrive.geometry.se3 import compose, matrix_from_transform
 from redrive.io import open_log
-from redrive.io.decoders import decode
-from redrive.io.qos import LATCHED_QOS, VOLATILE_QOS
+from redrive.io.mcap.qos import LATCHED_QOS, VOLATILE_QOS
+from redrive.io.ros.decoders import decode
 from redrive.sim.scenario import load_scenario
 from redrive.sim.synth import synthesize
 from redrive.types import Transform, VehicleState
@@ -101,7 +101,7 @@ def test_ros2_channels_offer_qos_and_tf_static_is_latched(log: Path) -> None:
 
 
 def test_readers_still_find_the_ego_pose_and_the_mounts(log: Path) -> None:
-    from redrive.io.frames import iter_frames
+    from redrive.assembly.frames import iter_frames
 
     with open_log(log) as reader:
         assert reader.capabilities.has_ego_pose

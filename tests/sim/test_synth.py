@@ -11,11 +11,11 @@ from typing import Any
 import numpy as np
 import pytest
 
+from redrive.assembly.frames import iter_frames
 from redrive.cli.main import main
 from redrive.errors import SimulationError
 from redrive.geometry import points_in_box, transform_points
 from redrive.io import open_log
-from redrive.io.frames import iter_frames
 from redrive.sim.rig import rig_from_mapping
 from redrive.sim.scenario import Scenario, load_scenario
 from redrive.sim.synth import synthesize

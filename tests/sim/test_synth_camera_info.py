@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from redrive.assembly.calibration import CameraCalibration, camera_calibrations
 from redrive.geometry import project_points, rotation_matrix_from_yaw
 from redrive.geometry.se3 import se3_from_rotation_translation
 from redrive.io import open_log
-from redrive.io.calibration import CameraCalibration, camera_calibrations
-from redrive.io.decoders import decode
+from redrive.io.ros.decoders import decode
 from redrive.sim.camera import CameraModel
 from redrive.sim.rig import rig_from_mapping
 from redrive.sim.scenario import load_scenario

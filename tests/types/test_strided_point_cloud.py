@@ -14,8 +14,8 @@ import numpy.typing as npt
 from redrive.algorithms.reference.detector import ClusterDetector
 from redrive.interop.foxglove_msgs import point_cloud
 from redrive.io import open_log
-from redrive.io.decoders import decode
-from redrive.io.writer import McapWriter
+from redrive.io.mcap.writer import McapWriter
+from redrive.io.ros.decoders import decode
 from redrive.transport import Reader, Writer
 from redrive.types import PointCloud, SensorData, SensorType
 

@@ -30,12 +30,12 @@ logger = logging.getLogger(__name__)
 PRELOAD = (
     "redrive.engine.run",
     "redrive.io.recognise",
-    "redrive.io.typestore",
-    "redrive.io._deserialize",
-    "redrive.io.ros1bag",
-    "redrive.io.ros2bag",
-    "redrive.io.mcapfile",
-    "redrive.io.kitti",
+    "redrive.io.ros.typestore",
+    "redrive.io.ros.deserialize",
+    "redrive.io.rosbag1.reader",
+    "redrive.io.rosbag2.reader",
+    "redrive.io.mcap.reader",
+    "redrive.io.datasets.kitti",
     "redrive.algorithms.reference.detector",
     "redrive.algorithms.reference.planner",
     "redrive.algorithms.reference.controller",
@@ -59,8 +59,8 @@ WARM = (
 #: every log's typestore starts from.  ≈ 45 ms of a forked cell's thread CPU (see above).
 CACHES = (
     ("redrive.io.readers", "reader_formats", ()),
-    ("redrive.io.typestore", "_default_fielddefs", (1,)),
-    ("redrive.io.typestore", "_default_fielddefs", (2,)),
+    ("redrive.io.ros.typestore", "_default_fielddefs", (1,)),
+    ("redrive.io.ros.typestore", "_default_fielddefs", (2,)),
 )
 
 

@@ -24,8 +24,8 @@ from redrive.batch.manifest import (
     write_batch_manifest,
 )
 from redrive.batch.spec import BatchSpec, LogItem, pipeline_hash
-from redrive.engine.run import log_fingerprint
 from redrive.errors import ConfigError
+from redrive.io.content import fingerprint_log
 from redrive.results import RunStatus, read_manifest
 from redrive.results.manifest import host_info, now_iso, redrive_version
 
@@ -100,7 +100,7 @@ class _Throttle:
 def _log_key(item: LogItem, duration_s: float | None, cache: dict[str, str]) -> str:
     if item.path is not None:
         if item.path not in cache:
-            cache[item.path] = str(log_fingerprint(Path(item.path), format="").sha256)
+            cache[item.path] = fingerprint_log(Path(item.path)).sha256
         return cache[item.path]
     scenario = item.scenario or ""
     if scenario.endswith(".toml"):

@@ -21,9 +21,10 @@ A batch spec file (``redrive batch --spec batch.toml``; relative paths are relat
     planning = ["idm-planner"]       # or plugins, as --perception/--planning/--control
     control = ["pure-pursuit-pid"]
 
-A log entry is a log (file or ROS 2 bag directory), a glob, a directory (the logs in it: ``.bag``
-and ``.mcap`` files, ROS 2 bag directories, KITTI folders), a ``.txt`` file of such entries (one a
-line, ``#`` comments), or a synthetic scenario: a name of ``redrive synth --list`` or a scenario
+A log entry is a log (file or ROS 2 bag directory), a glob, a directory (the logs in it: what a
+registered reader recognises — ``.bag`` and ``.mcap`` files, ROS 2 bag directories, KITTI and
+nuScenes folders, a reader plugin's logs), a ``.txt`` file of such entries (one a line, ``#``
+comments), or a synthetic scenario: a name of ``redrive synth --list`` or a scenario
 ``.toml`` with an optional ``@SEED``.  No pipeline means the reference pipeline.
 """
 
@@ -164,31 +165,33 @@ def _is_scenario(name: str) -> bool:
     return name in list_scenarios() or (name.endswith(".toml") and Path(name).is_file())
 
 
-def _is_log_dir(path: Path) -> bool:
-    """A directory that is one log: a ROS 2 bag (metadata.yaml), a KITTI object folder, a
-    nuScenes data root or a folder holding an mmdetection3d info file."""
-    from redrive.io.mmdet3d_info import Mmdet3dInfoReader
-    from redrive.io.nuscenes import NuScenesReader
+def _is_log(path: Path) -> bool:
+    """Whether a registered reader (redrive's, an installed plugin, one ``REDRIVE_READERS``
+    names) recognises ``path`` as one log.  A folder of split MCAP files is not one log here:
+    each of its files is."""
+    from redrive.io.readers import recognised_format
 
-    return (
-        (path / "metadata.yaml").is_file()
-        or (path / "velodyne").is_dir()
-        or NuScenesReader.recognises(path)
-        or Mmdet3dInfoReader.recognises(path)
-    )
+    return recognised_format(path, sets=False) is not None
 
 
 def _logs_in_dir(path: Path) -> list[Path]:
-    if _is_log_dir(path):
+    if _is_log(path):
         return [path]
-    found = [
-        p
-        for p in sorted(path.iterdir())
-        if (p.is_file() and p.suffix in (".bag", ".mcap")) or (p.is_dir() and _is_log_dir(p))
-    ]
+    entries = sorted(path.iterdir())
+    found = [p for p in entries if _is_log(p)]
     if not found:
-        msg = f"{path}: a directory with no logs in it (.bag, .mcap, ROS 2 bag directories)"
+        msg = (
+            f"{path}: a directory with no logs in it (nothing in it is a log a reader "
+            "recognises: .bag, .mcap, ROS 2 bag directories, KITTI, nuScenes, reader plugins)"
+        )
         raise ConfigError(msg)
+    if len(found) < len(entries):
+        import logging
+
+        left = [p.name for p in entries if p not in found]
+        logging.getLogger(__name__).info(
+            "%s: %d entries no reader recognises are not logs: %s", path, len(left), left[:5]
+        )
     return found
 
 
@@ -215,7 +218,7 @@ def _expand_one(entry: str, base: Path, seeds: Sequence[int], depth: int) -> lis
         if not matches:
             msg = f"{entry}: the pattern matches no file"
             raise ConfigError(msg)
-        return [m for m in matches if m.is_file() or _is_log_dir(m)]
+        return [m for m in matches if _is_log(m)]
     if path.is_dir():
         return list(_logs_in_dir(path))
     if path.suffix == ".txt" and path.is_file():

@@ -132,12 +132,12 @@ def raw_pass(path: Path, topics: Sequence[str], log_format: str) -> PassResult:
 
 def redrive_pass(path: Path, topics: Sequence[str]) -> PassResult:
     """``open_log`` + ``decode`` every message of ``topics`` to a PointCloud."""
-    import redrive.io.mcapfile
-    import redrive.io.ros1bag
-    import redrive.io.ros2bag  # noqa: F401  (imported here so open_s is work, not imports)
+    import redrive.io.mcap.reader
+    import redrive.io.rosbag1.reader
+    import redrive.io.rosbag2.reader  # noqa: F401  (imported here so open_s is work, not imports)
     from redrive.io import open_log
-    from redrive.io.decoders import decode
-    from redrive.io.decoders.registry import active_decoders
+    from redrive.io.ros.decoders import decode
+    from redrive.io.ros.decoders.registry import active_decoders
     from redrive.types import PointCloud
 
     # The decoders (redrive's and the installed plugins', an entry-point scan) are found once a

@@ -9,9 +9,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from redrive.assembly.summary import LogSummary, summarize_log
 from redrive.errors import LogDamagedError
 from redrive.io import open_log
-from redrive.io.summary import LogSummary, summarize_log
 
 __all__ = ["EXIT_DAMAGED", "damage_lines", "register"]
 

@@ -29,7 +29,7 @@ exactly replayed; one it held up drives on at its logged speed, behind its logge
 it catches up with it (only where the log is faster).  Nothing else reacts (no lane changes, no pedestrians, no objects the
 log does not have), and an object is shown only while the log has it.
 
-Frames come from :class:`redrive.io.frames.FrameAssembler` (a log without a LiDAR, camera or radar
+Frames come from :class:`redrive.assembly.frames.FrameAssembler` (a log without a LiDAR, camera or radar
 is paced by its busiest sensor, e.g. an IMU), at most ``rate_hz`` of them: the first frame at
 or after each tick of a ``1 / rate_hz`` clock (less a quarter period, for jitter).  The time step between two frames is
 the log's (:attr:`LogSimulator.dt_s` is the gap to the next frame).
@@ -47,14 +47,14 @@ import numpy as np
 import numpy.typing as npt
 
 from redrive.algorithms import StageOutputs
+from redrive.assembly.frames import FrameAssembler
+from redrive.assembly.sensor_map import SensorMapOverrides, infer_sensor_map
 from redrive.closedloop.mode import DEFAULT_DEVIATION_M, DEFAULT_DEVIATION_RAD
 from redrive.closedloop.simulator import EgoCommand, PathFollower, check_options, choose_command
 from redrive.closedloop.synthetic import AgentMode
 from redrive.errors import ConfigError
 from redrive.geometry import invert, transform_object
 from redrive.io import LogReader
-from redrive.io.frames import FrameAssembler
-from redrive.io.sensor_map import SensorMapOverrides, infer_sensor_map
 from redrive.sim.agents import IdmParams, idm_acceleration
 from redrive.sim.ego import ActuatedEgo, BicycleModel, EgoGeometry, PedalModel, pose_matrix
 from redrive.types import (

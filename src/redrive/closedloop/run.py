@@ -36,6 +36,7 @@ from typing import Any
 
 from redrive.algorithms import GROUND_TRUTH, VEHICLE_STATE
 from redrive.algorithms.discovery import load_algorithm_class
+from redrive.assembly.sensor_map import load_sensor_map_overrides
 from redrive.closedloop.logreplay import LogSimulator
 from redrive.closedloop.mode import DEFAULT_DEVIATION_M, DEFAULT_DEVIATION_RAD, ClosedLoopMode
 from redrive.closedloop.sensors import RecordingThread
@@ -44,12 +45,12 @@ from redrive.closedloop.synthetic import AgentMode, Level, SyntheticSimulator
 from redrive.closedloop.tracker import LqrPidTracker
 from redrive.config import PipelineConfig
 from redrive.engine.graph import LogInputs, build_graph
-from redrive.engine.run import execute, log_fingerprint, log_road_map, run_setup
+from redrive.engine.run import execute, run_setup, source_log
 from redrive.engine.stats import RunReport
 from redrive.errors import ConfigError
 from redrive.io import LogReader, open_log
-from redrive.io.sensor_map import load_sensor_map_overrides
-from redrive.io.writer import McapWriter
+from redrive.io.content import log_road_map
+from redrive.io.mcap.writer import McapWriter
 from redrive.results import (
     FrameRecord,
     RunWriter,
@@ -225,7 +226,7 @@ def _run_log(
     return _drive(
         request,
         simulator,
-        source=log_fingerprint(Path(request.scenario), format=log.format),
+        source=source_log(Path(request.scenario), format=log.format),
         described=simulator.describe(),
         road_map=log_road_map(log),  # a redrive synth log's: the map metrics apply
         total=None,

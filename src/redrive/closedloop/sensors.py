@@ -14,7 +14,7 @@ needs the ego's motion over its whole period, and that motion depends on the com
 frame.  The first frame is therefore one (slowest) LiDAR period after the scenario's start.
 
 A :class:`SensorTee` hands every message to more than one sink: the run's ``sensors.mcap``
-(a :class:`~redrive.io.writer.McapWriter`) records what the algorithms saw, through a
+(a :class:`~redrive.io.mcap.writer.McapWriter`) records what the algorithms saw, through a
 :class:`RecordingThread` that serialises and compresses on its own thread (zstd releases the
 GIL), off the frame loop.
 """
@@ -31,11 +31,11 @@ import numpy as np
 import numpy.typing as npt
 from rosbags.typesys.store import Typestore
 
+from redrive.assembly.sensor_map import infer_sensor_map
 from redrive.errors import SimulationError
 from redrive.io.base import TopicInfo
-from redrive.io.decoders.base import Decoded
-from redrive.io.sensor_map import infer_sensor_map
-from redrive.io.writer import McapWriter
+from redrive.io.mcap.writer import McapWriter
+from redrive.io.ros.decoders.base import Decoded
 from redrive.sim.rig import Rig, SensorSpec
 from redrive.sim.scene import Scene
 from redrive.sim.sinks import MessageSink, SampleSink
@@ -119,7 +119,7 @@ class FrameSensors(SampleSink):
     :class:`~redrive.types.SensorData` (what a replay of the recorded log would put in a frame).
 
     Sensor ids and types come from the log's own rule
-    (:func:`~redrive.io.sensor_map.infer_sensor_map` on the topics ``redrive synth`` writes):
+    (:func:`~redrive.assembly.sensor_map.infer_sensor_map` on the topics ``redrive synth`` writes):
     ``lidar_top``, ``camera_front_image_raw``, …; wheel odometry is ego motion there, not a
     sensor.  The rate is
     the rig's; the location the sensor's mount in base_link.

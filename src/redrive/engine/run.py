@@ -6,16 +6,16 @@
 
 from __future__ import annotations
 
-import hashlib
 import itertools
-import json
 import logging
 import threading
 from collections.abc import Callable, Iterable, Iterator, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from redrive.assembly.frames import FrameAssembler
+from redrive.assembly.sensor_map import load_sensor_map_overrides
 from redrive.config import PipelineConfig
 from redrive.engine._heap import setup_frozen
 from redrive.engine.core import Engine
@@ -25,9 +25,8 @@ from redrive.engine.resources import ResourceSampler
 from redrive.engine.stats import RunReport
 from redrive.errors import ConfigError
 from redrive.io import LogReader, open_log
+from redrive.io.content import LogScenario, fingerprint_log, log_road_map, log_scenario
 from redrive.io.damage import damage_report
-from redrive.io.frames import FrameAssembler
-from redrive.io.sensor_map import load_sensor_map_overrides
 from redrive.results import (
     FrameRecord,
     PipelineInfo,
@@ -36,21 +35,17 @@ from redrive.results import (
     RunWriter,
     SourceLog,
 )
-from redrive.results.manifest import SCENARIO_METADATA
-from redrive.results.roadmap import MAP_METADATA, road_map_from_json
-from redrive.types import Frame, RoadMap
+from redrive.types import Frame
 
 __all__ = [
     "RunRequest",
     "execute",
     "expected_frames",
-    "log_fingerprint",
     "log_inputs",
-    "log_road_map",
-    "log_scenario",
     "run_log",
     "run_reader",
     "run_setup",
+    "source_log",
 ]
 
 logger = logging.getLogger(__name__)
@@ -84,31 +79,16 @@ class RunRequest:
     strict: bool = True
 
 
-def log_fingerprint(path: Path, *, format: str) -> SourceLog:
-    """Path, size and sha256 of a log file (or of every file of a log directory, in name order);
-    ``format`` is the reader's format name."""
-    from redrive.io.mcapset import expand_log_set
-
-    digest = hashlib.sha256()
-    if path.is_file():
-        files = [path]
-    elif path.is_dir():
-        files = sorted(p for p in path.rglob("*") if p.is_file())
-    else:  # a glob of split files
-        files = expand_log_set(path)
-    size = 0
-    for file in files:
-        if file is not path:
-            name = file.relative_to(path) if path.is_dir() else Path(file.name)
-            digest.update(name.as_posix().encode() + b"\0")
-        with file.open("rb") as fh:
-            hashlib.file_digest(fh, lambda: digest)  # feeds the whole file into `digest`
-        size += file.stat().st_size
+def source_log(path: Path, *, format: str, scenario: LogScenario | None = None) -> SourceLog:
+    """The manifest's record of the log at ``path`` (its reader's fingerprint of the files);
+    ``format`` is the reader's format name, ``scenario`` what a synthetic log was made from."""
+    found = fingerprint_log(path)
     return SourceLog(
-        path=str(path.absolute() if files and not path.exists() else path.resolve()),
+        path=found.path,
         format=format,
-        sha256=digest.hexdigest(),
-        size_bytes=size,
+        sha256=found.sha256,
+        size_bytes=found.size_bytes,
+        scenario={} if scenario is None else asdict(scenario),
     )
 
 
@@ -143,45 +123,10 @@ def _reading_only_inputs(
     return FrameAssembler(log, sensor_map=replace(smap, sensors=kept), lookahead_ns=lookahead_ns)
 
 
-def log_road_map(log: LogReader) -> RoadMap | None:
-    """The log's road map (a ``redrive synth`` MCAP carries one), for the map metrics; None for
-    a log without one, or a reader without named metadata."""
-    metadata = getattr(log, "metadata", None)
-    found = metadata(MAP_METADATA) if callable(metadata) else None
-    if not found or "road_map" not in found:
-        return None
-    try:
-        return road_map_from_json(json.loads(found["road_map"]), path=Path(log.path))
-    except (ValueError, ConfigError) as err:
-        logger.warning("%s: its road map is unreadable, the run has none (%s)", log.path, err)
-        return None
-
-
 def _copy_road_map(log: LogReader, writer: RunWriter) -> None:
     road_map = log_road_map(log)
     if road_map is not None:
         writer.write_map(road_map)
-
-
-def log_scenario(log: LogReader) -> dict[str, Any]:
-    """What a ``redrive synth`` log was synthesized from (its MCAP metadata record
-    ``redrive.scenario``: ``name``, ``seed``, ``duration_s``), for the manifest's
-    ``log.scenario``; empty for any other log, or one whose record is unreadable."""
-    metadata = getattr(log, "metadata", None)
-    found = metadata(SCENARIO_METADATA) if callable(metadata) else None
-    if not found:
-        return {}
-    try:
-        return {
-            "name": str(found["name"]),
-            "seed": int(found["seed"]),
-            "duration_s": float(found["duration_s"]),
-        }
-    except (KeyError, ValueError) as err:
-        logger.warning(
-            "%s: its scenario record is unreadable, the run has none (%s)", log.path, err
-        )
-        return {}
 
 
 def _select(frames: Iterator[Frame], first: int | None, stop: int | None) -> Iterator[Frame]:
@@ -268,9 +213,7 @@ def run_log(
             request,
             log,
             hooks=ReplayMode(rate=request.rate),
-            log_info=replace(
-                log_fingerprint(request.log, format=log.format), scenario=log_scenario(log)
-            ),
+            log_info=source_log(request.log, format=log.format, scenario=log_scenario(log)),
             on_start=on_start,
             progress=progress,
             cancel=cancel,

@@ -28,10 +28,10 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 from PySide6 import QtCore, QtWidgets
 
+from redrive.assembly.frames import FrameAssembler
 from redrive.errors import RedriveError, TransportError
 from redrive.gui.loader import FrameLoader, LogSummary, ViewOptions, build_scene
 from redrive.gui.scene import Scene
-from redrive.io.frames import FrameAssembler
 from redrive.live.dispatcher import LiveLog
 from redrive.live.recorder import DataLogger
 from redrive.live.session import LiveSession

@@ -21,6 +21,7 @@ import numpy as np
 import numpy.typing as npt
 from PySide6 import QtCore
 
+from redrive.assembly.calibration import camera_calibrations, static_transforms
 from redrive.errors import RedriveError
 from redrive.gui.closedloop import (
     EGO_BOX,
@@ -46,7 +47,6 @@ from redrive.gui.scene import (
     transform_xyz,
 )
 from redrive.gui.session import LogSession, RunData, series_from_log
-from redrive.io.calibration import camera_calibrations, static_transforms
 from redrive.types import (
     Box3D,
     DetectedObject,

@@ -1,7 +1,7 @@
 """An open log (and optionally a run over it) as the GUI sees it — no Qt here.
 
 :class:`LogSession` streams: opening reads the log's index only; frame *k* is assembled by the
-Sensor Dispatcher (:class:`~redrive.io.frames.FrameAssembler`) starting at the log time of the
+Sensor Dispatcher (:class:`~redrive.assembly.frames.FrameAssembler`) starting at the log time of the
 *k*-th driver sample, so a 1 GB log shows its first frame as fast as a small one.  The list of
 driver samples (the timeline) is built by :meth:`LogSession.index` in the background, from a
 second reader, while the first frames are already shown.
@@ -24,10 +24,10 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from redrive.assembly.frames import FrameAssembler
 from redrive.errors import LogError, UnsupportedMessageError
 from redrive.gui.closedloop import Deviation, map_polylines, read_deviation
 from redrive.io import LogReader, open_log
-from redrive.io.frames import FrameAssembler
 from redrive.results import Run, RunManifest, RunStatus, open_run
 from redrive.types import ControlCommands, DetectedObject, Frame, PlannedPath, VehicleState
 
@@ -381,7 +381,7 @@ def series_from_log(
 ) -> Series:
     """Ego speed, yaw rate and IMU series of a log (small topics; read with their own reader);
     ``stop`` ends the reading early."""
-    from redrive.io.decoders import decode
+    from redrive.io.ros.decoders import decode
     from redrive.types import Imu
     from redrive.types.enums import SensorType
 

@@ -28,7 +28,7 @@ from PySide6 import QtCore, QtGui, QtWidgets
 
 from redrive.errors import RedriveError
 from redrive.io import TopicInfo as LogTopicInfo
-from redrive.io.decoders import decoder_for
+from redrive.io.ros.decoders import decoder_for
 from redrive.live.ros1 import UNKNOWN_TYPE, list_topics, master_alive
 from redrive.live.ros1 import TopicInfo as MasterTopicInfo
 from redrive.live.session import ROS_PYTHON

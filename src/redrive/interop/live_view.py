@@ -45,11 +45,11 @@ from redrive.interop.stream import (
     transforms_channel,
 )
 from redrive.io.base import LogMessage, TopicInfo
-from redrive.io.decoders import decode
-from redrive.io.decoders.base import Decoded
-from redrive.io.qos import offered_qos_profiles
-from redrive.io.ros_encode import encode_value
-from redrive.io.typestore import typestore_for
+from redrive.io.mcap.qos import offered_qos_profiles
+from redrive.io.ros.decoders import decode
+from redrive.io.ros.decoders.base import Decoded
+from redrive.io.ros.encode import encode_value
+from redrive.io.ros.typestore import typestore_for
 from redrive.results.records import FrameRecord
 
 __all__ = ["LiveView"]

@@ -37,8 +37,8 @@ from mcap.records import (
 )
 
 from redrive.errors import LogError
-from redrive.io.mcap_scan import MAGIC, Message, RecordError, chunk_head, read_chunk
-from redrive.io.mcap_stream import encode_chunk, record_bytes, summary_section, write_all
+from redrive.io.mcap.scan import MAGIC, Message, RecordError, chunk_head, read_chunk
+from redrive.io.mcap.stream import encode_chunk, record_bytes, summary_section, write_all
 from redrive.io.recognise import starts_with
 
 __all__ = ["MAGIC", "LogLayout", "SpliceWriter", "is_mcap_file", "read_layout"]

@@ -49,10 +49,10 @@ from redrive.interop.run_scene import (
 )
 from redrive.io import open_log
 from redrive.io.base import LogMessage, LogReader, TopicInfo
-from redrive.io.decoders import DecodedKind, decode, topic_kind
-from redrive.io.decoders.base import Decoded
-from redrive.io.qos import offered_qos_profiles
-from redrive.io.typestore import typestore_for
+from redrive.io.mcap.qos import offered_qos_profiles
+from redrive.io.ros.decoders import DecodedKind, decode, topic_kind
+from redrive.io.ros.decoders.base import Decoded
+from redrive.io.ros.typestore import typestore_for
 from redrive.results import Run, open_run
 from redrive.types import DetectedObject, Image, PointCloud, SensorType, Transform
 

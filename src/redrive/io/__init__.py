@@ -1,5 +1,9 @@
-"""Log I/O (layer L2): readers for ROS 1 bags, ROS 2 bags, MCAP, KITTI and nuScenes; decoders to the data
-model; the Sensor Dispatcher that assembles frames; the MCAP writer.
+"""Log I/O (layer L3), by format: ``mcap/`` (files, split sets, the writer), ``rosbag1/``,
+``rosbag2/``, ``datasets/`` (KITTI, nuScenes, mmdetection3d infos) and ``ros/`` (type store,
+encoding, decoders to the data model); here what they share: the reader interface, the registry
+that decides what a log is, damage reports, what a log holds beside its messages
+(:mod:`redrive.io.content`), ``convert`` and ``repair``.  Frames are assembled above, in
+:mod:`redrive.assembly`.
 
 >>> from redrive.io import open_log
 >>> with open_log("drive.bag") as log:                      # doctest: +SKIP

@@ -2,7 +2,7 @@
 
 A reader yields :class:`LogMessage` records in log-time order.  Messages from ROS logs carry their
 serialised bytes (``encoding`` ``ros1`` or ``cdr``) and are decoded on demand by
-:mod:`redrive.io.decoders`; readers of non-ROS layouts (KITTI) yield already-decoded payloads
+:mod:`redrive.io.ros.decoders`; readers of non-ROS layouts (KITTI) yield already-decoded payloads
 (``encoding == "native"``).
 """
 
@@ -72,7 +72,7 @@ class TopicInfo:
             none either (its messages pass through raw and cannot be deserialised).
         kind: for a ``native`` topic, how its values are used (its reader says; it has no ROS
             type a decoder could tell it from); None for message-typed topics, whose decoder
-            says (:func:`redrive.io.decoders.topic_kind` answers for both).
+            says (:func:`redrive.io.ros.decoders.topic_kind` answers for both).
         sensor_type: for a ``native`` topic of kind SENSOR, the sensor it feeds.
     """
 
@@ -167,13 +167,17 @@ class ReaderCapabilities:
     Attributes:
         message_typed: its messages are serialised ROS messages (``deserialize`` gives ROS
             message objects, topics have ROS types); False: it yields redrive data-model values
-            directly (``native`` messages holding a :class:`~redrive.io.decoders.Decoded`).
+            directly (``native`` messages holding a :class:`~redrive.io.ros.decoders.Decoded`).
         has_tf: it carries transforms (``/tf_static``, ``/tf`` or a calibration the reader turns
             into them): sensors can be placed on the vehicle.
         has_ground_truth: it carries ground-truth objects (labels, a simulator's objects).
         has_ego_pose: it carries the ego vehicle's motion (odometry, poses).
         calibration_per_frame: its sensor calibration may change from frame to frame (KITTI's
             object set: every frame its own calib file), so calibrations are looked up by stamp.
+        road_map: the reader can be asked for the log's road map (it has ``road_map()``, which
+            gives None when this log holds none): :func:`redrive.io.content.log_road_map`.
+        scenario: the reader can say what the log was synthesized from (``scenario()``):
+            :func:`redrive.io.content.log_scenario`.
     """
 
     message_typed: bool
@@ -181,6 +185,8 @@ class ReaderCapabilities:
     has_ground_truth: bool
     has_ego_pose: bool
     calibration_per_frame: bool = False
+    road_map: bool = False
+    scenario: bool = False
 
 
 @runtime_checkable

@@ -1,7 +1,7 @@
 """Convert any log redrive reads into MCAP (ROS 2 CDR) or a ROS 1 bag.
 
 The output format follows the suffix of ``out_path``: ``.mcap`` → MCAP with profile ``ros2``,
-CDR messages and ``ros2msg`` schemas (see :class:`~redrive.io.writer.McapWriter`); ``.bag`` → a
+CDR messages and ``ros2msg`` schemas (see :class:`~redrive.io.mcap.writer.McapWriter`); ``.bag`` → a
 ROS 1 bag written with ``rosbags.rosbag1.Writer``.
 
 Serialised ROS messages are **re-encoded, not decoded** to the data model, so no field is lost:
@@ -10,7 +10,7 @@ rosbags' ``cdr_to_ros1`` / ``ros1_to_cdr`` (which add or drop ROS 1 ``Header.seq
 are migrated field by field with rosbags' ``migrate_message``.  Message types keep the log's own
 definitions (only ``std_msgs/Header`` follows the output's ROS version), and ``tf/tfMessage``
 becomes ``tf2_msgs/msg/TFMessage``.  Native messages (KITTI) are serialised from their decoded
-values as standard messages (:mod:`redrive.io.ros_encode`).
+values as standard messages (:mod:`redrive.io.ros.encode`).
 
 Topics whose type has no definition are skipped (they are named in the stats); a message that
 does not deserialise is skipped and counted.  The output is written atomically.
@@ -36,11 +36,11 @@ from rosbags.typesys.store import Typestore
 
 from redrive.errors import LogError, RedriveError
 from redrive.io.base import LogMessage, LogReader
-from redrive.io.decoders.base import Decoded
+from redrive.io.mcap.writer import McapWriter
 from redrive.io.readers import open_log
-from redrive.io.ros_encode import encode_value
-from redrive.io.typestore import typestore_for
-from redrive.io.writer import McapWriter
+from redrive.io.ros.decoders.base import Decoded
+from redrive.io.ros.encode import encode_value
+from redrive.io.ros.typestore import typestore_for
 
 __all__ = ["ConvertStats", "Progress", "convert_log"]
 

@@ -8,38 +8,54 @@ A *reader format* is a reader class that declares, as class attributes and a cla
 - ``description``: what it reads, for listings and error messages;
 - ``recognises(path)``: whether ``path`` is a log of this format, from its content (magic bytes,
   layout), never from its file name;
-- a constructor ``(path, *, strict)`` that opens it (a :class:`~redrive.io.base.LogReader`).
+- a constructor ``(path, *, strict)`` that opens it (a :class:`~redrive.io.base.LogReader`);
+- optionally ``reads_a_set = True``: it reads several logs as one (split MCAP files), so a caller
+  looking for logs in a folder takes the files one by one (:func:`recognised_format`).
 
 An opened reader says what it can provide through ``capabilities`` (:class:`ReaderCapabilities`):
 callers (the frame assembler, the GUI, the engine) ask these, never the format name.  The
 formats redrive ships are tried first, in a fixed order; installed plugins of the
 ``redrive.readers`` entry-point group (loaded by :mod:`redrive.plugins`) after them, so a new
 format (closed-loop output, another dataset …) plugs in without touching :func:`open_log`.
+
+A reader not installed as a package is named in the environment variable ``REDRIVE_READERS``:
+comma-separated specs of the plugin loader (``path/to/toy.py:ToyReader``,
+``mypkg.readers:ToyReader``), tried after the entry points.  Every command that opens logs
+(``redrive info``, ``run``, ``batch`` and its worker processes, which inherit the variable)
+then reads that format::
+
+    REDRIVE_READERS=./toy_reader.py:ToyReader redrive batch drives/
 """
 
 from __future__ import annotations
 
 import functools
 import logging
+import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Protocol, runtime_checkable
 
-from redrive.errors import LogError
+from redrive.errors import LogError, PluginError
 from redrive.io.base import LogReader, ReaderCapabilities
-from redrive.plugins import READERS, installed_plugins
+from redrive.plugins import READERS, class_target, installed_plugins, load_plugin
 
 __all__ = [
+    "READERS_ENV",
     "ReaderCapabilities",
     "ReaderFormat",
     "detect_format",
     "open_log",
     "reader_format",
     "reader_formats",
+    "recognised_format",
     "reload_readers",
 ]
 
 logger = logging.getLogger(__name__)
+
+#: the environment variable naming reader plugins by spec (see the module docstring)
+READERS_ENV = "REDRIVE_READERS"
 
 
 @runtime_checkable
@@ -72,13 +88,13 @@ def _check_reader(obj: object) -> str | None:
 
 def _builtin() -> list[type[ReaderFormat]]:
     # imported here: each pulls in its own dependencies (rosbags, mcap, PIL)
-    from redrive.io.kitti import KittiReader
-    from redrive.io.mcapfile import McapFileReader
-    from redrive.io.mcapset import McapSetReader
-    from redrive.io.mmdet3d_info import Mmdet3dInfoReader
-    from redrive.io.nuscenes import NuScenesReader
-    from redrive.io.ros1bag import Ros1BagReader
-    from redrive.io.ros2bag import Ros2BagReader
+    from redrive.io.datasets.kitti import KittiReader
+    from redrive.io.datasets.mmdet3d_info import Mmdet3dInfoReader
+    from redrive.io.datasets.nuscenes import NuScenesReader
+    from redrive.io.mcap.fileset import McapSetReader
+    from redrive.io.mcap.reader import McapFileReader
+    from redrive.io.rosbag1.reader import Ros1BagReader
+    from redrive.io.rosbag2.reader import Ros2BagReader
 
     # a ROS 2 bag before MCAP: a bag directory's .mcap storage is read through its metadata.yaml;
     # a folder of .mcap files without one is a set of split files
@@ -95,17 +111,24 @@ def _builtin() -> list[type[ReaderFormat]]:
 
 @functools.cache
 def reader_formats() -> Sequence[type[ReaderFormat]]:
-    """The reader formats in the order they are tried: redrive's, then installed plugins."""
+    """The reader formats in the order they are tried: redrive's, then installed plugins, then
+    those :data:`READERS_ENV` names.
+
+    Raises:
+        PluginError: a spec in :data:`READERS_ENV` does not load (the message says which).
+    """
     out = _builtin()
     taken = {cls.format: cls for cls in out}
     registry = installed_plugins(READERS, _check_reader)
-    for name, cls in registry.items():
+    found = [(name, registry.target(name), cls) for name, cls in registry.items()]
+    found += [(spec, spec, cls) for spec, cls in _named_in_env()]
+    for name, target, cls in found:
         fmt = str(cls.format)
         if fmt in taken:
             logger.warning(
                 "reader plugin %s (%s) left out: format %r is already read by %s",
                 name,
-                registry.target(name),
+                target,
                 fmt,
                 taken[fmt].__qualname__,
             )
@@ -115,8 +138,23 @@ def reader_formats() -> Sequence[type[ReaderFormat]]:
     return tuple(out)
 
 
+def _named_in_env() -> list[tuple[str, type[ReaderFormat]]]:
+    specs = [s.strip() for s in os.environ.get(READERS_ENV, "").split(",") if s.strip()]
+    out = []
+    for spec in specs:
+        try:
+            cls = load_plugin(READERS, _check_reader, spec)
+        except PluginError as err:
+            msg = f"{READERS_ENV}: {err}"
+            raise PluginError(msg) from err
+        logger.debug("reader %s from %s=%s", class_target(cls), READERS_ENV, spec)
+        out.append((spec, cls))
+    return out
+
+
 def reload_readers() -> None:
-    """Read the ``redrive.readers`` entry points again at the next lookup."""
+    """Read the ``redrive.readers`` entry points (and :data:`READERS_ENV`) again at the next
+    lookup."""
     reader_formats.cache_clear()
 
 
@@ -135,14 +173,40 @@ def reader_format(name: str) -> type[ReaderFormat]:
 
 
 def _recognising(path: Path) -> type[ReaderFormat]:
+    cls = _first_recognising(path, sets=True)
+    if cls is None:
+        raise LogError(_not_a_log(path))
+    return cls
+
+
+def _first_recognising(path: Path, *, sets: bool) -> type[ReaderFormat] | None:
     for cls in reader_formats():
+        if not sets and getattr(cls, "reads_a_set", False):
+            continue
         try:
             if cls.recognises(path):
                 return cls
         except OSError as err:
             msg = f"{path}: cannot read ({err.strerror or err})"
             raise LogError(msg) from err
-    raise LogError(_not_a_log(path))
+    return None
+
+
+def recognised_format(path: Path, *, sets: bool = True) -> str | None:
+    """The format name of the first reader (redrive's, then plugins') that recognises ``path``,
+    or None when none does: *the* test of "is this a log", for every caller that looks for logs
+    (``redrive batch DIR``, globs) rather than guessing from names.
+
+    Args:
+        sets: when False, readers that read several logs as one (a class attribute
+            ``reads_a_set = True``: a folder of split MCAP files) are left out, for callers that
+            take each of those files as a log of its own.
+
+    Raises:
+        LogError: ``path`` cannot be read.
+    """
+    cls = _first_recognising(Path(path), sets=sets)
+    return None if cls is None else cls.format
 
 
 def _not_a_log(path: Path) -> str:
@@ -170,7 +234,7 @@ def detect_format(path: Path) -> str:
     """
     path = Path(path)
     if not path.exists():
-        from redrive.io.mcapset import expand_log_set, is_glob
+        from redrive.io.mcap.fileset import expand_log_set, is_glob
 
         if is_glob(path) and expand_log_set(path):
             return _recognising(path).format

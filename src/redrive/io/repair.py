@@ -4,7 +4,7 @@ In the spirit of ``mcap recover`` and ``rosbag reindex``: the log is read past i
 (``strict=False``) and every intact message is written, **as it is** — its bytes, channel,
 schema and encodings are kept (no re-encoding, unlike :func:`~redrive.io.convert.convert_log`):
 
-- an MCAP is copied record by record from a forward scan (:mod:`redrive.io.mcap_scan`):
+- an MCAP is copied record by record from a forward scan (:mod:`redrive.io.mcap.scan`):
   schemas, channels with their metadata, messages with their sequence and publish time, metadata
   and attachment records;
 - a ROS 1 bag becomes an MCAP of profile ``ros1`` (``ros1msg`` schemas from the bag's connection
@@ -31,17 +31,17 @@ from mcap.writer import Writer as McapLibWriter
 from redrive.errors import LogError
 from redrive.io.base import LogReader
 from redrive.io.damage import LogDamage, damage_report
-from redrive.io.mcap_scan import (
+from redrive.io.mcap.reader import McapFileReader
+from redrive.io.mcap.scan import (
     McapAttachment,
     McapChannel,
     McapMetadata,
     McapSchema,
     Message,
 )
-from redrive.io.mcapfile import McapFileReader
 from redrive.io.readers import open_log
-from redrive.io.ros1bag import Ros1BagReader
-from redrive.io.ros2bag import Ros2BagReader
+from redrive.io.rosbag1.reader import Ros1BagReader
+from redrive.io.rosbag2.reader import Ros2BagReader
 
 __all__ = ["RepairStats", "repair_log"]
 

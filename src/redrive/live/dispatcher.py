@@ -1,7 +1,7 @@
 """The Sensor Dispatcher for live data: shared-memory streams read as a log.
 
 :class:`LiveLog` implements :class:`redrive.io.LogReader` over the streams of a live session, so
-the replay path's :class:`~redrive.io.frames.FrameAssembler` (sensor map inference, nearest-stamp
+the replay path's :class:`~redrive.assembly.frames.FrameAssembler` (sensor map inference, nearest-stamp
 synchronisation, ego-state interpolation) assembles live frames unchanged. ``ros1`` streams yield
 the scraper's serialised bytes, decoded here with redrive's decoders and a ROS 1 Noetic typestore
 (``cdr`` streams: the ROS 2 scraper's CDR bytes and a ROS 2 Humble one);
@@ -34,11 +34,11 @@ from types import MappingProxyType, TracebackType
 from typing import Any
 
 from redrive.errors import ConfigError, TransportError
-from redrive.io._deserialize import Deserializer
 from redrive.io.base import LogMessage, ReaderCapabilities, TopicInfo
-from redrive.io.decoders import capabilities_of, decoder_for
-from redrive.io.decoders.base import Decoded, DecodedKind
-from redrive.io.typestore import typestore_for
+from redrive.io.ros.decoders import capabilities_of, decoder_for
+from redrive.io.ros.decoders.base import Decoded, DecodedKind
+from redrive.io.ros.deserialize import Deserializer
+from redrive.io.ros.typestore import typestore_for
 from redrive.live.streams import StreamSpec
 from redrive.transport import Policy, ProducerGoneError, Reader
 from redrive.transport.codec import KIND_CDR, KIND_ROS1, KIND_SENSOR, decode_sample

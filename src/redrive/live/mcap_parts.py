@@ -14,9 +14,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from redrive.errors import DiskFullError, LogError, is_no_space
-from redrive.io.mcap_part import McapPart
-from redrive.io.writer import COMPRESSION as _COMPRESSION
-from redrive.io.writer import Compression, McapWriter
+from redrive.io.mcap.part import McapPart
+from redrive.io.mcap.writer import COMPRESSION as _COMPRESSION
+from redrive.io.mcap.writer import Compression, McapWriter
 
 __all__ = ["Ros1Schema", "SplitMcapWriter", "split_name"]
 
@@ -142,7 +142,7 @@ class SplitMcapWriter(_SplitParts):
     @property
     def chunks(self) -> tuple[int, int]:
         """Chunks written so far, every file: (all, those written uncompressed because the
-        compressor was behind — see :class:`~redrive.io.mcap_stream.McapStream`)."""
+        compressor was behind — see :class:`~redrive.io.mcap.stream.McapStream`)."""
         part = self._part
         current = None if part is None else (part.stream.chunks, part.stream.uncompressed_chunks)
         return self._chunks_with(current)
@@ -259,7 +259,7 @@ class SplitMcapWriter(_SplitParts):
 class SplitNativeWriter(_SplitParts):
     """A ROS 2 recording (CDR as it came off the wire, or data-model values serialised as ROS 2
     messages) to ``path`` — or, with a split limit, to numbered files as
-    :class:`SplitMcapWriter` writes ROS 1 ones: each a complete :class:`~redrive.io.writer.McapWriter`
+    :class:`SplitMcapWriter` writes ROS 1 ones: each a complete :class:`~redrive.io.mcap.writer.McapWriter`
     file, every channel (with the QoS its publishers offer) declared again in each.
 
     Args:
@@ -327,7 +327,7 @@ class SplitNativeWriter(_SplitParts):
     def write_raw(
         self, topic: str, msgtype: str, log_time_ns: int, cdr_bytes: bytes | memoryview
     ) -> None:
-        """One ROS 2 CDR message, as :meth:`McapWriter.write_raw <redrive.io.writer.McapWriter.write_raw>`.
+        """One ROS 2 CDR message, as :meth:`McapWriter.write_raw <redrive.io.mcap.writer.McapWriter.write_raw>`.
 
         Raises:
             DiskFullError: as :meth:`SplitMcapWriter.write`.
@@ -346,7 +346,7 @@ class SplitNativeWriter(_SplitParts):
         frame_id: str | None = None,
         stamp_ns: int | None = None,
     ) -> None:
-        """A data-model value, as :meth:`McapWriter.write <redrive.io.writer.McapWriter.write>`."""
+        """A data-model value, as :meth:`McapWriter.write <redrive.io.mcap.writer.McapWriter.write>`."""
         try:
             self._writer().write(topic, log_time_ns, value, frame_id=frame_id, stamp_ns=stamp_ns)
         except DiskFullError as err:

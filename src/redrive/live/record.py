@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from redrive.errors import ConfigError
-from redrive.io.writer import Compression
+from redrive.io.mcap.writer import Compression
 from redrive.live.recorder import DataLogger
 from redrive.live.recording import Recording, TopicSelection, TopicStatus
 from redrive.live.run import LiveSource

@@ -10,7 +10,7 @@ it has not recorded) in its own thread, so the algorithm pipeline never waits fo
   too), else ROS Noetic's. ``redrive info``/``open_log``, rosbags, Foxglove and Lichtblick read
   it. It may be split into numbered files (:mod:`redrive.live.mcap_parts`).
 * Otherwise (ROS 2 topics, typed samples from the replay or synthetic sources, possibly mixed
-  with ROS 1 topics) it is redrive's native format (:class:`redrive.io.writer.McapWriter`: ROS 2
+  with ROS 1 topics) it is redrive's native format (:class:`redrive.io.mcap.writer.McapWriter`: ROS 2
   CDR of standard types); ROS 2 messages are written byte for byte as DDS delivered them, with
   the QoS their publishers offer as ``offered_qos_profiles``; ROS 1 messages are decoded and
   re-encoded as their standard type. It may be split too, each file declaring every channel.
@@ -33,9 +33,9 @@ from pathlib import Path
 
 from redrive.errors import DiskFullError, LogError, TransportError, UnsupportedMessageError
 from redrive.io.base import LogMessage
-from redrive.io.decoders import decode
-from redrive.io.typestore import typestore_for
-from redrive.io.writer import Compression
+from redrive.io.mcap.writer import Compression
+from redrive.io.ros.decoders import decode
+from redrive.io.ros.typestore import typestore_for
 from redrive.live.mcap_parts import Ros1Schema, SplitMcapWriter, SplitNativeWriter
 from redrive.live.scraper_state import Ros1Definition
 from redrive.live.streams import StreamSpec, ros1_type

@@ -164,7 +164,7 @@ class Recording:
                 self._refused.add(topic)
                 self.say(
                     f"not recording {topic}: redrive has no definition of {offered.msgtype}, and "
-                    "ROS 2 publishers send none (ROS 1 ones do); add its .msg to redrive/io/msgs"
+                    "ROS 2 publishers send none (ROS 1 ones do); add its .msg to redrive/io/ros/msgs"
                 )
                 continue
             qos = QosProfile(

@@ -4,7 +4,7 @@ The ROS master answers every call with ``[code, status_message, value]``; ``code
 :func:`list_topics` asks it ``getTopicTypes`` (topic → ``pkg/Type``) and ``getSystemState``
 (topic → publishing and subscribing nodes), and says for each topic which redrive decoder — and so
 which sensor type — would handle its messages, from the same decoder registry the log readers use
-(:func:`redrive.io.decoders.active_decoders`).
+(:func:`redrive.io.ros.decoders.active_decoders`).
 
 >>> from redrive.live.ros1 import list_topics, master_alive
 >>> master_alive("http://127.0.0.1:11311")                      # doctest: +SKIP
@@ -27,7 +27,7 @@ from urllib.parse import urlsplit
 from xml.parsers.expat import ExpatError
 
 from redrive.errors import ConfigError, TransportError
-from redrive.io.decoders import DecodedKind, decoder_for
+from redrive.io.ros.decoders import DecodedKind, decoder_for
 from redrive.types import SensorType
 
 __all__ = [

@@ -29,8 +29,8 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from redrive.errors import ConfigError, TransportError, UnsupportedMessageError
-from redrive.io.ros_encode import encode_value
-from redrive.io.typestore import typestore_for
+from redrive.io.ros.encode import encode_value
+from redrive.io.ros.typestore import typestore_for
 from redrive.live.ros2_dds import (
     DEFAULT,
     Publication,

@@ -258,7 +258,7 @@ def _idl_struct(store: Typestore, msgtype: str) -> Any:
     if msgtype not in store.fielddefs:
         msg = (
             f"no definition of {msgtype} is known; redrive speaks the ROS 2 Humble types and "
-            "the ones it ships (redrive/io/msgs)"
+            "the ones it ships (redrive/io/ros/msgs)"
         )
         raise ConfigError(msg)
     fields: dict[str, Any] = {}

@@ -78,7 +78,7 @@ class _Scraper:
     """The readers, their streams and counts of one scraper process."""
 
     def __init__(self, dp: Any, waitset: Any, slots: int, timeout_s: float) -> None:
-        from redrive.io.typestore import typestore_for
+        from redrive.io.ros.typestore import typestore_for
 
         self.dp, self.waitset, self.slots, self.timeout_s = dp, waitset, slots, timeout_s
         self.store = typestore_for(2)[0]

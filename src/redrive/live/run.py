@@ -30,7 +30,7 @@ from typing import Any, Literal, Protocol
 from redrive.config import PipelineConfig
 from redrive.engine import RealtimeMode, RunRequest, run_reader
 from redrive.engine.stats import RunReport
-from redrive.io.writer import Compression
+from redrive.io.mcap.writer import Compression
 from redrive.live.dispatcher import LiveLog
 from redrive.live.recorder import DataLogger
 from redrive.live.ros1 import DEFAULT_MASTER_URI

@@ -43,7 +43,6 @@ from redrive.types import Role, SensorType, to_jsonable
 
 __all__ = [
     "MANIFEST_NAME",
-    "SCENARIO_METADATA",
     "SCHEMA_VERSION",
     "AlgorithmEntry",
     "HostInfo",
@@ -65,9 +64,6 @@ __all__ = [
 ]
 
 MANIFEST_NAME = "manifest.json"
-#: the MCAP metadata record ``redrive synth`` writes the scenario in (string pairs ``name``,
-#: ``seed``, ``duration_s``); a replay of the log records it as the manifest's ``log.scenario``.
-SCENARIO_METADATA = "redrive.scenario"
 #: version of the manifest format; bumped on any incompatible change.
 SCHEMA_VERSION = 2
 
@@ -138,7 +134,8 @@ class SourceLog:
     a live session (``format`` ``live``, no hash; ``source``, ``topics`` and ``record`` set).
 
     ``scenario``: what a ``redrive synth`` log was synthesized from (``name``, ``seed``,
-    ``duration_s``; its MCAP metadata record :data:`SCENARIO_METADATA`), empty for other logs —
+    ``duration_s``; its reader's ``scenario`` capability, :mod:`redrive.io.content`), empty for
+    other logs —
     ``redrive compare`` pairs an open-loop run of the log with a closed-loop run of the scenario.
     """
 

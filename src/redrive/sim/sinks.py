@@ -11,8 +11,8 @@ import numpy.typing as npt
 from rosbags.typesys.store import Typestore
 
 from redrive.io.base import LogMessage
-from redrive.io.decoders import decode
-from redrive.io.typestore import typestore_for
+from redrive.io.ros.decoders import decode
+from redrive.io.ros.typestore import typestore_for
 from redrive.sim.scene import Scene
 from redrive.types import VehicleState
 
@@ -21,7 +21,7 @@ __all__ = ["MessageSink", "SampleSink", "SensorWorld"]
 
 class MessageSink(Protocol):
     """Where a :class:`SensorSimulation` sends its messages: a
-    :class:`~redrive.io.writer.McapWriter` (:func:`synthesize`), or a live source's buffer."""
+    :class:`~redrive.io.mcap.writer.McapWriter` (:func:`synthesize`), or a live source's buffer."""
 
     @property
     def typestore(self) -> Typestore:
@@ -37,7 +37,7 @@ class MessageSink(Protocol):
         frame_id: str | None = None,
         stamp_ns: int | None = None,
     ) -> None:
-        """A data-model value, as :meth:`McapWriter.write <redrive.io.writer.McapWriter.write>`."""
+        """A data-model value, as :meth:`McapWriter.write <redrive.io.mcap.writer.McapWriter.write>`."""
         ...
 
     def write_raw(

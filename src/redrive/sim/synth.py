@@ -47,7 +47,6 @@ from __future__ import annotations
 
 import dataclasses
 import heapq
-import json
 import math
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -63,9 +62,14 @@ from redrive.geometry import invert
 from redrive.geometry.se3 import (
     quaternion_from_rotation_matrix,
 )
-from redrive.io.writer import McapWriter
-from redrive.results.manifest import SCENARIO_METADATA
-from redrive.results.roadmap import MAP_METADATA, road_map_to_json
+from redrive.io.content import LogScenario
+from redrive.io.mcap.metadata import (
+    MAP_METADATA,
+    SCENARIO_METADATA,
+    road_map_record,
+    scenario_record,
+)
+from redrive.io.mcap.writer import McapWriter
 from redrive.sim.camera import CameraFrame, CameraModel
 from redrive.sim.ground_truth import ground_truth_objects
 from redrive.sim.inertial import GnssModel, ImuModel, OdometryModel
@@ -87,7 +91,6 @@ __all__ = [
     "SynthSummary",
     "camera_info_topic",
     "ground_truth_objects",
-    "scenario_metadata",
     "sensor_topic",
     "synthesize",
 ]
@@ -482,17 +485,6 @@ class SensorSimulation:
         return recorder.last_hits, recorder.camera_pixels()
 
 
-def scenario_metadata(scenario: Scenario) -> dict[str, str]:
-    """The MCAP metadata record (:data:`~redrive.results.manifest.SCENARIO_METADATA`) of a log
-    synthesized from ``scenario``: its ``name``, ``seed`` and ``duration_s``, as text (``repr``
-    of the float, so it reads back equal)."""
-    return {
-        "name": scenario.name,
-        "seed": str(scenario.seed),
-        "duration_s": repr(float(scenario.duration_s)),
-    }
-
-
 def synthesize(
     scenario: Scenario,
     output: str | Path,
@@ -518,11 +510,13 @@ def synthesize(
     path = Path(output)
     with McapWriter(path) as writer:
         # the road map travels with the log: a replay stores it in the run (the map metrics)
-        road = json.dumps(road_map_to_json(scenario_road_map(scenario)), separators=(",", ":"))
-        writer.add_metadata(MAP_METADATA, {"road_map": road})
+        writer.add_metadata(MAP_METADATA, road_map_record(scenario_road_map(scenario)))
         # and so does what it was made from: `redrive compare` pairs a replay of the log with a
         # closed-loop run of the same scenario, seed and duration
-        writer.add_metadata(SCENARIO_METADATA, scenario_metadata(scenario))
+        made_from = LogScenario(
+            name=scenario.name, seed=scenario.seed, duration_s=scenario.duration_s
+        )
+        writer.add_metadata(SCENARIO_METADATA, scenario_record(made_from))
         total_s = scenario.duration_s
         for stamp_ns in sim.run(writer):
             if progress is not None:

@@ -9,11 +9,11 @@ from collections.abc import Callable, Collection, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
+from redrive.assembly.sensor_map import infer_sensor_map, sensor_id_for
 from redrive.errors import ConfigError, TransportError, UnsupportedMessageError
 from redrive.io import LogMessage, LogReader, open_log
-from redrive.io.decoders import decode, topic_kind
-from redrive.io.decoders.base import Decoded, DecodedKind
-from redrive.io.sensor_map import infer_sensor_map, sensor_id_for
+from redrive.io.ros.decoders import decode, topic_kind
+from redrive.io.ros.decoders.base import Decoded, DecodedKind
 from redrive.live.sources._common import (
     _PAGE,
     _SENSOR_PAYLOAD,
@@ -258,7 +258,7 @@ def run_replay_source(
     A message is due at its log time (recorder time) since the log's start divided by ``rate``
     (``None``: as fast as possible); it is decoded ahead and published at that moment, with its
     header stamp as the sample's stamp, its frame, the sensor id the sensor map infers
-    (:func:`~redrive.io.sensor_map.infer_sensor_map`, as the replay frames use) and the sensor
+    (:func:`~redrive.assembly.sensor_map.infer_sensor_map`, as the replay frames use) and the sensor
     location from the log's ``/tf_static`` (zeros without one).  Undecodable messages are
     skipped and counted.  With ``loop`` the log plays again and again until ``stop``, stamps
     shifted each pass by the log's span plus :data:`LOOP_GAP_NS` so time keeps increasing.

@@ -10,7 +10,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
-from redrive.io.sensor_map import sensor_id_for
+from redrive.assembly.sensor_map import sensor_id_for
 from redrive.live.sources._common import (
     _PAGE,
     _POLL_S,

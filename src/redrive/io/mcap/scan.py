@@ -1,0 +1,560 @@
+"""MCAP records read by hand, so that a damaged file yields everything that is still intact.
+
+The ``mcap`` library stops at the first bad byte (``struct.error``, ``ZstdError``, ``EndOfFile``)
+and cannot go on.  :class:`McapScan` walks the records of the file from the start instead
+(what ``mcap recover`` does): a chunk that does not decompress, fails its CRC or holds a
+malformed record is skipped — its byte range and, from the message index records that follow
+it, the number of messages it held are reported as a :class:`~redrive.io.damage.LogDamage` —
+and reading resumes at the next record that parses (a *resync*: the next chunk of a chunked
+file, the next plausible record of an unchunked one).  :func:`read_chunk` serves the indexed
+reader in :mod:`redrive.io.mcap.reader` with the same checks.
+
+The file is read through a read-only memory map: an uncompressed chunk's messages are views of
+it, with no copy.
+"""
+
+from __future__ import annotations
+
+import re
+import struct
+import zlib
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field, replace
+
+import lz4.frame
+import zstandard
+
+from redrive.io.damage import LogDamage
+
+__all__ = [
+    "MAGIC",
+    "ChunkHead",
+    "McapAttachment",
+    "McapChannel",
+    "McapMetadata",
+    "McapScan",
+    "McapSchema",
+    "Message",
+    "RecordError",
+    "ScanEvent",
+    "chunk_head",
+    "message_index_count",
+    "read_chunk",
+    "summary_crc_ok",
+]
+
+MAGIC = b"\x89MCAP0\r\n"
+
+OP_HEADER = 0x01
+OP_FOOTER = 0x02
+OP_SCHEMA = 0x03
+OP_CHANNEL = 0x04
+OP_MESSAGE = 0x05
+OP_CHUNK = 0x06
+OP_MESSAGE_INDEX = 0x07
+OP_ATTACHMENT = 0x09
+OP_METADATA = 0x0C
+OP_DATA_END = 0x0F
+
+_OPLEN = struct.Struct("<BQ")
+_U16 = struct.Struct("<H")
+_U32 = struct.Struct("<I")
+_U64 = struct.Struct("<Q")
+_MESSAGE = struct.Struct("<HIQQ")
+_CHUNK = struct.Struct("<QQQI")
+_CHANNEL = struct.Struct("<HH")
+_COMPRESSIONS = ("", "zstd", "lz4")
+_KINDS = {
+    OP_HEADER: "a header",
+    OP_SCHEMA: "a schema",
+    OP_CHANNEL: "a channel",
+    OP_MESSAGE: "a message",
+    OP_CHUNK: "a chunk",
+    OP_MESSAGE_INDEX: "a message index",
+    OP_METADATA: "a metadata",
+    OP_ATTACHMENT: "an attachment",
+}
+_ANY_OP = re.compile(rb"[\x01-\x0f]")
+_CHUNK_OP = re.compile(rb"[\x06\x0f]")
+#: A chunk claiming more than this uncompressed is taken for damage (the writers use ≤ 64 MiB).
+_MAX_CHUNK = 1 << 31
+
+
+class RecordError(Exception):
+    """Internal: the bytes at a position are not the record they should be (never escapes a
+    reader: readers turn it into a LogDamage or a LogDamagedError)."""
+
+
+@dataclass(frozen=True, slots=True)
+class McapSchema:
+    id: int
+    name: str
+    encoding: str
+    data: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class McapChannel:
+    id: int
+    schema_id: int
+    topic: str
+    message_encoding: str
+    metadata: Mapping[str, str] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, slots=True)
+class McapMetadata:
+    name: str
+    metadata: Mapping[str, str]
+
+
+@dataclass(frozen=True, slots=True)
+class McapAttachment:
+    log_time: int
+    create_time: int
+    name: str
+    media_type: str
+    data: bytes
+
+
+#: A message is (channel id, sequence, log time ns, publish time ns, data).
+Message = tuple[int, int, int, int, memoryview]
+#: What :meth:`McapScan.events` yields: ("message", Message), ("schema", McapSchema),
+#: ("channel", McapChannel), ("metadata", McapMetadata), ("attachment", McapAttachment) or
+#: ("damage", LogDamage).
+ScanEvent = tuple[str, object]
+
+
+def _string(buf: memoryview, pos: int, end: int) -> tuple[str, int]:
+    if pos + 4 > end:
+        raise RecordError("a string length runs past the record")
+    (n,) = _U32.unpack_from(buf, pos)
+    pos += 4
+    if pos + n > end:
+        raise RecordError("a string runs past the record")
+    try:
+        return str(buf[pos : pos + n], "utf-8"), pos + n
+    except UnicodeDecodeError as err:
+        raise RecordError("a string is not UTF-8") from err
+
+
+def _string_map(buf: memoryview, pos: int, end: int) -> tuple[dict[str, str], int]:
+    if pos + 4 > end:
+        raise RecordError("a map length runs past the record")
+    (n,) = _U32.unpack_from(buf, pos)
+    pos += 4
+    stop = pos + n
+    if stop > end:
+        raise RecordError("a map runs past the record")
+    out: dict[str, str] = {}
+    while pos < stop:
+        key, pos = _string(buf, pos, stop)
+        out[key], pos = _string(buf, pos, stop)
+    return out, stop
+
+
+def _schema(buf: memoryview, pos: int, end: int) -> McapSchema:
+    if pos + 2 > end:
+        raise RecordError("a schema record is too short")
+    (sid,) = _U16.unpack_from(buf, pos)
+    name, pos = _string(buf, pos + 2, end)
+    encoding, pos = _string(buf, pos, end)
+    if pos + 4 > end:
+        raise RecordError("a schema's data length runs past the record")
+    (n,) = _U32.unpack_from(buf, pos)
+    if pos + 4 + n > end:
+        raise RecordError("a schema's data runs past the record")
+    return McapSchema(sid, name, encoding, bytes(buf[pos + 4 : pos + 4 + n]))
+
+
+def _channel(buf: memoryview, pos: int, end: int) -> McapChannel:
+    if pos + 4 > end:
+        raise RecordError("a channel record is too short")
+    cid, sid = _CHANNEL.unpack_from(buf, pos)
+    topic, pos = _string(buf, pos + 4, end)
+    encoding, pos = _string(buf, pos, end)
+    meta, pos = _string_map(buf, pos, end)
+    return McapChannel(cid, sid, topic, encoding, meta)
+
+
+@dataclass(frozen=True, slots=True)
+class ChunkHead:
+    """A chunk record's fields; ``data_start``/``data_stop`` bound its compressed records."""
+
+    pos: int
+    stop: int
+    start_time: int
+    end_time: int
+    uncompressed_size: int
+    crc: int
+    compression: str
+    data_start: int
+    data_stop: int
+
+
+def chunk_head(buf: memoryview, pos: int, size: int) -> ChunkHead:
+    """The chunk record at ``pos`` (its opcode byte), checked for consistency.
+
+    Raises:
+        RecordError: it is not a whole, well-formed chunk record.
+    """
+    if pos + 9 + 40 > size:
+        raise RecordError("the file ends inside a chunk record")
+    op, length = _OPLEN.unpack_from(buf, pos)
+    if op != OP_CHUNK:
+        raise RecordError(f"expected a chunk record, found opcode {op:#04x}")
+    stop = pos + 9 + length
+    if stop > size:
+        raise RecordError(f"a chunk record of {length} bytes runs past the end of the file")
+    start_time, end_time, usize, crc = _CHUNK.unpack_from(buf, pos + 9)
+    compression, at = _string(buf, pos + 9 + _CHUNK.size, stop)
+    if compression not in _COMPRESSIONS or usize > _MAX_CHUNK:
+        raise RecordError(f"a chunk record with compression {compression!r} of {usize} bytes")
+    if at + 8 > stop:
+        raise RecordError("a chunk's records length runs past the record")
+    (n,) = _U64.unpack_from(buf, at)
+    if at + 8 + n != stop:
+        raise RecordError("a chunk's records length does not match the record length")
+    return ChunkHead(pos, stop, start_time, end_time, usize, crc, compression, at + 8, stop)
+
+
+def read_chunk(buf: memoryview, head: ChunkHead) -> tuple[list[Message], list[object], str | None]:
+    """The messages and schema/channel records of a chunk, and why it stopped early (None when
+    the whole chunk was read).
+
+    A chunk that does not decompress or fails its CRC yields nothing (the reason says why); one
+    whose CRC is not recorded and that holds a malformed record yields the records before it.
+    """
+    raw = buf[head.data_start : head.data_stop]
+    try:
+        if head.compression == "zstd":
+            data: bytes | memoryview = zstandard.ZstdDecompressor().decompress(
+                raw, max_output_size=head.uncompressed_size
+            )
+        elif head.compression == "lz4":
+            data = lz4.frame.decompress(raw)
+        else:
+            data = raw
+    except (zstandard.ZstdError, RuntimeError, ValueError, OSError, EOFError, MemoryError) as err:
+        return [], [], f"the {head.compression} chunk does not decompress ({err})"
+    if len(data) != head.uncompressed_size:
+        return (
+            [],
+            [],
+            (
+                f"the chunk decompresses to {len(data)} bytes, not the {head.uncompressed_size} "
+                "it records"
+            ),
+        )
+    if head.crc != 0 and zlib.crc32(data) != head.crc:
+        return [], [], "the chunk fails its CRC check (its bytes changed)"
+    messages, others, pos, why = _chunk_records(memoryview(data))
+    if why is not None:
+        return messages, others, f"a record at offset {pos} of the chunk is malformed ({why})"
+    return messages, others, None
+
+
+def _chunk_records(
+    view: memoryview,
+) -> tuple[list[Message], list[object], int, str | None]:
+    """The records of a chunk's decompressed bytes: messages, schemas/channels, the offset
+    reached, and why it stopped early (None when every byte was read)."""
+    messages: list[Message] = []
+    others: list[object] = []
+    pos, end = 0, len(view)
+    unpack_head, unpack_msg = _OPLEN.unpack_from, _MESSAGE.unpack_from
+    try:
+        while pos < end:
+            if pos + 9 > end:
+                raise RecordError("a record header is cut off")
+            op, length = unpack_head(view, pos)
+            body, stop = pos + 9, pos + 9 + length
+            if stop > end:
+                raise RecordError(f"a record of {length} bytes runs past the chunk")
+            if op == OP_MESSAGE:
+                if length < _MESSAGE.size:
+                    raise RecordError("a message record is too short")
+                cid, seq, log_time, pub_time = unpack_msg(view, body)
+                messages.append((cid, seq, log_time, pub_time, view[body + _MESSAGE.size : stop]))
+            elif op == OP_SCHEMA:
+                others.append(_schema(view, body, stop))
+            elif op == OP_CHANNEL:
+                others.append(_channel(view, body, stop))
+            pos = stop
+    except RecordError as err:
+        return messages, others, pos, str(err)
+    return messages, others, pos, None
+
+
+def salvage_cut_chunk(buf: memoryview, pos: int) -> tuple[list[Message], list[object]]:
+    """The whole records at the start of a chunk record at ``pos`` that the end of the file cuts
+    off: what a recorder killed in the middle of writing a chunk left of it.
+
+    The chunk's bytes up to the end of the file are decompressed as a stream (zstd and lz4
+    frames give what their complete blocks hold; an uncompressed chunk is read as it is), and the
+    records that are whole in them are read; the cut record is dropped. The chunk's CRC covers
+    the whole chunk, so it cannot be checked: the records' own framing is what is trusted.
+    Nothing when the chunk's header itself is cut, or its compression is unknown.
+    """
+    size = len(buf)
+    head_end = pos + 9 + _CHUNK.size
+    if head_end + 4 > size:
+        return [], []
+    usize = _CHUNK.unpack_from(buf, pos + 9)[2]
+    try:
+        compression, at = _string(buf, head_end, size)
+    except RecordError:
+        return [], []
+    if compression not in _COMPRESSIONS or usize > _MAX_CHUNK or at + 8 > size:
+        return [], []
+    raw = buf[at + 8 : size]
+    try:
+        if compression == "zstd":
+            data: bytes | memoryview = (
+                zstandard.ZstdDecompressor().decompressobj().decompress(bytes(raw))
+            )
+        elif compression == "lz4":
+            data = lz4.frame.LZ4FrameDecompressor().decompress(bytes(raw))
+        else:
+            data = raw
+    except (zstandard.ZstdError, RuntimeError, ValueError, OSError, EOFError, MemoryError):
+        return [], []
+    messages, others, _pos, _why = _chunk_records(memoryview(data)[:usize])
+    return messages, others
+
+
+def summary_crc_ok(buf: memoryview) -> bool:
+    """Whether the summary section matches the CRC its footer records (True when it records
+    none, or the file has no footer to check against)."""
+    size = len(buf)
+    footer = size - len(MAGIC) - 9 - 20
+    if footer < len(MAGIC) or bytes(buf[size - len(MAGIC) :]) != MAGIC:
+        return True
+    op, length = _OPLEN.unpack_from(buf, footer)
+    if op != OP_FOOTER or length != 20:
+        return True
+    summary_start, _, crc = struct.unpack_from("<QQI", buf, footer + 9)
+    if crc == 0:
+        return True
+    start = summary_start if 0 < summary_start <= footer else footer
+    return bool(zlib.crc32(buf[start : size - len(MAGIC) - 4]) == crc)
+
+
+def message_index_count(buf: memoryview, pos: int, size: int) -> int | None:
+    """How many messages the message index record at ``pos`` lists (None if it is not one)."""
+    if pos + 9 + 6 > size:
+        return None
+    op, length = _OPLEN.unpack_from(buf, pos)
+    if op != OP_MESSAGE_INDEX or pos + 9 + length > size:
+        return None
+    (n,) = _U32.unpack_from(buf, pos + 9 + 2)
+    if n % 16 or 6 + n != length:
+        return None
+    return int(n) // 16
+
+
+class McapScan:
+    """One forward pass over the records of an MCAP file in ``buf`` (see the module text)."""
+
+    def __init__(self, buf: memoryview) -> None:
+        self.buf = buf
+        self.size = len(buf)
+        self.channel_ids: set[int] = set()
+        self.chunked = False
+
+    def events(self, *, counts_only: bool = False) -> Iterator[ScanEvent]:
+        """Every intact record's content and every damage, in file order.
+
+        A whole chunk record is announced by ("chunk", :class:`ChunkHead`) before what it holds.
+
+        ``counts_only``: a chunk whose message index records name only channels already seen is
+        not decompressed; ("counts", (channel id → messages, first time, last time)) from its
+        index and header stands for its messages (a quick pass to open a file without a
+        summary; damage inside such a chunk is found when its messages are read).
+        """
+        buf, size = self.buf, self.size
+        pos = len(MAGIC)
+        data_done = False  # past the data section: damage there loses no message
+        # a damaged chunk whose message index records follow: (damage, messages it yielded,
+        # messages its index lists)
+        lost: tuple[LogDamage, int, int | None] | None = None
+        while pos < size:
+            if lost is not None and (n := message_index_count(buf, pos, size)) is not None:
+                lost = (lost[0], lost[1], (lost[2] or 0) + n)
+                pos += 9 + _OPLEN.unpack_from(buf, pos)[1]
+                continue
+            if lost is not None:
+                yield "damage", _counted(*lost)
+                lost = None
+            try:
+                if pos + 9 > size:
+                    raise RecordError("the file ends inside a record header")
+                op, length = _OPLEN.unpack_from(buf, pos)
+                stop = pos + 9 + length
+                if (stop > size or length > size) and op == OP_CHUNK and not data_done:
+                    messages, others = salvage_cut_chunk(buf, pos)
+                    for record in others:
+                        yield self._record(record)
+                    for message in messages:
+                        yield "message", message
+                    yield (
+                        "damage",
+                        LogDamage(
+                            what=(
+                                f"the file is cut off inside a chunk record of {length} bytes at "
+                                f"byte {size}: {len(messages)} whole messages of its start were "
+                                "read, the rest of it is lost"
+                            ),
+                            start_byte=pos,
+                            stop_byte=size,
+                        ),
+                    )
+                    return
+                if stop > size or length > size:
+                    kind = _KINDS.get(op, f"an opcode-{op:#04x}")
+                    raise RecordError(
+                        f"the file is cut off (or a length is damaged): {kind} record of {length} "
+                        f"bytes runs past its end at byte {size}"
+                    )
+                if op == OP_CHUNK:
+                    self.chunked = True
+                    head = chunk_head(buf, pos, size)
+                    yield "chunk", head
+                    listed = self._listed(stop) if counts_only else None
+                    if listed is not None:
+                        yield "counts", (listed, head.start_time, head.end_time)
+                        pos = stop
+                        continue
+                    messages, others, why = read_chunk(buf, head)
+                    for record in others:
+                        yield self._record(record)
+                    for message in messages:
+                        yield "message", message
+                    if why is not None:
+                        lost = (
+                            LogDamage(what=why, start_byte=pos, stop_byte=stop),
+                            len(messages),
+                            None,
+                        )
+                elif op == OP_MESSAGE:
+                    if length < _MESSAGE.size:
+                        raise RecordError("a message record is too short")
+                    cid, seq, log_time, pub_time = _MESSAGE.unpack_from(buf, pos + 9)
+                    yield "message", (cid, seq, log_time, pub_time, buf[pos + 31 : stop])
+                elif op == OP_SCHEMA:
+                    yield self._record(_schema(buf, pos + 9, stop))
+                elif op == OP_CHANNEL:
+                    yield self._record(_channel(buf, pos + 9, stop))
+                elif op == OP_METADATA:
+                    name, at = _string(buf, pos + 9, stop)
+                    yield "metadata", McapMetadata(name, _string_map(buf, at, stop)[0])
+                elif op == OP_ATTACHMENT:
+                    yield "attachment", _attachment(buf, pos + 9, stop)
+                elif op == OP_DATA_END:
+                    data_done = True
+                elif op == OP_FOOTER:
+                    return
+                elif not (0 < op <= 0x11 or op >= 0x80):  # 0x80+: private records, skipped
+                    raise RecordError(f"opcode {op:#04x} is not an MCAP record")
+                pos = stop
+            except RecordError as err:
+                resume = self._resync(pos + 1)
+                yield (
+                    "damage",
+                    LogDamage(
+                        what=("the summary section: " if data_done else "")
+                        + (str(err) if resume < size else f"{err}; nothing after it is readable"),
+                        start_byte=pos,
+                        stop_byte=resume,
+                        messages_lost=0 if data_done else None,
+                    ),
+                )
+                pos = resume
+        if lost is not None:
+            yield "damage", _counted(*lost)
+
+    def _listed(self, pos: int) -> dict[int, int] | None:
+        """Channel id → messages of the message index records at ``pos`` (after a chunk), or
+        None when there are none or they name a channel not seen yet."""
+        out: dict[int, int] = {}
+        while (n := message_index_count(self.buf, pos, self.size)) is not None:
+            (cid,) = _U16.unpack_from(self.buf, pos + 9)
+            if cid not in self.channel_ids:
+                return None
+            out[cid] = out.get(cid, 0) + n
+            pos += 9 + _OPLEN.unpack_from(self.buf, pos)[1]
+        return out or None
+
+    def _record(self, record: object) -> ScanEvent:
+        if isinstance(record, McapChannel):
+            self.channel_ids.add(record.id)
+            return "channel", record
+        return "schema", record
+
+    def _resync(self, start: int) -> int:
+        """The position of the next plausible record after ``start`` (the file size if none)."""
+        pattern = _CHUNK_OP if self.chunked else _ANY_OP
+        while True:
+            found = pattern.search(self.buf, start)
+            if found is None:
+                return self.size
+            pos = int(found.start())
+            if self._plausible(pos):
+                return pos
+            start = pos + 1
+
+    def _plausible(self, pos: int) -> bool:
+        buf, size = self.buf, self.size
+        if pos + 9 > size:
+            return False
+        op, length = _OPLEN.unpack_from(buf, pos)
+        stop = pos + 9 + length
+        if stop > size:
+            return False
+        try:
+            if op == OP_CHUNK:
+                chunk_head(buf, pos, size)
+                return True
+            if op == OP_DATA_END:
+                return length == 4 and self._next_ok(stop)
+            if op == OP_MESSAGE:
+                ok = length >= _MESSAGE.size and (
+                    _U16.unpack_from(buf, pos + 9)[0] in self.channel_ids
+                )
+            elif op == OP_SCHEMA:
+                ok = _schema(buf, pos + 9, stop) is not None
+            elif op == OP_CHANNEL:
+                ok = _channel(buf, pos + 9, stop) is not None
+            else:
+                return False
+        except RecordError:
+            return False
+        return ok and self._next_ok(stop)
+
+    def _next_ok(self, pos: int) -> bool:
+        """Whether a record (or the closing magic, or the end) follows at ``pos``."""
+        if pos == self.size or bytes(self.buf[pos : pos + 8]) == MAGIC:
+            return True
+        if pos + 9 > self.size:
+            return False
+        op, length = _OPLEN.unpack_from(self.buf, pos)
+        return bool(0 < op <= 0x11 and pos + 9 + length <= self.size)
+
+
+def _counted(damage: LogDamage, read: int, listed: int | None) -> LogDamage:
+    """``damage`` with the messages it lost: those the chunk's index lists, less those read."""
+    return replace(damage, messages_lost=None if listed is None else max(listed - read, 0))
+
+
+def _attachment(buf: memoryview, pos: int, end: int) -> McapAttachment:
+    if pos + 16 > end:
+        raise RecordError("an attachment record is too short")
+    log_time, create_time = struct.unpack_from("<QQ", buf, pos)
+    name, at = _string(buf, pos + 16, end)
+    media_type, at = _string(buf, at, end)
+    if at + 8 > end:
+        raise RecordError("an attachment's data length runs past the record")
+    (n,) = _U64.unpack_from(buf, at)
+    if at + 8 + n + 4 > end:
+        raise RecordError("an attachment's data runs past the record")
+    return McapAttachment(log_time, create_time, name, media_type, bytes(buf[at + 8 : at + 8 + n]))

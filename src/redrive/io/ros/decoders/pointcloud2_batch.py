@@ -1,0 +1,238 @@
+"""Many PointCloud2 messages of one chunk decoded together (see :class:`~redrive.io.base.MessageBatch`).
+
+A sensor publishes clouds of one layout, so the messages of one connection in a ROS 1 chunk
+usually have the same size, the same header but for ``seq`` and the stamp, and lie at a fixed
+distance from each other.  Then the point bytes of all of them are the rows of one strided view
+of the chunk, and xyz and every channel of every cloud are strided views — the arrays the
+one-message path makes, by C-level iteration over the chunk's clouds instead of a Python step
+per message.  What they view:
+
+* the chunk itself, when it is a private immutable ``bytes`` (the ROS 1 reader reads a chunk of
+  clouds into one; a decompressed chunk is one) and the batch's clouds are at least
+  :data:`VIEW_SHARE` of it: nothing is copied, and the clouds kept pin at most
+  1 / :data:`VIEW_SHARE` times their own bytes (one cloud kept pins its whole chunk, at most
+  :data:`VIEW_MAX_BYTES` unless it fills half of it alone);
+* otherwise (a file map, a sparse selection: one small topic in chunks of another) a copy of
+  their point bytes, in groups of at most :data:`GROUP_BYTES`.
+
+Messages that do not fit (another size, another layout, a layout the one-message fast path does
+not take) are left to that path.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from itertools import islice, repeat
+from operator import getitem
+from typing import TYPE_CHECKING, Any, cast
+
+import numpy as np
+import numpy.typing as npt
+
+from redrive.io._byte_rows import byte_rows
+from redrive.io.base import MessageBatch
+from redrive.io.ros.decoders._common import buffer_is_immutable
+from redrive.io.ros.decoders.base import Decoded
+from redrive.types import PointCloud
+
+if TYPE_CHECKING:
+    from redrive.io.ros.decoders.pointcloud2 import LayoutCache, _FieldBlock, _Head, _Plan
+
+#: The member of a plan's view dtype that holds x, y, z as a float32 (3,) subarray.
+_XYZ = "xyz"
+
+__all__ = [
+    "BATCH_FROM",
+    "GROUP_BYTES",
+    "VIEW_MAX_BYTES",
+    "VIEW_SHARE",
+    "decode_batch",
+    "views_buffer",
+]
+
+#: Batches of fewer messages are decoded one by one (the batch's few numpy calls cost a
+#: fixed few tens of µs, what one message costs alone).
+BATCH_FROM = 4
+
+#: The largest copy of point bytes the clouds of a chunk share (see ``decode_batch``).
+GROUP_BYTES = 256 << 10
+
+#: Clouds view a reader's private chunk buffer (no copy) when their point bytes are at least
+#: this share of it: a chunk kept alive by its clouds is then at most 1 / VIEW_SHARE = 2 times
+#: their bytes; a sparse selection is copied instead, so that it never pins a chunk of others'
+#: bytes.  (A single cloud kept pins its chunk: a few hundred KiB to a few MiB as recorders cut
+#: them, or ≈ its own size for a cloud that fills one; never more than VIEW_MAX_BYTES unless
+#: it fills the chunk itself.)
+VIEW_SHARE = 0.5
+
+#: Clouds sharing a chunk view it only when it is at most this large (a recorder's chunks are
+#: ≈ 1 MiB: rosbag's default is 768 KiB), so one cloud kept never pins more than this or twice
+#: its own bytes, whatever chunk size the bag was recorded with.
+VIEW_MAX_BYTES = 4 << 20
+
+_U32 = np.dtype("<u4")
+#: ROS 1 PointCloud2 bytes: seq (4), stamp sec (4), nsec (4), then the frame id's length.
+_STAMP_AT = 4
+_SAME_FROM = 12
+
+_new = object.__new__
+#: ``points[name]``: a field of a structured array, for ``map``.
+_field = cast("Callable[[npt.NDArray[Any], str], npt.NDArray[Any]]", getitem)
+_SET_DECODED = tuple(Decoded.__dict__[n].__set__ for n in ("stamp_ns", "frame_id", "value"))
+
+
+def _cut(
+    rows: npt.NDArray[np.uint8], nbytes: int, view: np.dtype[Any], names: tuple[str, ...]
+) -> tuple[list[npt.NDArray[np.float32]], list[list[npt.NDArray[Any]]]]:
+    """Each cloud's xyz and channels ``names`` from ``rows``, the (B, ``nbytes``) point bytes
+    of B clouds in the reader's buffer, as strided views of copies (``view``: a plan's).
+
+    The bytes are copied in groups of clouds of at most :data:`GROUP_BYTES` together: one or
+    two numpy calls a group, a copy small enough to stay in the cache while it is cut, and a
+    cloud kept pins its group's copy only, never the reader's chunk or map (the path for
+    clouds that may not view their buffer: see :func:`views_buffer`).  A cloud larger
+    than that is copied alone into its own ``bytes`` (immutable).  All by C-level iteration:
+    no Python step a cloud.
+    """
+    group = GROUP_BYTES // nbytes
+    if group <= 1:
+        points = list(map(np.frombuffer, map(bytes, rows), repeat(view)))
+        return (
+            list(map(_field, points, repeat(_XYZ))),
+            [list(map(_field, points, repeat(name))) for name in names],
+        )
+    xyz: list[npt.NDArray[np.float32]] = []
+    values: list[list[npt.NDArray[Any]]] = [[] for _ in names]
+    for lo in range(0, len(rows), group):
+        block = rows[lo : lo + group].copy().view(view)
+        block.flags.writeable = False
+        # Iterating in C: one read-only (N, 3) view a cloud.  ``islice`` stops at the last
+        # cloud: iterating an array to its end costs numpy a formatted IndexError (≈ 2,400
+        # instructions, more than a cloud's view).
+        count = len(block)
+        xyz.extend(islice(block[_XYZ], count))
+        for name, into in zip(names, values, strict=True):
+            into.extend(islice(block[name], count))
+    return xyz, values
+
+
+def views_buffer(buf: bytes | memoryview, nbytes: int, *, each: int | None = None) -> bool:
+    """True when clouds of ``nbytes`` point bytes (``each``: a cloud's; all of them when
+    None) may view ``buf`` instead of a copy: it is immutable and private (a ``bytes``, or a
+    view of one; never a file map), the clouds are at least :data:`VIEW_SHARE` of it, and one
+    of them kept alone pins at most :data:`VIEW_MAX_BYTES` or 1 / :data:`VIEW_SHARE` times
+    its own bytes."""
+    owner = buf.obj if isinstance(buf, memoryview) else buf
+    if type(owner) is not bytes:
+        return False
+    size = len(owner)
+    return nbytes >= size * VIEW_SHARE and (
+        size <= VIEW_MAX_BYTES or (nbytes if each is None else each) >= size * VIEW_SHARE
+    )
+
+
+def _view(
+    buf: bytes | memoryview,
+    offsets: npt.NDArray[np.int64],
+    stride: int | None,
+    n: int,
+    plan: tuple[np.dtype[Any], tuple[str, ...]],
+) -> tuple[list[npt.NDArray[np.float32]], list[list[npt.NDArray[Any]]]]:
+    """Each cloud's xyz and channels as read-only strided views of ``buf``: ``n`` points of
+    the plan's view dtype at each of ``offsets`` (``stride`` apart, or None when they are not
+    at a fixed distance), by C-level iteration."""
+    view, names = plan
+    count = len(offsets)
+    if stride is not None:
+        # At a fixed distance: one (count, n) array over the buffer, a row a cloud.
+        block = np.ndarray((count, n), view, buf, int(offsets[0]), (stride, view.itemsize))
+        return (
+            list(islice(block[_XYZ], count)),
+            [list(islice(block[name], count)) for name in names],
+        )
+    points = list(map(np.frombuffer, repeat(buf), repeat(view), repeat(n), offsets.tolist()))
+    return (
+        list(map(_field, points, repeat(_XYZ))),
+        [list(map(_field, points, repeat(name))) for name in names],
+    )
+
+
+def decode_batch(
+    batch: MessageBatch,
+    *,
+    read_head: Callable[[memoryview, str, LayoutCache], _Head],
+    layouts: LayoutCache,
+    plan_of: Callable[[_FieldBlock], _Plan],
+) -> list[Decoded | None]:
+    """What :meth:`~redrive.io.ros.decoders.pointcloud2.PointCloud2Decoder.decode` gives each
+    message of ``batch`` (equal arrays), for the messages decoded together; None for those the
+    caller must decode one by one.  ``read_head``, ``layouts`` and ``plan_of`` are the
+    decoder's header parser, layout cache and plan lookup."""
+    count = len(batch)
+    out: list[Decoded | None] = [None] * count
+    buf = batch.buffer
+    if count < BATCH_FROM or batch.encoding != "ros1" or not buffer_is_immutable(buf):
+        return out
+    starts = np.asarray(batch.starts, dtype=np.int64)
+    sizes = np.asarray(batch.stops, dtype=np.int64) - starts
+    size = int(sizes[0])
+    if not (sizes == size).all():
+        return out
+    first = int(starts[0])
+    view = memoryview(buf)[first : first + size]
+    try:
+        head = read_head(view, "ros1", layouts)
+        plan = plan_of(head[5])
+    except ValueError:
+        return out
+    _, _, frame_id, height, width, block, data_offset, data_size, _ = head
+    n = width * height
+    step = block.point_step
+    if (
+        plan.view is None
+        or plan.missing
+        or n == 0
+        or not (height == 1 or block.row_step == width * step)
+        or data_size < n * step
+    ):
+        return out
+    # Each message's stamp and everything after it up to the point data, in one gather:
+    # everything from the frame id on must be the first message's.
+    heads = byte_rows(buf, starts + _STAMP_AT, data_offset - _STAMP_AT)
+    same = heads[:, _SAME_FROM - _STAMP_AT :]
+    if not (same == same[0]).all():
+        return out
+    stamp = heads[:, : _SAME_FROM - _STAMP_AT].view(_U32)
+    stamps = stamp[:, 0].astype(np.int64) * 1_000_000_000 + stamp[:, 1]
+    gaps = starts[1:] - starts[:-1]
+    nbytes = n * step
+    # At a fixed distance (a chunk of one topic), or between other topics' messages.
+    stride = size if count == 1 else int(gaps[0])
+    regular = count == 1 or (stride >= size and (gaps == stride).all())
+    if views_buffer(buf, count * nbytes, each=nbytes):
+        # The clouds are most of a private chunk buffer: views of it, nothing copied.
+        xyz, values = _view(
+            buf, starts + data_offset, stride if regular else None, n, (plan.view, plan.channels)
+        )
+    else:
+        if regular:
+            # The point bytes of every cloud as rows of one strided view of the chunk, each
+            # row copied out below.
+            rows: npt.NDArray[np.uint8] = np.ndarray(
+                (count, nbytes), np.uint8, buf, first + data_offset, (stride, 1)
+            )
+        else:
+            # Gathered row by row.
+            rows = byte_rows(buf, starts + data_offset, nbytes)
+        xyz, values = _cut(rows, nbytes, plan.view, plan.channels)
+    channels = list(zip(plan.channels, values, strict=True))
+    # A zero stamp means "unset": the message's log time stands in for it.
+    stamps_ns = np.where(stamps == 0, batch.log_times_ns, stamps).tolist()
+    clouds = PointCloud.many_from_frozen(xyz, channels)
+    # The Decoded objects built by C-level iteration too (their slots' setters, as ``__init__``).
+    decoded: list[Decoded | None] = list(map(_new, repeat(Decoded, count)))
+    set_stamp, set_frame, set_value = _SET_DECODED
+    any(map(set_stamp, decoded, stamps_ns))
+    any(map(set_frame, decoded, repeat(frame_id, count)))
+    any(map(set_value, decoded, clouds))
+    return decoded
