@@ -9,7 +9,8 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from redrive.sim.agents import IdmParams, LaneChange, LaneFollower, Obstacles
+from redrive.motion import IdmParams
+from redrive.sim.agents import LaneChange, LaneFollower, Obstacles
 from redrive.sim.fleet import LaneFleet
 from redrive.sim.gaps import GapSearch
 from redrive.sim.lights import LightTiming, TrafficLights

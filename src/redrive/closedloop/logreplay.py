@@ -55,7 +55,7 @@ from redrive.geometry import invert, transform_object
 from redrive.io import LogReader
 from redrive.io.frames import FrameAssembler
 from redrive.io.sensor_map import SensorMapOverrides, infer_sensor_map
-from redrive.sim.agents import IdmParams, idm_acceleration
+from redrive.motion import IdmParams, idm_acceleration
 from redrive.sim.ego import ActuatedEgo, BicycleModel, EgoGeometry, PedalModel, pose_matrix
 from redrive.types import (
     ControlCommands,

@@ -22,6 +22,7 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
+from redrive.motion.idm import GAP_MIN_M, V0_MIN_MPS, idm_kernel
 from redrive.sim import kernels
 from redrive.sim.agents import LaneFollower
 from redrive.sim.gaps import GapSearch
@@ -341,8 +342,9 @@ def _plan_advance(  # noqa: PLR0917 (the fleet's arrays; numba has no keyword-on
     route_len: F64,
     powers: F64,
 ) -> None:  # pragma: no cover - compiled
-    """finish_plan (``light_gap``, ``idm_acceleration``, the scripted braking) and advance
-    (``advance_1d``, leaving at the route's end) of every follower, in place."""
+    """finish_plan (``light_gap``, IDM: :func:`~redrive.motion.idm.idm_kernel`, the scripted
+    braking) and advance (``advance_1d``, leaving at the route's end) of every follower, in
+    place."""
     time_s, dt_s, any_lights = clock[0], clock[1], clock[2] != 0.0
     two = powers[0]
     for k in range(len(f)):
@@ -366,19 +368,21 @@ def _plan_advance(  # noqa: PLR0917 (the fleet's arrays; numba has no keyword-on
                 break
             if stop < gap:
                 gap, v_lead = stop, 0.0
-        # idm_acceleration
-        a_max = f[k, A_MAX]
-        free = 1.0 - (max(v, 0.0) / max(f[k, V0], 1e-3)) ** f[k, DELTA]
-        interaction = 0.0
-        if math.isfinite(gap):
-            dv = v - v_lead
-            s_star = f[k, MIN_GAP] + max(
-                0.0,
-                v * f[k, HEADWAY] + v * dv / (2.0 * math.sqrt(a_max * f[k, B_COMF])),
-            )
-            interaction = (s_star / max(gap, 0.05)) ** two
-        accel = a_max * (free - interaction)
-        accel = min(max(accel, -f[k, MAX_DECEL]), a_max)
+        accel = idm_kernel(
+            v,
+            gap,
+            v_lead,
+            f[k, V0],
+            f[k, DELTA],
+            f[k, HEADWAY],
+            f[k, MIN_GAP],
+            f[k, A_MAX],
+            f[k, B_COMF],
+            f[k, MAX_DECEL],
+            V0_MIN_MPS,
+            GAP_MIN_M,
+            two,
+        )
         if has_brake[k] and time_s >= f[k, BRAKE_T]:
             accel = min(accel, -f[k, BRAKE_DECEL])
         # advance_1d

@@ -26,12 +26,14 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
+from redrive.motion.idm import GAP_MIN_M, V0_MIN_MPS, idm_kernel
 from redrive.sim import fleet as fl
 from redrive.sim import kernels
 from redrive.sim.gaps import _gap_kernel  # compiled into _frame, with gaps.BLOCK (8 since h-obj7)
 
-# numba keys _frame's cache by this file alone: an edit of gaps.py's kernel or BLOCK must change
-# this file too (or run `make clean-kernels`), else a cached _frame keeps the old gap search
+# numba keys _frame's cache by this file alone: an edit of gaps.py's kernel or BLOCK (or of
+# fleet.py's, kernels.py's or motion/idm.py's kernels) must change this file too (or run
+# `make clean-kernels`), else a cached _frame keeps the old code
 
 if TYPE_CHECKING:
     from redrive.sim.world import World
@@ -431,7 +433,21 @@ def _frame(  # noqa: PLR0917 (the world's columns; numba has no keyword-only par
             end = route_len[ego_route] - 1.0 - s_front
             if min(stop, end) < gap_e:
                 gap_e, lead_e = min(stop, end), 0.0
-            accel_cmd = _idm(p, v, gap_e, lead_e, two)
+            accel_cmd = idm_kernel(
+                v,
+                gap_e,
+                lead_e,
+                p[V0],
+                p[DELTA],
+                p[HEADWAY],
+                p[MIN_GAP],
+                p[A_MAX],
+                p[B_COMF],
+                p[IDM_DEC],
+                V0_MIN_MPS,
+                GAP_MIN_M,
+                two,
+            )
         else:  # ActuatedEgo.apply: the pedals under the held command
             v = e[ESPEED]
             accel_cmd = p[THROTTLE] * p[P_ACC] - p[BRAKE] * p[P_BRK] - (p[ROLL] + p[DRAG] * v * v)
@@ -468,22 +484,6 @@ def _walker(walk: F64, k: int) -> tuple[float, float, float, float]:  # pragma: 
         vx = walk[k, WSPD] * math.cos(walk[k, WYAW])
         vy = walk[k, WSPD] * math.sin(walk[k, WYAW])
     return x, y, vx, vy
-
-
-@numba.njit(cache=True, nogil=True)
-def _idm(p: F64, v: float, gap: float, v_lead: float, two: float) -> float:  # pragma: no cover
-    """``agents.idm_acceleration`` with the ego driver's parameters."""
-    a_max = p[A_MAX]
-    free = 1.0 - (max(v, 0.0) / max(p[V0], 1e-3)) ** p[DELTA]
-    interaction = 0.0
-    if math.isfinite(gap):
-        dv = v - v_lead
-        s_star = p[MIN_GAP] + max(
-            0.0, v * p[HEADWAY] + v * dv / (2.0 * math.sqrt(a_max * p[B_COMF]))
-        )
-        interaction = (s_star / max(gap, 0.05)) ** two
-    accel = a_max * (free - interaction)
-    return float(min(max(accel, -p[IDM_DEC]), a_max))
 
 
 @numba.njit(cache=True, nogil=True)

@@ -22,7 +22,8 @@ import numpy as np
 import numpy.typing as npt
 
 from redrive.errors import SimulationError
-from redrive.sim.agents import IdmParams, LaneChange, LaneFollower, ParkedObject, Walker
+from redrive.motion import IdmParams
+from redrive.sim.agents import LaneChange, LaneFollower, ParkedObject, Walker
 from redrive.sim.ego import BicycleModel, EgoDriver, EgoGeometry, PedalModel, pose_matrix
 from redrive.sim.fleet import LaneFleet
 from redrive.sim.gaps import GapSearch
