@@ -90,7 +90,7 @@ def idm_kernel(  # noqa: PLR0917 (numba has no keyword-only parameters)
         accel = -max_decel_mps2
     if a_max_mps2 < accel:
         accel = a_max_mps2
-    return accel
+    return float(accel)
 
 
 def idm_acceleration(
