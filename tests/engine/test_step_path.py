@@ -10,7 +10,8 @@ import pytest
 
 from redrive.algorithms import Algorithm, Role, StageOutputs
 from redrive.config import AlgorithmSpec, PipelineConfig, StageSpec
-from redrive.engine import Engine, LogInputs, _short, build_graph
+from redrive.engine import Engine, LogInputs, build_graph
+from redrive.engine import sequential as _short
 from redrive.engine.stats import StatsCollector
 from redrive.results import FrameRecord, RunStatus
 from redrive.types import ControlCommands, Frame

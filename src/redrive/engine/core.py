@@ -38,7 +38,7 @@ from redrive.algorithms import (
 )
 from redrive.config import PipelineConfig
 from redrive.engine._heap import setup_frozen
-from redrive.engine._short import Single, run_short, single_step_record
+from redrive.engine.sequential import Single, run_short, single_step_record
 from redrive.engine.graph import LogInputs, PlannedAlgorithm, StageGraph
 from redrive.engine.handoff import Handoff, HandoffClosedError
 from redrive.engine.modes import ModeHooks, PacedFrame, ReplayMode
