@@ -216,7 +216,7 @@ def run_sequential(
             for frame, wall_ns, raw, late in ran:
                 failed: tuple[int, StepRecord] | None = None
                 records = []
-                counted: list[StepRecord] = []  # run_steps stages' ok steps, counted handed on
+                counted: list[StepRecord] | None = None  # run_steps stages' ok steps
                 for kept, status, output, latency_ns, cpu_ns, error in raw:
                     if status is _OK and output is not None:  # the common step, built inline
                         single, lat, cpu, objects, counts = kept
@@ -232,7 +232,7 @@ def run_sequential(
                         continue
                     if status is _STAGE:
                         records.extend(kept)
-                        counted.extend(r for r in kept if r.status == "ok")
+                        counted = [*(counted or ()), *(r for r in kept if r.status == "ok")]
                         if failed is None and output is not None:
                             failed = (frame.index, output)
                         continue
@@ -261,8 +261,9 @@ def run_sequential(
                     first[0] = frame.stamp_ns
                 last = frame
                 handed += 1
-                for step in counted:
-                    stats.add_step(record.frame_index, step)
+                if counted is not None:  # counted once handed on
+                    for step in counted:
+                        stats.add_step(record.frame_index, step)
                 if failed is not None and _not_ok(stats, record):
                     failed_frames += 1
                 if frame.missing:
