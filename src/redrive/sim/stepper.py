@@ -382,18 +382,7 @@ def _frame(  # noqa: PLR0917 (the world's columns; numba has no keyword-only par
         gap_e, lead_e = np.inf, 0.0
         if plan:
             nq = nf + 1 if scripted else nf
-            q_int = np.empty((3, nq), dtype=np.int64)
-            q_float = np.empty((4, nq))
-            for k in range(nf):
-                route = i[k, fl.ROUTE]
-                s_front = f[k, fl.S] + f[k, fl.LENGTH] / 2.0
-                q_int[0, k], q_int[1, k], q_int[2, k] = (
-                    table[0, route],
-                    table[1, route],
-                    i[k, fl.ID],
-                )
-                q_float[0, k], q_float[1, k] = f[k, fl.S], s_front
-                q_float[2, k], q_float[3, k] = s_front + p[HORIZON], f[k, fl.WIDTH]
+            q_int, q_float = fl._queries(f, i, table, p[HORIZON], scripted)
             if scripted:
                 s_front = e[ES] + p[FRONT]
                 q_int[0, nf], q_int[1, nf], q_int[2, nf] = off, n_route, 0
