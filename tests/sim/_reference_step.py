@@ -3,7 +3,7 @@
 
 :func:`reference_step_to` is what ``World.step_to`` did before the kernel: one physics step at a
 time, the obstacle snapshot, the pedestrians' triggers, the lane changes
-(:meth:`LaneFleet.start_plan`: ``Route.project``), every agent's gap search
+(:func:`start_plan`: ``Route.project``), every agent's gap search
 (:meth:`GapSearch.gaps_of`), the followers' plan and motion (:meth:`LaneFleet.finish_and_advance`),
 the scripted ego's pure pursuit and IDM (:class:`~redrive.sim.ego.EgoDriver`), its pedals or the
 Python step of ``World.drive_ego``, and the walkers' clocks.
@@ -16,10 +16,34 @@ import math
 import numpy as np
 import numpy.typing as npt
 
+from redrive.sim import fleet as fl
 from redrive.sim.ego import BicycleModel
 from redrive.sim.world import EGO_ID, World
 
-__all__ = ["reference_step_to"]
+__all__ = ["reference_step_to", "start_plan"]
+
+
+def start_plan(fleet: fl.LaneFleet, time_s: float) -> None:
+    """:meth:`LaneFollower.start_plan` of all the fleet's followers: the lane changes that
+    start now, in Python (the follower's pose, then :meth:`Route.project` onto the target, as
+    the follower does); the frame kernel's ``_start_lane_changes`` is compared with it."""
+    if time_s >= fleet._next_lc:
+        f, i = fleet._f, fleet._i
+        poses = None
+        for k in range(len(f)):
+            if i[k, fl.LC_TARGET] < 0 or i[k, fl.LC_STARTED] or not time_s >= f[k, fl.LC_START]:
+                continue
+            if poses is None:
+                poses = fleet.poses()
+            x, y = float(poses[0, k]), float(poses[1, k])
+            target = fleet._routes[int(i[k, fl.LC_TARGET])]
+            s_new, lat = target.project([[x, y]], s_min_m=0.0, s_max_m=target.length_m)
+            i[k, fl.ROUTE], f[k, fl.S] = i[k, fl.LC_TARGET], float(s_new[0])
+            f[k, fl.LC_OFF0] = float(lat[0]) - float(f[k, fl.LAT])
+            i[k, fl.LC_STARTED] = 1
+        pending = (i[:, fl.LC_TARGET] >= 0) & (i[:, fl.LC_STARTED] == 0)
+        fleet._next_lc = float(f[pending, fl.LC_START].min()) if pending.any() else math.inf
+    fleet._time_s = time_s
 
 
 def reference_step_to(world: World, stamp_ns: int) -> None:
@@ -52,7 +76,7 @@ def _substep(w: World, dt_ns: int) -> None:
     for walker, s_cross, distance in w._triggers:
         if s_cross - front <= distance:
             walker.start(t)
-    fleet.start_plan(t)
+    start_plan(fleet, t)
     search = w._gaps
     ego_query = None
     if scripted:

@@ -9,8 +9,10 @@ the motion of all of them.
 
 Every value is the one :class:`LaneFollower` computes, bit for bit: the same float64 operations
 in the same order (compiled without ``fastmath``; powers go through ``pow`` with a run-time
-exponent, as Python's ``**`` does; ``math.hypot`` of each route segment is taken from Python),
-and a lane change starts in Python with the follower's own :meth:`Route.project`.
+exponent, as Python's ``**`` does; ``math.hypot`` of each route segment is taken from Python);
+a lane change starts in the world's frame kernel (:mod:`redrive.sim.stepper`) where
+:meth:`Route.project` puts the follower on its target (the Python version of that step is in
+``tests/sim/_reference_step.py``).
 """
 
 from __future__ import annotations
@@ -172,27 +174,6 @@ class LaneFleet:
         return _snapshot(
             self._f, self._i, self._time_s, search.net, search.route_table, _POWERS, ids, rows
         )
-
-    def start_plan(self, time_s: float) -> None:
-        """:meth:`LaneFollower.start_plan` of all: lane changes that start now (rare: in Python,
-        the follower's pose then :meth:`Route.project` onto the target, as the follower does)."""
-        if time_s >= self._next_lc:
-            f, i = self._f, self._i
-            poses = None
-            for k in range(len(f)):
-                if i[k, LC_TARGET] < 0 or i[k, LC_STARTED] or not time_s >= f[k, LC_START]:
-                    continue
-                if poses is None:
-                    poses = self.poses()
-                x, y = float(poses[0, k]), float(poses[1, k])
-                target = self._routes[int(i[k, LC_TARGET])]
-                s_new, lat = target.project([[x, y]], s_min_m=0.0, s_max_m=target.length_m)
-                i[k, ROUTE], f[k, S] = i[k, LC_TARGET], float(s_new[0])
-                f[k, LC_OFF0] = float(lat[0]) - float(f[k, LAT])
-                i[k, LC_STARTED] = 1
-            pending = (i[:, LC_TARGET] >= 0) & (i[:, LC_STARTED] == 0)
-            self._next_lc = float(f[pending, LC_START].min()) if pending.any() else math.inf
-        self._time_s = time_s
 
     def queries(
         self, horizon_m: float, extra: tuple[int, int, int, float, float, float, float] | None

@@ -473,9 +473,9 @@ def _frame(  # noqa: PLR0917 (the world's columns; numba has no keyword-only par
 def _start_lane_changes(  # noqa: PLR0917 (numba has no keyword-only parameters)
     f: F64, i: I64, t: float, fleet_t: float, net: F64, table: I64, route_len: F64, powers: F64
 ) -> float:  # pragma: no cover - compiled
-    """``LaneFleet.start_plan``'s lane changes at ``t``: each follower whose change is due moves
-    onto its target route where ``Route.project`` of its pose (over the whole target) puts it;
-    returns the start time of the next change (inf: none left)."""
+    """``LaneFollower.start_plan``'s lane changes at ``t``: each follower whose change is due
+    moves onto its target route where ``Route.project`` of its pose (over the whole target)
+    puts it; returns the start time of the next change (inf: none left)."""
     net_s, net_x, net_y = net[0], net[1], net[2]
     next_lc = np.inf
     for k in range(len(f)):
