@@ -120,6 +120,7 @@ clean: clean-kernels
 
 ## clean-kernels: drop numba's cached compiled kernels (next to the sources, in __pycache__);
 ## numba checks only a kernel's own file, so after editing a kernel that another module's
-## kernels call (sim/gaps.py, called by sim/stepper.py), the callers' caches are stale
+## kernels call (sim/gaps.py, called by sim/stepper.py; motion/idm.py, called by the world's
+## and the reference planner's kernels), the callers' caches are stale
 clean-kernels:
 	find src -path '*__pycache__*' \( -name '*.nbi' -o -name '*.nbc' \) -delete

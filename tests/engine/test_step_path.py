@@ -10,7 +10,9 @@ import pytest
 
 from redrive.algorithms import Algorithm, Role, StageOutputs
 from redrive.config import AlgorithmSpec, PipelineConfig, StageSpec
-from redrive.engine import Engine, LogInputs, _short, build_graph
+from redrive.engine import Engine, LogInputs, build_graph
+from redrive.engine import sequential as _seq
+from redrive.engine.modes import ReplayMode
 from redrive.engine.stats import StatsCollector
 from redrive.results import FrameRecord, RunStatus
 from redrive.types import ControlCommands, Frame
@@ -119,11 +121,11 @@ def test_the_short_sequential_path_records_what_the_stage_path_records(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     def not_here(*args: object, **kwargs: object) -> None:
-        raise AssertionError("the general sequential path ran instead of the short one")
+        raise AssertionError("the frame-by-frame regime ran instead of the chained one")
 
     with monkeypatch.context() as patch:
-        patch.setattr(Engine, "_sequential", not_here)
-        short, _ = _run_in("sequential")  # one in-process algorithm per stage: the short loop
+        patch.setattr(ReplayMode, "before_frame", not_here)
+        short, _ = _run_in("sequential")  # one in-process algorithm per stage: chained
     general, _ = _run_in("pipelined")  # the same stages through _Stage.run
     assert [r.frame_index for r in short] == [0, *range(2, 12)]
     assert _steps_of(short) == _steps_of(general)
@@ -175,7 +177,7 @@ def test_the_short_path_keeps_log_reading_and_the_sink_out_of_the_steps_cpu() ->
     # the thread CPU clock is chained from step to step across frames: what the engine does
     # between two frames (reading the log, handing the record on) must not land in a step
     def frames() -> Iterator[Frame]:
-        for i in range(3 * _short.READ_AHEAD):
+        for i in range(3 * _seq.READ_AHEAD):
             if i in {5, 20}:
                 _burn(0.02)  # a slow frame to read
             yield Frame(stamp_ns=i * 10, index=i)
@@ -192,15 +194,15 @@ def test_the_short_path_keeps_log_reading_and_the_sink_out_of_the_steps_cpu() ->
         report = engine.run(frames(), sink=sink)
     finally:
         engine.close()
-    assert report.frames == len(kept) == 3 * _short.READ_AHEAD
-    assert [r.frame_index for r in kept] == list(range(3 * _short.READ_AHEAD))
+    assert report.frames == len(kept) == 3 * _seq.READ_AHEAD
+    assert [r.frame_index for r in kept] == list(range(3 * _seq.READ_AHEAD))
     assert max(s.cpu_ns for r in kept for s in r.steps) < 10_000_000  # ns; each burn is 20 ms
 
 
 def test_the_short_path_hands_on_each_frame_before_reading_past_its_chain(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    monkeypatch.setattr(_short, "CHAIN_NS", 0)  # every chain ends after its first frame
+    monkeypatch.setattr(_seq, "CHAIN_NS", 0)  # every chain ends after its first frame
     kept: list[FrameRecord] = []
     seen: list[int] = []
 

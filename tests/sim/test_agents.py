@@ -5,14 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from redrive.sim.agents import (
-    IdmParams,
-    LaneChange,
-    LaneFollower,
-    Obstacles,
-    Walker,
-    idm_acceleration,
-)
+from redrive.motion import IdmParams, idm_acceleration
+from redrive.sim.agents import LaneChange, LaneFollower, Obstacles, Walker
 from redrive.sim.lights import LightTiming, TrafficLights
 from redrive.sim.roads import HighwayLayout, UrbanLayout, highway_network, urban_network
 from redrive.types import LightState, ObjectClass

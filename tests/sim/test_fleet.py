@@ -9,7 +9,8 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from redrive.sim.agents import IdmParams, LaneChange, LaneFollower, Obstacles
+from redrive.motion import IdmParams
+from redrive.sim.agents import LaneChange, LaneFollower, Obstacles
 from redrive.sim.fleet import LaneFleet
 from redrive.sim.gaps import GapSearch
 from redrive.sim.lights import LightTiming, TrafficLights
@@ -21,6 +22,7 @@ from redrive.sim.roads import (
     urban_network,
 )
 from redrive.types import ObjectClass
+from tests.sim._reference_step import start_plan
 
 #: an obstacle far from every road, in the place of the world's ego (the snapshot's first row)
 FAR = (1e6, 1e6, 4.7, 1.9, 0.0, 0.0)
@@ -127,7 +129,7 @@ def test_fleet_moves_as_lane_followers_do(
         assert obst[0:2].T.tolist() == want.centers.tolist()
         assert obst[2].tolist() == want.lengths.tolist()
         assert obst[4:6].T.tolist() == want.velocities.tolist()
-        fleet.start_plan(t)
+        start_plan(fleet, t)
         q_int, q_float = fleet.queries(search.horizon_m, None)
         gaps, speeds = search.gaps_of(q_int, q_float, ids, obst)
         fleet.finish_and_advance(t, dt, gap_m=gaps, leader_speed_mps=speeds)

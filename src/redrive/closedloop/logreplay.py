@@ -55,7 +55,7 @@ from redrive.closedloop.synthetic import AgentMode
 from redrive.errors import ConfigError
 from redrive.geometry import invert, transform_object
 from redrive.io import LogReader
-from redrive.sim.agents import IdmParams, idm_acceleration
+from redrive.motion import IdmParams, idm_acceleration
 from redrive.sim.ego import ActuatedEgo, BicycleModel, EgoGeometry, PedalModel, pose_matrix
 from redrive.types import (
     ControlCommands,

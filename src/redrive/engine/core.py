@@ -1,6 +1,7 @@
 """The Orchestration Engine: frames through the stage graph, sequentially or pipelined.
 
-- *sequential*: each frame goes through every stage before the next frame starts.
+- *sequential*: each frame goes through every stage before the next frame starts — one loop,
+  :func:`redrive.engine.sequential.run_sequential` (chained at full speed, see there).
 - *pipelined*: one thread per stage and one reading the log, joined by short bounded hand-offs
   (:class:`~redrive.engine.handoff.Handoff`), so stage k works on frame t while stage k-1 works
   on frame t+1.  Each stage still sees frames in
@@ -38,10 +39,10 @@ from redrive.algorithms import (
 )
 from redrive.config import PipelineConfig
 from redrive.engine._heap import setup_frozen
-from redrive.engine._short import Single, run_short, single_step_record
 from redrive.engine.graph import LogInputs, PlannedAlgorithm, StageGraph
 from redrive.engine.handoff import Handoff, HandoffClosedError
 from redrive.engine.modes import ModeHooks, PacedFrame, ReplayMode
+from redrive.engine.sequential import Single, run_sequential, single_step_record
 from redrive.engine.stats import RunReport, StatsCollector
 from redrive.engine.worker import AlgorithmRunner, InlineRunner, ProcessRunner, frame_for
 from redrive.results import FrameRecord, RunStatus, StepRecord
@@ -99,9 +100,9 @@ class _Stage:
         self.last = False
         self._inline = all(isinstance(r, InlineRunner) for r in runners)
         self._single: Single | None = None
-        # the short paths call Algorithm.timed_step (or do what timed_step_from does, inline);
-        # an algorithm that overrides run_step or those keeps being run through run_step (the
-        # general path below)
+        # the pipelined stage calls Algorithm.timed_step, the sequential loop does what
+        # timed_step_from does, inline; an algorithm that overrides run_step or those keeps
+        # being run through run_step (run_steps below)
         kind = type(planned[0].instance)
         if (
             self._inline
@@ -148,30 +149,42 @@ class _Stage:
                     self.roles_after,
                 )
             return
+        records, failed, item.upstream = self.run_steps(frame, item.upstream)
+        item.steps.extend(records)
+        if failed is not None and item.failed is None:
+            item.failed = (frame.index, failed)
+
+    def run_steps(
+        self, frame: Frame, upstream: StageOutputs
+    ) -> tuple[list[StepRecord], StepRecord | None, StageOutputs]:
+        """The stage's steps of ``frame`` through its runners (several algorithms side by
+        side, or worker processes): their records, the first that failed (or None), and the
+        upstream outputs after the stage."""
         results: list[StepResult]
         if self._pool is not None:
-            futures = [
-                self._pool.submit(_run_inline, r, frame, item.upstream) for r in self.runners
-            ]
+            futures = [self._pool.submit(_run_inline, r, frame, upstream) for r in self.runners]
             results = [f.result() for f in futures]
         else:
             for runner in self.runners:
-                runner.submit(frame, item.upstream)
+                runner.submit(frame, upstream)
             results = [runner.result() for runner in self.runners]
         outputs = {}
+        records = []
+        failed = None
         for planned, role, result in zip(self.planned, self._role_values, results, strict=True):
             record = _record(planned, role, result)
-            item.steps.append(record)
+            records.append(record)
             if result.status is _OK and result.output is not None:
                 outputs[planned.name] = result.output
-            elif item.failed is None:
-                item.failed = (frame.index, record)
-        item.upstream = item.upstream.merged(outputs, self.roles)
+            elif failed is None:
+                failed = record
+        return records, failed, upstream.merged(outputs, self.roles)
 
     @property
     def single(self) -> Single | None:
         """``(algorithm, its sensors, name, stage, role)`` of a stage of one in-process
-        algorithm run through :meth:`Algorithm.timed_step` (the short paths); else None."""
+        algorithm run through :meth:`Algorithm.timed_step` (or stepped inline by the
+        sequential loop); else None."""
         return self._single
 
     def close(self) -> None:
@@ -321,7 +334,8 @@ class Engine:
         if cancel is not None:
             pending = _until_cancelled(pending, cancel, cancelled)
         pipelined = self.pipeline.mode == "pipelined" and len(self._stages) > 1
-        # the common replay: as fast as possible, one algorithm in-process per stage, in order
+        # the common replay: as fast as possible, one algorithm in-process per stage, in order —
+        # the sequential loop's chained regime (sequential.py)
         short = (
             not pipelined
             and type(self.hooks) is ReplayMode
@@ -356,46 +370,33 @@ class Engine:
         t0 = time.perf_counter()
         status = RunStatus.COMPLETE
         try:
-            if paced is None:
-                failure = run_short(
+            if paced is not None and pipelined:
+                failure = self._pipelined(paced, finish)
+            else:
+                failure = run_sequential(
                     [
-                        (stage.single, stage.roles_after, stage.last)
+                        (stage.single, stage.roles_after, stage.last, stage.run_steps)
                         for stage in self._stages
-                        if stage.single is not None
                     ],
-                    pending,
+                    pending if paced is None else paced,
+                    chained=paced is None,
                     sink=sink,
                     stats=stats,
                     progress=progress,
                     fail_fast=fail_fast,
-                    cancel=cancel,
+                    after_frame=None if paced is None else after_frame,
+                    cancel=cancel if paced is None else None,  # (else: no frame read once set)
                 )
-            elif pipelined:
-                failure = self._pipelined(paced, finish)
-            else:
-                failure = self._sequential(paced, finish)
         except KeyboardInterrupt:
             status, failure = RunStatus.INTERRUPTED, None
         if failure is not None:
             status = RunStatus.FAILED
         elif cancelled[0] or (paced is None and cancel is not None and cancel.is_set()):
-            status = RunStatus.INTERRUPTED  # (the short path stops without reading on)
+            status = RunStatus.INTERRUPTED  # (the chained regime stops without reading on)
         late = getattr(self.hooks, "late_frames", 0)
         return stats.report(
             status=status, wall_s=time.perf_counter() - t0, late_frames=late, failure=failure
         )
-
-    def _sequential(
-        self, paced: Iterator[PacedFrame], finish: Callable[[_Item], tuple[int, StepRecord] | None]
-    ) -> tuple[int, StepRecord] | None:
-        for pf in paced:
-            item = _Item(pf.frame, pf.late, perf_counter_ns())
-            for stage in self._stages:
-                stage.run(item)
-            failed = finish(item)
-            if failed is not None:
-                return failed
-        return None
 
     def _pipelined(
         self, paced: Iterator[PacedFrame], finish: Callable[[_Item], tuple[int, StepRecord] | None]

@@ -1,12 +1,10 @@
 """Agents of the synthetic world: IDM vehicles and cyclists on routes, walking pedestrians, parked cars.
 
-Vehicles use Treiber's Intelligent Driver Model (Treiber, Hennecke & Helbing 2000)::
-
-    a = a_max · [1 − (v / v0)^δ − (s* / s)²],   s* = s0 + max(0, v·T + v·Δv / (2·√(a_max·b)))
-
-with the gap ``s`` to the nearest obstacle on the route ahead (another agent, the ego, a
-pedestrian in the lane) or to a stop line whose light is red (or yellow, when there is room to stop
-comfortably): a red light is a stopped virtual leader at the stop line.
+Vehicles use Treiber's Intelligent Driver Model (:mod:`redrive.motion.idm`: the one kernel that
+the world's compiled steps and the reference planner call too) with the gap ``s`` to the nearest
+obstacle on the route ahead (another agent, the ego, a pedestrian in the lane) or to a stop line
+whose light is red (or yellow, when there is room to stop comfortably): a red light is a stopped
+virtual leader at the stop line.
 
 Every update is two-phase: all agents *plan* from one :class:`Obstacles` snapshot, then all
 *advance*; nothing depends on iteration order of sets or on wall-clock time.
@@ -20,58 +18,23 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from redrive.motion import IdmParams, idm_acceleration
 from redrive.sim.lights import TrafficLights
 from redrive.sim.roads import Route
 from redrive.types import LightState, ObjectClass
 
 __all__ = [
-    "IdmParams",
     "LaneChange",
     "LaneFollower",
     "Obstacles",
     "ParkedObject",
     "Walker",
     "gap_ahead",
-    "idm_acceleration",
     "light_gap",
 ]
 
 F64 = npt.NDArray[np.float64]
 _NO_GAP = math.inf
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class IdmParams:
-    """IDM parameters: desired speed v0 (m/s), time headway T (s), minimum gap s0 (m),
-    maximum acceleration a (m/s²), comfortable deceleration b (m/s²), exponent δ, and the
-    physical braking limit (m/s², positive) the command is clipped to."""
-
-    desired_speed_mps: float = 13.9
-    time_headway_s: float = 1.5
-    min_gap_m: float = 2.0
-    max_accel_mps2: float = 1.5
-    comfort_decel_mps2: float = 2.0
-    delta: float = 4.0
-    max_decel_mps2: float = 9.0
-
-
-def idm_acceleration(
-    params: IdmParams, speed_mps: float, *, gap_m: float = _NO_GAP, leader_speed_mps: float = 0.0
-) -> float:
-    """IDM acceleration (m/s²) for a bumper-to-bumper ``gap_m`` to a leader (inf: free road)."""
-    p = params
-    free = 1.0 - (max(speed_mps, 0.0) / max(p.desired_speed_mps, 1e-3)) ** p.delta
-    interaction = 0.0
-    if math.isfinite(gap_m):
-        dv = speed_mps - leader_speed_mps
-        s_star = p.min_gap_m + max(
-            0.0,
-            speed_mps * p.time_headway_s
-            + speed_mps * dv / (2.0 * math.sqrt(p.max_accel_mps2 * p.comfort_decel_mps2)),
-        )
-        interaction = (s_star / max(gap_m, 0.05)) ** 2
-    accel = float(p.max_accel_mps2 * (free - interaction))
-    return min(max(accel, -p.max_decel_mps2), p.max_accel_mps2)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

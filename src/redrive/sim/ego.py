@@ -22,14 +22,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from redrive.sim.agents import (
-    IdmParams,
-    Obstacles,
-    advance_1d,
-    gap_ahead,
-    idm_acceleration,
-    light_gap,
-)
+from redrive.motion import IdmParams, idm_acceleration
+from redrive.sim.agents import Obstacles, advance_1d, gap_ahead, light_gap
 from redrive.sim.lights import TrafficLights
 from redrive.sim.roads import Route
 from redrive.types import ControlCommands, VehicleState

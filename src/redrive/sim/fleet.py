@@ -9,8 +9,10 @@ the motion of all of them.
 
 Every value is the one :class:`LaneFollower` computes, bit for bit: the same float64 operations
 in the same order (compiled without ``fastmath``; powers go through ``pow`` with a run-time
-exponent, as Python's ``**`` does; ``math.hypot`` of each route segment is taken from Python),
-and a lane change starts in Python with the follower's own :meth:`Route.project`.
+exponent, as Python's ``**`` does; ``math.hypot`` of each route segment is taken from Python);
+a lane change starts in the world's frame kernel (:mod:`redrive.sim.stepper`) where
+:meth:`Route.project` puts the follower on its target (the Python version of that step is in
+``tests/sim/_reference_step.py``).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
+from redrive.motion.idm import GAP_MIN_M, V0_MIN_MPS, idm_kernel
 from redrive.sim import kernels
 from redrive.sim.agents import LaneFollower
 from redrive.sim.gaps import GapSearch
@@ -172,27 +175,6 @@ class LaneFleet:
             self._f, self._i, self._time_s, search.net, search.route_table, _POWERS, ids, rows
         )
 
-    def start_plan(self, time_s: float) -> None:
-        """:meth:`LaneFollower.start_plan` of all: lane changes that start now (rare: in Python,
-        the follower's pose then :meth:`Route.project` onto the target, as the follower does)."""
-        if time_s >= self._next_lc:
-            f, i = self._f, self._i
-            poses = None
-            for k in range(len(f)):
-                if i[k, LC_TARGET] < 0 or i[k, LC_STARTED] or not time_s >= f[k, LC_START]:
-                    continue
-                if poses is None:
-                    poses = self.poses()
-                x, y = float(poses[0, k]), float(poses[1, k])
-                target = self._routes[int(i[k, LC_TARGET])]
-                s_new, lat = target.project([[x, y]], s_min_m=0.0, s_max_m=target.length_m)
-                i[k, ROUTE], f[k, S] = i[k, LC_TARGET], float(s_new[0])
-                f[k, LC_OFF0] = float(lat[0]) - float(f[k, LAT])
-                i[k, LC_STARTED] = 1
-            pending = (i[:, LC_TARGET] >= 0) & (i[:, LC_STARTED] == 0)
-            self._next_lc = float(f[pending, LC_START].min()) if pending.any() else math.inf
-        self._time_s = time_s
-
     def queries(
         self, horizon_m: float, extra: tuple[int, int, int, float, float, float, float] | None
     ) -> tuple[I64, F64]:
@@ -341,8 +323,9 @@ def _plan_advance(  # noqa: PLR0917 (the fleet's arrays; numba has no keyword-on
     route_len: F64,
     powers: F64,
 ) -> None:  # pragma: no cover - compiled
-    """finish_plan (``light_gap``, ``idm_acceleration``, the scripted braking) and advance
-    (``advance_1d``, leaving at the route's end) of every follower, in place."""
+    """finish_plan (``light_gap``, IDM: :func:`~redrive.motion.idm.idm_kernel`, the scripted
+    braking) and advance (``advance_1d``, leaving at the route's end) of every follower, in
+    place."""
     time_s, dt_s, any_lights = clock[0], clock[1], clock[2] != 0.0
     two = powers[0]
     for k in range(len(f)):
@@ -366,19 +349,21 @@ def _plan_advance(  # noqa: PLR0917 (the fleet's arrays; numba has no keyword-on
                 break
             if stop < gap:
                 gap, v_lead = stop, 0.0
-        # idm_acceleration
-        a_max = f[k, A_MAX]
-        free = 1.0 - (max(v, 0.0) / max(f[k, V0], 1e-3)) ** f[k, DELTA]
-        interaction = 0.0
-        if math.isfinite(gap):
-            dv = v - v_lead
-            s_star = f[k, MIN_GAP] + max(
-                0.0,
-                v * f[k, HEADWAY] + v * dv / (2.0 * math.sqrt(a_max * f[k, B_COMF])),
-            )
-            interaction = (s_star / max(gap, 0.05)) ** two
-        accel = a_max * (free - interaction)
-        accel = min(max(accel, -f[k, MAX_DECEL]), a_max)
+        accel = idm_kernel(
+            v,
+            gap,
+            v_lead,
+            f[k, V0],
+            f[k, DELTA],
+            f[k, HEADWAY],
+            f[k, MIN_GAP],
+            f[k, A_MAX],
+            f[k, B_COMF],
+            f[k, MAX_DECEL],
+            V0_MIN_MPS,
+            GAP_MIN_M,
+            two,
+        )
         if has_brake[k] and time_s >= f[k, BRAKE_T]:
             accel = min(accel, -f[k, BRAKE_DECEL])
         # advance_1d

@@ -1,20 +1,20 @@
-"""A frame's physics steps as one compiled call: the world's state as columns, Python at the ends.
+"""The world's physics step, compiled: a frame's steps as one call, Python only at the ends.
 
-:meth:`World._substep <redrive.sim.world.World>` is the reference: one 100-Hz physics step of
-the obstacle snapshot, the pedestrians' triggers, the lane followers' and the scripted ego's
-gap search, stop lines and IDM, the ego's pure pursuit (or its pedals under a held command),
-the bicycle model and the walkers' clocks — a few dozen Python calls around the fleet's kernels.
-:class:`FrameStepper` copies the state that lives in Python objects (the ego's
-:class:`~redrive.sim.ego.BicycleModel` and driver, the walkers) into arrays, runs every physics
-step up to a stamp in :func:`_frame` and copies it back; the lane followers' arrays
-(:class:`~redrive.sim.fleet.LaneFleet`) are stepped in place.
+A 100-Hz physics step is the obstacle snapshot, the pedestrians' triggers, the lane changes that
+start, the lane followers' and the scripted ego's gap search, stop lines and IDM, the ego's pure
+pursuit (or its pedals under a held command), the bicycle model and the walkers' clocks.
+:class:`FrameStepper` is the world's only way to step: it copies the state that lives in Python
+objects (the ego's :class:`~redrive.sim.ego.BicycleModel` and driver, the walkers) into arrays,
+runs every physics step up to a stamp in :func:`_frame` and copies it back; the lane followers'
+arrays (:class:`~redrive.sim.fleet.LaneFleet`) are stepped in place.
 
-Every value is the one the Python step gives, bit for bit: the same float64 operations in the
-same order (no ``fastmath``; powers through ``pow`` with a run-time exponent; ``math.hypot`` as
-CPython computes it, :func:`redrive.sim.kernels.hypot`).  What the kernel does not do it hands
-back to Python: a lane change that starts (the follower's :meth:`Route.project`), and the
-removal of a follower that left its route — :func:`_frame` stops at such a step and the world
-does it, then calls again.
+Every value is the one the world's Python step gives (the objects' methods: ``LaneFleet``'s,
+``EgoDriver``'s, ``Route.project``; that step stays in ``tests/sim/_reference_step.py`` as the
+reference), bit for bit: the same float64 operations in the same order (no ``fastmath``; powers
+through ``pow`` with a run-time exponent; ``math.hypot`` as CPython computes it,
+:func:`redrive.sim.kernels.hypot`).  Python does two things between calls: it removes a follower
+that left its route (:func:`_frame` stops after that step), and it moves an ego that
+:meth:`World.drive_ego` hands to a Python step (one physics step a call).
 """
 
 from __future__ import annotations
@@ -26,12 +26,15 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
+from redrive.errors import SimulationError
+from redrive.motion.idm import GAP_MIN_M, V0_MIN_MPS, idm_kernel
 from redrive.sim import fleet as fl
 from redrive.sim import kernels
 from redrive.sim.gaps import _gap_kernel  # compiled into _frame, with gaps.BLOCK (8 since h-obj7)
 
-# numba keys _frame's cache by this file alone: an edit of gaps.py's kernel or BLOCK must change
-# this file too (or run `make clean-kernels`), else a cached _frame keeps the old gap search
+# numba keys _frame's cache by this file alone: an edit of gaps.py's kernel or BLOCK (or of
+# fleet.py's, kernels.py's or motion/idm.py's kernels) must change this file too (or run
+# `make clean-kernels`), else a cached _frame keeps the old code
 
 if TYPE_CHECKING:
     from redrive.sim.world import World
@@ -60,9 +63,13 @@ class FrameStepper:
     def __init__(self, world: World) -> None:
         w = world
         search, driver, g = w._gaps, w._driver, w.ego_geometry
-        #: no route has a zero-length segment (the Python step's numpy fallback is not compiled)
         seg_len = search.net[5][_segment_starts(search.route_table)]
-        self.usable = bool(np.all(seg_len * seg_len != 0.0))
+        if not np.all(seg_len * seg_len != 0.0):
+            msg = (
+                "World: a route of the scenario's road has two samples at one arclength (a "
+                "segment of zero length); give every lane a positive length"
+            )
+            raise SimulationError(msg)
         self._route = search.routes.index(driver.route)
         idm = driver.idm
         p = np.zeros(_NP)
@@ -124,10 +131,11 @@ class FrameStepper:
             [walkers.index(a) for a, _, _ in w._triggers], dtype=np.int64
         ).reshape(-1)
 
-    def run(self, world: World, stamp_ns: int, pedals: bool) -> bool:
-        """Step ``world`` towards ``stamp_ns`` in compiled calls, with the scripted driver or
-        (``pedals``) the held command of :meth:`World.drive_ego_pedals`; False when it stopped
-        early and the world must take the next step in Python (a lane change starts)."""
+    def run(self, world: World, stamp_ns: int) -> None:
+        """Step ``world`` towards ``stamp_ns`` in one compiled call — the scripted driver, the
+        held command of :meth:`World.drive_ego_pedals`, or (one step a call) the ego moved by
+        the step :meth:`World.drive_ego` gave; it stops early after a step in which a follower
+        left its route (removed here)."""
         w, fleet, model, driver = world, world._fleet, world._ego, world._driver
         e, p = self._ego, self._p
         e[:] = (
@@ -139,8 +147,12 @@ class FrameStepper:
             model.accel_mps2,
             driver.s_m,
         )
-        if pedals:
-            assert w._ego_pedals is not None
+        ego_step = w._ego_step
+        mode = 0  # the scripted driver
+        if ego_step is not None:
+            mode = 2
+        elif w._ego_pedals is not None:
+            mode = 1
             cmd, pm = w._ego_pedals
             p[THROTTLE:HORIZON] = (
                 cmd.throttle,
@@ -166,9 +178,9 @@ class FrameStepper:
             self._hist_t = np.zeros(max_steps, dtype=np.int64)
             self._hist = np.zeros((max_steps, 3))
         clock = self._clock
-        clock[:] = (w._time_ns, w._start_ns, dt_ns, stamp_ns, 1 if pedals else 0, 0)
+        clock[:] = (w._time_ns, w._start_ns, dt_ns, stamp_ns, mode, 0)
         search = w._gaps
-        done, fleet_t, lc_due, left = _frame(
+        done, fleet_t, next_lc, left = _frame(
             clock,
             fleet._time_s,
             fleet._next_lc,
@@ -209,20 +221,21 @@ class FrameStepper:
             for index, flag in enumerate(committed[: self._n_ego_stops].tolist()):
                 if flag:
                     driver._committed.add(index)
+        fleet._time_s, fleet._next_lc = fleet_t, next_lc
+        if ego_step is not None:  # the step's ego motion, after the others planned and moved
+            ego_step(model, (int(clock[0]) - w._time_ns) / 1e9)
+            self._hist[0] = (model.x_m, model.y_m, model.yaw_rad)
         for k, a in enumerate(walkers):
             if a.start_time_s is None and not math.isnan(walk[k, WSTART]):
                 a.start_time_s = float(walk[k, WSTART])
             a._time_s = float(walk[k, WTIME])
-        if done:
-            fleet._time_s = fleet_t
-            w._time_ns = int(clock[0])
-            # (t_ns, x, y, yaw) a step, as World._record_pose appends them
-            xs, ys, yaws = self._hist[:done].T.tolist()
-            w._history.extend(zip(self._hist_t[:done].tolist(), xs, ys, yaws, strict=True))
-            w._trim_history()
-            if left:
-                fleet._keep(fleet._i[:, fl.ACTIVE] == 1)
-        return not lc_due
+        w._time_ns = int(clock[0])
+        # (t_ns, x, y, yaw) a step, as World._record_pose appends them
+        xs, ys, yaws = self._hist[:done].T.tolist()
+        w._history.extend(zip(self._hist_t[:done].tolist(), xs, ys, yaws, strict=True))
+        w._trim_history()
+        if left:
+            fleet._keep(fleet._i[:, fl.ACTIVE] == 1)
 
 
 def _segment_starts(table: I64) -> B:
@@ -296,10 +309,10 @@ def _frame(  # noqa: PLR0917 (the world's columns; numba has no keyword-only par
     parked: F64,
     hist_t: I64,
     hist: F64,
-) -> tuple[int, float, bool, bool]:  # pragma: no cover - compiled
-    """World._substep until ``clock[3]``; returns the steps taken, the fleet's plan time,
-    whether a lane change is due (the next step is then Python's) and whether a follower left
-    its route (it stops after that step)."""
+) -> tuple[int, float, float, bool]:  # pragma: no cover - compiled
+    """The world's physics steps until ``clock[3]`` (one step when ``clock[4]`` is 2: the ego is
+    moved by Python); returns the steps taken, the fleet's plan time, the time of the next lane
+    change to start and whether a follower left its route (it stops after that step)."""
     time_ns, start_ns, dt_full, stamp_ns, pedals = clock[0], clock[1], clock[2], clock[3], clock[4]
     two = powers[0]
     off, n_route = table[0, ego_route], table[1, ego_route]
@@ -310,16 +323,13 @@ def _frame(  # noqa: PLR0917 (the world's columns; numba has no keyword-only par
     while time_ns < stamp_ns:
         dt_ns = min(dt_full, stamp_ns - time_ns)
         t = (time_ns - start_ns) / 1e9
-        if t >= next_lc:
-            clock[0] = time_ns
-            return steps, fleet_t, True, False
         dt_s = dt_ns / 1e9
         scripted = pedals == 0
         plan = scripted or nf > 0
         nm = 1 + nf + nw + npk
         ids = np.empty(nm, dtype=np.int64)
         obst = np.empty((6, nm))
-        if plan:  # World._obstacles: the ego, the followers, the walkers, the parked
+        if plan:  # the obstacle snapshot: the ego, the followers, the walkers, the parked
             c, s = math.cos(e[EYAW]), math.sin(e[EYAW])
             ids[0] = 0
             obst[0, 0], obst[1, 0] = e[EX] + p[CENTER] * c, e[EY] + p[CENTER] * s
@@ -349,8 +359,10 @@ def _frame(  # noqa: PLR0917 (the world's columns; numba has no keyword-only par
             k = trig_walker[r]
             if trig[r, 0] - front <= trig[r, 1] and math.isnan(walk[k, WSTART]):
                 walk[k, WSTART] = t
+        if t >= next_lc:  # lane changes that start now (after the snapshot: it has the old lanes)
+            next_lc = _start_lane_changes(f, i, t, fleet_t, net, table, route_len, powers)
         fleet_t = t
-        # the ego on its route again (EgoDriver.steer / World._track_route)
+        # the ego on its route again (EgoDriver.steer; Route.project_point)
         s0 = e[ES]
         lo = min(max(kernels.bisect_right(net_s, off, off + n_route, s0 - 2.0) - 1, 0), n_route - 2)
         hi = min(kernels.bisect_left(net_s, off, off + n_route, s0 + 10.0) + 1, n_route - 1)
@@ -370,18 +382,7 @@ def _frame(  # noqa: PLR0917 (the world's columns; numba has no keyword-only par
         gap_e, lead_e = np.inf, 0.0
         if plan:
             nq = nf + 1 if scripted else nf
-            q_int = np.empty((3, nq), dtype=np.int64)
-            q_float = np.empty((4, nq))
-            for k in range(nf):
-                route = i[k, fl.ROUTE]
-                s_front = f[k, fl.S] + f[k, fl.LENGTH] / 2.0
-                q_int[0, k], q_int[1, k], q_int[2, k] = (
-                    table[0, route],
-                    table[1, route],
-                    i[k, fl.ID],
-                )
-                q_float[0, k], q_float[1, k] = f[k, fl.S], s_front
-                q_float[2, k], q_float[3, k] = s_front + p[HORIZON], f[k, fl.WIDTH]
+            q_int, q_float = fl._queries(f, i, table, p[HORIZON], scripted)
             if scripted:
                 s_front = e[ES] + p[FRONT]
                 q_int[0, nf], q_int[1, nf], q_int[2, nf] = off, n_route, 0
@@ -431,12 +432,27 @@ def _frame(  # noqa: PLR0917 (the world's columns; numba has no keyword-only par
             end = route_len[ego_route] - 1.0 - s_front
             if min(stop, end) < gap_e:
                 gap_e, lead_e = min(stop, end), 0.0
-            accel_cmd = _idm(p, v, gap_e, lead_e, two)
-        else:  # ActuatedEgo.apply: the pedals under the held command
+            accel_cmd = idm_kernel(
+                v,
+                gap_e,
+                lead_e,
+                p[V0],
+                p[DELTA],
+                p[HEADWAY],
+                p[MIN_GAP],
+                p[A_MAX],
+                p[B_COMF],
+                p[IDM_DEC],
+                V0_MIN_MPS,
+                GAP_MIN_M,
+                two,
+            )
+            _bicycle(e, p, dt_s, accel_cmd, steer)
+        elif pedals == 1:  # ActuatedEgo.apply: the pedals under the held command
             v = e[ESPEED]
             accel_cmd = p[THROTTLE] * p[P_ACC] - p[BRAKE] * p[P_BRK] - (p[ROLL] + p[DRAG] * v * v)
-            steer = p[STEER_CMD]
-        _bicycle(e, p, dt_s, accel_cmd, steer)
+            _bicycle(e, p, dt_s, accel_cmd, p[STEER_CMD])
+        # (pedals == 2: Python moves the ego after this step, World.drive_ego)
         time_ns += dt_ns
         t_new = (time_ns - start_ns) / 1e9
         for k in range(nw):
@@ -447,10 +463,39 @@ def _frame(  # noqa: PLR0917 (the world's columns; numba has no keyword-only par
         for k in range(nf):
             if i[k, fl.ACTIVE] == 0:
                 left = True
-        if left:
+        if left or pedals == 2:
             break
     clock[0] = time_ns
-    return steps, fleet_t, False, left
+    return steps, fleet_t, next_lc, left
+
+
+@numba.njit(cache=True, nogil=True)
+def _start_lane_changes(  # noqa: PLR0917 (numba has no keyword-only parameters)
+    f: F64, i: I64, t: float, fleet_t: float, net: F64, table: I64, route_len: F64, powers: F64
+) -> float:  # pragma: no cover - compiled
+    """``LaneFollower.start_plan``'s lane changes at ``t``: each follower whose change is due
+    moves onto its target route where ``Route.project`` of its pose (over the whole target)
+    puts it; returns the start time of the next change (inf: none left)."""
+    net_s, net_x, net_y = net[0], net[1], net[2]
+    next_lc = np.inf
+    for k in range(len(f)):
+        if i[k, fl.LC_TARGET] < 0 or i[k, fl.LC_STARTED] == 1:
+            continue
+        if not t >= f[k, fl.LC_START]:
+            next_lc = min(next_lc, f[k, fl.LC_START])
+            continue
+        x, y, _ = fl._pose(f, i, k, fleet_t, net, table, powers)
+        target = i[k, fl.LC_TARGET]
+        off, n = table[0, target], table[1, target]
+        # Route._piece(0, length): every segment of the target
+        lo = min(max(kernels.bisect_right(net_s, off, off + n, 0.0) - 1, 0), n - 2)
+        hi = min(kernels.bisect_left(net_s, off, off + n, route_len[target]) + 1, n - 1)
+        hi = max(hi, lo + 1)
+        s_new, lat, _ = kernels.project_point(net_s, net_x, net_y, off + lo, off + hi, x, y)
+        i[k, fl.ROUTE], f[k, fl.S] = target, s_new
+        f[k, fl.LC_OFF0] = lat - f[k, fl.LAT]
+        i[k, fl.LC_STARTED] = 1
+    return next_lc
 
 
 @numba.njit(cache=True, nogil=True)
@@ -468,22 +513,6 @@ def _walker(walk: F64, k: int) -> tuple[float, float, float, float]:  # pragma: 
         vx = walk[k, WSPD] * math.cos(walk[k, WYAW])
         vy = walk[k, WSPD] * math.sin(walk[k, WYAW])
     return x, y, vx, vy
-
-
-@numba.njit(cache=True, nogil=True)
-def _idm(p: F64, v: float, gap: float, v_lead: float, two: float) -> float:  # pragma: no cover
-    """``agents.idm_acceleration`` with the ego driver's parameters."""
-    a_max = p[A_MAX]
-    free = 1.0 - (max(v, 0.0) / max(p[V0], 1e-3)) ** p[DELTA]
-    interaction = 0.0
-    if math.isfinite(gap):
-        dv = v - v_lead
-        s_star = p[MIN_GAP] + max(
-            0.0, v * p[HEADWAY] + v * dv / (2.0 * math.sqrt(a_max * p[B_COMF]))
-        )
-        interaction = (s_star / max(gap, 0.05)) ** two
-    accel = a_max * (free - interaction)
-    return float(min(max(accel, -p[IDM_DEC]), a_max))
 
 
 @numba.njit(cache=True, nogil=True)

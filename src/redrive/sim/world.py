@@ -6,9 +6,10 @@ states bit for bit.  Time is int nanoseconds since the epoch; physics runs at th
 ``physics_dt_s``; :meth:`World.scene` is the :class:`~redrive.sim.scene.Scene` the sensors render.
 
 The lane followers are built as :class:`~redrive.sim.agents.LaneFollower` objects and then kept
-as arrays (:class:`~redrive.sim.fleet.LaneFleet`): a physics step is the obstacle snapshot, the
-gap search of every agent and the followers' plan and motion in compiled calls, with the
-results the objects would give, bit for bit.
+as arrays (:class:`~redrive.sim.fleet.LaneFleet`); the world steps only in compiled calls
+(:class:`~redrive.sim.stepper.FrameStepper`: a frame's physics steps — the obstacle snapshot,
+lane changes, every agent's gap search, the followers' and the ego's plan and motion — in one
+call), with the results the objects would give, bit for bit.
 """
 
 from __future__ import annotations
@@ -22,7 +23,8 @@ import numpy as np
 import numpy.typing as npt
 
 from redrive.errors import SimulationError
-from redrive.sim.agents import IdmParams, LaneChange, LaneFollower, ParkedObject, Walker
+from redrive.motion import IdmParams
+from redrive.sim.agents import LaneChange, LaneFollower, ParkedObject, Walker
 from redrive.sim.ego import BicycleModel, EgoDriver, EgoGeometry, PedalModel, pose_matrix
 from redrive.sim.fleet import LaneFleet
 from redrive.sim.gaps import GapSearch
@@ -126,7 +128,7 @@ class World:
         for agent in scenario.agents:
             next_id = self._add_agent(agent, next_id)
         self._history: deque[tuple[int, float, float, float]] = deque()
-        #: steps the ego instead of the scripted driver (closed loop): ``step(model, dt_s)``
+        #: steps the ego instead of the scripted driver: ``step(model, dt_s)`` (drive_ego)
         self._ego_step: Callable[[BicycleModel, float], None] | None = None
         #: the command and pedals the ego moves under (:meth:`drive_ego_pedals`), or None
         self._ego_pedals: tuple[ControlCommands, PedalModel] | None = None
@@ -253,72 +255,15 @@ class World:
             msg = f"World.step_to: {stamp_ns} ns is before the current time {self._time_ns} ns; the world only moves forward"
             raise SimulationError(msg)
         stepper = self._stepper
-        compiled = stepper.usable and (self._ego_step is None or self._ego_pedals is not None)
         while self._time_ns < stamp_ns:
-            # the compiled steps stop before a lane change starts: that step is Python's
-            if compiled and stepper.run(self, stamp_ns, self._ego_pedals is not None):
-                continue
-            self._substep(min(self._dt_ns, stamp_ns - self._time_ns))
-
-    def _substep(self, dt_ns: int) -> None:
-        t = self.time_s
-        dt_s = dt_ns / 1e9
-        ego_step = self._ego_step
-        scripted = ego_step is None
-        fleet = self._fleet
-        # every agent plans from one snapshot (taken before any moves or changes lane), their
-        # gap searches in one batch; a driven ego with nobody around needs none
-        obstacles = self._obstacles() if scripted or len(fleet) else None
-        front = self._driver.s_m + self.ego_geometry.front_offset_m
-        for walker, s_cross, distance in self._triggers:
-            if s_cross - front <= distance:
-                walker.start(t)
-        fleet.start_plan(t)
-        search = self._gaps
-        ego_query = None
-        if scripted:
-            g, driver = self.ego_geometry, self._driver
-            steer = driver.steer(self._ego)
-            off, n = search.route_row(driver.route)
-            s_front = driver.s_m + g.front_offset_m
-            ego_query = (
-                off,
-                n,
-                driver.ego_id,
-                driver.s_m + g.center_offset_m,
-                s_front,
-                s_front + search.horizon_m,
-                g.width_m,
-            )
-        else:
-            self._track_route()
-        if obstacles is not None:
-            q_int, q_float = fleet.queries(search.horizon_m, ego_query)
-            gaps, speeds = search.gaps_of(q_int, q_float, *obstacles)
-            # the followers plan (stop lines, IDM, braking) and move; the ego's plan does not
-            # read them
-            fleet.finish_and_advance(t, dt_s, gap_m=gaps, leader_speed_mps=speeds)
-        if scripted:
-            accel = self._driver.accelerate(
-                self._ego,
-                t,
-                self.lights,
-                gap_m=float(gaps[-1]),
-                leader_speed_mps=float(speeds[-1]),
-            )
-        if ego_step is None:
-            self._ego.step(dt_s, accel_mps2=accel, steer_rad=steer)
-        else:
-            ego_step(self._ego, dt_s)
-        self._time_ns += dt_ns
-        t_new = self.time_s
-        for walker in self._walkers:
-            walker.set_time(t_new)
-        self._record_pose()
+            stepper.run(self, stamp_ns)
 
     def drive_ego(self, step: Callable[[BicycleModel, float], None] | None) -> None:
         """Hand the ego to ``step(model, dt_s)``, called every physics step in place of the
         scripted driver (closed loop: the algorithm's commands move the car); None gives it back.
+        Each call comes after the other agents planned and moved in that physics step (the
+        world then steps one physics step per compiled call: :meth:`drive_ego_pedals` is the
+        fast way to drive it).
 
         The ego's progress along its route is still tracked (it starts the scenario's
         pedestrian triggers), and the other agents see the ego wherever it is.
@@ -330,14 +275,8 @@ class World:
         """Move the ego, every physics step from now on, under ``commands`` through ``pedals`` —
         what :meth:`drive_ego` with ``ActuatedEgo(model, pedals=pedals).apply(commands, dt_s)``
         does, in the compiled physics step (call it again for each new command)."""
-        self._ego_step = self._pedal_step
+        self._ego_step = None
         self._ego_pedals = (commands, pedals)
-
-    def _pedal_step(self, model: BicycleModel, dt_s: float) -> None:
-        assert self._ego_pedals is not None
-        commands, pedals = self._ego_pedals
-        accel = pedals.acceleration(commands, model.speed_mps)
-        model.step(dt_s, accel_mps2=accel, steer_rad=commands.steering_angle_rad)
 
     def drop_agents(self) -> None:
         """Remove every agent — lane followers, pedestrians, parked vehicles — for good: the world
@@ -375,15 +314,6 @@ class World:
         """The ego's bicycle model (its state; step it only through :meth:`drive_ego`)."""
         return self._ego
 
-    def _track_route(self) -> None:
-        route = self._driver.route
-        self._driver.s_m, _ = route.project_point(
-            self._ego.x_m,
-            self._ego.y_m,
-            s_min_m=self._driver.s_m - 2.0,
-            s_max_m=self._driver.s_m + 10.0,
-        )
-
     def _record_pose(self) -> None:
         self._history.append((self._time_ns, self._ego.x_m, self._ego.y_m, self._ego.yaw_rad))
         self._trim_history()
@@ -398,32 +328,6 @@ class World:
         """The agents that are not lane followers (those are :attr:`_fleet`), in the world's
         order after them."""
         return [*self._walkers, *self._parked]
-
-    def _obstacles(self) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]:
-        """The snapshot every agent plans from: ids (M,) and (6, M) centre x, y, length,
-        width, velocity x, y (``GapSearch.gaps_of``'s obstacles) — the ego, the lane
-        followers, the pedestrians, the parked vehicles."""
-        g, ego = self.ego_geometry, self._ego
-        c, s = math.cos(ego.yaw_rad), math.sin(ego.yaw_rad)
-        ids = [EGO_ID]
-        rows = [
-            (
-                ego.x_m + g.center_offset_m * c,
-                ego.y_m + g.center_offset_m * s,
-                g.length_m,
-                g.width_m,
-                ego.speed_mps * c,
-                ego.speed_mps * s,
-            )
-        ]
-        for walker in self._walkers:
-            x, y, _ = walker.pose()
-            ids.append(walker.agent_id)
-            rows.append((x, y, walker.size_lwh_m[0], walker.size_lwh_m[1], *walker.velocity()))
-        for parked in self._parked:
-            ids.append(parked.agent_id)
-            rows.append((*parked.center_xy, *parked.size_lwh_m[:2], 0.0, 0.0))
-        return self._fleet.snapshot(np.array(ids, dtype=np.int64), np.array(rows, dtype=np.float64))
 
     def ego_state(self) -> VehicleState:
         """The ego's true state (rear-axle centre, map frame) at :attr:`time_ns` (the same

@@ -6,8 +6,10 @@ planner's choice of leaders, each one compiled call doing the numpy code's float
 (``hypot``, ``np.interp`` written out, numpy's minimum, maximum and ``searchsorted`` choices).
 
 :func:`idm_profile` is the planner's forward integration — every leader's gap, the IDM
-acceleration, the ballistic update and the ``s0`` guard, one waypoint per step — as one compiled
-call instead of ~60 Python steps over Python lists.  It does the float64 operations of the Python
+acceleration (:func:`redrive.motion.idm.idm_kernel`, the one IDM the world's agents use too), the
+ballistic update and the ``s0`` guard, one waypoint per step — as one compiled call instead of ~60
+Python steps over Python lists (numba caches this file's kernels by this file alone: after an
+edit of ``motion/idm.py``, run ``make clean-kernels``).  It does the float64 operations of the Python
 loop it replaced in the same order, so the plans are bit for bit the same (numba compiles without
 ``fastmath``: no reassociation, no fused multiply-add):
 
@@ -31,6 +33,7 @@ import numpy.typing as npt
 
 from redrive.algorithms.reference._kernels import project_on_segments
 from redrive.algorithms.reference._numeric_kernels import interp_at, nan_span, segment_at
+from redrive.motion.idm import idm_kernel
 
 __all__ = ["idm_profile", "leaders_on_path", "points_at", "polyline_arc", "project_pruned"]
 
@@ -77,7 +80,6 @@ def idm_profile(  # noqa: PLR0917 - numba takes no keyword-only parameters
     v = speed_mps
     if 0.0 > v:
         v = 0.0
-    sqrt_ab = 2.0 * math.sqrt(a_max * b)
     for k in range(n):
         t = k * dt
         gap = math.inf
@@ -89,24 +91,10 @@ def idm_profile(  # noqa: PLR0917 - numba takes no keyword-only parameters
             j = _first_min(gaps, m)
             gap = gaps[j]
             v_lead = lead_v[j]
-        # the IDM acceleration
-        vv = v
-        if 0.0 > vv:
-            vv = 0.0
-        free = 1.0 - (vv / v0) ** delta
-        interaction = 0.0
-        if math.isfinite(gap):
-            dyn = v * headway + v * (v - v_lead) / sqrt_ab
-            s_star = s0 + (dyn if dyn > 0.0 else 0.0)
-            g = gap
-            if 1e-3 > g:
-                g = 1e-3
-            interaction = (s_star / g) ** two
-        accel = a_max * (free - interaction)
-        if -max_decel > accel:
-            accel = -max_decel
-        if a_max < accel:
-            accel = a_max
+        # the IDM acceleration (v0 as given, the gap at least 1 mm)
+        accel = idm_kernel(
+            v, gap, v_lead, v0, delta, headway, s0, a_max, b, max_decel, -math.inf, 1e-3, two
+        )
         # the ballistic update, never reversing
         if v + accel * dt < 0.0:
             s_new = s - v * v / (2.0 * accel)
