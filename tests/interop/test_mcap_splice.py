@@ -1,4 +1,4 @@
-"""SpliceWriter on small MCAP files written by the ``mcap`` library: copied chunks stay byte for
+"""McapStream splicing small MCAP files written by the ``mcap`` library: copied chunks stay byte for
 byte, rewritten chunks lose only the channel left out, a summary-less log is not spliced, and a
 summary that does not match the file is an error that says what to do."""
 
@@ -14,7 +14,8 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
 from redrive.errors import LogError
-from redrive.interop.mcap_splice import SpliceWriter, read_layout
+from redrive.interop.mcap_splice import chunk_messages, read_layout
+from redrive.io.mcap.stream import McapStream
 
 Row = tuple[str, int, int, int, bytes]
 
@@ -62,7 +63,7 @@ def _splice(src: Path, dst: Path, *, drop: set[int], extra: list[tuple[int, byte
     assert layout is not None
     new_id = max(layout.channels) + 1
     with src.open("rb") as fin, dst.open("wb") as fout:
-        out = SpliceWriter(fout.fileno(), chunk_size_bytes=1024)
+        out = McapStream(fout.fileno(), compression="lz4", chunk_size_bytes=1024)
         out.start(profile="", library="test")
         for schema in layout.schemas.values():
             out.add_schema(schema)
@@ -79,7 +80,7 @@ def _splice(src: Path, dst: Path, *, drop: set[int], extra: list[tuple[int, byte
                 t, data = pending.pop(0)
                 out.add_message(new_id, log_time=t, publish_time=t, sequence=0, data=data)
             if drop & set(index.message_index_offsets):
-                messages = SpliceWriter.chunk_messages(fin.fileno(), index, where=str(src))
+                messages = chunk_messages(fin.fileno(), index, where=str(src))
                 for cid, seq, log_time, publish_time, data in messages:
                     if cid not in drop:
                         out.add_message(
@@ -161,6 +162,6 @@ def test_a_summary_that_does_not_match_the_file_says_repair(tmp_path: Path) -> N
     fd = os.open(tmp_path / "out.mcap", os.O_WRONLY | os.O_CREAT)
     try:
         with src.open("rb") as fin, pytest.raises(LogError, match="redrive repair"):
-            SpliceWriter(fd).copy_chunk(fin.fileno(), index, where=str(src))
+            McapStream(fd, compression="none").copy_chunk(fin.fileno(), index, where=str(src))
     finally:
         os.close(fd)

@@ -32,8 +32,11 @@ from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 from mcap.records import Channel, Schema
 
 from redrive import __version__
-from redrive.interop.mcap_splice import LogLayout, SpliceWriter, is_mcap_file, read_layout
+from redrive.errors import is_no_space
+from redrive.interop.mcap_splice import LogLayout, chunk_messages, is_mcap_file, read_layout
 from redrive.interop.stream import OutMessage, SceneStream, open_scene_stream
+from redrive.io.mcap.part import McapPart
+from redrive.io.mcap.stream import McapStream
 
 __all__ = ["export_mcap", "splice_stream", "write_stream"]
 
@@ -104,12 +107,11 @@ def splice_stream(
         LogError: the log's bytes are not what its summary says."""
     where = str(layout.path)
     dropped = {c.id for c in layout.channels.values() if c.topic in stream.dropped_topics}
-    tmp = path.with_name(f".{path.name}.part")
     count = 0
+    part = McapPart(path, profile="", library=f"redrive {__version__}", compression="lz4")
     try:
-        with layout.path.open("rb") as src, tmp.open("wb") as dst:
-            out = SpliceWriter(dst.fileno())
-            out.start(profile="", library=f"redrive {__version__}")
+        with layout.path.open("rb") as src:
+            out = part.stream
             kept_channels = [c for c in layout.channels.values() if c.id not in dropped]
             used_schemas = {c.schema_id for c in kept_channels}
             for schema in layout.schemas.values():
@@ -126,7 +128,7 @@ def splice_stream(
                     count += 1
                     pending = next(added, None)
                 if dropped & set(index.message_index_offsets):
-                    for cid, seq, log_time, publish_time, data in SpliceWriter.chunk_messages(
+                    for cid, seq, log_time, publish_time, data in chunk_messages(
                         src.fileno(), index, where=where
                     ):
                         if cid not in dropped:
@@ -149,14 +151,19 @@ def splice_stream(
                 if progress is not None:
                     progress(pending.log_time_ns)
                 pending = next(added, None)
-            out.finish()
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    except OSError as err:
+        if is_no_space(err):
+            raise part.out_of_space(err) from err
+        part.abort()
+        raise
+    except BaseException:
+        part.abort()
+        raise
+    part.close()
     return count
 
 
-def _add(out: SpliceWriter, ids: Mapping[str, int], message: OutMessage) -> None:
+def _add(out: McapStream, ids: Mapping[str, int], message: OutMessage) -> None:
     out.add_message(
         ids[message.topic],
         log_time=message.log_time_ns,
@@ -166,9 +173,7 @@ def _add(out: SpliceWriter, ids: Mapping[str, int], message: OutMessage) -> None
     )
 
 
-def _add_stream_channels(
-    out: SpliceWriter, stream: SceneStream, layout: LogLayout
-) -> dict[str, int]:
+def _add_stream_channels(out: McapStream, stream: SceneStream, layout: LogLayout) -> dict[str, int]:
     """The stream's own channels (all but the log's) with ids the log does not use; returns
     topic → channel id."""
     schema_ids: dict[tuple[str, str, bytes], int] = {}

@@ -30,7 +30,8 @@ class McapPart:
 
     Args:
         target: the file it becomes.
-        profile: the MCAP header's profile (``ros1``, ``ros2``).
+        profile: the MCAP header's profile (``ros1``, ``ros2``; "" for none).
+        library: the header's library.
         compression, chunk_size_bytes, live, zstd_level: as :class:`McapStream`.
 
     Raises:
@@ -42,6 +43,7 @@ class McapPart:
         target: Path,
         *,
         profile: str,
+        library: str = "redrive",
         compression: StreamCompression = "zstd",
         chunk_size_bytes: int = 1 << 20,
         live: bool = False,
@@ -65,7 +67,7 @@ class McapPart:
             zstd_level=zstd_level,
         )
         try:
-            self.stream.start(profile=profile, library="redrive")
+            self.stream.start(profile=profile, library=library)
         except OSError as err:
             self.abort()  # not even the header: nothing to keep
             if is_no_space(err):

@@ -34,6 +34,7 @@ Use (``fd`` from ``os.open``; the caller fsyncs and closes it)::
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import os
 import queue
 import struct
@@ -42,44 +43,34 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
-from isal.isal_zlib import crc32
-from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
 from mcap.records import (
     Channel,
     ChunkIndex,
     DataEnd,
-    Footer,
     Header,
-    McapRecord,
     Metadata,
     MetadataIndex,
     Schema,
     Statistics,
-    SummaryOffset,
 )
 
+from redrive.errors import LogError
+from redrive.io.mcap.records import (
+    copy_range,
+    encode_chunk,
+    index_counts,
+    record_bytes,
+    summary_section,
+    write_all,
+)
 from redrive.io.mcap.scan import MAGIC
 
-__all__ = [
-    "MAGIC",
-    "EncodedChunk",
-    "McapStream",
-    "StreamCompression",
-    "encode_chunk",
-    "record_bytes",
-    "summary_section",
-    "write_all",
-]
+__all__ = ["MAGIC", "McapStream", "StreamCompression"]
 
 StreamCompression = Literal["zstd", "lz4", "none"]
 
 _MESSAGE = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, log, publish
-_CHUNK_HEAD = struct.Struct("<BQQQQI")  # opcode, length, start, end, uncompressed size, crc
-_U32 = struct.Struct("<I")
-_U64 = struct.Struct("<Q")
-_INDEX_HEAD = struct.Struct("<BQHI")  # opcode, length, channel, records length
-_IOV_MAX = 512  # os.writev takes at most IOV_MAX (1024 on Linux) pieces at once
 #: live recordings: the compression thread's niceness (above the receiving threads' 0, so on a
 #: busy machine compression yields and more chunks are written uncompressed, no message lost)
 _COMPRESS_NICE = 10
@@ -123,144 +114,6 @@ def _compressor(
         return zstandard.ZstdCompressor(level=level).compress
     msg = f"compression must be zstd, lz4 or none, got {compression!r}"
     raise ValueError(msg)
-
-
-def record_bytes(record: McapRecord) -> bytes:
-    """One record's bytes, as the mcap library writes it."""
-    builder = RecordBuilder()
-    record.write(builder)
-    data: bytes = builder.end()  # type: ignore[no-untyped-call]
-    return data
-
-
-def write_all(fd: int, pieces: Sequence[bytes | bytearray | memoryview]) -> int:
-    """``os.writev`` until every byte of ``pieces`` is written; returns their length."""
-    views = [memoryview(p).cast("B") for p in pieces if len(p)]
-    total = sum(v.nbytes for v in views)
-    while views:
-        written = os.writev(fd, views[:_IOV_MAX])
-        while views and written >= views[0].nbytes:
-            written -= views[0].nbytes
-            views.pop(0)
-        if written:
-            views[0] = views[0][written:]
-    return total
-
-
-@dataclass(frozen=True, slots=True)
-class EncodedChunk:
-    """A chunk record and the message index records after it, ready to write: ``pieces`` in
-    order, then :meth:`index_at` the offset they were written at for the summary."""
-
-    pieces: list[bytes | bytearray | memoryview]
-    start_ns: int
-    end_ns: int
-    chunk_length: int  # the chunk record, opcode and length included
-    index_length: int  # its message index records
-    index_offsets: dict[int, int]  # channel → its message index record, from the chunk's end
-    compression: str
-    compressed_size: int
-    uncompressed_size: int
-
-    def index_at(self, chunk_start: int) -> ChunkIndex:
-        """The summary's chunk index of this chunk written at byte ``chunk_start``."""
-        index_start = chunk_start + self.chunk_length
-        return ChunkIndex(
-            message_start_time=self.start_ns,
-            message_end_time=self.end_ns,
-            chunk_start_offset=chunk_start,
-            chunk_length=self.chunk_length,
-            message_index_offsets={c: index_start + at for c, at in self.index_offsets.items()},
-            message_index_length=self.index_length,
-            compression=self.compression,
-            compressed_size=self.compressed_size,
-            uncompressed_size=self.uncompressed_size,
-        )
-
-
-def encode_chunk(
-    records: Sequence[bytes | bytearray | memoryview],
-    start_ns: int,
-    end_ns: int,
-    index: Mapping[int, list[int]],
-    compressed: tuple[str, bytes] | None,
-) -> EncodedChunk:
-    """A chunk of the message records ``records`` (their CRC is taken here), stored as they are
-    or as ``compressed`` (compression name, compressed bytes), and the message index records of
-    ``index`` (channel → [log time, offset in the records, …])."""
-    crc = 0
-    size = 0
-    for piece in records:
-        crc = crc32(piece, crc)
-        size += len(piece)
-    name, body = ("", list(records)) if compressed is None else (compressed[0], [compressed[1]])
-    body_size = size if compressed is None else len(compressed[1])
-    name_bytes = name.encode()
-    record_length = 8 + 8 + 8 + 4 + 4 + len(name_bytes) + 8 + body_size
-    head = (
-        _CHUNK_HEAD.pack(Opcode.CHUNK, record_length, start_ns, end_ns, size, crc)
-        + _U32.pack(len(name_bytes))
-        + name_bytes
-        + _U64.pack(body_size)
-    )
-    relative: dict[int, int] = {}
-    indexes = bytearray()
-    for channel_id, entries in index.items():
-        relative[channel_id] = len(indexes)
-        pairs = len(entries) // 2
-        indexes += _INDEX_HEAD.pack(Opcode.MESSAGE_INDEX, 6 + 16 * pairs, channel_id, 16 * pairs)
-        indexes += struct.pack(f"<{len(entries)}Q", *entries)
-    return EncodedChunk(
-        pieces=[head, *body, indexes],
-        start_ns=start_ns,
-        end_ns=end_ns,
-        chunk_length=len(head) + body_size,
-        index_length=len(indexes),
-        index_offsets=relative,
-        compression=name,
-        compressed_size=body_size,
-        uncompressed_size=size,
-    )
-
-
-def summary_section(
-    summary_start: int,
-    *,
-    schemas: Sequence[Schema],
-    channels: Sequence[Channel],
-    statistics: Statistics,
-    chunk_indexes: Sequence[ChunkIndex],
-    metadata_indexes: Sequence[MetadataIndex] = (),
-) -> bytes:
-    """The bytes from the summary section to the end of a file whose summary starts at byte
-    ``summary_start``: schemas, channels, statistics, chunk and metadata indexes, a summary
-    offset record for each group that has records, the footer with the summary's CRC, and the
-    closing magic."""
-    summary = RecordBuilder()
-    offsets: list[SummaryOffset] = []
-    groups: list[
-        tuple[Opcode, Sequence[Schema | Channel | Statistics | ChunkIndex | MetadataIndex]]
-    ] = [
-        (Opcode.SCHEMA, schemas),
-        (Opcode.CHANNEL, channels),
-        (Opcode.STATISTICS, [statistics]),
-        (Opcode.CHUNK_INDEX, chunk_indexes),
-        (Opcode.METADATA_INDEX, metadata_indexes),
-    ]
-    for opcode, records in groups:
-        start = summary.count
-        for record in records:
-            record.write(summary)
-        if records:
-            offsets.append(SummaryOffset(opcode, summary_start + start, summary.count - start))
-    offset_start = summary_start + summary.count
-    for offset in offsets:
-        offset.write(summary)
-    data: bytes = summary.end()  # type: ignore[no-untyped-call]
-    footer_head = struct.pack("<BQQQ", Opcode.FOOTER, 20, summary_start, offset_start)
-    crc = crc32(footer_head, crc32(data))
-    footer = Footer(summary_start=summary_start, summary_offset_start=offset_start, summary_crc=crc)
-    return b"".join((data, record_bytes(footer), MAGIC))
 
 
 class McapStream:
@@ -338,7 +191,9 @@ class McapStream:
 
     def register_schema(self, name: str, encoding: str, data: bytes) -> int:
         """A new schema (written into the open chunk); returns its id."""
-        schema = Schema(id=len(self._schemas) + 1, name=name, encoding=encoding, data=data)
+        schema = Schema(
+            id=max(self._schemas, default=0) + 1, name=name, encoding=encoding, data=data
+        )
         self._schemas[schema.id] = schema
         self._append_record(schema)
         return schema.id
@@ -348,7 +203,7 @@ class McapStream:
     ) -> int:
         """A new channel (written into the open chunk); returns its id."""
         channel = Channel(
-            id=len(self._channels) + 1,
+            id=max(self._channels, default=0) + 1,
             topic=topic,
             message_encoding=message_encoding,
             schema_id=schema_id,
@@ -357,6 +212,19 @@ class McapStream:
         self._channels[channel.id] = channel
         self._append_record(channel)
         return channel.id
+
+    def add_schema(self, schema: Schema) -> None:
+        """A schema record with the id it has (another file's), in the data section after the
+        open chunk (which is finished first)."""
+        self.end_chunk()
+        self._schemas[schema.id] = schema
+        self._put(record_bytes(schema))
+
+    def add_channel(self, channel: Channel) -> None:
+        """A channel record with the id it has, as :meth:`add_schema`."""
+        self.end_chunk()
+        self._channels[channel.id] = channel
+        self._put(record_bytes(channel))
 
     def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
         """A metadata record (after the open chunk, which is finished first)."""
@@ -412,6 +280,65 @@ class McapStream:
             return
         self._view[self._used : self._used + size] = memoryview(data).cast("B")
         self._used += size
+
+    def copy_chunk(self, src_fd: int, index: ChunkIndex, *, where: str) -> int:
+        """Append the chunk of ``index`` (in the MCAP file ``src_fd``) and its message indexes
+        byte for byte (``copy_file_range``: the kernel copies), after the open chunk; returns its
+        message count. Its schemas and channels must be added with their ids. ``where`` names
+        the source in errors.
+
+        Raises:
+            LogError: the bytes are not what the source's summary says (repair it).
+        """
+        self.end_chunk()
+        if self._jobs is not None:
+            self._jobs.join()  # the chunks queued before it are written
+        self._raise_failure()
+        start = index.chunk_start_offset
+        head = os.pread(src_fd, 9, start)
+        opcode, length = struct.unpack("<BQ", head) if len(head) == 9 else (0, 0)
+        if opcode != Opcode.CHUNK or 9 + length != index.chunk_length:
+            msg = f"{where}: no chunk at offset {start} where its summary says; repair the log (`redrive repair`)"
+            raise LogError(msg)
+        counts = index_counts(
+            os.pread(src_fd, index.message_index_length, start + index.chunk_length),
+            where=f"{where} (chunk at offset {start})",
+        )
+        if set(counts) != set(index.message_index_offsets):
+            msg = f"{where}: the chunk at offset {start} does not match its index; repair the log"
+            raise LogError(msg)
+        size = index.chunk_length + index.message_index_length
+        with self._lock:
+            new_start = self.position
+            try:
+                copy_range(src_fd, self._fd, start, size, where=where)
+            except BaseException as err:
+                self._failed = err
+                raise
+            self.position += size
+            shift = new_start - start
+            self._chunk_indexes.append(
+                dataclasses.replace(
+                    index,
+                    chunk_start_offset=new_start,
+                    message_index_offsets={
+                        c: at + shift for c, at in index.message_index_offsets.items()
+                    },
+                )
+            )
+            self._count_written(counts, index.message_start_time, index.message_end_time)
+        return sum(counts.values())
+
+    def _count_written(self, counts: Mapping[int, int], start_ns: int, end_ns: int) -> None:
+        """Messages (channel → count) of a chunk that reached the file (under the lock)."""
+        written = self._written_counts
+        for channel_id, n in counts.items():
+            written[channel_id] = written.get(channel_id, 0) + n
+            self.written_messages += n
+        span = self._written_span
+        self._written_span = (
+            (start_ns, end_ns) if span is None else (min(span[0], start_ns), max(span[1], end_ns))
+        )
 
     def end_chunk(self) -> None:
         """Finish the open chunk now (if it holds a message), so it reaches the file."""
