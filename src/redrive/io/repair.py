@@ -17,20 +17,15 @@ The output is written to a temporary file beside it and renamed over ``out_path`
 
 from __future__ import annotations
 
-import contextlib
-import os
-import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, cast
+from typing import cast
 
-from mcap.writer import CompressionType
-from mcap.writer import Writer as McapLibWriter
-
-from redrive.errors import LogError
+from redrive.errors import LogError, is_no_space
 from redrive.io.base import LogReader
 from redrive.io.damage import LogDamage, damage_report
+from redrive.io.mcap.part import McapPart
 from redrive.io.mcap.reader import McapFileReader
 from redrive.io.mcap.scan import (
     McapAttachment,
@@ -45,11 +40,7 @@ from redrive.io.rosbag2.reader import Ros2BagReader
 
 __all__ = ["RepairStats", "repair_log"]
 
-_COMPRESSION: Mapping[str, CompressionType] = {
-    "zstd": CompressionType.ZSTD,
-    "lz4": CompressionType.LZ4,
-    "none": CompressionType.NONE,
-}
+_COMPRESSION = ("zstd", "lz4", "none")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -81,34 +72,26 @@ class RepairStats:
 
 
 class _Out:
-    """The MCAP being written: a temporary file renamed over the target on :meth:`close`."""
+    """The MCAP being written (:class:`~redrive.io.mcap.part.McapPart`: a part renamed over the
+    target on :meth:`close`; a full disk keeps what was written) and its messages per topic."""
 
     def __init__(self, path: Path, *, profile: str, compression: str) -> None:
-        self.path = path
-        try:
-            fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".part")
-        except OSError as err:
-            msg = (
-                f"{path}: cannot create a file in {path.parent} ({err.strerror}); check the "
-                "directory exists and is writable"
-            )
-            raise LogError(msg) from err
-        self.tmp = Path(tmp)
-        self.fh: IO[bytes] = os.fdopen(fd, "wb")
-        self.writer = McapLibWriter(self.fh, compression=_COMPRESSION[compression])
-        self.writer.start(profile=profile, library="redrive repair")
+        self.part = McapPart(
+            path,
+            profile=profile,
+            library="redrive repair",
+            compression=compression,  # type: ignore[arg-type]
+        )
+        self.writer = self.part.stream
         self.counts: dict[str, int] = {}
 
     def close(self) -> None:
-        self.writer.finish()  # type: ignore[no-untyped-call]
-        self.fh.close()
-        os.chmod(self.tmp, 0o644)
-        self.tmp.replace(self.path)
+        self.part.close()
 
-    def abort(self) -> None:
-        with contextlib.suppress(OSError):
-            self.fh.close()
-        self.tmp.unlink(missing_ok=True)
+    def abort(self, err: BaseException) -> None:
+        if is_no_space(err) and self.part.is_open:
+            raise self.part.out_of_space(err) from err  # type: ignore[arg-type]
+        self.part.abort()
 
 
 def repair_log(
@@ -162,7 +145,9 @@ def _repair_mcap(reader: McapFileReader, out_path: Path, compression: str) -> Re
                 if known is None:
                     dropped += 1
                     continue
-                out.writer.add_message(known[0], log_time, bytes(data), pub_time, sequence=seq)
+                out.writer.add_message(
+                    known[0], log_time=log_time, publish_time=pub_time, sequence=seq, data=data
+                )
                 out.counts[known[1]] = out.counts.get(known[1], 0) + 1
                 written += 1
             elif kind == "schema":
@@ -188,13 +173,17 @@ def _repair_mcap(reader: McapFileReader, out_path: Path, compression: str) -> Re
             elif kind == "attachment":
                 att = cast("McapAttachment", item)
                 out.writer.add_attachment(
-                    att.create_time, att.log_time, att.name, att.media_type, att.data
+                    name=att.name,
+                    media_type=att.media_type,
+                    data=att.data,
+                    log_time=att.log_time,
+                    create_time=att.create_time,
                 )
             elif kind == "damage":
                 damage.append(cast("LogDamage", item))
         out.close()
-    except BaseException:
-        out.abort()
+    except BaseException as err:
+        out.abort(err)
         raise
     return RepairStats(
         output_path=out_path,
@@ -252,13 +241,17 @@ def _repair_bag(reader: LogReader, out_path: Path, compression: str) -> RepairSt
                 continue
             seq = sequence[message.topic] = sequence.get(message.topic, 0) + 1
             out.writer.add_message(
-                channel, message.log_time_ns, bytes(message.raw), message.log_time_ns, seq
+                channel,
+                log_time=message.log_time_ns,
+                publish_time=message.log_time_ns,
+                sequence=seq,
+                data=message.raw,
             )
             out.counts[message.topic] = out.counts.get(message.topic, 0) + 1
             written += 1
         out.close()
-    except BaseException:
-        out.abort()
+    except BaseException as err:
+        out.abort(err)
         raise
     return RepairStats(
         output_path=out_path,

@@ -15,6 +15,7 @@ from isal.isal_zlib import crc32
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
 from mcap.records import (
+    AttachmentIndex,
     Channel,
     ChunkIndex,
     Footer,
@@ -153,20 +154,25 @@ def summary_section(
     statistics: Statistics,
     chunk_indexes: Sequence[ChunkIndex],
     metadata_indexes: Sequence[MetadataIndex] = (),
+    attachment_indexes: Sequence[AttachmentIndex] = (),
 ) -> bytes:
     """The bytes from the summary section to the end of a file whose summary starts at byte
-    ``summary_start``: schemas, channels, statistics, chunk and metadata indexes, a summary
+    ``summary_start``: schemas, channels, statistics, chunk, attachment and metadata indexes, a summary
     offset record for each group that has records, the footer with the summary's CRC, and the
     closing magic."""
     summary = RecordBuilder()
     offsets: list[SummaryOffset] = []
     groups: list[
-        tuple[Opcode, Sequence[Schema | Channel | Statistics | ChunkIndex | MetadataIndex]]
+        tuple[
+            Opcode,
+            Sequence[Schema | Channel | Statistics | ChunkIndex | AttachmentIndex | MetadataIndex],
+        ]
     ] = [
         (Opcode.SCHEMA, schemas),
         (Opcode.CHANNEL, channels),
         (Opcode.STATISTICS, [statistics]),
         (Opcode.CHUNK_INDEX, chunk_indexes),
+        (Opcode.ATTACHMENT_INDEX, attachment_indexes),
         (Opcode.METADATA_INDEX, metadata_indexes),
     ]
     for opcode, records in groups:

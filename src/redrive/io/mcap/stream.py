@@ -45,6 +45,8 @@ from typing import Literal
 
 from mcap.opcode import Opcode
 from mcap.records import (
+    Attachment,
+    AttachmentIndex,
     Channel,
     ChunkIndex,
     DataEnd,
@@ -169,6 +171,7 @@ class McapStream:
         self._channels: dict[int, Channel] = {}
         self._chunk_indexes: list[ChunkIndex] = []
         self._metadata_indexes: list[MetadataIndex] = []
+        self._attachment_indexes: list[AttachmentIndex] = []
         #: what the file holds (the chunks written whole): messages, per channel, first and last
         #: log time — a file cut short by a full disk is closed with these (:meth:`salvage`)
         self.written_messages = 0
@@ -225,6 +228,33 @@ class McapStream:
         self.end_chunk()
         self._channels[channel.id] = channel
         self._put(record_bytes(channel))
+
+    def add_attachment(
+        self, *, name: str, media_type: str, data: bytes, log_time: int, create_time: int
+    ) -> None:
+        """An attachment record (after the open chunk, which is finished first)."""
+        self.end_chunk()
+        record = record_bytes(
+            Attachment(
+                log_time=log_time,
+                create_time=create_time,
+                name=name,
+                media_type=media_type,
+                data=data,
+            )
+        )
+        offset = self._put(record)
+        self._attachment_indexes.append(
+            AttachmentIndex(
+                offset=offset,
+                length=len(record),
+                log_time=log_time,
+                create_time=create_time,
+                data_size=len(data),
+                name=name,
+                media_type=media_type,
+            )
+        )
 
     def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
         """A metadata record (after the open chunk, which is finished first)."""
@@ -506,7 +536,7 @@ class McapStream:
             message_count=self.written_messages,
             schema_count=len(self._schemas),
             channel_count=len(self._channels),
-            attachment_count=0,
+            attachment_count=len(self._attachment_indexes),
             metadata_count=len(self._metadata_indexes),
             chunk_count=len(self._chunk_indexes),
             message_start_time=first,
@@ -520,6 +550,7 @@ class McapStream:
             statistics=statistics,
             chunk_indexes=self._chunk_indexes,
             metadata_indexes=self._metadata_indexes,
+            attachment_indexes=self._attachment_indexes,
         )
 
     def salvage(self) -> bool:
