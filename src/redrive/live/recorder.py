@@ -8,7 +8,7 @@ it has not recorded) in its own thread, so the algorithm pipeline never waits fo
   ``ros1msg`` encoding — the full definition the publisher sent in its connection header (as
   ``rosbag record`` stores it; so types redrive has no decoder or definition of are recorded
   too), else ROS Noetic's. ``redrive info``/``open_log``, rosbags, Foxglove and Lichtblick read
-  it. It may be split into numbered files (:mod:`redrive.live.mcap_parts`).
+  it. It may be split into numbered files (:mod:`redrive.io.mcap.split`).
 * Otherwise (ROS 2 topics, typed samples from the replay or synthetic sources, possibly mixed
   with ROS 1 topics) it is redrive's native format (:class:`redrive.io.mcap.writer.McapWriter`: ROS 2
   CDR of standard types); ROS 2 messages are written byte for byte as DDS delivered them, with
@@ -33,10 +33,10 @@ from pathlib import Path
 
 from redrive.errors import DiskFullError, LogError, TransportError, UnsupportedMessageError
 from redrive.io.base import LogMessage
+from redrive.io.mcap.split import Ros1Schema, SplitMcapWriter, SplitNativeWriter
 from redrive.io.mcap.writer import Compression
 from redrive.io.ros.decoders import decode
 from redrive.io.ros.typestore import typestore_for
-from redrive.live.mcap_parts import Ros1Schema, SplitMcapWriter, SplitNativeWriter
 from redrive.live.scraper_state import Ros1Definition
 from redrive.live.streams import StreamSpec, ros1_type
 from redrive.transport import Message, Policy, ProducerGoneError, Reader

@@ -1,4 +1,4 @@
-"""Split MCAP files (redrive.live.mcap_parts) and reading them back as one log (redrive.io.mcap.fileset),
+"""Split MCAP files (redrive.io.mcap.split) and reading them back as one log (redrive.io.mcap.fileset),
 without ROS: real ROS 1 messages serialised with rosbags, written by the writer redrive live uses."""
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ import pytest
 
 from redrive.errors import LogError
 from redrive.io import open_log
+from redrive.io.mcap.split import Ros1Schema, SplitMcapWriter
 from redrive.io.ros.typestore import typestore_for
-from redrive.live.mcap_parts import Ros1Schema, SplitMcapWriter
 
 
 def _imu_messages(n: int) -> tuple[Ros1Schema, list[bytes]]:
