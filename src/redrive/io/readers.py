@@ -32,6 +32,7 @@ from __future__ import annotations
 import functools
 import logging
 import os
+import stat
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Protocol, runtime_checkable
@@ -205,6 +206,11 @@ def recognised_format(path: Path, *, sets: bool = True) -> str | None:
     Raises:
         LogError: ``path`` cannot be read.
     """
+    try:
+        if _kind_of(Path(path).stat().st_mode) is not None:
+            return None  # a pipe or a device is no log (and reading it could block)
+    except OSError:
+        pass
     cls = _first_recognising(Path(path), sets=sets)
     return None if cls is None else cls.format
 
@@ -225,6 +231,39 @@ def _not_a_log(path: Path) -> str:
     return f"{path}: not a log redrive reads (starts with {head!r}); redrive reads {described}"
 
 
+def _kind_of(mode: int) -> str | None:
+    """What a path that is neither a regular file nor a directory is, in words; None for those."""
+    for test, name in (
+        (stat.S_ISFIFO, "a named pipe (FIFO)"),
+        (stat.S_ISCHR, "a character device"),
+        (stat.S_ISBLK, "a block device"),
+        (stat.S_ISSOCK, "a socket"),
+    ):
+        if test(mode):
+            return name
+    return None if stat.S_ISREG(mode) or stat.S_ISDIR(mode) else "not a regular file"
+
+
+def refuse_special(path: Path) -> None:
+    """Refuse at once a path that is neither a regular file nor a directory (a named pipe, a
+    device, a socket): reading one would block or never end.
+
+    Raises:
+        LogError: it is one, with what it is.
+    """
+    try:
+        mode = path.stat().st_mode
+    except OSError:
+        return  # missing or unreadable: the caller says so
+    kind = _kind_of(mode)
+    if kind is not None:
+        msg = (
+            f"{path}: {kind}, not a log: redrive reads logs from regular files and log "
+            "directories; copy the data to a file first"
+        )
+        raise LogError(msg)
+
+
 def detect_format(path: Path) -> str:
     """The format name of the log at ``path`` (``ros1``, ``ros2``, ``mcap``, ``kitti``,
     ``nuscenes``, ``nuscenes-mmdet3d`` or a plugin's), from its content, not its name.
@@ -242,6 +281,7 @@ def detect_format(path: Path) -> str:
         if is_glob(path):
             msg += " (a glob names MCAP files of one recording; this one names none)"
         raise LogError(msg)
+    refuse_special(path)
     if path.is_file():
         try:
             size = path.stat().st_size
