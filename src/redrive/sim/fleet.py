@@ -308,6 +308,38 @@ def _light_state(group: I64, timing: F64, light: int, time_s: float) -> int:  # 
 
 
 @numba.njit(cache=True, nogil=True)
+def light_gap_kernel(  # noqa: PLR0917 (numba has no keyword-only parameters)
+    stop_s: F64,
+    stop_light: I64,
+    route: int,
+    n_stops: int,
+    committed: B,
+    light_group: I64,
+    timing: F64,
+    s_front: float,
+    v: float,
+    time_s: float,
+    comfort: float,
+    two: float,
+) -> float:  # pragma: no cover - compiled
+    """``light_gap`` (tests/sim/_reference_agents.py): the gap (m) to the first stop line of
+    ``route`` ahead of ``s_front`` that must be respected, inf if none; a yellow line that cannot
+    be stopped at comfortably is marked in ``committed`` (that vehicle's row) and passed."""
+    for j in range(n_stops):
+        g = stop_s[route, j] - s_front
+        if g < -0.5 or committed[j]:
+            continue
+        state = _light_state(light_group, timing, stop_light[route, j], time_s)
+        if state == 0:
+            return np.inf
+        if state == 1 and v**two / (2.0 * comfort) > g:
+            committed[j] = True
+            continue
+        return float(max(g, 0.0))
+    return np.inf
+
+
+@numba.njit(cache=True, nogil=True)
 def _plan_advance(  # noqa: PLR0917 (the fleet's arrays; numba has no keyword-only parameters)
     f: F64,
     i: I64,
@@ -335,19 +367,20 @@ def _plan_advance(  # noqa: PLR0917 (the fleet's arrays; numba has no keyword-on
         if i[k, OBEYS] == 1 and any_lights:
             route = i[k, ROUTE]
             s_front = f[k, S] + f[k, LENGTH] / 2.0
-            stop = np.inf
-            for j in range(n_stops[route]):  # light_gap
-                g = stop_s[route, j] - s_front
-                if g < -0.5 or committed[k, j]:
-                    continue
-                state = _light_state(light_group, timing, stop_light[route, j], time_s)
-                if state == 0:
-                    break
-                if state == 1 and v**two / (2.0 * f[k, B_COMF]) > g:
-                    committed[k, j] = True
-                    continue
-                stop = max(g, 0.0)
-                break
+            stop = light_gap_kernel(
+                stop_s,
+                stop_light,
+                route,
+                n_stops[route],
+                committed[k],
+                light_group,
+                timing,
+                s_front,
+                v,
+                time_s,
+                f[k, B_COMF],
+                two,
+            )
             if stop < gap:
                 gap, v_lead = stop, 0.0
         accel = idm_kernel(

@@ -247,36 +247,6 @@ def _segment_starts(table: I64) -> B:
 
 
 @numba.njit(cache=True, nogil=True)
-def _light_gap(  # noqa: PLR0917 (numba has no keyword-only parameters)
-    stop_s: F64,
-    stop_light: I64,
-    route: int,
-    n_stops: int,
-    committed: B,
-    light_group: I64,
-    timing: F64,
-    s_front: float,
-    v: float,
-    time_s: float,
-    comfort: float,
-    two: float,
-) -> float:  # pragma: no cover - compiled
-    """``light_gap`` (tests/sim/_reference_agents.py) of the ego (its committed stop lines in ``committed``)."""
-    for j in range(n_stops):
-        g = stop_s[route, j] - s_front
-        if g < -0.5 or committed[j]:
-            continue
-        state = fl._light_state(light_group, timing, stop_light[route, j], time_s)
-        if state == 0:
-            return np.inf
-        if state == 1 and v**two / (2.0 * comfort) > g:
-            committed[j] = True
-            continue
-        return float(max(g, 0.0))
-    return np.inf
-
-
-@numba.njit(cache=True, nogil=True)
 def _frame(  # noqa: PLR0917 (the world's columns; numba has no keyword-only parameters)
     clock: I64,
     fleet_t: float,
@@ -415,7 +385,7 @@ def _frame(  # noqa: PLR0917 (the world's columns; numba has no keyword-only par
         if scripted:  # the reference's accelerate: the stop lines, the route's end, IDM
             v = e[ESPEED]
             s_front = e[ES] + p[FRONT]
-            stop = _light_gap(
+            stop = fl.light_gap_kernel(
                 stop_s,
                 stop_light,
                 ego_route,
