@@ -5,7 +5,7 @@
 time, the obstacle snapshot, the pedestrians' triggers, the lane changes
 (:func:`start_plan`: ``Route.project``), every agent's gap search
 (:meth:`GapSearch.gaps_of`), the followers' plan and motion (:meth:`LaneFleet.finish_and_advance`),
-the scripted ego's pure pursuit and IDM (:class:`~redrive.sim.ego.EgoDriver`), its pedals or the
+the scripted ego's pure pursuit and IDM (:mod:`tests.sim._reference_agents`), its pedals or the
 Python step of ``World.drive_ego``, and the walkers' clocks.
 """
 
@@ -19,12 +19,13 @@ import numpy.typing as npt
 from redrive.sim import fleet as fl
 from redrive.sim.ego import BicycleModel
 from redrive.sim.world import EGO_ID, World
+from tests.sim import _reference_agents as ref
 
 __all__ = ["reference_step_to", "start_plan"]
 
 
 def start_plan(fleet: fl.LaneFleet, time_s: float) -> None:
-    """:meth:`LaneFollower.start_plan` of all the fleet's followers: the lane changes that
+    """:meth:`ReferenceFollower.start_plan` of all the fleet's followers: the lane changes that
     start now, in Python (the follower's pose, then :meth:`Route.project` onto the target, as
     the follower does); the frame kernel's ``_start_lane_changes`` is compared with it."""
     if time_s >= fleet._next_lc:
@@ -81,7 +82,7 @@ def _substep(w: World, dt_ns: int) -> None:
     ego_query = None
     if scripted:
         g, driver = w.ego_geometry, w._driver
-        steer = driver.steer(w._ego)
+        steer = ref.steer(driver, w._ego)
         off, n = search.route_row(driver.route)
         s_front = driver.s_m + g.front_offset_m
         ego_query = (
@@ -102,7 +103,8 @@ def _substep(w: World, dt_ns: int) -> None:
         # read them
         fleet.finish_and_advance(t, dt_s, gap_m=gaps, leader_speed_mps=speeds)
     if ego_step is None:
-        accel = w._driver.accelerate(
+        accel = ref.accelerate(
+            w._driver,
             w._ego,
             t,
             w.lights,

@@ -6,15 +6,16 @@ import numpy as np
 import pytest
 
 from redrive.motion import IdmParams, idm_acceleration
-from redrive.sim.agents import LaneChange, LaneFollower, Obstacles, Walker
+from redrive.sim.agents import LaneChange, Obstacles, Walker
 from redrive.sim.lights import LightTiming, TrafficLights
 from redrive.sim.roads import HighwayLayout, UrbanLayout, highway_network, urban_network
 from redrive.types import LightState, ObjectClass
+from tests.sim._reference_agents import ReferenceFollower
 
 CAR = (4.5, 1.8, 1.5)
 
 
-def _obstacles(*agents: LaneFollower) -> Obstacles:
+def _obstacles(*agents: ReferenceFollower) -> Obstacles:
     poses = [a.pose() for a in agents]
     return Obstacles(
         ids=np.array([a.agent_id for a in agents], dtype=np.int64),
@@ -25,8 +26,8 @@ def _obstacles(*agents: LaneFollower) -> Obstacles:
     )
 
 
-def _car(agent_id: int, route: object, s_m: float, speed: float, **kw: object) -> LaneFollower:
-    return LaneFollower(
+def _car(agent_id: int, route: object, s_m: float, speed: float, **kw: object) -> ReferenceFollower:
+    return ReferenceFollower(
         agent_id, ObjectClass.VEHICLE, route=route, s_m=s_m, speed_mps=speed,  # type: ignore[arg-type]
         idm=IdmParams(desired_speed_mps=speed), size_lwh_m=CAR, color_rgb=(1, 2, 3), **kw,  # type: ignore[arg-type]
     )  # fmt: skip

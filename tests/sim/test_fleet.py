@@ -1,4 +1,4 @@
-"""The world's lane followers as arrays (LaneFleet, compiled) move as LaneFollower objects do,
+"""The world's lane followers as arrays (LaneFleet, compiled) move as ReferenceFollower objects do,
 bit for bit: red and yellow lights, queues, cyclists beside the lane, scripted braking, lane
 changes, leaving at the route's end."""
 
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from redrive.motion import IdmParams
-from redrive.sim.agents import LaneChange, LaneFollower, Obstacles
+from redrive.sim.agents import LaneChange, Obstacles
 from redrive.sim.fleet import LaneFleet
 from redrive.sim.gaps import GapSearch
 from redrive.sim.lights import LightTiming, TrafficLights
@@ -22,15 +22,18 @@ from redrive.sim.roads import (
     urban_network,
 )
 from redrive.types import ObjectClass
+from tests.sim._reference_agents import ReferenceFollower
 from tests.sim._reference_step import start_plan
 
 #: an obstacle far from every road, in the place of the world's ego (the snapshot's first row)
 FAR = (1e6, 1e6, 4.7, 1.9, 0.0, 0.0)
 
 
-def _agent(agent_id: int, route: object, s_m: float, speed: float, **kw: object) -> LaneFollower:
+def _agent(
+    agent_id: int, route: object, s_m: float, speed: float, **kw: object
+) -> ReferenceFollower:
     cyclist = kw.pop("cyclist", False)
-    return LaneFollower(
+    return ReferenceFollower(
         agent_id,
         ObjectClass.BICYCLE if cyclist else ObjectClass.VEHICLE,
         route=route,  # type: ignore[arg-type]
@@ -44,7 +47,7 @@ def _agent(agent_id: int, route: object, s_m: float, speed: float, **kw: object)
     )
 
 
-def _urban(net: RoadNetwork) -> list[LaneFollower]:
+def _urban(net: RoadNetwork) -> list[ReferenceFollower]:
     r = net.routes
     return [
         _agent(1, r["west_east_0"], 75.0, 12.0),  # meets the yellow light
@@ -59,7 +62,7 @@ def _urban(net: RoadNetwork) -> list[LaneFollower]:
     ]
 
 
-def _highway(net: RoadNetwork) -> list[LaneFollower]:
+def _highway(net: RoadNetwork) -> list[ReferenceFollower]:
     r = net.routes
     return [
         _agent(1, r["forward_1"], 80.0, 25.0, brake_time_s=4.0, brake_decel_mps2=6.0),
@@ -83,9 +86,9 @@ def _highway(net: RoadNetwork) -> list[LaneFollower]:
 
 
 def _reference_step(
-    followers: list[LaneFollower], t: float, dt: float, lights: TrafficLights
+    followers: list[ReferenceFollower], t: float, dt: float, lights: TrafficLights
 ) -> Obstacles:
-    """What the world did with LaneFollower objects: one snapshot, every plan, every advance."""
+    """What the world did with ReferenceFollower objects: one snapshot, every plan, every advance."""
     poses = [f.pose() for f in followers]
     vels = [f.velocity() for f in followers]
     obstacles = Obstacles(
@@ -112,7 +115,9 @@ def _reference_step(
     ids=["urban", "highway"],
 )
 def test_fleet_moves_as_lane_followers_do(
-    network: RoadNetwork, build: Callable[[RoadNetwork], list[LaneFollower]], timing: LightTiming
+    network: RoadNetwork,
+    build: Callable[[RoadNetwork], list[ReferenceFollower]],
+    timing: LightTiming,
 ) -> None:
     lights = TrafficLights(network.signals, timing)
     search = GapSearch(network.routes.values())

@@ -7,11 +7,12 @@ import math
 import numpy as np
 import pytest
 
-from redrive.sim.agents import Obstacles, gap_ahead
+from redrive.sim.agents import Obstacles
 from redrive.sim.gaps import GapQuery, GapSearch
 from redrive.sim.roads import HighwayLayout, Route, UrbanLayout, highway_network, urban_network
 from redrive.sim.scenario import load_scenario
 from redrive.sim.world import World
+from tests.sim._reference_agents import gap_ahead
 
 
 def _obstacles_on(routes: list[Route], rng: np.random.Generator, n: int) -> Obstacles:

@@ -66,7 +66,6 @@ EGO_COLOR = (230, 230, 230)
 GHOST_COLOR = (120, 200, 255)
 GHOST_ALPHA = 0.45
 MAP_COLOR = (110, 110, 125)
-PATH_COLOR = (255, 200, 40)
 #: colours of the algorithms' detections, in manifest order.
 PALETTE = ((255, 80, 80), (80, 160, 255), (255, 140, 0), (200, 90, 255), (0, 220, 220))
 _EGO_BOX: Box3D = EGO_BOX

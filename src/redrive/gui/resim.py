@@ -418,9 +418,6 @@ class ResimPanel(QtWidgets.QWidget):
         self.frame_slider.setValue(index)
         self._show_frame(self.frame_slider.value())
 
-    def current_frame(self) -> int:
-        return int(self.frame_slider.value())
-
     def _show_frame(self, index: int) -> None:
         a, b = self.run_a, self.run_b
         n_a = self.result_view.show_frame(a, index, shown=self.shown_a)

@@ -22,9 +22,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from redrive.motion import IdmParams, idm_acceleration
-from redrive.sim.agents import Obstacles, advance_1d, gap_ahead, light_gap
-from redrive.sim.lights import TrafficLights
+from redrive.motion import IdmParams
+from redrive.sim.agents import advance_1d
 from redrive.sim.roads import Route
 from redrive.types import ControlCommands, VehicleState
 
@@ -280,6 +279,9 @@ class EgoDriver:
     """Pure pursuit on ``route`` and IDM towards ``idm.desired_speed_mps`` (the set speed).
 
     The lookahead distance is ``clip(lookahead_time_s · v, min_lookahead_m, max_lookahead_m)``.
+    The world's frame kernel (:mod:`redrive.sim.stepper`) drives with these parameters and state;
+    the same driver in plain Python, the reference it is compared with, is
+    ``tests/sim/_reference_agents.py``.
     """
 
     def __init__(
@@ -301,64 +303,3 @@ class EgoDriver:
         self.min_lookahead_m = min_lookahead_m
         self.max_lookahead_m = max_lookahead_m
         self._committed: set[int] = set()
-
-    def control(
-        self, model: BicycleModel, time_s: float, obstacles: Obstacles, lights: TrafficLights
-    ) -> tuple[float, float]:
-        """Acceleration (m/s²) and steering angle (rad) for the next step."""
-        steer = self.steer(model)
-        g = model.geometry
-        gap, v_lead = gap_ahead(
-            self.route,
-            obstacles,
-            s_center_m=self.s_m + g.center_offset_m,
-            s_front_m=self.s_m + g.front_offset_m,
-            width_m=g.width_m,
-            self_id=self.ego_id,
-        )
-        return self.accelerate(model, time_s, lights, gap_m=gap, leader_speed_mps=v_lead), steer
-
-    def steer(self, model: BicycleModel) -> float:
-        """:meth:`control` up to the gap search: find the ego on the route again and return the
-        steering angle (rad); then search along ``route`` from ``s_m + center_offset_m`` (the
-        box centre) and ``s_m + front_offset_m`` (the front) for the ego's width, and call
-        :meth:`accelerate` with the result (the world batches all agents' searches)."""
-        g = model.geometry
-        self.s_m, _ = self.route.project_point(
-            model.x_m, model.y_m, s_min_m=self.s_m - 2.0, s_max_m=self.s_m + 10.0
-        )
-        v = model.speed_mps
-        look = min(max(self.lookahead_time_s * v, self.min_lookahead_m), self.max_lookahead_m)
-        tx, ty, _ = self.route.pose_at(self.s_m + look)
-        dx, dy = tx - model.x_m, ty - model.y_m
-        c, sn = math.cos(model.yaw_rad), math.sin(model.yaw_rad)
-        lx, ly = c * dx + sn * dy, -sn * dx + c * dy
-        dist = max(math.hypot(lx, ly), 1e-6)
-        return math.atan2(2.0 * g.wheelbase_m * ly, dist * dist)
-
-    def accelerate(
-        self,
-        model: BicycleModel,
-        time_s: float,
-        lights: TrafficLights,
-        *,
-        gap_m: float,
-        leader_speed_mps: float,
-    ) -> float:
-        """:meth:`control` after the gap search: the stop lines, the route's end and IDM (m/s²)."""
-        gap, v_lead = gap_m, leader_speed_mps
-        v = model.speed_mps
-        s_front = self.s_m + model.geometry.front_offset_m
-        stop = light_gap(
-            self.route,
-            lights,
-            s_front_m=s_front,
-            speed_mps=v,
-            time_s=time_s,
-            comfort_decel_mps2=self.idm.comfort_decel_mps2,
-            committed=self._committed,
-        )
-        end = self.route.length_m - 1.0 - s_front
-        if min(stop, end) < gap:
-            gap, v_lead = min(stop, end), 0.0
-        return idm_acceleration(self.idm, v, gap_m=gap, leader_speed_mps=v_lead)

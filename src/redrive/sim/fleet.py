@@ -1,13 +1,14 @@
 """The world's lane followers as arrays, planned and moved by compiled kernels.
 
-:class:`~redrive.sim.agents.LaneFollower` is the reference: one object per vehicle, its pose,
+``ReferenceFollower`` (``tests/sim/_reference_agents.py``, a
+:class:`~redrive.sim.agents.LaneFollower` that moves itself) is the reference: one object per vehicle, its pose,
 stop lines, IDM and motion in Python, a few dozen calls per agent per physics step.  The world
 keeps the same state for all of them in arrays (:class:`LaneFleet`): every physics step is then
 one kernel call for their poses (the obstacle snapshot), one for the gap search
 (:class:`~redrive.sim.gaps.GapSearch`) and one for the stop lines, IDM, scripted braking and
 the motion of all of them.
 
-Every value is the one :class:`LaneFollower` computes, bit for bit: the same float64 operations
+Every value is the one ``ReferenceFollower`` computes, bit for bit: the same float64 operations
 in the same order (compiled without ``fastmath``; powers go through ``pow`` with a run-time
 exponent, as Python's ``**`` does; ``math.hypot`` of each route segment is taken from Python);
 a lane change starts in the world's frame kernel (:mod:`redrive.sim.stepper`) where
@@ -162,7 +163,7 @@ class LaneFleet:
 
     def poses(self) -> F64:
         """(5, N): box centre x, y (metres), yaw (rad) and map velocity x, y (m/s) — what each
-        :meth:`LaneFollower.pose` and :meth:`~LaneFollower.velocity` give."""
+        ``ReferenceFollower.pose`` and ``velocity`` give."""
         search = self._search
         return _poses(self._f, self._i, self._time_s, search.net, search.route_table, _POWERS)
 
@@ -193,7 +194,7 @@ class LaneFleet:
     def finish_and_advance(
         self, time_s: float, dt_s: float, *, gap_m: F64, leader_speed_mps: F64
     ) -> None:
-        """:meth:`LaneFollower.finish_plan` then :meth:`~LaneFollower.advance` of all; those
+        """``ReferenceFollower.finish_plan`` then ``advance`` of all; those
         who left the end of their route are removed."""
         clock = self._clock
         clock[0], clock[1], clock[2] = time_s, dt_s, 1.0 if self._lights.signals else 0.0
@@ -222,7 +223,7 @@ class LaneFleet:
 def _pose(  # noqa: PLR0917 (numba has no keyword-only parameters)  # pragma: no cover
     f: F64, i: I64, k: int, time_s: float, net: F64, table: I64, powers: F64
 ) -> tuple[float, float, float]:
-    """:meth:`LaneFollower.pose` of follower ``k``."""
+    """``ReferenceFollower.pose`` of follower ``k``."""
     off = rate = 0.0
     if i[k, LC_TARGET] >= 0 and i[k, LC_STARTED] == 1:
         dur = f[k, LC_DUR]
@@ -307,6 +308,38 @@ def _light_state(group: I64, timing: F64, light: int, time_s: float) -> int:  # 
 
 
 @numba.njit(cache=True, nogil=True)
+def light_gap_kernel(  # noqa: PLR0917 (numba has no keyword-only parameters)
+    stop_s: F64,
+    stop_light: I64,
+    route: int,
+    n_stops: int,
+    committed: B,
+    light_group: I64,
+    timing: F64,
+    s_front: float,
+    v: float,
+    time_s: float,
+    comfort: float,
+    two: float,
+) -> float:  # pragma: no cover - compiled
+    """``light_gap`` (tests/sim/_reference_agents.py): the gap (m) to the first stop line of
+    ``route`` ahead of ``s_front`` that must be respected, inf if none; a yellow line that cannot
+    be stopped at comfortably is marked in ``committed`` (that vehicle's row) and passed."""
+    for j in range(n_stops):
+        g = stop_s[route, j] - s_front
+        if g < -0.5 or committed[j]:
+            continue
+        state = _light_state(light_group, timing, stop_light[route, j], time_s)
+        if state == 0:
+            return np.inf
+        if state == 1 and v**two / (2.0 * comfort) > g:
+            committed[j] = True
+            continue
+        return float(max(g, 0.0))
+    return np.inf
+
+
+@numba.njit(cache=True, nogil=True)
 def _plan_advance(  # noqa: PLR0917 (the fleet's arrays; numba has no keyword-only parameters)
     f: F64,
     i: I64,
@@ -334,19 +367,20 @@ def _plan_advance(  # noqa: PLR0917 (the fleet's arrays; numba has no keyword-on
         if i[k, OBEYS] == 1 and any_lights:
             route = i[k, ROUTE]
             s_front = f[k, S] + f[k, LENGTH] / 2.0
-            stop = np.inf
-            for j in range(n_stops[route]):  # light_gap
-                g = stop_s[route, j] - s_front
-                if g < -0.5 or committed[k, j]:
-                    continue
-                state = _light_state(light_group, timing, stop_light[route, j], time_s)
-                if state == 0:
-                    break
-                if state == 1 and v**two / (2.0 * f[k, B_COMF]) > g:
-                    committed[k, j] = True
-                    continue
-                stop = max(g, 0.0)
-                break
+            stop = light_gap_kernel(
+                stop_s,
+                stop_light,
+                route,
+                n_stops[route],
+                committed[k],
+                light_group,
+                timing,
+                s_front,
+                v,
+                time_s,
+                f[k, B_COMF],
+                two,
+            )
             if stop < gap:
                 gap, v_lead = stop, 0.0
         accel = idm_kernel(

@@ -1,14 +1,15 @@
-"""Every agent's gap to its leader in one batch: :func:`redrive.sim.agents.gap_ahead` compiled.
+"""Every agent's gap to its leader in one batch: ``gap_ahead`` (the plain-Python reference in
+``tests/sim/_reference_agents.py``) compiled.
 
 The world asks, every physics step, for each lane follower and the scripted ego: the nearest
 obstacle ahead on its route (bumper-to-bumper gap and the leader's speed along the route).  One
-:func:`gap_ahead` per agent costs a dozen small numpy calls each; :meth:`GapSearch.gaps` answers
+``gap_ahead`` per agent costs a dozen small numpy calls each; :meth:`GapSearch.gaps` answers
 all agents' :class:`GapQuery` with one call of a numba kernel over the routes of one network
 concatenated once (:class:`GapSearch`): per query, the route piece found by bisection, the
 bounding-box filter of :meth:`~redrive.sim.roads.Route.near`, the projection of each nearby
 obstacle onto the piece and the nearest one ahead, in loops.
 
-The answers are bit for bit those of :func:`gap_ahead`: every value is computed with the same
+The answers are bit for bit those of ``gap_ahead``: every value is computed with the same
 float64 operations in the same order (the kernel is compiled without ``fastmath``, so nothing is
 reassociated or fused), and ties go to the same (first) segment and the same (first) obstacle.
 The projection skips a block of :data:`BLOCK` segments whose bounding box (:attr:`GapSearch.blocks`)
@@ -45,7 +46,7 @@ _SKIP_MARGIN_M2 = 1e-6
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class GapQuery:
-    """One agent's question, as :func:`redrive.sim.agents.gap_ahead` takes it (metres)."""
+    """One agent's question, as ``gap_ahead`` takes it (metres)."""
 
     route: Route
     s_center_m: float

@@ -171,8 +171,8 @@ class BoxMesh:
         directions: npt.NDArray[np.float32],
         tfar: npt.NDArray[np.float32],
     ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.int32], npt.NDArray[np.float32]]:
-        """Embree's answers as they come (local frame; directions unit length): what
-        :meth:`intersect` is made of, without its per-ray post-processing.
+        """Embree's answers as they come (local frame; directions unit length), without per-ray
+        post-processing.
 
         ``tfar`` (R,) float32 holds each ray's limit and is overwritten.  Returns ``(tfar,
         primitive, normal)``: (R,) float32 distance (the limit where nothing was hit before it),
@@ -185,26 +185,3 @@ class BoxMesh:
         res = self.scene.run(origins, directions, dists=tfar, output=1)
         prim: npt.NDArray[np.int32] = res["primID"]
         return res["tfar"], prim, res["Ng"]
-
-    def intersect(
-        self,
-        origins: npt.NDArray[np.float32],
-        directions: npt.NDArray[np.float32],
-        max_dist: npt.NDArray[np.float32],
-    ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.int64], npt.NDArray[np.float32]]:
-        """Nearest box hit of each ray (local frame; directions unit length).
-
-        Returns:
-            ``(dist, box_index, normal)``: (R,) float32 distance (``max_dist`` where nothing was
-            hit before it), (R,) int64 box index or −1, (R, 3) float32 geometric normal (not
-            normalised, arbitrary sign; zeros on a miss).
-        """
-        n = origins.shape[0]
-        if self.scene is None or n == 0:
-            return max_dist.copy(), np.full(n, -1, np.int64), np.zeros((n, 3), np.float32)
-        res = self.scene.run(origins, directions, dists=max_dist.copy(), output=1)
-        prim = res["primID"].astype(np.int64)
-        hit = prim >= 0
-        dist = np.where(hit, res["tfar"], max_dist).astype(np.float32)
-        box = np.where(hit, prim // TRIANGLES_PER_BOX, -1)
-        return dist, box, res["Ng"]

@@ -252,11 +252,6 @@ class Route:
             out.append(math.hypot((xs[i + 1] - xs[i]) / ds, (ys[i + 1] - ys[i]) / ds))
         return out
 
-    def curvature_at(self, s_m: float) -> float:
-        """Signed curvature (1/m) at ``s_m`` (of the sample before it)."""
-        i = int(np.clip(np.searchsorted(self.s_m, s_m, side="right") - 1, 0, len(self.s_m) - 1))
-        return float(self.curvature_1pm[i])
-
     def _piece(self, s_min_m: float, s_max_m: float) -> tuple[int, int]:
         """Sample indices ``lo < hi``: the segments ``lo … hi - 1`` cover ``[s_min_m, s_max_m]``."""
         s_arr = self._s_list

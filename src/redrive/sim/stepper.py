@@ -9,7 +9,7 @@ runs every physics step up to a stamp in :func:`_frame` and copies it back; the 
 arrays (:class:`~redrive.sim.fleet.LaneFleet`) are stepped in place.
 
 Every value is the one the world's Python step gives (the objects' methods: ``LaneFleet``'s,
-``EgoDriver``'s, ``Route.project``; that step stays in ``tests/sim/_reference_step.py`` as the
+the scripted driver's, ``Route.project``; that step stays in ``tests/sim/_reference_step.py`` as the
 reference), bit for bit: the same float64 operations in the same order (no ``fastmath``; powers
 through ``pow`` with a run-time exponent; ``math.hypot`` as CPython computes it,
 :func:`redrive.sim.kernels.hypot`).  Python does two things between calls: it removes a follower
@@ -247,36 +247,6 @@ def _segment_starts(table: I64) -> B:
 
 
 @numba.njit(cache=True, nogil=True)
-def _light_gap(  # noqa: PLR0917 (numba has no keyword-only parameters)
-    stop_s: F64,
-    stop_light: I64,
-    route: int,
-    n_stops: int,
-    committed: B,
-    light_group: I64,
-    timing: F64,
-    s_front: float,
-    v: float,
-    time_s: float,
-    comfort: float,
-    two: float,
-) -> float:  # pragma: no cover - compiled
-    """``agents.light_gap`` of the ego (its committed stop lines in ``committed``)."""
-    for j in range(n_stops):
-        g = stop_s[route, j] - s_front
-        if g < -0.5 or committed[j]:
-            continue
-        state = fl._light_state(light_group, timing, stop_light[route, j], time_s)
-        if state == 0:
-            return np.inf
-        if state == 1 and v**two / (2.0 * comfort) > g:
-            committed[j] = True
-            continue
-        return float(max(g, 0.0))
-    return np.inf
-
-
-@numba.njit(cache=True, nogil=True)
 def _frame(  # noqa: PLR0917 (the world's columns; numba has no keyword-only parameters)
     clock: I64,
     fleet_t: float,
@@ -362,7 +332,7 @@ def _frame(  # noqa: PLR0917 (the world's columns; numba has no keyword-only par
         if t >= next_lc:  # lane changes that start now (after the snapshot: it has the old lanes)
             next_lc = _start_lane_changes(f, i, t, fleet_t, net, table, route_len, powers)
         fleet_t = t
-        # the ego on its route again (EgoDriver.steer; Route.project_point)
+        # the ego on its route again (the reference's steer; Route.project_point)
         s0 = e[ES]
         lo = min(max(kernels.bisect_right(net_s, off, off + n_route, s0 - 2.0) - 1, 0), n_route - 2)
         hi = min(kernels.bisect_left(net_s, off, off + n_route, s0 + 10.0) + 1, n_route - 1)
@@ -412,10 +382,10 @@ def _frame(  # noqa: PLR0917 (the world's columns; numba has no keyword-only par
             )
             if scripted:
                 gap_e, lead_e = gaps[nf], speeds[nf]
-        if scripted:  # EgoDriver.accelerate: the stop lines, the route's end, IDM
+        if scripted:  # the reference's accelerate: the stop lines, the route's end, IDM
             v = e[ESPEED]
             s_front = e[ES] + p[FRONT]
-            stop = _light_gap(
+            stop = fl.light_gap_kernel(
                 stop_s,
                 stop_light,
                 ego_route,
@@ -473,7 +443,7 @@ def _frame(  # noqa: PLR0917 (the world's columns; numba has no keyword-only par
 def _start_lane_changes(  # noqa: PLR0917 (numba has no keyword-only parameters)
     f: F64, i: I64, t: float, fleet_t: float, net: F64, table: I64, route_len: F64, powers: F64
 ) -> float:  # pragma: no cover - compiled
-    """``LaneFollower.start_plan``'s lane changes at ``t``: each follower whose change is due
+    """``ReferenceFollower.start_plan``'s lane changes at ``t``: each follower whose change is due
     moves onto its target route where ``Route.project`` of its pose (over the whole target)
     puts it; returns the start time of the next change (inf: none left)."""
     net_s, net_x, net_y = net[0], net[1], net[2]

@@ -124,16 +124,6 @@ class Polyline:
         s = np.ascontiguousarray(np.asarray(s_m, dtype=np.float64).reshape(-1))
         return points_at(self.xy, self.s, s)
 
-    def tangents_at(self, s_m: npt.ArrayLike) -> F64:
-        """(K, 2) unit tangents of the segments holding arc lengths ``s_m``."""
-        s = np.asarray(s_m, dtype=np.float64).reshape(-1)
-        if len(self.xy) == 1:
-            return np.tile([1.0, 0.0], (len(s), 1))
-        i = np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, len(self.xy) - 2)
-        d = self.xy[i + 1] - self.xy[i]
-        out: F64 = d / np.hypot(d[:, 0], d[:, 1])[:, None]
-        return out
-
     def project(
         self, points: npt.ArrayLike, *, s_min_m: float = -math.inf, s_max_m: float = math.inf
     ) -> tuple[F64, F64, F64]:
