@@ -7,10 +7,10 @@ malformed record is skipped — its byte range and, from the message index recor
 it, the number of messages it held are reported as a :class:`~redrive.io.damage.LogDamage` —
 and reading resumes at the next record that parses (a *resync*: the next chunk of a chunked
 file, the next plausible record of an unchunked one).  :func:`read_chunk` serves the indexed
-reader in :mod:`redrive.io.mcap.reader` with the same checks.
+reader in :mod:`redrive.io.mcap.reader` with the same checks (damaged chunks' remains:
+:mod:`redrive.io.mcap.salvage`).
 
-The file is read through a read-only memory map: an uncompressed chunk's messages are views of
-it, with no copy.
+The file is read through a read-only memory map: an uncompressed chunk's messages are views of it.
 """
 
 from __future__ import annotations
@@ -403,6 +403,7 @@ class McapScan:
 
                         fixed = repaired_chunk_head(buf, pos, size)
                         if fixed is None and (stop > size or length > size):
+                            self.chunked = True  # resync at chunks, not at records inside it
                             resume = self._resync(pos + 1)  # a damaged length, or the file cut
                             yield from self._cut_chunk(pos, length, resume)
                             if resume >= size:
