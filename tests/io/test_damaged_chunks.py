@@ -29,10 +29,12 @@ def _read(path: Path) -> int:
         return sum(1 for _ in log.messages())
 
 
-def test_repair_keeps_what_the_readers_read(tmp_path: Path) -> None:
+def test_repair_keeps_what_the_readers_read(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
     """Flipped bytes and lengths, zeroed ranges and cut-out bytes in random chunks: repair writes
     as many messages as open_log(strict=False) yields (it kept 46 of 795 before)."""
-    logging.getLogger("redrive.io").setLevel(logging.ERROR)
+    caplog.set_level(logging.ERROR, logger="redrive.io")  # restored after the test
     src = tmp_path / "log.mcap"
     write_string_mcap(src, messages=600)
     original = src.read_bytes()
