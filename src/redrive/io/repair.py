@@ -137,11 +137,25 @@ def _repair_mcap(reader: McapFileReader, out_path: Path, compression: str) -> Re
     pending: dict[int, McapChannel] = {}  # channels whose schema has not been seen (yet)
     damage: list[LogDamage] = []
     written = dropped = 0
+    # the records of the summary or the whole file: for messages whose schema or channel record
+    # before them is damaged
+    summary_schemas, summary_channels = reader.known_records()
     try:
         for kind, item in reader.scan():
             if kind == "message":
                 cid, seq, log_time, pub_time, data = cast("Message", item)
                 known = channels.get(cid)
+                if known is None and cid in summary_channels:
+                    channel = pending.pop(cid, None) or summary_channels[cid]
+                    sid = channel.schema_id
+                    if sid != 0 and sid not in schemas and sid in summary_schemas:
+                        schema = summary_schemas[sid]
+                        schemas[sid] = out.writer.register_schema(
+                            schema.name, schema.encoding, schema.data
+                        )
+                    if sid == 0 or sid in schemas:
+                        _add_channel(out, channel, schemas, channels)
+                        known = channels[cid]
                 if known is None:
                     dropped += 1
                     continue

@@ -105,6 +105,8 @@ class McapFileReader(RosReaderBase):
         self._chunk_floors: dict[int, int] = {}
         self._sizes: dict[int, int] = {}
         self._metadata: list[McapMetadata] | None = None
+        # the schemas and channels a forward scan met (a file read without its summary)
+        self._scan_records: tuple[dict[int, McapSchema], dict[int, McapChannel]] = ({}, {})
         self._start_ns = self._end_ns = 0
         defs: dict[Literal[1, 2], dict[str, tuple[str, str]]] = {1: {}, 2: {}}
         if self._summary is not None and self._summary.statistics is not None:
@@ -136,6 +138,22 @@ class McapFileReader(RosReaderBase):
         """Every intact record of the file and every damage, in file order (a forward scan:
         see :class:`~redrive.io.mcap.scan.McapScan`); ``redrive repair`` copies from it."""
         return McapScan(self._buf).events()
+
+    def known_records(self) -> tuple[dict[int, McapSchema], dict[int, McapChannel]]:
+        """The schemas and channels of the summary section (of the whole file's forward scan when
+        the summary is not used): what a message means when the schema or channel record before
+        it is damaged."""
+        if self._summary is None:
+            return dict(self._scan_records[0]), dict(self._scan_records[1])
+        schemas = {
+            sid: McapSchema(sid, s.name, s.encoding, bytes(s.data))
+            for sid, s in self._summary.schemas.items()
+        }
+        channels = {
+            cid: McapChannel(cid, c.schema_id, c.topic, c.message_encoding, dict(c.metadata))
+            for cid, c in self._summary.channels.items()
+        }
+        return schemas, channels
 
     @property
     def damage_report(self) -> tuple[LogDamage, ...]:
@@ -215,7 +233,8 @@ class McapFileReader(RosReaderBase):
         """One forward pass for a file without a usable summary: channels, counts, time range,
         metadata and damage."""
         schemas: dict[int, McapSchema] = {}
-        seen_channels: set[int] = set()
+        seen_channels: dict[int, McapChannel] = {}
+        self._scan_records = (schemas, seen_channels)
         self._metadata = []
         unsized: set[int] = set()
         first = True
@@ -247,7 +266,7 @@ class McapFileReader(RosReaderBase):
             elif kind == "channel":
                 assert isinstance(item, McapChannel)
                 if item.id not in seen_channels:
-                    seen_channels.add(item.id)
+                    seen_channels[item.id] = item
                     self._add_channel(item, schemas.get(item.schema_id))
             elif kind == "metadata":
                 assert isinstance(item, McapMetadata)
@@ -414,7 +433,13 @@ class McapFileReader(RosReaderBase):
         try:
             head = chunk_head(self._buf, pos, self._size)
         except RecordError as err:
-            return [], str(err), pos + int(index.chunk_length)
+            from redrive.io.mcap.salvage import repaired_chunk_head  # the failure path only
+
+            fixed = repaired_chunk_head(self._buf, pos, self._size)
+            if fixed is None:
+                return [], str(err), pos + int(index.chunk_length)
+            messages = read_chunk(self._buf, fixed)[0]  # whole: it passes its CRC check
+            return messages, f"the chunk record's length is damaged ({err}); read whole", fixed.stop
         messages, _, why = read_chunk(self._buf, head)
         return messages, why, head.stop
 

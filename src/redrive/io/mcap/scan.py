@@ -7,10 +7,10 @@ malformed record is skipped — its byte range and, from the message index recor
 it, the number of messages it held are reported as a :class:`~redrive.io.damage.LogDamage` —
 and reading resumes at the next record that parses (a *resync*: the next chunk of a chunked
 file, the next plausible record of an unchunked one).  :func:`read_chunk` serves the indexed
-reader in :mod:`redrive.io.mcap.reader` with the same checks.
+reader in :mod:`redrive.io.mcap.reader` with the same checks (damaged chunks' remains:
+:mod:`redrive.io.mcap.salvage`).
 
-The file is read through a read-only memory map: an uncompressed chunk's messages are views of
-it, with no copy.
+The file is read through a read-only memory map: an uncompressed chunk's messages are views of it.
 """
 
 from __future__ import annotations
@@ -236,7 +236,9 @@ def read_chunk(buf: memoryview, head: ChunkHead) -> tuple[list[Message], list[ob
         else:
             data = raw
     except (zstandard.ZstdError, RuntimeError, ValueError, OSError, EOFError, MemoryError) as err:
-        return [], [], f"the {head.compression} chunk does not decompress ({err})"
+        from redrive.io.mcap.salvage import decoded_prefix  # the failure path only
+
+        return decoded_prefix(raw, head, err)
     if len(data) != head.uncompressed_size:
         return (
             [],
@@ -391,8 +393,27 @@ class McapScan:
                     raise RecordError("the file ends inside a record header")
                 op, length = _OPLEN.unpack_from(buf, pos)
                 stop = pos + 9 + length
-                if (stop > size or length > size) and op == OP_CHUNK and not data_done:
-                    messages, others = salvage_cut_chunk(buf, pos)
+                head: ChunkHead | None = None
+                fixed: ChunkHead | None = None
+                if op == OP_CHUNK and not data_done:
+                    try:
+                        head = chunk_head(buf, pos, size)
+                    except RecordError:
+                        from redrive.io.mcap.salvage import repaired_chunk_head
+
+                        fixed = repaired_chunk_head(buf, pos, size)
+                        if fixed is None and (stop > size or length > size):
+                            self.chunked = True  # resync at chunks, not at records inside it
+                            resume = self._resync(pos + 1)  # a damaged length, or the file cut
+                            yield from self._cut_chunk(pos, length, resume)
+                            if resume >= size:
+                                return
+                            pos = resume
+                            continue
+                if fixed is not None:
+                    self.chunked = True
+                    yield "chunk", fixed
+                    messages, others, _ = read_chunk(buf, fixed)
                     for record in others:
                         yield self._record(record)
                     for message in messages:
@@ -400,16 +421,16 @@ class McapScan:
                     yield (
                         "damage",
                         LogDamage(
-                            what=(
-                                f"the file is cut off inside a chunk record of {length} bytes at "
-                                f"byte {size}: {len(messages)} whole messages of its start were "
-                                "read, the rest of it is lost"
-                            ),
+                            what=f"a chunk record's length is damaged ({length} bytes); the "
+                            f"chunk is {fixed.stop - pos} bytes long and passes its CRC check: "
+                            "its records were read",
                             start_byte=pos,
-                            stop_byte=size,
+                            stop_byte=fixed.stop,
+                            messages_lost=0,
                         ),
                     )
-                    return
+                    pos = fixed.stop
+                    continue
                 if stop > size or length > size:
                     kind = _KINDS.get(op, f"an opcode-{op:#04x}")
                     raise RecordError(
@@ -418,7 +439,7 @@ class McapScan:
                     )
                 if op == OP_CHUNK:
                     self.chunked = True
-                    head = chunk_head(buf, pos, size)
+                    head = head or chunk_head(buf, pos, size)
                     yield "chunk", head
                     listed = self._listed(stop) if counts_only else None
                     if listed is not None:
@@ -472,6 +493,26 @@ class McapScan:
                 pos = resume
         if lost is not None:
             yield "damage", _counted(*lost)
+
+    def _cut_chunk(self, pos: int, length: int, resume: int) -> Iterator[ScanEvent]:
+        """:func:`salvage_cut_chunk` of a chunk record running past the end, and the damage."""
+        messages, others = salvage_cut_chunk(self.buf, pos)
+        for record in others:
+            yield self._record(record)
+        for message in messages:
+            yield "message", message
+        yield (
+            "damage",
+            LogDamage(
+                what=(
+                    f"the file is cut off (or the record's length damaged) inside a chunk record "
+                    f"of {length} bytes at byte {self.size}: {len(messages)} whole messages of "
+                    "its start were read, the rest of it is lost"
+                ),
+                start_byte=pos,
+                stop_byte=resume,
+            ),
+        )
 
     def _listed(self, pos: int) -> dict[int, int] | None:
         """Channel id → messages of the message index records at ``pos`` (after a chunk), or

@@ -9,13 +9,15 @@ from __future__ import annotations
 
 import logging
 import sqlite3
-from collections.abc import Collection, Iterator
+from collections.abc import Collection, Iterator, Mapping
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 from rosbags.interfaces import Connection, MessageDefinitionFormat
 from rosbags.rosbag2 import Reader as RosbagsReader
 from rosbags.rosbag2 import ReaderError as RosbagsReaderError
+from rosbags.rosbag2.reader import DirectoryReader
 
 from redrive.errors import LogError
 from redrive.io.base import LogMessage, TopicInfo
@@ -23,13 +25,29 @@ from redrive.io.damage import DamageLog, LogDamage
 from redrive.io.ros._reader_base import RosReaderBase
 from redrive.io.ros.deserialize import Deserializer
 from redrive.io.ros.typestore import typestore_for
-from redrive.io.rosbag2.salvage import salvage_sqlite
+from redrive.io.rosbag2.salvage import SalvagingSqlite3Reader, salvage_sqlite
 
 __all__ = ["Ros2BagReader"]
 
 logger = logging.getLogger(__name__)
 
 _SQLITE_MAGIC = b"SQLite format 3\x00"
+
+
+class _SalvagingDirectory(DirectoryReader):
+    """rosbags' bag directory, its sqlite3 databases opened even when their pages are damaged."""
+
+    STORAGE_PLUGINS: Mapping[str, type[Any]] = {
+        **DirectoryReader.STORAGE_PLUGINS,
+        "sqlite3": SalvagingSqlite3Reader,
+    }
+
+
+class _SalvagingReader(RosbagsReader):
+    STORAGE_PLUGINS: Mapping[str, type[Any]] = {
+        **RosbagsReader.STORAGE_PLUGINS,
+        "dir": _SalvagingDirectory,
+    }
 
 
 class Ros2BagReader(RosReaderBase):
@@ -60,7 +78,7 @@ class Ros2BagReader(RosReaderBase):
         self.strict = strict
         self._damage = DamageLog(self.path, strict=strict)
         try:
-            reader = RosbagsReader(self.path)
+            reader = _SalvagingReader(self.path)
             reader.open()
         except Exception as err:  # rosbags: ReaderError, apsw/sqlite3 errors, YAML, KeyError …
             if not isinstance(err, RosbagsReaderError | sqlite3.Error | OSError | ValueError):
@@ -84,6 +102,26 @@ class Ros2BagReader(RosReaderBase):
         store, _ = typestore_for(2, definitions, needed={c.msgtype for c in reader.connections})
         self._deserializer = Deserializer(self.path, ros1=None, cdr=store)
         self._topics = self._summarise(reader.connections)
+        self._opened_damaged = self._open_damage(reader)
+
+    def _open_damage(self, reader: RosbagsReader) -> bool:
+        """Record the damage of the databases rosbags could not open (read row by row);
+        whether there was any."""
+        damaged = False
+        for storage in getattr(reader.storage, "storages", ()):
+            if not isinstance(storage, SalvagingSqlite3Reader) or not storage.failure:
+                continue
+            damaged = True
+            name = Path(str(storage.path)).name
+            for damage in storage.damage or [
+                LogDamage(
+                    what=f"{name}: the database is damaged ({storage.failure}), but every "
+                    "message row in it was read one by one",
+                    messages_lost=0,
+                )
+            ]:
+                self._damage.add(damage)
+        return damaged
 
     def _summarise(self, connections: list[Connection]) -> dict[str, TopicInfo]:
         out: dict[str, TopicInfo] = {}
@@ -116,6 +154,8 @@ class Ros2BagReader(RosReaderBase):
         conns = [c for c in self._reader.connections if topics is None or c.topic in topics]
         if topics is not None and not conns:
             return
+        if self.strict and self._opened_damaged:  # rows of damaged pages: their times unknown
+            self._damage.hit(self._damage.items[0], messages_read=0)
         count = 0
         last_ns, at_last = -1, 0  # the last time yielded, and how many messages had it
         try:
