@@ -25,6 +25,7 @@ import lz4.frame
 import zstandard
 
 from redrive.io.damage import LogDamage
+from redrive.io.limits import max_chunk_bytes, over_budget, stream_pieces
 
 __all__ = [
     "MAGIC",
@@ -76,8 +77,14 @@ _KINDS = {
 }
 _ANY_OP = re.compile(rb"[\x01-\x0f]")
 _CHUNK_OP = re.compile(rb"[\x06\x0f]")
-#: A chunk claiming more than this uncompressed is taken for damage (the writers use ≤ 64 MiB).
-_MAX_CHUNK = 1 << 31
+_DECOMPRESS_ERRORS = (
+    zstandard.ZstdError,
+    RuntimeError,
+    ValueError,
+    OSError,
+    EOFError,
+    MemoryError,
+)
 
 
 class RecordError(Exception):
@@ -208,7 +215,7 @@ def chunk_head(buf: memoryview, pos: int, size: int) -> ChunkHead:
         raise RecordError(f"a chunk record of {length} bytes runs past the end of the file")
     start_time, end_time, usize, crc = _CHUNK.unpack_from(buf, pos + 9)
     compression, at = _string(buf, pos + 9 + _CHUNK.size, stop)
-    if compression not in _COMPRESSIONS or usize > _MAX_CHUNK:
+    if compression not in _COMPRESSIONS:
         raise RecordError(f"a chunk record with compression {compression!r} of {usize} bytes")
     if at + 8 > stop:
         raise RecordError("a chunk's records length runs past the record")
@@ -218,24 +225,48 @@ def chunk_head(buf: memoryview, pos: int, size: int) -> ChunkHead:
     return ChunkHead(pos, stop, start_time, end_time, usize, crc, compression, at + 8, stop)
 
 
-def read_chunk(buf: memoryview, head: ChunkHead) -> tuple[list[Message], list[object], str | None]:
+def read_chunk(
+    buf: memoryview, head: ChunkHead, budget: int | None = None
+) -> tuple[list[Message], list[object], str | None]:
     """The messages and schema/channel records of a chunk, and why it stopped early (None when
     the whole chunk was read).
 
     A chunk that does not decompress or fails its CRC yields nothing (the reason says why); one
     whose CRC is not recorded and that holds a malformed record yields the records before it.
+    Nothing is decompressed past the size the chunk declares; a chunk declaring more than
+    ``budget`` bytes (:func:`~redrive.io.limits.max_chunk_bytes`) yields the whole records at
+    its start, streamed up to the budget (:func:`chunk_prefix`), and says so.
     """
     raw = buf[head.data_start : head.data_stop]
+    usize = head.uncompressed_size
+    limit = max_chunk_bytes(budget)
+    if usize > limit:
+        messages, others, why = chunk_prefix(raw, head.compression, limit)
+        return (
+            messages,
+            others,
+            f"{over_budget(usize, limit)}: the {len(messages)} messages at its start were read "
+            f"(its CRC unchecked){f', up to {why}' if why else ''}",
+        )
     try:
         if head.compression == "zstd":
+            declared = zstandard.frame_content_size(raw)
+            if declared not in (-1, usize):  # decompress() would allocate what the frame says
+                messages, others, _ = chunk_prefix(raw, "zstd", usize)
+                return (
+                    messages,
+                    others,
+                    f"the zstd frame declares {declared} bytes, the chunk {usize}: the "
+                    f"{len(messages)} whole messages in its first {usize} bytes were read",
+                )
             data: bytes | memoryview = zstandard.ZstdDecompressor().decompress(
-                raw, max_output_size=head.uncompressed_size
+                raw, max_output_size=max(usize, 1)
             )
         elif head.compression == "lz4":
-            data = lz4.frame.decompress(raw)
+            data = lz4.frame.LZ4FrameDecompressor().decompress(raw, max_length=usize + 1)
         else:
             data = raw
-    except (zstandard.ZstdError, RuntimeError, ValueError, OSError, EOFError, MemoryError) as err:
+    except _DECOMPRESS_ERRORS as err:
         return [], [], f"the {head.compression} chunk does not decompress ({err})"
     if len(data) != head.uncompressed_size:
         return (
@@ -280,13 +311,54 @@ def _chunk_records(
                 others.append(_schema(view, body, stop))
             elif op == OP_CHANNEL:
                 others.append(_channel(view, body, stop))
+            elif op == 0:  # no record has opcode 0: zeros (a bomb's padding, a zeroed page)
+                raise RecordError("opcode 0x00 is no MCAP record (zeroed bytes)")
             pos = stop
     except RecordError as err:
         return messages, others, pos, str(err)
     return messages, others, pos, None
 
 
-def salvage_cut_chunk(buf: memoryview, pos: int) -> tuple[list[Message], list[object]]:
+def chunk_prefix(
+    raw: bytes | memoryview, compression: str, limit: int
+) -> tuple[list[Message], list[object], str | None]:
+    """The whole records at the start of a chunk's compressed bytes ``raw``, decompressed as a
+    stream of at most ``limit`` bytes (a chunk over the budget, or cut off by the end of the
+    file), and where they stopped (None: at the limit or the end of the bytes).
+
+    Memory holds the records read and one piece of the stream; the first malformed record
+    (zeroed bytes: opcode 0) ends the read at once.
+    """
+    messages: list[Message] = []
+    others: list[object] = []
+    rest = b""
+    try:
+        for piece in stream_pieces(compression, raw, limit):
+            data = rest + piece
+            got, more, pos, why = _chunk_records(memoryview(data))
+            messages += got
+            others += more
+            if why is not None and _whole_at(data, pos):
+                return messages, others, f"a malformed record ({why})"
+            rest = data[pos:]
+    except _DECOMPRESS_ERRORS as err:
+        return messages, others, f"bytes that do not decompress ({err})"
+    except KeyError:
+        return messages, others, f"an unknown compression {compression!r}"
+    return messages, others, None
+
+
+def _whole_at(data: bytes, pos: int) -> bool:
+    """Whether the record at ``pos`` of ``data`` is all there (so a fault in it is damage, not
+    a record cut by the end of a piece)."""
+    if pos + 9 > len(data):
+        return False
+    return bool(pos + 9 + _OPLEN.unpack_from(data, pos)[1] <= len(data))
+
+
+def salvage_cut_chunk(
+    buf: memoryview, pos: int, budget: int | None = None
+) -> tuple[list[Message], list[object]]:
     """The whole records at the start of a chunk record at ``pos`` that the end of the file cuts
     off: what a recorder killed in the middle of writing a chunk left of it.
 
@@ -305,21 +377,11 @@ def salvage_cut_chunk(buf: memoryview, pos: int) -> tuple[list[Message], list[ob
         compression, at = _string(buf, head_end, size)
     except RecordError:
         return [], []
-    if compression not in _COMPRESSIONS or usize > _MAX_CHUNK or at + 8 > size:
+    if compression not in _COMPRESSIONS or at + 8 > size:
         return [], []
-    raw = buf[at + 8 : size]
-    try:
-        if compression == "zstd":
-            data: bytes | memoryview = (
-                zstandard.ZstdDecompressor().decompressobj().decompress(bytes(raw))
-            )
-        elif compression == "lz4":
-            data = lz4.frame.LZ4FrameDecompressor().decompress(bytes(raw))
-        else:
-            data = raw
-    except (zstandard.ZstdError, RuntimeError, ValueError, OSError, EOFError, MemoryError):
-        return [], []
-    messages, others, _pos, _why = _chunk_records(memoryview(data)[:usize])
+    messages, others, _why = chunk_prefix(
+        buf[at + 8 : size], compression, min(usize, max_chunk_bytes(budget))
+    )
     return messages, others
 
 
@@ -354,10 +416,12 @@ def message_index_count(buf: memoryview, pos: int, size: int) -> int | None:
 
 
 class McapScan:
-    """One forward pass over the records of an MCAP file in ``buf`` (see the module text)."""
+    """One forward pass over the records of an MCAP file in ``buf`` (see the module text);
+    ``budget``: the most bytes a chunk is decompressed to (:mod:`redrive.io.limits`)."""
 
-    def __init__(self, buf: memoryview) -> None:
+    def __init__(self, buf: memoryview, budget: int | None = None) -> None:
         self.buf = buf
+        self.budget = max_chunk_bytes(budget)
         self.size = len(buf)
         self.channel_ids: set[int] = set()
         self.chunked = False
@@ -392,7 +456,7 @@ class McapScan:
                 op, length = _OPLEN.unpack_from(buf, pos)
                 stop = pos + 9 + length
                 if (stop > size or length > size) and op == OP_CHUNK and not data_done:
-                    messages, others = salvage_cut_chunk(buf, pos)
+                    messages, others = salvage_cut_chunk(buf, pos, self.budget)
                     for record in others:
                         yield self._record(record)
                     for message in messages:
@@ -425,7 +489,7 @@ class McapScan:
                         yield "counts", (listed, head.start_time, head.end_time)
                         pos = stop
                         continue
-                    messages, others, why = read_chunk(buf, head)
+                    messages, others, why = read_chunk(buf, head, self.budget)
                     for record in others:
                         yield self._record(record)
                     for message in messages:
