@@ -27,6 +27,7 @@ from redrive.errors import LogError
 __all__ = [
     "DEFAULT_MAX_CHUNK_BYTES",
     "MAX_CHUNK_ENV",
+    "decompress_bounded",
     "max_chunk_bytes",
     "over_budget",
     "stream_pieces",
@@ -110,3 +111,32 @@ def stream_pieces(compression: str, raw: bytes | memoryview, limit: int) -> Iter
             return
         done += len(piece)
         yield piece
+
+
+def decompress_bounded(compression: str, data: bytes, limit: int) -> bytes:
+    """The whole of ``data`` decompressed (a ROS 1 bag's chunk: ``bz2``, ``lz4`` or ``none``),
+    never more than ``limit`` bytes of it in memory.
+
+    Raises:
+        KeyError: an unknown compression.
+        ValueError: it expands past ``limit`` (:func:`over_budget` says so).
+        EOFError: the data end before the end of the compressed stream.
+        OSError, RuntimeError: the bytes do not decompress.
+    """
+    if compression == "none":
+        return data
+    decompressor: lz4.frame.LZ4FrameDecompressor | bz2.BZ2Decompressor
+    if compression == "bz2":
+        decompressor = bz2.BZ2Decompressor()
+    elif compression == "lz4":
+        decompressor = lz4.frame.LZ4FrameDecompressor()
+    else:
+        raise KeyError(compression)
+    out: bytes = decompressor.decompress(data, max_length=limit + 1)
+    if len(out) > limit:
+        msg = f"it expands past {limit} bytes, the budget (raise it with {MAX_CHUNK_ENV})"
+        raise ValueError(msg)
+    if not decompressor.eof:
+        msg = "the compressed data end before the end of their stream"
+        raise EOFError(msg)
+    return out
