@@ -303,9 +303,7 @@ class McapFileReader(RosReaderBase):
     ) -> Iterator[LogMessage]:
         asked = None if topics is None else set(topics)  # a list of 50k topics: quadratic
         ids = {
-            cid
-            for cid, (topic, _, _) in self._channels.items()
-            if asked is None or topic in asked
+            cid for cid, (topic, _, _) in self._channels.items() if asked is None or topic in asked
         }
         source = (
             self._indexed(ids, start_ns, stop_ns)
