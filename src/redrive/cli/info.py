@@ -6,6 +6,7 @@ import argparse
 import json
 import logging
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -97,7 +98,7 @@ def _print_table(summary: LogSummary) -> None:
             console.print(f"  {shown(line)}", highlight=False)
 
 
-def _plain_table(columns: tuple[tuple[str, str], ...], rows: list[tuple[str, ...]]) -> str:
+def _plain_table(columns: tuple[tuple[str, str], ...], rows: Sequence[tuple[str, ...]]) -> str:
     """The table as aligned plain text (for logs with more than :data:`_RICH_ROWS` topics)."""
     widths = [max(len(name), *(len(r[i]) for r in rows)) for i, (name, _) in enumerate(columns)]
 
