@@ -29,6 +29,7 @@ from redrive.io.damage import DamageLog, LogDamage
 from redrive.io.limits import max_chunk_bytes as chunk_budget
 from redrive.io.mcap._prefetch import prefetched
 from redrive.io.mcap.metadata import MAP_METADATA, SCENARIO_METADATA, road_map_in, scenario_in
+from redrive.io.mcap.records import summary_crc_ok
 from redrive.io.mcap.scan import (
     OP_CHUNK,
     ChunkHead,
@@ -42,7 +43,6 @@ from redrive.io.mcap.scan import (
     chunk_head,
     message_index_count,
     read_chunk,
-    summary_crc_ok,
 )
 from redrive.io.recognise import starts_with
 from redrive.io.ros._reader_base import RosReaderBase

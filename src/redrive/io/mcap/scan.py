@@ -41,7 +41,6 @@ __all__ = [
     "chunk_head",
     "message_index_count",
     "read_chunk",
-    "summary_crc_ok",
 ]
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -77,14 +76,7 @@ _KINDS = {
 }
 _ANY_OP = re.compile(rb"[\x01-\x0f]")
 _CHUNK_OP = re.compile(rb"[\x06\x0f]")
-_DECOMPRESS_ERRORS = (
-    zstandard.ZstdError,
-    RuntimeError,
-    ValueError,
-    OSError,
-    EOFError,
-    MemoryError,
-)
+_DECOMPRESS_ERRORS = (zstandard.ZstdError, RuntimeError, ValueError, OSError, EOFError, MemoryError)
 
 
 class RecordError(Exception):
@@ -383,23 +375,6 @@ def salvage_cut_chunk(
         buf[at + 8 : size], compression, min(usize, max_chunk_bytes(budget))
     )
     return messages, others
-
-
-def summary_crc_ok(buf: memoryview) -> bool:
-    """Whether the summary section matches the CRC its footer records (True when it records
-    none, or the file has no footer to check against)."""
-    size = len(buf)
-    footer = size - len(MAGIC) - 9 - 20
-    if footer < len(MAGIC) or bytes(buf[size - len(MAGIC) :]) != MAGIC:
-        return True
-    op, length = _OPLEN.unpack_from(buf, footer)
-    if op != OP_FOOTER or length != 20:
-        return True
-    summary_start, _, crc = struct.unpack_from("<QQI", buf, footer + 9)
-    if crc == 0:
-        return True
-    start = summary_start if 0 < summary_start <= footer else footer
-    return bool(zlib.crc32(buf[start : size - len(MAGIC) - 4]) == crc)
 
 
 def message_index_count(buf: memoryview, pos: int, size: int) -> int | None:
