@@ -193,7 +193,7 @@ def test_a_scan_without_summary_restores_time_order_across_chunks_written_out_of
 ) -> None:
     """The recording of a compressor that was behind, killed before its summary: read by a
     forward scan, its messages still come in log-time order, every one of them."""
-    from redrive.io.mcap.scan import McapScan
+    from redrive.io.mcap.forward import McapScan
 
     path = tmp_path / "behind.mcap"
     _, messages = _record_behind(path, monkeypatch)

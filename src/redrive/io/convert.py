@@ -256,7 +256,8 @@ def convert_log(
         store = _destination_store(sources, ros_version=2 if is2 else 1)
         recoder = _Recoder(sources, store, dst_is2=is2)
         native_store = store if is2 else typestore_for(2)[0]
-        selected = [t for t in reader.topics.values() if topics is None or t.topic in topics]
+        asked = None if topics is None else set(topics)  # sets: 50k topics made lists quadratic
+        selected = [t for t in reader.topics.values() if asked is None or t.topic in asked]
         skipped_topics = {
             t.topic: f"no definition of {t.msgtype}"
             for t in selected
@@ -265,7 +266,7 @@ def convert_log(
         for topic, why in skipped_topics.items():
             logger.warning("%s: topic %s is left out: %s", reader.path, topic, why)
         wanted = [t.topic for t in selected if t.topic not in skipped_topics]
-        total = sum(t.count for t in selected if t.topic in wanted)
+        total = sum(t.count for t in selected if t.topic not in skipped_topics)
         written: dict[str, str] = {}
         done = skipped = 0
         sink = _Sink(out, store, compression=compression)

@@ -26,14 +26,16 @@ from redrive.errors import LogError
 from redrive.io.base import Encoding, LogMessage, ReaderCapabilities, TopicInfo, normalize_msgtype
 from redrive.io.content import LogScenario
 from redrive.io.damage import DamageLog, LogDamage
+from redrive.io.limits import max_chunk_bytes as chunk_budget
 from redrive.io.mcap._prefetch import prefetched
+from redrive.io.mcap.forward import McapScan
 from redrive.io.mcap.metadata import MAP_METADATA, SCENARIO_METADATA, road_map_in, scenario_in
+from redrive.io.mcap.records import summary_crc_ok
 from redrive.io.mcap.scan import (
     OP_CHUNK,
     ChunkHead,
     McapChannel,
     McapMetadata,
-    McapScan,
     McapSchema,
     Message,
     RecordError,
@@ -41,7 +43,6 @@ from redrive.io.mcap.scan import (
     chunk_head,
     message_index_count,
     read_chunk,
-    summary_crc_ok,
 )
 from redrive.io.recognise import starts_with
 from redrive.io.ros._reader_base import RosReaderBase
@@ -66,6 +67,9 @@ class McapFileReader(RosReaderBase):
         strict: when True, reading stops at the first damage with
             :class:`~redrive.errors.LogDamagedError` (every message before it was yielded); when
             False the damage is skipped and listed in :attr:`damage_report`.
+        max_chunk_bytes: the most bytes one chunk is decompressed to; one declaring more is
+            damage, its first messages read (default: :func:`redrive.io.limits.max_chunk_bytes`,
+            256 MiB or ``REDRIVE_MAX_CHUNK_BYTES``).
 
     Attributes:
         damage_report: the damage met so far (found while opening a file without a summary, or
@@ -80,9 +84,12 @@ class McapFileReader(RosReaderBase):
     def recognises(cls, path: Path) -> bool:
         return starts_with(path, _MAGIC[:5])  # not the version byte: __init__ explains a wrong one
 
-    def __init__(self, path: Path, *, strict: bool = True) -> None:
+    def __init__(
+        self, path: Path, *, strict: bool = True, max_chunk_bytes: int | None = None
+    ) -> None:
         self.path = Path(path)
         self.strict = strict
+        self._budget = chunk_budget(max_chunk_bytes)
         self._damage = DamageLog(self.path, strict=strict)
         try:
             self._fh: IO[bytes] = self.path.open("rb")
@@ -136,8 +143,8 @@ class McapFileReader(RosReaderBase):
 
     def scan(self) -> Iterator[ScanEvent]:
         """Every intact record of the file and every damage, in file order (a forward scan:
-        see :class:`~redrive.io.mcap.scan.McapScan`); ``redrive repair`` copies from it."""
-        return McapScan(self._buf).events()
+        see :class:`~redrive.io.mcap.forward.McapScan`); ``redrive repair`` copies from it."""
+        return McapScan(self._buf, self._budget).events()
 
     def known_records(self) -> tuple[dict[int, McapSchema], dict[int, McapChannel]]:
         """The schemas and channels of the summary section (of the whole file's forward scan when
@@ -239,7 +246,7 @@ class McapFileReader(RosReaderBase):
         unsized: set[int] = set()
         first = True
         starts: list[tuple[int, int]] = []  # (position, start time) of each chunk, file order
-        for kind, item in McapScan(self._buf).events(counts_only=True):
+        for kind, item in McapScan(self._buf, self._budget).events(counts_only=True):
             if kind == "chunk":
                 head = cast("ChunkHead", item)
                 starts.append((head.pos, head.start_time))
@@ -313,10 +320,9 @@ class McapFileReader(RosReaderBase):
         start_ns: int | None = None,
         stop_ns: int | None = None,
     ) -> Iterator[LogMessage]:
+        asked = None if topics is None else set(topics)  # a list of 50k topics: quadratic
         ids = {
-            cid
-            for cid, (topic, _, _) in self._channels.items()
-            if topics is None or topic in topics
+            cid for cid, (topic, _, _) in self._channels.items() if asked is None or topic in asked
         }
         source = (
             self._indexed(ids, start_ns, stop_ns)
@@ -345,7 +351,7 @@ class McapFileReader(RosReaderBase):
         floors = self._chunk_floors
         heap: list[tuple[int, int, int, memoryview]] = []
         order = count = 0
-        for kind, item in McapScan(self._buf).events():
+        for kind, item in McapScan(self._buf, self._budget).events():
             if kind == "message":
                 cid, _, t, _, data = cast("Message", item)
                 if (
@@ -438,9 +444,9 @@ class McapFileReader(RosReaderBase):
             fixed = repaired_chunk_head(self._buf, pos, self._size)
             if fixed is None:
                 return [], str(err), pos + int(index.chunk_length)
-            messages = read_chunk(self._buf, fixed)[0]  # whole: it passes its CRC check
+            messages = read_chunk(self._buf, fixed, self._budget)[0]  # whole: its CRC checks
             return messages, f"the chunk record's length is damaged ({err}); read whole", fixed.stop
-        messages, _, why = read_chunk(self._buf, head)
+        messages, _, why = read_chunk(self._buf, head, self._budget)
         return messages, why, head.stop
 
     def _chunk_messages(

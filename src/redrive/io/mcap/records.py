@@ -35,6 +35,7 @@ __all__ = [
     "encode_chunk",
     "index_counts",
     "record_bytes",
+    "summary_crc_ok",
     "summary_section",
     "write_all",
 ]
@@ -226,3 +227,20 @@ def copy_range(src_fd: int, dst_fd: int, offset: int, size: int, *, where: str) 
             raise LogError(msg)
         write_all(dst_fd, [piece])
         done += len(piece)
+
+
+def summary_crc_ok(buf: memoryview) -> bool:
+    """Whether the summary section matches the CRC its footer records (True when it records
+    none, or the file has no footer to check against)."""
+    size = len(buf)
+    footer = size - len(MAGIC) - 9 - 20
+    if footer < len(MAGIC) or bytes(buf[size - len(MAGIC) :]) != MAGIC:
+        return True
+    op, length = _RECORD_HEAD.unpack_from(buf, footer)
+    if op != Opcode.FOOTER or length != 20:
+        return True
+    summary_start, _, crc = struct.unpack_from("<QQI", buf, footer + 9)
+    if crc == 0:
+        return True
+    start = summary_start if 0 < summary_start <= footer else footer
+    return bool(crc32(buf[start : size - len(MAGIC) - 4]) == crc)

@@ -15,10 +15,10 @@ from typing import Any
 import lz4.frame
 import zstandard
 
+from redrive.io.limits import max_chunk_bytes
 from redrive.io.mcap.scan import (
     _CHUNK,
     _COMPRESSIONS,
-    _MAX_CHUNK,
     _U64,
     OP_CHUNK,
     ChunkHead,
@@ -79,7 +79,12 @@ def repaired_chunk_head(buf: memoryview, pos: int, size: int) -> ChunkHead | Non
         compression, at = _string(buf, head_end, size)
     except RecordError:
         return None
-    if compression not in _COMPRESSIONS or usize > _MAX_CHUNK or at + 8 > size or crc == 0:
+    if (
+        compression not in _COMPRESSIONS
+        or usize > max_chunk_bytes(None)
+        or at + 8 > size
+        or crc == 0
+    ):
         return None
     (records,) = _U64.unpack_from(buf, at)
     (length,) = _U64.unpack_from(buf, pos + 1)

@@ -18,13 +18,13 @@ from __future__ import annotations
 import re
 import struct
 import zlib
-from collections.abc import Iterator, Mapping
-from dataclasses import dataclass, field, replace
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 
 import lz4.frame
 import zstandard
 
-from redrive.io.damage import LogDamage
+from redrive.io.limits import max_chunk_bytes, over_budget, stream_pieces
 
 __all__ = [
     "MAGIC",
@@ -32,7 +32,6 @@ __all__ = [
     "McapAttachment",
     "McapChannel",
     "McapMetadata",
-    "McapScan",
     "McapSchema",
     "Message",
     "RecordError",
@@ -40,7 +39,6 @@ __all__ = [
     "chunk_head",
     "message_index_count",
     "read_chunk",
-    "summary_crc_ok",
 ]
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -76,8 +74,7 @@ _KINDS = {
 }
 _ANY_OP = re.compile(rb"[\x01-\x0f]")
 _CHUNK_OP = re.compile(rb"[\x06\x0f]")
-#: A chunk claiming more than this uncompressed is taken for damage (the writers use ≤ 64 MiB).
-_MAX_CHUNK = 1 << 31
+_DECOMPRESS_ERRORS = (zstandard.ZstdError, RuntimeError, ValueError, OSError, EOFError, MemoryError)
 
 
 class RecordError(Exception):
@@ -208,7 +205,7 @@ def chunk_head(buf: memoryview, pos: int, size: int) -> ChunkHead:
         raise RecordError(f"a chunk record of {length} bytes runs past the end of the file")
     start_time, end_time, usize, crc = _CHUNK.unpack_from(buf, pos + 9)
     compression, at = _string(buf, pos + 9 + _CHUNK.size, stop)
-    if compression not in _COMPRESSIONS or usize > _MAX_CHUNK:
+    if compression not in _COMPRESSIONS:
         raise RecordError(f"a chunk record with compression {compression!r} of {usize} bytes")
     if at + 8 > stop:
         raise RecordError("a chunk's records length runs past the record")
@@ -218,24 +215,48 @@ def chunk_head(buf: memoryview, pos: int, size: int) -> ChunkHead:
     return ChunkHead(pos, stop, start_time, end_time, usize, crc, compression, at + 8, stop)
 
 
-def read_chunk(buf: memoryview, head: ChunkHead) -> tuple[list[Message], list[object], str | None]:
+def read_chunk(
+    buf: memoryview, head: ChunkHead, budget: int | None = None
+) -> tuple[list[Message], list[object], str | None]:
     """The messages and schema/channel records of a chunk, and why it stopped early (None when
     the whole chunk was read).
 
     A chunk that does not decompress or fails its CRC yields nothing (the reason says why); one
     whose CRC is not recorded and that holds a malformed record yields the records before it.
+    Nothing is decompressed past the size the chunk declares; a chunk declaring more than
+    ``budget`` bytes (:func:`~redrive.io.limits.max_chunk_bytes`) yields the whole records at
+    its start, streamed up to the budget (:func:`chunk_prefix`), and says so.
     """
     raw = buf[head.data_start : head.data_stop]
+    usize = head.uncompressed_size
+    limit = max_chunk_bytes(budget)
+    if usize > limit:
+        messages, others, why = chunk_prefix(raw, head.compression, limit)
+        return (
+            messages,
+            others,
+            f"{over_budget(usize, limit)}: the {len(messages)} messages at its start were read "
+            f"(its CRC unchecked){f', up to {why}' if why else ''}",
+        )
     try:
         if head.compression == "zstd":
+            declared = zstandard.frame_content_size(raw)
+            if declared not in (-1, usize):  # decompress() would allocate what the frame says
+                messages, others, _ = chunk_prefix(raw, "zstd", usize)
+                return (
+                    messages,
+                    others,
+                    f"the zstd frame declares {declared} bytes, the chunk {usize}: the "
+                    f"{len(messages)} whole messages in its first {usize} bytes were read",
+                )
             data: bytes | memoryview = zstandard.ZstdDecompressor().decompress(
-                raw, max_output_size=head.uncompressed_size
+                raw, max_output_size=max(usize, 1)
             )
         elif head.compression == "lz4":
-            data = lz4.frame.decompress(raw)
+            data = lz4.frame.LZ4FrameDecompressor().decompress(raw, max_length=usize + 1)
         else:
             data = raw
-    except (zstandard.ZstdError, RuntimeError, ValueError, OSError, EOFError, MemoryError) as err:
+    except _DECOMPRESS_ERRORS as err:
         from redrive.io.mcap.salvage import decoded_prefix  # the failure path only
 
         return decoded_prefix(raw, head, err)
@@ -282,13 +303,54 @@ def _chunk_records(
                 others.append(_schema(view, body, stop))
             elif op == OP_CHANNEL:
                 others.append(_channel(view, body, stop))
+            elif op == 0:  # no record has opcode 0: zeros (a bomb's padding, a zeroed page)
+                raise RecordError("opcode 0x00 is no MCAP record (zeroed bytes)")
             pos = stop
     except RecordError as err:
         return messages, others, pos, str(err)
     return messages, others, pos, None
 
 
-def salvage_cut_chunk(buf: memoryview, pos: int) -> tuple[list[Message], list[object]]:
+def chunk_prefix(
+    raw: bytes | memoryview, compression: str, limit: int
+) -> tuple[list[Message], list[object], str | None]:
+    """The whole records at the start of a chunk's compressed bytes ``raw``, decompressed as a
+    stream of at most ``limit`` bytes (a chunk over the budget, or cut off by the end of the
+    file), and where they stopped (None: at the limit or the end of the bytes).
+
+    Memory holds the records read and one piece of the stream; the first malformed record
+    (zeroed bytes: opcode 0) ends the read at once.
+    """
+    messages: list[Message] = []
+    others: list[object] = []
+    rest = b""
+    try:
+        for piece in stream_pieces(compression, raw, limit):
+            data = rest + piece
+            got, more, pos, why = _chunk_records(memoryview(data))
+            messages += got
+            others += more
+            if why is not None and _whole_at(data, pos):
+                return messages, others, f"a malformed record ({why})"
+            rest = data[pos:]
+    except _DECOMPRESS_ERRORS as err:
+        return messages, others, f"bytes that do not decompress ({err})"
+    except KeyError:
+        return messages, others, f"an unknown compression {compression!r}"
+    return messages, others, None
+
+
+def _whole_at(data: bytes, pos: int) -> bool:
+    """Whether the record at ``pos`` of ``data`` is all there (so a fault in it is damage, not
+    a record cut by the end of a piece)."""
+    if pos + 9 > len(data):
+        return False
+    return bool(pos + 9 + _OPLEN.unpack_from(data, pos)[1] <= len(data))
+
+
+def salvage_cut_chunk(
+    buf: memoryview, pos: int, budget: int | None = None
+) -> tuple[list[Message], list[object]]:
     """The whole records at the start of a chunk record at ``pos`` that the end of the file cuts
     off: what a recorder killed in the middle of writing a chunk left of it.
 
@@ -307,39 +369,12 @@ def salvage_cut_chunk(buf: memoryview, pos: int) -> tuple[list[Message], list[ob
         compression, at = _string(buf, head_end, size)
     except RecordError:
         return [], []
-    if compression not in _COMPRESSIONS or usize > _MAX_CHUNK or at + 8 > size:
+    if compression not in _COMPRESSIONS or at + 8 > size:
         return [], []
-    raw = buf[at + 8 : size]
-    try:
-        if compression == "zstd":
-            data: bytes | memoryview = (
-                zstandard.ZstdDecompressor().decompressobj().decompress(bytes(raw))
-            )
-        elif compression == "lz4":
-            data = lz4.frame.LZ4FrameDecompressor().decompress(bytes(raw))
-        else:
-            data = raw
-    except (zstandard.ZstdError, RuntimeError, ValueError, OSError, EOFError, MemoryError):
-        return [], []
-    messages, others, _pos, _why = _chunk_records(memoryview(data)[:usize])
+    messages, others, _why = chunk_prefix(
+        buf[at + 8 : size], compression, min(usize, max_chunk_bytes(budget))
+    )
     return messages, others
-
-
-def summary_crc_ok(buf: memoryview) -> bool:
-    """Whether the summary section matches the CRC its footer records (True when it records
-    none, or the file has no footer to check against)."""
-    size = len(buf)
-    footer = size - len(MAGIC) - 9 - 20
-    if footer < len(MAGIC) or bytes(buf[size - len(MAGIC) :]) != MAGIC:
-        return True
-    op, length = _OPLEN.unpack_from(buf, footer)
-    if op != OP_FOOTER or length != 20:
-        return True
-    summary_start, _, crc = struct.unpack_from("<QQI", buf, footer + 9)
-    if crc == 0:
-        return True
-    start = summary_start if 0 < summary_start <= footer else footer
-    return bool(zlib.crc32(buf[start : size - len(MAGIC) - 4]) == crc)
 
 
 def message_index_count(buf: memoryview, pos: int, size: int) -> int | None:
@@ -353,238 +388,6 @@ def message_index_count(buf: memoryview, pos: int, size: int) -> int | None:
     if n % 16 or 6 + n != length:
         return None
     return int(n) // 16
-
-
-class McapScan:
-    """One forward pass over the records of an MCAP file in ``buf`` (see the module text)."""
-
-    def __init__(self, buf: memoryview) -> None:
-        self.buf = buf
-        self.size = len(buf)
-        self.channel_ids: set[int] = set()
-        self.chunked = False
-
-    def events(self, *, counts_only: bool = False) -> Iterator[ScanEvent]:
-        """Every intact record's content and every damage, in file order.
-
-        A whole chunk record is announced by ("chunk", :class:`ChunkHead`) before what it holds.
-
-        ``counts_only``: a chunk whose message index records name only channels already seen is
-        not decompressed; ("counts", (channel id → messages, first time, last time)) from its
-        index and header stands for its messages (a quick pass to open a file without a
-        summary; damage inside such a chunk is found when its messages are read).
-        """
-        buf, size = self.buf, self.size
-        pos = len(MAGIC)
-        data_done = False  # past the data section: damage there loses no message
-        # a damaged chunk whose message index records follow: (damage, messages it yielded,
-        # messages its index lists)
-        lost: tuple[LogDamage, int, int | None] | None = None
-        while pos < size:
-            if lost is not None and (n := message_index_count(buf, pos, size)) is not None:
-                lost = (lost[0], lost[1], (lost[2] or 0) + n)
-                pos += 9 + _OPLEN.unpack_from(buf, pos)[1]
-                continue
-            if lost is not None:
-                yield "damage", _counted(*lost)
-                lost = None
-            try:
-                if pos + 9 > size:
-                    raise RecordError("the file ends inside a record header")
-                op, length = _OPLEN.unpack_from(buf, pos)
-                stop = pos + 9 + length
-                head: ChunkHead | None = None
-                fixed: ChunkHead | None = None
-                if op == OP_CHUNK and not data_done:
-                    try:
-                        head = chunk_head(buf, pos, size)
-                    except RecordError:
-                        from redrive.io.mcap.salvage import repaired_chunk_head
-
-                        fixed = repaired_chunk_head(buf, pos, size)
-                        if fixed is None and (stop > size or length > size):
-                            self.chunked = True  # resync at chunks, not at records inside it
-                            resume = self._resync(pos + 1)  # a damaged length, or the file cut
-                            yield from self._cut_chunk(pos, length, resume)
-                            if resume >= size:
-                                return
-                            pos = resume
-                            continue
-                if fixed is not None:
-                    self.chunked = True
-                    yield "chunk", fixed
-                    messages, others, _ = read_chunk(buf, fixed)
-                    for record in others:
-                        yield self._record(record)
-                    for message in messages:
-                        yield "message", message
-                    yield (
-                        "damage",
-                        LogDamage(
-                            what=f"a chunk record's length is damaged ({length} bytes); the "
-                            f"chunk is {fixed.stop - pos} bytes long and passes its CRC check: "
-                            "its records were read",
-                            start_byte=pos,
-                            stop_byte=fixed.stop,
-                            messages_lost=0,
-                        ),
-                    )
-                    pos = fixed.stop
-                    continue
-                if stop > size or length > size:
-                    kind = _KINDS.get(op, f"an opcode-{op:#04x}")
-                    raise RecordError(
-                        f"the file is cut off (or a length is damaged): {kind} record of {length} "
-                        f"bytes runs past its end at byte {size}"
-                    )
-                if op == OP_CHUNK:
-                    self.chunked = True
-                    head = head or chunk_head(buf, pos, size)
-                    yield "chunk", head
-                    listed = self._listed(stop) if counts_only else None
-                    if listed is not None:
-                        yield "counts", (listed, head.start_time, head.end_time)
-                        pos = stop
-                        continue
-                    messages, others, why = read_chunk(buf, head)
-                    for record in others:
-                        yield self._record(record)
-                    for message in messages:
-                        yield "message", message
-                    if why is not None:
-                        lost = (
-                            LogDamage(what=why, start_byte=pos, stop_byte=stop),
-                            len(messages),
-                            None,
-                        )
-                elif op == OP_MESSAGE:
-                    if length < _MESSAGE.size:
-                        raise RecordError("a message record is too short")
-                    cid, seq, log_time, pub_time = _MESSAGE.unpack_from(buf, pos + 9)
-                    yield "message", (cid, seq, log_time, pub_time, buf[pos + 31 : stop])
-                elif op == OP_SCHEMA:
-                    yield self._record(_schema(buf, pos + 9, stop))
-                elif op == OP_CHANNEL:
-                    yield self._record(_channel(buf, pos + 9, stop))
-                elif op == OP_METADATA:
-                    name, at = _string(buf, pos + 9, stop)
-                    yield "metadata", McapMetadata(name, _string_map(buf, at, stop)[0])
-                elif op == OP_ATTACHMENT:
-                    yield "attachment", _attachment(buf, pos + 9, stop)
-                elif op == OP_DATA_END:
-                    data_done = True
-                elif op == OP_FOOTER:
-                    return
-                elif not (0 < op <= 0x11 or op >= 0x80):  # 0x80+: private records, skipped
-                    raise RecordError(f"opcode {op:#04x} is not an MCAP record")
-                pos = stop
-            except RecordError as err:
-                resume = self._resync(pos + 1)
-                yield (
-                    "damage",
-                    LogDamage(
-                        what=("the summary section: " if data_done else "")
-                        + (str(err) if resume < size else f"{err}; nothing after it is readable"),
-                        start_byte=pos,
-                        stop_byte=resume,
-                        messages_lost=0 if data_done else None,
-                    ),
-                )
-                pos = resume
-        if lost is not None:
-            yield "damage", _counted(*lost)
-
-    def _cut_chunk(self, pos: int, length: int, resume: int) -> Iterator[ScanEvent]:
-        """:func:`salvage_cut_chunk` of a chunk record running past the end, and the damage."""
-        messages, others = salvage_cut_chunk(self.buf, pos)
-        for record in others:
-            yield self._record(record)
-        for message in messages:
-            yield "message", message
-        yield (
-            "damage",
-            LogDamage(
-                what=(
-                    f"the file is cut off (or the record's length damaged) inside a chunk record "
-                    f"of {length} bytes at byte {self.size}: {len(messages)} whole messages of "
-                    "its start were read, the rest of it is lost"
-                ),
-                start_byte=pos,
-                stop_byte=resume,
-            ),
-        )
-
-    def _listed(self, pos: int) -> dict[int, int] | None:
-        """Channel id → messages of the message index records at ``pos`` (after a chunk), or
-        None when there are none or they name a channel not seen yet."""
-        out: dict[int, int] = {}
-        while (n := message_index_count(self.buf, pos, self.size)) is not None:
-            (cid,) = _U16.unpack_from(self.buf, pos + 9)
-            if cid not in self.channel_ids:
-                return None
-            out[cid] = out.get(cid, 0) + n
-            pos += 9 + _OPLEN.unpack_from(self.buf, pos)[1]
-        return out or None
-
-    def _record(self, record: object) -> ScanEvent:
-        if isinstance(record, McapChannel):
-            self.channel_ids.add(record.id)
-            return "channel", record
-        return "schema", record
-
-    def _resync(self, start: int) -> int:
-        """The position of the next plausible record after ``start`` (the file size if none)."""
-        pattern = _CHUNK_OP if self.chunked else _ANY_OP
-        while True:
-            found = pattern.search(self.buf, start)
-            if found is None:
-                return self.size
-            pos = int(found.start())
-            if self._plausible(pos):
-                return pos
-            start = pos + 1
-
-    def _plausible(self, pos: int) -> bool:
-        buf, size = self.buf, self.size
-        if pos + 9 > size:
-            return False
-        op, length = _OPLEN.unpack_from(buf, pos)
-        stop = pos + 9 + length
-        if stop > size:
-            return False
-        try:
-            if op == OP_CHUNK:
-                chunk_head(buf, pos, size)
-                return True
-            if op == OP_DATA_END:
-                return length == 4 and self._next_ok(stop)
-            if op == OP_MESSAGE:
-                ok = length >= _MESSAGE.size and (
-                    _U16.unpack_from(buf, pos + 9)[0] in self.channel_ids
-                )
-            elif op == OP_SCHEMA:
-                ok = _schema(buf, pos + 9, stop) is not None
-            elif op == OP_CHANNEL:
-                ok = _channel(buf, pos + 9, stop) is not None
-            else:
-                return False
-        except RecordError:
-            return False
-        return ok and self._next_ok(stop)
-
-    def _next_ok(self, pos: int) -> bool:
-        """Whether a record (or the closing magic, or the end) follows at ``pos``."""
-        if pos == self.size or bytes(self.buf[pos : pos + 8]) == MAGIC:
-            return True
-        if pos + 9 > self.size:
-            return False
-        op, length = _OPLEN.unpack_from(self.buf, pos)
-        return bool(0 < op <= 0x11 and pos + 9 + length <= self.size)
-
-
-def _counted(damage: LogDamage, read: int, listed: int | None) -> LogDamage:
-    """``damage`` with the messages it lost: those the chunk's index lists, less those read."""
-    return replace(damage, messages_lost=None if listed is None else max(listed - read, 0))
 
 
 def _attachment(buf: memoryview, pos: int, end: int) -> McapAttachment:

@@ -36,6 +36,8 @@ from rosbags.rosbag1.reader import decompressors as rosbags_decompressors
 from redrive.errors import LogError
 from redrive.io.base import LogMessage, MessageBatch, TopicInfo
 from redrive.io.damage import DamageLog, LogDamage
+from redrive.io.limits import decompress_bounded
+from redrive.io.limits import max_chunk_bytes as chunk_budget
 from redrive.io.recognise import starts_with
 from redrive.io.ros._reader_base import RosReaderBase
 from redrive.io.ros.deserialize import Deserializer
@@ -56,6 +58,7 @@ from redrive.io.rosbag1.scan import BagWalk, ChunkSpan, Conn
 __all__ = ["Ros1BagReader"]
 
 logger = logging.getLogger(__name__)
+_COMPRESSION_OF = {fn: name for name, fn in rosbags_decompressors.items()}
 
 
 class Ros1BagReader(RosReaderBase):
@@ -67,6 +70,8 @@ class Ros1BagReader(RosReaderBase):
             raises :class:`~redrive.errors.LogTruncatedError` after every message before it was
             yielded; when False it is logged as a warning and reading goes on with the next
             readable chunk.
+        max_chunk_bytes: the most bytes a chunk may expand to; one that expands past it is
+            damage (default :func:`redrive.io.limits.max_chunk_bytes`).
 
     Attributes:
         damage_report: the damage met so far (found by the sequential walk at open, or while
@@ -81,9 +86,12 @@ class Ros1BagReader(RosReaderBase):
     def recognises(cls, path: Path) -> bool:
         return starts_with(path, b"#ROSBAG V")
 
-    def __init__(self, path: Path, *, strict: bool = True) -> None:
+    def __init__(
+        self, path: Path, *, strict: bool = True, max_chunk_bytes: int | None = None
+    ) -> None:
         self.path = Path(path)
         self.strict = strict
+        self._budget = chunk_budget(max_chunk_bytes)
         self._damage = DamageLog(self.path, strict=strict)
         self.indexed = True
         self._conns: dict[int, Conn] = {}
@@ -164,7 +172,7 @@ class Ros1BagReader(RosReaderBase):
                 what=f"no usable index ({why}); the bag was read sequentially", messages_lost=0
             )
         )
-        walk = BagWalk(self.path, self._file_size)
+        walk = BagWalk(self.path, self._file_size, self._budget)
         walk.walk()
         self._walked = walk
         self._conns = walk.conns
@@ -380,7 +388,8 @@ class Ros1BagReader(RosReaderBase):
         if len(compressed) != header.datasize:
             msg = "the chunk is cut off"
             raise ValueError(msg)
-        return memoryview(header.decompressor(compressed)), None
+        name = _COMPRESSION_OF[header.decompressor]
+        return memoryview(decompress_bounded(name, compressed, self._budget)), None
 
     def _file_map(self) -> memoryview:
         if self._map is None:

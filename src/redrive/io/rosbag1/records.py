@@ -7,7 +7,7 @@ from __future__ import annotations
 import bz2
 import mmap
 import struct
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 
 import lz4.frame
 
@@ -36,25 +36,23 @@ MAGIC = b"#ROSBAG V2.0\n"
 U32 = struct.Struct("<I")
 TIME = struct.Struct("<II")
 
-DECOMPRESSORS: Mapping[str, Callable[[bytes], bytes]] = {
-    "none": lambda data: data,
-    "bz2": bz2.decompress,
-    "lz4": lz4.frame.decompress,
-}
+#: the chunk compressions of ROS 1 bags (chunks are decompressed against the budget of
+#: :func:`redrive.io.limits.decompress_bounded`).
+DECOMPRESSORS = ("none", "bz2", "lz4")
 
 
 #: what the record functions read: file bytes, a view of them, or a map of the file.
 Buf = bytes | memoryview | mmap.mmap
 
 
-def decompress_prefix(compression: str, data: bytes) -> bytes:
-    """Decompress as much of a cut-off chunk as its bytes allow."""
+def decompress_prefix(compression: str, data: bytes, limit: int) -> bytes:
+    """Decompress as much of a cut-off chunk as its bytes allow, at most ``limit`` bytes."""
     if compression == "none":
         return data
     if compression == "bz2":
-        return bz2.BZ2Decompressor().decompress(data)
+        return bz2.BZ2Decompressor().decompress(data, max_length=limit)
     if compression == "lz4":
-        out: bytes = lz4.frame.LZ4FrameDecompressor().decompress(data)
+        out: bytes = lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=limit)
         return out
     raise KeyError(compression)
 

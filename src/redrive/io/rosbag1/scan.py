@@ -22,6 +22,7 @@ from pathlib import Path
 
 from redrive.io.base import normalize_msgtype
 from redrive.io.damage import LogDamage
+from redrive.io.limits import decompress_bounded, max_chunk_bytes
 from redrive.io.rosbag1.records import (
     DECOMPRESSORS,
     MAGIC,
@@ -92,9 +93,10 @@ class BagWalk:
             damage).
     """
 
-    def __init__(self, path: Path, size: int) -> None:
+    def __init__(self, path: Path, size: int, budget: int | None = None) -> None:
         self.path = path
         self.size = size
+        self.budget = max_chunk_bytes(budget)
         self.conns: dict[int, Conn] = {}
         self.items: list[ChunkSpan | LogDamage] = []
 
@@ -210,9 +212,9 @@ class BagWalk:
         raw = bytes(buf[span.datapos : span.datapos + span.datasize])
         try:
             if span.cut:
-                chunk = memoryview(decompress_prefix(span.compression, raw))
+                chunk = memoryview(decompress_prefix(span.compression, raw, self.budget))
             else:
-                chunk = memoryview(DECOMPRESSORS[span.compression](raw))
+                chunk = memoryview(decompress_bounded(span.compression, raw, self.budget))
         except KeyError:
             span.damaged = f"uses an unknown compression {span.compression!r}"
             return

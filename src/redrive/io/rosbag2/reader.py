@@ -151,7 +151,8 @@ class Ros2BagReader(RosReaderBase):
         start_ns: int | None = None,
         stop_ns: int | None = None,
     ) -> Iterator[LogMessage]:
-        conns = [c for c in self._reader.connections if topics is None or c.topic in topics]
+        asked = None if topics is None else set(topics)
+        conns = [c for c in self._reader.connections if asked is None or c.topic in asked]
         if topics is not None and not conns:
             return
         if self.strict and self._opened_damaged:  # rows of damaged pages: their times unknown
