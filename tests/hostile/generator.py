@@ -238,7 +238,9 @@ def _nan_cloud_data(msg: Any, rng: random.Random) -> None:
             continue
         view = data[: n * step].reshape(n, step)[:, field.offset : field.offset + 4]
         values = np.ascontiguousarray(view).view(np.float32).reshape(n)
-        values[:] = np.where(np.arange(n) % 3 == 0, np.nan, np.where(np.arange(n) % 3 == 1, np.inf, -np.inf))
+        values[:] = np.where(
+            np.arange(n) % 3 == 0, np.nan, np.where(np.arange(n) % 3 == 1, np.inf, -np.inf)
+        )
         view[:] = values.view(np.uint8).reshape(n, 4)
     msg.data = data
 
