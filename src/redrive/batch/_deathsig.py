@@ -1,37 +1,42 @@
-"""Linux: a local batch worker dies with its driver (issue 37: after a killed ``redrive batch``
-its workers kept running and overlapped the rerun's workers on the same cells).
+"""A local batch worker dies with its driver (issue 37: after a killed ``redrive batch`` its
+workers kept running and overlapped the rerun's workers on the same cells).
 
-The forkserver asks for SIGKILL when the driver (its parent) ends, and each cell — forked from
-the forkserver — for SIGKILL when the forkserver ends: so SIGKILL on the driver takes the server
-and every running cell with it."""
+A cell is forked from the forkserver, not from the driver, so the kernel's parent-death signal
+would follow the server; instead each cell watches the driver's process id from a daemon thread
+and SIGKILLs itself within :data:`POLL_S` once the driver is gone."""
 
 from __future__ import annotations
 
 import os
 import signal
-import sys
+import threading
 
-__all__ = ["die_with_parent", "in_forkserver"]
+__all__ = ["POLL_S", "die_with_driver"]
 
-_PR_SET_PDEATHSIG = 1
-
-
-def in_forkserver() -> bool:
-    """Whether this process is multiprocessing's forkserver (started with ``-c``)."""
-    return sys.argv[:1] == ["-c"] and "multiprocessing.forkserver" in sys.modules
+POLL_S = 0.5
 
 
-def die_with_parent(parent_pid: int) -> None:
-    """Ask the kernel to SIGKILL this process when its parent ends; a parent that ended before
-    (``parent_pid`` is no longer the parent) ends it at once.  Elsewhere than Linux: nothing."""
-    if not sys.platform.startswith("linux"):
-        return
+def _alive(pid: int) -> bool:
     try:
-        import ctypes
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
 
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
-    except (OSError, AttributeError):
-        return
-    if os.getppid() != parent_pid:
-        os._exit(1)
+
+def _watch(driver_pid: int) -> None:
+    while _alive(driver_pid):
+        threading.Event().wait(POLL_S)
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+def die_with_driver(driver_pid: int) -> None:
+    """SIGKILL this process once process ``driver_pid`` has ended (checked every
+    :data:`POLL_S` seconds by a daemon thread; at once when it has already ended)."""
+    if not _alive(driver_pid):
+        os.kill(os.getpid(), signal.SIGKILL)
+    threading.Thread(
+        target=_watch, args=(driver_pid,), name="redrive-driver-watch", daemon=True
+    ).start()

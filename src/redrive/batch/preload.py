@@ -21,9 +21,6 @@ from __future__ import annotations
 
 import importlib
 import logging
-import os
-
-from redrive.batch._deathsig import die_with_parent, in_forkserver
 
 __all__ = ["CACHES", "PRELOAD", "WARM"]
 
@@ -109,8 +106,6 @@ def fill(caches: tuple[tuple[str, str, tuple[object, ...]], ...] = CACHES) -> in
     return done
 
 
-if in_forkserver():  # not when a test imports this module
-    die_with_parent(os.getppid())
 preload()
 fill()
 warm()
