@@ -118,3 +118,15 @@ class NoisyOracle(Algorithm):
                 )
             )
         return out
+
+
+class Sleepy(Algorithm):
+    """Sleeps a second a frame: a cell that is still running when its driver is killed."""
+
+    role = Role.PLANNING
+
+    def step(self, frame: Frame, upstream: StageOutputs) -> PlannedPath:
+        import time
+
+        time.sleep(1.0)
+        return _stand_still(frame.stamp_ns)

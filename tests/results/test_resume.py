@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from redrive.results import RunStatus, RunWriter, open_run
 from tests.results._records import SETUP, frame
 
@@ -23,7 +25,7 @@ os.kill(os.getpid(), signal.SIGKILL)
 """
 
 
-def test_resume_after_kill(tmp_path: Path) -> None:
+def test_resume_after_kill(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
     run_dir = tmp_path / "run"
     proc = subprocess.run(
         [sys.executable, "-c", _CRASH, str(run_dir)], cwd=_ROOT, check=False, timeout=120
@@ -43,6 +45,10 @@ def test_resume_after_kill(tmp_path: Path) -> None:
 
     with RunWriter(run_dir, setup=SETUP, resume=True, flush_every=50) as writer:
         assert writer.done_frames == frozenset(range(150))
+        # a resumed run says that its algorithms (trackers, planners with memory) start fresh
+        (said,) = [r.getMessage() for r in caplog.records if "fresh state" in r.getMessage()]
+        assert said.startswith("resuming after 150 frames done: the algorithms start from a")
+        assert "can differ from those of an uninterrupted run" in said
         for i in range(200):
             if i not in writer.done_frames:
                 writer.write_frame(frame(i))

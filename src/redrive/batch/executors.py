@@ -28,6 +28,7 @@ from dataclasses import dataclass, replace
 from multiprocessing.connection import wait
 from typing import Any, Protocol
 
+from redrive.batch._deathsig import die_with_driver
 from redrive.batch.cell import CellRunner, CellTask
 from redrive.batch.manifest import CellRecord, CellStatus, read_cell_record, write_cell_record
 from redrive.errors import ConfigError
@@ -60,10 +61,11 @@ def dead_worker_reason(exitcode: int | None) -> str:
     return f"WorkerDied: the worker process exited with status {exitcode} before finishing the cell"
 
 
-def _child(runner: CellRunner, task: CellTask) -> None:
-    """A local worker: run one cell (its record is written by the runner).  It leaves the
-    terminal's process group, so that Ctrl-C reaches the driver only, which then interrupts each
-    running cell once (:func:`_stop`)."""
+def _child(runner: CellRunner, task: CellTask, driver_pid: int) -> None:
+    """A local worker: run one cell (its record is written by the runner).  It dies with the
+    driver (:func:`~redrive.batch._deathsig.die_with_driver`), and leaves the terminal's process group, so that Ctrl-C
+    reaches the driver only, which then interrupts each running cell once (:func:`_stop`)."""
+    die_with_driver(driver_pid)
     os.setpgrp()
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     try:
@@ -122,7 +124,9 @@ class LocalExecutor:
                     task = pending.popleft()
                     task.record_path.unlink(missing_ok=True)
                     proc = ctx.Process(
-                        target=_child, args=(runner, task), name=f"redrive-batch {task.cell_id}"
+                        target=_child,
+                        args=(runner, task, os.getpid()),
+                        name=f"redrive-batch {task.cell_id}",
                     )
                     proc.start()
                     running[proc.sentinel] = (proc, task)

@@ -16,7 +16,7 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from concurrent.futures import wait as futures_wait
 from pathlib import Path
 from typing import Any
@@ -91,10 +91,18 @@ def write_files(
     deletes); the renames happen in the order given, so the file that commits a flush goes last.
     """
     tmps = [temp_path(path) for path, _ in files]
-    pending = [
-        _pool().submit(_write_synced, tmp, payload)
-        for tmp, (_, payload) in zip(tmps, files, strict=True)
-    ]
+    pending: list[Future[None]] = []
+    for tmp, (_, payload) in zip(tmps, files, strict=True):
+        try:
+            pending.append(_pool().submit(_write_synced, tmp, payload))
+        except RuntimeError:  # no thread to be had (an address-space limit): write it here
+            done: Future[None] = Future()
+            try:
+                _write_synced(tmp, payload)
+                done.set_result(None)
+            except BaseException as exc:
+                done.set_exception(exc)
+            pending.append(done)
     final: tuple[Path, Path] | None = None
     try:
         if last is not None:

@@ -54,6 +54,12 @@ except ImportError:  # pragma: no cover - Windows
 
 __all__ = ["FINAL_STATUSES", "Run", "RunWriter", "open_run"]
 
+#: said on every resume: a plugin's memory (a tracker's tracks, a planner's history) is not stored
+RESUME_FRESH_STATE = (
+    "resuming after %d frames done: the algorithms start from a fresh state at the first frame "
+    "not done (a tracker's tracks, a planner's memory are not restored), so results after the "
+    "resume point can differ from those of an uninterrupted run"
+)
 logger = logging.getLogger(__name__)
 
 #: the statuses :meth:`RunWriter.close` accepts.
@@ -229,6 +235,7 @@ class RunWriter:
             len(done),
             removed,
         )
+        logger.warning(RESUME_FRESH_STATE, len(done))
         return manifest
 
     # -- writing -----------------------------------------------------------------------------
