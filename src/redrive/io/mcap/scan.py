@@ -261,14 +261,12 @@ def read_chunk(
 
         return decoded_prefix(raw, head, err)
     if len(data) != head.uncompressed_size:
-        return (
-            [],
-            [],
-            (
-                f"the chunk decompresses to {len(data)} bytes, not the {head.uncompressed_size} "
-                "it records"
-            ),
-        )
+        why = f"it decompresses to {len(data)} bytes, not the {head.uncompressed_size} it records"
+        if head.compression:  # damaged compressed bytes: keep the whole messages decoded first
+            from redrive.io.mcap.salvage import decoded_prefix  # the failure path only
+
+            return decoded_prefix(raw, head, ValueError(why))
+        return [], [], f"the chunk: {why}"
     if head.crc != 0 and zlib.crc32(data) != head.crc:
         return [], [], "the chunk fails its CRC check (its bytes changed)"
     messages, others, pos, why = _chunk_records(memoryview(data))
