@@ -16,7 +16,7 @@ from redrive.assembly.frames import FrameAssembler
 from redrive.cli.main import main
 from redrive.closedloop.logreplay import LogSimulator, driven_from_logged, reexpress_cloud
 from redrive.closedloop.run import ClosedLoopRequest, run_closed_loop
-from redrive.closedloop.tracker import LqrPidTracker
+from redrive.closedloop.tracker import LqrTracker
 from redrive.config import PipelineConfig, load_pipeline, pipeline_from_plugins
 from redrive.errors import ConfigError
 from redrive.evaluation.closedloop import AtFaultCollisions
@@ -212,7 +212,7 @@ def test_a_bag_whose_poses_miss_its_frames_is_refused(shared_data: Path) -> None
         open_log(bag) as log,
         pytest.raises(ConfigError, match=r"at least two frames with the ego's pose.*has 0"),
     ):
-        LogSimulator(log, tracker=LqrPidTracker())
+        LogSimulator(log, tracker=LqrTracker())
 
 
 def test_the_lidar_points_stay_put_in_the_world(follower_log: Path) -> None:
@@ -220,7 +220,7 @@ def test_the_lidar_points_stay_put_in_the_world(follower_log: Path) -> None:
     are the logged clouds moved by exactly the pose difference."""
     with open_log(follower_log) as log:
         raw = list(FrameAssembler(log).frames())[:12]
-        sim = LogSimulator(log, tracker=LqrPidTracker(), duration_s=1.0)
+        sim = LogSimulator(log, tracker=LqrTracker(), duration_s=1.0)
         throttle = StageOutputs(
             outputs={"stop": ControlCommands(brake=1.0)}, roles={"stop": Role.CONTROL}
         )

@@ -19,7 +19,7 @@ from redrive.assembly.frames import FrameAssembler
 from redrive.cli.main import main
 from redrive.closedloop.run import ClosedLoopRequest, run_closed_loop
 from redrive.closedloop.synthetic import SyntheticSimulator
-from redrive.closedloop.tracker import LqrPidTracker
+from redrive.closedloop.tracker import LqrTracker
 from redrive.config import pipeline_from_plugins, reference_pipeline
 from redrive.errors import ConfigError, SimulationError
 from redrive.io import open_log
@@ -137,7 +137,7 @@ def test_driven_as_logged_the_closed_loop_renders_the_logged_clouds_and_images(
 ) -> None:
     scenario = _small("cut_in", duration_s=1.5)
     log = synthesize(scenario, tmp_path / "cut_in.mcap").path
-    sim = ScriptedEgo(scenario, tracker=LqrPidTracker(), level="sensor")
+    sim = ScriptedEgo(scenario, tracker=LqrTracker(), level="sensor")
     frames = _drive(sim, StageOutputs(outputs={}, roles={}))
     assert [f.index for f in frames] == list(range(14))  # 0.1 s … 1.4 s: after the first sweep
     assert frames[0].stamp_ns == scenario.start_stamp_ns + 100_000_000
@@ -213,10 +213,8 @@ def _non_ground(frame: Frame) -> np.ndarray:
 
 def test_one_metre_to_the_left_the_scene_is_one_metre_to_the_right() -> None:
     scenario = _small("highway", duration_s=1.0)
-    ref = _drive(SyntheticSimulator(scenario, tracker=LqrPidTracker(), level="sensor"), STRAIGHT_ON)
-    left = _drive(
-        StartsOneMetreLeft(scenario, tracker=LqrPidTracker(), level="sensor"), STRAIGHT_ON
-    )
+    ref = _drive(SyntheticSimulator(scenario, tracker=LqrTracker(), level="sensor"), STRAIGHT_ON)
+    left = _drive(StartsOneMetreLeft(scenario, tracker=LqrTracker(), level="sensor"), STRAIGHT_ON)
     assert len(ref) == len(left) == 9
     for a, b in zip(ref, left, strict=True):
         assert a.vehicle_state is not None
@@ -320,10 +318,10 @@ def test_level_is_checked() -> None:
     with pytest.raises(ConfigError, match="level"):
         SyntheticSimulator(
             load_scenario("cut_in"),
-            tracker=LqrPidTracker(),
+            tracker=LqrTracker(),
             level="pixels",  # type: ignore[arg-type]
         )
-    sim = SyntheticSimulator(_small("cut_in", 1.0), tracker=LqrPidTracker(), level="sensor")
+    sim = SyntheticSimulator(_small("cut_in", 1.0), tracker=LqrTracker(), level="sensor")
     assert dict(sim.sensors) == {
         "camera_front_image_raw": SensorType.CAMERA,
         "gnss": SensorType.GNSS,
@@ -395,10 +393,10 @@ def test_a_failed_run_leaves_a_recording_that_opens(tmp_path: Path) -> None:
 
 
 def test_recording_is_for_a_sensor_level_run_from_its_start(tmp_path: Path) -> None:
-    objects = SyntheticSimulator(_small("cut_in", 1.0), tracker=LqrPidTracker())
+    objects = SyntheticSimulator(_small("cut_in", 1.0), tracker=LqrTracker())
     with pytest.raises(ConfigError, match="object-level"):
         objects.record_sensors(McapWriter(tmp_path / "a.mcap"))
-    sim = SyntheticSimulator(_small("cut_in", 1.0), tracker=LqrPidTracker(), level="sensor")
+    sim = SyntheticSimulator(_small("cut_in", 1.0), tracker=LqrTracker(), level="sensor")
     sim.observe()
     with pytest.raises(SimulationError, match="before the first frame"):
         sim.record_sensors(McapWriter(tmp_path / "b.mcap"))

@@ -7,6 +7,6 @@ actuation delay) lives in ``redrive.sim.ego``.
 
 from __future__ import annotations
 
-from redrive.closedloop.tracker import LqrPidTracker
+from redrive.closedloop.tracker import LqrTracker
 
-__all__ = ["LqrPidTracker"]
+__all__ = ["LqrTracker"]

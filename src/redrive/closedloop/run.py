@@ -42,7 +42,7 @@ from redrive.closedloop.mode import DEFAULT_DEVIATION_M, DEFAULT_DEVIATION_RAD, 
 from redrive.closedloop.sensors import RecordingThread
 from redrive.closedloop.simulator import Simulator
 from redrive.closedloop.synthetic import AgentMode, Level, SyntheticSimulator
-from redrive.closedloop.tracker import LqrPidTracker
+from redrive.closedloop.tracker import LqrTracker
 from redrive.config import PipelineConfig
 from redrive.engine.graph import LogInputs, build_graph
 from redrive.engine.run import execute, run_setup, source_log
@@ -167,7 +167,7 @@ def _run_scenario(
         scenario = dataclasses.replace(scenario, seed=int(request.seed))
     simulator = SyntheticSimulator(
         scenario,
-        tracker=LqrPidTracker(),
+        tracker=LqrTracker(),
         agents=request.agents,
         rate_hz=request.rate_hz,
         delay_steps=request.delay_steps,
@@ -216,7 +216,7 @@ def _run_log(
     overrides = load_sensor_map_overrides(request.sensor_map) if request.sensor_map else None
     simulator = LogSimulator(
         log,
-        tracker=LqrPidTracker(),
+        tracker=LqrTracker(),
         agents=request.agents,
         rate_hz=request.rate_hz,
         duration_s=request.duration_s,

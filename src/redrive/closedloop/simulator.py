@@ -102,8 +102,17 @@ class PathFollower(Protocol):
     """The built-in tracker that turns a planned path into commands (no control stage)."""
 
     def commands(
-        self, state: VehicleState, path: PlannedPath, dt_s: float, *, stamp_ns: int
-    ) -> ControlCommands: ...
+        self,
+        state: VehicleState,
+        path: PlannedPath,
+        dt_s: float,
+        *,
+        stamp_ns: int,
+        steer_rad: float | None = None,
+    ) -> ControlCommands:
+        """Commands for the next ``dt_s`` from ``stamp_ns``; ``steer_rad`` is the ego's current
+        road-wheel angle (None: not known)."""
+        ...
 
     def reset(self) -> None:
         """Forget what the last run left (integrals, last errors)."""
@@ -154,7 +163,8 @@ def choose_command(
         outputs: the frame's stage outputs (failed steps are absent).
         state: the ego's true state (map frame) when the frame was observed; a base_link path
             starts at this pose.
-        steer_rad: the current steering angle (held by the fallback).
+        steer_rad: the current steering angle (held by the fallback; the tracker's lateral
+            state).
         tracker: follows a planned path when no control stage produced commands.
         dt_s: the step the command is held for.
         stamp_ns: the time the command starts acting.
@@ -175,7 +185,7 @@ def choose_command(
         if problem:
             return _brake(steer_rad, f"{name}: {problem}")
         try:
-            command = tracker.commands(state, path, dt_s, stamp_ns=stamp_ns)
+            command = tracker.commands(state, path, dt_s, stamp_ns=stamp_ns, steer_rad=steer_rad)
         except ValueError as err:
             return _brake(steer_rad, f"{name}: the tracker cannot follow its path: {err}")
         return EgoCommand(commands=command, source="tracker", algorithm=name)

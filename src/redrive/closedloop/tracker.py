@@ -1,72 +1,321 @@
-"""The built-in path tracker: LQR steering and PID speed control towards a ``PlannedPath``.
+"""The built-in path tracker: nuPlan's LQR tracker, turning a ``PlannedPath`` into commands.
 
-Used when a closed-loop pipeline has no control stage.  Following nuPlan's LQR tracker it is two
-decoupled stages on the kinematic bicycle (reference point the rear axle, ``redrive.sim.ego``):
+Used when a closed-loop pipeline has no control stage.  It is nuplan-devkit's ``LQRTracker``
+(``nuplan/planning/simulation/controller/tracker/lqr.py``) with the defaults of its
+``nuplan/planning/script/config/simulation/ego_controller/tracker/lqr_tracker.yaml``: two
+decoupled one-step LQR problems on the kinematic bicycle (reference point the rear axle), solved
+against a reference read ``tracking_horizon · discretization_time_s`` (1 s) ahead.
 
-Lateral — a discrete-time LQR on the error dynamics linearised about the path (small angles)::
+Reference (:mod:`redrive.closedloop.profiles`): the path resampled every
+``discretization_time_s`` and its speed and curvature profiles fitted by regularised least
+squares (``jerk_penalty``, ``curvature_rate_penalty``).  The reference speed is the fitted speed
+at ``t + N·dt`` (N = ``tracking_horizon``), the curvature profile the fitted curvature at
+``t, t + dt, …, t + (N−1)·dt`` — ``_compute_reference_velocity_and_curvature_profile``.
 
-    e_y'  = v · e_ψ                                lateral error, m (left of the path > 0)
-    e_ψ'  = v · (tan δ / L − κ)                    heading error, rad
-          ≈ v / (L cos² δ_ff) · (δ − δ_ff)         with the feed-forward δ_ff = atan(L · κ)
+Longitudinal (``_longitudinal_lqr_controller``): the acceleration ``a`` held over the horizon
+takes the speed from ``v`` to ``v + N·dt·a``; the one-step LQR with weights ``q_longitudinal``,
+``r_longitudinal`` gives the proportional law::
 
-discretised exactly (zero-order hold over ``dt_s``) at the current speed; the steering angle is
-``δ = δ_ff − K · (e_y, e_ψ)`` with ``K`` from the discrete algebraic Riccati equation
-(``scipy.linalg.solve_discrete_are``), clipped to the vehicle's steering limit.  The command is an
-angle (what ``ControlCommands`` carries), so the steering angle is the input, not a state as in
-nuPlan (there the input is the steering rate); the vehicle's rate limit acts on it afterwards.
+    a = N·dt·q / ((N·dt)²·q + r) · (v_ref − v)        (10/11 · (v_ref − v) with the defaults)
 
-Longitudinal — a PID on the speed error towards the path's speed profile (from its time column,
-looked ``speed_lookahead_s`` ahead), plus the profile's acceleration as feed-forward; the wanted
-acceleration becomes throttle or brake through the inverse of the ego's ``PedalModel``.  Near
-standstill with a standing reference (below ``stopping_speed_mps``) it holds the brake at
-``stop_brake``, as nuPlan switches to its stopping controller.
+Stopping (``_stopping_controller``): when the reference speed and the ego speed are both at or
+below ``stopping_velocity_mps``, ``a = stopping_proportional_gain · (v_ref − v)`` and the
+steering rate is zero.  A plan that starts from rest is not "stopped": its speed one second on is
+what is read.
 
-The path's reference point is found by projecting the ego onto the path polyline (the first and
-last segments extended), its heading interpolated between the segments' headings and its curvature
-taken ``curvature_preview_s`` ahead along the path.
+Lateral (``_lateral_lqr_controller``): state (lateral error m, heading error rad, steering angle
+rad) with respect to the path's pose *at the current time*, input the steering rate, dynamics
+linearised (small angles) and Euler-discretised over ``dt`` at the speeds ``v + k·dt·a`` and the
+reference curvatures::
+
+    e_y'  = v · e_ψ          e_ψ' = v · (δ / L − κ)          δ' = steering rate
+
+composed over the N steps into ``x_N = A x_0 + B u + g``; the rate minimises
+``x_Nᵀ Q x_N + uᵀ R u`` with ``Q = diag(q_lateral)``, ``R = r_lateral`` (angles wrapped).
+
+What reaches the ego: nuPlan hands acceleration and steering rate to its motion model; here the
+command is ``ControlCommands`` — the steering angle ``δ + rate · dt_s`` at the end of the step
+(the bicycle's own range and rate limits act on it) and the throttle or brake that give the
+acceleration through the inverse of the ego's ``PedalModel`` (at standstill a wanted
+deceleration needs no pedal: the car stands).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from scipy.linalg import solve_discrete_are
 
-from redrive.geometry import normalize_angle
+from redrive.closedloop.profiles import (
+    ReferenceProfiles,
+    fit_profiles,
+    resample_poses,
+)
 from redrive.sim.ego import EgoGeometry, PedalModel
 from redrive.types import ControlCommands, PlannedPath, VehicleState
 
-__all__ = ["LqrPidTracker"]
-
-_SAME_POINT_M = 1e-6
-"""Consecutive waypoints closer than this are one point of the path's geometry."""
+__all__ = ["LQR_DEFAULTS", "LqrTracker"]
 
 F64 = npt.NDArray[np.float64]
 
+#: nuPlan's ``lqr_tracker.yaml`` (the defaults of :class:`LqrTracker`).
+LQR_DEFAULTS: dict[str, Any] = {
+    "q_longitudinal": (10.0,),
+    "r_longitudinal": (1.0,),
+    "q_lateral": (1.0, 10.0, 0.0),
+    "r_lateral": (1.0,),
+    "discretization_time_s": 0.1,
+    "tracking_horizon": 10,
+    "jerk_penalty": 1e-4,
+    "curvature_rate_penalty": 1e-2,
+    "stopping_proportional_gain": 0.5,
+    "stopping_velocity_mps": 0.2,
+}
 
-@dataclass(frozen=True, slots=True, kw_only=True)
-class _PathShape:
-    """A path's geometry (distinct points) and speed profile, in the path's frame.
+#: the source of the tracker's definition and defaults, for the manifest.
+SOURCE = (
+    "nuplan-devkit nuplan/planning/simulation/controller/tracker/lqr.py LQRTracker "
+    "(defaults: nuplan/planning/script/config/simulation/ego_controller/tracker/lqr_tracker.yaml)"
+)
 
-    ``xy`` (P, 2) metres, ``s_m`` (P,) arc length at each point, ``vertex_heading_rad`` (P,)
-    unwrapped, ``curvature_1pm`` (P-1,) per segment; ``t_s`` (T,) strictly increasing seconds
-    relative to the path's stamp with ``speed_mps`` and ``accel_mps2`` (T,) at those times.
+
+def _wrap(angle_rad: float) -> float:
+    return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def _weights(name: str, values: tuple[float, ...], size: int, *, positive: bool) -> F64:
+    if len(values) != size:
+        msg = f"LqrTracker: {name} has {size} weight(s), got {len(values)}: {values}"
+        raise ValueError(msg)
+    for v in values:
+        if not math.isfinite(v) or v < 0.0 or (positive and v == 0.0):
+            kind = "positive" if positive else "non-negative"
+            msg = f"LqrTracker: the weights of {name} must be {kind} numbers, got {values}"
+            raise ValueError(msg)
+    return np.diag(np.asarray(values, dtype=np.float64))
+
+
+class LqrTracker:
+    """Follows a ``PlannedPath`` as nuPlan's LQR tracker does (module docstring).
+
+    Keyword arguments (defaults: nuPlan's, :data:`LQR_DEFAULTS`):
+
+    - ``geometry`` (``EgoGeometry()``): the ego's wheelbase (L) and steering limit.
+    - ``pedals`` (``PedalModel()``): inverted to turn the acceleration into throttle or brake.
+    - ``q_longitudinal`` (10,), ``r_longitudinal`` (1,): speed-error and acceleration weights.
+    - ``q_lateral`` (1, 10, 0): weights of the lateral error (1/m²), heading error and steering
+      angle (1/rad²) at the horizon; ``r_lateral`` (1,): weight of the steering rate.
+    - ``discretization_time_s`` (0.1) and ``tracking_horizon`` (10, > 1): the horizon's step and
+      length; the reference speed is read ``tracking_horizon · discretization_time_s`` ahead.
+    - ``jerk_penalty`` (1e-4), ``curvature_rate_penalty`` (1e-2): regularisation of the fits.
+    - ``stopping_proportional_gain`` (0.5, 1/s) and ``stopping_velocity_mps`` (0.2): the stopping
+      controller and the speed at or below which (ego and reference) it takes over.
     """
 
-    xy: F64
-    s_m: F64
-    vertex_heading_rad: F64
-    curvature_1pm: F64
-    t_s: F64
-    speed_mps: F64
-    accel_mps2: F64
+    name = "lqr"
+
+    def __init__(
+        self,
+        *,
+        geometry: EgoGeometry | None = None,
+        pedals: PedalModel | None = None,
+        q_longitudinal: tuple[float, ...] = LQR_DEFAULTS["q_longitudinal"],
+        r_longitudinal: tuple[float, ...] = LQR_DEFAULTS["r_longitudinal"],
+        q_lateral: tuple[float, ...] = LQR_DEFAULTS["q_lateral"],
+        r_lateral: tuple[float, ...] = LQR_DEFAULTS["r_lateral"],
+        discretization_time_s: float = LQR_DEFAULTS["discretization_time_s"],
+        tracking_horizon: int = LQR_DEFAULTS["tracking_horizon"],
+        jerk_penalty: float = LQR_DEFAULTS["jerk_penalty"],
+        curvature_rate_penalty: float = LQR_DEFAULTS["curvature_rate_penalty"],
+        stopping_proportional_gain: float = LQR_DEFAULTS["stopping_proportional_gain"],
+        stopping_velocity_mps: float = LQR_DEFAULTS["stopping_velocity_mps"],
+    ) -> None:
+        self.geometry = geometry if geometry is not None else EgoGeometry()
+        self.pedals = pedals if pedals is not None else PedalModel()
+        self._q_lon = _weights("q_longitudinal", tuple(q_longitudinal), 1, positive=False)
+        self._r_lon = _weights("r_longitudinal", tuple(r_longitudinal), 1, positive=True)
+        self._q_lat = _weights("q_lateral", tuple(q_lateral), 3, positive=False)
+        self._r_lat = _weights("r_lateral", tuple(r_lateral), 1, positive=True)
+        for key, value in (
+            ("discretization_time_s", discretization_time_s),
+            ("jerk_penalty", jerk_penalty),
+            ("curvature_rate_penalty", curvature_rate_penalty),
+            ("stopping_proportional_gain", stopping_proportional_gain),
+            ("stopping_velocity_mps", stopping_velocity_mps),
+        ):
+            if not (math.isfinite(value) and value > 0.0):
+                msg = f"LqrTracker: {key} must be a positive number, got {value}"
+                raise ValueError(msg)
+        if isinstance(tracking_horizon, bool) or int(tracking_horizon) != tracking_horizon:
+            msg = f"LqrTracker: tracking_horizon is a number of steps, got {tracking_horizon!r}"
+            raise ValueError(msg)
+        if tracking_horizon <= 1:
+            msg = (
+                "LqrTracker: tracking_horizon must be greater than 1 (with one Euler step the "
+                f"steering rate cannot move the lateral error), got {tracking_horizon}"
+            )
+            raise ValueError(msg)
+        self.params: dict[str, Any] = {
+            "q_longitudinal": [float(v) for v in q_longitudinal],
+            "r_longitudinal": [float(v) for v in r_longitudinal],
+            "q_lateral": [float(v) for v in q_lateral],
+            "r_lateral": [float(v) for v in r_lateral],
+            "discretization_time_s": float(discretization_time_s),
+            "tracking_horizon": int(tracking_horizon),
+            "jerk_penalty": float(jerk_penalty),
+            "curvature_rate_penalty": float(curvature_rate_penalty),
+            "stopping_proportional_gain": float(stopping_proportional_gain),
+            "stopping_velocity_mps": float(stopping_velocity_mps),
+        }
+        self._dt = float(discretization_time_s)
+        self._n = int(tracking_horizon)
+
+    def reset(self) -> None:
+        """Nothing to forget: the tracker keeps no state between calls (nuPlan's neither)."""
+
+    def describe(self) -> dict[str, Any]:
+        """The tracker's name, source and every parameter, for the run manifest."""
+        return {
+            "name": self.name,
+            "source": SOURCE,
+            "longitudinal": "one-step LQR on speed toward the reference 1 horizon ahead; "
+            "a P controller when stopping",
+            "lateral": "one-step LQR on (lateral error, heading error, steering angle) over the "
+            "horizon, steering-rate input",
+            "wheelbase_m": self.geometry.wheelbase_m,
+            "max_steer_rad": self.geometry.max_steer_rad,
+            "pedals": asdict(self.pedals),
+            **self.params,
+        }
+
+    # -- the commands ------------------------------------------------------------------------
+
+    def commands(
+        self,
+        state: VehicleState,
+        path: PlannedPath,
+        dt_s: float,
+        *,
+        stamp_ns: int,
+        steer_rad: float | None = None,
+    ) -> ControlCommands:
+        """Commands for the next ``dt_s`` seconds from ``stamp_ns``.
+
+        ``state`` is the ego in ``path.frame_id``; for a ``base_link`` path the ego is at its
+        origin heading +x (the path is in base_link of ``path.stamp_ns``) and only its speed is
+        read.  The path is read at ``stamp_ns − path.stamp_ns`` seconds into it.  ``steer_rad``
+        is the ego's road-wheel angle (the lateral state's third entry); None: estimated from
+        the yaw rate and speed (``atan(L · ω / v)``, 0 at rest).
+
+        Raises:
+            ValueError: an empty path, one with non-finite values, one that jumps (two places
+                at one time), one shorter than the discretisation step, a frame it cannot
+                relate to ``state``, or ``dt_s`` not > 0.
+        """
+        if not (math.isfinite(dt_s) and dt_s > 0.0):
+            msg = f"LqrTracker.commands: dt_s must be a positive number of seconds, got {dt_s}"
+            raise ValueError(msg)
+        _check_path(path)
+        if path.frame_id == "base_link":
+            x, y, yaw = 0.0, 0.0, 0.0
+        elif path.frame_id == state.frame_id:
+            x, y, yaw = float(state.position[0]), float(state.position[1]), state.heading_rad
+        else:
+            msg = (
+                f"the planned path of stamp {path.stamp_ns} is in frame {path.frame_id!r} but the "
+                f"ego state is in {state.frame_id!r}: give the path in base_link or in the "
+                "state's frame"
+            )
+            raise ValueError(msg)
+        speed = state.speed_mps
+        if steer_rad is None:
+            steer_rad = 0.0
+            if speed > 0.1:
+                steer_rad = math.atan(self.geometry.wheelbase_m * state.yaw_rate_rad_s / speed)
+        times, poses = resample_poses(
+            path.waypoints, discretization_time_s=self._dt, standing_heading_rad=yaw
+        )
+        profiles = fit_profiles(
+            times,
+            poses,
+            discretization_time_s=self._dt,
+            jerk_penalty=self.params["jerk_penalty"],
+            curvature_rate_penalty=self.params["curvature_rate_penalty"],
+        )
+        t_s = (stamp_ns - path.stamp_ns) * 1e-9
+        accel, rate = self.track(
+            profiles, pose=(x, y, yaw), speed_mps=speed, steer_rad=steer_rad, t_s=t_s
+        )
+        g = self.geometry
+        steer = min(max(steer_rad + rate * dt_s, -g.max_steer_rad), g.max_steer_rad)
+        throttle, brake = self._pedals(accel, speed)
+        return ControlCommands(throttle=throttle, brake=brake, steering_angle_rad=steer)
+
+    def track(
+        self,
+        profiles: ReferenceProfiles,
+        *,
+        pose: tuple[float, float, float],
+        speed_mps: float,
+        steer_rad: float,
+        t_s: float,
+    ) -> tuple[float, float]:
+        """nuPlan's ``track_trajectory``: the acceleration (m/s²) and steering rate (rad/s) for
+        the ego at ``pose`` (x m, y m, yaw rad in the path's frame) with ``speed_mps`` and the
+        road-wheel angle ``steer_rad``, ``t_s`` seconds into the path."""
+        n, dt = self._n, self._dt
+        v_ref = profiles.speed_at(t_s + n * dt)
+        kappa = profiles.curvature_at(t_s + dt * np.arange(n))
+        stop = self.params["stopping_velocity_mps"]
+        if v_ref <= stop and speed_mps <= stop:
+            return self.params["stopping_proportional_gain"] * (v_ref - speed_mps), 0.0
+        accel = self.longitudinal(speed_mps, v_ref)
+        speeds = speed_mps + accel * dt * np.arange(n)
+        x_ref, y_ref, h_ref = profiles.pose_at(t_s)
+        dx, dy = pose[0] - x_ref, pose[1] - y_ref
+        lateral = -dx * math.sin(h_ref) + dy * math.cos(h_ref)
+        initial = np.array([lateral, _wrap(pose[2] - h_ref), steer_rad])
+        return accel, self.lateral(initial, speeds_mps=speeds, curvatures_1pm=kappa)
+
+    def longitudinal(self, speed_mps: float, reference_mps: float) -> float:
+        """The acceleration (m/s²) of the one-step longitudinal LQR: ``v_N = v + N·dt·a``."""
+        b = self._n * self._dt
+        q, r = float(self._q_lon[0, 0]), float(self._r_lon[0, 0])
+        return -(b * q) / (b * q * b + r) * (speed_mps - reference_mps)
+
+    def lateral(self, initial: F64, *, speeds_mps: F64, curvatures_1pm: F64) -> float:
+        """The steering rate (rad/s) of the one-step lateral LQR from ``initial`` (lateral error
+        m, heading error rad, steering angle rad) over the horizon's speeds and curvatures."""
+        dt, wheelbase = self._dt, self.geometry.wheelbase_m
+        a = np.eye(3)
+        b = np.zeros(3)
+        g = np.zeros(3)
+        step_b = np.array([0.0, 0.0, dt])
+        for v, kappa in zip(speeds_mps.tolist(), curvatures_1pm.tolist(), strict=True):
+            step_a = np.eye(3)
+            step_a[0, 1] = v * dt
+            step_a[1, 2] = v * dt / wheelbase
+            a = step_a @ a
+            b = step_a @ b + step_b
+            g = step_a @ g + np.array([0.0, -v * kappa * dt, 0.0])
+        error = a @ initial + g
+        error[1], error[2] = _wrap(float(error[1])), _wrap(float(error[2]))
+        q = self._q_lat
+        rate = -(b @ q @ error) / (b @ q @ b + float(self._r_lat[0, 0]))
+        return float(rate)
+
+    def _pedals(self, accel_mps2: float, speed_mps: float) -> tuple[float, float]:
+        """Throttle and brake for ``accel_mps2`` at ``speed_mps`` (standing: a deceleration
+        needs no pedal)."""
+        if speed_mps <= 0.0 and accel_mps2 <= 0.0:
+            return 0.0, 0.0
+        return self.pedals.pedals(accel_mps2, speed_mps)
 
 
-def _shape(path: PlannedPath) -> _PathShape:
+def _check_path(path: PlannedPath) -> None:
     wp = path.waypoints
     if wp.shape[0] == 0:
         msg = f"the planned path of stamp {path.stamp_ns} has no waypoints: nothing to track"
@@ -81,7 +330,7 @@ def _shape(path: PlannedPath) -> _PathShape:
         raise ValueError(msg)
     xy, t = wp[:, :2], wp[:, 3]
     seg = np.hypot(*np.diff(xy, axis=0).T)
-    jump = (np.diff(t) <= 0.0) & (seg > _SAME_POINT_M)
+    jump = (np.diff(t) <= 0.0) & (seg > 1e-6)
     if jump.any():
         i = int(np.flatnonzero(jump)[0])
         msg = (
@@ -89,271 +338,10 @@ def _shape(path: PlannedPath) -> _PathShape:
             f"{seg[i]:.3f} m apart at the same time t_s={t[i]}: the speed would be infinite"
         )
         raise ValueError(msg)
-    s_all = np.concatenate([[0.0], np.cumsum(seg)])
-
-    distinct = np.concatenate([[True], seg > _SAME_POINT_M])
-    gxy, gs = xy[distinct], s_all[distinct]
-    if gxy.shape[0] >= 2:
-        d = np.diff(gxy, axis=0)
-        seg_heading = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
-        inner = 0.5 * (seg_heading[:-1] + seg_heading[1:])
-        vertex = np.concatenate([seg_heading[:1], inner, seg_heading[-1:]])
-        curvature = np.diff(vertex) / np.diff(gs)
-    else:
-        vertex, curvature = np.zeros(1), np.zeros(0)
-
-    later = np.concatenate([[True], np.diff(t) > 0.0])
-    ts, ss = t[later], s_all[later]
-    if ts.shape[0] >= 2:
-        # second order at the ends too (from three points): a path starts where the ego is, and a
-        # first-order end would misread a braking profile's first speed and acceleration
-        if ts.shape[0] >= 3:
-            speed = np.gradient(ss, ts, edge_order=2)
-            accel = np.gradient(speed, ts, edge_order=2)
-        else:
-            speed = np.gradient(ss, ts)
-            accel = np.gradient(speed, ts)
-    else:
-        speed, accel = np.zeros(1), np.zeros(1)
-    return _PathShape(
-        xy=gxy,
-        s_m=gs,
-        vertex_heading_rad=vertex,
-        curvature_1pm=curvature,
-        t_s=ts,
-        speed_mps=speed,
-        accel_mps2=accel,
-    )
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class _LateralReference:
-    lateral_error_m: float
-    heading_error_rad: float
-    s_m: float
-
-
-def _project(shape: _PathShape, x_m: float, y_m: float, yaw_rad: float) -> _LateralReference:
-    """The ego's lateral and heading error w.r.t. the nearest point of the path polyline."""
-    a, b = shape.xy[:-1], shape.xy[1:]
-    d = b - a
-    length2 = np.einsum("ij,ij->i", d, d)
-    rel = np.array([x_m, y_m]) - a
-    u = np.einsum("ij,ij->i", rel, d) / length2
-    lo = np.zeros_like(u)
-    hi = np.ones_like(u)
-    lo[0], hi[-1] = -np.inf, np.inf  # beyond the ends: the extended first and last segments
-    u = np.clip(u, lo, hi)
-    dist2 = np.einsum("ij,ij->i", rel - u[:, None] * d, rel - u[:, None] * d)
-    i = int(np.argmin(dist2))
-    length = math.sqrt(float(length2[i]))
-    lateral = float(d[i, 0] * rel[i, 1] - d[i, 1] * rel[i, 0]) / length
-    w = min(max(float(u[i]), 0.0), 1.0)
-    heading = (1.0 - w) * shape.vertex_heading_rad[i] + w * shape.vertex_heading_rad[i + 1]
-    return _LateralReference(
-        lateral_error_m=lateral,
-        heading_error_rad=normalize_angle(yaw_rad - float(heading)),
-        s_m=float(shape.s_m[i]) + float(u[i]) * length,
-    )
-
-
-class LqrPidTracker:
-    """Follows a ``PlannedPath`` with LQR steering and PID speed control (module docstring).
-
-    Keyword arguments (defaults in parentheses):
-
-    - ``geometry`` (``EgoGeometry()``): wheelbase and steering limit of the ego.
-    - ``pedals`` (``PedalModel()``): the ego's pedal model, inverted to turn the wanted
-      acceleration into throttle and brake.
-    - ``q_lateral_1pm2`` (1.0), ``q_heading_1prad2`` (10.0), ``r_steer_1prad2`` (10.0): LQR weights
-      per step on the lateral error² (1/m²), heading error² (1/rad²) and steering angle² (1/rad²)
-      relative to the feed-forward angle.  Larger ``r`` steers more gently; the heading
-      weight damps the approach (closed loop ζ ≈ 0.9 at 10 m/s and 10 Hz: no visible overshoot).
-    - ``min_lqr_speed_mps`` (1.0): the lateral model is linearised at no less than this speed
-      (at standstill the steering does not move the vehicle and the Riccati equation has no
-      solution).
-    - ``curvature_preview_s`` (0.1): the feed-forward curvature is taken this many seconds
-      (at the current speed) ahead of the projection, to cover the steering's rate limit.
-    - ``kp_speed_1ps`` (1.0), ``ki_speed_1ps2`` (0.1), ``kd_speed`` (0.0): PID gains on the speed
-      error (acceleration per m/s, per m, per m/s²).
-    - ``integral_limit_m`` (2.0): bound of the integral of the speed error (anti-windup), m.
-    - ``accel_feedforward`` (1.0): weight of the profile's acceleration in the command.
-    - ``speed_lookahead_s`` (0.0): the speed profile is read this far ahead of the current time
-      (a lookahead makes the speed lead the profile: the ego falls behind the path in space).
-    - ``stopping_speed_mps`` (0.3): below this speed, with a reference below it too, hold the
-      brake at ``stop_brake`` (0.5, fraction of full brake) instead of the PID.
-
-    The tracker keeps the PID's integral and last error between calls; :meth:`reset` clears them.
-    """
-
-    name = "lqr+pid"
-
-    def __init__(
-        self,
-        *,
-        geometry: EgoGeometry | None = None,
-        pedals: PedalModel | None = None,
-        q_lateral_1pm2: float = 1.0,
-        q_heading_1prad2: float = 10.0,
-        r_steer_1prad2: float = 10.0,
-        min_lqr_speed_mps: float = 1.0,
-        curvature_preview_s: float = 0.1,
-        kp_speed_1ps: float = 1.0,
-        ki_speed_1ps2: float = 0.1,
-        kd_speed: float = 0.0,
-        integral_limit_m: float = 2.0,
-        accel_feedforward: float = 1.0,
-        speed_lookahead_s: float = 0.0,
-        stopping_speed_mps: float = 0.3,
-        stop_brake: float = 0.5,
-    ) -> None:
-        self.geometry = geometry if geometry is not None else EgoGeometry()
-        self.pedals = pedals if pedals is not None else PedalModel()
-        self.gains: dict[str, float] = {
-            "q_lateral_1pm2": q_lateral_1pm2,
-            "q_heading_1prad2": q_heading_1prad2,
-            "r_steer_1prad2": r_steer_1prad2,
-            "min_lqr_speed_mps": min_lqr_speed_mps,
-            "curvature_preview_s": curvature_preview_s,
-            "kp_speed_1ps": kp_speed_1ps,
-            "ki_speed_1ps2": ki_speed_1ps2,
-            "kd_speed": kd_speed,
-            "integral_limit_m": integral_limit_m,
-            "accel_feedforward": accel_feedforward,
-            "speed_lookahead_s": speed_lookahead_s,
-            "stopping_speed_mps": stopping_speed_mps,
-            "stop_brake": stop_brake,
-        }
-        for key, value in self.gains.items():
-            if not (math.isfinite(value) and value >= 0.0):
-                msg = f"LqrPidTracker: {key} must be a non-negative number, got {value}"
-                raise ValueError(msg)
-        for key in ("r_steer_1prad2", "min_lqr_speed_mps"):
-            if self.gains[key] <= 0.0:
-                msg = f"LqrPidTracker: {key} must be positive, got {self.gains[key]}"
-                raise ValueError(msg)
-        if stop_brake > 1.0:
-            msg = f"LqrPidTracker: stop_brake is a pedal fraction in [0, 1], got {stop_brake}"
-            raise ValueError(msg)
-        self._q = np.diag([q_lateral_1pm2, q_heading_1prad2])
-        self._r = np.array([[r_steer_1prad2]])
-        self._integral_m = 0.0
-        self._last_error_mps: float | None = None
-
-    def reset(self) -> None:
-        """Forget the PID's integral and last error (between runs)."""
-        self._integral_m = 0.0
-        self._last_error_mps = None
-
-    def describe(self) -> dict[str, Any]:
-        """The tracker's name and every gain, for the run manifest."""
-        return {
-            "name": self.name,
-            "lateral": "discrete LQR on (lateral error, heading error), steering angle input",
-            "longitudinal": "PID on speed with acceleration feed-forward",
-            "wheelbase_m": self.geometry.wheelbase_m,
-            "max_steer_rad": self.geometry.max_steer_rad,
-            "pedals": asdict(self.pedals),
-            **self.gains,
-        }
-
-    def commands(
-        self, state: VehicleState, path: PlannedPath, dt_s: float, *, stamp_ns: int
-    ) -> ControlCommands:
-        """Commands for the next ``dt_s`` seconds from ``stamp_ns``.
-
-        ``state`` is the ego in ``path.frame_id``; for a ``base_link`` path the ego is at its
-        origin heading +x (the path is in base_link of ``path.stamp_ns``) and only its speed is
-        read.  The speed profile is read at ``stamp_ns − path.stamp_ns`` seconds into the path
-        (plus the lookahead).  Raises ``ValueError`` for an empty path, a path with non-finite
-        values, one that jumps (two places at one time) or a frame it cannot relate to ``state``.
-        """
-        if not (math.isfinite(dt_s) and dt_s > 0.0):
-            msg = f"LqrPidTracker.commands: dt_s must be a positive number of seconds, got {dt_s}"
-            raise ValueError(msg)
-        shape = _shape(path)
-        speed = state.speed_mps
-        if path.frame_id == "base_link":
-            x, y, yaw = 0.0, 0.0, 0.0
-        elif path.frame_id == state.frame_id:
-            x, y, yaw = float(state.position[0]), float(state.position[1]), state.heading_rad
-        else:
-            msg = (
-                f"the planned path of stamp {path.stamp_ns} is in frame {path.frame_id!r} but the "
-                f"ego state is in {state.frame_id!r}: give the path in base_link or in the "
-                "state's frame"
-            )
-            raise ValueError(msg)
-        steer = self._steer(shape, (x, y, yaw), speed_mps=speed, dt_s=dt_s)
-        t_s = (stamp_ns - path.stamp_ns) * 1e-9
-        throttle, brake = self._pedals(shape, t_s=t_s, speed_mps=speed, dt_s=dt_s)
-        return ControlCommands(throttle=throttle, brake=brake, steering_angle_rad=steer)
-
-    def _steer(
-        self, shape: _PathShape, pose: tuple[float, float, float], *, speed_mps: float, dt_s: float
-    ) -> float:
-        """Steering angle (rad) towards the path from the ego's ``pose`` (x m, y m, yaw rad)."""
-        g = self.geometry
-        if shape.xy.shape[0] < 2:
-            return 0.0  # a path that stands still: nothing to steer along
-        ref = _project(shape, *pose)
-        s_ahead = ref.s_m + speed_mps * self.gains["curvature_preview_s"]
-        i = int(np.clip(np.searchsorted(shape.s_m, s_ahead, side="right") - 1, 0, None))
-        kappa = float(shape.curvature_1pm[min(i, shape.curvature_1pm.shape[0] - 1)])
-        steer_ff = min(max(math.atan(g.wheelbase_m * kappa), -g.max_steer_rad), g.max_steer_rad)
-        speed_lin = max(speed_mps, self.gains["min_lqr_speed_mps"])
-        gain = self.lqr_gain(speed_lin, steer_ff_rad=steer_ff, dt_s=dt_s)
-        error = np.array([ref.lateral_error_m, ref.heading_error_rad])
-        steer = steer_ff - float(gain @ error)
-        return min(max(steer, -g.max_steer_rad), g.max_steer_rad)
-
-    def lqr_gain(self, speed_mps: float, *, steer_ff_rad: float, dt_s: float) -> F64:
-        """The (2,) LQR gain ``K`` on (lateral error m, heading error rad) of the lateral error
-        model linearised at ``speed_mps`` and the feed-forward angle ``steer_ff_rad``, discretised
-        exactly over ``dt_s`` with the steering angle held (the matrices of :meth:`lateral_model`).
-        """
-        a_d, b_d = self.lateral_model(speed_mps, steer_ff_rad=steer_ff_rad, dt_s=dt_s)
-        p = solve_discrete_are(a_d, b_d, self._q, self._r)
-        gain: F64 = np.linalg.solve(self._r + b_d.T @ p @ b_d, b_d.T @ p @ a_d)[0]
-        return gain
-
-    def lateral_model(
-        self, speed_mps: float, *, steer_ff_rad: float, dt_s: float
-    ) -> tuple[F64, F64]:
-        """Discrete lateral error model ``x' = A x + B u`` over ``dt_s``: x = (lateral error m,
-        heading error rad), u = steering angle − ``steer_ff_rad`` (rad), at ``speed_mps``."""
-        b = speed_mps / (self.geometry.wheelbase_m * math.cos(steer_ff_rad) ** 2)
-        a_d = np.array([[1.0, speed_mps * dt_s], [0.0, 1.0]])
-        b_d = np.array([[0.5 * speed_mps * b * dt_s * dt_s], [b * dt_s]])
-        return a_d, b_d
-
-    def _pedals(
-        self, shape: _PathShape, *, t_s: float, speed_mps: float, dt_s: float
-    ) -> tuple[float, float]:
-        """Throttle and brake towards the speed profile at ``t_s`` seconds into the path."""
-        speed = speed_mps
-        gains = self.gains
-        t_ref = t_s + gains["speed_lookahead_s"]
-        if t_ref > shape.t_s[-1]:
-            v_ref, a_ref = 0.0, 0.0  # past the path's last waypoint: stand
-        else:
-            v_ref = float(np.interp(t_ref, shape.t_s, shape.speed_mps))
-            a_ref = float(np.interp(t_ref, shape.t_s, shape.accel_mps2))
-        stop = gains["stopping_speed_mps"]
-        if v_ref <= stop and speed <= stop:
-            self.reset()
-            return 0.0, gains["stop_brake"]
-        error = v_ref - speed
-        limit = gains["integral_limit_m"]
-        self._integral_m = min(max(self._integral_m + error * dt_s, -limit), limit)
-        derivative = 0.0
-        if self._last_error_mps is not None:
-            derivative = (error - self._last_error_mps) / dt_s
-        self._last_error_mps = error
-        accel = (
-            gains["accel_feedforward"] * a_ref
-            + gains["kp_speed_1ps"] * error
-            + gains["ki_speed_1ps2"] * self._integral_m
-            + gains["kd_speed"] * derivative
+    if (np.diff(t) < 0.0).any():
+        i = int(np.flatnonzero(np.diff(t) < 0.0)[0])
+        msg = (
+            f"the planned path of stamp {path.stamp_ns} goes back in time at waypoint {i + 1} "
+            f"(t_s {t[i]} then {t[i + 1]}): waypoints must be in time order"
         )
-        return self.pedals.pedals(accel, speed)
+        raise ValueError(msg)
