@@ -268,12 +268,12 @@ class LqrTracker:
         road-wheel angle ``steer_rad``, ``t_s`` seconds into the path."""
         n, dt = self._n, self._dt
         v_ref = profiles.speed_at(t_s + n * dt)
-        kappa = profiles.curvature_at(t_s + dt * np.arange(n))
+        kappa = profiles.curvature_at(t_s + dt * np.arange(n, dtype=np.float64))
         stop = self.params["stopping_velocity_mps"]
         if v_ref <= stop and speed_mps <= stop:
             return self.params["stopping_proportional_gain"] * (v_ref - speed_mps), 0.0
         accel = self.longitudinal(speed_mps, v_ref)
-        speeds = speed_mps + accel * dt * np.arange(n)
+        speeds: F64 = speed_mps + accel * dt * np.arange(n, dtype=np.float64)
         x_ref, y_ref, h_ref = profiles.pose_at(t_s)
         dx, dy = pose[0] - x_ref, pose[1] - y_ref
         lateral = -dx * math.sin(h_ref) + dy * math.cos(h_ref)
