@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from redrive.algorithms import Algorithm, Role, StageOutputs
-from redrive.types import DetectedObject, Frame, PlannedPath, PointCloud
+from redrive.types import ControlCommands, DetectedObject, Frame, PlannedPath, PointCloud
 
 
 def _straight(stamp_ns: int, speed_mps: float, horizon_s: float = 6.0) -> PlannedPath:
@@ -148,3 +148,60 @@ class LidarWitness(Algorithm):
         assert isinstance(cloud, PointCloud)
         SEEN_CLOUDS[frame.index] = cloud
         return ()
+
+
+class Weaver(Algorithm):
+    """A control stage that steers to full lock, left then right, every ``half_period_s``, with
+    the throttle at ``throttle`` — the weaving driver of issue 33 (81.6 m/s² lateral without a
+    tyre limit)."""
+
+    role = Role.CONTROL
+    inputs = ("vehicle_state",)
+    defaults = MappingProxyType({"half_period_s": 1.0, "throttle": 0.4, "steer_rad": 0.6})
+
+    def setup(self, config: Mapping[str, Any]) -> None:
+        self.half_period_ns = round(float(config["half_period_s"]) * 1e9)
+        self.throttle = float(config["throttle"])
+        self.steer_rad = float(config["steer_rad"])
+        self.start_ns: int | None = None
+
+    def reset(self) -> None:
+        self.start_ns = None
+
+    def step(self, frame: Frame, upstream: StageOutputs) -> ControlCommands:
+        if self.start_ns is None:
+            self.start_ns = frame.stamp_ns
+        left = ((frame.stamp_ns - self.start_ns) // self.half_period_ns) % 2 == 0
+        steer = self.steer_rad if left else -self.steer_rad
+        return ControlCommands(throttle=self.throttle, steering_angle_rad=steer)
+
+
+class WeavingPlanner(Algorithm):
+    """Plans arcs of curvature ±``curvature_1pm`` at the current speed, turning left then right
+    every ``half_period_s`` — a weaver through the built-in tracker."""
+
+    role = Role.PLANNING
+    inputs = ("vehicle_state",)
+    defaults = MappingProxyType({"half_period_s": 1.0, "curvature_1pm": 0.25})
+
+    def setup(self, config: Mapping[str, Any]) -> None:
+        self.half_period_ns = round(float(config["half_period_s"]) * 1e9)
+        self.curvature_1pm = float(config["curvature_1pm"])
+        self.start_ns: int | None = None
+
+    def reset(self) -> None:
+        self.start_ns = None
+
+    def step(self, frame: Frame, upstream: StageOutputs) -> PlannedPath:
+        assert frame.vehicle_state is not None
+        if self.start_ns is None:
+            self.start_ns = frame.stamp_ns
+        left = ((frame.stamp_ns - self.start_ns) // self.half_period_ns) % 2 == 0
+        kappa = self.curvature_1pm if left else -self.curvature_1pm
+        speed = max(frame.vehicle_state.speed_mps, 1.0)
+        t = np.arange(0.0, 3.0 + 1e-9, 0.1)
+        angle = kappa * speed * t
+        x, y = np.sin(angle) / kappa, (1.0 - np.cos(angle)) / kappa
+        return PlannedPath(
+            stamp_ns=frame.stamp_ns, waypoints=np.column_stack([x, y, np.zeros_like(t), t])
+        )

@@ -48,7 +48,7 @@ def test_the_planner_drives_and_the_world_follows(tmp_path: Path) -> None:
     assert manifest.pipeline.mode_manager == "closed_loop"
     assert manifest.closed_loop["backend"] == "synthetic"
     assert manifest.closed_loop["agents"] == "replay"
-    assert manifest.closed_loop["tracker"]["name"] == "lqr+pid"
+    assert manifest.closed_loop["tracker"]["name"] == "lqr"
     driven, logged = run.ego(), run.logged_ego()
     assert sorted(driven) == sorted(logged) == list(range(60))  # 6 s at 10 Hz
     start = driven[0].position[:2]

@@ -11,7 +11,7 @@ import numpy.typing as npt
 import pytest
 from scipy.integrate import solve_ivp
 
-from redrive.sim.ego import ActuatedEgo, BicycleModel, EgoGeometry, PedalModel
+from redrive.sim.ego import ActuatedEgo, BicycleModel, EgoGeometry, PedalModel, TyreLimit
 from redrive.types import ControlCommands
 
 
@@ -113,9 +113,10 @@ def test_full_brake_stops_in_the_model_distance() -> None:
 def test_brake_is_full_with_the_steering_held() -> None:
     geo = EgoGeometry(max_decel_mps2=9.0)
     pedals = PedalModel()
-    ego = ActuatedEgo(BicycleModel(geo, speed_mps=10.0, steer_rad=0.1), pedals=pedals)
+    # (a gentle curve: −8.1 m/s² and 0.9 m/s² lateral are inside the tyres' friction circle)
+    ego = ActuatedEgo(BicycleModel(geo, speed_mps=10.0, steer_rad=0.025), pedals=pedals)
     ego.brake(0.1)
-    assert ego.model.steer_rad == 0.1
+    assert ego.model.steer_rad == 0.025
     assert ego.model.accel_mps2 == pytest.approx(-(pedals.max_brake_mps2 + pedals.coast(10.0)))
 
 
@@ -127,7 +128,9 @@ def test_limits_are_respected_under_random_commands() -> None:
         max_decel_mps2=6.0,
         max_jerk_mps3=4.0,
     )
-    ego = ActuatedEgo(BicycleModel(geo, speed_mps=8.0), pedals=PedalModel())
+    # the actuators alone: tyres that never slide (the friction circle has its own tests)
+    no_slip = TyreLimit(friction_coefficient=1e3)
+    ego = ActuatedEgo(BicycleModel(geo, speed_mps=8.0), pedals=PedalModel(), tyres=no_slip)
     rng = np.random.default_rng(15)
     dt = 0.05
     steer, accel, speed = [0.0], [0.0], [8.0]
@@ -222,6 +225,11 @@ def test_describe_records_every_parameter() -> None:
         "max_decel_mps2",
         "max_jerk_mps3",
     }
+    assert described["tyres"] == {
+        "friction_coefficient": 0.9,
+        "gravity_mps2": 9.80665,
+        "friction_circle_mps2": pytest.approx(0.9 * 9.80665),
+    }
     assert described["pedals"] == {
         "max_accel_mps2": 3.0,
         "max_brake_mps2": 7.0,
@@ -239,3 +247,81 @@ def test_bad_parameters_are_refused() -> None:
         PedalModel(max_brake_mps2=0.0)
     with pytest.raises(ValueError, match="drag_coefficient_1pm must be a non-negative"):
         PedalModel(drag_coefficient_1pm=float("nan"))
+
+
+# -- the tyres: the friction circle -------------------------------------------------------------
+
+
+def _combined(model: BicycleModel) -> tuple[float, float]:
+    """(|acceleration|, |lateral acceleration|) of the model's state, as a run records it."""
+    state = model.state(0)
+    lateral = state.speed_mps * abs(state.yaw_rate_rad_s)
+    return float(np.hypot(*state.acceleration[:2])), lateral
+
+
+def test_full_lock_at_speed_is_held_to_the_friction_circle() -> None:
+    geo = EgoGeometry()
+    limit = TyreLimit().max_accel_mps2  # 0.9 · 9.80665 = 8.826 m/s²
+    # without the tyres: full lock (0.6 rad) at 18 m/s asks v²·tan δ / L = 79 m/s² of them
+    free = BicycleModel(geo, speed_mps=18.0, steer_rad=0.6)
+    free.step(0.01, accel_mps2=0.0, steer_rad=0.6)
+    assert _combined(free)[1] > 75.0
+    ego = ActuatedEgo(BicycleModel(geo, speed_mps=18.0), pedals=PedalModel())
+    hold = PedalModel().coast(18.0) / PedalModel().max_accel_mps2
+    for _ in range(300):
+        ego.apply(ControlCommands(throttle=hold, steering_angle_rad=0.6), 0.01)
+        total, lateral = _combined(ego.model)
+        assert total <= limit * (1.0 + 1e-12)
+    # at the limit: the turn the tyres hold, R = v² / (μ·g), and the wheel at that angle
+    v = ego.model.speed_mps
+    assert total == pytest.approx(limit, rel=1e-6)
+    assert ego.model.steer_rad == pytest.approx(math.atan(geo.wheelbase_m * limit / v**2), rel=1e-6)
+    # the yaw rate is bounded by μ·g / v, well below the steering's v·tan(0.6) / L
+    assert ego.model.state(0).yaw_rate_rad_s <= limit / v * (1.0 + 1e-12)
+
+
+def test_braking_in_a_turn_shares_the_circle() -> None:
+    """Full brake with full lock at 15 m/s: the demand (−8.2, 55) m/s² is scaled back onto the
+    circle, its direction kept."""
+    geo = EgoGeometry()
+    tyres = TyreLimit()
+    model = BicycleModel(geo, speed_mps=15.0, steer_rad=0.6)
+    demand_lat = 15.0**2 * math.tan(0.6) / geo.wheelbase_m
+    accel = -(8.0 + PedalModel().coast(15.0))
+    model.step(0.01, accel_mps2=accel, steer_rad=0.6, friction_circle_mps2=tyres.max_accel_mps2)
+    scale = tyres.max_accel_mps2 / math.hypot(accel, demand_lat)
+    assert model.accel_mps2 == pytest.approx(accel * scale, rel=1e-12)
+    assert math.tan(model.steer_rad) == pytest.approx(math.tan(0.6) * scale, rel=1e-12)
+
+
+def test_slow_turns_are_not_touched_by_the_tyres() -> None:
+    # 3 m/s at full lock: 9 · tan(0.6) / 2.8 = 2.2 m/s², inside the circle
+    ego = ActuatedEgo(BicycleModel(EgoGeometry(), speed_mps=3.0, steer_rad=0.6))
+    ego.apply(ControlCommands(throttle=0.1, steering_angle_rad=0.6), 0.1)
+    assert ego.model.steer_rad == 0.6
+    assert ego.model.accel_mps2 == pytest.approx(PedalModel().acceleration(
+        ControlCommands(throttle=0.1), 3.0))  # fmt: skip
+
+
+def test_random_commands_never_leave_the_friction_circle() -> None:
+    rng = np.random.default_rng(33)
+    for mu in (0.9, 0.3):
+        tyres = TyreLimit(friction_coefficient=mu)
+        ego = ActuatedEgo(BicycleModel(EgoGeometry(), speed_mps=20.0), tyres=tyres)
+        worst = 0.0
+        for _ in range(3000):
+            throttle, brake = (rng.uniform(), 0.0) if rng.uniform() < 0.6 else (0.0, rng.uniform())
+            ego.apply(
+                ControlCommands(
+                    throttle=throttle, brake=brake, steering_angle_rad=rng.uniform(-0.8, 0.8)
+                ),
+                0.05,
+            )
+            worst = max(worst, _combined(ego.model)[0])
+        assert worst <= tyres.max_accel_mps2 * (1.0 + 1e-12)
+        assert worst > 0.95 * tyres.max_accel_mps2  # the commands did reach the circle
+
+
+def test_bad_tyres_are_refused() -> None:
+    with pytest.raises(ValueError, match="friction_coefficient must be a positive"):
+        TyreLimit(friction_coefficient=0.0)

@@ -59,7 +59,12 @@ def _pedal_step(world: World, model: BicycleModel, dt_s: float) -> None:
     assert world._ego_pedals is not None
     commands, pedals = world._ego_pedals
     accel = pedals.acceleration(commands, model.speed_mps)
-    model.step(dt_s, accel_mps2=accel, steer_rad=commands.steering_angle_rad)
+    model.step(
+        dt_s,
+        accel_mps2=accel,
+        steer_rad=commands.steering_angle_rad,
+        friction_circle_mps2=world._ego_friction_mps2,
+    )
 
 
 def _substep(w: World, dt_ns: int) -> None:

@@ -56,7 +56,14 @@ from redrive.errors import ConfigError
 from redrive.geometry import invert, transform_object
 from redrive.io import LogReader
 from redrive.motion import IdmParams, idm_acceleration
-from redrive.sim.ego import ActuatedEgo, BicycleModel, EgoGeometry, PedalModel, pose_matrix
+from redrive.sim.ego import (
+    ActuatedEgo,
+    BicycleModel,
+    EgoGeometry,
+    PedalModel,
+    TyreLimit,
+    pose_matrix,
+)
 from redrive.types import (
     ControlCommands,
     DetectedObject,
@@ -182,7 +189,8 @@ class LogSimulator:
         rate_hz: at most this many frames per second.
         duration_s: how much of the log (None: all of it).
         overrides: a sensor map file's content (which topic is which sensor).
-        geometry, pedal, delay_steps: the driven ego.
+        geometry, pedal, tyres, delay_steps: the driven ego (``tyres``: its friction circle,
+            ``TyreLimit()`` — μ = 0.9 — by default).
         deviation_threshold_m, deviation_threshold_rad: a frame farther than either from the
             logged ego is flagged ``deviated``.
         lane_half_width_m: ``reactive``: how far off a vehicle's heading line the ego still
@@ -206,6 +214,7 @@ class LogSimulator:
         overrides: SensorMapOverrides | None = None,
         geometry: EgoGeometry | None = None,
         pedal: PedalModel | None = None,
+        tyres: TyreLimit | None = None,
         delay_steps: int = 0,
         deviation_threshold_m: float = DEFAULT_DEVIATION_M,
         deviation_threshold_rad: float = DEFAULT_DEVIATION_RAD,
@@ -247,6 +256,7 @@ class LogSimulator:
         self.duration_s = duration_s
         self.geometry = geometry or EgoGeometry()
         self.pedal = pedal or PedalModel()
+        self.tyres = tyres or TyreLimit()
         self.delay_steps = delay_steps
         self.deviation_threshold_m = float(deviation_threshold_m)
         self.deviation_threshold_rad = float(deviation_threshold_rad)
@@ -284,7 +294,7 @@ class LogSimulator:
             steer_rad=steer,
         )
         # the one-frame delay is applied per frame here (a frame spans several physics steps)
-        self._ego = ActuatedEgo(model, pedals=self.pedal, delay_steps=0)
+        self._ego = ActuatedEgo(model, pedals=self.pedal, delay_steps=0, tyres=self.tyres)
         neutral = ControlCommands(steering_angle_rad=steer)
         self._acting: ControlCommands = neutral  # the command the ego moves under now
         self._queued: ControlCommands = neutral  # with a one-frame delay: the next one
@@ -378,10 +388,8 @@ class LogSimulator:
             "sensors_reexpressed": "point clouds moved by the pose difference; images and "
             "other payloads passed through unchanged",
             "ego": {
-                "motion_model": "kinematic_bicycle",
-                "geometry": dataclasses.asdict(self.geometry),
-                "pedals": dataclasses.asdict(self.pedal),
-                "delay_steps": self.delay_steps,
+                **self._ego.describe(),
+                "delay_steps": self.delay_steps,  # applied per frame, not by the ActuatedEgo
                 "max_physics_dt_s": _MAX_PHYSICS_DT_S,
             },
             "tracker": self.tracker.describe(),

@@ -50,7 +50,7 @@ from redrive.closedloop.simulator import (
     choose_command,
 )
 from redrive.errors import ConfigError, SimulationError
-from redrive.sim.ego import ActuatedEgo, PedalModel
+from redrive.sim.ego import ActuatedEgo, PedalModel, TyreLimit
 from redrive.sim.ground_truth import objects_in_base
 from redrive.sim.rig import rig_from_mapping
 from redrive.sim.scenario import Scenario
@@ -75,6 +75,7 @@ class SyntheticSimulator:
         agents: ``replay`` or ``reactive`` (see the module text).
         rate_hz: frames per second (the step between frames is ``1 / rate_hz``).
         pedal: throttle/brake → acceleration.
+        tyres: the friction circle the ego moves within (``TyreLimit()``: μ = 0.9).
         delay_steps: 0, or 1 to act on each command one frame late.
         level: ``object`` or ``sensor`` (see the module text).
     """
@@ -90,6 +91,7 @@ class SyntheticSimulator:
         agents: AgentMode = "replay",
         rate_hz: float = 10.0,
         pedal: PedalModel | None = None,
+        tyres: TyreLimit | None = None,
         delay_steps: int = 0,
         level: Level = "object",
     ) -> None:
@@ -102,6 +104,7 @@ class SyntheticSimulator:
         self.agents: AgentMode = agents
         self.dt_s = 1.0 / rate_hz
         self.pedal = pedal or PedalModel()
+        self.tyres = tyres or TyreLimit()
         self.delay_steps = delay_steps
         self.level: Level = level
         #: sensor id → type of the frames' sensors (none at object level)
@@ -121,7 +124,9 @@ class SyntheticSimulator:
             # the frames show the expert world's agents, and nothing of the driven world moves
             # its ego: stepping its own copies of them would only cost time
             self._world.drop_agents()
-        self._ego = ActuatedEgo(self._world.ego_model, pedals=self.pedal, delay_steps=0)
+        self._ego = ActuatedEgo(
+            self._world.ego_model, pedals=self.pedal, delay_steps=0, tyres=self.tyres
+        )
         self.tracker.reset()  # the PID's integral belongs to one run
         neutral = ControlCommands(steering_angle_rad=self._world.ego_model.steer_rad)
         self._acting: ControlCommands = neutral  # the command the ego moves under now
@@ -286,4 +291,4 @@ class SyntheticSimulator:
         """Move the closed-loop world's ego under the acting command from now on: each physics
         step is ``self._ego.apply(self._acting, dt_s)``, in the world's compiled step."""
         self._commanding = True
-        self._world.drive_ego_pedals(self._acting, self._ego.pedals)
+        self._world.drive_ego_pedals(self._acting, self._ego.pedals, tyres=self._ego.tyres)

@@ -7,7 +7,8 @@ constant acceleration: a vehicle at constant speed and zero steer travels exactl
 
 ``ActuatedEgo`` is the ego under an algorithm's control (closed loop): its ``ControlCommands`` become an
 acceleration through a ``PedalModel`` (throttle, brake, coasting resistance), optionally one step late,
-and drive the bicycle within the actuator limits of ``EgoGeometry``.
+and drive the bicycle within the actuator limits of ``EgoGeometry`` and the tyres' friction circle
+(``TyreLimit``): the combined acceleration ``sqrt(a_lon² + a_lat²)`` never exceeds ``μ·g``.
 
 The driver is not a redrive algorithm: it follows the route with pure pursuit and sets its speed with
 IDM towards the set speed, stopping behind leaders, at red lights and at the end of its route.
@@ -27,7 +28,19 @@ from redrive.sim.agents import advance_1d
 from redrive.sim.roads import Route
 from redrive.types import ControlCommands, VehicleState
 
-__all__ = ["ActuatedEgo", "BicycleModel", "EgoDriver", "EgoGeometry", "PedalModel"]
+__all__ = [
+    "STANDARD_GRAVITY_MPS2",
+    "ActuatedEgo",
+    "BicycleModel",
+    "EgoDriver",
+    "EgoGeometry",
+    "PedalModel",
+    "TyreLimit",
+    "friction_scale",
+]
+
+#: standard gravity g_n (CGPM 1901; ISO 80000-3), m/s².
+STANDARD_GRAVITY_MPS2 = 9.80665
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -86,10 +99,24 @@ class BicycleModel:
         """Path curvature tan(δ)/L, 1/m (left > 0)."""
         return math.tan(self.steer_rad) / self.geometry.wheelbase_m
 
-    def step(self, dt_s: float, *, accel_mps2: float, steer_rad: float) -> None:
+    def step(
+        self,
+        dt_s: float,
+        *,
+        accel_mps2: float,
+        steer_rad: float,
+        friction_circle_mps2: float | None = None,
+    ) -> None:
         """Advance ``dt_s`` seconds with a steering command (clipped to range and rate) and a
         longitudinal acceleration (clipped to the limits and, when ``max_jerk_mps3`` is set, to
         ``max_jerk_mps3 · dt_s`` from the previous step's; the vehicle never reverses).
+
+        With ``friction_circle_mps2`` (μ·g, :class:`TyreLimit`) the combined acceleration is
+        bounded too (:func:`friction_scale`): where ``sqrt(a² + (v²·tan δ / L)²)`` — ``v`` the
+        step's highest speed — passes it, the acceleration and the curvature are scaled back
+        onto the circle together (the tyre force keeps the direction asked for), and the steering
+        angle becomes the one of that curvature: the angle the tyres hold.  None: no bound (the
+        scripted driver of a synthetic world).
 
         Coming to rest sets the acceleration to zero at once: that is the vehicle stopping, not a
         commanded change, and the jerk bound does not apply to it.
@@ -102,6 +129,17 @@ class BicycleModel:
         if g.max_jerk_mps3 is not None:
             max_change = g.max_jerk_mps3 * dt_s
             accel = min(max(accel, self.accel_mps2 - max_change), self.accel_mps2 + max_change)
+        if friction_circle_mps2 is not None:
+            scale = friction_scale(
+                self.speed_mps,
+                accel_mps2=accel,
+                curvature_1pm=self.curvature_1pm,
+                dt_s=dt_s,
+                limit_mps2=friction_circle_mps2,
+            )
+            if scale < 1.0:
+                accel *= scale
+                self.steer_rad = math.atan(math.tan(self.steer_rad) * scale)
         self.accel_mps2 = accel
         dist, self.speed_mps = advance_1d(0.0, self.speed_mps, self.accel_mps2, dt_s)
         if self.speed_mps == 0.0 and self.accel_mps2 < 0.0:
@@ -151,6 +189,49 @@ class BicycleModel:
     def map_from_base(self) -> npt.NDArray[np.float64]:
         """4×4 float64 pose of base_link (rear-axle centre) in the map frame."""
         return pose_matrix(self.x_m, self.y_m, self.yaw_rad)
+
+
+def friction_scale(
+    speed_mps: float, *, accel_mps2: float, curvature_1pm: float, dt_s: float, limit_mps2: float
+) -> float:
+    """The factor (≤ 1) that puts the demand of one step — longitudinal ``accel_mps2`` and the
+    lateral ``v²·κ`` at the step's highest speed ``v = max(v₀, v₀ + a·dt)`` — on the friction
+    circle of radius ``limit_mps2``; 1 when it is inside.  Scaling both by it keeps every speed
+    of the step within the bound (the lateral acceleration grows with v²)."""
+    v = max(speed_mps, speed_mps + accel_mps2 * dt_s)
+    lateral = v * v * curvature_1pm
+    demand = math.hypot(accel_mps2, lateral)
+    if demand <= limit_mps2:
+        return 1.0
+    return limit_mps2 / demand
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class TyreLimit:
+    """The tyres' grip: the friction circle ``sqrt(a_lon² + a_lat²) ≤ μ·g`` (Kamm's circle).
+
+    ``friction_coefficient`` (μ, default 0.9): the peak tyre–road friction of a car on dry
+    asphalt or concrete in good condition — the Bosch Automotive Handbook's table of static
+    friction coefficients of pneumatic tyres gives 0.75–1.0 for dry roads (new and worn tyres,
+    50–130 km/h); 0.9 is the middle of that range, and the ego's pedal model brakes at 8 m/s²
+    (0.82 g), inside it.  Use about 0.5 for a wet road, 0.1–0.2 for snow and ice.
+    ``gravity_mps2``: standard gravity.
+    """
+
+    friction_coefficient: float = 0.9
+    gravity_mps2: float = STANDARD_GRAVITY_MPS2
+
+    def __post_init__(self) -> None:
+        for name in ("friction_coefficient", "gravity_mps2"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                msg = f"TyreLimit.{name} must be a positive number, got {value}"
+                raise ValueError(msg)
+
+    @property
+    def max_accel_mps2(self) -> float:
+        """The friction circle's radius μ·g, m/s²."""
+        return self.friction_coefficient * self.gravity_mps2
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -213,17 +294,24 @@ class ActuatedEgo:
     ``delay_steps`` is 0 (a command acts in the step it is applied) or 1 (the command applied at step
     k acts at step k+1; the first step acts on a neutral command: pedals released — coasting — and
     the steering angle held where it is).  Steering and acceleration limits (angle, rate, accel,
-    decel, jerk) are those of the model's :class:`EgoGeometry`, enforced by :meth:`BicycleModel.step`.
+    decel, jerk) are those of the model's :class:`EgoGeometry`, the combined acceleration that of
+    ``tyres`` (:class:`TyreLimit`, μ = 0.9 by default), enforced by :meth:`BicycleModel.step`.
     """
 
     def __init__(
-        self, model: BicycleModel, *, pedals: PedalModel | None = None, delay_steps: int = 0
+        self,
+        model: BicycleModel,
+        *,
+        pedals: PedalModel | None = None,
+        delay_steps: int = 0,
+        tyres: TyreLimit | None = None,
     ) -> None:
         if delay_steps not in (0, 1):
             msg = f"ActuatedEgo: delay_steps must be 0 or 1, got {delay_steps!r}"
             raise ValueError(msg)
         self._model = model
         self.pedals = pedals if pedals is not None else PedalModel()
+        self.tyres = tyres if tyres is not None else TyreLimit()
         self.delay_steps = delay_steps
         self._pending: ControlCommands | None = None
 
@@ -243,7 +331,12 @@ class ActuatedEgo:
             acting = self._pending or ControlCommands(steering_angle_rad=self._model.steer_rad)
             self._pending = commands
         accel = self.pedals.acceleration(acting, self._model.speed_mps)
-        self._model.step(dt_s, accel_mps2=accel, steer_rad=acting.steering_angle_rad)
+        self._model.step(
+            dt_s,
+            accel_mps2=accel,
+            steer_rad=acting.steering_angle_rad,
+            friction_circle_mps2=self.tyres.max_accel_mps2,
+        )
 
     def brake(self, dt_s: float) -> None:
         """Advance ``dt_s`` seconds under a full emergency brake with the steering angle held —
@@ -262,6 +355,7 @@ class ActuatedEgo:
             "motion_model": "kinematic_bicycle",
             "geometry": asdict(self._model.geometry),
             "pedals": asdict(self.pedals),
+            "tyres": {**asdict(self.tyres), "friction_circle_mps2": self.tyres.max_accel_mps2},
             "delay_steps": self.delay_steps,
         }
 

@@ -50,7 +50,8 @@ B = npt.NDArray[np.bool_]
 (WB, CENTER, FRONT, ELEN, EWID, MAX_STEER, STEER_RATE, MAX_ACC, MAX_DEC, JERK) = range(10)
 (LOOK_T, LOOK_MIN, LOOK_MAX, V0, HEADWAY, MIN_GAP, A_MAX, B_COMF, DELTA, IDM_DEC) = range(10, 20)
 (THROTTLE, BRAKE, STEER_CMD, P_ACC, P_BRK, ROLL, DRAG, HORIZON, MARGIN) = range(20, 29)
-_NP = 29
+FRICTION = 29  # the commanded ego's friction circle μ·g (m/s²; World.drive_ego_pedals)
+_NP = 30
 # a walker's columns: start x, y, end x, y, speed, start time (nan: not started), distance,
 # yaw, clock, length, width
 (WSX, WSY, WEX, WEY, WSPD, WSTART, WDIST, WYAW, WTIME, WLEN, WWID) = range(11)
@@ -163,6 +164,7 @@ class FrameStepper:
                 pm.rolling_resistance_mps2,
                 pm.drag_coefficient_1pm,
             )
+            p[FRICTION] = w._ego_friction_mps2
         committed = self._ego_committed
         if self._n_ego_stops:
             committed[:] = False
@@ -417,11 +419,11 @@ def _frame(  # noqa: PLR0917 (the world's columns; numba has no keyword-only par
                 GAP_MIN_M,
                 two,
             )
-            _bicycle(e, p, dt_s, accel_cmd, steer)
+            _bicycle(e, p, dt_s, accel_cmd, steer, math.nan)  # the script: no tyre bound
         elif pedals == 1:  # ActuatedEgo.apply: the pedals under the held command
             v = e[ESPEED]
             accel_cmd = p[THROTTLE] * p[P_ACC] - p[BRAKE] * p[P_BRK] - (p[ROLL] + p[DRAG] * v * v)
-            _bicycle(e, p, dt_s, accel_cmd, p[STEER_CMD])
+            _bicycle(e, p, dt_s, accel_cmd, p[STEER_CMD], p[FRICTION])
         # (pedals == 2: Python moves the ego after this step, World.drive_ego)
         time_ns += dt_ns
         t_new = (time_ns - start_ns) / 1e9
@@ -486,8 +488,11 @@ def _walker(walk: F64, k: int) -> tuple[float, float, float, float]:  # pragma: 
 
 
 @numba.njit(cache=True, nogil=True)
-def _bicycle(e: F64, p: F64, dt_s: float, accel_cmd: float, steer_cmd: float) -> None:
-    """``BicycleModel.step`` of the ego's columns, in place."""  # pragma: no cover - compiled
+def _bicycle(  # noqa: PLR0917 (numba has no keyword-only parameters)
+    e: F64, p: F64, dt_s: float, accel_cmd: float, steer_cmd: float, friction: float
+) -> None:
+    """``BicycleModel.step`` of the ego's columns, in place (``friction``: its
+    ``friction_circle_mps2``, NaN for None)."""  # pragma: no cover - compiled
     max_delta = p[STEER_RATE] * dt_s
     cmd = min(max(steer_cmd, -p[MAX_STEER]), p[MAX_STEER])
     e[ESTEER] += min(max(cmd - e[ESTEER], -max_delta), max_delta)
@@ -495,6 +500,15 @@ def _bicycle(e: F64, p: F64, dt_s: float, accel_cmd: float, steer_cmd: float) ->
     if not math.isnan(p[JERK]):
         max_change = p[JERK] * dt_s
         accel = min(max(accel, e[EACCEL] - max_change), e[EACCEL] + max_change)
+    if not math.isnan(friction):  # friction_scale
+        v0 = e[ESPEED]
+        v_top = max(v0, v0 + accel * dt_s)
+        lateral = v_top * v_top * (math.tan(e[ESTEER]) / p[WB])  # v² · curvature_1pm
+        demand = kernels.hypot(accel, lateral)  # CPython's hypot, as friction_scale's
+        if demand > friction:
+            scale = friction / demand
+            accel *= scale
+            e[ESTEER] = math.atan(math.tan(e[ESTEER]) * scale)
     e[EACCEL] = accel
     v = e[ESPEED]
     v1 = v + accel * dt_s

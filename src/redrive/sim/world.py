@@ -25,7 +25,14 @@ import numpy.typing as npt
 from redrive.errors import SimulationError
 from redrive.motion import IdmParams
 from redrive.sim.agents import LaneChange, LaneFollower, ParkedObject, Walker
-from redrive.sim.ego import BicycleModel, EgoDriver, EgoGeometry, PedalModel, pose_matrix
+from redrive.sim.ego import (
+    BicycleModel,
+    EgoDriver,
+    EgoGeometry,
+    PedalModel,
+    TyreLimit,
+    pose_matrix,
+)
 from redrive.sim.fleet import LaneFleet
 from redrive.sim.gaps import GapSearch
 from redrive.sim.ground import rasterize
@@ -132,6 +139,8 @@ class World:
         self._ego_step: Callable[[BicycleModel, float], None] | None = None
         #: the command and pedals the ego moves under (:meth:`drive_ego_pedals`), or None
         self._ego_pedals: tuple[ControlCommands, PedalModel] | None = None
+        #: the friction circle (m/s²) the pedal-driven ego moves within
+        self._ego_friction_mps2 = TyreLimit().max_accel_mps2
         #: every lane follower's and the scripted ego's gap search, batched per physics step
         self._gaps = GapSearch(self.network.routes.values())
         #: the lane followers' state as arrays, stepped by compiled kernels
@@ -271,12 +280,16 @@ class World:
         self._ego_step = step
         self._ego_pedals = None
 
-    def drive_ego_pedals(self, commands: ControlCommands, pedals: PedalModel) -> None:
-        """Move the ego, every physics step from now on, under ``commands`` through ``pedals`` —
-        what :meth:`drive_ego` with ``ActuatedEgo(model, pedals=pedals).apply(commands, dt_s)``
-        does, in the compiled physics step (call it again for each new command)."""
+    def drive_ego_pedals(
+        self, commands: ControlCommands, pedals: PedalModel, *, tyres: TyreLimit | None = None
+    ) -> None:
+        """Move the ego, every physics step from now on, under ``commands`` through ``pedals``
+        within the friction circle of ``tyres`` (None: ``TyreLimit()``) — what :meth:`drive_ego`
+        with ``ActuatedEgo(model, pedals=pedals, tyres=tyres).apply(commands, dt_s)`` does, in
+        the compiled physics step (call it again for each new command)."""
         self._ego_step = None
         self._ego_pedals = (commands, pedals)
+        self._ego_friction_mps2 = (tyres if tyres is not None else TyreLimit()).max_accel_mps2
 
     def drop_agents(self) -> None:
         """Remove every agent — lane followers, pedestrians, parked vehicles — for good: the world
