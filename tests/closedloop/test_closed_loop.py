@@ -52,10 +52,13 @@ def test_the_planner_drives_and_the_world_follows(tmp_path: Path) -> None:
     driven, logged = run.ego(), run.logged_ego()
     assert sorted(driven) == sorted(logged) == list(range(60))  # 6 s at 10 Hz
     start = driven[0].position[:2]
-    # a planner that stands still: from 25 m/s the ego brakes (8 m/s² at full brake: ~39 m)
-    # to a stop, and stays
+    # a planner that stands still: from 25 m/s the ego brakes — at full brake (8 m/s²) while
+    # nuPlan's longitudinal law a = −10/11 · v asks for more, then with that law, v decaying as
+    # e^(−0.91 t) from about 9 m/s: ~34 m + ~10 m
     assert driven[0].speed_mps == pytest.approx(25.0)
-    assert driven[59].speed_mps == pytest.approx(0.0, abs=0.05)
+    speeds = [driven[i].speed_mps for i in range(60)]
+    assert speeds[59] < 0.3
+    assert all(b <= a for a, b in zip(speeds, speeds[1:], strict=False))  # it only slows
     assert 35.0 < np.linalg.norm(driven[59].position[:2] - start) < 50.0
     # the logged ego (the scenario's own driver) drove on
     assert np.linalg.norm(logged[59].position[:2] - driven[59].position[:2]) > 50.0

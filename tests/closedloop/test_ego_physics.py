@@ -270,7 +270,7 @@ def test_full_lock_at_speed_is_held_to_the_friction_circle() -> None:
     hold = PedalModel().coast(18.0) / PedalModel().max_accel_mps2
     for _ in range(300):
         ego.apply(ControlCommands(throttle=hold, steering_angle_rad=0.6), 0.01)
-        total, lateral = _combined(ego.model)
+        total, _ = _combined(ego.model)
         assert total <= limit * (1.0 + 1e-12)
     # at the limit: the turn the tyres hold, R = v² / (μ·g), and the wheel at that angle
     v = ego.model.speed_mps
