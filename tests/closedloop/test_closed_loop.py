@@ -3,6 +3,7 @@ driven and the logged ego and what moved the car, and the same seed gives the sa
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import numpy as np
@@ -58,7 +59,7 @@ def test_the_planner_drives_and_the_world_follows(tmp_path: Path) -> None:
     assert driven[0].speed_mps == pytest.approx(25.0)
     speeds = [driven[i].speed_mps for i in range(60)]
     assert speeds[59] < 0.3
-    assert all(b <= a for a, b in zip(speeds, speeds[1:], strict=False))  # it only slows
+    assert all(b <= a for a, b in itertools.pairwise(speeds))  # it only slows
     assert 35.0 < np.linalg.norm(driven[59].position[:2] - start) < 50.0
     # the logged ego (the scenario's own driver) drove on
     assert np.linalg.norm(logged[59].position[:2] - driven[59].position[:2]) > 50.0
@@ -158,13 +159,17 @@ def _score(run_dir: Path, *metrics: Metric) -> dict[str, dict[str, float]]:
     return {s.metric.name: dict(s.result.values) for s in summary.scored}
 
 
-def _blind(tmp_path: Path, speed_mps: float) -> PipelineConfig:
+def _blind_file(tmp_path: Path, speed_mps: float) -> Path:
     toml = tmp_path / "blind.toml"
     toml.write_text(
         '[[stage]]\nname = "planning"\n[[stage.algorithm]]\nname = "blind"\n'
         f'plugin = "{PLUGINS}:Straight"\nconfig = {{ speed_mps = {speed_mps} }}\n'
     )
-    return load_pipeline(toml)
+    return toml
+
+
+def _blind(tmp_path: Path, speed_mps: float) -> PipelineConfig:
+    return load_pipeline(_blind_file(tmp_path, speed_mps))
 
 
 def test_a_blind_planner_rear_ends_the_braking_lead_and_is_at_fault(tmp_path: Path) -> None:
@@ -177,6 +182,107 @@ def test_a_blind_planner_rear_ends_the_braking_lead_and_is_at_fault(tmp_path: Pa
     assert scores["at_fault_collisions"]["at_fault_collisions"] >= 1
     assert scores["at_fault_collisions"]["no_at_fault_collisions"] == 0.0
     assert scores["pdm_score"]["pdm_score"] == 0.0
+
+
+def _touching(run_dir: Path) -> dict[int, list[int]]:
+    """Frame → ids of the ground-truth objects the ego footprint intersects, by shapely on the
+    stored tables (independent of the run's own check): ego 4.7 × 1.9 m, centre 1.4 m ahead of
+    the rear axle; the objects in base_link."""
+    from shapely.geometry import Polygon
+
+    def rect(cx: float, cy: float, yaw: float, length: float, width: float) -> Polygon:
+        c, s = np.cos(yaw), np.sin(yaw)
+        pts = [(sx * length / 2, sy * width / 2) for sx, sy in ((1, 1), (-1, 1), (-1, -1), (1, -1))]
+        return Polygon([(cx + c * x - s * y, cy + s * x + c * y) for x, y in pts])
+
+    ego = rect(4.7 / 2 - 0.95, 0.0, 0.0, 4.7, 1.9)
+    out: dict[int, list[int]] = {}
+    for frame, objects in open_run(run_dir).ground_truth().items():
+        out[frame] = sorted(
+            o.object_id
+            for o in objects
+            if ego.intersects(
+                rect(*map(float, o.box.center[:2]), o.box.yaw_rad, *map(float, o.box.size[:2]))
+            )
+        )
+    return out
+
+
+def test_collisions_are_recorded_per_frame_and_the_run_drives_on(tmp_path: Path) -> None:
+    out = tmp_path / "blind"
+    request = ClosedLoopRequest(
+        scenario="lead_vehicle_hard_brake", pipeline=_blind(tmp_path, 25.0), out=out
+    )
+    assert run_closed_loop(request).status is RunStatus.COMPLETE
+    run = open_run(out)
+    rows = {r["frame_index"]: r for r in run.table("closed_loop").to_pylist()}
+    touching = _touching(out)
+    hit = [f for f in sorted(rows) if touching.get(f)]
+    assert hit  # the blind planner does drive into the braking lead
+    for f, r in rows.items():
+        assert r["collisions"] == len(touching.get(f, []))
+        if touching.get(f):
+            assert r["collision_object_id"] == touching[f][0]
+            assert r["collision_object_class"] == "vehicle"
+        else:
+            assert r["collision_object_id"] is None
+            assert r["collision_object_class"] == ""
+    # continue (the default, as nuPlan): the run goes on to the scenario's end
+    assert max(rows) > hit[-1] or max(rows) == len(rows) - 1
+    assert len(rows) == round(run.manifest.closed_loop["duration_s"] * 10)
+    summary = dict(run.manifest.summary.closed_loop)  # type: ignore[union-attr]
+    assert run.manifest.closed_loop["on_collision"] == "continue"
+    assert summary["on_collision"] == "continue"
+    assert summary["collision_frames"] == len(hit)
+    assert summary["first_collision_frame"] == hit[0]
+    assert summary["stopped"] is None
+
+
+def test_on_collision_stop_ends_the_run_at_the_first_collision(tmp_path: Path) -> None:
+    out = tmp_path / "stop"
+    code = main(
+        [
+            "run",
+            "lead_vehicle_hard_brake",
+            "--closed-loop",
+            "--pipeline",
+            str(_blind_file(tmp_path, 25.0)),
+            "--on-collision",
+            "stop",
+            "--out",
+            str(out),
+            "--no-progress",
+        ]
+    )
+    assert code == 0
+    run = open_run(out)
+    rows = run.table("closed_loop").to_pylist()
+    first = min(f for f, ids in _touching(out).items() if ids)
+    assert rows[-1]["frame_index"] == first  # the run ended with the frame of the collision
+    assert rows[-1]["collisions"] >= 1
+    assert all(r["collisions"] == 0 for r in rows[:-1])
+    assert run.manifest.closed_loop["on_collision"] == "stop"
+    stopped = dict(run.manifest.summary.closed_loop)["stopped"]  # type: ignore[union-attr]
+    assert stopped["reason"] == "collision"
+    assert stopped["frame_index"] == first
+    assert stopped["object_id"] == rows[-1]["collision_object_id"]
+    assert stopped["object_class"] == "vehicle"
+
+
+def test_bad_closed_loop_options_are_refused(tmp_path: Path) -> None:
+    pipeline = pipeline_from_plugins(planning=[f"{PLUGINS}:StandStill"])
+    with pytest.raises(ConfigError, match="--on-collision must be one of continue, stop"):
+        run_closed_loop(
+            ClosedLoopRequest(
+                scenario="cut_in", pipeline=pipeline, out=tmp_path / "a", on_collision="halt"
+            )
+        )
+    with pytest.raises(ConfigError, match="friction coefficient must be a positive"):
+        run_closed_loop(
+            ClosedLoopRequest(
+                scenario="cut_in", pipeline=pipeline, out=tmp_path / "b", friction_coefficient=0.0
+            )
+        )
 
 
 def test_a_follower_rear_ends_a_braking_ego_when_replayed_and_brakes_when_reactive(

@@ -36,8 +36,10 @@ directory that --resume continues.  `redrive export RUN --format xlsx` exports t
 
 Closed loop (--closed-loop): LOG is a scenario of the synthetic catalogue (`redrive synth
 --list`) or a scenario TOML; the outputs move the ego (the last control stage's commands, else the
-built-in LQR + PID tracker on the last planned path, else an emergency brake) and the world goes
-on from where it puts the car.  Frames are object-level (the true ego state and the ground-truth
+built-in tracker — nuPlan's LQR tracker — on the last planned path, else an emergency brake)
+and the world goes on from where it puts the car, within the tyres' friction circle (--friction,
+default μ = 0.9).  A collision is recorded (closed_loop table) and the run drives on, as nuPlan's
+does; --on-collision stop ends it there.  Frames are object-level (the true ego state and the ground-truth
 objects: use a perception that reads ground truth, e.g. noisy-oracle); with --sensors they also
 carry the scenario's rig (LiDAR, camera, IMU, GNSS) rendered from the driven ego, as a replay of
 its `redrive synth` log would, each LiDAR's last finished sweep in a frame (the first frame comes
@@ -338,6 +340,8 @@ def _run_closed_loop(args: argparse.Namespace, pipeline: Any) -> int:
         duration_s=args.duration,
         level="sensor" if args.sensors else "object",
         sensor_map=None if scenario else args.sensor_map,
+        on_collision=args.on_collision,
+        friction_coefficient=args.friction,
     )
     report = run_closed_loop(request)
     print_run_report(report, out)
@@ -370,6 +374,14 @@ def _print_deviation(out: Path) -> None:
             else ""
         )
     )
+    if dev.get("collision_frames"):
+        print(
+            f"collisions: the ego touched an object in {dev['collision_frames']} frame(s), "
+            f"first in frame {dev['first_collision_frame']}"
+        )
+    stopped = dev.get("stopped")
+    if isinstance(stopped, dict):
+        print(f"stopped: {stopped.get('detail', 'at the first collision')}")
 
 
 def register(sub: Any) -> None:
@@ -451,6 +463,25 @@ def register(sub: Any) -> None:
         type=float,
         metavar="S",
         help="closed loop: seconds (default: the scenario's, or the whole log)",
+    )
+    parser.add_argument(
+        "--on-collision",
+        choices=("continue", "stop"),
+        default="continue",
+        help=(
+            "closed loop: when the ego touches an object, drive on and count it (default, as "
+            "nuPlan) or end the run there (the reason is in the manifest's summary)"
+        ),
+    )
+    parser.add_argument(
+        "--friction",
+        type=float,
+        metavar="MU",
+        default=0.9,
+        help=(
+            "closed loop: tyre-road friction coefficient; the ego's combined acceleration stays "
+            "within MU·g (default 0.9: dry asphalt; about 0.5 wet, 0.1-0.2 snow and ice)"
+        ),
     )
     parser.add_argument(
         "--strict",

@@ -8,8 +8,14 @@ the stages of one frame before it asks for the next — sequential mode (the pip
 ahead and is refused).
 
 ``after_frame`` applies the outputs (the simulator steps) and then hands the frame's record —
-completed with the logged ego and what moved the car (:class:`~redrive.results.ClosedLoopRecord`)
-— to ``write``: a closed-loop frame is stored once its consequence is known.
+completed with the logged ego, what moved the car and what the ego touched
+(:class:`~redrive.results.ClosedLoopRecord`) — to ``write``: a closed-loop frame is stored once
+its consequence is known.
+
+Collisions (:mod:`redrive.closedloop.contact`): every frame, the objects of its ground truth the
+ego footprint touches are recorded (``collisions``, ``collision_object_id`` / ``_class``).
+``on_collision="continue"`` (nuPlan's behaviour) drives on; ``"stop"`` ends the run after the
+first frame with a collision, and :meth:`ClosedLoopMode.collision_summary` says why it ended.
 """
 
 from __future__ import annotations
@@ -21,12 +27,20 @@ from dataclasses import dataclass
 from typing import Any
 
 from redrive.algorithms import StageOutputs, StepStatus
+from redrive.closedloop.contact import ON_COLLISION, Contact, check_on_collision, contacts
 from redrive.closedloop.simulator import EgoCommand, Simulator
 from redrive.engine.modes import Mode, PacedFrame
 from redrive.results import ClosedLoopRecord, FrameRecord
+from redrive.sim.ego import EgoGeometry
 from redrive.types import Frame, Role, VehicleState
 
-__all__ = ["DEFAULT_DEVIATION_M", "DEFAULT_DEVIATION_RAD", "ClosedLoopMode", "ClosedLoopStep"]
+__all__ = [
+    "DEFAULT_DEVIATION_M",
+    "DEFAULT_DEVIATION_RAD",
+    "ON_COLLISION",
+    "ClosedLoopMode",
+    "ClosedLoopStep",
+]
 
 _OK = StepStatus.OK.value
 #: a step record's role (its value) → the Role
@@ -47,6 +61,7 @@ class ClosedLoopStep:
         driven: the ego state of the frame (the closed-loop ego).
         logged: the logged (expert) ego state at the same time, if the backend has one.
         command: what moved the ego after the frame.
+        collisions: the ground-truth objects the ego's footprint touched in the frame, by id.
     """
 
     frame_index: int
@@ -54,6 +69,7 @@ class ClosedLoopStep:
     driven: VehicleState | None
     logged: VehicleState | None
     command: EgoCommand
+    collisions: tuple[Contact, ...] = ()
 
     @property
     def deviation(self) -> tuple[float, float]:
@@ -101,6 +117,9 @@ class ClosedLoopStep:
             deviation_m=dist,
             deviation_yaw_rad=dyaw,
             deviated=deviated,  # as deviated() says, from the deviation computed once
+            collisions=len(self.collisions),
+            collision_object_id=self.collisions[0].object_id if self.collisions else None,
+            collision_object_class=self.collisions[0].object_class if self.collisions else "",
         )
 
 
@@ -108,7 +127,9 @@ class ClosedLoopMode:
     """Closed loop over ``simulator``, at most ``max_frames`` frames (None: until it is done);
     every finished frame's completed record goes to ``write`` (the run writer).  A frame farther
     than ``deviation_threshold_m`` or ``deviation_threshold_rad`` from the logged ego is flagged
-    ``deviated`` (:meth:`deviation_summary` counts them)."""
+    ``deviated`` (:meth:`deviation_summary` counts them).  Collisions are those of the ego
+    footprint of ``ego_geometry``; ``on_collision`` is ``continue`` or ``stop`` (module text).
+    """
 
     mode = Mode.CLOSED_LOOP
 
@@ -120,7 +141,14 @@ class ClosedLoopMode:
         max_frames: int | None = None,
         deviation_threshold_m: float = DEFAULT_DEVIATION_M,
         deviation_threshold_rad: float = DEFAULT_DEVIATION_RAD,
+        ego_geometry: EgoGeometry | None = None,
+        on_collision: str = ON_COLLISION[0],
     ) -> None:
+        check_on_collision(on_collision)
+        self.ego_geometry = ego_geometry if ego_geometry is not None else EgoGeometry()
+        self.on_collision = on_collision
+        #: with ``on_collision="stop"``: the step whose collision ended the run
+        self.stopped_at: ClosedLoopStep | None = None
         self.simulator = simulator
         self.deviation_threshold_m = float(deviation_threshold_m)
         self.deviation_threshold_rad = float(deviation_threshold_rad)
@@ -147,7 +175,7 @@ class ClosedLoopMode:
             self._stepped = False
             yield frame
             count += 1
-            if self.simulator.done:
+            if self.simulator.done or self.stopped_at is not None:
                 return
 
     def before_frame(self, frames: Iterable[Frame]) -> Iterator[PacedFrame]:
@@ -173,8 +201,11 @@ class ClosedLoopMode:
             driven=frame.vehicle_state,
             logged=logged,
             command=command,
+            collisions=contacts(frame, self.ego_geometry),
         )
         self.steps.append(step)
+        if step.collisions and self.on_collision == "stop" and self.stopped_at is None:
+            self.stopped_at = step
         self.write(
             dataclasses.replace(
                 record,
@@ -208,4 +239,30 @@ class ClosedLoopMode:
             "first_deviated_frame": flagged[0] if flagged else None,
             "max_deviation_m": max((d for d, _ in dists), default=None),
             "max_deviation_yaw_rad": max((y for _, y in dists), default=None),
+        }
+
+    def collision_summary(self) -> dict[str, Any]:
+        """For the run summary: ``on_collision``, how many frames had the ego touching an
+        object, the first of them and — ``stop`` — why and where the run ended."""
+        hit = [s for s in self.steps if s.collisions]
+        stopped = self.stopped_at
+        ended: dict[str, Any] | None = None
+        if stopped is not None:
+            first = stopped.collisions[0]
+            ended = {
+                "reason": "collision",
+                "frame_index": stopped.frame_index,
+                "stamp_ns": stopped.stamp_ns,
+                "object_id": first.object_id,
+                "object_class": first.object_class,
+                "detail": (
+                    f"--on-collision stop: the ego touched {first.object_class} "
+                    f"{first.object_id} in frame {stopped.frame_index}"
+                ),
+            }
+        return {
+            "on_collision": self.on_collision,
+            "collision_frames": len(hit),
+            "first_collision_frame": hit[0].frame_index if hit else None,
+            "stopped": ended,
         }

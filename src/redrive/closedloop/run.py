@@ -8,7 +8,9 @@ The run directory is the one every command reads (``evaluate``, ``report``, ``ex
 per frame, and progress and deviation are measured against it. ``closed_loop`` holds what moved
 the ego after each frame (command, its source, the fallback's reason), how far the ego was
 from the logged one and whether that passed the thresholds (``deviated``; counted in the
-summary's ``closed_loop``). ``map.json`` holds the road map of a scenario or of a ``redrive synth`` log (a recorded log has none). The
+summary's ``closed_loop``), and which objects the ego touched (``collisions``,
+``collision_object_id`` / ``_class``; ``--on-collision stop`` ends the run at the first, the
+summary's ``closed_loop.stopped`` says where). ``map.json`` holds the road map of a scenario or of a ``redrive synth`` log (a recorded log has none). The
 manifest's pipeline has ``mode_manager = "closed_loop"``, and the simulator's description
 (backend ``synthetic`` or ``log``, agents, ego limits, tracker and gains, deviation thresholds)
 is under ``closed_loop``.  A log run's source is the log's usual fingerprint (path, sha256), so
@@ -37,6 +39,7 @@ from typing import Any
 from redrive.algorithms import GROUND_TRUTH, VEHICLE_STATE
 from redrive.algorithms.discovery import load_algorithm_class
 from redrive.assembly.sensor_map import load_sensor_map_overrides
+from redrive.closedloop.contact import ON_COLLISION, check_on_collision
 from redrive.closedloop.logreplay import LogSimulator
 from redrive.closedloop.mode import DEFAULT_DEVIATION_M, DEFAULT_DEVIATION_RAD, ClosedLoopMode
 from redrive.closedloop.sensors import RecordingThread
@@ -56,6 +59,7 @@ from redrive.results import (
     RunWriter,
     SourceLog,
 )
+from redrive.sim.ego import EgoGeometry, TyreLimit
 from redrive.sim.roadmap import scenario_road_map
 from redrive.sim.scenario import list_scenarios, load_scenario
 from redrive.types import RoadMap, SensorType
@@ -88,6 +92,11 @@ class ClosedLoopRequest:
         level: ``object`` (frames carry the ego state and ground truth) or ``sensor`` (the
             scenario's rig re-rendered from the driven ego as well).
         sensor_map: a log only: a sensor map TOML (which topic is which sensor).
+        on_collision: ``continue`` (as nuPlan: drive on, the metrics count it) or ``stop`` (end
+            the run after the first frame in which the ego touches an object; the summary's
+            ``closed_loop.stopped`` says why).
+        friction_coefficient: μ of the ego's tyres (friction circle μ·g; default 0.9, dry
+            asphalt — :class:`redrive.sim.ego.TyreLimit`).
     """
 
     scenario: str
@@ -100,6 +109,8 @@ class ClosedLoopRequest:
     delay_steps: int = 0
     level: Level = "object"
     sensor_map: Path | None = None
+    on_collision: str = ON_COLLISION[0]
+    friction_coefficient: float = TyreLimit().friction_coefficient
 
 
 def is_scenario(text: str) -> bool:
@@ -126,6 +137,13 @@ def run_closed_loop(
             backend does not provide; the pipelined mode), or the log cannot be driven (no ego
             pose; no objects for ``reactive`` agents) — checked before any frame.
     """
+    check_on_collision(request.on_collision)
+    if not (math.isfinite(request.friction_coefficient) and request.friction_coefficient > 0.0):
+        msg = (
+            f"the tyres' friction coefficient must be a positive number (0.9: dry asphalt, "
+            f"0.5: wet), got {request.friction_coefficient}"
+        )
+        raise ConfigError(msg)
     if request.pipeline.mode == "pipelined":
         msg = (
             "closed loop runs the stages of a frame before the next frame exists (the outputs "
@@ -170,6 +188,7 @@ def _run_scenario(
         tracker=LqrTracker(),
         agents=request.agents,
         rate_hz=request.rate_hz,
+        tyres=TyreLimit(friction_coefficient=request.friction_coefficient),
         delay_steps=request.delay_steps,
         level=request.level,
     )
@@ -190,6 +209,7 @@ def _run_scenario(
         source=source,
         described=described,
         road_map=scenario_road_map(scenario),
+        ego_geometry=simulator.ego_geometry,
         total=math.floor(
             (scenario.duration_s - (simulator.first_stamp_ns - scenario.start_stamp_ns) / 1e9)
             * request.rate_hz
@@ -221,6 +241,7 @@ def _run_log(
         rate_hz=request.rate_hz,
         duration_s=request.duration_s,
         overrides=overrides,
+        tyres=TyreLimit(friction_coefficient=request.friction_coefficient),
         delay_steps=request.delay_steps,
     )
     return _drive(
@@ -229,6 +250,7 @@ def _run_log(
         source=source_log(Path(request.scenario), format=log.format),
         described=simulator.describe(),
         road_map=log_road_map(log),  # a redrive synth log's: the map metrics apply
+        ego_geometry=simulator.geometry,
         total=None,
         on_start=on_start,
         progress=progress,
@@ -244,6 +266,7 @@ def _drive(
     source: SourceLog,
     described: Mapping[str, Any],
     road_map: RoadMap | None,
+    ego_geometry: EgoGeometry,
     total: int | None,
     on_start: Callable[[int | None], None] | None,
     progress: Callable[[int], None] | None,
@@ -268,11 +291,17 @@ def _drive(
             **described,
             "deviation_threshold_m": DEFAULT_DEVIATION_M,
             "deviation_threshold_rad": DEFAULT_DEVIATION_RAD,
+            "on_collision": request.on_collision,
         },
     )
     writer = RunWriter(request.out, setup=setup)
     looped: Simulator = simulator if wrap is None else wrap(simulator)
-    mode = ClosedLoopMode(looped, write=writer.write_frame)
+    mode = ClosedLoopMode(
+        looped,
+        write=writer.write_frame,
+        ego_geometry=ego_geometry,
+        on_collision=request.on_collision,
+    )
     if road_map is not None:
         writer.write_map(road_map)
     if on_start is not None:
@@ -298,7 +327,9 @@ def _drive(
             progress=progress,
             cancel=cancel,
             sink=stored_after_the_step,
-            summary_extra=lambda: {"closed_loop": mode.deviation_summary()},
+            summary_extra=lambda: {
+                "closed_loop": {**mode.deviation_summary(), **mode.collision_summary()}
+            },
         )
     except BaseException:
         if recording is not None and recorder is not None:

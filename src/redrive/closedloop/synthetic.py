@@ -50,7 +50,7 @@ from redrive.closedloop.simulator import (
     choose_command,
 )
 from redrive.errors import ConfigError, SimulationError
-from redrive.sim.ego import ActuatedEgo, PedalModel, TyreLimit
+from redrive.sim.ego import ActuatedEgo, EgoGeometry, PedalModel, TyreLimit
 from redrive.sim.ground_truth import objects_in_base
 from redrive.sim.rig import rig_from_mapping
 from redrive.sim.scenario import Scenario
@@ -275,6 +275,11 @@ class SyntheticSimulator:
                 else {}
             ),
         }
+
+    @property
+    def ego_geometry(self) -> EgoGeometry:
+        """The driven ego's dimensions and actuator limits."""
+        return self._world.ego_geometry
 
     @property
     def first_stamp_ns(self) -> int:

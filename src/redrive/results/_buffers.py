@@ -48,7 +48,8 @@ _ORDER: dict[str, tuple[str, ...]] = {
     ),
     "closed_loop": (
         "frame_index", "stamp_ns", "source", "algorithm", "reason", "throttle", "brake",
-        "steering_angle_rad", "deviation_m", "deviation_yaw_rad", "deviated",
+        "steering_angle_rad", "deviation_m", "deviation_yaw_rad", "deviated", "collisions",
+        "collision_object_id", "collision_object_class",
     ),
     "resources": ("t_ns", "label", "pid", "cpu_percent", "rss_bytes"),
     "frames": (
@@ -158,6 +159,9 @@ class TableBuffers:
                     cl.deviation_m,
                     cl.deviation_yaw_rad,
                     cl.deviated,
+                    cl.collisions,
+                    cl.collision_object_id,
+                    cl.collision_object_class,
                 )
             )
         self.n_frames += 1

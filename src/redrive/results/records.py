@@ -123,6 +123,9 @@ class ClosedLoopRecord:
         deviation_yaw_rad: |heading difference| of the two (NaN without a logged ego).
         deviated: either deviation passed its threshold (the run manifest's ``closed_loop``
             says which: default 2 m / 10°); None without a logged ego.
+        collisions: how many ground-truth objects the ego's footprint touched in this frame.
+        collision_object_id, collision_object_class: the one of them with the lowest id (its
+            class value, e.g. ``vehicle``); None and "" when it touched none.
     """
 
     source: str
@@ -134,6 +137,9 @@ class ClosedLoopRecord:
     deviation_m: float = math.nan
     deviation_yaw_rad: float = math.nan
     deviated: bool | None = None
+    collisions: int = 0
+    collision_object_id: int | None = None
+    collision_object_class: str = ""
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -169,6 +169,10 @@ CLOSED_LOOP = pa.schema(
         *_floats("throttle", "brake", "steering_angle_rad", "deviation_m", "deviation_yaw_rad"),
         # null: no logged ego to compare with (and runs written before the column existed)
         _f("deviated", pa.bool_(), nullable=True),
+        # objects the ego touched in the frame (null: a run written before the columns existed)
+        _f("collisions", _I64, nullable=True),
+        _f("collision_object_id", _I64, nullable=True),  # the lowest id of them; null: none
+        _f("collision_object_class", _STR, nullable=True),
     ]
 )
 

@@ -1,0 +1,65 @@
+"""Collisions while a closed loop runs: which objects the driven ego's footprint touches.
+
+The geometry is that of the collision metrics (``redrive.evaluation.closedloop``, nuPlan's
+``in_collision``): the ego footprint is the rectangle ``length_m × width_m`` whose centre lies
+``length/2 − rear_overhang`` ahead of the rear axle, each object its box's footprint, and touching
+counts as a collision (the separating axis test of
+:func:`redrive.evaluation._kinematics.rectangles_overlap`).  A frame's ground truth is in the
+driven ego's ``base_link``, so the ego rectangle is fixed there.
+
+What a run does on a collision is ``on_collision`` (:data:`ON_COLLISION`): ``continue`` (the
+default, as nuPlan: the simulation goes on, the metrics count the collisions) or ``stop`` (the
+run ends after the first frame with one, the reason in the run summary).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from redrive.errors import ConfigError
+from redrive.evaluation._kinematics import rectangle_corners, rectangles_overlap
+from redrive.sim.ego import EgoGeometry
+from redrive.types import Frame
+
+__all__ = ["ON_COLLISION", "Contact", "check_on_collision", "contacts"]
+
+#: what a closed loop does when the ego collides (``--on-collision``); the first is the default.
+ON_COLLISION = ("continue", "stop")
+
+
+def check_on_collision(value: str) -> None:
+    """Raises ConfigError for a value not in :data:`ON_COLLISION`."""
+    if value not in ON_COLLISION:
+        msg = f"--on-collision must be one of {', '.join(ON_COLLISION)}, got {value!r}"
+        raise ConfigError(msg)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Contact:
+    """One object the ego's footprint touches in a frame: its id and class (value)."""
+
+    object_id: int
+    object_class: str
+
+
+def contacts(frame: Frame, geometry: EgoGeometry) -> tuple[Contact, ...]:
+    """The ground-truth objects of ``frame`` (base_link of the driven ego) that the ego footprint
+    of ``geometry`` touches, by object id; () without ground truth."""
+    objects = frame.ground_truth
+    if not objects:
+        return ()
+    ego = rectangle_corners(
+        (geometry.center_offset_m, 0.0), 0.0, geometry.length_m, geometry.width_m
+    )
+    centers = np.array([o.box.center[:2] for o in objects], dtype=np.float64)
+    yaws = np.array([o.box.yaw_rad for o in objects], dtype=np.float64)
+    sizes = np.array([o.box.size[:2] for o in objects], dtype=np.float64)
+    boxes = rectangle_corners(centers, yaws, sizes[:, 0], sizes[:, 1])
+    touching = rectangles_overlap(ego, boxes)
+    found = [
+        Contact(object_id=int(objects[m].object_id), object_class=objects[m].object_class.value)
+        for m in np.flatnonzero(touching)
+    ]
+    return tuple(sorted(found, key=lambda c: c.object_id))
