@@ -184,3 +184,25 @@ def test_ray_missing_is_a_clear_error(
     with pytest.raises(ConfigError, match=r"pip install 'redrive\[ray\]'"):
         run_batch(spec, tmp_path / "b", runner=batch_cell, executor="ray", workers=1)
     assert len(plan_cells(spec, tmp_path / "b")) == 1
+
+
+def test_on_collision_reaches_the_closed_loop_cells_and_their_key(tmp_path: Path) -> None:
+    spec_file = tmp_path / "stop.toml"
+    spec_file.write_text(
+        'logs = ["cut_in"]\nloop = "both"\non_collision = "stop"\nout = "b"\n', encoding="utf-8"
+    )
+    keys = load_batch_spec(spec_file)
+    assert keys["on_collision"] == "stop"
+    spec = BatchSpec(
+        logs=keys["logs"],
+        pipelines=(make_pipeline_item(name="idm", planning=["idm-planner"]),),
+        loops=("open", "closed"),
+        on_collision="stop",
+    )
+    tasks = {t.loop: t for t in plan_cells(spec, tmp_path / "b")}
+    assert tasks["closed"].on_collision == "stop"
+    assert "on_collision=stop" in tasks["closed"].key.options
+    assert tasks["open"].key.options == ""
+    # the default leaves the key of earlier batches as it was
+    default = BatchSpec(logs=spec.logs, pipelines=spec.pipelines, loops=("closed",))
+    assert plan_cells(default, tmp_path / "b")[0].key.options == "agents=replay"

@@ -55,6 +55,7 @@ class CellTask:
     key: CellKey
     duration_s: float | None = None
     agents: str = "replay"
+    on_collision: str = "continue"
     fail_fast: bool = False
     attempt: int = 1
 
@@ -95,6 +96,7 @@ class ClosedLoopRunner(Protocol):
         seed: int | None,
         duration_s: float | None,
         agents: str,
+        on_collision: str = "continue",
     ) -> RunReport: ...
 
 
@@ -206,6 +208,7 @@ def _run(task: CellTask, run_dir: Path, closed_loop: ClosedLoopRunner | None) ->
         seed=task.log.seed,
         duration_s=task.duration_s,
         agents=task.agents,
+        on_collision=task.on_collision,
     )
 
 

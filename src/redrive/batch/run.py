@@ -140,7 +140,11 @@ def plan_cells(spec: BatchSpec, out: Path) -> list[CellTask]:
     for pipeline in spec.pipelines:
         for loop in spec.loops:
             for log in spec.logs:
-                options = f"agents={spec.agents}" if loop == "closed" else ""
+                options = ""
+                if loop == "closed":
+                    options = f"agents={spec.agents}"
+                    if spec.on_collision != "continue":  # the keys of earlier batches stand
+                        options += f",on_collision={spec.on_collision}"
                 key = CellKey(
                     log=_log_key(log, spec.duration_s, log_keys),
                     pipeline_hash=hashes[pipeline.name],
@@ -157,6 +161,7 @@ def plan_cells(spec: BatchSpec, out: Path) -> list[CellTask]:
                         key=key,
                         duration_s=spec.duration_s,
                         agents=spec.agents,
+                        on_collision=spec.on_collision,
                         fail_fast=spec.fail_fast,
                     )
                 )

@@ -7,6 +7,7 @@ A batch spec file (``redrive batch --spec batch.toml``; relative paths are relat
     duration_s = 2.0         # synthetic scenarios only (default: the scenario's duration)
     loop = "open"            # "open", "closed" or "both"
     agents = "replay"        # closed loop: "replay" or "reactive"
+    on_collision = "continue"  # closed loop: "continue" (count it, as nuPlan) or "stop"
     out = "batches/nightly"  # the batch directory
     executor = "local"       # "local" or "ray"
     workers = 2              # default: the number of cores
@@ -127,6 +128,7 @@ class BatchSpec:
     loops: tuple[LoopMode, ...] = ("open",)
     duration_s: float | None = None
     agents: Literal["replay", "reactive"] = "replay"
+    on_collision: Literal["continue", "stop"] = "continue"
     fail_fast: bool = False
     options: Mapping[str, Any] = field(default_factory=dict)  # out, executor, workers, retries
 
@@ -140,6 +142,7 @@ class BatchSpec:
             "loops": list(self.loops),
             "duration_s": self.duration_s,
             "agents": self.agents,
+            "on_collision": self.on_collision,
             "fail_fast": self.fail_fast,
         }
 
@@ -398,6 +401,7 @@ _SPEC_KEYS = {
     "duration_s",
     "loop",
     "agents",
+    "on_collision",
     "out",
     "executor",
     "workers",
@@ -420,7 +424,7 @@ def load_batch_spec(path: Path) -> dict[str, Any]:
     doc.check_keys(_SPEC_KEYS)
     base = path.parent
     out: dict[str, Any] = {}
-    for key in ("loop", "agents", "out", "executor", "address"):
+    for key in ("loop", "agents", "on_collision", "out", "executor", "address"):
         if key in doc:
             out[key] = doc.text(key)
     for key in ("workers", "retries"):

@@ -72,6 +72,7 @@ def _closed_loop(
     seed: int | None,
     duration_s: float | None,
     agents: str,
+    on_collision: str = "continue",
 ) -> RunReport:
     from redrive.closedloop.run import ClosedLoopRequest, run_closed_loop
 
@@ -84,6 +85,7 @@ def _closed_loop(
         agents="reactive" if agents == "reactive" else "replay",
         seed=seed,
         duration_s=duration_s,
+        on_collision=on_collision,
     )
     return run_closed_loop(request)
 
@@ -128,12 +130,16 @@ def _spec_from_args(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
     agents = args.agents or base.get("agents", "replay")
     if agents not in ("replay", "reactive"):
         raise ConfigError(f"agents {agents!r}: expected replay or reactive")
+    on_collision = args.on_collision or base.get("on_collision", "continue")
+    if on_collision not in ("continue", "stop"):
+        raise ConfigError(f"on_collision {on_collision!r}: expected continue or stop")
     spec = BatchSpec(
         logs=tuple(logs),
         pipelines=unique_pipelines(pipelines),
         loops=LOOP_MODES[loop],
         duration_s=args.duration if args.duration is not None else base.get("duration_s"),
         agents=agents,
+        on_collision=on_collision,
         fail_fast=bool(args.fail_fast or base.get("fail_fast", False)),
     )
     options = {
@@ -260,6 +266,11 @@ def register(sub: Any) -> None:
     )
     parser.add_argument(
         "--agents", choices=("replay", "reactive"), help="closed loop: other road users"
+    )
+    parser.add_argument(
+        "--on-collision",
+        choices=("continue", "stop"),
+        help="closed loop: drive on after a collision (default, as nuPlan) or end the run there",
     )
     parser.add_argument(
         "--fail-fast", action="store_true", help="a failed algorithm step fails its cell"
