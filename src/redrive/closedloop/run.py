@@ -10,10 +10,11 @@ the ego after each frame (command, its source, the fallback's reason), how far t
 from the logged one and whether that passed the thresholds (``deviated``; counted in the
 summary's ``closed_loop``), and which objects the ego touched (``collisions``,
 ``collision_object_id`` / ``_class``; ``--on-collision stop`` ends the run at the first, the
-summary's ``closed_loop.stopped`` says where). ``map.json`` holds the road map of a scenario or of a ``redrive synth`` log (a recorded log has none). The
-manifest's pipeline has ``mode_manager = "closed_loop"``, and the simulator's description
-(backend ``synthetic`` or ``log``, agents, ego limits, tracker and gains, deviation thresholds)
-is under ``closed_loop``.  A log run's source is the log's usual fingerprint (path, sha256), so
+summary's ``closed_loop.stopped`` says where). ``map.json`` holds the road map of a scenario
+or of a ``redrive synth`` log (a recorded log has none). The manifest's pipeline has
+``mode_manager = "closed_loop"``, and the simulator's description (backend ``synthetic`` or
+``log``, agents, ego limits and tyres, tracker and its parameters, deviation thresholds,
+``on_collision``) is under ``closed_loop``.  A log run's source is the log's usual fingerprint (path, sha256), so
 ``compare`` pairs runs of the same log.
 
 A sensor-level run records the rendered rig in ``RUN/sensors.mcap`` (:data:`SENSOR_LOG`): every
