@@ -38,11 +38,11 @@ Closed loop (--closed-loop): LOG is a scenario of the synthetic catalogue (`redr
 --list`) or a scenario TOML; the outputs move the ego (the last control stage's commands, else the
 built-in tracker — nuPlan's LQR tracker — on the last planned path, else an emergency brake)
 and the world goes on from where it puts the car, within the tyres' friction circle (--friction,
-default μ = 0.9).  A collision is recorded (closed_loop table) and the run drives on, as nuPlan's
-does; --on-collision stop ends it there.  Frames are object-level (the true ego state and the ground-truth
-objects: use a perception that reads ground truth, e.g. noisy-oracle); with --sensors they also
-carry the scenario's rig (LiDAR, camera, IMU, GNSS) rendered from the driven ego, as a replay of
-its `redrive synth` log would, each LiDAR's last finished sweep in a frame (the first frame comes
+default μ = 0.9).  A collision is recorded (closed_loop table) and the run drives on, as
+nuPlan's does; --on-collision stop ends it there.  Frames are object-level (the true ego state
+and the ground-truth objects: use a perception that reads ground truth, e.g. noisy-oracle); with
+--sensors they also carry the scenario's rig (LiDAR, camera, IMU, GNSS) rendered from the driven
+ego, as a replay of its `redrive synth` log would, each LiDAR's last finished sweep in a frame (the first frame comes
 one sweep after the start), and OUT/sensors.mcap records them (`redrive gui OUT` and Foxglove
 open it).  --agents replay (default) keeps the other road users on their
 scripted paths, --agents reactive lets them react to the ego.  --seed seeds the scenario too.
