@@ -23,7 +23,7 @@ from redrive.evaluation._kinematics import (
     rectangle_corners,
     rectangles_overlap,
 )
-from redrive.evaluation.base import EvalData, MetricSkipped, Series
+from redrive.evaluation.base import EvalData, MetricResult, MetricSkipped, Series
 from redrive.types import DetectedObject, ObjectClass, ObjectColumns, RoadMap, VehicleState
 
 F64 = npt.NDArray[np.float64]
@@ -57,7 +57,8 @@ class EgoRun:
 
     Attributes:
         frames: frame indices (N,); stamps_ns (N,); xy: rear axle (N, 2) m; heading_rad (N,);
-        speed_mps: (N,) norm of the stored velocity.
+        speed_mps: (N,) norm of the stored velocity; accel_xy: (N, 2) the stored acceleration
+        of the rear axle in the map frame, m/s²; yaw_rate_rad_s: (N,) the stored yaw rate.
     """
 
     frames: npt.NDArray[np.int64]
@@ -65,6 +66,8 @@ class EgoRun:
     xy: F64
     heading_rad: F64
     speed_mps: F64
+    accel_xy: F64
+    yaw_rate_rad_s: F64
 
     @classmethod
     def of(cls, states: Mapping[int, VehicleState]) -> EgoRun:
@@ -76,6 +79,10 @@ class EgoRun:
             xy=np.array([s.position[:2] for _, s in items], dtype=np.float64).reshape(n, 2),
             heading_rad=np.array([s.heading_rad for _, s in items], dtype=np.float64),
             speed_mps=np.array([s.speed_mps for _, s in items], dtype=np.float64),
+            accel_xy=np.array([s.acceleration[:2] for _, s in items], dtype=np.float64).reshape(
+                n, 2
+            ),
+            yaw_rate_rad_s=np.array([s.yaw_rate_rad_s for _, s in items], dtype=np.float64),
         )
 
     def __len__(self) -> int:
@@ -352,3 +359,64 @@ def collision_score(collisions: Sequence[Collision]) -> float:
 
 def series(frames: Sequence[int] | npt.NDArray[np.int64], values: Sequence[float] | F64) -> Series:
     return np.asarray(frames, dtype=np.int64), np.asarray(values, dtype=np.float64)
+
+
+def deviated_frames(data: EvalData, frames: npt.NDArray[np.int64]) -> int | None:
+    """How many of ``frames`` a log-backed closed loop flagged ``deviated`` (its driven ego past
+    the deviation threshold from the logged one); None when the run has no such flags (open
+    loop, or a closed loop without a logged ego)."""
+    table = data.closed_loop()
+    if table.num_rows == 0 or "deviated" not in table.column_names:
+        return None
+    flags = table.column("deviated").to_pylist()
+    if all(f is None for f in flags):
+        return None
+    flagged = {
+        int(f) for f, d in zip(table.column("frame_index").to_pylist(), flags, strict=True) if d
+    }
+    return int(sum(int(f) in flagged for f in np.asarray(frames).tolist()))
+
+
+def with_deviation(
+    result: MetricResult, data: EvalData, frames: npt.NDArray[np.int64]
+) -> MetricResult:
+    """``result`` with ``deviated_frames`` (of the frames it was computed on) added when the run
+    is a log-backed closed loop: a score over frames whose ego left the logged one is a score
+    against a log that no longer describes what the ego would have met."""
+    n = deviated_frames(data, frames)
+    if n is None:
+        return result
+    return dataclasses.replace(
+        result,
+        values={**result.values, "deviated_frames": float(n)},
+        units={**result.units, "deviated_frames": "frames"},
+        higher_is_better={**result.higher_is_better, "deviated_frames": None},
+    )
+
+
+def driven_route(road: RoadIndex, points: F64) -> list[tuple[int, ...]]:
+    """nuPlan ``route_extractor.get_route``: per point (the ego centre of each state), the lanes
+    it is assigned to, as lane indices (empty: in none).
+
+    A point keeps the lanes of the previous point that still contain it; only when none does is
+    the map searched again (every lane containing it). Then ``remove_extra_lane_connectors``'
+    first rule: walking back from the end, a set of several lanes that holds all of the next
+    point's lanes is narrowed to those. Without a lane graph (no successors), a point that left
+    its single lane is searched again rather than looked for in the lane's successors, and the
+    lane-connector rules (the 5 m proximity and incoming-edge filters) do not apply: a lane is
+    a lane here.
+    """
+    inside = road.lanes_containing(points)  # (L, K)
+    route: list[tuple[int, ...]] = []
+    current: tuple[int, ...] = ()
+    for k in range(inside.shape[1]):
+        if current:
+            current = tuple(i for i in current if inside[i, k])
+        if not current:
+            current = tuple(int(i) for i in np.flatnonzero(inside[:, k]))
+        route.append(current)
+    for k in range(len(route) - 2, -1, -1):
+        here, after = route[k], route[k + 1]
+        if len(here) > 1 and len(here) > len(after) and all(i in here for i in after):
+            route[k] = after
+    return route

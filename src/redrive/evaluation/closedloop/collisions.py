@@ -25,6 +25,7 @@ from redrive.evaluation.closedloop._common import (
     road_index,
     scene,
     series,
+    with_deviation,
 )
 from redrive.types import Role
 
@@ -72,7 +73,7 @@ class AtFaultCollisions(Metric):
         ):
             values[kind] = float(sum(c.kind == kind for c in found))
         counts = {k: "collisions" for k in values if k != "no_at_fault_collisions"}
-        return MetricResult(
+        result = MetricResult(
             values=values,
             units=counts,
             higher_is_better=dict.fromkeys(counts, False),
@@ -84,6 +85,7 @@ class AtFaultCollisions(Metric):
             },
             bookmarks=[_bookmark(c) for c in found],
         )
+        return with_deviation(result, data, np.asarray(frames, dtype=np.int64))
 
 
 def _bookmark(c: Collision) -> Bookmark:
@@ -182,7 +184,7 @@ class TimeToCollision(Metric):
         bound = float(self.params["least_min_ttc_s"])
         low = ttc <= bound
         min_ttc = float(ttc.min()) if ttc.size else math.inf
-        return MetricResult(
+        result = MetricResult(
             values={
                 "ttc_within_bound": float(min_ttc > bound),
                 "min_ttc_s": min_ttc,
@@ -202,3 +204,4 @@ class TimeToCollision(Metric):
                 for f, v in zip(frames[low], ttc[low], strict=True)
             ],
         )
+        return with_deviation(result, data, frames)
