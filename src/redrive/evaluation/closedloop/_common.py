@@ -347,14 +347,52 @@ def find_collisions(sc: SceneData) -> list[Collision]:
     return found
 
 
-def collision_score(collisions: Sequence[Collision]) -> float:
-    """nuPlan's ``no_ego_at_fault_collisions`` score (NAVSIM's NC): 1 without at-fault
-    collisions; 0 with one involving an agent; else 1 − n/2 for n at-fault collisions with
-    objects (0.5 for one, 0 from two on)."""
+#: nuPlan ``VRU_types`` (an at-fault collision with one counts against ``max_violations_vru``);
+#: the other agent classes count as vehicles.
+VRU_CLASSES = frozenset({ObjectClass.PEDESTRIAN, ObjectClass.BICYCLE})
+
+
+def collision_score(
+    collisions: Sequence[Collision],
+    *,
+    max_violations_vru: int = 0,
+    max_violations_vehicle: int = 0,
+    max_violations_object: int = 1,
+) -> float:
+    """nuPlan ``EgoAtFaultCollisionStatistics.compute_score`` (NAVSIM's NC): 1 without at-fault
+    collisions; else the product over VRUs, vehicles and objects of ``max(0, 1 − n / (m + 1))``
+    for n at-fault collisions of that kind and its threshold m (the config's
+    ``max_violation_threshold_vru`` 0, ``_vehicle`` 0, ``_object`` 1): 0 after one with an
+    agent, 0.5 after one with an object, 0 after two."""
     fault = [c for c in collisions if c.at_fault]
-    if any(c.object_class in AGENT_CLASSES for c in fault):
-        return 0.0
-    return max(0.0, 1.0 - len(fault) / 2.0)
+    if not fault:
+        return 1.0
+    vru = sum(c.object_class in VRU_CLASSES for c in fault)
+    vehicle = sum(c.object_class in AGENT_CLASSES - VRU_CLASSES for c in fault)
+    objects = len(fault) - vru - vehicle
+    score = 1.0
+    for n, m in (
+        (vru, max_violations_vru),
+        (vehicle, max_violations_vehicle),
+        (objects, max_violations_object),
+    ):
+        score *= max(0.0, 1.0 - n / (m + 1))
+    return score
+
+
+COLLISION_DEFAULTS: Mapping[str, Any] = MappingProxyType(
+    {
+        **EGO_DEFAULTS,
+        "max_violations_vru": 0,
+        "max_violations_vehicle": 0,
+        "max_violations_object": 1,
+    }
+)
+
+
+def collision_params(p: Mapping[str, Any]) -> dict[str, int]:
+    """The :func:`collision_score` thresholds of a metric's parameters."""
+    return {k: int(p[k]) for k in COLLISION_DEFAULTS if k.startswith("max_violations_")}
 
 
 def series(frames: Sequence[int] | npt.NDArray[np.int64], values: Sequence[float] | F64) -> Series:

@@ -16,9 +16,11 @@ from redrive.evaluation.base import Bookmark, EvalData, Metric, MetricResult
 from redrive.evaluation.closedloop._common import (
     AHEAD_ANGLE_RAD,
     BEHIND_ANGLE_RAD,
+    COLLISION_DEFAULTS,
     EGO_DEFAULTS,
     Collision,
     bearing_rad,
+    collision_params,
     collision_score,
     corners,
     find_collisions,
@@ -52,7 +54,7 @@ class AtFaultCollisions(Metric):
     needs: ClassVar[frozenset[str]] = frozenset({"ego", "ground_truth"})
     unit: ClassVar[str] = "score"
     higher_is_better: ClassVar[bool] = True
-    defaults: ClassVar[Mapping[str, Any]] = MappingProxyType(dict(EGO_DEFAULTS))
+    defaults: ClassVar[Mapping[str, Any]] = COLLISION_DEFAULTS
 
     def evaluate(self, data: EvalData) -> MetricResult:
         sc = scene(data, self.params)
@@ -60,7 +62,7 @@ class AtFaultCollisions(Metric):
         frames = sorted(sc.objects)
         new = {f: [c for c in found if c.frame == f] for f in frames}
         values = {
-            "no_at_fault_collisions": collision_score(found),
+            "no_at_fault_collisions": collision_score(found, **collision_params(self.params)),
             "at_fault_collisions": float(sum(c.at_fault for c in found)),
             "collisions": float(len(found)),
         }

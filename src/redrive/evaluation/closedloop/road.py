@@ -15,6 +15,7 @@ import shapely
 from redrive.evaluation.base import Bookmark, EvalData, Metric, MetricResult
 from redrive.evaluation.closedloop._common import (
     EGO_DEFAULTS,
+    EgoRun,
     driven_route,
     ego_run,
     require_road,
@@ -27,8 +28,10 @@ __all__ = [
     "DrivableAreaCompliance",
     "DrivingDirectionCompliance",
     "SpeedLimitCompliance",
+    "SL_DEFAULTS",
     "drivable_area_score",
     "driving_direction_score",
+    "speed_limit_score",
 ]
 
 F64 = npt.NDArray[np.float64]
@@ -202,6 +205,35 @@ class DrivingDirectionCompliance(Metric):
         return with_deviation(result, data, frames)
 
 
+SL_DEFAULTS: Mapping[str, Any] = MappingProxyType({**EGO_DEFAULTS, "max_overspeed_mps": 2.23})
+
+
+def speed_limit_score(
+    data: EvalData, params: Mapping[str, Any]
+) -> tuple[float, F64, F64, EgoRun]:
+    """(score, per-frame overspeed m/s, per-frame limit m/s — NaN where none —, the ego) of
+    :class:`SpeedLimitCompliance`."""
+    road = require_road(data)
+    ego = ego_run(data)
+    route = driven_route(road, ego.centres(params))
+    limits = [lane.speed_limit_mps for lane in road.lanes]
+    limit = np.full(len(ego), math.nan)
+    for i, lanes in enumerate(route):
+        here = [limits[k] for k in lanes]
+        if here and all(here):  # the devkit's ``all(speed_limits)``: None or 0 is no limit
+            limit[i] = float(max(v for v in here if v is not None))
+    over = np.where(np.isnan(limit), 0.0, np.maximum(0.0, ego.speed_mps - np.nan_to_num(limit)))
+    t = ego.t_s
+    duration = float(t[-1]) if t.size else 0.0
+    if duration <= 0.0 or not np.any(over > 0):
+        score = 1.0
+    else:
+        dt = float(np.mean(np.diff(t)))
+        loss = over.sum() * dt / (max(float(params["max_overspeed_mps"]), 1e-3) * duration)
+        score = max(0.0, 1.0 - float(loss))
+    return score, over, limit, ego
+
+
 class SpeedLimitCompliance(Metric):
     """nuPlan ``speed_limit_compliance``: the ego's speed above the limit of the lanes its centre
     is assigned to (:func:`driven_route`; the highest of their limits — the devkit's rule for
@@ -220,29 +252,10 @@ class SpeedLimitCompliance(Metric):
     needs: ClassVar[frozenset[str]] = frozenset({"ego", "road_map"})
     unit: ClassVar[str] = "score"
     higher_is_better: ClassVar[bool] = True  # the headline; per value in the result
-    defaults: ClassVar[Mapping[str, Any]] = MappingProxyType(
-        {**EGO_DEFAULTS, "max_overspeed_mps": 2.23}
-    )
+    defaults: ClassVar[Mapping[str, Any]] = SL_DEFAULTS
 
     def evaluate(self, data: EvalData) -> MetricResult:
-        road = require_road(data)
-        ego = ego_run(data)
-        route = driven_route(road, ego.centres(self.params))
-        limits = [lane.speed_limit_mps for lane in road.lanes]
-        limit = np.full(len(ego), math.nan)
-        for i, lanes in enumerate(route):
-            here = [limits[k] for k in lanes]
-            if here and all(here):  # the devkit's ``all(speed_limits)``: None or 0 is no limit
-                limit[i] = float(max(v for v in here if v is not None))
-        over = np.where(np.isnan(limit), 0.0, np.maximum(0.0, ego.speed_mps - np.nan_to_num(limit)))
-        t = ego.t_s
-        duration = float(t[-1]) if t.size else 0.0
-        if duration <= 0.0 or not np.any(over > 0):
-            score = 1.0
-        else:
-            dt = float(np.mean(np.diff(t)))
-            loss = over.sum() * dt / (max(float(self.params["max_overspeed_mps"]), 1e-3) * duration)
-            score = max(0.0, 1.0 - float(loss))
+        score, over, limit, ego = speed_limit_score(data, self.params)
         speeding = over > 0
         starts = np.flatnonzero(speeding & ~np.concatenate([[False], speeding[:-1]]))
         bookmarks = []
