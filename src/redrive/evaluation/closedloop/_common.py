@@ -23,7 +23,7 @@ from redrive.evaluation._kinematics import (
     rectangle_corners,
     rectangles_overlap,
 )
-from redrive.evaluation.base import EvalData, MetricResult, MetricSkipped, Series
+from redrive.evaluation.base import EvalData, MetricSkipped, Series
 from redrive.types import DetectedObject, ObjectClass, ObjectColumns, RoadMap, VehicleState
 
 F64 = npt.NDArray[np.float64]
@@ -397,39 +397,6 @@ def collision_params(p: Mapping[str, Any]) -> dict[str, int]:
 
 def series(frames: Sequence[int] | npt.NDArray[np.int64], values: Sequence[float] | F64) -> Series:
     return np.asarray(frames, dtype=np.int64), np.asarray(values, dtype=np.float64)
-
-
-def deviated_frames(data: EvalData, frames: npt.NDArray[np.int64]) -> int | None:
-    """How many of ``frames`` a log-backed closed loop flagged ``deviated`` (its driven ego past
-    the deviation threshold from the logged one); None when the run has no such flags (open
-    loop, or a closed loop without a logged ego)."""
-    table = data.closed_loop()
-    if table.num_rows == 0 or "deviated" not in table.column_names:
-        return None
-    flags = table.column("deviated").to_pylist()
-    if all(f is None for f in flags):
-        return None
-    flagged = {
-        int(f) for f, d in zip(table.column("frame_index").to_pylist(), flags, strict=True) if d
-    }
-    return int(sum(int(f) in flagged for f in np.asarray(frames).tolist()))
-
-
-def with_deviation(
-    result: MetricResult, data: EvalData, frames: npt.NDArray[np.int64]
-) -> MetricResult:
-    """``result`` with ``deviated_frames`` (of the frames it was computed on) added when the run
-    is a log-backed closed loop: a score over frames whose ego left the logged one is a score
-    against a log that no longer describes what the ego would have met."""
-    n = deviated_frames(data, frames)
-    if n is None:
-        return result
-    return dataclasses.replace(
-        result,
-        values={**result.values, "deviated_frames": float(n)},
-        units={**result.units, "deviated_frames": "frames"},
-        higher_is_better={**result.higher_is_better, "deviated_frames": None},
-    )
 
 
 def driven_route(road: RoadIndex, points: F64) -> list[tuple[int, ...]]:

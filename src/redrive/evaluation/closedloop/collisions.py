@@ -27,8 +27,8 @@ from redrive.evaluation.closedloop._common import (
     road_index,
     scene,
     series,
-    with_deviation,
 )
+from redrive.evaluation.closedloop.deviation import with_deviation
 from redrive.types import Role
 
 __all__ = ["AtFaultCollisions", "TimeToCollision", "time_to_collision_series"]

@@ -18,8 +18,8 @@ from redrive.evaluation.closedloop._common import (
     EgoRun,
     ego_run,
     series,
-    with_deviation,
 )
+from redrive.evaluation.closedloop.deviation import with_deviation
 from redrive.evaluation.planning import COMFORT_BOUNDS
 from redrive.types import Role
 
@@ -145,9 +145,7 @@ def phase_unwrap(heading_rad: F64) -> F64:
     return np.asarray(heading_rad - two_pi * adjust, dtype=np.float64)
 
 
-def approximate_derivative(
-    y: F64, t_s: F64, *, window: int, order: int, deriv: int
-) -> F64:
+def approximate_derivative(y: F64, t_s: F64, *, window: int, order: int, deriv: int) -> F64:
     """nuPlan ``approximate_derivatives``: a Savitzky–Golay derivative with the window shrunk to
     the series, the sample spacing the *mean* time step."""
     window = min(window, len(t_s))

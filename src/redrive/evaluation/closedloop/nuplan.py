@@ -17,9 +17,9 @@ from redrive.evaluation.closedloop._common import (
     collision_score,
     find_collisions,
     scene,
-    with_deviation,
 )
 from redrive.evaluation.closedloop.collisions import TTC_DEFAULTS, time_to_collision_series
+from redrive.evaluation.closedloop.deviation import with_deviation
 from redrive.evaluation.closedloop.motion import (
     COMFORT_DEFAULTS,
     PROGRESS_DEFAULTS,

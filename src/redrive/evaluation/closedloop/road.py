@@ -20,15 +20,15 @@ from redrive.evaluation.closedloop._common import (
     ego_run,
     require_road,
     series,
-    with_deviation,
 )
+from redrive.evaluation.closedloop.deviation import with_deviation
 from redrive.types import Role
 
 __all__ = [
+    "SL_DEFAULTS",
     "DrivableAreaCompliance",
     "DrivingDirectionCompliance",
     "SpeedLimitCompliance",
-    "SL_DEFAULTS",
     "drivable_area_score",
     "driving_direction_score",
     "speed_limit_score",
@@ -208,9 +208,7 @@ class DrivingDirectionCompliance(Metric):
 SL_DEFAULTS: Mapping[str, Any] = MappingProxyType({**EGO_DEFAULTS, "max_overspeed_mps": 2.23})
 
 
-def speed_limit_score(
-    data: EvalData, params: Mapping[str, Any]
-) -> tuple[float, F64, F64, EgoRun]:
+def speed_limit_score(data: EvalData, params: Mapping[str, Any]) -> tuple[float, F64, F64, EgoRun]:
     """(score, per-frame overspeed m/s, per-frame limit m/s — NaN where none —, the ego) of
     :class:`SpeedLimitCompliance`."""
     road = require_road(data)
