@@ -254,15 +254,16 @@ def classify(
     ego_speed: float,
     ego_corners: F64,
     straddling: bool | None,
+    stopped_speed_mps: float = STOPPED_SPEED_MPS,
 ) -> tuple[str, bool]:
     """nuPlan's ``_get_collision_type`` and at-fault rule for object ``m`` touching the ego.
 
     ``straddling``: the ego is in multiple lanes or off the drivable area (None: no map, then a
     lateral collision is never at fault)."""
     obj_corners = corners(objs)[m]
-    if ego_speed <= STOPPED_SPEED_MPS:
+    if ego_speed <= stopped_speed_mps:
         return "stopped_ego", False
-    if float(speed_mps(objs)[m]) <= STOPPED_SPEED_MPS:
+    if float(speed_mps(objs)[m]) <= stopped_speed_mps:
         return "stopped_track", True
     if float(bearing_rad(ego_xy, ego_heading, objs.center_m[m : m + 1, :2])[0]) > BEHIND_ANGLE_RAD:
         return "active_rear", False
@@ -307,9 +308,12 @@ def scene(data: EvalData, params: Mapping[str, Any]) -> SceneData:
     return out
 
 
-def find_collisions(sc: SceneData) -> list[Collision]:
+def find_collisions(
+    sc: SceneData, *, stopped_speed_mps: float = STOPPED_SPEED_MPS
+) -> list[Collision]:
     """Every new contact of the ego footprint with a ground-truth box, classified (nuPlan's
-    ``_find_new_collisions``: a track collides once, later frames leave it out)."""
+    ``_find_new_collisions``: a track collides once, later frames leave it out; stopped below
+    ``stopped_speed_mps``, ``_get_collision_type``'s ``stopped_speed_threshold``)."""
     seen: set[int] = set()
     found: list[Collision] = []
     ego = sc.ego
@@ -331,6 +335,7 @@ def find_collisions(sc: SceneData) -> list[Collision]:
                 ego_speed=float(ego.speed_mps[i]),
                 ego_corners=sc.corners[i],
                 straddling=sc.straddling.get(frame),
+                stopped_speed_mps=stopped_speed_mps,
             )
             h = float(ego.heading_rad[i])
             ego_v = float(ego.speed_mps[i]) * np.array([math.cos(h), math.sin(h)])
@@ -386,6 +391,7 @@ COLLISION_DEFAULTS: Mapping[str, Any] = MappingProxyType(
         "max_violations_vru": 0,
         "max_violations_vehicle": 0,
         "max_violations_object": 1,
+        "stopped_speed_mps": STOPPED_SPEED_MPS,
     }
 )
 

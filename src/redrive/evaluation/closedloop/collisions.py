@@ -17,7 +17,6 @@ from redrive.evaluation.closedloop._common import (
     AHEAD_ANGLE_RAD,
     BEHIND_ANGLE_RAD,
     COLLISION_DEFAULTS,
-    EGO_DEFAULTS,
     Collision,
     bearing_rad,
     collision_params,
@@ -58,7 +57,7 @@ class AtFaultCollisions(Metric):
 
     def evaluate(self, data: EvalData) -> MetricResult:
         sc = scene(data, self.params)
-        found = find_collisions(sc)
+        found = find_collisions(sc, stopped_speed_mps=float(self.params["stopped_speed_mps"]))
         frames = sorted(sc.objects)
         new = {f: [c for c in found if c.frame == f] for f in frames}
         values = {
@@ -109,7 +108,11 @@ def time_to_collision_series(
     horizon or the ego stopped) and the object hit per frame with a finite TTC."""
     sc = scene(data, params)
     road = road_index(data)
-    found = find_collisions(sc) if collisions is None else list(collisions)
+    found = (
+        find_collisions(sc, stopped_speed_mps=float(params["stopped_speed_mps"]))
+        if collisions is None
+        else list(collisions)
+    )
     step, horizon = float(params["ttc_step_s"]), float(params["ttc_horizon_s"])
     times = np.arange(step, horizon, step)
     at_fault_frames = {c.frame for c in found if c.at_fault}
@@ -127,7 +130,7 @@ def time_to_collision_series(
             values.append(0.0)
             continue
         speed = float(ego.speed_mps[i])
-        if len(objs) == 0 or speed <= TTC_STOPPED_SPEED_MPS:
+        if len(objs) == 0 or speed <= float(params["ttc_stopped_speed_mps"]):
             values.append(math.inf)
             continue
         xy, h = ego.xy[i], float(ego.heading_rad[i])
@@ -159,7 +162,13 @@ def time_to_collision_series(
 
 
 TTC_DEFAULTS: Mapping[str, Any] = MappingProxyType(
-    {**EGO_DEFAULTS, "ttc_step_s": 0.1, "ttc_horizon_s": 3.0, "least_min_ttc_s": 0.95}
+    {
+        **COLLISION_DEFAULTS,
+        "ttc_step_s": 0.1,
+        "ttc_horizon_s": 3.0,
+        "least_min_ttc_s": 0.95,
+        "ttc_stopped_speed_mps": TTC_STOPPED_SPEED_MPS,
+    }
 )
 
 

@@ -131,7 +131,7 @@ class NuplanScenarioScore(Metric):
     def evaluate(self, data: EvalData) -> MetricResult:
         p = self.params
         sc = scene(data, p)
-        collisions = find_collisions(sc)
+        collisions = find_collisions(sc, stopped_speed_mps=float(p["stopped_speed_mps"]))
         ep, _, _, _, _ = progress_ratio(data, p)
         _, ttc_values, _ = time_to_collision_series(data, p, collisions)
         min_ttc = float(ttc_values.min()) if ttc_values.size else np.inf
