@@ -23,6 +23,7 @@ from redrive.evaluation._kinematics import (
     rectangles_overlap,
 )
 from redrive.evaluation.base import EvalData, MetricSkipped, Series
+from redrive.evaluation.closedloop.lanes import corners_in_common_or_connected_lanes
 from redrive.maps.index import RoadMapIndex
 from redrive.types import DetectedObject, ObjectClass, ObjectColumns, RoadMap, VehicleState
 
@@ -241,8 +242,9 @@ def classify(
 ) -> tuple[str, bool]:
     """nuPlan's ``_get_collision_type`` and at-fault rule for object ``m`` touching the ego.
 
-    ``straddling``: the ego is in multiple lanes or off the drivable area (None: no map, then a
-    lateral collision is never at fault)."""
+    ``straddling``: the ego's footprint is not in one common or connected lane (nuPlan's
+    ``classify_at_fault_collisions``: "in multiple lanes or nondrivable area"; None: no map,
+    then a lateral collision is never at fault)."""
     obj_corners = corners(objs)[m]
     if ego_speed <= stopped_speed_mps:
         return "stopped_ego", False
@@ -263,7 +265,10 @@ class SceneData:
     ego: EgoRun
     corners: F64
     objects: dict[int, ObjectColumns] = field(default_factory=dict)
+    #: nuPlan: the footprint is *not* in one common or connected lane (None: no map)
     straddling: dict[int, bool | None] = field(default_factory=dict)
+    #: NAVSIM: the ego is in multiple lanes or off the drivable area (None: no map)
+    multiple_lanes_or_off_road: dict[int, bool | None] = field(default_factory=dict)
 
 
 def scene(data: EvalData, params: Mapping[str, Any]) -> SceneData:
@@ -277,15 +282,19 @@ def scene(data: EvalData, params: Mapping[str, Any]) -> SceneData:
     road = road_index(data)
     corners = ego.corners(params)
     out = SceneData(ego=ego, corners=corners)
+    one_lane = None if road is None else corners_in_common_or_connected_lanes(road, corners)
     for i, frame in enumerate(ego.frames.tolist()):
         objs = truth.get(frame)
         if objs is None:
             continue
         out.objects[frame] = map_objects(objs, ego.xy[i], float(ego.heading_rad[i]))
-        out.straddling[frame] = (
-            None
-            if road is None
-            else road.in_multiple_lanes(corners[i]) or road.off_road(corners[i])
+        if road is None or one_lane is None:
+            out.straddling[frame] = None
+            out.multiple_lanes_or_off_road[frame] = None
+            continue
+        out.straddling[frame] = not bool(one_lane[i])
+        out.multiple_lanes_or_off_road[frame] = road.in_multiple_lanes(corners[i]) or road.off_road(
+            corners[i]
         )
     data._cache[key] = out
     return out
@@ -386,31 +395,3 @@ def collision_params(p: Mapping[str, Any]) -> dict[str, int]:
 
 def series(frames: Sequence[int] | npt.NDArray[np.int64], values: Sequence[float] | F64) -> Series:
     return np.asarray(frames, dtype=np.int64), np.asarray(values, dtype=np.float64)
-
-
-def driven_route(road: RoadIndex, points: F64) -> list[tuple[int, ...]]:
-    """nuPlan ``route_extractor.get_route``: per point (the ego centre of each state), the lanes
-    it is assigned to, as lane indices (empty: in none).
-
-    A point keeps the lanes of the previous point that still contain it; only when none does is
-    the map searched again (every lane containing it). Then ``remove_extra_lane_connectors``'
-    first rule: walking back from the end, a set of several lanes that holds all of the next
-    point's lanes is narrowed to those. Without a lane graph (no successors), a point that left
-    its single lane is searched again rather than looked for in the lane's successors, and the
-    lane-connector rules (the 5 m proximity and incoming-edge filters) do not apply: a lane is
-    a lane here.
-    """
-    inside = road.lanes_containing(points)  # (L, K)
-    route: list[tuple[int, ...]] = []
-    current: tuple[int, ...] = ()
-    for k in range(inside.shape[1]):
-        if current:
-            current = tuple(i for i in current if inside[i, k])
-        if not current:
-            current = tuple(int(i) for i in np.flatnonzero(inside[:, k]))
-        route.append(current)
-    for k in range(len(route) - 2, -1, -1):
-        here, after = route[k], route[k + 1]
-        if len(here) > 1 and len(here) > len(after) and all(i in here for i in after):
-            route[k] = after
-    return route

@@ -16,12 +16,12 @@ from redrive.evaluation.base import Bookmark, EvalData, Metric, MetricResult
 from redrive.evaluation.closedloop._common import (
     EGO_DEFAULTS,
     EgoRun,
-    driven_route,
     ego_run,
     require_road,
     series,
 )
 from redrive.evaluation.closedloop.deviation import with_deviation
+from redrive.evaluation.closedloop.lanes import driven_route, is_connector, lane_edges
 from redrive.types import Role
 
 __all__ = [
@@ -217,7 +217,15 @@ def speed_limit_score(data: EvalData, params: Mapping[str, Any]) -> tuple[float,
     limits = [lane.speed_limit_mps for lane in road.lanes]
     limit = np.full(len(ego), math.nan)
     for i, lanes in enumerate(route):
-        here = [limits[k] for k in lanes]
+        if not lanes:
+            continue
+        if is_connector(road, lanes[0]):  # a connector: its outgoing and incoming lanes' limits
+            edges = [
+                e for k in lanes for out in (True, False) for e in lane_edges(road, k, outgoing=out)
+            ]
+            here = [limits[e] for e in edges]
+        else:
+            here = [limits[k] for k in lanes]
         if here and all(here):  # the devkit's ``all(speed_limits)``: None or 0 is no limit
             limit[i] = float(max(v for v in here if v is not None))
     over = np.where(np.isnan(limit), 0.0, np.maximum(0.0, ego.speed_mps - np.nan_to_num(limit)))
@@ -233,9 +241,10 @@ def speed_limit_score(data: EvalData, params: Mapping[str, Any]) -> tuple[float,
 
 
 class SpeedLimitCompliance(Metric):
-    """nuPlan ``speed_limit_compliance``: the ego's speed above the limit of the lanes its centre
-    is assigned to (:func:`driven_route`; the highest of their limits — the devkit's rule for
-    lane connectors —; no lane, or a lane without a limit: no violation); score = max(0, 1 −
+    """nuPlan ``speed_limit_compliance``: the ego's speed above the limit of the lane its centre
+    is assigned to (:func:`~redrive.evaluation.closedloop.lanes.driven_route`; on lane
+    connectors the highest limit of their outgoing and incoming lanes; no lane, or a lane
+    without a limit: no violation); score = max(0, 1 −
     Σ overspeed·dt / (``max_overspeed_mps`` · duration)) with dt the mean step and duration
     last − first stamp, ``max_overspeed_mps`` 2.23 m/s; 1 without any violation.
 
