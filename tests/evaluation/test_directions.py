@@ -29,7 +29,7 @@ HIGHER_EXACT = {
 NEUTRAL_HEADS = {
     "frames", "num_frames", "num_objects", "num_predictions", "gt_objects", "detections",
     "matched", "deadline_ms", "expert_progress_m", "gt", "deviated_frames",
-    "acceleration_from_states",
+    "acceleration_from_states", "along_map_route",
 }  # fmt: skip
 LOWER = re.compile(
     r"rmse|mae|error|^m?a[tsova]e\b|^a[tsova]e/|^[af]de/|_ms\b|_ms/|miss|false_pos|switch|"

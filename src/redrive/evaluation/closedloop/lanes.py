@@ -10,6 +10,9 @@ without a graph (no successors, no roadblocks) the rules degrade to per-lane tes
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Any
+
 import numpy as np
 import numpy.typing as npt
 import shapely
@@ -22,6 +25,8 @@ __all__ = [
     "driven_route",
     "is_connector",
     "lane_edges",
+    "progress_along_route",
+    "route_roadblocks",
 ]
 
 F64 = npt.NDArray[np.float64]
@@ -201,3 +206,140 @@ def corners_in_common_or_connected_lanes(road: RoadMapIndex, corners: F64) -> np
     return np.array(
         [_common_or_connected(road, per) for per in corners_route(road, corners)], dtype=bool
     )
+
+
+@dataclass(slots=True)
+class _Block:
+    """``RouteBaselineRoadBlockPair``: a roadblock of the expert route and the baseline (the
+    centreline of the route's first lane in it)."""
+
+    polygon: Any
+    baseline: Any
+    next: _Block | None = None
+
+    def contains(self, xy: F64) -> bool:
+        return bool(shapely.contains_xy(self.polygon, float(xy[0]), float(xy[1])))
+
+
+def _project(line: Any, xy: F64) -> float:
+    """``get_distance_of_closest_baseline_point_to_its_start``."""
+    return float(shapely.line_locate_point(line, shapely.Point(float(xy[0]), float(xy[1]))))
+
+
+def _end(line: Any, *, last: bool) -> F64:
+    coords = shapely.get_coordinates(line)
+    return np.asarray(coords[-1 if last else 0], dtype=np.float64)
+
+
+def _positions(road: RoadMapIndex, lane_ids: tuple[str, ...]) -> list[int]:
+    out = []
+    for lane_id in lane_ids:
+        try:
+            out.append(road.lane_position(lane_id))
+        except KeyError:
+            continue  # a roadblock naming a lane the map does not hold
+    return out
+
+
+def route_roadblocks(road: RoadMapIndex, expert_points: F64) -> _Block | None:
+    """The expert route's roadblocks as nuPlan links them: ``get_route`` of the expert centres,
+    ``get_route_simplified`` (repeats dropped), then one block per change of the first lane's
+    roadblock (``get_route_baseline_roadblock_linkedlist``); None when the expert is in no lane.
+
+    A lane without a ``roadblock_id`` is its own roadblock."""
+    route = driven_route(road, expert_points)
+    simplified: list[tuple[int, ...]] = []
+    for objs in route:
+        if objs and (not simplified or not set(simplified[-1]) & set(objs)):
+            simplified.append(objs)
+    lanes = road.road_map.lanes
+    blocks = {b.roadblock_id: b for b in road.road_map.roadblocks}
+    head: _Block | None = None
+    tail: _Block | None = None
+    previous: str | None = None
+    for objs in simplified:
+        lane = lanes[objs[0]]
+        block_id = lane.roadblock_id if lane.roadblock_id is not None else f"lane:{lane.lane_id}"
+        if block_id == previous:
+            continue
+        previous = block_id
+        members = blocks[block_id].lane_ids if block_id in blocks else (lane.lane_id,)
+        polygon = shapely.union_all([road.lane_polygons[k] for k in _positions(road, members)])
+        block = _Block(polygon=polygon, baseline=shapely.LineString(lane.centerline))
+        if tail is None:
+            head = block
+        else:
+            tail.next = block
+        tail = block
+    return head
+
+
+class _ProgressAlongRoute:
+    """``PerFrameProgressAlongRouteComputer``: per pose, the progress since the previous pose
+    along the baselines of the route's roadblocks (including roadblocks skipped between two
+    poses); the first pose's is 0."""
+
+    def __init__(self, head: _Block) -> None:
+        self.curr = head
+        self.prev_distance = 0.0
+        self.next: _Block | None = None
+        self.skipped: _Block | None = None
+
+    def __call__(self, points: F64) -> F64:
+        self.prev_distance = _project(self.curr.baseline, points[0])
+        progress = [0.0]
+        for xy in points[1:]:
+            if self.curr.contains(xy):
+                distance = _project(self.curr.baseline, xy)
+                progress.append(distance - self.prev_distance)
+                self.prev_distance = distance
+            else:
+                progress.append(self._multi_block(xy))
+        return np.asarray(progress, dtype=np.float64)
+
+    def _multi_block(self, xy: F64) -> float:
+        skipped_progress = 0.0
+        self.next = self.curr.next
+        self.skipped = None
+        while self.next is not None:
+            if self.next.contains(xy):
+                return self._entering(xy, skipped_progress)
+            if self.next.next is None:
+                break
+            skipped_progress += self._skip()
+        return 0.0
+
+    def _skip(self) -> float:
+        assert self.next is not None
+        before = self.skipped if self.skipped is not None else self.curr
+        prev_last = _end(before.baseline, last=True)
+        self.skipped = self.next
+        skipped_start = _project(self.skipped.baseline, prev_last)
+        self.next = self.next.next
+        assert self.next is not None
+        next_first = _end(self.next.baseline, last=False)
+        return _project(self.skipped.baseline, next_first) - skipped_start
+
+    def _entering(self, xy: F64, skipped_progress: float) -> float:
+        assert self.next is not None
+        in_prev = float(self.curr.baseline.length) - self.prev_distance
+        prev_last = _end(self.curr.baseline, last=True)
+        self.curr = self.next
+        distance = _project(self.curr.baseline, xy)
+        in_new = distance - _project(self.curr.baseline, prev_last)
+        self.prev_distance = distance
+        return in_prev + in_new + skipped_progress
+
+
+def progress_along_route(
+    road: RoadMapIndex, *, expert_points: F64, ego_points: F64
+) -> tuple[F64, F64] | None:
+    """Per-pose progress (m) of the ego and of the expert along the expert route's roadblocks
+    (nuPlan ``EgoProgressAlongExpertRouteStatistics.compute``); None when the expert is in no
+    lane (nuPlan then scores the ratio 1)."""
+    head = route_roadblocks(road, expert_points)
+    if head is None:
+        return None
+    ego = _ProgressAlongRoute(head)(np.asarray(ego_points, dtype=np.float64).reshape(-1, 2))
+    expert = _ProgressAlongRoute(head)(np.asarray(expert_points, dtype=np.float64).reshape(-1, 2))
+    return ego, expert

@@ -3,6 +3,7 @@ see ``docs/metrics.md``)."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from types import MappingProxyType
 from typing import Any, ClassVar
@@ -17,9 +18,11 @@ from redrive.evaluation.closedloop._common import (
     EGO_DEFAULTS,
     EgoRun,
     ego_run,
+    road_index,
     series,
 )
 from redrive.evaluation.closedloop.deviation import with_deviation
+from redrive.evaluation.closedloop.lanes import progress_along_route
 from redrive.evaluation.planning import COMFORT_BOUNDS
 from redrive.types import Role
 
@@ -45,38 +48,58 @@ PROGRESS_DEFAULTS: Mapping[str, Any] = MappingProxyType(
 def progress_ratio(
     data: EvalData, params: Mapping[str, Any]
 ) -> tuple[float, float, float, F64, F64]:
-    """(ratio, ego progress m, expert progress m, frames, ego arc length along the route m).
+    """(ratio, ego progress m, expert progress m, frames, ego progress so far per frame m):
+    nuPlan ``EgoProgressAlongExpertRouteStatistics.compute``.
 
-    The route is the logged ego's path (``logged_ego``; in open loop the ego itself); progress
-    is the arc length of the last footprint centre minus that of the first, projected on it.
-    nuPlan's ratio: 0 when the ego went back more than the threshold, else
-    min(1, max(ego, thr) / max(expert, thr)), ``score_progress_threshold_m`` = 2 m.
+    The expert is the logged ego (``logged_ego``; in open loop the ego itself). With a road
+    map, both footprint centres' progress is measured along the baselines of the expert
+    route's roadblocks (:func:`~redrive.evaluation.closedloop.lanes.progress_along_route`); an
+    expert in no lane scores the ratio 1 (ego progress NaN, expert 0), as nuPlan does. Without a
+    map the route is the expert's own path and progress the arc length of the last centre minus
+    the first's, projected on it. nuPlan's ratio: 0 when the ego went back more than
+    ``score_progress_threshold_m`` (2 m), else min(1, max(ego, thr) / max(expert, thr)).
     """
     ego = ego_run(data)
     logged = data.logged_ego()
     expert = EgoRun.of(logged) if logged else ego
-    route = expert.centres(params)
-    keep = np.concatenate([[True], np.hypot(*np.diff(route, axis=0).T) > 1e-6])
-    route = route[keep]
-    expert_m = float(np.hypot(*np.diff(route, axis=0).T).sum())
-    arc, _, _ = project_on_polyline(ego.centres(params), route)
-    ego_m = float(arc[-1] - arc[0])
     thr = float(params["score_progress_threshold_m"])
+    frames = ego.frames.astype(np.float64)
+    road = road_index(data)
+    if road is not None:
+        along = progress_along_route(
+            road, expert_points=expert.centres(params), ego_points=ego.centres(params)
+        )
+        if along is None:
+            return 1.0, math.nan, 0.0, frames, np.full(len(ego), math.nan)
+        ego_steps, expert_steps = along
+        ego_m, expert_m = float(ego_steps.sum()), float(expert_steps.sum())
+        arc = np.cumsum(ego_steps)
+    else:
+        route = expert.centres(params)
+        keep = np.concatenate([[True], np.hypot(*np.diff(route, axis=0).T) > 1e-6])
+        route = route[keep]
+        expert_m = float(np.hypot(*np.diff(route, axis=0).T).sum())
+        arc, _, _ = project_on_polyline(ego.centres(params), route)
+        ego_m = float(arc[-1] - arc[0])
+        arc = arc - arc[0]
     ratio = 0.0 if ego_m < -thr else min(1.0, max(ego_m, thr) / max(expert_m, thr))
-    return ratio, ego_m, expert_m, ego.frames.astype(np.float64), arc - arc[0]
+    return ratio, ego_m, expert_m, frames, np.asarray(arc, dtype=np.float64)
 
 
 class EgoProgress(Metric):
-    """nuPlan ``ego_progress_along_expert_route``: how far the ego got along the logged route
-    compared with the logged ego (the expert).
+    """nuPlan ``ego_progress_along_expert_route``: how far the ego got along the expert's route
+    (its roadblocks on the road map; without a map, its path) compared with the logged ego (the
+    expert), :func:`progress_ratio`.
 
     Values: ``ego_progress_ratio`` (headline, [0, 1]), ``ego_progress_m``,
     ``expert_progress_m``, ``making_progress`` (nuPlan ``ego_is_making_progress``: ratio at least
-    ``min_progress_ratio`` 0.2). Per frame ``progress_m`` (arc length along the route).
+    ``min_progress_ratio`` 0.2), ``along_map_route`` (1: along the map's roadblocks, 0: along
+    the expert's path), in a closed loop with a logged ego ``deviated_frames``. Per frame
+    ``progress_m`` (the progress so far).
     """
 
     name: ClassVar[str] = "ego_progress"
-    version: ClassVar[str] = "1"
+    version: ClassVar[str] = "2"
     role: ClassVar[Role | None] = None
     needs: ClassVar[frozenset[str]] = frozenset({"ego"})
     unit: ClassVar[str] = "ratio"
@@ -87,15 +110,23 @@ class EgoProgress(Metric):
 
     def evaluate(self, data: EvalData) -> MetricResult:
         ratio, ego_m, expert_m, frames, arc = progress_ratio(data, self.params)
+        along_map = float(road_index(data) is not None)
         result = MetricResult(
             values={
                 "ego_progress_ratio": ratio,
                 "ego_progress_m": ego_m,
                 "expert_progress_m": expert_m,
                 "making_progress": float(ratio >= float(self.params["min_progress_ratio"])),
+                "along_map_route": along_map,
             },
-            units={"ego_progress_m": "m", "expert_progress_m": "m", "making_progress": "score"},
-            higher_is_better={"expert_progress_m": None},  # the logged ego's: the reference
+            units={
+                "ego_progress_m": "m",
+                "expert_progress_m": "m",
+                "making_progress": "score",
+                "along_map_route": "flag",
+            },
+            # the logged ego's: the reference; the flag says how progress was measured
+            higher_is_better={"expert_progress_m": None, "along_map_route": None},
             per_frame={"progress_m": series(frames.astype(np.int64), arc)},
         )
         return with_deviation(result, data, frames.astype(np.int64))
