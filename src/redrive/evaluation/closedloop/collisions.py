@@ -39,8 +39,11 @@ TTC_STOPPED_SPEED_MPS = 5e-3
 class AtFaultCollisions(Metric):
     """nuPlan ``no_ego_at_fault_collisions``: contacts of the ego footprint with ground-truth
     boxes, split into stopped_ego, stopped_track, active_front, active_rear, active_lateral;
-    at fault: active_front, stopped_track, and active_lateral while the ego straddles lanes or
-    leaves the drivable area (needs the map; without one a lateral collision is never at fault).
+    at fault: active_front, stopped_track, and active_lateral while the footprint is not in one
+    common or connected lane (nuPlan's "in multiple lanes or nondrivable area", on the map's lane
+    graph: :mod:`redrive.evaluation.closedloop.lanes`; without a map a lateral collision is
+    never at fault). Score thresholds ``max_violations_vru`` 0, ``max_violations_vehicle`` 0,
+    ``max_violations_object`` 1; stopped below ``stopped_speed_mps`` 0.05 m/s.
 
     Values: ``no_at_fault_collisions`` (headline: nuPlan's score, 1, 0.5 or 0),
     ``at_fault_collisions``, ``collisions`` and one count per kind. Per frame:
