@@ -1,5 +1,5 @@
 """Lanelet2 maps (OSM XML) as a :class:`~redrive.types.RoadMap`, read through the ``lanelet2``
-wheel (``pip install 'redrive[maps]'``).
+wheel (a dependency of redrive).
 
 The map is loaded with ``lanelet2.io.loadRobust`` and a ``UtmProjector``: x, y are metres east and
 north of the projection origin (a transverse-Mercator projection about it, the Lanelet2
@@ -62,7 +62,7 @@ __all__ = ["first_node", "read_lanelet2_map"]
 F64 = npt.NDArray[np.float64]
 _EDGE_TYPES = frozenset({"curbstone", "road_border", "guard_rail", "wall", "fence"})
 _AREA_KINDS = {"parking": "carpark", "freespace": "freespace"}
-_INSTALL = "install the Lanelet2 wheel: pip install 'redrive[maps]' (or pip install lanelet2)"
+_INSTALL = "install the Lanelet2 wheel: pip install lanelet2 (redrive depends on it)"
 
 
 def _attr(attributes: Any, key: str, default: str) -> str:
