@@ -26,6 +26,7 @@ import numpy as np
 import numpy.typing as npt
 import shapely
 
+from redrive.maps._edges import SegmentDistance
 from redrive.types import MapLane, RoadMap
 
 __all__ = ["DEFAULT_LANE_CHANGE_COST_M", "DEFAULT_MAX_HEADING_DIFF_RAD", "RoadMapIndex"]
@@ -88,7 +89,7 @@ class RoadMapIndex:
         self._junctions: Any = shapely.union_all(junctions) if junctions else None
         if self._junctions is not None:
             shapely.prepare(self._junctions)
-        self._edge_tree = shapely.STRtree(_edge_segments(self.drivable))
+        self._edge = SegmentDistance(_edge_segments(self.drivable))
         self._build_centrelines(lanes)
 
     def _build_centrelines(self, lanes: Sequence[MapLane]) -> None:
@@ -244,15 +245,7 @@ class RoadMapIndex:
     def distance_to_road_edge_m(self, xy: npt.ArrayLike) -> F64:
         """(N,) distance of each point to the road edge (the drivable area's boundary), m, ≥ 0
         on either side of it (:meth:`on_drivable_area` tells the side); inf without a road."""
-        p = _points(xy)
-        out = np.full(p.shape[0], math.inf)
-        if len(self._edge_tree) == 0:
-            return out
-        idx, dist = self._edge_tree.query_nearest(
-            shapely.points(p), return_distance=True, all_matches=False
-        )
-        out[idx[0]] = dist
-        return out
+        return self._edge(_points(xy))
 
     def in_intersection(self, xy: npt.ArrayLike) -> npt.NDArray[np.bool_]:
         """(N,) each point lies in an intersection (an :class:`Intersection` or a drivable area
@@ -311,16 +304,14 @@ class RoadMapIndex:
         return ()
 
 
-def _edge_segments(area: Any) -> list[Any]:
-    """The boundary of ``area`` as two-point line strings (the road-edge tree's items)."""
-    out: list[Any] = []
+def _edge_segments(area: Any) -> F64:
+    """The boundary of ``area`` as (M, 2, 2) segments (start, end)."""
     boundary = shapely.boundary(area)
     if boundary is None or shapely.is_empty(boundary):
-        return out
+        return np.zeros((0, 2, 2))
+    pieces = []
     for part in shapely.get_parts(boundary):
         coords = shapely.get_coordinates(part)
-        if coords.shape[0] < 2:
-            continue
-        pairs = np.stack([coords[:-1], coords[1:]], axis=1)
-        out.extend(shapely.linestrings(pairs).tolist())
-    return out
+        if coords.shape[0] >= 2:
+            pieces.append(np.stack([coords[:-1], coords[1:]], axis=1))
+    return np.concatenate(pieces) if pieces else np.zeros((0, 2, 2))
