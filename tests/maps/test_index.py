@@ -125,3 +125,18 @@ def test_empty_map() -> None:
     assert index.lane_of_pose([[0.0, 0.0]], [0.0]) == [None]
     assert not index.on_drivable_area([[0.0, 0.0]])[0]
     assert index.distance_to_road_edge_m([[0.0, 0.0]])[0] == math.inf
+
+
+def test_segment_distance_is_exact_against_shapely() -> None:
+    from redrive.maps._edges import SegmentDistance
+
+    rng = np.random.default_rng(3)
+    starts = rng.uniform(-50, 50, (300, 2))
+    ends = starts + rng.normal(0, 8, (300, 2))
+    ends[:10] = starts[:10]  # zero-length segments count as points
+    segments = np.stack([starts, ends], axis=1)
+    pts = rng.uniform(-80, 80, (500, 2))
+    got = SegmentDistance(segments, spacing_m=3.0)(pts)
+    lines = shapely.multilinestrings(list(segments[10:])).union(shapely.multipoints(starts[:10]))
+    np.testing.assert_allclose(got, shapely.distance(lines, shapely.points(pts)), atol=1e-9)
+    assert SegmentDistance(np.zeros((0, 2, 2)))(pts[:3]).tolist() == [math.inf] * 3
