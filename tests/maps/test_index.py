@@ -140,3 +140,19 @@ def test_segment_distance_is_exact_against_shapely() -> None:
     lines = shapely.multilinestrings(list(segments[10:])).union(shapely.multipoints(starts[:10]))
     np.testing.assert_allclose(got, shapely.distance(lines, shapely.points(pts)), atol=1e-9)
     assert SegmentDistance(np.zeros((0, 2, 2)))(pts[:3]).tolist() == [math.inf] * 3
+
+
+def test_bike_lanes_are_lanes_but_not_drivable() -> None:
+    car = MapLane(lane_id="car", centerline=[[0.0, 0.0], [20.0, 0.0]], width_m=3.0)
+    bike = MapLane(lane_id="bike", centerline=[[0.0, 2.5], [20.0, 2.5]], width_m=2.0, kind="bike")
+    road = RoadMap(lanes=(car, bike))
+    every = RoadMapIndex(road)
+    cars = RoadMapIndex(road, lane_kinds={"vehicle", "bus"})
+    on_bike = [[10.0, 2.8]]
+    assert every.lanes_at(on_bike) == [("bike",)]
+    assert cars.lanes_at(on_bike) == [()]
+    assert cars.lane_of_pose(on_bike, [0.0]) == [None]
+    assert every.lane_of_pose(on_bike, [0.0]) == ["bike"]
+    assert not every.on_drivable_area(on_bike)[0]  # the drivable area is the cars' road
+    assert every.distance_outside_drivable_m(on_bike)[0] == pytest.approx(1.3)
+    assert every.distance_to_road_edge_m([[10.0, 0.0]])[0] == pytest.approx(1.5)

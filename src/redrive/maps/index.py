@@ -10,8 +10,9 @@ Geometry (the map frame, metres):
 - a lane's polygon lies between its boundaries (:meth:`MapLane.boundaries
   <redrive.types.MapLane.boundaries>`); a lane without boundaries is its centreline widened by
   ``width_m / 2`` either side with flat ends (as the closed-loop metrics always measured it);
-- the drivable area is the union of the lane polygons and the map's :class:`DrivableArea`
-  polygons; the road edge is the boundary of that union;
+- the drivable area is the union of the polygons of the lanes cars may use
+  (:data:`DRIVABLE_LANE_KINDS`: not bicycle lanes) and the map's :class:`DrivableArea` polygons;
+  the road edge is the boundary of that union;
 - "on" counts the boundary as inside (a point on a lane's edge is in the lane).
 """
 
@@ -19,7 +20,7 @@ from __future__ import annotations
 
 import heapq
 import math
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from typing import Any
 
 import numpy as np
@@ -29,7 +30,13 @@ import shapely
 from redrive.maps._edges import SegmentDistance
 from redrive.types import MapLane, RoadMap
 
-__all__ = ["DEFAULT_LANE_CHANGE_COST_M", "DEFAULT_MAX_HEADING_DIFF_RAD", "RoadMapIndex"]
+__all__ = [
+    "DEFAULT_LANE_CHANGE_COST_M",
+    "DEFAULT_MAX_HEADING_DIFF_RAD",
+    "DRIVABLE_LANE_KINDS",
+    "RoadMapIndex",
+    "lane_polygon",
+]
 
 F64 = npt.NDArray[np.float64]
 #: :meth:`RoadMapIndex.lane_of_pose`: a lane whose direction differs from the pose's heading by
@@ -38,6 +45,9 @@ DEFAULT_MAX_HEADING_DIFF_RAD = math.pi / 2.0
 #: :meth:`RoadMapIndex.route`: the cost of one lane change, metres of driving (so that of two
 #: routes of equal length the one with fewer lane changes wins).
 DEFAULT_LANE_CHANGE_COST_M = 5.0
+#: the lane kinds that are part of the drivable area (cars may drive there: nuPlan's and
+#: NAVSIM's drivable area is roads, not bicycle lanes)
+DRIVABLE_LANE_KINDS = frozenset({"vehicle", "bus"})
 
 
 def lane_polygon(lane: MapLane) -> Any:
@@ -67,21 +77,36 @@ def _points(xy: npt.ArrayLike) -> F64:
 class RoadMapIndex:
     """Spatial queries on one :class:`RoadMap`, vectorised over N points (see the module doc).
 
+    Args:
+        lane_kinds: the kinds of lane the lane queries (:meth:`lanes_at`, :meth:`lane_hits`,
+            :meth:`lane_of_pose`) consider; None: every lane.  The drivable area is always the
+            lanes of :data:`DRIVABLE_LANE_KINDS` and the map's drivable areas.
+
     Attributes:
         road_map: the map.
         lane_polygons: shapely polygons, one per lane of ``road_map.lanes`` (same order).
         drivable: the drivable area (a shapely (multi)polygon, prepared).
     """
 
-    def __init__(self, road_map: RoadMap) -> None:
+    def __init__(self, road_map: RoadMap, *, lane_kinds: Collection[str] | None = None) -> None:
         self.road_map = road_map
         lanes = road_map.lanes
         self._lane_pos = {lane.lane_id: i for i, lane in enumerate(lanes)}
         self.lane_polygons: tuple[Any, ...] = tuple(lane_polygon(lane) for lane in lanes)
         areas = [shapely.make_valid(shapely.Polygon(a.polygon)) for a in road_map.areas]
         self._lane_tree = shapely.STRtree(list(self.lane_polygons))
-        self._drivable_tree = shapely.STRtree([*self.lane_polygons, *areas])
-        self.drivable: Any = shapely.union_all([*self.lane_polygons, *areas])
+        self._considered = (
+            None
+            if lane_kinds is None
+            else np.array([lane.kind in lane_kinds for lane in lanes], dtype=bool)
+        )
+        roads = [
+            p
+            for p, lane in zip(self.lane_polygons, lanes, strict=True)
+            if lane.kind in DRIVABLE_LANE_KINDS
+        ]
+        self._drivable_tree = shapely.STRtree([*roads, *areas])
+        self.drivable: Any = shapely.union_all([*roads, *areas])
         shapely.prepare(self.drivable)
         junctions = [shapely.Polygon(i.polygon) for i in road_map.intersections] + [
             p for p, a in zip(areas, road_map.areas, strict=True) if a.kind == "intersection"
@@ -133,9 +158,12 @@ class RoadMapIndex:
 
     def lane_hits(self, xy: npt.ArrayLike) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
         """Every (point, lane) pair where lane holds point: the point indices into ``xy`` and
-        the lane positions in ``road_map.lanes``, sorted by point then lane."""
+        the lane positions in ``road_map.lanes``, sorted by point then lane (the lanes of the
+        index's ``lane_kinds``)."""
         p = _points(xy)
         pairs = self._lane_tree.query(shapely.points(p), predicate="intersects")
+        if self._considered is not None:
+            pairs = pairs[:, self._considered[pairs[1]]]
         order = np.lexsort((pairs[1], pairs[0]))
         return pairs[0][order].astype(np.int64), pairs[1][order].astype(np.int64)
 
@@ -187,9 +215,9 @@ class RoadMapIndex:
         *,
         max_heading_diff_rad: float = DEFAULT_MAX_HEADING_DIFF_RAD,
     ) -> list[str | None]:
-        """For each pose: the lane that holds its point and runs within
-        less than ``max_heading_diff_rad`` from its heading, the one whose centreline is nearest when several
-        do (then the smaller heading difference); None when no lane does."""
+        """For each pose: the lane that holds its point and runs less than
+        ``max_heading_diff_rad`` from its heading, the one whose centreline is nearest when
+        several do (then the smaller heading difference); None when no lane does."""
         p = _points(xy)
         yaw = np.broadcast_to(np.asarray(yaw_rad, dtype=np.float64), (p.shape[0],))
         which, lane = self.lane_hits(p)
@@ -212,7 +240,8 @@ class RoadMapIndex:
     # ---- the drivable area -----------------------------------------------------------------
 
     def on_drivable_area(self, xy: npt.ArrayLike) -> npt.NDArray[np.bool_]:
-        """(N,) each point lies on a lane or a drivable area (its boundary included)."""
+        """(N,) each point lies on a lane of :data:`DRIVABLE_LANE_KINDS` or a drivable area
+        (its boundary included)."""
         p = _points(xy)
         hits = self._drivable_tree.query(shapely.points(p), predicate="intersects")
         out = np.zeros(p.shape[0], dtype=bool)
