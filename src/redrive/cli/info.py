@@ -11,10 +11,8 @@ from pathlib import Path
 from typing import Any
 
 from redrive.assembly.summary import LogSummary, summarize_log
-from redrive.cli.info_map import run_map_info
 from redrive.errors import LogDamagedError
 from redrive.io import open_log
-from redrive.maps.files import map_format
 
 __all__ = ["EXIT_DAMAGED", "damage_lines", "register"]
 
@@ -143,8 +141,12 @@ def _advice(summary: LogSummary) -> str:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from redrive.maps.files import map_format  # maps (shapely, scipy): only for `info`
+
     fmt = map_format(args.log)
     if fmt is not None:
+        from redrive.cli.info_map import run_map_info
+
         return run_map_info(args, fmt)
     io_logger = logging.getLogger("redrive.io")
     level = io_logger.level

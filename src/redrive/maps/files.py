@@ -15,9 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from redrive.errors import ConfigError, MapError
-from redrive.maps.av2 import read_av2_map
 from redrive.maps.document import road_map_from_json
-from redrive.maps.lanelet2_osm import read_lanelet2_map
 from redrive.types import RoadMap
 
 __all__ = ["MAP_FORMATS", "MapSummary", "map_format", "read_map_file", "summarize_map"]
@@ -65,8 +63,12 @@ def read_map_file(
     file = Path(path)
     fmt = map_format(file)
     if fmt == "lanelet2":
+        from redrive.maps.lanelet2_osm import read_lanelet2_map
+
         return read_lanelet2_map(file, origin_lat_lon=origin_lat_lon)
     if fmt == "av2":
+        from redrive.maps.av2 import read_av2_map  # shapely: imported when a map is read
+
         return read_av2_map(file)
     if fmt == "redrive":
         try:
