@@ -186,13 +186,14 @@ class _Reader:
             self.lanes[lane_id] = lane
             self.group[lane_id] = group
 
-    def lanes_holding(self, element_id: int) -> tuple[str, ...]:
-        out = []
+    def lanes_by_element(self) -> dict[int, tuple[str, ...]]:
+        """Regulatory element id → the lanes whose lanelet holds it (one pass over the lanes)."""
+        out: dict[int, list[str]] = {}
         for lane_id in self.lanes:
             lanelet = self.map.laneletLayer[int(lane_id.split(":")[0])]
-            if any(r.id == element_id for r in lanelet.regulatoryElements):
-                out.append(lane_id)
-        return tuple(out)
+            for element in lanelet.regulatoryElements:
+                out.setdefault(element.id, []).append(lane_id)
+        return {k: tuple(v) for k, v in out.items()}
 
     def stop_line(self, line: Any, lane_ids: tuple[str, ...]) -> str:
         stop_id = str(line.id)
@@ -208,14 +209,11 @@ class _Reader:
         for line in self.map.lineStringLayer:
             if "type" in line.attributes and line.attributes["type"] == "stop_line":
                 self.stop_line(line, ())
+        holding = self.lanes_by_element()
         for element in self.map.regulatoryElementLayer:
             params = element.parameters
             refs = list(params["ref_line"]) if "ref_line" in params else []
-            lanes = (
-                self.lanes_holding(element.id)
-                if refs or type(element).__name__ == "TrafficLight"
-                else ()
-            )
+            lanes = holding.get(element.id, ())
             stop_ids = [self.stop_line(ref, lanes) for ref in refs if len(ref) >= 2]
             if type(element).__name__ != "TrafficLight":
                 continue
