@@ -102,6 +102,23 @@ def test_route_along_successors_and_lane_changes() -> None:
         index.route("ghost", "west_in_0")
     highway = RoadMapIndex(road_map(build_network(HighwayLayout())))
     assert highway.route("entry:f2", "exit:f2") == ("entry:f2", "curve:f2", "exit:f2")
+    assert highway.route("entry:f2", "entry:f0") == ("entry:f2", "entry:f1", "entry:f0")
+
+
+def test_route_does_not_change_lanes_across_a_solid_line() -> None:
+    def lane(lane_id: str, y: float, **kw: object) -> MapLane:
+        return MapLane(lane_id=lane_id, centerline=[[0.0, y], [50.0, y]], width_m=3.5, **kw)  # type: ignore[arg-type]
+
+    road = RoadMap(
+        lanes=(
+            lane("a", 0.0, left_neighbor="b", left_boundary_type="solid"),
+            lane("b", 3.5, right_neighbor="a", right_boundary_type="dashed"),
+        )
+    )
+    index = RoadMapIndex(road)
+    assert index.route("a", "b") == ()  # a's left line is solid
+    assert index.route("a", "b", cross_solid=True) == ("a", "b")
+    assert index.route("b", "a") == ("b", "a")  # b's right line is dashed
 
 
 def test_lane_with_boundaries_is_the_polygon_between_them() -> None:

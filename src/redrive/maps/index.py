@@ -48,6 +48,8 @@ DEFAULT_LANE_CHANGE_COST_M = 5.0
 #: the lane kinds that are part of the drivable area (cars may drive there: nuPlan's and
 #: NAVSIM's drivable area is roads, not bicycle lanes)
 DRIVABLE_LANE_KINDS = frozenset({"vehicle", "bus"})
+#: boundary types a lane change of :meth:`RoadMapIndex.route` does not cross
+_UNCROSSABLE = frozenset({"solid", "road_edge"})
 
 
 def lane_polygon(lane: MapLane) -> Any:
@@ -292,12 +294,15 @@ class RoadMapIndex:
         goal_lane_id: str,
         *,
         lane_change_cost_m: float = DEFAULT_LANE_CHANGE_COST_M,
+        cross_solid: bool = False,
     ) -> tuple[str, ...]:
         """The cheapest chain of lanes from ``start_lane_id`` to ``goal_lane_id`` (both
         included) along successors and left/right neighbours; () when the goal cannot be reached.
 
         Driving on to a successor costs the length of the lane left; a lane change costs
-        ``lane_change_cost_m``.  Raises KeyError for an id that is not a lane of the map.
+        ``lane_change_cost_m`` and crosses the boundary on that side, which must not be
+        ``solid`` or a ``road_edge`` unless ``cross_solid``.  Raises KeyError for an id that is
+        not a lane of the map.
         """
         for lane_id in (start_lane_id, goal_lane_id):
             if lane_id not in self._lane_pos:
@@ -320,8 +325,11 @@ class RoadMapIndex:
             lane = road.lane(lane_id)
             steps = [(s, lane.length_m) for s in lane.successors] + [
                 (n, lane_change_cost_m)
-                for n in (lane.left_neighbor, lane.right_neighbor)
-                if n is not None
+                for n, kind in (
+                    (lane.left_neighbor, lane.left_boundary_type),
+                    (lane.right_neighbor, lane.right_boundary_type),
+                )
+                if n is not None and (cross_solid or kind not in _UNCROSSABLE)
             ]
             for nxt, step in steps:
                 new = cost + step
