@@ -18,6 +18,7 @@ __all__ = [
     "LogError",
     "LogTruncatedError",
     "MapError",
+    "MissingInputError",
     "PluginError",
     "RedriveError",
     "SimulationError",
@@ -106,6 +107,10 @@ class ConfigError(RedriveError):
 class MapError(RedriveError):
     """A map file (Lanelet2 OSM, Argoverse 2 vector map …) cannot be read, or one of its
     elements is not valid (the message names the file and the element)."""
+
+
+class MissingInputError(ConfigError):
+    """An algorithm declares an input (a sensor, the ego state, ground truth) the log lacks."""
 
 
 class PluginError(RedriveError):
