@@ -61,9 +61,10 @@ def test_the_map_holds_its_lanes_lights_and_crossings(road: RoadMap) -> None:
 
 def test_lanes_are_the_lanelets_bounds_and_centreline(osm: Path, road: RoadMap) -> None:
     ll_map = _lanelet2_map(osm)
+    by_id = {lane.lane_id: lane for lane in road.lanes}
     for lanelet in list(ll_map.laneletLayer)[:40]:  # type: ignore[attr-defined]
         lane_id = str(lanelet.id)
-        if lane_id not in {lane.lane_id for lane in road.lanes}:
+        if lane_id not in by_id:
             continue
         lane = road.lane(lane_id)
         left = np.array([[p.x, p.y] for p in lanelet.leftBound])
@@ -71,7 +72,7 @@ def test_lanes_are_the_lanelets_bounds_and_centreline(osm: Path, road: RoadMap) 
         assert lane.left_boundary is not None
         np.testing.assert_allclose(lane.left_boundary, left)
         np.testing.assert_allclose(lane.centerline, centre)
-        inv = road._lane_by_id.get(f"{lane_id}:inv")
+        inv = by_id.get(f"{lane_id}:inv")
         if inv is not None:  # the other direction runs the other way between swapped bounds
             assert inv.right_boundary is not None
             np.testing.assert_allclose(inv.right_boundary, left[::-1])
