@@ -18,7 +18,7 @@ What becomes what:
 - successors, predecessors, neighbours as the file gives them, except references to lane
   segments outside this (cropped) map and neighbours that run the other way (AV2 neighbours may
   be opposing lanes; the model's are of the same direction of travel), which are dropped;
-- roadblocks: rows of mutually neighbouring lanes (:func:`redrive.maps._graph.group_roadblocks`);
+- roadblocks: rows of mutually neighbouring lanes (:func:`redrive.maps.graph.group_roadblocks`);
 - intersections: the lanes with ``is_intersection``, grouped where their polygons touch, each
   group an :class:`~redrive.types.Intersection` (``intersection:<k>``) with the union's outline;
 - drivable areas (kind ``drivable``) and pedestrian crossings (the polygon of their two edges,
@@ -37,7 +37,7 @@ import numpy.typing as npt
 import shapely
 
 from redrive.errors import MapError
-from redrive.maps._graph import drop_dangling, group_roadblocks
+from redrive.maps.graph import drop_dangling, group_roadblocks
 from redrive.maps.index import lane_polygon
 from redrive.types import Crosswalk, DrivableArea, Intersection, MapLane, RoadMap
 

@@ -19,7 +19,7 @@ its traffic rules and routing graph, ``lanelet2_traffic_rules``, ``lanelet2_rout
 - successors, predecessors and neighbours come from the routing graph of that participant
   (``following``, ``previous``, ``left`` / ``adjacentLeft``, ``right`` / ``adjacentRight``);
   roadblocks are the rows of mutually neighbouring lanes, id ``"rb:<lane id>"`` of their
-  leftmost lane (:func:`redrive.maps._graph.group_roadblocks`);
+  leftmost lane (:func:`redrive.maps.graph.group_roadblocks`);
 - speed limits are the traffic rules' ``speedLimit`` (km/h in the Python API, m/s here);
 - boundary types: ``line_thin`` / ``line_thick`` ``dashed`` → dashed, ``solid`` and
   ``solid_solid`` → solid, ``solid_dashed`` / ``dashed_solid`` → the half on the lane's side;
@@ -47,7 +47,7 @@ import numpy as np
 import numpy.typing as npt
 
 from redrive.errors import MapError
-from redrive.maps._graph import group_roadblocks
+from redrive.maps.graph import group_roadblocks
 from redrive.types import (
     Crosswalk,
     DrivableArea,

@@ -1,5 +1,6 @@
-"""What the map readers share: roadblocks from the lane neighbours, references into a cropped
-map dropped, points as float64 arrays."""
+"""What the map readers share when they build a :class:`~redrive.types.RoadMap`: references
+into a cropped map dropped (:func:`drop_dangling`), roadblocks from the lane neighbours for a
+format that has none (:func:`group_roadblocks`)."""
 
 from __future__ import annotations
 
