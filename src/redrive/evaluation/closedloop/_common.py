@@ -24,7 +24,7 @@ from redrive.evaluation._kinematics import (
 )
 from redrive.evaluation.base import EvalData, MetricSkipped, Series
 from redrive.evaluation.closedloop.lanes import corners_in_common_or_connected_lanes
-from redrive.maps.index import RoadMapIndex
+from redrive.maps.index import DRIVABLE_LANE_KINDS, RoadMapIndex
 from redrive.types import DetectedObject, ObjectClass, ObjectColumns, RoadMap, VehicleState
 
 F64 = npt.NDArray[np.float64]
@@ -158,10 +158,12 @@ def bearing_rad(ego_xy: F64, ego_heading: float, points: F64) -> F64:
 
 class RoadIndex(RoadMapIndex):
     """The metrics' questions to a :class:`RoadMap`, answered by its indexed queries
-    (:class:`~redrive.maps.index.RoadMapIndex`, built once per evaluation)."""
+    (:class:`~redrive.maps.index.RoadMapIndex`, built once per evaluation) over the lanes cars
+    drive in (:data:`~redrive.maps.index.DRIVABLE_LANE_KINDS`: nuPlan's lanes, not bicycle
+    lanes)."""
 
     def __init__(self, road_map: RoadMap) -> None:
-        super().__init__(road_map)
+        super().__init__(road_map, lane_kinds=DRIVABLE_LANE_KINDS)
         self.lanes = road_map.lanes
 
     def lanes_containing(self, points: F64) -> npt.NDArray[np.bool_]:
