@@ -127,7 +127,7 @@ class SyntheticSimulator:
         self._ego = ActuatedEgo(
             self._world.ego_model, pedals=self.pedal, delay_steps=0, tyres=self.tyres
         )
-        self.tracker.reset()  # the PID's integral belongs to one run
+        self.tracker.reset()  # whatever a tracker keeps belongs to one run
         neutral = ControlCommands(steering_angle_rad=self._world.ego_model.steer_rad)
         self._acting: ControlCommands = neutral  # the command the ego moves under now
         self._queued: ControlCommands = neutral  # with a one-frame delay: the next one
