@@ -77,12 +77,18 @@ class VelodyneSettings:
         min_range_m, max_range_m: returns at these distances or beyond are no points.
         cloud_min_angle_deg, cloud_max_angle_deg: the azimuth crop, degrees (0 … 360 keeps
             all; min > max wraps through 0).
+        dual_timing_table: which firing-time table ``firing_offset_ns`` uses: None, the one of
+            the packets' return mode (in dual mode a block pair fires at once, the manuals'
+            timing); False, the single-return table whatever the packets say — what nebula uses
+            in practice, since its ``return_mode_from_string("Dual")`` gives ``DUAL_ONLY`` and
+            its decoders build the dual table only for ``DUAL``.
     """
 
     min_range_m: float = 0.3
     max_range_m: float = 300.0
     cloud_min_angle_deg: int = 0
     cloud_max_angle_deg: int = 360
+    dual_timing_table: bool | None = None
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -270,11 +276,12 @@ def decode_packets(
         intensity=inten,
         intensity_other=intensity[:, partner, :][p_idx, b_idx, j_idx],
     )
+    dual_table = dual if settings.dual_timing_table is None else settings.dual_timing_table
     if sixteen:
-        block_index = (b_idx - b_idx % 2 if dual else b_idx * 2) + j_idx // 16
+        block_index = (b_idx - b_idx % 2 if dual_table else b_idx * 2) + j_idx // 16
         point_index = j_idx % 16
     else:
-        block_index = b_idx // 2 if dual else b_idx
+        block_index = b_idx // 2 if dual_table else b_idx
         point_index = j_idx // 2
     firing_ns = np.rint((55.296e-6 * block_index + 2.304e-6 * point_index) * 1e9).astype(np.int64)
     azimuth_rad = _ROT_RAD[az] if sixteen else _ROT_RAD[rotation[p_idx, b_idx]]
