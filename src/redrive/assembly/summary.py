@@ -18,9 +18,10 @@ from typing import Any
 from redrive.assembly.calibration import camera_info_topics
 from redrive.assembly.sensor_map import SensorSpec, infer_sensor_map, load_sensor_map_overrides
 from redrive.errors import ConfigError, LogTruncatedError
-from redrive.io.base import LogReader, ReaderCapabilities
+from redrive.io.base import LogReader, ReaderCapabilities, TopicInfo, normalize_msgtype
 from redrive.io.damage import LogDamage, damage_report
 from redrive.io.ros.decoders import decoder_for
+from redrive.io.ros.decoders.ouster_log import PACKET_MSGTYPES
 
 __all__ = ["LogSummary", "TopicSummary", "summarize_log"]
 
@@ -221,7 +222,11 @@ def summarize_log(log: LogReader, *, sensor_map_path: Path | None = None) -> Log
                 rate_hz=round((st.count - 1) / span_s, 3) if st.count > 1 and span_s > 0 else None,
                 size_bytes=st.size_bytes if info.encoding != "native" else None,
                 # a native topic holds data-model values already: its reader decodes it
-                decoder=decoder.name if decoder else "native" if info.kind is not None else None,
+                decoder=decoder.name
+                if decoder
+                else _native_decoder(info)
+                if info.kind is not None
+                else None,
                 has_definition=info.has_definition,
                 maps_to=maps_to or None,
             )
@@ -236,3 +241,9 @@ def summarize_log(log: LogReader, *, sensor_map_path: Path | None = None) -> Log
         capabilities=log.capabilities,
         damage_report=damage_report(log),
     )
+
+
+def _native_decoder(info: TopicInfo) -> str:
+    """What a native topic's decoder column says: ``ouster-packets`` for the Ouster packet
+    topics read as clouds (:mod:`redrive.io.ros.decoders.ouster_log`), else ``native``."""
+    return "ouster-packets" if normalize_msgtype(info.msgtype) in PACKET_MSGTYPES else "native"

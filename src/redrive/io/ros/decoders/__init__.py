@@ -33,6 +33,7 @@ from redrive.io.ros.decoders.registry import (
 )
 from redrive.io.ros.decoders.sensors import ImuDecoder, LaserScanDecoder, NavSatFixDecoder
 from redrive.io.ros.decoders.tf import TFMessageDecoder
+from redrive.io.ros.decoders.velodyne import VelodyneScanDecoder
 
 __all__ = [
     "DEFAULT_DECODERS",
@@ -56,6 +57,7 @@ __all__ = [
     "PoseDecoder",
     "TFMessageDecoder",
     "TwistDecoder",
+    "VelodyneScanDecoder",
     "active_decoders",
     "build_registry",
     "capabilities_of",

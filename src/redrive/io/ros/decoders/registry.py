@@ -35,6 +35,7 @@ from redrive.io.ros.decoders.objects import (
 from redrive.io.ros.decoders.pointcloud2 import PointCloud2Decoder
 from redrive.io.ros.decoders.sensors import ImuDecoder, LaserScanDecoder, NavSatFixDecoder
 from redrive.io.ros.decoders.tf import TFMessageDecoder
+from redrive.io.ros.decoders.velodyne import VelodyneScanDecoder
 from redrive.plugins import DECODERS, installed_plugins
 from redrive.types import SensorType
 
@@ -81,6 +82,7 @@ def _add(out: dict[str, Decoder], decoder: Decoder) -> None:
 DEFAULT_DECODERS: Mapping[str, Decoder] = build_registry(
     [
         PointCloud2Decoder(),
+        VelodyneScanDecoder(),
         ImageDecoder(),
         CompressedImageDecoder(),
         CameraInfoDecoder(),
