@@ -20,7 +20,8 @@ def pcap_udp_payloads(path: Path, *, port: int) -> list[bytes]:
     as these captures are)."""
     data = path.read_bytes()
     magic, link = struct.unpack_from("<I", data, 0)[0], struct.unpack_from("<I", data, 20)[0]
-    assert magic == 0xA1B2C3D4 and link == 1, (hex(magic), link)
+    assert magic == 0xA1B2C3D4, hex(magic)
+    assert link == 1, link  # Ethernet
     out, pos = [], 24
     while pos + 16 <= len(data):
         _, _, captured, _ = struct.unpack_from("<IIII", data, pos)

@@ -24,7 +24,7 @@ import numpy as np
 
 
 def main() -> None:
-    import ouster.sdk.core as core
+    from ouster.sdk import core
 
     parser = argparse.ArgumentParser()
     parser.add_argument("job")

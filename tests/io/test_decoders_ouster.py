@@ -172,10 +172,18 @@ class _FakeLog:
                 continue
             if (start_ns is not None and t < start_ns) or (stop_ns is not None and t >= stop_ns):
                 continue
-            yield LogMessage(topic=topic, msgtype=msgtype, log_time_ns=t, encoding="ros1", raw=bytes([i % 256]) * 4)
+            yield LogMessage(
+                topic=topic,
+                msgtype=msgtype,
+                log_time_ns=t,
+                encoding="ros1",
+                raw=bytes([i % 256]) * 4,
+            )
 
     def deserialize(self, message: LogMessage) -> object:
-        return next(r[3] for r in self.records if r[0] == message.topic and r[2] == message.log_time_ns)
+        return next(
+            r[3] for r in self.records if r[0] == message.topic and r[2] == message.log_time_ns
+        )
 
     def close(self) -> None:
         pass
@@ -186,7 +194,14 @@ def _fake(meta: str | None, packets: list[bytes]) -> _FakeLog:
     if meta is not None:
         records.append(("/os/metadata", "std_msgs/msg/String", 1, SimpleNamespace(data=meta)))
     for k, buf in enumerate(packets):
-        records.append(("/os/lidar_packets", "ouster_ros/msg/PacketMsg", 10 + k, SimpleNamespace(buf=np.frombuffer(buf, np.uint8))))
+        records.append(
+            (
+                "/os/lidar_packets",
+                "ouster_ros/msg/PacketMsg",
+                10 + k,
+                SimpleNamespace(buf=np.frombuffer(buf, np.uint8)),
+            )
+        )
     return _FakeLog(records)
 
 
@@ -206,11 +221,14 @@ def test_damaged_packets_are_left_out_with_a_warning(
         (message,) = list(log.messages(topics=["/os/lidar_packets"]))
     assert log.packet_damage == {"/os/lidar_packets": 2}
     text = caplog.text
-    assert "1000 bytes" in text and "8448" in text and "left out" in text
+    assert "1000 bytes" in text
+    assert "8448" in text
+    assert "left out" in text
     cloud = message.payload.value  # type: ignore[union-attr]
-    _, rng, whole = _decode(meta, packets)
+    _, _rng, whole = _decode(meta, packets)
     columns = set(np.unique(cloud.channels["column"]).tolist())
-    assert not columns & set(range(3 * 16, 4 * 16)) and not columns & set(range(7 * 16, 8 * 16))
+    assert not columns & set(range(3 * 16, 4 * 16))
+    assert not columns & set(range(7 * 16, 8 * 16))
     assert 0 < cloud.xyz.shape[0] < whole.xyz.shape[0]
 
 
@@ -242,7 +260,8 @@ def test_frames_split_by_frame_id(data: dict[str, tuple[str, np.ndarray]]) -> No
     messages = list(log.messages(topics=["/os/lidar_packets"]))
     assert len(messages) == 2
     counts = [m.payload.value.xyz.shape[0] for m in messages]  # type: ignore[union-attr]
-    assert counts[1] == 28751 and 0 < counts[0] < counts[1]
+    assert counts[1] == 28751
+    assert 0 < counts[0] < counts[1]
     assert messages[0].log_time_ns == 10 + 20  # when the second frame's first packet came
 
 

@@ -103,7 +103,11 @@ def _find_sources(log: LogReader) -> dict[str, _Source]:
             fmt = OusterPacketFormat(parse_metadata(text))
         except (ValueError, UnsupportedMessageError, LogError) as err:
             logger.warning(
-                "%s: %s stays raw: its metadata (%s) cannot be used: %s", log.path, topic, meta_topic, err
+                "%s: %s stays raw: its metadata (%s) cannot be used: %s",
+                log.path,
+                topic,
+                meta_topic,
+                err,
             )
             continue
         sources[topic] = _Source(topic, meta_topic, fmt)
@@ -132,6 +136,8 @@ class PacketCloudsReader:
 
     def __init__(self, inner: LogReader, sources: Mapping[str, _Source]) -> None:
         self.inner = inner
+        self.path = inner.path
+        self.format = inner.format
         self._sources = dict(sources)
         self.packet_damage: dict[str, int] = {}
         topics = dict(inner.topics)
@@ -153,14 +159,6 @@ class PacketCloudsReader:
     # --- what the wrapped reader says -------------------------------------------------------
     def __getattr__(self, name: str) -> Any:
         return getattr(self.inner, name)
-
-    @property
-    def path(self) -> Any:
-        return self.inner.path
-
-    @property
-    def format(self) -> str:
-        return self.inner.format
 
     @property
     def capabilities(self) -> ReaderCapabilities:

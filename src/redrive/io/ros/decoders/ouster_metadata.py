@@ -38,7 +38,13 @@ import numpy.typing as npt
 
 __all__ = ["OusterSensorInfo", "parse_metadata", "xyz_lut"]
 
-_NEW_FORMAT_KEYS = ("sensor_info", "beam_intrinsics", "imu_intrinsics", "lidar_intrinsics", "config_params")
+_NEW_FORMAT_KEYS = (
+    "sensor_info",
+    "beam_intrinsics",
+    "imu_intrinsics",
+    "lidar_intrinsics",
+    "config_params",
+)
 _DEFAULT_LIDAR_TO_SENSOR = (-1, 0, 0, 0, 0, -1, 0, 0, 0, 0, 1, 36.18, 0, 0, 0, 1)
 _RANGE_UNIT_M = 0.001
 
@@ -91,7 +97,14 @@ def _to_new_format(root: Mapping[str, Any]) -> dict[str, Any]:
             "beam_azimuth_angles",
             "beam_to_lidar_transform",
         ),
-        "sensor_info": ("prod_line", "status", "prod_pn", "prod_sn", "initialization_id", "build_rev"),
+        "sensor_info": (
+            "prod_line",
+            "status",
+            "prod_pn",
+            "prod_sn",
+            "initialization_id",
+            "build_rev",
+        ),
     }
     taken: set[str] = set()
     if "lidar_to_sensor_transform" in root:
@@ -156,7 +169,9 @@ def parse_metadata(text: str | bytes) -> OusterSensorInfo:
         )
         raise ValueError(msg)
     if width <= 0 or height <= 0 or per_packet <= 0 or width % per_packet:
-        msg = f"Ouster metadata gives {width} columns, {height} pixels, {per_packet} columns a packet"
+        msg = (
+            f"Ouster metadata gives {width} columns, {height} pixels, {per_packet} columns a packet"
+        )
         raise ValueError(msg)
     prod_line = str(sensor.get("prod_line", ""))
     if "beam_to_lidar_transform" in beams:
@@ -172,7 +187,9 @@ def parse_metadata(text: str | bytes) -> OusterSensorInfo:
         "lidar_to_sensor_transform",
     )
     profile = str(fmt.get("udp_profile_lidar") or "LEGACY")
-    header_type = str(fmt.get("header_type") or ("FUSA" if profile == "FUSA_RNG15_RFL8_NIR8_DUAL" else "STANDARD"))
+    header_type = str(
+        fmt.get("header_type") or ("FUSA" if profile == "FUSA_RNG15_RFL8_NIR8_DUAL" else "STANDARD")
+    )
     for array in (altitude, azimuth, beam_to_lidar, lidar_to_sensor):
         array.flags.writeable = False
     return OusterSensorInfo(

@@ -56,7 +56,11 @@ class _Field:
 _RANGE20 = _Field("range", 0, 20)
 _RANGE19 = _Field("range", 0, 19)
 _RANGE15 = _Field("range", 0, 15, 3)
-_REFL = {24: _Field("reflectivity", 24, 8), 16: _Field("reflectivity", 16, 8), 32: _Field("reflectivity", 32, 8)}
+_REFL = {
+    24: _Field("reflectivity", 24, 8),
+    16: _Field("reflectivity", 16, 8),
+    32: _Field("reflectivity", 32, 8),
+}
 _NIR8 = _Field("near_ir", 24, 8, 4)
 
 #: profile → (bytes a pixel, fields)
@@ -177,7 +181,7 @@ class OusterPacketFormat:
         if self.legacy:
             status = cols[:, :, -4:].copy().view("<u4")[..., 0]
         else:
-            status = (cols[:, :, 10].astype(np.uint32) | (cols[:, :, 11].astype(np.uint32) << 8))
+            status = cols[:, :, 10].astype(np.uint32) | (cols[:, :, 11].astype(np.uint32) << 8)
         valid = ((status & 1) != 0) & (m_id < w)
         pixels = cols[:, :, self.column_header : self.column_header + h * self.pixel_bytes]
         pixels = pixels.reshape(len(packets), c, h, self.pixel_bytes)[valid]  # (K, H, bytes)
@@ -190,7 +194,10 @@ class OusterPacketFormat:
         stamps = np.zeros(w, np.uint64)
         stamps[ids] = timestamps[valid]
         return OusterFrame(
-            frame_id=self.frame_id(packets[0]), fields=fields, timestamp_ns=stamps, packets=len(packets)
+            frame_id=self.frame_id(packets[0]),
+            fields=fields,
+            timestamp_ns=stamps,
+            packets=len(packets),
         )
 
     def cloud(self, frame: OusterFrame) -> PointCloud:

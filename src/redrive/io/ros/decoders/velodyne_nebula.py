@@ -114,7 +114,9 @@ class NebulaScanAssembler:
             index = np.arange(bounds[p], bounds[p + 1], dtype=np.int64)
             if index.size:
                 # nebula keeps its timing table in float32 seconds
-                offset_s = (points.firing_offset_ns[index] * 1e-9).astype(np.float32).astype(np.float64)
+                offset_s = (
+                    (points.firing_offset_ns[index] * 1e-9).astype(np.float32).astype(np.float64)
+                )
                 ts = np.floor(np.maximum(t - self._scan_ts + offset_s, 0.0) * 1e9)
                 self._scan.append(_Chunk(points, index, ts.astype(np.int64)))
                 self._last_block_ts = t
@@ -177,7 +179,9 @@ class NebulaScanAssembler:
         parts = [_select(c.points, c.index) for c in chunks]
         joined = _concat(parts)
         n = joined.xyz.shape[0]
-        return _Chunk(joined, np.arange(n, dtype=np.int64), np.concatenate([c.ts_ns for c in chunks]))
+        return _Chunk(
+            joined, np.arange(n, dtype=np.int64), np.concatenate([c.ts_ns for c in chunks])
+        )
 
     @staticmethod
     def _cloud(chunks: list[_Chunk]) -> PointCloud:

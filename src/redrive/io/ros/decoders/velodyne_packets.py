@@ -175,7 +175,9 @@ def _block_azimuths(
     azimuth = rotation[:, own]
     diff = np.zeros_like(azimuth)
     measured = _BLOCKS - step  # blocks with a next one to measure the step to
-    diff[:, :measured] = (_FULL_TURN + rotation[:, step : step + measured] - azimuth[:, :measured]) % _FULL_TURN
+    diff[:, :measured] = (
+        _FULL_TURN + rotation[:, step : step + measured] - azimuth[:, :measured]
+    ) % _FULL_TURN
     last = diff[:, measured - 1 : measured]
     zero_block = (_BLOCKS - step) if sixteen else (_BLOCKS - 4 * dual - 1)
     for b in range(measured, _BLOCKS):
@@ -242,8 +244,12 @@ def decode_packets(
         shift = diff.astype(_F32)[:, :, None] * _F32(2.304) / _F32(55.296) * j.astype(_F32)
     corrected = (azimuth.astype(_F32)[:, :, None] + shift).astype(np.float64)
     corrected = (corrected - rot_centideg[laser][None, None, :]).astype(_F32)
-    corrected = np.where(corrected < 0, (corrected.astype(np.float64) + _FULL_TURN).astype(_F32), corrected)
-    az_centideg = (np.floor(corrected.astype(np.float64) + 0.5).astype(np.int64) % 65536) % _FULL_TURN
+    corrected = np.where(
+        corrected < 0, (corrected.astype(np.float64) + _FULL_TURN).astype(_F32), corrected
+    )
+    az_centideg = (
+        np.floor(corrected.astype(np.float64) + 0.5).astype(np.int64) % 65536
+    ) % _FULL_TURN
 
     distance = raw.astype(_F32) * _F32(model.distance_resolution_m)
     keep = good[:, :, None] & (raw != 0)
