@@ -37,7 +37,8 @@ from redrive.types import PointCloud, SensorType
 from ._ouster_data import BAG, PCAPS, datasets, write_job
 
 _REFERENCE = Path(__file__).parent / "data" / "ouster_sdk_reference.npz"
-_TOPIC = "/os_node0/lidar_packets"
+_PACKETS = "/os_node0/lidar_packets"
+_TOPIC = "/os_node0/points"  # the clouds made of them
 _NAMES = ("bag", *PCAPS)
 _MM = 1e-3
 
@@ -109,14 +110,18 @@ def test_every_point_equals_ouster_sdk(ouster: Path, tmp_path: Path) -> None:
         assert np.abs(cloud.xyz - ref[f"{name}/xyz"][hits]).max() < _MM, name
 
 
-def test_bag_topic_is_a_lidar_cloud_topic(ouster: Path) -> None:
-    """``open_log``: the packet topic is a LiDAR topic of one 512×10 frame; the frame's cloud
-    comes through ``decode`` with its channels; ``packets="raw"`` keeps the packets."""
+def test_bag_has_a_lidar_cloud_topic_beside_its_packets(ouster: Path) -> None:
+    """``open_log``: beside the packet topic, a LiDAR topic of one 512×10 frame; the frame's cloud
+    comes through ``decode`` with its channels; the packets stay readable; ``packets="raw"``
+    adds nothing."""
     with open_log(ouster / BAG) as log:
         assert isinstance(log, PacketCloudsReader)
+        assert log.cloud_topics == {_TOPIC: _PACKETS}
         info = log.topics[_TOPIC]
         assert topic_kind(info) == (DecodedKind.SENSOR, SensorType.LIDAR)
         assert info.count == 1
+        assert log.topics[_PACKETS].encoding == "ros1"
+        assert log.topics[_PACKETS].count == 32
         messages = list(log.messages(topics=[_TOPIC]))
         assert len(messages) == 1
         decoded = decode(messages[0], log.deserialize)
@@ -128,11 +133,16 @@ def test_bag_topic_is_a_lidar_cloud_topic(ouster: Path) -> None:
         assert set(cloud.channels) >= {"intensity", "reflectivity", "near_ir", "ring", "column"}
         assert int(cloud.channels["ring"].max()) == 127
         assert int(cloud.channels["column"].max()) == 511
-        assert log.topics["/os_node0/imu_packets"].encoding == "ros1"  # not lidar data
-        assert {t for m in log.messages() for t in [m.topic]} == set(log.topics)
+        assert "/os_node0/imu_points" not in log.topics  # imu_packets: not lidar data
+        everything = list(log.messages())
+        assert [m.log_time_ns for m in everything] == sorted(m.log_time_ns for m in everything)
+        seen = {t: sum(m.topic == t for m in everything) for t in log.topics}
+        assert seen == {t: i.count for t, i in log.topics.items()}
+        assert len(list(log.messages(topics=[_PACKETS]))) == 32
+        assert list(log.messages(topics=[_TOPIC], start_ns=log.end_ns + 1)) == []
+        assert len(list(log.messages(topics=[_TOPIC], start_ns=log.start_ns + 1))) == 1
     with open_log(ouster / BAG, packets="raw") as log:
-        assert log.topics[_TOPIC].encoding == "ros1"
-        assert log.topics[_TOPIC].count == 32
+        assert _TOPIC not in log.topics
 
 
 def test_frames_feed_the_dispatcher(ouster: Path) -> None:
@@ -218,7 +228,7 @@ def test_damaged_packets_are_left_out_with_a_warning(
     log = with_packet_clouds(_fake(meta, damaged))  # type: ignore[arg-type]
     assert isinstance(log, PacketCloudsReader)
     with caplog.at_level(logging.WARNING):
-        (message,) = list(log.messages(topics=["/os/lidar_packets"]))
+        (message,) = list(log.messages(topics=["/os/points"]))
     assert log.packet_damage == {"/os/lidar_packets": 2}
     text = caplog.text
     assert "1000 bytes" in text
@@ -257,7 +267,7 @@ def test_frames_split_by_frame_id(data: dict[str, tuple[str, np.ndarray]]) -> No
         b[2:4] = (int.from_bytes(p[2:4], "little") + 1).to_bytes(2, "little")
         second.append(bytes(b))
     log = with_packet_clouds(_fake(meta, first[:20] + second))  # type: ignore[arg-type]
-    messages = list(log.messages(topics=["/os/lidar_packets"]))
+    messages = list(log.messages(topics=["/os/points"]))
     assert len(messages) == 2
     counts = [m.payload.value.xyz.shape[0] for m in messages]  # type: ignore[union-attr]
     assert counts[1] == 28751

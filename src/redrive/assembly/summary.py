@@ -18,10 +18,10 @@ from typing import Any
 from redrive.assembly.calibration import camera_info_topics
 from redrive.assembly.sensor_map import SensorSpec, infer_sensor_map, load_sensor_map_overrides
 from redrive.errors import ConfigError, LogTruncatedError
-from redrive.io.base import LogReader, ReaderCapabilities, TopicInfo, normalize_msgtype
+from redrive.io.base import LogReader, ReaderCapabilities
 from redrive.io.damage import LogDamage, damage_report
 from redrive.io.ros.decoders import decoder_for
-from redrive.io.ros.decoders.ouster_log import PACKET_MSGTYPES
+from redrive.io.ros.decoders.ouster_log import PacketCloudsReader
 
 __all__ = ["LogSummary", "TopicSummary", "summarize_log"]
 
@@ -199,6 +199,9 @@ def summarize_log(log: LogReader, *, sensor_map_path: Path | None = None) -> Log
         roles = {smap.vehicle_state_topic: "vehicle state", smap.ground_truth_topic: "ground truth"}
         roles.update(dict.fromkeys(smap.tf_topics, "tf"))
         roles.update(_camera_info_roles(log, sensors))
+        roles.update(
+            {packets: f"packets of {cloud}" for cloud, packets in _cloud_topics(log).items()}
+        )
     except ConfigError:
         if sensor_map_path:
             raise
@@ -224,7 +227,7 @@ def summarize_log(log: LogReader, *, sensor_map_path: Path | None = None) -> Log
                 # a native topic holds data-model values already: its reader decodes it
                 decoder=decoder.name
                 if decoder
-                else _native_decoder(info)
+                else _native_decoder(log, topic)
                 if info.kind is not None
                 else None,
                 has_definition=info.has_definition,
@@ -243,7 +246,12 @@ def summarize_log(log: LogReader, *, sensor_map_path: Path | None = None) -> Log
     )
 
 
-def _native_decoder(info: TopicInfo) -> str:
-    """What a native topic's decoder column says: ``ouster-packets`` for the Ouster packet
-    topics read as clouds (:mod:`redrive.io.ros.decoders.ouster_log`), else ``native``."""
-    return "ouster-packets" if normalize_msgtype(info.msgtype) in PACKET_MSGTYPES else "native"
+def _native_decoder(log: LogReader, topic: str) -> str:
+    """What a native topic's decoder column says: ``ouster-packets`` for the clouds made of
+    Ouster packets (:mod:`redrive.io.ros.decoders.ouster_log`), else ``native``."""
+    return "ouster-packets" if topic in _cloud_topics(log) else "native"
+
+
+def _cloud_topics(log: LogReader) -> dict[str, str]:
+    """Cloud topic → the packet topic it is made of (empty for a log without)."""
+    return dict(log.cloud_topics) if isinstance(log, PacketCloudsReader) else {}

@@ -313,10 +313,10 @@ def open_log(
         strict: when True, damage met while reading raises
             :class:`~redrive.errors.LogTruncatedError` after every message before it was
             yielded; when False the damage is logged and reading goes on where it can.
-        packets: ``clouds`` (the default): topics of Ouster lidar packets whose sensor metadata
-            is in the log read as LiDAR topics, one cloud per frame
-            (:mod:`redrive.io.ros.decoders.ouster_log`); ``raw``: every message as it is in the
-            file (converting, repairing, counting what was recorded).
+        packets: ``clouds`` (the default): beside each topic of Ouster lidar packets whose sensor
+            metadata is in the log, a LiDAR topic ``…/points`` of one cloud per frame
+            (:mod:`redrive.io.ros.decoders.ouster_log`); ``raw``: the file's own topics only
+            (converting, repairing, counting what was recorded).
 
     Raises:
         LogError: the path is missing, empty, damaged beyond use or not a log.

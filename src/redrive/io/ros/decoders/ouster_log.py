@@ -1,27 +1,31 @@
-"""A log whose Ouster lidar packet topics read as point-cloud topics.
+"""A log with a point-cloud topic beside each of its Ouster lidar packet topics.
 
 ``ouster_ros`` records the sensor's UDP packets as they came (``ouster_ros/PacketMsg``, ROS 2
 ``ouster_sensor_msgs/msg/PacketMsg``: one ``uint8[] buf``) on ``…/lidar_packets`` and the sensor
 metadata JSON once on ``…/metadata`` (``std_msgs/String``, latched).  A packet holds 16 columns of
 a frame, so no single message decodes to a cloud: :func:`with_packet_clouds` wraps a reader so
-that each such topic whose metadata is in the log becomes a ``native`` LiDAR topic yielding one
+that beside each such topic whose metadata is in the log there is a ``native`` LiDAR topic
+``<namespace>/points`` (``/os_node0/points`` for ``/os_node0/lidar_packets``: the name ouster-ros
+gives its own clouds; type ``redrive/PointCloud``) yielding one
 :class:`~redrive.types.PointCloud` per frame (the packets of one frame id, see
-:mod:`~redrive.io.ros.decoders.ouster_packets`).
+:mod:`~redrive.io.ros.decoders.ouster_packets`).  The packet topic stays as it is, so nothing
+of the log is hidden (an export copies the packets too); a log that has a topic of that name
+already (the driver's clouds recorded as well) gets no second one.
 
 * A frame's message is yielded when its last packet is read (the metadata's packet count
   reached) or when a packet of another frame id comes; its log time is that moment's, its stamp
   the log time of its first packet, its frame ``os_sensor`` (ouster-ros's sensor frame; the
   points are in it).
-* The topic's ``count`` is the packets' count over the packets a frame takes, rounded up (the
-  frames the log holds when none lost packets).
+* The cloud topic's ``count`` is the packets' count over the packets a frame takes, rounded up
+  (the frames the log holds when none lost packets).
 * A packet of the wrong size is damage: it is left out (its columns stay empty), a warning names
   the topic, the log time, its size and the size the metadata makes, and
   ``packet_damage[topic]`` counts them.  A packet topic whose metadata is missing or does not
-  parse stays as it is (raw), with a warning saying why.
+  parse gets no cloud topic, with a warning saying why.
 
-Everything else — other topics, ``deserialize``, the damage report, ``road_map`` … — is the
+Everything else — the other topics, ``deserialize``, the damage report, ``road_map`` … — is the
 wrapped reader's.  ``open_log(path, packets="raw")`` skips the wrapping (converting, repairing
-and re-publishing a log keep its packets as they are).
+and counting what was recorded see the file's own topics only).
 """
 
 from __future__ import annotations
@@ -47,12 +51,14 @@ from redrive.io.ros.decoders.ouster_metadata import parse_metadata
 from redrive.io.ros.decoders.ouster_packets import OusterPacketFormat
 from redrive.types import SensorType
 
-__all__ = ["PACKET_MSGTYPES", "PacketCloudsReader", "with_packet_clouds"]
+__all__ = ["CLOUD_MSGTYPE", "PACKET_MSGTYPES", "PacketCloudsReader", "with_packet_clouds"]
 
 logger = logging.getLogger(__name__)
 
 #: The ouster-ros packet message types (ROS 1 and ROS 2 names).
 PACKET_MSGTYPES = frozenset({"ouster_ros/msg/PacketMsg", "ouster_sensor_msgs/msg/PacketMsg"})
+#: The type name of the cloud topics (as the dataset readers name their native clouds).
+CLOUD_MSGTYPE = "redrive/PointCloud"
 _STRING = "std_msgs/msg/String"
 _SENSOR_FRAME = "os_sensor"
 #: read this long before a seek's start so the frame running at the start is whole.
@@ -61,7 +67,8 @@ _SEEK_MARGIN_NS = 200_000_000
 
 @dataclass(slots=True)
 class _Source:
-    topic: str
+    topic: str  # the packets'
+    cloud_topic: str
     metadata_topic: str
     fmt: OusterPacketFormat
 
@@ -93,7 +100,7 @@ def _find_sources(log: LogReader) -> dict[str, _Source]:
         if meta_topic is None:
             logger.warning(
                 "%s: %s holds Ouster lidar packets but the log has no metadata topic "
-                "(std_msgs/String …/metadata) beside it: it stays raw",
+                "(std_msgs/String …/metadata) beside it: it is not decoded",
                 log.path,
                 topic,
             )
@@ -103,14 +110,20 @@ def _find_sources(log: LogReader) -> dict[str, _Source]:
             fmt = OusterPacketFormat(parse_metadata(text))
         except (ValueError, UnsupportedMessageError, LogError) as err:
             logger.warning(
-                "%s: %s stays raw: its metadata (%s) cannot be used: %s",
+                "%s: %s is not decoded: its metadata (%s) cannot be used: %s",
                 log.path,
                 topic,
                 meta_topic,
                 err,
             )
             continue
-        sources[topic] = _Source(topic, meta_topic, fmt)
+        cloud_topic = f"{topic.rsplit('/', 1)[0]}/points"
+        if cloud_topic in log.topics:
+            logger.info(
+                "%s: %s is in the log already: %s is not decoded", log.path, cloud_topic, topic
+            )
+            continue
+        sources[cloud_topic] = _Source(topic, cloud_topic, meta_topic, fmt)
     return sources
 
 
@@ -123,8 +136,8 @@ def _first_string(log: LogReader, topic: str) -> str:
 
 
 def with_packet_clouds(log: LogReader) -> LogReader:
-    """``log`` with its Ouster lidar packet topics as cloud topics; ``log`` itself when it has
-    none that can be decoded."""
+    """``log`` with a cloud topic beside each of its Ouster lidar packet topics; ``log`` itself
+    when it has none that can be decoded."""
     if not any(normalize_msgtype(i.msgtype) in PACKET_MSGTYPES for i in log.topics.values()):
         return log
     sources = _find_sources(log)
@@ -132,7 +145,12 @@ def with_packet_clouds(log: LogReader) -> LogReader:
 
 
 class PacketCloudsReader:
-    """A reader whose Ouster packet topics yield clouds (see the module docstring)."""
+    """A reader with cloud topics made of Ouster packet topics (see the module docstring).
+
+    Attributes:
+        cloud_topics: cloud topic → the packet topic it is made of.
+        packet_damage: packet topic → damaged packets met.
+    """
 
     def __init__(self, inner: LogReader, sources: Mapping[str, _Source]) -> None:
         self.inner = inner
@@ -141,19 +159,19 @@ class PacketCloudsReader:
         self._sources = dict(sources)
         self.packet_damage: dict[str, int] = {}
         topics = dict(inner.topics)
-        for topic, source in self._sources.items():
-            info = topics[topic]
+        for cloud_topic, source in self._sources.items():
+            info = topics[source.topic]
             frames = math.ceil(info.count / source.fmt.packets_per_frame) if info.count else 0
-            topics[topic] = TopicInfo(
-                topic=topic,
-                msgtype=info.msgtype,
+            topics[cloud_topic] = TopicInfo(
+                topic=cloud_topic,
+                msgtype=CLOUD_MSGTYPE,
                 count=frames,
-                size_bytes=info.size_bytes,
                 encoding="native",
                 has_definition=True,
                 kind=DecodedKind.SENSOR,
                 sensor_type=SensorType.LIDAR,
             )
+        self.cloud_topics = {c: s.topic for c, s in self._sources.items()}
         self._topics = MappingProxyType(topics)
 
     # --- what the wrapped reader says -------------------------------------------------------
@@ -182,7 +200,7 @@ class PacketCloudsReader:
 
     def deserialize(self, message: LogMessage) -> object:
         if message.encoding == "native":
-            msg = f"{message.topic}: its messages are decoded clouds already (payload), not ROS messages"
+            msg = f"{message.topic}: its messages are decoded clouds (payload), not ROS messages"
             raise UnsupportedMessageError(msg)
         return self.inner.deserialize(message)
 
@@ -209,20 +227,22 @@ class PacketCloudsReader:
         stop_ns: int | None = None,
     ) -> Iterator[LogMessage]:
         wanted = set(self._topics) if topics is None else set(topics)
-        read_from = None if start_ns is None else start_ns - _SEEK_MARGIN_NS
+        clouds = {c: self._sources[c] for c in wanted if c in self._sources}
+        by_packets = {s.topic: s for s in clouds.values()}
+        to_read = (wanted - set(clouds)) | set(by_packets)
+        read_from = None if start_ns is None or not clouds else start_ns - _SEEK_MARGIN_NS
         pending: dict[str, _Pending] = {}
-        for message in self.inner.messages(topics=wanted, start_ns=read_from, stop_ns=stop_ns):
-            source = self._sources.get(message.topic)
+        for message in self.inner.messages(topics=to_read, start_ns=read_from, stop_ns=stop_ns):
+            if message.topic in wanted and (start_ns is None or message.log_time_ns >= start_ns):
+                yield message
+            source = by_packets.get(message.topic)
             if source is None:
-                if start_ns is None or message.log_time_ns >= start_ns:
-                    yield message
                 continue
-            done = self._add(source, pending, message)
-            for frame in done:
+            for frame in self._add(source, pending, message):
                 if start_ns is None or frame.log_time_ns >= start_ns:
                     yield frame
-        for topic, open_frame in pending.items():
-            source = self._sources[topic]
+        for cloud_topic, open_frame in pending.items():
+            source = self._sources[cloud_topic]
             last = self.inner.end_ns if stop_ns is None else min(self.inner.end_ns, stop_ns - 1)
             yield self._frame(source, open_frame, max(last, open_frame.first_log_ns))
 
@@ -237,24 +257,24 @@ class PacketCloudsReader:
             return []
         out: list[LogMessage] = []
         frame_id = fmt.frame_id(buf)
-        current = pending.get(source.topic)
+        current = pending.get(source.cloud_topic)
         if current is not None and current.frame_id != frame_id:
             out.append(self._frame(source, current, message.log_time_ns))
             current = None
         if current is None:
-            current = pending[source.topic] = _Pending(frame_id, message.log_time_ns)
+            current = pending[source.cloud_topic] = _Pending(frame_id, message.log_time_ns)
         current.packets.append(buf)
         if len(current.packets) >= fmt.packets_per_frame:
             out.append(self._frame(source, current, message.log_time_ns))
-            del pending[source.topic]
+            del pending[source.cloud_topic]
         return out
 
     def _frame(self, source: _Source, frame: _Pending, log_time_ns: int) -> LogMessage:
         cloud = source.fmt.cloud(source.fmt.decode(frame.packets))
         decoded = Decoded(stamp_ns=frame.first_log_ns, frame_id=_SENSOR_FRAME, value=cloud)
         return LogMessage(
-            topic=source.topic,
-            msgtype=self._topics[source.topic].msgtype,
+            topic=source.cloud_topic,
+            msgtype=CLOUD_MSGTYPE,
             log_time_ns=log_time_ns,
             encoding="native",
             payload=decoded,
