@@ -264,3 +264,30 @@ def test_damaged_packets(velodyne: Path) -> None:
         decode_packets(mixed)
     with pytest.raises(ValueError, match="1206 bytes"):
         decode_packets(packets[:, :1200])
+
+
+def test_geometry_of_a_hand_made_vlp16_packet() -> None:
+    """The documented layout by hand: block b at azimuth 0.20°·b, every return 1000 × 2 mm; laser
+    0 (−15°) of the first firing lies at (r cos ω, 0, r sin ω); the second firing is half a block
+    step (0.10°) later; the last block has no step (nebula), x forward, y left."""
+    packet = bytearray()
+    for block in range(12):
+        packet += bytes([0xFF, 0xEE, block * 20, 0]) + bytes([0xE8, 0x03, 9]) * 32
+    packet += bytes([0, 0, 0, 0, 0x37, 0x22])
+    points = decode_packets(np.frombuffer(bytes(packet), np.uint8).reshape(1, -1))
+    assert points.model.name == "VLP-16"
+    assert points.xyz.shape == (12 * 32, 3)
+    omega = np.radians(-15.0)
+    assert np.allclose(points.xyz[0], [2 * np.cos(omega), 0.0, 2 * np.sin(omega)], atol=1e-6)
+    # block 0, firing 1, laser 0: 20 · 55.296 / 110.592 = 10 hundredths of a degree
+    assert points.azimuth_centideg[16] == 10
+    alpha = np.radians(0.10)
+    expected = [
+        2 * np.cos(omega) * np.cos(alpha),
+        -2 * np.cos(omega) * np.sin(alpha),
+        2 * np.sin(omega),
+    ]
+    assert np.allclose(points.xyz[16], expected, atol=1e-6)
+    assert np.all(points.azimuth_centideg[11 * 32 :] == 220)  # the last block: no step
+    assert np.array_equal(points.ring[:16], [0, 8, 1, 9, 2, 10, 3, 11, 4, 12, 5, 13, 6, 14, 7, 15])
+    assert np.all(points.distance_m == np.float32(2.0))

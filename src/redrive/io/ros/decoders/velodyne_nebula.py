@@ -151,9 +151,10 @@ class NebulaScanAssembler:
             past = np.floor(np.degrees(2 * math.pi + azimuth.astype(np.float64) - phase)) % 360 < 90
         else:
             past = 2 * math.pi + azimuth.astype(np.float64) - phase < math.pi / 2
-        keep = azimuth.size
-        while keep > 0 and past[keep - 1]:
-            keep -= 1
+        # nebula pops points off the end while they lie past the phase: keep up to the last
+        # point that does not
+        before = np.flatnonzero(~past)
+        keep = int(before[-1]) + 1 if before.size else 0
         head = self._take(chunks, 0, keep)
         if keep < azimuth.size:
             self._overflow = self._merged(self._take(chunks, keep, azimuth.size))
