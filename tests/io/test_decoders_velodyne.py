@@ -291,3 +291,17 @@ def test_geometry_of_a_hand_made_vlp16_packet() -> None:
     assert np.all(points.azimuth_centideg[11 * 32 :] == 220)  # the last block: no step
     assert np.array_equal(points.ring[:16], [0, 8, 1, 9, 2, 10, 3, 11, 4, 12, 5, 13, 6, 14, 7, 15])
     assert np.all(points.distance_m == np.float32(2.0))
+
+
+def test_the_odd_vli16_packet_is_refused_clearly(shared_data: Path) -> None:
+    """ouster-sdk's non-Ouster test packet (../shared/data/ouster/VLI-16-one-packet.pcap): a
+    Velodyne-style payload of 1212 bytes, not the VLP-16's 1206, with unusual factory bytes."""
+    from ._ouster_data import pcap_udp_payloads
+
+    (payload,) = pcap_udp_payloads(shared_data / "ouster" / "VLI-16-one-packet.pcap", port=2368)
+    packet = np.frombuffer(payload, np.uint8)
+    assert bytes(packet[:2]) == b"\xff\xee"
+    with pytest.raises(ValueError, match=r"1206 bytes, got an array of shape \(1, 1212\)"):
+        decode_packets(packet.reshape(1, -1))
+    with pytest.raises(ValueError, match="product id 0x1e"):
+        decode_packets(packet[:1206].reshape(1, -1))
