@@ -53,32 +53,43 @@ class _Field:
         return np.uint8 if bits <= 8 else np.uint16 if bits <= 16 else np.uint32
 
 
-_RANGE20 = _Field("range", 0, 20)
-_RANGE19 = _Field("range", 0, 19)
-_RANGE15 = _Field("range", 0, 15, 3)
-_REFL = {
-    24: _Field("reflectivity", 24, 8),
-    16: _Field("reflectivity", 16, 8),
-    32: _Field("reflectivity", 32, 8),
-}
-_NIR8 = _Field("near_ir", 24, 8, 4)
-
-#: profile → (bytes a pixel, fields)
+#: profile → (bytes a pixel, fields): ouster-sdk's ``*_FIELD_INFO`` (bit start, bits, upshift)
 _PROFILES: dict[str, tuple[int, tuple[_Field, ...]]] = {
     "LEGACY": (
         12,
-        (_RANGE20, _REFL[32], _Field("signal", 48, 16), _Field("near_ir", 64, 16)),
+        (
+            _Field("range", 0, 20),
+            _Field("reflectivity", 32, 8),
+            _Field("signal", 48, 16),
+            _Field("near_ir", 64, 16),
+        ),
     ),
     "RNG19_RFL8_SIG16_NIR16": (
         12,
-        (_RANGE19, _REFL[24], _Field("signal", 32, 16), _Field("near_ir", 48, 16)),
+        (
+            _Field("range", 0, 19),
+            _Field("reflectivity", 24, 8),
+            _Field("signal", 32, 16),
+            _Field("near_ir", 48, 16),
+        ),
     ),
     "RNG19_RFL8_SIG16_NIR16_DUAL": (
         16,
-        (_RANGE19, _REFL[24], _Field("signal", 64, 16), _Field("near_ir", 96, 16)),
+        (
+            _Field("range", 0, 19),
+            _Field("reflectivity", 24, 8),
+            _Field("signal", 64, 16),
+            _Field("near_ir", 96, 16),
+        ),
     ),
-    "RNG15_RFL8_NIR8": (4, (_RANGE15, _REFL[16], _NIR8)),
-    "RNG15_RFL8_NIR8_DUAL": (8, (_RANGE15, _REFL[16], _NIR8)),
+    "RNG15_RFL8_NIR8": (
+        4,
+        (_Field("range", 0, 15, 3), _Field("reflectivity", 16, 8), _Field("near_ir", 24, 8, 4)),
+    ),
+    "RNG15_RFL8_NIR8_DUAL": (
+        8,
+        (_Field("range", 0, 15, 3), _Field("reflectivity", 16, 8), _Field("near_ir", 24, 8, 4)),
+    ),
 }
 
 
