@@ -358,6 +358,7 @@ class Engine:
                 perf_counter_ns() - item.t0_ns,
                 bool(item.late),
                 frame.missing,
+                frame.traffic.traffic_lights,
             )
             sink(record)
             stats.add(record)
