@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any, ClassVar
 
-from redrive.errors import AlgorithmError, ConfigError
+from redrive.errors import AlgorithmError, ConfigError, MissingInputError
 from redrive.types import (
     ControlCommands,
     DetectedObject,
@@ -291,7 +291,7 @@ class Algorithm(ABC):
                 log provides.
 
         Raises:
-            ConfigError: an input is not in the log (the message lists what is).
+            MissingInputError: an input is not in the log (the message lists what is).
         """
         have = set(extras)
         bound: dict[Input, str] = {}
@@ -319,12 +319,16 @@ class Algorithm(ABC):
     def _missing(self, what: str, sensors: Mapping[str, SensorType], have: set[str]) -> None:
         listing = ", ".join(f"{s} ({t.name})" for s, t in sorted(sensors.items())) or "none"
         extra = ", ".join(sorted(have)) or "no ego state or ground truth"
+        advice = (
+            "give it a log that carries one (a redrive synth log or a scenario does)"
+            if what == "road map"
+            else "map a topic with a sensor map file"
+        )
         msg = (
             f"algorithm {self.name!r} needs {what}, which this log does not have "
-            f"(sensors: {listing}; also {extra}); map a topic with a sensor map file or pick "
-            "another algorithm"
+            f"(sensors: {listing}; also {extra}); {advice} or pick another algorithm"
         )
-        raise ConfigError(msg)
+        raise MissingInputError(msg)
 
     def sensor(self, frame: Frame, wanted: Input) -> SensorData:
         """The sample of input ``wanted`` in ``frame`` (a sensor id or type from :attr:`inputs`).

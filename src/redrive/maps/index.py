@@ -130,7 +130,10 @@ class RoadMapIndex:
         """The position of ``lane_id`` in ``road_map.lanes`` (KeyError when it is none)."""
         return self._lane_pos[lane_id]
 
-    def _lane_pairs(self, p: F64) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    def lane_hits(self, xy: npt.ArrayLike) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+        """Every (point, lane) pair where lane holds point: the point indices into ``xy`` and
+        the lane positions in ``road_map.lanes``, sorted by point then lane."""
+        p = _points(xy)
         pairs = self._lane_tree.query(shapely.points(p), predicate="intersects")
         order = np.lexsort((pairs[1], pairs[0]))
         return pairs[0][order].astype(np.int64), pairs[1][order].astype(np.int64)
@@ -138,7 +141,7 @@ class RoadMapIndex:
     def lanes_at(self, xy: npt.ArrayLike) -> list[tuple[str, ...]]:
         """For each of the points ``xy`` (N, 2): the ids of the lanes holding it (map order)."""
         p = _points(xy)
-        which, lane = self._lane_pairs(p)
+        which, lane = self.lane_hits(p)
         out: list[list[str]] = [[] for _ in range(p.shape[0])]
         lanes = self.road_map.lanes
         for k, m in zip(which.tolist(), lane.tolist(), strict=True):
@@ -188,7 +191,7 @@ class RoadMapIndex:
         do (then the smaller heading difference); None when no lane does."""
         p = _points(xy)
         yaw = np.broadcast_to(np.asarray(yaw_rad, dtype=np.float64), (p.shape[0],))
-        which, lane = self._lane_pairs(p)
+        which, lane = self.lane_hits(p)
         out: list[str | None] = [None] * p.shape[0]
         if which.size == 0:
             return out
