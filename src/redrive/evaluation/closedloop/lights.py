@@ -51,7 +51,13 @@ import numpy.typing as npt
 import shapely
 
 from redrive.evaluation.base import Bookmark, EvalData, Metric, MetricResult, MetricSkipped
-from redrive.evaluation.closedloop._common import EGO_DEFAULTS, EgoRun, ego_run, series
+from redrive.evaluation.closedloop._common import (
+    EGO_DEFAULTS,
+    EgoRun,
+    ego_run,
+    require_road,
+    series,
+)
 from redrive.maps.index import RoadMapIndex, lane_polygon
 from redrive.types import LightState, MapTrafficLight, RoadMap, Role, TrafficLight
 
@@ -221,9 +227,8 @@ class TrafficLightCompliance(Metric):
     defaults: ClassVar[Mapping[str, Any]] = TLC_DEFAULTS
 
     def evaluate(self, data: EvalData) -> MetricResult:
-        road_map = data.road_map()
-        if road_map is None:  # pragma: no cover - the need is checked before
-            raise MetricSkipped("no road map in the run")
+        index = require_road(data)  # the evaluation's one index of the map, shared
+        road_map = index.road_map
         ego = ego_run(data)
         frames = ego.frames
         counts = {"lights_in_map": float(len(road_map.traffic_lights))}
@@ -243,7 +248,6 @@ class TrafficLightCompliance(Metric):
                 "holds no light states (its log has no traffic-light topic)"
             )
             raise MetricSkipped(msg)
-        index = RoadMapIndex(road_map)
         route = _route(road_map, ego, EgoRun.of(data.logged_ego()), index)
         states = [per_frame.get(f, ()) for f in frames.tolist()]
         hits = red_light_hits(
