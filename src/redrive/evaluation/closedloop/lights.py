@@ -26,7 +26,7 @@ The map side (:mod:`redrive.types.roadmap`):
   <redrive.maps.index.RoadMapIndex.lane_of_pose>`) — the metric passes the logged ego's and the
   driven ego's poses — and every lane of those roadblocks (a lane without a roadblock: itself).
 
-The reusable function (NAVSIM's EPDMS, :mod:`redrive.evaluation.closedloop.pdm`, imports it)::
+The reusable function (NAVSIM's EPDMS imports it)::
 
     red_light_violations(
         road_map: RoadMap,
