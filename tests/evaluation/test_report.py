@@ -419,3 +419,20 @@ def test_worst_frames_rank_by_a_score_of_errors_not_by_switch_bookmarks(
     assert [f for f, _ in by_switches] == [4, 7]
     with pytest.raises(ConfigError, match=r"--rank-by latency\.frame_ms: no such per-frame"):
         worst_frames(run, ev, count=2, rank_by="latency.frame_ms")
+
+
+def test_the_per_frame_plots_tick_whole_frame_indices(monkeypatch: pytest.MonkeyPatch) -> None:
+    # issue 35 item 10: a 3-frame run's per-frame plots ticked 0.25, 0.5 … on the frame axis
+    from matplotlib.figure import Figure
+
+    from redrive.evaluation import plots
+
+    drawn: list[Figure] = []
+    monkeypatch.setattr(plots.h, "png", lambda fig, dpi: drawn.append(fig) or b"")
+    frames = np.array([0, 1, 2], dtype=np.int64)
+    plots.timelines_png([("tp", frames, np.array([1.0, 2.0, 1.0]))], title="t")
+    (fig,) = drawn
+    fig.canvas.draw()
+    ticks = [t for t in fig.axes[-1].get_xticks() if -0.5 <= t <= 2.5]
+    assert ticks
+    assert all(float(t).is_integer() for t in ticks), ticks

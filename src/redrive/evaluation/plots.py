@@ -24,6 +24,7 @@ import pyarrow.compute as pc
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle, Polygon
+from matplotlib.ticker import MaxNLocator
 
 from redrive.errors import ConfigError
 from redrive.evaluation import html as h
@@ -121,6 +122,7 @@ def timelines_png(
         for frame in list(marks)[:50]:
             ax.axvline(frame, color="#d62728", alpha=0.25, linewidth=0.8)
     axes[-1].set_xlabel("frame index")
+    axes[-1].xaxis.set_major_locator(MaxNLocator(integer=True))  # frames are whole numbers
     axes[0].set_title(plain(title), fontsize=10)
     return h.png(fig, dpi=PNG_DPI)
 

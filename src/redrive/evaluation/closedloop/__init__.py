@@ -12,6 +12,7 @@ from redrive.evaluation.closedloop.collisions import AtFaultCollisions, TimeToCo
 from redrive.evaluation.closedloop.commands import FallbackCommands
 from redrive.evaluation.closedloop.lights import TrafficLightCompliance
 from redrive.evaluation.closedloop.motion import Comfort, EgoProgress
+from redrive.evaluation.closedloop.nuplan import NuplanScenarioScore
 from redrive.evaluation.closedloop.pdm import PdmScore
 from redrive.evaluation.closedloop.road import (
     DrivableAreaCompliance,
@@ -26,6 +27,7 @@ __all__ = [
     "DrivingDirectionCompliance",
     "EgoProgress",
     "FallbackCommands",
+    "NuplanScenarioScore",
     "PdmScore",
     "SpeedLimitCompliance",
     "TimeToCollision",

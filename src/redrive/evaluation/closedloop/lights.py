@@ -58,6 +58,7 @@ from redrive.evaluation.closedloop._common import (
     require_road,
     series,
 )
+from redrive.evaluation.closedloop.deviation import with_deviation
 from redrive.maps.index import RoadMapIndex, lane_polygon
 from redrive.types import LightState, MapTrafficLight, RoadMap, Role, TrafficLight
 
@@ -214,7 +215,8 @@ class TrafficLightCompliance(Metric):
 
     Values: ``traffic_light_compliance`` (headline, 1 or 0), ``red_light_frames`` (frames in
     violation), ``lights_in_map``, ``frames_without_states`` (frames of the ego track with no
-    light states: never a violation). Per frame ``red_light_violation`` (1/0). Bookmarks
+    light states: never a violation), in a log-backed closed loop ``deviated_frames``. Per frame
+    ``red_light_violation`` (1/0). Bookmarks
     ``red_light`` at the first frame of each violation, naming the lights.
     """
 
@@ -233,7 +235,7 @@ class TrafficLightCompliance(Metric):
         frames = ego.frames
         counts = {"lights_in_map": float(len(road_map.traffic_lights))}
         if not road_map.traffic_lights:
-            return _result(
+            result = _result(
                 1.0,
                 np.zeros(len(ego), dtype=bool),
                 frames=frames,
@@ -241,6 +243,7 @@ class TrafficLightCompliance(Metric):
                 counts=counts,
                 without=0,
             )
+            return with_deviation(result, data, frames)
         per_frame = data.traffic_lights()
         if not per_frame:
             msg = (
@@ -260,7 +263,8 @@ class TrafficLightCompliance(Metric):
         violated = np.array([bool(h) for h in hits], dtype=bool)
         score = 0.0 if violated.any() else 1.0
         without = sum(1 for f in frames.tolist() if f not in per_frame)
-        return _result(score, violated, frames=frames, hits=hits, counts=counts, without=without)
+        result = _result(score, violated, frames=frames, hits=hits, counts=counts, without=without)
+        return with_deviation(result, data, frames)
 
 
 def _route(road_map: RoadMap, ego: EgoRun, logged: EgoRun, index: RoadMapIndex) -> frozenset[str]:
