@@ -64,6 +64,7 @@ def test_default_registry_is_complete_and_consistent() -> None:
         "vision_msgs/msg/Detection3DArray",
         "derived_object_msgs/msg/ObjectArray",
         "redrive_msgs/msg/GroundTruthObjectArray",
+        "redrive_msgs/msg/TrafficLightStateArray",
     }
     assert set(DEFAULT_DECODERS) == expected
     for msgtype, decoder in DEFAULT_DECODERS.items():

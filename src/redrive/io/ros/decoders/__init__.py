@@ -12,6 +12,7 @@ from redrive.io.base import normalize_msgtype
 from redrive.io.ros.decoders.base import Decoded, DecodedKind, DecodedValue, Decoder, Deserialize
 from redrive.io.ros.decoders.camera_info import CameraInfoDecoder
 from redrive.io.ros.decoders.image import CompressedImageDecoder, ImageDecoder
+from redrive.io.ros.decoders.lights import TrafficLightStateArrayDecoder
 from redrive.io.ros.decoders.motion import OdometryDecoder, PoseDecoder, TwistDecoder
 from redrive.io.ros.decoders.objects import (
     Detection3DArrayDecoder,
@@ -56,6 +57,7 @@ __all__ = [
     "PointCloud2Decoder",
     "PoseDecoder",
     "TFMessageDecoder",
+    "TrafficLightStateArrayDecoder",
     "TwistDecoder",
     "VelodyneScanDecoder",
     "active_decoders",

@@ -25,6 +25,7 @@ from redrive.io.ros.decoders._common import describe
 from redrive.io.ros.decoders.base import Decoded, DecodedKind, Decoder, Deserialize
 from redrive.io.ros.decoders.camera_info import CameraInfoDecoder
 from redrive.io.ros.decoders.image import CompressedImageDecoder, ImageDecoder
+from redrive.io.ros.decoders.lights import TrafficLightStateArrayDecoder
 from redrive.io.ros.decoders.motion import OdometryDecoder, PoseDecoder, TwistDecoder
 from redrive.io.ros.decoders.objects import (
     Detection3DArrayDecoder,
@@ -97,6 +98,7 @@ DEFAULT_DECODERS: Mapping[str, Decoder] = build_registry(
         Detection3DArrayDecoder(),
         ObjectArrayDecoder(),
         GroundTruthObjectArrayDecoder(),
+        TrafficLightStateArrayDecoder(),
     ]
 )
 
