@@ -250,7 +250,7 @@ def convert_log(
     if out.suffix not in (".mcap", ".bag"):
         msg = f"{out}: the output must end in .mcap (MCAP, ROS 2) or .bag (ROS 1 bag)"
         raise LogError(msg)
-    with open_log(in_path, strict=strict) as reader:
+    with open_log(in_path, strict=strict, packets="raw") as reader:
         sources = _source_stores(reader)
         is2 = out.suffix == ".mcap"
         store = _destination_store(sources, ros_version=2 if is2 else 1)
