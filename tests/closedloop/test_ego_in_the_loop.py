@@ -36,12 +36,18 @@ def _pipeline(tmp_path: Path, plugin: str, role: str, config: str = "") -> Pipel
     return load_pipeline(toml)
 
 
-def test_urban_idm_planner_without_control_crosses_after_the_green(tmp_path: Path) -> None:
-    """`redrive run urban --closed-loop --perception noisy-oracle --planning idm-planner`: the
-    ego stops behind the lead car queued at the red light and, once the light is green and the
-    lead car drives off, follows it across the junction (the old tracker held the brake from
-    frame ~120 to the end: its reference speed at t = 0 of a plan from rest was 0)."""
-    pipeline = pipeline_from_plugins(perception=["noisy-oracle"], planning=["idm-planner"])
+@pytest.mark.parametrize(
+    "perception", [(), ("noisy-oracle",)], ids=["planner-only", "with-perception"]
+)
+def test_urban_idm_planner_without_control_crosses_after_the_green(
+    tmp_path: Path, perception: tuple[str, ...]
+) -> None:
+    """`redrive run urban --closed-loop --planning idm-planner`: the planner stops the ego at the
+    red light (with `--perception noisy-oracle`: behind the lead car queued there) and, once the
+    light is green, the ego drives off across the junction (the old tracker held the brake from
+    frame ~120 to the end: its reference speed at t = 0 of a plan from rest was 0).  Planning
+    blind, the ego drives through the queued lead car: that is the planner's doing."""
+    pipeline = pipeline_from_plugins(perception=list(perception), planning=["idm-planner"])
     run = _run(tmp_path / "urban", "urban", pipeline)
     rows = run.table("closed_loop").to_pylist()
     assert {r["source"] for r in rows} == {"tracker"}
