@@ -11,7 +11,7 @@ from __future__ import annotations
 from redrive.evaluation.closedloop.collisions import AtFaultCollisions, TimeToCollision
 from redrive.evaluation.closedloop.commands import FallbackCommands
 from redrive.evaluation.closedloop.motion import Comfort, EgoProgress
-from redrive.evaluation.closedloop.pdm import PdmScore
+from redrive.evaluation.closedloop.pdm import NavsimEpdms, NavsimPdms
 from redrive.evaluation.closedloop.road import (
     DrivableAreaCompliance,
     DrivingDirectionCompliance,
@@ -25,7 +25,8 @@ __all__ = [
     "DrivingDirectionCompliance",
     "EgoProgress",
     "FallbackCommands",
-    "PdmScore",
+    "NavsimEpdms",
+    "NavsimPdms",
     "SpeedLimitCompliance",
     "TimeToCollision",
 ]

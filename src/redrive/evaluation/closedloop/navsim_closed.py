@@ -1,0 +1,276 @@
+"""PDM-Closed, the reference planner NAVSIM measures ego progress against.
+
+Follows NAVSIM's ``pdm_planner`` (``abstract_pdm_closed_planner.py``
+``AbstractPDMClosedPlanner._get_closed_loop_trajectory``, ``proposal/pdm_generator.py``
+``PDMGenerator``, ``proposal/batch_idm_policy.py`` ``BatchIDMPolicy``,
+``observation/pdm_observation.py`` ``PDMObservation.update``) with the metric cache's
+configuration (``metric_cache_processor.py``: speed-limit fractions 0.2 … 1.0, fallback target
+15 m/s, minimum gap 1 m, headway 1.5 s, acceleration 1.5 m/s², deceleration 3 m/s², lateral
+offsets ±1 m, map radius 100 m): 15 IDM proposals along the route's centreline and its two
+offsets, each forecast against the current boxes at constant velocity, simulated and scored
+like the planner's trajectory, and the best one kept.  Its quirks are kept: the leading agent
+is refreshed every second step, so at the first step it is the zero-initialised row (progress
+0: the IDM brakes there), and one leading-agent row is shared by the proposals of a step.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import shapely
+
+from redrive.evaluation._kinematics import rectangle_corners
+from redrive.evaluation.closedloop.navsim_scene import MapContext, Occupancy, TrackInfo
+from redrive.evaluation.closedloop.navsim_score import ego_coords, score_proposals
+from redrive.evaluation.closedloop.navsim_sim import (
+    STATE_SIZE,
+    VELOCITY_X,
+    X,
+    Y,
+    normalize_angle,
+    simulate_proposals,
+)
+from redrive.types import ObjectColumns
+
+F64 = npt.NDArray[np.float64]
+
+__all__ = ["PDM_CLOSED_DEFAULTS", "forecast_observation", "pdm_closed_poses"]
+
+PDM_CLOSED_DEFAULTS: Mapping[str, Any] = MappingProxyType(
+    {
+        "speed_limit_fractions": (0.2, 0.4, 0.6, 0.8, 1.0),
+        "fallback_target_velocity_mps": 15.0,
+        "min_gap_to_lead_agent_m": 1.0,
+        "headway_time_s": 1.5,
+        "idm_accel_max_mps2": 1.5,
+        "idm_decel_max_mps2": 3.0,
+        "lateral_offsets_m": (-1.0, 1.0),
+        "map_radius_m": 100.0,
+        "leading_agent_update_rate": 2,
+        "observation_sample_res": 2,
+    }
+)
+_IDM_EXPONENT = 10  # BatchIDMPolicy.propagate's acceleration_exponent
+
+
+def forecast_observation(
+    objs: ObjectColumns,
+    *,
+    ego_center_xy: F64,
+    ego_box: F64,
+    n_steps: int,
+    interval_s: float,
+    p: Mapping[str, Any],
+) -> tuple[list[Occupancy], dict[str, TrackInfo], frozenset[str]]:
+    """``PDMObservation.update``: the boxes within the map radius, agents moved at their
+    velocity, others fixed, sampled every ``observation_sample_res`` steps; and the tokens
+    the ego box ``ego_box`` (4, 2) touches now (ignored by the scorer)."""
+    from redrive.evaluation._kinematics import rectangles_overlap
+    from redrive.evaluation.closedloop._common import AGENT_CLASSES
+
+    keep = np.hypot(*(objs.center_m[:, :2] - ego_center_xy).T) <= float(p["map_radius_m"])
+    idx = np.flatnonzero(keep)
+    tokens = tuple(
+        str(int(objs.object_id[m])) if int(objs.object_id[m]) >= 0 else f"now:{m}" for m in idx
+    )
+    agent = np.array([objs.object_class[m] in AGENT_CLASSES for m in idx], dtype=bool)
+    vel = objs.velocity_mps[idx, :2] * agent[:, None]
+    unique = {
+        tok: TrackInfo(
+            object_class=objs.object_class[m],
+            velocity_xy=np.asarray(objs.velocity_mps[m, :2], dtype=np.float64).copy(),
+            heading_rad=float(objs.yaw_rad[m]),
+        )
+        for tok, m in zip(tokens, idx.tolist(), strict=True)
+    }
+    res = int(p["observation_sample_res"])
+    out: list[Occupancy] = []
+    for i in range(n_steps):
+        dt = (i // res) * res * interval_s
+        centres = objs.center_m[idx, :2] + dt * vel
+        corners = rectangle_corners(centres, objs.yaw_rad[idx], objs.size_m[idx, 0], objs.size_m[idx, 1])
+        out.append(Occupancy(tokens=tokens, corners=corners))
+    touching = rectangles_overlap(ego_box[None], out[0].corners) if idx.size else np.zeros(0, bool)
+    collided = frozenset(tok for tok, t in zip(tokens, touching.tolist(), strict=True) if t)
+    return out, unique, collided
+
+
+class _Path:
+    """``PDMPath``: (x, y, heading) interpolated linearly along the arc length."""
+
+    def __init__(self, xyh: F64) -> None:
+        self.xyh = xyh
+        seg = np.hypot(*np.diff(xyh[:, :2], axis=0).T)
+        self.progress = np.concatenate([[0.0], np.cumsum(seg)])
+        self.length = float(self.progress[-1])
+        self.line = shapely.LineString(xyh[:, :2])
+
+    def interpolate(self, s: F64) -> F64:
+        d = np.clip(s, 1e-5, self.length)
+        out = np.empty((np.size(d), 3), dtype=np.float64)
+        for k in range(3):
+            out[:, k] = np.interp(d, self.progress, self.xyh[:, k])
+        out[:, 2] = normalize_angle(out[:, 2])
+        return out
+
+    def project(self, xy: F64) -> F64:
+        pts = shapely.points(np.asarray(xy, dtype=np.float64).reshape(-1, 2))
+        return np.asarray(shapely.line_locate_point(self.line, pts), dtype=np.float64)
+
+    def corridor(self, start: float, end: float, half_width_m: float) -> shapely.Geometry:
+        a, b = np.clip([start, end], 0.0, self.length)
+        inside = (a <= self.progress) & (self.progress <= b)
+        if inside.sum() > 1:
+            line = shapely.LineString(self.xyh[inside, :2])
+        else:
+            line = shapely.ops.substring(self.line, a, b)
+        return shapely.buffer(line, half_width_m, cap_style="square")
+
+
+def _offset(xyh: F64, lateral_m: float) -> F64:
+    """``parallel_discrete_path``: each pose moved ``lateral_m`` to its left."""
+    out = xyh.copy()
+    out[:, 0] += lateral_m * np.cos(xyh[:, 2] + np.pi / 2)
+    out[:, 1] += lateral_m * np.sin(xyh[:, 2] + np.pi / 2)
+    return out
+
+
+def _idm_step(
+    x: F64, v: F64, lead: F64, target: F64, p: Mapping[str, Any], dt: float
+) -> tuple[F64, F64]:
+    """``BatchIDMPolicy.propagate``."""
+    gap0 = float(p["min_gap_to_lead_agent_m"])
+    headway = float(p["headway_time_s"])
+    a_max, d_max = float(p["idm_accel_max_mps2"]), float(p["idm_decel_max_mps2"])
+    s_star = gap0 + v * headway + v * (v - lead[:, 1]) / (2 * np.sqrt(a_max * d_max))
+    s_alpha = np.maximum(lead[:, 0] - x - lead[:, 2], gap0)
+    v_dot = a_max * (1 - (v / target) ** _IDM_EXPONENT - (s_star / s_alpha) ** 2)
+    v_dot = np.clip(v_dot, -d_max, a_max)
+    return x + dt * v, v + dt * v_dot
+
+
+def pdm_closed_poses(
+    initial_state: F64,
+    *,
+    ctx: MapContext,
+    obs: list[Occupancy],
+    unique: Mapping[str, TrackInfo],
+    collided: frozenset[str],
+    red_lights: list[list[shapely.Polygon]] | None,
+    version: str,
+    vehicle: Mapping[str, float],
+    sim: Mapping[str, Any],
+    p: Mapping[str, Any] = PDM_CLOSED_DEFAULTS,
+) -> F64:
+    """PDM-Closed's trajectory (N+1, 3) from the ego state ``initial_state`` (11,): the poses
+    of its best-scoring IDM proposal (NAVSIM then tracks them like the planner's)."""
+    if ctx.centerline_xyh is None:
+        msg = "PDM-Closed needs the route's centreline"
+        raise ValueError(msg)
+    dt = float(sim["interval_s"])
+    n = int(sim["num_poses"]) + 1
+    limit = ctx.centerline_speed_limit_mps
+    fractions = np.asarray(p["speed_limit_fractions"], dtype=np.float64)
+    targets = fractions * (float(p["fallback_target_velocity_mps"]) if limit is None else limit)
+    paths = [_Path(ctx.centerline_xyh)] + [
+        _Path(_offset(ctx.centerline_xyh, float(o))) for o in p["lateral_offsets_m"]
+    ]
+    n_lon = targets.size
+    half_l, half_w = vehicle["half_length_m"], vehicle["half_width_m"]
+    r2c = vehicle["rear_axle_to_center_m"]
+    poses = np.zeros((len(paths) * n_lon, n, 3), dtype=np.float64)
+    update = int(p["leading_agent_update_rate"])
+    red_polys = red_lights[0] if red_lights else []
+    for li, path in enumerate(paths):
+        rows = slice(li * n_lon, (li + 1) * n_lon)
+        x = np.full(n_lon, float(path.project(initial_state[X : Y + 1])[0]))
+        v = np.full(n_lon, float(initial_state[VELOCITY_X]))
+        poses[rows, 0] = path.interpolate(x[:1])[0]
+        corridor = path.corridor(
+            float(x[0]), float(x[0]) + float(targets.max()) * (n - 1) * dt, half_w
+        )
+        lead = np.zeros((n_lon, 3), dtype=np.float64)
+        for ti in range(1, n):
+            if ti % update == 0:
+                lead = _leading_agents(
+                    path, corridor, obs[ti], unique, collided, red_polys, poses[rows, ti - 1], x,
+                    half_l=half_l, half_w=half_w, r2c=r2c,
+                )
+            x, v = _idm_step(x, v, lead, targets, p, dt)
+            poses[rows, ti] = path.interpolate(x)
+    simulated = simulate_proposals(poses, initial_state, sim)
+    scores = score_proposals(
+        simulated,
+        obs=obs,
+        unique=unique,
+        ctx=ctx,
+        version=version,
+        vehicle=vehicle,
+        interval_s=dt,
+        red_lights=red_lights,
+        ignore_tokens=collided,
+    )["score"]
+    return poses[int(np.argmax(scores))]
+
+
+def _leading_agents(
+    path: _Path,
+    corridor: shapely.Geometry,
+    occ: Occupancy,
+    unique: Mapping[str, TrackInfo],
+    collided: frozenset[str],
+    red: list[shapely.Polygon],
+    current: F64,
+    x: F64,
+    *,
+    half_l: float,
+    half_w: float,
+    r2c: float,
+) -> F64:
+    """``PDMGenerator._update_leading_agents`` at an update step: per proposal (progress,
+    velocity, rear length) of the nearest box or red light ahead in the corridor."""
+    keep = [m for m, tok in enumerate(occ.tokens) if tok not in collided]
+    boxes = shapely.polygons(occ.corners[keep]) if keep else np.zeros(0, dtype=object)
+    hit = shapely.intersects(corridor, boxes) if keep else np.zeros(0, dtype=bool)
+    sel = [keep[i] for i in np.flatnonzero(hit).tolist()]
+    polys = list(boxes[hit]) if keep else []
+    speeds: list[float | None] = []
+    heads: list[float] = []
+    for m in sel:
+        info = unique[occ.tokens[m]]
+        speeds.append(float(np.hypot(*info.velocity_xy)) if info.is_agent else 0.0)
+        heads.append(info.heading_rad)
+    for poly in red:
+        if corridor.intersects(poly):
+            polys.append(poly)
+            speeds.append(None)
+            heads.append(0.0)
+    out = np.zeros((x.size, 3), dtype=np.float64)
+    row = np.zeros(3, dtype=np.float64)  # NAVSIM reuses one row for the proposals of a step
+    if polys:
+        geoms = np.array(polys, dtype=object)
+        progress = path.project(shapely.get_coordinates(shapely.centroid(geoms)))
+        states = np.zeros((x.size, 1, STATE_SIZE))
+        states[:, 0, :3] = current
+        ego = shapely.polygons(
+            ego_coords(states, half_length_m=half_l, half_width_m=half_w, rear_axle_to_center_m=r2c)[:, 0, :4]
+        )
+    for k in range(x.size):
+        ahead = np.flatnonzero(progress > x[k]) if polys else np.zeros(0, dtype=np.int64)
+        if ahead.size:
+            dist = shapely.distance(ego[k], geoms[ahead])
+            j = int(ahead[int(np.argmin(dist))])
+            row[0] = x[k] + float(dist.min())
+            speed = speeds[j]
+            if speed is not None:
+                rel = normalize_angle(np.asarray(heads[j] - current[k, 2]))
+                row[1] = speed * float(np.cos(rel))
+        else:
+            row[0] = path.length
+            row[2] = half_l
+        out[k] = row
+    return out

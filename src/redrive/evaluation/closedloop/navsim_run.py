@@ -1,0 +1,334 @@
+"""NAVSIM's pseudo-simulation on a run: every 0.5 s the planner's trajectory is simulated from
+the ego's state there and scored against what the log's agents did next.
+
+One NAVSIM scene per proposal (``navsim/evaluate/pdm_score.py`` ``pdm_score`` /
+``pdm_score_from_interpolated_trajectory``; v2's ``run_pdm_score_one_stage.py``
+``compute_final_scores`` and ``scoring/scene_aggregator.py`` for the two-frame extended comfort).
+The planner's path (positions in the base_link of its frame) gets NAVSIM's inputs: headings
+from the direction of travel between waypoints, the ego's state as the first pose, sampled
+at 10 Hz over 4 s (held at its last pose if shorter).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from redrive.evaluation.base import EvalData, MetricSkipped
+from redrive.evaluation.closedloop._common import EGO_DEFAULTS, require_road, scene
+from redrive.evaluation.closedloop.navsim_closed import forecast_observation, pdm_closed_poses
+from redrive.evaluation.closedloop.navsim_comfort import two_frame_extended_comfort
+from redrive.evaluation.closedloop.navsim_scene import (
+    interpolate_observation,
+    map_context,
+    red_light_polygons,
+)
+from redrive.evaluation.closedloop.navsim_score import ego_coords, score_proposals
+from redrive.evaluation.closedloop.navsim_sim import (
+    STATE_SIZE,
+    interpolate_poses,
+    simulate_proposals,
+)
+from redrive.types import LightState, PlannedPath, VehicleState
+
+F64 = npt.NDArray[np.float64]
+
+__all__ = ["SceneScore", "navsim_scenes", "planner_poses", "state_array"]
+
+V1_KEYS = ("nc", "dac", "ep", "ttc", "c", "ddc")
+V2_KEYS = ("nc", "dac", "ddc", "tlc", "ep", "ttc", "lk", "hc")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SceneScore:
+    """One scored proposal: its frame, the sub-scores (``V1_KEYS`` / ``V2_KEYS``, v2 with
+    ``ec``, NaN for the first of a sequence), the PDM-Closed reference's raw progress and the
+    score."""
+
+    frame: int
+    stamp_ns: int
+    parts: Mapping[str, float]
+    score: float
+    simulated: F64
+
+
+def state_array(state: VehicleState) -> F64:
+    """NAVSIM's initial ego state (``ego_status_to_ego_state``): rear-axle pose, body-frame
+    velocity and acceleration; steering angle, its rate, angular velocity and acceleration 0."""
+    h = float(state.heading_rad)
+    c, s = math.cos(h), math.sin(h)
+    out = np.zeros(STATE_SIZE, dtype=np.float64)
+    out[0:2] = state.position[:2]
+    out[2] = h
+    vx, vy = float(state.velocity[0]), float(state.velocity[1])
+    ax, ay = float(state.acceleration[0]), float(state.acceleration[1])
+    out[3:5] = (c * vx + s * vy, -s * vx + c * vy)
+    out[5:7] = (c * ax + s * ay, -s * ax + c * ay)
+    return out
+
+
+def _headings(xy: F64, first_rad: float) -> F64:
+    """Direction of travel into each point (the previous heading where it does not move)."""
+    out = np.empty(xy.shape[0], dtype=np.float64)
+    prev_xy = np.zeros(2)
+    prev_h = first_rad
+    for i, p in enumerate(xy):
+        d = p - prev_xy
+        if float(np.hypot(*d)) > 1e-3:
+            prev_h = math.atan2(float(d[1]), float(d[0]))
+        out[i] = prev_h
+        prev_xy = p
+    return out
+
+
+def planner_poses(path: PlannedPath, ego: VehicleState, sim: Mapping[str, Any]) -> F64 | None:
+    """The path as NAVSIM's ``transform_trajectory`` + ``get_trajectory_as_array`` see a
+    planner's output: (N+1, 3) map-frame poses every ``interval_s``; None without a waypoint
+    after its start."""
+    wp = path.waypoints
+    sel = wp[:, 3] > 1e-9
+    if not sel.any():
+        return None
+    local = wp[sel, :2]
+    rel_t = wp[sel, 3]
+    h_local = _headings(local, 0.0)
+    h0 = float(ego.heading_rad)
+    c, s = math.cos(h0), math.sin(h0)
+    world = np.column_stack([c * local[:, 0] - s * local[:, 1], s * local[:, 0] + c * local[:, 1]])
+    world += ego.position[:2]
+    poses = np.vstack([[ego.position[0], ego.position[1], h0], np.column_stack([world, h_local + h0])])
+    times = np.concatenate([[0.0], rel_t])
+    n = int(sim["num_poses"])
+    return interpolate_poses(times, poses, np.arange(n + 1) * float(sim["interval_s"]))
+
+
+class _Track:
+    """A logged ego track interpolated in time (map frame)."""
+
+    def __init__(self, states: Mapping[int, VehicleState]) -> None:
+        items = sorted(states.values(), key=lambda s: s.stamp_ns)
+        self.t_ns = np.array([s.stamp_ns for s in items], dtype=np.int64)
+        self.arr = np.stack([state_array(s) for s in items]) if items else np.zeros((0, STATE_SIZE))
+
+    def covers(self, t0_ns: int, t1_ns: int) -> bool:
+        return bool(self.t_ns.size) and self.t_ns[0] <= t0_ns and self.t_ns[-1] >= t1_ns
+
+    def at(self, stamps_ns: F64) -> F64:
+        t = (self.t_ns - self.t_ns[0]) / 1e9
+        q = (np.asarray(stamps_ns, dtype=np.float64) - self.t_ns[0]) / 1e9
+        out = np.zeros((q.size, STATE_SIZE), dtype=np.float64)
+        for k in range(7):
+            col = np.unwrap(self.arr[:, k]) if k == 2 else self.arr[:, k]
+            out[:, k] = np.interp(q, t, col)
+        out[:, 2] = np.arctan2(np.sin(out[:, 2]), np.cos(out[:, 2]))
+        return out
+
+
+def _visited_lanes(data: EvalData, logged: _Track) -> list[str]:
+    """The lanes the logged ego drives, in order (the route: NAVSIM's route roadblocks)."""
+    road = require_road(data)
+    if not logged.t_ns.size:
+        return []
+    inside = road.lanes_containing(logged.arr[:, :2])  # L, K
+    out: list[str] = []
+    for k in range(inside.shape[1]):
+        for i in np.flatnonzero(inside[:, k]).tolist():
+            lane = road.lanes[i]
+            tangent = road.lane_tangent(i, logged.arr[k, :2])
+            h = logged.arr[k, 2]
+            if tangent[0] * math.cos(h) + tangent[1] * math.sin(h) > 0 and lane.lane_id not in out:
+                out.append(lane.lane_id)
+    return out
+
+
+def navsim_scenes(
+    data: EvalData,
+    *,
+    version: str,
+    params: Mapping[str, Any],
+    light_states: Mapping[int, Mapping[str, LightState]] | None = None,
+) -> list[SceneScore]:
+    """Score the run's planner every ``scene_interval_s`` with NAVSIM ``version`` ("v1" PDMS,
+    "v2" EPDMS).  ``light_states``: frame → light id → state (v2's traffic-light compliance;
+    None: no light is known to be red)."""
+    p = params
+    road_map = data.road_map()
+    if road_map is None:
+        require_road(data)
+        raise AssertionError  # pragma: no cover - require_road raised
+    paths = data.paths()
+    if not paths:
+        raise MetricSkipped("the planner made no trajectory in this run")
+    ego_states = data.ego()
+    logged_states = data.logged_ego() or ego_states
+    logged = _Track(logged_states)
+    sc = scene(data, {k: p[k] for k in EGO_DEFAULTS})
+    frames = sorted(ego_states, key=lambda f: ego_states[f].stamp_ns)
+    stamps = np.array([ego_states[f].stamp_ns for f in frames], dtype=np.int64)
+    period_ns = float(np.median(np.diff(stamps))) if stamps.size > 1 else 1e8
+    tol_ns = max(period_ns / 2.0, 1e6)
+    sim = {k: p[k] for k in p if k in _SIM_KEYS}
+    dt = float(p["interval_s"])
+    n = int(p["num_poses"]) + 1
+    horizon_ns = round((n - 1) * dt * 1e9)
+    obs_steps = n + (10 if version == "v1" else 0)  # v1.1 observes 5 s for its TTC
+    length = float(p["ego_length_m"])
+    vehicle = {
+        "half_length_m": length / 2.0,
+        "half_width_m": float(p["ego_width_m"]) / 2.0,
+        "rear_axle_to_center_m": length / 2.0 - float(p["rear_overhang_m"]),
+    }
+    visited = _visited_lanes(data, logged)
+    light_frames = sorted(light_states or {})
+
+    def frame_at(t_ns: float) -> int | None:
+        i = int(np.searchsorted(stamps, t_ns))
+        best = None
+        for j in (i - 1, i):
+            if 0 <= j < stamps.size and abs(stamps[j] - t_ns) <= tol_ns:
+                if best is None or abs(stamps[j] - t_ns) < abs(stamps[best] - t_ns):
+                    best = j
+        return None if best is None else frames[best]
+
+    def lights_at(t_ns: float) -> Mapping[str, LightState] | None:
+        if not light_states:
+            return None
+        known = [f for f in light_frames if f in ego_states and ego_states[f].stamp_ns <= t_ns + tol_ns]
+        return light_states[known[-1]] if known else None
+
+    out: list[SceneScore] = []
+    next_ns = -math.inf
+    interval_ns = float(p["scene_interval_s"]) * 1e9
+    for f in frames:
+        s0 = ego_states[f].stamp_ns
+        if f not in paths or s0 < next_ns - tol_ns or stamps[-1] < s0 + horizon_ns - tol_ns:
+            continue
+        ego = ego_states[f]
+        pred = planner_poses(paths[f], ego, sim)
+        objs_now = sc.objects.get(f)
+        if pred is None or objs_now is None:
+            continue
+        ctx = map_context(
+            road_map,
+            ego_xy=np.asarray(ego.position[:2], dtype=np.float64),
+            ego_heading_rad=float(ego.heading_rad),
+            visited_lane_ids=visited,
+            radius_m=float(p["map_radius_m"]),
+        )
+        if ctx.centerline is None:
+            continue
+        next_ns = s0 + interval_ns
+        n_samples = int(round((obs_steps - 1) * dt / 0.5)) + 1
+        samples = []
+        for k in range(n_samples):
+            fk = frame_at(s0 + k * 0.5e9)
+            samples.append(None if fk is None else sc.objects.get(fk))
+        obs, unique = interpolate_observation(samples, n_steps=obs_steps, interval_s=dt)
+        red = (
+            red_light_polygons(road_map, ctx, [lights_at(s0 + i * dt * 1e9) for i in range(n)])
+            if version == "v2"
+            else None
+        )
+        init = state_array(ego)
+        init_box = ego_coords(init[None, None], **vehicle)[0, 0]
+        fobs, funique, collided = forecast_observation(
+            objs_now,
+            ego_center_xy=init_box[4],
+            ego_box=init_box[:4],
+            n_steps=n + 11,
+            interval_s=dt,
+            p=p,
+        )
+        red_now = None
+        if red is not None:
+            red_now = [red[0]] * (n + 11)
+        ref = pdm_closed_poses(
+            init, ctx=ctx, obs=fobs, unique=funique, collided=collided, red_lights=red_now,
+            version=version, vehicle=vehicle, sim=sim, p=p,
+        )
+        simulated = simulate_proposals(np.stack([ref, pred]), init, sim)
+        history = None
+        if version == "v2" and logged.covers(s0 - round(1.5e9), s0):
+            knots = logged.at(np.array([s0 - 1.5e9, s0 - 1.0e9, s0 - 0.5e9]))
+            q = np.arange(9) * 0.1
+            history = np.zeros((9, STATE_SIZE), dtype=np.float64)
+            for k in range(7):
+                col = np.unwrap(knots[:, k]) if k == 2 else knots[:, k]
+                history[:, k] = np.interp(q, [0.0, 0.5, 1.0], col)
+        kw: dict[str, Any] = {
+            "obs": obs, "unique": unique, "ctx": ctx, "version": version,
+            "vehicle": vehicle, "interval_s": dt, "red_lights": red, "params": p,
+        }
+        scores = score_proposals(simulated, history=history, **kw)
+        keys = V1_KEYS if version == "v1" else V2_KEYS
+        parts = {k: float(scores[k][1]) for k in keys}
+        if version == "v2" and bool(p["human_penalty_filter"]) and logged.covers(s0, s0 + horizon_ns):
+            fut = logged.at(s0 + np.arange(1, 9) * 0.5e9)
+            human = PlannedPath(
+                stamp_ns=s0,
+                waypoints=_local_waypoints(fut, ego),
+            )
+            hpose = planner_poses(human, ego, sim)
+            if hpose is not None:
+                hsim = simulate_proposals(hpose[None], init, sim)
+                hs = score_proposals(hsim, **kw)
+                for k in keys:
+                    if float(hs[k][0]) == 0.0:
+                        parts[k] = 1.0
+        out.append(
+            SceneScore(frame=f, stamp_ns=s0, parts=parts, score=math.nan, simulated=simulated[1])
+        )
+    return _finalise(out, version=version, dt=dt)
+
+
+def _local_waypoints(states: F64, ego: VehicleState) -> F64:
+    h = float(ego.heading_rad)
+    c, s = math.cos(h), math.sin(h)
+    d = states[:, :2] - ego.position[:2]
+    t = np.arange(1, states.shape[0] + 1) * 0.5
+    return np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], np.zeros(len(t)), t])
+
+
+def _finalise(scenes: Sequence[SceneScore], *, version: str, dt: float) -> list[SceneScore]:
+    """The score of each scene: v1.1's from its parts; v2's with the two-frame extended comfort
+    against the previous scene within 0.55 s (``infer_start_adjacent_mapping``), weight 2 of 16,
+    left out (weights 14) for the first of a sequence (``compute_final_scores``)."""
+    out: list[SceneScore] = []
+    for i, sc in enumerate(scenes):
+        parts = dict(sc.parts)
+        if version == "v1":
+            weighted = (5 * parts["ep"] + 5 * parts["ttc"] + 2 * parts["c"] + 0 * parts["ddc"]) / 12
+            score = parts["nc"] * parts["dac"] * weighted
+        else:
+            ec = math.nan
+            if i > 0:
+                gap = (sc.stamp_ns - scenes[i - 1].stamp_ns) / 1e9
+                if 0 < gap <= 0.55:
+                    ec = two_frame_extended_comfort(
+                        sc.simulated, scenes[i - 1].simulated, interval_s=dt, gap_s=gap
+                    )
+            parts["ec"] = ec
+            total = 5 * parts["ep"] + 5 * parts["ttc"] + 2 * parts["lk"] + 2 * parts["hc"]
+            weight = 14.0
+            if not math.isnan(ec):
+                total += 2 * ec
+                weight = 16.0
+            multi = parts["nc"] * parts["dac"] * parts["ddc"] * parts["tlc"]
+            score = multi * total / weight
+        out.append(SceneScore(frame=sc.frame, stamp_ns=sc.stamp_ns, parts=parts, score=score, simulated=sc.simulated))
+    return out
+
+
+_SIM_KEYS = frozenset(
+    {
+        "interval_s", "num_poses", "wheel_base_m", "q_longitudinal", "r_longitudinal",
+        "q_lateral", "r_lateral", "tracking_horizon", "jerk_penalty", "curvature_rate_penalty",
+        "stopping_proportional_gain", "stopping_velocity_mps", "max_steering_angle_rad",
+        "accel_time_constant_s", "steering_angle_time_constant_s",
+    }
+)
