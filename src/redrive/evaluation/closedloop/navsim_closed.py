@@ -32,13 +32,17 @@ from redrive.evaluation.closedloop.navsim_sim import (
     X,
     Y,
     normalize_angle,
-    simulate_proposals,
 )
 from redrive.types import ObjectColumns
 
 F64 = npt.NDArray[np.float64]
 
-__all__ = ["PDM_CLOSED_DEFAULTS", "forecast_observation", "pdm_closed_poses"]
+__all__ = [
+    "PDM_CLOSED_DEFAULTS",
+    "forecast_observation",
+    "pdm_closed_candidates",
+    "pdm_closed_choice",
+]
 
 PDM_CLOSED_DEFAULTS: Mapping[str, Any] = MappingProxyType(
     {
@@ -153,7 +157,7 @@ def _idm_step(
     return x + dt * v, v + dt * v_dot
 
 
-def pdm_closed_poses(
+def pdm_closed_candidates(
     initial_state: F64,
     *,
     ctx: MapContext,
@@ -161,13 +165,12 @@ def pdm_closed_poses(
     unique: Mapping[str, TrackInfo],
     collided: frozenset[str],
     red_lights: list[list[shapely.Polygon]] | None,
-    version: str,
     vehicle: Mapping[str, float],
     sim: Mapping[str, Any],
     p: Mapping[str, Any] = PDM_CLOSED_DEFAULTS,
 ) -> F64:
-    """PDM-Closed's trajectory (N+1, 3) from the ego state ``initial_state`` (11,): the poses
-    of its best-scoring IDM proposal (NAVSIM then tracks them like the planner's)."""
+    """PDM-Closed's proposals (P, N+1, 3) from the ego state ``initial_state`` (11,)
+    (``PDMGenerator.generate_proposals``: path-major, the IDM policies within a path)."""
     if ctx.centerline_xyh is None:
         msg = "PDM-Closed needs the route's centreline"
         raise ValueError(msg)
@@ -193,6 +196,7 @@ def pdm_closed_poses(
         corridor = path.corridor(
             float(x[0]), float(x[0]) + float(targets.max()) * (n - 1) * dt, half_w
         )
+        shapely.prepare(corridor)
         lead = np.zeros((n_lon, 3), dtype=np.float64)
         for ti in range(1, n):
             if ti % update == 0:
@@ -202,7 +206,23 @@ def pdm_closed_poses(
                 )
             x, v = _idm_step(x, v, lead, targets, p, dt)
             poses[rows, ti] = path.interpolate(x)
-    simulated = simulate_proposals(poses, initial_state, sim)
+    return poses
+
+
+def pdm_closed_choice(
+    simulated: F64,
+    *,
+    ctx: MapContext,
+    obs: list[Occupancy],
+    unique: Mapping[str, TrackInfo],
+    collided: frozenset[str],
+    red_lights: list[list[shapely.Polygon]] | None,
+    version: str,
+    vehicle: Mapping[str, float],
+    interval_s: float,
+) -> int:
+    """The proposal PDM-Closed keeps: the first best score of its simulated proposals
+    (``AbstractPDMClosedPlanner._get_closed_loop_trajectory``: ``np.argmax``)."""
     scores = score_proposals(
         simulated,
         obs=obs,
@@ -210,11 +230,11 @@ def pdm_closed_poses(
         ctx=ctx,
         version=version,
         vehicle=vehicle,
-        interval_s=dt,
+        interval_s=interval_s,
         red_lights=red_lights,
         ignore_tokens=collided,
     )["score"]
-    return poses[int(np.argmax(scores))]
+    return int(np.argmax(scores))
 
 
 def _leading_agents(

@@ -11,6 +11,7 @@ at 10 Hz over 4 s (held at its last pose if shorter).
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -21,10 +22,19 @@ import numpy.typing as npt
 
 from redrive.evaluation.base import EvalData, MetricSkipped
 from redrive.evaluation.closedloop._common import EGO_DEFAULTS, require_road, scene
-from redrive.evaluation.closedloop.navsim_closed import forecast_observation, pdm_closed_poses
+from redrive.evaluation.closedloop.navsim_closed import (
+    PDM_CLOSED_DEFAULTS,
+    forecast_observation,
+    pdm_closed_candidates,
+    pdm_closed_choice,
+)
 from redrive.evaluation.closedloop.navsim_comfort import two_frame_extended_comfort
 from redrive.evaluation.closedloop.navsim_scene import (
+    MapContext,
+    Occupancy,
+    TrackInfo,
     interpolate_observation,
+    lane_polygons,
     map_context,
     red_light_polygons,
 )
@@ -34,7 +44,7 @@ from redrive.evaluation.closedloop.navsim_sim import (
     interpolate_poses,
     simulate_proposals,
 )
-from redrive.types import LightState, PlannedPath, VehicleState
+from redrive.types import LightState, ObjectColumns, PlannedPath, VehicleState
 
 F64 = npt.NDArray[np.float64]
 
@@ -146,17 +156,35 @@ def _visited_lanes(data: EvalData, logged: _Track) -> list[str]:
     return out
 
 
-def navsim_scenes(
-    data: EvalData,
-    *,
-    version: str,
-    params: Mapping[str, Any],
-    light_states: Mapping[int, Mapping[str, LightState]] | None = None,
-) -> list[SceneScore]:
-    """Score the run's planner every ``scene_interval_s`` with NAVSIM ``version`` ("v1" PDMS,
-    "v2" EPDMS).  ``light_states``: frame → light id → state (v2's traffic-light compliance;
-    None: no light is known to be red)."""
-    p = params
+@dataclass(frozen=True, slots=True, kw_only=True)
+class _Frame:
+    """What both versions share at one scene: the map around the ego, its initial state, the
+    simulated planner / human trajectories and PDM-Closed's simulated proposals."""
+
+    frame: int
+    stamp_ns: int
+    ctx: MapContext
+    init: F64
+    pred: F64
+    human: F64 | None
+    candidates: F64
+    forecast: tuple[list[Occupancy], dict[str, TrackInfo], frozenset[str]]
+    history: F64 | None
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class _Run:
+    frames: tuple[_Frame, ...]
+    samples_at: Any  # frame → 2-Hz sample list builder
+    vehicle: Mapping[str, float]
+
+
+def _shared(data: EvalData, p: Mapping[str, Any]) -> _Run:
+    """The run's scenes simulated once (cached on ``data`` per parameters)."""
+    key = "navsim:" + ",".join(f"{k}={p[k]!r}" for k in sorted(_SHARED_KEYS))
+    cached = data._cache.get(key)
+    if isinstance(cached, _Run):
+        return cached
     road_map = data.road_map()
     if road_map is None:
         require_road(data)
@@ -165,18 +193,16 @@ def navsim_scenes(
     if not paths:
         raise MetricSkipped("the planner made no trajectory in this run")
     ego_states = data.ego()
-    logged_states = data.logged_ego() or ego_states
-    logged = _Track(logged_states)
+    logged = _Track(data.logged_ego() or ego_states)
     sc = scene(data, {k: p[k] for k in EGO_DEFAULTS})
     frames = sorted(ego_states, key=lambda f: ego_states[f].stamp_ns)
     stamps = np.array([ego_states[f].stamp_ns for f in frames], dtype=np.int64)
     period_ns = float(np.median(np.diff(stamps))) if stamps.size > 1 else 1e8
     tol_ns = max(period_ns / 2.0, 1e6)
-    sim = {k: p[k] for k in p if k in _SIM_KEYS}
+    sim = {k: p[k] for k in _SIM_KEYS}
     dt = float(p["interval_s"])
     n = int(p["num_poses"]) + 1
     horizon_ns = round((n - 1) * dt * 1e9)
-    obs_steps = n + (10 if version == "v1" else 0)  # v1.1 observes 5 s for its TTC
     length = float(p["ego_length_m"])
     vehicle = {
         "half_length_m": length / 2.0,
@@ -184,24 +210,21 @@ def navsim_scenes(
         "rear_axle_to_center_m": length / 2.0 - float(p["rear_overhang_m"]),
     }
     visited = _visited_lanes(data, logged)
-    light_frames = sorted(light_states or {})
+    lanes = lane_polygons(road_map)
 
     def frame_at(t_ns: float) -> int | None:
         i = int(np.searchsorted(stamps, t_ns))
-        best = None
-        for j in (i - 1, i):
-            if 0 <= j < stamps.size and abs(stamps[j] - t_ns) <= tol_ns:
-                if best is None or abs(stamps[j] - t_ns) < abs(stamps[best] - t_ns):
-                    best = j
-        return None if best is None else frames[best]
+        near = [j for j in (i - 1, i) if 0 <= j < stamps.size and abs(stamps[j] - t_ns) <= tol_ns]
+        return frames[min(near, key=lambda j: abs(stamps[j] - t_ns))] if near else None
 
-    def lights_at(t_ns: float) -> Mapping[str, LightState] | None:
-        if not light_states:
-            return None
-        known = [f for f in light_frames if f in ego_states and ego_states[f].stamp_ns <= t_ns + tol_ns]
-        return light_states[known[-1]] if known else None
+    def samples_at(stamp_ns: int, count: int) -> list[ObjectColumns | None]:
+        out = []
+        for k in range(count):
+            fk = frame_at(stamp_ns + k * 0.5e9)
+            out.append(None if fk is None else sc.objects.get(fk))
+        return out
 
-    out: list[SceneScore] = []
+    scenes: list[_Frame] = []
     next_ns = -math.inf
     interval_ns = float(p["scene_interval_s"]) * 1e9
     for f in frames:
@@ -219,69 +242,108 @@ def navsim_scenes(
             ego_heading_rad=float(ego.heading_rad),
             visited_lane_ids=visited,
             radius_m=float(p["map_radius_m"]),
+            lanes=lanes,
         )
         if ctx.centerline is None:
             continue
         next_ns = s0 + interval_ns
-        n_samples = int(round((obs_steps - 1) * dt / 0.5)) + 1
-        samples = []
-        for k in range(n_samples):
-            fk = frame_at(s0 + k * 0.5e9)
-            samples.append(None if fk is None else sc.objects.get(fk))
-        obs, unique = interpolate_observation(samples, n_steps=obs_steps, interval_s=dt)
-        red = (
-            red_light_polygons(road_map, ctx, [lights_at(s0 + i * dt * 1e9) for i in range(n)])
-            if version == "v2"
-            else None
-        )
         init = state_array(ego)
-        init_box = ego_coords(init[None, None], **vehicle)[0, 0]
-        fobs, funique, collided = forecast_observation(
-            objs_now,
-            ego_center_xy=init_box[4],
-            ego_box=init_box[:4],
-            n_steps=n + 11,
-            interval_s=dt,
-            p=p,
+        box = ego_coords(init[None, None], **vehicle)[0, 0]
+        forecast = forecast_observation(
+            objs_now, ego_center_xy=box[4], ego_box=box[:4], n_steps=n + 11, interval_s=dt, p=p
         )
-        red_now = None
-        if red is not None:
-            red_now = [red[0]] * (n + 11)
-        ref = pdm_closed_poses(
-            init, ctx=ctx, obs=fobs, unique=funique, collided=collided, red_lights=red_now,
-            version=version, vehicle=vehicle, sim=sim, p=p,
+        candidates = pdm_closed_candidates(
+            init, ctx=ctx, obs=forecast[0], unique=forecast[1], collided=forecast[2],
+            red_lights=None, vehicle=vehicle, sim=sim, p=p,
         )
-        simulated = simulate_proposals(np.stack([ref, pred]), init, sim)
+        human_poses = None
+        if logged.covers(s0, s0 + horizon_ns):
+            fut = logged.at(s0 + np.arange(1, 9) * 0.5e9)
+            human = PlannedPath(stamp_ns=s0, waypoints=_local_waypoints(fut, ego))
+            human_poses = planner_poses(human, ego, sim)
+        batch = [candidates, pred[None]] + ([human_poses[None]] if human_poses is not None else [])
+        simulated = simulate_proposals(np.concatenate(batch), init, sim)
+        m = candidates.shape[0]
         history = None
-        if version == "v2" and logged.covers(s0 - round(1.5e9), s0):
+        if logged.covers(s0 - round(1.5e9), s0):
             knots = logged.at(np.array([s0 - 1.5e9, s0 - 1.0e9, s0 - 0.5e9]))
-            q = np.arange(9) * 0.1
             history = np.zeros((9, STATE_SIZE), dtype=np.float64)
             for k in range(7):
                 col = np.unwrap(knots[:, k]) if k == 2 else knots[:, k]
-                history[:, k] = np.interp(q, [0.0, 0.5, 1.0], col)
+                history[:, k] = np.interp(np.arange(9) * 0.1, [0.0, 0.5, 1.0], col)
+        scenes.append(
+            _Frame(
+                frame=f, stamp_ns=s0, ctx=ctx, init=init, pred=simulated[m],
+                human=simulated[m + 1] if human_poses is not None else None,
+                candidates=simulated[:m], forecast=forecast, history=history,
+            )
+        )
+    run = _Run(frames=tuple(scenes), samples_at=samples_at, vehicle=vehicle)
+    data._cache[key] = run
+    return run
+
+
+def navsim_scenes(
+    data: EvalData,
+    *,
+    version: str,
+    params: Mapping[str, Any],
+    light_states: Mapping[int, Mapping[str, LightState]] | None = None,
+) -> list[SceneScore]:
+    """Score the run's planner every ``scene_interval_s`` with NAVSIM ``version`` ("v1" PDMS,
+    "v2" EPDMS).  ``light_states``: frame → light id → state (v2's traffic-light compliance;
+    None: no light is known to be red)."""
+    p = params
+    shared = _shared(data, p)
+    road_map = data.road_map()
+    assert road_map is not None
+    ego_states = data.ego()
+    dt = float(p["interval_s"])
+    n = int(p["num_poses"]) + 1
+    obs_steps = n + (10 if version == "v1" else 0)  # v1.1 observes 5 s for its TTC
+    n_samples = round((obs_steps - 1) * dt / 0.5) + 1
+    known = sorted((ego_states[f].stamp_ns, f) for f in (light_states or {}) if f in ego_states)
+
+    def lights_at(t_ns: float) -> Mapping[str, LightState] | None:
+        if not light_states:
+            return None
+        i = bisect.bisect_right(known, (t_ns + 1e6, math.inf))
+        return light_states[known[i - 1][1]] if i else None
+
+    out: list[SceneScore] = []
+    vehicle = shared.vehicle
+    for fr in shared.frames:
+        obs, unique = interpolate_observation(
+            shared.samples_at(fr.stamp_ns, n_samples), n_steps=obs_steps, interval_s=dt
+        )
+        red = None
+        if version == "v2":
+            red = red_light_polygons(
+                road_map, fr.ctx, [lights_at(fr.stamp_ns + i * dt * 1e9) for i in range(n)]
+            )
+        fobs, funique, collided = fr.forecast
+        best = pdm_closed_choice(
+            fr.candidates, ctx=fr.ctx, obs=fobs, unique=funique, collided=collided,
+            red_lights=None if red is None else [red[0]] * len(fobs),
+            version=version, vehicle=vehicle, interval_s=dt,
+        )
         kw: dict[str, Any] = {
-            "obs": obs, "unique": unique, "ctx": ctx, "version": version,
+            "obs": obs, "unique": unique, "ctx": fr.ctx, "version": version,
             "vehicle": vehicle, "interval_s": dt, "red_lights": red, "params": p,
         }
-        scores = score_proposals(simulated, history=history, **kw)
+        both = np.stack([fr.candidates[best], fr.pred])
+        scores = score_proposals(both, history=fr.history if version == "v2" else None, **kw)
         keys = V1_KEYS if version == "v1" else V2_KEYS
         parts = {k: float(scores[k][1]) for k in keys}
-        if version == "v2" and bool(p["human_penalty_filter"]) and logged.covers(s0, s0 + horizon_ns):
-            fut = logged.at(s0 + np.arange(1, 9) * 0.5e9)
-            human = PlannedPath(
-                stamp_ns=s0,
-                waypoints=_local_waypoints(fut, ego),
-            )
-            hpose = planner_poses(human, ego, sim)
-            if hpose is not None:
-                hsim = simulate_proposals(hpose[None], init, sim)
-                hs = score_proposals(hsim, **kw)
-                for k in keys:
-                    if float(hs[k][0]) == 0.0:
-                        parts[k] = 1.0
+        if version == "v2" and bool(p["human_penalty_filter"]) and fr.human is not None:
+            hs = score_proposals(fr.human[None], **kw)
+            for k in keys:
+                if float(hs[k][0]) == 0.0:
+                    parts[k] = 1.0
         out.append(
-            SceneScore(frame=f, stamp_ns=s0, parts=parts, score=math.nan, simulated=simulated[1])
+            SceneScore(
+                frame=fr.frame, stamp_ns=fr.stamp_ns, parts=parts, score=math.nan, simulated=fr.pred
+            )
         )
     return _finalise(out, version=version, dt=dt)
 
@@ -332,3 +394,4 @@ _SIM_KEYS = frozenset(
         "accel_time_constant_s", "steering_angle_time_constant_s",
     }
 )
+_SHARED_KEYS = _SIM_KEYS | frozenset(EGO_DEFAULTS) | frozenset(PDM_CLOSED_DEFAULTS) | {"scene_interval_s"}

@@ -31,6 +31,7 @@ __all__ = [
     "Occupancy",
     "TrackInfo",
     "interpolate_observation",
+    "lane_polygons",
     "map_context",
     "red_light_polygons",
 ]
@@ -243,9 +244,22 @@ def _centerline(
     return np.column_stack([pts, np.unwrap(heading)])
 
 
+def lane_polygons(road_map: RoadMap) -> tuple[list[shapely.Polygon], shapely.Geometry]:
+    """Each lane's polygon (its boundaries when the map has them, else its centreline widened
+    by half its width either side) and the drivable union of lanes and areas, prepared."""
+    polys = [_lane_polygon(road_map, i) for i in range(len(road_map.lanes))]
+    for poly in polys:
+        shapely.prepare(poly)
+    areas = [shapely.Polygon(a.polygon) for a in road_map.areas]
+    drivable = shapely.union_all([*polys, *areas])
+    shapely.prepare(drivable)
+    return polys, drivable
+
+
 def map_context(
     road_map: RoadMap,
     *,
+    lanes: tuple[list[shapely.Polygon], shapely.Geometry] | None = None,
     ego_xy: F64,
     ego_heading_rad: float,
     visited_lane_ids: Sequence[str],
@@ -256,14 +270,13 @@ def map_context(
     ``map_radius``), its route (the lanes the logged ego drives, ``visited_lane_ids``) and the
     centreline from the starting lane (PDM-Closed ``_get_starting_lane``: the on-route lane
     under the rear axle with the least heading error, else the nearest on-route lane)."""
-    all_polys = [_lane_polygon(road_map, i) for i in range(len(road_map.lanes))]
+    all_polys, drivable = lane_polygons(road_map) if lanes is None else lanes
     centre = shapely.Point(float(ego_xy[0]), float(ego_xy[1]))
-    near = [i for i, poly in enumerate(all_polys) if poly.distance(centre) <= radius_m]
-    areas = [shapely.Polygon(a.polygon) for a in road_map.areas]
-    inter = [p for p, a in zip(areas, road_map.areas, strict=True) if a.kind == "intersection"]
-    inter += [shapely.Polygon(x.polygon) for x in getattr(road_map, "intersections", ())]
-    drivable = shapely.union_all([*(all_polys[i] for i in near), *areas])
-    shapely.prepare(drivable)
+    dist = shapely.distance(np.array(all_polys, dtype=object), centre)
+    near = np.flatnonzero(dist <= radius_m).tolist()
+    inter = [
+        shapely.Polygon(a.polygon) for a in road_map.areas if a.kind == "intersection"
+    ] + [shapely.Polygon(x.polygon) for x in getattr(road_map, "intersections", ())]
     intersection = shapely.union_all(inter) if inter else None
     if intersection is not None:
         shapely.prepare(intersection)
@@ -289,8 +302,6 @@ def map_context(
     )
     line = None if line_xyh is None else shapely.LineString(line_xyh[:, :2])
     polys = [all_polys[i] for i in near]
-    for poly in polys:
-        shapely.prepare(poly)
     ids = [road_map.lanes[i].lane_id for i in near]
     return MapContext(
         lane_polygons=polys,
