@@ -187,7 +187,25 @@ def pdm_closed_candidates(
     r2c = vehicle["rear_axle_to_center_m"]
     poses = np.zeros((len(paths) * n_lon, n, 3), dtype=np.float64)
     update = int(p["leading_agent_update_rate"])
-    red_polys = red_lights[0] if red_lights else []
+    red_polys = list(red_lights[0]) if red_lights else []
+    steps = [ti for ti in range(1, n) if ti % update == 0]
+    tokens = obs[0].tokens if obs else ()
+    keep = np.array([tok not in collided for tok in tokens], dtype=bool)
+    info: list[tuple[float | None, float]] = []
+    for tok in tokens:
+        track = unique[tok]
+        info.append((float(np.hypot(*track.velocity_xy)) if track.is_agent else 0.0, track.heading_rad))
+    info += [(None, 0.0)] * len(red_polys)
+    n_box = len(tokens)
+    corners = np.stack([obs[ti].corners for ti in steps]) if steps else np.zeros((0, n_box, 4, 2))
+    boxes = shapely.polygons(corners) if n_box else np.zeros((len(steps), 0), dtype=object)
+    reds = np.array(red_polys, dtype=object).reshape(1, -1).repeat(len(steps), axis=0)
+    polys = np.concatenate([boxes, reds], axis=1)
+    centres = np.concatenate(
+        [corners.mean(axis=2), shapely.get_coordinates(shapely.centroid(reds.reshape(-1))).reshape(len(steps), -1, 2)],
+        axis=1,
+    )
+    valid = np.concatenate([np.broadcast_to(keep, (len(steps), n_box)), np.ones(reds.shape, bool)], axis=1)
     for li, path in enumerate(paths):
         rows = slice(li * n_lon, (li + 1) * n_lon)
         x = np.full(n_lon, float(path.project(initial_state[X : Y + 1])[0]))
@@ -197,11 +215,14 @@ def pdm_closed_candidates(
             float(x[0]), float(x[0]) + float(targets.max()) * (n - 1) * dt, half_w
         )
         shapely.prepare(corridor)
+        hits = shapely.intersects(corridor, polys) & valid if polys.size else valid
+        prog = path.project(centres.reshape(-1, 2)).reshape(valid.shape) if polys.size else np.zeros(valid.shape)
         lead = np.zeros((n_lon, 3), dtype=np.float64)
         for ti in range(1, n):
             if ti % update == 0:
+                si = steps.index(ti)
                 lead = _leading_agents(
-                    path, corridor, obs[ti], unique, collided, red_polys, poses[rows, ti - 1], x,
+                    path, polys[si], hits[si], prog[si], info, poses[rows, ti - 1], x,
                     half_l=half_l, half_w=half_w, r2c=r2c,
                 )
             x, v = _idm_step(x, v, lead, targets, p, dt)
@@ -239,11 +260,10 @@ def pdm_closed_choice(
 
 def _leading_agents(
     path: _Path,
-    corridor: shapely.Geometry,
-    occ: Occupancy,
-    unique: Mapping[str, TrackInfo],
-    collided: frozenset[str],
-    red: list[shapely.Polygon],
+    polys: npt.NDArray[np.object_],
+    hit: npt.NDArray[np.bool_],
+    progress: F64,
+    info: list[tuple[float | None, float]],
     current: F64,
     x: F64,
     *,
@@ -252,42 +272,27 @@ def _leading_agents(
     r2c: float,
 ) -> F64:
     """``PDMGenerator._update_leading_agents`` at an update step: per proposal (progress,
-    velocity, rear length) of the nearest box or red light ahead in the corridor."""
-    keep = [m for m, tok in enumerate(occ.tokens) if tok not in collided]
-    boxes = shapely.polygons(occ.corners[keep]) if keep else np.zeros(0, dtype=object)
-    hit = shapely.intersects(corridor, boxes) if keep else np.zeros(0, dtype=bool)
-    sel = [keep[i] for i in np.flatnonzero(hit).tolist()]
-    polys = list(boxes[hit]) if keep else []
-    speeds: list[float | None] = []
-    heads: list[float] = []
-    for m in sel:
-        info = unique[occ.tokens[m]]
-        speeds.append(float(np.hypot(*info.velocity_xy)) if info.is_agent else 0.0)
-        heads.append(info.heading_rad)
-    for poly in red:
-        if corridor.intersects(poly):
-            polys.append(poly)
-            speeds.append(None)
-            heads.append(0.0)
+    velocity, rear length) of the nearest box or red light ahead in the corridor (``hit``:
+    the step's boxes and red lights in the corridor, ``progress``: their centroids' progress
+    along the path, ``info``: their (speed or None for a red light, heading))."""
     out = np.zeros((x.size, 3), dtype=np.float64)
     row = np.zeros(3, dtype=np.float64)  # NAVSIM reuses one row for the proposals of a step
-    if polys:
-        geoms = np.array(polys, dtype=object)
-        progress = path.project(shapely.get_coordinates(shapely.centroid(geoms)))
-        states = np.zeros((x.size, 1, STATE_SIZE))
-        states[:, 0, :3] = current
-        ego = shapely.polygons(
-            ego_coords(states, half_length_m=half_l, half_width_m=half_w, rear_axle_to_center_m=r2c)[:, 0, :4]
-        )
+    cand = np.flatnonzero(hit)
+    ego = None
     for k in range(x.size):
-        ahead = np.flatnonzero(progress > x[k]) if polys else np.zeros(0, dtype=np.int64)
+        ahead = cand[progress[cand] > x[k]]
         if ahead.size:
-            dist = shapely.distance(ego[k], geoms[ahead])
+            if ego is None:
+                states = np.zeros((x.size, 1, STATE_SIZE))
+                states[:, 0, :3] = current
+                box = ego_coords(states, half_length_m=half_l, half_width_m=half_w, rear_axle_to_center_m=r2c)
+                ego = shapely.polygons(box[:, 0, :4])
+            dist = shapely.distance(ego[k], polys[ahead])
             j = int(ahead[int(np.argmin(dist))])
             row[0] = x[k] + float(dist.min())
-            speed = speeds[j]
+            speed, heading = info[j]
             if speed is not None:
-                rel = normalize_angle(np.asarray(heads[j] - current[k, 2]))
+                rel = normalize_angle(np.asarray(heading - current[k, 2]))
                 row[1] = speed * float(np.cos(rel))
         else:
             row[0] = path.length
