@@ -216,7 +216,9 @@ def pdm_closed_candidates(
         )
         shapely.prepare(corridor)
         hits = shapely.intersects(corridor, polys) & valid if polys.size else valid
-        prog = path.project(centres.reshape(-1, 2)).reshape(valid.shape) if polys.size else np.zeros(valid.shape)
+        prog = np.full(valid.shape, -np.inf)
+        if hits.any():  # only boxes in the corridor can lead
+            prog[hits] = path.project(centres[hits])
         lead = np.zeros((n_lon, 3), dtype=np.float64)
         for ti in range(1, n):
             if ti % update == 0:
@@ -278,16 +280,18 @@ def _leading_agents(
     out = np.zeros((x.size, 3), dtype=np.float64)
     row = np.zeros(3, dtype=np.float64)  # NAVSIM reuses one row for the proposals of a step
     cand = np.flatnonzero(hit)
-    ego = None
+    dist_all = None
     for k in range(x.size):
         ahead = cand[progress[cand] > x[k]]
         if ahead.size:
-            if ego is None:
+            if dist_all is None:  # every proposal's box against every candidate, one call
                 states = np.zeros((x.size, 1, STATE_SIZE))
                 states[:, 0, :3] = current
                 box = ego_coords(states, half_length_m=half_l, half_width_m=half_w, rear_axle_to_center_m=r2c)
                 ego = shapely.polygons(box[:, 0, :4])
-            dist = shapely.distance(ego[k], polys[ahead])
+                dist_all = np.full((x.size, polys.size), np.inf)
+                dist_all[:, cand] = shapely.distance(ego[:, None], polys[None, cand])
+            dist = dist_all[k, ahead]
             j = int(ahead[int(np.argmin(dist))])
             row[0] = x[k] + float(dist.min())
             speed, heading = info[j]

@@ -171,6 +171,7 @@ class MapContext:
     centerline_xyh: F64 | None
     centerline_speed_limit_mps: float | None
     lane_polygon_by_id: dict[str, shapely.Polygon] = field(default_factory=dict)
+    lane_bounds: F64 = field(default_factory=lambda: np.zeros((0, 4)))
 
     def in_intersection(self, xy: F64) -> npt.NDArray[np.bool_]:
         """(K,) points within an intersection polygon (NAVSIM ``is_in_layer``: ``within``)."""
@@ -313,6 +314,7 @@ def map_context(
         centerline_xyh=line_xyh,
         centerline_speed_limit_mps=None if start is None else road_map.lanes[start].speed_limit_mps,
         lane_polygon_by_id={road_map.lanes[i].lane_id: all_polys[i] for i in range(len(all_polys))},
+        lane_bounds=np.asarray(shapely.bounds(np.array(polys, dtype=object)), dtype=np.float64).reshape(-1, 4),
     )
 
 

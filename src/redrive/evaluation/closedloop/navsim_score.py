@@ -79,8 +79,11 @@ def _ego_areas(coords: F64, ctx: MapContext) -> tuple[npt.NDArray[np.bool_], ...
     pts = coords.reshape(-1, 2)
     n_lanes = len(ctx.lane_polygons)
     inside = np.zeros((n_lanes, pts.shape[0]), dtype=bool)
-    for i, poly in enumerate(ctx.lane_polygons):
-        inside[i] = shapely.contains_xy(poly, pts[:, 0], pts[:, 1])
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    bounds = ctx.lane_bounds
+    near = (bounds[:, 0] <= hi[0]) & (bounds[:, 2] >= lo[0]) & (bounds[:, 1] <= hi[1]) & (bounds[:, 3] >= lo[1])
+    for i in np.flatnonzero(near).tolist():  # a lane off the points' box holds none of them
+        inside[i] = shapely.contains_xy(ctx.lane_polygons[i], pts[:, 0], pts[:, 1])
     inside = inside.reshape(n_lanes, b, t, 5).transpose(1, 2, 0, 3)  # B, T, L, 5
     corners_in = inside[..., :4]
     count = corners_in.sum(axis=-1)  # B, T, L
