@@ -25,7 +25,7 @@ HIGHER_EXACT = {
 #: counts of what the data held and parameters echoed (the part before the first "/")
 NEUTRAL_HEADS = {
     "frames", "num_frames", "num_objects", "num_predictions", "gt_objects", "detections",
-    "matched", "deadline_ms", "expert_progress_m", "gt",
+    "matched", "deadline_ms", "expert_progress_m", "gt", "proposals",
 }  # fmt: skip
 LOWER = re.compile(
     r"rmse|mae|error|^m?a[tsova]e\b|^a[tsova]e/|^[af]de/|_ms\b|_ms/|miss|false_pos|switch|"
@@ -34,7 +34,8 @@ LOWER = re.compile(
 )
 HIGHER = re.compile(
     r"^m?ap|^recall|^precision|hota|deta|assa|loca|detre|detpr|assre|asspr|mota|idf1|^idp|^idr|"
-    r"nds|pdm_score|compliance|progress|ttc_within|comfortable|accuracy|f1|^(nc|dac|mp|ttc|ep|c|ddc)$"
+    r"nds|navsim_e?pdms|compliance|progress|ttc_within|comfortable|accuracy|f1|"
+    r"^(nc|dac|mp|ttc|ep|c|ddc|tlc|lk|hc|ec)$"
 )
 
 

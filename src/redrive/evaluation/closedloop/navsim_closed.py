@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 import shapely
+from shapely.ops import substring
 
 from redrive.evaluation._kinematics import rectangle_corners
 from redrive.evaluation.closedloop.navsim_scene import MapContext, Occupancy, TrackInfo
@@ -131,7 +132,7 @@ class _Path:
         if inside.sum() > 1:
             line = shapely.LineString(self.xyh[inside, :2])
         else:
-            line = shapely.ops.substring(self.line, a, b)
+            line = substring(self.line, a, b)
         return shapely.buffer(line, half_width_m, cap_style="square")
 
 
