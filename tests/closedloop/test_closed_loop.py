@@ -226,7 +226,9 @@ def test_a_planner_that_never_moves_makes_no_progress(tmp_path: Path) -> None:
     pdms = scores["navsim_pdms"]
     assert pdms["nc"] == pdms["dac"] == 1.0
     assert pdms["ep"] < 0.5
-    assert pdms["navsim_pdms"] == pytest.approx((5 * pdms["ep"] + 5 * pdms["ttc"] + 2 * pdms["c"]) / 12)
+    assert pdms["navsim_pdms"] == pytest.approx(
+        (5 * pdms["ep"] + 5 * pdms["ttc"] + 2 * pdms["c"]) / 12
+    )
 
 
 def test_two_planners_in_closed_loop_compare_on_the_same_scenario(tmp_path: Path) -> None:

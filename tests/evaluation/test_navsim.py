@@ -13,7 +13,7 @@ import pytest
 import shapely
 
 from redrive.evaluation.closedloop.navsim_comfort import two_frame_extended_comfort
-from redrive.evaluation.closedloop.navsim_run import V1_KEYS, V2_KEYS, _finalise, SceneScore
+from redrive.evaluation.closedloop.navsim_run import V1_KEYS, V2_KEYS, SceneScore, _finalise
 from redrive.evaluation.closedloop.navsim_scene import (
     interpolate_observation,
     map_context,
@@ -82,13 +82,24 @@ def test_never_moving_ego() -> None:
     holds: PDMS = (5·0 + 5·1 + 2·1)/12, EPDMS = (5·0 + 5·1 + 2·1 + 2·1)/14."""
     v1 = score("v1", straight(10.0), straight(0.0))
     assert {k: v1[k][1] for k in ("nc", "dac", "ep", "ttc", "c")} == {
-        "nc": 1.0, "dac": 1.0, "ep": 0.0, "ttc": 1.0, "c": 1.0
+        "nc": 1.0,
+        "dac": 1.0,
+        "ep": 0.0,
+        "ttc": 1.0,
+        "c": 1.0,
     }
     assert v1["score"][1] == pytest.approx(7 / 12)
     assert v1["score"][0] == pytest.approx(1.0)
     v2 = score("v2", straight(10.0), straight(0.0))
     assert {k: v2[k][1] for k in ("nc", "dac", "ddc", "tlc", "ep", "ttc", "lk", "hc")} == {
-        "nc": 1.0, "dac": 1.0, "ddc": 1.0, "tlc": 1.0, "ep": 0.0, "ttc": 1.0, "lk": 1.0, "hc": 1.0
+        "nc": 1.0,
+        "dac": 1.0,
+        "ddc": 1.0,
+        "tlc": 1.0,
+        "ep": 0.0,
+        "ttc": 1.0,
+        "lk": 1.0,
+        "hc": 1.0,
     }
     assert v2["score"][1] == pytest.approx(9 / 14)
 
@@ -179,7 +190,7 @@ def test_red_light_polygons_follow_the_map_and_the_states() -> None:
 
 def test_epdms_aggregate_with_and_without_extended_comfort() -> None:
     """EC is weight 2 of 16; the first proposal of a sequence has none (weights 14)."""
-    parts = {k: 1.0 for k in V2_KEYS} | {"ep": 0.5}
+    parts = dict.fromkeys(V2_KEYS, 1.0) | {"ep": 0.5}
     sim = straight(10.0)
     scenes = [
         SceneScore(frame=f, stamp_ns=f * 100_000_000, parts=parts, score=0.0, simulated=sim)
@@ -191,7 +202,11 @@ def test_epdms_aggregate_with_and_without_extended_comfort() -> None:
     assert out[1].parts["ec"] == 1.0
     assert out[1].score == pytest.approx((2.5 + 5 + 2 + 2 + 2) / 16)
     v1 = _finalise(
-        [SceneScore(frame=0, stamp_ns=0, parts={k: 1.0 for k in V1_KEYS}, score=0.0, simulated=sim)],
+        [
+            SceneScore(
+                frame=0, stamp_ns=0, parts=dict.fromkeys(V1_KEYS, 1.0), score=0.0, simulated=sim
+            )
+        ],
         version="v1",
         dt=DT,
     )
@@ -218,7 +233,7 @@ def _poses(x: np.ndarray) -> np.ndarray:
 def test_lqr_tracks_a_straight_cruise() -> None:
     t = np.arange(N) * DT
     init = straight(10.0)[0]
-    sim = simulate_proposals(_poses(10.0 * t), init, SIM_DEFAULTS)[0]
+    sim = simulate_proposals(_poses(10.0 * t), init, p=SIM_DEFAULTS)[0]
     assert np.abs(sim[:, 0] - 10.0 * t).max() < 0.05
     assert np.abs(sim[:, 1]).max() < 1e-9
     assert sim[-1, 3] == pytest.approx(10.0, abs=0.05)
@@ -228,13 +243,13 @@ def test_lqr_starts_from_rest() -> None:
     """A plan accelerating from rest at 2 m/s² (16 m in 4 s): the reference speed 1 s ahead is
     above the 0.2 m/s stopping band, so the LQR drives off."""
     t = np.arange(N) * DT
-    sim = simulate_proposals(_poses(t**2), np.zeros(11), SIM_DEFAULTS)[0]
+    sim = simulate_proposals(_poses(t**2), np.zeros(11), p=SIM_DEFAULTS)[0]
     assert sim[-1, 3] > 4.0
     assert sim[-1, 0] > 8.0
 
 
 def test_stopped_plan_from_rest_stays_put() -> None:
-    sim = simulate_proposals(_poses(np.zeros(N)), np.zeros(11), SIM_DEFAULTS)[0]
+    sim = simulate_proposals(_poses(np.zeros(N)), np.zeros(11), p=SIM_DEFAULTS)[0]
     assert np.abs(sim[:, :4]).max() == 0.0
 
 
@@ -244,7 +259,7 @@ def test_lqr_follows_a_lane_change() -> None:
     y = 3.5 * (1 - np.cos(np.pi * t / 4.0)) / 2
     heading = np.arctan2(np.gradient(y, t), 10.0)
     poses = np.column_stack([10.0 * t, y, heading])[None]
-    sim = simulate_proposals(poses, straight(10.0)[0], SIM_DEFAULTS)[0]
+    sim = simulate_proposals(poses, straight(10.0)[0], p=SIM_DEFAULTS)[0]
     assert abs(sim[-1, 1] - 3.5) < 0.5
 
 

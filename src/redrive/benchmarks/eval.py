@@ -45,7 +45,12 @@ class EvalBench:
             "load_cpu_s": self.load_cpu_s,
             "metrics_cpu_s": self.metrics_cpu_s,
             "metrics": [
-                {"metric": c.metric, "algorithm": c.algorithm, "cpu_s": c.cpu_s, "outcome": c.outcome}
+                {
+                    "metric": c.metric,
+                    "algorithm": c.algorithm,
+                    "cpu_s": c.cpu_s,
+                    "outcome": c.outcome,
+                }
                 for c in self.costs
             ],
         }
@@ -69,7 +74,9 @@ def bench_eval(run_dir: str | Path, metrics: Sequence[Metric]) -> EvalBench:
     load = time.process_time() - t0
     costs: list[MetricCost] = []
     for metric in metrics:
-        targets = [""] if metric.role is None else [a for a, r in roles.items() if r == metric.role.value]
+        targets = (
+            [""] if metric.role is None else [a for a, r in roles.items() if r == metric.role.value]
+        )
         for algo in targets:
             t = time.process_time()
             try:
@@ -77,9 +84,14 @@ def bench_eval(run_dir: str | Path, metrics: Sequence[Metric]) -> EvalBench:
                 outcome = "scored"
             except MetricSkipped as skip:
                 outcome = f"skipped: {skip.reason}"
-            except Exception as err:  # noqa: BLE001 - reported with its cost, as evaluate does
+            except Exception as err:
                 outcome = f"error: {type(err).__name__}: {err}"
             costs.append(
-                MetricCost(metric=metric.name, algorithm=algo, cpu_s=time.process_time() - t, outcome=outcome)
+                MetricCost(
+                    metric=metric.name,
+                    algorithm=algo,
+                    cpu_s=time.process_time() - t,
+                    outcome=outcome,
+                )
             )
     return EvalBench(run=str(run.path), load_cpu_s=load, costs=tuple(costs))

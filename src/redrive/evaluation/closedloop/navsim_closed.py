@@ -97,7 +97,9 @@ def forecast_observation(
     for i in range(n_steps):
         dt = (i // res) * res * interval_s
         centres = objs.center_m[idx, :2] + dt * vel
-        corners = rectangle_corners(centres, objs.yaw_rad[idx], objs.size_m[idx, 0], objs.size_m[idx, 1])
+        corners = rectangle_corners(
+            centres, objs.yaw_rad[idx], objs.size_m[idx, 0], objs.size_m[idx, 1]
+        )
         out.append(Occupancy(tokens=tokens, corners=corners))
     touching = rectangles_overlap(ego_box[None], out[0].corners) if idx.size else np.zeros(0, bool)
     collided = frozenset(tok for tok, t in zip(tokens, touching.tolist(), strict=True) if t)
@@ -145,7 +147,7 @@ def _offset(xyh: F64, lateral_m: float) -> F64:
 
 
 def _idm_step(
-    x: F64, v: F64, lead: F64, target: F64, p: Mapping[str, Any], dt: float
+    x: F64, v: F64, *, lead: F64, target: F64, p: Mapping[str, Any], dt: float
 ) -> tuple[F64, F64]:
     """``BatchIDMPolicy.propagate``."""
     gap0 = float(p["min_gap_to_lead_agent_m"])
@@ -195,7 +197,9 @@ def pdm_closed_candidates(
     info: list[tuple[float | None, float]] = []
     for tok in tokens:
         track = unique[tok]
-        info.append((float(np.hypot(*track.velocity_xy)) if track.is_agent else 0.0, track.heading_rad))
+        info.append(
+            (float(np.hypot(*track.velocity_xy)) if track.is_agent else 0.0, track.heading_rad)
+        )
     info += [(None, 0.0)] * len(red_polys)
     n_box = len(tokens)
     corners = np.stack([obs[ti].corners for ti in steps]) if steps else np.zeros((0, n_box, 4, 2))
@@ -203,10 +207,15 @@ def pdm_closed_candidates(
     reds = np.array(red_polys, dtype=object).reshape(1, -1).repeat(len(steps), axis=0)
     polys = np.concatenate([boxes, reds], axis=1)
     centres = np.concatenate(
-        [corners.mean(axis=2), shapely.get_coordinates(shapely.centroid(reds.reshape(-1))).reshape(len(steps), -1, 2)],
+        [
+            corners.mean(axis=2),
+            shapely.get_coordinates(shapely.centroid(reds.reshape(-1))).reshape(len(steps), -1, 2),
+        ],
         axis=1,
     )
-    valid = np.concatenate([np.broadcast_to(keep, (len(steps), n_box)), np.ones(reds.shape, bool)], axis=1)
+    valid = np.concatenate(
+        [np.broadcast_to(keep, (len(steps), n_box)), np.ones(reds.shape, bool)], axis=1
+    )
     for li, path in enumerate(paths):
         rows = slice(li * n_lon, (li + 1) * n_lon)
         x = np.full(n_lon, float(path.project(initial_state[X : Y + 1])[0]))
@@ -225,10 +234,18 @@ def pdm_closed_candidates(
             if ti % update == 0:
                 si = steps.index(ti)
                 lead = _leading_agents(
-                    path, polys[si], hits[si], prog[si], info, poses[rows, ti - 1], x,
-                    half_l=half_l, half_w=half_w, r2c=r2c,
+                    path,
+                    polys=polys[si],
+                    hit=hits[si],
+                    progress=prog[si],
+                    info=info,
+                    current=poses[rows, ti - 1],
+                    x=x,
+                    half_l=half_l,
+                    half_w=half_w,
+                    r2c=r2c,
                 )
-            x, v = _idm_step(x, v, lead, targets, p, dt)
+            x, v = _idm_step(x, v, lead=lead, target=targets, p=p, dt=dt)
             poses[rows, ti] = path.interpolate(x)
     return poses
 
@@ -263,13 +280,13 @@ def pdm_closed_choice(
 
 def _leading_agents(
     path: _Path,
+    *,
     polys: npt.NDArray[np.object_],
     hit: npt.NDArray[np.bool_],
     progress: F64,
     info: list[tuple[float | None, float]],
     current: F64,
     x: F64,
-    *,
     half_l: float,
     half_w: float,
     r2c: float,
@@ -288,7 +305,9 @@ def _leading_agents(
             if dist_all is None:  # every proposal's box against every candidate, one call
                 states = np.zeros((x.size, 1, STATE_SIZE))
                 states[:, 0, :3] = current
-                box = ego_coords(states, half_length_m=half_l, half_width_m=half_w, rear_axle_to_center_m=r2c)
+                box = ego_coords(
+                    states, half_length_m=half_l, half_width_m=half_w, rear_axle_to_center_m=r2c
+                )
                 ego = shapely.polygons(box[:, 0, :4])
                 dist_all = np.full((x.size, polys.size), np.inf)
                 dist_all[:, cand] = shapely.distance(ego[:, None], polys[None, cand])

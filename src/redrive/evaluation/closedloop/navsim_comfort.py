@@ -87,7 +87,9 @@ def _unwrap(headings: F64) -> F64:
 def _yaw(states: F64, t: F64, *, deriv: int, poly: int) -> F64:
     """``_extract_ego_yaw_rate``: the window argument is not passed on, so it is always the
     default 5 of ``_approximate_derivatives``."""
-    return np.round(_derivative(_unwrap(states[..., HEADING]), t, window=5, poly=poly, deriv=deriv), 8)
+    return np.round(
+        _derivative(_unwrap(states[..., HEADING]), t, window=5, poly=poly, deriv=deriv), 8
+    )
 
 
 def _jerk(acc: F64, t: F64, window: int) -> F64:

@@ -111,10 +111,12 @@ def planner_poses(path: PlannedPath, ego: VehicleState, sim: Mapping[str, Any]) 
     c, s = math.cos(h0), math.sin(h0)
     world = np.column_stack([c * local[:, 0] - s * local[:, 1], s * local[:, 0] + c * local[:, 1]])
     world += ego.position[:2]
-    poses = np.vstack([[ego.position[0], ego.position[1], h0], np.column_stack([world, h_local + h0])])
+    poses = np.vstack(
+        [[ego.position[0], ego.position[1], h0], np.column_stack([world, h_local + h0])]
+    )
     times = np.concatenate([[0.0], rel_t])
     n = int(sim["num_poses"])
-    return interpolate_poses(times, poses, np.arange(n + 1) * float(sim["interval_s"]))
+    return interpolate_poses(times, poses, query_s=np.arange(n + 1, dtype=np.float64) * float(sim["interval_s"]))
 
 
 class _Track:
@@ -253,16 +255,23 @@ def _shared(data: EvalData, p: Mapping[str, Any]) -> _Run:
             objs_now, ego_center_xy=box[4], ego_box=box[:4], n_steps=n + 11, interval_s=dt, p=p
         )
         candidates = pdm_closed_candidates(
-            init, ctx=ctx, obs=forecast[0], unique=forecast[1], collided=forecast[2],
-            red_lights=None, vehicle=vehicle, sim=sim, p=p,
+            init,
+            ctx=ctx,
+            obs=forecast[0],
+            unique=forecast[1],
+            collided=forecast[2],
+            red_lights=None,
+            vehicle=vehicle,
+            sim=sim,
+            p=p,
         )
         human_poses = None
         if logged.covers(s0, s0 + horizon_ns):
-            fut = logged.at(s0 + np.arange(1, 9) * 0.5e9)
+            fut = logged.at(s0 + np.arange(1, 9, dtype=np.float64) * 0.5e9)
             human = PlannedPath(stamp_ns=s0, waypoints=_local_waypoints(fut, ego))
             human_poses = planner_poses(human, ego, sim)
         batch = [candidates, pred[None]] + ([human_poses[None]] if human_poses is not None else [])
-        simulated = simulate_proposals(np.concatenate(batch), init, sim)
+        simulated = simulate_proposals(np.concatenate(batch), init, p=sim)
         m = candidates.shape[0]
         history = None
         if logged.covers(s0 - round(1.5e9), s0):
@@ -273,9 +282,15 @@ def _shared(data: EvalData, p: Mapping[str, Any]) -> _Run:
                 history[:, k] = np.interp(np.arange(9) * 0.1, [0.0, 0.5, 1.0], col)
         scenes.append(
             _Frame(
-                frame=f, stamp_ns=s0, ctx=ctx, init=init, pred=simulated[m],
+                frame=f,
+                stamp_ns=s0,
+                ctx=ctx,
+                init=init,
+                pred=simulated[m],
                 human=simulated[m + 1] if human_poses is not None else None,
-                candidates=simulated[:m], forecast=forecast, history=history,
+                candidates=simulated[:m],
+                forecast=forecast,
+                history=history,
             )
         )
     run = _Run(frames=tuple(scenes), samples_at=samples_at, vehicle=vehicle)
@@ -323,13 +338,25 @@ def navsim_scenes(
             )
         fobs, funique, collided = fr.forecast
         best = pdm_closed_choice(
-            fr.candidates, ctx=fr.ctx, obs=fobs, unique=funique, collided=collided,
+            fr.candidates,
+            ctx=fr.ctx,
+            obs=fobs,
+            unique=funique,
+            collided=collided,
             red_lights=None if red is None else [red[0]] * len(fobs),
-            version=version, vehicle=vehicle, interval_s=dt,
+            version=version,
+            vehicle=vehicle,
+            interval_s=dt,
         )
         kw: dict[str, Any] = {
-            "obs": obs, "unique": unique, "ctx": fr.ctx, "version": version,
-            "vehicle": vehicle, "interval_s": dt, "red_lights": red, "params": p,
+            "obs": obs,
+            "unique": unique,
+            "ctx": fr.ctx,
+            "version": version,
+            "vehicle": vehicle,
+            "interval_s": dt,
+            "red_lights": red,
+            "params": p,
         }
         both = np.stack([fr.candidates[best], fr.pred])
         scores = score_proposals(both, history=fr.history if version == "v2" else None, **kw)
@@ -353,7 +380,9 @@ def _local_waypoints(states: F64, ego: VehicleState) -> F64:
     c, s = math.cos(h), math.sin(h)
     d = states[:, :2] - ego.position[:2]
     t = np.arange(1, states.shape[0] + 1) * 0.5
-    return np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], np.zeros(len(t)), t])
+    return np.column_stack(
+        [c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], np.zeros(len(t)), t]
+    )
 
 
 def _finalise(scenes: Sequence[SceneScore], *, version: str, dt: float) -> list[SceneScore]:
@@ -382,16 +411,37 @@ def _finalise(scenes: Sequence[SceneScore], *, version: str, dt: float) -> list[
                 weight = 16.0
             multi = parts["nc"] * parts["dac"] * parts["ddc"] * parts["tlc"]
             score = multi * total / weight
-        out.append(SceneScore(frame=sc.frame, stamp_ns=sc.stamp_ns, parts=parts, score=score, simulated=sc.simulated))
+        out.append(
+            SceneScore(
+                frame=sc.frame,
+                stamp_ns=sc.stamp_ns,
+                parts=parts,
+                score=score,
+                simulated=sc.simulated,
+            )
+        )
     return out
 
 
 _SIM_KEYS = frozenset(
     {
-        "interval_s", "num_poses", "wheel_base_m", "q_longitudinal", "r_longitudinal",
-        "q_lateral", "r_lateral", "tracking_horizon", "jerk_penalty", "curvature_rate_penalty",
-        "stopping_proportional_gain", "stopping_velocity_mps", "max_steering_angle_rad",
-        "accel_time_constant_s", "steering_angle_time_constant_s",
+        "interval_s",
+        "num_poses",
+        "wheel_base_m",
+        "q_longitudinal",
+        "r_longitudinal",
+        "q_lateral",
+        "r_lateral",
+        "tracking_horizon",
+        "jerk_penalty",
+        "curvature_rate_penalty",
+        "stopping_proportional_gain",
+        "stopping_velocity_mps",
+        "max_steering_angle_rad",
+        "accel_time_constant_s",
+        "steering_angle_time_constant_s",
     }
 )
-_SHARED_KEYS = _SIM_KEYS | frozenset(EGO_DEFAULTS) | frozenset(PDM_CLOSED_DEFAULTS) | {"scene_interval_s"}
+_SHARED_KEYS = (
+    _SIM_KEYS | frozenset(EGO_DEFAULTS) | frozenset(PDM_CLOSED_DEFAULTS) | {"scene_interval_s"}
+)

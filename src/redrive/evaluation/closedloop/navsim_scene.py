@@ -239,8 +239,8 @@ def _centerline(
     keep = np.ones(len(pts), dtype=bool)
     keep[1:] = np.hypot(*np.diff(pts, axis=0).T) > 1e-6
     pts = pts[keep]
-    d = np.diff(pts, axis=0)
-    heading = np.arctan2(d[:, 1], d[:, 0])
+    step = np.diff(pts, axis=0)
+    heading = np.arctan2(step[:, 1], step[:, 0])
     heading = np.append(heading, heading[-1])
     return np.column_stack([pts, np.unwrap(heading)])
 
@@ -275,9 +275,9 @@ def map_context(
     centre = shapely.Point(float(ego_xy[0]), float(ego_xy[1]))
     dist = shapely.distance(np.array(all_polys, dtype=object), centre)
     near = np.flatnonzero(dist <= radius_m).tolist()
-    inter = [
-        shapely.Polygon(a.polygon) for a in road_map.areas if a.kind == "intersection"
-    ] + [shapely.Polygon(x.polygon) for x in getattr(road_map, "intersections", ())]
+    inter = [shapely.Polygon(a.polygon) for a in road_map.areas if a.kind == "intersection"] + [
+        shapely.Polygon(x.polygon) for x in getattr(road_map, "intersections", ())
+    ]
     intersection = shapely.union_all(inter) if inter else None
     if intersection is not None:
         shapely.prepare(intersection)
@@ -294,7 +294,9 @@ def map_context(
         if err < best:
             best, start = err, i
     if start is None:
-        dist = [(all_polys[i].distance(centre), i) for i in near if road_map.lanes[i].lane_id in route]
+        dist = [
+            (all_polys[i].distance(centre), i) for i in near if road_map.lanes[i].lane_id in route
+        ]
         start = min(dist)[1] if dist else None
     line_xyh = (
         None
@@ -314,7 +316,9 @@ def map_context(
         centerline_xyh=line_xyh,
         centerline_speed_limit_mps=None if start is None else road_map.lanes[start].speed_limit_mps,
         lane_polygon_by_id={road_map.lanes[i].lane_id: all_polys[i] for i in range(len(all_polys))},
-        lane_bounds=np.asarray(shapely.bounds(np.array(polys, dtype=object)), dtype=np.float64).reshape(-1, 4),
+        lane_bounds=np.asarray(
+            shapely.bounds(np.array(polys, dtype=object)), dtype=np.float64
+        ).reshape(-1, 4),
     )
 
 

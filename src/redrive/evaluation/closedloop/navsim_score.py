@@ -51,7 +51,9 @@ _BEHIND_RAD = math.radians(150.0)  # nuPlan is_agent_behind
 FL, RL, RR, FR, CENTER = range(5)  # NAVSIM BBCoordsIndex
 
 
-def ego_coords(states: F64, *, half_length_m: float, half_width_m: float, rear_axle_to_center_m: float) -> F64:
+def ego_coords(
+    states: F64, *, half_length_m: float, half_width_m: float, rear_axle_to_center_m: float
+) -> F64:
     """``state_array_to_coords_array``: (B, T, 5, 2) front-left, rear-left, rear-right,
     front-right corners and the centre of the ego box."""
     h = states[..., HEADING]
@@ -81,18 +83,23 @@ def _ego_areas(coords: F64, ctx: MapContext) -> tuple[npt.NDArray[np.bool_], ...
     inside = np.zeros((n_lanes, pts.shape[0]), dtype=bool)
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     bounds = ctx.lane_bounds
-    near = (bounds[:, 0] <= hi[0]) & (bounds[:, 2] >= lo[0]) & (bounds[:, 1] <= hi[1]) & (bounds[:, 3] >= lo[1])
+    near = (
+        (bounds[:, 0] <= hi[0])
+        & (bounds[:, 2] >= lo[0])
+        & (bounds[:, 1] <= hi[1])
+        & (bounds[:, 3] >= lo[1])
+    )
     for i in np.flatnonzero(near).tolist():  # a lane off the points' box holds none of them
         inside[i] = shapely.contains_xy(ctx.lane_polygons[i], pts[:, 0], pts[:, 1])
-    inside = inside.reshape(n_lanes, b, t, 5).transpose(1, 2, 0, 3)  # B, T, L, 5
-    corners_in = inside[..., :4]
+    per_lane = inside.reshape(n_lanes, b, t, 5).transpose(1, 2, 0, 3)  # B, T, L, 5
+    corners_in = per_lane[..., :4]
     count = corners_in.sum(axis=-1)  # B, T, L
     multiple = ((count > 0).sum(axis=-1) > 1) & np.all(count != 4, axis=-1)
     corner_pts = coords[..., :4, :].reshape(-1, 2)
     on_road = shapely.contains_xy(ctx.drivable, corner_pts[:, 0], corner_pts[:, 1])
     nondrivable = on_road.reshape(b, t, 4).sum(axis=-1) < 4
     route = np.array([lid in ctx.route_lane_ids for lid in ctx.lane_ids], dtype=bool)
-    oncoming = inside[..., CENTER][..., route].sum(axis=-1) == 0
+    oncoming = per_lane[..., CENTER][..., route].sum(axis=-1) == 0
     return multiple, nondrivable, oncoming
 
 
@@ -128,7 +135,9 @@ def _pack(obs: Sequence[Occupancy]) -> tuple[F64, npt.NDArray[np.bool_], F64, F6
     return corners, valid, centres, radii
 
 
-def _contacts(boxes: F64, times: npt.NDArray[np.int64], packed: tuple[F64, npt.NDArray[np.bool_], F64, F64]) -> list[tuple[int, ...]]:
+def _contacts(
+    boxes: F64, times: npt.NDArray[np.int64], packed: tuple[F64, npt.NDArray[np.bool_], F64, F64]
+) -> list[tuple[int, ...]]:
     """Index tuples ``(*box index, m)`` where box ``boxes[...]`` (…, 4, 2) overlaps box ``m``
     of observation step ``times[...]`` (an array shaped like ``boxes.shape[:-2]``), in
     lexicographic order: a bounding-circle test first, the exact test (separating axes,
@@ -153,6 +162,7 @@ def _contacts(boxes: F64, times: npt.NDArray[np.int64], packed: tuple[F64, npt.N
 def _no_at_fault_collision(
     states: F64,
     coords: F64,
+    *,
     obs: Sequence[Occupancy],
     packed: tuple[F64, npt.NDArray[np.bool_], F64, F64],
     unique: Mapping[str, TrackInfo],
@@ -187,11 +197,11 @@ def _no_at_fault_collision(
 def _ttc(
     states: F64,
     coords: F64,
+    *,
     obs: Sequence[Occupancy],
     packed: tuple[F64, npt.NDArray[np.bool_], F64, F64],
     straddling: npt.NDArray[np.bool_],
     ctx: MapContext,
-    *,
     version: str,
     interval_s: float,
     p: Mapping[str, Any],
@@ -231,7 +241,12 @@ def _ttc(
 
 
 def _driving_direction(
-    coords: F64, oncoming: npt.NDArray[np.bool_], ctx: MapContext, *, version: str, interval_s: float,
+    coords: F64,
+    oncoming: npt.NDArray[np.bool_],
+    ctx: MapContext,
+    *,
+    version: str,
+    interval_s: float,
     p: Mapping[str, Any],
 ) -> F64:
     """``_calculate_driving_direction_compliance``: the most distance driven against traffic
@@ -321,12 +336,31 @@ def score_proposals(
     straddling = multiple | nondrivable
     packed = _pack(obs)
     out: dict[str, F64] = {
-        "nc": _no_at_fault_collision(states, coords, obs, packed, unique, straddling, params, ignore_tokens),
+        "nc": _no_at_fault_collision(
+            states,
+            coords,
+            obs=obs,
+            packed=packed,
+            unique=unique,
+            straddling=straddling,
+            p=params,
+            ignore=ignore_tokens,
+        ),
         "dac": np.where(nondrivable.any(axis=1), 0.0, 1.0),
-        "ddc": _driving_direction(coords, oncoming, ctx, version=version, interval_s=interval_s, p=params),
+        "ddc": _driving_direction(
+            coords, oncoming, ctx, version=version, interval_s=interval_s, p=params
+        ),
         "ttc": _ttc(
-            states, coords, obs, packed, straddling, ctx,
-            version=version, interval_s=interval_s, p=params, ignore=ignore_tokens,
+            states,
+            coords,
+            obs=obs,
+            packed=packed,
+            straddling=straddling,
+            ctx=ctx,
+            version=version,
+            interval_s=interval_s,
+            p=params,
+            ignore=ignore_tokens,
         ),
     }
     if ctx.centerline is None:
@@ -338,7 +372,9 @@ def score_proposals(
     t = np.arange(states.shape[1], dtype=np.float64) * interval_s
     r2c = float(vehicle["rear_axle_to_center_m"])
     if version == "v1":
-        out["c"] = comfortable(states, t, version="v1", rear_axle_to_center_m=r2c).astype(np.float64)
+        out["c"] = comfortable(states, t, version="v1", rear_axle_to_center_m=r2c).astype(
+            np.float64
+        )
     else:
         out["tlc"] = _traffic_lights(coords, red_lights)
         out["lk"] = _lane_keeping(coords, ctx, interval_s=interval_s, p=params)
@@ -355,7 +391,9 @@ def score_proposals(
     return aggregate(out, version=version, params=params)
 
 
-def aggregate(parts: dict[str, F64], *, version: str, params: Mapping[str, Any] = SCORER_DEFAULTS) -> dict[str, F64]:
+def aggregate(
+    parts: dict[str, F64], *, version: str, params: Mapping[str, Any] = SCORER_DEFAULTS
+) -> dict[str, F64]:
     """``_aggregate_scores`` (v1.1) / ``_aggregate_pdm_scores`` (v2, without the two-frame
     extended comfort): the multiplicative metrics times the weighted mean, the progress
     normalised by the best progress of a proposal that passes every multiplicative metric."""

@@ -64,7 +64,7 @@ def normalize_angle(a: npt.ArrayLike) -> F64:
     return np.asarray(np.arctan2(np.sin(arr), np.cos(arr)), dtype=np.float64)
 
 
-def interpolate_poses(times_s: F64, poses: F64, query_s: F64) -> F64:
+def interpolate_poses(times_s: F64, poses: F64, *, query_s: F64) -> F64:
     """(K, 3) x, y, heading at ``query_s`` from poses (N, 3) at increasing ``times_s``: linear,
     headings unwrapped first, queries clipped to the span (nuPlan ``InterpolatedTrajectory``
     with its ``AngularInterpolator``, as NAVSIM's ``get_trajectory_as_array`` samples it)."""
@@ -115,9 +115,7 @@ def _solve(lhs: F64, rhs: F64) -> F64:
     return np.asarray(np.linalg.solve(lhs, rhs[..., None])[..., 0], dtype=np.float64)
 
 
-def _curvature_fit(
-    heading_disp: F64, velocity: F64, dt: float, penalty: float
-) -> tuple[F64, F64]:
+def _curvature_fit(heading_disp: F64, velocity: F64, dt: float, penalty: float) -> tuple[F64, F64]:
     """``_fit_initial_curvature_and_curvature_rate_profile``."""
     batch, dim = heading_disp.shape
     a = np.repeat(np.tri(dim, dtype=np.float64)[None], batch, axis=0)
@@ -189,12 +187,20 @@ def _track(
         b = horizon * dt
         accel[go] = -1.0 / (b * q_lon * b + r_lon) * b * q_lon * (v0[go] - v_ref[go])
         v_prof = _profile(v0[go], np.repeat(accel[go, None], horizon, axis=-1), dt)[:, :horizon]
-        steer_rate[go] = _lateral_lqr(lat0[go], v_prof, curvature[go], dt, wheel_base, p)
+        steer_rate[go] = _lateral_lqr(
+            lat0[go], v_prof, curvature=curvature[go], dt=dt, wheel_base=wheel_base, p=p
+        )
     return accel, steer_rate
 
 
 def _lateral_lqr(
-    x0: F64, velocity: F64, curvature: F64, dt: float, wheel_base: float, p: Mapping[str, Any]
+    x0: F64,
+    velocity: F64,
+    *,
+    curvature: F64,
+    dt: float,
+    wheel_base: float,
+    p: Mapping[str, Any],
 ) -> F64:
     """``_lateral_lqr_controller`` + ``_solve_one_step_lateral_lqr``."""
     # A = Π M_k, B, g accumulated with M_k = [[1, v dt, 0], [0, 1, v dt / L], [0, 0, 1]]:
@@ -266,7 +272,7 @@ def _propagate(states: F64, accel_cmd: F64, steer_rate_cmd: F64, p: Mapping[str,
     return out
 
 
-def simulate_proposals(poses: F64, initial_state: F64, p: Mapping[str, Any]) -> F64:
+def simulate_proposals(poses: F64, initial_state: F64, *, p: Mapping[str, Any]) -> F64:
     """``PDMSimulator.simulate_proposals``: proposals' poses (B, N+1, 3) tracked from
     ``initial_state`` (11,) → simulated states (B, N+1, 11), the first row the initial state."""
     batch, n = poses.shape[:2]
