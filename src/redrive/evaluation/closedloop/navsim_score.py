@@ -43,6 +43,7 @@ SCORER_DEFAULTS: Mapping[str, Any] = MappingProxyType(
         "lane_keeping_deviation_limit_m": 0.5,
         "lane_keeping_horizon_s": 2.0,
         "collision_stopped_speed_mps": 5e-2,  # get_collision_type / nuPlan is_track_stopped
+        "comfort_rear_axle_to_center_m": 1.461,  # get_pacifica_parameters().rear_axle_to_center
     }
 )
 
@@ -370,7 +371,9 @@ def score_proposals(
     end = shapely.line_locate_point(ctx.centerline, shapely.points(coords[:, -1, CENTER]))
     out["progress_m"] = np.clip(np.asarray(end - start, dtype=np.float64), 0.0, None)
     t = np.arange(states.shape[1], dtype=np.float64) * interval_s
-    r2c = float(vehicle["rear_axle_to_center_m"])
+    # v2's ego_is_comfortable shifts to the centre of its default vehicle, the Pacifica, whatever
+    # the scorer's vehicle (v1.1 does not shift)
+    r2c = float(params["comfort_rear_axle_to_center_m"])
     if version == "v1":
         out["c"] = comfortable(states, t, version="v1", rear_axle_to_center_m=r2c).astype(
             np.float64

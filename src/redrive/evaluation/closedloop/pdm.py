@@ -10,7 +10,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from redrive.evaluation.base import EvalData, Metric, MetricResult, MetricSkipped
+from redrive.evaluation.base import Bookmark, EvalData, Metric, MetricResult, MetricSkipped
 from redrive.evaluation.closedloop._common import EGO_DEFAULTS
 from redrive.evaluation.closedloop.navsim_closed import PDM_CLOSED_DEFAULTS
 from redrive.evaluation.closedloop.navsim_run import V1_KEYS, V2_KEYS, SceneScore, navsim_scenes
@@ -43,6 +43,23 @@ def light_states(data: EvalData) -> dict[int, dict[str, LightState]] | None:
     return {int(f): {str(t.id): t.state for t in lights} for f, lights in raw.items()}
 
 
+def _bookmarks(scenes: list[SceneScore], headline: str, keys: tuple[str, ...]) -> list[Bookmark]:
+    """A ``navsim_infraction`` at each proposal a binary sub-score fails (0), naming them."""
+    out = []
+    for s in scenes:
+        failed = [k for k in keys if k != "ep" and s.parts.get(k) == 0.0]
+        if failed:
+            out.append(
+                Bookmark(
+                    frame_index=s.frame,
+                    kind="navsim_infraction",
+                    detail=f"{headline} {s.score:.2f}: {', '.join(failed)} 0",
+                    severity=1.0 - s.score,
+                )
+            )
+    return out
+
+
 def _result(scenes: list[SceneScore], headline: str, keys: tuple[str, ...]) -> MetricResult:
     if not scenes:
         msg = (
@@ -64,6 +81,7 @@ def _result(scenes: list[SceneScore], headline: str, keys: tuple[str, ...]) -> M
         per_frame=per_frame,
         units={"proposals": "count"},
         higher_is_better={"proposals": None},
+        bookmarks=_bookmarks(scenes, headline, keys),
     )
 
 
@@ -76,7 +94,8 @@ class NavsimPdms(Metric):
 
     Values: ``navsim_pdms`` (headline: the mean over proposals, NAVSIM's average), the mean of
     each sub-score (``nc``, ``dac``, ``ep``, ``ttc``, ``c``, ``ddc``), ``proposals``; per-frame
-    series of each at the proposals' frames."""
+    series of each at the proposals' frames; a ``navsim_infraction`` bookmark where a binary
+    sub-score fails."""
 
     name: ClassVar[str] = "navsim_pdms"
     version: ClassVar[str] = "1"
