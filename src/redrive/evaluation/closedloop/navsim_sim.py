@@ -203,29 +203,27 @@ def _lateral_lqr(
     p: Mapping[str, Any],
 ) -> F64:
     """``_lateral_lqr_controller`` + ``_solve_one_step_lateral_lqr``."""
-    # A = Π M_k, B, g accumulated with M_k = [[1, v dt, 0], [0, 1, v dt / L], [0, 0, 1]]:
-    # A stays unit upper-triangular, so its products are written out
+    # A = Π M_k, B, g accumulated over the horizon with M_k = [[1, v dt, 0], [0, 1, v dt / L],
+    # [0, 0, 1]] (NAVSIM multiplies the matrices step by step): A stays unit upper-triangular,
+    # so each entry is a sum over the steps of what the earlier steps accumulated
     batch = x0.shape[0]
-    a01 = np.zeros(batch)
-    a02 = np.zeros(batch)
-    a12 = np.zeros(batch)
-    b0 = np.zeros(batch)
-    b1 = np.zeros(batch)
-    b2 = np.zeros(batch)
-    g0 = np.zeros(batch)
-    g1 = np.zeros(batch)
-    for k in range(velocity.shape[1]):
-        vk = velocity[:, k]
-        m01 = vk * dt
-        m12 = vk * dt / wheel_base
-        a02 = a02 + m01 * a12
-        a01 = a01 + m01
-        a12 = a12 + m12
-        b0 = b0 + m01 * b1
-        b1 = b1 + m12 * b2
-        b2 = b2 + dt
-        g0 = g0 + m01 * g1
-        g1 = g1 - vk * curvature[:, k] * dt
+    m01 = velocity * dt  # (B, H)
+    m12 = velocity * dt / wheel_base
+    steps = np.arange(velocity.shape[1], dtype=np.float64)
+
+    def before(x: F64) -> F64:  # Σ_{j<k} x_j
+        return np.asarray(np.cumsum(x, axis=1) - x, dtype=np.float64)
+
+    a01 = m01.sum(axis=1)
+    a12 = m12.sum(axis=1)
+    a02 = (m01 * before(m12)).sum(axis=1)
+    b1_terms = m12 * steps * dt  # b2 before step k is k·dt
+    b1 = b1_terms.sum(axis=1)
+    b0 = (m01 * before(b1_terms)).sum(axis=1)
+    b2 = np.full(batch, velocity.shape[1] * dt)
+    g1_terms = -velocity * curvature * dt
+    g1 = g1_terms.sum(axis=1)
+    g0 = (m01 * before(g1_terms)).sum(axis=1)
     a = np.zeros((batch, 3, 3))
     a[:, 0, 0] = a[:, 1, 1] = a[:, 2, 2] = 1.0
     a[:, 0, 1], a[:, 0, 2], a[:, 1, 2] = a01, a02, a12
