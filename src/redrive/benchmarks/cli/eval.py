@@ -17,6 +17,11 @@ before it: work they share (NAVSIM's PDMS and EPDMS share their simulated propos
 the first.
 """
 
+_EPILOG = """\
+example:
+  redrive bench eval RUN --metric navsim_pdms --metric navsim_epdms
+"""
+
 
 def _run_eval(args: argparse.Namespace) -> int:
     from redrive.benchmarks.eval import bench_eval
@@ -44,6 +49,7 @@ def add_eval_parser(sub: Any) -> None:
         "eval",
         help="the CPU seconds of each metric on a run",
         description=_DESCRIPTION,
+        epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("run", metavar="RUN", help="a run directory")
