@@ -99,16 +99,20 @@ def _headings(xy: F64, first_rad: float) -> F64:
 def planner_poses(path: PlannedPath, ego: VehicleState, sim: Mapping[str, Any]) -> F64 | None:
     """The path as NAVSIM's ``transform_trajectory`` + ``get_trajectory_as_array`` see a
     planner's output: (N+1, 3) map-frame poses every ``interval_s``; None without a waypoint
-    after its start."""
+    after its start or in a frame other than ``base_link`` (of the plan's frame) or ``map``."""
     wp = path.waypoints
     sel = wp[:, 3] > 1e-9
-    if not sel.any():
+    if not sel.any() or path.frame_id not in ("base_link", "map"):
         return None
-    local = wp[sel, :2]
-    rel_t = wp[sel, 3]
-    h_local = _headings(local, 0.0)
     h0 = float(ego.heading_rad)
     c, s = math.cos(h0), math.sin(h0)
+    if path.frame_id == "map":  # into base_link of the plan's frame first
+        d = wp[sel, :2] - ego.position[:2]
+        local = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
+    else:
+        local = wp[sel, :2]
+    rel_t = wp[sel, 3]
+    h_local = _headings(local, 0.0)
     world = np.column_stack([c * local[:, 0] - s * local[:, 1], s * local[:, 0] + c * local[:, 1]])
     world += ego.position[:2]
     poses = np.vstack(
@@ -116,7 +120,9 @@ def planner_poses(path: PlannedPath, ego: VehicleState, sim: Mapping[str, Any]) 
     )
     times = np.concatenate([[0.0], rel_t])
     n = int(sim["num_poses"])
-    return interpolate_poses(times, poses, query_s=np.arange(n + 1, dtype=np.float64) * float(sim["interval_s"]))
+    return interpolate_poses(
+        times, poses, query_s=np.arange(n + 1, dtype=np.float64) * float(sim["interval_s"])
+    )
 
 
 class _Track:
