@@ -291,3 +291,26 @@ def test_evaluate_reports_navsim_pdms_per_proposal(demo_run: Path, tmp_path: Pat
     )
     assert ev.value("navsim_pdms", "proposals", algorithm="planner") == len(frames)
     assert 0.0 <= ev.value("navsim_epdms", "navsim_epdms", algorithm="planner") <= 1.0
+
+
+def test_planner_path_in_base_link_or_map_gives_the_same_poses() -> None:
+    """A path 10 m/s straight ahead of an ego at (5, 2) heading 90°: the same poses whether the
+    waypoints are in base_link or in the map; headings are the direction of travel."""
+    from redrive.evaluation.closedloop.navsim_run import planner_poses
+    from redrive.types import PlannedPath, VehicleState
+
+    ego = VehicleState(stamp_ns=0, position=np.array([5.0, 2.0, 0.0]), heading_rad=np.pi / 2)
+    t = np.arange(1, 9) * 0.5
+    local = np.column_stack([10.0 * t, np.zeros(8), np.zeros(8), t])
+    world = np.column_stack([np.full(8, 5.0), 2.0 + 10.0 * t, np.zeros(8), t])
+    a = planner_poses(PlannedPath(stamp_ns=0, waypoints=local), ego, SIM_DEFAULTS)
+    b = planner_poses(PlannedPath(stamp_ns=0, waypoints=world, frame_id="map"), ego, SIM_DEFAULTS)
+    assert a is not None
+    assert b is not None
+    assert a.shape == (N, 3)
+    np.testing.assert_allclose(a, b, atol=1e-9)
+    np.testing.assert_allclose(a[:, 0], 5.0, atol=1e-9)
+    np.testing.assert_allclose(a[:, 1], 2.0 + 10.0 * np.arange(N) * DT, atol=1e-9)
+    np.testing.assert_allclose(a[:, 2], np.pi / 2, atol=1e-9)
+    odd = PlannedPath(stamp_ns=0, waypoints=local, frame_id="odom")
+    assert planner_poses(odd, ego, SIM_DEFAULTS) is None
