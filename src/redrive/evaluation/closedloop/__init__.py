@@ -4,6 +4,8 @@ They score a run as a whole (``role = None``) from its ``ego`` table, its ground
 frame's base_link, put into ``map`` with the frame's ego pose) and, where road geometry is
 needed, its road map (``RUN/map.json``; runs of a synthetic scenario or its log store one, others skip those
 metrics).  They apply to open-loop runs as well: there the driven ego is the logged one.
+NAVSIM's ``navsim_pdms`` and ``navsim_epdms`` score a planning algorithm instead (``pdm``): its
+trajectories, pseudo-simulated every 0.5 s against the log's agents.
 """
 
 from __future__ import annotations
