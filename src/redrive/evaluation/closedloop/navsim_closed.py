@@ -235,7 +235,6 @@ def pdm_closed_candidates(
                 si = steps.index(ti)
                 lead = _leading_agents(
                     path,
-                    box_corners=corners[si],
                     polys=polys[si],
                     hit=hits[si],
                     progress=prog[si],
@@ -279,34 +278,9 @@ def pdm_closed_choice(
     return int(np.argmax(scores))
 
 
-def _rect_distance(a: F64, b: F64) -> F64:
-    """(P, K) distances between rectangles ``a`` (P, 4, 2) and ``b`` (K, 4, 2): 0 where they
-    overlap, else the least distance of a corner of one to an edge of the other (shapely's
-    ``distance`` of the two polygons)."""
-    from redrive.evaluation._kinematics import rectangles_overlap
-
-    def corner_to_edges(pts: F64, quads: F64) -> F64:  # (P, K) min over 4 corners × 4 edges
-        e0 = quads  # K, 4, 2
-        e1 = np.roll(quads, -1, axis=1)
-        d = e1 - e0
-        rel = pts[:, None, :, None, :] - e0[None, :, None, :, :]  # P, K, 4c, 4e, 2
-        len2 = np.maximum((d**2).sum(-1), 1e-18)[None, :, None, :]
-        u = np.clip((rel * d[None, :, None]).sum(-1) / len2, 0.0, 1.0)
-        near = e0[None, :, None] + u[..., None] * d[None, :, None]
-        return np.asarray(
-            np.linalg.norm(pts[:, None, :, None, :] - near, axis=-1).min(axis=(2, 3)),
-            dtype=np.float64,
-        )
-
-    dist = np.minimum(corner_to_edges(a, b), corner_to_edges(b, a).T)
-    dist[rectangles_overlap(a[:, None], b[None])] = 0.0
-    return dist
-
-
 def _leading_agents(
     path: _Path,
     *,
-    box_corners: F64,
     polys: npt.NDArray[np.object_],
     hit: npt.NDArray[np.bool_],
     progress: F64,
@@ -320,11 +294,9 @@ def _leading_agents(
     """``PDMGenerator._update_leading_agents`` at an update step: per proposal (progress,
     velocity, rear length) of the nearest box or red light ahead in the corridor (``hit``:
     the step's boxes and red lights in the corridor, ``progress``: their centroids' progress
-    along the path, ``info``: their (speed or None for a red light, heading); the boxes come
-    first, their corners ``box_corners``, then the red lights)."""
+    along the path, ``info``: their (speed or None for a red light, heading))."""
     out = np.zeros((x.size, 3), dtype=np.float64)
     row = np.zeros(3, dtype=np.float64)  # NAVSIM reuses one row for the proposals of a step
-    n_boxes = box_corners.shape[0]
     cand = np.flatnonzero(hit)
     dist_all = None
     for k in range(x.size):
@@ -336,14 +308,9 @@ def _leading_agents(
                 box = ego_coords(
                     states, half_length_m=half_l, half_width_m=half_w, rear_axle_to_center_m=r2c
                 )
+                ego = shapely.polygons(box[:, 0, :4])
                 dist_all = np.full((x.size, polys.size), np.inf)
-                rect = cand[cand < n_boxes]
-                if rect.size:  # boxes: exact rectangle distances in numpy
-                    dist_all[:, rect] = _rect_distance(box[:, 0, :4], box_corners[rect])
-                other = cand[cand >= n_boxes]
-                if other.size:  # red lights' lane polygons
-                    ego = shapely.polygons(box[:, 0, :4])
-                    dist_all[:, other] = shapely.distance(ego[:, None], polys[None, other])
+                dist_all[:, cand] = shapely.distance(ego[:, None], polys[None, cand])
             dist = dist_all[k, ahead]
             j = int(ahead[int(np.argmin(dist))])
             row[0] = x[k] + float(dist.min())

@@ -277,7 +277,15 @@ def _lane_keeping(coords: F64, ctx: MapContext, *, interval_s: float, p: Mapping
     centre = coords[:, :, CENTER]
     b, t = centre.shape[:2]
     flat = centre.reshape(-1, 2)
-    dev = shapely.distance(ctx.centerline, shapely.points(flat)).reshape(b, t)
+    # the centreline near the points only (distances beyond the margin exceed the limit either
+    # way: the verdict is the same, the long line is not walked for every point)
+    margin = 10.0 + float(p["lane_keeping_deviation_limit_m"])
+    lo, hi = flat.min(axis=0) - margin, flat.max(axis=0) + margin
+    near = shapely.clip_by_rect(ctx.centerline, lo[0], lo[1], hi[0], hi[1])
+    if near.is_empty:
+        dev = np.full((b, t), np.inf)
+    else:
+        dev = shapely.distance(near, shapely.points(flat)).reshape(b, t)
     inter = ctx.in_intersection(flat).reshape(b, t)
     need = int(np.ceil(float(p["lane_keeping_horizon_s"]) / interval_s))
     limit = float(p["lane_keeping_deviation_limit_m"])
