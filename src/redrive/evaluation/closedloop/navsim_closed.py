@@ -93,14 +93,17 @@ def forecast_observation(
         for tok, m in zip(tokens, idx.tolist(), strict=True)
     }
     res = int(p["observation_sample_res"])
-    out: list[Occupancy] = []
-    for i in range(n_steps):
-        dt = (i // res) * res * interval_s
-        centres = objs.center_m[idx, :2] + dt * vel
-        corners = rectangle_corners(
-            centres, objs.yaw_rad[idx], objs.size_m[idx, 0], objs.size_m[idx, 1]
-        )
-        out.append(Occupancy(tokens=tokens, corners=corners))
+    n_samples = (n_steps - 1) // res + 1
+    dts = np.arange(n_samples, dtype=np.float64) * res * interval_s
+    centres = objs.center_m[idx, :2][None] + dts[:, None, None] * vel[None]  # S, M, 2
+    corners = rectangle_corners(
+        centres.reshape(-1, 2),
+        np.tile(objs.yaw_rad[idx], n_samples),
+        np.tile(objs.size_m[idx, 0], n_samples),
+        np.tile(objs.size_m[idx, 1], n_samples),
+    ).reshape(n_samples, idx.size, 4, 2)
+    samples = [Occupancy(tokens=tokens, corners=corners[k]) for k in range(n_samples)]
+    out = [samples[i // res] for i in range(n_steps)]
     touching = rectangles_overlap(ego_box[None], out[0].corners) if idx.size else np.zeros(0, bool)
     collided = frozenset(tok for tok, t in zip(tokens, touching.tolist(), strict=True) if t)
     return out, unique, collided

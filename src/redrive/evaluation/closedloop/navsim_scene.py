@@ -114,33 +114,49 @@ def interpolate_observation(
                 )
             tracks[token].append((t, state))
     times = np.arange(n_steps, dtype=np.float64) * interval_s
-    per_step: list[list[tuple[str, F64]]] = [[] for _ in range(n_steps)]
+    # every (step, token) box gathered, the corners computed in one call
+    step_of: list[npt.NDArray[np.int64]] = []
+    tok_of: list[str] = []
+    xs: list[F64] = []
+    ys: list[F64] = []
+    hs: list[F64] = []
+    lengths: list[F64] = []
+    widths: list[F64] = []
     for token, rows in tracks.items():
         t_k = np.array([r[0] for r in rows])
         st = np.stack([r[1] for r in rows])
-        length, width = sizes[token]
         if t_k[0] == t_k[-1]:  # one sample: NAVSIM keeps its first box at every step
-            box = rectangle_corners(st[0, :2], st[0, 2], length, width)[0]
-            for i in range(n_steps):
-                per_step[i].append((token, box))
-            continue
-        heading = np.unwrap(st[:, 2])
-        inside = (times >= t_k[0]) & (times <= t_k[-1])
-        idx = np.flatnonzero(inside)
-        xq = np.interp(times[idx], t_k, st[:, 0])
-        yq = np.interp(times[idx], t_k, st[:, 1])
-        hq = _wrap(np.interp(times[idx], t_k, heading))
-        boxes = rectangle_corners(np.column_stack([xq, yq]), hq, length, width)
-        for j, i in enumerate(idx.tolist()):
-            per_step[i].append((token, boxes[j]))
+            idx = np.arange(n_steps, dtype=np.int64)
+            xq, yq, hq = (np.full(n_steps, st[0, c]) for c in range(3))
+        else:
+            idx = np.flatnonzero((times >= t_k[0]) & (times <= t_k[-1])).astype(np.int64)
+            xq = np.interp(times[idx], t_k, st[:, 0])
+            yq = np.interp(times[idx], t_k, st[:, 1])
+            hq = _wrap(np.interp(times[idx], t_k, np.unwrap(st[:, 2])))
+        step_of.append(idx)
+        tok_of += [token] * idx.size
+        xs.append(xq)
+        ys.append(yq)
+        hs.append(hq)
+        lengths.append(np.full(idx.size, sizes[token][0]))
+        widths.append(np.full(idx.size, sizes[token][1]))
+    if not step_of:
+        return [Occupancy.empty() for _ in range(n_steps)], unique
+    steps = np.concatenate(step_of)
+    corners = rectangle_corners(
+        np.column_stack([np.concatenate(xs), np.concatenate(ys)]),
+        np.concatenate(hs),
+        np.concatenate(lengths),
+        np.concatenate(widths),
+    )
+    order = np.argsort(steps, kind="stable")  # per step, tokens in first-seen order
+    bounds = np.searchsorted(steps[order], np.arange(n_steps + 1))
     occupancy = [
         Occupancy(
-            tokens=tuple(tok for tok, _ in rows),
-            corners=np.stack([c for _, c in rows])
-            if rows
-            else np.zeros((0, 4, 2), dtype=np.float64),
+            tokens=tuple(tok_of[j] for j in order[bounds[i] : bounds[i + 1]].tolist()),
+            corners=corners[order[bounds[i] : bounds[i + 1]]],
         )
-        for rows in per_step
+        for i in range(n_steps)
     ]
     return occupancy, unique
 

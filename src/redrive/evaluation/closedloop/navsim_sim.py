@@ -186,7 +186,8 @@ def _track(
         q_lon, r_lon = float(p["q_longitudinal"]), float(p["r_longitudinal"])
         b = horizon * dt
         accel[go] = -1.0 / (b * q_lon * b + r_lon) * b * q_lon * (v0[go] - v_ref[go])
-        v_prof = _profile(v0[go], np.repeat(accel[go, None], horizon, axis=-1), dt)[:, :horizon]
+        # _generate_profile_from_initial_condition_and_derivatives of a constant acceleration
+        v_prof = v0[go, None] + accel[go, None] * dt * np.arange(horizon, dtype=np.float64)
         steer_rate[go] = _lateral_lqr(
             lat0[go], v_prof, curvature=curvature[go], dt=dt, wheel_base=wheel_base, p=p
         )
