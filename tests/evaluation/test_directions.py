@@ -75,7 +75,8 @@ def test_every_metric_class_states_its_direction() -> None:
 def evaluated(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
     tmp = tmp_path_factory.mktemp("directions")
     log = tmp / "cut_in.mcap"
-    assert main(["synth", "cut_in", "--duration", "4", "-o", str(log)]) == 0
+    # 5 s: NAVSIM's scores need 4 s of log after each proposal they score
+    assert main(["synth", "cut_in", "--duration", "5", "-o", str(log)]) == 0
     open_loop = tmp / "open"
     assert main(["run", str(log), "--out", str(open_loop), "--no-progress"]) == 0
     closed = tmp / "closed"
@@ -83,7 +84,7 @@ def evaluated(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
         perception=["noisy-oracle"], planning=["idm-planner"], control=["pure-pursuit-pid"]
     )
     run_closed_loop(
-        ClosedLoopRequest(scenario="cut_in", pipeline=pipeline, out=closed, duration_s=4.0)
+        ClosedLoopRequest(scenario="cut_in", pipeline=pipeline, out=closed, duration_s=5.0)
     )
     for run in (open_loop, closed):
         summary = evaluate_run(run)
