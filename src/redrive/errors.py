@@ -17,6 +17,8 @@ __all__ = [
     "LogDamagedError",
     "LogError",
     "LogTruncatedError",
+    "MapError",
+    "MissingInputError",
     "PluginError",
     "RedriveError",
     "SimulationError",
@@ -100,6 +102,15 @@ class UnsupportedMessageError(RedriveError):
 
 class ConfigError(RedriveError):
     """A user configuration (TOML file, CLI argument) is invalid."""
+
+
+class MapError(RedriveError):
+    """A map file (Lanelet2 OSM, Argoverse 2 vector map …) cannot be read, or one of its
+    elements is not valid (the message names the file and the element)."""
+
+
+class MissingInputError(ConfigError):
+    """An algorithm declares an input (a sensor, the ego state, ground truth) the log lacks."""
 
 
 class PluginError(RedriveError):

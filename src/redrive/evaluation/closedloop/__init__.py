@@ -13,6 +13,7 @@ from __future__ import annotations
 from redrive.evaluation.closedloop.collisions import AtFaultCollisions, TimeToCollision
 from redrive.evaluation.closedloop.commands import FallbackCommands
 from redrive.evaluation.closedloop.motion import Comfort, EgoProgress
+from redrive.evaluation.closedloop.nuplan import NuplanScenarioScore
 from redrive.evaluation.closedloop.pdm import NavsimEpdms, NavsimPdms
 from redrive.evaluation.closedloop.road import (
     DrivableAreaCompliance,
@@ -29,6 +30,7 @@ __all__ = [
     "FallbackCommands",
     "NavsimEpdms",
     "NavsimPdms",
+    "NuplanScenarioScore",
     "SpeedLimitCompliance",
     "TimeToCollision",
 ]
