@@ -22,7 +22,8 @@ import shapely
 
 from redrive.evaluation._kinematics import rectangle_corners
 from redrive.evaluation.closedloop._common import AGENT_CLASSES
-from redrive.types import LightState, ObjectClass, ObjectColumns, RoadMap
+from redrive.maps.index import DRIVABLE_LANE_KINDS
+from redrive.types import LightState, MapLane, ObjectClass, ObjectColumns, RoadMap
 
 F64 = npt.NDArray[np.float64]
 
@@ -261,14 +262,21 @@ def _centerline(
     return np.column_stack([pts, np.unwrap(heading)])
 
 
+def _drives(lane: MapLane) -> bool:
+    """A lane cars drive in (NAVSIM's LANE / LANE_CONNECTOR layers: not bicycle lanes)."""
+    return getattr(lane, "kind", "vehicle") in DRIVABLE_LANE_KINDS
+
+
 def lane_polygons(road_map: RoadMap) -> tuple[list[shapely.Polygon], shapely.Geometry]:
     """Each lane's polygon (its boundaries when the map has them, else its centreline widened
-    by half its width either side) and the drivable union of lanes and areas, prepared."""
+    by half its width either side) and the drivable union of the lanes cars drive in and the
+    areas, prepared."""
     polys = [_lane_polygon(road_map, i) for i in range(len(road_map.lanes))]
     for poly in polys:
         shapely.prepare(poly)
     areas = [shapely.Polygon(a.polygon) for a in road_map.areas]
-    drivable = shapely.union_all([*polys, *areas])
+    cars = [p for p, lane in zip(polys, road_map.lanes, strict=True) if _drives(lane)]
+    drivable = shapely.union_all([*cars, *areas])
     shapely.prepare(drivable)
     return polys, drivable
 
@@ -290,7 +298,7 @@ def map_context(
     all_polys, drivable = lane_polygons(road_map) if lanes is None else lanes
     centre = shapely.Point(float(ego_xy[0]), float(ego_xy[1]))
     dist = shapely.distance(np.array(all_polys, dtype=object), centre)
-    near = np.flatnonzero(dist <= radius_m).tolist()
+    near = [i for i in np.flatnonzero(dist <= radius_m).tolist() if _drives(road_map.lanes[i])]
     inter = [shapely.Polygon(a.polygon) for a in road_map.areas if a.kind == "intersection"] + [
         shapely.Polygon(x.polygon) for x in getattr(road_map, "intersections", ())
     ]
