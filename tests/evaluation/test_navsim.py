@@ -314,3 +314,16 @@ def test_planner_path_in_base_link_or_map_gives_the_same_poses() -> None:
     np.testing.assert_allclose(a[:, 2], np.pi / 2, atol=1e-9)
     odd = PlannedPath(stamp_ns=0, waypoints=local, frame_id="odom")
     assert planner_poses(odd, ego, SIM_DEFAULTS) is None
+
+
+def test_light_states_are_read_from_the_run_when_it_has_them() -> None:
+    """``light_states``: frame → light id → state from the run's logged lights; None when this
+    run cannot say (then no light is red for TLC)."""
+    from redrive.evaluation.closedloop.pdm import light_states
+    from redrive.types import TrafficLight
+
+    lights = {3: (TrafficLight(id="L1", state=LightState.RED),)}
+    with_lights = SimpleNamespace(traffic_lights=lambda: lights, run=None)
+    assert light_states(with_lights) == {3: {"L1": LightState.RED}}  # type: ignore[arg-type]
+    without = SimpleNamespace(run=SimpleNamespace())
+    assert light_states(without) is None  # type: ignore[arg-type]

@@ -34,7 +34,8 @@ _COMMON: Mapping[str, Any] = MappingProxyType(
 def light_states(data: EvalData) -> dict[int, dict[str, LightState]] | None:
     """frame → light id → state, from the run's logged traffic lights
     (``TrafficData.traffic_lights``) when the run stores them; None when it does not."""
-    reader = getattr(data.run, "traffic_lights", None)
+    # EvalData.traffic_lights (cached) or Run.traffic_lights where this redrive has them
+    reader = getattr(data, "traffic_lights", None) or getattr(data.run, "traffic_lights", None)
     if not callable(reader):
         return None
     raw = reader()
