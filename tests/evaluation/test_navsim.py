@@ -176,7 +176,8 @@ def test_running_a_red_light_scores_zero() -> None:
 
 def test_red_light_polygons_follow_the_map_and_the_states() -> None:
     """Red lights cover the on-route lanes they control; green ones and off-route lanes none."""
-    road = SimpleNamespace(
+    road = SimpleNamespace(  # lanes without a graph: a light covers the lane it controls
+        lanes=ROAD.lanes,
         traffic_lights=(
             SimpleNamespace(light_id="L1", lane_ids=("east",)),
             SimpleNamespace(light_id="L2", lane_ids=("west",)),
@@ -327,3 +328,44 @@ def test_light_states_are_read_from_the_run_when_it_has_them() -> None:
     assert light_states(with_lights) == {3: {"L1": LightState.RED}}  # type: ignore[arg-type]
     without = SimpleNamespace(run=SimpleNamespace())
     assert light_states(without) is None  # type: ignore[arg-type]
+
+
+def test_the_route_goes_on_and_a_red_light_covers_the_connector_past_its_stop_line() -> None:
+    """A lane to a stop line at x = 0, a connector across the junction and a lane beyond; the
+    light controls the approach.  The route goes on past the log's last lane along the straightest
+    successor, and a red light covers the connector (NAVSIM's lane-connector polygon), not the
+    approach where the ego waits."""
+    from redrive.evaluation.closedloop.navsim_run import _extend_route
+    from redrive.types import Intersection, MapTrafficLight
+
+    def lane(lid: str, x0: float, x1: float, **kw: object) -> MapLane:
+        return MapLane(lane_id=lid, centerline=np.array([[x0, 0.0], [x1, 0.0]]), width_m=3.5, **kw)  # type: ignore[arg-type]
+
+    road = RoadMap(
+        lanes=(
+            lane("in", -100.0, 0.0, successors=("conn",)),
+            lane("conn", 0.0, 20.0, predecessors=("in",), successors=("out",), intersection_id="j"),
+            lane("out", 20.0, 200.0, predecessors=("conn",)),
+        ),
+        intersections=(
+            Intersection(
+                intersection_id="j",
+                polygon=np.array([[0.0, -10.0], [20.0, -10.0], [20.0, 10.0], [0.0, 10.0]]),
+                lane_ids=("conn",),
+            ),
+        ),
+        traffic_lights=(
+            MapTrafficLight(light_id="L", position=np.array([0.0, -3.0]), lane_ids=("in",)),
+        ),
+    )
+    route = _extend_route(road, ["in"], length_m=100.0)
+    assert route == ["in", "conn", "out"]
+    ctx = map_context(
+        road, ego_xy=np.array([-30.0, 0.0]), ego_heading_rad=0.0, visited_lane_ids=route
+    )
+    assert ctx.centerline is not None
+    assert ctx.centerline.length == pytest.approx(300.0)
+    red = red_light_polygons(road, ctx, [{"L": LightState.RED}, {"L": LightState.GREEN}])
+    assert len(red[0]) == 1
+    assert red[0][0].equals(ctx.lane_polygon_by_id["conn"])
+    assert red[1] == []

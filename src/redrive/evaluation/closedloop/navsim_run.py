@@ -44,7 +44,7 @@ from redrive.evaluation.closedloop.navsim_sim import (
     interpolate_poses,
     simulate_proposals,
 )
-from redrive.types import LightState, ObjectColumns, PlannedPath, VehicleState
+from redrive.types import LightState, ObjectColumns, PlannedPath, RoadMap, VehicleState
 
 F64 = npt.NDArray[np.float64]
 
@@ -164,6 +164,36 @@ def _visited_lanes(data: EvalData, logged: _Track) -> list[str]:
     return out
 
 
+def _extend_route(road_map: RoadMap, visited: list[str], *, length_m: float) -> list[str]:
+    """The route on past the last lane the logged ego drove, along the map's successors (the
+    one that turns least), for ``length_m``: NAVSIM's route comes from the scenario's mission
+    and goes on past the log; a log alone does not say where the drive was going."""
+    if not visited:
+        return visited
+    lanes = {lane.lane_id: lane for lane in road_map.lanes}
+    out = list(visited)
+    cur = lanes.get(visited[-1])
+    ahead = 0.0
+    while cur is not None and ahead < length_m and len(out) < len(visited) + 32:
+        d_end = cur.centerline[-1] - cur.centerline[-2]
+        h_end = math.atan2(float(d_end[1]), float(d_end[0]))
+        best: tuple[float, str] | None = None
+        for sid in cur.successors:
+            nxt = lanes.get(sid)
+            if nxt is None or sid in out:
+                continue
+            d0 = nxt.centerline[-1] - nxt.centerline[0]
+            turn = abs(math.remainder(math.atan2(float(d0[1]), float(d0[0])) - h_end, math.tau))
+            if best is None or turn < best[0]:
+                best = (turn, sid)
+        if best is None:
+            break
+        out.append(best[1])
+        cur = lanes[best[1]]
+        ahead += cur.length_m
+    return out
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class _Frame:
     """What both versions share at one scene: the map around the ego, its initial state, the
@@ -217,7 +247,9 @@ def _shared(data: EvalData, p: Mapping[str, Any]) -> _Run:
         "half_width_m": float(p["ego_width_m"]) / 2.0,
         "rear_axle_to_center_m": length / 2.0 - float(p["rear_overhang_m"]),
     }
-    visited = _visited_lanes(data, logged)
+    visited = _extend_route(
+        road_map, _visited_lanes(data, logged), length_m=float(p["route_extension_m"])
+    )
     lanes = lane_polygons(road_map)
 
     def frame_at(t_ns: float) -> int | None:

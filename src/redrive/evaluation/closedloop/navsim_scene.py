@@ -356,9 +356,21 @@ def red_light_polygons(
 
     ``states[i]``: light id → state at step ``i`` (the last state logged at or before it), None
     where nothing is known.  The lanes a light controls come from the map's traffic lights
-    (``MapTrafficLight.lane_ids``); a map without them has no red lights."""
-    controlled: dict[str, tuple[str, ...]] = {
-        str(light.light_id): tuple(light.lane_ids)
+    (``MapTrafficLight.lane_ids``): a lane inside an intersection itself, a lane that leads to
+    the stop line its successors (the connectors beyond it, NAVSIM's red-light polygons); a map
+    without lights has no red lights."""
+    lanes = {lane.lane_id: lane for lane in road_map.lanes}
+
+    def past_the_line(lane_id: str) -> tuple[str, ...]:
+        # NAVSIM's light covers the lane connector inside the intersection; a map light that
+        # controls the lane leading to its stop line covers that lane's successors
+        lane = lanes.get(lane_id)
+        if lane is None or getattr(lane, "intersection_id", None) is not None:
+            return (lane_id,)
+        return tuple(getattr(lane, "successors", ())) or (lane_id,)
+
+    beyond: dict[str, tuple[str, ...]] = {
+        str(light.light_id): tuple(s for lid in light.lane_ids for s in past_the_line(lid))
         for light in getattr(road_map, "traffic_lights", ())
     }
     out: list[list[shapely.Polygon]] = []
@@ -368,7 +380,7 @@ def red_light_polygons(
             for light_id, state in st.items():
                 if state is not LightState.RED:
                     continue
-                for lane_id in controlled.get(light_id, ()):
+                for lane_id in beyond.get(light_id, ()):
                     poly = ctx.lane_polygon_by_id.get(lane_id)
                     if poly is not None and lane_id in ctx.route_lane_ids:
                         polys.append(poly)

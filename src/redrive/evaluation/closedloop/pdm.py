@@ -27,6 +27,7 @@ _COMMON: Mapping[str, Any] = MappingProxyType(
         **SCORER_DEFAULTS,
         **PDM_CLOSED_DEFAULTS,
         "scene_interval_s": 0.5,
+        "route_extension_m": 100.0,
     }
 )
 
