@@ -181,7 +181,7 @@ def test_red_light_polygons_follow_the_map_and_the_states() -> None:
         traffic_lights=(
             SimpleNamespace(light_id="L1", lane_ids=("east",)),
             SimpleNamespace(light_id="L2", lane_ids=("west",)),
-        )
+        ),
     )
     states = [{"L1": LightState.RED, "L2": LightState.RED}, {"L1": LightState.GREEN}, None]
     got = red_light_polygons(road, CTX, states)  # type: ignore[arg-type]
@@ -369,3 +369,13 @@ def test_the_route_goes_on_and_a_red_light_covers_the_connector_past_its_stop_li
     assert len(red[0]) == 1
     assert red[0][0].equals(ctx.lane_polygon_by_id["conn"])
     assert red[1] == []
+
+
+def test_parameters_the_simulation_cannot_run_with_are_refused() -> None:
+    from redrive.errors import ConfigError
+    from redrive.evaluation.closedloop import NavsimEpdms, NavsimPdms
+
+    with pytest.raises(ConfigError, match=r"navsim_pdms.*num_poses must be >= 3"):
+        NavsimPdms(num_poses=2)
+    with pytest.raises(ConfigError, match=r"navsim_epdms.*scene_interval_s must be > 0"):
+        NavsimEpdms(scene_interval_s=0.0)

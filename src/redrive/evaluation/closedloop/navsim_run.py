@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import bisect
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -213,7 +213,7 @@ class _Frame:
 @dataclass(frozen=True, slots=True, kw_only=True)
 class _Run:
     frames: tuple[_Frame, ...]
-    samples_at: Any  # frame → 2-Hz sample list builder
+    samples_at: Callable[[int, int], list[ObjectColumns | None]]  # the 2-Hz samples after a stamp
     vehicle: Mapping[str, float]
 
 
@@ -223,10 +223,9 @@ def _shared(data: EvalData, p: Mapping[str, Any]) -> _Run:
     cached = data._cache.get(key)
     if isinstance(cached, _Run):
         return cached
+    require_road(data)  # MetricSkipped without a map
     road_map = data.road_map()
-    if road_map is None:
-        require_road(data)
-        raise AssertionError  # pragma: no cover - require_road raised
+    assert road_map is not None
     paths = data.paths()
     if not paths:
         raise MetricSkipped("the planner made no trajectory in this run")

@@ -10,6 +10,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from redrive.errors import ConfigError
 from redrive.evaluation.base import Bookmark, EvalData, Metric, MetricResult, MetricSkipped
 from redrive.evaluation.closedloop._common import EGO_DEFAULTS
 from redrive.evaluation.closedloop.navsim_closed import PDM_CLOSED_DEFAULTS
@@ -30,6 +31,23 @@ _COMMON: Mapping[str, Any] = MappingProxyType(
         "route_extension_m": 100.0,
     }
 )
+
+
+def _check(name: str, p: Mapping[str, Any]) -> None:
+    """Parameters NAVSIM's simulation cannot run with: a ConfigError naming them."""
+    bad = [
+        f"{k} must be > 0, got {p[k]!r}"
+        for k in ("interval_s", "scene_interval_s", "ego_length_m", "ego_width_m", "wheel_base_m")
+        if not float(p[k]) > 0
+    ]
+    if int(p["num_poses"]) < 3:
+        bad.append(
+            f"num_poses must be >= 3 (the LQR fits a jerk over them), got {p['num_poses']!r}"
+        )
+    if int(p["tracking_horizon"]) < 2:
+        bad.append(f"tracking_horizon must be >= 2 steps, got {p['tracking_horizon']!r}")
+    if bad:
+        raise ConfigError(f"metric {name!r}: " + "; ".join(bad))
 
 
 def light_states(data: EvalData) -> dict[int, dict[str, LightState]] | None:
@@ -107,6 +125,10 @@ class NavsimPdms(Metric):
     higher_is_better: ClassVar[bool] = True
     defaults: ClassVar[Mapping[str, Any]] = _COMMON
 
+    def __init__(self, **params: Any) -> None:
+        super().__init__(**params)
+        _check(self.name, self.params)
+
     def evaluate(self, data: EvalData) -> MetricResult:
         scenes = navsim_scenes(data, version="v1", params=self.params)
         return _result(scenes, "navsim_pdms", V1_KEYS)
@@ -131,6 +153,10 @@ class NavsimEpdms(Metric):
     defaults: ClassVar[Mapping[str, Any]] = MappingProxyType(
         {**_COMMON, "human_penalty_filter": True}
     )
+
+    def __init__(self, **params: Any) -> None:
+        super().__init__(**params)
+        _check(self.name, self.params)
 
     def evaluate(self, data: EvalData) -> MetricResult:
         scenes = navsim_scenes(
