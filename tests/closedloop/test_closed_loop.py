@@ -19,7 +19,7 @@ from redrive.evaluation.closedloop import (
     AtFaultCollisions,
     EgoProgress,
     FallbackCommands,
-    PdmScore,
+    NavsimPdms,
 )
 from redrive.evaluation.compare import compare_runs
 from redrive.evaluation.evaluator import evaluate_run
@@ -178,10 +178,12 @@ def test_a_blind_planner_rear_ends_the_braking_lead_and_is_at_fault(tmp_path: Pa
         scenario="lead_vehicle_hard_brake", pipeline=_blind(tmp_path, 25.0), out=out
     )
     assert run_closed_loop(request).status is RunStatus.COMPLETE
-    scores = _score(out, AtFaultCollisions(), PdmScore())
+    scores = _score(out, AtFaultCollisions(), NavsimPdms())
     assert scores["at_fault_collisions"]["at_fault_collisions"] >= 1
     assert scores["at_fault_collisions"]["no_at_fault_collisions"] == 0.0
-    assert scores["pdm_score"]["pdm_score"] == 0.0
+    # NAVSIM: some 4-s plans drive into the braking lead's logged future (NC 0 there)
+    assert scores["navsim_pdms"]["nc"] < 1.0
+    assert scores["navsim_pdms"]["navsim_pdms"] < 1.0
 
 
 def _touching(run_dir: Path) -> dict[int, list[int]]:
@@ -321,13 +323,21 @@ def test_a_planner_that_never_moves_makes_no_progress(tmp_path: Path) -> None:
     _run(out, f"{PLUGINS}:StandStill", scenario=str(scenario), duration_s=8.0)
     driven = open_run(out).ego()
     assert max(s.speed_mps for s in driven.values()) < 0.01
-    scores = _score(out, EgoProgress(), PdmScore())
+    scores = _score(out, EgoProgress(), NavsimPdms())
     assert abs(scores["ego_progress"]["ego_progress_m"]) < 0.01
     # nuPlan's ratio floors both distances at 2 m: 2 m / the expert's ~45 m
     ratio = scores["ego_progress"]["ego_progress_ratio"]
     assert ratio == pytest.approx(2.0 / scores["ego_progress"]["expert_progress_m"])
     assert ratio < 0.05
-    assert scores["pdm_score"]["pdm_score"] < 0.01
+    # NAVSIM: a standing plan makes no progress against PDM-Closed's (EP 0) unless PDM-Closed
+    # itself makes less than 5 m (then EP is 1 for every proposal); it collides with nothing
+    # and TTC ignores a stopped ego
+    pdms = scores["navsim_pdms"]
+    assert pdms["nc"] == pdms["dac"] == 1.0
+    assert pdms["ep"] < 0.5
+    assert pdms["navsim_pdms"] == pytest.approx(
+        (5 * pdms["ep"] + 5 * pdms["ttc"] + 2 * pdms["c"]) / 12
+    )
 
 
 def test_two_planners_in_closed_loop_compare_on_the_same_scenario(tmp_path: Path) -> None:

@@ -1,4 +1,4 @@
-"""The closed-loop metrics (nuPlan's definitions, NAVSIM's PDM score) on runs written with the
+"""The closed-loop metrics (nuPlan's definitions) on runs written with the
 real RunWriter: hand-made drives on a two-lane road, and the reference pipeline on a synthetic
 cut-in with its road map."""
 
@@ -20,7 +20,6 @@ from redrive.evaluation.closedloop import (
     DrivableAreaCompliance,
     DrivingDirectionCompliance,
     EgoProgress,
-    PdmScore,
     SpeedLimitCompliance,
     TimeToCollision,
     TrafficLightCompliance,
@@ -281,11 +280,10 @@ def test_map_metrics_skip_without_a_map(tmp_path: Path) -> None:
             DrivableAreaCompliance(),
             DrivingDirectionCompliance(),
             SpeedLimitCompliance(),
-            PdmScore(),
         ],
     )
     reasons = {o.metric: o.reason for o in summary.skipped}
-    assert set(reasons) == {"drivable_area", "driving_direction", "speed_limit", "pdm_score"}
+    assert set(reasons) == {"drivable_area", "driving_direction", "speed_limit"}
     assert set(reasons.values()) == {
         "no road map in the run (runs of a synthetic scenario or its log store one; recorded logs have none)"
     }
@@ -303,8 +301,6 @@ def test_progress_of_a_never_moving_ego_is_about_zero(tmp_path: Path) -> None:
     assert res.values["ego_progress_m"] == pytest.approx(0.0, abs=1e-9)
     assert res.values["ego_progress_ratio"] == pytest.approx(2.0 / 39.0)  # nuPlan's 2 m floor
     assert res.values["making_progress"] == 0.0
-    pdm = score(PdmScore(), run)
-    assert pdm.values["pdm_score"] == 0.0
 
 
 def test_progress_of_the_expert_itself_is_one(tmp_path: Path) -> None:
@@ -330,29 +326,6 @@ def test_harsh_brake_breaks_comfort(tmp_path: Path) -> None:
     assert smooth.values["max_abs_jerk_mps3"] == pytest.approx(0.0, abs=1e-6)
 
 
-def test_pdm_score(tmp_path: Path) -> None:
-    clean = score(PdmScore(), make_run(tmp_path, cruise(10.0)))
-    assert clean.values["pdm_score"] == pytest.approx(1.0)
-    assert dict(clean.values) == pytest.approx(
-        {
-            "pdm_score": 1.0,
-            "nc": 1.0,
-            "dac": 1.0,
-            "mp": 1.0,
-            "ttc": 1.0,
-            "ep": 1.0,
-            "c": 1.0,
-            "ddc": 1.0,
-        }
-    )
-    crash = make_run(
-        tmp_path, cruise(10.0), things=lambda t: (Thing(30.0, 0.0),), name="crash"
-    )  # into a stopped car
-    res = score(PdmScore(), crash)
-    assert res.values["nc"] == 0.0
-    assert res.values["pdm_score"] == 0.0
-
-
 def test_entry_points_match_names() -> None:
     import importlib
 
@@ -366,7 +339,6 @@ def test_entry_points_match_names() -> None:
         "speed_limit": SpeedLimitCompliance,
         "ego_progress": EgoProgress,
         "comfort": Comfort,
-        "pdm_score": PdmScore,
         "traffic_light_compliance": TrafficLightCompliance,
     }
     for name, cls in wanted.items():
@@ -415,7 +387,6 @@ def test_reference_pipeline_on_a_synthetic_cut_in(tmp_path: Path) -> None:
         SpeedLimitCompliance(),
         EgoProgress(),
         Comfort(),
-        PdmScore(),
     ]
     summary = evaluate_run(out, metrics=metrics)
     assert not summary.failed
@@ -430,8 +401,3 @@ def test_reference_pipeline_on_a_synthetic_cut_in(tmp_path: Path) -> None:
     assert got["ego_progress"]["expert_progress_m"] == pytest.approx(25 * 1.9, rel=0.1)
     assert got["time_to_collision"]["min_ttc_s"] > 0.95
     assert got["comfort"]["max_abs_yaw_rate_rad_s"] < 0.1  # a straight road
-    assert got["pdm_score"]["pdm_score"] == pytest.approx(
-        (5 * got["time_to_collision"]["ttc_within_bound"] + 5 + 2 * got["comfort"]["comfortable"])
-        / 12
-    )
-    assert got["pdm_score"]["pdm_score"] > 0.5

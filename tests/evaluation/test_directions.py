@@ -30,6 +30,7 @@ NEUTRAL_HEADS = {
     "frames", "num_frames", "num_objects", "num_predictions", "gt_objects", "detections",
     "matched", "deadline_ms", "expert_progress_m", "gt", "deviated_frames",
     "acceleration_from_states", "along_map_route", "lights_in_map", "frames_without_states",
+    "proposals",
 }  # fmt: skip
 LOWER = re.compile(
     r"rmse|mae|error|^m?a[tsova]e\b|^a[tsova]e/|^[af]de/|_ms\b|_ms/|miss|false_pos|switch|"
@@ -39,8 +40,8 @@ LOWER = re.compile(
 )
 HIGHER = re.compile(
     r"^m?ap|^recall|^precision|hota|deta|assa|loca|detre|detpr|assre|asspr|mota|idf1|^idp|^idr|"
-    r"nds|pdm_score|scenario_score|^cls$|^multiplier$|^weighted_average$|compliance|progress|"
-    r"ttc_within|comfortable|accuracy|f1|^(nc|dac|mp|ttc|ep|c|ddc)$"
+    r"nds|navsim_e?pdms|scenario_score|^cls$|^multiplier$|^weighted_average$|compliance|progress|"
+    r"ttc_within|comfortable|accuracy|f1|^(nc|dac|mp|ttc|ep|c|ddc|tlc|lk|hc|ec)$"
 )
 
 
@@ -83,7 +84,8 @@ def test_every_metric_class_states_its_direction() -> None:
 def evaluated(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
     tmp = tmp_path_factory.mktemp("directions")
     log = tmp / "cut_in.mcap"
-    assert main(["synth", "cut_in", "--duration", "4", "-o", str(log)]) == 0
+    # 5 s: NAVSIM's scores need 4 s of log after each proposal they score
+    assert main(["synth", "cut_in", "--duration", "5", "-o", str(log)]) == 0
     open_loop = tmp / "open"
     assert main(["run", str(log), "--out", str(open_loop), "--no-progress"]) == 0
     closed = tmp / "closed"
@@ -91,7 +93,7 @@ def evaluated(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
         perception=["noisy-oracle"], planning=["idm-planner"], control=["pure-pursuit-pid"]
     )
     run_closed_loop(
-        ClosedLoopRequest(scenario="cut_in", pipeline=pipeline, out=closed, duration_s=4.0)
+        ClosedLoopRequest(scenario="cut_in", pipeline=pipeline, out=closed, duration_s=5.0)
     )
     for run in (open_loop, closed):
         summary = evaluate_run(run)

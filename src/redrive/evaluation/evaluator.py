@@ -128,6 +128,9 @@ def evaluate_run(
     provides = _Provides(run, roles)
     scored: list[Scored] = []
     outcomes: list[MetricOutcome] = []
+    # one EvalData per algorithm, shared by the metrics: each table is read once, and what
+    # metrics compute in common (closed-loop scenes, NAVSIM's simulated proposals) once
+    datas: dict[str, EvalData] = {}
     for metric in chosen:
         targets = (
             [""] if metric.role is None else [a for a, r in roles.items() if r == metric.role.value]
@@ -140,7 +143,10 @@ def evaluate_run(
                 outcomes.append(MetricOutcome(metric=metric.name, algorithm=algo, reason=missing))
                 continue
             try:
-                result = metric.evaluate(EvalData(run, algo))
+                data = datas.get(algo)
+                if data is None:
+                    data = datas[algo] = EvalData(run, algo)
+                result = metric.evaluate(data)
             except MetricSkipped as skip:
                 outcomes.append(
                     MetricOutcome(metric=metric.name, algorithm=algo, reason=skip.reason)

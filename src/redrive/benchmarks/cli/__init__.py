@@ -9,6 +9,7 @@ from typing import Any
 
 from redrive.benchmarks.cli.closed_loop import add_closed_loop_parser
 from redrive.benchmarks.cli.engine import add_engine_parser
+from redrive.benchmarks.cli.eval import add_eval_parser
 from redrive.benchmarks.cli.read import EPILOG as _EPILOG
 from redrive.benchmarks.cli.read import add_read_parser
 from redrive.benchmarks.cli.transport import add_transport_parser
@@ -26,7 +27,7 @@ def register(sub: Any) -> None:
         "bench",
         help="benchmarks of this machine and your logs against a baseline measured in the same run",
         description="Benchmarks of redrive on this machine and your logs, each against a baseline "
-        "measured in the same run: read, engine, closed-loop, transport. (Comparisons against "
+        "measured in the same run: read, engine, closed-loop, transport; and the CPU cost of each metric on a run (eval). (Comparisons against "
         "peers, soak and whole-system benchmarks: benchmarks/ in a checkout, `make bench`.)",
         epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -37,3 +38,4 @@ def register(sub: Any) -> None:
     add_engine_parser(bench_sub)
     add_closed_loop_parser(bench_sub)
     add_transport_parser(bench_sub)
+    add_eval_parser(bench_sub)

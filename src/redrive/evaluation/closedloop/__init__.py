@@ -4,6 +4,8 @@ They score a run as a whole (``role = None``) from its ``ego`` table, its ground
 frame's base_link, put into ``map`` with the frame's ego pose) and, where road geometry is
 needed, its road map (``RUN/map.json``; runs of a synthetic scenario or its log store one, others skip those
 metrics).  They apply to open-loop runs as well: there the driven ego is the logged one.
+NAVSIM's ``navsim_pdms`` and ``navsim_epdms`` score a planning algorithm instead (``pdm``): its
+trajectories, pseudo-simulated every 0.5 s against the log's agents.
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ from redrive.evaluation.closedloop.commands import FallbackCommands
 from redrive.evaluation.closedloop.lights import TrafficLightCompliance
 from redrive.evaluation.closedloop.motion import Comfort, EgoProgress
 from redrive.evaluation.closedloop.nuplan import NuplanScenarioScore
-from redrive.evaluation.closedloop.pdm import PdmScore
+from redrive.evaluation.closedloop.pdm import NavsimEpdms, NavsimPdms
 from redrive.evaluation.closedloop.road import (
     DrivableAreaCompliance,
     DrivingDirectionCompliance,
@@ -27,8 +29,9 @@ __all__ = [
     "DrivingDirectionCompliance",
     "EgoProgress",
     "FallbackCommands",
+    "NavsimEpdms",
+    "NavsimPdms",
     "NuplanScenarioScore",
-    "PdmScore",
     "SpeedLimitCompliance",
     "TimeToCollision",
     "TrafficLightCompliance",
