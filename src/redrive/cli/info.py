@@ -59,6 +59,9 @@ def _print_table(summary: LogSummary) -> None:
     console.print(f"[bold]start[/]:     {summary.start_utc}  ({summary.start_ns} ns)")
     console.print(f"[bold]end[/]:       {summary.end_utc}  ({summary.end_ns} ns)")
     console.print(f"[bold]messages[/]:  {summary.messages}  ({_human_bytes(summary.size_bytes)})")
+    for name, value in summary.contents:
+        what = f"{value} {name}" if isinstance(value, int) else f"{name}: {value}"
+        console.print(f"[bold]contains[/]:  {shown(what)}", highlight=False)
     columns = (
         ("topic", "left"),
         ("type", "left"),

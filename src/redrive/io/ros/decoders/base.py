@@ -16,6 +16,7 @@ from redrive.types import (
     Imu,
     PointCloud,
     SensorType,
+    TrafficData,
     Transform,
     VehicleState,
 )
@@ -33,6 +34,7 @@ DecodedValue = (
     | tuple[DetectedObject, ...]
     | tuple[Transform, ...]
     | CameraInfo
+    | TrafficData
 )
 
 #: ``reader.deserialize``: LogMessage → rosbags message object.
