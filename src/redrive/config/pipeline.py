@@ -194,6 +194,22 @@ def reference_pipeline() -> PipelineConfig:
     )
 
 
+def object_level_pipeline() -> PipelineConfig:
+    """The baseline for a log of recorded traffic without a LiDAR (Waymo Open Motion,
+    CommonRoad): ground truth through the noisy oracle → Kalman tracker → IDM planner → pure
+    pursuit."""
+    reference = reference_pipeline()
+    return PipelineConfig(
+        stages=(
+            StageSpec(
+                name="detection",
+                algorithms=(AlgorithmSpec(name="oracle", plugin="noisy-oracle"),),
+            ),
+            *reference.stages[1:],
+        )
+    )
+
+
 def _algorithm(t: Table, base: Path) -> AlgorithmSpec:
     t.check_keys({"name", "plugin", "config"})
     if not isinstance(t.data.get("plugin"), str):

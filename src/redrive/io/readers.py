@@ -93,6 +93,7 @@ def _builtin() -> list[type[ReaderFormat]]:
     from redrive.io.datasets.kitti import KittiReader
     from redrive.io.datasets.mmdet3d_info import Mmdet3dInfoReader
     from redrive.io.datasets.nuscenes import NuScenesReader
+    from redrive.io.datasets.womd import WomdReader
     from redrive.io.mcap.fileset import McapSetReader
     from redrive.io.mcap.reader import McapFileReader
     from redrive.io.rosbag1.reader import Ros1BagReader
@@ -107,6 +108,7 @@ def _builtin() -> list[type[ReaderFormat]]:
         Mmdet3dInfoReader,
         Av2SensorLogReader,
         Ros1BagReader,
+        WomdReader,
         McapFileReader,
         McapSetReader,
     ]

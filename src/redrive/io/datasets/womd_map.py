@@ -1,0 +1,135 @@
+"""The roadgraph of a Waymo Open Motion ``Scenario`` (its ``map_features``) in the road-map model.
+
+``map.proto``'s ``LaneCenter`` is a centreline (``polyline``, in the direction of travel) with a
+``speed_limit_mph`` (0: unknown), ``entry_lanes`` / ``exit_lanes``, left/right neighbours and
+boundary segments: ``lane_start_index``..``lane_end_index`` of the centreline bounded by the road
+line or edge ``boundary_feature_id``.  WOMD gives no lane width: it is measured here, per lane,
+as the mean over the centreline points bounded on both sides of the sum of the distances to the
+left and right boundary features (twice the one distance where only one side is bounded); a lane
+bounded nowhere (lanes interpolated through intersections) takes the median width of those that
+are.  A lane of fewer than two points has no direction and is left out (``redrive info`` counts
+the lanes of the scenario, the map the ones it keeps).
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import shapely
+
+from redrive.errors import LogError
+from redrive.types import MapLane, RoadMap
+
+__all__ = ["MPH_TO_MPS", "lane_widths", "road_map_from_scenario"]
+
+logger = logging.getLogger(__name__)
+
+#: one mile per hour in m/s
+MPH_TO_MPS = 0.44704
+
+
+def _xy(points: Any) -> npt.NDArray[np.float64]:
+    return np.array([(p.x, p.y) for p in points], dtype=np.float64).reshape(-1, 2)
+
+
+def _side_distances(
+    centre: npt.NDArray[np.float64],
+    segments: Any,
+    lines: dict[int, Any],
+) -> npt.NDArray[np.float64]:
+    """(N,) distance of each centreline point to its boundary on one side; NaN where unbounded."""
+    out = np.full(len(centre), np.nan)
+    points = shapely.points(centre)
+    for seg in segments:
+        line = lines.get(int(seg.boundary_feature_id))
+        if line is None:
+            continue
+        lo = max(int(seg.lane_start_index), 0)
+        hi = min(int(seg.lane_end_index), len(centre) - 1)
+        if hi < lo:
+            continue
+        out[lo : hi + 1] = shapely.distance(points[lo : hi + 1], line)
+    return out
+
+
+def lane_widths(scenario: Any) -> dict[int, float | None]:
+    """Lane feature id → its measured width (m), or None where no boundary bounds it."""
+    lines: dict[int, Any] = {}
+    for feature in scenario.map_features:
+        kind = feature.WhichOneof("feature_data")
+        if kind in ("road_line", "road_edge"):
+            xy = _xy(getattr(feature, kind).polyline)
+            if len(xy) >= 2:
+                lines[int(feature.id)] = shapely.linestrings(xy)
+            elif len(xy) == 1:
+                lines[int(feature.id)] = shapely.points(xy[0])
+    out: dict[int, float | None] = {}
+    for feature in scenario.map_features:
+        if feature.WhichOneof("feature_data") != "lane":
+            continue
+        centre = _xy(feature.lane.polyline)
+        if len(centre) < 2:
+            continue
+        left = _side_distances(centre, feature.lane.left_boundaries, lines)
+        right = _side_distances(centre, feature.lane.right_boundaries, lines)
+        both = np.isfinite(left) & np.isfinite(right)
+        if both.any():
+            width = float(np.mean(left[both] + right[both]))
+        elif np.isfinite(left).any() or np.isfinite(right).any():
+            one = np.where(np.isfinite(left), left, right)
+            width = float(2.0 * np.nanmean(one))
+        else:
+            width = None
+        out[int(feature.id)] = width if width is not None and width > 0.5 else None
+    return out
+
+
+def road_map_from_scenario(scenario: Any, *, source: str) -> RoadMap:
+    """The road map of a decoded ``Scenario``.
+
+    Raises:
+        LogError: a lane's points are not finite, or two features share an id.
+    """
+    widths = lane_widths(scenario)
+    known = [w for w in widths.values() if w is not None]
+    fallback = float(np.median(known)) if known else None
+    lanes = []
+    seen: set[int] = set()
+    skipped = 0
+    for feature in scenario.map_features:
+        fid = int(feature.id)
+        if fid in seen:
+            msg = f"{source}: map feature id {fid} appears twice; the roadgraph is damaged"
+            raise LogError(msg)
+        seen.add(fid)
+        if feature.WhichOneof("feature_data") != "lane":
+            continue
+        centre = _xy(feature.lane.polyline)
+        if not np.all(np.isfinite(centre)):
+            msg = f"{source}: lane {fid}: its polyline holds a point that is not finite"
+            raise LogError(msg)
+        if len(centre) < 2:
+            skipped += 1
+            continue
+        width = widths.get(fid) or fallback
+        if width is None:
+            msg = (
+                f"{source}: lane {fid}: no lane of the roadgraph has a boundary, so no width "
+                "can be measured"
+            )
+            raise LogError(msg)
+        limit = float(feature.lane.speed_limit_mph) * MPH_TO_MPS
+        lanes.append(
+            MapLane(
+                lane_id=str(fid),
+                centerline=centre,
+                width_m=width,
+                speed_limit_mps=limit if limit > 0 else None,
+            )
+        )
+    if skipped:
+        logger.debug("%s: %d lanes of fewer than two points left out", source, skipped)
+    return RoadMap(lanes=tuple(lanes))
