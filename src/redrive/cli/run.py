@@ -289,12 +289,21 @@ def _default_pipeline_for(log_path: Path, reference: Any, *, sensor_map: Path | 
             smap = infer_sensor_map(
                 log.topics, duration_ns=log.end_ns - log.start_ns, overrides=overrides
             )
+            state = log.topics.get(smap.vehicle_state_topic or "")
     except (RedriveError, OSError):
         return reference  # the run itself reports what is wrong with the log
     if smap.ground_truth_topic is None or any(
         s.sensor_type is SensorType.LIDAR for s in smap.sensors
     ):
         return reference
+    if state is None or state.count < 2:
+        print(
+            "redrive run: the log has ground truth but no LiDAR and records no ego motion (a "
+            "CommonRoad scenario gives the ego's start only: `--closed-loop` drives it): the "
+            "object-level perception stages run (noisy-oracle → kalman-tracker)",
+            file=sys.stderr,
+        )
+        return object_level_pipeline(planning=False)
     print(
         "redrive run: the log has no LiDAR but ground truth: the object-level reference "
         "pipeline runs (noisy-oracle → kalman-tracker → idm-planner → pure-pursuit-pid)",

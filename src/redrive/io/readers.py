@@ -90,6 +90,7 @@ def _check_reader(obj: object) -> str | None:
 def _builtin() -> list[type[ReaderFormat]]:
     # imported here: each pulls in its own dependencies (rosbags, mcap, PIL)
     from redrive.io.datasets.av2 import Av2SensorLogReader
+    from redrive.io.datasets.commonroad import CommonRoadReader
     from redrive.io.datasets.kitti import KittiReader
     from redrive.io.datasets.mmdet3d_info import Mmdet3dInfoReader
     from redrive.io.datasets.nuscenes import NuScenesReader
@@ -109,6 +110,7 @@ def _builtin() -> list[type[ReaderFormat]]:
         Av2SensorLogReader,
         Ros1BagReader,
         WomdReader,
+        CommonRoadReader,
         McapFileReader,
         McapSetReader,
     ]
