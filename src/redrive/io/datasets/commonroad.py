@@ -120,9 +120,10 @@ def _looks_like_commonroad(path: Path) -> bool:
 
 
 def _xml_error(path: Path, err: Exception) -> LogError:
-    line, column = getattr(err, "position", (None, None))
+    position: tuple[int, int] | None = getattr(err, "position", None)
     where = ""
-    if line is not None:
+    if position is not None:
+        line, column = position
         offset = None
         try:
             lines = path.read_bytes().split(b"\n")

@@ -34,7 +34,7 @@ _MASK_DELTA = 0xA282EAD8
 
 def masked_crc32c(data: bytes | memoryview) -> int:
     """TFRecord's masked CRC-32C of ``data``."""
-    crc = google_crc32c.value(bytes(data))
+    crc = int(google_crc32c.value(bytes(data)))
     return (((crc >> 15) | (crc << 17)) + _MASK_DELTA) & 0xFFFFFFFF
 
 
@@ -111,7 +111,7 @@ def looks_like_tfrecord(path: Path) -> bool:
     if len(head) < _HEADER.size:
         return False
     _, length_crc = _HEADER.unpack(head)
-    return masked_crc32c(head[:8]) == length_crc
+    return bool(masked_crc32c(head[:8]) == length_crc)
 
 
 def write_tfrecord(path: Path, records: list[bytes]) -> None:
