@@ -23,6 +23,7 @@ from redrive.types import (
     ControlCommands,
     DetectedObject,
     Frame,
+    ObjectClass,
     PlannedPath,
     PointCloud,
     SensorData,
@@ -185,6 +186,31 @@ def test_the_perception_template_finds_cars_in_a_synthetic_log(
                     matched += int(np.min(dist) < 2.0)
     assert total >= 3
     assert matched / total >= 0.7
+
+
+def test_the_perception_template_works_on_real_kitti(tmp_path: Path, shared_data: Path) -> None:
+    # issue 35 item 8: KITTI's base_link is the Velodyne, the road 1.7 m below; a template that
+    # took the ground for z = 0 cut every object away (mAP 0). The RANSAC ground finds the
+    # pedestrian of frame 0 where it stands, at its height.
+    from redrive.assembly.frames import iter_frames
+    from redrive.io import open_log
+
+    algo_path, _ = write_algorithm("kitti_blobs", Role.PERCEPTION, directory=tmp_path)
+    algo = load_algorithm_class(f"{algo_path}:KittiBlobs")()
+    algo.configure({})
+    algo.bind({"kitti_velodyne": SensorType.LIDAR})
+    with open_log(shared_data / "kitti_object" / "training") as log:
+        frame = next(iter(iter_frames(log)))
+    result = algo.run_step(frame, StageOutputs())
+    assert result.status is StepStatus.OK, result.error
+    assert isinstance(result.output, tuple)
+    (person,) = [o for o in frame.ground_truth or () if o.object_class is ObjectClass.PEDESTRIAN]
+    found = min(result.output, key=lambda o: np.hypot(*(o.box.center[:2] - person.box.center[:2])))
+    assert np.hypot(*(found.box.center[:2] - person.box.center[:2])) < 0.3
+    assert found.object_class is ObjectClass.PEDESTRIAN
+    bottom = found.box.center[2] - found.box.size[2] / 2
+    assert abs(bottom - (person.box.center[2] - person.box.size[2] / 2)) < 0.15
+    assert abs(found.box.size[2] - person.box.size[2]) < 0.15
 
 
 @pytest.mark.parametrize(

@@ -122,3 +122,25 @@ def test_project_points() -> None:
     np.testing.assert_allclose(depth, [2.0, 2.0, -1.0])
     q = rotation_matrix_from_quaternion([0.0, 0.0, 0.0, 1.0])
     assert np.array_equal(q, np.eye(3))
+
+
+def test_points_in_a_pitched_and_rolled_box() -> None:
+    from scipy.spatial.transform import Rotation
+
+    from redrive.geometry import yaw_pitch_roll_from_rotation_matrices
+
+    rng = np.random.default_rng(3)
+    yaw, pitch, roll = 0.7, 0.05, -0.08
+    rotation = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix()
+    np.testing.assert_allclose(
+        yaw_pitch_roll_from_rotation_matrices(rotation[None])[0], [yaw, pitch, roll], atol=1e-12
+    )
+    box = Box3D(center=np.array([4.0, -2.0, 1.0]), size=np.array([6.0, 2.0, 3.0]), yaw_rad=yaw)
+    local = rng.uniform(-1.2, 1.2, (2000, 3)) * (box.size / 2)
+    world = local @ rotation.T + box.center
+    expected = np.all(np.abs(local) <= box.size / 2, axis=1)
+    got = points_in_box(world, box, pitch_rad=pitch, roll_rad=roll)
+    assert got.tolist() == expected.tolist()
+    assert 0 < expected.sum() < len(expected)
+    # heading only: the tilt moves points at the box's ends across its faces
+    assert (points_in_box(world, box) != expected).sum() > 10

@@ -177,3 +177,31 @@ def test_the_app_seeks_and_the_stream_restarts_there(
     assert (status, current, did_seek, rid) == (0, seek_ns, True, "seek")  # 0: playing
     assert got == after_seek
     assert player.sent >= total + 10
+
+
+def test_the_old_subprotocol_alone_is_refused_and_offered_beside_the_new_one_is_served(
+    served: tuple[SceneStream, Player, int],
+) -> None:
+    # issue 35 item 12, as docs/foxglove.md says: foxglove-sdk's server speaks only
+    # `foxglove.sdk.v1` (the same protocol as `foxglove.websocket.v1` under a new name); a client
+    # that offers only the old name gets HTTP 400, one that offers both is served
+    _, _, port = served
+    url = f"ws://127.0.0.1:{port}"
+
+    async def old_only() -> int | None:
+        try:
+            async with websockets.connect(url, subprotocols=["foxglove.websocket.v1"]):
+                return None
+        except websockets.exceptions.InvalidStatus as err:
+            return err.response.status_code
+
+    async def both() -> str | None:
+        async with websockets.connect(
+            url, subprotocols=["foxglove.websocket.v1", _SUBPROTOCOL], close_timeout=1
+        ) as ws:
+            info = json.loads(await asyncio.wait_for(ws.recv(), 10))
+            assert info["op"] == "serverInfo"
+            return ws.subprotocol
+
+    assert asyncio.run(old_only()) == 400
+    assert asyncio.run(both()) == _SUBPROTOCOL

@@ -97,10 +97,26 @@ def test_boxes_are_in_base_link_and_hold_their_lidar_points(frame) -> None:  # t
     assert len(gt) == 69
     lidar = frame.sensors["lidar_top"]
     pts = lidar.data.xyz.astype(np.float64) + np.asarray(lidar.sensor_location)
-    counted = np.array([int(points_in_box(pts, o.box).sum()) for o in gt])
     labelled = np.array([o.num_lidar_points for o in gt])
-    assert np.mean(counted == labelled) > 0.75
-    assert np.abs(counted - labelled).sum() <= 0.05 * labelled.sum()
+    # the whole rotation (issue 35 item 7): nuScenes boxes are upright in the global frame, so on
+    # this ego (tilted ~1.4°) they pitch and roll in base_link; counted so, every box holds the
+    # devkit's num_lidar_pts — the truck 495, where its heading alone gives 474
+    counted = np.array(
+        [
+            int(
+                points_in_box(
+                    pts, o.box, pitch_rad=o.orientation[1], roll_rad=o.orientation[2]
+                ).sum()
+            )
+            for o in gt
+        ]
+    )
+    np.testing.assert_array_equal(counted, labelled)
+    truck = next(o for o in gt if o.num_lidar_points == 495)
+    assert truck.object_class is ObjectClass.VEHICLE or "TRUCK" in truck.object_class.name
+    assert int(points_in_box(pts, truck.box).sum()) == 474  # heading only: what was reported
+    assert 0.005 < float(np.hypot(truck.orientation[1], truck.orientation[2])) < 0.05
+    np.testing.assert_allclose([o.orientation[0] for o in gt], [o.box.yaw_rad for o in gt])
     classes = {o.object_class for o in gt}
     assert {ObjectClass.PEDESTRIAN, ObjectClass.VEHICLE, ObjectClass.STATIC} <= classes
     assert frame.vehicle_state is not None

@@ -71,7 +71,7 @@ def test_map_written_into_a_finished_run(tmp_path: Path) -> None:
         (lambda d: d["lanes"][1].pop("width_m"), r"lanes\[1\]: 'width_m' is missing"),
         (lambda d: d["lanes"][0].update(centerline=[[1, 2]]), "needs >= 2 finite points"),
         (lambda d: d["lanes"][0].update(width_m="wide"), r"lanes\[0\]\.width_m: expected"),
-        (lambda d: d["areas"][0].update(polygon=[1, 2, 3]), r"areas\[0\]: points must be"),
+        (lambda d: d["areas"][0].update(polygon=[1, 2, 3]), r"areas\[0\]\.polygon: points must be"),
         (lambda d: d["lanes"].append(d["lanes"][0]), "lane id 'a' appears twice"),
     ],
 )

@@ -18,6 +18,7 @@ from redrive.geometry.se3 import (
     transform_points,
     transform_vectors,
     yaw_from_rotation_matrix,
+    yaw_pitch_roll_from_rotation_matrices,
 )
 
 __all__ = [
@@ -39,4 +40,5 @@ __all__ = [
     "transform_points",
     "transform_vectors",
     "yaw_from_rotation_matrix",
+    "yaw_pitch_roll_from_rotation_matrices",
 ]

@@ -84,21 +84,44 @@ def box_corners(box: Box3D) -> npt.NDArray[np.float64]:
 
 
 def points_in_box(
-    points: npt.NDArray[Any], box: Box3D, *, margin_m: float = 0.0
+    points: npt.NDArray[Any],
+    box: Box3D,
+    *,
+    margin_m: float = 0.0,
+    pitch_rad: float = 0.0,
+    roll_rad: float = 0.0,
 ) -> npt.NDArray[np.bool_]:
     """(N,) bool: which of ``points`` (N, 3), in the box's frame, lie inside ``box``.
 
     The boundary counts as inside; ``margin_m`` grows (or, negative, shrinks) every half-size.
+    ``pitch_rad`` / ``roll_rad`` tilt the box as ``Rz(yaw) Ry(pitch) Rx(roll)`` (a
+    :class:`~redrive.types.DetectedObject`'s ``orientation``: a box upright in another frame,
+    such as a nuScenes box in the global frame seen from a tilted ego) — the nuScenes devkit's
+    ``points_in_box`` on the box's full rotation.
     """
     pts = np.asarray(points)
     if pts.ndim != 2 or pts.shape[1] != 3:
         msg = f"points_in_box: points must have shape (N, 3), got {pts.shape}"
         raise ValueError(msg)
-    c, s = math.cos(box.yaw_rad), math.sin(box.yaw_rad)
     d = pts.astype(np.float64, copy=False) - box.center
+    half = 0.5 * box.size + margin_m
+    if pitch_rad or roll_rad:
+        cy, sy = math.cos(box.yaw_rad), math.sin(box.yaw_rad)
+        cp, sp = math.cos(pitch_rad), math.sin(pitch_rad)
+        cr, sr = math.cos(roll_rad), math.sin(roll_rad)
+        rotation = np.array(
+            [
+                [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                [-sp, cp * sr, cp * cr],
+            ]
+        )
+        local = d @ rotation  # box coordinates: rotation.T @ d for every point
+        inside: npt.NDArray[np.bool_] = np.all(np.abs(local) <= half, axis=1)
+        return inside
+    c, s = math.cos(box.yaw_rad), math.sin(box.yaw_rad)
     local_x = d[:, 0] * c + d[:, 1] * s
     local_y = -d[:, 0] * s + d[:, 1] * c
-    half = 0.5 * box.size + margin_m
     mask: npt.NDArray[np.bool_] = (
         (np.abs(local_x) <= half[0]) & (np.abs(local_y) <= half[1]) & (np.abs(d[:, 2]) <= half[2])
     )

@@ -31,6 +31,7 @@ __all__ = [
     "transform_points",
     "transform_vectors",
     "yaw_from_rotation_matrix",
+    "yaw_pitch_roll_from_rotation_matrices",
 ]
 
 Matrix = npt.NDArray[np.float64]
@@ -201,6 +202,17 @@ def yaw_from_rotation_matrix(rotation: npt.ArrayLike) -> float:
     """Heading of the rotated +x axis projected on the xy plane, radians in (-π, π]."""
     rot = np.asarray(rotation, dtype=np.float64)
     return math.atan2(float(rot[1, 0]), float(rot[0, 0]))
+
+
+def yaw_pitch_roll_from_rotation_matrices(rotations: npt.ArrayLike) -> Matrix:
+    """(N, 3) yaw, pitch, roll (radians) of rotations (N, 3, 3) as ``R = Rz(yaw) Ry(pitch)
+    Rx(roll)`` (intrinsic z-y'-x''; pitch in [-π/2, π/2]); yaw is :func:`yaw_from_rotation_matrix`'s,
+    the nuScenes devkit evaluation's ``quaternion_yaw``."""
+    rot = np.asarray(rotations, dtype=np.float64).reshape(-1, 3, 3)
+    yaw = np.arctan2(rot[:, 1, 0], rot[:, 0, 0])
+    pitch = np.arcsin(np.clip(-rot[:, 2, 0], -1.0, 1.0))
+    roll = np.arctan2(rot[:, 2, 1], rot[:, 2, 2])
+    return np.stack([yaw, pitch, roll], axis=1)
 
 
 def matrix_from_transform(transform: Transform) -> Matrix:

@@ -6,7 +6,8 @@
 - :class:`RunFrames`: the frames of an object-level run, rebuilt from its stored tables (the
   driven ego, the ground truth) — such a run has no sensor log to play.
 - :func:`ghost_segments`: the logged ego's box in the driven ego's base_link.
-- :func:`map_polylines` / :func:`map_segments`: the road map (``RUN/map.json``) as line segments,
+- :func:`map_polylines` / :func:`map_segments`: the road map (``RUN/map.json``: lane boundaries,
+  areas, intersections, crosswalks, stop lines) as line segments,
   in the map frame once and in base_link per frame.
 - :func:`driven_from_frame`: the pose difference that re-expresses a recorded log's frame in the
   driven ego's base_link (a closed loop on a recorded log).
@@ -179,21 +180,19 @@ def driven_from_frame(driven: VehicleState, recorded: VehicleState) -> Float | N
 
 
 def map_polylines(road_map: RoadMap) -> Float:
-    """(2M, 2) segment endpoints of the map (map frame): each lane's two edges (its centreline
-    offset by half its width) and each drivable area's outline."""
+    """(2M, 2) segment endpoints of the map (map frame): each lane's two boundaries (the map's
+    own, else its centreline offset by half its width: :meth:`MapLane.boundaries
+    <redrive.types.MapLane.boundaries>`), the outlines of the drivable areas, intersections and
+    crosswalks, and the stop lines."""
     pieces: list[Float] = []
     for lane in road_map.lanes:
-        line = np.asarray(lane.centerline, dtype=np.float64)
-        tangent = np.gradient(line, axis=0)
-        norm = np.hypot(tangent[:, 0], tangent[:, 1])
-        norm[norm == 0] = 1.0
-        left = np.stack([-tangent[:, 1], tangent[:, 0]], axis=1) / norm[:, None]
-        for side in (1.0, -1.0):
-            edge = line + side * lane.width_m / 2 * left
-            pieces.append(_pairs(edge))
-    for area in road_map.areas:
-        ring = np.asarray(area.polygon, dtype=np.float64)
+        pieces.extend(_pairs(edge) for edge in lane.boundaries())
+    rings = [a.polygon for a in road_map.areas]
+    rings += [i.polygon for i in road_map.intersections]
+    rings += [c.polygon for c in road_map.crosswalks]
+    for ring in rings:
         pieces.append(_pairs(np.vstack([ring, ring[:1]])))
+    pieces.extend(_pairs(stop.line) for stop in road_map.stop_lines)
     if not pieces:
         return np.zeros((0, 2), dtype=np.float64)
     return np.vstack(pieces)

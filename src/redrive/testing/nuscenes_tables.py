@@ -30,6 +30,8 @@ import numpy.typing as npt
 from PIL import Image as PilImage
 from scipy.spatial.transform import Rotation
 
+from redrive.io.datasets.nuscenes_common import gravity_aligned_rotations
+
 __all__ = ["CATEGORY_OF_DETECTION_NAME", "write_mini_tables"]
 
 #: mmdetection3d's class (detection name) → the nuScenes category written for it; label −1
@@ -207,7 +209,11 @@ def write_mini_tables(
     for i, inst in enumerate(entry["instances"]):
         x, y, z, box_l, box_w, box_h, yaw = (float(v) for v in inst["bbox_3d"][:7])
         center = global_from_lidar @ np.array([x, y, z, 1.0])
-        rot = global_from_lidar[:3, :3] @ Rotation.from_euler("z", yaw).as_matrix()
+        # upright in the global frame, as nuScenes annotates (the info keeps the LiDAR heading)
+        rot = (
+            global_from_lidar[:3, :3]
+            @ gravity_aligned_rotations(np.array([yaw]), global_from_lidar)[0]
+        )
         vel = np.zeros(3)
         vel[:2] = np.nan_to_num(
             np.asarray(inst.get("velocity", [0.0, 0.0])[:2], float)

@@ -19,17 +19,29 @@ from redrive.types.environment import EnvironmentData, TrafficData, TrafficLight
 from redrive.types.frame import ExtensionPayload, Frame, SensorData, SensorPayload
 from redrive.types.jsonable import to_jsonable
 from redrive.types.objects import CLASS_CODES, Box3D, DetectedObject, ObjectColumns
-from redrive.types.roadmap import DrivableArea, MapLane, RoadMap
+from redrive.types.roadmap import (
+    BOUNDARY_TYPES,
+    Crosswalk,
+    DrivableArea,
+    Intersection,
+    MapLane,
+    MapTrafficLight,
+    Roadblock,
+    RoadMap,
+    StopLine,
+)
 from redrive.types.sensors import IMAGE_ENCODINGS, CameraInfo, GnssFix, Image, Imu, PointCloud
 from redrive.types.transforms import Transform
 from redrive.types.vehicle import ControlCommands, PlannedPath, VehicleState
 
 __all__ = [
+    "BOUNDARY_TYPES",
     "CLASS_CODES",
     "IMAGE_ENCODINGS",
     "Box3D",
     "CameraInfo",
     "ControlCommands",
+    "Crosswalk",
     "DetectedObject",
     "DrivableArea",
     "EnvironmentData",
@@ -38,19 +50,23 @@ __all__ = [
     "GnssFix",
     "Image",
     "Imu",
+    "Intersection",
     "LightState",
     "Lighting",
     "MapLane",
+    "MapTrafficLight",
     "ObjectClass",
     "ObjectColumns",
     "PlannedPath",
     "PointCloud",
     "RoadCondition",
     "RoadMap",
+    "Roadblock",
     "Role",
     "SensorData",
     "SensorPayload",
     "SensorType",
+    "StopLine",
     "TrafficData",
     "TrafficLight",
     "Transform",

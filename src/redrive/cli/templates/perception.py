@@ -7,9 +7,11 @@ __all__ = ["ALGORITHM", "TEST"]
 ALGORITHM = '''\
 """$cls: a perception algorithm for redrive (written by `redrive new-algorithm`).
 
-A LiDAR baseline to start from: the points of one LiDAR are moved into base_link, the ground is
-cut away with a height threshold, the rest is binned into a coarse grid in the x-y plane, and each
-connected group of occupied cells that is not too tall or too long becomes one box.
+A LiDAR baseline to start from: the points of one LiDAR are moved into base_link, the ground
+plane is fitted with RANSAC (base_link's origin may sit anywhere above the road: at the rear
+axle on the ground, or at the LiDAR as on KITTI, 1.7 m up), the points near it are cut away, the
+rest is binned into a coarse grid in the x-y plane, and each connected group of occupied cells
+that is not too tall or too long becomes one box standing on the fitted ground.
 Replace ``step`` with your detector; keep its signature and its output type.
 
     python -m pytest test_$module.py                          its tests
@@ -46,8 +48,8 @@ class $cls(Algorithm):
 
     Input: one LiDAR (``SensorType.LIDAR``; the first of the log unless the config key
     ``lidar_sensor`` names one).  Output: a list of :class:`DetectedObject` with boxes in
-    base_link (x forward, y left, z up, metres; the ground at z = 0 below the rear axle), axis
-    aligned (yaw 0), standing on the ground, without ids (-1: a tracker assigns them).
+    base_link (x forward, y left, z up, metres), axis aligned (yaw 0), standing on the ground
+    plane fitted to the sweep, without ids (-1: a tracker assigns them).
 
     Assumes the LiDAR's axes are parallel to base_link, as for a roof-mounted sensor: its points
     are moved by ``sensor_location`` only.  Configuration (metres unless said otherwise):
@@ -56,7 +58,10 @@ class $cls(Algorithm):
     key               default  meaning
     ================  =======  ==============================================================
     lidar_sensor      None     sensor id of the LiDAR to use; None: the first one
-    min_height_m      0.3      points lower than this above the ground are ground
+    min_height_m      0.3      points lower than this above the ground plane are ground
+    ground_tolerance  0.15     RANSAC: points this close to a candidate plane support it (m)
+    ground_tries      60       RANSAC: candidate planes per sweep (seeded: runs repeat)
+    ground_max_tilt   10.0     RANSAC: planes tilted more than this (degrees) are not ground
     max_height_m      4.0      clusters reaching higher are poles, trees or buildings
     ceiling_m         6.0      points higher than this (bridges, overhead signs) are ignored
     min_range_m       3.0      nearer points (horizontal, from the LiDAR) hit the ego itself
@@ -74,6 +79,9 @@ class $cls(Algorithm):
         {
             "lidar_sensor": None,
             "min_height_m": 0.3,
+            "ground_tolerance": 0.15,
+            "ground_tries": 60,
+            "ground_max_tilt": 10.0,
             "max_height_m": 4.0,
             "ceiling_m": 6.0,
             "min_range_m": 3.0,
@@ -111,13 +119,12 @@ class $cls(Algorithm):
         xyz = lidar.data.xyz.astype(np.float64) + np.asarray(lidar.sensor_location)
         sensor_xy = np.asarray(lidar.sensor_location[:2])
         range_m = np.hypot(xyz[:, 0] - sensor_xy[0], xyz[:, 1] - sensor_xy[1])
-        keep = (
-            (xyz[:, 2] >= cfg["min_height_m"])
-            & (xyz[:, 2] <= cfg["ceiling_m"])
-            & (range_m >= cfg["min_range_m"])
-            & (range_m < cfg["max_range_m"])
-        )
-        points = xyz[keep]
+        in_range = (range_m >= cfg["min_range_m"]) & (range_m < cfg["max_range_m"])
+        plane = self._ground_plane(xyz[in_range])
+        # height above the fitted ground: z - (a x + b y + c)
+        height = xyz[:, 2] - (plane[0] * xyz[:, 0] + plane[1] * xyz[:, 1] + plane[2])
+        keep = in_range & (height >= cfg["min_height_m"]) & (height <= cfg["ceiling_m"])
+        points = np.column_stack([xyz[keep, :2], height[keep]])  # x, y, height above ground
         if len(points) == 0:
             return []
         labels = self._cluster(points[:, :2] - sensor_xy)
@@ -125,10 +132,47 @@ class $cls(Algorithm):
         order = np.argsort(labels, kind="stable")
         starts = np.flatnonzero(np.diff(labels[order], prepend=-1))
         for members in np.split(order, starts[1:]):
-            found = self._object(points[members])
+            found = self._object(points[members], plane)
             if found is not None:
                 objects.append(found)
         return objects
+
+    def _ground_plane(self, xyz: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """(a, b, c) of the ground z = a x + b y + c, base_link metres: the RANSAC plane, no
+        steeper than ``ground_max_tilt``, that the most points lie within ``ground_tolerance``
+        of, refined by least squares on them.  The flat z = 0 when the sweep has too few
+        points."""
+        flat = np.zeros(3)
+        if len(xyz) < 3:
+            return flat
+        tolerance = float(self.config["ground_tolerance"])
+        min_nz = np.cos(np.radians(float(self.config["ground_max_tilt"])))
+        rng = np.random.default_rng(0)  # the same planes for the same sweep: runs repeat
+        # candidates from the lower half of the sweep: the road is below what stands on it
+        low = xyz[xyz[:, 2] <= np.median(xyz[:, 2])]
+        tries = int(self.config["ground_tries"])
+        triples = low[rng.integers(0, len(low), size=(tries, 3))]
+        normals = np.cross(triples[:, 1] - triples[:, 0], triples[:, 2] - triples[:, 0])
+        lengths = np.linalg.norm(normals, axis=1)
+        ok = lengths > 1e-9
+        normals = normals[ok] / lengths[ok, None]
+        normals *= np.sign(normals[:, 2:3] + 1e-12)  # pointing up
+        level = normals[:, 2] >= min_nz
+        if not level.any():
+            return flat
+        normals, origins = normals[level], triples[ok][level, 0]
+        # each candidate's support, counted on at most 4,000 of the points (enough to rank)
+        sample = xyz[rng.permutation(len(xyz))[:4000]]
+        offsets = np.einsum("kj,kj->k", normals, origins)  # the plane: n · p = offset
+        support = np.abs(sample @ normals.T - offsets) < tolerance  # (points, candidates)
+        k = int(np.argmax(support.sum(axis=0)))
+        best = np.abs(xyz @ normals[k] - offsets[k]) < tolerance
+        if best.sum() < 3:
+            return flat
+        ground = xyz[best]
+        design = np.column_stack([ground[:, 0], ground[:, 1], np.ones(len(ground))])
+        fitted: npt.NDArray[np.float64] = np.linalg.lstsq(design, ground[:, 2], rcond=None)[0]
+        return fitted
 
     def _cluster(self, xy: npt.NDArray[np.float64]) -> npt.NDArray[np.intp]:
         """A cluster label per point: connected occupied cells of a grid centred on the LiDAR."""
@@ -142,17 +186,22 @@ class $cls(Algorithm):
         labels: npt.NDArray[np.intp] = cells[ij[:, 0], ij[:, 1]].astype(np.intp)
         return labels
 
-    def _object(self, points: npt.NDArray[np.float64]) -> DetectedObject | None:
-        """One box around a cluster's points (base_link, metres), or None for noise and walls."""
+    def _object(
+        self, points: npt.NDArray[np.float64], plane: npt.NDArray[np.float64]
+    ) -> DetectedObject | None:
+        """One box around a cluster's points (x, y in base_link and height above the ground
+        ``plane``, metres), or None for noise and walls."""
         if len(points) < int(self.config["min_points"]):
             return None
         lo, hi = points.min(axis=0), points.max(axis=0)
         length_m, width_m = float(hi[0] - lo[0]), float(hi[1] - lo[1])
-        height_m = float(hi[2])  # the box stands on the ground (z = 0)
+        height_m = float(hi[2])  # the box stands on the ground
         too_long = max(length_m, width_m) > float(self.config["max_length_m"])
         if too_long or height_m > float(self.config["max_height_m"]):
             return None
-        center = np.array([(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0, height_m / 2.0])
+        x_m, y_m = (lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0
+        ground_z = plane[0] * x_m + plane[1] * y_m + plane[2]
+        center = np.array([x_m, y_m, ground_z + height_m / 2.0])
         object_class = _classify(length_m, width_m, height_m)
         if object_class is None:
             return None
@@ -262,6 +311,19 @@ def test_two_cars_are_two_objects() -> None:
     centers = sorted(tuple(o.box.center[:2].round(1)) for o in _run(_ready(), frame))
     assert len(centers) == 2
     assert np.allclose(centers, [(-8.0, -4.0), (12.0, 3.0)], atol=0.3)
+
+
+def test_finds_the_car_on_a_ground_below_base_link() -> None:
+    # base_link at the LiDAR, as on KITTI: the road 1.7 m below, sloping 2 % uphill
+    lowered = np.concatenate([_ground(), _car(12.0, 3.0)])
+    lowered[:, 2] += -1.7 + 0.02 * lowered[:, 0]
+    objects = _run(_ready(), _frame(lowered))
+    assert len(objects) == 1
+    car = objects[0]
+    assert np.allclose(car.box.center[:2], [12.0, 3.0], atol=0.3)
+    assert 1.3 < car.box.size[2] < 1.6
+    bottom_m = car.box.center[2] - car.box.size[2] / 2
+    assert abs(bottom_m - (-1.7 + 0.02 * 12.0)) < 0.15  # standing on the road
 
 
 def test_ground_only_and_empty_sweeps_give_no_objects() -> None:

@@ -19,11 +19,11 @@ import shapely
 
 from redrive.evaluation._kinematics import (
     ego_footprint_corners,
-    project_on_polyline,
     rectangle_corners,
     rectangles_overlap,
 )
 from redrive.evaluation.base import EvalData, MetricSkipped, Series
+from redrive.maps.index import RoadMapIndex
 from redrive.types import DetectedObject, ObjectClass, ObjectColumns, RoadMap, VehicleState
 
 F64 = npt.NDArray[np.float64]
@@ -148,58 +148,41 @@ def bearing_rad(ego_xy: F64, ego_heading: float, points: F64) -> F64:
     return np.abs((ang + math.pi) % (2.0 * math.pi) - math.pi)
 
 
-class RoadIndex:
-    """Geometric queries on a :class:`RoadMap` (shapely polygons, built once per evaluation)."""
+class RoadIndex(RoadMapIndex):
+    """The metrics' questions to a :class:`RoadMap`, answered by its indexed queries
+    (:class:`~redrive.maps.index.RoadMapIndex`, built once per evaluation)."""
 
     def __init__(self, road_map: RoadMap) -> None:
-        self.road_map = road_map
+        super().__init__(road_map)
         self.lanes = road_map.lanes
-        self.lane_polygons = [
-            shapely.buffer(
-                shapely.LineString(lane.centerline), lane.width_m / 2.0, cap_style="flat"
-            )
-            for lane in self.lanes
-        ]
-        areas = [shapely.Polygon(a.polygon) for a in road_map.areas]
-        self.drivable = shapely.union_all([*self.lane_polygons, *areas])
-        inter = [p for p, a in zip(areas, road_map.areas, strict=True) if a.kind == "intersection"]
-        self.intersections = shapely.union_all(inter) if inter else None
-        for geom in (self.drivable, *self.lane_polygons):
-            shapely.prepare(geom)
 
     def lanes_containing(self, points: F64) -> npt.NDArray[np.bool_]:
         """(L, K): lane l contains point k (its boundary included)."""
         p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        which, lane = self.lane_hits(p)
         out = np.zeros((len(self.lanes), p.shape[0]), dtype=bool)
-        for i, poly in enumerate(self.lane_polygons):
-            out[i] = shapely.intersects_xy(poly, p[:, 0], p[:, 1])
+        out[lane, which] = True
         return out
 
     def distance_outside(self, points: F64) -> F64:
         """(K,) distance of each point to the drivable area, m (0 inside or on it)."""
-        p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-        return np.asarray(shapely.distance(self.drivable, shapely.points(p)), dtype=np.float64)
-
-    def in_intersection(self, point: F64) -> bool:
-        if self.intersections is None:
-            return False
-        x, y = np.asarray(point, dtype=np.float64).reshape(2)
-        return bool(shapely.intersects_xy(self.intersections, x, y))
+        return self.distance_outside_drivable_m(np.asarray(points, dtype=np.float64).reshape(-1, 2))
 
     def in_multiple_lanes(self, corners: F64) -> bool:
         """NAVSIM's ``MULTIPLE_LANES`` area: more than one lane holds a corner and no lane holds
         all four (the ego straddles lanes, as in a lane change)."""
-        inside = self.lanes_containing(corners)  # (L, 4)
-        return bool(inside.any(axis=1).sum() > 1 and not inside.all(axis=1).any())
+        held = self.lanes_at(np.asarray(corners, dtype=np.float64).reshape(-1, 2))
+        every = {lane for lanes in held for lane in lanes}
+        return len(every) > 1 and not set.intersection(*(set(h) for h in held))
 
     def off_road(self, corners: F64) -> bool:
         """A corner lies outside the drivable area (NAVSIM's ``NON_DRIVABLE_AREA``)."""
-        return bool(np.any(self.distance_outside(corners) > 0.0))
+        return bool(not self.footprint_on_drivable_area(np.asarray(corners).reshape(1, -1, 2))[0])
 
     def lane_tangent(self, lane: int, point: F64) -> F64:
         """Unit direction of travel (2,) of lane ``lane`` nearest ``point``."""
-        _, _, heading = project_on_polyline(
-            np.asarray(point).reshape(1, 2), self.lanes[lane].centerline
+        _, _, heading = self.station(
+            np.asarray(point, dtype=np.float64).reshape(1, 2), [self.lanes[lane].lane_id]
         )
         return np.array([math.cos(float(heading[0])), math.sin(float(heading[0]))])
 

@@ -101,13 +101,18 @@ def driving_direction_score(data: EvalData, params: Mapping[str, Any]) -> tuple[
     ego = ego_run(data)
     centres = ego.centres(params)
     against = np.zeros(len(ego))
-    for i in range(1, len(ego)):
-        step = centres[i] - centres[i - 1]
-        lanes = np.flatnonzero(road.lanes_containing(centres[i])[:, 0])
-        if lanes.size == 0:
-            continue  # off every lane: the drivable-area metric's business
-        along = [float(step @ road.lane_tangent(int(k), centres[i])) for k in lanes]
-        against[i] = max(0.0, -max(along))  # some lane it is in runs its way: no violation
+    if len(ego) > 1:
+        # every (frame, lane holding the centre) pair at once; off every lane: no pair (the
+        # drivable-area metric's business)
+        which, lanes = road.lane_hits(centres[1:])
+        ids = [road.lanes[k].lane_id for k in lanes.tolist()]
+        _, _, heading = road.station(centres[1:][which], ids)
+        steps = np.diff(centres, axis=0)[which]
+        along = steps[:, 0] * np.cos(heading) + steps[:, 1] * np.sin(heading)
+        best = np.full(len(ego) - 1, -np.inf)
+        np.maximum.at(best, which, along)
+        # some lane it is in runs its way: no violation
+        against[1:] = np.where(np.isfinite(best), np.maximum(0.0, -best), 0.0)
     t = ego.t_s
     window = float(params["time_horizon_s"])
     over = np.array(
@@ -188,18 +193,20 @@ class SpeedLimitCompliance(Metric):
     def evaluate(self, data: EvalData) -> MetricResult:
         road = require_road(data)
         ego = ego_run(data)
-        inside = road.lanes_containing(ego.centres(self.params))  # (L, N)
+        which, lanes = road.lane_hits(ego.centres(self.params))
         limits = np.array(
             [
                 math.nan if lane.speed_limit_mps is None else lane.speed_limit_mps
                 for lane in road.lanes
             ]
-        )
-        limit = np.full(len(ego), math.nan)
-        for i in range(len(ego)):
-            here = limits[inside[:, i]]
-            if here.size and not np.any(np.isnan(here)):
-                limit[i] = float(here.max())
+        )[lanes]
+        # the highest limit of the lanes holding the centre; NaN when none does or one of them
+        # has no limit
+        limit = np.full(len(ego), -np.inf)
+        np.maximum.at(limit, which, np.nan_to_num(limits, nan=-np.inf))
+        unknown = np.zeros(len(ego), dtype=bool)
+        unknown[which[np.isnan(limits)]] = True
+        limit[unknown | ~np.isfinite(limit)] = math.nan
         over = np.where(np.isnan(limit), 0.0, np.maximum(0.0, ego.speed_mps - np.nan_to_num(limit)))
         t = ego.t_s
         duration = float(t[-1]) if t.size else 0.0

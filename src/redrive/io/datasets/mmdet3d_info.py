@@ -41,8 +41,8 @@ from redrive.io.datasets.nuscenes_common import (
     NuScenesReaderBase,
     NuScenesSample,
     boxes_to_base,
+    gravity_aligned_rotations,
     object_class_of,
-    yaw_rotations,
 )
 from redrive.types import ObjectClass
 
@@ -271,19 +271,29 @@ class Mmdet3dInfoReader(NuScenesReaderBase):
                     ego_from_camera=_matrix(image["cam2ego"], (4, 4), f"{channel} cam2ego"),
                 )
             )
+        global_from_ego = _matrix(entry["ego2global"], (4, 4), "ego2global")
         return NuScenesSample(
             token=str(entry.get("token", "")),
             stamp_ns=stamp_ns,
             lidar_path=self._file(str(lidar["lidar_path"]), LIDAR_CHANNEL),
             ego_from_lidar=ego_from_lidar,
-            global_from_ego=_matrix(entry["ego2global"], (4, 4), "ego2global"),
+            global_from_ego=global_from_ego,
             cameras=tuple(cameras),
-            objects=self._objects(entry.get("instances") or [], ego_from_lidar),
+            objects=self._objects(
+                entry.get("instances") or [], ego_from_lidar, global_from_ego @ ego_from_lidar
+            ),
         )
 
     def _objects(
-        self, instances: Sequence[Mapping[str, Any]], ego_from_lidar: npt.NDArray[np.float64]
+        self,
+        instances: Sequence[Mapping[str, Any]],
+        ego_from_lidar: npt.NDArray[np.float64],
+        global_from_lidar: npt.NDArray[np.float64],
     ) -> tuple[Any, ...]:
+        """The boxes of an info entry (LiDAR frame, heading only) as ground truth in base_link.
+        nuScenes annotates boxes upright in the global frame; the info keeps only their heading
+        in the LiDAR frame, so the whole rotation is rebuilt upright in the global frame
+        (:func:`gravity_aligned_rotations`) — the box the devkit counts ``num_lidar_pts`` in."""
         if not instances:
             return ()
         boxes = np.array([inst["bbox_3d"] for inst in instances], dtype=np.float64)
@@ -307,7 +317,7 @@ class Mmdet3dInfoReader(NuScenesReaderBase):
         return boxes_to_base(
             centers=boxes[:, :3],
             sizes_lwh=boxes[:, 3:6],
-            rotations=yaw_rotations(boxes[:, 6]),
+            rotations=gravity_aligned_rotations(boxes[:, 6], global_from_lidar),
             velocities=velocities,
             base_from_src=ego_from_lidar,
             classes=classes,

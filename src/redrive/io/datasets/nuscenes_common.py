@@ -64,6 +64,7 @@ from redrive.geometry.se3 import (
     transform_from_matrix,
     transform_points,
     yaw_from_rotation_matrix,
+    yaw_pitch_roll_from_rotation_matrices,
 )
 from redrive.io.base import DecodedKind, LogMessage, ReaderCapabilities, TopicInfo
 from redrive.io.ros.decoders.base import Decoded, DecodedValue
@@ -92,6 +93,7 @@ __all__ = [
     "NuScenesReaderBase",
     "NuScenesSample",
     "boxes_to_base",
+    "gravity_aligned_rotations",
     "object_class_of",
     "read_lidar_bin",
     "velocity_and_yaw_rate",
@@ -474,14 +476,17 @@ def boxes_to_base(
     """Boxes given in a source frame (centres (N, 3), l w h (N, 3), rotations (N, 3, 3) of the
     box axes — x along its length —, velocities (N, 3) with NaN for unknown) as ground truth in
     base_link.  The yaw is that of the whole rotation moved into base_link, as the devkit's
-    ``Box.rotate`` then ``orientation.yaw_pitch_roll[0]``."""
+    ``Box.rotate`` then ``quaternion_yaw``; the object's ``orientation`` keeps the whole
+    rotation as yaw, pitch and roll (``Rz Ry Rx``): a box upright in the global frame is tilted
+    in a tilted ego's base_link, and the devkit counts its points that way."""
     n = len(classes)
     if n == 0:
         return ()
     rot = base_from_src[:3, :3]
     out_centers = transform_points(base_from_src, np.asarray(centers, dtype=np.float64))
     turned = rot @ np.asarray(rotations, dtype=np.float64)
-    out_yaws = np.arctan2(turned[:, 1, 0], turned[:, 0, 0])
+    angles = yaw_pitch_roll_from_rotation_matrices(turned)
+    out_yaws = angles[:, 0]
     vel = np.nan_to_num(np.asarray(velocities, dtype=np.float64), nan=0.0) @ rot.T
     ids = object_ids if object_ids is not None else [-1] * n
     out = []
@@ -494,11 +499,37 @@ def boxes_to_base(
                 confidence=1.0,
                 box=Box3D(center=out_centers[i], size=sizes_lwh[i], yaw_rad=yaw),
                 velocity=vel[i],
-                orientation=np.array([yaw, 0.0, 0.0]),
+                orientation=angles[i],
                 num_lidar_points=num_lidar_points[i],
             )
         )
     return tuple(out)
+
+
+def gravity_aligned_rotations(
+    yaws_rad: npt.NDArray[np.float64], global_from_src: npt.NDArray[np.float64]
+) -> npt.NDArray[np.float64]:
+    """(N, 3, 3) rotations in a source frame of boxes that are upright in the *global* frame
+    (a nuScenes ``sample_annotation``'s rotation turns about the global z only) and whose heading
+    in the source frame is ``yaws_rad`` (N,) — the heading that mmdet3d's info converter keeps of
+    the devkit's box after ``Box.rotate`` into the LiDAR frame.  The global
+    heading θ solves ``yaw(src_from_global · Rz(θ)) = yaw``; a few Newton-free fixed-point steps
+    reach float64 precision, since a tilt of a few degrees changes the heading's slope by
+    far less than one."""
+    yaws = np.asarray(yaws_rad, dtype=np.float64)
+    src_from_global = np.asarray(global_from_src, dtype=np.float64)[:3, :3].T
+    theta = yaws + yaw_from_rotation_matrix(src_from_global.T)
+    for _ in range(8):
+        turned = src_from_global @ yaw_rotations(theta)
+        error = np.arctan2(
+            np.sin(yaws - np.arctan2(turned[:, 1, 0], turned[:, 0, 0])),
+            np.cos(yaws - np.arctan2(turned[:, 1, 0], turned[:, 0, 0])),
+        )
+        theta = theta + error
+        if np.all(np.abs(error) < 1e-12):
+            break
+    out: npt.NDArray[np.float64] = src_from_global @ yaw_rotations(theta)
+    return out
 
 
 def yaw_rotations(yaws_rad: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:

@@ -289,6 +289,8 @@ class Ros1BagReader(RosReaderBase):
             times, chunk_pos, offsets, conn_ids = (
                 a[:times_stop] for a in (times, chunk_pos, offsets, conn_ids)
             )
+        if not len(times):
+            return  # no message of these topics in the span (a topic the bag lacks: nothing)
         # Where the chunk changes: the messages of [bounds[k], bounds[k + 1]) share a chunk.
         bounds = [0, *(np.flatnonzero(np.diff(chunk_pos)) + 1).tolist(), len(times)]
         heads = {cid: (c.topic, c.msgtype) for cid, c in self._conns.items()}

@@ -1,0 +1,326 @@
+"""Indexed queries on a :class:`~redrive.types.RoadMap`: which lanes hold a point, the lane of a
+pose, the drivable area, the distance to the road edge, a route along the lane graph.
+
+:class:`RoadMapIndex` is built once per map (shapely STRtrees over the lane polygons, the
+drivable polygons and the road-edge segments) and answers for N points at a time, so that a
+frame of 100 agents costs a few tree queries, not a scan of every lane.
+
+Geometry (the map frame, metres):
+
+- a lane's polygon lies between its boundaries (:meth:`MapLane.boundaries
+  <redrive.types.MapLane.boundaries>`); a lane without boundaries is its centreline widened by
+  ``width_m / 2`` either side with flat ends (as the closed-loop metrics always measured it);
+- the drivable area is the union of the lane polygons and the map's :class:`DrivableArea`
+  polygons; the road edge is the boundary of that union;
+- "on" counts the boundary as inside (a point on a lane's edge is in the lane).
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import shapely
+
+from redrive.types import MapLane, RoadMap
+
+__all__ = ["DEFAULT_LANE_CHANGE_COST_M", "DEFAULT_MAX_HEADING_DIFF_RAD", "RoadMapIndex"]
+
+F64 = npt.NDArray[np.float64]
+#: :meth:`RoadMapIndex.lane_of_pose`: a lane whose direction differs from the pose's heading by
+#: more than this is not the pose's lane (90°: the pose travels along it, not against it).
+DEFAULT_MAX_HEADING_DIFF_RAD = math.pi / 2.0
+#: :meth:`RoadMapIndex.route`: the cost of one lane change, metres of driving (so that of two
+#: routes of equal length the one with fewer lane changes wins).
+DEFAULT_LANE_CHANGE_COST_M = 5.0
+
+
+def lane_polygon(lane: MapLane) -> Any:
+    """The shapely polygon of ``lane`` (see the module docstring), made valid."""
+    if lane.left_boundary is None and lane.right_boundary is None:
+        line = shapely.LineString(lane.centerline)
+        return shapely.buffer(line, lane.width_m / 2.0, cap_style="flat")
+    left, right = lane.boundaries()
+    poly = shapely.Polygon(np.concatenate([left, right[::-1]]))
+    if not poly.is_valid:
+        poly = shapely.make_valid(poly)
+        parts = [p for p in shapely.get_parts(poly) if p.geom_type in ("Polygon", "MultiPolygon")]
+        poly = shapely.union_all(parts) if parts else shapely.Polygon()
+    return poly
+
+
+def _points(xy: npt.ArrayLike) -> F64:
+    p = np.asarray(xy, dtype=np.float64)
+    if p.ndim == 1 and p.shape == (2,):
+        p = p.reshape(1, 2)
+    if p.ndim != 2 or p.shape[1] != 2:
+        msg = f"points must be (N, 2) x, y metres, got shape {p.shape}"
+        raise ValueError(msg)
+    return p
+
+
+class RoadMapIndex:
+    """Spatial queries on one :class:`RoadMap`, vectorised over N points (see the module doc).
+
+    Attributes:
+        road_map: the map.
+        lane_polygons: shapely polygons, one per lane of ``road_map.lanes`` (same order).
+        drivable: the drivable area (a shapely (multi)polygon, prepared).
+    """
+
+    def __init__(self, road_map: RoadMap) -> None:
+        self.road_map = road_map
+        lanes = road_map.lanes
+        self._lane_pos = {lane.lane_id: i for i, lane in enumerate(lanes)}
+        self.lane_polygons: tuple[Any, ...] = tuple(lane_polygon(lane) for lane in lanes)
+        areas = [shapely.make_valid(shapely.Polygon(a.polygon)) for a in road_map.areas]
+        self._lane_tree = shapely.STRtree(list(self.lane_polygons))
+        self._drivable_tree = shapely.STRtree([*self.lane_polygons, *areas])
+        self.drivable: Any = shapely.union_all([*self.lane_polygons, *areas])
+        shapely.prepare(self.drivable)
+        junctions = [shapely.Polygon(i.polygon) for i in road_map.intersections] + [
+            p for p, a in zip(areas, road_map.areas, strict=True) if a.kind == "intersection"
+        ]
+        self._junctions: Any = shapely.union_all(junctions) if junctions else None
+        if self._junctions is not None:
+            shapely.prepare(self._junctions)
+        self._edge_tree = shapely.STRtree(_edge_segments(self.drivable))
+        self._build_centrelines(lanes)
+
+    def _build_centrelines(self, lanes: Sequence[MapLane]) -> None:
+        # every centreline's vertices one after the other, their arclength made global (each
+        # lane starts 1 m after the previous one ends) so one searchsorted finds the segment of
+        # any (lane, arclength) pair.
+        self._centerlines = np.array([shapely.LineString(lane.centerline) for lane in lanes])
+        starts, offsets, cums, heads, xys = [], [], [], [], []
+        vertex = 0
+        offset = 0.0
+        for lane in lanes:
+            pts = lane.centerline
+            seg = np.diff(pts, axis=0)
+            length = np.hypot(seg[:, 0], seg[:, 1])
+            heading = np.arctan2(seg[:, 1], seg[:, 0])
+            for j in range(1, heading.size):  # a repeated point: the heading before it
+                if length[j] == 0.0:
+                    heading[j] = heading[j - 1]
+            for j in range(heading.size - 2, -1, -1):
+                if length[j] == 0.0:
+                    heading[j] = heading[j + 1]
+            starts.append(vertex)
+            offsets.append(offset)
+            cums.append(offset + np.concatenate([[0.0], np.cumsum(length)]))
+            heads.append(np.append(heading, heading[-1]))
+            xys.append(pts)
+            vertex += pts.shape[0]
+            offset += float(length.sum()) + 1.0
+        self._vertex_start = np.array(starts, dtype=np.int64)
+        self._vertex_count = np.array([lane.centerline.shape[0] for lane in lanes], np.int64)
+        self._s_offset = np.array(offsets, dtype=np.float64)
+        self._cum_s = np.concatenate(cums) if cums else np.zeros(0)
+        self._seg_heading = np.concatenate(heads) if heads else np.zeros(0)
+        self._vertices = np.concatenate(xys) if xys else np.zeros((0, 2))
+
+    # ---- lanes ---------------------------------------------------------------------------
+
+    def lane_position(self, lane_id: str) -> int:
+        """The position of ``lane_id`` in ``road_map.lanes`` (KeyError when it is none)."""
+        return self._lane_pos[lane_id]
+
+    def lane_hits(self, xy: npt.ArrayLike) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+        """Every (point, lane) pair where lane holds point: the point indices into ``xy`` and
+        the lane positions in ``road_map.lanes``, sorted by point then lane."""
+        p = _points(xy)
+        pairs = self._lane_tree.query(shapely.points(p), predicate="intersects")
+        order = np.lexsort((pairs[1], pairs[0]))
+        return pairs[0][order].astype(np.int64), pairs[1][order].astype(np.int64)
+
+    def lanes_at(self, xy: npt.ArrayLike) -> list[tuple[str, ...]]:
+        """For each of the points ``xy`` (N, 2): the ids of the lanes holding it (map order)."""
+        p = _points(xy)
+        which, lane = self.lane_hits(p)
+        out: list[list[str]] = [[] for _ in range(p.shape[0])]
+        lanes = self.road_map.lanes
+        for k, m in zip(which.tolist(), lane.tolist(), strict=True):
+            out[k].append(lanes[m].lane_id)
+        return [tuple(ids) for ids in out]
+
+    def station(self, xy: npt.ArrayLike, lane_ids: Sequence[str]) -> tuple[F64, F64, F64]:
+        """Where each point ``xy[k]`` lies along lane ``lane_ids[k]``: the arclength of its
+        closest centreline point (m, from the lane's start), its signed lateral offset (m, left
+        > 0) and the lane's direction of travel there (rad)."""
+        p = _points(xy)
+        if len(lane_ids) != p.shape[0]:
+            msg = f"station: {p.shape[0]} points but {len(lane_ids)} lane ids"
+            raise ValueError(msg)
+        lanes = np.array([self._lane_pos[i] for i in lane_ids], dtype=np.int64)
+        return self._station(p, lanes)
+
+    def _station(self, p: F64, lanes: npt.NDArray[np.int64]) -> tuple[F64, F64, F64]:
+        if lanes.size == 0:
+            empty = np.zeros(0)
+            return empty, empty.copy(), empty.copy()
+        pts = shapely.points(p)
+        lines = self._centerlines[lanes]
+        s = np.asarray(shapely.line_locate_point(lines, pts), dtype=np.float64)
+        dist = np.asarray(shapely.distance(lines, pts), dtype=np.float64)
+        first = self._vertex_start[lanes]
+        last_seg = first + self._vertex_count[lanes] - 2
+        vertex = np.searchsorted(self._cum_s, self._s_offset[lanes] + s, side="right") - 1
+        vertex = np.clip(vertex, first, last_seg)
+        heading = self._seg_heading[vertex]
+        a, b = self._vertices[vertex], self._vertices[vertex + 1]
+        cross = (b[:, 0] - a[:, 0]) * (p[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (
+            p[:, 0] - a[:, 0]
+        )
+        lateral = np.where(cross < 0.0, -dist, dist)
+        return s, lateral, heading
+
+    def lane_of_pose(
+        self,
+        xy: npt.ArrayLike,
+        yaw_rad: npt.ArrayLike,
+        *,
+        max_heading_diff_rad: float = DEFAULT_MAX_HEADING_DIFF_RAD,
+    ) -> list[str | None]:
+        """For each pose: the lane that holds its point and runs within
+        less than ``max_heading_diff_rad`` from its heading, the one whose centreline is nearest when several
+        do (then the smaller heading difference); None when no lane does."""
+        p = _points(xy)
+        yaw = np.broadcast_to(np.asarray(yaw_rad, dtype=np.float64), (p.shape[0],))
+        which, lane = self.lane_hits(p)
+        out: list[str | None] = [None] * p.shape[0]
+        if which.size == 0:
+            return out
+        _, lateral, heading = self._station(p[which], lane)
+        diff = np.abs(np.mod(heading - yaw[which] + math.pi, 2.0 * math.pi) - math.pi)
+        ok = diff < max_heading_diff_rad
+        which, lane, lateral, diff = which[ok], lane[ok], lateral[ok], diff[ok]
+        order = np.lexsort((diff, np.abs(lateral), which))
+        which, lane = which[order], lane[order]
+        first = np.ones(which.size, dtype=bool)
+        first[1:] = which[1:] != which[:-1]
+        lanes = self.road_map.lanes
+        for k, m in zip(which[first].tolist(), lane[first].tolist(), strict=True):
+            out[k] = lanes[m].lane_id
+        return out
+
+    # ---- the drivable area -----------------------------------------------------------------
+
+    def on_drivable_area(self, xy: npt.ArrayLike) -> npt.NDArray[np.bool_]:
+        """(N,) each point lies on a lane or a drivable area (its boundary included)."""
+        p = _points(xy)
+        hits = self._drivable_tree.query(shapely.points(p), predicate="intersects")
+        out = np.zeros(p.shape[0], dtype=bool)
+        out[hits[0]] = True
+        return out
+
+    def footprint_on_drivable_area(self, corners: npt.ArrayLike) -> npt.NDArray[np.bool_]:
+        """(N,) every corner of each footprint ``corners`` (N, K, 2) is on the drivable area
+        (NAVSIM's drivable-area test: a corner off every drivable polygon puts it off road)."""
+        c = np.asarray(corners, dtype=np.float64)
+        if c.ndim != 3 or c.shape[2] != 2:
+            msg = f"footprint corners must be (N, K, 2), got shape {c.shape}"
+            raise ValueError(msg)
+        inside = self.on_drivable_area(c.reshape(-1, 2)).reshape(c.shape[0], c.shape[1])
+        return np.asarray(inside.all(axis=1))
+
+    def distance_outside_drivable_m(self, xy: npt.ArrayLike) -> F64:
+        """(N,) distance of each point to the drivable area, m (0 on it)."""
+        p = _points(xy)
+        out = np.zeros(p.shape[0])
+        if len(self._drivable_tree) == 0:
+            out[:] = math.inf
+            return out
+        idx, dist = self._drivable_tree.query_nearest(
+            shapely.points(p), return_distance=True, all_matches=False
+        )
+        out[idx[0]] = dist
+        return out
+
+    def distance_to_road_edge_m(self, xy: npt.ArrayLike) -> F64:
+        """(N,) distance of each point to the road edge (the drivable area's boundary), m, ≥ 0
+        on either side of it (:meth:`on_drivable_area` tells the side); inf without a road."""
+        p = _points(xy)
+        out = np.full(p.shape[0], math.inf)
+        if len(self._edge_tree) == 0:
+            return out
+        idx, dist = self._edge_tree.query_nearest(
+            shapely.points(p), return_distance=True, all_matches=False
+        )
+        out[idx[0]] = dist
+        return out
+
+    def in_intersection(self, xy: npt.ArrayLike) -> npt.NDArray[np.bool_]:
+        """(N,) each point lies in an intersection (an :class:`Intersection` or a drivable area
+        of kind ``intersection``)."""
+        p = _points(xy)
+        if self._junctions is None:
+            return np.zeros(p.shape[0], dtype=bool)
+        return np.asarray(shapely.intersects_xy(self._junctions, p[:, 0], p[:, 1]))
+
+    # ---- the lane graph --------------------------------------------------------------------
+
+    def route(
+        self,
+        start_lane_id: str,
+        goal_lane_id: str,
+        *,
+        lane_change_cost_m: float = DEFAULT_LANE_CHANGE_COST_M,
+    ) -> tuple[str, ...]:
+        """The cheapest chain of lanes from ``start_lane_id`` to ``goal_lane_id`` (both
+        included) along successors and left/right neighbours; () when the goal cannot be reached.
+
+        Driving on to a successor costs the length of the lane left; a lane change costs
+        ``lane_change_cost_m``.  Raises KeyError for an id that is not a lane of the map.
+        """
+        for lane_id in (start_lane_id, goal_lane_id):
+            if lane_id not in self._lane_pos:
+                msg = f"route: {lane_id!r} is not a lane of the map"
+                raise KeyError(msg)
+        road = self.road_map
+        best: dict[str, float] = {start_lane_id: 0.0}
+        came_from: dict[str, str] = {}
+        queue: list[tuple[float, int, str]] = [(0.0, 0, start_lane_id)]
+        tick = 1
+        while queue:
+            cost, _, lane_id = heapq.heappop(queue)
+            if lane_id == goal_lane_id:
+                chain = [lane_id]
+                while chain[-1] in came_from:
+                    chain.append(came_from[chain[-1]])
+                return tuple(reversed(chain))
+            if cost > best.get(lane_id, math.inf):
+                continue
+            lane = road.lane(lane_id)
+            steps = [(s, lane.length_m) for s in lane.successors] + [
+                (n, lane_change_cost_m)
+                for n in (lane.left_neighbor, lane.right_neighbor)
+                if n is not None
+            ]
+            for nxt, step in steps:
+                new = cost + step
+                if new < best.get(nxt, math.inf):
+                    best[nxt] = new
+                    came_from[nxt] = lane_id
+                    heapq.heappush(queue, (new, tick, nxt))
+                    tick += 1
+        return ()
+
+
+def _edge_segments(area: Any) -> list[Any]:
+    """The boundary of ``area`` as two-point line strings (the road-edge tree's items)."""
+    out: list[Any] = []
+    boundary = shapely.boundary(area)
+    if boundary is None or shapely.is_empty(boundary):
+        return out
+    for part in shapely.get_parts(boundary):
+        coords = shapely.get_coordinates(part)
+        if coords.shape[0] < 2:
+            continue
+        pairs = np.stack([coords[:-1], coords[1:]], axis=1)
+        out.extend(shapely.linestrings(pairs).tolist())
+    return out

@@ -1,0 +1,127 @@
+"""redrive.maps.index: the indexed queries equal brute-force shapely answers over every lane."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import shapely
+
+from redrive.evaluation._kinematics import project_on_polyline
+from redrive.maps.index import RoadMapIndex, lane_polygon
+from redrive.sim.roadmap import road_map
+from redrive.sim.roads import HighwayLayout, UrbanLayout, build_network
+from redrive.types import MapLane, RoadMap
+
+
+@pytest.fixture(scope="module", params=["urban2", "highway"])
+def index(request: pytest.FixtureRequest) -> RoadMapIndex:
+    layout = UrbanLayout(lanes_per_direction=2) if request.param == "urban2" else HighwayLayout()
+    return RoadMapIndex(road_map(build_network(layout)))
+
+
+def _points(index: RoadMapIndex, n: int = 400) -> np.ndarray:
+    """Half uniform over the map's extent, half within a few metres of a centreline point."""
+    extent = index.road_map.extent()
+    assert extent is not None
+    x0, y0, x1, y1 = extent
+    rng = np.random.default_rng(7)
+    uniform = np.column_stack([rng.uniform(x0 - 5, x1 + 5, n), rng.uniform(y0 - 5, y1 + 5, n)])
+    centre = np.concatenate([lane.centerline for lane in index.road_map.lanes])
+    near = centre[rng.integers(0, centre.shape[0], n)] + rng.normal(0.0, 3.0, (n, 2))
+    return np.concatenate([uniform, near])
+
+
+def test_lanes_at_equals_a_scan_of_every_lane(index: RoadMapIndex) -> None:
+    pts = _points(index)
+    got = index.lanes_at(pts)
+    for k, p in enumerate(pts):
+        want = tuple(
+            lane.lane_id
+            for lane, poly in zip(index.road_map.lanes, index.lane_polygons, strict=True)
+            if shapely.intersects_xy(poly, *p)
+        )
+        assert got[k] == want
+    assert sum(map(len, got)) > 200  # the sample reaches the lanes
+
+
+def test_lane_of_pose_nearest_centreline_of_the_right_direction(index: RoadMapIndex) -> None:
+    pts = _points(index)
+    yaw = np.random.default_rng(8).uniform(-math.pi, math.pi, pts.shape[0])
+    got = index.lane_of_pose(pts, yaw, max_heading_diff_rad=math.radians(60))
+    for k, p in enumerate(pts):
+        best: tuple[float, str] | None = None
+        for lane_id in index.lanes_at(p)[0]:
+            line = index.road_map.lane(lane_id).centerline
+            _, dist, heading = project_on_polyline(p.reshape(1, 2), line)
+            diff = abs((float(heading[0]) - yaw[k] + math.pi) % (2 * math.pi) - math.pi)
+            if diff < math.radians(60) and (best is None or abs(float(dist[0])) < best[0]):
+                best = (abs(float(dist[0])), lane_id)
+        assert got[k] == (None if best is None else best[1])
+    assert sum(g is not None for g in got) > 10
+
+
+def test_station_gives_arclength_lateral_and_heading(index: RoadMapIndex) -> None:
+    lane = index.road_map.lanes[0]
+    pts = lane.centerline[::7] + 0.4 * np.array([1.0, -1.0])
+    s, lateral, heading = index.station(pts, [lane.lane_id] * len(pts))
+    want_s, want_d, want_h = project_on_polyline(pts, lane.centerline)
+    np.testing.assert_allclose(s, want_s, atol=1e-9)
+    np.testing.assert_allclose(lateral, want_d, atol=1e-9)
+    np.testing.assert_allclose(np.cos(heading - want_h), 1.0, atol=1e-9)
+
+
+def test_drivable_area_and_road_edge_equal_the_union(index: RoadMapIndex) -> None:
+    pts = _points(index)
+    union = index.drivable
+    inside = shapely.intersects_xy(union, pts[:, 0], pts[:, 1])
+    np.testing.assert_array_equal(index.on_drivable_area(pts), inside)
+    outside = shapely.distance(union, shapely.points(pts))
+    np.testing.assert_allclose(index.distance_outside_drivable_m(pts), outside, atol=1e-9)
+    edge = shapely.distance(shapely.boundary(union), shapely.points(pts))
+    np.testing.assert_allclose(index.distance_to_road_edge_m(pts), edge, atol=1e-9)
+    corners = pts[-400:].reshape(100, 4, 2)
+    np.testing.assert_array_equal(
+        index.footprint_on_drivable_area(corners), inside[-400:].reshape(100, 4).all(axis=1)
+    )
+
+
+def test_route_along_successors_and_lane_changes() -> None:
+    index = RoadMapIndex(road_map(build_network(UrbanLayout(lanes_per_direction=2))))
+    # the left turn leaves from the inner lane: change lanes first, then turn
+    assert index.route("west_in_1", "north_out_0") == (
+        "west_in_1",
+        "west_in_0",
+        "west_north_0",
+        "north_out_0",
+    )
+    assert index.route("west_in_0", "west_in_0") == ("west_in_0",)
+    assert index.route("north_out_0", "west_in_0") == ()  # leaves the map
+    with pytest.raises(KeyError, match="'ghost' is not a lane"):
+        index.route("ghost", "west_in_0")
+    highway = RoadMapIndex(road_map(build_network(HighwayLayout())))
+    assert highway.route("entry:f2", "exit:f2") == ("entry:f2", "curve:f2", "exit:f2")
+
+
+def test_lane_with_boundaries_is_the_polygon_between_them() -> None:
+    lane = MapLane(
+        lane_id="a",
+        centerline=[[0.0, 0.0], [10.0, 0.0]],
+        width_m=None,
+        left_boundary=[[0.0, 2.0], [10.0, 1.0]],
+        right_boundary=[[0.0, -1.0], [10.0, -1.0]],
+    )
+    poly = lane_polygon(lane)
+    assert poly.area == pytest.approx(25.0)
+    index = RoadMapIndex(RoadMap(lanes=(lane,)))
+    assert index.lanes_at([[9.0, 1.05], [9.0, 1.5]]) == [("a",), ()]
+    assert index.distance_to_road_edge_m([[5.0, 0.0]])[0] == pytest.approx(1.0)
+
+
+def test_empty_map() -> None:
+    index = RoadMapIndex(RoadMap(lanes=()))
+    assert index.lanes_at([[0.0, 0.0]]) == [()]
+    assert index.lane_of_pose([[0.0, 0.0]], [0.0]) == [None]
+    assert not index.on_drivable_area([[0.0, 0.0]])[0]
+    assert index.distance_to_road_edge_m([[0.0, 0.0]])[0] == math.inf
