@@ -399,6 +399,7 @@ class Av2SensorLogReader(NativeLogBase):
         if road_map is not None:
             out["lane segments"] = len(road_map.lanes)
             out["drivable areas"] = len(road_map.areas)
+            out["pedestrian crossings"] = len(road_map.crosswalks)
         return out
 
     def road_map(self) -> RoadMap | None:

@@ -9,6 +9,19 @@ left and right boundary features (twice the one distance where only one side is 
 bounded nowhere (lanes interpolated through intersections) takes the median width of those that
 are.  A lane of fewer than two points has no direction and is left out (``redrive info`` counts
 the lanes of the scenario, the map the ones it keeps).
+
+The lane graph: ``exit_lanes`` are the successors, ``entry_lanes`` the predecessors, the first
+``left_neighbors`` / ``right_neighbors`` entry the neighbour on that side (WOMD's neighbours are
+lanes of the same direction one can change into); ids not in the map are dropped.  A side's
+boundary type is that of the boundary segment bounding most of the lane: a road edge feature →
+``road_edge``, a broken line → ``dashed``, a solid line → ``solid``, a passing double yellow (solid
+on one side, broken on the other, and WOMD does not say which faces the lane) → ``unknown``; a side
+bounded nowhere is ``virtual`` on an interpolated lane (through an intersection), else
+``unknown``.  ``TYPE_BIKE_LANE`` lanes have kind ``bike``.  Crosswalks are :class:`Crosswalk`
+polygons; each lane a dynamic map state controls is a :class:`MapTrafficLight` whose ``light_id``
+is the lane's id (as ``TrafficLight.id`` of the reader's ``/traffic_lights``), at the state's
+``stop_point``.  Stop signs, speed bumps and driveways have no element in the model (``redrive
+info`` counts them).
 """
 
 from __future__ import annotations
@@ -21,7 +34,7 @@ import numpy.typing as npt
 import shapely
 
 from redrive.errors import LogError
-from redrive.types import MapLane, RoadMap
+from redrive.types import Crosswalk, MapLane, MapTrafficLight, RoadMap
 
 __all__ = ["MPH_TO_MPS", "lane_widths", "road_map_from_scenario"]
 
@@ -96,7 +109,7 @@ def road_map_from_scenario(scenario: Any, *, source: str) -> RoadMap:
     widths = lane_widths(scenario)
     known = [w for w in widths.values() if w is not None]
     fallback = float(np.median(known)) if known else None
-    lanes = []
+    lanes: list[tuple[int, Any, npt.NDArray[np.float64], float]] = []
     seen: set[int] = set()
     skipped = 0
     for feature in scenario.map_features:
@@ -121,15 +134,78 @@ def road_map_from_scenario(scenario: Any, *, source: str) -> RoadMap:
                 "can be measured"
             )
             raise LogError(msg)
-        limit = float(feature.lane.speed_limit_mph) * MPH_TO_MPS
-        lanes.append(
+        lanes.append((fid, feature.lane, centre, width))
+    if skipped:
+        logger.debug("%s: %d lanes of fewer than two points left out", source, skipped)
+    kept = {str(fid) for fid, *_ in lanes}
+    edges = {
+        int(f.id) for f in scenario.map_features if f.WhichOneof("feature_data") == "road_edge"
+    }
+
+    def known(ids: Any) -> tuple[str, ...]:
+        return tuple(str(int(i)) for i in ids if str(int(i)) in kept)
+
+    def first(neighbours: Any) -> str | None:
+        ids = known([n.feature_id for n in neighbours])
+        return ids[0] if ids else None
+
+    out = []
+    for fid, lane, centre, width in lanes:
+        limit = float(lane.speed_limit_mph) * MPH_TO_MPS
+        out.append(
             MapLane(
                 lane_id=str(fid),
                 centerline=centre,
                 width_m=width,
                 speed_limit_mps=limit if limit > 0 else None,
+                left_boundary_type=_side_type(lane.left_boundaries, edges, lane.interpolating),
+                right_boundary_type=_side_type(lane.right_boundaries, edges, lane.interpolating),
+                successors=known(lane.exit_lanes),
+                predecessors=known(lane.entry_lanes),
+                left_neighbor=first(lane.left_neighbors),
+                right_neighbor=first(lane.right_neighbors),
+                kind="bike" if int(lane.type) == _BIKE_LANE else "vehicle",
             )
         )
-    if skipped:
-        logger.debug("%s: %d lanes of fewer than two points left out", source, skipped)
-    return RoadMap(lanes=tuple(lanes))
+    crosswalks = []
+    for feature in scenario.map_features:
+        if feature.WhichOneof("feature_data") == "crosswalk":
+            poly = _xy(feature.crosswalk.polygon)
+            if len(poly) >= 3 and np.all(np.isfinite(poly)):
+                crosswalks.append(Crosswalk(crosswalk_id=str(int(feature.id)), polygon=poly))
+    lights: dict[str, MapTrafficLight] = {}
+    for state in scenario.dynamic_map_states:
+        for lane_state in state.lane_states:
+            lid = str(int(lane_state.lane))
+            if lid in lights or not lane_state.HasField("stop_point"):
+                continue
+            point = lane_state.stop_point
+            lights[lid] = MapTrafficLight(
+                light_id=lid,
+                position=np.array([point.x, point.y], dtype=np.float64),
+                lane_ids=(lid,) if lid in kept else (),
+            )
+    return RoadMap(
+        lanes=tuple(out),
+        crosswalks=tuple(crosswalks),
+        traffic_lights=tuple(lights.values()),
+        source=f"womd:{source}",
+    )
+
+
+_BIKE_LANE = 3  # LaneCenter.LaneType.TYPE_BIKE_LANE
+_LINE_TYPE = {1: "dashed", 2: "solid", 3: "solid", 4: "dashed", 5: "dashed", 6: "solid", 7: "solid"}
+
+
+def _side_type(segments: Any, edges: set[int], interpolating: bool) -> str:
+    """The boundary type of the segment bounding most of one side of a lane."""
+    best, best_span = None, -1
+    for seg in segments:
+        span = int(seg.lane_end_index) - int(seg.lane_start_index)
+        if span > best_span:
+            best, best_span = seg, span
+    if best is None:
+        return "virtual" if interpolating else "unknown"
+    if int(best.boundary_feature_id) in edges:
+        return "road_edge"
+    return _LINE_TYPE.get(int(best.boundary_type), "unknown")
