@@ -1,0 +1,210 @@
+"""The Argoverse 2 sensor log of ../shared/data read as a log: its poses, cuboids, calibration,
+LiDAR sweeps and vector map, checked against the conventions of av2-api; damaged tables and maps
+give errors that name the file, the element and the byte."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pyarrow.feather as feather
+import pytest
+
+from redrive.errors import LogError
+from redrive.io import open_log
+from redrive.io.content import log_contents, log_road_map
+from redrive.io.datasets.av2 import TOPIC_ANNOTATIONS, TOPIC_LIDAR, Av2SensorLogReader
+from redrive.io.datasets.av2_map import boundary_type, interp_arc, read_av2_map
+from redrive.maps.index import RoadMapIndex
+from redrive.types import DetectedObject, ObjectClass, PointCloud
+
+LOG_ID = "7fab2350-7eaf-3b7e-a39d-6937a4c1bede"
+
+
+@pytest.fixture(scope="module")
+def av2_log(shared_data: Path) -> Path:
+    path = shared_data / "av2_sensor_val" / LOG_ID
+    if not path.is_dir():
+        pytest.skip("the Argoverse 2 log is not in ../shared/data")
+    return path
+
+
+def _copy(av2_log: Path, tmp_path: Path) -> Path:
+    return Path(shutil.copytree(av2_log, tmp_path / LOG_ID))
+
+
+@pytest.mark.shared_data
+def test_the_log_holds_156_annotated_sweeps_of_114_tracks(av2_log: Path) -> None:
+    with open_log(av2_log) as log:
+        assert log.format == "av2-sensor"
+        contents = log_contents(log)
+        assert contents["annotated sweeps"] == 156
+        assert contents["tracks"] == 114
+        assert contents["cuboids"] == 11364
+        assert contents["lane segments"] == 183
+        assert contents["drivable areas"] == 13
+        assert contents["pedestrian crossings"] == 11
+        assert log.topics[TOPIC_ANNOTATIONS].count == 156
+        assert log.topics[TOPIC_LIDAR].count == 2
+        gt = [m.payload.value for m in log.messages(topics=[TOPIC_ANNOTATIONS])]  # type: ignore[attr-defined]
+    assert sum(len(objs) for objs in gt) == 11364
+    ids = {o.object_id for objs in gt for o in objs}
+    assert ids == set(range(114))  # tracks numbered in the order they first appear
+    for objs in gt:
+        assert len({o.object_id for o in objs}) == len(objs)
+
+
+@pytest.mark.shared_data
+def test_a_bollard_stands_still_in_the_city_frame(av2_log: Path) -> None:
+    """Cuboids are in the ego frame of their sweep (av2-api): moved into the city frame by the
+    sweep's ego pose, a bollard's centre must not move while the ego drives 75 m."""
+    table = feather.read_table(av2_log / "annotations.feather").to_pydict()
+    bollard = next(
+        u for u, c in zip(table["track_uuid"], table["category"], strict=True) if c == "BOLLARD"
+    )
+    centres = []
+    ego_path = []
+    with Av2SensorLogReader(av2_log) as log:
+        states = {m.log_time_ns: m.payload.value for m in log.messages(topics=["/ego_pose"])}  # type: ignore[attr-defined]
+        for message in log.messages(topics=[TOPIC_ANNOTATIONS]):
+            objs: tuple[DetectedObject, ...] = message.payload.value  # type: ignore[attr-defined]
+            state = states[message.log_time_ns]
+            ego_path.append(state.position[:2])
+            c, s = np.cos(state.heading_rad), np.sin(state.heading_rad)
+            for o in objs:
+                if o.object_class is ObjectClass.STATIC and o.object_id == _id_of(log, bollard):
+                    x, y = o.box.center[:2]
+                    centres.append(state.position[:2] + [c * x - s * y, c * y + s * x])
+                    assert np.linalg.norm(o.velocity) < 0.5
+    assert len(centres) > 10
+    spread = np.ptp(np.array(centres), axis=0)
+    assert np.all(spread < 0.5), spread  # heading-only ego rotation: pitch/roll leave ~cm
+    assert np.hypot(*(ego_path[-1] - ego_path[0])) > 50
+
+
+def _id_of(log: Av2SensorLogReader, uuid: str) -> int:
+    table = feather.read_table(log.path / "annotations.feather").to_pydict()
+    rows = sorted(zip(table["timestamp_ns"], table["track_uuid"], strict=True))
+    order: dict[str, int] = {}
+    for _, u in rows:
+        order.setdefault(u, len(order))
+    return order[uuid]
+
+
+@pytest.mark.shared_data
+def test_the_sweeps_keep_every_point_and_field(av2_log: Path) -> None:
+    with open_log(av2_log) as log:
+        clouds = [m.payload for m in log.messages(topics=[TOPIC_LIDAR])]
+    first = feather.read_table(sorted((av2_log / "sensors" / "lidar").glob("*.feather"))[0])
+    cloud = clouds[0].value  # type: ignore[attr-defined]
+    assert isinstance(cloud, PointCloud)
+    assert clouds[0].frame_id == "base_link"  # type: ignore[attr-defined]
+    assert len(cloud.xyz) == first.num_rows == 99229
+    np.testing.assert_array_equal(cloud.xyz[:, 0], first["x"].to_numpy().astype(np.float32))
+    np.testing.assert_array_equal(cloud.channels["ring"], first["laser_number"].to_numpy())
+    np.testing.assert_array_equal(cloud.channels["t_offset_ns"], first["offset_ns"].to_numpy())
+
+
+@pytest.mark.shared_data
+def test_the_calibration_places_every_sensor(av2_log: Path) -> None:
+    with open_log(av2_log) as log:
+        (tf,) = [m.payload.value for m in log.messages(topics=["/tf_static"])]  # type: ignore[attr-defined]
+    names = {t.child_frame for t in tf}
+    assert {"up_lidar", "down_lidar", "ring_front_center"} <= names
+    assert all(t.parent_frame == "base_link" for t in tf)
+
+
+@pytest.mark.shared_data
+def test_the_map_is_a_lane_graph_the_ego_drives_on(av2_log: Path) -> None:
+    with open_log(av2_log) as log:
+        road = log_road_map(log)
+        states = [m.payload.value for m in log.messages(topics=["/ego_pose"])]  # type: ignore[attr-defined]
+    assert road is not None
+    assert len(road.lanes) == 183 and len(road.crosswalks) == 11 and len(road.areas) == 13
+    assert road.source is not None and road.source.startswith("av2:")
+    assert {lane.kind for lane in road.lanes} == {"vehicle", "bike"}
+    assert sum(len(lane.successors) for lane in road.lanes) > 150
+    index = RoadMapIndex(road)
+    xy = np.array([s.position[:2] for s in states])
+    yaw = np.array([s.heading_rad for s in states])
+    assert index.on_drivable_area(xy).all()
+    lanes = index.lane_of_pose(xy, yaw)
+    assert sum(lane is not None for lane in lanes) >= 0.9 * len(lanes)
+
+
+def test_centreline_points_are_equally_spaced_by_chord_length() -> None:
+    line = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 0.0], [10.0, 0.0]])  # a duplicate point
+    out = interp_arc(10, line)
+    np.testing.assert_allclose(out[:, 0], np.linspace(0, 10, 10))
+    np.testing.assert_allclose(out[:, 1], 0)
+
+
+@pytest.mark.parametrize(
+    ("mark", "seen_from_right", "seen_from_left"),
+    [
+        ("SOLID_WHITE", "solid", "solid"),
+        ("DASHED_YELLOW", "dashed", "dashed"),
+        ("DOUBLE_SOLID_YELLOW", "solid", "solid"),
+        ("DOUBLE_DASH_WHITE", "dashed", "dashed"),
+        ("DASH_SOLID_YELLOW", "solid", "dashed"),
+        ("SOLID_DASH_WHITE", "dashed", "solid"),
+        ("NONE", "virtual", "virtual"),
+        ("UNKNOWN", "unknown", "unknown"),
+    ],
+)
+def test_a_double_line_is_seen_by_its_nearer_paint(
+    mark: str, seen_from_right: str, seen_from_left: str
+) -> None:
+    assert boundary_type(mark, lane_side="right") == seen_from_right
+    assert boundary_type(mark, lane_side="left") == seen_from_left
+
+
+@pytest.mark.shared_data
+def test_a_cut_annotation_table_names_the_file_and_where_it_ends(
+    av2_log: Path, tmp_path: Path
+) -> None:
+    log = _copy(av2_log, tmp_path)
+    table = log / "annotations.feather"
+    data = table.read_bytes()
+    table.chmod(0o644)
+    table.write_bytes(data[: len(data) // 2])
+    with pytest.raises(
+        LogError, match=rf"annotations\.feather: it ends at byte {len(data) // 2}.*cut off"
+    ):
+        open_log(log)
+
+
+@pytest.mark.shared_data
+def test_a_pose_table_without_a_column_says_which(av2_log: Path, tmp_path: Path) -> None:
+    log = _copy(av2_log, tmp_path)
+    path = log / "city_SE3_egovehicle.feather"
+    path.chmod(0o644)
+    feather.write_feather(feather.read_table(path).drop_columns(["qz"]), path)
+    with pytest.raises(LogError, match=r"city_SE3_egovehicle\.feather: no column qz"):
+        open_log(log)
+
+
+@pytest.mark.shared_data
+def test_a_cut_map_names_the_byte_and_a_lane_without_bound_its_id(
+    av2_log: Path, tmp_path: Path
+) -> None:
+    (path,) = (av2_log / "map").glob("log_map_archive_*.json")
+    cut = tmp_path / path.name
+    text = path.read_bytes()
+    cut.write_bytes(text[:5000])
+    with pytest.raises(LogError, match=r"not JSON at byte \d+ of 5000"):
+        read_av2_map(cut)
+    doc = json.loads(text)
+    lane_id = next(iter(doc["lane_segments"]))
+    del doc["lane_segments"][lane_id]["right_lane_boundary"]
+    broken = tmp_path / "broken.json"
+    broken.write_text(json.dumps(doc))
+    with pytest.raises(LogError, match=rf"lane segment {lane_id}: no right_lane_boundary"):
+        read_av2_map(broken)
+
+
+def test_a_folder_without_poses_is_not_an_av2_log(tmp_path: Path) -> None:
+    (tmp_path / "calibration").mkdir()
+    assert not Av2SensorLogReader.recognises(tmp_path)
