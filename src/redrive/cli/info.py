@@ -25,6 +25,7 @@ examples:
   redrive info rosbag2_dir/ --json
   redrive info kitti/training --sensor-map sensors.toml
   redrive info cut.mcap --strict        exit 1 if the log is damaged at all
+  redrive info scenario.tfrecord        what a recorded-traffic log holds (contains: …)
 
 exit status: 0 intact, 5 damaged (read past the damage; the damage is listed), 1 an error.
 """
@@ -185,7 +186,11 @@ def register(sub: Any) -> None:
     parser.add_argument(
         "log",
         type=Path,
-        help="a .bag, .mcap, ROS 2 bag directory, KITTI folder, nuScenes data root or mmdetection3d info file",
+        help=(
+            "a .bag, .mcap, ROS 2 bag directory, KITTI folder, nuScenes data root, mmdetection3d "
+            "info file, Argoverse 2 sensor log folder, Waymo Open Motion .tfrecord or CommonRoad "
+            ".xml"
+        ),
     )
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
     parser.add_argument(

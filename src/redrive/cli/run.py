@@ -420,7 +420,7 @@ def register(sub: Any) -> None:
         "run",
         help="replay a log through perception → planning → control",
         description=(
-            "Replay a log (ROS 1/2 bag, MCAP, KITTI, nuScenes) frame by frame through a pipeline of "
+            "Replay a log (ROS 1/2 bag, MCAP, KITTI, nuScenes, Argoverse 2, Waymo Open Motion, CommonRoad) frame by frame through a pipeline of "
             "algorithms and store every output, latency and error in a run directory "
             "(manifest.json + Parquet)."
         ),
