@@ -50,7 +50,8 @@ def test_info_lists_the_content(
     info = json.loads(capsys.readouterr().out)
     assert info["format"] == fmt
     assert expected.items() <= info["contents"].items()
-    assert info["capabilities"]["road_map"] and info["capabilities"]["has_ground_truth"]
+    assert info["capabilities"]["road_map"]
+    assert info["capabilities"]["has_ground_truth"]
     assert main(["info", str(path)]) == 0
     table = capsys.readouterr().out
     for name, value in expected.items():

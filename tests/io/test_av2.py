@@ -9,8 +9,8 @@ import shutil
 from pathlib import Path
 
 import numpy as np
-import pyarrow.feather as feather
 import pytest
+from pyarrow import feather
 
 from redrive.errors import LogError
 from redrive.io import open_log
@@ -76,7 +76,7 @@ def test_a_bollard_stands_still_in_the_city_frame(av2_log: Path) -> None:
             for o in objs:
                 if o.object_class is ObjectClass.STATIC and o.object_id == _id_of(log, bollard):
                     x, y = o.box.center[:2]
-                    centres.append(state.position[:2] + [c * x - s * y, c * y + s * x])
+                    centres.append(state.position[:2] + np.array([c * x - s * y, c * y + s * x]))
                     assert np.linalg.norm(o.velocity) < 0.5
     assert len(centres) > 10
     spread = np.ptp(np.array(centres), axis=0)
@@ -122,8 +122,11 @@ def test_the_map_is_a_lane_graph_the_ego_drives_on(av2_log: Path) -> None:
         road = log_road_map(log)
         states = [m.payload.value for m in log.messages(topics=["/ego_pose"])]  # type: ignore[attr-defined]
     assert road is not None
-    assert len(road.lanes) == 183 and len(road.crosswalks) == 11 and len(road.areas) == 13
-    assert road.source is not None and road.source.startswith("av2:")
+    assert len(road.lanes) == 183
+    assert len(road.crosswalks) == 11
+    assert len(road.areas) == 13
+    assert road.source is not None
+    assert road.source.startswith("av2:")
     assert {lane.kind for lane in road.lanes} == {"vehicle", "bike"}
     assert sum(len(lane.successors) for lane in road.lanes) > 150
     index = RoadMapIndex(road)

@@ -49,7 +49,8 @@ def test_each_scenario_lists_its_obstacles_and_lanelets(
         assert contents["time steps"] == steps
         assert log.topics["/objects"].count == steps
         road = log_road_map(log)
-    assert road is not None and len(road.lanes) == lanelets
+    assert road is not None
+    assert len(road.lanes) == lanelets
 
 
 def test_obstacles_are_their_trajectory_states_around_the_ego_start(scenarios: Path) -> None:
@@ -58,7 +59,8 @@ def test_obstacles_are_their_trajectory_states_around_the_ego_start(scenarios: P
         problem = next(iter(log.planning_problems.planning_problem_dict.values()))
         np.testing.assert_allclose(start.position[:2], problem.initial_state.position)
         assert start.heading_rad == pytest.approx(problem.initial_state.orientation)
-        assert log.goal is not None and log.goal.lanelet_ids == (31,)
+        assert log.goal is not None
+        assert log.goal.lanelet_ids == (31,)
         assert log.goal.time_steps == (30, 31)
         step = 5
         objects = log.objects_at(step)
@@ -68,7 +70,9 @@ def test_obstacles_are_their_trajectory_states_around_the_ego_start(scenarios: P
     assert o.object_class is ObjectClass.VEHICLE
     c, s = math.cos(start.heading_rad), math.sin(start.heading_rad)
     x, y = o.box.center[:2]
-    np.testing.assert_allclose(start.position[:2] + [c * x - s * y, s * x + c * y], state.position)
+    np.testing.assert_allclose(
+        start.position[:2] + np.array([c * x - s * y, s * x + c * y]), state.position
+    )
     assert o.box.yaw_rad == pytest.approx(
         math.remainder(state.orientation - start.heading_rad, math.tau)
     )
@@ -112,7 +116,8 @@ def test_traffic_lights_follow_their_cycles_and_the_map_knows_them(scenarios: Pa
     assert road is not None
     assert {t.light_id for t in road.traffic_lights} == {t.id for t in lights[0].traffic_lights}
     assert all(t.lane_ids for t in road.traffic_lights)
-    assert len(road.intersections) == 1 and len(road.stop_lines) > 0
+    assert len(road.intersections) == 1
+    assert len(road.stop_lines) > 0
     assert {lane.speed_limit_mps for lane in road.lanes} >= {11.176, 15.6464}  # MAX_SPEED signs
 
 

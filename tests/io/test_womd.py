@@ -128,7 +128,8 @@ def test_a_written_scenario_reads_back_as_a_log(tmp_path: Path) -> None:
     objects = [m.payload.value for m in messages if m.topic == TOPIC_OBJECTS]  # type: ignore[attr-defined]
     assert [len(o) for o in objects] == [1, 1, 0]  # the cyclist is invalid at the last step
     cyclist = objects[0][0]
-    assert cyclist.object_id == 7 and cyclist.object_class is ObjectClass.BICYCLE
+    assert cyclist.object_id == 7
+    assert cyclist.object_class is ObjectClass.BICYCLE
     np.testing.assert_allclose(cyclist.box.center, [10.0, 0.0, 0.0])  # SDC at x=0 heading +x
     assert cyclist.box.yaw_rad == pytest.approx(math.pi / 2)
     np.testing.assert_allclose(cyclist.velocity, [10.0, 0.0, 0.0])
@@ -182,10 +183,11 @@ def test_the_real_scenario_has_its_agents_91_steps_and_the_sdc(womd_file: Path) 
         i = int(np.flatnonzero(tracks.ids == o.object_id)[0])
         x, y = o.box.center[:2]
         np.testing.assert_allclose(
-            state.position[:2] + [c * x - s * y, s * x + c * y], tracks.xyz[i, k, :2]
+            state.position[:2] + np.array([c * x - s * y, s * x + c * y]), tracks.xyz[i, k, :2]
         )
     lights = [m.payload.value for m in messages if m.topic == TOPIC_TRAFFIC_LIGHTS]  # type: ignore[attr-defined]
-    assert len(lights) == 91 and all(isinstance(tl, TrafficData) for tl in lights)
+    assert len(lights) == 91
+    assert all(isinstance(tl, TrafficData) for tl in lights)
     assert {tl.state for tl in lights[0].traffic_lights} >= {LightState.RED, LightState.UNKNOWN}
 
 
@@ -194,7 +196,9 @@ def test_the_sdc_drives_in_lanes_of_the_roadgraph(womd_file: Path) -> None:
     with open_log(womd_file) as log:
         road = log_road_map(log)
         tracks = log.tracks
-    assert road is not None and len(road.lanes) >= 190 and len(road.crosswalks) == 4
+    assert road is not None
+    assert len(road.lanes) >= 190
+    assert len(road.crosswalks) == 4
     assert {light.light_id for light in road.traffic_lights} <= {
         lane.lane_id for lane in road.lanes
     }
