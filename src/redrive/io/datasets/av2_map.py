@@ -176,7 +176,7 @@ _KIND = {"VEHICLE": "vehicle", "BIKE": "bike", "BUS": "bus"}
 
 
 def _direction(line: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-    d = line[-1] - line[0]
+    d: npt.NDArray[np.float64] = line[-1] - line[0]
     n = float(np.hypot(*d))
     return d / n if n > 0 else d
 

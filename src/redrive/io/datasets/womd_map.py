@@ -142,11 +142,11 @@ def road_map_from_scenario(scenario: Any, *, source: str) -> RoadMap:
         int(f.id) for f in scenario.map_features if f.WhichOneof("feature_data") == "road_edge"
     }
 
-    def known(ids: Any) -> tuple[str, ...]:
+    def in_map(ids: Any) -> tuple[str, ...]:
         return tuple(str(int(i)) for i in ids if str(int(i)) in kept)
 
     def first(neighbours: Any) -> str | None:
-        ids = known([n.feature_id for n in neighbours])
+        ids = in_map([n.feature_id for n in neighbours])
         return ids[0] if ids else None
 
     out = []
@@ -160,8 +160,8 @@ def road_map_from_scenario(scenario: Any, *, source: str) -> RoadMap:
                 speed_limit_mps=limit if limit > 0 else None,
                 left_boundary_type=_side_type(lane.left_boundaries, edges, lane.interpolating),
                 right_boundary_type=_side_type(lane.right_boundaries, edges, lane.interpolating),
-                successors=known(lane.exit_lanes),
-                predecessors=known(lane.entry_lanes),
+                successors=in_map(lane.exit_lanes),
+                predecessors=in_map(lane.entry_lanes),
                 left_neighbor=first(lane.left_neighbors),
                 right_neighbor=first(lane.right_neighbors),
                 kind="bike" if int(lane.type) == _BIKE_LANE else "vehicle",
