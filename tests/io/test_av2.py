@@ -211,3 +211,20 @@ def test_a_cut_map_names_the_byte_and_a_lane_without_bound_its_id(
 def test_a_folder_without_poses_is_not_an_av2_log(tmp_path: Path) -> None:
     (tmp_path / "calibration").mkdir()
     assert not Av2SensorLogReader.recognises(tmp_path)
+
+
+@pytest.mark.shared_data
+def test_frames_from_the_ground_truth_when_the_sweeps_are_not_all_there(av2_log: Path) -> None:
+    """The LiDAR drives the frames (2 sweeps here); a sensor map's driver = "ground_truth"
+    makes one of every annotated sweep, the sweeps present joining theirs."""
+    from redrive.assembly.frames import FrameAssembler
+    from redrive.assembly.sensor_map import SensorMapOverrides
+
+    sweeps = sorted(int(p.stem) for p in (av2_log / "sensors" / "lidar").glob("*.feather"))
+    with open_log(av2_log) as log:
+        assert [f.stamp_ns for f in FrameAssembler(log).frames()] == sweeps
+        overrides = SensorMapOverrides(driver="ground_truth", tolerance_ns=50_000_000)
+        frames = list(FrameAssembler(log, overrides=overrides).frames())
+    assert len(frames) == 156
+    assert [f.stamp_ns for f in frames if f.sensors] == sweeps
+    assert all(f.vehicle_state is not None and f.ground_truth for f in frames)

@@ -225,3 +225,15 @@ def test_a_damaged_byte_of_the_real_file_names_the_record(womd_file: Path, tmp_p
     ):
         open_log(damaged)
     assert struct.unpack("<Q", raw[:8])[0] == 952947
+
+
+def test_a_log_without_sensors_makes_a_frame_per_step(tmp_path: Path) -> None:
+    from redrive.assembly.frames import FrameAssembler
+
+    path = tmp_path / "toy.tfrecord"
+    write_tfrecord(path, [_scenario().SerializeToString()])
+    with open_log(path) as log:
+        frames = list(FrameAssembler(log).frames())
+    assert [f.stamp_ns for f in frames] == [0, 100_000_000, 200_000_000]
+    assert [len(f.ground_truth or ()) for f in frames] == [1, 1, 0]
+    assert all(f.vehicle_state is not None for f in frames)
