@@ -237,3 +237,9 @@ def test_a_log_without_sensors_makes_a_frame_per_step(tmp_path: Path) -> None:
     assert [f.stamp_ns for f in frames] == [0, 100_000_000, 200_000_000]
     assert [len(f.ground_truth or ()) for f in frames] == [1, 1, 0]
     assert all(f.vehicle_state is not None for f in frames)
+    # the signal states reach the frames
+    assert [[(t.id, t.state) for t in f.traffic.traffic_lights] for f in frames] == [
+        [("100", LightState.RED)],
+        [("100", LightState.GREEN)],
+        [("100", LightState.GREEN)],
+    ]

@@ -5,7 +5,8 @@ but with ground truth (recorded traffic: Waymo Open Motion, CommonRoad) makes on
 ground-truth message instead.  Each other sensor contributes the sample
 whose header stamp is nearest the driver's, if it is within that input's tolerance (the sensor
 map's: 50 ms, or half the period of an input slower than ~8 Hz); the ego state is interpolated
-to the driver's stamp; ground truth is the nearest objects message within its tolerance.  What
+to the driver's stamp; ground truth is the nearest objects message within its tolerance, and so
+are the traffic-light states (``Frame.traffic``) of a log that has them.  What
 no sample within its tolerance provides is named in ``Frame.missing``.  Reading is streaming:
 only a window of the widest tolerance + lookahead around the frame being assembled is held,
 whatever the log's length.
@@ -33,6 +34,7 @@ from redrive.types import (
     Frame,
     Image,
     SensorData,
+    TrafficData,
     Transform,
     VehicleState,
 )
@@ -114,10 +116,16 @@ class FrameAssembler:
         buffers: dict[str, deque[_Sample]] = {s.sensor_id: deque() for s in smap.sensors}
         states: deque[VehicleState | PendingState] = deque()
         objects: deque[_Sample] = deque()
+        lights: deque[_Sample] = deque()
         mounts = SensorMounts()
         pending: deque[_Sample] = deque()
         assemble = partial(
-            self._assemble, buffers=buffers, states=states, objects=objects, mounts=mounts
+            self._assemble,
+            buffers=buffers,
+            states=states,
+            objects=objects,
+            lights=lights,
+            mounts=mounts,
         )
         index = 0
         read_from = None if start_ns is None else start_ns - tol - self.lookahead_ns
@@ -180,6 +188,8 @@ class FrameAssembler:
                             break
                         else:
                             pending.append(sample)
+                elif message.topic == smap.traffic_topic:
+                    lights.append(_Sample(decoded.stamp_ns, decoded))
                 elif message.topic in smap.tf_topics and isinstance(decoded.value, tuple):
                     mounts.add(message.topic, _transforms(decoded))
             while pending and now - pending[0].stamp_ns > tol + self.lookahead_ns:
@@ -189,8 +199,9 @@ class FrameAssembler:
             for buf in buffers.values():
                 while len(buf) > 1 and buf[0].stamp_ns < horizon:
                     buf.popleft()
-            while len(objects) > 1 and objects[0].stamp_ns < horizon:
-                objects.popleft()
+            for samples in (objects, lights):
+                while len(samples) > 1 and samples[0].stamp_ns < horizon:
+                    samples.popleft()
             while len(states) > 2 and states[1].stamp_ns < horizon - _STATE_WINDOW_NS:
                 states.popleft()
         while pending:
@@ -220,6 +231,7 @@ class FrameAssembler:
         buffers: dict[str, deque[_Sample]],
         states: deque[VehicleState | PendingState],
         objects: deque[_Sample],
+        lights: deque[_Sample],
         mounts: SensorMounts,
     ) -> Frame:
         smap = self.sensor_map
@@ -271,6 +283,12 @@ class FrameAssembler:
         elif smap.ground_truth_topic is not None:
             ground_truth = ()
             missing.append("ground_truth")  # the log has labels, none near this frame
+        traffic = TrafficData()
+        light_sample = _nearest(lights, t, smap.tolerance_for("traffic"))
+        if light_sample is not None and isinstance(light_sample.decoded.value, TrafficData):
+            traffic = light_sample.decoded.value
+        elif smap.traffic_topic is not None:
+            missing.append("traffic")
         state = _state_at(states, t, smap.tolerance_for("vehicle_state"))
         if state is None and smap.vehicle_state_topic is not None:
             missing.append("vehicle_state")
@@ -279,6 +297,7 @@ class FrameAssembler:
             index=index,
             sensors=sensors,
             vehicle_state=state,
+            traffic=traffic,
             ground_truth=ground_truth,
             missing=tuple(missing),
         )

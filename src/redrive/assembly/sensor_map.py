@@ -69,6 +69,8 @@ class SensorMap:
     vehicle_state_topic: str | None = None
     ground_truth_topic: str | None = None
     tf_topics: tuple[str, ...] = ()
+    #: the topic of traffic-light states (``TrafficData``: WOMD, CommonRoad), None when none
+    traffic_topic: str | None = None
     #: per input (sensor id, ``vehicle_state``, ``ground_truth``): how far its sample may be from
     #: a frame's stamp; inputs not listed use ``tolerance_ns``.  Inferred from each input's rate
     #: over the log: half its period for inputs slower than ~8 Hz (a 2 Hz input: 250 ms) —
@@ -98,7 +100,9 @@ class SensorMap:
     def topics(self) -> tuple[str, ...]:
         """Every topic the frames read."""
         out = [s.topic for s in self.sensors] + list(self.tf_topics)
-        out += [t for t in (self.vehicle_state_topic, self.ground_truth_topic) if t]
+        out += [
+            t for t in (self.vehicle_state_topic, self.ground_truth_topic, self.traffic_topic) if t
+        ]
         return tuple(dict.fromkeys(out))
 
 
@@ -180,6 +184,7 @@ def infer_sensor_map(
     vehicle_state: list[TopicInfo] = []
     objects: list[TopicInfo] = []
     tf_topics: list[str] = []
+    traffic: list[TopicInfo] = []
     for topic, info in topics.items():
         if topic in ov.ignore or topic in explicit_topics:
             continue
@@ -203,6 +208,8 @@ def infer_sensor_map(
             objects.append(info)
         elif kind is DecodedKind.TRANSFORMS:
             tf_topics.append(topic)
+        elif kind is DecodedKind.TRAFFIC:
+            traffic.append(info)
         # DecodedKind.CAMERA_INFO: calibration, never a sensor (see redrive.assembly.calibration)
     for sid, raw in ov.sensors.items():
         topic = str(raw["topic"])
@@ -261,6 +268,7 @@ def infer_sensor_map(
         vehicle_state_topic=state_topic,
         ground_truth_topic=gt_topic,
         tf_topics=tuple(sorted(tf_topics)),
+        traffic_topic=_busiest(traffic, prefer="traffic"),
         tolerances_ns=tolerances,
     )
 
