@@ -243,3 +243,14 @@ def test_a_log_without_sensors_makes_a_frame_per_step(tmp_path: Path) -> None:
         [("100", LightState.GREEN)],
         [("100", LightState.GREEN)],
     ]
+
+
+def test_a_shard_of_several_scenarios_reads_its_first(tmp_path: Path) -> None:
+    first, second = _scenario(), _scenario()
+    second.scenario_id = "other"
+    path = tmp_path / "shard.tfrecord"
+    write_tfrecord(path, [first.SerializeToString(), second.SerializeToString()])
+    with open_log(path) as log:
+        contents = log_contents(log)
+    assert contents["scenario"] == "toy"
+    assert contents["scenarios in the file (the first is read)"] == 2

@@ -214,20 +214,24 @@ class WomdReader(NativeLogBase):
     def __init__(self, path: str | Path, *, strict: bool = True) -> None:
         """``strict`` is accepted like every reader's; the file is checked whole at open."""
         self.path = Path(path)
-        records = list(read_tfrecords(self.path))
-        if not records:
+        first = None
+        count = 0
+        for record in read_tfrecords(self.path):  # every record checked, the first kept
+            first = first or record
+            count += 1
+        if first is None:
             msg = f"{self.path}: holds no TFRecord record; restore it"
             raise LogError(msg)
-        scenario = _parse(records[0].data)
-        where = f"{self.path}: record 0 at byte {records[0].offset}"
+        scenario = _parse(first.data)
+        where = f"{self.path}: record 0 at byte {first.offset}"
         if scenario is None:
             msg = f"{where}: not a waymo.open_dataset.Scenario protobuf (or a damaged one)"
             raise LogError(msg)
-        if len(records) > 1:
+        if count > 1:
             logger.warning(
                 "%s holds %d scenarios; the first (%s) is read",
                 self.path,
-                len(records),
+                count,
                 scenario.scenario_id,
             )
         self._scenario = scenario
@@ -248,7 +252,7 @@ class WomdReader(NativeLogBase):
                 for p in scenario.tracks_to_predict
                 if 0 <= p.track_index < len(ids)
             ),
-            scenarios_in_file=len(records),
+            scenarios_in_file=count,
         )
         self._sdc = sdc
         self._stamps = [round(float(t) * 1e9) for t in scenario.timestamps_seconds]
