@@ -17,6 +17,7 @@ __all__ = [
     "LogDamagedError",
     "LogError",
     "LogTruncatedError",
+    "MissingInputError",
     "PluginError",
     "RedriveError",
     "SimulationError",
@@ -100,6 +101,10 @@ class UnsupportedMessageError(RedriveError):
 
 class ConfigError(RedriveError):
     """A user configuration (TOML file, CLI argument) is invalid."""
+
+
+class MissingInputError(ConfigError):
+    """An algorithm declares an input (a sensor, the ego state, ground truth) the log lacks."""
 
 
 class PluginError(RedriveError):

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any, ClassVar
 
-from redrive.errors import AlgorithmError, ConfigError
+from redrive.errors import AlgorithmError, ConfigError, MissingInputError
 from redrive.types import (
     ControlCommands,
     DetectedObject,
@@ -277,7 +277,7 @@ class Algorithm(ABC):
             extras: which of :data:`VEHICLE_STATE` / :data:`GROUND_TRUTH` the log provides.
 
         Raises:
-            ConfigError: an input is not in the log (the message lists what is).
+            MissingInputError: an input is not in the log (the message lists what is).
         """
         have = set(extras)
         bound: dict[Input, str] = {}
@@ -310,7 +310,7 @@ class Algorithm(ABC):
             f"(sensors: {listing}; also {extra}); map a topic with a sensor map file or pick "
             "another algorithm"
         )
-        raise ConfigError(msg)
+        raise MissingInputError(msg)
 
     def sensor(self, frame: Frame, wanted: Input) -> SensorData:
         """The sample of input ``wanted`` in ``frame`` (a sensor id or type from :attr:`inputs`).

@@ -193,7 +193,9 @@ def _run(task: CellTask, run_dir: Path, closed_loop: ClosedLoopRunner | None) ->
     pipeline = task.pipeline.load(fail_fast=task.fail_fast)
     if task.loop == "open":
         log = Path(task.log.path) if task.log.path is not None else _synthesize(task)
-        return run_log(RunRequest(log=log, pipeline=pipeline, out=run_dir))
+        # a batch over mixed logs: the stages a log can feed run, the others are skipped with
+        # the reason in the cell's manifest (pipeline.skipped), as `redrive run` does
+        return run_log(RunRequest(log=log, pipeline=pipeline, out=run_dir, skip_unfed=True))
     if closed_loop is None:
         msg = "this batch runs no closed loop (its runner was given none); use --loop open"
         raise ConfigError(msg)

@@ -161,6 +161,12 @@ def print_run_report(report: Any, out: Path, *, live: bool = False) -> None:
             "refuses damaged logs",
             highlight=False,
         )
+    for name, why in getattr(report, "skipped", {}).items():
+        console.print(
+            f"[bold yellow]skipped {name}, {why}; the other stages ran (--strict refuses a "
+            "pipeline the log cannot feed whole)",
+            highlight=False,
+        )
     for name, count in sorted(report.missing_inputs.items()):
         console.print(
             f"[bold yellow]{count} of {report.frames} frames had no {name} within the tolerance"
@@ -242,6 +248,7 @@ def _run(args: argparse.Namespace) -> int:
         rate=args.rate,
         resume=args.resume,
         strict=args.strict,
+        skip_unfed=not args.strict,
     )
     progress_bar = ProgressBar(args.log.name, unit="frames", quiet=args.no_progress)
     lines = None if args.no_progress or is_terminal() else ProgressLines(args.log.name, sys.stderr)
@@ -499,8 +506,11 @@ def register(sub: Any) -> None:
         "--strict",
         action="store_true",
         help=(
-            "refuse a damaged log (stop at its first damage, exit status 1); by default the "
-            "damaged parts are skipped with a warning and the run covers the intact part"
+            "refuse a damaged log (stop at its first damage, exit status 1) and a pipeline the "
+            "log cannot feed whole; by default the damaged parts are skipped with a warning and "
+            "the run covers the intact part, and the algorithms whose inputs the log lacks (a "
+            "planner on a log without ego state) are skipped with the reason, shown and stored "
+            "in the manifest (pipeline.skipped)"
         ),
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")

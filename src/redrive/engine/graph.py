@@ -7,7 +7,9 @@ Checks made before the first frame (each a :class:`~redrive.errors.ConfigError` 
 - roles never go backwards: no planning stage before a perception stage, no control before
   planning (a stage may mix roles only if they are equal);
 - every algorithm's declared ``inputs`` exist in the log (sensor ids or types, ego state,
-  ground truth).
+  ground truth).  With ``skip_unfed=True`` an algorithm whose inputs the log lacks is left out
+  instead, with the reason (:attr:`StageGraph.skipped`), and so is a control stage left without
+  a planning stage; only a pipeline left with nothing to run is refused.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from typing import Any
 from redrive.algorithms import GROUND_TRUTH, VEHICLE_STATE, Algorithm, Role
 from redrive.algorithms.discovery import load_algorithm_class
 from redrive.config import AlgorithmSpec, PipelineConfig
-from redrive.errors import ConfigError, PluginError
+from redrive.errors import ConfigError, MissingInputError, PluginError
 from redrive.results import AlgorithmEntry
 from redrive.types import SensorType, to_jsonable
 
@@ -98,9 +100,11 @@ class PlannedAlgorithm:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class StageGraph:
-    """Stages in execution order, each a tuple of planned algorithms."""
+    """Stages in execution order, each a tuple of planned algorithms; ``skipped``: the
+    algorithms left out because the log cannot feed them (name → why), in pipeline order."""
 
     stages: tuple[tuple[str, tuple[PlannedAlgorithm, ...]], ...]
+    skipped: Mapping[str, str] = field(default_factory=dict)
 
     @property
     def algorithms(self) -> tuple[PlannedAlgorithm, ...]:
@@ -118,11 +122,20 @@ def instantiate(
     return algo
 
 
-def build_graph(pipeline: PipelineConfig, inputs: LogInputs) -> StageGraph:
-    """Load, configure and check every algorithm of ``pipeline`` against ``inputs``."""
+def build_graph(
+    pipeline: PipelineConfig, inputs: LogInputs, *, skip_unfed: bool = False
+) -> StageGraph:
+    """Load, configure and check every algorithm of ``pipeline`` against ``inputs``.
+
+    ``skip_unfed``: leave out (and say why) the algorithms whose inputs the log lacks — and a
+    control stage whose planning was left out — instead of refusing the pipeline; what is left
+    must not be empty.
+    """
     stages: list[tuple[str, tuple[PlannedAlgorithm, ...]]] = []
+    skipped: dict[str, str] = {}
     last_role: Role | None = None
     last_stage = ""
+    planning_skipped = False
     for stage in pipeline.stages:
         planned: list[PlannedAlgorithm] = []
         for spec in stage.algorithms:
@@ -148,8 +161,26 @@ def build_graph(pipeline: PipelineConfig, inputs: LogInputs) -> StageGraph:
             config = dict(spec.config)
             if "seed" in cls.defaults and "seed" not in config:
                 config["seed"] = pipeline.seed
+            if (
+                skip_unfed
+                and role is Role.CONTROL
+                and planning_skipped
+                and not _has_planning(stages, planned)
+            ):
+                skipped[spec.name] = (
+                    f"stage {stage.name!r} ({spec.plugin}): no planning stage runs to give it a "
+                    "path (the planning stage was skipped)"
+                )
+                continue
             try:
                 algo = instantiate(cls, name=spec.name, config=config, inputs=inputs)
+            except MissingInputError as err:
+                if not skip_unfed:
+                    msg = f"stage {stage.name!r}, algorithm {spec.name!r} ({spec.plugin}): {err}"
+                    raise MissingInputError(msg) from err
+                skipped[spec.name] = f"stage {stage.name!r} ({spec.plugin}): {_need(err)}"
+                planning_skipped = planning_skipped or role is Role.PLANNING
+                continue
             except ConfigError as err:
                 msg = f"stage {stage.name!r}, algorithm {spec.name!r} ({spec.plugin}): {err}"
                 raise ConfigError(msg) from err
@@ -158,6 +189,8 @@ def build_graph(pipeline: PipelineConfig, inputs: LogInputs) -> StageGraph:
                     spec=spec, stage=stage.name, cls=cls, config=dict(algo.config), instance=algo
                 )
             )
+        if not planned:
+            continue  # every algorithm of the stage was skipped
         roles = {p.role for p in planned}
         if len(roles) > 1:
             names = ", ".join(f"{p.name} ({p.role.name})" for p in planned)
@@ -166,4 +199,23 @@ def build_graph(pipeline: PipelineConfig, inputs: LogInputs) -> StageGraph:
         last_role = planned[0].role
         last_stage = stage.name
         stages.append((stage.name, tuple(planned)))
-    return StageGraph(stages=tuple(stages))
+    if skipped and not stages:
+        reasons = "; ".join(f"{name}: {why}" for name, why in skipped.items())
+        msg = f"no stage of the pipeline can run on this log ({reasons})"
+        raise MissingInputError(msg)
+    return StageGraph(stages=tuple(stages), skipped=skipped)
+
+
+def _has_planning(
+    stages: list[tuple[str, tuple[PlannedAlgorithm, ...]]], planned: list[PlannedAlgorithm]
+) -> bool:
+    return any(p.role is Role.PLANNING for _, algos in stages for p in algos) or any(
+        p.role is Role.PLANNING for p in planned
+    )
+
+
+def _need(err: MissingInputError) -> str:
+    """The reason of a missing input without the advice that fits only a refusal."""
+    text = str(err)
+    cut = text.find("; map a topic with a sensor map file")
+    return text if cut < 0 else text[:cut]

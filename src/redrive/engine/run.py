@@ -66,6 +66,9 @@ class RunRequest:
         strict: refuse a damaged log (:class:`~redrive.errors.LogDamagedError` at the first
             damage); when False the damaged parts are skipped and listed in the report's
             ``damage``.
+        skip_unfed: leave out the algorithms whose inputs the log lacks (a planner on a log
+            without ego state), with the reason in the report and the manifest
+            (``pipeline.skipped``), instead of refusing the pipeline.
     """
 
     log: Path
@@ -77,6 +80,7 @@ class RunRequest:
     rate: float | None = None
     resume: bool = False
     strict: bool = True
+    skip_unfed: bool = False
 
 
 def source_log(path: Path, *, format: str, scenario: LogScenario | None = None) -> SourceLog:
@@ -184,6 +188,7 @@ def run_setup(
             rate=rate,
             stages=tuple(name for name, _ in graph.stages),
             mode_manager=mode,
+            skipped=dict(graph.skipped),
         ),
         algorithms=tuple(p.manifest_entry() for p in graph.algorithms),
         closed_loop=dict(closed_loop or {}),
@@ -249,7 +254,7 @@ def run_reader(
     if lookahead_ns is not None:
         assembler.lookahead_ns = lookahead_ns
     inputs = log_inputs(assembler)
-    graph = build_graph(request.pipeline, inputs)
+    graph = build_graph(request.pipeline, inputs, skip_unfed=request.skip_unfed)
     assembler = _reading_only_inputs(log, assembler, graph, lookahead_ns=assembler.lookahead_ns)
     setup = _setup(request, graph, inputs, log=log_info, mode=hooks.mode.value)
     writer = RunWriter(request.out, setup=setup, resume=request.resume)
@@ -269,7 +274,7 @@ def run_reader(
             {"undecodable_messages": dict(assembler.undecodable)} if assembler.undecodable else {}
         )
 
-    return execute(
+    report = execute(
         graph,
         request.pipeline,
         inputs=inputs,
@@ -281,6 +286,7 @@ def run_reader(
         sink=None if on_frame is None else _then(writer.write_frame, on_frame),
         summary_extra=summary_extra,
     )
+    return replace(report, skipped=dict(graph.skipped)) if graph.skipped else report
 
 
 def _then(

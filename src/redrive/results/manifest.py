@@ -175,6 +175,8 @@ class PipelineInfo:
     rate: float | None = None  # real-time factor paced at; None: as fast as possible
     stages: tuple[str, ...] = ()  # stage names in execution order
     mode_manager: str = "replay"  # the Mode Manager's mode: replay | realtime | …
+    # algorithms of the pipeline left out because the log cannot feed them: name → why
+    skipped: Mapping[str, str] = field(default_factory=dict)
 
     @classmethod
     def _parse(cls, f: Fields) -> PipelineInfo:
@@ -188,6 +190,7 @@ class PipelineInfo:
             rate=f.opt_number("rate"),
             stages=f.texts("stages"),
             mode_manager=f.text("mode_manager"),
+            skipped=f.text_map("skipped", {}),
         )
 
 
@@ -417,7 +420,11 @@ class RunManifest(RunSetup):
             "host": _asdict(self.host),
             "sensors": {k: v.value for k, v in self.sensors.items()},
             "seed": self.seed,
-            "pipeline": {**_asdict(self.pipeline), "stages": list(self.pipeline.stages)},
+            "pipeline": {
+                **_asdict(self.pipeline),
+                "stages": list(self.pipeline.stages),
+                "skipped": dict(self.pipeline.skipped),
+            },
             "algorithms": [a.to_json() for a in self.algorithms],
             "log": {
                 **_asdict(self.log),
