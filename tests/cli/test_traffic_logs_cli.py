@@ -79,3 +79,15 @@ def test_run_replays_open_loop(
     steps = run.table("steps").to_pydict()
     assert set(steps["algorithm"]) == algorithms
     assert set(steps["status"]) == {"ok"}
+
+
+def test_closed_loop_on_a_scenario_without_sensors_is_paced_by_its_ground_truth(
+    shared_data: Path, tmp_path: Path
+) -> None:
+    path = _path(shared_data, WOMD)
+    out = tmp_path / "loop"
+    args = ["run", str(path), "--closed-loop", "--planning", "idm-planner", "-o", str(out)]
+    assert main([*args, "--no-progress"]) == 0
+    run = open_run(out)
+    assert run.manifest.status is RunStatus.COMPLETE
+    assert run.table("frames").num_rows == 90  # of the 91 steps (as redrive counts a log replay)
