@@ -17,6 +17,7 @@ __all__ = [
     "LogDamagedError",
     "LogError",
     "LogTruncatedError",
+    "MapError",
     "MissingInputError",
     "PluginError",
     "RedriveError",
@@ -101,6 +102,11 @@ class UnsupportedMessageError(RedriveError):
 
 class ConfigError(RedriveError):
     """A user configuration (TOML file, CLI argument) is invalid."""
+
+
+class MapError(RedriveError):
+    """A map file (Lanelet2 OSM, Argoverse 2 vector map …) cannot be read, or one of its
+    elements is not valid (the message names the file and the element)."""
 
 
 class MissingInputError(ConfigError):

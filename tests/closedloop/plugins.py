@@ -148,3 +148,26 @@ class LidarWitness(Algorithm):
         assert isinstance(cloud, PointCloud)
         SEEN_CLOUDS[frame.index] = cloud
         return ()
+
+
+class Jerky(Algorithm):
+    """Plans straight ahead, its speed switching between ``slow_mps`` and ``fast_mps`` every
+    ``period_s``: the tracker brakes and accelerates hard, again and again."""
+
+    role = Role.PLANNING
+    defaults = MappingProxyType({"slow_mps": 12.0, "fast_mps": 20.0, "period_s": 1.0})
+
+    def setup(self, config: Mapping[str, Any]) -> None:
+        self.slow_mps = float(config["slow_mps"])
+        self.fast_mps = float(config["fast_mps"])
+        self.period_ns = round(float(config["period_s"]) * 1e9)
+        self.start_ns: int | None = None
+
+    def reset(self) -> None:
+        self.start_ns = None
+
+    def step(self, frame: Frame, upstream: StageOutputs) -> PlannedPath:
+        if self.start_ns is None:
+            self.start_ns = frame.stamp_ns
+        phase = ((frame.stamp_ns - self.start_ns) // self.period_ns) % 2
+        return _straight(frame.stamp_ns, self.slow_mps if phase else self.fast_mps)

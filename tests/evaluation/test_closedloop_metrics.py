@@ -251,7 +251,9 @@ def test_driving_against_the_lane_direction(tmp_path: Path) -> None:
     wrong = lambda t: Pose(200.0 - 10.0 * t, 0.0, math.pi, 10.0)  # noqa: E731  west in "east"
     res = score(DrivingDirectionCompliance(), make_run(tmp_path, wrong))
     assert res.values["driving_direction_compliance"] == 0.0
-    assert res.values["max_wrong_way_m"] == pytest.approx(10.0, abs=0.05)
+    # nuPlan sums n + 1 = 11 steps of the 1 s horizon at 10 Hz: 11 steps of 1 m against the lane
+    assert res.values["max_wrong_way_m"] == pytest.approx(11.0, abs=0.05)
+    assert res.values["min_progress_in_horizon_m"] == pytest.approx(-11.0, abs=0.05)
     slow = lambda t: Pose(200.0 - 3.0 * t, 0.0, math.pi, 3.0)  # noqa: E731  3 m in 1 s
     res = score(DrivingDirectionCompliance(), make_run(tmp_path, slow, name="slow"))
     assert res.values["driving_direction_compliance"] == 0.5

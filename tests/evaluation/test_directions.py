@@ -20,12 +20,16 @@ from redrive.results.evaluation import read_evaluation
 #: value names whose direction the name patterns below would get wrong
 HIGHER_EXACT = {
     "no_at_fault_collisions", "min_lon_accel_mps2", "making_progress", "num_matches",
-    "mostly_tracked", "driven_frames", "min_ttc_s",
+    "mostly_tracked", "driven_frames", "min_ttc_s", "no_ego_at_fault_collisions",
+    "time_to_collision_within_bound", "lon_accel_mps2_within_bound", "lat_accel_mps2_within_bound",
+    "yaw_rate_rad_s_within_bound", "yaw_accel_rad_s2_within_bound", "lon_jerk_mps3_within_bound",
+    "jerk_mps3_within_bound",
 }  # fmt: skip
 #: counts of what the data held and parameters echoed (the part before the first "/")
 NEUTRAL_HEADS = {
     "frames", "num_frames", "num_objects", "num_predictions", "gt_objects", "detections",
-    "matched", "deadline_ms", "expert_progress_m", "gt",
+    "matched", "deadline_ms", "expert_progress_m", "gt", "deviated_frames",
+    "acceleration_from_states", "along_map_route",
 }  # fmt: skip
 LOWER = re.compile(
     r"rmse|mae|error|^m?a[tsova]e\b|^a[tsova]e/|^[af]de/|_ms\b|_ms/|miss|false_pos|switch|"
@@ -34,7 +38,8 @@ LOWER = re.compile(
 )
 HIGHER = re.compile(
     r"^m?ap|^recall|^precision|hota|deta|assa|loca|detre|detpr|assre|asspr|mota|idf1|^idp|^idr|"
-    r"nds|pdm_score|compliance|progress|ttc_within|comfortable|accuracy|f1|^(nc|dac|mp|ttc|ep|c|ddc)$"
+    r"nds|pdm_score|scenario_score|^cls$|^multiplier$|^weighted_average$|compliance|progress|"
+    r"ttc_within|comfortable|accuracy|f1|^(nc|dac|mp|ttc|ep|c|ddc)$"
 )
 
 

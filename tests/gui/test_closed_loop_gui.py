@@ -170,3 +170,26 @@ def pa_rows(run_dir: Path) -> list[dict[str, Any]]:
 
     rows: list[dict[str, Any]] = read_evaluation(run_dir).bookmarks.to_pylist()
     return rows
+
+
+def test_an_object_level_run_plots_the_run_s_ego_and_names_its_box_colours(
+    qtbot: Any, window: MainWindow, blind_run: Path
+) -> None:
+    # issue 35 item 10: an object-level closed-loop run has no log to read speed and yaw rate
+    # from, but its `ego` table has them; the legend says what each box colour is
+    run = open_run(blind_run)
+    driven = run.ego()
+    _open(qtbot, window, blind_run)
+    qtbot.waitUntil(lambda: window.frame_count == 80, timeout=_WAIT_MS)
+    speed_plot = window.plots.plots["speed"]
+    curves = [item for item in speed_plot.listDataItems() if item.yData is not None]
+    assert curves, "no speed series"
+    drawn = np.asarray(curves[0].yData)
+    assert len(drawn) == len(driven)
+    assert drawn == pytest.approx([driven[i].speed_mps for i in sorted(driven)])
+    assert max(drawn) > 20.0  # the blind planner drives at 25 m/s
+    assert window.plots.plots["yaw rate"].listDataItems()
+    legend = window.planview.legend.text()
+    for name in ("ground truth", "ego", "logged ego"):
+        assert f"&nbsp;{name}" in legend
+    assert "rgb(60,220,90)" in legend  # ground truth's green

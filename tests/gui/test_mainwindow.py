@@ -54,7 +54,7 @@ def test_open_play_pause_step_scrub(qtbot: Any, window: MainWindow, demo_log: Pa
     frame30 = ref.frame(30)
     ref.close()
     assert window.scene.stamp_ns == frame30.stamp_ns
-    assert "frame 30 / 99" in window.timeline.frame_label.text()
+    assert "frame 31 / 100" in window.timeline.frame_label.text()  # 1-based, of 100 frames
 
     # Step over / step back.
     with qtbot.waitSignal(window.frame_shown, timeout=_WAIT_MS, check_params_cb=lambda i: i == 31):
@@ -345,3 +345,42 @@ def test_a_damaged_log_opens_with_its_intact_part(
     assert "damaged" in window.damage_label.text()
     assert window.summary is not None
     assert window.summary.damage  # what was skipped, for the Log panel
+
+
+def test_plots_start_on_a_headline_metric_and_show_constant_series_plainly(
+    qtbot: Any, window: MainWindow, evaluated_run: Path
+) -> None:
+    # issue 35 item 10: the dropdown started on `clear_mot/…/fp`; a constant-zero series was
+    # autoscaled to ±1e-3 and labelled "(x0.001)"; rotated y labels of the stacked plots overlapped
+    from redrive.gui.plots import first_metric
+
+    keys = [
+        ("clear_mot", "tracker", "fp"),
+        ("latency", "", "frame_ms"),
+        ("planning", "p", "ADE/3s"),
+    ]
+    assert first_metric(keys) == ("planning", "p", "ADE/3s")
+    assert first_metric(keys[:2]) == ("latency", "", "frame_ms")
+    assert first_metric(keys[:1]) == ("clear_mot", "tracker", "fp")
+    _open(qtbot, window, evaluated_run)
+    key = window.plots.metric_box.currentData()
+    assert key is not None
+    assert window.run is not None
+    assert tuple(key) == first_metric(sorted(window.run.per_frame))
+    for plot in window.plots.plots.values():
+        assert plot.getAxis("left").autoSIPrefix is False
+        assert not plot.getAxis("left").labelText  # named by a title instead
+        assert plot.titleLabel.text
+    # a constant series is shown as ±1 around its value, a varying one autoscaled
+    from redrive.gui.plots import _fit_y
+
+    plot = window.plots.plots["metric"]
+    plot.clear()
+    plot.plot([0.0, 1.0, 2.0], [0.0, 0.0, 0.0])
+    _fit_y(plot, [0.0, 0.0, 0.0])
+    assert plot.viewRange()[1] == pytest.approx([-1.0, 1.0])
+    plot.clear()
+    plot.plot([0.0, 1.0, 2.0], [3.0, 5.0, 4.0])
+    _fit_y(plot, [3.0, 5.0, 4.0])
+    qtbot.waitUntil(lambda: 2.5 < plot.viewRange()[1][0] <= 3.0, timeout=_WAIT_MS)
+    assert 5.0 <= plot.viewRange()[1][1] < 5.5

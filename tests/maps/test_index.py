@@ -102,6 +102,23 @@ def test_route_along_successors_and_lane_changes() -> None:
         index.route("ghost", "west_in_0")
     highway = RoadMapIndex(road_map(build_network(HighwayLayout())))
     assert highway.route("entry:f2", "exit:f2") == ("entry:f2", "curve:f2", "exit:f2")
+    assert highway.route("entry:f2", "entry:f0") == ("entry:f2", "entry:f1", "entry:f0")
+
+
+def test_route_does_not_change_lanes_across_a_solid_line() -> None:
+    def lane(lane_id: str, y: float, **kw: object) -> MapLane:
+        return MapLane(lane_id=lane_id, centerline=[[0.0, y], [50.0, y]], width_m=3.5, **kw)  # type: ignore[arg-type]
+
+    road = RoadMap(
+        lanes=(
+            lane("a", 0.0, left_neighbor="b", left_boundary_type="solid"),
+            lane("b", 3.5, right_neighbor="a", right_boundary_type="dashed"),
+        )
+    )
+    index = RoadMapIndex(road)
+    assert index.route("a", "b") == ()  # a's left line is solid
+    assert index.route("a", "b", cross_solid=True) == ("a", "b")
+    assert index.route("b", "a") == ("b", "a")  # b's right line is dashed
 
 
 def test_lane_with_boundaries_is_the_polygon_between_them() -> None:
@@ -125,3 +142,34 @@ def test_empty_map() -> None:
     assert index.lane_of_pose([[0.0, 0.0]], [0.0]) == [None]
     assert not index.on_drivable_area([[0.0, 0.0]])[0]
     assert index.distance_to_road_edge_m([[0.0, 0.0]])[0] == math.inf
+
+
+def test_segment_distance_is_exact_against_shapely() -> None:
+    from redrive.maps._edges import SegmentDistance
+
+    rng = np.random.default_rng(3)
+    starts = rng.uniform(-50, 50, (300, 2))
+    ends = starts + rng.normal(0, 8, (300, 2))
+    ends[:10] = starts[:10]  # zero-length segments count as points
+    segments = np.stack([starts, ends], axis=1)
+    pts = rng.uniform(-80, 80, (500, 2))
+    got = SegmentDistance(segments, spacing_m=3.0)(pts)
+    lines = shapely.multilinestrings(list(segments[10:])).union(shapely.multipoints(starts[:10]))
+    np.testing.assert_allclose(got, shapely.distance(lines, shapely.points(pts)), atol=1e-9)
+    assert SegmentDistance(np.zeros((0, 2, 2)))(pts[:3]).tolist() == [math.inf] * 3
+
+
+def test_bike_lanes_are_lanes_but_not_drivable() -> None:
+    car = MapLane(lane_id="car", centerline=[[0.0, 0.0], [20.0, 0.0]], width_m=3.0)
+    bike = MapLane(lane_id="bike", centerline=[[0.0, 2.5], [20.0, 2.5]], width_m=2.0, kind="bike")
+    road = RoadMap(lanes=(car, bike))
+    every = RoadMapIndex(road)
+    cars = RoadMapIndex(road, lane_kinds={"vehicle", "bus"})
+    on_bike = [[10.0, 2.8]]
+    assert every.lanes_at(on_bike) == [("bike",)]
+    assert cars.lanes_at(on_bike) == [()]
+    assert cars.lane_of_pose(on_bike, [0.0]) == [None]
+    assert every.lane_of_pose(on_bike, [0.0]) == ["bike"]
+    assert not every.on_drivable_area(on_bike)[0]  # the drivable area is the cars' road
+    assert every.distance_outside_drivable_m(on_bike)[0] == pytest.approx(1.3)
+    assert every.distance_to_road_edge_m([[10.0, 0.0]])[0] == pytest.approx(1.5)

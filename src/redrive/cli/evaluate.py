@@ -39,6 +39,11 @@ HOTA, object attributes and latency over all frames of all logs together; the ot
 mean of the logs' values weighted by their frame counts. Stored in BATCH/evaluation/ (Parquet:
 cells/pipeline=P/loop=L/log=ID/values.parquet and pooled.parquet); see docs/batch.md.
 
+A log-backed closed loop (`redrive run LOG --closed-loop` on a recorded log) whose driven ego
+passed its deviation threshold from the logged one gets a caveat: from there the log's agents
+and sensors no longer show what the ego would have met. Each closed-loop metric says how many
+of its frames were deviated (`deviated_frames`).
+
 exit status: 0 every metric scored or was skipped (it does not apply: the reason is printed);
 3 a metric raised an error (printed; the other metrics are stored); 4 a CI gate failed (the
 table says which value, and its threshold); 1 a redrive error (not a run, unreadable run …);
@@ -60,6 +65,7 @@ def _run(args: argparse.Namespace) -> int:
     from rich.table import Table
 
     from redrive.batch.manifest import BATCH_MANIFEST
+    from redrive.evaluation.closedloop.deviation import deviation_caveat
     from redrive.evaluation.evaluator import evaluate_run, headline
     from redrive.evaluation.registry import build_metrics, parse_metric_params
     from redrive.results import open_run
@@ -97,6 +103,9 @@ def _run(args: argparse.Namespace) -> int:
             markup=True,
             highlight=False,
         )
+    caveat = deviation_caveat(open_run(args.run))
+    if caveat:
+        console.print(f"[bold yellow]{caveat}[/]", highlight=False)
     console.print(
         f"{len(summary.scored)} results, {summary.bookmarks} bookmarked frames → "
         f"{summary.metrics_dir} (`redrive report {args.run}` for the HTML report)"

@@ -26,6 +26,8 @@ examples:
   redrive info kitti/training --sensor-map sensors.toml
   redrive info cut.mcap --strict        exit 1 if the log is damaged at all
   redrive info scenario.tfrecord        what a recorded-traffic log holds (contains: …)
+  redrive info map.osm --map-origin 49.0,8.4     a Lanelet2 map: source, extent, lanes …
+  redrive info log/map/log_map_archive_X.json    an Argoverse 2 vector map
 
 exit status: 0 intact, 5 damaged (read past the damage; the damage is listed), 1 an error.
 """
@@ -143,6 +145,13 @@ def _advice(summary: LogSummary) -> str:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from redrive.maps.files import map_format  # maps (shapely, scipy): only for `info`
+
+    fmt = map_format(args.log)
+    if fmt is not None:
+        from redrive.cli.info_map import run_map_info
+
+        return run_map_info(args, fmt)
     io_logger = logging.getLogger("redrive.io")
     level = io_logger.level
     if not args.verbose:  # the damage is listed below: no warning per damaged part
@@ -189,7 +198,7 @@ def register(sub: Any) -> None:
         help=(
             "a .bag, .mcap, ROS 2 bag directory, KITTI folder, nuScenes data root, mmdetection3d "
             "info file, Argoverse 2 sensor log folder, Waymo Open Motion .tfrecord or CommonRoad "
-            ".xml"
+            ".xml; or a map file (Lanelet2 .osm, Argoverse 2 log_map_archive_*.json, map.json)"
         ),
     )
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
@@ -204,4 +213,24 @@ def register(sub: Any) -> None:
         default=None,
         help="TOML file that overrides the topic → sensor mapping",
     )
+    parser.add_argument(
+        "--map-origin",
+        type=_lat_lon,
+        default=None,
+        metavar="LAT,LON",
+        help="a Lanelet2 map's projection origin, degrees (default: the map's local_x/local_y, "
+        "else its first node)",
+    )
     parser.set_defaults(func=_run)
+
+
+def _lat_lon(text: str) -> tuple[float, float]:
+    try:
+        lat, lon = (float(v) for v in text.split(","))
+    except ValueError as err:
+        msg = f"expected LAT,LON in degrees (e.g. 49.0,8.4), got {text!r}"
+        raise argparse.ArgumentTypeError(msg) from err
+    if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+        msg = f"latitude must be in [-90, 90] and longitude in [-180, 180], got {text!r}"
+        raise argparse.ArgumentTypeError(msg)
+    return lat, lon

@@ -106,7 +106,7 @@ class MetricSkipped(Exception):  # noqa: N818 - a skip is an outcome, not an err
 
 
 #: how a metric pools across the logs of a batch (``Metric.pooling``).
-POOLING_RULES = ("concatenate", "frame_weighted_mean", "none")
+POOLING_RULES = ("concatenate", "frame_weighted_mean", "scenario_mean", "none")
 
 #: what ``Metric.role`` is stored as when a metric scores the run as a whole (``role = None``).
 WHOLE_RUN = "run"
@@ -280,8 +280,11 @@ class Metric(ABC):
             frames of all logs together (frame and object ids made unique per log), for metrics
             whose definition is a sum over frames (detection AP, CLEAR MOT and HOTA totals,
             latency percentiles); ``"frame_weighted_mean"`` (default) — each value is the mean of
-            the logs' values weighted by their frame counts; ``"none"`` — it cannot be pooled
-            (per-log values only).
+            the logs' values weighted by their frame counts; ``"scenario_mean"`` — the plain
+            mean of the logs' values, each log (scenario) counting once (nuPlan's final score
+            over its scenarios); ``"none"`` — it cannot be pooled (per-log values only).
+        pooled_name: the name of the pooled headline when the pooled value has a name of its
+            own (``nuplan_scenario_score`` pools to ``cls``); None: the headline's name.
     """
 
     name: ClassVar[str]
@@ -292,6 +295,7 @@ class Metric(ABC):
     higher_is_better: ClassVar[bool] = True
     defaults: ClassVar[Mapping[str, Any]] = MappingProxyType({})
     pooling: ClassVar[str] = "frame_weighted_mean"
+    pooled_name: ClassVar[str | None] = None
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)

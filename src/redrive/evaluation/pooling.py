@@ -14,6 +14,11 @@ Each metric says how in ``Metric.pooling``:
   frame counts (NaN values left out).  Metrics of the ego's motion over time (planning, control,
   the closed-loop metrics) are per-log quantities: concatenating would join one log's last pose
   to the next log's first.
+* ``"scenario_mean"`` — each value is the plain mean of the runs' values (NaN left out), every
+  log counting once whatever its length: nuPlan's final score is the mean of its scenario
+  scores (``WeightedAverageMetricAggregator``: per scenario type the mean, then the types
+  weighted by their scenario counts — the same mean). A metric's ``pooled_name`` names the
+  pooled headline (``nuplan_scenario_score`` → ``cls``, the closed-loop score).
 * ``"none"`` — the metric cannot be pooled: its per-log values stand alone.
 """
 
@@ -44,6 +49,7 @@ _V = TypeVar("_V")
 _RULE_TEXT = {
     "concatenate": "all frames of all logs evaluated together",
     "frame_weighted_mean": "mean of the logs' values weighted by their frames",
+    "scenario_mean": "mean of the logs' values, each log counting once",
     "none": "cannot be pooled: per-log values only",
 }
 
@@ -191,6 +197,10 @@ def _weighted(results: Sequence[tuple[MetricResult, int]]) -> dict[str, float]:
     return out
 
 
+def _scenario_mean(results: Sequence[MetricResult]) -> dict[str, float]:
+    return _weighted([(res, 1) for res in results])
+
+
 def pool_metric(
     metric: Metric,
     *,
@@ -238,6 +248,16 @@ def pool_metric(
             units=units,
             higher_is_better=hib,
             frames=int(data.frames().num_rows),
+        )
+    if rule == "scenario_mean":
+        values = _scenario_mean(results)
+        head = next(iter(values), None)
+        if metric.pooled_name and head is not None:
+            values = {metric.pooled_name: values[head], **values}
+            units[metric.pooled_name] = units.get(head, metric.unit)
+            hib[metric.pooled_name] = hib.get(head, metric.higher_is_better)
+        return common(
+            rule=rule, values=values, units=units, higher_is_better=hib, frames=sum(frames)
         )
     return common(
         rule=rule,

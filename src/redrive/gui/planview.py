@@ -12,6 +12,9 @@ points under llvmpipe against 25–36 for the raster).  Both are in base_link: x
 
 from __future__ import annotations
 
+import html
+from collections.abc import Sequence
+
 import numpy as np
 import pyqtgraph as pg
 import pyqtgraph.opengl as gl
@@ -19,7 +22,7 @@ import shiboken6
 from pyqtgraph.opengl.GLViewWidget import GLViewMixin
 from PySide6 import QtCore, QtGui, QtOpenGL, QtWidgets
 
-from redrive.gui.scene import ColorMode, RasterSpec, Scene
+from redrive.gui.scene import ColorMode, LayerLines, RasterSpec, Scene
 
 __all__ = ["Planview"]
 
@@ -249,6 +252,11 @@ class Planview(QtWidgets.QWidget):
         self.reset_button.clicked.connect(self.reset_view)
         bar.addWidget(self.reset_button)
         bar.addStretch(1)
+        # what each box colour is: one swatch per layer the frame draws
+        self.legend = QtWidgets.QLabel("")
+        self.legend.setObjectName("legend")
+        self.legend.setTextFormat(QtCore.Qt.TextFormat.RichText)
+        bar.addWidget(self.legend)
         self.status = QtWidgets.QLabel("")
         bar.addWidget(self.status)
         layout.addLayout(bar)
@@ -317,6 +325,7 @@ class Planview(QtWidgets.QWidget):
             if layer.name not in ("ego", "logged ego", "road map")  # (not the scene's boxes)
         )
         self.status.setText(f"{scene.point_count:,} points · {boxes} boxes")
+        self.legend.setText(legend_html(scene.layers))
 
     def grab_view(self) -> QtGui.QImage:
         """The current view as an image (the GL framebuffer in 3D)."""
@@ -347,3 +356,18 @@ class Planview(QtWidgets.QWidget):
         painter = QtGui.QPainter(image)
         painter.drawImage(top_left, self.view3d.grabFramebuffer())
         painter.end()
+
+
+def legend_html(layers: Sequence[LayerLines]) -> str:
+    """A colour swatch and the name of each drawn layer (ground truth, each algorithm, the ego …),
+    in drawing order, as rich text for the view's legend."""
+    items = []
+    seen: set[str] = set()
+    for layer in layers:
+        if layer.name in seen or not len(layer.segments):
+            continue
+        seen.add(layer.name)
+        r, g, b = layer.color[:3]
+        name = html.escape(layer.name)
+        items.append(f'<span style="color:rgb({r},{g},{b})">&#9632;</span>&nbsp;{name}')
+    return " &nbsp; ".join(items)

@@ -321,7 +321,8 @@ class Timeline(QtWidgets.QWidget):
         self._setting = False
         if self.deviation.isVisible():
             self.deviation.show_frame(index)
-        self.frame_label.setText(f"frame {index} / {self.slider.maximum()}")
+        # counted from 1, of the frames known: "frame 3 / 3" at the last frame of a 3-frame log
+        self.frame_label.setText(f"frame {index + 1} / {self.slider.maximum() + 1}")
         when = dt.datetime.fromtimestamp(stamp_ns / 1e9, tz=dt.UTC)
         self.time_label.setText(
             f"t+{(stamp_ns - start_ns) / 1e9:7.3f} s  {when:%H:%M:%S}.{when.microsecond // 1000:03d}"

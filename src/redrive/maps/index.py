@@ -10,8 +10,9 @@ Geometry (the map frame, metres):
 - a lane's polygon lies between its boundaries (:meth:`MapLane.boundaries
   <redrive.types.MapLane.boundaries>`); a lane without boundaries is its centreline widened by
   ``width_m / 2`` either side with flat ends (as the closed-loop metrics always measured it);
-- the drivable area is the union of the lane polygons and the map's :class:`DrivableArea`
-  polygons; the road edge is the boundary of that union;
+- the drivable area is the union of the polygons of the lanes cars may use
+  (:data:`DRIVABLE_LANE_KINDS`: not bicycle lanes) and the map's :class:`DrivableArea` polygons;
+  the road edge is the boundary of that union;
 - "on" counts the boundary as inside (a point on a lane's edge is in the lane).
 """
 
@@ -19,16 +20,23 @@ from __future__ import annotations
 
 import heapq
 import math
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 import shapely
 
+from redrive.maps._edges import SegmentDistance
 from redrive.types import MapLane, RoadMap
 
-__all__ = ["DEFAULT_LANE_CHANGE_COST_M", "DEFAULT_MAX_HEADING_DIFF_RAD", "RoadMapIndex"]
+__all__ = [
+    "DEFAULT_LANE_CHANGE_COST_M",
+    "DEFAULT_MAX_HEADING_DIFF_RAD",
+    "DRIVABLE_LANE_KINDS",
+    "RoadMapIndex",
+    "lane_polygon",
+]
 
 F64 = npt.NDArray[np.float64]
 #: :meth:`RoadMapIndex.lane_of_pose`: a lane whose direction differs from the pose's heading by
@@ -37,6 +45,11 @@ DEFAULT_MAX_HEADING_DIFF_RAD = math.pi / 2.0
 #: :meth:`RoadMapIndex.route`: the cost of one lane change, metres of driving (so that of two
 #: routes of equal length the one with fewer lane changes wins).
 DEFAULT_LANE_CHANGE_COST_M = 5.0
+#: the lane kinds that are part of the drivable area (cars may drive there: nuPlan's and
+#: NAVSIM's drivable area is roads, not bicycle lanes)
+DRIVABLE_LANE_KINDS = frozenset({"vehicle", "bus"})
+#: boundary types a lane change of :meth:`RoadMapIndex.route` does not cross
+_UNCROSSABLE = frozenset({"solid", "road_edge"})
 
 
 def lane_polygon(lane: MapLane) -> Any:
@@ -66,21 +79,36 @@ def _points(xy: npt.ArrayLike) -> F64:
 class RoadMapIndex:
     """Spatial queries on one :class:`RoadMap`, vectorised over N points (see the module doc).
 
+    Args:
+        lane_kinds: the kinds of lane the lane queries (:meth:`lanes_at`, :meth:`lane_hits`,
+            :meth:`lane_of_pose`) consider; None: every lane.  The drivable area is always the
+            lanes of :data:`DRIVABLE_LANE_KINDS` and the map's drivable areas.
+
     Attributes:
         road_map: the map.
         lane_polygons: shapely polygons, one per lane of ``road_map.lanes`` (same order).
         drivable: the drivable area (a shapely (multi)polygon, prepared).
     """
 
-    def __init__(self, road_map: RoadMap) -> None:
+    def __init__(self, road_map: RoadMap, *, lane_kinds: Collection[str] | None = None) -> None:
         self.road_map = road_map
         lanes = road_map.lanes
         self._lane_pos = {lane.lane_id: i for i, lane in enumerate(lanes)}
         self.lane_polygons: tuple[Any, ...] = tuple(lane_polygon(lane) for lane in lanes)
         areas = [shapely.make_valid(shapely.Polygon(a.polygon)) for a in road_map.areas]
         self._lane_tree = shapely.STRtree(list(self.lane_polygons))
-        self._drivable_tree = shapely.STRtree([*self.lane_polygons, *areas])
-        self.drivable: Any = shapely.union_all([*self.lane_polygons, *areas])
+        self._considered = (
+            None
+            if lane_kinds is None
+            else np.array([lane.kind in lane_kinds for lane in lanes], dtype=bool)
+        )
+        roads = [
+            p
+            for p, lane in zip(self.lane_polygons, lanes, strict=True)
+            if lane.kind in DRIVABLE_LANE_KINDS
+        ]
+        self._drivable_tree = shapely.STRtree([*roads, *areas])
+        self.drivable: Any = shapely.union_all([*roads, *areas])
         shapely.prepare(self.drivable)
         junctions = [shapely.Polygon(i.polygon) for i in road_map.intersections] + [
             p for p, a in zip(areas, road_map.areas, strict=True) if a.kind == "intersection"
@@ -88,7 +116,7 @@ class RoadMapIndex:
         self._junctions: Any = shapely.union_all(junctions) if junctions else None
         if self._junctions is not None:
             shapely.prepare(self._junctions)
-        self._edge_tree = shapely.STRtree(_edge_segments(self.drivable))
+        self._edge = SegmentDistance(_edge_segments(self.drivable))
         self._build_centrelines(lanes)
 
     def _build_centrelines(self, lanes: Sequence[MapLane]) -> None:
@@ -132,9 +160,12 @@ class RoadMapIndex:
 
     def lane_hits(self, xy: npt.ArrayLike) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
         """Every (point, lane) pair where lane holds point: the point indices into ``xy`` and
-        the lane positions in ``road_map.lanes``, sorted by point then lane."""
+        the lane positions in ``road_map.lanes``, sorted by point then lane (the lanes of the
+        index's ``lane_kinds``)."""
         p = _points(xy)
         pairs = self._lane_tree.query(shapely.points(p), predicate="intersects")
+        if self._considered is not None:
+            pairs = pairs[:, self._considered[pairs[1]]]
         order = np.lexsort((pairs[1], pairs[0]))
         return pairs[0][order].astype(np.int64), pairs[1][order].astype(np.int64)
 
@@ -186,9 +217,9 @@ class RoadMapIndex:
         *,
         max_heading_diff_rad: float = DEFAULT_MAX_HEADING_DIFF_RAD,
     ) -> list[str | None]:
-        """For each pose: the lane that holds its point and runs within
-        less than ``max_heading_diff_rad`` from its heading, the one whose centreline is nearest when several
-        do (then the smaller heading difference); None when no lane does."""
+        """For each pose: the lane that holds its point and runs less than
+        ``max_heading_diff_rad`` from its heading, the one whose centreline is nearest when
+        several do (then the smaller heading difference); None when no lane does."""
         p = _points(xy)
         yaw = np.broadcast_to(np.asarray(yaw_rad, dtype=np.float64), (p.shape[0],))
         which, lane = self.lane_hits(p)
@@ -211,7 +242,8 @@ class RoadMapIndex:
     # ---- the drivable area -----------------------------------------------------------------
 
     def on_drivable_area(self, xy: npt.ArrayLike) -> npt.NDArray[np.bool_]:
-        """(N,) each point lies on a lane or a drivable area (its boundary included)."""
+        """(N,) each point lies on a lane of :data:`DRIVABLE_LANE_KINDS` or a drivable area
+        (its boundary included)."""
         p = _points(xy)
         hits = self._drivable_tree.query(shapely.points(p), predicate="intersects")
         out = np.zeros(p.shape[0], dtype=bool)
@@ -244,15 +276,7 @@ class RoadMapIndex:
     def distance_to_road_edge_m(self, xy: npt.ArrayLike) -> F64:
         """(N,) distance of each point to the road edge (the drivable area's boundary), m, ≥ 0
         on either side of it (:meth:`on_drivable_area` tells the side); inf without a road."""
-        p = _points(xy)
-        out = np.full(p.shape[0], math.inf)
-        if len(self._edge_tree) == 0:
-            return out
-        idx, dist = self._edge_tree.query_nearest(
-            shapely.points(p), return_distance=True, all_matches=False
-        )
-        out[idx[0]] = dist
-        return out
+        return self._edge(_points(xy))
 
     def in_intersection(self, xy: npt.ArrayLike) -> npt.NDArray[np.bool_]:
         """(N,) each point lies in an intersection (an :class:`Intersection` or a drivable area
@@ -270,12 +294,15 @@ class RoadMapIndex:
         goal_lane_id: str,
         *,
         lane_change_cost_m: float = DEFAULT_LANE_CHANGE_COST_M,
+        cross_solid: bool = False,
     ) -> tuple[str, ...]:
         """The cheapest chain of lanes from ``start_lane_id`` to ``goal_lane_id`` (both
         included) along successors and left/right neighbours; () when the goal cannot be reached.
 
         Driving on to a successor costs the length of the lane left; a lane change costs
-        ``lane_change_cost_m``.  Raises KeyError for an id that is not a lane of the map.
+        ``lane_change_cost_m`` and crosses the boundary on that side, which must not be
+        ``solid`` or a ``road_edge`` unless ``cross_solid``.  Raises KeyError for an id that is
+        not a lane of the map.
         """
         for lane_id in (start_lane_id, goal_lane_id):
             if lane_id not in self._lane_pos:
@@ -298,8 +325,11 @@ class RoadMapIndex:
             lane = road.lane(lane_id)
             steps = [(s, lane.length_m) for s in lane.successors] + [
                 (n, lane_change_cost_m)
-                for n in (lane.left_neighbor, lane.right_neighbor)
-                if n is not None
+                for n, kind in (
+                    (lane.left_neighbor, lane.left_boundary_type),
+                    (lane.right_neighbor, lane.right_boundary_type),
+                )
+                if n is not None and (cross_solid or kind not in _UNCROSSABLE)
             ]
             for nxt, step in steps:
                 new = cost + step
@@ -311,16 +341,14 @@ class RoadMapIndex:
         return ()
 
 
-def _edge_segments(area: Any) -> list[Any]:
-    """The boundary of ``area`` as two-point line strings (the road-edge tree's items)."""
-    out: list[Any] = []
+def _edge_segments(area: Any) -> F64:
+    """The boundary of ``area`` as (M, 2, 2) segments (start, end)."""
     boundary = shapely.boundary(area)
     if boundary is None or shapely.is_empty(boundary):
-        return out
+        return np.zeros((0, 2, 2))
+    pieces = []
     for part in shapely.get_parts(boundary):
         coords = shapely.get_coordinates(part)
-        if coords.shape[0] < 2:
-            continue
-        pairs = np.stack([coords[:-1], coords[1:]], axis=1)
-        out.extend(shapely.linestrings(pairs).tolist())
-    return out
+        if coords.shape[0] >= 2:
+            pieces.append(np.stack([coords[:-1], coords[1:]], axis=1))
+    return np.concatenate(pieces) if pieces else np.zeros((0, 2, 2))

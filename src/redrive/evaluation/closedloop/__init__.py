@@ -11,6 +11,7 @@ from __future__ import annotations
 from redrive.evaluation.closedloop.collisions import AtFaultCollisions, TimeToCollision
 from redrive.evaluation.closedloop.commands import FallbackCommands
 from redrive.evaluation.closedloop.motion import Comfort, EgoProgress
+from redrive.evaluation.closedloop.nuplan import NuplanScenarioScore
 from redrive.evaluation.closedloop.pdm import PdmScore
 from redrive.evaluation.closedloop.road import (
     DrivableAreaCompliance,
@@ -25,6 +26,7 @@ __all__ = [
     "DrivingDirectionCompliance",
     "EgoProgress",
     "FallbackCommands",
+    "NuplanScenarioScore",
     "PdmScore",
     "SpeedLimitCompliance",
     "TimeToCollision",

@@ -23,7 +23,8 @@ from redrive.evaluation._kinematics import (
     rectangles_overlap,
 )
 from redrive.evaluation.base import EvalData, MetricSkipped, Series
-from redrive.maps.index import RoadMapIndex
+from redrive.evaluation.closedloop.lanes import corners_in_common_or_connected_lanes
+from redrive.maps.index import DRIVABLE_LANE_KINDS, RoadMapIndex
 from redrive.types import DetectedObject, ObjectClass, ObjectColumns, RoadMap, VehicleState
 
 F64 = npt.NDArray[np.float64]
@@ -57,7 +58,8 @@ class EgoRun:
 
     Attributes:
         frames: frame indices (N,); stamps_ns (N,); xy: rear axle (N, 2) m; heading_rad (N,);
-        speed_mps: (N,) norm of the stored velocity.
+        speed_mps: (N,) norm of the stored velocity; accel_xy: (N, 2) the stored acceleration
+        of the rear axle in the map frame, m/s²; yaw_rate_rad_s: (N,) the stored yaw rate.
     """
 
     frames: npt.NDArray[np.int64]
@@ -65,6 +67,8 @@ class EgoRun:
     xy: F64
     heading_rad: F64
     speed_mps: F64
+    accel_xy: F64
+    yaw_rate_rad_s: F64
 
     @classmethod
     def of(cls, states: Mapping[int, VehicleState]) -> EgoRun:
@@ -76,6 +80,10 @@ class EgoRun:
             xy=np.array([s.position[:2] for _, s in items], dtype=np.float64).reshape(n, 2),
             heading_rad=np.array([s.heading_rad for _, s in items], dtype=np.float64),
             speed_mps=np.array([s.speed_mps for _, s in items], dtype=np.float64),
+            accel_xy=np.array([s.acceleration[:2] for _, s in items], dtype=np.float64).reshape(
+                n, 2
+            ),
+            yaw_rate_rad_s=np.array([s.yaw_rate_rad_s for _, s in items], dtype=np.float64),
         )
 
     def __len__(self) -> int:
@@ -150,10 +158,12 @@ def bearing_rad(ego_xy: F64, ego_heading: float, points: F64) -> F64:
 
 class RoadIndex(RoadMapIndex):
     """The metrics' questions to a :class:`RoadMap`, answered by its indexed queries
-    (:class:`~redrive.maps.index.RoadMapIndex`, built once per evaluation)."""
+    (:class:`~redrive.maps.index.RoadMapIndex`, built once per evaluation) over the lanes cars
+    drive in (:data:`~redrive.maps.index.DRIVABLE_LANE_KINDS`: nuPlan's lanes, not bicycle
+    lanes)."""
 
     def __init__(self, road_map: RoadMap) -> None:
-        super().__init__(road_map)
+        super().__init__(road_map, lane_kinds=DRIVABLE_LANE_KINDS)
         self.lanes = road_map.lanes
 
     def lanes_containing(self, points: F64) -> npt.NDArray[np.bool_]:
@@ -230,15 +240,17 @@ def classify(
     ego_speed: float,
     ego_corners: F64,
     straddling: bool | None,
+    stopped_speed_mps: float = STOPPED_SPEED_MPS,
 ) -> tuple[str, bool]:
     """nuPlan's ``_get_collision_type`` and at-fault rule for object ``m`` touching the ego.
 
-    ``straddling``: the ego is in multiple lanes or off the drivable area (None: no map, then a
-    lateral collision is never at fault)."""
+    ``straddling``: the ego's footprint is not in one common or connected lane (nuPlan's
+    ``classify_at_fault_collisions``: "in multiple lanes or nondrivable area"; None: no map,
+    then a lateral collision is never at fault)."""
     obj_corners = corners(objs)[m]
-    if ego_speed <= STOPPED_SPEED_MPS:
+    if ego_speed <= stopped_speed_mps:
         return "stopped_ego", False
-    if float(speed_mps(objs)[m]) <= STOPPED_SPEED_MPS:
+    if float(speed_mps(objs)[m]) <= stopped_speed_mps:
         return "stopped_track", True
     if float(bearing_rad(ego_xy, ego_heading, objs.center_m[m : m + 1, :2])[0]) > BEHIND_ANGLE_RAD:
         return "active_rear", False
@@ -255,7 +267,10 @@ class SceneData:
     ego: EgoRun
     corners: F64
     objects: dict[int, ObjectColumns] = field(default_factory=dict)
+    #: nuPlan: the footprint is *not* in one common or connected lane (None: no map)
     straddling: dict[int, bool | None] = field(default_factory=dict)
+    #: NAVSIM: the ego is in multiple lanes or off the drivable area (None: no map)
+    multiple_lanes_or_off_road: dict[int, bool | None] = field(default_factory=dict)
 
 
 def scene(data: EvalData, params: Mapping[str, Any]) -> SceneData:
@@ -269,23 +284,30 @@ def scene(data: EvalData, params: Mapping[str, Any]) -> SceneData:
     road = road_index(data)
     corners = ego.corners(params)
     out = SceneData(ego=ego, corners=corners)
+    one_lane = None if road is None else corners_in_common_or_connected_lanes(road, corners)
     for i, frame in enumerate(ego.frames.tolist()):
         objs = truth.get(frame)
         if objs is None:
             continue
         out.objects[frame] = map_objects(objs, ego.xy[i], float(ego.heading_rad[i]))
-        out.straddling[frame] = (
-            None
-            if road is None
-            else road.in_multiple_lanes(corners[i]) or road.off_road(corners[i])
+        if road is None or one_lane is None:
+            out.straddling[frame] = None
+            out.multiple_lanes_or_off_road[frame] = None
+            continue
+        out.straddling[frame] = not bool(one_lane[i])
+        out.multiple_lanes_or_off_road[frame] = road.in_multiple_lanes(corners[i]) or road.off_road(
+            corners[i]
         )
     data._cache[key] = out
     return out
 
 
-def find_collisions(sc: SceneData) -> list[Collision]:
+def find_collisions(
+    sc: SceneData, *, stopped_speed_mps: float = STOPPED_SPEED_MPS
+) -> list[Collision]:
     """Every new contact of the ego footprint with a ground-truth box, classified (nuPlan's
-    ``_find_new_collisions``: a track collides once, later frames leave it out)."""
+    ``_find_new_collisions``: a track collides once, later frames leave it out; stopped below
+    ``stopped_speed_mps``, ``_get_collision_type``'s ``stopped_speed_threshold``)."""
     seen: set[int] = set()
     found: list[Collision] = []
     ego = sc.ego
@@ -307,6 +329,7 @@ def find_collisions(sc: SceneData) -> list[Collision]:
                 ego_speed=float(ego.speed_mps[i]),
                 ego_corners=sc.corners[i],
                 straddling=sc.straddling.get(frame),
+                stopped_speed_mps=stopped_speed_mps,
             )
             h = float(ego.heading_rad[i])
             ego_v = float(ego.speed_mps[i]) * np.array([math.cos(h), math.sin(h)])
@@ -323,14 +346,53 @@ def find_collisions(sc: SceneData) -> list[Collision]:
     return found
 
 
-def collision_score(collisions: Sequence[Collision]) -> float:
-    """nuPlan's ``no_ego_at_fault_collisions`` score (NAVSIM's NC): 1 without at-fault
-    collisions; 0 with one involving an agent; else 1 − n/2 for n at-fault collisions with
-    objects (0.5 for one, 0 from two on)."""
+#: nuPlan ``VRU_types`` (an at-fault collision with one counts against ``max_violations_vru``);
+#: the other agent classes count as vehicles.
+VRU_CLASSES = frozenset({ObjectClass.PEDESTRIAN, ObjectClass.BICYCLE})
+
+
+def collision_score(
+    collisions: Sequence[Collision],
+    *,
+    max_violations_vru: int = 0,
+    max_violations_vehicle: int = 0,
+    max_violations_object: int = 1,
+) -> float:
+    """nuPlan ``EgoAtFaultCollisionStatistics.compute_score`` (NAVSIM's NC): 1 without at-fault
+    collisions; else the product over VRUs, vehicles and objects of ``max(0, 1 − n / (m + 1))``
+    for n at-fault collisions of that kind and its threshold m (the config's
+    ``max_violation_threshold_vru`` 0, ``_vehicle`` 0, ``_object`` 1): 0 after one with an
+    agent, 0.5 after one with an object, 0 after two."""
     fault = [c for c in collisions if c.at_fault]
-    if any(c.object_class in AGENT_CLASSES for c in fault):
-        return 0.0
-    return max(0.0, 1.0 - len(fault) / 2.0)
+    if not fault:
+        return 1.0
+    vru = sum(c.object_class in VRU_CLASSES for c in fault)
+    vehicle = sum(c.object_class in AGENT_CLASSES - VRU_CLASSES for c in fault)
+    objects = len(fault) - vru - vehicle
+    score = 1.0
+    for n, m in (
+        (vru, max_violations_vru),
+        (vehicle, max_violations_vehicle),
+        (objects, max_violations_object),
+    ):
+        score *= max(0.0, 1.0 - n / (m + 1))
+    return score
+
+
+COLLISION_DEFAULTS: Mapping[str, Any] = MappingProxyType(
+    {
+        **EGO_DEFAULTS,
+        "max_violations_vru": 0,
+        "max_violations_vehicle": 0,
+        "max_violations_object": 1,
+        "stopped_speed_mps": STOPPED_SPEED_MPS,
+    }
+)
+
+
+def collision_params(p: Mapping[str, Any]) -> dict[str, int]:
+    """The :func:`collision_score` thresholds of a metric's parameters."""
+    return {k: int(p[k]) for k in COLLISION_DEFAULTS if k.startswith("max_violations_")}
 
 
 def series(frames: Sequence[int] | npt.NDArray[np.int64], values: Sequence[float] | F64) -> Series:

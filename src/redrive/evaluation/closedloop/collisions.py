@@ -16,9 +16,10 @@ from redrive.evaluation.base import Bookmark, EvalData, Metric, MetricResult
 from redrive.evaluation.closedloop._common import (
     AHEAD_ANGLE_RAD,
     BEHIND_ANGLE_RAD,
-    EGO_DEFAULTS,
+    COLLISION_DEFAULTS,
     Collision,
     bearing_rad,
+    collision_params,
     collision_score,
     corners,
     find_collisions,
@@ -26,6 +27,7 @@ from redrive.evaluation.closedloop._common import (
     scene,
     series,
 )
+from redrive.evaluation.closedloop.deviation import with_deviation
 from redrive.types import Role
 
 __all__ = ["AtFaultCollisions", "TimeToCollision", "time_to_collision_series"]
@@ -37,8 +39,11 @@ TTC_STOPPED_SPEED_MPS = 5e-3
 class AtFaultCollisions(Metric):
     """nuPlan ``no_ego_at_fault_collisions``: contacts of the ego footprint with ground-truth
     boxes, split into stopped_ego, stopped_track, active_front, active_rear, active_lateral;
-    at fault: active_front, stopped_track, and active_lateral while the ego straddles lanes or
-    leaves the drivable area (needs the map; without one a lateral collision is never at fault).
+    at fault: active_front, stopped_track, and active_lateral while the footprint is not in one
+    common or connected lane (nuPlan's "in multiple lanes or nondrivable area", on the map's lane
+    graph: :mod:`redrive.evaluation.closedloop.lanes`; without a map a lateral collision is
+    never at fault). Score thresholds ``max_violations_vru`` 0, ``max_violations_vehicle`` 0,
+    ``max_violations_object`` 1; stopped below ``stopped_speed_mps`` 0.05 m/s.
 
     Values: ``no_at_fault_collisions`` (headline: nuPlan's score, 1, 0.5 or 0),
     ``at_fault_collisions``, ``collisions`` and one count per kind. Per frame:
@@ -51,15 +56,15 @@ class AtFaultCollisions(Metric):
     needs: ClassVar[frozenset[str]] = frozenset({"ego", "ground_truth"})
     unit: ClassVar[str] = "score"
     higher_is_better: ClassVar[bool] = True
-    defaults: ClassVar[Mapping[str, Any]] = MappingProxyType(dict(EGO_DEFAULTS))
+    defaults: ClassVar[Mapping[str, Any]] = COLLISION_DEFAULTS
 
     def evaluate(self, data: EvalData) -> MetricResult:
         sc = scene(data, self.params)
-        found = find_collisions(sc)
+        found = find_collisions(sc, stopped_speed_mps=float(self.params["stopped_speed_mps"]))
         frames = sorted(sc.objects)
         new = {f: [c for c in found if c.frame == f] for f in frames}
         values = {
-            "no_at_fault_collisions": collision_score(found),
+            "no_at_fault_collisions": collision_score(found, **collision_params(self.params)),
             "at_fault_collisions": float(sum(c.at_fault for c in found)),
             "collisions": float(len(found)),
         }
@@ -72,7 +77,7 @@ class AtFaultCollisions(Metric):
         ):
             values[kind] = float(sum(c.kind == kind for c in found))
         counts = {k: "collisions" for k in values if k != "no_at_fault_collisions"}
-        return MetricResult(
+        result = MetricResult(
             values=values,
             units=counts,
             higher_is_better=dict.fromkeys(counts, False),
@@ -84,6 +89,7 @@ class AtFaultCollisions(Metric):
             },
             bookmarks=[_bookmark(c) for c in found],
         )
+        return with_deviation(result, data, np.asarray(frames, dtype=np.int64))
 
 
 def _bookmark(c: Collision) -> Bookmark:
@@ -105,7 +111,11 @@ def time_to_collision_series(
     horizon or the ego stopped) and the object hit per frame with a finite TTC."""
     sc = scene(data, params)
     road = road_index(data)
-    found = find_collisions(sc) if collisions is None else list(collisions)
+    found = (
+        find_collisions(sc, stopped_speed_mps=float(params["stopped_speed_mps"]))
+        if collisions is None
+        else list(collisions)
+    )
     step, horizon = float(params["ttc_step_s"]), float(params["ttc_horizon_s"])
     times = np.arange(step, horizon, step)
     at_fault_frames = {c.frame for c in found if c.at_fault}
@@ -123,7 +133,7 @@ def time_to_collision_series(
             values.append(0.0)
             continue
         speed = float(ego.speed_mps[i])
-        if len(objs) == 0 or speed <= TTC_STOPPED_SPEED_MPS:
+        if len(objs) == 0 or speed <= float(params["ttc_stopped_speed_mps"]):
             values.append(math.inf)
             continue
         xy, h = ego.xy[i], float(ego.heading_rad[i])
@@ -155,7 +165,13 @@ def time_to_collision_series(
 
 
 TTC_DEFAULTS: Mapping[str, Any] = MappingProxyType(
-    {**EGO_DEFAULTS, "ttc_step_s": 0.1, "ttc_horizon_s": 3.0, "least_min_ttc_s": 0.95}
+    {
+        **COLLISION_DEFAULTS,
+        "ttc_step_s": 0.1,
+        "ttc_horizon_s": 3.0,
+        "least_min_ttc_s": 0.95,
+        "ttc_stopped_speed_mps": TTC_STOPPED_SPEED_MPS,
+    }
 )
 
 
@@ -182,7 +198,7 @@ class TimeToCollision(Metric):
         bound = float(self.params["least_min_ttc_s"])
         low = ttc <= bound
         min_ttc = float(ttc.min()) if ttc.size else math.inf
-        return MetricResult(
+        result = MetricResult(
             values={
                 "ttc_within_bound": float(min_ttc > bound),
                 "min_ttc_s": min_ttc,
@@ -202,3 +218,4 @@ class TimeToCollision(Metric):
                 for f, v in zip(frames[low], ttc[low], strict=True)
             ],
         )
+        return with_deviation(result, data, frames)
