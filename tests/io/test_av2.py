@@ -12,11 +12,10 @@ import numpy as np
 import pytest
 from pyarrow import feather
 
-from redrive.errors import LogError
+from redrive.errors import LogError, MapError
 from redrive.io import open_log
 from redrive.io.content import log_contents, log_road_map
 from redrive.io.datasets.av2 import TOPIC_ANNOTATIONS, TOPIC_LIDAR, Av2SensorLogReader
-from redrive.io.datasets.av2_map import boundary_type, interp_arc, read_av2_map
 from redrive.maps.index import RoadMapIndex
 from redrive.types import DetectedObject, ObjectClass, PointCloud
 
@@ -137,33 +136,6 @@ def test_the_map_is_a_lane_graph_the_ego_drives_on(av2_log: Path) -> None:
     assert sum(lane is not None for lane in lanes) >= 0.9 * len(lanes)
 
 
-def test_centreline_points_are_equally_spaced_by_chord_length() -> None:
-    line = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 0.0], [10.0, 0.0]])  # a duplicate point
-    out = interp_arc(10, line)
-    np.testing.assert_allclose(out[:, 0], np.linspace(0, 10, 10))
-    np.testing.assert_allclose(out[:, 1], 0)
-
-
-@pytest.mark.parametrize(
-    ("mark", "seen_from_right", "seen_from_left"),
-    [
-        ("SOLID_WHITE", "solid", "solid"),
-        ("DASHED_YELLOW", "dashed", "dashed"),
-        ("DOUBLE_SOLID_YELLOW", "solid", "solid"),
-        ("DOUBLE_DASH_WHITE", "dashed", "dashed"),
-        ("DASH_SOLID_YELLOW", "solid", "dashed"),
-        ("SOLID_DASH_WHITE", "dashed", "solid"),
-        ("NONE", "virtual", "virtual"),
-        ("UNKNOWN", "unknown", "unknown"),
-    ],
-)
-def test_a_double_line_is_seen_by_its_nearer_paint(
-    mark: str, seen_from_right: str, seen_from_left: str
-) -> None:
-    assert boundary_type(mark, lane_side="right") == seen_from_right
-    assert boundary_type(mark, lane_side="left") == seen_from_left
-
-
 @pytest.mark.shared_data
 def test_a_cut_annotation_table_names_the_file_and_where_it_ends(
     av2_log: Path, tmp_path: Path
@@ -190,22 +162,22 @@ def test_a_pose_table_without_a_column_says_which(av2_log: Path, tmp_path: Path)
 
 
 @pytest.mark.shared_data
-def test_a_cut_map_names_the_byte_and_a_lane_without_bound_its_id(
+def test_a_damaged_map_is_named_and_the_rest_of_the_log_still_listed(
     av2_log: Path, tmp_path: Path
 ) -> None:
-    (path,) = (av2_log / "map").glob("log_map_archive_*.json")
-    cut = tmp_path / path.name
-    text = path.read_bytes()
-    cut.write_bytes(text[:5000])
-    with pytest.raises(LogError, match=r"not JSON at byte \d+ of 5000"):
-        read_av2_map(cut)
-    doc = json.loads(text)
+    log = _copy(av2_log, tmp_path)
+    (path,) = (log / "map").glob("log_map_archive_*.json")
+    doc = json.loads(path.read_text())
     lane_id = next(iter(doc["lane_segments"]))
     del doc["lane_segments"][lane_id]["right_lane_boundary"]
-    broken = tmp_path / "broken.json"
-    broken.write_text(json.dumps(doc))
-    with pytest.raises(LogError, match=rf"lane segment {lane_id}: no right_lane_boundary"):
-        read_av2_map(broken)
+    path.chmod(0o644)
+    path.write_text(json.dumps(doc))
+    with open_log(log) as opened:
+        with pytest.raises(MapError, match=rf"lane_segments\[{lane_id}\].*right_lane_boundary"):
+            log_road_map(opened)
+        contents = log_contents(opened)
+    assert contents["annotated sweeps"] == 156
+    assert str(contents["map"]).startswith("unreadable")
 
 
 def test_a_folder_without_poses_is_not_an_av2_log(tmp_path: Path) -> None:

@@ -10,7 +10,8 @@ Written on the layout and conventions of ``argoverse/av2-api`` (the package is n
     calibration/egovehicle_SE3_sensor.feather   sensor_name, qw..qz, tx_m..tz_m (ego frame)
     sensors/lidar/<timestamp_ns>.feather        x y z (ego frame), intensity, laser_number,
                                                 offset_ns
-    map/log_map_archive_*.json        the vector map (lane segments, drivable areas, crossings)
+    map/log_map_archive_*.json        the vector map (lane segments, drivable areas, crossings),
+                                      read by :func:`redrive.maps.av2.read_av2_map`
 
 Conventions carried over from av2-api: a cuboid is in the **ego frame at its sweep's
 timestamp** (``structures/cuboid.py``, ``CuboidList.from_feather``: ``ego_SE3_object`` from the
@@ -52,7 +53,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from redrive.errors import LogError
+from redrive.errors import LogError, MapError
 from redrive.geometry.se3 import transform_from_matrix, yaw_from_rotation_matrix
 from redrive.io.base import DecodedKind, ReaderCapabilities
 from redrive.io.datasets._feather import read_feather_columns, rotations_from_wxyz
@@ -395,7 +396,11 @@ class Av2SensorLogReader(NativeLogBase):
             "ego poses": len(self._pose_stamps),
             "calibrated sensors": len(self._extrinsics),
         }
-        road_map = self.road_map()
+        try:
+            road_map = self.road_map()
+        except MapError as err:  # the log's other content is still worth listing
+            out["map"] = f"unreadable ({err})"
+            return out
         if road_map is not None:
             out["lane segments"] = len(road_map.lanes)
             out["drivable areas"] = len(road_map.areas)
@@ -403,11 +408,15 @@ class Av2SensorLogReader(NativeLogBase):
         return out
 
     def road_map(self) -> RoadMap | None:
-        """The log's vector map in the road-map model (``map`` = AV2's city frame)."""
+        """The log's vector map in the road-map model (``map`` = AV2's city frame).
+
+        Raises:
+            MapError: the map file is cut or an element of it is not valid (named).
+        """
         if self._map_path is None:
             return None
         if self._road_map is None:
-            from redrive.io.datasets.av2_map import read_av2_map
+            from redrive.maps.av2 import read_av2_map
 
             self._road_map = read_av2_map(self._map_path)
         return self._road_map
