@@ -11,7 +11,8 @@ width, ``successor`` / ``predecessor``, ``adj_left`` / ``adj_right`` as neighbou
 commonroad-io's ``TrafficSignInterpreter.speed_limit`` reads it (the lowest of its signs' values,
 m/s) for the scenario's country.  ``lanelet_type`` bicycle lane / bus lane / sidewalk / crosswalk
 gives the lane's ``kind`` (``bike``, ``bus``, ``sidewalk``, ``crosswalk``; else ``vehicle``);
-crosswalk lanelets are also :class:`Crosswalk` polygons.
+crosswalk lanelets are also :class:`Crosswalk` polygons.  Roadblocks are the rows of
+same-direction neighbours (:func:`redrive.maps.graph.group_roadblocks`).
 
 A lanelet's ``stop_line`` is a :class:`StopLine` (``stop_<lanelet id>``); each traffic light a
 :class:`MapTrafficLight` at its ``position`` controlling the lanelets that refer to it (its stop
@@ -30,6 +31,7 @@ import numpy.typing as npt
 import shapely
 
 from redrive.errors import LogError
+from redrive.maps.graph import group_roadblocks
 from redrive.types import Crosswalk, Intersection, MapLane, MapTrafficLight, RoadMap, StopLine
 
 __all__ = ["boundary_type", "road_map_from_lanelets"]
@@ -185,8 +187,10 @@ def road_map_from_lanelets(scenario: Any, *, source: str) -> RoadMap:
                 stop_line_id=stop,
             )
         )
+    grouped, roadblocks = group_roadblocks({lane.lane_id: lane for lane in lanes})
     return RoadMap(
-        lanes=tuple(lanes),
+        lanes=tuple(grouped.values()),
+        roadblocks=roadblocks,
         intersections=tuple(intersections),
         crosswalks=tuple(crosswalks),
         stop_lines=tuple(stop_lines),

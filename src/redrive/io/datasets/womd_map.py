@@ -17,7 +17,8 @@ boundary type is that of the boundary segment bounding most of the lane: a road 
 ``road_edge``, a broken line → ``dashed``, a solid line → ``solid``, a passing double yellow (solid
 on one side, broken on the other, and WOMD does not say which faces the lane) → ``unknown``; a side
 bounded nowhere is ``virtual`` on an interpolated lane (through an intersection), else
-``unknown``.  ``TYPE_BIKE_LANE`` lanes have kind ``bike``.  Crosswalks are :class:`Crosswalk`
+``unknown``.  ``TYPE_BIKE_LANE`` lanes have kind ``bike``.  Roadblocks are the rows of mutual
+neighbours (:func:`redrive.maps.graph.group_roadblocks`).  Crosswalks are :class:`Crosswalk`
 polygons; each lane a dynamic map state controls is a :class:`MapTrafficLight` whose ``light_id``
 is the lane's id (as ``TrafficLight.id`` of the reader's ``/traffic_lights``), at the state's
 ``stop_point``.  Stop signs, speed bumps and driveways have no element in the model (``redrive
@@ -34,6 +35,7 @@ import numpy.typing as npt
 import shapely
 
 from redrive.errors import LogError
+from redrive.maps.graph import group_roadblocks
 from redrive.types import Crosswalk, MapLane, MapTrafficLight, RoadMap
 
 __all__ = ["MPH_TO_MPS", "lane_widths", "road_map_from_scenario"]
@@ -185,8 +187,10 @@ def road_map_from_scenario(scenario: Any, *, source: str) -> RoadMap:
                 position=np.array([point.x, point.y], dtype=np.float64),
                 lane_ids=(lid,) if lid in kept else (),
             )
+    grouped, roadblocks = group_roadblocks({lane.lane_id: lane for lane in out})
     return RoadMap(
-        lanes=tuple(out),
+        lanes=tuple(grouped.values()),
+        roadblocks=roadblocks,
         crosswalks=tuple(crosswalks),
         traffic_lights=tuple(lights.values()),
         source=f"womd:{source}",
