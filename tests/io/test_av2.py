@@ -200,3 +200,28 @@ def test_frames_from_the_ground_truth_when_the_sweeps_are_not_all_there(av2_log:
     assert len(frames) == 156
     assert [f.stamp_ns for f in frames if f.sensors] == sweeps
     assert all(f.vehicle_state is not None and f.ground_truth for f in frames)
+
+
+@pytest.mark.shared_data
+def test_a_cut_sweep_ends_a_strict_read_and_is_skipped_otherwise(
+    av2_log: Path, tmp_path: Path
+) -> None:
+    from redrive.errors import LogDamagedError
+
+    log = _copy(av2_log, tmp_path)
+    first, second = sorted((log / "sensors" / "lidar").glob("*.feather"))
+    data = second.read_bytes()
+    second.chmod(0o644)
+    second.write_bytes(data[:1000])
+    with (
+        open_log(log) as strict,
+        pytest.raises(LogDamagedError, match=rf"{second.name}: it ends at byte 1000") as err,
+    ):
+        list(strict.messages(topics=[TOPIC_LIDAR]))
+    assert err.value.messages_read == 1
+    with open_log(log, strict=False) as lenient:
+        clouds = list(lenient.messages(topics=[TOPIC_LIDAR]))
+        assert len(clouds) == 1
+        assert lenient.damage is not None
+        assert second.name in lenient.damage
+    assert clouds[0].log_time_ns == int(first.stem)  # the intact sweep was read

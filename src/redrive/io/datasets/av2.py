@@ -170,15 +170,15 @@ class Av2SensorLogReader(NativeLogBase):
         return path.is_dir() and (path / _POSES).is_file() and (path / _EXTRINSICS).is_file()
 
     def __init__(self, path: str | Path, *, strict: bool = True) -> None:
-        """``strict`` is accepted like every reader's; the tables are checked whole at open."""
+        """``strict``: see :mod:`redrive.io.datasets.native`; the tables are checked whole at open."""
         self.path = Path(path)
+        self.strict = strict
         if not self.recognises(self.path):
             msg = (
                 f"{self.path}: not an Argoverse 2 sensor log: it needs {_POSES} and "
                 f"{_EXTRINSICS.as_posix()}; pass the log folder (<split>/<log_id>/)"
             )
             raise LogError(msg)
-        self._strict = strict
         poses = read_feather_columns(self.path / _POSES, _POSE_COLUMNS)
         order = np.argsort(poses["timestamp_ns"], kind="stable")
         self._pose_stamps = np.asarray(poses["timestamp_ns"], dtype=np.int64)[order]

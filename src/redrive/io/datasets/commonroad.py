@@ -230,8 +230,9 @@ class CommonRoadReader(NativeLogBase):
         return path.is_file() and _looks_like_commonroad(path)
 
     def __init__(self, path: str | Path, *, strict: bool = True) -> None:
-        """``strict`` is accepted like every reader's; the file is checked whole at open."""
+        """``strict``: see :mod:`redrive.io.datasets.native`; the file is checked whole at open."""
         self.path = Path(path)
+        self.strict = strict
         _check_elements(self.path)
         try:
             from commonroad.common.reader.file_reader_xml import XMLFileReader

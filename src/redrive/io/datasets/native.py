@@ -6,6 +6,11 @@ A reader builds, at open, one :class:`NativeStep` per time step — its stamp an
 :class:`~redrive.io.base.TopicInfo` of every topic; :class:`NativeLogBase` streams them
 (``messages`` with topic and time filters, the summary properties, the context manager).  A
 loader runs only when its message is yielded, so a reader may keep its files closed until then.
+
+A loader that meets a damaged file (a cut LiDAR sweep) raises :class:`~redrive.errors.LogError`;
+opened with ``strict=True`` the stream then ends with :class:`~redrive.errors.LogDamagedError`
+after every message before it, with ``strict=False`` the message is skipped, a warning logged
+and the first such damage kept in ``damage`` (which ``redrive info`` reports).
 """
 
 from __future__ import annotations
@@ -17,7 +22,7 @@ from pathlib import Path
 from types import MappingProxyType, TracebackType
 from typing import Self
 
-from redrive.errors import UnsupportedMessageError
+from redrive.errors import LogDamagedError, LogError, UnsupportedMessageError
 from redrive.io.base import DecodedKind, LogMessage, ReaderCapabilities, TopicInfo
 from redrive.io.ros.decoders.base import Decoded, DecodedValue
 from redrive.types import SensorType
@@ -77,6 +82,9 @@ class NativeLogBase:
     description: str
     path: Path
     capabilities: ReaderCapabilities
+    strict: bool = True
+    #: the first damage a ``strict=False`` read skipped, else None
+    damage: str | None = None
     _steps: Sequence[NativeStep]
     _topics: Mapping[str, TopicInfo]
 
@@ -104,6 +112,7 @@ class NativeLogBase:
         stop_ns: int | None = None,
     ) -> Iterator[LogMessage]:
         wanted = None if topics is None else set(topics)
+        yielded = 0
         for step in self._steps:
             stamp_ns = step.stamp_ns
             if start_ns is not None and stamp_ns < start_ns:
@@ -113,12 +122,21 @@ class NativeLogBase:
             for topic, load in step.messages:
                 if wanted is not None and topic not in wanted:
                     continue
+                try:
+                    payload = load()
+                except LogError as err:
+                    if self.strict:
+                        raise LogDamagedError(str(err), messages_read=yielded) from err
+                    logger.warning("%s; the message is skipped", err)
+                    self.damage = self.damage or str(err)
+                    continue
+                yielded += 1
                 yield LogMessage(
                     topic=topic,
                     msgtype=self._topics[topic].msgtype,
                     log_time_ns=stamp_ns,
                     encoding="native",
-                    payload=load(),
+                    payload=payload,
                 )
 
     def deserialize(self, message: LogMessage) -> object:

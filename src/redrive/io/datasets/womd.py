@@ -212,8 +212,9 @@ class WomdReader(NativeLogBase):
         return _parse(first.data) is not None
 
     def __init__(self, path: str | Path, *, strict: bool = True) -> None:
-        """``strict`` is accepted like every reader's; the file is checked whole at open."""
+        """``strict``: see :mod:`redrive.io.datasets.native`; the file is checked whole at open."""
         self.path = Path(path)
+        self.strict = strict
         first = None
         count = 0
         for record in read_tfrecords(self.path):  # every record checked, the first kept
