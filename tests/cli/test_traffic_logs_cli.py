@@ -91,3 +91,18 @@ def test_closed_loop_on_a_scenario_without_sensors_is_paced_by_its_ground_truth(
     run = open_run(out)
     assert run.manifest.status is RunStatus.COMPLETE
     assert run.table("frames").num_rows == 90  # of the 91 steps (as redrive counts a log replay)
+
+
+def test_the_gui_session_steps_through_a_scenario_without_sensors(shared_data: Path) -> None:
+    from redrive.gui.session import LogSession
+
+    session = LogSession(_path(shared_data, WOMD))
+    try:
+        assert session.driver_topic == "/objects"
+        assert list(session.index())[-1] == session.expected_frames == 91
+        frame = session.frame(50)
+    finally:
+        session.close()
+    assert frame.vehicle_state is not None
+    assert frame.ground_truth
+    assert frame.traffic.traffic_lights
