@@ -225,3 +225,43 @@ def test_a_cut_sweep_ends_a_strict_read_and_is_skipped_otherwise(
         assert lenient.damage is not None
         assert second.name in lenient.damage
     assert clouds[0].log_time_ns == int(first.stem)  # the intact sweep was read
+
+
+@pytest.mark.shared_data
+def test_camera_images_with_their_intrinsics(av2_log: Path, tmp_path: Path) -> None:
+    from PIL import Image as PilImage
+
+    from redrive.assembly.calibration import camera_info_topics
+    from redrive.types import CameraInfo, Image
+
+    log = _copy(av2_log, tmp_path)
+    folder = log / "sensors" / "cameras" / "ring_front_center"
+    folder.mkdir(parents=True)
+    sweep = min(int(p.stem) for p in (log / "sensors" / "lidar").glob("*.feather"))
+    stamps = [sweep + 5_000_000, sweep + 55_000_000]
+    for stamp in stamps:
+        PilImage.new("RGB", (1550, 2048), (40, 80, 120)).save(folder / f"{stamp}.jpg")
+    intrinsics = feather.read_table(log / "calibration" / "intrinsics.feather").to_pydict()
+    row = intrinsics["sensor_name"].index("ring_front_center")
+    with open_log(log) as opened:
+        image_topic, info_topic = (
+            "/cameras/ring_front_center/image",
+            "/cameras/ring_front_center/camera_info",
+        )
+        assert opened.topics[image_topic].count == 2
+        assert camera_info_topics(opened.topics) == {image_topic: info_topic}
+        messages = list(opened.messages(topics=[image_topic, info_topic]))
+        assert log_contents(opened)["camera images present"] == 2
+    assert [m.log_time_ns for m in messages] == [stamps[0], stamps[0], stamps[1], stamps[1]]
+    info = messages[0].payload.value  # type: ignore[attr-defined]
+    assert isinstance(info, CameraInfo)
+    assert (info.width, info.height) == (1550, 2048)
+    assert info.k[0, 0] == pytest.approx(intrinsics["fx_px"][row])
+    assert info.k[1, 2] == pytest.approx(intrinsics["cy_px"][row])
+    np.testing.assert_allclose(
+        info.d, [intrinsics["k1"][row], intrinsics["k2"][row], 0, 0, intrinsics["k3"][row]]
+    )
+    image = messages[1].payload
+    assert image.frame_id == "ring_front_center"  # type: ignore[attr-defined]
+    assert isinstance(image.value, Image)
+    assert image.value.pixels.shape == (2048, 1550, 3)

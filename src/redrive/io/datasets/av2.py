@@ -21,7 +21,8 @@ frame, motion-compensated to the sweep's timestamp, the file's stem (``structure
 (``datasets/sensor/av2_sensor_dataloader.py``, ``get_city_SE3_ego``).  The ego frame (origin at
 the rear axle's centre, x forward, z up) is redrive's ``base_link``; the city frame is ``map``.
 
-Every annotated sweep (and every sweep file) is a time step, yielding at its stamp:
+Every annotated sweep (and every sweep file and camera image) is a time step, yielding at its
+stamp:
 
 ===================  ==========================  ==============================================
 topic                msgtype                     payload (:class:`Decoded` value)
@@ -31,6 +32,12 @@ topic                msgtype                     payload (:class:`Decoded` value
 ``/lidar``           ``redrive/PointCloud``      the sweep (only where its file is present),
                                                  frame ``base_link``, channels ``intensity``,
                                                  ``ring`` (laser_number) and ``t_offset_ns``
+``/cameras/C/image``  ``redrive/Image``           each image of camera C present
+                                                 (``sensors/cameras/C/<stamp>.jpg``) at its own
+                                                 stamp, rgb8, frame ``C`` (the optical frame the
+                                                 extrinsics place)
+``/cameras/C/camera_  ``redrive/CameraInfo``      C's intrinsics with each image
+info``                                           (:mod:`redrive.io.datasets.av2_cameras`)
 ``/ego_pose``        ``redrive/VehicleState``    the ego pose, frame ``map``; velocity and yaw
                                                  rate by central differences of the steps' poses
 ``/annotations``     ``redrive/GroundTruth…``    the sweep's cuboids in ``base_link``
@@ -56,6 +63,7 @@ import numpy.typing as npt
 from redrive.errors import LogError, MapError
 from redrive.geometry.se3 import transform_from_matrix, yaw_from_rotation_matrix
 from redrive.io.base import DecodedKind, ReaderCapabilities
+from redrive.io.datasets import av2_cameras as cams
 from redrive.io.datasets._feather import read_feather_columns, rotations_from_wxyz
 from redrive.io.datasets.native import Loader, NativeLogBase, NativeStep, decoded, native_topics
 from redrive.io.datasets.nuscenes_common import velocity_and_yaw_rate
@@ -207,8 +215,10 @@ class Av2SensorLogReader(NativeLogBase):
         self._map_path = _map_file(self.path)
         self._road_map: RoadMap | None = None
         self._has_labels = cuboids is not None
+        self._camera_files = cams.camera_images(self.path)
+        self._camera_infos = cams.camera_infos(self.path, set(self._camera_files))
         self._steps = self._schedule()
-        kinds = {
+        kinds: dict[str, tuple[str, DecodedKind, SensorType | None]] = {
             TOPIC_TF_STATIC: ("redrive/Transforms", DecodedKind.TRANSFORMS, None),
             TOPIC_LIDAR: ("redrive/PointCloud", DecodedKind.SENSOR, SensorType.LIDAR),
             TOPIC_EGO_POSE: (
@@ -218,6 +228,13 @@ class Av2SensorLogReader(NativeLogBase):
             ),
             TOPIC_ANNOTATIONS: ("redrive/GroundTruthObjects", DecodedKind.OBJECTS, None),
         }
+        for camera in self._camera_files:
+            kinds[cams.info_topic(camera)] = ("redrive/CameraInfo", DecodedKind.CAMERA_INFO, None)
+            kinds[cams.image_topic(camera)] = (
+                "redrive/Image",
+                DecodedKind.SENSOR,
+                SensorType.CAMERA,
+            )
         self._topics = native_topics(self._steps, kinds)
         self.capabilities = ReaderCapabilities(
             message_typed=False,
@@ -344,11 +361,23 @@ class Av2SensorLogReader(NativeLogBase):
             )
             for (t, j), (velocity, yaw_rate) in zip(known, motion, strict=True)
         }
+        sweeps = set(self._stamps)
+        images: dict[int, list[tuple[str, Path]]] = {}
+        for camera, files in self._camera_files.items():
+            for stamp, path in files.items():
+                images.setdefault(stamp, []).append((camera, path))
         steps = []
-        for k, t in enumerate(self._stamps):
+        for k, t in enumerate(sorted(sweeps | set(images))):
             messages: list[tuple[str, Loader]] = []
             if k == 0:
                 messages.append((TOPIC_TF_STATIC, self._tf_loader(t)))
+            for camera, path in sorted(images.get(t, ())):
+                info = self._camera_infos[camera]
+                messages.append((cams.info_topic(camera), _const(t, camera, info)))
+                messages.append((cams.image_topic(camera), cams.image_loader(camera, t, path)))
+            if t not in sweeps:
+                steps.append(NativeStep(stamp_ns=t, messages=tuple(messages)))
+                continue
             if t in self._lidar_files:
                 messages.append((TOPIC_LIDAR, self._lidar_loader(t)))
             if t in states:
@@ -393,6 +422,7 @@ class Av2SensorLogReader(NativeLogBase):
             "tracks": self._track_count,
             "cuboids": self._cuboid_count,
             "LiDAR sweeps present": len(self._lidar_files),
+            "camera images present": sum(len(f) for f in self._camera_files.values()),
             "ego poses": len(self._pose_stamps),
             "calibrated sensors": len(self._extrinsics),
         }
