@@ -30,6 +30,9 @@ def _path(shared_data: Path, rel: str) -> Path:
     return path
 
 
+_MAP_LANES = {AV2: 183, WOMD: 198, COMMONROAD: 79}
+
+
 @pytest.mark.parametrize(
     ("rel", "fmt", "expected"),
     [
@@ -38,7 +41,7 @@ def _path(shared_data: Path, rel: str) -> Path:
         (COMMONROAD, "commonroad", {"dynamic obstacles": 9, "lanelets": 79}),
     ],
 )
-def test_info_lists_the_content(
+def test_info_lists_the_content_and_the_map(
     shared_data: Path,
     capsys: pytest.CaptureFixture[str],
     rel: str,
@@ -52,8 +55,12 @@ def test_info_lists_the_content(
     assert expected.items() <= info["contents"].items()
     assert info["capabilities"]["road_map"]
     assert info["capabilities"]["has_ground_truth"]
+    lanes = _MAP_LANES[rel]
+    assert info["map"]["lanes"] == lanes
+    assert info["map"]["source"].startswith(fmt.split("-", maxsplit=1)[0] + ":")
     assert main(["info", str(path)]) == 0
     table = capsys.readouterr().out
+    assert f"map lanes:     {lanes} (" in table
     for name, value in expected.items():
         line = f"{value} {name}" if isinstance(value, int) else f"{name}: {value}"
         assert f"contains:  {line}" in table
