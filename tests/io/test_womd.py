@@ -103,6 +103,9 @@ def _scenario() -> Any:
             edge.road_edge.polyline.add(x=x, y=y)
     lane.lane.left_boundaries.add(lane_start_index=0, lane_end_index=2, boundary_feature_id=200)
     lane.lane.right_boundaries.add(lane_start_index=0, lane_end_index=2, boundary_feature_id=201)
+    sign = sc.map_features.add(id=300)
+    sign.stop_sign.lane.append(100)
+    sign.stop_sign.position.x, sign.stop_sign.position.y = 21.0, 2.5
     for k in range(3):
         sc.dynamic_map_states.add().lane_states.add(
             lane=100, state=6 if k else 4, stop_point={"x": 40.0, "y": 0.0}
@@ -147,6 +150,10 @@ def test_a_written_scenario_reads_back_as_a_log(tmp_path: Path) -> None:
     (light,) = road.traffic_lights
     assert light.light_id == "100" == lights[0].traffic_lights[0].id
     assert light.lane_ids == ("100",)
+    stops = {stop.stop_line_id: stop for stop in road.stop_lines}
+    assert light.stop_line_id == "signal:100"
+    np.testing.assert_allclose(stops["signal:100"].line, [[40.0, 1.8], [40.0, -1.8]])
+    np.testing.assert_allclose(stops["stop_sign:300:100"].line, [[20.0, 1.8], [20.0, -1.8]])
 
 
 def test_a_track_with_missing_states_is_damage(tmp_path: Path) -> None:

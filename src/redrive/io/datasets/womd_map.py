@@ -21,8 +21,11 @@ bounded nowhere is ``virtual`` on an interpolated lane (through an intersection)
 neighbours (:func:`redrive.maps.graph.group_roadblocks`).  Crosswalks are :class:`Crosswalk`
 polygons; each lane a dynamic map state controls is a :class:`MapTrafficLight` whose ``light_id``
 is the lane's id (as ``TrafficLight.id`` of the reader's ``/traffic_lights``), at the state's
-``stop_point``.  Stop signs, speed bumps and driveways have no element in the model (``redrive
-info`` counts them).
+``stop_point``.  WOMD has no stop lines; a stop sign (its ``position`` and the ``lane`` ids it
+controls) and each signal's ``stop_point`` become a :class:`StopLine` across each lane it
+stops: perpendicular to the lane at the centreline point nearest it, one lane width long
+(``stop_sign:<id>:<lane>``, ``signal:<lane>``; a light names its own).  Speed bumps and
+driveways have no element in the model (``redrive info`` counts them).
 """
 
 from __future__ import annotations
@@ -36,7 +39,7 @@ import shapely
 
 from redrive.errors import LogError
 from redrive.maps.graph import group_roadblocks
-from redrive.types import Crosswalk, MapLane, MapTrafficLight, RoadMap
+from redrive.types import Crosswalk, MapLane, MapTrafficLight, RoadMap, StopLine
 
 __all__ = ["MPH_TO_MPS", "lane_widths", "road_map_from_scenario"]
 
@@ -175,6 +178,21 @@ def road_map_from_scenario(scenario: Any, *, source: str) -> RoadMap:
             poly = _xy(feature.crosswalk.polygon)
             if len(poly) >= 3 and np.all(np.isfinite(poly)):
                 crosswalks.append(Crosswalk(crosswalk_id=str(int(feature.id)), polygon=poly))
+    by_id = {lane.lane_id: lane for lane in out}
+    stop_lines: list[StopLine] = []
+    for feature in scenario.map_features:
+        if feature.WhichOneof("feature_data") != "stop_sign":
+            continue
+        sign = feature.stop_sign
+        where = np.array([sign.position.x, sign.position.y], dtype=np.float64)
+        for lid in in_map(sign.lane):
+            stop_lines.append(
+                StopLine(
+                    stop_line_id=f"stop_sign:{int(feature.id)}:{lid}",
+                    line=_stop_line_across(by_id[lid], where),
+                    lane_ids=(lid,),
+                )
+            )
     lights: dict[str, MapTrafficLight] = {}
     for state in scenario.dynamic_map_states:
         for lane_state in state.lane_states:
@@ -182,19 +200,39 @@ def road_map_from_scenario(scenario: Any, *, source: str) -> RoadMap:
             if lid in lights or not lane_state.HasField("stop_point"):
                 continue
             point = lane_state.stop_point
+            position = np.array([point.x, point.y], dtype=np.float64)
+            stop_id = None
+            if lid in kept:
+                stop_id = f"signal:{lid}"
+                line = _stop_line_across(by_id[lid], position)
+                stop_lines.append(StopLine(stop_line_id=stop_id, line=line, lane_ids=(lid,)))
             lights[lid] = MapTrafficLight(
                 light_id=lid,
-                position=np.array([point.x, point.y], dtype=np.float64),
+                position=position,
                 lane_ids=(lid,) if lid in kept else (),
+                stop_line_id=stop_id,
             )
-    grouped, roadblocks = group_roadblocks({lane.lane_id: lane for lane in out})
+    grouped, roadblocks = group_roadblocks(by_id)
     return RoadMap(
         lanes=tuple(grouped.values()),
         roadblocks=roadblocks,
         crosswalks=tuple(crosswalks),
+        stop_lines=tuple(stop_lines),
         traffic_lights=tuple(lights.values()),
         source=f"womd:{source}",
     )
+
+
+def _stop_line_across(lane: MapLane, point: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """A segment across ``lane``, one lane width long, perpendicular to it at the centreline
+    vertex nearest ``point``."""
+    line = lane.centerline
+    i = int(np.argmin(np.hypot(*(line - point).T)))
+    j, k = max(i - 1, 0), min(i + 1, len(line) - 1)
+    tangent = line[k] - line[j]
+    tangent = tangent / max(float(np.hypot(*tangent)), 1e-9)
+    normal = np.array([-tangent[1], tangent[0]]) * (lane.width_m / 2.0)
+    return np.array([line[i] + normal, line[i] - normal])
 
 
 _BIKE_LANE = 3  # LaneCenter.LaneType.TYPE_BIKE_LANE
