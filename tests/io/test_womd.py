@@ -261,3 +261,16 @@ def test_a_shard_of_several_scenarios_reads_its_first(tmp_path: Path) -> None:
         contents = log_contents(log)
     assert contents["scenario"] == "toy"
     assert contents["scenarios in the file (the first is read)"] == 2
+
+
+def test_convert_writes_the_scenario_and_leaves_the_light_states_out(tmp_path: Path) -> None:
+    from redrive.io.convert import convert_log
+
+    path = tmp_path / "toy.tfrecord"
+    write_tfrecord(path, [_scenario().SerializeToString()])
+    stats = convert_log(path, tmp_path / "toy.mcap")
+    assert set(stats.topics) == {"/ego_pose", TOPIC_OBJECTS}
+    assert stats.skipped_topics == {
+        TOPIC_TRAFFIC_LIGHTS: "traffic-light states have no standard ROS message"
+    }
+    assert stats.messages_written == 6

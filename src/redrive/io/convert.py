@@ -35,7 +35,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
 from redrive.errors import LogError, RedriveError
-from redrive.io.base import LogMessage, LogReader
+from redrive.io.base import DecodedKind, LogMessage, LogReader
 from redrive.io.mcap.writer import McapWriter
 from redrive.io.readers import open_log
 from redrive.io.ros.decoders.base import Decoded
@@ -263,6 +263,13 @@ def convert_log(
             for t in selected
             if t.encoding != "native" and (not t.has_definition or t.encoding not in sources)
         }
+        skipped_topics.update(
+            {
+                t.topic: "traffic-light states have no standard ROS message"
+                for t in selected
+                if t.encoding == "native" and t.kind is DecodedKind.TRAFFIC
+            }
+        )
         for topic, why in skipped_topics.items():
             logger.warning("%s: topic %s is left out: %s", reader.path, topic, why)
         wanted = [t.topic for t in selected if t.topic not in skipped_topics]
