@@ -3,7 +3,7 @@
 A *reader format* is a reader class that declares, as class attributes and a class method:
 
 - ``format``: its short name (``ros1``, ``ros2``, ``mcap``, ``kitti``, ``nuscenes``,
-  ``nuscenes-mmdet3d``), recorded in the run
+  ``nuscenes-mmdet3d``, ``av2-sensor``, ``womd``, ``commonroad``), recorded in the run
   manifest and shown by ``redrive info``;
 - ``description``: what it reads, for listings and error messages;
 - ``recognises(path)``: whether ``path`` is a log of this format, from its content (magic bytes,
@@ -107,12 +107,13 @@ def _builtin() -> list[type[ReaderFormat]]:
         KittiReader,
         NuScenesReader,
         Mmdet3dInfoReader,
-        Av2SensorLogReader,
         Ros1BagReader,
-        WomdReader,
-        CommonRoadReader,
         McapFileReader,
         McapSetReader,
+        # recorded traffic: an AV2 log folder, a WOMD TFRecord, a CommonRoad .xml
+        Av2SensorLogReader,
+        WomdReader,
+        CommonRoadReader,
     ]
 
 
