@@ -23,6 +23,7 @@ from redrive.evaluation.closedloop import (
     PdmScore,
     SpeedLimitCompliance,
     TimeToCollision,
+    TrafficLightCompliance,
 )
 from redrive.evaluation.closedloop._common import EGO_DEFAULTS
 from redrive.evaluation.evaluator import evaluate_run
@@ -366,6 +367,7 @@ def test_entry_points_match_names() -> None:
         "ego_progress": EgoProgress,
         "comfort": Comfort,
         "pdm_score": PdmScore,
+        "traffic_light_compliance": TrafficLightCompliance,
     }
     for name, cls in wanted.items():
         module, _, attr = group[name].partition(":")

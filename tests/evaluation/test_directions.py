@@ -29,12 +29,13 @@ HIGHER_EXACT = {
 NEUTRAL_HEADS = {
     "frames", "num_frames", "num_objects", "num_predictions", "gt_objects", "detections",
     "matched", "deadline_ms", "expert_progress_m", "gt", "deviated_frames",
-    "acceleration_from_states", "along_map_route",
+    "acceleration_from_states", "along_map_route", "lights_in_map", "frames_without_states",
 }  # fmt: skip
 LOWER = re.compile(
     r"rmse|mae|error|^m?a[tsova]e\b|^a[tsova]e/|^[af]de/|_ms\b|_ms/|miss|false_pos|switch|"
     r"fragment|collision|fallback|overspeed|outside|wrong_way|uncomfortable|off_road|speeding|"
-    r"unmatched|low_ttc|mostly_lost|max|jerk|deviation|motp|stopped_|active_|without_output"
+    r"unmatched|low_ttc|mostly_lost|max|jerk|deviation|motp|stopped_|active_|without_output|"
+    r"red_light"
 )
 HIGHER = re.compile(
     r"^m?ap|^recall|^precision|hota|deta|assa|loca|detre|detpr|assre|asspr|mota|idf1|^idp|^idr|"
@@ -65,6 +66,9 @@ def test_the_rules_know_the_known_cases() -> None:
     assert expected_direction("position_rmse_m") is False
     assert expected_direction("gt_objects") is None
     assert expected_direction("no_at_fault_collisions") is True
+    assert expected_direction("traffic_light_compliance") is True
+    assert expected_direction("red_light_frames") is False
+    assert expected_direction("lights_in_map") is None
 
 
 def test_every_metric_class_states_its_direction() -> None:

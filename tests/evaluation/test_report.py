@@ -419,3 +419,41 @@ def test_worst_frames_rank_by_a_score_of_errors_not_by_switch_bookmarks(
     assert [f for f, _ in by_switches] == [4, 7]
     with pytest.raises(ConfigError, match=r"--rank-by latency\.frame_ms: no such per-frame"):
         worst_frames(run, ev, count=2, rank_by="latency.frame_ms")
+
+
+def test_the_per_frame_plots_tick_whole_frame_indices(monkeypatch: pytest.MonkeyPatch) -> None:
+    # issue 35 item 10: a 3-frame run's per-frame plots ticked 0.25, 0.5 … on the frame axis
+    from matplotlib.figure import Figure
+
+    from redrive.evaluation import plots
+
+    drawn: list[Figure] = []
+    monkeypatch.setattr(plots.h, "png", lambda fig, dpi: drawn.append(fig) or b"")
+    frames = np.array([0, 1, 2], dtype=np.int64)
+    plots.timelines_png([("tp", frames, np.array([1.0, 2.0, 1.0]))], title="t")
+    (fig,) = drawn
+    fig.canvas.draw()
+    ticks = [t for t in fig.axes[-1].get_xticks() if -0.5 <= t <= 2.5]
+    assert ticks
+    assert all(float(t).is_integer() for t in ticks), ticks
+
+
+def test_the_worst_frames_views_draw_the_log_s_lidar_points(demo_run: Path) -> None:
+    # issue 35 item 10: the report's bird's-eye views of the worst frames drew no LiDAR points
+    from redrive.assembly.frames import iter_frames
+    from redrive.evaluation.frame_points import lidar_points_of_frames
+    from redrive.io import open_log
+    from redrive.results import open_run
+
+    run = open_run(demo_run)
+    got = lidar_points_of_frames(run, [3, 7], max_points=10**9)
+    assert set(got) == {3, 7}
+    with open_log(run.manifest.log.path) as log:
+        frames = {f.index: f for f in iter_frames(log) if f.index in (3, 7)}
+    for index, xy in got.items():
+        cloud = frames[index].sensors["lidar_top"]
+        expect = cloud.data.xyz[:, :2].astype(np.float64) + cloud.sensor_location[:2]
+        np.testing.assert_allclose(xy, expect[np.all(np.isfinite(expect), axis=1)])
+    assert len(lidar_points_of_frames(run, [3], max_points=1000)[3]) <= 1100  # subsampled
+    # no frame asked for: the log is not read
+    assert lidar_points_of_frames(run, []) == {}

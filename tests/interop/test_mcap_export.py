@@ -466,3 +466,36 @@ def test_a_closed_loop_export_shows_the_ghost_where_the_log_drove(
         tf = base_link[stamps[frame]]
         assert tf.parent_frame_id == state.frame_id
         assert (tf.translation.x, tf.translation.y) == pytest.approx(tuple(state.position[:2]))
+
+
+def test_the_lights_stand_at_their_map_positions_in_their_state_colours(
+    short_run: Path, decoded: dict[str, list[tuple[int, Any]]]
+) -> None:
+    from redrive.interop.light_shapes import LAMP_HEIGHT_M, STATE_COLORS
+
+    run = open_run(short_run)
+    road_map = run.road_map()
+    assert road_map is not None
+    positions = {t.light_id: t.position for t in road_map.traffic_lights}
+    states = run.traffic_lights()
+    frames = run.table("frames").to_pylist()
+    updates = dict(decoded["/redrive/traffic_lights"])
+    assert len(updates) == len(frames)
+    for row in frames:
+        by_id = {e.id: e for e in updates[row["stamp_ns"]].entities}
+        shown = {t.id: t.state for t in states[row["frame_index"]]}
+        assert set(shown) == set(positions) == {"0", "1", "2", "3"}
+        for light_id, state in shown.items():
+            entity = by_id[f"light/{light_id}"]
+            assert entity.frame_id == "map"
+            cube = entity.cubes[0]
+            x, y = positions[light_id]
+            got = (cube.pose.position.x, cube.pose.position.y, cube.pose.position.z)
+            assert got == pytest.approx((x, y, LAMP_HEIGHT_M))
+            color = (cube.color.r, cube.color.g, cube.color.b, cube.color.a)
+            assert color == pytest.approx(STATE_COLORS[state])
+            assert state.value in by_id[f"light/{light_id}/label"].texts[0].text
+            line = by_id[f"light/{light_id}/stop_line"].lines[0]  # its stop line, same colour
+            assert (line.color.r, line.color.g, line.color.b) == pytest.approx(color[:3])
+        # urban, the first second: west/east green, south/north red
+        assert (shown["0"].value, shown["1"].value) == ("green", "red")

@@ -102,7 +102,18 @@ def test_image_whose_step_does_not_fit(
     _decodes_or_refuses(message)
 
 
+def _velodyne_packet() -> list[int]:
+    """A VLP-16 strongest-return packet: 12 blocks 0xFFEE, azimuths 0.00° … 2.20°, every return
+    at 2 m with intensity 9, then a timestamp and the factory bytes 0x37 0x22."""
+    out: list[int] = []
+    for block in range(12):
+        out += [0xFF, 0xEE, (block * 20) & 0xFF, (block * 20) >> 8]
+        out += [0xE8, 0x03, 9] * 32  # 1000 × 2 mm
+    return [*out, 0, 0, 0, 0, 0x37, 0x22]
+
+
 _TYPES: dict[str, dict[str, Any]] = {
+    "velodyne_msgs/msg/VelodyneScan": {"packets": [{"data": _velodyne_packet()}] * 2},
     "sensor_msgs/msg/Imu": {},
     "nav_msgs/msg/Odometry": {"child_frame_id": "base_link"},
     "sensor_msgs/msg/NavSatFix": {},

@@ -14,7 +14,6 @@ from rosbags.rosbag1 import Reader as Reader1
 from rosbags.rosbag2 import Reader as Reader2
 
 from redrive.assembly.tf_buffer import TransformBuffer, TransformLookupError
-from redrive.errors import UnsupportedMessageError
 from redrive.io.base import LogMessage
 from redrive.io.ros.decoders import Deserialize, decode, decoder_for
 from redrive.io.ros.typestore import typestore_for
@@ -246,16 +245,18 @@ def test_turtlesim_ros1_tf_tfmessage(shared_data: Path) -> None:
     assert "tf/msg/tfMessage" in msgtypes
 
 
-def test_pass_through_and_velodyne_definitions(
+def test_velodyne_definitions_and_decoder(
     shared_data: Path,
 ) -> None:
-    """VelodyneScan deserialises with the shipped definition; without a decoder it passes through."""
+    """VelodyneScan deserialises with the shipped definition and decodes to a LiDAR cloud
+    (issue 35 item 11; tests/io/test_decoders_velodyne.py compares the clouds with nebula's)."""
     bag = shared_data / "velodyne_nebula_ros2" / "vlp16" / "1673400471837873222"
     scans = 0
     for message, deserialize in ros2_messages(bag):
-        assert decoder_for(message.msgtype) is None
-        with pytest.raises(UnsupportedMessageError, match="no decoder for velodyne_msgs/msg/Velo"):
-            decode(message, deserialize)
+        assert decoder_for(message.msgtype) is not None
+        cloud = decode(message, deserialize).value
+        assert isinstance(cloud, PointCloud)
+        assert cloud.xyz.shape[0] > 14_000
         scan: Any = deserialize(message)
         assert scan.packets
         assert all(len(p.data) == 1206 for p in scan.packets)

@@ -47,6 +47,7 @@ def test_decoder_for_accepts_ros1_and_ros2_names() -> None:
 def test_default_registry_is_complete_and_consistent() -> None:
     expected = {
         "sensor_msgs/msg/PointCloud2",
+        "velodyne_msgs/msg/VelodyneScan",
         "sensor_msgs/msg/Image",
         "sensor_msgs/msg/CompressedImage",
         "sensor_msgs/msg/CameraInfo",
@@ -63,6 +64,7 @@ def test_default_registry_is_complete_and_consistent() -> None:
         "vision_msgs/msg/Detection3DArray",
         "derived_object_msgs/msg/ObjectArray",
         "redrive_msgs/msg/GroundTruthObjectArray",
+        "redrive_msgs/msg/TrafficLightStateArray",
     }
     assert set(DEFAULT_DECODERS) == expected
     for msgtype, decoder in DEFAULT_DECODERS.items():

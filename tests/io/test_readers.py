@@ -44,7 +44,7 @@ LOGS = [
 def test_every_shared_log_opens_with_the_right_counts(
     shared_data: Path, rel: str, fmt: str, counts: dict[str, int]
 ) -> None:
-    with open_log(shared_data / rel) as log:
+    with open_log(shared_data / rel, packets="raw") as log:  # the file's own messages
         assert isinstance(log, LogReader)
         assert log.format == fmt
         for topic, count in counts.items():
@@ -63,7 +63,7 @@ def test_every_shared_log_opens_with_the_right_counts(
 def test_every_typed_message_deserialises(shared_data: Path) -> None:
     """rosbags deserialises each message through redrive's typestores (embedded or shipped)."""
     for rel, _, _ in LOGS:
-        with open_log(shared_data / rel) as log:
+        with open_log(shared_data / rel, packets="raw") as log:  # the file's own messages
             for message in log.messages():
                 assert log.topics[message.topic].has_definition, (rel, message.topic)
                 assert log.deserialize(message) is not None
@@ -90,7 +90,7 @@ def test_a_topic_the_log_lacks_yields_nothing(
 ) -> None:
     # issue 35: the real ROS 1 bags have no /tf_static; asking for it raised IndexError from
     # the bag reader's empty merged index (and the GUI could not open them)
-    with open_log(shared_data / rel) as log:
+    with open_log(shared_data / rel, packets="raw") as log:  # the file's own messages
         assert list(log.messages(topics=["/no/such/topic"])) == []
         first = next(iter(counts))
         assert len(list(log.messages(topics=["/no/such/topic", first]))) == counts[first]
@@ -104,7 +104,7 @@ def test_mcap_and_ros2_time_filters(shared_data: Path) -> None:
         "rosbag_fixtures/evo_nav2_turtlebot_sim.mcap",
         "rosbag_fixtures/evo_tf_example_ros2",
     ):
-        with open_log(shared_data / rel) as log:
+        with open_log(shared_data / rel, packets="raw") as log:  # the file's own messages
             mid = (log.start_ns + log.end_ns) // 2
             after = list(log.messages(start_ns=mid))
             before = list(log.messages(stop_ns=mid))

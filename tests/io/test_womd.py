@@ -263,14 +263,15 @@ def test_a_shard_of_several_scenarios_reads_its_first(tmp_path: Path) -> None:
     assert contents["scenarios in the file (the first is read)"] == 2
 
 
-def test_convert_writes_the_scenario_and_leaves_the_light_states_out(tmp_path: Path) -> None:
+def test_convert_writes_the_scenario_with_its_light_states(tmp_path: Path) -> None:
     from redrive.io.convert import convert_log
 
     path = tmp_path / "toy.tfrecord"
     write_tfrecord(path, [_scenario().SerializeToString()])
     stats = convert_log(path, tmp_path / "toy.mcap")
-    assert set(stats.topics) == {"/ego_pose", TOPIC_OBJECTS}
-    assert stats.skipped_topics == {
-        TOPIC_TRAFFIC_LIGHTS: "traffic-light states have no standard ROS message"
-    }
-    assert stats.messages_written == 6
+    assert set(stats.topics) == {"/ego_pose", TOPIC_OBJECTS, TOPIC_TRAFFIC_LIGHTS}
+    assert not stats.skipped_topics
+    assert stats.messages_written == 9  # an empty objects message keeps the objects' type
+    with open_log(tmp_path / "toy.mcap") as log:
+        lights = list(log.messages(topics=[TOPIC_TRAFFIC_LIGHTS]))
+    assert len(lights) == 3

@@ -20,9 +20,11 @@ from redrive.types import (
     Box3D,
     ControlCommands,
     DetectedObject,
+    LightState,
     ObjectClass,
     PlannedPath,
     Role,
+    TrafficLight,
     VehicleState,
 )
 
@@ -71,7 +73,8 @@ def gt_object(i: int, k: int) -> DetectedObject:
 
 def frame(i: int, *, planning: bool = True, long_traceback: str = "") -> FrameRecord:
     """Frame ``i``: det finds i % 3 objects, bad_det fails on even frames, a 5-point path,
-    commands; ground truth None every 5th frame (i % 5 == 4), empty when i % 5 == 3."""
+    commands; ground truth None every 5th frame (i % 5 == 4), empty when i % 5 == 3; two
+    traffic lights but on frame 2 (light "w" red on odd frames, "s" green)."""
     stamp = T0_NS + i * 100_000_000
     dets = tuple(detection(i, k, bbox=k % 2 == 0) for k in range(i % 3))
     steps = [
@@ -172,6 +175,12 @@ def frame(i: int, *, planning: bool = True, long_traceback: str = "") -> FrameRe
         logged_vehicle_state=logged,
         closed_loop=closed,
         ground_truth=gt,
+        traffic_lights=()
+        if i == 2
+        else (
+            TrafficLight(id="w", state=LightState.RED if i % 2 else LightState.GREEN),
+            TrafficLight(id="s", state=LightState.GREEN),
+        ),
         wall_ns=5_000_000,
         late=i == 2,
     )

@@ -68,6 +68,10 @@ def test_round_trip_values(tmp_path: Path) -> None:
     assert [r["latency_ns"] for r in det_rows] == [1_000_000 + i for i in range(6)]
 
     # data model readers
+    lights = run.traffic_lights()
+    assert sorted(lights) == [0, 1, 3, 4, 5]  # frame 2 had none
+    assert [(t.id, t.state.value) for t in lights[3]] == [("w", "red"), ("s", "green")]
+    assert lights[4][0].state.value == "green"
     dets = run.detections("det")
     assert sorted(dets) == list(range(6))
     for i in range(6):
@@ -173,10 +177,10 @@ def test_parts_are_deterministic(tmp_path: Path) -> None:
     write_run(tmp_path / "b", n=9)
     files_a = sorted(p.relative_to(tmp_path / "a") for p in (tmp_path / "a").rglob("*.parquet"))
     files_b = sorted(p.relative_to(tmp_path / "b") for p in (tmp_path / "b").rglob("*.parquet"))
-    # 3 flushes × 7 tables (resources come with the last); frame 8 has empty ground truth;
+    # 3 flushes × 8 tables (traffic_lights too) (resources come with the last); frame 8 has empty ground truth;
     # ego_logged and closed_loop (odd frames) in the first two
     assert files_a == files_b
-    assert len(files_a) == 3 * 7 + 2 * 2
+    assert len(files_a) == 3 * 8 + 2 * 2
     for rel in files_a:
         assert (tmp_path / "a" / rel).read_bytes() == (tmp_path / "b" / rel).read_bytes(), rel
     # no wall-clock metadata in the files

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from redrive.algorithms.base import (
     GROUND_TRUTH,
+    ROAD_MAP,
     VEHICLE_STATE,
     Algorithm,
     AlgorithmOutput,
@@ -28,6 +29,7 @@ from redrive.algorithms.discovery import (
 
 __all__ = [
     "GROUND_TRUTH",
+    "ROAD_MAP",
     "VEHICLE_STATE",
     "Algorithm",
     "AlgorithmInfo",

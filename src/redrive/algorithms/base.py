@@ -31,6 +31,7 @@ from redrive.types import (
     DetectedObject,
     Frame,
     PlannedPath,
+    RoadMap,
     Role,
     SensorData,
     SensorType,
@@ -38,6 +39,7 @@ from redrive.types import (
 
 __all__ = [
     "GROUND_TRUTH",
+    "ROAD_MAP",
     "VEHICLE_STATE",
     "Algorithm",
     "AlgorithmOutput",
@@ -54,9 +56,12 @@ __all__ = [
 VEHICLE_STATE = "vehicle_state"
 #: an input meaning "the frame's ground-truth objects" (``Frame.ground_truth``).
 GROUND_TRUTH = "ground_truth"
+#: an input meaning "the log's road map" (:attr:`Algorithm.road_map`, handed over before the
+#: first frame: a synthetic log or scenario has one, recorded logs mostly not).
+ROAD_MAP = "road_map"
 
 #: what ``inputs`` may name: a sensor id of the log (``"lidar_top"``), any sensor of a type
-#: (``SensorType.LIDAR``), :data:`VEHICLE_STATE` or :data:`GROUND_TRUTH`.
+#: (``SensorType.LIDAR``), :data:`VEHICLE_STATE`, :data:`GROUND_TRUTH` or :data:`ROAD_MAP`.
 Input = str | SensorType
 
 AlgorithmOutput = tuple[DetectedObject, ...] | PlannedPath | ControlCommands
@@ -236,6 +241,9 @@ class Algorithm(ABC):
         self.name = name or type(self).__name__
         self.config: Mapping[str, Any] = MappingProxyType(dict(self.defaults))
         self.bound_inputs: Mapping[Input, str] = MappingProxyType({})
+        #: the log's road map (lanes, stop lines, traffic lights; map frame), None when the log
+        #: has none — set by :meth:`use_road_map` before the first frame
+        self.road_map: RoadMap | None = None
 
     # -- what a researcher writes -------------------------------------------------------------
 
@@ -248,6 +256,11 @@ class Algorithm(ABC):
 
     def reset(self) -> None:  # noqa: B027 - optional hook
         """Forget all state (between runs, and after a worker restart)."""
+
+    def use_road_map(self, road_map: RoadMap | None) -> None:
+        """Called once before the first frame with the log's road map (None: it has none); keeps
+        it as :attr:`road_map`.  Override (calling this) to prepare what the steps look up."""
+        self.road_map = road_map
 
     # -- what the engine calls ----------------------------------------------------------------
 
@@ -274,7 +287,8 @@ class Algorithm(ABC):
 
         Args:
             sensors: sensor id → type, for the log being replayed.
-            extras: which of :data:`VEHICLE_STATE` / :data:`GROUND_TRUTH` the log provides.
+            extras: which of :data:`VEHICLE_STATE` / :data:`GROUND_TRUTH` / :data:`ROAD_MAP` the
+                log provides.
 
         Raises:
             MissingInputError: an input is not in the log (the message lists what is).
@@ -292,7 +306,7 @@ class Algorithm(ABC):
                 else:
                     missing = f"a {wanted.name} sensor" + (f" {chosen!r}" if chosen else "")
                     self._missing(missing, sensors, have)
-            elif wanted in (VEHICLE_STATE, GROUND_TRUTH):
+            elif wanted in (VEHICLE_STATE, GROUND_TRUTH, ROAD_MAP):
                 if wanted not in have:
                     self._missing(wanted.replace("_", " "), sensors, have)
                 bound[wanted] = wanted
@@ -305,10 +319,14 @@ class Algorithm(ABC):
     def _missing(self, what: str, sensors: Mapping[str, SensorType], have: set[str]) -> None:
         listing = ", ".join(f"{s} ({t.name})" for s, t in sorted(sensors.items())) or "none"
         extra = ", ".join(sorted(have)) or "no ego state or ground truth"
+        advice = (
+            "give it a log that carries one (a redrive synth log or a scenario does)"
+            if what == "road map"
+            else "map a topic with a sensor map file"
+        )
         msg = (
             f"algorithm {self.name!r} needs {what}, which this log does not have "
-            f"(sensors: {listing}; also {extra}); map a topic with a sensor map file or pick "
-            "another algorithm"
+            f"(sensors: {listing}; also {extra}); {advice} or pick another algorithm"
         )
         raise MissingInputError(msg)
 

@@ -5,8 +5,8 @@ but with ground truth (recorded traffic: Waymo Open Motion, CommonRoad) makes on
 ground-truth message instead.  Each other sensor contributes the sample
 whose header stamp is nearest the driver's, if it is within that input's tolerance (the sensor
 map's: 50 ms, or half the period of an input slower than ~8 Hz); the ego state is interpolated
-to the driver's stamp; ground truth is the nearest objects message within its tolerance, and so
-are the traffic-light states (``Frame.traffic``) of a log that has them.  What
+to the driver's stamp; ground truth is the nearest objects message within its tolerance, the
+traffic lights' states (``Frame.traffic``) the nearest light-states message within its.  What
 no sample within its tolerance provides is named in ``Frame.missing``.  Reading is streaming:
 only a window of the widest tolerance + lookahead around the frame being assembled is held,
 whatever the log's length.
@@ -188,7 +188,7 @@ class FrameAssembler:
                             break
                         else:
                             pending.append(sample)
-                elif message.topic == smap.traffic_topic:
+                elif message.topic == smap.traffic_lights_topic:
                     lights.append(_Sample(decoded.stamp_ns, decoded))
                 elif message.topic in smap.tf_topics and isinstance(decoded.value, tuple):
                     mounts.add(message.topic, _transforms(decoded))
@@ -199,9 +199,10 @@ class FrameAssembler:
             for buf in buffers.values():
                 while len(buf) > 1 and buf[0].stamp_ns < horizon:
                     buf.popleft()
-            for samples in (objects, lights):
-                while len(samples) > 1 and samples[0].stamp_ns < horizon:
-                    samples.popleft()
+            while len(objects) > 1 and objects[0].stamp_ns < horizon:
+                objects.popleft()
+            while len(lights) > 1 and lights[0].stamp_ns < horizon:
+                lights.popleft()
             while len(states) > 2 and states[1].stamp_ns < horizon - _STATE_WINDOW_NS:
                 states.popleft()
         while pending:
@@ -284,11 +285,11 @@ class FrameAssembler:
             ground_truth = ()
             missing.append("ground_truth")  # the log has labels, none near this frame
         traffic = TrafficData()
-        light_sample = _nearest(lights, t, smap.tolerance_for("traffic"))
-        if light_sample is not None and isinstance(light_sample.decoded.value, TrafficData):
-            traffic = light_sample.decoded.value
-        elif smap.traffic_topic is not None:
-            missing.append("traffic")
+        lights_sample = _nearest(lights, t, smap.tolerance_for("traffic_lights"))
+        if lights_sample is not None and isinstance(lights_sample.decoded.value, TrafficData):
+            traffic = lights_sample.decoded.value
+        elif smap.traffic_lights_topic is not None:
+            missing.append("traffic_lights")  # the log has light states, none near this frame
         state = _state_at(states, t, smap.tolerance_for("vehicle_state"))
         if state is None and smap.vehicle_state_topic is not None:
             missing.append("vehicle_state")

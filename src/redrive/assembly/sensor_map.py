@@ -9,6 +9,7 @@ A sensor map file (all keys optional)::
                                     # 50, or half the period of an input slower than ~8 Hz)
     vehicle_state = "/odom"         # ego motion topic (Odometry, PoseStamped, TwistStamped)
     ground_truth = "/carla/objects" # objects topic used as ground truth
+    traffic_lights = "/lights"      # traffic-light states topic (Frame.traffic)
     ignore = ["/rosout"]            # topics never mapped
 
     [sensors.lidar_top]
@@ -68,10 +69,10 @@ class SensorMap:
     tolerance_ns: int = _DEFAULT_TOLERANCE_NS
     vehicle_state_topic: str | None = None
     ground_truth_topic: str | None = None
+    #: the traffic-light states (``Frame.traffic``), None when the log has none
+    traffic_lights_topic: str | None = None
     tf_topics: tuple[str, ...] = ()
-    #: the topic of traffic-light states (``TrafficData``: WOMD, CommonRoad), None when none
-    traffic_topic: str | None = None
-    #: per input (sensor id, ``vehicle_state``, ``ground_truth``): how far its sample may be from
+    #: per input (sensor id, ``vehicle_state``, ``ground_truth``, ``traffic_lights``): how far its sample may be from
     #: a frame's stamp; inputs not listed use ``tolerance_ns``.  Inferred from each input's rate
     #: over the log: half its period for inputs slower than ~8 Hz (a 2 Hz input: 250 ms) —
     #: unless a sensor map file sets ``tolerance_ms``, which then holds for every input.
@@ -81,7 +82,8 @@ class SensorMap:
         return {s.topic: s for s in self.sensors}
 
     def tolerance_for(self, name: str) -> int:
-        """The tolerance of input ``name`` (a sensor id, ``vehicle_state``, ``ground_truth``)."""
+        """The tolerance of input ``name`` (a sensor id, ``vehicle_state``, ``ground_truth``,
+        ``traffic_lights``)."""
         return self.tolerances_ns.get(name, self.tolerance_ns)
 
     @property
@@ -101,7 +103,9 @@ class SensorMap:
         """Every topic the frames read."""
         out = [s.topic for s in self.sensors] + list(self.tf_topics)
         out += [
-            t for t in (self.vehicle_state_topic, self.ground_truth_topic, self.traffic_topic) if t
+            t
+            for t in (self.vehicle_state_topic, self.ground_truth_topic, self.traffic_lights_topic)
+            if t
         ]
         return tuple(dict.fromkeys(out))
 
@@ -114,6 +118,7 @@ class SensorMapOverrides:
     tolerance_ns: int | None = None
     vehicle_state_topic: str | None = None
     ground_truth_topic: str | None = None
+    traffic_lights_topic: str | None = None
     ignore: frozenset[str] = frozenset()
     sensors: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
 
@@ -131,7 +136,17 @@ def load_sensor_map_overrides(path: str | Path) -> SensorMapOverrides:
         ConfigError: unreadable file, unknown key, or a value of the wrong kind.
     """
     doc = Table(read_toml(path, what="sensor map"), source=str(path))
-    doc.check_keys({"driver", "tolerance_ms", "vehicle_state", "ground_truth", "ignore", "sensors"})
+    doc.check_keys(
+        {
+            "driver",
+            "tolerance_ms",
+            "vehicle_state",
+            "ground_truth",
+            "traffic_lights",
+            "ignore",
+            "sensors",
+        }
+    )
     types = tuple(t.value for t in SensorType)
     sensors: dict[str, Mapping[str, Any]] = {}
     for sid in (table := doc.table("sensors", {}, fix="write each sensor as [sensors.NAME]")):
@@ -148,6 +163,7 @@ def load_sensor_map_overrides(path: str | Path) -> SensorMapOverrides:
         tolerance_ns=None if tol is None else int(tol * 1_000_000),
         vehicle_state_topic=doc.text("vehicle_state", None),
         ground_truth_topic=doc.text("ground_truth", None),
+        traffic_lights_topic=doc.text("traffic_lights", None),
         ignore=frozenset(ignore),
         sensors=sensors,
     )
@@ -175,7 +191,8 @@ def infer_sensor_map(
         ConfigError: the overrides name a topic or sensor the log does not have.
     """
     ov = overrides or SensorMapOverrides()
-    for topic in [t for t in (ov.vehicle_state_topic, ov.ground_truth_topic) if t]:
+    named = (ov.vehicle_state_topic, ov.ground_truth_topic, ov.traffic_lights_topic)
+    for topic in [t for t in named if t]:
         if topic not in topics:
             msg = f"sensor map names topic {topic!r}, which is not in the log"
             raise ConfigError(msg)
@@ -183,8 +200,8 @@ def infer_sensor_map(
     explicit_topics = {str(s["topic"]) for s in ov.sensors.values()}
     vehicle_state: list[TopicInfo] = []
     objects: list[TopicInfo] = []
+    lights: list[TopicInfo] = []
     tf_topics: list[str] = []
-    traffic: list[TopicInfo] = []
     for topic, info in topics.items():
         if topic in ov.ignore or topic in explicit_topics:
             continue
@@ -208,8 +225,8 @@ def infer_sensor_map(
             objects.append(info)
         elif kind is DecodedKind.TRANSFORMS:
             tf_topics.append(topic)
-        elif kind is DecodedKind.TRAFFIC:
-            traffic.append(info)
+        elif kind is DecodedKind.TRAFFIC_LIGHTS:
+            lights.append(info)
         # DecodedKind.CAMERA_INFO: calibration, never a sensor (see redrive.assembly.calibration)
     for sid, raw in ov.sensors.items():
         topic = str(raw["topic"])
@@ -251,10 +268,16 @@ def infer_sensor_map(
     if by_ground_truth and gt_topic is None:
         msg = f'sensor map: driver = "{GROUND_TRUTH_DRIVER}" but the log has no ground truth'
         raise ConfigError(msg)
+    lights_topic = ov.traffic_lights_topic or _busiest(lights, prefer="trafficlight")
     tolerances: dict[str, int] = {}
     if ov.tolerance_ns is None:  # a sensor map file's tolerance_ms holds for every input
         rates = {s.sensor_id: s.rate_hz for s in specs.values()}
-        for name, input_topic in (("vehicle_state", state_topic), ("ground_truth", gt_topic)):
+        inputs = (
+            ("vehicle_state", state_topic),
+            ("ground_truth", gt_topic),
+            ("traffic_lights", lights_topic),
+        )
+        for name, input_topic in inputs:
             if input_topic is not None and input_topic in topics:
                 rates[name] = _rate_hz(topics[input_topic], duration_ns)
         for name, rate in rates.items():
@@ -267,8 +290,8 @@ def infer_sensor_map(
         tolerance_ns=_DEFAULT_TOLERANCE_NS if ov.tolerance_ns is None else ov.tolerance_ns,
         vehicle_state_topic=state_topic,
         ground_truth_topic=gt_topic,
+        traffic_lights_topic=lights_topic,
         tf_topics=tuple(sorted(tf_topics)),
-        traffic_topic=_busiest(traffic, prefer="traffic"),
         tolerances_ns=tolerances,
     )
 

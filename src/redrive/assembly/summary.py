@@ -18,10 +18,11 @@ from typing import Any
 from redrive.assembly.calibration import camera_info_topics
 from redrive.assembly.sensor_map import SensorSpec, infer_sensor_map, load_sensor_map_overrides
 from redrive.errors import ConfigError, LogTruncatedError
-from redrive.io.base import DecodedKind, LogReader, ReaderCapabilities
+from redrive.io.base import LogReader, ReaderCapabilities
 from redrive.io.content import log_contents
 from redrive.io.damage import LogDamage, damage_report
 from redrive.io.ros.decoders import decoder_for
+from redrive.io.ros.decoders.ouster_log import PacketCloudsReader
 
 __all__ = ["LogSummary", "TopicSummary", "summarize_log"]
 
@@ -208,8 +209,10 @@ def summarize_log(log: LogReader, *, sensor_map_path: Path | None = None) -> Log
         roles.update(_camera_info_roles(log, sensors))
         if driver is None and smap.ground_truth_topic is not None:
             roles[smap.ground_truth_topic] = "ground truth (drives frames)"
+        if smap.traffic_lights_topic is not None:
+            roles[smap.traffic_lights_topic] = "traffic lights"
         roles.update(
-            {t: "traffic lights" for t, i in log.topics.items() if i.kind is DecodedKind.TRAFFIC}
+            {packets: f"packets of {cloud}" for cloud, packets in _cloud_topics(log).items()}
         )
     except ConfigError:
         if sensor_map_path:
@@ -234,7 +237,11 @@ def summarize_log(log: LogReader, *, sensor_map_path: Path | None = None) -> Log
                 rate_hz=round((st.count - 1) / span_s, 3) if st.count > 1 and span_s > 0 else None,
                 size_bytes=st.size_bytes if info.encoding != "native" else None,
                 # a native topic holds data-model values already: its reader decodes it
-                decoder=decoder.name if decoder else "native" if info.kind is not None else None,
+                decoder=decoder.name
+                if decoder
+                else _native_decoder(log, topic)
+                if info.kind is not None
+                else None,
                 has_definition=info.has_definition,
                 maps_to=maps_to or None,
             )
@@ -250,3 +257,14 @@ def summarize_log(log: LogReader, *, sensor_map_path: Path | None = None) -> Log
         damage_report=damage_report(log),
         contents=tuple(log_contents(log).items()),
     )
+
+
+def _native_decoder(log: LogReader, topic: str) -> str:
+    """What a native topic's decoder column says: ``ouster-packets`` for the clouds made of
+    Ouster packets (:mod:`redrive.io.ros.decoders.ouster_log`), else ``native``."""
+    return "ouster-packets" if topic in _cloud_topics(log) else "native"
+
+
+def _cloud_topics(log: LogReader) -> dict[str, str]:
+    """Cloud topic → the packet topic it is made of (empty for a log without)."""
+    return dict(log.cloud_topics) if isinstance(log, PacketCloudsReader) else {}

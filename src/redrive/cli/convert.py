@@ -26,7 +26,7 @@ def _run(args: argparse.Namespace) -> int:
     from redrive.io.convert import convert_log
     from redrive.output.progress import ProgressBar
 
-    with open_log(args.input, strict=not args.skip_damaged) as log:
+    with open_log(args.input, strict=not args.skip_damaged, packets="raw") as log:
         origin = log.start_ns
         total = log.message_count
     start_ns = _seconds_to_ns(args.start, origin)

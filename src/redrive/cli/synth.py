@@ -71,7 +71,7 @@ def register(sub: Any) -> None:
             "Simulate a scenario of the built-in catalogue (or a scenario TOML file): a "
             "deterministic world with traffic, pedestrians and lights, sensed by a rig of "
             "ray-cast LiDARs, a camera, IMU, GNSS and odometry, written as an MCAP log with "
-            "ground truth."
+            "ground truth (objects, the ego state, the lights' states) and the road map."
         ),
         epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,

@@ -255,6 +255,7 @@ def _drive(
         sensors=dict(simulator.sensors),
         has_vehicle_state=simulator.has_vehicle_state,
         has_ground_truth=simulator.has_ground_truth,
+        road_map=road_map,
     )
     graph = build_graph(request.pipeline, inputs)
     pipeline = request.pipeline

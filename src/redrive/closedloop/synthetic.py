@@ -16,8 +16,9 @@ may then run into a braking ego (the closed-loop world drops its own copies of t
 the closed-loop world's own agents, whose IDM sees the driven ego as an obstacle — a follower
 brakes for it.
 
-Levels: ``object`` (the default): frames carry the true ego state (map frame) and the
-ground-truth objects in ``base_link`` of the driven ego, at a fixed rate; an algorithm that
+Levels: ``object`` (the default): frames carry the true ego state (map frame), the
+ground-truth objects in ``base_link`` of the driven ego and the signals' states
+(``Frame.traffic``), at a fixed rate; an algorithm that
 declares a sensor input is refused before the run.  ``sensor``: frames carry as well the
 scenario's rig — LiDAR sweeps ray-cast, camera images, IMU, GNSS — rendered from the driven ego's
 pose (:mod:`redrive.closedloop.sensors`), exactly as a replay of the ``redrive synth`` log of the
@@ -198,6 +199,7 @@ class SyntheticSimulator:
                 stamp_ns=world.time_ns,
                 index=self._index,
                 vehicle_state=world.ego_state(),
+                traffic=world.traffic_data(),
                 ground_truth=objects,
             )
         self._start_rendering()
@@ -213,6 +215,7 @@ class SyntheticSimulator:
             index=self._index,
             sensors=self._frame_sensors.sensor_data(),
             vehicle_state=world.ego_state(),
+            traffic=world.traffic_data(),
             ground_truth=objects,
         )
 

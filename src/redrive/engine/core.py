@@ -258,6 +258,7 @@ class Engine:
             "sensors": dict(inputs.sensors),
             "has_vehicle_state": inputs.has_vehicle_state,
             "has_ground_truth": inputs.has_ground_truth,
+            "road_map": inputs.road_map,
         }
         self._stages: list[_Stage] = []
         roles_before: Mapping[str, Role] = {}
@@ -358,6 +359,7 @@ class Engine:
                 perf_counter_ns() - item.t0_ns,
                 bool(item.late),
                 frame.missing,
+                frame.traffic.traffic_lights,
             )
             sink(record)
             stats.add(record)

@@ -21,12 +21,12 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from redrive.algorithms import GROUND_TRUTH, VEHICLE_STATE, Algorithm, Role
+from redrive.algorithms import GROUND_TRUTH, ROAD_MAP, VEHICLE_STATE, Algorithm, Role
 from redrive.algorithms.discovery import load_algorithm_class
 from redrive.config import AlgorithmSpec, PipelineConfig
 from redrive.errors import ConfigError, MissingInputError, PluginError
 from redrive.results import AlgorithmEntry
-from redrive.types import SensorType, to_jsonable
+from redrive.types import RoadMap, SensorType, to_jsonable
 
 __all__ = ["LogInputs", "PlannedAlgorithm", "StageGraph", "build_graph", "config_hash"]
 
@@ -35,11 +35,13 @@ _ROLE_ORDER = {Role.PERCEPTION: 0, Role.PLANNING: 1, Role.CONTROL: 2}
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class LogInputs:
-    """What a log can feed algorithms: sensor id → type, plus ego state / ground truth."""
+    """What a log can feed algorithms: sensor id → type, plus ego state / ground truth, and its
+    road map (handed to every algorithm before the first frame: ``Algorithm.use_road_map``)."""
 
     sensors: Mapping[str, SensorType] = field(default_factory=dict)
     has_vehicle_state: bool = False
     has_ground_truth: bool = False
+    road_map: RoadMap | None = None
 
     @property
     def extras(self) -> tuple[str, ...]:
@@ -48,6 +50,8 @@ class LogInputs:
             out.append(VEHICLE_STATE)
         if self.has_ground_truth:
             out.append(GROUND_TRUTH)
+        if self.road_map is not None:
+            out.append(ROAD_MAP)
         return tuple(out)
 
 
@@ -119,6 +123,7 @@ def instantiate(
     algo = cls(name=name)
     algo.configure(config)
     algo.bind(inputs.sensors, extras=inputs.extras)
+    algo.use_road_map(inputs.road_map)
     return algo
 
 

@@ -35,7 +35,7 @@ from redrive.results import (
     RunWriter,
     SourceLog,
 )
-from redrive.types import Frame
+from redrive.types import Frame, RoadMap
 
 __all__ = [
     "RunRequest",
@@ -96,12 +96,13 @@ def source_log(path: Path, *, format: str, scenario: LogScenario | None = None) 
     )
 
 
-def log_inputs(assembler: FrameAssembler) -> LogInputs:
+def log_inputs(assembler: FrameAssembler, *, road_map: RoadMap | None = None) -> LogInputs:
     smap = assembler.sensor_map
     return LogInputs(
         sensors={s.sensor_id: s.sensor_type for s in smap.sensors},
         has_vehicle_state=smap.vehicle_state_topic is not None,
         has_ground_truth=smap.ground_truth_topic is not None,
+        road_map=road_map,
     )
 
 
@@ -130,12 +131,6 @@ def _reading_only_inputs(
     if len(kept) == len(smap.sensors):
         return assembler
     return FrameAssembler(log, sensor_map=replace(smap, sensors=kept), lookahead_ns=lookahead_ns)
-
-
-def _copy_road_map(log: LogReader, writer: RunWriter) -> None:
-    road_map = log_road_map(log)
-    if road_map is not None:
-        writer.write_map(road_map)
 
 
 def _select(frames: Iterator[Frame], first: int | None, stop: int | None) -> Iterator[Frame]:
@@ -253,12 +248,14 @@ def run_reader(
     assembler = FrameAssembler(log, overrides=overrides)
     if lookahead_ns is not None:
         assembler.lookahead_ns = lookahead_ns
-    inputs = log_inputs(assembler)
+    road_map = log_road_map(log)
+    inputs = log_inputs(assembler, road_map=road_map)
     graph = build_graph(request.pipeline, inputs, skip_unfed=request.skip_unfed)
     assembler = _reading_only_inputs(log, assembler, graph, lookahead_ns=assembler.lookahead_ns)
     setup = _setup(request, graph, inputs, log=log_info, mode=hooks.mode.value)
     writer = RunWriter(request.out, setup=setup, resume=request.resume)
-    _copy_road_map(log, writer)
+    if road_map is not None:  # the map travels with the run: the map metrics read it
+        writer.write_map(road_map)
     if on_start is not None:
         total = expected_frames(log, assembler)
         if total is not None and total > 0:

@@ -251,6 +251,7 @@ def run_sequential(
                     wall_ns,
                     late,
                     frame.missing,
+                    frame.traffic.traffic_lights,
                 )
                 try:
                     sink(record)

@@ -43,6 +43,7 @@ from redrive.types import (
     PlannedPath,
     RoadMap,
     Role,
+    TrafficLight,
     VehicleState,
 )
 
@@ -69,6 +70,7 @@ NEEDS = frozenset(
         "logged_ego",
         "closed_loop",
         "road_map",
+        "traffic_lights",
         "detections",
         "paths",
         "commands",
@@ -84,6 +86,7 @@ NEED_SOURCES: Mapping[str, str] = MappingProxyType(
         "logged_ego": "a closed-loop run, which stores the logged ego apart from the driven one",
         "closed_loop": "a closed-loop run (its closed_loop table: the command that moved the ego each frame)",
         "road_map": "a road map in the run (runs of a synthetic scenario or its log store one; recorded logs have none)",
+        "traffic_lights": "a log with traffic-light states (synthetic scenarios with lights record them)",
         "detections": "a perception algorithm with at least one successful step",
         "paths": "a planning algorithm with at least one successful step",
         "commands": "a control algorithm with at least one successful step",
@@ -249,6 +252,10 @@ class EvalData:
     def road_map(self) -> RoadMap | None:
         """The run's road map, None when it has none."""
         return self._cached("road_map", self.run.road_map)
+
+    def traffic_lights(self) -> dict[int, tuple[TrafficLight, ...]]:
+        """frame index → the traffic lights' states of the frame (frames that had any)."""
+        return self._cached("traffic_lights", self.run.traffic_lights)
 
     def paths(self) -> dict[int, PlannedPath]:
         return self._cached("paths", lambda: self.run.paths(self.algorithm))

@@ -68,6 +68,7 @@ class _Provides:
         self.has_ego = run.table("ego").num_rows > 0
         self.has_logged_ego = run.table("ego_logged").num_rows > 0
         self.has_closed_loop = run.table("closed_loop").num_rows > 0
+        self.has_traffic_lights = run.table("traffic_lights").num_rows > 0
         # the file's presence: a damaged map is the metric's error to report, with the file
         self.has_road_map = (run.path / MAP_NAME).is_file()
 
@@ -79,6 +80,7 @@ class _Provides:
             "logged_ego": self.has_logged_ego,
             "closed_loop": self.has_closed_loop,
             "road_map": self.has_road_map,
+            "traffic_lights": self.has_traffic_lights,
             "steps": self.has_steps,
             "frames": self.has_frames,
         }.get(need)

@@ -24,10 +24,12 @@ import pyarrow.compute as pc
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle, Polygon
+from matplotlib.ticker import MaxNLocator
 
 from redrive.errors import ConfigError
 from redrive.evaluation import html as h
 from redrive.evaluation.deltas import series_direction
+from redrive.evaluation.frame_points import lidar_points_of_frames
 from redrive.evaluation.store import Evaluation
 from redrive.geometry.boxes import box_corners
 from redrive.results import Run
@@ -121,6 +123,7 @@ def timelines_png(
         for frame in list(marks)[:50]:
             ax.axvline(frame, color="#d62728", alpha=0.25, linewidth=0.8)
     axes[-1].set_xlabel("frame index")
+    axes[-1].xaxis.set_major_locator(MaxNLocator(integer=True))  # frames are whole numbers
     axes[0].set_title(plain(title), fontsize=10)
     return h.png(fig, dpi=PNG_DPI)
 
@@ -202,9 +205,11 @@ def birds_eye_png(
     ground_truth: Sequence[DetectedObject],
     detections: Mapping[str, Sequence[DetectedObject]],
     paths: Mapping[str, FloatArray] | None = None,
+    points_xy: FloatArray | None = None,
     title: str,
 ) -> bytes:
-    """Top view of one frame in base_link: ground truth (green, solid), each algorithm's
+    """Top view of one frame in base_link: the LiDAR points ``points_xy`` ((N, 2) x, y in m,
+    light grey dots) when given, ground truth (green, solid), each algorithm's
     detections (dashed, one colour each), planned paths ((K, 2) x, y in m), the ego box
     (4.7 m × 1.9 m from 0.95 m behind the rear axle) and range rings every 10 m.  The view spans
     the farthest object within 60 m, + 5 m (20 … 60 m); farther objects are cut off."""
@@ -217,6 +222,10 @@ def birds_eye_png(
         ax.add_patch(Circle((0.0, 0.0), float(r), fill=False, color="#bbbbbb", linewidth=0.7))
         if r < extent:
             ax.text(0.0, float(r), f"{r:.0f} m", fontsize=6, color="#888888", ha="center")
+    if points_xy is not None and len(points_xy):
+        near = points_xy[np.all(np.abs(points_xy) <= extent, axis=1)]
+        ax.scatter(near[:, 1], near[:, 0], s=0.15, color="#9a9a9a", linewidths=0, zorder=0,
+                   label="LiDAR", rasterized=True)  # fmt: skip
     ego = np.array([[3.75, 0.95], [-0.95, 0.95], [-0.95, -0.95], [3.75, -0.95]])
     ax.add_patch(Polygon(ego[:, ::-1], closed=True, color="#444444", alpha=0.8, label="ego"))
     _draw_boxes(ax, ground_truth, color=GROUND_TRUTH_COLOR, label="ground truth", dashed=False)
@@ -234,7 +243,7 @@ def birds_eye_png(
     ax.set_ylabel("x (m, forward +)", fontsize=8)
     ax.tick_params(labelsize=7)
     ax.set_title(plain(title), fontsize=9)
-    fig.legend(fontsize=7, loc="outside lower center", ncol=3, frameon=False)
+    fig.legend(fontsize=7, loc="outside lower center", ncol=3, frameon=False, markerscale=12)
     return h.png(fig, dpi=PNG_DPI)
 
 
@@ -427,6 +436,7 @@ def snapshot_figures(run: Run, frames: Sequence[tuple[int, Sequence[str]]]) -> l
         return table.filter(pc.is_in(table.column("frame_index"), value_set=wanted))
 
     gt, dets, paths = rows_of("ground_truth"), rows_of("detections"), rows_of("paths")
+    clouds = lidar_points_of_frames(run, [f for f, _ in frames])
     detectors = algorithm_order(run, run.table("detections").column("algorithm").to_pylist())
     out = []
     for frame, why in frames:
@@ -447,7 +457,7 @@ def snapshot_figures(run: Run, frames: Sequence[tuple[int, Sequence[str]]]) -> l
                 ).astype(np.float64)
         png = birds_eye_png(
             ground_truth=gt_objs.get(frame, ()), detections=shown, paths=planned,
-            title=f"frame {frame}",
+            points_xy=clouds.get(frame), title=f"frame {frame}",
         )  # fmt: skip
         caption = h.Markup(f"<b>frame {frame}</b><br>" + "<br>".join(h.esc(line) for line in why))
         out.append(h.figure(png, caption=caption, alt=f"bird's-eye view of frame {frame}"))

@@ -154,6 +154,9 @@ class PooledEvalData(EvalData):
     def road_map(self) -> RoadMap | None:
         return None  # each log has its own map: map metrics pool by their frame-weighted mean
 
+    def traffic_lights(self) -> dict[int, Any]:
+        return self._cached("traffic_lights", lambda: self._by_frame(lambda r: r.traffic_lights()))
+
     def paths(self) -> dict[int, Any]:
         algo = self.algorithm
         return self._cached("paths", lambda: self._by_frame(lambda r: r.paths(algo)))

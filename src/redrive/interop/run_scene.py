@@ -15,6 +15,9 @@ Topics (each a :class:`~redrive.interop.shapes.ShapeSet` per frame, stamped with
 ``/redrive/bookmarks``            the stored evaluation's bookmarks as labels over the ego,
                                   ``metric/algorithm: detail`` (none before ``redrive
                                   evaluate``)
+``/redrive/traffic_lights``       runs whose map has lights and whose log their states: each
+                                  light at its map position, coloured by its state, with
+                                  its stop line (``map``; :mod:`.light_shapes`)
 ================================  =========================================================
 
 The transforms per frame: the log's static transforms (sensors on ``base_link``) plus the ego's
@@ -35,6 +38,7 @@ import pyarrow.compute as pc
 
 from redrive.errors import ConfigError
 from redrive.geometry.se3 import quaternion_from_yaw
+from redrive.interop.light_shapes import LIGHTS_TOPIC, light_shapes
 from redrive.interop.shapes import (
     BoxShape,
     Color,
@@ -47,7 +51,15 @@ from redrive.results import Run
 from redrive.results.evaluation import read_evaluation, stored_metric_names
 from redrive.results.records import FrameRecord
 from redrive.sim.ego import EgoGeometry
-from redrive.types import DetectedObject, ObjectColumns, PlannedPath, Transform, VehicleState
+from redrive.types import (
+    DetectedObject,
+    LightState,
+    ObjectColumns,
+    PlannedPath,
+    RoadMap,
+    Transform,
+    VehicleState,
+)
 
 __all__ = [
     "BODY_FRAME",
@@ -92,7 +104,20 @@ def scene_topics(run: Run) -> tuple[str, ...]:
     topics |= {f"/redrive/paths/{a}" for a in _algorithms(run, "planning")}
     if "ego_logged" in run.tables():
         topics.add(_GHOST_TOPIC)
+    if _lights_map(run) is not None:
+        topics.add(LIGHTS_TOPIC)
     return tuple(sorted(topics))
+
+
+def _lights_map(run: Run) -> RoadMap | None:
+    """The run's road map when it has lights and the run their states, else None."""
+    if "traffic_lights" not in run.tables():
+        return None
+    try:
+        road_map = run.road_map()
+    except ConfigError:
+        return None  # a damaged map: the scene goes without its lights
+    return road_map if road_map is not None and road_map.traffic_lights else None
 
 
 Row = dict[str, Any]
@@ -261,6 +286,11 @@ def run_scenes(
     found = read("paths")
     paths = {a: _rows_by_frame(found, a) for a in _algorithms(run, "planning")}
     bookmarks = _bookmarks(run)
+    lights_map = _lights_map(run)
+    lights = {
+        f: {str(r["light_id"]): LightState(r["state"]) for r in rows}
+        for f, rows in _rows_by_frame(read("traffic_lights")).items()
+    }
     static = tuple(static_transforms)
     for frame in frames:
         index, stamp = int(frame["frame_index"]), int(frame["stamp_ns"])
@@ -325,6 +355,8 @@ def run_scenes(
                 for i, text in enumerate(marks)
             ),
         )
+        if lights_map is not None:
+            shapes[LIGHTS_TOPIC] = light_shapes(lights_map, lights.get(index, {}), stamp_ns=stamp)
         yield FrameScene(frame_index=index, stamp_ns=stamp, shapes=shapes, transforms=transforms)
 
 

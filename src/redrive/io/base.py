@@ -56,7 +56,7 @@ class DecodedKind(enum.Enum):
     OBJECTS = "objects"  # tuple[DetectedObject, ...]: ground truth or detections
     TRANSFORMS = "transforms"  # tuple[Transform, ...]: tf / tf_static
     CAMERA_INFO = "camera_info"  # CameraInfo: a camera's calibration, never a sensor of frames
-    TRAFFIC = "traffic"  # TrafficData: the states of traffic lights at a stamp
+    TRAFFIC_LIGHTS = "traffic_lights"  # TrafficData: the lights' states (Frame.traffic)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

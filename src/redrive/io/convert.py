@@ -250,7 +250,7 @@ def convert_log(
     if out.suffix not in (".mcap", ".bag"):
         msg = f"{out}: the output must end in .mcap (MCAP, ROS 2) or .bag (ROS 1 bag)"
         raise LogError(msg)
-    with open_log(in_path, strict=strict) as reader:
+    with open_log(in_path, strict=strict, packets="raw") as reader:
         sources = _source_stores(reader)
         is2 = out.suffix == ".mcap"
         store = _destination_store(sources, ros_version=2 if is2 else 1)
@@ -263,13 +263,6 @@ def convert_log(
             for t in selected
             if t.encoding != "native" and (not t.has_definition or t.encoding not in sources)
         }
-        skipped_topics.update(
-            {
-                t.topic: "traffic-light states have no standard ROS message"
-                for t in selected
-                if t.encoding == "native" and t.kind is DecodedKind.TRAFFIC
-            }
-        )
         for topic, why in skipped_topics.items():
             logger.warning("%s: topic %s is left out: %s", reader.path, topic, why)
         wanted = [t.topic for t in selected if t.topic not in skipped_topics]

@@ -35,7 +35,7 @@ import os
 import stat
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Protocol, runtime_checkable
+from typing import Literal, Protocol, runtime_checkable
 
 from redrive.errors import LogError, PluginError
 from redrive.io.base import LogReader, ReaderCapabilities
@@ -303,7 +303,9 @@ def detect_format(path: Path) -> str:
     return _recognising(path).format
 
 
-def open_log(path: str | Path, *, strict: bool = True) -> LogReader:
+def open_log(
+    path: str | Path, *, strict: bool = True, packets: Literal["clouds", "raw"] = "clouds"
+) -> LogReader:
     """Open any log redrive reads, recognised by its content.
 
     Args:
@@ -318,6 +320,10 @@ def open_log(path: str | Path, *, strict: bool = True) -> LogReader:
         strict: when True, damage met while reading raises
             :class:`~redrive.errors.LogTruncatedError` after every message before it was
             yielded; when False the damage is logged and reading goes on where it can.
+        packets: ``clouds`` (the default): beside each topic of Ouster lidar packets whose sensor
+            metadata is in the log, a LiDAR topic ``…/points`` of one cloud per frame
+            (:mod:`redrive.io.ros.decoders.ouster_log`); ``raw``: the file's own topics only
+            (converting, repairing, counting what was recorded).
 
     Raises:
         LogError: the path is missing, empty, damaged beyond use or not a log.
@@ -325,4 +331,13 @@ def open_log(path: str | Path, *, strict: bool = True) -> LogReader:
     path = Path(path)
     cls = reader_format(detect_format(path))
     opener: Callable[..., LogReader] = cls  # type: ignore[assignment]
-    return opener(path, strict=strict)
+    log = opener(path, strict=strict)
+    if packets == "raw":
+        return log
+    from redrive.io.ros.decoders.ouster_log import with_packet_clouds  # decoders load on use
+
+    try:
+        return with_packet_clouds(log)
+    except BaseException:
+        log.close()
+        raise

@@ -118,7 +118,7 @@ def repair_log(
     if out.exists() and src.exists() and out.resolve() == src.resolve():
         msg = f"{out}: the output would replace the damaged input; write it elsewhere"
         raise LogError(msg)
-    with open_log(src, strict=False) as reader:
+    with open_log(src, strict=False, packets="raw") as reader:
         if isinstance(reader, McapFileReader):
             return _repair_mcap(reader, out, compression)
         if isinstance(reader, Ros1BagReader | Ros2BagReader):

@@ -335,7 +335,7 @@ class DataLogger:
         sizes = dict.fromkeys(self.recorded, 0)
         for path in self.files:
             try:
-                with open_log(path) as log:
+                with open_log(path, packets="raw") as log:
                     for topic, info in log.topics.items():
                         recorded[topic] = recorded.get(topic, 0) + info.count
                         sizes[topic] = sizes.get(topic, 0) + max(info.size_bytes, 0)

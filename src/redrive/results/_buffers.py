@@ -50,6 +50,7 @@ _ORDER: dict[str, tuple[str, ...]] = {
         "frame_index", "stamp_ns", "source", "algorithm", "reason", "throttle", "brake",
         "steering_angle_rad", "deviation_m", "deviation_yaw_rad", "deviated",
     ),
+    "traffic_lights": ("frame_index", "stamp_ns", "light_id", "state"),
     "resources": ("t_ns", "label", "pid", "cpu_percent", "rss_bytes"),
     "frames": (
         "frame_index", "stamp_ns", "wall_ns", "late", "n_ground_truth", "missing_inputs",
@@ -139,6 +140,10 @@ class TableBuffers:
             )
         if gt:
             self._rows["ground_truth"].extend(_object_rows((fi, stamp), gt, ground_truth=True))
+        if rec.traffic_lights:
+            self._rows["traffic_lights"].extend(
+                [(fi, stamp, light.id, light.state.value) for light in rec.traffic_lights]
+            )
         if rec.vehicle_state is not None:
             self._rows["ego"].append(_state_row(fi, rec.vehicle_state))
         if rec.logged_vehicle_state is not None:

@@ -9,7 +9,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from redrive.types import ControlCommands, DetectedObject, PlannedPath, Role, VehicleState
+from redrive.types import (
+    ControlCommands,
+    DetectedObject,
+    PlannedPath,
+    Role,
+    TrafficLight,
+    VehicleState,
+)
 
 __all__ = [
     "ROLES",
@@ -154,6 +161,8 @@ class FrameRecord:
         wall_ns: wall time the engine spent on the whole frame, int ns.
         late: real-time pacing only: the frame was processed after its due time.
         missing: the frame's inputs with no sample within the tolerance (``Frame.missing``).
+        traffic_lights: the traffic lights' states of the frame (``Frame.traffic``); empty
+            when the log has none.
     """
 
     frame_index: int
@@ -166,6 +175,7 @@ class FrameRecord:
     wall_ns: int = 0
     late: bool = False
     missing: tuple[str, ...] = ()
+    traffic_lights: tuple[TrafficLight, ...] = ()
 
     def __post_init__(self) -> None:
         index = int(self.frame_index)
@@ -184,6 +194,7 @@ class FrameRecord:
         object.__setattr__(self, "steps", steps)
         if self.ground_truth is not None:
             object.__setattr__(self, "ground_truth", tuple(self.ground_truth))
+        object.__setattr__(self, "traffic_lights", tuple(self.traffic_lights))
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -222,7 +233,7 @@ assert StepRecord.__slots__ == (
 )  # fmt: skip
 assert FrameRecord.__slots__ == (
     "frame_index", "stamp_ns", "steps", "vehicle_state", "logged_vehicle_state", "closed_loop",
-    "ground_truth", "wall_ns", "late", "missing",
+    "ground_truth", "wall_ns", "late", "missing", "traffic_lights",
 )  # fmt: skip
 
 
@@ -252,6 +263,7 @@ class _FrameBuilder:
     wall_ns: int
     late: bool
     missing: tuple[str, ...]
+    traffic_lights: tuple[TrafficLight, ...]
 
 
 def step_record_unchecked(  # noqa: PLR0917 (per step: positional is cheaper)
@@ -296,6 +308,7 @@ def frame_record_unchecked(  # noqa: PLR0917 (per frame: positional is cheaper)
     wall_ns: int,
     late: bool,
     missing: tuple[str, ...],
+    traffic_lights: tuple[TrafficLight, ...] = (),
 ) -> FrameRecord:
     """A :class:`FrameRecord` of an open-loop frame without its checks (called per frame).
 
@@ -313,5 +326,6 @@ def frame_record_unchecked(  # noqa: PLR0917 (per frame: positional is cheaper)
     record.wall_ns = wall_ns
     record.late = late
     record.missing = missing
+    record.traffic_lights = traffic_lights
     record.__class__ = FrameRecord  # type: ignore[assignment]
     return record  # type: ignore[return-value]

@@ -22,7 +22,15 @@ from redrive.results.readers import (
 from redrive.results.roadmap import read_road_map
 from redrive.results.schema import SCHEMAS, SORT_KEYS, TABLES
 from redrive.results.summary import summarize_steps
-from redrive.types import ControlCommands, DetectedObject, PlannedPath, RoadMap, VehicleState
+from redrive.types import (
+    ControlCommands,
+    DetectedObject,
+    LightState,
+    PlannedPath,
+    RoadMap,
+    TrafficLight,
+    VehicleState,
+)
 
 __all__ = ["Run", "check_table", "open_run"]
 
@@ -151,6 +159,31 @@ class Run:
         """frame_index → the ego state the log recorded, where the run stored it apart from the
         driven ego (closed loop); empty otherwise (open loop: :meth:`ego` *is* the logged ego)."""
         return ego_by_frame(self.table("ego_logged"))
+
+    def traffic_lights(self) -> dict[int, tuple[TrafficLight, ...]]:
+        """frame_index → the traffic lights' states of the frame, for every frame that had any
+        (``Frame.traffic``); empty when the run's log has no light states.
+
+        Raises:
+            ConfigError: a stored state is not a :class:`~redrive.types.LightState` value.
+        """
+        table = self.table("traffic_lights")
+        out: dict[int, list[TrafficLight]] = {}
+        states = {s.value: s for s in LightState}
+        for fi, light_id, state in zip(
+            table.column("frame_index").to_pylist(),
+            table.column("light_id").to_pylist(),
+            table.column("state").to_pylist(),
+            strict=True,
+        ):
+            if state not in states:
+                msg = (
+                    f"{self.path}: traffic_lights row of frame {fi}, light {light_id!r}: state "
+                    f"{state!r} is not one of {', '.join(states)}; the run is damaged"
+                )
+                raise ConfigError(msg)
+            out.setdefault(fi, []).append(TrafficLight(id=light_id, state=states[state]))
+        return {fi: tuple(lights) for fi, lights in out.items()}
 
     def road_map(self) -> RoadMap | None:
         """The run's road map (``RUN/map.json``), None when the run has none.

@@ -27,6 +27,7 @@ __all__ = [
     "STEPS",
     "SUMMARY",
     "TABLES",
+    "TRAFFIC_LIGHTS",
 ]
 
 
@@ -172,6 +173,19 @@ CLOSED_LOOP = pa.schema(
     ]
 )
 
+#: one row per traffic light per frame with light states (``Frame.traffic``): ``light_id`` is
+#: ``TrafficLight.id`` (the road map's ``MapTrafficLight.light_id``), ``state`` the
+#: ``LightState`` value (``red``, ``yellow``, ``green``, ``unknown``).  Optional: runs of logs
+#: without lights (and runs written before it existed) have no parts.
+TRAFFIC_LIGHTS = pa.schema(
+    [
+        _f("frame_index", _I64),
+        _f("stamp_ns", _I64),
+        _f("light_id", _STR),
+        _f("state", _STR),
+    ]
+)
+
 #: the per-algorithm summary of :meth:`redrive.results.Run.summary` (not stored; computed).
 SUMMARY = pa.schema(
     [
@@ -206,6 +220,7 @@ SCHEMAS: Mapping[str, pa.Schema] = MappingProxyType(
         "paths": PATHS,
         "commands": COMMANDS,
         "closed_loop": CLOSED_LOOP,
+        "traffic_lights": TRAFFIC_LIGHTS,
         "resources": RESOURCES,
         "frames": FRAMES,
     }

@@ -3,6 +3,11 @@
 Two phase groups alternate (west/east, then south/north).  One cycle lasts
 ``2 · (green_s + yellow_s + all_red_s)``; group 0 is green at ``t = -offset_s``, group 1 half a
 cycle later.  Time is the simulation time in seconds since the start of the scenario.
+
+The ground truth of the signals is :meth:`TrafficLights.traffic_data`: one
+:class:`~redrive.types.TrafficLight` per signal head, its ``id`` :func:`light_id_text` of the
+signal — the ``light_id`` of the :class:`~redrive.types.MapTrafficLight` the scenario's road map
+places for it (:mod:`redrive.sim.roadmap`).
 """
 
 from __future__ import annotations
@@ -13,9 +18,25 @@ from dataclasses import dataclass
 
 from redrive.sim.roads import Signal
 from redrive.sim.scene import TrafficLightState
-from redrive.types import LightState
+from redrive.types import LightState, TrafficData, TrafficLight
 
-__all__ = ["LightTiming", "TrafficLights"]
+__all__ = ["LightTiming", "TrafficLights", "light_id_text", "traffic_data_of"]
+
+
+def light_id_text(light_id: int) -> str:
+    """The text id of signal ``light_id`` in the road map and the ground truth (``"0"``, ``"1"``,
+    …: ``TrafficLight.id == MapTrafficLight.light_id``)."""
+    return str(int(light_id))
+
+
+def traffic_data_of(states: Sequence[TrafficLightState]) -> TrafficData:
+    """The ground truth of a scene's signal heads (ids :func:`light_id_text`, in their order;
+    no nearby vehicles — those are the objects)."""
+    return TrafficData(
+        traffic_lights=tuple(
+            TrafficLight(id=light_id_text(head.light_id), state=head.state) for head in states
+        )
+    )
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -70,3 +91,8 @@ class TrafficLights:
             )
             for sig in self.signals
         )
+
+    def traffic_data(self, time_s: float) -> TrafficData:
+        """The ground truth of every signal head at ``time_s`` (:func:`traffic_data_of` of
+        :meth:`states`)."""
+        return traffic_data_of(self.states(time_s))

@@ -2,41 +2,47 @@
 
 What the log holds (ROS 2 CDR, standard types, schemas embedded; frames REP-105):
 
-==============================  ==========================================  ====================
-topic                           type                                        what
-==============================  ==========================================  ====================
-``/<lidar>``                    ``sensor_msgs/msg/PointCloud2``             one sweep per
-                                                                            message, stamped at
-                                                                            its start; channels
-                                                                            intensity, ring,
-                                                                            t_offset_ns
-``/<lidar_2d>``                 ``sensor_msgs/msg/LaserScan``               one scan
-``/<camera>/image_raw``         ``sensor_msgs/msg/Image``                   rgb8
-``/<camera>/camera_info``       ``sensor_msgs/msg/CameraInfo``              the true intrinsics,
-                                                                            with each image
-                                                                            (same stamp, optical
-                                                                            frame)
-``/<imu>``                      ``sensor_msgs/msg/Imu``                     specific force,
-                                                                            rate, orientation
-``/<gnss>``                     ``sensor_msgs/msg/NavSatFix``               map = ENU at the
-                                                                            reference
-``/<odometry>``                 ``nav_msgs/msg/Odometry``                   wheel odometry
-                                                                            (noisy, ``odom``)
-``/ground_truth/ego_state``     ``nav_msgs/msg/Odometry``                   the true ego state
-                                                                            (``map``), at twice
-                                                                            the odometry rate
-``/ground_truth/objects``       ``redrive_msgs/msg/GroundTruthObjectArray`` every object within
-                                                                            range, in
-                                                                            ``base_link``, at
-                                                                            each sweep of the
-                                                                            first LiDAR
-``/tf``                         ``tf2_msgs/msg/TFMessage``                  map→odom→base_link
-                                                                            (REP-105), with the
-                                                                            ground-truth pose
-``/tf_static``                  ``tf2_msgs/msg/TFMessage``                  base_link→sensors
-                                                                            (latched: transient
-                                                                            local QoS)
-==============================  ==========================================  ====================
+================================  ===========================================  ====================
+topic                             type                                         what
+================================  ===========================================  ====================
+``/<lidar>``                      ``sensor_msgs/msg/PointCloud2``              one sweep per
+                                                                               message, stamped at
+                                                                               its start; channels
+                                                                               intensity, ring,
+                                                                               t_offset_ns
+``/<lidar_2d>``                   ``sensor_msgs/msg/LaserScan``                one scan
+``/<camera>/image_raw``           ``sensor_msgs/msg/Image``                    rgb8
+``/<camera>/camera_info``         ``sensor_msgs/msg/CameraInfo``               the true intrinsics,
+                                                                               with each image
+                                                                               (same stamp, optical
+                                                                               frame)
+``/<imu>``                        ``sensor_msgs/msg/Imu``                      specific force,
+                                                                               rate, orientation
+``/<gnss>``                       ``sensor_msgs/msg/NavSatFix``                map = ENU at the
+                                                                               reference
+``/<odometry>``                   ``nav_msgs/msg/Odometry``                    wheel odometry
+                                                                               (noisy, ``odom``)
+``/ground_truth/ego_state``       ``nav_msgs/msg/Odometry``                    the true ego state
+                                                                               (``map``), at twice
+                                                                               the odometry rate
+``/ground_truth/objects``         ``redrive_msgs/msg/GroundTruthObjectArray``  every object within
+                                                                               range, in
+                                                                               ``base_link``, at
+                                                                               each sweep of the
+                                                                               first LiDAR
+``/ground_truth/traffic_lights``  ``redrive_msgs/msg/TrafficLightStateArray``  every signal's state
+                                                                               (ids = the road
+                                                                               map's ``light_id``),
+                                                                               with each objects
+                                                                               message (scenarios
+                                                                               with lights)
+``/tf``                           ``tf2_msgs/msg/TFMessage``                   map→odom→base_link
+                                                                               (REP-105), with the
+                                                                               ground-truth pose
+``/tf_static``                    ``tf2_msgs/msg/TFMessage``                   base_link→sensors
+                                                                               (latched: transient
+                                                                               local QoS)
+================================  ===========================================  ====================
 
 Determinism: one :class:`numpy.random.SeedSequence` of the scenario seed is split into one
 generator per sensor, the world has its own, and nothing reads the clock, so the same scenario and
@@ -74,6 +80,7 @@ from redrive.sim.camera import CameraFrame, CameraModel
 from redrive.sim.ground_truth import ground_truth_objects
 from redrive.sim.inertial import GnssModel, ImuModel, OdometryModel
 from redrive.sim.lidar import LidarModel, LidarScan
+from redrive.sim.lights import traffic_data_of
 from redrive.sim.rig import Rig, SensorSpec, rig_from_mapping
 from redrive.sim.roadmap import scenario_road_map
 from redrive.sim.scenario import Scenario
@@ -85,6 +92,7 @@ from redrive.types import SensorType, Transform, VehicleState
 __all__ = [
     "EGO_STATE_TOPIC",
     "GROUND_TRUTH_TOPIC",
+    "TRAFFIC_LIGHTS_TOPIC",
     "MessageSink",
     "SensorSimulation",
     "SensorWorld",
@@ -96,6 +104,7 @@ __all__ = [
 ]
 
 GROUND_TRUTH_TOPIC = "/ground_truth/objects"
+TRAFFIC_LIGHTS_TOPIC = "/ground_truth/traffic_lights"
 EGO_STATE_TOPIC = "/ground_truth/ego_state"
 
 
@@ -265,6 +274,9 @@ class _Recorder:
                 scene, lidar_hits=self.last_hits, camera_pixels=self.camera_pixels()
             )
             self.writer.write(GROUND_TRUTH_TOPIC, scan.stamp_ns, objects, frame_id="base_link")
+            if scene.traffic_lights:  # the signals' states at the sweep's start, as its objects
+                lights = traffic_data_of(scene.traffic_lights)
+                self.writer.write(TRAFFIC_LIGHTS_TOPIC, scan.stamp_ns, lights, frame_id="map")
 
     def camera_pixels(self) -> dict[int, int] | None:
         """Object id → pixels it covers in the last image of every camera (None before any)."""

@@ -36,7 +36,7 @@ from redrive.sim.scene import GroundMap, ObjectLooks, Scene
 from redrive.sim.scenery import build_scenery
 from redrive.sim.stepper import FrameStepper
 from redrive.sim.truth import _Constant, truth_columns
-from redrive.types import ControlCommands, ObjectClass, ObjectColumns, VehicleState
+from redrive.types import ControlCommands, ObjectClass, ObjectColumns, TrafficData, VehicleState
 
 __all__ = ["World"]
 
@@ -450,6 +450,10 @@ class World:
             is_ground_truth=np.concatenate([np.ones(n, dtype=bool), looks.is_ground_truth]),
         )
         return columns, appearance
+
+    def traffic_data(self) -> TrafficData:
+        """The signals' ground truth at :attr:`time_ns` (ids: the road map's ``light_id``)."""
+        return self.lights.traffic_data(self.time_s)
 
     def scene(self) -> Scene:
         """The world at :attr:`time_ns`, as the sensors see it (the ego's own box excluded)."""

@@ -104,9 +104,12 @@ class Frame:
         vehicle_state: ego state interpolated to ``stamp_ns``; None when the log has none.
         ground_truth: objects (in base_link when a transform was known, else in their own
             frame) or None when the log carries no ground truth.
+        traffic: the traffic lights' states at ``stamp_ns`` (``TrafficLight.id`` is the
+            ``light_id`` of a light of the log's road map); no lights when the log has none.
         missing: what the log provides but had no sample of within the tolerance of this
             frame's stamp (stale or absent here): sensor ids, ``vehicle_state``,
-            ``ground_truth``.  Their fields above are then absent / None.
+            ``ground_truth``, ``traffic_lights``.  Their fields above are then absent / None
+            (empty, for the lights).
     """
 
     stamp_ns: int

@@ -21,6 +21,13 @@
   against the discretisation, the plan never moves the bumper closer than ``s0_m`` to an obstacle
   (and does not move at all while it is already closer).
 
+* **Traffic lights** — with a road map (:attr:`Algorithm.road_map`, which synthetic logs and
+  scenarios hand over) and light states in ``frame.traffic``, the stop line of a light showing
+  red — or yellow while the ego can still stop comfortably (``v² / (2 b)`` within the gap) —
+  that the path crosses in its lane's direction is a stopped obstacle at the line (the IDM stops
+  ``s0_m`` before it); a yellow it cannot stop for is driven through, until the light is green
+  again (:mod:`redrive.algorithms.reference._lights`).  ``traffic_lights = false`` ignores them.
+
 Obstacles are the objects of the last perception algorithm upstream (boxes in base_link of the
 frame). One is in the path when the lateral extent of its box (its corners projected onto the path)
 overlaps the corridor ``±corridor_half_width_m`` around the path and part of it is ahead of the
@@ -53,6 +60,7 @@ max_curvature_1pm        0.2       lane-arc curvature limit (radius ≥ 5 m)
 min_turn_speed_mps       1.0       below this speed the lane arc is straight
 max_route_offset_m       10.0      farther from the route than this is an error
 perception               None      name of the perception algorithm to read; None: the last
+traffic_lights           true      stop at red (and stoppable yellow) lights of the road map
 =======================  ========  ==========================================================
 """
 
@@ -69,6 +77,7 @@ import numpy.typing as npt
 
 from redrive.algorithms.base import VEHICLE_STATE, Algorithm, Input, Role, StageOutputs
 from redrive.algorithms.reference._kernels import project_on_segments
+from redrive.algorithms.reference._lights import Gate, gates_of, stop_arcs
 from redrive.algorithms.reference._plan_kernels import (
     idm_profile,
     leaders_on_path,
@@ -82,6 +91,7 @@ from redrive.types import (
     Frame,
     ObjectColumns,
     PlannedPath,
+    RoadMap,
     SensorType,
     VehicleState,
 )
@@ -202,6 +212,7 @@ class IdmPlanner(Algorithm):
             "min_turn_speed_mps": 1.0,
             "max_route_offset_m": 10.0,
             "perception": None,
+            "traffic_lights": True,
         }
     )
 
@@ -209,6 +220,8 @@ class IdmPlanner(Algorithm):
         super().__init__(name=name)
         self._route: Polyline | None = None
         self._route_s_m: float | None = None
+        self._gates: tuple[Gate, ...] = ()
+        self._committed: set[str] = set()  # yellow lights it drives through
         self.setup(self.config)
 
     def setup(self, config: Mapping[str, Any]) -> None:
@@ -237,6 +250,11 @@ class IdmPlanner(Algorithm):
             msg = f"IdmPlanner config 'perception' must be an algorithm name or None, got {perception!r}"
             raise ConfigError(msg)
         self.perception: str | None = perception
+        obey = config.get("traffic_lights", True)
+        if not isinstance(obey, bool):
+            msg = f"IdmPlanner config 'traffic_lights' must be true or false, got {obey!r}"
+            raise ConfigError(msg)
+        self.obey_lights = obey
         self._route = self._parse_route(config.get("route"))
         self._route_s_m = None
 
@@ -263,6 +281,12 @@ class IdmPlanner(Algorithm):
 
     def reset(self) -> None:
         self._route_s_m = None
+        self._committed = set()
+
+    def use_road_map(self, road_map: RoadMap | None) -> None:
+        """Keep the map and the stop lines of its traffic lights (the gates the step obeys)."""
+        super().use_road_map(road_map)
+        self._gates = gates_of(road_map)
 
     def bind(self, sensors: Mapping[str, SensorType], *, extras: Iterable[str] = ()) -> None:
         """As :meth:`Algorithm.bind`, then one made-up plan's profile and projection, so that
@@ -301,6 +325,20 @@ class IdmPlanner(Algorithm):
         if route_end_m is not None:
             leaders_s = np.append(leaders_s, route_end_m)
             leaders_v = np.append(leaders_v, 0.0)
+        lights = frame.traffic.traffic_lights
+        if self.obey_lights and self._gates and lights:
+            stops = stop_arcs(
+                self._gates,
+                lights,
+                state=state,
+                path_xy=path.xy,
+                path_s=path.s,
+                front_offset_m=self.front_offset_m,
+                comfort_decel_mps2=self.b_mps2,
+                committed=self._committed,
+            )
+            leaders_s = np.append(leaders_s, stops)
+            leaders_v = np.append(leaders_v, np.zeros(stops.size))
         t_s, s_m = self._profile(speed_mps, leaders_s, leaders_v)
         xy = path.points_at(s_m)
         waypoints = np.column_stack([xy, np.zeros(len(t_s)), t_s])

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from redrive.evaluation.closedloop.collisions import AtFaultCollisions, TimeToCollision
 from redrive.evaluation.closedloop.commands import FallbackCommands
+from redrive.evaluation.closedloop.lights import TrafficLightCompliance
 from redrive.evaluation.closedloop.motion import Comfort, EgoProgress
 from redrive.evaluation.closedloop.nuplan import NuplanScenarioScore
 from redrive.evaluation.closedloop.pdm import PdmScore
@@ -30,4 +31,5 @@ __all__ = [
     "PdmScore",
     "SpeedLimitCompliance",
     "TimeToCollision",
+    "TrafficLightCompliance",
 ]

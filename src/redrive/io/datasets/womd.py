@@ -274,7 +274,7 @@ class WomdReader(NativeLogBase):
             {
                 TOPIC_EGO_POSE: ("redrive/VehicleState", DecodedKind.VEHICLE_STATE, None),
                 TOPIC_OBJECTS: ("redrive/GroundTruthObjects", DecodedKind.OBJECTS, None),
-                TOPIC_TRAFFIC_LIGHTS: ("redrive/TrafficData", DecodedKind.TRAFFIC, None),
+                TOPIC_TRAFFIC_LIGHTS: ("redrive/TrafficData", DecodedKind.TRAFFIC_LIGHTS, None),
             },
         )
         self.capabilities = ReaderCapabilities(

@@ -41,7 +41,7 @@ from redrive.io.mcap.qos import offered_qos_profiles
 from redrive.io.ros.decoders.base import Decoded
 from redrive.io.ros.encode import encode_value
 from redrive.io.ros.typestore import typestore_for
-from redrive.types import Frame, VehicleState
+from redrive.types import Frame, TrafficData, VehicleState
 
 __all__ = ["COMPRESSION", "Compression", "McapWriter"]
 
@@ -258,8 +258,8 @@ class McapWriter:
         """Serialise a data-model value as its standard ROS 2 message and write it.
 
         Args:
-            value: PointCloud, Image, CameraInfo, Imu, GnssFix, VehicleState, tuple[Transform],
-                tuple[DetectedObject] (see :mod:`redrive.io.ros.encode`), or a
+            value: PointCloud, Image, CameraInfo, Imu, GnssFix, VehicleState, TrafficData (its
+                lights), tuple[Transform], tuple[DetectedObject] (see :mod:`redrive.io.ros.encode`), or a
                 :class:`~redrive.io.ros.decoders.base.Decoded` holding one (its frame and stamp are
                 then the defaults).
             frame_id: header frame; default the Decoded's / VehicleState's frame, else "".
@@ -297,7 +297,8 @@ class McapWriter:
         (log time = header stamp) in its ``frame_id``; the vehicle state to
         ``topics["vehicle_state"]`` (default ``/odom``); ground truth to
         ``topics["ground_truth"]`` (default ``/ground_truth``) at the frame stamp, in
-        ``ground_truth_frame``.
+        ``ground_truth_frame``; the traffic lights' states, when the frame has any, to
+        ``topics["traffic_lights"]`` (default ``/traffic_lights``) at the frame stamp.
         """
         names = topics or {}
         for sensor_id, sample in sorted(frame.sensors.items()):
@@ -317,6 +318,14 @@ class McapWriter:
                 frame.stamp_ns,
                 frame.ground_truth,
                 frame_id=ground_truth_frame,
+                stamp_ns=frame.stamp_ns,
+            )
+        if frame.traffic.traffic_lights:
+            lights = TrafficData(traffic_lights=frame.traffic.traffic_lights)
+            self.write(
+                names.get("traffic_lights", "/traffic_lights"),
+                frame.stamp_ns,
+                lights,
                 stamp_ns=frame.stamp_ns,
             )
 

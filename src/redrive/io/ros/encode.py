@@ -25,6 +25,11 @@ ground truth (objects with  ``redrive_msgs/msg/                   the same Detec
 num_lidar_points or         GroundTruthObjectArray``          velocities, num_lidar_points and
 visible set)                                                  visible (shipped .msg, built of
                                                               standard parts)
+TrafficData (lights only)  ``redrive_msgs/msg/                   ``ids`` (``TrafficLight.id``) and
+                           TrafficLightStateArray``           ``states`` (UNKNOWN 0, RED 1,
+                                                              YELLOW 2, GREEN 3; shipped .msg);
+                                                              nearby vehicles are objects: a
+                                                              TrafficData with any is refused
 =========================  =================================  ====================================
 """
 
@@ -45,12 +50,14 @@ from redrive.types import (
     GnssFix,
     Image,
     Imu,
+    LightState,
     PointCloud,
+    TrafficData,
     Transform,
     VehicleState,
 )
 
-__all__ = ["BODY_FRAME", "encode_value", "msgtype_of"]
+__all__ = ["BODY_FRAME", "LIGHT_STATE_CODES", "encode_value", "msgtype_of"]
 
 #: child_frame_id of the Odometry messages written for a VehicleState.
 BODY_FRAME = "base_link"
@@ -69,6 +76,13 @@ _POINTFIELD: dict[np.dtype[Any], int] = {
 _NAVSAT_COVARIANCE_UNKNOWN = 0
 _NAVSAT_COVARIANCE_KNOWN = 3
 _NAVSAT_SERVICE_GPS = 1
+#: a light's state → its code in ``redrive_msgs/msg/TrafficLightStateArray`` (the .msg constants)
+LIGHT_STATE_CODES: dict[LightState, int] = {
+    LightState.UNKNOWN: 0,
+    LightState.RED: 1,
+    LightState.YELLOW: 2,
+    LightState.GREEN: 3,
+}
 
 
 def is_ground_truth(objects: tuple[DetectedObject, ...]) -> bool:
@@ -94,6 +108,15 @@ def msgtype_of(value: object) -> str:
         return "sensor_msgs/msg/NavSatFix"
     if isinstance(value, VehicleState):
         return "nav_msgs/msg/Odometry"
+    if isinstance(value, TrafficData):
+        if value.nearby_vehicles:
+            msg = (
+                f"a TrafficData with {len(value.nearby_vehicles)} nearby vehicle(s): its message "
+                "carries the lights only; write the vehicles as a tuple[DetectedObject] on an "
+                "object topic and the lights as TrafficData(traffic_lights=...)"
+            )
+            raise UnsupportedMessageError(msg)
+        return "redrive_msgs/msg/TrafficLightStateArray"
     if isinstance(value, tuple) and all(isinstance(v, Transform) for v in value):
         return "tf2_msgs/msg/TFMessage"  # an empty tuple is an empty TFMessage
     if isinstance(value, tuple) and all(isinstance(v, DetectedObject) for v in value):
@@ -102,7 +125,8 @@ def msgtype_of(value: object) -> str:
         return "vision_msgs/msg/Detection3DArray"
     msg = (
         f"a {type(value).__name__} has no standard ROS 2 message; write PointCloud, Image, "
-        "CameraInfo, Imu, GnssFix, VehicleState, tuple[Transform] or tuple[DetectedObject]"
+        "CameraInfo, Imu, GnssFix, VehicleState, TrafficData, tuple[Transform] or "
+        "tuple[DetectedObject]"
     )
     raise UnsupportedMessageError(msg)
 
@@ -346,6 +370,22 @@ def _ground_truth(b: _Builder, objects: tuple[DetectedObject, ...], header: Any)
     )
 
 
+def _traffic_lights(b: _Builder, traffic: TrafficData, header: Any) -> Any:
+    ids = [light.id for light in traffic.traffic_lights]
+    if len(set(ids)) != len(ids):
+        twice = sorted({i for i in ids if ids.count(i) > 1})
+        msg = f"TrafficData: light id(s) {', '.join(map(repr, twice))} appear twice; ids are unique"
+        raise UnsupportedMessageError(msg)
+    return b.new(
+        "redrive_msgs/msg/TrafficLightStateArray",
+        header=header,
+        ids=ids,
+        states=np.array(
+            [LIGHT_STATE_CODES[light.state] for light in traffic.traffic_lights], dtype=np.uint8
+        ),
+    )
+
+
 def encode_value(
     value: object,
     typestore: Typestore,
@@ -387,6 +427,8 @@ def encode_value(
         return msgtype, _navsat(b, value, header)
     if isinstance(value, VehicleState):
         return msgtype, _odometry(b, value, header)
+    if isinstance(value, TrafficData):
+        return msgtype, _traffic_lights(b, value, header)
     assert isinstance(value, tuple)
     if msgtype == "redrive_msgs/msg/GroundTruthObjectArray":
         return msgtype, _ground_truth(b, value, header)

@@ -12,6 +12,7 @@ from redrive.io.base import normalize_msgtype
 from redrive.io.ros.decoders.base import Decoded, DecodedKind, DecodedValue, Decoder, Deserialize
 from redrive.io.ros.decoders.camera_info import CameraInfoDecoder
 from redrive.io.ros.decoders.image import CompressedImageDecoder, ImageDecoder
+from redrive.io.ros.decoders.lights import TrafficLightStateArrayDecoder
 from redrive.io.ros.decoders.motion import OdometryDecoder, PoseDecoder, TwistDecoder
 from redrive.io.ros.decoders.objects import (
     Detection3DArrayDecoder,
@@ -33,6 +34,7 @@ from redrive.io.ros.decoders.registry import (
 )
 from redrive.io.ros.decoders.sensors import ImuDecoder, LaserScanDecoder, NavSatFixDecoder
 from redrive.io.ros.decoders.tf import TFMessageDecoder
+from redrive.io.ros.decoders.velodyne import VelodyneScanDecoder
 
 __all__ = [
     "DEFAULT_DECODERS",
@@ -55,7 +57,9 @@ __all__ = [
     "PointCloud2Decoder",
     "PoseDecoder",
     "TFMessageDecoder",
+    "TrafficLightStateArrayDecoder",
     "TwistDecoder",
+    "VelodyneScanDecoder",
     "active_decoders",
     "build_registry",
     "capabilities_of",

@@ -25,6 +25,7 @@ from redrive.io.ros.decoders._common import describe
 from redrive.io.ros.decoders.base import Decoded, DecodedKind, Decoder, Deserialize
 from redrive.io.ros.decoders.camera_info import CameraInfoDecoder
 from redrive.io.ros.decoders.image import CompressedImageDecoder, ImageDecoder
+from redrive.io.ros.decoders.lights import TrafficLightStateArrayDecoder
 from redrive.io.ros.decoders.motion import OdometryDecoder, PoseDecoder, TwistDecoder
 from redrive.io.ros.decoders.objects import (
     Detection3DArrayDecoder,
@@ -35,6 +36,7 @@ from redrive.io.ros.decoders.objects import (
 from redrive.io.ros.decoders.pointcloud2 import PointCloud2Decoder
 from redrive.io.ros.decoders.sensors import ImuDecoder, LaserScanDecoder, NavSatFixDecoder
 from redrive.io.ros.decoders.tf import TFMessageDecoder
+from redrive.io.ros.decoders.velodyne import VelodyneScanDecoder
 from redrive.plugins import DECODERS, installed_plugins
 from redrive.types import SensorType
 
@@ -81,6 +83,7 @@ def _add(out: dict[str, Decoder], decoder: Decoder) -> None:
 DEFAULT_DECODERS: Mapping[str, Decoder] = build_registry(
     [
         PointCloud2Decoder(),
+        VelodyneScanDecoder(),
         ImageDecoder(),
         CompressedImageDecoder(),
         CameraInfoDecoder(),
@@ -95,6 +98,7 @@ DEFAULT_DECODERS: Mapping[str, Decoder] = build_registry(
         Detection3DArrayDecoder(),
         ObjectArrayDecoder(),
         GroundTruthObjectArrayDecoder(),
+        TrafficLightStateArrayDecoder(),
     ]
 )
 

@@ -1,0 +1,152 @@
+"""The stop lines the reference planner obeys: a red light is a stopped obstacle at its line.
+
+From the road map (:attr:`Algorithm.road_map <redrive.algorithms.Algorithm.road_map>`) each
+:class:`~redrive.types.MapTrafficLight` gives a *gate*: its stop line (the map's
+:class:`~redrive.types.StopLine`, or, without one, the cross-section of each controlled lane
+where it meets the junction: the end of an approach lane, the start of a lane connector) and the
+direction of travel through it (its lanes').  Every frame, the gates whose light the frame's
+``traffic`` shows RED — or YELLOW while the ego can still stop before the line at the
+comfortable deceleration ``b`` (``v² / (2 b) ≤`` the gap), as the synthetic world's drivers
+decide — and that the planned path crosses in their direction of travel, ahead of a front bumper
+not already more than 0.5 m past them, become stopped leaders at the crossing.  A yellow light
+the ego could not stop for is *committed*: it drives on through it (and through its red) until
+the light shows green again.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from redrive.types import LightState, MapLane, RoadMap, TrafficLight, VehicleState
+
+__all__ = ["Gate", "gates_of", "stop_arcs"]
+
+F64 = npt.NDArray[np.float64]
+
+#: a bumper this far past a line (metres) has crossed it: the line no longer holds it back
+_PASSED_M = 0.5
+
+
+@dataclass(frozen=True, slots=True)
+class Gate:
+    """One light's stop line: ``line`` (K, 2) map metres, ``direction`` (2,) unit vector."""
+
+    light_id: str
+    line: F64
+    direction: F64
+
+
+def _tangent(lane: MapLane, point: F64) -> F64:
+    """The unit direction of travel of ``lane`` at its centreline vertex nearest ``point``."""
+    c = lane.centerline
+    k = int(np.argmin(np.hypot(c[:, 0] - point[0], c[:, 1] - point[1])))
+    k = min(k, len(c) - 2)
+    d = c[k + 1] - c[k]
+    return np.asarray(d / max(float(np.hypot(d[0], d[1])), 1e-12), dtype=np.float64)
+
+
+def _cross_section(lane: MapLane, *, at_end: bool) -> tuple[F64, F64]:
+    """The segment across ``lane`` at its end (or start), and the direction of travel there."""
+    c = lane.centerline
+    p, q = (c[-1], c[-2]) if at_end else (c[0], c[1])
+    d = (p - q) if at_end else (q - p)
+    d = d / max(float(np.hypot(d[0], d[1])), 1e-12)
+    normal = np.array([-d[1], d[0]])
+    half = lane.width_m / 2.0
+    return np.array([p + half * normal, p - half * normal]), np.asarray(d, dtype=np.float64)
+
+
+def gates_of(road_map: RoadMap | None) -> tuple[Gate, ...]:
+    """The gates of every traffic light of ``road_map`` (none without a map or lights)."""
+    if road_map is None:
+        return ()
+    stop_lines = {s.stop_line_id: s for s in road_map.stop_lines}
+    gates: list[Gate] = []
+    for light in road_map.traffic_lights:
+        lanes = [road_map.lane(i) for i in light.lane_ids]
+        stop = stop_lines.get(light.stop_line_id) if light.stop_line_id is not None else None
+        if stop is not None and lanes:
+            mid = stop.line.mean(axis=0)
+            gates.append(Gate(light.light_id, stop.line, _tangent(lanes[0], mid)))
+            continue
+        for lane in lanes:  # no stop line: where each controlled lane meets the junction
+            line, direction = _cross_section(lane, at_end=lane.intersection_id is None)
+            gates.append(Gate(light.light_id, line, direction))
+    return tuple(gates)
+
+
+def _first_crossing(path_xy: F64, path_s: F64, line: F64) -> tuple[float, F64] | None:
+    """Arc length along the path of its first crossing with the polyline ``line``, and the
+    path's unit direction there; None when it does not cross."""
+    if len(path_xy) < 2:
+        return None
+    a, ab = path_xy[:-1], np.diff(path_xy, axis=0)
+    best: tuple[float, F64] | None = None
+    for p, q in itertools.pairwise(line):
+        pq = q - p
+        denom = ab[:, 0] * pq[1] - ab[:, 1] * pq[0]
+        ok = np.abs(denom) > 1e-12
+        if not ok.any():
+            continue
+        ap = p - a
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (ap[:, 0] * pq[1] - ap[:, 1] * pq[0]) / denom  # along the path segment
+            u = (ap[:, 0] * ab[:, 1] - ap[:, 1] * ab[:, 0]) / denom  # along the line segment
+        hit = ok & (t >= 0.0) & (t <= 1.0) & (u >= 0.0) & (u <= 1.0)
+        if not hit.any():
+            continue
+        j = int(np.flatnonzero(hit)[0])
+        s = float(path_s[j] + t[j] * (path_s[j + 1] - path_s[j]))
+        if best is None or s < best[0]:
+            seg = ab[j] / max(float(np.hypot(ab[j, 0], ab[j, 1])), 1e-12)
+            best = (s, seg)
+    return best
+
+
+def stop_arcs(
+    gates: Iterable[Gate],
+    lights: Iterable[TrafficLight],
+    *,
+    state: VehicleState,
+    path_xy: F64,
+    path_s: F64,
+    front_offset_m: float,
+    comfort_decel_mps2: float,
+    committed: set[str],
+) -> F64:
+    """Arc lengths (along the base_link path ``path_xy`` / ``path_s``) of the stop lines the ego
+    must stop at now (see the module text); updates ``committed`` (yellow lights driven through).
+    """
+    shown: Mapping[str, LightState] = {light.id: light.state for light in lights}
+    for light_id in [i for i in committed if shown.get(i) is LightState.GREEN]:
+        committed.discard(light_id)
+    c, sn = math.cos(state.heading_rad), math.sin(state.heading_rad)
+    origin = state.position[:2]
+    base_from_map = np.array([[c, sn], [-sn, c]])
+    speed = state.speed_mps
+    out: list[float] = []
+    for gate in gates:
+        light = shown.get(gate.light_id)
+        if light not in (LightState.RED, LightState.YELLOW) or gate.light_id in committed:
+            continue
+        line = (gate.line - origin) @ base_from_map.T
+        crossing = _first_crossing(path_xy, path_s, line)
+        if crossing is None:
+            continue
+        s, tangent = crossing
+        if float(tangent @ (base_from_map @ gate.direction)) <= 0.0:
+            continue  # crossed against its direction of travel: not this light's lane
+        gap = s - front_offset_m
+        if gap < -_PASSED_M:
+            continue  # already through it
+        if light is LightState.YELLOW and speed**2 / (2.0 * comfort_decel_mps2) > gap:
+            committed.add(gate.light_id)  # too close to stop comfortably: drive through
+            continue
+        out.append(s)
+    return np.array(out, dtype=np.float64)
