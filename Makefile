@@ -23,7 +23,8 @@ $(VENV)/.installed: $(BIN)/python pyproject.toml
 	@touch $@
 
 $(VENV)/.installed-test: $(VENV)/.installed pyproject.toml
-	$(BIN)/pip install -q -e '.[test,bench,gui,ray,ros2,foxglove]'
+	$(BIN)/pip install -q -e '.[test,bench,gui,ray,ros2,foxglove,commonroad]'
+	$(BIN)/pip install -q --no-deps 'commonroad-io>=2024.1,<2027'  # see pyproject: [commonroad]
 	@touch $@
 
 venv: $(VENV)/.installed

@@ -32,6 +32,8 @@ def test_info_json_on_a_real_bag(shared_data: Path, capsys: pytest.CaptureFixtur
         "has_ground_truth": False,
         "has_ego_pose": True,
         "calibration_per_frame": False,
+        "road_map": False,
+        "traffic_lights": False,
     }
 
 

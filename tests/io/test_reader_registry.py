@@ -36,13 +36,17 @@ def test_capabilities_of_real_logs(
 
 
 def test_builtin_formats_and_their_names() -> None:
-    assert [cls.format for cls in reader_formats()][:6] == [
+    assert [cls.format for cls in reader_formats()][:10] == [
         "ros2",
         "kitti",
         "nuscenes",
         "nuscenes-mmdet3d",
         "ros1",
         "mcap",
+        "mcap-set",
+        "av2-sensor",
+        "womd",
+        "commonroad",
     ]
     assert all(cls.description for cls in reader_formats())
     with pytest.raises(LogError, match=r"no reader for format 'ros2-sqlite3'; redrive reads ros2"):

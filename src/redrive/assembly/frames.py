@@ -1,6 +1,8 @@
 """The Sensor Dispatcher for replay: a log becomes a stream of synchronised :class:`Frame`s.
 
-Every sample of the *driver* sensor makes one frame.  Each other sensor contributes the sample
+Every sample of the *driver* sensor makes one frame; a log without a sensor to drive frames
+but with ground truth (recorded traffic: Waymo Open Motion, CommonRoad) makes one frame per
+ground-truth message instead.  Each other sensor contributes the sample
 whose header stamp is nearest the driver's, if it is within that input's tolerance (the sensor
 map's: 50 ms, or half the period of an input slower than ~8 Hz); the ego state is interpolated
 to the driver's stamp; ground truth is the nearest objects message within its tolerance, the
@@ -78,7 +80,7 @@ class FrameAssembler:
             samples (covers recorder latency: log time later than the header stamp).
 
     Raises:
-        ConfigError: the log has no sensor to drive frames.
+        ConfigError: the log has neither a sensor nor ground truth to drive frames.
     """
 
     def __init__(
@@ -93,10 +95,10 @@ class FrameAssembler:
         self.sensor_map = sensor_map or infer_sensor_map(
             log.topics, duration_ns=log.end_ns - log.start_ns, overrides=overrides
         )
-        if self.sensor_map.driver is None:
+        if self.sensor_map.driver is None and self.sensor_map.ground_truth_topic is None:
             msg = (
                 f"{log.path}: no sensor to drive frames (no LiDAR, camera or radar topic with a "
-                "decoder); name one with `driver` in a sensor map file"
+                "decoder) and no ground truth; name one with `driver` in a sensor map file"
             )
             raise ConfigError(msg)
         self.lookahead_ns = lookahead_ns
@@ -107,7 +109,8 @@ class FrameAssembler:
     def frames(self, *, start_ns: int | None = None, stop_ns: int | None = None) -> Iterator[Frame]:
         """Frames in order, from driver samples with log time in ``[start_ns, stop_ns)``."""
         smap = self.sensor_map
-        driver = smap.sensor(smap.driver or "")
+        # no driver sensor: the ground-truth messages drive the frames (checked at __init__)
+        driver_id = smap.sensor(smap.driver).sensor_id if smap.driver is not None else None
         by_topic = smap.by_topic()
         tol = smap.widest_tolerance_ns  # frames wait this long for the slowest input's samples
         buffers: dict[str, deque[_Sample]] = {s.sensor_id: deque() for s in smap.sensors}
@@ -164,7 +167,7 @@ class FrameAssembler:
                 if spec is not None:
                     sample = _Sample(decoded.stamp_ns, decoded)
                     buffers[spec.sensor_id].append(sample)
-                    if spec.sensor_id == driver.sensor_id:
+                    if spec.sensor_id == driver_id:
                         if start_ns is not None and now < start_ns:
                             pass
                         elif stop_ns is not None and now >= stop_ns:
@@ -176,7 +179,15 @@ class FrameAssembler:
                 ):
                     states.append(decoded.value)
                 elif message.topic == smap.ground_truth_topic:
-                    objects.append(_Sample(decoded.stamp_ns, decoded))
+                    sample = _Sample(decoded.stamp_ns, decoded)
+                    objects.append(sample)
+                    if driver_id is None:
+                        if start_ns is not None and now < start_ns:
+                            pass
+                        elif stop_ns is not None and now >= stop_ns:
+                            break
+                        else:
+                            pending.append(sample)
                 elif message.topic == smap.traffic_lights_topic:
                     lights.append(_Sample(decoded.stamp_ns, decoded))
                 elif message.topic in smap.tf_topics and isinstance(decoded.value, tuple):

@@ -2,7 +2,9 @@
 
 A sensor map file (all keys optional)::
 
-    driver = "lidar_top"            # the sensor whose samples make the frames
+    driver = "lidar_top"            # the sensor whose samples make the frames, or
+                                    # "ground_truth": every ground-truth message makes one (an
+                                    # Argoverse 2 log whose sweeps are not all there)
     tolerance_ms = 50               # how far any input's sample may be from a frame (default:
                                     # 50, or half the period of an input slower than ~8 Hz)
     vehicle_state = "/odom"         # ego motion topic (Odometry, PoseStamped, TwistStamped)
@@ -34,6 +36,8 @@ from redrive.types import SensorType
 __all__ = ["SensorMap", "SensorSpec", "infer_sensor_map", "load_sensor_map_overrides"]
 
 _DEFAULT_TOLERANCE_NS = 50_000_000
+#: the ``driver`` of a sensor map file that makes a frame of every ground-truth message
+GROUND_TRUTH_DRIVER = "ground_truth"
 _DRIVER_PREFERENCE = (SensorType.LIDAR, SensorType.CAMERA, SensorType.LIDAR_2D, SensorType.RADAR)
 
 
@@ -179,7 +183,8 @@ def infer_sensor_map(
 ) -> SensorMap:
     """Map topics to sensors from their message types, then apply ``overrides``.
 
-    The driver is the user's choice, else the highest-rate LiDAR (then camera, 2D LiDAR, radar).
+    The driver is the user's choice, else the highest-rate LiDAR (then camera, 2D LiDAR, radar);
+    none (frames from the ground truth) when the user says ``driver = "ground_truth"``.
     Camera info topics are calibration, not sensors: they map to nothing here.
 
     Raises:
@@ -246,10 +251,13 @@ def infer_sensor_map(
             location=None if loc is None else (float(loc[0]), float(loc[1]), float(loc[2])),
         )
     driver = ov.driver
+    by_ground_truth = driver == GROUND_TRUTH_DRIVER and driver not in specs
+    if by_ground_truth:
+        driver = None
     if driver is not None and driver not in specs:
         msg = f"sensor map: driver {driver!r} is not a sensor of this log ({', '.join(specs)})"
         raise ConfigError(msg)
-    if driver is None:
+    if driver is None and not by_ground_truth:
         for stype in _DRIVER_PREFERENCE:
             candidates = [s for s in specs.values() if s.sensor_type is stype]
             if candidates:
@@ -257,6 +265,9 @@ def infer_sensor_map(
                 break
     state_topic = ov.vehicle_state_topic or _busiest(vehicle_state, prefer="odom")
     gt_topic = ov.ground_truth_topic or _busiest(objects, prefer="groundtruth")
+    if by_ground_truth and gt_topic is None:
+        msg = f'sensor map: driver = "{GROUND_TRUTH_DRIVER}" but the log has no ground truth'
+        raise ConfigError(msg)
     lights_topic = ov.traffic_lights_topic or _busiest(lights, prefer="trafficlight")
     tolerances: dict[str, int] = {}
     if ov.tolerance_ns is None:  # a sensor map file's tolerance_ms holds for every input

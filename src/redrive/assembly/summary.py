@@ -19,6 +19,7 @@ from redrive.assembly.calibration import camera_info_topics
 from redrive.assembly.sensor_map import SensorSpec, infer_sensor_map, load_sensor_map_overrides
 from redrive.errors import ConfigError, LogTruncatedError
 from redrive.io.base import LogReader, ReaderCapabilities
+from redrive.io.content import log_contents
 from redrive.io.damage import LogDamage, damage_report
 from redrive.io.ros.decoders import decoder_for
 from redrive.io.ros.decoders.ouster_log import PacketCloudsReader
@@ -70,6 +71,8 @@ class LogSummary:
     damage: str | None
     capabilities: ReaderCapabilities
     damage_report: tuple[LogDamage, ...] = ()
+    #: what the log holds beside its topics, counted (its reader's ``contents()``)
+    contents: tuple[tuple[str, int | str], ...] = ()
 
     @property
     def provides(self) -> list[str]:
@@ -81,6 +84,8 @@ class LogSummary:
                 ("tf", caps.has_tf),
                 ("ground truth", caps.has_ground_truth),
                 ("ego pose", caps.has_ego_pose),
+                ("road map", caps.road_map),
+                ("traffic lights", caps.traffic_lights),
             )
             if has
         ]
@@ -132,12 +137,15 @@ class LogSummary:
             "topics": [t.to_json() for t in self.topics],
             "damage": self.damage,
             "damage_report": [d.to_json() for d in self.damage_report],
+            "contents": dict(self.contents),
             "capabilities": {
                 "message_typed": self.capabilities.message_typed,
                 "has_tf": self.capabilities.has_tf,
                 "has_ground_truth": self.capabilities.has_ground_truth,
                 "has_ego_pose": self.capabilities.has_ego_pose,
                 "calibration_per_frame": self.capabilities.calibration_per_frame,
+                "road_map": self.capabilities.road_map,
+                "traffic_lights": self.capabilities.traffic_lights,
             },
         }
 
@@ -199,6 +207,10 @@ def summarize_log(log: LogReader, *, sensor_map_path: Path | None = None) -> Log
         roles = {smap.vehicle_state_topic: "vehicle state", smap.ground_truth_topic: "ground truth"}
         roles.update(dict.fromkeys(smap.tf_topics, "tf"))
         roles.update(_camera_info_roles(log, sensors))
+        if driver is None and smap.ground_truth_topic is not None:
+            roles[smap.ground_truth_topic] = "ground truth (drives frames)"
+        if smap.traffic_lights_topic is not None:
+            roles[smap.traffic_lights_topic] = "traffic lights"
         roles.update(
             {packets: f"packets of {cloud}" for cloud, packets in _cloud_topics(log).items()}
         )
@@ -243,6 +255,7 @@ def summarize_log(log: LogReader, *, sensor_map_path: Path | None = None) -> Log
         damage=damage,
         capabilities=log.capabilities,
         damage_report=damage_report(log),
+        contents=tuple(log_contents(log).items()),
     )
 
 

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from redrive.assembly.summary import LogSummary, summarize_log
-from redrive.errors import LogDamagedError
+from redrive.errors import LogDamagedError, LogError
 from redrive.io import open_log
 
 __all__ = ["EXIT_DAMAGED", "damage_lines", "register"]
@@ -25,6 +25,7 @@ examples:
   redrive info rosbag2_dir/ --json
   redrive info kitti/training --sensor-map sensors.toml
   redrive info cut.mcap --strict        exit 1 if the log is damaged at all
+  redrive info scenario.tfrecord        what a recorded-traffic log holds (contains: …)
   redrive info map.osm --map-origin 49.0,8.4     a Lanelet2 map: source, extent, lanes …
   redrive info log/map/log_map_archive_X.json    an Argoverse 2 vector map
 
@@ -61,6 +62,9 @@ def _print_table(summary: LogSummary) -> None:
     console.print(f"[bold]start[/]:     {summary.start_utc}  ({summary.start_ns} ns)")
     console.print(f"[bold]end[/]:       {summary.end_utc}  ({summary.end_ns} ns)")
     console.print(f"[bold]messages[/]:  {summary.messages}  ({_human_bytes(summary.size_bytes)})")
+    for name, value in summary.contents:
+        what = f"{value} {name}" if isinstance(value, int) else f"{name}: {value}"
+        console.print(f"[bold]contains[/]:  {shown(what)}", highlight=False)
     columns = (
         ("topic", "left"),
         ("type", "left"),
@@ -155,6 +159,7 @@ def _run(args: argparse.Namespace) -> int:
     try:
         with open_log(args.log, strict=args.strict) as log:
             summary = summarize_log(log, sensor_map_path=args.sensor_map)
+            road_map, map_error = _log_map(log)
     finally:
         io_logger.setLevel(level)
     if args.strict and (summary.damage_report or summary.damage):
@@ -166,12 +171,53 @@ def _run(args: argparse.Namespace) -> int:
             else str(summary.damage)
         )
         raise LogDamagedError(msg, messages_read=summary.messages)
+    map_summary = None
+    if road_map is not None:
+        from redrive.maps.files import summarize_map
+
+        map_summary = summarize_map(road_map, path=args.log, fmt=summary.format)
     if args.json:
+        doc = summary.to_json()
+        if map_summary is not None:
+            doc["map"] = map_summary.to_json()
+        if map_error is not None:
+            doc["map_error"] = map_error
         # one write: json.dump writes each token on its own (2 million writes for 50k topics)
-        sys.stdout.write(json.dumps(summary.to_json(), indent=2) + "\n")
+        sys.stdout.write(json.dumps(doc, indent=2) + "\n")
     else:
         _print_table(summary)
+        _print_map(map_summary, map_error)
     return EXIT_DAMAGED if summary.damage or summary.damage_report else 0
+
+
+def _log_map(log: Any) -> tuple[Any, str | None]:
+    """The road map a log holds (None when none) and, when it cannot be read, why."""
+    from redrive.errors import MapError
+    from redrive.io.content import log_road_map
+
+    try:
+        return log_road_map(log), None
+    except (MapError, LogError) as err:
+        return None, str(err)
+
+
+def _print_map(map_summary: Any, map_error: str | None) -> None:
+    """The map lines of a log with a road map (as ``redrive info MAPFILE`` prints them)."""
+    if map_summary is None and map_error is None:
+        return
+    from rich.console import Console
+
+    from redrive.cli.info_map import map_lines
+    from redrive.output.text import shown
+
+    console = Console(width=None if sys.stdout.isatty() else 160)
+    if map_error is not None:
+        console.print(f"[bold red]map[/]:       unreadable: {shown(map_error)}", highlight=False)
+        return
+    for label, text in map_lines(map_summary):
+        head = f"map {label}:"
+        pad = " " * max(1, 15 - len(head))
+        console.print(f"[bold]{head}[/]{pad}{shown(text)}", highlight=False)
 
 
 def register(sub: Any) -> None:
@@ -191,8 +237,11 @@ def register(sub: Any) -> None:
     parser.add_argument(
         "log",
         type=Path,
-        help="a .bag, .mcap, ROS 2 bag directory, KITTI folder, nuScenes data root or mmdetection3d "
-        "info file; or a map file (Lanelet2 .osm, Argoverse 2 log_map_archive_*.json, map.json)",
+        help=(
+            "a .bag, .mcap, ROS 2 bag directory, KITTI folder, nuScenes data root, mmdetection3d "
+            "info file, Argoverse 2 sensor log folder, Waymo Open Motion .tfrecord or CommonRoad "
+            ".xml; or a map file (Lanelet2 .osm, Argoverse 2 log_map_archive_*.json, map.json)"
+        ),
     )
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
     parser.add_argument(

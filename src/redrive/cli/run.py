@@ -30,7 +30,8 @@ examples:
 
 Plugins are entry-point names (`redrive algorithms` lists them), package.module:Class or
 path/to/file.py:Class.  With no --pipeline and no plugin flag the reference pipeline runs:
-cluster-detector → kalman-tracker → idm-planner → pure-pursuit-pid.  A step that raises is
+cluster-detector → kalman-tracker → idm-planner → pure-pursuit-pid (on a log with ground truth
+but no LiDAR — Waymo Open Motion, CommonRoad — noisy-oracle first instead of the detector).  A step that raises is
 recorded for its frame and the run goes on (--fail-fast stops instead); Ctrl-C leaves a run
 directory that --resume continues.  `redrive export RUN --format xlsx` exports the results.
 
@@ -221,7 +222,11 @@ def _run(args: argparse.Namespace) -> int:
     if args.pipeline is not None and (args.perception or args.planning or args.control):
         print("redrive run: give either --pipeline or --perception/--planning/--control")
         return 2
-    pipeline = pipeline_from_args(args).with_options(
+    default = args.pipeline is None and not (args.perception or args.planning or args.control)
+    base = pipeline_from_args(args)
+    if default and not args.closed_loop:
+        base = _default_pipeline_for(args.log, base, sensor_map=args.sensor_map)
+    pipeline = base.with_options(
         mode=args.mode,
         executor=args.executor,
         seed=args.seed,
@@ -276,6 +281,44 @@ def _run(args: argparse.Namespace) -> int:
         )
         return 1
     return nothing_succeeded_status(report, out)
+
+
+def _default_pipeline_for(log_path: Path, reference: Any, *, sensor_map: Path | None) -> Any:
+    """The reference pipeline, or — for a log with ground truth but no LiDAR (recorded traffic:
+    Waymo Open Motion, CommonRoad) — the object-level one (noisy oracle first)."""
+    from redrive.assembly.sensor_map import infer_sensor_map, load_sensor_map_overrides
+    from redrive.config import object_level_pipeline
+    from redrive.errors import RedriveError
+    from redrive.io import open_log
+    from redrive.types import SensorType
+
+    try:
+        with open_log(log_path) as log:
+            overrides = load_sensor_map_overrides(sensor_map) if sensor_map else None
+            smap = infer_sensor_map(
+                log.topics, duration_ns=log.end_ns - log.start_ns, overrides=overrides
+            )
+            state = log.topics.get(smap.vehicle_state_topic or "")
+    except (RedriveError, OSError):
+        return reference  # the run itself reports what is wrong with the log
+    if smap.ground_truth_topic is None or any(
+        s.sensor_type is SensorType.LIDAR for s in smap.sensors
+    ):
+        return reference
+    if state is None or state.count < 2:
+        print(
+            "redrive run: the log has ground truth but no LiDAR and records no ego motion (a "
+            "CommonRoad scenario gives the ego's start only: `--closed-loop` drives it): the "
+            "object-level perception stages run (noisy-oracle → kalman-tracker)",
+            file=sys.stderr,
+        )
+        return object_level_pipeline(planning=False)
+    print(
+        "redrive run: the log has no LiDAR but ground truth: the object-level reference "
+        "pipeline runs (noisy-oracle → kalman-tracker → idm-planner → pure-pursuit-pid)",
+        file=sys.stderr,
+    )
+    return object_level_pipeline()
 
 
 def nothing_succeeded_status(report: Any, out: Path | None = None) -> int:
@@ -396,7 +439,7 @@ def register(sub: Any) -> None:
         "run",
         help="replay a log through perception → planning → control",
         description=(
-            "Replay a log (ROS 1/2 bag, MCAP, KITTI, nuScenes) frame by frame through a pipeline of "
+            "Replay a log (ROS 1/2 bag, MCAP, KITTI, nuScenes, Argoverse 2, Waymo Open Motion, CommonRoad) frame by frame through a pipeline of "
             "algorithms and store every output, latency and error in a run directory "
             "(manifest.json + Parquet)."
         ),

@@ -30,7 +30,8 @@ it catches up with it (only where the log is faster).  Nothing else reacts (no l
 log does not have), and an object is shown only while the log has it.
 
 Frames come from :class:`redrive.assembly.frames.FrameAssembler` (a log without a LiDAR, camera or radar
-is paced by its busiest sensor, e.g. an IMU), at most ``rate_hz`` of them: the first frame at
+is paced by its busiest sensor, e.g. an IMU; one without any sensor, or whose sensor map says
+``driver = "ground_truth"``, by its ground-truth messages), at most ``rate_hz`` of them: the first frame at
 or after each tick of a ``1 / rate_hz`` clock (less a quarter period, for jitter).  The time step between two frames is
 the log's (:attr:`LogSimulator.dt_s` is the gap to the next frame).
 """
@@ -48,7 +49,11 @@ import numpy.typing as npt
 
 from redrive.algorithms import StageOutputs
 from redrive.assembly.frames import FrameAssembler
-from redrive.assembly.sensor_map import SensorMapOverrides, infer_sensor_map
+from redrive.assembly.sensor_map import (
+    GROUND_TRUTH_DRIVER,
+    SensorMapOverrides,
+    infer_sensor_map,
+)
 from redrive.closedloop.mode import DEFAULT_DEVIATION_M, DEFAULT_DEVIATION_RAD
 from redrive.closedloop.simulator import EgoCommand, PathFollower, check_options, choose_command
 from redrive.closedloop.synthetic import AgentMode
@@ -237,15 +242,19 @@ class LogSimulator:
                 f"or tracks), but no topic decodes to them — its topics: {_topics(log)}"
             )
             raise ConfigError(msg)
-        if smap.driver is None:
-            if not smap.sensors:
+        by_ground_truth = overrides is not None and overrides.driver == GROUND_TRUTH_DRIVER
+        if smap.driver is None and not by_ground_truth:
+            if smap.sensors:
+                busiest = max(smap.sensors, key=lambda s: (s.rate_hz, s.sensor_id))
+                smap = dataclasses.replace(smap, driver=busiest.sensor_id)
+            elif smap.ground_truth_topic is None:
                 msg = (
-                    f"{log.path}: closed loop needs a sensor topic to pace its frames (a LiDAR, "
-                    f"camera, radar, IMU or GNSS); this log has none — its topics: {_topics(log)}"
+                    f"{log.path}: closed loop needs a sensor topic or ground truth to pace its "
+                    "frames (a LiDAR, camera, radar, IMU or GNSS, or objects); this log has none "
+                    f"— its topics: {_topics(log)}"
                 )
                 raise ConfigError(msg)
-            busiest = max(smap.sensors, key=lambda s: (s.rate_hz, s.sensor_id))
-            smap = dataclasses.replace(smap, driver=busiest.sensor_id)
+            # else recorded traffic without sensors (WOMD, CommonRoad): the ground truth paces
         self.log = log
         self.assembler = FrameAssembler(log, sensor_map=smap)
         self.sensors: Mapping[str, SensorType] = {s.sensor_id: s.sensor_type for s in smap.sensors}

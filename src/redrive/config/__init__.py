@@ -15,6 +15,7 @@ from redrive.config.pipeline import (
     RunMode,
     StageSpec,
     load_pipeline,
+    object_level_pipeline,
     pipeline_from_plugins,
     reference_pipeline,
 )
@@ -26,6 +27,7 @@ __all__ = [
     "RunMode",
     "StageSpec",
     "load_pipeline",
+    "object_level_pipeline",
     "pipeline_from_plugins",
     "reference_pipeline",
 ]

@@ -194,6 +194,24 @@ def reference_pipeline() -> PipelineConfig:
     )
 
 
+def object_level_pipeline(*, planning: bool = True) -> PipelineConfig:
+    """The baseline for a log of recorded traffic without a LiDAR (Waymo Open Motion,
+    CommonRoad): ground truth through the noisy oracle → Kalman tracker → IDM planner → pure
+    pursuit; without ``planning`` the perception stages only (a log that records no ego
+    motion to plan from)."""
+    reference = reference_pipeline()
+    rest = reference.stages[1:] if planning else reference.stages[1:2]
+    return PipelineConfig(
+        stages=(
+            StageSpec(
+                name="detection",
+                algorithms=(AlgorithmSpec(name="oracle", plugin="noisy-oracle"),),
+            ),
+            *rest,
+        )
+    )
+
+
 def _algorithm(t: Table, base: Path) -> AlgorithmSpec:
     t.check_keys({"name", "plugin", "config"})
     if not isinstance(t.data.get("plugin"), str):

@@ -107,11 +107,16 @@ def log_inputs(assembler: FrameAssembler, *, road_map: RoadMap | None = None) ->
 
 
 def expected_frames(log: LogReader, assembler: FrameAssembler) -> int | None:
-    """How many frames the log makes (messages on the driver topic)."""
+    """How many frames the log makes (messages on the driver topic; on the ground-truth topic
+    when no sensor drives the frames)."""
     smap = assembler.sensor_map
     if smap.driver is None:
-        return None
-    info = log.topics.get(smap.sensor(smap.driver).topic)
+        topic = smap.ground_truth_topic
+        if topic is None:
+            return None
+    else:
+        topic = smap.sensor(smap.driver).topic
+    info = log.topics.get(topic)
     return None if info is None else int(info.count)
 
 

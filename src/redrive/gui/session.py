@@ -68,7 +68,12 @@ class LogSession:
             self.log.close()
             raise
         smap = self.assembler.sensor_map
-        self.driver_topic = smap.sensor(smap.driver or "").topic
+        # a log without a sensor (recorded traffic) makes a frame per ground-truth message
+        self.driver_topic = (
+            smap.sensor(smap.driver).topic
+            if smap.driver is not None
+            else str(smap.ground_truth_topic)
+        )
         #: log times of the driver samples seen so far (the timeline); grows while indexing.
         self.driver_times_ns: list[int] = []
         self.indexed = False

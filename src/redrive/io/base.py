@@ -179,6 +179,10 @@ class ReaderCapabilities:
             gives None when this log holds none): :func:`redrive.io.content.log_road_map`.
         scenario: the reader can say what the log was synthesized from (``scenario()``):
             :func:`redrive.io.content.log_scenario`.
+        traffic_lights: it carries the states of traffic lights (``TrafficData`` messages).
+        contents: the reader can count what the log holds beside its topics (annotated sweeps,
+            tracks, lanes …: ``contents()``): :func:`redrive.io.content.log_contents`, which
+            ``redrive info`` prints.
     """
 
     message_typed: bool
@@ -188,6 +192,8 @@ class ReaderCapabilities:
     calibration_per_frame: bool = False
     road_map: bool = False
     scenario: bool = False
+    traffic_lights: bool = False
+    contents: bool = False
 
 
 @runtime_checkable

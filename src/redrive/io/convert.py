@@ -35,7 +35,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
 from redrive.errors import LogError, RedriveError
-from redrive.io.base import LogMessage, LogReader
+from redrive.io.base import DecodedKind, LogMessage, LogReader
 from redrive.io.mcap.writer import McapWriter
 from redrive.io.readers import open_log
 from redrive.io.ros.decoders.base import Decoded
@@ -272,8 +272,14 @@ def convert_log(
         sink = _Sink(out, store, compression=compression)
         try:
             for message in reader.messages(topics=wanted, start_ns=start_ns, stop_ns=stop_ns):
+                objects_as = None
+                if reader.topics[message.topic].kind is DecodedKind.OBJECTS:
+                    # an empty tuple of objects keeps its topic's type (else it reads as tf)
+                    objects_as = written.get(message.topic, "vision_msgs/msg/Detection3DArray")
                 try:
-                    msgtype, data = _recode(message, recoder, native_store, store, is2=is2)
+                    msgtype, data = _recode(
+                        message, recoder, native_store, store, is2=is2, objects_as=objects_as
+                    )
                 except RedriveError:
                     raise
                 except Exception as err:  # rosbags raises plain errors on bad bytes
@@ -313,7 +319,13 @@ def convert_log(
 
 
 def _recode(
-    message: LogMessage, recoder: _Recoder, native_store: Typestore, store: Typestore, *, is2: bool
+    message: LogMessage,
+    recoder: _Recoder,
+    native_store: Typestore,
+    store: Typestore,
+    *,
+    is2: bool,
+    objects_as: str | None = None,
 ) -> tuple[str, bytes | memoryview]:
     if message.encoding != "native":
         conv = recoder.converter(message.encoding, message.msgtype)
@@ -323,7 +335,11 @@ def _recode(
         msg = f"topic {message.topic}: a native message without a Decoded payload cannot be written"
         raise LogError(msg)
     msgtype, ros_msg = encode_value(
-        payload.value, native_store, frame_id=payload.frame_id, stamp_ns=payload.stamp_ns
+        payload.value,
+        native_store,
+        frame_id=payload.frame_id,
+        stamp_ns=payload.stamp_ns,
+        empty_objects_as=objects_as,
     )
     cdr = native_store.serialize_cdr(ros_msg, msgtype)
     if is2:

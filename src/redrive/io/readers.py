@@ -3,7 +3,7 @@
 A *reader format* is a reader class that declares, as class attributes and a class method:
 
 - ``format``: its short name (``ros1``, ``ros2``, ``mcap``, ``kitti``, ``nuscenes``,
-  ``nuscenes-mmdet3d``), recorded in the run
+  ``nuscenes-mmdet3d``, ``av2-sensor``, ``womd``, ``commonroad``), recorded in the run
   manifest and shown by ``redrive info``;
 - ``description``: what it reads, for listings and error messages;
 - ``recognises(path)``: whether ``path`` is a log of this format, from its content (magic bytes,
@@ -89,9 +89,12 @@ def _check_reader(obj: object) -> str | None:
 
 def _builtin() -> list[type[ReaderFormat]]:
     # imported here: each pulls in its own dependencies (rosbags, mcap, PIL)
+    from redrive.io.datasets.av2 import Av2SensorLogReader
+    from redrive.io.datasets.commonroad import CommonRoadReader
     from redrive.io.datasets.kitti import KittiReader
     from redrive.io.datasets.mmdet3d_info import Mmdet3dInfoReader
     from redrive.io.datasets.nuscenes import NuScenesReader
+    from redrive.io.datasets.womd import WomdReader
     from redrive.io.mcap.fileset import McapSetReader
     from redrive.io.mcap.reader import McapFileReader
     from redrive.io.rosbag1.reader import Ros1BagReader
@@ -107,6 +110,10 @@ def _builtin() -> list[type[ReaderFormat]]:
         Ros1BagReader,
         McapFileReader,
         McapSetReader,
+        # recorded traffic: an AV2 log folder, a WOMD TFRecord, a CommonRoad .xml
+        Av2SensorLogReader,
+        WomdReader,
+        CommonRoadReader,
     ]
 
 

@@ -387,7 +387,12 @@ def _traffic_lights(b: _Builder, traffic: TrafficData, header: Any) -> Any:
 
 
 def encode_value(
-    value: object, typestore: Typestore, *, frame_id: str, stamp_ns: int
+    value: object,
+    typestore: Typestore,
+    *,
+    frame_id: str,
+    stamp_ns: int,
+    empty_objects_as: str | None = None,
 ) -> tuple[str, Any]:
     """``(msgtype, message)``: ``value`` as a standard ROS 2 message of ``typestore``.
 
@@ -396,11 +401,16 @@ def encode_value(
         typestore: a ROS 2 store that knows the types (``typestore_for(2)``).
         frame_id: the header frame (for tf, each transform's parent frame is used instead).
         stamp_ns: the header stamp, int ns.
+        empty_objects_as: the object message type (``vision_msgs/msg/Detection3DArray`` or
+            ``redrive_msgs/msg/GroundTruthObjectArray``) of an empty tuple from an objects
+            topic; without it an empty tuple is an empty TFMessage.
 
     Raises:
         UnsupportedMessageError: the value has no standard message, or cannot be represented.
     """
     msgtype = msgtype_of(value)
+    if value == () and empty_objects_as is not None:
+        msgtype = empty_objects_as
     b = _Builder(typestore)
     if isinstance(value, tuple) and msgtype == "tf2_msgs/msg/TFMessage":
         return msgtype, _tf(b, value, stamp_ns)

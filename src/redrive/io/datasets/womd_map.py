@@ -1,0 +1,253 @@
+"""The roadgraph of a Waymo Open Motion ``Scenario`` (its ``map_features``) in the road-map model.
+
+``map.proto``'s ``LaneCenter`` is a centreline (``polyline``, in the direction of travel) with a
+``speed_limit_mph`` (0: unknown), ``entry_lanes`` / ``exit_lanes``, left/right neighbours and
+boundary segments: ``lane_start_index``..``lane_end_index`` of the centreline bounded by the road
+line or edge ``boundary_feature_id``.  WOMD gives no lane width: it is measured here, per lane,
+as the mean over the centreline points bounded on both sides of the sum of the distances to the
+left and right boundary features (twice the one distance where only one side is bounded); a lane
+bounded nowhere (lanes interpolated through intersections) takes the median width of those that
+are.  A lane of fewer than two points has no direction and is left out (``redrive info`` counts
+the lanes of the scenario, the map the ones it keeps).
+
+The lane graph: ``exit_lanes`` are the successors, ``entry_lanes`` the predecessors, the first
+``left_neighbors`` / ``right_neighbors`` entry the neighbour on that side (WOMD's neighbours are
+lanes of the same direction one can change into); ids not in the map are dropped.  A side's
+boundary type is that of the boundary segment bounding most of the lane: a road edge feature →
+``road_edge``, a broken line → ``dashed``, a solid line → ``solid``, a passing double yellow (solid
+on one side, broken on the other, and WOMD does not say which faces the lane) → ``unknown``; a side
+bounded nowhere is ``virtual`` on an interpolated lane (through an intersection), else
+``unknown``.  ``TYPE_BIKE_LANE`` lanes have kind ``bike``.  Roadblocks are the rows of mutual
+neighbours (:func:`redrive.maps.graph.group_roadblocks`).  Crosswalks are :class:`Crosswalk`
+polygons; each lane a dynamic map state controls is a :class:`MapTrafficLight` whose ``light_id``
+is the lane's id (as ``TrafficLight.id`` of the reader's ``/traffic_lights``), at the state's
+``stop_point``.  WOMD has no stop lines; a stop sign (its ``position`` and the ``lane`` ids it
+controls) and each signal's ``stop_point`` become a :class:`StopLine` across each lane it
+stops: perpendicular to the lane at the centreline point nearest it, one lane width long
+(``stop_sign:<id>:<lane>``, ``signal:<lane>``; a light names its own).  Speed bumps and
+driveways have no element in the model (``redrive info`` counts them).
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import shapely
+
+from redrive.errors import LogError
+from redrive.maps.graph import group_roadblocks
+from redrive.types import Crosswalk, MapLane, MapTrafficLight, RoadMap, StopLine
+
+__all__ = ["MPH_TO_MPS", "lane_widths", "road_map_from_scenario"]
+
+logger = logging.getLogger(__name__)
+
+#: one mile per hour in m/s
+MPH_TO_MPS = 0.44704
+
+
+def _xy(points: Any) -> npt.NDArray[np.float64]:
+    return np.array([(p.x, p.y) for p in points], dtype=np.float64).reshape(-1, 2)
+
+
+def _side_distances(
+    centre: npt.NDArray[np.float64],
+    segments: Any,
+    lines: dict[int, Any],
+) -> npt.NDArray[np.float64]:
+    """(N,) distance of each centreline point to its boundary on one side; NaN where unbounded."""
+    out = np.full(len(centre), np.nan)
+    points = shapely.points(centre)
+    for seg in segments:
+        line = lines.get(int(seg.boundary_feature_id))
+        if line is None:
+            continue
+        lo = max(int(seg.lane_start_index), 0)
+        hi = min(int(seg.lane_end_index), len(centre) - 1)
+        if hi < lo:
+            continue
+        out[lo : hi + 1] = shapely.distance(points[lo : hi + 1], line)
+    return out
+
+
+def lane_widths(scenario: Any) -> dict[int, float | None]:
+    """Lane feature id → its measured width (m), or None where no boundary bounds it."""
+    lines: dict[int, Any] = {}
+    for feature in scenario.map_features:
+        kind = feature.WhichOneof("feature_data")
+        if kind in ("road_line", "road_edge"):
+            xy = _xy(getattr(feature, kind).polyline)
+            if len(xy) >= 2:
+                lines[int(feature.id)] = shapely.linestrings(xy)
+            elif len(xy) == 1:
+                lines[int(feature.id)] = shapely.points(xy[0])
+    out: dict[int, float | None] = {}
+    for feature in scenario.map_features:
+        if feature.WhichOneof("feature_data") != "lane":
+            continue
+        centre = _xy(feature.lane.polyline)
+        if len(centre) < 2:
+            continue
+        left = _side_distances(centre, feature.lane.left_boundaries, lines)
+        right = _side_distances(centre, feature.lane.right_boundaries, lines)
+        both = np.isfinite(left) & np.isfinite(right)
+        if both.any():
+            width = float(np.mean(left[both] + right[both]))
+        elif np.isfinite(left).any() or np.isfinite(right).any():
+            one = np.where(np.isfinite(left), left, right)
+            width = float(2.0 * np.nanmean(one))
+        else:
+            width = None
+        out[int(feature.id)] = width if width is not None and width > 0.5 else None
+    return out
+
+
+def road_map_from_scenario(scenario: Any, *, source: str) -> RoadMap:
+    """The road map of a decoded ``Scenario``.
+
+    Raises:
+        LogError: a lane's points are not finite, or two features share an id.
+    """
+    widths = lane_widths(scenario)
+    known = [w for w in widths.values() if w is not None]
+    fallback = float(np.median(known)) if known else None
+    lanes: list[tuple[int, Any, npt.NDArray[np.float64], float]] = []
+    seen: set[int] = set()
+    skipped = 0
+    for feature in scenario.map_features:
+        fid = int(feature.id)
+        if fid in seen:
+            msg = f"{source}: map feature id {fid} appears twice; the roadgraph is damaged"
+            raise LogError(msg)
+        seen.add(fid)
+        if feature.WhichOneof("feature_data") != "lane":
+            continue
+        centre = _xy(feature.lane.polyline)
+        if not np.all(np.isfinite(centre)):
+            msg = f"{source}: lane {fid}: its polyline holds a point that is not finite"
+            raise LogError(msg)
+        if len(centre) < 2:
+            skipped += 1
+            continue
+        width = widths.get(fid) or fallback
+        if width is None:
+            msg = (
+                f"{source}: lane {fid}: no lane of the roadgraph has a boundary, so no width "
+                "can be measured"
+            )
+            raise LogError(msg)
+        lanes.append((fid, feature.lane, centre, width))
+    if skipped:
+        logger.debug("%s: %d lanes of fewer than two points left out", source, skipped)
+    kept = {str(fid) for fid, *_ in lanes}
+    edges = {
+        int(f.id) for f in scenario.map_features if f.WhichOneof("feature_data") == "road_edge"
+    }
+
+    def in_map(ids: Any) -> tuple[str, ...]:
+        return tuple(str(int(i)) for i in ids if str(int(i)) in kept)
+
+    def first(neighbours: Any) -> str | None:
+        ids = in_map([n.feature_id for n in neighbours])
+        return ids[0] if ids else None
+
+    out = []
+    for fid, lane, centre, width in lanes:
+        limit = float(lane.speed_limit_mph) * MPH_TO_MPS
+        out.append(
+            MapLane(
+                lane_id=str(fid),
+                centerline=centre,
+                width_m=width,
+                speed_limit_mps=limit if limit > 0 else None,
+                left_boundary_type=_side_type(lane.left_boundaries, edges, lane.interpolating),
+                right_boundary_type=_side_type(lane.right_boundaries, edges, lane.interpolating),
+                successors=in_map(lane.exit_lanes),
+                predecessors=in_map(lane.entry_lanes),
+                left_neighbor=first(lane.left_neighbors),
+                right_neighbor=first(lane.right_neighbors),
+                kind="bike" if int(lane.type) == _BIKE_LANE else "vehicle",
+            )
+        )
+    crosswalks = []
+    for feature in scenario.map_features:
+        if feature.WhichOneof("feature_data") == "crosswalk":
+            poly = _xy(feature.crosswalk.polygon)
+            if len(poly) >= 3 and np.all(np.isfinite(poly)):
+                crosswalks.append(Crosswalk(crosswalk_id=str(int(feature.id)), polygon=poly))
+    by_id = {lane.lane_id: lane for lane in out}
+    stop_lines: list[StopLine] = []
+    for feature in scenario.map_features:
+        if feature.WhichOneof("feature_data") != "stop_sign":
+            continue
+        sign = feature.stop_sign
+        where = np.array([sign.position.x, sign.position.y], dtype=np.float64)
+        for lid in in_map(sign.lane):
+            stop_lines.append(
+                StopLine(
+                    stop_line_id=f"stop_sign:{int(feature.id)}:{lid}",
+                    line=_stop_line_across(by_id[lid], where),
+                    lane_ids=(lid,),
+                )
+            )
+    lights: dict[str, MapTrafficLight] = {}
+    for state in scenario.dynamic_map_states:
+        for lane_state in state.lane_states:
+            lid = str(int(lane_state.lane))
+            if lid in lights or not lane_state.HasField("stop_point"):
+                continue
+            point = lane_state.stop_point
+            position = np.array([point.x, point.y], dtype=np.float64)
+            stop_id = None
+            if lid in kept:
+                stop_id = f"signal:{lid}"
+                line = _stop_line_across(by_id[lid], position)
+                stop_lines.append(StopLine(stop_line_id=stop_id, line=line, lane_ids=(lid,)))
+            lights[lid] = MapTrafficLight(
+                light_id=lid,
+                position=position,
+                lane_ids=(lid,) if lid in kept else (),
+                stop_line_id=stop_id,
+            )
+    grouped, roadblocks = group_roadblocks(by_id)
+    return RoadMap(
+        lanes=tuple(grouped.values()),
+        roadblocks=roadblocks,
+        crosswalks=tuple(crosswalks),
+        stop_lines=tuple(stop_lines),
+        traffic_lights=tuple(lights.values()),
+        source=f"womd:{source}",
+    )
+
+
+def _stop_line_across(lane: MapLane, point: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """A segment across ``lane``, one lane width long, perpendicular to it at the centreline
+    vertex nearest ``point``."""
+    line = lane.centerline
+    i = int(np.argmin(np.hypot(*(line - point).T)))
+    j, k = max(i - 1, 0), min(i + 1, len(line) - 1)
+    tangent = line[k] - line[j]
+    tangent = tangent / max(float(np.hypot(*tangent)), 1e-9)
+    normal = np.array([-tangent[1], tangent[0]]) * (lane.width_m / 2.0)
+    return np.array([line[i] + normal, line[i] - normal])
+
+
+_BIKE_LANE = 3  # LaneCenter.LaneType.TYPE_BIKE_LANE
+_LINE_TYPE = {1: "dashed", 2: "solid", 3: "solid", 4: "dashed", 5: "dashed", 6: "solid", 7: "solid"}
+
+
+def _side_type(segments: Any, edges: set[int], interpolating: bool) -> str:
+    """The boundary type of the segment bounding most of one side of a lane."""
+    best, best_span = None, -1
+    for seg in segments:
+        span = int(seg.lane_end_index) - int(seg.lane_start_index)
+        if span > best_span:
+            best, best_span = seg, span
+    if best is None:
+        return "virtual" if interpolating else "unknown"
+    if int(best.boundary_feature_id) in edges:
+        return "road_edge"
+    return _LINE_TYPE.get(int(best.boundary_type), "unknown")
