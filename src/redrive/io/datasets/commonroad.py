@@ -42,8 +42,18 @@ from typing import Any
 import numpy as np
 
 from redrive.errors import LogError
-from redrive.io.base import DecodedKind, ReaderCapabilities
-from redrive.io.datasets.native import Loader, NativeLogBase, NativeStep, decoded, native_topics
+from redrive.io.base import ReaderCapabilities
+from redrive.io.datasets.native import (
+    TOPIC_EGO_POSE,
+    TOPIC_OBJECTS,
+    TOPIC_TRAFFIC_LIGHTS,
+    TRAFFIC_TOPIC_KINDS,
+    Loader,
+    NativeLogBase,
+    NativeStep,
+    decoded,
+    native_topics,
+)
 from redrive.types import (
     Box3D,
     DetectedObject,
@@ -59,9 +69,6 @@ __all__ = ["CLASS_OF_OBSTACLE_TYPE", "CommonRoadGoal", "CommonRoadReader"]
 
 logger = logging.getLogger(__name__)
 
-TOPIC_EGO_POSE = "/ego_pose"
-TOPIC_OBJECTS = "/objects"
-TOPIC_TRAFFIC_LIGHTS = "/traffic_lights"
 _HEAD_BYTES = 4096
 
 #: commonroad-io ``ObstacleType`` value → ObjectClass
@@ -274,14 +281,7 @@ class CommonRoadReader(NativeLogBase):
         self._start = None if problem is None else self._start_state(problem)
         self._road_map: RoadMap | None = None
         self._steps = self._schedule()
-        self._topics = native_topics(
-            self._steps,
-            {
-                TOPIC_EGO_POSE: ("redrive/VehicleState", DecodedKind.VEHICLE_STATE, None),
-                TOPIC_OBJECTS: ("redrive/GroundTruthObjects", DecodedKind.OBJECTS, None),
-                TOPIC_TRAFFIC_LIGHTS: ("redrive/TrafficData", DecodedKind.TRAFFIC_LIGHTS, None),
-            },
-        )
+        self._topics = native_topics(self._steps, TRAFFIC_TOPIC_KINDS)
         self.capabilities = ReaderCapabilities(
             message_typed=False,
             has_tf=False,

@@ -48,6 +48,21 @@ def decoded(stamp_ns: int, frame_id: str, value: DecodedValue) -> Decoded:
     return Decoded(stamp_ns=stamp_ns, frame_id=frame_id, value=value)
 
 
+#: the topics of a recorded-traffic log (WOMD, CommonRoad): the ego, every agent as ground
+#: truth, the signals' states
+TOPIC_EGO_POSE = "/ego_pose"
+TOPIC_OBJECTS = "/objects"
+TOPIC_TRAFFIC_LIGHTS = "/traffic_lights"
+#: their ``native_topics`` table
+TRAFFIC_TOPIC_KINDS: Mapping[str, tuple[str, DecodedKind, SensorType | None]] = MappingProxyType(
+    {
+        TOPIC_EGO_POSE: ("redrive/VehicleState", DecodedKind.VEHICLE_STATE, None),
+        TOPIC_OBJECTS: ("redrive/GroundTruthObjects", DecodedKind.OBJECTS, None),
+        TOPIC_TRAFFIC_LIGHTS: ("redrive/TrafficData", DecodedKind.TRAFFIC_LIGHTS, None),
+    }
+)
+
+
 def native_topics(
     steps: Sequence[NativeStep],
     kinds: Mapping[str, tuple[str, DecodedKind, SensorType | None]],

@@ -47,8 +47,18 @@ import numpy as np
 import numpy.typing as npt
 
 from redrive.errors import LogError
-from redrive.io.base import DecodedKind, ReaderCapabilities
-from redrive.io.datasets.native import Loader, NativeLogBase, NativeStep, decoded, native_topics
+from redrive.io.base import ReaderCapabilities
+from redrive.io.datasets.native import (
+    TOPIC_EGO_POSE,
+    TOPIC_OBJECTS,
+    TOPIC_TRAFFIC_LIGHTS,
+    TRAFFIC_TOPIC_KINDS,
+    Loader,
+    NativeLogBase,
+    NativeStep,
+    decoded,
+    native_topics,
+)
 from redrive.io.datasets.tfrecord import looks_like_tfrecord, read_tfrecords
 from redrive.io.datasets.womd_proto import LANE_STATE_NAMES, scenario_class
 from redrive.types import (
@@ -74,9 +84,6 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-TOPIC_EGO_POSE = "/ego_pose"
-TOPIC_OBJECTS = "/objects"
-TOPIC_TRAFFIC_LIGHTS = "/traffic_lights"
 _CLASSES = (
     ObjectClass.UNKNOWN,
     ObjectClass.VEHICLE,
@@ -269,14 +276,7 @@ class WomdReader(NativeLogBase):
         ]
         self._road_map: RoadMap | None = None
         self._steps = self._schedule(steps)
-        self._topics = native_topics(
-            self._steps,
-            {
-                TOPIC_EGO_POSE: ("redrive/VehicleState", DecodedKind.VEHICLE_STATE, None),
-                TOPIC_OBJECTS: ("redrive/GroundTruthObjects", DecodedKind.OBJECTS, None),
-                TOPIC_TRAFFIC_LIGHTS: ("redrive/TrafficData", DecodedKind.TRAFFIC_LIGHTS, None),
-            },
-        )
+        self._topics = native_topics(self._steps, TRAFFIC_TOPIC_KINDS)
         self.capabilities = ReaderCapabilities(
             message_typed=False,
             has_tf=False,
