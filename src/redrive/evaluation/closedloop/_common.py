@@ -202,7 +202,7 @@ def road_index(data: EvalData) -> RoadIndex | None:
     road_map = data.road_map()
     if road_map is None:
         return None
-    cache = data._cache  # one index per EvalData, shared by pdm_score's parts
+    cache = data._cache  # one index per EvalData, shared by every road metric of the evaluation
     index = cache.get("road_index")
     if not isinstance(index, RoadIndex):
         index = RoadIndex(road_map)
