@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import signal
+import time
 from collections.abc import Mapping
 from types import MappingProxyType
 from typing import Any
@@ -58,9 +59,14 @@ class KillOnce(Algorithm):
         return _stand_still(frame.stamp_ns)
 
 
+#: how long :class:`InterruptDriver` waits for the driver's SIGINT (it comes within milliseconds)
+_ANSWER_WAIT_S = 10.0
+
+
 class InterruptDriver(Algorithm):
-    """Sends SIGINT (Ctrl-C) to process ``driver_pid`` at frame ``frame_index``, once: the run
-    that creates ``marker`` does; later runs plan on."""
+    """Sends SIGINT (Ctrl-C) to process ``driver_pid`` at frame ``frame_index``, once, and waits
+    for the driver to interrupt it back: the run that creates ``marker`` does; later runs plan
+    on."""
 
     role = Role.PLANNING
     defaults = MappingProxyType({"driver_pid": 0, "frame_index": 21, "marker": ""})
@@ -79,6 +85,9 @@ class InterruptDriver(Algorithm):
             else:
                 os.close(fd)
                 os.kill(self.driver_pid, signal.SIGINT)
+                # the driver answers with a SIGINT to this cell: wait for it here, so that the
+                # run is interrupted on this frame and not (by chance) after its last one
+                time.sleep(_ANSWER_WAIT_S)
         return _stand_still(frame.stamp_ns)
 
 

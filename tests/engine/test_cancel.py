@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import signal
 import threading
 from collections.abc import Callable
 from pathlib import Path
@@ -85,3 +87,27 @@ def test_an_unset_cancel_event_changes_nothing(demo_bag: Path, tmp_path: Path) -
     request = RunRequest(log=demo_bag, pipeline=_pipeline(), out=tmp_path / "run")
     assert run_log(request, cancel=threading.Event()).status == "complete"
     assert open_run(tmp_path / "run").table("frames").num_rows == 50
+
+
+def test_ctrl_c_while_a_finished_run_is_closed_leaves_it_complete(
+    demo_bag: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A batch driver stops its cells with SIGINT; one that arrives after the last frame, while
+    the run directory is being closed, used to leave the manifest ``running`` (CI, stop 39)."""
+    from redrive.results import RunWriter
+
+    original = RunWriter.write_resources
+
+    def write_resources_then_ctrl_c(self: RunWriter, *args: object, **kwargs: object) -> None:
+        os.kill(os.getpid(), signal.SIGINT)
+        original(self, *args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(RunWriter, "write_resources", write_resources_then_ctrl_c)
+    report = run_log(RunRequest(log=demo_bag, pipeline=_pipeline(), out=tmp_path / "run"))
+
+    assert report.status == "complete"
+    run = open_run(tmp_path / "run")
+    assert run.manifest.status is RunStatus.COMPLETE
+    assert run.manifest.frames_done == len(run.table("frames"))
+    # the handler the run found is back
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler

@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import itertools
 import logging
+import signal
 import threading
 from collections.abc import Callable, Iterable, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -332,20 +334,42 @@ def execute(
             cancel=cancel,
         )
     except BaseException as err:
+        with _sigint_deferred():
+            writer.write_resources(sampler.stop())
+            engine.close()
+            interrupted = isinstance(err, KeyboardInterrupt)
+            status = RunStatus.INTERRUPTED if interrupted else RunStatus.FAILED
+            writer.close(status=status, summary={"error": f"{type(err).__name__}: {err}"})
+        raise
+    # the frames are done: a Ctrl-C from here on (a batch driver stopping its cells just as the
+    # last frame finished) must not leave the manifest `running` — the run is closed with what
+    # it did, and a run that processed every frame stays `complete`
+    with _sigint_deferred() as pressed:
         writer.write_resources(sampler.stop())
         engine.close()
-        interrupted = isinstance(err, KeyboardInterrupt)
-        status = RunStatus.INTERRUPTED if interrupted else RunStatus.FAILED
-        writer.close(status=status, summary={"error": f"{type(err).__name__}: {err}"})
-        raise
-    writer.write_resources(sampler.stop())
-    engine.close()
-    summary = report.as_dict()
-    del summary["status"]  # the manifest's own status
-    if summary_extra is not None:
-        summary.update(summary_extra())
-    skipped = getattr(hooks, "skipped_frames", None)
-    if skipped is not None:
-        summary["skipped_frames"] = int(skipped)
-    writer.close(status=report.status, summary=summary)
+        summary = report.as_dict()
+        del summary["status"]  # the manifest's own status
+        if summary_extra is not None:
+            summary.update(summary_extra())
+        skipped = getattr(hooks, "skipped_frames", None)
+        if skipped is not None:
+            summary["skipped_frames"] = int(skipped)
+        writer.close(status=report.status, summary=summary)
+    if pressed:
+        logger.warning("Ctrl-C came after the last frame; the run is closed as %s", report.status)
     return report
+
+
+@contextmanager
+def _sigint_deferred() -> Iterator[list[int]]:
+    """SIGINT held back while a run directory is closed: the list it yields gets an entry per
+    Ctrl-C that came meanwhile.  Off the main thread (where Python delivers no signal) a no-op."""
+    pressed: list[int] = []
+    if threading.current_thread() is not threading.main_thread():
+        yield pressed
+        return
+    previous = signal.signal(signal.SIGINT, lambda signum, _frame: pressed.append(signum))
+    try:
+        yield pressed
+    finally:
+        signal.signal(signal.SIGINT, previous)
