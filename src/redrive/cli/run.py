@@ -122,6 +122,8 @@ def print_run_report(report: Any, out: Path, *, live: bool = False) -> None:
     from rich.console import Console
     from rich.table import Table
 
+    from redrive.assembly.non_finite import NON_FINITE_WARN_FRACTION
+
     console = Console(width=None if sys.stdout.isatty() else 120)
     table = Table(title=f"run {out}", title_justify="left")
     table.add_column("algorithm")
@@ -158,6 +160,17 @@ def print_run_report(report: Any, out: Path, *, live: bool = False) -> None:
             f"skipped ({known} messages lost{' and an unknown number more' if unknown else ''}); "
             "the run covers the intact part — `redrive info LOG` lists the damage, --strict "
             "refuses damaged logs",
+            highlight=False,
+        )
+    for topic, counts in sorted(getattr(report, "non_finite_points", {}).items()):
+        if not counts.get("clouds_over"):
+            continue
+        console.print(
+            f"[bold yellow]{topic}: {counts['clouds_over']} of {counts['clouds']} clouds had more "
+            f"than {NON_FINITE_WARN_FRACTION:.0%} NaN or infinite points[/bold yellow] (up to "
+            f"{counts['max_fraction']:.0%} in one; {counts['non_finite']:,} of {counts['points']:,} "
+            "points in all): the algorithms got them as they are — the manifest's summary "
+            "counts them (non_finite_points)",
             highlight=False,
         )
     for name, count in sorted(report.missing_inputs.items()):

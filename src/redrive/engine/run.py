@@ -260,11 +260,14 @@ def run_reader(
     frames = _select(assembler.frames(), request.first_frame, request.stop_frame)
 
     def summary_extra() -> dict[str, Any]:
-        return (
-            {"undecodable_messages": dict(assembler.undecodable)} if assembler.undecodable else {}
-        )
+        extra: dict[str, Any] = {}
+        if assembler.undecodable:
+            extra["undecodable_messages"] = dict(assembler.undecodable)
+        if non_finite := assembler.non_finite.summary():
+            extra["non_finite_points"] = non_finite
+        return extra
 
-    return execute(
+    report = execute(
         graph,
         request.pipeline,
         inputs=inputs,
@@ -276,6 +279,7 @@ def run_reader(
         sink=None if on_frame is None else _then(writer.write_frame, on_frame),
         summary_extra=summary_extra,
     )
+    return replace(report, non_finite_points=assembler.non_finite.summary())
 
 
 def _then(

@@ -52,6 +52,8 @@ class RunReport:
         failed_frames: frames in which at least one step failed (error or timeout).
         missing_inputs: input → frames that had no sample of it within the tolerance.
         damage: the damaged parts of the log that were skipped (a run with ``strict=False``).
+        non_finite_points: topic → the NaN / ±inf points of its clouds, for the topics with any
+            (:meth:`redrive.assembly.non_finite.NonFiniteCounter.summary`).
     """
 
     status: RunStatus
@@ -64,6 +66,7 @@ class RunReport:
     failed_frames: int = 0
     missing_inputs: Mapping[str, int] = field(default_factory=dict)
     damage: tuple[LogDamage, ...] = ()
+    non_finite_points: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
 
     @property
     def nothing_succeeded(self) -> bool:

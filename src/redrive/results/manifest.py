@@ -319,6 +319,10 @@ class RunSummary:
     #: input → frames without a sample of it within the tolerance (stale or absent there)
     missing_inputs: Mapping[str, int] = field(default_factory=dict)
     undecodable_messages: Mapping[str, int] = field(default_factory=dict)  # topic → count
+    #: topic → the non-finite (NaN, ±inf) points of its clouds: clouds, points, non_finite,
+    #: clouds_with_non_finite, clouds_over (over the warning fraction), max_fraction
+    #: (:mod:`redrive.assembly.non_finite`); only topics with any
+    non_finite_points: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     error: str | None = None  # ``Type: message`` of what ended a failed or interrupted run
     #: closed loop: the deviation thresholds, how many frames passed them (``deviated_frames``),
     #: the first such frame and the largest deviations
@@ -329,6 +333,7 @@ class RunSummary:
         out["algorithms"] = [_plain(a) for a in self.algorithms]
         out["failure"] = None if self.failure is None else _asdict(self.failure)
         out["undecodable_messages"] = dict(self.undecodable_messages)
+        out["non_finite_points"] = {t: dict(c) for t, c in self.non_finite_points.items()}
         out["missing_inputs"] = dict(self.missing_inputs)
         out["closed_loop"] = to_jsonable(self.closed_loop)
         return out
@@ -351,6 +356,17 @@ class RunSummary:
             failed_frames=f.opt_integer("failed_frames", None),
             missing_inputs=f.int_map("missing_inputs", {}),
             undecodable_messages=f.int_map("undecodable_messages", {}),
+            non_finite_points={
+                t: dict(c)
+                for t, c in f.value(
+                    "non_finite_points",
+                    lambda v: (
+                        isinstance(v, Mapping) and all(isinstance(c, Mapping) for c in v.values())
+                    ),
+                    "an object of objects (topic → counts)",
+                    {},
+                ).items()
+            },
             error=f.opt_text("error", None),
             closed_loop=f.mapping("closed_loop", {}),
         )
