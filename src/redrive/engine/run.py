@@ -173,6 +173,7 @@ def run_setup(
             mode=pipeline.mode,
             executor=pipeline.executor,
             step_timeout_s=pipeline.step_timeout_s,
+            max_rss_mb=pipeline.max_rss_by_stage,
             fail_fast=pipeline.fail_fast,
             first_frame=first_frame,
             stop_frame=stop_frame,

@@ -37,6 +37,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+from redrive.config.validate import is_number
 from redrive.results._fields import DAMAGED_ADVICE, Fields, manifest_error
 from redrive.results._files import write_json_atomic
 from redrive.types import Role, SensorType, to_jsonable
@@ -175,6 +176,8 @@ class PipelineInfo:
     rate: float | None = None  # real-time factor paced at; None: as fast as possible
     stages: tuple[str, ...] = ()  # stage names in execution order
     mode_manager: str = "replay"  # the Mode Manager's mode: replay | realtime | …
+    #: stage → the memory bound (MiB, resident) of each of its algorithms' worker processes
+    max_rss_mb: Mapping[str, float] = field(default_factory=dict)
 
     @classmethod
     def _parse(cls, f: Fields) -> PipelineInfo:
@@ -188,6 +191,15 @@ class PipelineInfo:
             rate=f.opt_number("rate"),
             stages=f.texts("stages"),
             mode_manager=f.text("mode_manager"),
+            max_rss_mb={
+                k: float(v)
+                for k, v in f.value(
+                    "max_rss_mb",
+                    lambda v: isinstance(v, Mapping) and all(is_number(x) for x in v.values()),
+                    "an object of numbers (stage → MiB)",
+                    {},
+                ).items()
+            },
         )
 
 
@@ -433,7 +445,11 @@ class RunManifest(RunSetup):
             "host": _asdict(self.host),
             "sensors": {k: v.value for k, v in self.sensors.items()},
             "seed": self.seed,
-            "pipeline": {**_asdict(self.pipeline), "stages": list(self.pipeline.stages)},
+            "pipeline": {
+                **_asdict(self.pipeline),
+                "stages": list(self.pipeline.stages),
+                "max_rss_mb": dict(self.pipeline.max_rss_mb),
+            },
             "algorithms": [a.to_json() for a in self.algorithms],
             "log": {
                 **_asdict(self.log),
