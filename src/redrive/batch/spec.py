@@ -317,7 +317,7 @@ def pipeline_hash(config: PipelineConfig) -> str:
                 entry["file_sha256"] = hashlib.sha256(Path(module).read_bytes()).hexdigest()
             algos.append(entry)
         stages.append({"name": stage.name, "algorithms": algos})
-    canonical = {
+    canonical: dict[str, Any] = {
         "stages": stages,
         "mode": config.mode,
         "executor": config.executor,
