@@ -131,17 +131,35 @@ def _huge_bag_record(src: bytes) -> bytes:
     return bytes(out)
 
 
-def _lying_bag_chunk(src: bytes) -> bytes:
+def _lying_bag_chunk(src: bytes, size: int = 0xFFFFFF00) -> bytes:
+    """``src`` with the ``size`` field of its first chunk's header set to ``size``."""
     offset, _, data_at = _first_bag_chunk(src)
     out = bytearray(src)
     at = offset + 4
     while at < data_at - 4:
         (flen,) = struct.unpack_from("<I", out, at)
         if bytes(out[at + 4 : at + 9]) == b"size=":
-            struct.pack_into("<I", out, at + 9, 0xFFFFFF00)
+            struct.pack_into("<I", out, at + 9, size)
             return bytes(out)
         at += 4 + flen
     raise ValueError("the chunk has no size field")
+
+
+def lying_bag_chunk(src: bytes, *, size: int = 0xFFFFFF00) -> bytes:
+    """A bag's bytes with its first chunk's header claiming ``size`` uncompressed bytes."""
+    return _lying_bag_chunk(src, size)
+
+
+def unindexed_bag(src: bytes) -> bytes:
+    """A bag's bytes with its header's ``index_pos`` zeroed: readers must walk its records."""
+    at = src.index(b"index_pos=", 0, 4096) + len(b"index_pos=")
+    return src[:at] + bytes(8) + src[at + 8 :]
+
+
+def first_bag_chunk_size(src: bytes) -> tuple[int, int]:
+    """(declared uncompressed size, position) of a bag's first chunk."""
+    offset, fields, _ = _first_bag_chunk(src)
+    return struct.unpack("<I", fields["size"])[0], offset
 
 
 # --------------------------------------------------------------------------- message-level lies

@@ -101,6 +101,14 @@ class McapFileReader(RosReaderBase):
             self._fh.close()
             msg = f"{self.path}: not an MCAP file (the magic bytes are missing)"
             raise LogError(msg)
+        if self._size <= len(_MAGIC):
+            self._fh.close()
+            msg = (
+                f"{self.path}: the file holds only the {self._size}-byte MCAP magic: no header, "
+                "no record, no message — an empty log (a recorder that stopped right after "
+                "opening it, or a copy cut off at its start); there is nothing to read or repair"
+            )
+            raise LogError(msg)
         self._map = mmap.mmap(self._fh.fileno(), 0, access=mmap.ACCESS_READ)
         self._buf = memoryview(self._map)
         self._summary = self._read_summary()
