@@ -275,6 +275,7 @@ def convert_log(
         total = sum(t.count for t in selected if t.topic not in skipped_topics)
         written: dict[str, str] = {}
         done = skipped = 0
+        failed_topics: set[str] = set()
         sink = _Sink(out, store, compression=compression)
         try:
             for message in reader.messages(topics=wanted, start_ns=start_ns, stop_ns=stop_ns):
@@ -284,13 +285,19 @@ def convert_log(
                     raise
                 except Exception as err:  # rosbags raises plain errors on bad bytes
                     skipped += 1
-                    logger.warning(
-                        "%s: topic %s at %d ns: message skipped, it does not convert (%s: %s)",
+                    first = message.topic not in failed_topics
+                    failed_topics.add(message.topic)
+                    logger.log(
+                        logging.WARNING if first else logging.DEBUG,
+                        "%s: topic %s at %d ns: message skipped, it does not convert (%s: %s)%s",
                         reader.path,
                         message.topic,
                         message.log_time_ns,
                         type(err).__name__,
                         err,
+                        " (further failures on this topic are counted, not logged)"
+                        if first
+                        else "",
                     )
                     continue
                 sink.write(message.topic, msgtype, message.log_time_ns, data)

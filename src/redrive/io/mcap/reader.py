@@ -142,9 +142,13 @@ class McapFileReader(RosReaderBase):
         }
         self._deserializer = Deserializer(
             self.path,
-            ros1=typestore_for(1, defs[1], needed=used["ros1"])[0] if defs[1] else None,
+            ros1=typestore_for(1, defs[1], needed=used["ros1"], source=self.path)[0]
+            if defs[1]
+            else None,
             cdr=(
-                typestore_for(2, defs[2], needed=used["cdr"])[0] if defs[2] or not defs[1] else None
+                typestore_for(2, defs[2], needed=used["cdr"], source=self.path)[0]
+                if defs[2] or not defs[1]
+                else None
             ),
         )
         self._topics = self._summarise()

@@ -114,7 +114,7 @@ class Ros1BagReader(RosReaderBase):
         self._open()
         definitions = {c.msgtype: ("msg", c.msgdef) for c in self._conns.values()}
         self._typestore, self._bad_definitions = typestore_for(
-            1, definitions, needed={c.msgtype for c in self._conns.values()}
+            1, definitions, needed={c.msgtype for c in self._conns.values()}, source=self.path
         )
         self._deserializer = Deserializer(self.path, ros1=self._typestore, cdr=None)
         self._topics = self._summarise()
@@ -321,6 +321,8 @@ class Ros1BagReader(RosReaderBase):
             times, chunk_pos, offsets, conn_ids = (
                 a[:times_stop] for a in (times, chunk_pos, offsets, conn_ids)
             )
+        if not len(times):
+            return  # nothing selected (no topic, or a range without messages)
         # Where the chunk changes: the messages of [bounds[k], bounds[k + 1]) share a chunk.
         bounds = [0, *(np.flatnonzero(np.diff(chunk_pos)) + 1).tolist(), len(times)]
         heads = {cid: (c.topic, c.msgtype) for cid, c in self._conns.items()}
