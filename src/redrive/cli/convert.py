@@ -85,6 +85,7 @@ def register(sub: Any) -> None:
     parser.add_argument(
         "--skip-damaged",
         action="store_true",
-        help="read past damage (corrupt chunks, a cut-off end) instead of stopping with an error",
+        help="read past damage (corrupt chunks, a cut-off end, a missing index) instead of "
+        "stopping with an error (without it any damage `redrive info` lists refuses the log)",
     )
     parser.set_defaults(func=_run)
