@@ -37,7 +37,6 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from redrive.config.validate import is_number
 from redrive.results._fields import DAMAGED_ADVICE, Fields, manifest_error
 from redrive.results._files import write_json_atomic
 from redrive.types import Role, SensorType, to_jsonable
@@ -191,15 +190,7 @@ class PipelineInfo:
             rate=f.opt_number("rate"),
             stages=f.texts("stages"),
             mode_manager=f.text("mode_manager"),
-            max_rss_mb={
-                k: float(v)
-                for k, v in f.value(
-                    "max_rss_mb",
-                    lambda v: isinstance(v, Mapping) and all(is_number(x) for x in v.values()),
-                    "an object of numbers (stage → MiB)",
-                    {},
-                ).items()
-            },
+            max_rss_mb=f.number_map("max_rss_mb", {}),
         )
 
 
@@ -368,17 +359,7 @@ class RunSummary:
             failed_frames=f.opt_integer("failed_frames", None),
             missing_inputs=f.int_map("missing_inputs", {}),
             undecodable_messages=f.int_map("undecodable_messages", {}),
-            non_finite_points={
-                t: dict(c)
-                for t, c in f.value(
-                    "non_finite_points",
-                    lambda v: (
-                        isinstance(v, Mapping) and all(isinstance(c, Mapping) for c in v.values())
-                    ),
-                    "an object of objects (topic → counts)",
-                    {},
-                ).items()
-            },
+            non_finite_points=f.object_map("non_finite_points", {}),
             error=f.opt_text("error", None),
             closed_loop=f.mapping("closed_loop", {}),
         )
