@@ -37,6 +37,13 @@ def test_non_finite_points_are_counted_exactly() -> None:
     assert non_finite_points(_cloud(100, 67)) == 67
     assert non_finite_points(_cloud(100, 100)) == 100
     assert non_finite_points(PointCloud(xyz=np.zeros((0, 3), dtype=np.float32))) == 0
+    for at in (0, 1, 6, 7, 8, 9999):  # one bad point anywhere, in any coordinate, strided
+        for axis in range(3):
+            for bad in (np.nan, np.inf, -np.inf):
+                rows = np.ones((10_000, 5), dtype=np.float32)
+                rows[at, axis] = bad
+                cloud = PointCloud(xyz=rows[:, :3])
+                assert non_finite_points(cloud) == 1, (at, axis, bad)
     # finite values whose float32 sum would overflow are not counted
     big = np.full((10, 3), np.finfo(np.float32).max, dtype=np.float32)
     assert non_finite_points(PointCloud(xyz=big)) == 0

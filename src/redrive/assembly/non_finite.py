@@ -67,19 +67,16 @@ class TopicNonFinite:
 
 
 def non_finite_points(cloud: PointCloud) -> int:
-    """How many points of ``cloud`` have a NaN or ±inf coordinate.
-
-    The common case (none) costs one float64 sum over the coordinates: any NaN or inf makes it
-    non-finite, and a sum of float32 values in float64 cannot overflow; only then are the
-    points counted one by one."""
+    """How many points of ``cloud`` have a NaN or ±inf coordinate (one pass over the
+    coordinates: ≈ 60 instructions a point on a decoded cloud, whose xyz is an unaligned
+    strided view that every numpy loop reads through its buffered path)."""
     xyz = cloud.xyz
     if not xyz.size:
         return 0
-    with np.errstate(invalid="ignore"):  # inf - inf is NaN: what is looked for, not a fault
-        total = xyz.sum(dtype=np.float64)
-    if np.isfinite(total):
+    finite = np.isfinite(xyz)
+    if finite.all():
         return 0
-    return int(np.count_nonzero(~np.isfinite(xyz).all(axis=1)))
+    return int(np.count_nonzero(~finite.all(axis=1)))
 
 
 class NonFiniteCounter:
