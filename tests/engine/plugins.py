@@ -153,3 +153,21 @@ class OwnRunStep(Algorithm):
 
     def run_step(self, frame: Frame, upstream: StageOutputs) -> StepResult:
         return replace(super().run_step(frame, upstream), output=ControlCommands(throttle=0.5))
+
+
+class Hog(Algorithm):
+    """Allocates (and touches) ``mib`` MiB on frame ``frame``; keeps it when ``keep``."""
+
+    role = Role.PERCEPTION
+    defaults: Mapping[str, Any] = {"frame": 2, "mib": 1024, "keep": True}
+
+    def setup(self, config: Mapping[str, Any]) -> None:
+        self.kept: list[np.ndarray] = []
+
+    def step(self, frame: Frame, upstream: StageOutputs) -> list[DetectedObject]:
+        if frame.index == self.config["frame"]:
+            block = np.ones(self.config["mib"] << 17)  # float64: 8 bytes each, every page touched
+            if self.config["keep"]:
+                self.kept.append(block)
+            del block
+        return []

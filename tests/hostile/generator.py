@@ -131,17 +131,35 @@ def _huge_bag_record(src: bytes) -> bytes:
     return bytes(out)
 
 
-def _lying_bag_chunk(src: bytes) -> bytes:
+def _lying_bag_chunk(src: bytes, size: int = 0xFFFFFF00) -> bytes:
+    """``src`` with the ``size`` field of its first chunk's header set to ``size``."""
     offset, _, data_at = _first_bag_chunk(src)
     out = bytearray(src)
     at = offset + 4
     while at < data_at - 4:
         (flen,) = struct.unpack_from("<I", out, at)
         if bytes(out[at + 4 : at + 9]) == b"size=":
-            struct.pack_into("<I", out, at + 9, 0xFFFFFF00)
+            struct.pack_into("<I", out, at + 9, size)
             return bytes(out)
         at += 4 + flen
     raise ValueError("the chunk has no size field")
+
+
+def lying_bag_chunk(src: bytes, *, size: int = 0xFFFFFF00) -> bytes:
+    """A bag's bytes with its first chunk's header claiming ``size`` uncompressed bytes."""
+    return _lying_bag_chunk(src, size)
+
+
+def unindexed_bag(src: bytes) -> bytes:
+    """A bag's bytes with its header's ``index_pos`` zeroed: readers must walk its records."""
+    at = src.index(b"index_pos=", 0, 4096) + len(b"index_pos=")
+    return src[:at] + bytes(8) + src[at + 8 :]
+
+
+def first_bag_chunk_size(src: bytes) -> tuple[int, int]:
+    """(declared uncompressed size, position) of a bag's first chunk."""
+    offset, fields, _ = _first_bag_chunk(src)
+    return struct.unpack("<I", fields["size"])[0], offset
 
 
 # --------------------------------------------------------------------------- message-level lies
@@ -387,3 +405,51 @@ def make_hostile(base_mcap: Path, real_bag: Path, out_dir: Path, seed: int = 37)
     paths["recursive_msgdef.bag"] = out_dir / "recursive_msgdef.bag"
     assert set(paths) == set(DESCRIPTIONS)
     return paths
+
+
+# --------------------------------------------------------------------------- non-finite points
+
+
+def inject_non_finite(
+    src: Path, dst: Path, *, topic: str, keep_every: int = 3
+) -> list[tuple[int, int]]:
+    """Copy the ROS 1 bag ``src`` to ``dst`` with the PointCloud2 messages of ``topic`` given
+    NaN, +inf or -inf (in turn, in x, y or z) in every point but each ``keep_every``-th; returns
+    (points, non-finite points) of each cloud written, in order."""
+    from rosbags.rosbag1 import Reader as BagReader
+    from rosbags.rosbag1 import Writer as BagWriter
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    dst.unlink(missing_ok=True)
+    counts: list[tuple[int, int]] = []
+    with BagReader(src) as reader, BagWriter(dst) as writer:
+        conns = {
+            c.id: writer.add_connection(c.topic, c.msgtype, typestore=store)
+            for c in reader.connections
+        }
+        for conn, t, raw in reader.messages():
+            data = raw
+            if conn.topic == topic:
+                msg = store.deserialize_ros1(raw, conn.msgtype)
+                counts.append(_spoil_points(msg, keep_every))
+                data = store.serialize_ros1(msg, conn.msgtype)
+            writer.write(conns[conn.id], t, data)
+    return counts
+
+
+def _spoil_points(msg: Any, keep_every: int) -> tuple[int, int]:
+    step = msg.point_step
+    n = msg.width * msg.height
+    data = np.frombuffer(bytes(msg.data), dtype=np.uint8).copy()
+    rows = data[: n * step].reshape(n, step)
+    offsets = {f.name: f.offset for f in msg.fields if f.name in ("x", "y", "z")}
+    spoiled = np.flatnonzero(np.arange(n) % keep_every != 0)
+    specials = np.array([np.nan, np.inf, -np.inf], dtype=np.float32)
+    for k, axis in enumerate(("x", "y", "z")):
+        picked = spoiled[spoiled % 3 == k]
+        at = offsets[axis]
+        values = specials[picked % 3].view(np.uint8).reshape(-1, 4)
+        rows[picked, at : at + 4] = values
+    msg.data = data
+    return n, len(spoiled)

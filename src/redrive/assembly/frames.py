@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from functools import partial
 
 from redrive.assembly.mounts import SensorMounts, mount_tf_topics
+from redrive.assembly.non_finite import NonFiniteCounter
 from redrive.assembly.sensor_map import SensorMap, SensorMapOverrides, infer_sensor_map
 from redrive.errors import ConfigError, UnsupportedMessageError
 from redrive.io.base import LogMessage, LogReader
@@ -33,7 +34,9 @@ from redrive.types import (
     DetectedObject,
     Frame,
     Image,
+    PointCloud,
     SensorData,
+    SensorType,
     TrafficData,
     Transform,
     VehicleState,
@@ -45,6 +48,8 @@ logger = logging.getLogger(__name__)
 
 _DEFAULT_LOOKAHEAD_NS = 200_000_000
 _STATE_WINDOW_NS = 2_000_000_000
+#: the clouds whose non-finite points are counted (a 2D scan marks a beam without return NaN)
+_COUNTED = frozenset({SensorType.LIDAR, SensorType.RADAR})
 
 
 @dataclass(frozen=True, slots=True)
@@ -103,6 +108,8 @@ class FrameAssembler:
             raise ConfigError(msg)
         self.lookahead_ns = lookahead_ns
         self.undecodable: dict[str, int] = {}
+        #: the non-finite points of each 3D cloud topic (counted, never filtered)
+        self.non_finite = NonFiniteCounter(log.path)
         self._warned: set[str] = set()
         self._unplaced: set[str] = set()
 
@@ -165,6 +172,8 @@ class FrameAssembler:
                     continue
                 spec = by_topic.get(message.topic)
                 if spec is not None:
+                    if type(decoded.value) is PointCloud and spec.sensor_type in _COUNTED:
+                        self.non_finite.check(message.topic, spec.sensor_id, decoded.value)
                     sample = _Sample(decoded.stamp_ns, decoded)
                     buffers[spec.sensor_id].append(sample)
                     if spec.sensor_id == driver_id:

@@ -320,7 +320,7 @@ def pipeline_hash(config: PipelineConfig) -> str:
                 entry["file_sha256"] = hashlib.sha256(Path(module).read_bytes()).hexdigest()
             algos.append(entry)
         stages.append({"name": stage.name, "algorithms": algos})
-    canonical = {
+    canonical: dict[str, Any] = {
         "stages": stages,
         "mode": config.mode,
         "executor": config.executor,
@@ -328,6 +328,10 @@ def pipeline_hash(config: PipelineConfig) -> str:
         "step_timeout_s": config.step_timeout_s,
         "fail_fast": config.fail_fast,
     }
+    if (
+        config.max_rss_by_stage
+    ):  # only when set: the hashes of unbounded pipelines stay as they were
+        canonical["max_rss_mb"] = config.max_rss_by_stage
     text = json.dumps(canonical, sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()
 

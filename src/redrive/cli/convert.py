@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import logging
 from pathlib import Path
 from typing import Any
 
@@ -26,9 +27,15 @@ def _run(args: argparse.Namespace) -> int:
     from redrive.io.convert import convert_log
     from redrive.output.progress import ProgressBar
 
-    with open_log(args.input, strict=not args.skip_damaged, packets="raw") as log:
-        origin = log.start_ns
-        total = log.message_count
+    io_logger = logging.getLogger("redrive.io")
+    level = io_logger.level
+    io_logger.setLevel(logging.ERROR)  # the conversion opens it again and warns of what it finds
+    try:
+        with open_log(args.input, strict=not args.skip_damaged, packets="raw") as log:
+            origin = log.start_ns
+            total = log.message_count
+    finally:
+        io_logger.setLevel(level)
     start_ns = _seconds_to_ns(args.start, origin)
     stop_ns = _seconds_to_ns(args.end, origin)
     with ProgressBar("converting", total=total, unit="messages") as bar:
@@ -78,6 +85,7 @@ def register(sub: Any) -> None:
     parser.add_argument(
         "--skip-damaged",
         action="store_true",
-        help="read past damage (corrupt chunks, a cut-off end) instead of stopping with an error",
+        help="read past damage (corrupt chunks, a cut-off end, a missing index) instead of "
+        "stopping with an error (without it any damage `redrive info` lists refuses the log)",
     )
     parser.set_defaults(func=_run)

@@ -10,6 +10,7 @@ import sys
 from collections.abc import Sequence
 
 from redrive import __version__
+from redrive.cli._address_space import fit_to_address_space
 from redrive.errors import DiskFullError, RedriveError, is_no_space
 
 __all__ = ["EXIT_DISK_FULL", "main"]
@@ -87,6 +88,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; returns the process exit status (docs/exit_status.md: 0 ok, 1 a redrive
     error, 2 bad usage, …); a Python traceback is printed only with ``-v``."""
+    fit_to_address_space()  # before numpy, pyarrow and their threads are loaded
     parser = build_parser()
     args = parser.parse_args(argv)
     args.argv = list(sys.argv[1:] if argv is None else argv)  # for hints that repeat the command

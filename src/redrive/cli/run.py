@@ -19,6 +19,7 @@ examples:
   redrive run drive.bag --perception mypkg.det:Det --planning idm-planner --control pure-pursuit-pid
   redrive run drive.bag --pipeline pipeline.toml --frames 100:200 --out runs/try1
   redrive run drive.bag --mode pipelined --step-timeout 2 --out runs/try2
+  redrive run drive.bag --perception big.py:Det --max-rss 2048   each worker under 2 GiB
   redrive run drive.bag --out runs/try2 --resume           continue an interrupted run
   redrive run cut_in --closed-loop --planning my.py:Planner   closed loop: the planner drives
   redrive run cut_in --closed-loop --agents reactive --perception noisy-oracle \
@@ -125,6 +126,8 @@ def print_run_report(report: Any, out: Path, *, live: bool = False) -> None:
     from rich.console import Console
     from rich.table import Table
 
+    from redrive.assembly.non_finite import NON_FINITE_WARN_FRACTION
+
     console = Console(width=None if sys.stdout.isatty() else 120)
     table = Table(title=f"run {out}", title_justify="left")
     table.add_column("algorithm")
@@ -167,6 +170,17 @@ def print_run_report(report: Any, out: Path, *, live: bool = False) -> None:
         console.print(
             f"[bold yellow]skipped {name}, {why}; the other stages ran (--strict refuses a "
             "pipeline the log cannot feed whole)",
+            highlight=False,
+        )
+    for topic, counts in sorted(getattr(report, "non_finite_points", {}).items()):
+        if not counts.get("clouds_over"):
+            continue
+        console.print(
+            f"[bold yellow]{topic}: {counts['clouds_over']} of {counts['clouds']} clouds had more "
+            f"than {NON_FINITE_WARN_FRACTION:.0%} NaN or infinite points[/bold yellow] (up to "
+            f"{counts['max_fraction']:.0%} in one; {counts['non_finite']:,} of {counts['points']:,} "
+            "points in all): the algorithms got them as they are — the manifest's summary "
+            "counts them (non_finite_points)",
             highlight=False,
         )
     for name, count in sorted(report.missing_inputs.items()):
@@ -231,6 +245,7 @@ def _run(args: argparse.Namespace) -> int:
         executor=args.executor,
         seed=args.seed,
         step_timeout_s=args.step_timeout,
+        max_rss_mb=args.max_rss,
         fail_fast=True if args.fail_fast else None,
     )
     if args.closed_loop:
@@ -477,6 +492,16 @@ def register(sub: Any) -> None:
         type=float,
         metavar="S",
         help="record steps longer than S seconds as timed out (runs algorithms in workers)",
+    )
+    parser.add_argument(
+        "--max-rss",
+        type=float,
+        metavar="MB",
+        help="bound each algorithm's worker process to MB MiB resident (interpreter and "
+        "libraries included, about 60-100 MiB); a step past it is killed and recorded as a "
+        "MemoryLimit error on its frame, a fresh worker takes the next (runs algorithms in "
+        "workers: an algorithm in this process cannot be bounded); a stage's own max_rss_mb in "
+        "--pipeline wins over it",
     )
     parser.add_argument("--fail-fast", action="store_true", help="stop at the first failed step")
     parser.add_argument(

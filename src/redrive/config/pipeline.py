@@ -6,6 +6,7 @@ A pipeline file (every key but the stages is optional; the CLI's flags override 
     executor = "threads"      # how algorithms run: "threads" (in this process) or "processes"
     seed = 0                  # handed to every algorithm whose defaults have a "seed"
     step_timeout_s = 2.0      # a step running longer is recorded as timed out (worker process)
+    max_rss_mb = 2048         # a worker process resident past this is killed (worker process)
     fail_fast = false         # stop at the first failed step instead of recording it
 
     [[stage]]
@@ -18,11 +19,20 @@ A pipeline file (every key but the stages is optional; the CLI's flags override 
 
     [[stage]]
     name = "planning"
+    max_rss_mb = 512          # this stage's own bound (else the pipeline's, or --max-rss)
     [[stage.algorithm]]
     plugin = "idm-planner"
 
 Stages run in file order; the algorithms of one stage run side by side on the same frame and see
 the outputs of every earlier stage.
+
+``max_rss_mb`` bounds the resident memory of each algorithm's worker process (the interpreter and
+its libraries included, ≈ 60-100 MB before the plugin allocates anything); a stage's own value
+wins over the pipeline's, which ``--max-rss`` replaces.  Like ``step_timeout_s`` it runs the
+algorithms in worker processes (an algorithm in the engine's process cannot be bounded without
+bounding the engine): a step whose worker goes past it is killed, recorded as an error
+``MemoryLimit`` on that frame, and a fresh worker takes the next frame
+(:class:`redrive.engine.worker.ProcessRunner`).
 """
 
 from __future__ import annotations
@@ -81,11 +91,14 @@ class StageSpec:
         algorithms: what runs in it.
         role: the role the user gave its algorithms (``--perception`` … sets it: "perception",
             "planning" or "control"); an algorithm of another role is refused. None: any.
+        max_rss_mb: the memory bound of each of its algorithms' worker processes (MiB); None:
+            the pipeline's.
     """
 
     name: str
     algorithms: tuple[AlgorithmSpec, ...]
     role: str | None = None
+    max_rss_mb: float | None = None
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -99,6 +112,8 @@ class PipelineConfig:
         seed: handed to algorithms that take a ``seed``; recorded in the manifest.
         step_timeout_s: per-step limit (forces worker processes); None for none.
         fail_fast: stop at the first failed step.
+        max_rss_mb: the memory bound (MiB, resident set) of every algorithm's worker process
+            whose stage sets none (forces worker processes); None for none.
     """
 
     stages: tuple[StageSpec, ...]
@@ -107,6 +122,7 @@ class PipelineConfig:
     seed: int = 0
     step_timeout_s: float | None = None
     fail_fast: bool = False
+    max_rss_mb: float | None = None
 
     def __post_init__(self) -> None:
         if not self.stages:
@@ -120,6 +136,13 @@ class PipelineConfig:
         if self.step_timeout_s is not None and not self.step_timeout_s > 0:
             msg = f"step_timeout_s must be > 0 seconds, got {self.step_timeout_s}"
             raise ConfigError(msg)
+        for where, bound in (
+            ("max_rss_mb", self.max_rss_mb),
+            *((f"stage {s.name!r}: max_rss_mb", s.max_rss_mb) for s in self.stages),
+        ):
+            if bound is not None and not bound > 0:
+                msg = f"{where} must be > 0 MiB, got {bound}"
+                raise ConfigError(msg)
         seen: set[str] = set()
         for stage in self.stages:
             if not stage.algorithms:
@@ -137,6 +160,28 @@ class PipelineConfig:
     @property
     def algorithms(self) -> tuple[AlgorithmSpec, ...]:
         return tuple(a for s in self.stages for a in s.algorithms)
+
+    def max_rss_mb_of(self, stage: str) -> float | None:
+        """The memory bound (MiB) of the algorithms of the stage named ``stage``: its own, else
+        the pipeline's (None: unbounded)."""
+        own = next((s.max_rss_mb for s in self.stages if s.name == stage), None)
+        return own if own is not None else self.max_rss_mb
+
+    @property
+    def max_rss_by_stage(self) -> dict[str, float]:
+        """Stage name → its memory bound (MiB), for the bounded stages."""
+        out = {s.name: self.max_rss_mb_of(s.name) for s in self.stages}
+        return {name: bound for name, bound in out.items() if bound is not None}
+
+    @property
+    def isolated(self) -> bool:
+        """Whether the algorithms run in worker processes: asked for, or needed by a step
+        timeout or a memory bound."""
+        return (
+            self.executor == "processes"
+            or self.step_timeout_s is not None
+            or bool(self.max_rss_by_stage)
+        )
 
     def with_options(self, **changes: Any) -> PipelineConfig:
         """A copy with the given fields changed (None values are ignored)."""
@@ -240,14 +285,17 @@ def load_pipeline(path: str | Path) -> PipelineConfig:
     """
     path = Path(path)
     top = Table(read_toml(path, what="pipeline file"), source=str(path))
-    top.check_keys({"mode", "executor", "seed", "step_timeout_s", "fail_fast", "stage"})
+    top.check_keys(
+        {"mode", "executor", "seed", "step_timeout_s", "fail_fast", "max_rss_mb", "stage"}
+    )
     stages: list[StageSpec] = []
     for i, stage in enumerate(top.tables("stage", [], fix="write each stage as [[stage]]")):
-        stage.check_keys({"name", "algorithm"})
+        stage.check_keys({"name", "algorithm", "max_rss_mb"})
         name = stage.text("name", f"stage_{i + 1}")
         algos = stage.tables("algorithm", [], fix="write each as [[stage.algorithm]]")
         specs = tuple(_algorithm(a, path.parent) for a in algos)
-        stages.append(StageSpec(name=name, algorithms=specs))
+        bound = stage.number("max_rss_mb", None, positive=True)
+        stages.append(StageSpec(name=name, algorithms=specs, max_rss_mb=bound))
     try:
         return PipelineConfig(
             stages=tuple(stages),
@@ -256,6 +304,7 @@ def load_pipeline(path: str | Path) -> PipelineConfig:
             seed=top.integer("seed", 0),
             step_timeout_s=top.number("step_timeout_s", None),
             fail_fast=top.flag("fail_fast", False),
+            max_rss_mb=top.number("max_rss_mb", None, positive=True),
         )
     except ConfigError as err:
         if str(err).startswith(str(path)):

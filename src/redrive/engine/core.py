@@ -253,7 +253,7 @@ class Engine:
         self.graph = graph
         self.pipeline = pipeline
         self.hooks: ModeHooks = hooks or ReplayMode()
-        use_processes = pipeline.executor == "processes" or pipeline.step_timeout_s is not None
+        use_processes = pipeline.isolated
         inputs_dict = {
             "sensors": dict(inputs.sensors),
             "has_vehicle_state": inputs.has_vehicle_state,
@@ -273,6 +273,7 @@ class Engine:
                             config=p.config,
                             inputs=inputs_dict,
                             timeout_s=pipeline.step_timeout_s,
+                            max_rss_mb=pipeline.max_rss_mb_of(name),
                         )
                     )
                 else:

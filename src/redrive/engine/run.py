@@ -179,6 +179,7 @@ def run_setup(
             mode=pipeline.mode,
             executor=pipeline.executor,
             step_timeout_s=pipeline.step_timeout_s,
+            max_rss_mb=pipeline.max_rss_by_stage,
             fail_fast=pipeline.fail_fast,
             first_frame=first_frame,
             stop_frame=stop_frame,
@@ -269,9 +270,12 @@ def run_reader(
     frames = _select(assembler.frames(), request.first_frame, request.stop_frame)
 
     def summary_extra() -> dict[str, Any]:
-        return (
-            {"undecodable_messages": dict(assembler.undecodable)} if assembler.undecodable else {}
-        )
+        extra: dict[str, Any] = {}
+        if assembler.undecodable:
+            extra["undecodable_messages"] = dict(assembler.undecodable)
+        if non_finite := assembler.non_finite.summary():
+            extra["non_finite_points"] = non_finite
+        return extra
 
     report = execute(
         graph,
@@ -285,6 +289,7 @@ def run_reader(
         sink=None if on_frame is None else _then(writer.write_frame, on_frame),
         summary_extra=summary_extra,
     )
+    report = replace(report, non_finite_points=assembler.non_finite.summary())
     return replace(report, skipped=dict(graph.skipped)) if graph.skipped else report
 
 

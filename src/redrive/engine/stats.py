@@ -54,6 +54,8 @@ class RunReport:
         damage: the damaged parts of the log that were skipped (a run with ``strict=False``).
         skipped: the algorithms left out because the log cannot feed them (name → why; a run
             with ``skip_unfed=True``).
+        non_finite_points: topic → the NaN / ±inf points of its clouds, for the topics with any
+            (:meth:`redrive.assembly.non_finite.NonFiniteCounter.summary`).
     """
 
     status: RunStatus
@@ -67,6 +69,7 @@ class RunReport:
     missing_inputs: Mapping[str, int] = field(default_factory=dict)
     damage: tuple[LogDamage, ...] = ()
     skipped: Mapping[str, str] = field(default_factory=dict)
+    non_finite_points: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
 
     @property
     def nothing_succeeded(self) -> bool:

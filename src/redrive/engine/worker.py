@@ -5,6 +5,9 @@ entry-point name), configures and binds it exactly as the engine does, then answ
 per frame.  When a step runs past the timeout the worker is killed, the step recorded as
 ``timeout``, and a fresh worker (``setup`` again, state lost) takes the next frame; a worker that
 dies (segfault, ``os._exit``) is recorded as an error on that frame and restarted the same way.
+With a memory bound (``max_rss_mb``) a worker whose resident set goes past it while a step runs,
+or whose peak after the step is past it, is killed the same way and the step recorded as an error
+of type ``MemoryLimit`` (:mod:`redrive.engine.memory`).
 
 Frames travel to workers pickled over a pipe, with the sensors the algorithm does not declare
 left out.  That is fine for control and planning inputs and for tests; the shared-memory
@@ -24,6 +27,7 @@ from multiprocessing.connection import Connection
 from typing import Any, Protocol
 
 from redrive.algorithms import Algorithm, StageOutputs, StepError, StepResult, StepStatus
+from redrive.engine.memory import RssWatch, mib, peak_rss_bytes
 from redrive.types import Frame
 
 __all__ = ["AlgorithmRunner", "InlineRunner", "ProcessRunner", "frame_for"]
@@ -105,7 +109,7 @@ def _worker_main(conn: Connection, init: Mapping[str, Any]) -> None:
     except Exception as err:
         conn.send(("error", StepError.from_exception(err)))
         return
-    conn.send(("ready", sorted(set(algo.bound_inputs.values()))))
+    conn.send(("ready", sorted(set(algo.bound_inputs.values())), peak_rss_bytes()))
     while True:
         try:
             request = conn.recv()
@@ -117,7 +121,8 @@ def _worker_main(conn: Connection, init: Mapping[str, Any]) -> None:
             algo.reset()
             continue
         frame, upstream = request
-        conn.send(algo.run_step(frame, upstream))
+        result = algo.run_step(frame, upstream)
+        conn.send((result, peak_rss_bytes()))
 
 
 class ProcessRunner:
@@ -127,6 +132,7 @@ class ProcessRunner:
         plugin, name, config: what the engine built the algorithm from.
         inputs: the log's inputs (a ``LogInputs`` as a plain dict of its fields).
         timeout_s: per-step limit; None waits for ever (a dead worker is still detected).
+        max_rss_mb: the bound of the worker's resident set (MiB); None for none.
     """
 
     def __init__(
@@ -137,15 +143,20 @@ class ProcessRunner:
         config: Mapping[str, Any],
         inputs: Mapping[str, Any],
         timeout_s: float | None,
+        max_rss_mb: float | None = None,
     ) -> None:
         self.name = name
         self._init = {"plugin": plugin, "name": name, "config": _plain(config), "inputs": inputs}
         self._timeout_s = timeout_s
+        self._max_rss_mb = max_rss_mb
+        self._limit = None if max_rss_mb is None else int(max_rss_mb * (1 << 20))
+        self._watch = None if self._limit is None else RssWatch(self._limit)
         self._ctx = mp.get_context("spawn")
         self._proc: Any = None
         self._conn: Connection | None = None
         self._sensors: frozenset[str] = frozenset()
         self._pending: tuple[int, int] | None = None
+        self._frame_index = -1
         self._start_error: StepError | None = None
         self._start()
 
@@ -170,14 +181,25 @@ class ProcessRunner:
             )
             return
         try:
-            kind, payload = parent.recv()
+            kind, *payload = parent.recv()
         except EOFError:
-            kind, payload = "error", self._died("while starting")
+            kind, payload = "error", [self._died("while starting")]
         if kind == "error":
             self._kill()
-            self._start_error = payload
+            self._start_error = payload[0]
             return
-        self._sensors = frozenset(payload)
+        self._sensors = frozenset(payload[0])
+        peak = payload[1]
+        if self._limit is not None and peak > self._limit:
+            self._kill()
+            self._start_error = StepError(
+                type="MemoryLimit",
+                message=(
+                    f"the worker of {self.name!r} used {mib(peak)} resident to start (import and "
+                    f"setup), over its bound of {self._max_rss_mb:g} MiB (--max-rss / "
+                    "max_rss_mb); raise the bound (the interpreter and its libraries count too)"
+                ),
+            )
 
     def _died(self, when: str) -> StepError:
         code = None if self._proc is None else self._proc.exitcode
@@ -213,11 +235,42 @@ class ProcessRunner:
             self._pending = (t0, -2)
             return
         self._pending = (t0, frame.index)
+        if self._watch is not None and self._proc is not None:
+            self._watch.arm(int(self._proc.pid))
 
     def result(self) -> StepResult:
+        result = self._result()
+        if self._watch is None:
+            return result
+        killed = self._watch.disarm()
+        if killed is None:
+            return result
+        self._kill()  # killed by the watch: a fresh worker takes the next frame
+        return self._over_memory(killed, result.latency_ns, when="while its step ran")
+
+    def _over_memory(self, rss: int, latency_ns: int, *, when: str) -> StepResult:
+        frame = self._frame_index
+        logger.debug(
+            "%s went past its memory bound on frame %d; worker restarted", self.name, frame
+        )
+        return StepResult(
+            status=StepStatus.ERROR,
+            latency_ns=latency_ns,
+            error=StepError(
+                type="MemoryLimit",
+                message=(
+                    f"{self.name} used {mib(rss)} resident on frame {frame} ({when}), over its "
+                    f"bound of {self._max_rss_mb:g} MiB (--max-rss / max_rss_mb); the worker "
+                    "was killed and restarted (state lost)"
+                ),
+            ),
+        )
+
+    def _result(self) -> StepResult:
         assert self._pending is not None, "result() before submit()"
         t0, state = self._pending
         self._pending = None
+        self._frame_index = state
         if state == -1:
             error = self._start_error
             self._start_error = None  # try a fresh worker on the next frame
@@ -244,11 +297,20 @@ class ProcessRunner:
                 ),
             )
         try:
-            result: StepResult = self._conn.recv()
+            result, peak = self._conn.recv()
         except (EOFError, OSError):
+            latency = time.perf_counter_ns() - t0
+            if self._watch is not None and self._watch.killed_rss is not None:
+                return StepResult(status=StepStatus.ERROR, latency_ns=latency)  # result() says
             error = self._died(f"on frame {state}")
             self._kill()
-            return StepResult(status=StepStatus.ERROR, error=error)
+            return StepResult(status=StepStatus.ERROR, latency_ns=latency, error=error)
+        if self._limit is not None and peak > self._limit:
+            if self._watch is not None:
+                self._watch.disarm()
+            self._kill()
+            return self._over_memory(peak, result.latency_ns, when="its peak during the step")
+        assert isinstance(result, StepResult)
         return result
 
     def reset(self) -> None:
@@ -262,6 +324,8 @@ class ProcessRunner:
         if self._proc is not None:
             self._proc.join(2.0)
         self._kill()
+        if self._watch is not None:
+            self._watch.close()
 
     def __del__(self) -> None:  # a forgotten runner must not leave a process behind
         if getattr(self, "_proc", None) is not None:

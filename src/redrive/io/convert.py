@@ -36,6 +36,7 @@ from rosbags.typesys.store import Typestore
 
 from redrive.errors import LogError, RedriveError
 from redrive.io.base import DecodedKind, LogMessage, LogReader
+from redrive.io.damage import damage_report, refused
 from redrive.io.mcap.writer import McapWriter
 from redrive.io.readers import open_log
 from redrive.io.ros.decoders.base import Decoded
@@ -241,7 +242,10 @@ def convert_log(
         compression: MCAP ``zstd`` (default) / ``lz4`` / ``none``; bag ``lz4`` (default) /
             ``bz2`` / ``none``.
         strict: passed to :func:`~redrive.io.open_log`: when True, damage in the source stops
-            the conversion (no output is left behind); when False what is readable is converted.
+            the conversion (no output is left behind) — any damage the reader reports, also
+            what loses no message (a missing summary or index, a chunk header whose size
+            lies), as ``redrive info --strict`` refuses it; when False what is readable is
+            converted.
 
     Raises:
         LogError: the source cannot be read, or the output cannot be written.
@@ -251,6 +255,8 @@ def convert_log(
         msg = f"{out}: the output must end in .mcap (MCAP, ROS 2) or .bag (ROS 1 bag)"
         raise LogError(msg)
     with open_log(in_path, strict=strict, packets="raw") as reader:
+        if strict and (found := damage_report(reader)):
+            raise refused(reader.path, found[0], messages_read=0)
         sources = _source_stores(reader)
         is2 = out.suffix == ".mcap"
         store = _destination_store(sources, ros_version=2 if is2 else 1)
@@ -269,6 +275,7 @@ def convert_log(
         total = sum(t.count for t in selected if t.topic not in skipped_topics)
         written: dict[str, str] = {}
         done = skipped = 0
+        failed_topics: set[str] = set()
         sink = _Sink(out, store, compression=compression)
         try:
             for message in reader.messages(topics=wanted, start_ns=start_ns, stop_ns=stop_ns):
@@ -284,13 +291,19 @@ def convert_log(
                     raise
                 except Exception as err:  # rosbags raises plain errors on bad bytes
                     skipped += 1
-                    logger.warning(
-                        "%s: topic %s at %d ns: message skipped, it does not convert (%s: %s)",
+                    first = message.topic not in failed_topics
+                    failed_topics.add(message.topic)
+                    logger.log(
+                        logging.WARNING if first else logging.DEBUG,
+                        "%s: topic %s at %d ns: message skipped, it does not convert (%s: %s)%s",
                         reader.path,
                         message.topic,
                         message.log_time_ns,
                         type(err).__name__,
                         err,
+                        " (further failures on this topic are counted, not logged)"
+                        if first
+                        else "",
                     )
                     continue
                 sink.write(message.topic, msgtype, message.log_time_ns, data)
@@ -298,6 +311,8 @@ def convert_log(
                 done += 1
                 if progress is not None and done % _PROGRESS_EVERY == 0:
                     progress(done, total)
+            if strict and (found := damage_report(reader)):  # recorded while reading
+                raise refused(reader.path, found[0], messages_read=done + skipped)
         except BaseException:
             sink.abort()
             raise

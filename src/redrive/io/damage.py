@@ -14,7 +14,7 @@ from pathlib import Path
 
 from redrive.errors import LogDamagedError
 
-__all__ = ["DamageLog", "LogDamage", "damage_report"]
+__all__ = ["DamageLog", "LogDamage", "damage_report", "refused"]
 
 logger = logging.getLogger(__name__)
 
@@ -83,14 +83,20 @@ class DamageLog:
     def hit(self, damage: LogDamage, *, messages_read: int) -> None:
         """Reading reached ``damage``: raise when strict, else record it and go on."""
         if self.strict:
-            msg = (
-                f"{self.path}: damaged {'at ' if damage.start_byte is not None else ''}{damage}; {messages_read} messages were read before it. "
-                "`redrive info` lists all the damage, `redrive repair` saves what is intact. To "
-                "read past it: `redrive run` or `info` without --strict, `redrive convert "
-                "--skip-damaged`, open_log(..., strict=False)."
-            )
-            raise LogDamagedError(msg, messages_read=messages_read, offset=damage.start_byte)
+            raise refused(self.path, damage, messages_read=messages_read)
         self.add(damage)
+
+
+def refused(path: Path, damage: LogDamage, *, messages_read: int) -> LogDamagedError:
+    """The error that refuses the log at ``path`` for ``damage`` (strict reading)."""
+    msg = (
+        f"{path}: damaged {'at ' if damage.start_byte is not None else ''}{damage}; "
+        f"{messages_read} messages were read before it. "
+        "`redrive info` lists all the damage, `redrive repair` saves what is intact. To "
+        "read past it: `redrive run` or `info` without --strict, `redrive convert "
+        "--skip-damaged`, open_log(..., strict=False)."
+    )
+    return LogDamagedError(msg, messages_read=messages_read, offset=damage.start_byte)
 
 
 def damage_report(log: object) -> tuple[LogDamage, ...]:

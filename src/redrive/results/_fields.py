@@ -97,6 +97,18 @@ class Fields(Table):
         check = lambda v: isinstance(v, Mapping) and all(is_integer(x) for x in v.values())  # noqa: E731
         return dict(self.value(key, check, "an object of integers", default))
 
+    def number_map(self, key: str, default: Any = REQUIRED) -> dict[str, float]:
+        check = lambda v: isinstance(v, Mapping) and all(is_number(x) for x in v.values())  # noqa: E731
+        return {
+            k: float(v) for k, v in self.value(key, check, "an object of numbers", default).items()
+        }
+
+    def object_map(self, key: str, default: Any = REQUIRED) -> dict[str, dict[str, Any]]:
+        check = lambda v: isinstance(v, Mapping) and all(isinstance(x, Mapping) for x in v.values())  # noqa: E731
+        return {
+            k: dict(v) for k, v in self.value(key, check, "an object of objects", default).items()
+        }
+
     def enum(self, key: str, cls: Callable[[Any], T], allowed: str, default: Any = REQUIRED) -> T:
         """``cls(value)`` of a string field; ``allowed`` lists the values in the error."""
         value = self.raw(key, default)

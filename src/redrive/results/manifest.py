@@ -177,6 +177,8 @@ class PipelineInfo:
     mode_manager: str = "replay"  # the Mode Manager's mode: replay | realtime | …
     # algorithms of the pipeline left out because the log cannot feed them: name → why
     skipped: Mapping[str, str] = field(default_factory=dict)
+    #: stage → the memory bound (MiB, resident) of each of its algorithms' worker processes
+    max_rss_mb: Mapping[str, float] = field(default_factory=dict)
 
     @classmethod
     def _parse(cls, f: Fields) -> PipelineInfo:
@@ -191,6 +193,7 @@ class PipelineInfo:
             stages=f.texts("stages"),
             mode_manager=f.text("mode_manager"),
             skipped=f.text_map("skipped", {}),
+            max_rss_mb=f.number_map("max_rss_mb", {}),
         )
 
 
@@ -322,6 +325,10 @@ class RunSummary:
     #: input → frames without a sample of it within the tolerance (stale or absent there)
     missing_inputs: Mapping[str, int] = field(default_factory=dict)
     undecodable_messages: Mapping[str, int] = field(default_factory=dict)  # topic → count
+    #: topic → the non-finite (NaN, ±inf) points of its clouds: clouds, points, non_finite,
+    #: clouds_with_non_finite, clouds_over (over the warning fraction), max_fraction
+    #: (:mod:`redrive.assembly.non_finite`); only topics with any
+    non_finite_points: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     error: str | None = None  # ``Type: message`` of what ended a failed or interrupted run
     #: closed loop: the deviation thresholds, how many frames passed them (``deviated_frames``),
     #: the first such frame and the largest deviations
@@ -332,6 +339,7 @@ class RunSummary:
         out["algorithms"] = [_plain(a) for a in self.algorithms]
         out["failure"] = None if self.failure is None else _asdict(self.failure)
         out["undecodable_messages"] = dict(self.undecodable_messages)
+        out["non_finite_points"] = {t: dict(c) for t, c in self.non_finite_points.items()}
         out["missing_inputs"] = dict(self.missing_inputs)
         out["closed_loop"] = to_jsonable(self.closed_loop)
         return out
@@ -354,6 +362,7 @@ class RunSummary:
             failed_frames=f.opt_integer("failed_frames", None),
             missing_inputs=f.int_map("missing_inputs", {}),
             undecodable_messages=f.int_map("undecodable_messages", {}),
+            non_finite_points=f.object_map("non_finite_points", {}),
             error=f.opt_text("error", None),
             closed_loop=f.mapping("closed_loop", {}),
         )
@@ -424,6 +433,7 @@ class RunManifest(RunSetup):
                 **_asdict(self.pipeline),
                 "stages": list(self.pipeline.stages),
                 "skipped": dict(self.pipeline.skipped),
+                "max_rss_mb": dict(self.pipeline.max_rss_mb),
             },
             "algorithms": [a.to_json() for a in self.algorithms],
             "log": {

@@ -101,6 +101,14 @@ class McapFileReader(RosReaderBase):
             self._fh.close()
             msg = f"{self.path}: not an MCAP file (the magic bytes are missing)"
             raise LogError(msg)
+        if self._size <= len(_MAGIC):
+            self._fh.close()
+            msg = (
+                f"{self.path}: the file holds only the {self._size}-byte MCAP magic: no header, "
+                "no record, no message — an empty log (a recorder that stopped right after "
+                "opening it, or a copy cut off at its start); there is nothing to read or repair"
+            )
+            raise LogError(msg)
         self._map = mmap.mmap(self._fh.fileno(), 0, access=mmap.ACCESS_READ)
         self._buf = memoryview(self._map)
         self._summary = self._read_summary()
@@ -134,9 +142,13 @@ class McapFileReader(RosReaderBase):
         }
         self._deserializer = Deserializer(
             self.path,
-            ros1=typestore_for(1, defs[1], needed=used["ros1"])[0] if defs[1] else None,
+            ros1=typestore_for(1, defs[1], needed=used["ros1"], source=self.path)[0]
+            if defs[1]
+            else None,
             cdr=(
-                typestore_for(2, defs[2], needed=used["cdr"])[0] if defs[2] or not defs[1] else None
+                typestore_for(2, defs[2], needed=used["cdr"], source=self.path)[0]
+                if defs[2] or not defs[1]
+                else None
             ),
         )
         self._topics = self._summarise()

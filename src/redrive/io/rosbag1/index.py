@@ -21,11 +21,19 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+from rosbags.rosbag1 import Reader as RosbagsReader
 
 from redrive.io._byte_rows import byte_rows
 from redrive.io.rosbag1.records import OP_MSGDATA, TIME, U32, DamageError, record_op
 
-__all__ = ["ARRAYS_FROM", "IndexArrays", "chunk_spans", "merged_index"]
+__all__ = [
+    "ARRAYS_FROM",
+    "IndexArrays",
+    "chunk_counts",
+    "chunk_spans",
+    "index_contradiction",
+    "merged_index",
+]
 
 _I64 = npt.NDArray[np.int64]
 
@@ -204,3 +212,35 @@ def _spans_one_by_one(
         starts.append(start)
         stops.append(start + length)
     return np.array(starts, dtype=np.int64), np.array(stops, dtype=np.int64)
+
+
+def index_contradiction(reader: RosbagsReader) -> str | None:
+    """Why the bag's index cannot be right (None when it is consistent): every entry must point
+    into a known chunk, within that chunk's time range, and the entries per chunk and connection
+    must add up to the chunk's counts.  A damaged index (zeroed, flipped) fails this, and the
+    bag is then read sequentially instead of trusting offsets that point at other messages."""
+    infos = {info.pos: info for info in reader.chunk_infos}
+    if set(infos) != set(reader.chunks):
+        return "the chunk infos and the chunks of the index do not match"
+    counts: dict[tuple[int, int], int] = {}
+    for conn_id, entries in reader.indexes.items():
+        for entry in entries:
+            info = infos.get(entry.chunk_pos)
+            if info is None or not info.start_time <= entry.time <= info.end_time:
+                return f"an index entry of connection {conn_id} points outside its chunk"
+            key = (entry.chunk_pos, conn_id)
+            counts[key] = counts.get(key, 0) + 1
+    for info in infos.values():
+        for conn_id, count in info.connection_counts.items():
+            if counts.get((info.pos, conn_id), 0) != count:
+                return f"the index of the chunk at byte {info.pos} does not match its counts"
+    return None
+
+
+def chunk_counts(reader: RosbagsReader | None, chunk_pos: int) -> dict[int, int]:
+    if reader is None:
+        return {}
+    for info in reader.chunk_infos:
+        if info.pos == chunk_pos:
+            return dict(info.connection_counts)
+    return {}

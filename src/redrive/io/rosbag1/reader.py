@@ -42,7 +42,13 @@ from redrive.io.recognise import starts_with
 from redrive.io.ros._reader_base import RosReaderBase
 from redrive.io.ros.deserialize import Deserializer
 from redrive.io.ros.typestore import typestore_for
-from redrive.io.rosbag1.index import IndexArrays, chunk_spans, merged_index
+from redrive.io.rosbag1.index import (
+    IndexArrays,
+    chunk_counts,
+    chunk_spans,
+    index_contradiction,
+    merged_index,
+)
 from redrive.io.rosbag1.records import (
     MAGIC,
     OP_CONNECTION,
@@ -54,6 +60,7 @@ from redrive.io.rosbag1.records import (
     record_op,
 )
 from redrive.io.rosbag1.scan import BagWalk, ChunkSpan, Conn
+from redrive.io.rosbag1.sizes import chunk_sizes, decompressed_lie
 
 __all__ = ["Ros1BagReader"]
 
@@ -100,10 +107,14 @@ class Ros1BagReader(RosReaderBase):
         self._file_size = 0
         self._map: mmap.mmap | None = None
         self._arrays: dict[int, IndexArrays] | None = None
+        # an indexed bag's chunks: position → the uncompressed size their header says, and the
+        # positions whose size was found wrong at open
+        self._declared: dict[int, int | None] = {}
+        self._lying: set[int] = set()
         self._open()
         definitions = {c.msgtype: ("msg", c.msgdef) for c in self._conns.values()}
         self._typestore, self._bad_definitions = typestore_for(
-            1, definitions, needed={c.msgtype for c in self._conns.values()}
+            1, definitions, needed={c.msgtype for c in self._conns.values()}, source=self.path
         )
         self._deserializer = Deserializer(self.path, ros1=self._typestore, cdr=None)
         self._topics = self._summarise()
@@ -137,7 +148,7 @@ class Ros1BagReader(RosReaderBase):
             self.indexed = False
             self._scan_open(f"{type(err).__name__}: {err}")
             return
-        why = _index_contradiction(reader)
+        why = index_contradiction(reader)
         if why is not None:
             reader.close()
             self.indexed = False
@@ -151,6 +162,7 @@ class Ros1BagReader(RosReaderBase):
             self.indexed = False
             self._scan_open("the index lists no chunks")
             return
+        self._check_chunk_sizes(reader)
         for conn in reader.connections:
             self._conns[conn.id] = Conn(
                 id=conn.id,
@@ -159,6 +171,26 @@ class Ros1BagReader(RosReaderBase):
                 msgdef=conn.msgdef.data,
                 count=conn.msgcount,
             )
+
+    def _check_chunk_sizes(self, reader: RosbagsReader) -> None:
+        """The chunks' declared sizes, and the damage in them (:mod:`~redrive.io.rosbag1.sizes`)."""
+        assert reader.bio is not None
+        self._declared, found = chunk_sizes(
+            reader.bio.fileno(), reader.chunks, _COMPRESSION_OF, self._budget
+        )
+        for damage in found:
+            self._lying.add(int(damage.start_byte or 0))
+            self._damage.add(damage)
+
+    def _size_lie(self, pos: int, header: Any, actual: int) -> LogDamage | None:
+        """A chunk that decompressed to another size than its header says (once per chunk)."""
+        if pos in self._lying or pos not in self._declared:
+            return None
+        name = _COMPRESSION_OF.get(header.decompressor, "none")
+        lie = decompressed_lie(name, self._declared[pos], actual, pos=pos, header=header)
+        if lie is not None:
+            self._lying.add(pos)
+        return lie
 
     def _scan_open(self, why: str) -> None:
         logger.warning(
@@ -290,7 +322,7 @@ class Ros1BagReader(RosReaderBase):
                 a[:times_stop] for a in (times, chunk_pos, offsets, conn_ids)
             )
         if not len(times):
-            return  # no message of these topics in the span (a topic the bag lacks: nothing)
+            return  # nothing selected (no topic, a topic the bag lacks, a range without messages)
         # Where the chunk changes: the messages of [bounds[k], bounds[k + 1]) share a chunk.
         bounds = [0, *(np.flatnonzero(np.diff(chunk_pos)) + 1).tolist(), len(times)]
         heads = {cid: (c.topic, c.msgtype) for cid, c in self._conns.items()}
@@ -321,6 +353,8 @@ class Ros1BagReader(RosReaderBase):
                 yielded += good
                 if damage is not None:
                     self._chunk_damage(pos, damage, yielded)
+                elif (lie := self._size_lie(pos, reader.chunks[pos], len(chunk))) is not None:
+                    self._damage.hit(lie, messages_read=yielded)
             finally:
                 if mapped is not None:
                     self._release(*mapped)
@@ -410,7 +444,7 @@ class Ros1BagReader(RosReaderBase):
             self._map.madvise(mmap.MADV_DONTNEED, start, length)
 
     def _chunk_damage(self, chunk_pos: int, err: Exception, yielded: int) -> None:
-        counts = _chunk_counts(self._rosbags, chunk_pos)
+        counts = chunk_counts(self._rosbags, chunk_pos)
         header = self._rosbags.chunks.get(chunk_pos) if self._rosbags is not None else None
         stop = header.datapos + header.datasize if header is not None else None
         lost = {self._conns[c].topic: n for c, n in counts.items() if c in self._conns}
@@ -564,35 +598,3 @@ def _batched(
     any(map(set_payload, messages, repeat(None, count)))
     any(map(set_batch, messages, slot_of))
     yield from messages
-
-
-def _index_contradiction(reader: RosbagsReader) -> str | None:
-    """Why the bag's index cannot be right (None when it is consistent): every entry must point
-    into a known chunk, within that chunk's time range, and the entries per chunk and connection
-    must add up to the chunk's counts.  A damaged index (zeroed, flipped) fails this, and the
-    bag is then read sequentially instead of trusting offsets that point at other messages."""
-    infos = {info.pos: info for info in reader.chunk_infos}
-    if set(infos) != set(reader.chunks):
-        return "the chunk infos and the chunks of the index do not match"
-    counts: dict[tuple[int, int], int] = {}
-    for conn_id, entries in reader.indexes.items():
-        for entry in entries:
-            info = infos.get(entry.chunk_pos)
-            if info is None or not info.start_time <= entry.time <= info.end_time:
-                return f"an index entry of connection {conn_id} points outside its chunk"
-            key = (entry.chunk_pos, conn_id)
-            counts[key] = counts.get(key, 0) + 1
-    for info in infos.values():
-        for conn_id, count in info.connection_counts.items():
-            if counts.get((info.pos, conn_id), 0) != count:
-                return f"the index of the chunk at byte {info.pos} does not match its counts"
-    return None
-
-
-def _chunk_counts(reader: RosbagsReader | None, chunk_pos: int) -> dict[int, int]:
-    if reader is None:
-        return {}
-    for info in reader.chunk_infos:
-        if info.pos == chunk_pos:
-            return dict(info.connection_counts)
-    return {}

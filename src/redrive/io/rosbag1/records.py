@@ -22,11 +22,13 @@ __all__ = [
     "Buf",
     "DamageError",
     "data_span",
+    "declared_size",
     "decode_time",
     "decompress_prefix",
     "op_of",
     "parse_header",
     "record_op",
+    "size_lie",
 ]
 
 OP_MSGDATA = 0x02
@@ -144,3 +146,27 @@ def decode_time(value: bytes) -> int:
     """A bag time field (uint32 secs, uint32 nsecs) as int ns."""
     secs, nsecs = TIME.unpack(value)
     return int(secs) * 1_000_000_000 + int(nsecs)
+
+
+def size_lie(compression: str, declared: int | None, actual: int) -> str | None:
+    """Why a chunk whose header's ``size`` field says ``declared`` bytes uncompressed, and whose
+    data hold (or decompress to) ``actual`` bytes, is damaged; None when they agree.
+
+    rosbag writes the size of the chunk's uncompressed records there (C++ rosbag allocates that
+    much before it decompresses); a field that is missing or says another size is damage even
+    when the data read whole."""
+    if declared is None:
+        return "has no size field in its header; its messages were read from its data"
+    if declared == actual:
+        return None
+    data = "its data are" if compression == "none" else "its data decompress to"
+    return (
+        f"header says it holds {declared} bytes uncompressed, but {data} {actual} bytes: the "
+        "size field is damaged; its messages were read from the data"
+    )
+
+
+def declared_size(fields: Mapping[str, bytes]) -> int | None:
+    """The ``size`` field of a chunk record's header (None when missing or not 4 bytes)."""
+    value = fields.get("size", b"")
+    return U32.unpack(value)[0] if len(value) == 4 else None

@@ -32,10 +32,12 @@ from redrive.io.rosbag1.records import (
     U32,
     DamageError,
     data_span,
+    declared_size,
     decode_time,
     decompress_prefix,
     op_of,
     parse_header,
+    size_lie,
 )
 
 __all__ = ["BagWalk", "ChunkSpan", "Conn"]
@@ -72,6 +74,17 @@ class ChunkSpan:
     listed: int | None = None  # messages the index data records after it list
     damaged: str | None = None
     cut: bool = False  # the file ends inside this chunk: only a prefix of it is readable
+    declared: int | None = None  # the uncompressed size its header's ``size`` field says
+    size_lie: str | None = None  # why that size is wrong (its messages were read anyway)
+
+    def lie(self) -> LogDamage:
+        """The damage of a chunk with ``size_lie`` set: no message lost."""
+        return LogDamage(
+            what=f"the {self.compression} chunk's {self.size_lie}",
+            start_byte=self.pos,
+            stop_byte=self.datapos + self.datasize,
+            messages_lost=0,
+        )
 
     def damage(self) -> LogDamage:
         """The damage of a chunk with ``damaged`` set."""
@@ -157,6 +170,7 @@ class BagWalk:
                 if op == OP_CHUNK:
                     compression = fields.get("compression", b"none").decode("ascii", "replace")
                     last = ChunkSpan(pos, datapos, dsize, compression)
+                    last.declared = declared_size(fields)
                     self.items.append(last)
                     times = [t for _, t, _ in self.records(buf, last, None, first=True)]
                     if times:
@@ -188,6 +202,8 @@ class BagWalk:
             out.append(item)
             if isinstance(item, ChunkSpan) and item.damaged is not None:
                 out.append(item.damage())
+            elif isinstance(item, ChunkSpan) and item.size_lie is not None:
+                out.append(item.lie())
         self.items = out
 
     def _salvage_cut_chunk(
@@ -223,6 +239,8 @@ class BagWalk:
                 span.damaged = f"does not decompress ({err})"
             return
         pos, end = 0, len(chunk)
+        if first and not span.cut:
+            span.size_lie = size_lie(span.compression, span.declared, end)
         while pos < end:
             try:
                 fields, hstop = parse_header(chunk, pos, end)

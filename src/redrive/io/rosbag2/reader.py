@@ -99,7 +99,9 @@ class Ros2BagReader(RosReaderBase):
                 definitions[conn.msgtype] = ("msg", conn.msgdef.data)
             elif fmt == MessageDefinitionFormat.IDL:
                 definitions[conn.msgtype] = ("idl", _idl_body(conn.msgdef.data))
-        store, _ = typestore_for(2, definitions, needed={c.msgtype for c in reader.connections})
+        store, _ = typestore_for(
+            2, definitions, needed={c.msgtype for c in reader.connections}, source=self.path
+        )
         self._deserializer = Deserializer(self.path, ros1=None, cdr=store)
         self._topics = self._summarise(reader.connections)
         self._opened_damaged = self._open_damage(reader)
