@@ -49,9 +49,8 @@ class LogTimeAxis:
         if not self.stamps_ns:
             return stamp_ns
         i = bisect.bisect_left(self.stamps_ns, stamp_ns)
-        if i == len(self.stamps_ns):
-            i -= 1
-        elif i > 0 and stamp_ns - self.stamps_ns[i - 1] < self.stamps_ns[i] - stamp_ns:
+        last = i == len(self.stamps_ns)
+        if last or (i > 0 and stamp_ns - self.stamps_ns[i - 1] < self.stamps_ns[i] - stamp_ns):
             i -= 1
         return stamp_ns + self.offsets_ns[i]
 
@@ -149,8 +148,7 @@ def frame_log_times(
     if axis.shifted:
         spread = max(axis.offsets_ns) - min(axis.offsets_ns)
         logger.info(
-            "%s: results put at their samples' log times on %s (log time − header stamp %.3f s"
-            "%s)",
+            "%s: results put at their samples' log times on %s (log time − header stamp %.3f s%s)",
             reader.path,
             topic,
             axis.offsets_ns[0] / _SEC,
