@@ -12,7 +12,10 @@ log without a sensor to drive frames — so the export and the server put a fram
 the log time of its sample; the messages themselves keep the header stamps.
 
 A frame whose stamp no message of that topic has (a closed loop's own ticks) is moved by the
-offset of the nearest frame that has one; when no frame has one the axis is the stamps'.
+offset of the nearest frame that has one; when no frame has one the axis is the stamps'.  When
+the first, middle and last frames' messages are found at log times equal to their stamps, the
+stamps are taken as the axis without reading the rest (a synthetic log, the datasets: the
+export of an MCAP log stays a copy of its chunks, not a second read of its clouds).
 """
 
 from __future__ import annotations
@@ -90,14 +93,16 @@ def _raw_header_stamp(message: LogMessage) -> int | None:
     return stamp if stamp != 0 else message.log_time_ns
 
 
-def _stamps(reader: LogReader, topic: str) -> Iterator[tuple[int, int]]:
+def _stamps(
+    reader: LogReader, topic: str, *, start_ns: int | None = None, stop_ns: int | None = None
+) -> Iterator[tuple[int, int]]:
     """(stamp as the decoder gives it, log time) of every message of ``topic``.
 
     The stamp is read from the message's first bytes when that agrees with the decoder on the
     first message (a header first, as sensor messages have); otherwise every message is
     decoded."""
     raw_ok: bool | None = None
-    for message in reader.messages(topics=[topic]):
+    for message in reader.messages(topics=[topic], start_ns=start_ns, stop_ns=stop_ns):
         if raw_ok is not False and message.encoding != "native":
             stamp = _raw_header_stamp(message)
             if raw_ok is None:
@@ -119,6 +124,18 @@ def _decoded_stamp(reader: LogReader, message: LogMessage) -> int | None:
         return None
 
 
+def _one_axis(reader: LogReader, topic: str, stamps_ns: Sequence[int]) -> bool:
+    """Whether the first, middle and last frames' messages sit at log times equal to their
+    stamps (looked up at those log times only: an indexed read of three chunks) — a log whose
+    writer sets the log time to the header stamp (``redrive synth``, the datasets), where
+    reading the whole driver topic again would only confirm it."""
+    for stamp in {stamps_ns[0], stamps_ns[len(stamps_ns) // 2], stamps_ns[-1]}:
+        at = _stamps(reader, topic, start_ns=stamp, stop_ns=stamp + 1)
+        if not any(found == stamp for found, _ in at):
+            return False
+    return True
+
+
 def frame_log_times(
     reader: LogReader,
     frame_stamps_ns: Sequence[int],
@@ -130,6 +147,8 @@ def frame_log_times(
         return LogTimeAxis()
     topic = driving_topic(reader, overrides=overrides)
     if topic is None or topic not in reader.topics:
+        return LogTimeAxis()
+    if _one_axis(reader, topic, frame_stamps_ns):
         return LogTimeAxis()
     wanted = set(frame_stamps_ns)
     found: dict[int, int] = {}

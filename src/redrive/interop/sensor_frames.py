@@ -19,17 +19,18 @@ mounts, else the sensor at ``base_link``'s origin):
 
 from __future__ import annotations
 
+import contextlib
 import logging
 from collections.abc import Sequence
 
 import numpy as np
 
-from redrive.assembly.mounts import BASE_FRAME, SensorMounts, first_frame_ids
+from redrive.assembly.mounts import BASE_FRAME, SensorMounts
 from redrive.assembly.sensor_map import SensorMapOverrides, infer_sensor_map
 from redrive.errors import ConfigError, UnsupportedMessageError
 from redrive.geometry.se3 import transform_from_matrix
 from redrive.io.base import LogReader
-from redrive.io.ros.decoders import decode
+from redrive.io.ros.decoders import decode, decoder_for
 from redrive.io.ros.decoders.tf import is_static_tf_topic
 from redrive.types import Transform
 
@@ -38,6 +39,35 @@ __all__ = ["sensor_mount_transforms"]
 logger = logging.getLogger(__name__)
 
 _SEC = 1_000_000_000
+
+
+def _frame_ids(reader: LogReader, topics: Sequence[str]) -> dict[str, str]:
+    """topic → the frame id of its first message, in one pass from the log's start (a reader
+    decompresses each chunk once) that ends when every topic has given one: the ROS message's
+    header frame — the frame a viewer draws the log's own message in — else the decoder's."""
+    wanted = {t for t in topics if t in reader.topics}
+    out: dict[str, str] = {}
+    seen: set[str] = set()
+    if not wanted:
+        return out
+    for message in reader.messages(topics=wanted):
+        if message.topic in seen:
+            continue
+        seen.add(message.topic)
+        if message.encoding != "native" and decoder_for(message.msgtype) is not None:
+            with contextlib.suppress(UnsupportedMessageError):  # the header, not the cloud
+                header = getattr(reader.deserialize(message), "header", None)
+                frame = getattr(header, "frame_id", None)
+                if isinstance(frame, str):
+                    out[message.topic] = frame
+        if message.topic not in out and (
+            decoder_for(message.msgtype) is not None or message.encoding == "native"
+        ):
+            with contextlib.suppress(UnsupportedMessageError):
+                out[message.topic] = decode(message, reader.deserialize).frame_id
+        if seen == wanted:
+            break
+    return out
 
 
 def _dynamic_mounts(reader: LogReader, static: Sequence[Transform]) -> SensorMounts:
@@ -78,7 +108,7 @@ def sensor_mount_transforms(
         )
     except ConfigError:
         return ()
-    frames = first_frame_ids(reader, [s.topic for s in smap.sensors])
+    frames = _frame_ids(reader, [s.topic for s in smap.sensors])
     placed = SensorMounts()
     placed.add("/tf_static", static)
     dynamic: SensorMounts | None = None
