@@ -91,9 +91,10 @@ def test_the_labels_are_the_infos_instances_and_hold_their_points(demo: Path) ->
     assert first.bbox_2d == pytest.approx((0.0, 192.37, 402.31, 374.0 - 192.37))
     # every box holds the scan's points: counted in rectified cam0 with REP-103 axes (where
     # KITTI boxes are upright; the KITTI folder reader's boxes give the devkit's counts there,
-    # tests/io/test_kitti.py) they come within 10 % of the info's num_lidar_pts.  Not equal:
-    # 1424 1941 878 668 53 164 against 1325 1900 881 659 55 162 — mmdet3d counted them with
-    # its own box conversion, which this test does not reproduce
+    # tests/io/test_kitti.py) they come within 10 % of the info's num_lidar_pts — not equal
+    # (1424 1941 878 668 53 164 against 1325 1900 881 659 55 162, differences both ways; the
+    # info's counts were made on the full scan cropped to the image, which is not in the data:
+    # docs/nuscenes.md)
     cloud = values[TOPIC_VELODYNE]
     flu_from_velo = calib.rect_flu_from_velodyne
     pts = transform_points(flu_from_velo, cloud.xyz)
