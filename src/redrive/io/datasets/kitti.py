@@ -154,8 +154,12 @@ class KittiReader:
             stems[topic] = {p.stem for p in folder.glob(f"*{suffix}")} if folder.is_dir() else set()
         self._frames = self._check_frames(stems)
         self._calib_cache: tuple[str, KittiCalibration] | None = None
+        self._topics = self._topic_infos()
+
+    def _topic_infos(self) -> Mapping[str, TopicInfo]:
+        """The topics present, one message per frame each."""
         count = len(self._frames)
-        self._topics = MappingProxyType(
+        return MappingProxyType(
             {
                 t: TopicInfo(
                     topic=t,

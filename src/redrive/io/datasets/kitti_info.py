@@ -31,18 +31,13 @@ import logging
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from types import MappingProxyType
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from redrive.errors import LogError
-from redrive.io.base import TopicInfo
 from redrive.io.datasets.kitti import (
-    _FILES,
-    _KINDS,
-    _MSGTYPES,
     TOPIC_CAMERA_INFO,
     TOPIC_IMAGE_2,
     TOPIC_LABEL_2,
@@ -180,20 +175,7 @@ class KittiInfoReader(KittiReader):
         ]
         self._topics_present.append(TOPIC_LABEL_2)
         self._calib_cache = None
-        count = len(self._frames)
-        self._topics = MappingProxyType(
-            {
-                t: TopicInfo(
-                    topic=t,
-                    msgtype=_MSGTYPES[t],
-                    count=count,
-                    encoding="native",
-                    kind=_KINDS[t][0],
-                    sensor_type=_KINDS[t][1],
-                )
-                for t in self._topics_present
-            }
-        )
+        self._topics = self._topic_infos()
 
     def _data_file(self, name: str, folders: tuple[str, ...]) -> Path:
         given = Path(name)
@@ -277,8 +259,7 @@ class KittiInfoReader(KittiReader):
             return entry.image
         if topic == TOPIC_VELODYNE:
             return entry.lidar
-        sub, suffix = _FILES[topic]
-        return self.root / sub / f"{stem}{suffix}"
+        return super()._file(topic, stem)
 
     def _load_labels(self, stem: str, stamp_ns: int) -> Decoded:
         return self._decoded(stamp_ns, "velodyne", self._entries[stem].objects)
