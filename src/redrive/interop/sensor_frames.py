@@ -9,12 +9,15 @@ static transforms (and, when the export keeps it, the log's ``/tf``) do not conn
 (:class:`~redrive.assembly.frames.FrameAssembler`: the sensor map's ``location``, else the log's
 mounts, else the sensor at ``base_link``'s origin):
 
-1. the log's ``/tf`` (read for its first second) when it holds the mount and the export leaves
-   ``/tf`` out — the full transform, rotation included;
-2. the ``location`` of a ``--sensor-map`` file: that translation, axes parallel (the data model
+1. the ``location`` of a ``--sensor-map`` file: that translation, axes parallel (the data model
    has no mount rotation, so the run took them parallel);
+2. the log's ``/tf`` (read for its first second) when it holds the mount and the export leaves
+   ``/tf`` out — the full transform, rotation included;
 3. otherwise the identity, with a warning: the run took the sensor to sit at ``base_link``'s
    origin, and the export shows it there.
+
+A frame the log's static transforms connect (or its ``/tf``, when the export keeps it) is left
+as the log has it, a ``location`` notwithstanding: a frame has one parent.
 """
 
 from __future__ import annotations
@@ -121,16 +124,16 @@ def sensor_mount_transforms(
             dynamic = _dynamic_mounts(reader, static)
         mat = dynamic.base_from(frame, reader.start_ns)
         if mat is not None and log_tf_kept:
-            continue  # the log's own /tf, in the export, connects it
-        if mat is not None:
-            out[frame] = transform_from_matrix(mat, parent_frame=BASE_FRAME, child_frame=frame)
-            continue
-        if spec.location is not None:
+            continue  # the log's own /tf, in the export, connects it (a frame has one parent)
+        if spec.location is not None:  # what the run used first
             out[frame] = Transform(
                 parent_frame=BASE_FRAME,
                 child_frame=frame,
                 translation=np.asarray(spec.location, dtype=np.float64),
             )
+            continue
+        if mat is not None:
+            out[frame] = transform_from_matrix(mat, parent_frame=BASE_FRAME, child_frame=frame)
             continue
         logger.warning(
             "%s: no transform from %r (topic %s) to %s in the log or the sensor map; the run "
