@@ -125,3 +125,23 @@ def test_open_loop_on_a_real_imu_and_odometry_bag_plans_and_controls(
     # --strict refuses it
     assert main(["run", str(bag), "--out", str(tmp_path / "strict"), "--strict"]) != 0
     assert "LIDAR" in capsys.readouterr().err
+
+
+def test_open_loop_on_the_real_husky_bag_plans_at_its_imu_rate(
+    shared_data: Path, tmp_path: Path
+) -> None:
+    # the Husky bag (REAL, 2015): /imu/data 11,865 Imu at 30 Hz, odometry at 10 Hz, /fix 2.5 Hz
+    bag = shared_data / "rosbag1_real" / "robot_localization_test1_husky.bag"
+    out = tmp_path / "run"
+    assert main(["run", str(bag), "--out", str(out), "--frames", "0:200", "--no-progress"]) == 0
+    manifest = read_manifest(out)
+    assert manifest.pipeline.stages == ("planning", "control")
+    assert manifest.sensors == {"fix": SensorType.GNSS, "imu_data": SensorType.IMU}
+    run = open_run(out)
+    stamps = run.table("frames").column("stamp_ns").to_pylist()
+    assert len(stamps) == 200
+    period_s = (stamps[-1] - stamps[0]) / 199 / 1e9
+    assert 1 / 35 < period_s < 1 / 25  # the IMU's ~30 Hz paces the frames
+    steps = run.table("steps").to_pylist()
+    assert all(s["status"] == "ok" for s in steps)
+    assert len(steps) == 400  # planner and controller, every frame
