@@ -21,6 +21,18 @@ Definitions (B − A throughout):
   positive worsening divided by the series' largest absolute per-frame difference (each series
   adds at most 1, so series in different units can be added); frames are ranked by score.
 
+* **whose motion a value scores** (its stored ``subject``): a value of the *logged* ego of
+  open-loop runs (at-fault collisions, comfort, progress, drivable area, nuPlan's score … of the
+  ego table, the controller's tracking error) is the log's, the same whatever the algorithms
+  did; such values are kept apart in :attr:`Comparison.log_values` (shown once, as the log's),
+  out of the algorithm comparison and the worse frames.  An open-loop run beside a closed-loop
+  one compares them (the log's ego against the driven one, subject ``log→run``).
+* **the CI beside a value is of that value**: the paired bootstrap of the statistic the value
+  is — the one its metric declares (``max`` over frames of ``max_lon_accel_mps2`` …), or, for the
+  per-frame series of its name, the one (mean, sum, max, min …) the stored value equals in both
+  runs — resampling the frames both runs have; a value that is none of those gets no CI (its
+  note says so) rather than the CI of another number.
+
 Only metrics whose name, version and ``params_hash`` agree in both manifests are compared; the
 others are listed in :attr:`Comparison.skipped` with the reason.
 
@@ -227,6 +239,11 @@ def compare_runs(
             v, s = metric_deltas(a, b, (metric, xa, xb), hib=hib, resamples=bootstrap, seed=seed)
             values += v
             series += s
+    # values of the logged ego (open loop, both sides): the log's, the same whatever the
+    # algorithms did; shown apart, never as an algorithm's result nor in the worse frames
+    log_values = tuple(v for v in values if v.is_log)
+    values = [v for v in values if not v.is_log]
+    series = [s for s in series if s.subject != "log"]
     compared = {(v.metric, v.algorithm_a, v.algorithm_b) for v in values}
     worst = worst_frames(a, b, series, compared=compared)
     return Comparison(
@@ -236,6 +253,7 @@ def compare_runs(
         pairing=pairing,
         pairs=tuple(pairs),
         values=tuple(values),
+        log_values=log_values,
         series=tuple(series),
         worst=tuple(worst),
         skipped=tuple(skipped),
