@@ -384,7 +384,7 @@ def test_real_detection_metric(tmp_path: Path) -> None:
 def _evaluation(per_frame: list[tuple[str, str, str, int, float]], marks: list[dict]) -> Evaluation:
     from redrive.results.evaluation import BOOKMARKS, CURVES, PER_FRAME, VALUES
 
-    rows = [dict(zip(PER_FRAME.names, r, strict=True)) for r in per_frame]
+    rows = [dict(zip(PER_FRAME.names, (*r, r[1] or "run"), strict=True)) for r in per_frame]
     return Evaluation(
         values=VALUES.empty_table(),
         per_frame=pa.Table.from_pylist(rows, schema=PER_FRAME),

@@ -99,6 +99,7 @@ def _pairs(
     algorithm_b: str | None,
     *,
     one_sided: bool,
+    role_pairs: list[tuple[str, str, str]],
 ) -> tuple[list[tuple[str, str]], list[SkippedMetric]]:
     algos_a, algos_b = a.algorithms(), b.algorithms()
     skipped: list[SkippedMetric] = []
@@ -107,9 +108,10 @@ def _pairs(
     if algorithm_a is None and algorithm_b is None:
         pairs = [(x, x) for x in sorted(algos_a & algos_b)]
         by_role = _pair_by_role(a, b, algos_a - algos_b, algos_b - algos_a)
-        pairs += by_role
-        paired_a = {x for x, _ in by_role}
-        paired_b = {y for _, y in by_role}
+        role_pairs += by_role
+        pairs += [(x, y) for x, y, _ in by_role]
+        paired_a = {x for x, _, _ in by_role}
+        paired_b = {y for _, y, _ in by_role}
         for only, other in (
             (algos_a - algos_b - paired_a, "B"),
             (algos_b - algos_a - paired_b, "A"),
@@ -140,9 +142,10 @@ def _pairs(
 
 def _pair_by_role(
     a: RunSide, b: RunSide, only_a: set[str], only_b: set[str]
-) -> list[tuple[str, str]]:
+) -> list[tuple[str, str, str]]:
     """Algorithms with different names in A and B, paired when each is the only unpaired
-    algorithm of its role on its side (``det_v1`` ↔ ``det_v2``: a new version renamed)."""
+    algorithm of its role on its side (``det_v1`` ↔ ``det_v2``: a new version renamed; a file
+    plugin, named after its class, against an installed one): (A's, B's, the role)."""
     roles_a = {x.name: x.role for x in a.run.manifest.algorithms}
     roles_b = {x.name: x.role for x in b.run.manifest.algorithms}
     pairs = []
@@ -150,7 +153,7 @@ def _pair_by_role(
         xa = [x for x in sorted(only_a) if x and roles_a.get(x) is role]
         xb = [x for x in sorted(only_b) if x and roles_b.get(x) is role]
         if len(xa) == 1 and len(xb) == 1:
-            pairs.append((xa[0], xb[0]))
+            pairs.append((xa[0], xb[0], role.value))
     return pairs
 
 
@@ -180,7 +183,9 @@ def compare_runs(
     """Compare two evaluated runs of the same log or situation (B against A); see the module
     doc. An open-loop and a closed-loop run of the same scenario pair in either order.
 
-    Algorithms are paired by name, or, with ``algorithm_a``/``algorithm_b`` (one defaults to the
+    Algorithms are paired by name, then by role: an algorithm whose name the other run lacks
+    pairs with the other run's one unpaired algorithm of its role (``Comparison.role_pairs``
+    says which pairs were made so); or, with ``algorithm_a``/``algorithm_b`` (one defaults to the
     other), only that pair is compared (plus run-level metrics).
 
     Raises:
@@ -196,7 +201,12 @@ def compare_runs(
         logger.info("%s", pairing.describe())
     one_sided = pairing.open_closed  # side by side: what only one run has is shown, not dropped
     a, b = RunSide.load(ra), RunSide.load(rb)
-    pairs, skipped = _pairs(a, b, algorithm_a, algorithm_b, one_sided=one_sided)
+    role_pairs: list[tuple[str, str, str]] = []
+    pairs, skipped = _pairs(
+        a, b, algorithm_a, algorithm_b, one_sided=one_sided, role_pairs=role_pairs
+    )
+    for xa, xb, role in role_pairs:
+        logger.info("pairing %s of A with %s of B by role (%s)", xa, xb, role)
     values: list[ValueDelta] = []
     series: list[SeriesDelta] = []
     metric_names = list(
@@ -252,6 +262,7 @@ def compare_runs(
         log_sha256=pairing.source,
         pairing=pairing,
         pairs=tuple(pairs),
+        role_pairs=tuple(role_pairs),
         values=tuple(values),
         log_values=log_values,
         series=tuple(series),

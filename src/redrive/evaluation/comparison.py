@@ -70,6 +70,7 @@ class Comparison:
         pairing: an A/B of one loop, or an open-loop run beside a closed-loop one; the
             pipelines' differences.
         pairs: the compared algorithm pairs (A's name, B's name); ("", "") = run-level metrics.
+        role_pairs: the pairs of different names made by role: (A's, B's, the role).
         values: per metric value of the algorithms (or the run); log_values: per value of the
             logged ego in both runs (open loop): the log's, kept out of the comparison;
         series: per per-frame series (with its bootstrap);
@@ -89,6 +90,7 @@ class Comparison:
     seed: int
     pairing: Pairing
     log_values: tuple[ValueDelta, ...] = ()
+    role_pairs: tuple[tuple[str, str, str], ...] = ()
 
     def worst_frames(self, n: int | None = None) -> tuple[WorseFrame, ...]:
         """The ``n`` frames where B is most worse than A (all of them for None), worst first."""
@@ -122,6 +124,9 @@ class Comparison:
             "log_sha256": self.log_sha256,
             "pairing": self.pairing.to_dict(),
             "pairs": [list(p) for p in self.pairs],
+            "role_pairs": [
+                {"algorithm_a": x, "algorithm_b": y, "role": r} for x, y, r in self.role_pairs
+            ],
             "bootstrap": {"resampled": "frames", "resamples": self.resamples, "seed": self.seed},
         }
         for name in ("values", "log_values", "series", "worst_frames", "skipped"):
