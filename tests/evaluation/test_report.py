@@ -278,6 +278,7 @@ def test_xlsx(report: tuple[Path, Any]) -> None:
     summary = [list(r) for r in wb["summary"].iter_rows(values_only=True)]
     assert summary[0] == [
         "metric", "algorithm", "value", "number", "unit", "better", "headline", "definition",
+        "scores",
     ]  # fmt: skip
     rows = [r[:7] for r in summary[1:]]
     assert rows == [  # an empty string reads back as an empty cell (None)
@@ -286,6 +287,7 @@ def test_xlsx(report: tuple[Path, Any]) -> None:
         ["lat", "(run)", "p95_ms", 4.85, "ms", "lower", True],
     ]
     assert all(r[7].startswith(("v2 params ", "v1 params ")) for r in summary[1:])
+    assert [r[8] for r in summary[1:]] == [EVIL, EVIL, "run"]  # whose output each value scores
     # header frozen and filterable on every sheet with rows
     full = load_workbook(report[1].xlsx)
     for name in ("summary", "run", "algorithms", "bookmarks", "metrics"):

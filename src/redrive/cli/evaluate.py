@@ -182,19 +182,30 @@ def print_batch_evaluation(evaluation: Any, console: Any) -> None:
         table = Table(
             title=f"pipeline {pipeline} ({loop} loop): pooled over its logs", title_justify="left"
         )
-        for col in ("algorithm", "metric", "headline", "pooled", "unit", "logs", "frames", "rule"):
+        cols = ("algorithm", "metric", "headline", "pooled", "unit", "scores", "logs", "frames",
+                "rule")  # fmt: skip
+        for col in cols:
             table.add_column(
                 col, justify="right" if col in ("pooled", "logs", "frames") else "left"
             )
+        of_log = 0
         for p in items:
             key = next(iter(p.values), "")
             value = p.values.get(key, math.nan)
+            subject = p.subjects.get(key, p.algorithm or "run")
+            of_log += subject == "log"
             table.add_row(
-                escape(p.algorithm or "(run)"), escape(p.metric), escape(key), _fmt(value),
-                escape(p.units.get(key, "")), str(p.logs), str(p.frames),
-                escape(p.note or p.rule),
+                escape(p.algorithm or ("(log)" if subject == "log" else "(run)")),
+                escape(p.metric), escape(key), _fmt(value), escape(p.units.get(key, "")),
+                escape(subject), str(p.logs), str(p.frames), escape(p.note or p.rule),
             )  # fmt: skip
         console.print(table)
+        if of_log:
+            console.print(
+                f"  {of_log} headline(s) score the log (the logged ego of the open-loop runs): "
+                "the same whatever the pipeline did, not its algorithms' result",
+                highlight=False,
+            )
     rules = sorted({p.rule for items in evaluation.pooled.values() for p in items})
     for rule in rules:
         console.print(f"  {rule}: {rule_text(rule)}", highlight=False)
