@@ -31,8 +31,8 @@ side. Δ = B − A; "better"/"worse" follow each value's direction. Metrics
 are compared only where name, version and parameters agree; the others are listed as not
 compared. Algorithms pair by name; one algorithm of a role that has a different name on each
 side (a file plugin named after its class, `RansacCluster`, against `cluster-detector`) pairs
-with the other by role, and the "paired" line says so; --algorithm-a/--algorithm-b choose a
-pair. Significance: a paired bootstrap over frames (the frames both runs have are resampled
+with the other by role — or, where a role has several, by role and stage (`perception_1`) —
+and the "paired" line says so; --algorithm-a/--algorithm-b choose a pair. Significance: a paired bootstrap over frames (the frames both runs have are resampled
 with replacement). The 95 % CI beside a value is of that value: of the statistic it is — the
 mean per-frame difference for a mean, the max over the frames for a max, a sum for a count —
 marked with that statistic ("max [..]"); aggregates such as mAP that are none of those get no
@@ -140,8 +140,8 @@ def _print(cmp: Any, *, worst: int, everything: bool = False) -> None:
     console = Console(width=None if sys.stdout.isatty() else 140)
     by_role = {(a, b): role for a, b, role in cmp.role_pairs}
     pairs = ", ".join(
-        (f"{a} ↔ {b}" + (f" (by role: the only {by_role[a, b]} algorithm on each side)"
-                         if (a, b) in by_role else ""))
+        (f"{a} ↔ {b}" + (f" (paired by role: the only unpaired {by_role[a, b]} algorithm on "
+                          "each side)" if (a, b) in by_role else ""))
         if a != b else a
         for a, b in cmp.pairs if a or b
     )  # fmt: skip

@@ -145,15 +145,23 @@ def _pair_by_role(
 ) -> list[tuple[str, str, str]]:
     """Algorithms with different names in A and B, paired when each is the only unpaired
     algorithm of its role on its side (``det_v1`` ↔ ``det_v2``: a new version renamed; a file
-    plugin, named after its class, against an installed one): (A's, B's, the role)."""
-    roles_a = {x.name: x.role for x in a.run.manifest.algorithms}
-    roles_b = {x.name: x.role for x in b.run.manifest.algorithms}
+    plugin, named after its class, against an installed one), else — a role with several
+    (a detector and a tracker, both renamed) — when each is the only unpaired algorithm of its
+    role *and stage* (``perception_1``) on its side: (A's, B's, how: the role [and stage])."""
+    info_a = {x.name: (x.role, x.stage) for x in a.run.manifest.algorithms}
+    info_b = {x.name: (x.role, x.stage) for x in b.run.manifest.algorithms}
     pairs = []
-    for role in dict.fromkeys(roles_a.values()):
-        xa = [x for x in sorted(only_a) if x and roles_a.get(x) is role]
-        xb = [x for x in sorted(only_b) if x and roles_b.get(x) is role]
+    for role in dict.fromkeys(r for r, _ in info_a.values()):
+        xa = [x for x in sorted(only_a) if x and x in info_a and info_a[x][0] is role]
+        xb = [x for x in sorted(only_b) if x and x in info_b and info_b[x][0] is role]
         if len(xa) == 1 and len(xb) == 1:
             pairs.append((xa[0], xb[0], role.value))
+            continue
+        for stage in dict.fromkeys(info_a[x][1] for x in xa):
+            sa = [x for x in xa if info_a[x][1] == stage]
+            sb = [x for x in xb if info_b[x][1] == stage]
+            if stage and len(sa) == 1 and len(sb) == 1:
+                pairs.append((sa[0], sb[0], f"{role.value}, stage {stage}"))
     return pairs
 
 
