@@ -190,7 +190,8 @@ def test_bootstrap_clear_shift_and_noise(ab: tuple[Path, Path]) -> None:
     v = {x.key: x for x in cmp.values if x.metric == "counts"}
     assert v["num_missed"].series == "missed"
     nb = v["num_missed"].bootstrap
-    assert nb is not None and nb.statistic == "sum"
+    assert nb is not None
+    assert nb.statistic == "sum"
     assert nb.mean_delta == pytest.approx(v["num_missed"].delta) == pytest.approx(20.0)
     assert nb.ci_low == pytest.approx(40 * 0.345, abs=40 * 0.04)
     assert nb.ci_high == pytest.approx(40 * 0.655, abs=40 * 0.04)

@@ -106,7 +106,8 @@ def test_two_planners_differ_and_the_log_scores_do_not(two_planners: tuple[Path,
     # … the logged ego's are identical, whichever planner ran
     log_a = {k: r["value"] for k, r in va.items() if r["subject"] == "log" and k[0] != "control"}
     log_b = {k: r["value"] for k, r in vb.items() if r["subject"] == "log" and k[0] != "control"}
-    assert len(log_a) >= 4 * 2 and log_a.keys() == log_b.keys()
+    assert len(log_a) >= 4 * 2
+    assert log_a.keys() == log_b.keys()
     assert all(
         log_a[k] == log_b[k] or (math.isnan(log_a[k]) and math.isnan(log_b[k])) for k in log_a
     )
@@ -114,7 +115,8 @@ def test_two_planners_differ_and_the_log_scores_do_not(two_planners: tuple[Path,
     cmp = compare_runs(a, b, bootstrap=500)
     assert cmp.role_pairs == (("idm-planner", "SlowIdm", "planning"),)
     compared = {v.metric for v in cmp.values}
-    assert "planning" in compared and not compared & set(EGO_METRICS)
+    assert "planning" in compared
+    assert not compared & set(EGO_METRICS)
     assert not any(v.subject == "log" for v in cmp.values)
     assert not any(s.subject == "log" for s in cmp.series)
     kept_apart = {v.metric for v in cmp.log_values}
@@ -153,11 +155,10 @@ def test_ci_of_a_max_is_of_the_max(two_planners: tuple[Path, Path]) -> None:
     checked = 0
     for key in ("max_lon_accel_mps2", "max_abs_jerk_mps3", "max_abs_lon_jerk_mps3"):
         v = planning[key]
-        assert v.bootstrap is not None and v.bootstrap.statistic == "max", key
+        assert v.bootstrap is not None, key
+        assert v.bootstrap.statistic == "max", key
         assert v.significance.startswith("max [")
-        if v.series and not any(
-            s.only_a or s.only_b for s in cmp.series if s.series == v.series
-        ):
+        if v.series and not any(s.only_a or s.only_b for s in cmp.series if s.series == v.series):
             assert v.bootstrap.ci_low <= v.delta <= v.bootstrap.ci_high, key
             assert v.bootstrap.mean_delta == pytest.approx(v.delta, rel=1e-12, abs=1e-15)
             checked += 1
@@ -175,7 +176,8 @@ def test_ci_of_a_max_contains_its_delta_where_the_mean_ci_does_not() -> None:
     mean = paired_bootstrap(b - a, resamples=2000, seed=0)
     assert mean.ci_high < 0 < d_max  # that CI contradicts the max's Δ
     boot = paired_statistic_bootstrap(a, b, statistic="max", resamples=2000, seed=0)
-    assert boot.statistic == "max" and boot.mean_delta == pytest.approx(d_max)
+    assert boot.statistic == "max"
+    assert boot.mean_delta == pytest.approx(d_max)
     assert boot.ci_low <= d_max <= boot.ci_high
     # the mean statistic is exactly the per-frame-difference bootstrap
     assert paired_statistic_bootstrap(a, b, statistic="mean", resamples=2000, seed=0) == mean

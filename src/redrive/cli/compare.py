@@ -116,9 +116,7 @@ def _print_log_values(cmp: Any, console: Any, *, everything: bool) -> None:
         if not (everything or headline or v in differ):
             continue
         shown += 1
-        other = (
-            "same" if v.verdict == "same" else f"{_side(v.b, v.in_b)} (Δ {_fmt(v.delta)})"
-        )
+        other = "same" if v.verdict == "same" else f"{_side(v.b, v.in_b)} (Δ {_fmt(v.delta)})"
         value = _side(v.a, v.in_a) if v.in_a else _side(v.b, v.in_b)
         table.add_row(escape(v.metric), escape(v.key), value, other)
     console.print(table)

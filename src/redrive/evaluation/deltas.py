@@ -164,9 +164,7 @@ class ValueDelta:
         if b.n_frames == 0:
             return "no common frames"
         what = "" if b.statistic == "mean" else f"{b.statistic} "
-        return f"{what}[{b.ci_low:+.3g}, {b.ci_high:+.3g}] " + (
-            "≠ 0" if b.excludes_zero else "∋ 0"
-        )
+        return f"{what}[{b.ci_low:+.3g}, {b.ci_high:+.3g}] " + ("≠ 0" if b.excludes_zero else "∋ 0")
 
     @property
     def verdict(self) -> str:
@@ -364,9 +362,12 @@ def metric_deltas(
                 else "no per-frame series: no significance test"
             )
         if subject == "log":
-            boot, note = None, (
-                "the logged ego's motion (open loop): the log's value, the same whatever the "
-                "algorithm did; not an algorithm result"
+            boot, note = (
+                None,
+                (
+                    "the logged ego's motion (open loop): the log's value, the same whatever the "
+                    "algorithm did; not an algorithm result"
+                ),
             )
         values.append(
             ValueDelta(

@@ -200,6 +200,8 @@ def subjects(scored: Scored, *, closed_loop: bool) -> dict[str, str]:
     """value name → whose motion or output it scores (stored as ``subject``): the algorithm's
     name, ``run`` for a whole-run metric, ``log`` for the logged ego of an open-loop run."""
     return {
-        k: scored.metric.subject(scored.result, k, algorithm=scored.algorithm, closed_loop=closed_loop)
+        k: scored.metric.subject(
+            scored.result, k, algorithm=scored.algorithm, closed_loop=closed_loop
+        )
         for k in scored.result.values
     }

@@ -232,9 +232,7 @@ def pool_metric(
         units.update({k: res.units.get(k, metric.unit) for k in res.values})
         hib.update({k: res.higher_is_better.get(k, metric.higher_is_better) for k in res.values})
         for k in res.values:
-            subjects.setdefault(
-                k, metric.subject(res, k, algorithm=algorithm, closed_loop=closed)
-            )
+            subjects.setdefault(k, metric.subject(res, k, algorithm=algorithm, closed_loop=closed))
     common = functools.partial(
         PooledValues, metric=metric.name, algorithm=algorithm, logs=len(runs), subjects=subjects
     )
