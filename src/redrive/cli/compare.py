@@ -241,12 +241,22 @@ def _print_batches(cmp: Any, *, worst: int) -> None:
     for col in ("metric", "loop", "value", "A", "B", "Δ", "B is"):
         table.add_column(col, justify="right" if col in ("A", "B", "Δ") else "left")
     colour = {"better": "green", "worse": "red"}
+    of_log = 0
     for v in cmp.pooled:
         verdict = f"[{colour[v.verdict]}]{v.verdict}[/]" if v.verdict in colour else v.verdict
+        if v.subject == "log":  # the logged ego's: not a result of A or B
+            of_log += 1
+            verdict = f"the log's ({v.verdict})"
         table.add_row(
             escape(v.metric), v.loop, escape(v.key), _fmt(v.a), _fmt(v.b), _fmt(v.delta), verdict
         )
     console.print(table)
+    if of_log:
+        console.print(
+            f'{of_log} value(s) marked "the log\'s" score the logged ego of open-loop runs: the '
+            "same whatever the pipelines did, not a result of A or B",
+            highlight=False,
+        )
     logs = Table(
         title=f"{cmp.metric}.{cmp.key} per log, B's worst first (top {worst} of {len(cmp.logs)})",
         title_justify="left",
