@@ -246,3 +246,26 @@ def test_plugin_pairs_with_installed_detector_by_role(
         ("kalman-tracker", "MyTracker", "perception, stage perception_2"),
     }
     assert not [k for k in both.skipped if k.metric in ("kitti_detection", "*")]
+
+
+def test_an_evaluation_stored_before_subjects_reads(
+    two_planners: tuple[Path, Path], tmp_path: Path
+) -> None:
+    """Tables written before the subject/series/statistic columns read with subject = the
+    algorithm (``run`` for a whole-run metric), as those values were then taken to be."""
+    import shutil
+
+    import pyarrow.parquet as pq
+
+    run = tmp_path / "old"
+    shutil.copytree(two_planners[0], run)
+    for path in (run / "metrics").glob("*/*.parquet"):
+        table = pq.read_table(path)
+        keep = [n for n in table.column_names if n not in ("subject", "series", "statistic")]
+        pq.write_table(table.select(keep), path)
+    ev = read_evaluation(open_run(run))
+    rows = ev.values.to_pylist()
+    assert {r["subject"] for r in rows if r["metric"] == "comfort"} == {"run"}
+    assert {r["subject"] for r in rows if r["metric"] == "planning"} == {"idm-planner"}
+    assert {r["statistic"] for r in rows} == {""}
+    assert set(ev.per_frame.column("subject").to_pylist()) >= {"run", "idm-planner"}
