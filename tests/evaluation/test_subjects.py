@@ -163,6 +163,17 @@ def test_ci_of_a_max_is_of_the_max(two_planners: tuple[Path, Path]) -> None:
             assert v.bootstrap.mean_delta == pytest.approx(v.delta, rel=1e-12, abs=1e-15)
             checked += 1
     assert checked
+    # latency's percentiles: the CI of the percentile; the renamed planner's
+    # own latency pairs under both names
+    latency = {v.key: v for v in cmp.values if v.metric == "latency"}
+    expected = {"frame_p95_ms": "p95", "frame_p50_ms": "p50", "p95_ms/idm-planner→SlowIdm": "p95"}
+    for key, stat in expected.items():
+        v = latency[key]
+        assert v.bootstrap is not None, key
+        assert v.bootstrap.statistic == stat, key
+        # (its Δ is of measured times: not asserted inside the CI, which a timing may not be)
+        assert v.bootstrap.mean_delta == pytest.approx(v.delta), key
+    assert "p95_ms/idm-planner" not in latency
 
 
 def test_ci_of_a_max_contains_its_delta_where_the_mean_ci_does_not() -> None:

@@ -130,7 +130,7 @@ SCORES = (SCORES_OUTPUT, SCORES_EGO)
 SUBJECT_LOG = "log"
 #: how a value is made from a per-frame series (``MetricResult.statistics``): the statistic
 #: over the frames that ``redrive compare`` bootstraps for the value's confidence interval.
-STATISTICS = ("mean", "sum", "max", "min", "max_abs", "rms")
+STATISTICS = ("mean", "sum", "max", "min", "max_abs", "rms", "p50", "p95", "p99")
 
 #: a per-frame series: (frame indices int64 (N,), values float64 (N,)).
 Series = tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]

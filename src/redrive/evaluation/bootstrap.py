@@ -101,7 +101,9 @@ def statistic_of(values: npt.NDArray[np.float64], statistic: str) -> npt.NDArray
         return np.asarray(np.abs(v).max(axis=-1))
     if statistic == "rms":
         return np.asarray(np.sqrt((v**2).mean(axis=-1)))
-    msg = f"unknown statistic {statistic!r} (mean, sum, max, min, max_abs, rms)"
+    if statistic in ("p50", "p95", "p99"):  # numpy's default (linear) percentile
+        return np.asarray(np.percentile(v, float(statistic[1:]), axis=-1))
+    msg = f"unknown statistic {statistic!r} (mean, sum, max, min, max_abs, rms, p50, p95, p99)"
     raise ConfigError(msg)
 
 

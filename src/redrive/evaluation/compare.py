@@ -215,6 +215,9 @@ def compare_runs(
     )
     for xa, xb, role in role_pairs:
         logger.info("pairing %s of A with %s of B by role (%s)", xa, xb, role)
+    # every pair of different names (by role, or --algorithm-a/-b): a whole-run metric's
+    # values of one algorithm (latency per algorithm) pair under both names
+    renamed = [(xa, xb) for xa, xb in pairs if xa and xb and xa != xb]
     values: list[ValueDelta] = []
     series: list[SeriesDelta] = []
     metric_names = list(
@@ -231,8 +234,9 @@ def compare_runs(
                 if len(only) == 1:
                     hib_one = bool(only[0].get("higher_is_better", True))
                     v, s = metric_deltas(
-                        a, b, (metric, xa, xb), hib=hib_one, resamples=bootstrap, seed=seed
-                    )
+                        a, b, (metric, xa, xb), hib=hib_one, resamples=bootstrap, seed=seed,
+                        renamed=renamed,
+                    )  # fmt: skip
                     values += v
                     series += s
                     continue
@@ -254,7 +258,9 @@ def compare_runs(
                 logger.info("not comparing %s%s: %s", metric, pair_label(xa, xb), reason)
                 continue
             hib = bool(da[0].get("higher_is_better", True))
-            v, s = metric_deltas(a, b, (metric, xa, xb), hib=hib, resamples=bootstrap, seed=seed)
+            v, s = metric_deltas(
+                a, b, (metric, xa, xb), hib=hib, resamples=bootstrap, seed=seed, renamed=renamed
+            )
             values += v
             series += s
     # values of the logged ego (open loop, both sides): the log's, the same whatever the

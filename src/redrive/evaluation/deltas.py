@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -297,21 +297,56 @@ class RunSide:
         return {algo for _, algo in self.values}
 
 
+def _renamer(renames: Mapping[str, str]) -> Callable[[str], str]:
+    """A function putting ``NAME/ALGO`` (a whole-run metric's value or series of one algorithm,
+    ``p95_ms/det_v1``) under the shown name of its algorithm pair (``p95_ms/det_v1→det_v2``)."""
+
+    def rename(name: str) -> str:
+        head, sep, algo = name.rpartition("/")
+        return f"{head}/{renames[algo]}" if sep and algo in renames else name
+
+    return rename
+
+
 def metric_deltas(
-    a: RunSide, b: RunSide, which: tuple[str, str, str], *, hib: bool, resamples: int, seed: int
+    a: RunSide,
+    b: RunSide,
+    which: tuple[str, str, str],
+    *,
+    hib: bool,
+    resamples: int,
+    seed: int,
+    renamed: Sequence[tuple[str, str]] = (),
 ) -> tuple[list[ValueDelta], list[SeriesDelta]]:
-    """The value and series deltas of one metric (``which`` = metric, A's and B's algorithm)."""
+    """The value and series deltas of one metric (``which`` = metric, A's and B's algorithm).
+
+    ``renamed``: algorithm pairs of different names (A's, B's); a whole-run metric's values and
+    series of one algorithm (``latency``'s ``p95_ms/ALGO``) pair under ``ALGO_A→ALGO_B``."""
     metric, xa, xb = which
-    rows_a = {r["key"]: r for r in a.values.get((metric, xa), [])}
-    rows_b = {r["key"]: r for r in b.values.get((metric, xb), [])}
+    pairs = {x: f"{x}→{y}" for x, y in renamed} if not xa and not xb else {}
+    ren_a = _renamer(pairs)
+    ren_b = _renamer({y: f"{x}→{y}" for x, y in renamed} if pairs else {})
+    rows_a = {
+        ren_a(r["key"]): {**r, "series": ren_a(str(r.get("series") or ""))}
+        for r in a.values.get((metric, xa), [])
+    }
+    rows_b = {
+        ren_b(r["key"]): {**r, "series": ren_b(str(r.get("series") or ""))}
+        for r in b.values.get((metric, xb), [])
+    }
     key_dirs = {k: _stored_direction(r) for k, r in (rows_b | rows_a).items()}
-    names = [s for m, x, s in a.series if m == metric and x == xa]
-    names += [s for m, x, s in b.series if m == metric and x == xb and s not in names]
+    stored_a = {ren_a(s): s for m, x, s in a.series if m == metric and x == xa}
+    stored_b = {ren_b(s): s for m, x, s in b.series if m == metric and x == xb}
+    names = list(stored_a) + [s for s in stored_b if s not in stored_a]
     series: list[SeriesDelta] = []
     full: dict[str, tuple[_F64, _F64]] = {}
     for name in names:
-        fa, va = a.series.get((metric, xa, name), (np.zeros(0, np.int64), np.zeros(0)))
-        fb, vb = b.series.get((metric, xb, name), (np.zeros(0, np.int64), np.zeros(0)))
+        key_a, key_b = (
+            (metric, xa, stored_a.get(name, name)),
+            (metric, xb, stored_b.get(name, name)),
+        )
+        fa, va = a.series.get(key_a, (np.zeros(0, np.int64), np.zeros(0)))
+        fb, vb = b.series.get(key_b, (np.zeros(0, np.int64), np.zeros(0)))
         full[name] = (va, vb)
         fa, va = fa[np.isfinite(va)], va[np.isfinite(va)]
         fb, vb = fb[np.isfinite(vb)], vb[np.isfinite(vb)]
@@ -330,10 +365,7 @@ def metric_deltas(
                 only_a=int(np.setdiff1d(fa, fb).size),
                 only_b=int(np.setdiff1d(fb, fa).size),
                 bootstrap=paired_bootstrap(sb - sa, resamples=resamples, seed=seed),
-                subject=pair_subject(
-                    a.series_subjects.get((metric, xa, name)),
-                    b.series_subjects.get((metric, xb, name)),
-                ),
+                subject=pair_subject(a.series_subjects.get(key_a), b.series_subjects.get(key_b)),
             )
         )
     by_name = {s.series: s for s in series}
@@ -397,7 +429,7 @@ def _statistic_matching(
 ) -> str | None:
     """The statistic (``mean``, ``sum``, ``max`` …) that each stored value is of its run's whole
     stored series, the same in both runs (a side without the value does not object); None."""
-    for stat in ("mean", "sum", "max", "min", "max_abs", "rms"):
+    for stat in ("mean", "sum", "max", "min", "max_abs", "rms", "p50", "p95", "p99"):
         ok = True
         for row, series in zip(rows, full, strict=True):
             if row is None:
