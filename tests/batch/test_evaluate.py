@@ -132,6 +132,17 @@ def test_the_rules_and_the_stored_tables(truth_batch: Path) -> None:
     for metric in ("nuscenes_detection", "kitti_detection", "clear_mot", "hota", "latency"):
         assert rules[metric] == "concatenate", metric
     assert rules["comfort"] == "frame_weighted_mean"
+    # whose motion: the open-loop runs' ego is the logged one (issue 35 item 3)
+    subjects = {r["metric"]: r["subject"] for r in pooled}
+    assert (subjects["comfort"], subjects["nuscenes_detection"], subjects["latency"]) == (
+        "log",
+        ALGO,
+        "run",
+    )
+    cell_subjects = {
+        r["subject"] for r in read_cell_values(truth_batch).to_pylist() if r["metric"] == "comfort"
+    }
+    assert cell_subjects == {"log"}
     frames = {r["metric"]: r["frames"] for r in pooled}
     assert frames["latency"] == 20 + 14 + 26
     # latency percentiles over every frame of every log
@@ -289,6 +300,11 @@ def test_fleet_report(truth_batch: Path, tmp_path: Path) -> None:
     from openpyxl import load_workbook
 
     cells = read_batch_manifest(truth_batch).cells
+    # (earlier tests evaluate the batch with other metrics: these are the ones looked at here)
+    evaluate = ["evaluate", str(truth_batch)]
+    for metric in ("nuscenes_detection", "comfort", "latency"):
+        evaluate += ["--metric", metric]
+    assert main(evaluate) == 0
     # one cell's own report, written as for any run: the fleet report links to it
     assert main(["report", str(truth_batch / cells[1].run_dir), "--worst", "0"]) == 0
     out = tmp_path / "fleet"
@@ -306,6 +322,11 @@ def test_fleet_report(truth_batch: Path, tmp_path: Path) -> None:
     ]
     assert f'<td class="num">{mAP:.4g}</td>' in page
     assert "data:image/png;base64," in page  # the per-log box plots
+    # the logged ego's values apart, as the log's
+    assert "score the logged ego of the open-loop runs" in page
+    assert "comfort.comfortable (the log&#x27;s: logged ego)" in page or (
+        "comfort.comfortable (the log's: logged ego)" in page
+    )
     wb = load_workbook(out / "report.xlsx", read_only=True)
     assert wb.sheetnames == ["pooled", "cells", "worst_logs", "worst_frames", "cells_left_out"]
     rows = list(wb["cells"].iter_rows(values_only=True))

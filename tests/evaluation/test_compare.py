@@ -185,11 +185,19 @@ def test_bootstrap_clear_shift_and_noise(ab: tuple[Path, Path]) -> None:
         0.0,
         False,
     )
-    # a value named after a series carries its bootstrap; aggregates point to the series
+    # a value named after a series carries the bootstrap of the statistic it is: num_missed is
+    # the sum of the per-frame misses, so its CI is of the sum (40 × the mean's), around its Δ
     v = {x.key: x for x in cmp.values if x.metric == "counts"}
     assert v["num_missed"].series == "missed"
-    assert v["num_missed"].bootstrap == bm
+    nb = v["num_missed"].bootstrap
+    assert nb is not None
+    assert nb.statistic == "sum"
+    assert nb.mean_delta == pytest.approx(v["num_missed"].delta) == pytest.approx(20.0)
+    assert nb.ci_low == pytest.approx(40 * 0.345, abs=40 * 0.04)
+    assert nb.ci_high == pytest.approx(40 * 0.655, abs=40 * 0.04)
+    assert nb.ci_low <= v["num_missed"].delta <= nb.ci_high
     assert "excludes 0" in v["num_missed"].note
+    assert v["num_missed"].significance.startswith("sum [")
     assert v["num_missed"].significance.endswith("≠ 0")
     assert v["recall"].bootstrap is None
     assert v["recall"].note.startswith("not a per-frame mean")
@@ -362,7 +370,14 @@ def test_worst_frames_ranking(tmp_path: Path) -> None:
     row = next(r for r in pf if r["series"] == "missed" and r["frame_index"] == 1)
     assert (row["a"], row["b"], row["delta"], row["worsening"]) == (1.0, 0.0, -1.0, -1.0)
     assert tables["per_frame"].num_rows == 3 * 10  # gt, missed, fp × 10 frames
-    assert set(tables) == {"values", "series", "per_frame", "worst_frames", "skipped"}
+    assert set(tables) == {
+        "values",
+        "log_values",
+        "series",
+        "per_frame",
+        "worst_frames",
+        "skipped",
+    }
 
 
 def test_html_self_contained_and_escaped(tmp_path: Path) -> None:

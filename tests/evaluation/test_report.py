@@ -278,6 +278,7 @@ def test_xlsx(report: tuple[Path, Any]) -> None:
     summary = [list(r) for r in wb["summary"].iter_rows(values_only=True)]
     assert summary[0] == [
         "metric", "algorithm", "value", "number", "unit", "better", "headline", "definition",
+        "scores",
     ]  # fmt: skip
     rows = [r[:7] for r in summary[1:]]
     assert rows == [  # an empty string reads back as an empty cell (None)
@@ -286,6 +287,7 @@ def test_xlsx(report: tuple[Path, Any]) -> None:
         ["lat", "(run)", "p95_ms", 4.85, "ms", "lower", True],
     ]
     assert all(r[7].startswith(("v2 params ", "v1 params ")) for r in summary[1:])
+    assert [r[8] for r in summary[1:]] == [EVIL, EVIL, "run"]  # whose output each value scores
     # header frozen and filterable on every sheet with rows
     full = load_workbook(report[1].xlsx)
     for name in ("summary", "run", "algorithms", "bookmarks", "metrics"):
@@ -384,7 +386,7 @@ def test_real_detection_metric(tmp_path: Path) -> None:
 def _evaluation(per_frame: list[tuple[str, str, str, int, float]], marks: list[dict]) -> Evaluation:
     from redrive.results.evaluation import BOOKMARKS, CURVES, PER_FRAME, VALUES
 
-    rows = [dict(zip(PER_FRAME.names, r, strict=True)) for r in per_frame]
+    rows = [dict(zip(PER_FRAME.names, (*r, r[1] or "run"), strict=True)) for r in per_frame]
     return Evaluation(
         values=VALUES.empty_table(),
         per_frame=pa.Table.from_pylist(rows, schema=PER_FRAME),

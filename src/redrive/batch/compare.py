@@ -19,14 +19,16 @@ import numpy as np
 from redrive.batch.evaluate import read_cell_values, read_pooled
 from redrive.errors import ConfigError
 from redrive.evaluation.bootstrap import Bootstrap, paired_bootstrap
-from redrive.evaluation.deltas import verdict
+from redrive.evaluation.deltas import pair_subject, verdict
 
 __all__ = ["BatchComparison", "LogDelta", "PooledDelta", "compare_batches"]
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class PooledDelta:
-    """One pooled value of A and B (same metric, key and loop mode)."""
+    """One pooled value of A and B (same metric, key and loop mode). ``subject``: whose
+    motion or output it scores; ``log`` — the logged ego of open-loop runs — is the same
+    whatever the pipelines did: the log's, not a result of A or B."""
 
     metric: str
     key: str
@@ -37,6 +39,7 @@ class PooledDelta:
     higher_is_better: bool | None
     a: float
     b: float
+    subject: str = ""
 
     @property
     def delta(self) -> float:
@@ -147,7 +150,9 @@ def compare_batches(
             msg = "A and B have no pooled metric in common"
             raise ConfigError(msg)
         # an algorithm's own metric first (detection, tracking …), before the run's
-        first = next((r for r in common if r["algorithm"]), common[0])
+        # (never a value of the logged ego: the same whatever the pipelines did)
+        mine = [r for r in common if r.get("subject") != "log"] or common
+        first = next((r for r in mine if r["algorithm"]), mine[0])
         metric, key = first["metric"], first["key"]
     else:
         metric, dot, key = value.partition(".")
@@ -179,6 +184,7 @@ def compare_batches(
             higher_is_better=ra["higher_is_better"],
             a=float(ra["value"]),
             b=float(ib[(m, k, loop)]["value"]),
+            subject=pair_subject(ra.get("subject"), ib[(m, k, loop)].get("subject")),
         )
         for (m, k, loop), ra in ia.items()
         if (m, k, loop) in ib

@@ -34,7 +34,12 @@ import pyarrow.parquet as pq
 from redrive.batch.manifest import BatchManifest, CellRecord, CellStatus, read_batch_manifest
 from redrive.errors import ConfigError
 from redrive.evaluation.base import Metric, MetricResult
-from redrive.evaluation.evaluator import EvaluationSummary, default_metrics, evaluate_run
+from redrive.evaluation.evaluator import (
+    EvaluationSummary,
+    default_metrics,
+    evaluate_run,
+    subjects,
+)
 from redrive.evaluation.pooling import PooledValues, pool_metric
 from redrive.output.atomic import fsync_dir, sync_tree
 from redrive.results import Run, read_manifest
@@ -64,6 +69,7 @@ CELL_VALUES = pa.schema(
         ("unit", _S),
         ("higher_is_better", pa.bool_()),
         ("frames", pa.int64()),
+        ("subject", _S),
     ]
 )
 POOLED = pa.schema(
@@ -79,6 +85,7 @@ POOLED = pa.schema(
         ("rule", _S),
         ("logs", pa.int64()),
         ("frames", pa.int64()),
+        ("subject", _S),
     ]
 )
 
@@ -133,8 +140,11 @@ class BatchEvaluation:
 
 def _cell_rows(summary: EvaluationSummary, frames: int) -> pa.Table:
     rows: dict[str, list[Any]] = {n: [] for n in CELL_VALUES.names}
+    closed = summary.closed_loop
     for s in summary.scored:
+        whose = subjects(s, closed_loop=closed)
         for key, value in s.result.values.items():
+            rows["subject"].append(whose[key])
             rows["metric"].append(s.metric.name)
             rows["algorithm"].append(s.algorithm)
             rows["key"].append(key)
@@ -164,6 +174,7 @@ def _pooled_rows(pooled: Mapping[tuple[str, str], Sequence[PooledValues]]) -> pa
                     ("rule", p.rule),
                     ("logs", p.logs),
                     ("frames", p.frames),
+                    ("subject", p.subjects.get(key, p.algorithm or "run")),
                 ):
                     rows[name].append(v)
     return pa.table(rows, schema=POOLED)
@@ -299,7 +310,16 @@ def read_cell_values(batch_dir: Path) -> pa.Table:
         msg = f"{batch_dir} has not been evaluated; run `redrive evaluate {batch_dir}` first"
         raise ConfigError(msg)
     part = ds.partitioning(pa.schema([("pipeline", _S), ("loop", _S), ("log", _S)]), flavor="hive")
-    return ds.dataset(folder, format="parquet", partitioning=part).to_table()
+    return _with_subject(ds.dataset(folder, format="parquet", partitioning=part).to_table())
+
+
+def _with_subject(table: pa.Table) -> pa.Table:
+    """``table`` with its ``subject`` column; a batch evaluated before values had one gets the
+    algorithm (``run`` for a whole-run metric), what those values were then taken to be."""
+    if "subject" in table.column_names:
+        return table
+    fill = [a or "run" for a in table.column("algorithm").to_pylist()]
+    return table.append_column("subject", pa.array(fill, type=_S))
 
 
 def read_pooled(batch_dir: Path) -> pa.Table:
@@ -312,4 +332,4 @@ def read_pooled(batch_dir: Path) -> pa.Table:
     if not path.is_file():
         msg = f"{batch_dir} has not been evaluated; run `redrive evaluate {batch_dir}` first"
         raise ConfigError(msg)
-    return pq.read_table(path, schema=POOLED)
+    return _with_subject(pq.read_table(path)).select(POOLED.names).cast(POOLED)

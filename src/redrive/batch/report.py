@@ -53,6 +53,14 @@ class BatchReportFiles:
         return (self.html, self.xlsx, *self.cell_reports)
 
 
+#: what the fleet report says above the values of the logged ego (subject ``log``).
+LOG_NOTE = (
+    "The log's values: these score the logged ego of the open-loop runs (at-fault collisions, "
+    "comfort, progress, drivable area, nuPlan's score, the controller's tracking error), the "
+    "same whatever the pipeline did — not a result of this pipeline's algorithms."
+)
+
+
 def _fmt(value: Any) -> str:
     return h.fmt_number(value)
 
@@ -150,21 +158,31 @@ def write_batch_report(
 
     pooled_parts: list[h.Markup] = []
     for pipeline, loop in groups:
-        rows = [
-            [r["algorithm"] or "(run)", r["metric"], r["key"], _fmt(r["value"]), r["unit"],
-             r["logs"], r["frames"], r["rule"]]
-            for r in pooled
+        mine = [
+            r for r in pooled
             if (r["pipeline"], r["loop"]) == (pipeline, loop)
             and (r["metric"], r["algorithm"], r["key"]) in heads
         ]  # fmt: skip
         pooled_parts.append(h.Markup(f"<h3>{h.esc(pipeline)} ({h.esc(loop)} loop)</h3>"))
-        pooled_parts.append(
-            h.table(
-                ["algorithm", "metric", "headline", "pooled", "unit", "logs", "frames", "rule"],
-                rows,
-                numeric=(3, 5, 6),
-            )
-        )
+        for of_log in (False, True):
+            rows = [
+                [r["algorithm"] or ("(log)" if of_log else "(run)"), r["metric"], r["key"],
+                 _fmt(r["value"]), r["unit"], r["logs"], r["frames"], r["rule"]]
+                for r in mine
+                if (r.get("subject") == "log") == of_log
+            ]  # fmt: skip
+            if not rows:
+                continue
+            if of_log:
+                pooled_parts.append(h.paragraph(LOG_NOTE, class_="muted"))
+            pooled_parts.append(
+                h.table(
+                    ["algorithm", "metric", "headline", "pooled", "unit", "logs", "frames",
+                     "rule"],
+                    rows,
+                    numeric=(3, 5, 6),
+                )
+            )  # fmt: skip
     rules = sorted({r["rule"] for r in pooled})
     pooled_parts.append(
         h.paragraph("; ".join(f"{r}: {rule_text(r)}" for r in rules), class_="muted")
@@ -179,6 +197,8 @@ def write_batch_report(
         if not sel:
             continue
         label = f"{metric}.{key}" + (f" [{algo}]" if algo else "")
+        if any(r.get("subject") == "log" for r in sel):
+            label += " (the log's: logged ego)"
         stats, box = [], []
         for pipeline, loop in groups:
             vals = [

@@ -29,9 +29,17 @@ either order: the output says which run is open and which closed loop, whether t
 are the same (and how they differ), and lists metrics only one run has with — on the other
 side. Δ = B − A; "better"/"worse" follow each value's direction. Metrics
 are compared only where name, version and parameters agree; the others are listed as not
-compared. Significance: a paired bootstrap over frames (the frames both runs have are resampled
-with replacement; 95 % CI of the mean per-frame difference). Aggregates such as mAP are not
-per-frame means: their note refers to the metric's per-frame series.
+compared. Algorithms pair by name; one algorithm of a role that has a different name on each
+side (a file plugin named after its class, `RansacCluster`, against `cluster-detector`) pairs
+with the other by role — or, where a role has several, by role and stage (`perception_1`) —
+and the "paired" line says so; --algorithm-a/--algorithm-b choose a pair. Significance: a paired bootstrap over frames (the frames both runs have are resampled
+with replacement). The 95 % CI beside a value is of that value: of the statistic it is — the
+mean per-frame difference for a mean, the max over the frames for a max, a sum for a count —
+marked with that statistic ("max [..]"); aggregates such as mAP that are none of those get no
+CI (their note refers to the metric's per-frame series).
+In open-loop runs the values that score the ego's motion (at-fault collisions, comfort,
+progress, drivable area, nuPlan's score, the controller's tracking error) score the *logged*
+ego: they are listed once, as the log's, apart from the algorithms' comparison.
 
 Batches (each evaluated with `redrive evaluate BATCH`):
   redrive compare batches/ab --pipeline-a a --pipeline-b b     two pipelines of one batch
@@ -83,16 +91,62 @@ def shown_values(cmp: Any, *, everything: bool) -> list[Any]:
     return keep[:SCREEN_VALUES]
 
 
+def _print_log_values(cmp: Any, console: Any, *, everything: bool) -> None:
+    """The values of the logged ego (open loop, both runs), once, as the log's: not compared."""
+    from rich.markup import escape
+    from rich.table import Table
+
+    if not cmp.log_values:
+        return
+    differ = [v for v in cmp.log_values if v.verdict not in ("same",)]
+    table = Table(
+        title=(
+            "the log's values — these score the logged ego of the open-loop runs, the same "
+            "whatever the algorithms did; not an algorithm result, not compared"
+        ),
+        title_justify="left",
+    )
+    for col in ("metric", "value", "log", "in B"):
+        table.add_column(col, justify="right" if col == "log" else "left")
+    seen: set[tuple[str, str]] = set()
+    shown = 0
+    for v in cmp.log_values:
+        headline = (v.metric, v.algorithm_a) not in seen
+        seen.add((v.metric, v.algorithm_a))
+        if not (everything or headline or v in differ):
+            continue
+        shown += 1
+        other = "same" if v.verdict == "same" else f"{_side(v.b, v.in_b)} (Δ {_fmt(v.delta)})"
+        value = _side(v.a, v.in_a) if v.in_a else _side(v.b, v.in_b)
+        table.add_row(escape(v.metric), escape(v.key), value, other)
+    console.print(table)
+    if differ:
+        console.print(
+            f"[yellow]{len(differ)} of the log's values differ between A and B (other frames, "
+            "or — the controller's tracking error — another planner's plan): still the logged "
+            "ego's, not a result of the compared algorithms[/]"
+        )
+    if shown < len(cmp.log_values):
+        console.print(f"{len(cmp.log_values) - shown} more of the log's values: --all lists them")
+
+
 def _print(cmp: Any, *, worst: int, everything: bool = False) -> None:
     from rich.console import Console
     from rich.markup import escape
     from rich.table import Table
 
     console = Console(width=None if sys.stdout.isatty() else 140)
-    pairs = ", ".join(f"{a} ↔ {b}" if a != b else a for a, b in cmp.pairs if a or b)
+    by_role = {(a, b): role for a, b, role in cmp.role_pairs}
+    pairs = ", ".join(
+        (f"{a} ↔ {b}" + (f" (paired by role: the only unpaired {by_role[a, b]} algorithm on "
+                          "each side)" if (a, b) in by_role else ""))
+        if a != b else a
+        for a, b in cmp.pairs if a or b
+    )  # fmt: skip
     p = cmp.pairing
     console.print(
-        f"{p.label_a} {cmp.run_a}\n{p.label_b} {cmp.run_b}\nsource {cmp.log_sha256}; paired {pairs}"
+        f"{p.label_a} {cmp.run_a}\n{p.label_b} {cmp.run_b}\nsource {cmp.log_sha256}; paired {pairs}",
+        highlight=False,
     )
     if p.open_closed:
         console.print(f"[bold]{escape(p.describe())}[/]")
@@ -105,7 +159,7 @@ def _print(cmp: Any, *, worst: int, everything: bool = False) -> None:
     if p.open_closed:
         title += "; — = the run has no such value"
     table = Table(title=title, title_justify="left")
-    for col in ("metric", "algorithm", "value", *numbers, f"{p.label_b} is", "95% CI of Δ/frame"):
+    for col in ("metric", "algorithm", "value", *numbers, f"{p.label_b} is", "95% CI of Δ"):
         table.add_column(col, justify="right" if col in numbers else "left")
     colour = {"better": "green", "worse": "red"}
     values = shown_values(cmp, everything=everything)
@@ -114,12 +168,15 @@ def _print(cmp: Any, *, worst: int, everything: bool = False) -> None:
             v.algorithm_a if v.algorithm_a == v.algorithm_b else f"{v.algorithm_a}→{v.algorithm_b}"
         )
         verdict = f"[{colour[v.verdict]}]{v.verdict}[/]" if v.verdict in colour else v.verdict
+        if "log" in v.subject.split("→"):  # open beside closed loop: the log's ego, the driven
+            algo = f"{algo or '(run)'} [{v.subject}]"
         table.add_row(
             escape(v.metric), escape(algo or "(run)"), escape(v.key), _side(v.a, v.in_a),
             _side(v.b, v.in_b),
             _fmt(v.delta), _pct(v.relative_delta), verdict, escape(v.significance),
         )  # fmt: skip
     console.print(table)
+    _print_log_values(cmp, console, everything=everything)
     series = Table(
         title="per-frame series (paired bootstrap over frames, 95% CI)", title_justify="left"
     )
@@ -184,12 +241,22 @@ def _print_batches(cmp: Any, *, worst: int) -> None:
     for col in ("metric", "loop", "value", "A", "B", "Δ", "B is"):
         table.add_column(col, justify="right" if col in ("A", "B", "Δ") else "left")
     colour = {"better": "green", "worse": "red"}
+    of_log = 0
     for v in cmp.pooled:
         verdict = f"[{colour[v.verdict]}]{v.verdict}[/]" if v.verdict in colour else v.verdict
+        if v.subject == "log":  # the logged ego's: not a result of A or B
+            of_log += 1
+            verdict = f"the log's ({v.verdict})"
         table.add_row(
             escape(v.metric), v.loop, escape(v.key), _fmt(v.a), _fmt(v.b), _fmt(v.delta), verdict
         )
     console.print(table)
+    if of_log:
+        console.print(
+            f'{of_log} value(s) marked "the log\'s" score the logged ego of open-loop runs: the '
+            "same whatever the pipelines did, not a result of A or B",
+            highlight=False,
+        )
     logs = Table(
         title=f"{cmp.metric}.{cmp.key} per log, B's worst first (top {worst} of {len(cmp.logs)})",
         title_justify="left",

@@ -27,7 +27,11 @@ examples:
       --fail-over latency.frame_p95_ms=50              CI gates on the pooled values
 
 Metrics score the algorithms of their role (perception, planning, control) or the run as a
-whole (latency). Each metric is stored on its own under RUN/metrics/ (values, per-frame series,
+whole (latency). The 'scores' column says whose motion or output a headline scores: an
+algorithm, the run, or "log": in an open-loop run, values of the ego's motion (at-fault
+collisions, comfort, progress, drivable area, nuPlan's score of the ego table, the
+controller's tracking error) score the *logged* ego — the same whatever the pipeline did; they
+are stored with subject "log" and `redrive report`/`compare` show them as the log's. Each metric is stored on its own under RUN/metrics/ (values, per-frame series,
 curves, failure-frame bookmarks, and its name, version and parameters in RUN/metrics/index.json):
 evaluating one metric again, or adding one, keeps every other stored metric.
 `redrive metrics` lists the installed metrics.
@@ -60,13 +64,20 @@ def _fmt(value: float) -> str:
     return f"{value:.4g}"
 
 
+def _subject_text(subject: str, others: list[str]) -> str:
+    """The 'scores' cell: the headline's subject, and the other subjects of the metric's
+    values (the controller's command rates beside the log's tracking error)."""
+    text = subject
+    return text + (f"; also {', '.join(others)}" if others else "")
+
+
 def _run(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.table import Table
 
     from redrive.batch.manifest import BATCH_MANIFEST
     from redrive.evaluation.closedloop.deviation import deviation_caveat
-    from redrive.evaluation.evaluator import evaluate_run, headline
+    from redrive.evaluation.evaluator import evaluate_run, headline, subjects
     from redrive.evaluation.registry import build_metrics, parse_metric_params
     from redrive.results import open_run
 
@@ -83,15 +94,31 @@ def _run(args: argparse.Namespace) -> int:
     if partial:
         console.print(f"[bold yellow]warning: {partial}[/]", highlight=False)
     table = Table(title=f"evaluation of {args.run}", title_justify="left")
-    for col in ("algorithm", "metric", "headline", "value", "unit", "bookmarks"):
+    for col in ("algorithm", "metric", "headline", "value", "unit", "scores", "bookmarks"):
         table.add_column(col, justify="right" if col in ("value", "bookmarks") else "left")
+    closed = summary.closed_loop
+    log_results = 0
     for s in summary.scored:
         key, value, unit = headline(s)
+        whose = subjects(s, closed_loop=closed)
+        subject = whose.get(key, s.algorithm or "run")
+        if subject == "log":
+            log_results += 1
+        others = sorted(set(whose.values()) - {subject})
         table.add_row(
-            s.algorithm or "(run)", s.metric.name, key, _fmt(value), unit,
-            str(len(s.result.bookmarks)),
+            s.algorithm or ("(log)" if subject == "log" else "(run)"), s.metric.name, key,
+            _fmt(value), unit,
+            _subject_text(subject, others), str(len(s.result.bookmarks)),
         )  # fmt: skip
     console.print(table)
+    if log_results:
+        console.print(
+            f"[bold]{log_results} result(s) score the log[/] ('scores' log): in an open-loop "
+            "run the ego is the logged one, so these values are the same whatever the pipeline "
+            "did — the log's, not an algorithm's (`redrive compare` keeps them apart; a "
+            "closed-loop run, `redrive run LOG --closed-loop`, scores the pipeline's driving)",
+            highlight=False,
+        )
     for skip in summary.skipped:
         where = skip.algorithm or "the run"
         console.print(f"[yellow]skipped {skip.metric} on {where}: {skip.reason}[/]")
@@ -155,19 +182,30 @@ def print_batch_evaluation(evaluation: Any, console: Any) -> None:
         table = Table(
             title=f"pipeline {pipeline} ({loop} loop): pooled over its logs", title_justify="left"
         )
-        for col in ("algorithm", "metric", "headline", "pooled", "unit", "logs", "frames", "rule"):
+        cols = ("algorithm", "metric", "headline", "pooled", "unit", "scores", "logs", "frames",
+                "rule")  # fmt: skip
+        for col in cols:
             table.add_column(
                 col, justify="right" if col in ("pooled", "logs", "frames") else "left"
             )
+        of_log = 0
         for p in items:
             key = next(iter(p.values), "")
             value = p.values.get(key, math.nan)
+            subject = p.subjects.get(key, p.algorithm or "run")
+            of_log += subject == "log"
             table.add_row(
-                escape(p.algorithm or "(run)"), escape(p.metric), escape(key), _fmt(value),
-                escape(p.units.get(key, "")), str(p.logs), str(p.frames),
-                escape(p.note or p.rule),
+                escape(p.algorithm or ("(log)" if subject == "log" else "(run)")),
+                escape(p.metric), escape(key), _fmt(value), escape(p.units.get(key, "")),
+                escape(subject), str(p.logs), str(p.frames), escape(p.note or p.rule),
             )  # fmt: skip
         console.print(table)
+        if of_log:
+            console.print(
+                f"  {of_log} headline(s) score the log (the logged ego of the open-loop runs): "
+                "the same whatever the pipeline did, not its algorithms' result",
+                highlight=False,
+            )
     rules = sorted({p.rule for items in evaluation.pooled.values() for p in items})
     for rule in rules:
         console.print(f"  {rule}: {rule_text(rule)}", highlight=False)

@@ -50,6 +50,11 @@ from redrive.types import (
 __all__ = [
     "NEEDS",
     "POOLING_RULES",
+    "SCORES",
+    "SCORES_EGO",
+    "SCORES_OUTPUT",
+    "STATISTICS",
+    "SUBJECT_LOG",
     "WHOLE_RUN",
     "Bookmark",
     "EvalData",
@@ -114,6 +119,19 @@ POOLING_RULES = ("concatenate", "frame_weighted_mean", "scenario_mean", "none")
 #: what ``Metric.role`` is stored as when a metric scores the run as a whole (``role = None``).
 WHOLE_RUN = "run"
 
+#: what a value scores (``Metric.scores``, ``MetricResult.scores``): the algorithm's own output
+#: (its boxes, plans, commands, step times) …
+SCORES_OUTPUT = "output"
+#: … or the ego's motion (the ``ego`` table): in open loop that is the *logged* ego, the same
+#: whatever the pipeline did, so its values are the log's, not an algorithm's.
+SCORES_EGO = "ego"
+SCORES = (SCORES_OUTPUT, SCORES_EGO)
+#: the stored ``subject`` of a value that scores the logged ego of an open-loop run.
+SUBJECT_LOG = "log"
+#: how a value is made from a per-frame series (``MetricResult.statistics``): the statistic
+#: over the frames that ``redrive compare`` bootstraps for the value's confidence interval.
+STATISTICS = ("mean", "sum", "max", "min", "max_abs", "rms", "p50", "p95", "p99")
+
 #: a per-frame series: (frame indices int64 (N,), values float64 (N,)).
 Series = tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]
 
@@ -153,6 +171,14 @@ class MetricResult:
             ``higher_is_better`` (e.g. ``{"MOTP": False, "num_switches": False}``); None for a
             value that is neither better nor worse when it grows (a count of what the log
             held, a parameter echoed): compared, it gets no verdict.
+        scores: per value (or per-frame series) name, what it scores where it differs from the
+            metric's :meth:`Metric.scores_kind`: :data:`SCORES_OUTPUT` (the algorithm's output)
+            or :data:`SCORES_EGO` (the ego's motion, the logged one in open loop).
+        statistics: per value name, the per-frame series it is made from and the statistic over
+            the frames (:data:`STATISTICS`): ``{"max_lon_accel_mps2": ("max_lon_accel_mps2",
+            "max")}``; ``redrive compare`` bootstraps that statistic for the value's confidence
+            interval.  A value not named here gets a CI only when it is the mean of the series
+            of its own name (checked on the stored numbers).
     """
 
     values: Mapping[str, float]
@@ -163,6 +189,8 @@ class MetricResult:
         default_factory=dict
     )
     bookmarks: Sequence[Bookmark] = ()
+    scores: Mapping[str, str] = field(default_factory=dict)
+    statistics: Mapping[str, tuple[str, str]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         object.__setattr__(
@@ -190,6 +218,21 @@ class MetricResult:
             curves[key] = (cx, cy)
         object.__setattr__(self, "curves", MappingProxyType(curves))
         object.__setattr__(self, "bookmarks", tuple(self.bookmarks))
+        bad = sorted(k for k, v in self.scores.items() if v not in SCORES)
+        if bad:
+            msg = f"MetricResult.scores[{bad[0]!r}]: give one of {', '.join(SCORES)}"
+            raise ValueError(msg)
+        object.__setattr__(self, "scores", MappingProxyType(dict(self.scores)))
+        stats = {}
+        for key, (series, stat) in self.statistics.items():
+            if stat not in STATISTICS:
+                msg = (
+                    f"MetricResult.statistics[{key!r}]: statistic {stat!r} is not one of "
+                    f"{', '.join(STATISTICS)}"
+                )
+                raise ValueError(msg)
+            stats[key] = (str(series), str(stat))
+        object.__setattr__(self, "statistics", MappingProxyType(stats))
 
     @property
     def headline(self) -> str:
@@ -292,6 +335,11 @@ class Metric(ABC):
             over its scenarios); ``"none"`` — it cannot be pooled (per-log values only).
         pooled_name: the name of the pooled headline when the pooled value has a name of its
             own (``nuplan_scenario_score`` pools to ``cls``); None: the headline's name.
+        scores: what its values score: :data:`SCORES_OUTPUT` (the algorithm's output) or
+            :data:`SCORES_EGO` (the ego's motion: in open loop the logged ego, so the value is
+            stored with subject :data:`SUBJECT_LOG`, the log's, not an algorithm's); None
+            (default): :data:`SCORES_EGO` for a whole-run metric that needs ``ego``, else
+            :data:`SCORES_OUTPUT` (:meth:`scores_kind`).  Per value in ``MetricResult.scores``.
     """
 
     name: ClassVar[str]
@@ -303,6 +351,7 @@ class Metric(ABC):
     defaults: ClassVar[Mapping[str, Any]] = MappingProxyType({})
     pooling: ClassVar[str] = "frame_weighted_mean"
     pooled_name: ClassVar[str | None] = None
+    scores: ClassVar[str | None] = None
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -317,6 +366,12 @@ class Metric(ABC):
             msg = (
                 f"metric class {cls.__qualname__}: pooling {cls.pooling!r} is not one of "
                 f"{', '.join(POOLING_RULES)}"
+            )
+            raise PluginError(msg)
+        if cls.scores is not None and cls.scores not in SCORES:
+            msg = (
+                f"metric class {cls.__qualname__}: scores {cls.scores!r} is not one of "
+                f"{', '.join(SCORES)}"
             )
             raise PluginError(msg)
 
@@ -339,6 +394,23 @@ class Metric(ABC):
         """The role's value, or :data:`WHOLE_RUN` for a metric of the run as a whole."""
         return WHOLE_RUN if cls.role is None else cls.role.value
 
+    @classmethod
+    def scores_kind(cls) -> str:
+        """What the metric's values score unless a value says otherwise (``scores``)."""
+        if cls.scores is not None:
+            return cls.scores
+        role = getattr(cls, "role", None)
+        return SCORES_EGO if role is None and "ego" in cls.needs else SCORES_OUTPUT
+
+    def subject(self, result: MetricResult, key: str, *, algorithm: str, closed_loop: bool) -> str:
+        """Whose motion or output value (or series) ``key`` of ``result`` scores: the algorithm's
+        name, :data:`WHOLE_RUN` for a whole-run metric, or :data:`SUBJECT_LOG` for a value of
+        the ego's motion in an open-loop run (the logged ego's)."""
+        kind = result.scores.get(key, self.scores_kind())
+        if kind == SCORES_EGO and not closed_loop:
+            return SUBJECT_LOG
+        return algorithm or WHOLE_RUN
+
     def describe(self) -> dict[str, Any]:
         """What the manifest records: name, version, parameters and their hash."""
         params = dict(self.params)
@@ -348,6 +420,7 @@ class Metric(ABC):
             "role": self.role_name(),
             "unit": self.unit,
             "higher_is_better": self.higher_is_better,
+            "scores": self.scores_kind(),
             "params": json.loads(json.dumps(params, default=repr)),
             "params_hash": params_hash(params),
         }

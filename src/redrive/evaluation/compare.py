@@ -21,6 +21,18 @@ Definitions (B − A throughout):
   positive worsening divided by the series' largest absolute per-frame difference (each series
   adds at most 1, so series in different units can be added); frames are ranked by score.
 
+* **whose motion a value scores** (its stored ``subject``): a value of the *logged* ego of
+  open-loop runs (at-fault collisions, comfort, progress, drivable area, nuPlan's score … of the
+  ego table, the controller's tracking error) is the log's, the same whatever the algorithms
+  did; such values are kept apart in :attr:`Comparison.log_values` (shown once, as the log's),
+  out of the algorithm comparison and the worse frames.  An open-loop run beside a closed-loop
+  one compares them (the log's ego against the driven one, subject ``log→run``).
+* **the CI beside a value is of that value**: the paired bootstrap of the statistic the value
+  is — the one its metric declares (``max`` over frames of ``max_lon_accel_mps2`` …), or, for the
+  per-frame series of its name, the one (mean, sum, max, min …) the stored value equals in both
+  runs — resampling the frames both runs have; a value that is none of those gets no CI (its
+  note says so) rather than the CI of another number.
+
 Only metrics whose name, version and ``params_hash`` agree in both manifests are compared; the
 others are listed in :attr:`Comparison.skipped` with the reason.
 
@@ -87,6 +99,7 @@ def _pairs(
     algorithm_b: str | None,
     *,
     one_sided: bool,
+    role_pairs: list[tuple[str, str, str]],
 ) -> tuple[list[tuple[str, str]], list[SkippedMetric]]:
     algos_a, algos_b = a.algorithms(), b.algorithms()
     skipped: list[SkippedMetric] = []
@@ -95,9 +108,10 @@ def _pairs(
     if algorithm_a is None and algorithm_b is None:
         pairs = [(x, x) for x in sorted(algos_a & algos_b)]
         by_role = _pair_by_role(a, b, algos_a - algos_b, algos_b - algos_a)
-        pairs += by_role
-        paired_a = {x for x, _ in by_role}
-        paired_b = {y for _, y in by_role}
+        role_pairs += by_role
+        pairs += [(x, y) for x, y, _ in by_role]
+        paired_a = {x for x, _, _ in by_role}
+        paired_b = {y for _, y, _ in by_role}
         for only, other in (
             (algos_a - algos_b - paired_a, "B"),
             (algos_b - algos_a - paired_b, "A"),
@@ -128,17 +142,26 @@ def _pairs(
 
 def _pair_by_role(
     a: RunSide, b: RunSide, only_a: set[str], only_b: set[str]
-) -> list[tuple[str, str]]:
+) -> list[tuple[str, str, str]]:
     """Algorithms with different names in A and B, paired when each is the only unpaired
-    algorithm of its role on its side (``det_v1`` ↔ ``det_v2``: a new version renamed)."""
-    roles_a = {x.name: x.role for x in a.run.manifest.algorithms}
-    roles_b = {x.name: x.role for x in b.run.manifest.algorithms}
+    algorithm of its role on its side (``det_v1`` ↔ ``det_v2``: a new version renamed; a file
+    plugin, named after its class, against an installed one), else — a role with several
+    (a detector and a tracker, both renamed) — when each is the only unpaired algorithm of its
+    role *and stage* (``perception_1``) on its side: (A's, B's, how: the role [and stage])."""
+    info_a = {x.name: (x.role, x.stage) for x in a.run.manifest.algorithms}
+    info_b = {x.name: (x.role, x.stage) for x in b.run.manifest.algorithms}
     pairs = []
-    for role in dict.fromkeys(roles_a.values()):
-        xa = [x for x in sorted(only_a) if x and roles_a.get(x) is role]
-        xb = [x for x in sorted(only_b) if x and roles_b.get(x) is role]
+    for role in dict.fromkeys(r for r, _ in info_a.values()):
+        xa = [x for x in sorted(only_a) if x and x in info_a and info_a[x][0] is role]
+        xb = [x for x in sorted(only_b) if x and x in info_b and info_b[x][0] is role]
         if len(xa) == 1 and len(xb) == 1:
-            pairs.append((xa[0], xb[0]))
+            pairs.append((xa[0], xb[0], role.value))
+            continue
+        for stage in dict.fromkeys(info_a[x][1] for x in xa):
+            sa = [x for x in xa if info_a[x][1] == stage]
+            sb = [x for x in xb if info_b[x][1] == stage]
+            if stage and len(sa) == 1 and len(sb) == 1:
+                pairs.append((sa[0], sb[0], f"{role.value}, stage {stage}"))
     return pairs
 
 
@@ -168,7 +191,9 @@ def compare_runs(
     """Compare two evaluated runs of the same log or situation (B against A); see the module
     doc. An open-loop and a closed-loop run of the same scenario pair in either order.
 
-    Algorithms are paired by name, or, with ``algorithm_a``/``algorithm_b`` (one defaults to the
+    Algorithms are paired by name, then by role: an algorithm whose name the other run lacks
+    pairs with the other run's one unpaired algorithm of its role (``Comparison.role_pairs``
+    says which pairs were made so); or, with ``algorithm_a``/``algorithm_b`` (one defaults to the
     other), only that pair is compared (plus run-level metrics).
 
     Raises:
@@ -184,7 +209,15 @@ def compare_runs(
         logger.info("%s", pairing.describe())
     one_sided = pairing.open_closed  # side by side: what only one run has is shown, not dropped
     a, b = RunSide.load(ra), RunSide.load(rb)
-    pairs, skipped = _pairs(a, b, algorithm_a, algorithm_b, one_sided=one_sided)
+    role_pairs: list[tuple[str, str, str]] = []
+    pairs, skipped = _pairs(
+        a, b, algorithm_a, algorithm_b, one_sided=one_sided, role_pairs=role_pairs
+    )
+    for xa, xb, role in role_pairs:
+        logger.info("pairing %s of A with %s of B by role (%s)", xa, xb, role)
+    # every pair of different names (by role, or --algorithm-a/-b): a whole-run metric's
+    # values of one algorithm (latency per algorithm) pair under both names
+    renamed = [(xa, xb) for xa, xb in pairs if xa and xb and xa != xb]
     values: list[ValueDelta] = []
     series: list[SeriesDelta] = []
     metric_names = list(
@@ -201,8 +234,9 @@ def compare_runs(
                 if len(only) == 1:
                     hib_one = bool(only[0].get("higher_is_better", True))
                     v, s = metric_deltas(
-                        a, b, (metric, xa, xb), hib=hib_one, resamples=bootstrap, seed=seed
-                    )
+                        a, b, (metric, xa, xb), hib=hib_one, resamples=bootstrap, seed=seed,
+                        renamed=renamed,
+                    )  # fmt: skip
                     values += v
                     series += s
                     continue
@@ -224,9 +258,16 @@ def compare_runs(
                 logger.info("not comparing %s%s: %s", metric, pair_label(xa, xb), reason)
                 continue
             hib = bool(da[0].get("higher_is_better", True))
-            v, s = metric_deltas(a, b, (metric, xa, xb), hib=hib, resamples=bootstrap, seed=seed)
+            v, s = metric_deltas(
+                a, b, (metric, xa, xb), hib=hib, resamples=bootstrap, seed=seed, renamed=renamed
+            )
             values += v
             series += s
+    # values of the logged ego (open loop, both sides): the log's, the same whatever the
+    # algorithms did; shown apart, never as an algorithm's result nor in the worse frames
+    log_values = tuple(v for v in values if v.is_log)
+    values = [v for v in values if not v.is_log]
+    series = [s for s in series if s.subject != "log"]
     compared = {(v.metric, v.algorithm_a, v.algorithm_b) for v in values}
     worst = worst_frames(a, b, series, compared=compared)
     return Comparison(
@@ -235,7 +276,9 @@ def compare_runs(
         log_sha256=pairing.source,
         pairing=pairing,
         pairs=tuple(pairs),
+        role_pairs=tuple(role_pairs),
         values=tuple(values),
+        log_values=log_values,
         series=tuple(series),
         worst=tuple(worst),
         skipped=tuple(skipped),

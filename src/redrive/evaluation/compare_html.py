@@ -12,24 +12,37 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from redrive.evaluation import html as h
-from redrive.evaluation.deltas import pair_label
+from redrive.evaluation.deltas import ValueDelta, pair_label
 
 if TYPE_CHECKING:
     from redrive.evaluation.comparison import Comparison
 
-__all__ = ["render_comparison"]
+__all__ = ["CHART_CLIP_PCT", "chart_panels", "delta_bars", "render_comparison"]
 
 #: dots per inch of the comparison's charts.
 CHART_DPI = 90
 _BETTER, _WORSE = "#187a2f", "#b3261e"
+#: the bar chart's axis ends at ± this many percent; a longer bar stops there, labelled with
+#: its number (a latency 50 times slower must not flatten every other bar to nothing).
+CHART_CLIP_PCT = 100.0
 
 
-def delta_bars(c: Comparison) -> list[tuple[str, float]]:
+def _is_timing(v: ValueDelta) -> bool:
+    """A value of how long the run took (latency), not of what the algorithms did."""
+    return v.metric == "latency" or v.unit == "ms"
+
+
+def delta_bars(c: Comparison, *, timing: bool | None = None) -> list[tuple[str, float]]:
     """The bar chart's bars, headline values first: (label, relative change of B against A in
     %, positive when B is better in the value's own direction — a latency that drops is a
-    positive bar, a recall that drops a negative one)."""
+    positive bar, a recall that drops a negative one).  ``timing``: only the latency values
+    (True), only the others (False), or all (None)."""
     rows = [
-        v for v in c.values if math.isfinite(v.relative_delta) and v.verdict in ("better", "worse")
+        v
+        for v in c.values
+        if math.isfinite(v.relative_delta)
+        and v.verdict in ("better", "worse")
+        and (timing is None or _is_timing(v) == timing)
     ]
     heads = {(v.metric, v.algorithm_a): v.key for v in reversed(c.values)}  # first key each
     rows = sorted(
@@ -44,21 +57,50 @@ def delta_bars(c: Comparison) -> list[tuple[str, float]]:
     ]
 
 
+def chart_panels(c: Comparison) -> list[tuple[str, list[tuple[str, float]]]]:
+    """The bar chart's panels, each on its own axis: the algorithms' values (headlines first),
+    then the run's timing (latency), whose relative changes are often far larger; a panel
+    without bars is left out.  Each axis ends at ±:data:`CHART_CLIP_PCT` %."""
+    panels = [
+        ("values of the algorithms (and the run)", delta_bars(c, timing=False)),
+        ("timing (latency)", delta_bars(c, timing=True)),
+    ]
+    return [(title, bars) for title, bars in panels if bars]
+
+
 def _delta_chart(c: Comparison) -> bytes | None:
     from matplotlib.figure import Figure
 
-    bars = delta_bars(c)
-    if not bars:
+    panels = chart_panels(c)
+    if not panels:
         return None
-    fig = Figure(figsize=(8, 0.3 * len(bars) + 1.2))
-    ax = fig.add_subplot()
-    gain = [g for _, g in bars]
-    colors = [_BETTER if g > 0 else _WORSE for g in gain]
-    ax.barh(range(len(bars)), gain, color=colors)
-    ax.set_yticks(range(len(bars)), [label for label, _ in bars], fontsize=7)
-    ax.invert_yaxis()
-    ax.axvline(0.0, color="k", lw=0.8)
-    ax.set_xlabel("relative change of B against A, % (right = better; headline values first)")
+    sizes = [len(bars) for _, bars in panels]
+    fig = Figure(figsize=(8, 0.3 * sum(sizes) + 1.4 * len(panels)))
+    axes = fig.subplots(len(panels), 1, squeeze=False, height_ratios=[n + 2 for n in sizes])[:, 0]
+    for ax, (title, bars) in zip(axes, panels, strict=True):
+        gain = np.array([g for _, g in bars], dtype=np.float64)
+        shown = np.clip(gain, -CHART_CLIP_PCT, CHART_CLIP_PCT)
+        colors = [_BETTER if g > 0 else _WORSE for g in gain]
+        ax.barh(range(len(bars)), shown, color=colors)
+        for i in np.flatnonzero(np.abs(gain) > CHART_CLIP_PCT):
+            ax.text(
+                float(shown[i]) * 0.98,
+                float(i),
+                f"{gain[i]:+.0f} %",
+                va="center",
+                ha="right" if gain[i] > 0 else "left",
+                fontsize=7,
+                color="white",
+            )
+        ax.set_yticks(range(len(bars)), [label for label, _ in bars], fontsize=7)
+        ax.set_xlim(-CHART_CLIP_PCT * 1.05, CHART_CLIP_PCT * 1.05)
+        ax.invert_yaxis()
+        ax.axvline(0.0, color="k", lw=0.8)
+        ax.set_title(title, fontsize=8, loc="left")
+    axes[-1].set_xlabel(
+        f"relative change of B against A, % (right = better; headline values first; axis "
+        f"clipped at ±{CHART_CLIP_PCT:.0f} %, a longer bar shows its number)"
+    )
     return h.png(fig, dpi=CHART_DPI, tight=True)
 
 
@@ -110,7 +152,9 @@ def render_comparison(c: Comparison, *, worst: int) -> str:
     method = h.paragraph(
         f"Δ = B − A. Significance: paired percentile bootstrap over frames — the frames both "
         f"runs have are resampled with replacement {c.resamples} times (seed {c.seed}); the 95 % "
-        f"CI of the mean per-frame difference is reported, significant when it excludes 0."
+        f"CI beside a value is of that value — of the statistic it is over the frames (the "
+        f"mean per-frame difference for a mean; 'max', 'sum' … when marked), significant when "
+        f"it excludes 0; an aggregate that is none of those gets no CI."
     )
     sections = [method]
     nav = []
@@ -134,6 +178,26 @@ def render_comparison(c: Comparison, *, worst: int) -> str:
         h.section("values", "Values", _chart(_delta_chart(c), "relative change per value"),
                   h.table(head, values, numeric=range(3, 7)))
     )  # fmt: skip
+    if c.log_values:
+        rows = [
+            [v.metric, v.key, v.unit, _n(v.a) if v.in_a else "—",
+             "same" if v.verdict == "same" else (_n(v.b) if v.in_b else "—")]
+            for v in c.log_values
+        ]  # fmt: skip
+        sections.append(
+            h.section(
+                "log",
+                "The log's values (not compared)",
+                h.paragraph(
+                    "These values score the logged ego of the open-loop runs — at-fault "
+                    "collisions, comfort, progress, drivable area, nuPlan's score of the ego "
+                    "table, the controller's tracking error: the same whatever the algorithms "
+                    "did, so they are the log's, not a result of A or B."
+                ),
+                h.table(["metric", "value", "unit", "log (A)", "B"], rows, numeric=[3]),
+            )
+        )
+        nav.append(("log", "the log's"))
     series = [
         [s.label, {True: "higher", False: "lower", None: "—"}[s.higher_is_better],
          str(s.bootstrap.n_frames), _n(s.bootstrap.mean_delta),

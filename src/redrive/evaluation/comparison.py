@@ -30,11 +30,11 @@ def _schema(spec: str) -> pa.Schema:
 _VALUES = _schema(
     "metric:s metric_version:s algorithm_a:s algorithm_b:s key:s unit:s higher_is_better:b a:f "
     "b:f delta:f relative_delta:f verdict:s series:s ci_low:f ci_high:f excludes_zero:b note:s "
-    "in_a:b in_b:b"
+    "in_a:b in_b:b subject:s"
 )
 _SERIES = _schema(
     "metric:s algorithm_a:s algorithm_b:s series:s higher_is_better:b n_frames:i only_a:i "
-    "only_b:i mean_delta:f ci_low:f ci_high:f excludes_zero:b resamples:i"
+    "only_b:i mean_delta:f ci_low:f ci_high:f excludes_zero:b resamples:i subject:s"
 )
 _PER_FRAME = _schema(
     "metric:s algorithm_a:s algorithm_b:s series:s frame_index:i a:f b:f delta:f worsening:f"
@@ -70,7 +70,10 @@ class Comparison:
         pairing: an A/B of one loop, or an open-loop run beside a closed-loop one; the
             pipelines' differences.
         pairs: the compared algorithm pairs (A's name, B's name); ("", "") = run-level metrics.
-        values: per metric value; series: per per-frame series (with its bootstrap);
+        role_pairs: the pairs of different names made by role: (A's, B's, the role).
+        values: per metric value of the algorithms (or the run); log_values: per value of the
+            logged ego in both runs (open loop): the log's, kept out of the comparison;
+        series: per per-frame series (with its bootstrap);
         worst: every frame where B is worse, worst first; skipped: metrics not compared.
         resamples, seed: the bootstrap's.
     """
@@ -86,14 +89,17 @@ class Comparison:
     resamples: int
     seed: int
     pairing: Pairing
+    log_values: tuple[ValueDelta, ...] = ()
+    role_pairs: tuple[tuple[str, str, str], ...] = ()
 
     def worst_frames(self, n: int | None = None) -> tuple[WorseFrame, ...]:
         """The ``n`` frames where B is most worse than A (all of them for None), worst first."""
         return self.worst if n is None else self.worst[: max(n, 0)]
 
     def to_tables(self) -> dict[str, pa.Table]:
-        """``values``, ``series`` (bootstrap per series), ``per_frame`` (A, B, Δ and B's
-        worsening per frame and series), ``worst_frames`` (ranked) and ``skipped``."""
+        """``values``, ``log_values`` (the logged ego's, apart), ``series`` (bootstrap per
+        series), ``per_frame`` (A, B, Δ and B's worsening per frame and series),
+        ``worst_frames`` (ranked) and ``skipped``."""
         per_frame: dict[str, list[Any]] = {n: [] for n in _PER_FRAME.names}
         for s in self.series:
             for col in ("metric", "algorithm_a", "algorithm_b", "series"):
@@ -102,6 +108,7 @@ class Comparison:
                 per_frame["frame_index" if col == "frames" else col] += getattr(s, col).tolist()
         return {
             "values": _table(_VALUES, self.values),
+            "log_values": _table(_VALUES, self.log_values),
             "series": _table(_SERIES, self.series),
             "per_frame": pa.table(per_frame, schema=_PER_FRAME),
             "worst_frames": _table(_WORST, self.worst),
@@ -117,9 +124,12 @@ class Comparison:
             "log_sha256": self.log_sha256,
             "pairing": self.pairing.to_dict(),
             "pairs": [list(p) for p in self.pairs],
+            "role_pairs": [
+                {"algorithm_a": x, "algorithm_b": y, "role": r} for x, y, r in self.role_pairs
+            ],
             "bootstrap": {"resampled": "frames", "resamples": self.resamples, "seed": self.seed},
         }
-        for name in ("values", "series", "worst_frames", "skipped"):
+        for name in ("values", "log_values", "series", "worst_frames", "skipped"):
             rows = tables[name].to_pylist()
             if name == "worst_frames" and worst is not None:
                 rows = rows[: max(worst, 0)]

@@ -4,7 +4,9 @@ smooth the commands were.
 **Open-loop replay.** In a replayed log the ego is *not* driven by these commands: the log's
 ego moved as it was recorded. The tracking errors below therefore measure how far the logged
 ego was from the plan; they are the controller's tracking error only in closed loop
-(``CLOSED_LOOP`` mode, or a log recorded with this controller driving). The command
+(``CLOSED_LOOP`` mode, or a log recorded with this controller driving), and an open-loop run
+stores them with subject ``log`` (``MetricResult.scores``: the ego's motion), so ``evaluate``,
+``report`` and ``compare`` show them as the log's, not the controller's. The command
 smoothness figures are the controller's own in either case.
 
 Definitions, for each frame f where the control algorithm produced commands and the planner
@@ -47,7 +49,14 @@ from redrive.evaluation._kinematics import (
     project_on_polyline,
     wrap_angle,
 )
-from redrive.evaluation.base import EvalData, Metric, MetricResult, MetricSkipped, Series
+from redrive.evaluation.base import (
+    SCORES_EGO,
+    EvalData,
+    Metric,
+    MetricResult,
+    MetricSkipped,
+    Series,
+)
 from redrive.types import Role
 
 __all__ = ["ControlMetrics", "planner_of"]
@@ -208,9 +217,39 @@ class ControlMetrics(Metric):
             "brake_rate_1_s": (rate_frames, rates[:, 2]),
         }
         # the errors and rates are lower-is-better (the metric's direction); the frame count is
-        # neither
+        # neither.  The tracking errors are of the ego's motion: in open loop the logged ego's
+        # (the log's, whatever the controller commanded); the rates are the controller's own.
+        tracking = {
+            "lateral": "lateral_error_m",
+            "heading": "heading_error_rad",
+            "speed": "speed_error_mps",
+            "longitudinal": "longitudinal_error_m",
+        }
+        scores = dict.fromkeys(tracking.values(), SCORES_EGO)
+        statistics: dict[str, tuple[str, str]] = {}
+        for prefix, series_name in (
+            *tracking.items(),
+            ("steering_rate", "steering_rate_rad_s"),
+            ("throttle_rate", "throttle_rate_1_s"),
+            ("brake_rate", "brake_rate_1_s"),
+        ):
+            for key in values:
+                if key.startswith(prefix + "_rmse"):
+                    statistics[key] = (series_name, "rms")
+                elif key.startswith(prefix + "_max"):
+                    statistics[key] = (series_name, "max_abs")
+                else:
+                    continue
+                if series_name in tracking.values():
+                    scores[key] = SCORES_EGO
+        scores["frames"] = SCORES_EGO
         return MetricResult(
-            values=values, units=units, higher_is_better={"frames": None}, per_frame=per_frame
+            values=values,
+            units=units,
+            higher_is_better={"frames": None},
+            per_frame=per_frame,
+            scores=scores,
+            statistics=statistics,
         )
 
 

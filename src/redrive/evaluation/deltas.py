@@ -7,14 +7,19 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from redrive.evaluation.bootstrap import Bootstrap, paired_bootstrap
+from redrive.evaluation.bootstrap import (
+    Bootstrap,
+    paired_bootstrap,
+    paired_statistic_bootstrap,
+    statistic_of,
+)
 from redrive.evaluation.store import Evaluation, read_evaluation
 from redrive.results import Run
 
@@ -26,6 +31,7 @@ __all__ = [
     "WorseFrame",
     "metric_deltas",
     "pair_label",
+    "pair_subject",
     "series_direction",
     "verdict",
     "worst_frames",
@@ -75,6 +81,8 @@ class SeriesDelta:
         frames: frame indices int64 (N,) present (finite) in both; ``a``, ``b`` float64 (N,).
         higher_is_better: the series' direction; None for series that count the log (``gt``).
         only_a, only_b: frames present in one run only (a failed step, a shorter run).
+        subject: whose motion or output the series scores (:func:`pair_subject`): ``log`` for
+            the logged ego of open-loop runs, else the algorithm (``run``: a whole-run metric).
     """
 
     metric: str
@@ -88,6 +96,7 @@ class SeriesDelta:
     only_a: int
     only_b: int
     bootstrap: Bootstrap
+    subject: str = ""
 
     @property
     def label(self) -> str:
@@ -110,7 +119,8 @@ class ValueDelta:
     """One stored value of a metric in A and B. ``series``/``bootstrap``: the per-frame series
     of the same name, when there is one; otherwise ``note`` reports the metric's series.
     ``in_a``/``in_b``: the run has the value (False: only the other run has it; its side is
-    NaN)."""
+    NaN). ``subject``: whose motion or output the value scores (:func:`pair_subject`; ``log``:
+    the logged ego of open-loop runs, the log's value, not an algorithm's)."""
 
     metric: str
     metric_version: str
@@ -126,10 +136,16 @@ class ValueDelta:
     note: str
     in_a: bool = True
     in_b: bool = True
+    subject: str = ""
 
     @property
     def delta(self) -> float:
         return self.b - self.a
+
+    @property
+    def is_log(self) -> bool:
+        """The value scores the logged ego in both runs: the log's, not an algorithm's."""
+        return self.subject == "log"
 
     @property
     def relative_delta(self) -> float:
@@ -141,11 +157,14 @@ class ValueDelta:
     def significance(self) -> str:
         """Short form of the note: the CI of the matching series and whether it excludes 0."""
         if self.bootstrap is None:
+            if self.is_log:
+                return "the log's"
             return "aggregate: see the series" if "per-frame series" in self.note else "—"
         b = self.bootstrap
         if b.n_frames == 0:
             return "no common frames"
-        return f"[{b.ci_low:+.3g}, {b.ci_high:+.3g}] " + ("≠ 0" if b.excludes_zero else "∋ 0")
+        what = "" if b.statistic == "mean" else f"{b.statistic} "
+        return f"{what}[{b.ci_low:+.3g}, {b.ci_high:+.3g}] " + ("≠ 0" if b.excludes_zero else "∋ 0")
 
     @property
     def verdict(self) -> str:
@@ -177,6 +196,14 @@ class SkippedMetric:
     algorithm_a: str
     algorithm_b: str
     reason: str
+
+
+def pair_subject(a: str | None, b: str | None) -> str:
+    """One subject for a pair: the common one (``log`` when both score the logged ego), the one
+    side that has it, else ``A→B`` (an open-loop run's ``log`` beside a closed loop's ``run``)."""
+    if not a or not b:
+        return a or b or ""
+    return a if a == b else f"{a}→{b}"
 
 
 def pair_label(a: str, b: str) -> str:
@@ -224,6 +251,7 @@ class RunSide:
     values: dict[tuple[str, str], list[dict[str, Any]]]
     series: dict[tuple[str, str, str], tuple[_I64, _F64]]
     stamps: dict[int, int]
+    series_subjects: dict[tuple[str, str, str], str]
 
     @classmethod
     def load(cls, run: Run) -> RunSide:
@@ -233,17 +261,30 @@ class RunSide:
             values.setdefault((row["metric"], row["algorithm"]), []).append(row)
         cols = ev.per_frame.to_pydict()
         rows: dict[tuple[str, str, str], list[int]] = {}
-        for i, key in enumerate(
-            zip(cols["metric"], cols["algorithm"], cols["series"], strict=True)
+        subjects: dict[tuple[str, str, str], str] = {}
+        for i, (key, subject) in enumerate(
+            zip(
+                zip(cols["metric"], cols["algorithm"], cols["series"], strict=True),
+                cols["subject"],
+                strict=True,
+            )
         ):
             rows.setdefault(key, []).append(i)
+            subjects.setdefault(key, subject)
         idx_all = np.asarray(cols["frame_index"], dtype=np.int64)
         val_all = np.asarray(cols["value"], dtype=np.float64)
         series = {k: (idx_all[r], val_all[r]) for k, r in rows.items()}
         frames = run.table("frames")
         idx, stamp = frames.column("frame_index").to_pylist(), frames.column("stamp_ns").to_pylist()
         stamps = dict(zip(idx, stamp, strict=True))
-        return cls(run=run, ev=ev, values=values, series=series, stamps=stamps)
+        return cls(
+            run=run,
+            ev=ev,
+            values=values,
+            series=series,
+            stamps=stamps,
+            series_subjects=subjects,
+        )
 
     def definition(self, metric: str, algorithm: str) -> list[Mapping[str, Any]]:
         return [
@@ -256,20 +297,57 @@ class RunSide:
         return {algo for _, algo in self.values}
 
 
+def _renamer(renames: Mapping[str, str]) -> Callable[[str], str]:
+    """A function putting ``NAME/ALGO`` (a whole-run metric's value or series of one algorithm,
+    ``p95_ms/det_v1``) under the shown name of its algorithm pair (``p95_ms/det_v1→det_v2``)."""
+
+    def rename(name: str) -> str:
+        head, sep, algo = name.rpartition("/")
+        return f"{head}/{renames[algo]}" if sep and algo in renames else name
+
+    return rename
+
+
 def metric_deltas(
-    a: RunSide, b: RunSide, which: tuple[str, str, str], *, hib: bool, resamples: int, seed: int
+    a: RunSide,
+    b: RunSide,
+    which: tuple[str, str, str],
+    *,
+    hib: bool,
+    resamples: int,
+    seed: int,
+    renamed: Sequence[tuple[str, str]] = (),
 ) -> tuple[list[ValueDelta], list[SeriesDelta]]:
-    """The value and series deltas of one metric (``which`` = metric, A's and B's algorithm)."""
+    """The value and series deltas of one metric (``which`` = metric, A's and B's algorithm).
+
+    ``renamed``: algorithm pairs of different names (A's, B's); a whole-run metric's values and
+    series of one algorithm (``latency``'s ``p95_ms/ALGO``) pair under ``ALGO_A→ALGO_B``."""
     metric, xa, xb = which
-    rows_a = {r["key"]: r for r in a.values.get((metric, xa), [])}
-    rows_b = {r["key"]: r for r in b.values.get((metric, xb), [])}
+    pairs = {x: f"{x}→{y}" for x, y in renamed} if not xa and not xb else {}
+    ren_a = _renamer(pairs)
+    ren_b = _renamer({y: f"{x}→{y}" for x, y in renamed} if pairs else {})
+    rows_a = {
+        ren_a(r["key"]): {**r, "series": ren_a(str(r.get("series") or ""))}
+        for r in a.values.get((metric, xa), [])
+    }
+    rows_b = {
+        ren_b(r["key"]): {**r, "series": ren_b(str(r.get("series") or ""))}
+        for r in b.values.get((metric, xb), [])
+    }
     key_dirs = {k: _stored_direction(r) for k, r in (rows_b | rows_a).items()}
-    names = [s for m, x, s in a.series if m == metric and x == xa]
-    names += [s for m, x, s in b.series if m == metric and x == xb and s not in names]
+    stored_a = {ren_a(s): s for m, x, s in a.series if m == metric and x == xa}
+    stored_b = {ren_b(s): s for m, x, s in b.series if m == metric and x == xb}
+    names = list(stored_a) + [s for s in stored_b if s not in stored_a]
     series: list[SeriesDelta] = []
+    full: dict[str, tuple[_F64, _F64]] = {}
     for name in names:
-        fa, va = a.series.get((metric, xa, name), (np.zeros(0, np.int64), np.zeros(0)))
-        fb, vb = b.series.get((metric, xb, name), (np.zeros(0, np.int64), np.zeros(0)))
+        key_a, key_b = (
+            (metric, xa, stored_a.get(name, name)),
+            (metric, xb, stored_b.get(name, name)),
+        )
+        fa, va = a.series.get(key_a, (np.zeros(0, np.int64), np.zeros(0)))
+        fb, vb = b.series.get(key_b, (np.zeros(0, np.int64), np.zeros(0)))
+        full[name] = (va, vb)
         fa, va = fa[np.isfinite(va)], va[np.isfinite(va)]
         fb, vb = fb[np.isfinite(vb)], vb[np.isfinite(vb)]
         common, ia, ib = np.intersect1d(fa, fb, assume_unique=False, return_indices=True)
@@ -287,6 +365,7 @@ def metric_deltas(
                 only_a=int(np.setdiff1d(fa, fb).size),
                 only_b=int(np.setdiff1d(fb, fa).size),
                 bootstrap=paired_bootstrap(sb - sa, resamples=resamples, seed=seed),
+                subject=pair_subject(a.series_subjects.get(key_a), b.series_subjects.get(key_b)),
             )
         )
     by_name = {s.series: s for s in series}
@@ -301,17 +380,26 @@ def metric_deltas(
         ra_, rb_ = rows_a.get(key), rows_b.get(key)
         row = ra_ or rb_
         assert row is not None
-        match = by_name.get(key) or (by_name.get(key[4:]) if key.startswith("num_") else None)
-        if match is not None:
-            boot: Bootstrap | None = match.bootstrap
-            note = f"per-frame {match.series}: {match.bootstrap.describe()}"
-        else:
-            boot = None
+        subject = pair_subject(
+            str(ra_["subject"]) if ra_ else None, str(rb_["subject"]) if rb_ else None
+        )
+        boot, note, used = _value_interval(
+            key, (ra_, rb_), by_name, full, resamples=resamples, seed=seed
+        )
+        if not note:
             note = (
-                f"not a per-frame mean; paired bootstrap of the per-frame series, mean Δ/frame "
+                "not a per-frame mean; paired bootstrap of the per-frame series, mean Δ/frame "
                 f"[95% CI] (≠0: excludes 0): {summary}"
                 if summary
                 else "no per-frame series: no significance test"
+            )
+        if subject == "log":
+            boot, note = (
+                None,
+                (
+                    "the logged ego's motion (open loop): the log's value, the same whatever the "
+                    "algorithm did; not an algorithm result"
+                ),
             )
         values.append(
             ValueDelta(
@@ -324,14 +412,86 @@ def metric_deltas(
                 higher_is_better=_stored_direction(row),
                 a=float(ra_["value"]) if ra_ else float("nan"),
                 b=float(rb_["value"]) if rb_ else float("nan"),
-                series=match.series if match else "",
+                series=used,
                 bootstrap=boot,
                 note=note,
                 in_a=ra_ is not None,
                 in_b=rb_ is not None,
+                subject=subject,
             )
         )
     return values, series
+
+
+def _statistic_matching(
+    rows: tuple[Mapping[str, Any] | None, Mapping[str, Any] | None],
+    full: tuple[_F64, _F64],
+) -> str | None:
+    """The statistic (``mean``, ``sum``, ``max`` …) that each stored value is of its run's whole
+    stored series, the same in both runs (a side without the value does not object); None."""
+    for stat in ("mean", "sum", "max", "min", "max_abs", "rms", "p50", "p95", "p99"):
+        ok = True
+        for row, series in zip(rows, full, strict=True):
+            if row is None:
+                continue
+            finite = series[np.isfinite(series)]
+            value = float(row["value"])
+            if finite.size == 0 or not math.isfinite(value):
+                ok = False
+                break
+            got = float(statistic_of(finite, stat))
+            ok &= bool(np.isclose(value, got, rtol=1e-9, atol=1e-12))
+        if ok:
+            return stat
+    return None
+
+
+def _value_interval(
+    key: str,
+    rows: tuple[Mapping[str, Any] | None, Mapping[str, Any] | None],
+    by_name: Mapping[str, SeriesDelta],
+    full: Mapping[str, tuple[_F64, _F64]],
+    *,
+    resamples: int,
+    seed: int,
+) -> tuple[Bootstrap | None, str, str]:
+    """The CI that belongs to value ``key`` (its bootstrap, note, series): the bootstrap of
+    the statistic the value is — declared by the metric (``max`` over frames …), or, for the
+    series of its name (``num_X``: of ``X``), the statistic the stored value equals in both
+    runs — else none, with a note saying why."""
+    ra_, rb_ = rows
+    declared = {
+        (str(r.get("series") or ""), str(r.get("statistic") or ""))
+        for r in (ra_, rb_)
+        if r is not None
+    }
+    declared.discard(("", ""))
+    name, stat = next(iter(declared)) if len(declared) == 1 else ("", "")
+    if not name:
+        name = key if key in by_name else (key[4:] if key.startswith("num_") else key)
+    match = by_name.get(name)
+    if match is None:
+        return None, "", ""
+    if not stat:
+        stat = _statistic_matching(rows, full[name]) or ""
+    if not stat:
+        return (
+            None,
+            f"an aggregate, not the mean, sum, max or min of per-frame {name}: no CI of its "
+            f"own (the series' {match.bootstrap.describe()} is of its mean Δ/frame, not of "
+            "this value)",
+            "",
+        )
+    boot = paired_statistic_bootstrap(
+        match.a, match.b, statistic=stat, resamples=resamples, seed=seed
+    )
+    note = f"{stat} of per-frame {name}: {boot.describe()}"
+    if match.only_a or match.only_b:
+        note += (
+            f"; on the {match.frames.size} frames both runs have ({match.only_a} only in A, "
+            f"{match.only_b} only in B), so its Δ can differ from the values' Δ"
+        )
+    return boot, note, name
 
 
 def worst_frames(

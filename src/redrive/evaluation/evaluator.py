@@ -15,10 +15,17 @@ from pathlib import Path
 from redrive.errors import ConfigError
 from redrive.evaluation.base import NEED_SOURCES, EvalData, Metric, MetricSkipped
 from redrive.evaluation.registry import installed_metrics
-from redrive.evaluation.store import MetricOutcome, Scored, write_evaluation
+from redrive.evaluation.store import MetricOutcome, Scored, closed_loop_run, write_evaluation
 from redrive.results import MAP_NAME, Run, open_run
 
-__all__ = ["EvaluationSummary", "MetricOutcome", "default_metrics", "evaluate_run"]
+__all__ = [
+    "EvaluationSummary",
+    "MetricOutcome",
+    "default_metrics",
+    "evaluate_run",
+    "headline",
+    "subjects",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -37,6 +44,11 @@ class EvaluationSummary:
     @property
     def bookmarks(self) -> int:
         return sum(len(s.result.bookmarks) for s in self.scored)
+
+    @property
+    def closed_loop(self) -> bool:
+        """The run's ego was driven by its pipeline (else the ego is the log's)."""
+        return closed_loop_run(self.run)
 
 
 def default_metrics() -> list[Metric]:
@@ -182,3 +194,14 @@ def headline(scored: Scored) -> tuple[str, float, str]:
     key = scored.result.headline
     value = scored.result.values.get(key, math.nan)
     return key, value, scored.result.units.get(key, scored.metric.unit)
+
+
+def subjects(scored: Scored, *, closed_loop: bool) -> dict[str, str]:
+    """value name → whose motion or output it scores (stored as ``subject``): the algorithm's
+    name, ``run`` for a whole-run metric, ``log`` for the logged ego of an open-loop run."""
+    return {
+        k: scored.metric.subject(
+            scored.result, k, algorithm=scored.algorithm, closed_loop=closed_loop
+        )
+        for k in scored.result.values
+    }

@@ -129,6 +129,15 @@ class Latency(Metric):
         )
         units.update(frame_deadline_misses="frames", frame_deadline_miss_fraction="ratio")
         per_frame["frame_ms"] = (f_idx, f_ms)
+        # each percentile is of a per-frame series: `compare` bootstraps that percentile
+        statistics: dict[str, tuple[str, str]] = {}
+
+        def of_series(suffix: str, series: str) -> None:
+            for stat in ("p50", "p95", "p99", "max"):
+                statistics[f"{stat}_ms{suffix}"] = (series, stat)
+
+        of_series("", "frame_ms")
+        statistics = {f"frame_{k}": v for k, v in statistics.items()}
 
         manifest = data.run.manifest
         in_order = manifest.names()
@@ -147,6 +156,7 @@ class Latency(Metric):
             units[f"deadline_misses/{algo}"] = "steps"
             units[f"deadline_miss_fraction/{algo}"] = "ratio"
             per_frame[f"latency_ms/{algo}"] = (s_frame[sel], s_ms[sel])
+            of_series(f"/{algo}", f"latency_ms/{algo}")
 
         combine = np.maximum if self.params["stage_combine"] == "max" else np.add
         stages_present = set(s_stage.tolist())
@@ -162,6 +172,7 @@ class Latency(Metric):
             for key, val in latency_stats_ms(stage_ms).items():
                 values[f"{key}/stage:{stage}"] = val
             per_frame[f"latency_ms/stage:{stage}"] = (frames_u, stage_ms)
+            of_series(f"/stage:{stage}", f"latency_ms/stage:{stage}")
 
         bookmarks: list[Bookmark] = []
         if deadline_s > 0:
@@ -188,4 +199,5 @@ class Latency(Metric):
             higher_is_better={"deadline_ms": None},  # the parameter, echoed
             per_frame=per_frame,
             bookmarks=bookmarks,
+            statistics={k: v for k, v in statistics.items() if k in values},
         )

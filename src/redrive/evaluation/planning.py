@@ -535,12 +535,24 @@ class PlanningMetrics(Metric):
         better.add("min_lon_accel_mps2")  # the hardest braking: closer to 0 is gentler
         directions: dict[str, bool | None] = {k: True for k in values if k in better}
         directions["frames"] = None
+        # how each aggregate is made from its per-frame series (compare bootstraps that)
+        statistics: dict[str, tuple[str, str]] = {
+            "collision_rate": ("collision", "mean"),
+            "at_fault_collision_rate": ("at_fault_collision", "mean"),
+            "collisions": ("collision", "sum"),
+            "at_fault_collisions": ("at_fault_collision", "sum"),
+            "min_ttc_s": ("min_ttc_s", "min"),
+            "comfortable_fraction": ("comfortable", "mean"),
+        }
+        for key in COMFORT_BOUNDS:
+            statistics[key] = (key, "min" if key.startswith("min_") else "max")
         return MetricResult(
             values=values,
             units=units,
             higher_is_better=directions,
             per_frame={k: s.series() for k, s in series.items()},
             bookmarks=bookmarks,
+            statistics={k: v for k, v in statistics.items() if v[0] in series},
         )
 
 

@@ -28,7 +28,7 @@ import dataclasses
 import functools
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
 import numpy as np
@@ -36,6 +36,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from redrive.evaluation.base import EvalData, Metric, MetricResult
+from redrive.evaluation.store import closed_loop_run
 from redrive.results import Run
 from redrive.types import DetectedObject, RoadMap
 
@@ -182,6 +183,8 @@ class PooledValues:
     logs: int
     frames: int
     note: str = ""
+    #: value name → whose motion or output it scores (``log``: the logged ego of open-loop runs)
+    subjects: Mapping[str, str] = field(default_factory=dict)
 
 
 def _weighted(results: Sequence[tuple[MetricResult, int]]) -> dict[str, float]:
@@ -223,11 +226,15 @@ def pool_metric(
     rule = metric.pooling
     units: dict[str, str] = {}
     hib: dict[str, bool | None] = {}
+    closed = bool(runs) and closed_loop_run(runs[0])
+    subjects: dict[str, str] = {}
     for res in results:
         units.update({k: res.units.get(k, metric.unit) for k in res.values})
         hib.update({k: res.higher_is_better.get(k, metric.higher_is_better) for k in res.values})
+        for k in res.values:
+            subjects.setdefault(k, metric.subject(res, k, algorithm=algorithm, closed_loop=closed))
     common = functools.partial(
-        PooledValues, metric=metric.name, algorithm=algorithm, logs=len(runs)
+        PooledValues, metric=metric.name, algorithm=algorithm, logs=len(runs), subjects=subjects
     )
     if rule == "none":
         return common(
@@ -241,6 +248,10 @@ def pool_metric(
     if rule == "concatenate":
         data = PooledEvalData(runs, algorithm)
         pooled = metric.evaluate(data)
+        for k in pooled.values:
+            subjects.setdefault(
+                k, metric.subject(pooled, k, algorithm=algorithm, closed_loop=closed)
+            )
         units.update({k: pooled.units.get(k, metric.unit) for k in pooled.values})
         hib.update(
             {k: pooled.higher_is_better.get(k, metric.higher_is_better) for k in pooled.values}
@@ -257,6 +268,8 @@ def pool_metric(
         head = next(iter(values), None)
         if metric.pooled_name and head is not None:
             values = {metric.pooled_name: values[head], **values}
+            if head in subjects:
+                subjects[metric.pooled_name] = subjects[head]
             units[metric.pooled_name] = units.get(head, metric.unit)
             hib[metric.pooled_name] = hib.get(head, metric.higher_is_better)
         return common(

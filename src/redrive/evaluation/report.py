@@ -142,12 +142,27 @@ def _algorithms_table(run: Run) -> h.Markup:
     return h.table(head, rows, numeric=range(6, 12))
 
 
+#: the heading of the values of the logged ego (subject ``log``) in the report.
+LOG_HEADING = "the log (logged ego of this open-loop run)"
+_LOG_NOTE = (
+    "These values score the logged ego: in an open-loop run the ego moved as it was recorded, "
+    "so they are the same whatever the pipeline did — the log's, not an algorithm's result. A "
+    "closed-loop run (redrive run LOG --closed-loop) scores the pipeline's own driving."
+)
+
+
+def _subject_order(run: Run, subjects: Sequence[str]) -> list[str]:
+    """The algorithms in pipeline order, then the run as a whole, then the log."""
+    algos = plots.algorithm_order(run, [s for s in subjects if s not in ("run", "log")])
+    return algos + [s for s in ("run", "log") if s in subjects]
+
+
 def _headline_tables(run: Run, evaluation: Evaluation) -> list[h.Markup]:
     v = evaluation.values
-    by_algo = plots.group_rows(v, ["algorithm"])
+    by_subject = plots.group_rows(v, ["subject"])
     out = []
-    for algo in plots.algorithm_order(run, [k[0] for k in by_algo]):
-        rows = by_algo[(algo,)]
+    for subject in _subject_order(run, [k[0] for k in by_subject]):
+        rows = by_subject[(subject,)]
         heads, every = [], []
         seen: set[str] = set()
         for i in rows:
@@ -159,7 +174,10 @@ def _headline_tables(run: Run, evaluation: Evaluation) -> list[h.Markup]:
                 seen.add(r["metric"])
                 heads.append(line)
         head = ["metric", "value name", "value", "unit", "better"]
-        out.append(h.Markup(f"<h3>{h.esc(algo or '(run as a whole)')}</h3>"))
+        title = {"run": "(run as a whole)", "log": LOG_HEADING}.get(subject, subject)
+        out.append(h.Markup(f"<h3>{h.esc(title)}</h3>"))
+        if subject == "log":
+            out.append(h.paragraph(_LOG_NOTE, class_="muted"))
         out.append(h.table(head, heads, numeric=[2]))
         out.append(h.details(f"all {len(every)} values", h.table(head, every, numeric=[2])))
     return out
@@ -269,13 +287,15 @@ def _wide_per_frame(evaluation: Evaluation, run: Run) -> Iterator[list[Any]]:
 #: the summary sheet: one tidy table, a row per stored value.
 SUMMARY_COLUMNS = (
     "metric", "algorithm", "value", "number", "unit", "better", "headline", "definition",
+    "scores",
 )  # fmt: skip
 
 
 def summary_rows(evaluation: Evaluation) -> Iterator[list[Any]]:
     """The summary sheet's rows after its header: metric, algorithm ("(run)" for run-level
     metrics), the value's name, the number, its unit, which way is better (higher / lower /
-    —), whether it is the metric's headline, and the definition (version and parameter hash)."""
+    —), whether it is the metric's headline, the definition (version and parameter hash), and
+    whose motion or output the value scores (``log``: the logged ego of an open-loop run)."""
     v = evaluation.values
     defs = {m.get("name"): m for m in evaluation.metrics}
     seen: set[tuple[str, str]] = set()
@@ -287,7 +307,7 @@ def summary_rows(evaluation: Evaluation) -> Iterator[list[Any]]:
         definition = f"v{r['metric_version']} params {str(d.get('params_hash', ''))[:12]}"
         better = {True: "higher", False: "lower", None: "—"}[r["higher_is_better"]]
         yield [r["metric"], r["algorithm"] or "(run)", r["key"], r["value"], r["unit"], better,
-               first, definition]  # fmt: skip
+               first, definition, r["subject"]]  # fmt: skip
 
 
 def _write_xlsx(path: Path, run: Run, evaluation: Evaluation, beside: Beside | None) -> None:

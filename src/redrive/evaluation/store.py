@@ -39,6 +39,7 @@ __all__ = [
     "Evaluation",
     "MetricOutcome",
     "Scored",
+    "closed_loop_run",
     "read_evaluation",
     "write_evaluation",
 ]
@@ -79,9 +80,11 @@ def _tables(run: Run, scored: Sequence[Scored]) -> dict[str, pa.Table]:
     per_frame: dict[str, Any] = {n: [] for n in PER_FRAME.names}
     curves: dict[str, Any] = {n: [] for n in CURVES.names}
     marks: list[tuple[Any, ...]] = []
+    closed = closed_loop_run(run)
     for s in scored:
         m, algo, res = s.metric, s.algorithm, s.result
         for key, value in res.values.items():
+            series, statistic = res.statistics.get(key, ("", ""))
             for col, v in zip(
                 VALUES.names,
                 (
@@ -92,6 +95,9 @@ def _tables(run: Run, scored: Sequence[Scored]) -> dict[str, pa.Table]:
                     value,
                     res.units.get(key, m.unit),
                     res.higher_is_better.get(key, m.higher_is_better),
+                    m.subject(res, key, algorithm=algo, closed_loop=closed),
+                    series,
+                    statistic,
                 ),
                 strict=True,
             ):
@@ -101,6 +107,7 @@ def _tables(run: Run, scored: Sequence[Scored]) -> dict[str, pa.Table]:
             per_frame["metric"] += [m.name] * n
             per_frame["algorithm"] += [algo] * n
             per_frame["series"] += [series] * n
+            per_frame["subject"] += [m.subject(res, series, algorithm=algo, closed_loop=closed)] * n
             per_frame["frame_index"].append(np.asarray(idx, dtype=np.int64))
             per_frame["value"].append(np.asarray(vals, dtype=np.float64))
         for curve, (x, y) in res.curves.items():
@@ -137,6 +144,13 @@ def _tables(run: Run, scored: Sequence[Scored]) -> dict[str, pa.Table]:
         "curves": pa.table(curves, schema=CURVES),
         "bookmarks": pa.table(bookmarks, schema=BOOKMARKS),
     }
+
+
+def closed_loop_run(run: Run) -> bool:
+    """True for a run of the closed-loop mode, whose ego the pipeline drove; in any other run
+    the ``ego`` table is the logged ego (values of its motion are the log's)."""
+    m = run.manifest
+    return bool(m.closed_loop) or m.pipeline.mode_manager == "closed_loop"
 
 
 def write_evaluation(

@@ -4,11 +4,22 @@ Layout::
 
     RUN/metrics/index.json            {"format": 2, "metrics": {NAME: {"folder": ..., record}}}
     RUN/metrics/NAME.TOKEN/values.parquet     metric, metric_version, algorithm, key, value,
-                                              unit, higher_is_better — a row per named value
-    RUN/metrics/NAME.TOKEN/per_frame.parquet  metric, algorithm, series, frame_index, value
+                                              unit, higher_is_better, subject, series,
+                                              statistic — a row per named value
+    RUN/metrics/NAME.TOKEN/per_frame.parquet  metric, algorithm, series, frame_index, value,
+                                              subject
     RUN/metrics/NAME.TOKEN/curves.parquet     metric, algorithm, curve, point, x, y
     RUN/metrics/NAME.TOKEN/bookmarks.parquet  frame_index, stamp_ns, kind, metric, algorithm,
                                               detail, severity
+
+``subject`` says whose motion or output a value scores: the algorithm's name, ``run`` (a
+whole-run metric), or ``log`` — the logged ego of an open-loop run, the same whatever the
+pipeline did (``redrive compare`` keeps such values out of the algorithms' comparison).
+``series`` and ``statistic`` say how the value is made from a per-frame series (``max`` of
+``max_lon_accel_mps2`` over the frames, ``mean`` …), empty when it is not; ``compare``
+bootstraps that statistic for the value's confidence interval.  Tables stored before these
+columns existed read with ``subject`` = the algorithm (or ``run``) and empty ``series`` and
+``statistic``.
 
 A metric's *record* (in the index) is what defines its numbers: name, version, role, unit,
 higher_is_better, params, params_hash, plus ``evaluated`` (ISO time), ``algorithms`` (scored),
@@ -71,10 +82,20 @@ VALUES = pa.schema(
         ("value", _F),
         ("unit", _S),
         ("higher_is_better", pa.bool_()),
+        ("subject", _S),
+        ("series", _S),
+        ("statistic", _S),
     ]
 )
 PER_FRAME = pa.schema(
-    [("metric", _S), ("algorithm", _S), ("series", _S), ("frame_index", _I), ("value", _F)]
+    [
+        ("metric", _S),
+        ("algorithm", _S),
+        ("series", _S),
+        ("frame_index", _I),
+        ("value", _F),
+        ("subject", _S),
+    ]
 )
 CURVES = pa.schema(
     [("metric", _S), ("algorithm", _S), ("curve", _S), ("point", _I), ("x", _F), ("y", _F)]
@@ -218,6 +239,30 @@ def stored_metric_names(run_dir: Path) -> tuple[str, ...]:
     return tuple(_read_index(folder)["metrics"])
 
 
+#: columns added after the first stored layout: name → how an older table's rows fill it.
+_ADDED = {"subject": "algorithm", "series": "", "statistic": ""}
+
+
+def _read_table(path: Path, schema: pa.Schema) -> pa.Table:
+    """A stored table in ``schema``; a table stored before the :data:`_ADDED` columns existed
+    gets them (``subject``: the algorithm, or ``run`` for a whole-run metric)."""
+    have = set(pq.read_schema(path).names)
+    missing = [n for n in schema.names if n not in have]
+    if not missing or any(n not in _ADDED for n in missing):
+        return pq.read_table(path, schema=schema)
+    table = pq.read_table(path, columns=[n for n in schema.names if n in have])
+    for name in missing:
+        fill = _ADDED[name]
+        if fill == "algorithm":
+            column = pa.array(
+                [a or "run" for a in table.column("algorithm").to_pylist()], type=pa.string()
+            )
+        else:
+            column = pa.array([fill] * table.num_rows, type=pa.string())
+        table = table.append_column(name, column)
+    return table.select(schema.names).cast(schema)
+
+
 def read_evaluation(run_dir: Path, *, metrics: Sequence[str] | None = None) -> Evaluation:
     """Every stored metric of the run (or only ``metrics``), tables concatenated.
 
@@ -238,7 +283,7 @@ def read_evaluation(run_dir: Path, *, metrics: Sequence[str] | None = None) -> E
         for table_name, schema in TABLE_SCHEMAS.items():
             path = sub / f"{table_name}.parquet"
             try:
-                parts[table_name].append(pq.read_table(path, schema=schema))
+                parts[table_name].append(_read_table(path, schema))
             except (OSError, pa.ArrowException) as err:
                 msg = (
                     f"{path}: cannot read the stored results of metric {record.get('name')!r} "
