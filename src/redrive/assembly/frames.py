@@ -17,7 +17,7 @@ from __future__ import annotations
 import logging
 import math
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from functools import partial
 
@@ -47,6 +47,8 @@ __all__ = ["FrameAssembler", "interpolate_state", "iter_frames"]
 logger = logging.getLogger(__name__)
 
 _DEFAULT_LOOKAHEAD_NS = 200_000_000
+#: an input whose nearest header stamp is further than this from a frame's follows another clock
+_OTHER_CLOCK_NS = 60_000_000_000
 _STATE_WINDOW_NS = 2_000_000_000
 #: the clouds whose non-finite points are counted (a 2D scan marks a beam without return NaN)
 _COUNTED = frozenset({SensorType.LIDAR, SensorType.RADAR})
@@ -81,8 +83,11 @@ class FrameAssembler:
         log: an open log.
         sensor_map: which topic is which sensor; inferred from the log when None.
         overrides: what a sensor map file says (used only when ``sensor_map`` is None).
-        lookahead_ns: how long after a driver sample to keep reading for the other sensors'
-            samples (covers recorder latency: log time later than the header stamp).
+        lookahead_ns: how much further the log is read (record time) after a driver sample
+            arrives before its frame is assembled: the other inputs' samples of that stamp may
+            be recorded later (recorder latency).  Header stamps are matched with header
+            stamps and record times with record times, never one with the other: on real bags
+            the two clocks can be days apart.
 
     Raises:
         ConfigError: the log has neither a sensor nor ground truth to drive frames.
@@ -112,6 +117,7 @@ class FrameAssembler:
         self.non_finite = NonFiniteCounter(log.path)
         self._warned: set[str] = set()
         self._unplaced: set[str] = set()
+        self._clock_warned: set[str] = set()
 
     def frames(self, *, start_ns: int | None = None, stop_ns: int | None = None) -> Iterator[Frame]:
         """Frames in order, from driver samples with log time in ``[start_ns, stop_ns)``."""
@@ -125,7 +131,11 @@ class FrameAssembler:
         objects: deque[_Sample] = deque()
         lights: deque[_Sample] = deque()
         mounts = SensorMounts()
-        pending: deque[_Sample] = deque()
+        # driver samples waiting for the other inputs, with the log time each arrived at: a frame
+        # is assembled once the log has moved on ``tol + lookahead`` past its driver's arrival.
+        # Header stamps and log times are never compared (on real bags they are far apart).
+        pending: deque[tuple[_Sample, int]] = deque()
+        last_driver_ns: int | None = None  # the newest driver stamp: the reference for pruning
         assemble = partial(
             self._assemble,
             buffers=buffers,
@@ -177,12 +187,13 @@ class FrameAssembler:
                     sample = _Sample(decoded.stamp_ns, decoded)
                     buffers[spec.sensor_id].append(sample)
                     if spec.sensor_id == driver_id:
+                        last_driver_ns = decoded.stamp_ns
                         if start_ns is not None and now < start_ns:
                             pass
                         elif stop_ns is not None and now >= stop_ns:
                             break
                         else:
-                            pending.append(sample)
+                            pending.append((sample, now))
                 elif message.topic == smap.vehicle_state_topic and isinstance(
                     decoded.value, VehicleState
                 ):
@@ -191,31 +202,29 @@ class FrameAssembler:
                     sample = _Sample(decoded.stamp_ns, decoded)
                     objects.append(sample)
                     if driver_id is None:
+                        last_driver_ns = decoded.stamp_ns
                         if start_ns is not None and now < start_ns:
                             pass
                         elif stop_ns is not None and now >= stop_ns:
                             break
                         else:
-                            pending.append(sample)
+                            pending.append((sample, now))
                 elif message.topic == smap.traffic_lights_topic:
                     lights.append(_Sample(decoded.stamp_ns, decoded))
                 elif message.topic in smap.tf_topics and isinstance(decoded.value, tuple):
                     mounts.add(message.topic, _transforms(decoded))
-            while pending and now - pending[0].stamp_ns > tol + self.lookahead_ns:
-                yield assemble(pending.popleft(), index=index)
+            while pending and now - pending[0][1] > tol + self.lookahead_ns:
+                yield assemble(pending.popleft()[0], index=index)
                 index += 1
-            horizon = (pending[0].stamp_ns if pending else now) - tol - self.lookahead_ns
-            for buf in buffers.values():
-                while len(buf) > 1 and buf[0].stamp_ns < horizon:
-                    buf.popleft()
-            while len(objects) > 1 and objects[0].stamp_ns < horizon:
-                objects.popleft()
-            while len(lights) > 1 and lights[0].stamp_ns < horizon:
-                lights.popleft()
-            while len(states) > 2 and states[1].stamp_ns < horizon - _STATE_WINDOW_NS:
-                states.popleft()
+            reference = pending[0][0].stamp_ns if pending else last_driver_ns
+            _prune(
+                (*buffers.values(), objects, lights),
+                states,
+                reference_ns=reference,
+                window_ns=tol + self.lookahead_ns,
+            )
         while pending:
-            yield assemble(pending.popleft(), index=index)
+            yield assemble(pending.popleft()[0], index=index)
             index += 1
 
     def _decode(self, message: LogMessage) -> Decoded | None:
@@ -226,6 +235,25 @@ class FrameAssembler:
         except UnsupportedMessageError as err:
             self._undecodable(message, err)
             return None
+
+    def _other_clock(self, name: str, stamps: Iterable[int], frame_ns: int) -> None:
+        """Warn once when ``name`` is missing from a frame because its header stamps follow
+        another clock: its nearest sample is more than a minute from the frame's stamp."""
+        gap = min((abs(s - frame_ns) for s in stamps), default=None)
+        if gap is None or gap <= _OTHER_CLOCK_NS or name in self._clock_warned:
+            return
+        self._clock_warned.add(name)
+        days = gap / 86_400e9
+        span = f"{days:.1f} days" if days >= 1.0 else f"{gap / 1e9:.0f} s"
+        logger.warning(
+            "%s: the header stamps of %s lie %s from the frames' (the %s's): they follow another "
+            "clock (simulated time, or a clock that was not set), so no frame gets a sample of "
+            "it; the frames say it is missing — fix the stamps, or leave it out with a sensor map",
+            self.log.path,
+            name,
+            span,
+            self.sensor_map.driver or "ground truth",
+        )
 
     def _undecodable(self, message: LogMessage, err: UnsupportedMessageError) -> None:
         self.undecodable[message.topic] = self.undecodable.get(message.topic, 0) + 1
@@ -256,6 +284,7 @@ class FrameAssembler:
             )
             if sample is None:
                 missing.append(spec.sensor_id)
+                self._other_clock(spec.sensor_id, (b.stamp_ns for b in buffers[spec.sensor_id]), t)
                 continue
             value = sample.decoded.value
             location = spec.location
@@ -302,6 +331,7 @@ class FrameAssembler:
         state = _state_at(states, t, smap.tolerance_for("vehicle_state"))
         if state is None and smap.vehicle_state_topic is not None:
             missing.append("vehicle_state")
+            self._other_clock("vehicle_state", (st.stamp_ns for st in states), t)
         return Frame(
             stamp_ns=t,
             index=index,
@@ -316,6 +346,29 @@ class FrameAssembler:
 def _transforms(decoded: Decoded) -> Iterator[Transform]:
     assert isinstance(decoded.value, tuple)
     return (t for t in decoded.value if isinstance(t, Transform))
+
+
+def _prune(
+    buffers: Iterable[deque[_Sample]],
+    states: deque[VehicleState | PendingState],
+    *,
+    reference_ns: int | None,
+    window_ns: int,
+) -> None:
+    """Drop the samples no frame can use any more: those more than ``window_ns`` before the
+    oldest waiting driver stamp (or the newest one seen, ``reference_ns``), the newest of each
+    kept.  Before any driver sample a buffer keeps the ``window_ns`` before its own newest
+    sample (bounded memory; a driver stamp further behind it finds that input missing)."""
+    for buf in buffers:
+        if not buf:
+            continue
+        horizon = (buf[-1].stamp_ns if reference_ns is None else reference_ns) - window_ns
+        while len(buf) > 1 and buf[0].stamp_ns < horizon:
+            buf.popleft()
+    if states:
+        horizon = (states[-1].stamp_ns if reference_ns is None else reference_ns) - window_ns
+        while len(states) > 2 and states[1].stamp_ns < horizon - _STATE_WINDOW_NS:
+            states.popleft()
 
 
 def _nearest(buf: deque[_Sample], stamp_ns: int, tolerance_ns: int) -> _Sample | None:
