@@ -130,9 +130,8 @@ def _write_bag(
     return path
 
 
-def _run(log: Path, out: Path, *extra: str) -> int:
-    return main(["run", str(log), "--planning", "idm-planner", "--out", str(out), "--no-progress",
-                 *extra])  # fmt: skip
+def _run(log: Path, out: Path, *extra: str, role: str = "planning", alg: str = "idm-planner") -> int:
+    return main(["run", str(log), f"--{role}", alg, "--out", str(out), "--no-progress", *extra])
 
 
 def _lanes_driven(run_dir: Path) -> list[str | None]:
@@ -320,7 +319,8 @@ def test_a_real_ros_bag_run_with_the_map_stores_it_and_says_what_is_missing(
         said = capsys.readouterr()
         assert "--map-origin" in said.out + said.err, said
     out = tmp_path / "run"
-    assert _run(bag, out, "--map", str(osm), "--map-origin", "49.0,8.4") == 0
+    origin = ("--map-origin", "49.0,8.4")
+    assert _run(bag, out, "--map", str(osm), *origin, role="perception", alg="cluster-detector") == 0
     entry = json.loads((out / "manifest.json").read_text())["map"]
     assert entry["path"] == str(osm.resolve())
     assert entry["sha256"] == hashlib.sha256(osm.read_bytes()).hexdigest()
