@@ -26,9 +26,9 @@ def lat_lon(text: str) -> tuple[float, float]:
     return lat, lon
 
 
-def add_map_options(parser: Any, *, stored: bool) -> None:
-    """Add the three options; ``stored``: the command writes the map into the run (run,
-    batch), else it attaches it to an existing run (evaluate, gui)."""
+def add_map_options(parser: Any, *, stored: bool, no_map: bool = True) -> None:
+    """Add the options (``no_map``: with ``--no-map``); ``stored``: the command writes the map
+    into the run (run, batch), else it attaches it to an existing run (evaluate, gui)."""
     where = (
         "stored in the run (RUN/map.json; the manifest's `map` says where it came from)"
         if stored
@@ -47,12 +47,13 @@ def add_map_options(parser: Any, *, stored: bool) -> None:
             "carries (with a warning)"
         ),
     )
-    group.add_argument(
-        "--no-map",
-        action="store_true",
-        help="no road map at all (not even the log's own): the map metrics are skipped; for a "
-        "damaged map you still want the log's other results of",
-    )
+    if no_map:
+        group.add_argument(
+            "--no-map",
+            action="store_true",
+            help="no road map at all (not even the log's own): the map metrics are skipped; for "
+            "a damaged map, or a log without a frame to place one in",
+        )
     parser.add_argument(
         "--map-origin",
         type=lat_lon,

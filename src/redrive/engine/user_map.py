@@ -41,7 +41,15 @@ from redrive.maps.files import map_format, read_map_file
 from redrive.maps.moved import moved_map
 from redrive.types import RoadMap, Transform, VehicleState
 
-__all__ = ["ChosenMap", "MapOption", "align_map", "choose_road_map", "read_user_map"]
+__all__ = [
+    "ChosenMap",
+    "MapOption",
+    "align_map",
+    "attach_map",
+    "choose_road_map",
+    "manifest_frames",
+    "read_user_map",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -310,3 +318,70 @@ def choose_road_map(
         )
         record["replaced"] = own.source or f"the {log.format} log's own map"
     return ChosenMap(road_map=placed, record=record)
+
+
+def attach_map(run_dir: Path, option: MapOption) -> dict[str, Any]:
+    """Give the existing run in ``run_dir`` the map of ``option`` (``evaluate --map``, ``gui
+    --map``): read, placed through the run's log (as :func:`choose_road_map` does), written to
+    ``RUN/map.json`` (a map the run had is replaced, with a warning) and recorded in the
+    manifest's ``map``; returns that entry.
+
+    Raises:
+        MapError: as :func:`choose_road_map`; the run's log is gone and no origin was given.
+        ConfigError: not a run directory.
+    """
+    from redrive.assembly.sensor_map import infer_sensor_map
+    from redrive.results import MAP_NAME, write_road_map
+    from redrive.results.manifest import read_manifest, write_manifest
+
+    assert option.path is not None
+    manifest = read_manifest(run_dir)
+    road_map, record = read_user_map(option)
+    log_path = Path(manifest.log.path)
+    if log_path.exists():
+        with open_log(log_path, strict=False) as log:
+            smap = infer_sensor_map(log.topics, duration_ns=log.end_ns - log.start_ns)
+            placed, alignment = align_map(
+                road_map, log, sensor_map=smap, origin_lat_lon=option.origin_lat_lon
+            )
+    elif option.origin_lat_lon is not None:
+        frame = next(iter(manifest_frames(run_dir)), road_map.frame_id)
+        logger.warning(
+            "%s: the run's log %s is gone; the run's %s frame is taken to be the map projected "
+            "about the given origin",
+            run_dir,
+            log_path,
+            frame,
+        )
+        placed = replace(road_map, frame_id=frame)
+        alignment = {"method": "origin", "frame": frame, "detail": "the run's log is gone"}
+    else:
+        msg = (
+            f"{run_dir}: the run's log {log_path} is gone, so redrive cannot place the map in its "
+            "frames; pass --map-origin LAT,LON (the origin of the ego's frame) or move the log back"
+        )
+        raise MapError(msg)
+    if (Path(run_dir) / MAP_NAME).is_file():
+        logger.warning(
+            "%s has a road map (%s); the map given with --map (%s) replaces it",
+            run_dir,
+            manifest.road_map.get("path") or manifest.road_map.get("source") or "the log's own",
+            option.path,
+        )
+        record["replaced"] = str(
+            manifest.road_map.get("path") or manifest.road_map.get("source") or "the run's map"
+        )
+    write_road_map(run_dir, placed)
+    entry = {"from": "--map", **record, "alignment": alignment}
+    write_manifest(Path(run_dir), replace(manifest, road_map=entry))
+    return entry
+
+
+def manifest_frames(run_dir: Path) -> list[str]:
+    """The frames the run's ego was stored in (first first), from its ``ego`` table."""
+    from redrive.results import open_run
+
+    table = open_run(run_dir).table("ego")
+    if table.num_rows == 0 or "frame_id" not in table.column_names:
+        return []
+    return list(dict.fromkeys(str(f) for f in table.column("frame_id").to_pylist() if f))
