@@ -11,7 +11,6 @@ import math
 from pathlib import Path
 
 import numpy as np
-import numpy.typing as npt
 import pytest
 
 from redrive.cli.main import main
@@ -20,13 +19,11 @@ from redrive.maps.files import read_map_file
 from redrive.maps.index import RoadMapIndex
 from redrive.results import open_run
 from redrive.types import RoadMap
+from tests._map_drive import DRIVE_LANES, drive_poses, write_drive_bag
 
 pytest.importorskip("lanelet2")
 
 ORIGIN = (49.0, 8.4)  # the origin the Lanelet2 examples load this map with
-#: a chain of successors through the map, 45080 (70 m) into 45082 … 45154
-DRIVE_LANES = ("45080", "45082", "45086", "45066", "45064", "45062", "45060", "45154")
-SPEED_MPS = 8.0
 
 
 @pytest.fixture(scope="module")
@@ -37,97 +34,6 @@ def osm(shared_data: Path) -> Path:
 @pytest.fixture(scope="module")
 def road(osm: Path) -> RoadMap:
     return read_map_file(osm, origin_lat_lon=ORIGIN)
-
-
-def _drive(road: RoadMap, *, seconds: float) -> npt.NDArray[np.float64]:
-    """(N, 3) x, y, yaw at 10 Hz along the centrelines of DRIVE_LANES at SPEED_MPS (map frame)."""
-    line = np.vstack([road.lane(i).centerline for i in DRIVE_LANES])
-    keep = np.concatenate([[True], np.hypot(*np.diff(line, axis=0).T) > 1e-6])
-    line = line[keep]
-    arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(line, axis=0).T))])
-    s = 1.0 + np.arange(0.0, seconds, 0.1) * SPEED_MPS  # from 1 m in: not on 45080's start line
-    assert s[-1] < arc[-1]
-    x, y = np.interp(s, arc, line[:, 0]), np.interp(s, arc, line[:, 1])
-    seg = np.clip(np.searchsorted(arc, s, side="right") - 1, 0, len(line) - 2)
-    d = line[seg + 1] - line[seg]
-    return np.column_stack([x, y, np.arctan2(d[:, 1], d[:, 0])])
-
-
-def _write_bag(
-    path: Path,
-    poses: npt.NDArray[np.float64],
-    *,
-    frame: str,
-    map_to_frame: tuple[float, float, float] | None = None,
-) -> Path:
-    """A ROS 1 bag: Odometry of ``poses`` in ``frame`` and a small cloud per pose (10 Hz);
-    ``map_to_frame`` (x, y, yaw): a /tf_static ``map → frame``."""
-    from rosbags.rosbag1 import Writer
-    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
-
-    ts = get_typestore(Stores.ROS1_NOETIC)
-    ts.register(
-        get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage")
-    )
-    g = ts.types
-    header, stamp_t = g["std_msgs/msg/Header"], g["builtin_interfaces/msg/Time"]
-    vec, quat = g["geometry_msgs/msg/Vector3"], g["geometry_msgs/msg/Quaternion"]
-    odom_t, pc2, pf = (
-        g["nav_msgs/msg/Odometry"],
-        g["sensor_msgs/msg/PointCloud2"],
-        g["sensor_msgs/msg/PointField"],
-    )
-    t0 = 1_700_000_000_000_000_000
-    fields = [pf(name=n, offset=4 * i, datatype=7, count=1) for i, n in enumerate("xyz")]
-    pts = np.array([[5.0, 0.0, 0.0], [6.0, 1.0, 0.5]], dtype="<f4")
-    with Writer(path) as bag:
-        c_odom = bag.add_connection("/odom", odom_t.__msgtype__, typestore=ts)
-        c_pts = bag.add_connection("/points", pc2.__msgtype__, typestore=ts)
-        if map_to_frame is not None:
-            tfm, tf_t = g["tf2_msgs/msg/TFMessage"], g["geometry_msgs/msg/TransformStamped"]
-            c_tf = bag.add_connection("/tf_static", tfm.__msgtype__, typestore=ts)
-            x, y, yaw = map_to_frame
-            edge = tf_t(
-                header=header(seq=0, stamp=stamp_t(sec=t0 // 10**9, nanosec=0), frame_id="map"),
-                child_frame_id=frame,
-                transform=g["geometry_msgs/msg/Transform"](
-                    translation=vec(x=x, y=y, z=0.0),
-                    rotation=quat(x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2)),
-                ),
-            )
-            bag.write(c_tf, t0, ts.serialize_ros1(tfm(transforms=[edge]), tfm.__msgtype__))
-        for k, (x, y, yaw) in enumerate(poses.tolist()):
-            t = t0 + k * 100_000_000
-            st = stamp_t(sec=t // 10**9, nanosec=t % 10**9)
-            pose = g["geometry_msgs/msg/Pose"](
-                position=g["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
-                orientation=quat(x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2)),
-            )
-            twist = g["geometry_msgs/msg/Twist"](
-                linear=vec(x=SPEED_MPS, y=0.0, z=0.0), angular=vec(x=0.0, y=0.0, z=0.0)
-            )
-            odom = odom_t(
-                header=header(seq=k, stamp=st, frame_id=frame),
-                child_frame_id="base_link",
-                pose=g["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.zeros(36)),
-                twist=g["geometry_msgs/msg/TwistWithCovariance"](
-                    twist=twist, covariance=np.zeros(36)
-                ),
-            )
-            bag.write(c_odom, t, ts.serialize_ros1(odom, odom_t.__msgtype__))
-            cloud = pc2(
-                header=header(seq=k, stamp=st, frame_id="base_link"),
-                height=1,
-                width=len(pts),
-                fields=fields,
-                is_bigendian=False,
-                point_step=12,
-                row_step=12 * len(pts),
-                data=pts.view(np.uint8).ravel(),
-                is_dense=True,
-            )
-            bag.write(c_pts, t + 1_000_000, ts.serialize_ros1(cloud, pc2.__msgtype__))
-    return path
 
 
 def _run(
@@ -153,8 +59,8 @@ def test_a_drive_through_the_lanelet2_map_finds_its_lane_on_every_frame(
     """The must-show: a bag whose ego drives along a lanelet chain of the Karlsruhe map (poses in
     `map`), run with --map: the map is stored, the manifest names it, every frame's pose finds
     its lane (in the chain, in order) and the map metrics are computed, not skipped."""
-    poses = _drive(road, seconds=12.0)
-    bag = _write_bag(tmp_path / "drive.bag", poses, frame="map")
+    poses = drive_poses(road, seconds=12.0)
+    bag = write_drive_bag(tmp_path / "drive.bag", poses, frame="map")
     out = tmp_path / "run"
     assert _run(bag, out, "--map", str(osm), "--map-origin", "49.0,8.4") == 0
     manifest = json.loads((out / "manifest.json").read_text())
@@ -198,11 +104,11 @@ def test_a_log_whose_ego_is_in_odom_is_placed_through_its_tf(
     """Poses in `odom`, a /tf_static map → odom (shift and 30° turn): the map is moved into
     `odom` by it, and the drive still finds its lanes."""
     x0, y0, yaw0 = 2000.0, 600.0, math.radians(30.0)  # odom's origin and heading in map
-    poses = _drive(road, seconds=4.0)
+    poses = drive_poses(road, seconds=4.0)
     c, s = math.cos(yaw0), math.sin(yaw0)
     dx, dy = poses[:, 0] - x0, poses[:, 1] - y0
     in_odom = np.column_stack([c * dx + s * dy, -s * dx + c * dy, poses[:, 2] - yaw0])
-    bag = _write_bag(tmp_path / "odom.bag", in_odom, frame="odom", map_to_frame=(x0, y0, yaw0))
+    bag = write_drive_bag(tmp_path / "odom.bag", in_odom, frame="odom", map_to_frame=(x0, y0, yaw0))
     out = tmp_path / "run"
     assert _run(bag, out, "--map", str(osm), "--map-origin", "49.0,8.4") == 0
     alignment = json.loads((out / "manifest.json").read_text())["map"]["alignment"]
@@ -222,8 +128,8 @@ def test_no_map_frame_and_no_origin_says_what_to_pass(
 ) -> None:
     """A map in metres (a run's map.json) and a log whose ego is in `odom` with no tf: the
     error says to pass --map-origin (or record the map → odom tf, or --no-map)."""
-    poses = _drive(road, seconds=1.0)
-    bag = _write_bag(tmp_path / "odom.bag", poses, frame="odom")
+    poses = drive_poses(road, seconds=1.0)
+    bag = write_drive_bag(tmp_path / "odom.bag", poses, frame="odom")
     out = tmp_path / "first"
     assert _run(bag, out, "--map", str(_projected_map(road, tmp_path)), "--map-origin",
                 "49.0,8.4") == 0  # fmt: skip
@@ -260,7 +166,7 @@ def test_a_damaged_map_is_refused_by_name_and_no_map_runs_without_it(
     )
     cut = tmp_path / "cut.osm"
     cut.write_text(text[: len(text) // 2], encoding="utf-8")
-    bag = _write_bag(tmp_path / "drive.bag", _drive(road, seconds=1.0), frame="map")
+    bag = write_drive_bag(tmp_path / "drive.bag", drive_poses(road, seconds=1.0), frame="map")
     for damaged, named in ((bad, "primitive 42440: Lanelet has not exactly one left border"),
                            (cut, "is the file complete")):  # fmt: skip
         capsys.readouterr()
@@ -347,7 +253,7 @@ def test_evaluate_map_gives_an_existing_run_its_map(
 ) -> None:
     """A run made without a map: `evaluate --map` places the map through the run's log, stores
     it (map.json, manifest `map`) and the map metrics are computed; `--no-map` leaves them out."""
-    bag = _write_bag(tmp_path / "drive.bag", _drive(road, seconds=3.0), frame="map")
+    bag = write_drive_bag(tmp_path / "drive.bag", drive_poses(road, seconds=3.0), frame="map")
     out = tmp_path / "run"
     assert _run(bag, out) == 0
     assert not (out / "map.json").exists()
@@ -370,7 +276,7 @@ def test_evaluate_map_gives_an_existing_run_its_map(
 def test_a_batch_spec_map_reaches_every_recorded_log(
     osm: Path, road: RoadMap, tmp_path: Path
 ) -> None:
-    bag = _write_bag(tmp_path / "drive.bag", _drive(road, seconds=2.0), frame="map")
+    bag = write_drive_bag(tmp_path / "drive.bag", drive_poses(road, seconds=2.0), frame="map")
     spec = tmp_path / "batch.toml"
     spec.write_text(
         f'logs = ["{bag}"]\nmap = "{osm}"\nmap_origin = "49.0,8.4"\nout = "b"\nworkers = 1\n'
