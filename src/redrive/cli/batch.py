@@ -162,6 +162,7 @@ def _map_fields(args: argparse.Namespace, base: dict[str, Any]) -> dict[str, Any
     """--map / --map-origin / --no-map over the spec's ``map`` / ``map_origin`` / ``no_map``."""
     from redrive.errors import ConfigError
 
+    fields: dict[str, Any]
     if args.map_file is not None or args.no_map:  # the command line replaces the spec's choice
         fields = {"map_file": None if args.map_file is None else str(args.map_file.resolve())}
         fields |= {"no_map": bool(args.no_map), "map_origin": args.map_origin}
