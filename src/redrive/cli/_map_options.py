@@ -29,11 +29,8 @@ def lat_lon(text: str) -> tuple[float, float]:
 def add_map_options(parser: Any, *, stored: bool, no_map: bool = True) -> None:
     """Add the options (``no_map``: with ``--no-map``); ``stored``: the command writes the map
     into the run (run, batch), else it attaches it to an existing run (evaluate, gui)."""
-    where = (
-        "stored in the run (RUN/map.json; the manifest's `map` says where it came from)"
-        if stored
-        else "placed through the run's log and stored in the run (RUN/map.json, manifest `map`)"
-    )
+    where = "the log's" if stored else "the run's log's"
+    wins = "a map the log carries" if stored else "a map the run has"
     group = parser.add_mutually_exclusive_group()
     group.add_argument(
         "--map",
@@ -41,10 +38,10 @@ def add_map_options(parser: Any, *, stored: bool, no_map: bool = True) -> None:
         metavar="FILE",
         dest="map_file",
         help=(
-            "a road map for the log: Lanelet2 .osm, Argoverse 2 log_map_archive_*.json, a run's "
-            "map.json or a CommonRoad scenario .xml; placed through the log's `map` frame (the "
-            f"ego's poses or its tf) or --map-origin, {where}; it wins over a map the log "
-            "carries (with a warning)"
+            "a road map: Lanelet2 .osm, Argoverse 2 log_map_archive_*.json, a run's map.json or "
+            f"a CommonRoad scenario .xml; placed in {where} frame through its `map` frame (the "
+            "ego's poses or its tf) or --map-origin, stored in the run (RUN/map.json; the "
+            f"manifest's `map` says where it came from); it wins over {wins} (with a warning)"
         ),
     )
     if no_map:

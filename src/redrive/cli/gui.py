@@ -27,6 +27,8 @@ Keys: space plays/pauses, ←/→ step.  The window layout is remembered between
 def _run(args: argparse.Namespace) -> int:
     from redrive.gui.preflight import require_display, require_gui
 
+    require_gui()
+    require_display()
     option = map_option(args)
     if option is not None:
         from redrive.engine.user_map import attach_map
@@ -36,8 +38,6 @@ def _run(args: argparse.Namespace) -> int:
             msg = "--map gives a run its road map: open a run directory (`redrive run LOG --map`)"
             raise ConfigError(msg)
         attach_map(args.path, option)
-    require_gui()
-    require_display()
     from redrive.gui.main import run_gui
 
     return run_gui(args.path)
