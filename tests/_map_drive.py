@@ -105,5 +105,5 @@ def write_drive_bag(
                 data=pts.view(np.uint8).ravel(),
                 is_dense=True,
             )
-            bag.write(c_pts, t + 1_000_000, ts.serialize_ros1(cloud, pc2.__msgtype__))
+            bag.write(c_pts, t, ts.serialize_ros1(cloud, pc2.__msgtype__))  # log time = stamp
     return path
