@@ -29,6 +29,8 @@ SCENE_TOPICS = (
     "/redrive/ego",
     "/redrive/ego_logged",
     "/redrive/bookmarks",
+    "/redrive/map",
+    "/redrive/traffic_lights",
 )
 
 

@@ -95,8 +95,8 @@ def test_an_object_level_run_plays_its_frames_with_the_logged_ego_as_a_ghost(
     assert np.linalg.norm(expect) > 2.0  # the ghost is visibly elsewhere
     # (the 12 edges: every corner 3 times; the front face's cross comes after them)
     assert ghost.segments[:24, :2].mean(axis=0) == pytest.approx(expect, abs=1e-6)
-    # The road map around the driven ego: lane edges at z = 0, within the view's radius.
-    road = _layer(window, "road map")
+    # The road map around the driven ego: lane lines at z = 0, within the view's radius.
+    road = _layer(window, "map: lane lines")
     assert len(road.segments) > 0
     assert np.all(road.segments[:, 2] == 0.0)
     # Nothing of a sensor: no points; the boxes counted are the scene's (not ghost, map, ego).

@@ -251,6 +251,9 @@ def test_every_entity_frame_is_in_the_transforms_at_its_stamp(
     frames = open_run(short_run).table("frames").column("stamp_ns").to_pylist()
     scene_topics = [t for t in decoded if t.startswith("/redrive/") and "markers" not in t]
     scene_topics.remove("/redrive/transforms")
+    # the road map is static: one update, at the first frame (tests/interop/test_map_export.py)
+    assert [t for t, _ in decoded["/redrive/map"]] == frames[:1]
+    scene_topics.remove("/redrive/map")
     assert {"/redrive/ground_truth", "/redrive/detections/tracker", "/redrive/ego"} <= set(
         scene_topics
     )

@@ -26,6 +26,7 @@ from redrive.batch.spec import LogItem, LoopMode, PipelineItem
 from redrive.config import PipelineConfig
 from redrive.engine.run import RunRequest, run_log
 from redrive.engine.stats import RunReport
+from redrive.engine.user_map import MapOption
 from redrive.errors import ConfigError
 from redrive.output.atomic import atomic_path
 from redrive.results import TABLES, RunStatus
@@ -58,6 +59,9 @@ class CellTask:
     on_collision: str = "continue"
     fail_fast: bool = False
     attempt: int = 1
+    map_file: str | None = None  # recorded logs: --map, its origin, --no-map
+    map_origin: tuple[float, float] | None = None
+    no_map: bool = False
 
     @property
     def run_dir(self) -> Path:
@@ -97,6 +101,7 @@ class ClosedLoopRunner(Protocol):
         duration_s: float | None,
         agents: str,
         on_collision: str = "continue",
+        road_map: MapOption | None = None,
     ) -> RunReport: ...
 
 
@@ -191,13 +196,24 @@ def _clear_run_dir(task: CellTask) -> None:
     run_dir.parent.mkdir(parents=True, exist_ok=True)
 
 
+def _map_option(task: CellTask) -> MapOption | None:
+    """The cell's map option: recorded logs only (a scenario drives on its own map)."""
+    if task.log.path is None or not (task.map_file or task.no_map):
+        return None
+    path = None if task.map_file is None else Path(task.map_file)
+    return MapOption(path=path, origin_lat_lon=task.map_origin, disabled=task.no_map)
+
+
 def _run(task: CellTask, run_dir: Path, closed_loop: ClosedLoopRunner | None) -> RunReport:
     pipeline = task.pipeline.load(fail_fast=task.fail_fast)
     if task.loop == "open":
         log = Path(task.log.path) if task.log.path is not None else _synthesize(task)
         # a batch over mixed logs: the stages a log can feed run, the others are skipped with
         # the reason in the cell's manifest (pipeline.skipped), as `redrive run` does
-        return run_log(RunRequest(log=log, pipeline=pipeline, out=run_dir, skip_unfed=True))
+        road_map = _map_option(task)
+        return run_log(
+            RunRequest(log=log, pipeline=pipeline, out=run_dir, skip_unfed=True, road_map=road_map)
+        )
     if closed_loop is None:
         msg = "this batch runs no closed loop (its runner was given none); use --loop open"
         raise ConfigError(msg)
@@ -211,6 +227,7 @@ def _run(task: CellTask, run_dir: Path, closed_loop: ClosedLoopRunner | None) ->
         duration_s=task.duration_s,
         agents=task.agents,
         on_collision=task.on_collision,
+        **({"road_map": road_map} if (road_map := _map_option(task)) is not None else {}),
     )
 
 

@@ -110,6 +110,16 @@ def _log_key(item: LogItem, duration_s: float | None, cache: dict[str, str]) -> 
     return f"scenario {scenario} seed {item.seed} duration {duration_s}"
 
 
+def _map_key(spec: BatchSpec) -> str:
+    """The map part of a cell's key: the map file's sha256 and origin, or ``no_map``."""
+    if spec.no_map or spec.map_file is None:
+        return "no_map"
+    import hashlib
+
+    digest = hashlib.sha256(Path(spec.map_file).read_bytes()).hexdigest()[:16]
+    return f"map={digest}@{spec.map_origin}"
+
+
 def _is_complete(task: CellTask) -> bool:
     """Whether the cell's run directory is complete for the same key (log, pipeline hash,
     redrive version, options) as ``task``'s."""
@@ -145,6 +155,8 @@ def plan_cells(spec: BatchSpec, out: Path) -> list[CellTask]:
                     options = f"agents={spec.agents}"
                     if spec.on_collision != "continue":  # the keys of earlier batches stand
                         options += f",on_collision={spec.on_collision}"
+                if log.path is not None and (spec.map_file or spec.no_map):
+                    options += f",{_map_key(spec)}"
                 key = CellKey(
                     log=_log_key(log, spec.duration_s, log_keys),
                     pipeline_hash=hashes[pipeline.name],
@@ -163,6 +175,9 @@ def plan_cells(spec: BatchSpec, out: Path) -> list[CellTask]:
                         agents=spec.agents,
                         on_collision=spec.on_collision,
                         fail_fast=spec.fail_fast,
+                        map_file=spec.map_file,
+                        map_origin=spec.map_origin,
+                        no_map=spec.no_map,
                     )
                 )
     return tasks

@@ -13,6 +13,8 @@ A batch spec file (``redrive batch --spec batch.toml``; relative paths are relat
     workers = 2              # default: the number of cores
     retries = 1              # a cell whose worker died is run again up to this many times
     fail_fast = false        # a failed step fails its cell (default: recorded, the run goes on)
+    map = "maps/lanelet2_map.osm"  # a road map for every recorded log (as `redrive run --map`)
+    map_origin = "49.0,8.4"  # its projection origin (`--map-origin`); no_map = true: no map at all
 
     [[pipeline]]
     file = "pipelines/a.toml"        # a pipeline file, as `redrive run --pipeline` takes
@@ -131,6 +133,10 @@ class BatchSpec:
     on_collision: Literal["continue", "stop"] = "continue"
     fail_fast: bool = False
     options: Mapping[str, Any] = field(default_factory=dict)  # out, executor, workers, retries
+    #: ``--map`` / ``map``: the road map of every recorded log, its origin, ``--no-map``
+    map_file: str | None = None
+    map_origin: tuple[float, float] | None = None
+    no_map: bool = False
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -144,6 +150,9 @@ class BatchSpec:
             "agents": self.agents,
             "on_collision": self.on_collision,
             "fail_fast": self.fail_fast,
+            "map": self.map_file,
+            "map_origin": None if self.map_origin is None else list(self.map_origin),
+            "no_map": self.no_map,
         }
 
 
@@ -413,7 +422,20 @@ _SPEC_KEYS = {
     "fail_fast",
     "address",
     "pipeline",
+    "map",
+    "map_origin",
+    "no_map",
 }
+
+
+def _origin(text: str, *, where: str) -> tuple[float, float]:
+    try:
+        lat, lon = (float(v) for v in text.split(","))
+    except ValueError as err:
+        raise ConfigError(f'{where}: expected "LAT,LON" in degrees, got {text!r}') from err
+    if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+        raise ConfigError(f"{where}: {text!r} is no latitude, longitude")
+    return lat, lon
 
 
 def load_batch_spec(path: Path) -> dict[str, Any]:
@@ -438,6 +460,13 @@ def load_batch_spec(path: Path) -> dict[str, Any]:
         out["duration_s"] = doc.number("duration_s")
     if "fail_fast" in doc:
         out["fail_fast"] = doc.flag("fail_fast")
+    if "no_map" in doc:
+        out["no_map"] = doc.flag("no_map")
+    if "map" in doc:
+        found = Path(doc.text("map"))
+        out["map"] = str(found if found.is_absolute() else base / found)
+    if "map_origin" in doc:
+        out["map_origin"] = _origin(doc.text("map_origin"), where=f"{path}: map_origin")
     if "seeds" in doc:
         out["seeds"] = doc.value("seeds", lambda v: isinstance(v, str) or is_integer(v), "0-3 or 3")
     if "out" in out:

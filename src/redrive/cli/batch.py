@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any
 
 from ._batch_progress import BatchBar, batch_progress
 from ._gates import add_gate_options
+from ._map_options import add_map_options
 
 if TYPE_CHECKING:
     from redrive.batch import CellRecord, CellTask
@@ -73,6 +74,7 @@ def _closed_loop(
     duration_s: float | None,
     agents: str,
     on_collision: str = "continue",
+    road_map: Any = None,
 ) -> RunReport:
     from redrive.closedloop.run import ClosedLoopRequest, run_closed_loop
 
@@ -86,6 +88,7 @@ def _closed_loop(
         seed=seed,
         duration_s=duration_s,
         on_collision=on_collision,
+        road_map=road_map,
     )
     return run_closed_loop(request)
 
@@ -141,6 +144,7 @@ def _spec_from_args(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
         agents=agents,
         on_collision=on_collision,
         fail_fast=bool(args.fail_fast or base.get("fail_fast", False)),
+        **_map_fields(args, base),
     )
     options = {
         "out": args.out or base.get("out"),
@@ -152,6 +156,24 @@ def _spec_from_args(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
     if options["out"] is None:
         raise ConfigError("give the batch directory: --out DIR (or `out` in the --spec file)")
     return spec, options
+
+
+def _map_fields(args: argparse.Namespace, base: dict[str, Any]) -> dict[str, Any]:
+    """--map / --map-origin / --no-map over the spec's ``map`` / ``map_origin`` / ``no_map``."""
+    from redrive.errors import ConfigError
+
+    fields: dict[str, Any]
+    if args.map_file is not None or args.no_map:  # the command line replaces the spec's choice
+        fields = {"map_file": None if args.map_file is None else str(args.map_file.resolve())}
+        fields |= {"no_map": bool(args.no_map), "map_origin": args.map_origin}
+    else:
+        fields = {"map_file": base.get("map"), "no_map": bool(base.get("no_map", False))}
+        fields["map_origin"] = args.map_origin or base.get("map_origin")
+    if fields["no_map"] and fields["map_file"] is not None:
+        raise ConfigError("the batch gives both a map and no_map: give one")
+    if fields["map_origin"] is not None and fields["map_file"] is None:
+        raise ConfigError("map_origin is the origin of the batch's map: give `map` / --map too")
+    return fields
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -306,4 +328,5 @@ def register(sub: Any) -> None:
         help="then evaluate the batch (as `redrive evaluate BATCH`; implied by a gate)",
     )
     add_gate_options(parser, on="the pooled value (the batch is evaluated after it ran)")
+    add_map_options(parser, stored=True)
     parser.set_defaults(func=_run)

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from ._gates import add_gate_options
+from ._map_options import add_map_options, map_option
 
 __all__ = ["print_batch_evaluation", "register"]
 
@@ -20,6 +21,8 @@ examples:
   redrive evaluate runs/first --metric nuscenes_detection --metric latency
   redrive evaluate runs/first --metric my_metrics.py:LaneOffset   a metric of your own
   redrive evaluate runs/first --algorithm clusters     only this algorithm (and run-level metrics)
+  redrive evaluate runs/first --map lanelet2_map.osm   give the run a road map first (stored in it)
+  redrive evaluate runs/first --no-map                 leave out the metrics that need a road map
   redrive report runs/first                            then: HTML, XLSX and CSV report
   redrive evaluate batches/ab                          a batch: every cell, then pooled per
                                                        pipeline × loop across the logs
@@ -87,7 +90,11 @@ def _run(args: argparse.Namespace) -> int:
         args.metric, parse_metric_params(args.metric_param or []), devkit_compat=args.devkit_compat
     )
     if (args.run / BATCH_MANIFEST).is_file():
+        if map_option(args) is not None:
+            print("redrive evaluate: --map/--no-map are for a run; give a batch's map in its spec")
+            return 2
         return _run_batch(args, metrics)
+    metrics, map_skipped = _map_choice(args, metrics)
     summary = evaluate_run(args.run, metrics=metrics, algorithms=args.algorithm)
     console = Console(width=None if sys.stdout.isatty() else 120)
     partial = open_run(args.run).manifest.partial_note()
@@ -122,6 +129,8 @@ def _run(args: argparse.Namespace) -> int:
     for skip in summary.skipped:
         where = skip.algorithm or "the run"
         console.print(f"[yellow]skipped {skip.metric} on {where}: {skip.reason}[/]")
+    for name in map_skipped:
+        console.print(f"[yellow]skipped {name}: --no-map (it needs the road map)[/]")
     for fail in summary.failed:
         where = fail.algorithm or "the run"
         console.print(
@@ -148,6 +157,24 @@ def _run(args: argparse.Namespace) -> int:
         )
         return EXIT_METRIC_FAILED
     return gated
+
+
+def _map_choice(args: argparse.Namespace, metrics: list[Any] | None) -> tuple[Any, list[str]]:
+    """``--map FILE``: the map is attached to the run first (stored, in the manifest);
+    ``--no-map``: the metrics that need a road map are left out (their names returned)."""
+    option = map_option(args)
+    if option is None:
+        return metrics, []
+    if option.disabled:
+        from redrive.evaluation.evaluator import default_metrics
+
+        chosen = list(metrics) if metrics is not None else default_metrics()
+        kept = [m for m in chosen if "road_map" not in m.needs]
+        return kept, [m.name for m in chosen if "road_map" in m.needs]
+    from redrive.engine.user_map import attach_map
+
+    attach_map(args.run, option)
+    return metrics, []
 
 
 def _run_batch(args: argparse.Namespace, metrics: list[Any] | None) -> int:
@@ -299,6 +326,7 @@ def register(sub: Any) -> None:
         "official NDS with mAAE (nuscenes_detection.class_mean=devkit)",
     )
     add_gate_options(parser, on="the value (a batch: the pooled value)")
+    add_map_options(parser, stored=False)
     parser.set_defaults(func=_run)
     metrics = sub.add_parser(
         "metrics",

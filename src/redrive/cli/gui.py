@@ -6,6 +6,8 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from ._map_options import add_map_options, map_option
+
 __all__ = ["register"]
 
 _EPILOG = """\
@@ -14,6 +16,8 @@ examples:
   redrive gui drive.bag                 play a log: planview, camera, plots, timeline
   redrive gui runs/a                    a run over its log: detections beside ground truth,
                                         failure bookmarks from `redrive evaluate` on the timeline
+  redrive gui runs/a --map map.osm      give the run a road map first (stored in it): lanes,
+                                        boundaries, crosswalks and lights on the planview
   make gui                              installs the extra and opens the demo run
 
 Keys: space plays/pauses, ←/→ step.  The window layout is remembered between sessions.
@@ -25,6 +29,15 @@ def _run(args: argparse.Namespace) -> int:
 
     require_gui()
     require_display()
+    option = map_option(args)
+    if option is not None:
+        from redrive.engine.user_map import attach_map
+        from redrive.errors import ConfigError
+
+        if args.path is None or not (args.path / "manifest.json").is_file():
+            msg = "--map gives a run its road map: open a run directory (`redrive run LOG --map`)"
+            raise ConfigError(msg)
+        attach_map(args.path, option)
     from redrive.gui.main import run_gui
 
     return run_gui(args.path)
@@ -46,4 +59,5 @@ def register(sub: Any) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("path", nargs="?", type=Path, help="a log or a run directory")
+    add_map_options(parser, stored=False, no_map=False)
     parser.set_defaults(func=_run)

@@ -14,6 +14,8 @@ from redrive.assembly.summary import LogSummary, summarize_log
 from redrive.errors import LogDamagedError, LogError
 from redrive.io import open_log
 
+from ._map_options import lat_lon
+
 __all__ = ["EXIT_DAMAGED", "damage_lines", "register"]
 
 #: ``redrive info`` read a damaged log: what is intact is summarised, the damage listed.
@@ -257,22 +259,10 @@ def register(sub: Any) -> None:
     )
     parser.add_argument(
         "--map-origin",
-        type=_lat_lon,
+        type=lat_lon,
         default=None,
         metavar="LAT,LON",
         help="a Lanelet2 map's projection origin, degrees (default: the map's local_x/local_y, "
         "else its first node)",
     )
     parser.set_defaults(func=_run)
-
-
-def _lat_lon(text: str) -> tuple[float, float]:
-    try:
-        lat, lon = (float(v) for v in text.split(","))
-    except ValueError as err:
-        msg = f"expected LAT,LON in degrees (e.g. 49.0,8.4), got {text!r}"
-        raise argparse.ArgumentTypeError(msg) from err
-    if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
-        msg = f"latitude must be in [-90, 90] and longitude in [-180, 180], got {text!r}"
-        raise argparse.ArgumentTypeError(msg)
-    return lat, lon

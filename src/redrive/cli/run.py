@@ -10,6 +10,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from ._map_options import add_map_options, map_option
+
 __all__ = ["parse_frames", "pipeline_from_args", "print_run_report", "register"]
 
 _EPILOG = """\
@@ -18,6 +20,8 @@ examples:
   redrive run drive.bag --perception my_detector.py:MyDetector
   redrive run drive.bag --perception mypkg.det:Det --planning idm-planner --control pure-pursuit-pid
   redrive run drive.bag --pipeline pipeline.toml --frames 100:200 --out runs/try1
+  redrive run autoware.bag --map lanelet2_map.osm         a Lanelet2 map (the log's `map` frame)
+  redrive run drive.bag --map map.osm --map-origin 49.0,8.4   no `map` frame: the map's origin
   redrive run drive.bag --mode pipelined --step-timeout 2 --out runs/try2
   redrive run drive.bag --perception big.py:Det --max-rss 2048   each worker under 2 GiB
   redrive run drive.bag --out runs/try2 --resume           continue an interrupted run
@@ -266,6 +270,7 @@ def _run(args: argparse.Namespace) -> int:
         resume=args.resume,
         strict=args.strict,
         skip_unfed=not args.strict,
+        road_map=map_option(args),
     )
     progress_bar = ProgressBar(args.log.name, unit="frames", quiet=args.no_progress)
     lines = None if args.no_progress or is_terminal() else ProgressLines(args.log.name, sys.stderr)
@@ -407,6 +412,7 @@ def _run_closed_loop(args: argparse.Namespace, pipeline: Any) -> int:
         sensor_map=None if scenario else args.sensor_map,
         on_collision=args.on_collision,
         friction_coefficient=args.friction,
+        road_map=_closed_loop_map(args, scenario=scenario),
     )
     report = run_closed_loop(request)
     print_run_report(report, out)
@@ -415,6 +421,17 @@ def _run_closed_loop(args: argparse.Namespace, pipeline: Any) -> int:
         print("interrupted: closed-loop runs do not resume; run it again into a new --out")
         return 130
     return nothing_succeeded_status(report, request.out)
+
+
+def _closed_loop_map(args: argparse.Namespace, *, scenario: bool) -> Any:
+    """The closed loop's --map option; a scenario brings its own map."""
+    option = map_option(args)
+    if option is not None and scenario:
+        from redrive.errors import ConfigError
+
+        msg = f"{args.log}: a synthetic scenario drives on its own road map; drop --map/--no-map"
+        raise ConfigError(msg)
+    return option
 
 
 def _print_deviation(out: Path) -> None:
@@ -569,5 +586,6 @@ def register(sub: Any) -> None:
             "in the manifest (pipeline.skipped)"
         ),
     )
+    add_map_options(parser, stored=True)
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.set_defaults(func=_run)

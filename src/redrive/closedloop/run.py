@@ -39,7 +39,7 @@ from typing import Any
 
 from redrive.algorithms import GROUND_TRUTH, VEHICLE_STATE
 from redrive.algorithms.discovery import load_algorithm_class
-from redrive.assembly.sensor_map import load_sensor_map_overrides
+from redrive.assembly.sensor_map import infer_sensor_map, load_sensor_map_overrides
 from redrive.closedloop.contact import ON_COLLISION, check_on_collision
 from redrive.closedloop.logreplay import LogSimulator
 from redrive.closedloop.mode import DEFAULT_DEVIATION_M, DEFAULT_DEVIATION_RAD, ClosedLoopMode
@@ -51,9 +51,9 @@ from redrive.config import PipelineConfig
 from redrive.engine.graph import LogInputs, build_graph
 from redrive.engine.run import execute, run_setup, source_log
 from redrive.engine.stats import RunReport
+from redrive.engine.user_map import MapOption, choose_road_map
 from redrive.errors import ConfigError
 from redrive.io import LogReader, open_log
-from redrive.io.content import log_road_map
 from redrive.io.mcap.writer import McapWriter
 from redrive.results import (
     FrameRecord,
@@ -112,6 +112,7 @@ class ClosedLoopRequest:
     sensor_map: Path | None = None
     on_collision: str = ON_COLLISION[0]
     friction_coefficient: float = TyreLimit().friction_coefficient
+    road_map: MapOption | None = None  # a log only: --map / --no-map (engine.user_map)
 
 
 def is_scenario(text: str) -> bool:
@@ -245,12 +246,15 @@ def _run_log(
         tyres=TyreLimit(friction_coefficient=request.friction_coefficient),
         delay_steps=request.delay_steps,
     )
+    smap = infer_sensor_map(log.topics, duration_ns=log.end_ns - log.start_ns, overrides=overrides)
+    chosen = choose_road_map(log, request.road_map, sensor_map=smap)
     return _drive(
         request,
         simulator,
         source=source_log(Path(request.scenario), format=log.format),
         described=simulator.describe(),
-        road_map=log_road_map(log),  # a redrive synth log's: the map metrics apply
+        road_map=chosen.road_map,  # the log's own (a redrive synth log's) or --map's
+        map_record=chosen.record,
         ego_geometry=simulator.geometry,
         total=None,
         on_start=on_start,
@@ -267,6 +271,7 @@ def _drive(
     source: SourceLog,
     described: Mapping[str, Any],
     road_map: RoadMap | None,
+    map_record: Mapping[str, Any] | None = None,
     ego_geometry: EgoGeometry,
     total: int | None,
     on_start: Callable[[int | None], None] | None,
@@ -296,6 +301,8 @@ def _drive(
             "on_collision": request.on_collision,
         },
     )
+    if map_record:
+        setup = dataclasses.replace(setup, road_map=dict(map_record))
     writer = RunWriter(request.out, setup=setup)
     looped: Simulator = simulator if wrap is None else wrap(simulator)
     mode = ClosedLoopMode(

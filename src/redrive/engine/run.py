@@ -25,9 +25,10 @@ from redrive.engine.graph import LogInputs, StageGraph, build_graph
 from redrive.engine.modes import ModeHooks, ReplayMode
 from redrive.engine.resources import ResourceSampler
 from redrive.engine.stats import RunReport
+from redrive.engine.user_map import MapOption, choose_road_map
 from redrive.errors import ConfigError
 from redrive.io import LogReader, open_log
-from redrive.io.content import LogScenario, fingerprint_log, log_road_map, log_scenario
+from redrive.io.content import LogScenario, fingerprint_log, log_scenario
 from redrive.io.damage import damage_report
 from redrive.results import (
     FrameRecord,
@@ -83,6 +84,7 @@ class RunRequest:
     resume: bool = False
     strict: bool = True
     skip_unfed: bool = False
+    road_map: MapOption | None = None
 
 
 def source_log(path: Path, *, format: str, scenario: LogScenario | None = None) -> SourceLog:
@@ -146,7 +148,7 @@ def _select(frames: Iterator[Frame], first: int | None, stop: int | None) -> Ite
 def _setup(
     request: RunRequest, graph: StageGraph, inputs: LogInputs, *, log: SourceLog, mode: str
 ) -> RunSetup:
-    return run_setup(
+    return run_setup(  # the map entry is added by run_reader
         request.pipeline,
         graph,
         inputs,
@@ -251,11 +253,13 @@ def run_reader(
     assembler = FrameAssembler(log, overrides=overrides)
     if lookahead_ns is not None:
         assembler.lookahead_ns = lookahead_ns
-    road_map = log_road_map(log)
+    chosen = choose_road_map(log, request.road_map, sensor_map=assembler.sensor_map)
+    road_map = chosen.road_map
     inputs = log_inputs(assembler, road_map=road_map)
     graph = build_graph(request.pipeline, inputs, skip_unfed=request.skip_unfed)
     assembler = _reading_only_inputs(log, assembler, graph, lookahead_ns=assembler.lookahead_ns)
     setup = _setup(request, graph, inputs, log=log_info, mode=hooks.mode.value)
+    setup = replace(setup, road_map=dict(chosen.record))
     writer = RunWriter(request.out, setup=setup, resume=request.resume)
     if road_map is not None:  # the map travels with the run: the map metrics read it
         writer.write_map(road_map)

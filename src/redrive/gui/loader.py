@@ -28,8 +28,8 @@ from redrive.gui.closedloop import (
     RunFrames,
     driven_from_frame,
     ghost_segments,
-    map_segments,
 )
+from redrive.gui.map_layers import map_layers
 from redrive.gui.scene import (
     CameraScene,
     ColorMode,
@@ -65,7 +65,6 @@ GT_COLOR = (60, 220, 90)
 EGO_COLOR = (230, 230, 230)
 GHOST_COLOR = (120, 200, 255)
 GHOST_ALPHA = 0.45
-MAP_COLOR = (110, 110, 125)
 #: colours of the algorithms' detections, in manifest order.
 PALETTE = ((255, 80, 80), (80, 160, 255), (255, 140, 0), (200, 90, 255), (0, 220, 220))
 _EGO_BOX: Box3D = EGO_BOX
@@ -195,11 +194,17 @@ def build_scene(
         kept_intensity = None if intensity is None else intensity[keep]
         colors = color_points(xyz[keep], options.color_mode, intensity=kept_intensity)
     layers: list[LayerLines] = []
-    map_lines = None if run is None else run.map_lines
-    if Layer.ROAD_MAP in layers_on and driven is not None and map_lines is not None:
-        layers.append(
-            LayerLines(name="road map", color=MAP_COLOR, segments=map_segments(map_lines, driven))
-        )
+    road = None if run is None else run.road_map
+    if Layer.ROAD_MAP in layers_on and road is not None and run is not None:
+        # the map in the pose the view is drawn from: the driven ego (closed loop), else the
+        # run's ego (the logged one), else the log's
+        pose = driven or (run.ego.get(at) if at is not None else None) or frame.vehicle_state
+        if pose is not None:
+            lights = run.lights.get(at, {}) if at is not None else {}
+            layers += [
+                LayerLines(name=m.name, color=m.color, segments=m.segments)
+                for m in map_layers(road, pose, lights=lights)
+            ]
     gt = frame.ground_truth
     if run is not None and at is not None and (not gt or driven is not None):
         # closed loop: the run's ground truth is in the driven ego's base_link, as the view

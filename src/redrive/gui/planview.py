@@ -22,6 +22,7 @@ import shiboken6
 from pyqtgraph.opengl.GLViewWidget import GLViewMixin
 from PySide6 import QtCore, QtGui, QtOpenGL, QtWidgets
 
+from redrive.gui.map_layers import MAP_PREFIX
 from redrive.gui.scene import ColorMode, LayerLines, RasterSpec, Scene
 
 __all__ = ["Planview"]
@@ -322,7 +323,7 @@ class Planview(QtWidgets.QWidget):
         boxes = sum(
             len(layer.segments) // 28
             for layer in scene.layers
-            if layer.name not in ("ego", "logged ego", "road map")  # (not the scene's boxes)
+            if layer.name not in ("ego", "logged ego") and not layer.name.startswith(MAP_PREFIX)
         )
         self.status.setText(f"{scene.point_count:,} points · {boxes} boxes")
         self.legend.setText(legend_html(scene.layers))

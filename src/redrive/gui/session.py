@@ -27,9 +27,17 @@ import numpy.typing as npt
 from redrive.assembly.frames import FrameAssembler
 from redrive.errors import LogError, UnsupportedMessageError
 from redrive.gui.closedloop import Deviation, map_polylines, read_deviation
+from redrive.gui.map_layers import MapLines, map_lines
 from redrive.io import LogReader, open_log
 from redrive.results import Run, RunManifest, RunStatus, open_run
-from redrive.types import ControlCommands, DetectedObject, Frame, PlannedPath, VehicleState
+from redrive.types import (
+    ControlCommands,
+    DetectedObject,
+    Frame,
+    LightState,
+    PlannedPath,
+    VehicleState,
+)
 
 __all__ = [
     "Bookmark",
@@ -201,6 +209,8 @@ class RunData:
         deviation: closed loop: the deviation series and threshold crossings.
         map_lines: the road map's (``RUN/map.json``) lane edges and areas as (2M, 2) segment
             endpoints in the map frame; None without a map.
+        road_map: the same map by element (:mod:`.map_layers`: lane lines, road edges,
+            centrelines, crosswalks, stop lines, lights); lights: frame index → light id → state.
     """
 
     path: Path
@@ -219,6 +229,8 @@ class RunData:
     logged_ego: Mapping[int, VehicleState] = field(default_factory=dict)
     deviation: Deviation | None = None
     map_lines: npt.NDArray[np.float64] | None = None
+    road_map: MapLines | None = None
+    lights: Mapping[int, Mapping[str, LightState]] = field(default_factory=dict)
     _index_of_stamp: dict[int, int] = field(init=False, repr=False, compare=False)
     _sorted_stamps: list[int] = field(init=False, repr=False, compare=False)
 
@@ -303,6 +315,10 @@ class RunData:
             logged_ego=run.logged_ego(),
             deviation=read_deviation(run),
             map_lines=None if road_map is None else map_polylines(road_map),
+            road_map=None if road_map is None else map_lines(road_map),
+            lights={
+                f: {t.id: t.state for t in lights} for f, lights in run.traffic_lights().items()
+            },
         )
 
 

@@ -5,7 +5,8 @@ value                      message                      notes
 =========================  ===========================  =========================================
 ShapeSet                   ``foxglove.SceneUpdate``     first a deletion of all the topic showed,
                                                         then one entity per box (a cube, its
-                                                        velocity as an arrow), line and label
+                                                        velocity as an arrow), line, label
+                                                        and triangle list (a filled surface)
 tuple[Transform, ...]      ``foxglove.FrameTransforms`` one FrameTransform each, stamped with the
                                                         message's stamp (static ones too)
 PointCloud                 ``foxglove.PointCloud``      x, y, z float32, then intensity as
@@ -33,6 +34,7 @@ from redrive.interop.shapes import (
     LabelShape,
     LineShape,
     ShapeSet,
+    TriangleShape,
     arrow_yaw_pitch,
     yaw_pitch_quaternion,
     yaw_quaternion,
@@ -104,6 +106,17 @@ def _line_entity(line: LineShape, *, stamp: fm.Timestamp, frame_id: str) -> fm.S
     return fm.SceneEntity(timestamp=stamp, frame_id=frame_id, id=line.id, lines=[primitive])
 
 
+def _triangle_entity(
+    surface: TriangleShape, *, stamp: fm.Timestamp, frame_id: str
+) -> fm.SceneEntity:
+    primitive = fm.TriangleListPrimitive(
+        pose=_pose((0.0, 0.0, 0.0)),
+        points=[fm.Point3(x=p[0], y=p[1], z=p[2]) for p in surface.points],
+        color=_color(surface.color),
+    )
+    return fm.SceneEntity(timestamp=stamp, frame_id=frame_id, id=surface.id, triangles=[primitive])
+
+
 def _label_entity(label: LabelShape, *, stamp: fm.Timestamp, frame_id: str) -> fm.SceneEntity:
     text = fm.TextPrimitive(
         pose=_pose(label.position),
@@ -123,6 +136,7 @@ def scene_update(shapes: ShapeSet) -> fm.SceneUpdate:
     entities = [_box_entity(b, stamp=stamp, frame_id=frame) for b in shapes.boxes]
     entities += [_line_entity(ln, stamp=stamp, frame_id=frame) for ln in shapes.lines]
     entities += [_label_entity(lb, stamp=stamp, frame_id=frame) for lb in shapes.labels]
+    entities += [_triangle_entity(t, stamp=stamp, frame_id=frame) for t in shapes.triangles]
     deletion = fm.SceneEntityDeletion(timestamp=stamp, type=fm.SceneEntityDeletionType.All)
     return fm.SceneUpdate(deletions=[deletion], entities=entities)
 

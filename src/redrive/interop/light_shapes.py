@@ -1,7 +1,7 @@
 """A run's traffic lights as shapes: each light of the road map drawn at its position, coloured
 by the state the frame records (``traffic_lights`` table), with its stop line in the same colour.
 
-Topic ``/redrive/traffic_lights`` (frame ``map``): per light a lamp box 0.5 × 0.5 × 1.2 m whose
+Topic ``/redrive/traffic_lights`` (the map's frame, ``map``): per light a lamp box 0.5 × 0.5 × 1.2 m whose
 centre stands :data:`LAMP_HEIGHT_M` above the map position (a map position is planar), a label
 ``light ID: state`` over it, and its stop line (the map's :class:`~redrive.types.StopLine`) on
 the ground.  Red, yellow and green are drawn as such; unknown — and a light the frame records no
@@ -71,7 +71,7 @@ def light_shapes(road_map: RoadMap, states: Mapping[str, LightState], *, stamp_n
             )
     return ShapeSet(
         stamp_ns=stamp_ns,
-        frame_id="map",
+        frame_id=road_map.frame_id,
         boxes=tuple(boxes),
         lines=tuple(lines),
         labels=tuple(labels),

@@ -4,7 +4,8 @@ The same :class:`~redrive.interop.shapes.ShapeSet` a SceneUpdate is made of: a `
 marker first (the array replaces what the topic showed), then a ``CUBE`` per box (namespace
 ``boxes``), an ``ARROW`` per moving box (``velocity``: from the box centre along its velocity,
 ``scale.x`` its speed in m/s as metres), a ``LINE_STRIP`` per line (``lines``) and a
-``TEXT_VIEW_FACING`` per label (``labels``).  Marker ids count up within each array.
+``TEXT_VIEW_FACING`` per label (``labels``) and a ``TRIANGLE_LIST`` per filled surface
+(``triangles``, ``scale`` 1).  Marker ids count up within each array.
 
 :func:`marker_array` gives the message as an object of a ``rosbags`` typestore;
 :func:`marker_array_cdr` gives its CDR bytes directly — the same bytes ``serialize_cdr`` makes of
@@ -31,7 +32,7 @@ from redrive.interop.shapes import (
 __all__ = ["MARKER_ARRAY", "marker_array", "marker_array_cdr"]
 
 MARKER_ARRAY = "visualization_msgs/msg/MarkerArray"
-_CUBE, _ARROW, _LINE_STRIP, _TEXT, _DELETEALL = 1, 0, 4, 9, 3
+_CUBE, _ARROW, _LINE_STRIP, _TEXT, _DELETEALL, _TRIANGLE_LIST = 1, 0, 4, 9, 3, 11
 _EMPTY_BYTES = np.zeros(0, dtype=np.uint8)
 
 
@@ -83,6 +84,10 @@ def _markers(shapes: ShapeSet) -> list[_Marker]:
                 color=line.color,
                 points=line.points,
             )
+        )
+    for surface in shapes.triangles:
+        out.append(
+            _Marker(ns="triangles", kind=_TRIANGLE_LIST, color=surface.color, points=surface.points)
         )
     for label in shapes.labels:
         out.append(

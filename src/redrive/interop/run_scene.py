@@ -15,9 +15,11 @@ Topics (each a :class:`~redrive.interop.shapes.ShapeSet` per frame, stamped with
 ``/redrive/bookmarks``            the stored evaluation's bookmarks as labels over the ego,
                                   ``metric/algorithm: detail`` (none before ``redrive
                                   evaluate``)
-``/redrive/traffic_lights``       runs whose map has lights and whose log their states: each
-                                  light at its map position, coloured by its state, with
-                                  its stop line (``map``; :mod:`.light_shapes`)
+``/redrive/traffic_lights``       runs whose map has lights: each light at its map position,
+                                  coloured by the state the frame records (grey when the log
+                                  has no states), with its stop line (:mod:`.light_shapes`)
+``/redrive/map``                  runs with a road map: lanes, boundaries, crosswalks, areas,
+                                  stop lines, once at the first frame (:mod:`.map_shapes`)
 ================================  =========================================================
 
 The transforms per frame: the log's static transforms (sensors on ``base_link``) plus the ego's
@@ -39,6 +41,7 @@ import pyarrow.compute as pc
 from redrive.errors import ConfigError
 from redrive.geometry.se3 import quaternion_from_yaw
 from redrive.interop.light_shapes import LIGHTS_TOPIC, light_shapes
+from redrive.interop.map_shapes import MAP_TOPIC, map_shapes
 from redrive.interop.shapes import (
     BoxShape,
     Color,
@@ -104,20 +107,20 @@ def scene_topics(run: Run) -> tuple[str, ...]:
     topics |= {f"/redrive/paths/{a}" for a in _algorithms(run, "planning")}
     if "ego_logged" in run.tables():
         topics.add(_GHOST_TOPIC)
-    if _lights_map(run) is not None:
-        topics.add(LIGHTS_TOPIC)
+    road_map = _road_map(run)
+    if road_map is not None:
+        topics.add(MAP_TOPIC)
+        if road_map.traffic_lights:
+            topics.add(LIGHTS_TOPIC)
     return tuple(sorted(topics))
 
 
-def _lights_map(run: Run) -> RoadMap | None:
-    """The run's road map when it has lights and the run their states, else None."""
-    if "traffic_lights" not in run.tables():
-        return None
+def _road_map(run: Run) -> RoadMap | None:
+    """The run's road map, None when it has none."""
     try:
-        road_map = run.road_map()
+        return run.road_map()
     except ConfigError:
-        return None  # a damaged map: the scene goes without its lights
-    return road_map if road_map is not None and road_map.traffic_lights else None
+        return None  # a damaged map: the scene goes without it
 
 
 Row = dict[str, Any]
@@ -286,7 +289,8 @@ def run_scenes(
     found = read("paths")
     paths = {a: _rows_by_frame(found, a) for a in _algorithms(run, "planning")}
     bookmarks = _bookmarks(run)
-    lights_map = _lights_map(run)
+    road_map = _road_map(run)
+    lights_map = road_map if road_map is not None and road_map.traffic_lights else None
     lights = {
         f: {str(r["light_id"]): LightState(r["state"]) for r in rows}
         for f, rows in _rows_by_frame(read("traffic_lights")).items()
@@ -357,6 +361,9 @@ def run_scenes(
         )
         if lights_map is not None:
             shapes[LIGHTS_TOPIC] = light_shapes(lights_map, lights.get(index, {}), stamp_ns=stamp)
+        if road_map is not None:  # once: the map does not change over the run
+            shapes[MAP_TOPIC] = map_shapes(road_map, stamp_ns=stamp)
+            road_map = None
         yield FrameScene(frame_index=index, stamp_ns=stamp, shapes=shapes, transforms=transforms)
 
 

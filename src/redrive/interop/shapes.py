@@ -18,6 +18,7 @@ __all__ = [
     "LabelShape",
     "LineShape",
     "ShapeSet",
+    "TriangleShape",
     "class_color",
 ]
 
@@ -69,6 +70,16 @@ class LineShape:
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
+class TriangleShape:
+    """A filled surface: ``points`` (m) taken three at a time as triangles (a polygon's
+    triangulation), all in one colour."""
+
+    id: str
+    points: tuple[tuple[float, float, float], ...]
+    color: Color
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
 class LabelShape:
     """A text facing the viewer at ``position`` (m)."""
 
@@ -89,13 +100,15 @@ class ShapeSet:
     boxes: tuple[BoxShape, ...] = ()
     lines: tuple[LineShape, ...] = ()
     labels: tuple[LabelShape, ...] = ()
+    triangles: tuple[TriangleShape, ...] = ()
 
     @property
     def ids(self) -> tuple[str, ...]:
-        shapes: tuple[BoxShape | LineShape | LabelShape, ...] = (
+        shapes: tuple[BoxShape | LineShape | LabelShape | TriangleShape, ...] = (
             *self.boxes,
             *self.lines,
             *self.labels,
+            *self.triangles,
         )
         return tuple(s.id for s in shapes)
 

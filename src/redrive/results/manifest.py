@@ -16,8 +16,7 @@ Versions (``schema_version``):
   :func:`upgrade_v1` fills the keys older releases did not write (``sensors``,
   ``pipeline.mode_manager`` …, ``summary`` ``{}`` → ``null``) and the result is validated as
   version 2, so a user's existing runs keep working.  A resume rewrites the file as version 2.
-* no ``schema_version``, or one newer than :data:`SCHEMA_VERSION`: refused (re-run the run, or
-  upgrade redrive).
+* no ``schema_version``, or one newer than :data:`SCHEMA_VERSION`: refused (re-run, or upgrade).
 
 Keys a manifest holds beyond the model are ignored when reading.
 """
@@ -254,6 +253,7 @@ class RunSetup:
     #: closed loop: the simulator's description (backend, agents, ego model and limits, tracker
     #: and gains, seed); empty for a replay
     closed_loop: Mapping[str, Any] = field(default_factory=dict)
+    road_map: Mapping[str, Any] = field(default_factory=dict)  # manifest `map`: engine.user_map
 
     def algorithm(self, name: str) -> AlgorithmEntry | None:
         """The entry of algorithm ``name``, or None."""
@@ -442,6 +442,7 @@ class RunManifest(RunSetup):
                 "scenario": to_jsonable(self.log.scenario),
             },
             "closed_loop": to_jsonable(self.closed_loop),
+            "map": to_jsonable(self.road_map),
             "frames_done": self.frames_done,
             "resumes": [
                 {**_asdict(r), "previous_status": r.previous_status.value} for r in self.resumes
@@ -502,6 +503,7 @@ class RunManifest(RunSetup):
             algorithms=tuple(AlgorithmEntry._parse(a) for a in f.objs("algorithms")),
             log=SourceLog._parse(f.obj("log")),
             closed_loop=f.mapping("closed_loop", {}),
+            road_map=f.mapping("map", {}),
             frames_done=f.integer("frames_done"),
             resumes=tuple(ResumeRecord._parse(r) for r in f.objs("resumes")),
             summary=None if summary is None else RunSummary.from_json(summary.data, path=f.path),
@@ -573,10 +575,8 @@ def read_manifest(run_dir: Path) -> RunManifest:
     """
     path = run_dir / MANIFEST_NAME
     if not path.is_file():
-        msg = (
-            f"{run_dir} is not a redrive run: it has no {MANIFEST_NAME} "
-            "(give the directory a `redrive run --out` wrote)"
-        )
+        msg = f"{run_dir} is not a redrive run: it has no {MANIFEST_NAME} (give the directory a "
+        msg += "`redrive run --out` wrote)"
         raise manifest_error(path, "is missing", msg) from None
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
