@@ -1,10 +1,10 @@
-"""redrive.gui.closedloop.map_polylines: what the planview's road-map layer draws (no Qt)."""
+"""redrive.gui.map_layers.map_lines: what the planview's road-map layers draw (no Qt)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from redrive.gui.closedloop import map_polylines
+from redrive.gui.map_layers import map_lines
 from redrive.types import Crosswalk, MapLane, RoadMap, StopLine
 
 
@@ -22,10 +22,14 @@ def test_map_lines_draw_boundaries_crosswalks_and_stop_lines() -> None:
         crosswalks=(Crosswalk(crosswalk_id="c", polygon=[[12, -2], [14, -2], [14, 2], [12, 2]]),),
         stop_lines=(StopLine(stop_line_id="s", line=[[11.0, -1.5], [11.0, 1.5]], lane_ids=("a",)),),
     )
-    seg = map_polylines(road).reshape(-1, 2, 2)
-    # lane a's own boundaries (2 + 1 segments), lane b's derived ones (1 + 1), the crosswalk's
-    # outline (4) and the stop line (1)
-    assert len(seg) == 3 + 2 + 4 + 1
-    assert np.array_equal(seg[1], [[5.0, 2.0], [10.0, 1.5]])
-    np.testing.assert_allclose(seg[3], [[0.0, 6.5], [10.0, 6.5]])
-    assert np.array_equal(seg[-1], [[11.0, -1.5], [11.0, 1.5]])
+    groups = {k: v.reshape(-1, 2, 2) for k, v in map_lines(road).groups.items()}
+    # lane a's own boundaries (2 + 1 segments) and lane b's derived ones (1 + 1): lane lines
+    # (no boundary type says road edge); one centreline segment each
+    bounds = groups["lane lines"]
+    assert len(bounds) == 3 + 2
+    assert np.array_equal(bounds[1], [[5.0, 2.0], [10.0, 1.5]])
+    np.testing.assert_allclose(bounds[3], [[0.0, 6.5], [10.0, 6.5]])
+    assert len(groups["centrelines"]) == 2
+    assert len(groups["crosswalks"]) == 4  # the outline, closed
+    assert np.array_equal(groups["stop lines"][0], [[11.0, -1.5], [11.0, 1.5]])
+    assert len(groups["road edges"]) == len(groups["drivable areas"]) == 0

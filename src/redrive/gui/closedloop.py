@@ -6,9 +6,7 @@
 - :class:`RunFrames`: the frames of an object-level run, rebuilt from its stored tables (the
   driven ego, the ground truth) — such a run has no sensor log to play.
 - :func:`ghost_segments`: the logged ego's box in the driven ego's base_link.
-- :func:`map_polylines` / :func:`map_segments`: the road map (``RUN/map.json``: lane boundaries,
-  areas, intersections, crosswalks, stop lines) as line segments,
-  in the map frame once and in base_link per frame.
+- (the road map's layers are :mod:`redrive.gui.map_layers`')
 - :func:`driven_from_frame`: the pose difference that re-expresses a recorded log's frame in the
   driven ego's base_link (a closed loop on a recorded log).
 """
@@ -25,7 +23,7 @@ import numpy.typing as npt
 from redrive.closedloop.logreplay import driven_from_logged
 from redrive.geometry.boxes import box_corners
 from redrive.results import Run
-from redrive.types import Box3D, Frame, RoadMap, VehicleState
+from redrive.types import Box3D, Frame, VehicleState
 
 __all__ = [
     "EGO_BOX",
@@ -33,8 +31,6 @@ __all__ = [
     "RunFrames",
     "driven_from_frame",
     "ghost_segments",
-    "map_polylines",
-    "map_segments",
     "read_deviation",
 ]
 
@@ -177,39 +173,3 @@ def driven_from_frame(driven: VehicleState, recorded: VehicleState) -> Float | N
     if np.allclose(mat, np.eye(4), atol=1e-6, rtol=0.0):
         return None
     return mat
-
-
-def map_polylines(road_map: RoadMap) -> Float:
-    """(2M, 2) segment endpoints of the map (map frame): each lane's two boundaries (the map's
-    own, else its centreline offset by half its width: :meth:`MapLane.boundaries
-    <redrive.types.MapLane.boundaries>`), the outlines of the drivable areas, intersections and
-    crosswalks, and the stop lines."""
-    pieces: list[Float] = []
-    for lane in road_map.lanes:
-        pieces.extend(_pairs(edge) for edge in lane.boundaries())
-    rings = [a.polygon for a in road_map.areas]
-    rings += [i.polygon for i in road_map.intersections]
-    rings += [c.polygon for c in road_map.crosswalks]
-    for ring in rings:
-        pieces.append(_pairs(np.vstack([ring, ring[:1]])))
-    pieces.extend(_pairs(stop.line) for stop in road_map.stop_lines)
-    if not pieces:
-        return np.zeros((0, 2), dtype=np.float64)
-    return np.vstack(pieces)
-
-
-def _pairs(line: Float) -> Float:
-    out = np.empty((2 * (len(line) - 1), 2), dtype=np.float64)
-    out[0::2], out[1::2] = line[:-1], line[1:]
-    return out
-
-
-def map_segments(polylines: Float, ego: VehicleState, *, radius_m: float = 120.0) -> Float:
-    """(2K, 3) endpoints, in ``ego``'s base_link at z = 0, of the map segments with an end
-    within ``radius_m``."""
-    if len(polylines) == 0:
-        return np.zeros((0, 3), dtype=np.float64)
-    xy = _to_base(ego, polylines)
-    near = (np.hypot(xy[:, 0], xy[:, 1]) <= radius_m).reshape(-1, 2).any(axis=1)
-    kept = xy.reshape(-1, 2, 2)[near].reshape(-1, 2)
-    return np.column_stack([kept, np.zeros(len(kept))])

@@ -26,7 +26,7 @@ import numpy.typing as npt
 
 from redrive.assembly.frames import FrameAssembler
 from redrive.errors import LogError, UnsupportedMessageError
-from redrive.gui.closedloop import Deviation, map_polylines, read_deviation
+from redrive.gui.closedloop import Deviation, read_deviation
 from redrive.gui.map_layers import MapLines, map_lines
 from redrive.io import LogReader, open_log
 from redrive.results import Run, RunManifest, RunStatus, open_run
@@ -207,9 +207,8 @@ class RunData:
         per_frame: the stored evaluation's per-frame series, on stamps (the plots' time axis).
         logged_ego: closed loop: frame index → the logged ego state (the ghost).
         deviation: closed loop: the deviation series and threshold crossings.
-        map_lines: the road map's (``RUN/map.json``) lane edges and areas as (2M, 2) segment
-            endpoints in the map frame; None without a map.
-        road_map: the same map by element (:mod:`.map_layers`: lane lines, road edges,
+        road_map: the run's road map (``RUN/map.json``) by element (:mod:`.map_layers`: lane
+            lines, road edges,
             centrelines, crosswalks, stop lines, lights); lights: frame index → light id → state.
     """
 
@@ -228,7 +227,6 @@ class RunData:
     per_frame: PerFrameSeries = field(default_factory=dict)
     logged_ego: Mapping[int, VehicleState] = field(default_factory=dict)
     deviation: Deviation | None = None
-    map_lines: npt.NDArray[np.float64] | None = None
     road_map: MapLines | None = None
     lights: Mapping[int, Mapping[str, LightState]] = field(default_factory=dict)
     _index_of_stamp: dict[int, int] = field(init=False, repr=False, compare=False)
@@ -314,7 +312,6 @@ class RunData:
             per_frame=per_frame,
             logged_ego=run.logged_ego(),
             deviation=read_deviation(run),
-            map_lines=None if road_map is None else map_polylines(road_map),
             road_map=None if road_map is None else map_lines(road_map),
             lights={
                 f: {t.id: t.state for t in lights} for f, lights in run.traffic_lights().items()
