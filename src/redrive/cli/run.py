@@ -423,7 +423,11 @@ def _print_deviation(out: Path) -> None:
 
     from redrive.results import open_run
 
-    summary = open_run(out).manifest.summary
+    manifest = open_run(out).manifest
+    paced_by = manifest.closed_loop.get("paced_by")
+    if paced_by:
+        print(f"frames paced by {paced_by}: {manifest.closed_loop.get('pace_reason', '')}")
+    summary = manifest.summary
     if summary is None or "deviated_frames" not in summary.closed_loop:
         return
     dev = dict(summary.closed_loop)

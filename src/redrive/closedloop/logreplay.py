@@ -51,6 +51,7 @@ from redrive.algorithms import StageOutputs
 from redrive.assembly.frames import FrameAssembler
 from redrive.assembly.sensor_map import (
     GROUND_TRUTH_DRIVER,
+    SensorMap,
     SensorMapOverrides,
     infer_sensor_map,
 )
@@ -115,6 +116,53 @@ def refuse_unfit_log(log: LogReader, *, agents: str) -> None:
             f"tracks); this log has none — its topics: {_topics(log)}. Use --agents replay"
         )
         raise ConfigError(msg)
+
+
+def _pace(
+    log: LogReader,
+    smap: SensorMap,
+    *,
+    overrides: SensorMapOverrides | None,
+    reads_sensors: bool,
+) -> tuple[SensorMap, str]:
+    """The sensor map with the stream that paces the frames as its ``driver`` (None: the
+    ground truth), and why that one.
+
+    The rule: a ``driver`` the sensor map file names wins (a sensor, or ``"ground_truth"``);
+    else, when no stage reads a sensor (an object-level run: the frames the algorithms use are
+    the ego state and the objects) and the log has ground truth, the ground truth paces — the
+    sensors' samples are then attached to the nearest ground-truth frame where one is near,
+    as in replay; else the sensor map's driver (its highest-rate LiDAR, camera, 2D LiDAR or
+    radar), else the busiest sensor (IMU, GNSS …); else the ground truth.
+    """
+    named = overrides.driver if overrides is not None else None
+    if named == GROUND_TRUTH_DRIVER:
+        return smap, f'the sensor map says driver = "{GROUND_TRUTH_DRIVER}"'
+    if named is not None:
+        return smap, "the sensor map names it as the driver"
+    has_truth = smap.ground_truth_topic is not None
+    if not reads_sensors and has_truth:
+        why = "no stage reads a sensor: an object-level run is paced by its ground truth"
+        return dataclasses.replace(smap, driver=None), why
+    if smap.driver is not None:
+        return smap, "a stage reads a sensor: the log's highest-rate LiDAR/camera/radar paces"
+    if smap.sensors:
+        busiest = max(smap.sensors, key=lambda s: (s.rate_hz, s.sensor_id))
+        why = "the log has no LiDAR, camera or radar: its busiest sensor paces"
+        if has_truth:
+            why = (
+                "a stage reads a sensor and the log has no LiDAR, camera or radar: its busiest "
+                "sensor paces"
+            )
+        return dataclasses.replace(smap, driver=busiest.sensor_id), why
+    if not has_truth:
+        msg = (
+            f"{log.path}: closed loop needs a sensor topic or ground truth to pace its "
+            "frames (a LiDAR, camera, radar, IMU or GNSS, or objects); this log has none "
+            f"— its topics: {_topics(log)}"
+        )
+        raise ConfigError(msg)
+    return smap, "the log has no sensor: its ground truth paces (recorded traffic)"
 
 
 def _pose(state: VehicleState) -> npt.NDArray[np.float64]:
@@ -200,6 +248,9 @@ class LogSimulator:
             logged ego is flagged ``deviated``.
         lane_half_width_m: ``reactive``: how far off a vehicle's heading line the ego still
             blocks it.
+        reads_sensors: whether a stage of the pipeline reads a sensor; when none does (an
+            object-level run) and the log has ground truth, the ground truth paces the frames
+            (see :func:`_pace`).
 
     Raises:
         ConfigError: the log has no ego pose, no objects for ``reactive``, no sensor to pace
@@ -224,6 +275,7 @@ class LogSimulator:
         deviation_threshold_m: float = DEFAULT_DEVIATION_M,
         deviation_threshold_rad: float = DEFAULT_DEVIATION_RAD,
         lane_half_width_m: float = 1.75,
+        reads_sensors: bool = True,
     ) -> None:
         check_options(agents=agents, rate_hz=rate_hz, delay_steps=delay_steps)
         refuse_unfit_log(log, agents=agents)
@@ -242,19 +294,7 @@ class LogSimulator:
                 f"or tracks), but no topic decodes to them — its topics: {_topics(log)}"
             )
             raise ConfigError(msg)
-        by_ground_truth = overrides is not None and overrides.driver == GROUND_TRUTH_DRIVER
-        if smap.driver is None and not by_ground_truth:
-            if smap.sensors:
-                busiest = max(smap.sensors, key=lambda s: (s.rate_hz, s.sensor_id))
-                smap = dataclasses.replace(smap, driver=busiest.sensor_id)
-            elif smap.ground_truth_topic is None:
-                msg = (
-                    f"{log.path}: closed loop needs a sensor topic or ground truth to pace its "
-                    "frames (a LiDAR, camera, radar, IMU or GNSS, or objects); this log has none "
-                    f"— its topics: {_topics(log)}"
-                )
-                raise ConfigError(msg)
-            # else recorded traffic without sensors (WOMD, CommonRoad): the ground truth paces
+        smap, self.pace_reason = _pace(log, smap, overrides=overrides, reads_sensors=reads_sensors)
         self.log = log
         self.assembler = FrameAssembler(log, sensor_map=smap)
         self.sensors: Mapping[str, SensorType] = {s.sensor_id: s.sensor_type for s in smap.sensors}
@@ -378,6 +418,15 @@ class LogSimulator:
     def logged_state(self) -> VehicleState | None:
         return self._logged(self._current)
 
+    @property
+    def paced_by(self) -> str:
+        """The stream whose messages make the frames: ``sensor ID (TOPIC)`` or ``ground truth
+        (TOPIC)``."""
+        smap = self.assembler.sensor_map
+        if smap.driver is not None:
+            return f"sensor {smap.driver} ({smap.sensor(smap.driver).topic})"
+        return f"ground truth ({smap.ground_truth_topic})"
+
     def describe(self) -> dict[str, Any]:
         smap = self.assembler.sensor_map
         return {
@@ -388,6 +437,8 @@ class LogSimulator:
             "rate_hz": self.rate_hz,
             "duration_s": self.duration_s,
             "pace_sensor": smap.driver,
+            "paced_by": self.paced_by,
+            "pace_reason": self.pace_reason,
             "vehicle_state_topic": smap.vehicle_state_topic,
             "ground_truth_topic": smap.ground_truth_topic,
             "delay_steps": self.delay_steps,

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from redrive.algorithms import GROUND_TRUTH, VEHICLE_STATE
+from redrive.algorithms import GROUND_TRUTH, ROAD_MAP, VEHICLE_STATE
 from redrive.algorithms.discovery import load_algorithm_class
 from redrive.assembly.sensor_map import load_sensor_map_overrides
 from redrive.closedloop.contact import ON_COLLISION, check_on_collision
@@ -244,6 +244,7 @@ def _run_log(
         overrides=overrides,
         tyres=TyreLimit(friction_coefficient=request.friction_coefficient),
         delay_steps=request.delay_steps,
+        reads_sensors=_reads_sensors(request.pipeline),
     )
     return _drive(
         request,
@@ -356,6 +357,16 @@ def _close_after_failure(recording: McapWriter, recorder: RecordingThread) -> No
     except Exception:
         logger.warning("%s: could not be finished, dropped", recording.path, exc_info=True)
         recording.abort()
+
+
+def _reads_sensors(pipeline: PipelineConfig) -> bool:
+    """Whether an algorithm of ``pipeline`` reads a sensor (not only the ego state, the ground
+    truth or the road map)."""
+    return any(
+        i not in (VEHICLE_STATE, GROUND_TRUTH, ROAD_MAP)
+        for spec in pipeline.algorithms
+        for i in load_algorithm_class(spec.plugin).inputs
+    )
 
 
 def _refuse_sensor_inputs(pipeline: PipelineConfig, sensors: Mapping[str, Any]) -> None:
