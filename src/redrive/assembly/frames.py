@@ -218,6 +218,18 @@ class FrameAssembler:
             yield assemble(pending.popleft(), index=index)
             index += 1
 
+    def ego_states(self, *, stop_ns: int | None = None) -> Iterator[VehicleState]:
+        """Every ego state of the log's vehicle-state topic, in log order (log time before
+        ``stop_ns``), without assembling frames (the closed loop's route from the logged
+        path); none when the sensor map has no such topic."""
+        topic = self.sensor_map.vehicle_state_topic
+        if topic is None:
+            return
+        for message in self.log.messages(topics=[topic], stop_ns=stop_ns):
+            decoded = self._decode(message)
+            if decoded is not None and isinstance(decoded.value, VehicleState):
+                yield decoded.value
+
     def _decode(self, message: LogMessage) -> Decoded | None:
         if decoder_for(message.msgtype) is None and message.encoding != "native":
             return None

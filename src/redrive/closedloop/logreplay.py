@@ -55,12 +55,14 @@ from redrive.assembly.sensor_map import (
     SensorMapOverrides,
     infer_sensor_map,
 )
+from redrive.closedloop.mission import logged_mission
 from redrive.closedloop.mode import DEFAULT_DEVIATION_M, DEFAULT_DEVIATION_RAD
 from redrive.closedloop.simulator import EgoCommand, PathFollower, check_options, choose_command
 from redrive.closedloop.synthetic import AgentMode
 from redrive.errors import ConfigError
 from redrive.geometry import invert, transform_object
 from redrive.io import LogReader
+from redrive.maps.index import RoadMapIndex
 from redrive.motion import IdmParams, idm_acceleration
 from redrive.sim.ego import (
     ActuatedEgo,
@@ -74,8 +76,10 @@ from redrive.types import (
     ControlCommands,
     DetectedObject,
     Frame,
+    Mission,
     ObjectClass,
     PointCloud,
+    RoadMap,
     SensorData,
     SensorType,
     VehicleState,
@@ -165,6 +169,10 @@ def _pace(
     return smap, "the log has no sensor: its ground truth paces (recorded traffic)"
 
 
+def _length_m(xy: npt.NDArray[np.float64]) -> float:
+    return float(np.hypot(*np.diff(xy, axis=0).T).sum()) if xy.shape[0] > 1 else 0.0
+
+
 def _pose(state: VehicleState) -> npt.NDArray[np.float64]:
     return pose_matrix(float(state.position[0]), float(state.position[1]), state.heading_rad)
 
@@ -251,6 +259,8 @@ class LogSimulator:
         reads_sensors: whether a stage of the pipeline reads a sensor; when none does (an
             object-level run) and the log has ground truth, the ground truth paces the frames
             (see :func:`_pace`).
+        road_map: the log's road map (None: it has none): the route of the :attr:`mission`
+            (the logged ego path on its lane graph) and the lanes ``reactive`` agents drive.
 
     Raises:
         ConfigError: the log has no ego pose, no objects for ``reactive``, no sensor to pace
@@ -276,6 +286,7 @@ class LogSimulator:
         deviation_threshold_rad: float = DEFAULT_DEVIATION_RAD,
         lane_half_width_m: float = 1.75,
         reads_sensors: bool = True,
+        road_map: RoadMap | None = None,
     ) -> None:
         check_options(agents=agents, rate_hz=rate_hz, delay_steps=delay_steps)
         refuse_unfit_log(log, agents=agents)
@@ -310,7 +321,16 @@ class LogSimulator:
         self.deviation_threshold_m = float(deviation_threshold_m)
         self.deviation_threshold_rad = float(deviation_threshold_rad)
         self.lane_half_width_m = float(lane_half_width_m)
+        self.road_map = road_map
+        self.road_index = RoadMapIndex(road_map) if road_map is not None else None
         self.reset(0)
+        #: the route along the lane graph and the logged ego trajectory (``use_mission``)
+        self.mission: Mission | None = logged_mission(
+            self.assembler,
+            index=self.road_index,
+            start_ns=self._current.stamp_ns,
+            duration_s=duration_s,
+        )
 
     # -- the Simulator protocol ---------------------------------------------------------------
 
@@ -453,6 +473,13 @@ class LogSimulator:
                 "max_physics_dt_s": _MAX_PHYSICS_DT_S,
             },
             "tracker": self.tracker.describe(),
+            "route": None
+            if self.mission is None
+            else {
+                "lanes": list(self.mission.route_lane_ids),
+                "length_m": _length_m(self.mission.route_xy),
+                "source": self.mission.source,
+            },
         }
 
     # -- frames and the ego -------------------------------------------------------------------

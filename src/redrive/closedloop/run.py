@@ -63,7 +63,7 @@ from redrive.results import (
 from redrive.sim.ego import EgoGeometry, TyreLimit
 from redrive.sim.roadmap import scenario_road_map
 from redrive.sim.scenario import list_scenarios, load_scenario
-from redrive.types import RoadMap, SensorType
+from redrive.types import Mission, RoadMap, SensorType
 
 __all__ = ["SENSOR_LOG", "ClosedLoopRequest", "is_scenario", "run_closed_loop"]
 
@@ -235,6 +235,7 @@ def _run_log(
     if request.seed is not None:
         logger.debug("closed loop on a log: --seed seeds the algorithms only")
     overrides = load_sensor_map_overrides(request.sensor_map) if request.sensor_map else None
+    road_map = log_road_map(log)  # a synthetic or recorded-traffic log's: the map metrics apply
     simulator = LogSimulator(
         log,
         tracker=LqrTracker(),
@@ -245,13 +246,15 @@ def _run_log(
         tyres=TyreLimit(friction_coefficient=request.friction_coefficient),
         delay_steps=request.delay_steps,
         reads_sensors=_reads_sensors(request.pipeline),
+        road_map=road_map,
     )
     return _drive(
         request,
         simulator,
         source=source_log(Path(request.scenario), format=log.format),
         described=simulator.describe(),
-        road_map=log_road_map(log),  # a redrive synth log's: the map metrics apply
+        road_map=road_map,
+        mission=simulator.mission,
         ego_geometry=simulator.geometry,
         total=None,
         on_start=on_start,
@@ -268,6 +271,7 @@ def _drive(
     source: SourceLog,
     described: Mapping[str, Any],
     road_map: RoadMap | None,
+    mission: Mission | None = None,
     ego_geometry: EgoGeometry,
     total: int | None,
     on_start: Callable[[int | None], None] | None,
@@ -281,6 +285,7 @@ def _drive(
         has_vehicle_state=simulator.has_vehicle_state,
         has_ground_truth=simulator.has_ground_truth,
         road_map=road_map,
+        mission=mission,
     )
     graph = build_graph(request.pipeline, inputs)
     pipeline = request.pipeline
