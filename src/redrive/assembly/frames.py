@@ -230,6 +230,23 @@ class FrameAssembler:
             if decoded is not None and isinstance(decoded.value, VehicleState):
                 yield decoded.value
 
+    def ground_truth(
+        self, *, stop_ns: int | None = None
+    ) -> Iterator[tuple[int, tuple[DetectedObject, ...]]]:
+        """Every ground-truth message of the log as (stamp_ns, objects in base_link of the
+        logged ego), in log order (log time before ``stop_ns``), without assembling frames (the
+        closed loop's reactive agents read their whole logged tracks first)."""
+        topic = self.sensor_map.ground_truth_topic
+        if topic is None:
+            return
+        for message in self.log.messages(topics=[topic], stop_ns=stop_ns):
+            decoded = self._decode(message)
+            if decoded is not None and isinstance(decoded.value, tuple):
+                yield (
+                    decoded.stamp_ns,
+                    tuple(o for o in decoded.value if isinstance(o, DetectedObject)),
+                )
+
     def _decode(self, message: LogMessage) -> Decoded | None:
         if decoder_for(message.msgtype) is None and message.encoding != "native":
             return None

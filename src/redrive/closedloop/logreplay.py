@@ -50,11 +50,11 @@ import numpy.typing as npt
 from redrive.algorithms import StageOutputs
 from redrive.assembly.frames import FrameAssembler
 from redrive.assembly.sensor_map import (
-    GROUND_TRUTH_DRIVER,
-    SensorMap,
     SensorMapOverrides,
     infer_sensor_map,
 )
+from redrive.closedloop.lane_agents import LaneAgents
+from redrive.closedloop.log_checks import pace_frames, refuse_unfit_log, topics_text
 from redrive.closedloop.mission import logged_mission
 from redrive.closedloop.mode import DEFAULT_DEVIATION_M, DEFAULT_DEVIATION_RAD
 from redrive.closedloop.simulator import EgoCommand, PathFollower, check_options, choose_command
@@ -96,77 +96,6 @@ __all__ = [
 _MAX_PHYSICS_DT_S = 0.01
 #: ``reactive``: beyond this bumper-to-bumper gap (m) the ego does not hold a vehicle up.
 _INTERACTION_M = 150.0
-
-
-def _topics(log: LogReader) -> str:
-    return ", ".join(f"{t} ({i.msgtype})" for t, i in sorted(log.topics.items())) or "none"
-
-
-def refuse_unfit_log(log: LogReader, *, agents: str) -> None:
-    """Refuse a log closed loop cannot run on, naming what is missing.
-
-    Raises:
-        ConfigError: no ego pose; ``agents == "reactive"`` and no objects.
-    """
-    if not log.capabilities.has_ego_pose:
-        msg = (
-            f"{log.path}: closed loop needs the ego's pose (odometry/poses); this log has none "
-            f"— its topics: {_topics(log)}"
-        )
-        raise ConfigError(msg)
-    if agents == "reactive" and not log.capabilities.has_ground_truth:
-        msg = (
-            f"{log.path}: --agents reactive needs the other road users (ground-truth objects or "
-            f"tracks); this log has none — its topics: {_topics(log)}. Use --agents replay"
-        )
-        raise ConfigError(msg)
-
-
-def _pace(
-    log: LogReader,
-    smap: SensorMap,
-    *,
-    overrides: SensorMapOverrides | None,
-    reads_sensors: bool,
-) -> tuple[SensorMap, str]:
-    """The sensor map with the stream that paces the frames as its ``driver`` (None: the
-    ground truth), and why that one.
-
-    The rule: a ``driver`` the sensor map file names wins (a sensor, or ``"ground_truth"``);
-    else, when no stage reads a sensor (an object-level run: the frames the algorithms use are
-    the ego state and the objects) and the log has ground truth, the ground truth paces — the
-    sensors' samples are then attached to the nearest ground-truth frame where one is near,
-    as in replay; else the sensor map's driver (its highest-rate LiDAR, camera, 2D LiDAR or
-    radar), else the busiest sensor (IMU, GNSS …); else the ground truth.
-    """
-    named = overrides.driver if overrides is not None else None
-    if named == GROUND_TRUTH_DRIVER:
-        return smap, f'the sensor map says driver = "{GROUND_TRUTH_DRIVER}"'
-    if named is not None:
-        return smap, "the sensor map names it as the driver"
-    has_truth = smap.ground_truth_topic is not None
-    if not reads_sensors and has_truth:
-        why = "no stage reads a sensor: an object-level run is paced by its ground truth"
-        return dataclasses.replace(smap, driver=None), why
-    if smap.driver is not None:
-        return smap, "a stage reads a sensor: the log's highest-rate LiDAR/camera/radar paces"
-    if smap.sensors:
-        busiest = max(smap.sensors, key=lambda s: (s.rate_hz, s.sensor_id))
-        why = "the log has no LiDAR, camera or radar: its busiest sensor paces"
-        if has_truth:
-            why = (
-                "a stage reads a sensor and the log has no LiDAR, camera or radar: its busiest "
-                "sensor paces"
-            )
-        return dataclasses.replace(smap, driver=busiest.sensor_id), why
-    if not has_truth:
-        msg = (
-            f"{log.path}: closed loop needs a sensor topic or ground truth to pace its "
-            "frames (a LiDAR, camera, radar, IMU or GNSS, or objects); this log has none "
-            f"— its topics: {_topics(log)}"
-        )
-        raise ConfigError(msg)
-    return smap, "the log has no sensor: its ground truth paces (recorded traffic)"
 
 
 def _length_m(xy: npt.NDArray[np.float64]) -> float:
@@ -258,7 +187,7 @@ class LogSimulator:
             blocks it.
         reads_sensors: whether a stage of the pipeline reads a sensor; when none does (an
             object-level run) and the log has ground truth, the ground truth paces the frames
-            (see :func:`_pace`).
+            (see :func:`~redrive.closedloop.log_checks.pace_frames`).
         road_map: the log's road map (None: it has none): the route of the :attr:`mission`
             (the logged ego path on its lane graph) and the lanes ``reactive`` agents drive.
 
@@ -296,16 +225,18 @@ class LogSimulator:
         if smap.vehicle_state_topic is None:
             msg = (
                 f"{log.path}: closed loop needs the ego's pose (odometry/poses), but no topic "
-                f"decodes to one — its topics: {_topics(log)}"
+                f"decodes to one — its topics: {topics_text(log)}"
             )
             raise ConfigError(msg)
         if agents == "reactive" and smap.ground_truth_topic is None:
             msg = (
                 f"{log.path}: --agents reactive needs the other road users (ground-truth objects "
-                f"or tracks), but no topic decodes to them — its topics: {_topics(log)}"
+                f"or tracks), but no topic decodes to them — its topics: {topics_text(log)}"
             )
             raise ConfigError(msg)
-        smap, self.pace_reason = _pace(log, smap, overrides=overrides, reads_sensors=reads_sensors)
+        smap, self.pace_reason = pace_frames(
+            log, smap, overrides=overrides, reads_sensors=reads_sensors
+        )
         self.log = log
         self.assembler = FrameAssembler(log, sensor_map=smap)
         self.sensors: Mapping[str, SensorType] = {s.sensor_id: s.sensor_type for s in smap.sensors}
@@ -323,6 +254,7 @@ class LogSimulator:
         self.lane_half_width_m = float(lane_half_width_m)
         self.road_map = road_map
         self.road_index = RoadMapIndex(road_map) if road_map is not None else None
+        self._lane_agents: LaneAgents | None = None
         self.reset(0)
         #: the route along the lane graph and the logged ego trajectory (``use_mission``)
         self.mission: Mission | None = logged_mission(
@@ -331,6 +263,18 @@ class LogSimulator:
             start_ns=self._current.stamp_ns,
             duration_s=duration_s,
         )
+        if agents == "reactive" and self.road_index is not None and self.mission is not None:
+            # the logged vehicles along the lane graph (lane_agents); without a map: along
+            # their own logged paths (_Agent)
+            self._lane_agents = LaneAgents(
+                self.assembler,
+                mission=self.mission,
+                index=self.road_index,
+                lane_half_width_m=self.lane_half_width_m,
+                stop_ns=None
+                if duration_s is None
+                else self._current.stamp_ns + round((duration_s + 1.0) * 1e9),
+            )
 
     # -- the Simulator protocol ---------------------------------------------------------------
 
@@ -370,6 +314,8 @@ class LogSimulator:
         self.tracker.reset()
         self._index = 0
         self._agents: dict[int, _Agent] = {}
+        if self._lane_agents is not None:
+            self._lane_agents.reset()
         self._update_agents(first, dt_s=0.0)
 
     def observe(self) -> Frame:
@@ -422,6 +368,8 @@ class LogSimulator:
             self._acting, self._queued = self._queued, chosen.commands
         else:
             self._acting = chosen.commands
+        if self._lane_agents is not None:  # the agents move from where everyone is now
+            self._step_lane_agents(frame, state, dt_s=dt_s)
         substeps = max(1, math.ceil(dt_s / _MAX_PHYSICS_DT_S - 1e-9))
         for _ in range(substeps):
             self._ego.apply(self._acting, dt_s / substeps)
@@ -519,19 +467,40 @@ class LogSimulator:
 
     # -- agents -------------------------------------------------------------------------------
 
+    def _step_lane_agents(self, frame: Frame, ego: VehicleState, *, dt_s: float) -> None:
+        assert self._lane_agents is not None
+        g = self.geometry
+        ahead = g.length_m / 2.0 - g.rear_overhang_m  # rear axle → centre
+        yaw = ego.heading_rad
+        centre = (
+            float(ego.position[0]) + ahead * math.cos(yaw),
+            float(ego.position[1]) + ahead * math.sin(yaw),
+        )
+        lights = {light.id: light.state for light in frame.traffic.traffic_lights}
+        self._lane_agents.step(
+            frame.stamp_ns,
+            dt_s=dt_s,
+            ego=(centre[0], centre[1], yaw, ego.speed_mps, g.length_m),
+            lights=lights,
+        )
+
     def _object(
         self, obj: DetectedObject, *, logged: VehicleState, driven: VehicleState
     ) -> DetectedObject:
-        agent = self._agents.get(obj.object_id) if self.agents == "reactive" else None
-        if agent is None:
+        pose: tuple[float, float, float, float] | None = None
+        if self._lane_agents is not None:
+            pose = self._lane_agents.pose(obj.object_id, self._current.stamp_ns)
+        elif self.agents == "reactive" and (agent := self._agents.get(obj.object_id)):
+            pose = (*agent.pose(), agent.speed_mps)
+        if pose is None:
             return transform_object(driven_from_logged(driven, logged), obj)
-        # the agent where IDM has it along its logged path, in the driven base frame
-        x, y, yaw = agent.pose()
+        # the agent where IDM has it (along its lane line, or its logged path), in the driven
+        # base frame
+        x, y, yaw, v = pose
         base_from_map = invert(_pose(driven))
         center = base_from_map @ np.array([x, y, 0.0, 1.0])
         yaw_base = math.remainder(yaw - driven.heading_rad, math.tau)
         logged_base = transform_object(driven_from_logged(driven, logged), obj)
-        v = agent.speed_mps
         velocity = base_from_map[:3, :3] @ np.array([v * math.cos(yaw), v * math.sin(yaw), 0.0])
         orientation = logged_base.orientation.copy()
         orientation[0] = yaw_base
@@ -544,7 +513,7 @@ class LogSimulator:
 
     def _update_agents(self, frame: Frame, *, dt_s: float) -> None:
         """``reactive``: log the vehicles' new poses, then move each by IDM against the ego."""
-        if self.agents != "reactive" or frame.ground_truth is None:
+        if self.agents != "reactive" or frame.ground_truth is None or self._lane_agents:
             return
         logged = self._logged(frame)
         map_from_base = _pose(logged)

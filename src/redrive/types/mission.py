@@ -75,4 +75,4 @@ class Mission:
 
     @property
     def has_route(self) -> bool:
-        return self.route_xy.shape[0] >= 2
+        return bool(self.route_xy.shape[0] >= 2)

@@ -7,7 +7,7 @@ scenario's logged ego trajectory from the current iteration on (``get_ego_future
 the logged trajectory is the :class:`~redrive.types.Mission`'s (``Algorithm.use_mission``: a
 closed loop on a recorded log hands it over): every frame the plan is the logged ego's positions
 at ``stamp + k·dt_s`` (linear between logged states, held at the last one past the log's end),
-``k = 0 … horizon_s / dt_s``, in the mission's frame (map).  The built-in tracker follows it, so
+``k = 0 … horizon_s / dt_s``, in base_link of the frame's (driven) ego.  The built-in tracker follows it, so
 the driven ego stays within the tracker's error of the log — "the expert on its own map".
 
 Configuration: ``horizon_s`` (8.0, nuPlan's ``future_time_horizon``), ``dt_s`` (0.1).
@@ -15,6 +15,7 @@ Configuration: ``horizon_s`` (8.0, nuPlan's ``future_time_horizon``), ``dt_s`` (
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from types import MappingProxyType
 from typing import Any, ClassVar
@@ -67,5 +68,15 @@ class LogFuturePlanner(Algorithm):
         rel = (stamps - stamps[0]).astype(np.float64) / 1e9
         x = np.interp(at, rel, mission.logged_xy[:, 0])
         y = np.interp(at, rel, mission.logged_xy[:, 1])
-        waypoints = np.column_stack([x, y, np.zeros_like(t_s), t_s])
-        return PlannedPath(stamp_ns=frame.stamp_ns, waypoints=waypoints, frame_id=mission.frame_id)
+        state = frame.vehicle_state
+        if state is None or state.frame_id != mission.frame_id:
+            msg = (
+                f"{self.name}: frame {frame.index} has no ego state in the mission's frame "
+                f"{mission.frame_id!r}"
+            )
+            raise AlgorithmError(msg)
+        # into base_link of the frame's (driven) ego, as every planner's plan
+        dx, dy = x - float(state.position[0]), y - float(state.position[1])
+        c, sn = math.cos(state.heading_rad), math.sin(state.heading_rad)
+        waypoints = np.column_stack([c * dx + sn * dy, -sn * dx + c * dy, np.zeros_like(t_s), t_s])
+        return PlannedPath(stamp_ns=frame.stamp_ns, waypoints=waypoints, frame_id="base_link")
