@@ -43,12 +43,12 @@ import numpy.typing as npt
 import shapely
 
 from redrive.assembly.frames import FrameAssembler
-from redrive.maps.index import DRIVABLE_LANE_KINDS, RoadMapIndex
+from redrive.maps.index import RoadMapIndex
 from redrive.maps.route import route_along_path
 from redrive.motion import IdmParams, idm_acceleration
 from redrive.types import LightState, Mission, ObjectClass, RoadMap
 
-__all__ = ["LANE_CLASSES", "LaneAgents", "Track"]
+__all__ = ["LANE_CLASSES", "LaneAgents", "Track", "TrackSamples", "read_tracks"]
 
 F64 = npt.NDArray[np.float64]
 #: the ground-truth classes that drive along lanes
@@ -116,9 +116,13 @@ def _logged_pose_at(mission: Mission, stamps_ns: npt.NDArray[np.int64]) -> tuple
     return x, y, yaw
 
 
+#: one logged track: stamps (ns), centres (x, y, map), headings (rad), (length, width) m
+TrackSamples = tuple[list[int], list[tuple[float, float]], list[float], tuple[float, float]]
+
+
 def read_tracks(
     assembler: FrameAssembler, mission: Mission, *, stop_ns: int | None
-) -> dict[int, tuple[list[int], list[tuple[float, float]], list[float], tuple[float, float]]]:
+) -> dict[int, TrackSamples]:
     """Every lane-class track of the log's ground truth, in the map frame: id → (stamps, xy,
     yaw, (length, width))."""
     raw: dict[int, list[tuple[int, float, float, float, float, float]]] = {}
@@ -167,37 +171,31 @@ class LaneAgents:
     """The logged vehicles of a log under IDM along the lane graph (see the module text).
 
     Args:
-        assembler: the log's frames (its ground truth is read whole here).
-        mission: the logged ego trajectory (to move the ground truth into the map frame).
-        index: the road map's index (its lanes of :data:`DRIVABLE_LANE_KINDS`).
+        tracks: the logged tracks, map frame (:func:`read_tracks`; :meth:`from_log`).
+        index: the road map's index (its lane queries: the lanes of
+            :data:`~redrive.maps.index.DRIVABLE_LANE_KINDS`).
         lane_half_width_m: a leader farther off an agent's lane line does not hold it up.
-        stop_ns: read the ground truth before this log time (None: all of it).
         params: IDM's parameters but the desired speed (per track).
     """
 
     def __init__(
         self,
-        assembler: FrameAssembler,
+        tracks: Mapping[int, TrackSamples],
         *,
-        mission: Mission,
         index: RoadMapIndex,
         lane_half_width_m: float = 1.75,
-        stop_ns: int | None = None,
         params: IdmParams | None = None,
     ) -> None:
         self.index = index
         self.lane_half_width_m = float(lane_half_width_m)
         self.params = params or IdmParams()
         road = index.road_map
-        lane_index = RoadMapIndex(road, lane_kinds=DRIVABLE_LANE_KINDS)
         controlled = {t.stop_line_id: t.light_id for t in road.traffic_lights if t.stop_line_id}
         self.tracks: dict[int, Track] = {}
-        for oid, (stamps, xy, yaw, (length, width)) in read_tracks(
-            assembler, mission, stop_ns=stop_ns
-        ).items():
+        for oid, (stamps, xy, yaw, (length, width)) in tracks.items():
             pts = np.array(xy, dtype=np.float64)
             yaws = np.array(yaw, dtype=np.float64)
-            lanes, line_xy = route_along_path(lane_index, pts, yaws, extend_m=_EXTEND_M)
+            lanes, line_xy = route_along_path(index, pts, yaws, extend_m=_EXTEND_M)
             if line_xy.shape[0] < 2:
                 lanes, line_xy = (), _dedup(pts)
             if line_xy.shape[0] < 2:  # a track that never moves: stays replayed
@@ -227,6 +225,20 @@ class LaneAgents:
                 line_length_m=float(line.length),
             )
         self._lines = {oid: t.line for oid, t in self.tracks.items()}
+
+    @classmethod
+    def from_log(
+        cls,
+        assembler: FrameAssembler,
+        *,
+        mission: Mission,
+        index: RoadMapIndex,
+        lane_half_width_m: float = 1.75,
+        stop_ns: int | None = None,
+    ) -> LaneAgents:
+        """The lane agents of a log's ground truth (read whole, :func:`read_tracks`)."""
+        tracks = read_tracks(assembler, mission, stop_ns=stop_ns)
+        return cls(tracks, index=index, lane_half_width_m=lane_half_width_m)
 
     # -- per frame ---------------------------------------------------------------------------
 

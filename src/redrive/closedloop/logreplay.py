@@ -20,18 +20,30 @@ ground and far objects shift with the car, and the log's own motion blur and tim
 flagged as too far from the log for its sensor data to be trusted (the ``deviated`` column).
 
 Agents: ``replay`` — the logged objects as recorded (moved into the driven base frame).
-``reactive`` — the same, except the logged *vehicles that have the driven ego ahead of them in
+``reactive`` on a log with a road map (Argoverse 2, Waymo Open Motion, CommonRoad, a ``redrive
+synth`` log) — the logged vehicles drive along the lane graph under IDM whenever the driven ego
+or a vehicle held up by it blocks them, stopping at red lights and stop signs, and hand back to
+their logged track when nothing does (:mod:`redrive.closedloop.lane_agents`).  ``reactive``
+without a map — the logged *vehicles that have the driven ego ahead of them in
 their lane* (the ego's rear axle within ``lane_half_width_m`` of their heading line, ahead of
 them, bumper-to-bumper gap below 150 m): each such vehicle moves along its own logged path at a
 speed set by IDM with the driven ego as its leader and its logged speed (along its logged path)
 as the desired one, never ahead of where the log has it.  A vehicle the ego never holds up is
 exactly replayed; one it held up drives on at its logged speed, behind its logged position, until
-it catches up with it (only where the log is faster).  Nothing else reacts (no lane changes, no pedestrians, no objects the
-log does not have), and an object is shown only while the log has it.
+it catches up with it (only where the log is faster).  In either, nothing else reacts
+(pedestrians and cyclists are replayed, no objects the log does not have), and an object is
+shown only while the log has it.
 
-Frames come from :class:`redrive.assembly.frames.FrameAssembler` (a log without a LiDAR, camera or radar
-is paced by its busiest sensor, e.g. an IMU; one without any sensor, or whose sensor map says
-``driver = "ground_truth"``, by its ground-truth messages), at most ``rate_hz`` of them: the first frame at
+Mission: with a road map the logged ego path is mapped onto the lane graph
+(:mod:`redrive.closedloop.mission`); the route and the logged trajectory are handed to every
+algorithm before the first frame (``Algorithm.use_mission``): ``idm-planner`` follows the route,
+``log-future-planner`` drives the logged trajectory (the expert).
+
+Frames come from :class:`redrive.assembly.frames.FrameAssembler`, paced by one stream
+(:func:`redrive.closedloop.log_checks.pace_frames`): the sensor map file's ``driver`` when it
+names one; else, when no stage reads a sensor and the log has ground truth (an object-level
+run), the ground-truth messages; else its highest-rate LiDAR/camera/radar, else its busiest
+sensor (an IMU …), else the ground truth — at most ``rate_hz`` of them: the first frame at
 or after each tick of a ``1 / rate_hz`` clock (less a quarter period, for jitter).  The time step between two frames is
 the log's (:attr:`LogSimulator.dt_s` is the gap to the next frame).
 """
@@ -62,7 +74,7 @@ from redrive.closedloop.synthetic import AgentMode
 from redrive.errors import ConfigError
 from redrive.geometry import invert, transform_object
 from redrive.io import LogReader
-from redrive.maps.index import RoadMapIndex
+from redrive.maps.index import DRIVABLE_LANE_KINDS, RoadMapIndex
 from redrive.motion import IdmParams, idm_acceleration
 from redrive.sim.ego import (
     ActuatedEgo,
@@ -253,7 +265,9 @@ class LogSimulator:
         self.deviation_threshold_rad = float(deviation_threshold_rad)
         self.lane_half_width_m = float(lane_half_width_m)
         self.road_map = road_map
-        self.road_index = RoadMapIndex(road_map) if road_map is not None else None
+        self.road_index = (
+            RoadMapIndex(road_map, lane_kinds=DRIVABLE_LANE_KINDS) if road_map is not None else None
+        )
         self._lane_agents: LaneAgents | None = None
         self.reset(0)
         #: the route along the lane graph and the logged ego trajectory (``use_mission``)
@@ -266,7 +280,7 @@ class LogSimulator:
         if agents == "reactive" and self.road_index is not None and self.mission is not None:
             # the logged vehicles along the lane graph (lane_agents); without a map: along
             # their own logged paths (_Agent)
-            self._lane_agents = LaneAgents(
+            self._lane_agents = LaneAgents.from_log(
                 self.assembler,
                 mission=self.mission,
                 index=self.road_index,
