@@ -16,6 +16,7 @@ sensor log and the Waymo Open Motion scenario of ../shared/data.
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 from pathlib import Path
@@ -118,7 +119,7 @@ def test_av2_route_is_the_logged_path_on_the_lane_graph(shared_data: Path) -> No
     lanes, line = route_along_path(index, xy, yaw)
     assert len(lanes) >= 3
     # every step of the chain is a successor or a lane change to a neighbour
-    for a, b in zip(lanes, lanes[1:], strict=False):
+    for a, b in itertools.pairwise(lanes):
         lane = road.lane(a)
         assert b in lane.successors or b in (lane.left_neighbor, lane.right_neighbor), (a, b)
     # every logged pose lies in a lane of the route, and the reference line (the lanes'
@@ -136,7 +137,8 @@ def test_av2_idm_planner_scores_every_map_metric_on_the_road(av2_idm: Path) -> N
         assert metric not in skipped, skipped
         assert headline in values[metric], values
     route = open_run(av2_idm).manifest.closed_loop["route"]
-    assert route["lanes"] and route["length_m"] > 75.0
+    assert route["lanes"]
+    assert route["length_m"] > 75.0
     # it follows the route through the turn: on the road, the right way, no one hit
     assert values["drivable_area"]["drivable_area_compliance"] == 1.0
     assert values["driving_direction"]["driving_direction_compliance"] == 1.0
@@ -205,7 +207,8 @@ def test_a_planner_that_leaves_the_road_fails_drivable_area_at_that_step(
         if outside >= 0.3:
             first = index
             break
-    assert first is not None and first > 5  # it starts on the road, leaves it later
+    assert first is not None
+    assert first > 5  # it starts on the road, leaves it later
     frames, outside_m = results["drivable_area"].per_frame["outside_m"]
     failing = [int(f) for f, d in zip(frames, outside_m, strict=True) if d >= 0.3]
     assert failing[0] == first
