@@ -276,19 +276,13 @@ class LaneAgents:
         if not live:
             return
         # where everyone is now (before this step): the leaders' positions
-        others: list[tuple[int, float, float, float, float, float]] = []
-        for t in live:
-            if t.lane_mode:
-                x, y, yaw = _on_line(t, t.s_m)
-                v = t.speed_mps
-            else:
-                x, y, yaw = _logged_xy_yaw(t, stamp_ns)
-                v = t.speed_logged(stamp_ns)
-            others.append((t.object_id, x, y, yaw, v, t.length_m))
         ex, ey, eyaw, ev, elen = ego
-        leaders_all = [(-1, ex, ey, eyaw, ev, elen), *others]
-        unlogged = [ldr for ldr in leaders_all if ldr[0] == -1 or self.tracks[ldr[0]].lane_mode]
+        driven = (-1, ex, ey, eyaw, ev, elen)
+        unlogged = [driven, *(self._now(t, stamp_ns) for t in live if t.lane_mode)]
         self._hold_up(stamp_ns, [t for t in live if not t.lane_mode], unlogged)
+        if not any(t.lane_mode for t in live):
+            return  # everyone as logged (the common case: nothing more to compute)
+        leaders_all = [driven, *(self._now(t, stamp_ns) for t in live)]
         for track in live:
             if not track.lane_mode:
                 continue
@@ -323,6 +317,17 @@ class LaneAgents:
                     track.lane_mode = False  # caught up, nothing holds it: the log again
 
     # -- helpers -----------------------------------------------------------------------------
+
+    @staticmethod
+    def _now(track: Track, stamp_ns: int) -> tuple[int, float, float, float, float, float]:
+        """(id, x, y, yaw, speed, length) of a track where it is at ``stamp_ns``."""
+        if track.lane_mode:
+            x, y, yaw = _on_line(track, track.s_m)
+            v = track.speed_mps
+        else:
+            x, y, yaw = _logged_xy_yaw(track, stamp_ns)
+            v = track.speed_logged(stamp_ns)
+        return track.object_id, x, y, yaw, v, track.length_m
 
     def _hold_up(
         self,

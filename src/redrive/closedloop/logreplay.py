@@ -340,7 +340,7 @@ class LogSimulator:
         sensors = {sid: _reexpress_sensor(data, mat) for sid, data in frame.sensors.items()}
         objects = frame.ground_truth
         if objects is not None:
-            objects = tuple(self._object(o, logged=logged, driven=driven) for o in objects)
+            objects = tuple(self._object(o, driven=driven, moved=mat) for o in objects)
         return dataclasses.replace(
             frame,
             index=self._index,
@@ -499,22 +499,24 @@ class LogSimulator:
         )
 
     def _object(
-        self, obj: DetectedObject, *, logged: VehicleState, driven: VehicleState
+        self, obj: DetectedObject, *, driven: VehicleState, moved: npt.NDArray[np.float64]
     ) -> DetectedObject:
+        """``obj`` (logged base_link) in the driven base frame (``moved``:
+        ``driven_base_from_logged_base``), or where its reactive agent is."""
         pose: tuple[float, float, float, float] | None = None
         if self._lane_agents is not None:
             pose = self._lane_agents.pose(obj.object_id, self._current.stamp_ns)
         elif self.agents == "reactive" and (agent := self._agents.get(obj.object_id)):
             pose = (*agent.pose(), agent.speed_mps)
         if pose is None:
-            return transform_object(driven_from_logged(driven, logged), obj)
+            return transform_object(moved, obj)
         # the agent where IDM has it (along its lane line, or its logged path), in the driven
         # base frame
         x, y, yaw, v = pose
         base_from_map = invert(_pose(driven))
         center = base_from_map @ np.array([x, y, 0.0, 1.0])
         yaw_base = math.remainder(yaw - driven.heading_rad, math.tau)
-        logged_base = transform_object(driven_from_logged(driven, logged), obj)
+        logged_base = transform_object(moved, obj)
         velocity = base_from_map[:3, :3] @ np.array([v * math.cos(yaw), v * math.sin(yaw), 0.0])
         orientation = logged_base.orientation.copy()
         orientation[0] = yaw_base
