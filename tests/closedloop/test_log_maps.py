@@ -228,3 +228,19 @@ def test_reactive_agents_stop_behind_a_stopped_ego_along_their_lanes(
     # vehicles it holds up queue behind it
     assert collisions["replay"] > 0
     assert collisions["reactive"] == 0
+
+
+def test_a_commonroad_scenario_runs_from_its_planning_problem_start(
+    shared_data: Path, tmp_path: Path
+) -> None:
+    # the planning problem's initial state is the ego's only logged state: every frame of the
+    # 32 steps is driven from it (no logged ego to deviate from), the obstacles on the lanes
+    out = tmp_path / "cr"
+    log = shared_data / "commonroad" / "USA_US101-3_3_T-1.xml"
+    _closed(out, log, "idm-planner", "--agents", "reactive", "--perception", "noisy-oracle")
+    run = open_run(out)
+    assert len(run.ego()) == 31
+    assert run.manifest.closed_loop["route"]["lanes"]
+    values, skipped = _scores(out)
+    assert not {m for m in MAP_METRICS if m in skipped}, skipped
+    assert values["drivable_area"]["drivable_area_compliance"] == 1.0

@@ -269,6 +269,10 @@ class LogSimulator:
             RoadMapIndex(road_map, lane_kinds=DRIVABLE_LANE_KINDS) if road_map is not None else None
         )
         self._lane_agents: LaneAgents | None = None
+        #: the log's ego pose topic has one message, the scenario's start (CommonRoad's planning
+        #: problem): the frames after it carry that pose as the logged one (objects are in its
+        #: base_link), and there is no logged ego to deviate from (``logged_state`` None)
+        self.start_only = log.topics[smap.vehicle_state_topic].count == 1
         self.reset(0)
         #: the route along the lane graph and the logged ego trajectory (``use_mission``)
         self.mission: Mission | None = logged_mission(
@@ -398,7 +402,8 @@ class LogSimulator:
 
     @property
     def logged_state(self) -> VehicleState | None:
-        return self._logged(self._current)
+        """The logged ego now; None when the log has only its start (:attr:`start_only`)."""
+        return None if self.start_only else self._logged(self._current)
 
     @property
     def paced_by(self) -> str:
@@ -453,9 +458,18 @@ class LogSimulator:
         slack_ns = period_ns // 4
         first_ns: int | None = None
         due_ns = 0
+        start: VehicleState | None = None
         for frame in self.assembler.frames():
             if frame.vehicle_state is None:
-                continue
+                if start is None or not self.start_only:
+                    continue
+                # a scenario's start is its only ego state (CommonRoad): the frames after it
+                # keep it (their objects are in its base_link)
+                frame = dataclasses.replace(  # noqa: PLW2901
+                    frame, vehicle_state=dataclasses.replace(start, stamp_ns=frame.stamp_ns)
+                )
+            elif start is None:
+                start = frame.vehicle_state
             if first_ns is None:
                 first_ns = frame.stamp_ns
             elif frame.stamp_ns < due_ns:
