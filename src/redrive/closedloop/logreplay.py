@@ -272,7 +272,8 @@ class LogSimulator:
         #: the log's ego pose topic has one message, the scenario's start (CommonRoad's planning
         #: problem): the frames after it carry that pose as the logged one (objects are in its
         #: base_link), and there is no logged ego to deviate from (``logged_state`` None)
-        self.start_only = log.topics[smap.vehicle_state_topic].count == 1
+        pose_topic = log.topics.get(smap.vehicle_state_topic or "")
+        self.start_only = pose_topic is not None and pose_topic.count == 1
         self.reset(0)
         #: the route along the lane graph and the logged ego trajectory (``use_mission``)
         self.mission: Mission | None = logged_mission(
