@@ -60,7 +60,7 @@ _STOPPED_MPS = 0.2
 _EXTEND_M = 40.0
 
 
-@dataclass(slots=True)
+@dataclass(slots=True, eq=False)
 class Track:
     """One logged vehicle: its samples (map frame) and its lane line.
 
@@ -87,6 +87,8 @@ class Track:
     desired_speed_mps: float
     lanes: tuple[str, ...]
     line_length_m: float = 0.0
+    first_ns: int = 0
+    last_ns: int = 0
     # -- the simulation state ---------------------------------------------------------------
     lane_mode: bool = False
     s_m: float = 0.0
@@ -223,6 +225,8 @@ class LaneAgents:
                 desired_speed_mps=desired,
                 lanes=lanes,
                 line_length_m=float(line.length),
+                first_ns=int(stamps[0]),
+                last_ns=int(stamps[-1]),
             )
         self._lines = {oid: t.line for oid, t in self.tracks.items()}
 
@@ -269,10 +273,12 @@ class LaneAgents:
     ) -> None:
         """Advance every track present at ``stamp_ns`` by ``dt_s``; ``ego`` is the driven
         ego's (centre x, y, yaw, speed, length)."""
-        live = [t for t in self.tracks.values() if t.stamps_ns[0] <= stamp_ns <= t.stamps_ns[-1]]
+        live: list[Track] = []
         for track in self.tracks.values():
-            if track not in live:
-                track.lane_mode = False
+            if track.first_ns <= stamp_ns <= track.last_ns:
+                live.append(track)
+            else:
+                track.lane_mode = False  # shown only while the log has it
         if not live:
             return
         # where everyone is now (before this step): the leaders' positions
