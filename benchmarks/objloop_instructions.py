@@ -3,7 +3,7 @@ callgrind — a load-robust figure: the count does not depend on what else runs 
 
     PYTHONPATH=src valgrind --tool=callgrind --instr-atstart=no --collect-atstart=no \\
         --toggle-collect=_operator_call --callgrind-out-file=cg.out \\
-        python benchmarks/objloop_instructions.py [--passes 1]
+        python benchmarks/objloop_instructions.py [--passes 1] [--baseline]
     callgrind_annotate --inclusive=yes cg.out | head -60
 
 One warm-up pass (imports, the compiled kernels loaded, plugin discovery; not instrumented, so
@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import Any
 
 import redrive.closedloop.run as closed_loop_run
-from redrive.benchmarks.closed_loop import closed_loop_pipeline
+from redrive.benchmarks.closed_loop import _world_alone, closed_loop_pipeline
 from redrive.closedloop.run import ClosedLoopRequest, run_closed_loop
 from redrive.results import RunWriter
 
@@ -57,7 +57,21 @@ def main() -> None:
     parser.add_argument(
         "--no-switch", action="store_true", help="do not call callgrind_control -i on"
     )
+    parser.add_argument(
+        "--baseline",
+        action="store_true",
+        help="count `bench closed-loop`'s baseline instead: the world stepped alone (its "
+        "_world_alone, 20 s of urban at 10 Hz) — the closed loop's count over this one is the "
+        "bench's ratio in instructions",
+    )
     args = parser.parse_args()
+    if args.baseline:
+        _world_alone("urban", 20.0, 10.0)  # warm: imports, the compiled kernels
+        if not args.no_switch:
+            subprocess.run(["callgrind_control", "-i", "on", str(os.getpid())], check=False)
+        for _ in range(args.passes):
+            operator.call(_world_alone, "urban", 20.0, 10.0)  # type: ignore[attr-defined]
+        return
     execute = closed_loop_run.execute
     # a native pass (≈ 0.2 s) flushes its frames once, at close; under callgrind a pass takes
     # tens of seconds and the writer's 2-s flush interval would add flushes (and instructions)

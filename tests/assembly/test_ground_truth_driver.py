@@ -42,3 +42,21 @@ def test_a_sensor_map_file_can_make_the_ground_truth_drive(tmp_path: Path) -> No
 
 def test_without_the_file_the_lidar_drives() -> None:
     assert infer_sensor_map(_topics(objects=True), duration_ns=10**9).driver == "points"
+
+
+def test_an_imu_paces_a_log_without_lidar_camera_radar_or_ground_truth() -> None:
+    # issue 35 item 11: an IMU/odometry-only log made no frames open loop
+    imu = TopicInfo(
+        topic="/imu", msgtype="sensor_msgs/msg/Imu", count=500, encoding="ros1",
+        kind=DecodedKind.SENSOR, sensor_type=SensorType.IMU,
+    )  # fmt: skip
+    fix = TopicInfo(
+        topic="/fix", msgtype="sensor_msgs/msg/NavSatFix", count=20, encoding="ros1",
+        kind=DecodedKind.SENSOR, sensor_type=SensorType.GNSS,
+    )  # fmt: skip
+    smap = infer_sensor_map({"/imu": imu, "/fix": fix}, duration_ns=10 * 10**9)
+    assert smap.driver == "imu"  # the busiest sensor
+    gt = _topics(objects=True)["/gt"]
+    smap = infer_sensor_map({"/imu": imu, "/gt": gt}, duration_ns=10 * 10**9)
+    assert smap.driver is None  # recorded traffic with an IMU: the ground truth still drives
+    assert smap.ground_truth_topic == "/gt"

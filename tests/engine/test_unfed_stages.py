@@ -72,3 +72,76 @@ def test_the_default_run_of_the_real_kitti_folder_runs_perception_and_stores_the
     # --strict refuses it, as before
     assert main(["run", str(kitti), "--out", str(tmp_path / "strict"), "--strict"]) != 0
     assert "needs vehicle state" in capsys.readouterr().err
+
+
+_WITH_TRACKER = (
+    ("detection", "clusters", "cluster-detector"),
+    ("tracking", "tracker", "kalman-tracker"),
+    ("planning", "planner", "idm-planner"),
+    ("control", "controller", "pure-pursuit-pid"),
+)
+
+
+def test_a_tracker_whose_detector_is_skipped_is_skipped_too() -> None:
+    # issue 35 item 11: an IMU/odometry-only log feeds planning and control, not perception
+    imu_only = LogInputs(sensors={"imu_data": SensorType.IMU}, has_vehicle_state=True)
+    graph = build_graph(_pipeline(*_WITH_TRACKER), imu_only, skip_unfed=True)
+    assert [name for name, _ in graph.stages] == ["planning", "control"]
+    assert list(graph.skipped) == ["clusters", "tracker"]
+    assert "needs a LIDAR sensor" in graph.skipped["clusters"]
+    assert "no perception algorithm runs before it" in graph.skipped["tracker"]
+    # with its detector fed, the tracker runs
+    lidar = LogInputs(sensors={"velodyne": SensorType.LIDAR}, has_vehicle_state=True)
+    graph = build_graph(_pipeline(*_WITH_TRACKER), lidar, skip_unfed=True)
+    assert graph.skipped == {}
+    # refused without skipping, as before: the detector's missing LiDAR is named
+    with pytest.raises(MissingInputError, match=r"stage 'detection'.*LIDAR"):
+        build_graph(_pipeline(*_WITH_TRACKER), imu_only)
+
+
+def test_open_loop_on_a_real_imu_and_odometry_bag_plans_and_controls(
+    shared_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # the Jackal bag: /imu/data (3,061 Imu) and /jackal_velocity_controller/odom (3,060
+    # Odometry), nothing else.  Its IMU now paces the frames (a closed loop over it did so
+    # already), the ego state is the odometry, and the default pipeline runs what that feeds.
+    bag = shared_data / "rosbag1_real" / "robot_localization_test2_jackal.bag"
+    out = tmp_path / "run"
+    assert main(["run", str(bag), "--out", str(out), "--no-progress"]) == 0
+    said = capsys.readouterr().out
+    assert "skipped clusters" in said
+    assert "skipped tracker" in said
+    manifest = read_manifest(out)
+    assert manifest.pipeline.stages == ("planning", "control")
+    assert set(manifest.pipeline.skipped) == {"clusters", "tracker"}
+    assert manifest.sensors == {"imu_data": SensorType.IMU}
+    run = open_run(out)
+    assert run.table("frames").num_rows == 3061  # one frame per IMU message
+    steps = run.table("steps").to_pylist()
+    assert {s["algorithm"] for s in steps} == {"planner", "controller"}
+    assert all(s["status"] == "ok" for s in steps)
+    assert run.table("paths").num_rows > 0
+    assert run.table("commands").num_rows == 3061
+    # --strict refuses it
+    assert main(["run", str(bag), "--out", str(tmp_path / "strict"), "--strict"]) != 0
+    assert "LIDAR" in capsys.readouterr().err
+
+
+def test_open_loop_on_the_real_husky_bag_plans_at_its_imu_rate(
+    shared_data: Path, tmp_path: Path
+) -> None:
+    # the Husky bag (REAL, 2015): /imu/data 11,865 Imu at 30 Hz, odometry at 10 Hz, /fix 2.5 Hz
+    bag = shared_data / "rosbag1_real" / "robot_localization_test1_husky.bag"
+    out = tmp_path / "run"
+    assert main(["run", str(bag), "--out", str(out), "--frames", "0:200", "--no-progress"]) == 0
+    manifest = read_manifest(out)
+    assert manifest.pipeline.stages == ("planning", "control")
+    assert manifest.sensors == {"fix": SensorType.GNSS, "imu_data": SensorType.IMU}
+    run = open_run(out)
+    stamps = run.table("frames").column("stamp_ns").to_pylist()
+    assert len(stamps) == 200
+    period_s = (stamps[-1] - stamps[0]) / 199 / 1e9
+    assert 1 / 35 < period_s < 1 / 25  # the IMU's ~30 Hz paces the frames
+    steps = run.table("steps").to_pylist()
+    assert all(s["status"] == "ok" for s in steps)
+    assert len(steps) == 400  # planner and controller, every frame

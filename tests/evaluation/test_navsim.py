@@ -4,6 +4,7 @@ run of a synthetic log through ``redrive evaluate``."""
 
 from __future__ import annotations
 
+import dataclasses
 import shutil
 from pathlib import Path
 from types import SimpleNamespace
@@ -175,17 +176,33 @@ def test_running_a_red_light_scores_zero() -> None:
 
 
 def test_red_light_polygons_follow_the_map_and_the_states() -> None:
-    """Red lights cover the on-route lanes they control; green ones and off-route lanes none."""
-    road = SimpleNamespace(  # lanes without a graph: a light covers the lane it controls
-        lanes=ROAD.lanes,
+    """Red lights cover the on-route lanes they control; green ones and off-route lanes none.
+    As in nuPlan's maps the lights sit on lanes inside an intersection (the connectors); a light
+    on an approach lane that leads nowhere covers nothing (no connector is beyond its line)."""
+    from redrive.types import Intersection, MapTrafficLight
+
+    square = np.array([[-100.0, -5.0], [400.0, -5.0], [400.0, 8.0], [-100.0, 8.0]])
+    road = RoadMap(
+        lanes=(
+            *(dataclasses.replace(lane, intersection_id="X") for lane in ROAD.lanes),
+            MapLane(lane_id="spur", centerline=np.array([[0.0, -20.0], [0.0, -10.0]]), width_m=3.5),
+        ),
+        intersections=(
+            Intersection(intersection_id="X", polygon=square, lane_ids=("east", "west")),
+        ),
         traffic_lights=(
-            SimpleNamespace(light_id="L1", lane_ids=("east",)),
-            SimpleNamespace(light_id="L2", lane_ids=("west",)),
+            MapTrafficLight(light_id="L1", position=np.zeros(2), lane_ids=("east",)),
+            MapTrafficLight(light_id="L2", position=np.zeros(2), lane_ids=("west",)),
+            MapTrafficLight(light_id="L3", position=np.zeros(2), lane_ids=("spur",)),
         ),
     )
-    states = [{"L1": LightState.RED, "L2": LightState.RED}, {"L1": LightState.GREEN}, None]
-    got = red_light_polygons(road, CTX, states)  # type: ignore[arg-type]
-    assert [len(p) for p in got] == [1, 0, 0]  # "west" is not on the route
+    states = [
+        {"L1": LightState.RED, "L2": LightState.RED, "L3": LightState.RED},
+        {"L1": LightState.GREEN},
+        None,
+    ]
+    got = red_light_polygons(road, CTX, states)
+    assert [len(p) for p in got] == [1, 0, 0]  # "west" is not on the route, "spur" leads nowhere
     assert got[0][0].equals(CTX.lane_polygon_by_id["east"])
 
 

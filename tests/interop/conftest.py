@@ -48,3 +48,19 @@ def short_run(short_log: Path, tmp_path_factory: pytest.TempPathFactory) -> Path
     )
     store_metric(out, record={"name": "detection", "version": "1"}, tables={"bookmarks": marks})
     return out
+
+
+@pytest.fixture(scope="session")
+def luminar_run(shared_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The reference perception (clusters → tracker) over the real Luminar bag of
+    ``../shared/data``, as ``redrive run`` writes it: its clouds' header stamps (2020-03-12) are
+    237.8 days before their log times (2020-11-04), and nothing in the bag connects their frame
+    ``luminar_lidar`` to ``base_link``."""
+    from redrive.cli.main import main
+
+    bag = shared_data / "rosbag1_real" / "embag_luminar_test.bag"
+    out = tmp_path_factory.mktemp("fg_luminar") / "luminar"
+    args = ["run", str(bag), "--out", str(out), "--no-progress"]
+    args += ["--perception", "cluster-detector", "--perception", "kalman-tracker"]
+    assert main(args) == 0
+    return out

@@ -14,6 +14,7 @@ import itertools
 import json
 import struct
 import threading
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -205,3 +206,47 @@ def test_the_old_subprotocol_alone_is_refused_and_offered_beside_the_new_one_is_
 
     assert asyncio.run(old_only()) == 400
     assert asyncio.run(both()) == _SUBPROTOCOL
+
+
+def test_a_real_bag_run_is_paced_on_the_log_time_axis(luminar_run: Path) -> None:
+    # issue 35 item 6: the Luminar bag's frames are stamped 237.8 days before their log times;
+    # served at their stamps, the results came first and the player then waited 237.8 days for
+    # the clouds.  Now the results sit at their clouds' log times: the whole stream (7.6 s of
+    # log) plays in its log span ÷ rate, clouds and their results side by side.
+    rate = 4.0
+    with open_scene_stream(luminar_run) as stream:
+        assert stream.reader is not None
+        assert (stream.start_ns, stream.end_ns) == (stream.reader.start_ns, stream.reader.end_ns)
+        expected = list(stream.messages())
+        player, server = serve_stream(stream, port=0, rate=rate, playing=False)
+        thread = threading.Thread(target=player.play, daemon=True)
+        thread.start()
+        try:
+
+            async def session() -> tuple[list[OutMessage], float]:
+                url = f"ws://127.0.0.1:{server.port}"
+                async with websockets.connect(
+                    url, subprotocols=[_SUBPROTOCOL], max_size=None, close_timeout=1
+                ) as ws:
+                    client = _Client(ws)
+                    await client.handshake(len(stream.channels))
+                    await client.subscribe_all()
+                    await ws.send(_control(_PLAY, speed=rate, rid="go"))
+                    first = await client.data(1)
+                    started = time.monotonic()
+                    rest = await client.data(len(expected) - 1)
+                    return first + rest, time.monotonic() - started
+
+            got, elapsed_s = asyncio.run(session())
+        finally:
+            player.stop()
+            thread.join(10)
+            server.stop()
+    assert got == expected
+    span_s = (expected[-1].log_time_ns - expected[0].log_time_ns) / 1e9
+    assert span_s < 8.0  # one axis: nothing 237.8 days away
+    assert elapsed_s >= 0.9 * span_s / rate  # paced, not sent at once
+    clouds = [m.log_time_ns for m in got if m.topic == "/luminar_pointcloud"]
+    boxes = [m.log_time_ns for m in got if m.topic == "/redrive/detections/cluster-detector"]
+    assert len(clouds) == len(boxes) == 5
+    assert clouds == boxes  # each frame's results at its cloud's log time

@@ -36,11 +36,12 @@ def test_capabilities_of_real_logs(
 
 
 def test_builtin_formats_and_their_names() -> None:
-    assert [cls.format for cls in reader_formats()][:10] == [
+    assert [cls.format for cls in reader_formats()][:11] == [
         "ros2",
         "kitti",
         "nuscenes",
         "nuscenes-mmdet3d",
+        "kitti-mmdet3d",
         "ros1",
         "mcap",
         "mcap-set",

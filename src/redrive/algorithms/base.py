@@ -231,10 +231,15 @@ class Algorithm(ABC):
         version: the algorithm's own version string, recorded in the run manifest.
         defaults: default configuration; the run's config is laid over it and handed to
             :meth:`setup`.
+        upstream: the role whose outputs ``step`` needs from earlier stages (a tracker:
+            ``Role.PERCEPTION``, the detections it tracks), None when it needs none; a run that
+            skips the stages a log cannot feed skips it too when no earlier stage of that role
+            runs.
     """
 
     role: ClassVar[Role]
     inputs: ClassVar[tuple[Input, ...]] = ()
+    upstream: ClassVar[Role | None] = None
     version: ClassVar[str] = "0"
     defaults: ClassVar[Mapping[str, Any]] = MappingProxyType({})
 

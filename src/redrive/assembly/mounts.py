@@ -26,7 +26,7 @@ from redrive.io.ros.decoders import decode, decoder_for
 from redrive.io.ros.decoders.tf import is_static_tf_topic
 from redrive.types import Transform
 
-__all__ = ["BASE_FRAME", "SensorMounts", "mount_tf_topics"]
+__all__ = ["BASE_FRAME", "SensorMounts", "first_frame_ids", "mount_tf_topics"]
 
 logger = logging.getLogger(__name__)
 
@@ -78,7 +78,7 @@ class SensorMounts:
         return float(mat[0, 3]), float(mat[1, 3]), float(mat[2, 3])
 
 
-def _first_frame_ids(log: LogReader, topics: Sequence[str]) -> dict[str, str]:
+def first_frame_ids(log: LogReader, topics: Sequence[str]) -> dict[str, str]:
     """topic → frame id of its first decodable message (one message per topic is read)."""
     out: dict[str, str] = {}
     for topic in topics:
@@ -121,7 +121,7 @@ def mount_tf_topics(
             continue
         if isinstance(value, tuple):
             mounts.add(message.topic, (t for t in value if isinstance(t, Transform)))
-    frames = _first_frame_ids(log, sensor_topics)
+    frames = first_frame_ids(log, sensor_topics)
     if all(mounts.base_from(f) is not None for f in frames.values() if f):
         return list(static)
     return list(tf_topics)

@@ -184,7 +184,9 @@ def infer_sensor_map(
     """Map topics to sensors from their message types, then apply ``overrides``.
 
     The driver is the user's choice, else the highest-rate LiDAR (then camera, 2D LiDAR, radar);
-    none (frames from the ground truth) when the user says ``driver = "ground_truth"``.
+    none (frames from the ground truth) when the user says ``driver = "ground_truth"`` or the log
+    has ground truth but none of those; in a log with neither (IMU, GNSS only) the highest-rate
+    sensor of any type.
     Camera info topics are calibration, not sensors: they map to nothing here.
 
     Raises:
@@ -257,14 +259,19 @@ def infer_sensor_map(
     if driver is not None and driver not in specs:
         msg = f"sensor map: driver {driver!r} is not a sensor of this log ({', '.join(specs)})"
         raise ConfigError(msg)
+    gt_topic = ov.ground_truth_topic or _busiest(objects, prefer="groundtruth")
     if driver is None and not by_ground_truth:
         for stype in _DRIVER_PREFERENCE:
             candidates = [s for s in specs.values() if s.sensor_type is stype]
             if candidates:
                 driver = max(candidates, key=lambda s: (s.rate_hz, s.sensor_id)).sensor_id
                 break
+        if driver is None and gt_topic is None and specs:
+            # an IMU / GNSS / odometry-sensor log: its busiest sensor paces the frames (as a
+            # closed loop over it does), so the stages it can feed (planning on the ego state)
+            # run open loop too
+            driver = max(specs.values(), key=lambda s: (s.rate_hz, s.sensor_id)).sensor_id
     state_topic = ov.vehicle_state_topic or _busiest(vehicle_state, prefer="odom")
-    gt_topic = ov.ground_truth_topic or _busiest(objects, prefer="groundtruth")
     if by_ground_truth and gt_topic is None:
         msg = f'sensor map: driver = "{GROUND_TRUTH_DRIVER}" but the log has no ground truth'
         raise ConfigError(msg)

@@ -31,7 +31,11 @@ loop, the logged ego as a ghost), the evaluation's bookmarks — as foxglove.Sce
 foxglove.FrameTransforms on /redrive/transforms (an open-loop run keeps the log's /tf, a
 closed-loop run's ego replaces it).  --sensor-copies adds every LiDAR cloud and camera image
 again as foxglove.PointCloud / foxglove.CompressedImage on /foxglove/<topic> (several times
-slower, a larger file).  See docs/foxglove.md.
+slower, a larger file).  Results sit at the log time of the sample their frame was made from
+(a bag's header stamps can be far from its log times; the messages keep the stamps), and a
+sensor frame the log does not connect to base_link is placed as the run placed it (--sensor-map
+gives the run's sensor map file; without a location: at base_link, with a warning).  See
+docs/foxglove.md.
 """
 
 
@@ -41,7 +45,12 @@ def _export_mcap(args: argparse.Namespace, out: Path) -> int:
     require_foxglove()
     from redrive.interop.mcap_export import export_mcap
 
-    print(export_mcap(args.run, out=out, sensor_copies=args.sensor_copies))
+    overrides = None
+    if args.sensor_map is not None:
+        from redrive.assembly.sensor_map import load_sensor_map_overrides
+
+        overrides = load_sensor_map_overrides(args.sensor_map)
+    print(export_mcap(args.run, out=out, sensor_copies=args.sensor_copies, sensor_map=overrides))
     return 0
 
 
@@ -52,8 +61,9 @@ def _run(args: argparse.Namespace) -> int:
     out = args.output if args.output is not None else run.path / "export"
     if args.format == "mcap":
         return _export_mcap(args, out)
-    if args.sensor_copies:
-        print("redrive export: --sensor-copies goes with --format mcap only", file=sys.stderr)
+    if args.sensor_copies or args.sensor_map is not None:
+        flag = "--sensor-copies" if args.sensor_copies else "--sensor-map"
+        print(f"redrive export: {flag} goes with --format mcap only", file=sys.stderr)
         return 2
     for path in export_run(run, fmt=args.format, out=out):
         print(path)
@@ -98,6 +108,16 @@ def register(sub: Any) -> None:
             "a JPEG foxglove.CompressedImage on /foxglove/<topic>, for viewers that read only "
             "Foxglove schemas (Foxglove and Lichtblick draw the log's own ROS sensor messages; "
             "the copies make the export several times slower and the file larger)"
+        ),
+    )
+    parser.add_argument(
+        "--sensor-map",
+        type=Path,
+        metavar="TOML",
+        help=(
+            "mcap: the sensor map file the run was given (`redrive run --sensor-map`): its "
+            "driver puts the results at their samples' log times, its sensor locations place "
+            "the sensor frames the log does not connect to base_link"
         ),
     )
     parser.set_defaults(func=_run)

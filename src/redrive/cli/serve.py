@@ -34,7 +34,12 @@ def _run(args: argparse.Namespace) -> int:
     from redrive.interop.serve import serve_stream
     from redrive.interop.stream import open_scene_stream
 
-    with open_scene_stream(args.path) as stream:
+    overrides = None
+    if args.sensor_map is not None:
+        from redrive.assembly.sensor_map import load_sensor_map_overrides
+
+        overrides = load_sensor_map_overrides(args.sensor_map)
+    with open_scene_stream(args.path, sensor_map=overrides) as stream:
         player, server = serve_stream(
             stream, host=args.host, port=args.port, rate=args.rate, playing=not args.paused
         )
@@ -97,5 +102,11 @@ def register(sub: Any) -> None:
         "--paused",
         action="store_true",
         help="start paused: nothing is sent until Play is pressed in the app",
+    )
+    parser.add_argument(
+        "--sensor-map",
+        type=Path,
+        metavar="TOML",
+        help="a run: the sensor map file it was given (as `redrive export --sensor-map`)",
     )
     parser.set_defaults(func=_run)

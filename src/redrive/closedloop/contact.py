@@ -14,6 +14,7 @@ run ends after the first frame with one, the reason in the run summary).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -50,16 +51,24 @@ def contacts(frame: Frame, geometry: EgoGeometry) -> tuple[Contact, ...]:
     objects = frame.ground_truth
     if not objects:
         return ()
+    centers = np.array([o.box.center[:2] for o in objects], dtype=np.float64)
+    sizes = np.array([o.box.size[:2] for o in objects], dtype=np.float64)
+    # two rectangles whose centres are further apart than the sum of their half-diagonals cannot
+    # touch: only the others go through the separating axis test (exact, not an approximation)
+    reach = 0.5 * (math.hypot(geometry.length_m, geometry.width_m) + np.hypot(*sizes.T))
+    near = np.flatnonzero(
+        np.hypot(centers[:, 0] - geometry.center_offset_m, centers[:, 1]) <= reach * (1.0 + 1e-9)
+    )
+    if near.size == 0:
+        return ()
     ego = rectangle_corners(
         (geometry.center_offset_m, 0.0), 0.0, geometry.length_m, geometry.width_m
     )
-    centers = np.array([o.box.center[:2] for o in objects], dtype=np.float64)
-    yaws = np.array([o.box.yaw_rad for o in objects], dtype=np.float64)
-    sizes = np.array([o.box.size[:2] for o in objects], dtype=np.float64)
-    boxes = rectangle_corners(centers, yaws, sizes[:, 0], sizes[:, 1])
-    touching = rectangles_overlap(ego, boxes)
+    yaws = np.array([objects[m].box.yaw_rad for m in near], dtype=np.float64)
+    boxes = rectangle_corners(centers[near], yaws, sizes[near, 0], sizes[near, 1])
+    touching = near[rectangles_overlap(ego, boxes)]
     found = [
         Contact(object_id=int(objects[m].object_id), object_class=objects[m].object_class.value)
-        for m in np.flatnonzero(touching)
+        for m in touching
     ]
     return tuple(sorted(found, key=lambda c: c.object_id))

@@ -38,12 +38,17 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from redrive.motion.lqr import (
+    INITIAL_CURVATURE_PENALTY,
+    fit_curvature_profiles,
+    fit_speed_profiles,
+    integrate_profiles,
+)
+
 __all__ = ["INITIAL_CURVATURE_PENALTY", "ReferenceProfiles", "fit_profiles", "resample_poses"]
 
 F64 = npt.NDArray[np.float64]
 
-#: nuPlan's ``INITIAL_CURVATURE_PENALTY`` (tracker_utils.py): the weight on κ_0².
-INITIAL_CURVATURE_PENALTY = 1e-10
 #: consecutive waypoints closer than this are one point of the path's geometry (m).
 SAME_POINT_M = 1e-6
 
@@ -140,13 +145,6 @@ def resample_poses(
     return times, poses
 
 
-def _profile(initial: float, rates: F64, dt_s: float) -> F64:
-    """``initial`` followed by its integration over ``rates`` (nuPlan's
-    ``_generate_profile_from_initial_condition_and_derivatives``)."""
-    out: F64 = initial + np.concatenate([[0.0], np.cumsum(rates * dt_s)])
-    return out
-
-
 def fit_profiles(
     times_s: F64,
     poses: F64,
@@ -155,7 +153,8 @@ def fit_profiles(
     jerk_penalty: float,
     curvature_rate_penalty: float,
 ) -> ReferenceProfiles:
-    """The speed and curvature profiles of the resampled ``poses`` (module text).
+    """The speed and curvature profiles of the resampled ``poses`` (module text; the fits are
+    :mod:`redrive.motion.lqr`'s, shared with NAVSIM's batch tracker).
 
     Raises:
         ValueError: fewer than two poses (a path shorter than one discretisation step).
@@ -168,36 +167,21 @@ def fit_profiles(
         )
         raise ValueError(msg)
     dt = discretization_time_s
-    d_xy = np.diff(poses[:, :2], axis=0)
     d_heading = np.diff(poses[:, 2])
     d_heading = (d_heading + np.pi) % (2.0 * np.pi) - np.pi  # principal value
-    m = n - 1
-    heading = poses[:-1, 2]
-    # speed: unknowns v_0, a_0 … a_{M-2}; rows 2k, 2k+1 the displacement k
-    c, s = np.cos(heading), np.sin(heading)
-    a = np.zeros((2 * m, m))
-    a[0::2, 0], a[1::2, 0] = c * dt, s * dt
-    lower = np.tri(m, m - 1, k=-1)  # row k: the accelerations before step k
-    a[0::2, 1:] = lower * (c * dt * dt)[:, None]
-    a[1::2, 1:] = lower * (s * dt * dt)[:, None]
-    jerk = np.zeros((max(m - 2, 0), m))
-    for j in range(m - 2):
-        jerk[j, j + 1], jerk[j, j + 2] = -1.0, 1.0
-    lhs = a.T @ a + jerk_penalty * (jerk.T @ jerk)
-    x = np.linalg.pinv(lhs) @ (a.T @ d_xy.reshape(-1))
-    speed = _profile(float(x[0]), x[1:], dt)
-    # curvature: unknowns κ_0, κ̇_0 … κ̇_{M-2}
-    b = np.tri(m)
-    b[:, 0] = speed * dt
-    b[1:, 1:] *= (speed[1:] * dt * dt)[:, None]
-    q = curvature_rate_penalty * np.eye(m)
-    q[0, 0] = INITIAL_CURVATURE_PENALTY
-    y = np.linalg.pinv(b.T @ b + q) @ (b.T @ d_heading)
-    curvature = _profile(float(y[0]), y[1:], dt)
+    v0, accel = fit_speed_profiles(
+        np.diff(poses[None, :, :2], axis=1), poses[None, :-1, 2], dt_s=dt, jerk_penalty=jerk_penalty
+    )
+    speed = integrate_profiles(v0, accel, dt)
+    k0, k_rate = fit_curvature_profiles(
+        d_heading[None], speed, dt_s=dt, curvature_rate_penalty=curvature_rate_penalty
+    )
+    curvature = integrate_profiles(k0, k_rate, dt)[0]
+    speed, accel = speed[0], accel[0]
     return ReferenceProfiles(
         times_s=times_s,
         poses=poses,
         speed_mps=speed,
-        accel_mps2=x[1:],
+        accel_mps2=accel,
         curvature_1pm=curvature,
     )

@@ -54,6 +54,7 @@ from redrive.closedloop.profiles import (
     fit_profiles,
     resample_poses,
 )
+from redrive.motion.lqr import lateral_lqr, longitudinal_lqr
 from redrive.sim.ego import EgoGeometry, PedalModel
 from redrive.types import ControlCommands, PlannedPath, VehicleState
 
@@ -282,30 +283,28 @@ class LqrTracker:
 
     def longitudinal(self, speed_mps: float, reference_mps: float) -> float:
         """The acceleration (m/s²) of the one-step longitudinal LQR: ``v_N = v + N·dt·a``."""
-        b = self._n * self._dt
-        q, r = float(self._q_lon[0, 0]), float(self._r_lon[0, 0])
-        return -(b * q) / (b * q * b + r) * (speed_mps - reference_mps)
+        accel = longitudinal_lqr(
+            np.array([speed_mps]),
+            np.array([reference_mps]),
+            horizon_s=self._n * self._dt,
+            q=float(self._q_lon[0, 0]),
+            r=float(self._r_lon[0, 0]),
+        )
+        return float(accel[0])
 
     def lateral(self, initial: F64, *, speeds_mps: F64, curvatures_1pm: F64) -> float:
         """The steering rate (rad/s) of the one-step lateral LQR from ``initial`` (lateral error
         m, heading error rad, steering angle rad) over the horizon's speeds and curvatures."""
-        dt, wheelbase = self._dt, self.geometry.wheelbase_m
-        a = np.eye(3)
-        b = np.zeros(3)
-        g = np.zeros(3)
-        step_b = np.array([0.0, 0.0, dt])
-        for v, kappa in zip(speeds_mps.tolist(), curvatures_1pm.tolist(), strict=True):
-            step_a = np.eye(3)
-            step_a[0, 1] = v * dt
-            step_a[1, 2] = v * dt / wheelbase
-            a = step_a @ a
-            b = step_a @ b + step_b
-            g = step_a @ g + np.array([0.0, -v * kappa * dt, 0.0])
-        error = a @ initial + g
-        error[1], error[2] = _wrap(float(error[1])), _wrap(float(error[2]))
-        q = self._q_lat
-        rate = -(b @ q @ error) / (b @ q @ b + float(self._r_lat[0, 0]))
-        return float(rate)
+        rate = lateral_lqr(
+            initial[None],
+            speeds_mps[None],
+            curvatures_1pm=curvatures_1pm[None],
+            dt_s=self._dt,
+            wheelbase_m=self.geometry.wheelbase_m,
+            q=np.diag(self._q_lat),
+            r=float(self._r_lat[0, 0]),
+        )
+        return float(rate[0])
 
     def _pedals(self, accel_mps2: float, speed_mps: float) -> tuple[float, float]:
         """Throttle and brake for ``accel_mps2`` at ``speed_mps`` (standing: a deceleration

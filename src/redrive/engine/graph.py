@@ -136,14 +136,16 @@ def build_graph(
     """Load, configure and check every algorithm of ``pipeline`` against ``inputs``.
 
     ``skip_unfed``: leave out (and say why) the algorithms whose inputs the log lacks — and a
-    control stage whose planning was left out — instead of refusing the pipeline; what is left
-    must not be empty.
+    control stage whose planning was left out, and an algorithm whose ``upstream`` role was left
+    out (a tracker without its detector) — instead of refusing the pipeline; what is left must
+    not be empty.
     """
     stages: list[tuple[str, tuple[PlannedAlgorithm, ...]]] = []
     skipped: dict[str, str] = {}
     last_role: Role | None = None
     last_stage = ""
     planning_skipped = False
+    skipped_roles: set[Role] = set()  # roles some algorithm of was skipped (its inputs lacking)
     for stage in pipeline.stages:
         planned: list[PlannedAlgorithm] = []
         for spec in stage.algorithms:
@@ -180,6 +182,18 @@ def build_graph(
                     "path (the planning stage was skipped)"
                 )
                 continue
+            needs = getattr(cls, "upstream", None)
+            if (
+                skip_unfed
+                and isinstance(needs, Role)
+                and needs in skipped_roles
+                and not _has_role(stages, planned, needs)
+            ):
+                skipped[spec.name] = (
+                    f"stage {stage.name!r} ({spec.plugin}): no {needs.value} algorithm runs "
+                    f"before it to give it its input (the {needs.value} stage was skipped)"
+                )
+                continue
             try:
                 algo = instantiate(cls, name=spec.name, config=config, inputs=inputs)
             except MissingInputError as err:
@@ -188,6 +202,7 @@ def build_graph(
                     raise MissingInputError(msg) from err
                 skipped[spec.name] = f"stage {stage.name!r} ({spec.plugin}): {_need(err)}"
                 planning_skipped = planning_skipped or role is Role.PLANNING
+                skipped_roles.add(role)
                 continue
             except ConfigError as err:
                 msg = f"stage {stage.name!r}, algorithm {spec.name!r} ({spec.plugin}): {err}"
@@ -217,8 +232,16 @@ def build_graph(
 def _has_planning(
     stages: list[tuple[str, tuple[PlannedAlgorithm, ...]]], planned: list[PlannedAlgorithm]
 ) -> bool:
-    return any(p.role is Role.PLANNING for _, algos in stages for p in algos) or any(
-        p.role is Role.PLANNING for p in planned
+    return _has_role(stages, planned, Role.PLANNING)
+
+
+def _has_role(
+    stages: list[tuple[str, tuple[PlannedAlgorithm, ...]]],
+    planned: list[PlannedAlgorithm],
+    role: Role,
+) -> bool:
+    return any(p.role is role for _, algos in stages for p in algos) or any(
+        p.role is role for p in planned
     )
 
 

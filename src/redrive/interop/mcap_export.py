@@ -32,6 +32,7 @@ from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 from mcap.records import Channel, Schema
 
 from redrive import __version__
+from redrive.assembly.sensor_map import SensorMapOverrides
 from redrive.errors import is_no_space
 from redrive.interop.mcap_splice import LogLayout, chunk_messages, is_mcap_file, read_layout
 from redrive.interop.stream import OutMessage, SceneStream, open_scene_stream
@@ -214,18 +215,22 @@ def export_mcap(
     *,
     out: Path,
     sensor_copies: bool = False,
+    sensor_map: SensorMapOverrides | None = None,
     progress: Callable[[int], None] | None = None,
 ) -> Path:
     """Write ``out/<run name>.mcap`` (``out`` created): the run's log and results for Foxglove;
     ``sensor_copies``: also ``foxglove.PointCloud`` / ``foxglove.CompressedImage`` copies of
-    the log's clouds and images.
+    the log's clouds and images; ``sensor_map``: the run's ``--sensor-map`` file (its driver and
+    sensor locations place the results in time and the sensors on ``base_link``).
 
     Raises:
         LogError, ConfigError: the run or its log cannot be read.
     """
     out.mkdir(parents=True, exist_ok=True)
     path = out / f"{run_dir.resolve().name or 'run'}.mcap"
-    with open_scene_stream(run_dir, sensor_copies=sensor_copies, log_tf=True) as stream:
+    with open_scene_stream(
+        run_dir, sensor_copies=sensor_copies, log_tf=True, sensor_map=sensor_map
+    ) as stream:
         layout = _splice_layout(stream)
         if layout is not None:
             count = splice_stream(stream, layout, path, progress=progress)

@@ -18,8 +18,10 @@ What a stream holds:
   again as ``foxglove.PointCloud`` and every camera image as ``foxglove.CompressedImage`` on
   ``/foxglove/<topic>``;
 * for a run: ``/redrive/transforms`` (``foxglove.FrameTransforms``) and the SceneUpdate topics
-  of :mod:`.run_scene` at each frame's stamp, each also as a MarkerArray on
-  ``/redrive/markers/<topic without /redrive/>``;
+  of :mod:`.run_scene` at each frame's log time (the log time of the sample that drove it,
+  :mod:`.log_time`; the messages keep the frame's stamp), each also as a MarkerArray on
+  ``/redrive/markers/<topic without /redrive/>``; each sensor frame the log does not connect to
+  ``base_link`` gets the mount the run used (:mod:`.sensor_frames`);
 * for a log without a run: its ground-truth and object topics as SceneUpdates on
   ``/foxglove/<topic>`` and its static transforms on ``/redrive/transforms``.
 """
@@ -37,8 +39,10 @@ from typing import Any, Self
 
 from foxglove import messages as fm
 
+from redrive.assembly.sensor_map import SensorMapOverrides
 from redrive.errors import LogError, UnsupportedMessageError
 from redrive.interop import foxglove_msgs as fx
+from redrive.interop.log_time import LogTimeAxis, frame_log_times
 from redrive.interop.markers import MARKER_ARRAY, marker_array_cdr
 from redrive.interop.run_scene import (
     BODY_FRAME,
@@ -47,6 +51,7 @@ from redrive.interop.run_scene import (
     run_scenes,
     scene_topics,
 )
+from redrive.interop.sensor_frames import sensor_mount_transforms
 from redrive.io import open_log
 from redrive.io.base import LogMessage, LogReader, TopicInfo
 from redrive.io.mcap.qos import offered_qos_profiles
@@ -239,14 +244,17 @@ def transforms_message(transforms: tuple[Transform, ...], stamp_ns: int) -> OutM
     return OutMessage(TRANSFORMS_TOPIC, stamp_ns, data)
 
 
-def scene_messages(scene: FrameScene) -> Iterator[OutMessage]:
-    """One frame's results: its transforms, then each topic's SceneUpdate and MarkerArray."""
+def scene_messages(scene: FrameScene, *, log_time_ns: int | None = None) -> Iterator[OutMessage]:
+    """One frame's results: its transforms, then each topic's SceneUpdate and MarkerArray, at
+    ``log_time_ns`` (default: the frame's stamp; the messages hold the stamp either way)."""
     stamp = scene.stamp_ns
+    at = stamp if log_time_ns is None else log_time_ns
     if scene.transforms:
-        yield transforms_message(scene.transforms, stamp)
+        data = fx.frame_transforms(scene.transforms, stamp_ns=stamp).encode()
+        yield OutMessage(TRANSFORMS_TOPIC, at, data)
     for topic, shapes in sorted(scene.shapes.items()):
-        yield OutMessage(topic, stamp, fx.scene_update(shapes).encode())
-        yield OutMessage(_marker_topic(topic), stamp, marker_array_cdr(shapes))
+        yield OutMessage(topic, at, fx.scene_update(shapes).encode())
+        yield OutMessage(_marker_topic(topic), at, marker_array_cdr(shapes))
 
 
 def find_run_log(run: Run) -> Path | None:
@@ -318,6 +326,9 @@ class SceneStream:
         log_tf: keep the log's ``/tf`` for an open-loop run when it places ``base_link`` under
             the ego's frame (:attr:`log_tf` says whether it was kept); the run's ego transform
             is then left out of ``/redrive/transforms``.
+        sensor_map: what the run's ``--sensor-map`` file said (its driver and sensor
+            locations), for the run's time axis and sensor mounts; None: inferred as the run
+            inferred it.
     """
 
     def __init__(
@@ -327,6 +338,7 @@ class SceneStream:
         run: Run | None,
         sensor_copies: bool = True,
         log_tf: bool = False,
+        sensor_map: SensorMapOverrides | None = None,
     ) -> None:
         self.reader = reader
         self.run = run
@@ -345,8 +357,16 @@ class SceneStream:
         self._raw: dict[str, str] = {}  # log topic → how to pass it on
         self._decoded: dict[str, tuple[DecodedKind, SensorType | None]] = {}
         self._static: tuple[Transform, ...] = ()
+        #: a run's frame stamp → log time (:mod:`.log_time`)
+        self.axis = LogTimeAxis()
         if reader is not None:
             self._add_log_channels(reader)
+        if run is not None and reader is not None:
+            self._static += sensor_mount_transforms(
+                reader, static=self._static, log_tf_kept=self.log_tf, overrides=sensor_map
+            )
+            stamps = run.table("frames").column("stamp_ns").to_pylist()
+            self.axis = frame_log_times(reader, stamps, overrides=sensor_map)
         if run is not None:
             self._add_run_channels(run)
         elif self._static:
@@ -403,7 +423,7 @@ class SceneStream:
         if self.run is not None:
             frames = self.run.table("frames").column("stamp_ns")
             if len(frames):
-                starts.append(int(frames[0].as_py()))
+                starts.append(self.axis.log_time_ns(int(frames[0].as_py())))
         return min(starts, default=0)
 
     @property
@@ -414,7 +434,7 @@ class SceneStream:
         if self.run is not None:
             frames = self.run.table("frames").column("stamp_ns")
             if len(frames):
-                ends.append(int(frames[-1].as_py()))
+                ends.append(self.axis.log_time_ns(int(frames[-1].as_py())))
         return max(ends, default=0)
 
     @property
@@ -460,9 +480,10 @@ class SceneStream:
         assert self.run is not None
         scenes = run_scenes(self.run, static_transforms=self._static, ego_transform=not self.log_tf)
         for scene in scenes:
-            if start_ns is not None and scene.stamp_ns < start_ns:
+            at = self.axis.log_time_ns(scene.stamp_ns)
+            if start_ns is not None and at < start_ns:
                 continue
-            yield from scene_messages(scene)
+            yield from scene_messages(scene, log_time_ns=at)
 
     # -- closing ---------------------------------------------------------------------------------
 
@@ -487,10 +508,15 @@ def _is_run_dir(path: Path) -> bool:
 
 
 def open_scene_stream(
-    path: str | Path, *, sensor_copies: bool = True, log_tf: bool = False
+    path: str | Path,
+    *,
+    sensor_copies: bool = True,
+    log_tf: bool = False,
+    sensor_map: SensorMapOverrides | None = None,
 ) -> SceneStream:
     """The stream of a run directory (its log, found as the GUI finds it, plus its results) or
-    of a log alone; ``sensor_copies`` and ``log_tf`` as :class:`SceneStream` takes them.
+    of a log alone; ``sensor_copies``, ``log_tf`` and ``sensor_map`` as :class:`SceneStream`
+    takes them.
 
     Raises:
         LogError: the log cannot be opened (the message names the file and what to do).
@@ -509,7 +535,13 @@ def open_scene_stream(
             return SceneStream(reader=None, run=run, sensor_copies=sensor_copies)
         reader = open_log(log)
         try:
-            return SceneStream(reader=reader, run=run, sensor_copies=sensor_copies, log_tf=log_tf)
+            return SceneStream(
+                reader=reader,
+                run=run,
+                sensor_copies=sensor_copies,
+                log_tf=log_tf,
+                sensor_map=sensor_map,
+            )
         except BaseException:
             reader.close()
             raise

@@ -3,7 +3,7 @@
 A *reader format* is a reader class that declares, as class attributes and a class method:
 
 - ``format``: its short name (``ros1``, ``ros2``, ``mcap``, ``kitti``, ``nuscenes``,
-  ``nuscenes-mmdet3d``, ``av2-sensor``, ``womd``, ``commonroad``), recorded in the run
+  ``nuscenes-mmdet3d``, ``kitti-mmdet3d``, ``av2-sensor``, ``womd``, ``commonroad``), recorded in the run
   manifest and shown by ``redrive info``;
 - ``description``: what it reads, for listings and error messages;
 - ``recognises(path)``: whether ``path`` is a log of this format, from its content (magic bytes,
@@ -92,6 +92,7 @@ def _builtin() -> list[type[ReaderFormat]]:
     from redrive.io.datasets.av2 import Av2SensorLogReader
     from redrive.io.datasets.commonroad import CommonRoadReader
     from redrive.io.datasets.kitti import KittiReader
+    from redrive.io.datasets.kitti_info import KittiInfoReader
     from redrive.io.datasets.mmdet3d_info import Mmdet3dInfoReader
     from redrive.io.datasets.nuscenes import NuScenesReader
     from redrive.io.datasets.womd import WomdReader
@@ -107,6 +108,7 @@ def _builtin() -> list[type[ReaderFormat]]:
         KittiReader,
         NuScenesReader,
         Mmdet3dInfoReader,
+        KittiInfoReader,
         Ros1BagReader,
         McapFileReader,
         McapSetReader,

@@ -131,11 +131,16 @@ def stop_arcs(
     base_from_map = np.array([[c, sn], [-sn, c]])
     speed = state.speed_mps
     out: list[float] = []
+    if len(path_xy) < 2:
+        return np.array(out, dtype=np.float64)
+    low, high = path_xy.min(axis=0), path_xy.max(axis=0)
     for gate in gates:
         light = shown.get(gate.light_id)
         if light not in (LightState.RED, LightState.YELLOW) or gate.light_id in committed:
             continue
         line = (gate.line - origin) @ base_from_map.T
+        if (line.max(axis=0) < low).any() or (line.min(axis=0) > high).any():
+            continue  # the line's bounding box misses the path's: no crossing
         crossing = _first_crossing(path_xy, path_s, line)
         if crossing is None:
             continue

@@ -126,6 +126,7 @@ class KalmanTracker(Algorithm):
 
     role = Role.PERCEPTION
     inputs = ()  # reads frame.vehicle_state when present; the detections come from upstream
+    upstream = Role.PERCEPTION
     version = "1"
     defaults: ClassVar[Mapping[str, Any]] = MappingProxyType(
         {

@@ -22,6 +22,7 @@ import shapely
 
 from redrive.evaluation._kinematics import rectangle_corners
 from redrive.evaluation.closedloop._common import AGENT_CLASSES
+from redrive.evaluation.closedloop.lights import controlled_lane_ids
 from redrive.maps.index import DRIVABLE_LANE_KINDS
 from redrive.types import LightState, MapLane, ObjectClass, ObjectColumns, RoadMap
 
@@ -355,23 +356,13 @@ def red_light_polygons(
     ``_get_traffic_light_geometries``: a red light's token covers its lane connector's polygon).
 
     ``states[i]``: light id → state at step ``i`` (the last state logged at or before it), None
-    where nothing is known.  The lanes a light controls come from the map's traffic lights
-    (``MapTrafficLight.lane_ids``): a lane inside an intersection itself, a lane that leads to
-    the stop line its successors (the connectors beyond it, NAVSIM's red-light polygons); a map
-    without lights has no red lights."""
-    lanes = {lane.lane_id: lane for lane in road_map.lanes}
-
-    def past_the_line(lane_id: str) -> tuple[str, ...]:
-        # NAVSIM's light covers the lane connector inside the intersection; a map light that
-        # controls the lane leading to its stop line covers that lane's successors
-        lane = lanes.get(lane_id)
-        if lane is None or getattr(lane, "intersection_id", None) is not None:
-            return (lane_id,)
-        return tuple(getattr(lane, "successors", ())) or (lane_id,)
-
-    beyond: dict[str, tuple[str, ...]] = {
-        str(light.light_id): tuple(s for lid in light.lane_ids for s in past_the_line(lid))
-        for light in getattr(road_map, "traffic_lights", ())
+    where nothing is known.  The lanes a light controls are
+    :func:`redrive.evaluation.closedloop.lights.controlled_lane_ids`' (the rule the traffic-light
+    metric uses too: a lane inside an intersection itself, a lane that leads to the stop line its
+    successors — the connectors beyond it, NAVSIM's red-light polygons); a map without lights has
+    no red lights."""
+    beyond = {
+        light.light_id: controlled_lane_ids(road_map, light) for light in road_map.traffic_lights
     }
     out: list[list[shapely.Polygon]] = []
     for st in states:

@@ -18,6 +18,14 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from redrive.motion.lqr import (
+    fit_curvature_profiles,
+    fit_speed_profiles,
+    integrate_profiles,
+    lateral_lqr,
+    longitudinal_lqr,
+)
+
 F64 = npt.NDArray[np.float64]
 
 __all__ = [
@@ -55,8 +63,6 @@ SIM_DEFAULTS: Mapping[str, Any] = MappingProxyType(
     }
 )
 
-_INITIAL_CURVATURE_PENALTY = 1e-10  # batch_lqr_utils.INITIAL_CURVATURE_PENALTY
-
 
 def normalize_angle(a: npt.ArrayLike) -> F64:
     """NAVSIM's ``normalize_angle``: arctan2(sin, cos)."""
@@ -78,56 +84,7 @@ def interpolate_poses(times_s: F64, poses: F64, *, query_s: F64) -> F64:
     return out
 
 
-# -- batch_lqr_utils -------------------------------------------------------------------------
-
-
-def _profile(initial: F64, derivatives: F64, dt: float) -> F64:
-    """``_generate_profile_from_initial_condition_and_derivatives``: (B, N+1)."""
-    cumsum = np.cumsum(derivatives * dt, axis=-1)
-    return np.asarray(initial[..., None] + np.pad(cumsum, [(0, 0), (1, 0)]), dtype=np.float64)
-
-
-def _velocity_fit(xy_disp: F64, headings: F64, dt: float, jerk_penalty: float) -> tuple[F64, F64]:
-    """``_fit_initial_velocity_and_acceleration_profile`` (regularised least squares)."""
-    batch, m = xy_disp.shape[:2]
-    y = xy_disp.reshape(batch, -1)
-    a_col = np.zeros(y.shape, dtype=np.float64)
-    a_col[:, 0::2] = np.cos(headings)
-    a_col[:, 1::2] = np.sin(headings)
-    a = np.repeat(a_col[..., None] * dt**2, m, axis=2)
-    a[..., 0] = a_col * dt
-    upper = np.repeat(np.triu(np.ones((m, m), dtype=bool), k=1), 2, axis=0)
-    a[:, upper] = 0.0
-    band = np.zeros((m - 2, m - 1), dtype=np.float64)
-    eye = np.eye(m - 2)
-    band[:, 1:] = eye
-    band[:, :-1] = -eye
-    r = np.block([np.zeros((m - 2, 1)), band])
-    a_t = a.transpose(0, 2, 1)
-    lhs = np.einsum("bij,bjk->bik", a_t, a) + jerk_penalty * (r.T @ r)[None]
-    x = _solve(lhs, np.einsum("bij,bj->bi", a_t, y))
-    return x[:, 0], x[:, 1:]
-
-
-def _solve(lhs: F64, rhs: F64) -> F64:
-    """``pinv(lhs) @ rhs`` for the regularised (positive definite) normal equations of
-    ``batch_lqr_utils``: solved directly, the same solution to rounding."""
-    return np.asarray(np.linalg.solve(lhs, rhs[..., None])[..., 0], dtype=np.float64)
-
-
-def _curvature_fit(heading_disp: F64, velocity: F64, dt: float, penalty: float) -> tuple[F64, F64]:
-    """``_fit_initial_curvature_and_curvature_rate_profile``."""
-    batch, dim = heading_disp.shape
-    a = np.repeat(np.tri(dim, dtype=np.float64)[None], batch, axis=0)
-    a[:, :, 0] = velocity * dt
-    v2 = velocity * dt**2
-    a[:, 1:, 1:] *= v2[:, None, 1:].transpose(0, 2, 1)
-    q = penalty * np.eye(dim)
-    q[0, 0] = _INITIAL_CURVATURE_PENALTY
-    a_t = a.transpose(0, 2, 1)
-    lhs = np.einsum("bij,bjk->bik", a_t, a) + q[None]
-    x = _solve(lhs, np.einsum("bij,bj->bi", a_t, heading_disp))
-    return x[:, 0], x[:, 1:]
+# -- batch_lqr_utils (the fits are redrive.motion.lqr's, shared with nuPlan's LQRTracker) ----
 
 
 def _reference_profiles(poses: F64, p: Mapping[str, Any]) -> tuple[F64, F64]:
@@ -137,10 +94,14 @@ def _reference_profiles(poses: F64, p: Mapping[str, Any]) -> tuple[F64, F64]:
     diff = np.diff(poses, axis=1)
     xy_disp = diff[..., :2]
     heading_disp = normalize_angle(diff[..., 2])
-    v0, accel = _velocity_fit(xy_disp, poses[:, :-1, 2], dt, float(p["jerk_penalty"]))
-    velocity = _profile(v0, accel, dt)
-    k0, k_rate = _curvature_fit(heading_disp, velocity, dt, float(p["curvature_rate_penalty"]))
-    return velocity, _profile(k0, k_rate, dt)
+    v0, accel = fit_speed_profiles(
+        xy_disp, poses[:, :-1, 2], dt_s=dt, jerk_penalty=float(p["jerk_penalty"])
+    )
+    velocity = integrate_profiles(v0, accel, dt)
+    k0, k_rate = fit_curvature_profiles(
+        heading_disp, velocity, dt_s=dt, curvature_rate_penalty=float(p["curvature_rate_penalty"])
+    )
+    return velocity, integrate_profiles(k0, k_rate, dt)
 
 
 # -- BatchLQRTracker ---------------------------------------------------------------------------
@@ -183,59 +144,25 @@ def _track(
     accel[stop] = -float(p["stopping_proportional_gain"]) * (v0[stop] - v_ref[stop])
     go = ~stop
     if go.any():
-        q_lon, r_lon = float(p["q_longitudinal"]), float(p["r_longitudinal"])
-        b = horizon * dt
-        accel[go] = -1.0 / (b * q_lon * b + r_lon) * b * q_lon * (v0[go] - v_ref[go])
+        accel[go] = longitudinal_lqr(
+            v0[go],
+            v_ref[go],
+            horizon_s=horizon * dt,
+            q=float(p["q_longitudinal"]),
+            r=float(p["r_longitudinal"]),
+        )
         # _generate_profile_from_initial_condition_and_derivatives of a constant acceleration
         v_prof = v0[go, None] + accel[go, None] * dt * np.arange(horizon, dtype=np.float64)
-        steer_rate[go] = _lateral_lqr(
-            lat0[go], v_prof, curvature=curvature[go], dt=dt, wheel_base=wheel_base, p=p
+        steer_rate[go] = lateral_lqr(  # _lateral_lqr_controller
+            lat0[go],
+            v_prof,
+            curvatures_1pm=curvature[go],
+            dt_s=dt,
+            wheelbase_m=wheel_base,
+            q=np.asarray(p["q_lateral"], dtype=np.float64),
+            r=float(p["r_lateral"]),
         )
     return accel, steer_rate
-
-
-def _lateral_lqr(
-    x0: F64,
-    velocity: F64,
-    *,
-    curvature: F64,
-    dt: float,
-    wheel_base: float,
-    p: Mapping[str, Any],
-) -> F64:
-    """``_lateral_lqr_controller`` + ``_solve_one_step_lateral_lqr``."""
-    # A = Π M_k, B, g accumulated over the horizon with M_k = [[1, v dt, 0], [0, 1, v dt / L],
-    # [0, 0, 1]] (NAVSIM multiplies the matrices step by step): A stays unit upper-triangular,
-    # so each entry is a sum over the steps of what the earlier steps accumulated
-    batch = x0.shape[0]
-    m01 = velocity * dt  # (B, H)
-    m12 = velocity * dt / wheel_base
-    steps = np.arange(velocity.shape[1], dtype=np.float64)
-
-    def before(x: F64) -> F64:  # Σ_{j<k} x_j
-        return np.asarray(np.cumsum(x, axis=1) - x, dtype=np.float64)
-
-    a01 = m01.sum(axis=1)
-    a12 = m12.sum(axis=1)
-    a02 = (m01 * before(m12)).sum(axis=1)
-    b1_terms = m12 * steps * dt  # b2 before step k is k·dt
-    b1 = b1_terms.sum(axis=1)
-    b0 = (m01 * before(b1_terms)).sum(axis=1)
-    b2 = np.full(batch, velocity.shape[1] * dt)
-    g1_terms = -velocity * curvature * dt
-    g1 = g1_terms.sum(axis=1)
-    g0 = (m01 * before(g1_terms)).sum(axis=1)
-    a = np.zeros((batch, 3, 3))
-    a[:, 0, 0] = a[:, 1, 1] = a[:, 2, 2] = 1.0
-    a[:, 0, 1], a[:, 0, 2], a[:, 1, 2] = a01, a02, a12
-    b = np.stack([b0, b1, b2], axis=-1)
-    g = np.stack([g0, g1, np.zeros(batch)], axis=-1)
-    err = np.einsum("bij,bj->bi", a, x0) + g
-    err[:, 1:] = np.arctan2(np.sin(err[:, 1:]), np.cos(err[:, 1:]))
-    q = np.asarray(p["q_lateral"], dtype=np.float64)
-    r = float(p["r_lateral"])
-    bq = b * q[None]
-    return np.asarray(-(bq * err).sum(-1) / ((bq * b).sum(-1) + r), dtype=np.float64)
 
 
 # -- BatchKinematicBicycleModel ----------------------------------------------------------------

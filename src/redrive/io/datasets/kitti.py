@@ -154,8 +154,12 @@ class KittiReader:
             stems[topic] = {p.stem for p in folder.glob(f"*{suffix}")} if folder.is_dir() else set()
         self._frames = self._check_frames(stems)
         self._calib_cache: tuple[str, KittiCalibration] | None = None
+        self._topics = self._topic_infos()
+
+    def _topic_infos(self) -> Mapping[str, TopicInfo]:
+        """The topics present, one message per frame each."""
         count = len(self._frames)
-        self._topics = MappingProxyType(
+        return MappingProxyType(
             {
                 t: TopicInfo(
                     topic=t,
@@ -307,6 +311,11 @@ class KittiReader:
                     payload=loaders[topic](stem, stamp_ns),
                 )
 
+    def _file(self, topic: str, stem: str) -> Path:
+        """The file a frame's message of ``topic`` is read from."""
+        sub, suffix = _FILES[topic]
+        return self.root / sub / f"{stem}{suffix}"
+
     def _decoded(self, stamp_ns: int, frame_id: str, value: DecodedValue) -> Decoded:
         return Decoded(stamp_ns=stamp_ns, frame_id=frame_id, value=value)
 
@@ -315,7 +324,7 @@ class KittiReader:
         return self._decoded(stamp_ns, "base_link", transforms)
 
     def _load_velodyne(self, stem: str, stamp_ns: int) -> Decoded:
-        path = self.root / "velodyne" / f"{stem}.bin"
+        path = self._file(TOPIC_VELODYNE, stem)
         try:
             raw = np.fromfile(path, dtype="<f4")
         except OSError as err:
@@ -332,7 +341,7 @@ class KittiReader:
         return self._decoded(stamp_ns, "velodyne", cloud)
 
     def _load_image(self, stem: str, stamp_ns: int) -> Decoded:
-        path = self.root / "image_2" / f"{stem}.png"
+        path = self._file(TOPIC_IMAGE_2, stem)
         try:
             with PilImage.open(path) as img:
                 if img.mode == "L":
@@ -349,7 +358,7 @@ class KittiReader:
         return self._decoded(stamp_ns, "cam2", image)
 
     def _load_camera_info(self, stem: str, stamp_ns: int) -> Decoded:
-        path = self.root / "image_2" / f"{stem}.png"
+        path = self._file(TOPIC_IMAGE_2, stem)
         try:
             with PilImage.open(path) as img:  # reads the header only
                 width, height = img.size

@@ -19,7 +19,13 @@ from redrive.errors import LogError
 from redrive.geometry.se3 import invert, normalize_angle, transform_from_matrix
 from redrive.types import Box3D, DetectedObject, ObjectClass, Transform
 
-__all__ = ["KITTI_CLASSES", "KittiCalibration", "parse_calibration", "parse_labels"]
+__all__ = [
+    "KITTI_CLASSES",
+    "KittiCalibration",
+    "camera_box_object",
+    "parse_calibration",
+    "parse_labels",
+]
 
 Matrix = npt.NDArray[np.float64]
 
@@ -234,27 +240,51 @@ def parse_labels(path: Path, calibration: KittiCalibration) -> tuple[DetectedObj
             raise LogError(msg) from err
         left, top, right, bottom = nums[3:7]
         height_m, width_m, length_m = nums[7:10]
-        x_m, y_m, z_m = nums[10:13]
-        rotation_y_rad = nums[13]
         if not all(math.isfinite(v) for v in nums) or min(height_m, width_m, length_m) < 0:
             msg = f"{where}: non-finite value or negative box size in {line.strip()!r}; fix or remove the row"
             raise LogError(msg)
-        center_rect = np.array([x_m, y_m - 0.5 * height_m, z_m, 1.0])
-        center_velo = (velodyne_from_rect @ center_rect)[:3]
-        confidence = 1.0 if len(nums) == 14 else min(1.0, max(0.0, nums[14]))
-        yaw_rad = normalize_angle(-rotation_y_rad - math.pi / 2)
         objects.append(
-            DetectedObject(
+            camera_box_object(
                 object_id=row,
                 object_class=KITTI_CLASSES.get(fields[0], ObjectClass.UNKNOWN),
-                confidence=confidence,
-                box=Box3D(
-                    center=center_velo,
-                    size=np.array([length_m, width_m, height_m]),
-                    yaw_rad=yaw_rad,
-                ),
-                orientation=np.array([yaw_rad, 0.0, 0.0]),
+                bottom_center_rect=(nums[10], nums[11], nums[12]),
+                size_lhw=(length_m, height_m, width_m),
+                rotation_y_rad=nums[13],
+                velodyne_from_rect=velodyne_from_rect,
+                confidence=1.0 if len(nums) == 14 else min(1.0, max(0.0, nums[14])),
                 bbox_2d=(left, top, right - left, bottom - top),
             )
         )
     return tuple(objects)
+
+
+def camera_box_object(
+    *,
+    object_id: int,
+    object_class: ObjectClass,
+    bottom_center_rect: tuple[float, float, float],
+    size_lhw: tuple[float, float, float],
+    rotation_y_rad: float,
+    velodyne_from_rect: Matrix,
+    confidence: float = 1.0,
+    bbox_2d: tuple[float, float, float, float] | None = None,
+) -> DetectedObject:
+    """A KITTI box given in rectified cam0 coordinates (bottom centre, length/height/width,
+    ``rotation_y``) as an object in the velodyne frame: the centre moved to mid-height, size
+    (l, w, h), yaw ``-rotation_y - π/2`` wrapped into [-π, π) (the KITTI devkit's and
+    mmdetection3d's convention)."""
+    x_m, y_m, z_m = bottom_center_rect
+    length_m, height_m, width_m = size_lhw
+    center_rect = np.array([x_m, y_m - 0.5 * height_m, z_m, 1.0])
+    center_velo = (velodyne_from_rect @ center_rect)[:3]
+    yaw_rad = normalize_angle(-rotation_y_rad - math.pi / 2)
+    return DetectedObject(
+        object_id=object_id,
+        object_class=object_class,
+        confidence=confidence,
+        box=Box3D(
+            center=center_velo, size=np.array([length_m, width_m, height_m]), yaw_rad=yaw_rad
+        ),
+        orientation=np.array([yaw_rad, 0.0, 0.0]),
+        bbox_2d=bbox_2d,
+    )

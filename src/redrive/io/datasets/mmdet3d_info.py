@@ -213,7 +213,7 @@ class Mmdet3dInfoReader(NuScenesReaderBase):
         if dataset.lower() != "nuscenes":
             msg = (
                 f"{info_file}: an mmdetection3d info file of {dataset}, not nuScenes; redrive "
-                "reads nuScenes info files (and KITTI as its own folder layout)"
+                "reads nuScenes and KITTI info files (a KITTI one as format kitti-mmdet3d)"
             )
             raise LogError(msg)
         categories = meta.get("categories") or {}
