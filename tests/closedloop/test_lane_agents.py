@@ -19,12 +19,28 @@ EGO_LENGTH_M = 4.7
 AWAY = (1000.0, 500.0, 0.0, 0.0, EGO_LENGTH_M)
 
 
-def _road() -> RoadMap:
+def _road(*, stop_line: bool = True) -> RoadMap:
     x = np.linspace(0.0, 300.0, 61)
     lane = MapLane(lane_id="a", centerline=np.column_stack([x, np.zeros_like(x)]), width_m=3.5)
     stop = StopLine(
         stop_line_id="sl", line=np.array([[100.0, -1.75], [100.0, 1.75]]), lane_ids=("a",)
     )
+    if not stop_line:  # the light holds lane "a" at its end: a second lane at x = 100
+        x1, x2 = np.linspace(0.0, 100.0, 21), np.linspace(100.0, 300.0, 41)
+        a = MapLane(
+            lane_id="a",
+            centerline=np.column_stack([x1, np.zeros_like(x1)]),
+            width_m=3.5,
+            successors=("b",),
+        )
+        b = MapLane(
+            lane_id="b",
+            centerline=np.column_stack([x2, np.zeros_like(x2)]),
+            width_m=3.5,
+            predecessors=("a",),
+        )
+        light = MapTrafficLight(light_id="L", position=np.array([101.0, 3.0]), lane_ids=("a",))
+        return RoadMap(lanes=(a, b), traffic_lights=(light,))
     light = MapTrafficLight(
         light_id="L", position=np.array([101.0, 3.0]), lane_ids=("a",), stop_line_id="sl"
     )
@@ -36,11 +52,12 @@ def _logged_x(t_s: float) -> float:
     return 20.0 + 10.0 * min(t_s, 13.0)
 
 
-def _agents() -> LaneAgents:
+def _agents(*, stop_line: bool = True) -> LaneAgents:
     stamps = [k * STEP_NS for k in range(401)]
     xy = [(_logged_x(k * DT_S), 0.0) for k in range(401)]
     tracks = {7: (stamps, xy, [0.0] * 401, (LENGTH_M, 1.9))}
-    return LaneAgents(tracks, index=RoadMapIndex(_road(), lane_kinds=DRIVABLE_LANE_KINDS))
+    road = _road(stop_line=stop_line)
+    return LaneAgents(tracks, index=RoadMapIndex(road, lane_kinds=DRIVABLE_LANE_KINDS))
 
 
 def _drive(
@@ -82,8 +99,9 @@ def test_held_up_it_queues_behind_the_ego_then_hands_back_to_its_log() -> None:
     assert after[-1][1] is None
 
 
-def test_it_stops_at_a_red_light_the_log_drove_through_and_goes_at_green() -> None:
-    agents = _agents()
+@pytest.mark.parametrize("stop_line", [True, False], ids=["stop line", "lane end"])
+def test_it_stops_at_a_red_light_the_log_drove_through_and_goes_at_green(stop_line: bool) -> None:
+    agents = _agents(stop_line=stop_line)
 
     def ego(t: float) -> tuple[float, float, float, float, float]:
         return (45.0, 0.0, 0.0, 0.0, EGO_LENGTH_M) if t < 3.0 else AWAY

@@ -25,6 +25,7 @@ import numpy as np
 import pytest
 import shapely
 
+from redrive.algorithms import StageOutputs
 from redrive.cli.main import main
 from redrive.evaluation.base import MetricResult
 from redrive.evaluation.evaluator import evaluate_run
@@ -244,3 +245,22 @@ def test_a_commonroad_scenario_runs_from_its_planning_problem_start(
     values, skipped = _scores(out)
     assert not {m for m in MAP_METRICS if m in skipped}, skipped
     assert values["drivable_area"]["drivable_area_compliance"] == 1.0
+
+
+def test_a_pipeline_that_reads_the_lidar_is_paced_by_the_lidar(shared_data: Path) -> None:
+    from redrive.closedloop.logreplay import LogSimulator
+    from redrive.closedloop.tracker import LqrTracker
+
+    with open_log(shared_data / AV2) as log:
+        by_lidar = LogSimulator(log, tracker=LqrTracker(), reads_sensors=True)
+        by_truth = LogSimulator(log, tracker=LqrTracker(), reads_sensors=False)
+        # a stage reads a sensor: it gets every sample — the 2 sweeps present, one step
+        assert by_lidar.describe()["paced_by"] == "sensor lidar (/lidar)"
+        assert "a stage reads a sensor" in by_lidar.describe()["pace_reason"]
+        assert by_lidar.done is False
+        steps = 0
+        while not by_lidar.done:
+            by_lidar.step(StageOutputs(), by_lidar.dt_s)
+            steps += 1
+        assert steps == 1
+        assert by_truth.describe()["paced_by"] == "ground truth (/annotations)"

@@ -471,7 +471,8 @@ def _logged_xy_yaw(track: Track, stamp_ns: int) -> tuple[float, float, float]:
 def _stops(
     road: RoadMap, lanes: tuple[str, ...], line: Any, controlled: Mapping[str, str]
 ) -> list[tuple[str, str | None, float]]:
-    """The stop lines of ``lanes`` as (id, light id or None, arclength on ``line``)."""
+    """The stop lines of ``lanes`` as (id, light id or None, arclength on ``line``), and the
+    stop positions of the lights of ``lanes`` that have no stop line."""
     mine = set(lanes)
     out: list[tuple[str, str | None, float]] = []
     for stop in road.stop_lines:
@@ -488,4 +489,15 @@ def _stops(
         else:
             s = float(shapely.line_locate_point(line, shapely.Point(*stop.line.mean(axis=0))))
         out.append((stop.stop_line_id, controlled.get(stop.stop_line_id), s))
+    # a light without a stop line holds its lanes where they meet the junction (the reference
+    # planner's gate, redrive.algorithms.reference._lights): the end of an approach lane, the
+    # start of a lane in the intersection
+    for light in road.traffic_lights:
+        if light.stop_line_id is not None:
+            continue
+        for lane_id in mine.intersection(light.lane_ids):
+            lane = road.lane(lane_id)
+            point = lane.centerline[0] if lane.intersection_id is not None else lane.centerline[-1]
+            s = float(shapely.line_locate_point(line, shapely.Point(*point)))
+            out.append((f"light:{light.light_id}:{lane_id}", light.light_id, s))
     return out
