@@ -22,7 +22,9 @@ than IDM's desired gap ``s* = s0 + max(0, v·T + v·Δv / (2·√(a·b)))`` (bum
 *lane* mode its leaders are every road user on its lane line ahead (the driven ego, the other
 tracks where they are now) and the stop lines of its lanes: one a light controls while the light
 shows red — or yellow while the agent can still stop at ``b`` (``v² / (2 b)`` within the gap) —
-and a stop sign's until it has stood still within ``_STOP_SERVED_M`` of it once.  (The logged
+and a stop sign's until it has stood still within ``_STOP_SERVED_M`` of it once (a light without
+a stop line holds its lanes where they meet the junction: an approach lane's end, an
+intersection lane's start).  (The logged
 tracks obey the logged lights by themselves: a track in *log* mode is the log.)  Its desired
 speed is its lane's speed limit, else the highest speed of its logged track (at least 1 m/s).
 It hands back to *log* once it has caught up with its logged position and nothing holds it
