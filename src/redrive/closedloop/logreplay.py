@@ -69,6 +69,7 @@ from redrive.closedloop.lane_agents import LaneAgents
 from redrive.closedloop.log_checks import pace_frames, refuse_unfit_log, topics_text
 from redrive.closedloop.mission import logged_mission
 from redrive.closedloop.mode import DEFAULT_DEVIATION_M, DEFAULT_DEVIATION_RAD
+from redrive.closedloop.path_agents import PathAgent
 from redrive.closedloop.simulator import EgoCommand, PathFollower, check_options, choose_command
 from redrive.closedloop.synthetic import AgentMode
 from redrive.errors import ConfigError
@@ -145,40 +146,6 @@ def _reexpress_sensor(data: SensorData, mat: npt.NDArray[np.float64]) -> SensorD
         return data  # images, IMU, GNSS …: cannot be re-rendered; passed through unchanged
     moved = reexpress_cloud(data.data, mat, sensor_location=data.sensor_location)
     return dataclasses.replace(data, data=moved)
-
-
-class _Agent:
-    """A logged vehicle under IDM along its own logged path (``reactive``)."""
-
-    __slots__ = ("logged_speed_mps", "path_s", "path_xy", "path_yaw", "s_m", "speed_mps")
-
-    def __init__(self, xy: npt.NDArray[np.float64], yaw_rad: float, speed_mps: float) -> None:
-        self.path_xy: list[npt.NDArray[np.float64]] = [xy]
-        self.path_yaw: list[float] = [yaw_rad]
-        self.path_s: list[float] = [0.0]
-        self.s_m = 0.0
-        self.speed_mps = speed_mps
-        self.logged_speed_mps = speed_mps
-
-    def log(self, xy: npt.NDArray[np.float64], yaw_rad: float, dt_s: float) -> None:
-        step = float(np.hypot(*(xy - self.path_xy[-1])))
-        self.path_xy.append(xy)
-        self.path_yaw.append(yaw_rad)
-        self.path_s.append(self.path_s[-1] + step)
-        self.logged_speed_mps = step / dt_s if dt_s > 0 else self.logged_speed_mps
-
-    def pose(self) -> tuple[float, float, float]:
-        """x, y, yaw (map) at ``s_m`` along the logged path."""
-        s = self.path_s
-        i = int(np.searchsorted(s, self.s_m, side="right")) - 1
-        i = min(max(i, 0), len(s) - 1)
-        if i == len(s) - 1 or s[i + 1] <= s[i]:
-            x, y = self.path_xy[i]
-            return float(x), float(y), self.path_yaw[i]
-        a = (self.s_m - s[i]) / (s[i + 1] - s[i])
-        x, y = self.path_xy[i] + a * (self.path_xy[i + 1] - self.path_xy[i])
-        dyaw = math.remainder(self.path_yaw[i + 1] - self.path_yaw[i], math.tau)
-        return float(x), float(y), self.path_yaw[i] + a * dyaw
 
 
 class LogSimulator:
@@ -282,9 +249,14 @@ class LogSimulator:
             start_ns=self._current.stamp_ns,
             duration_s=duration_s,
         )
-        if agents == "reactive" and self.road_index is not None and self.mission is not None:
+        if (
+            agents == "reactive"
+            and self.road_index is not None
+            and self.mission is not None
+            and self.mission.frame_id == self.road_index.road_map.frame_id
+        ):
             # the logged vehicles along the lane graph (lane_agents); without a map: along
-            # their own logged paths (_Agent)
+            # their own logged paths (PathAgent)
             self._lane_agents = LaneAgents.from_log(
                 self.assembler,
                 mission=self.mission,
@@ -332,7 +304,7 @@ class LogSimulator:
         self._queued: ControlCommands = neutral  # with a one-frame delay: the next one
         self.tracker.reset()
         self._index = 0
-        self._agents: dict[int, _Agent] = {}
+        self._agents: dict[int, PathAgent] = {}
         if self._lane_agents is not None:
             self._lane_agents.reset()
         self._update_agents(first, dt_s=0.0)
@@ -559,7 +531,7 @@ class LogSimulator:
             agent = self._agents.get(obj.object_id)
             if agent is None:
                 speed = float(np.hypot(obj.velocity[0], obj.velocity[1]))
-                self._agents[obj.object_id] = _Agent(xy, yaw, speed)
+                self._agents[obj.object_id] = PathAgent(xy, yaw, speed)
                 continue
             on_log = agent.s_m >= agent.path_s[-1]
             agent.log(xy, yaw, dt_s)
@@ -567,7 +539,7 @@ class LogSimulator:
         for gone in set(self._agents) - seen:
             del self._agents[gone]  # shown only while the log has it
 
-    def _idm_step(self, agent: _Agent, *, length_m: float, dt_s: float, on_log: bool) -> None:
+    def _idm_step(self, agent: PathAgent, *, length_m: float, dt_s: float, on_log: bool) -> None:
         """Advance ``agent`` by ``dt_s``: IDM with the driven ego as leader when the ego is
         ahead of it in its lane (gap below ``_INTERACTION_M``), else on its logged motion (or,
         once held up, at its logged speed behind it) — never ahead of the log."""

@@ -55,7 +55,12 @@ def logged_mission(
     lanes: tuple[str, ...] = ()
     line = np.zeros((0, 2))
     source = "no road map: no route"
-    if index is not None:
+    if index is not None and frame_id != index.road_map.frame_id:
+        source = (
+            f"the logged ego is in frame {frame_id!r}, the road map in "
+            f"{index.road_map.frame_id!r}: no route"
+        )
+    elif index is not None:
         run = np.array(stamps, dtype=np.int64) >= start_ns
         if duration_s is not None:
             run &= np.array(stamps, dtype=np.int64) <= start_ns + round(duration_s * 1e9)
