@@ -228,3 +228,24 @@ class Jerky(Algorithm):
             self.start_ns = frame.stamp_ns
         phase = ((frame.stamp_ns - self.start_ns) // self.period_ns) % 2
         return _straight(frame.stamp_ns, self.slow_mps if phase else self.fast_mps)
+
+
+class OffRoad(Algorithm):
+    """Plans a left arc of radius ``radius_m`` at ``speed_mps``, blind to the map: on a real
+    road it leaves the drivable area within seconds (the off-road planner of the map tests)."""
+
+    role = Role.PLANNING
+    defaults = MappingProxyType({"speed_mps": 8.0, "radius_m": 25.0})
+
+    def setup(self, config: Mapping[str, Any]) -> None:
+        self.speed_mps = float(config["speed_mps"])
+        self.radius_m = float(config["radius_m"])
+
+    def step(self, frame: Frame, upstream: StageOutputs) -> PlannedPath:
+        t = np.arange(0.0, 6.0 + 1e-9, 0.1)
+        angle = self.speed_mps * t / self.radius_m
+        x = self.radius_m * np.sin(angle)
+        y = self.radius_m * (1.0 - np.cos(angle))
+        return PlannedPath(
+            stamp_ns=frame.stamp_ns, waypoints=np.column_stack([x, y, np.zeros_like(t), t])
+        )

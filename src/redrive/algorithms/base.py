@@ -30,6 +30,7 @@ from redrive.types import (
     ControlCommands,
     DetectedObject,
     Frame,
+    Mission,
     PlannedPath,
     RoadMap,
     Role,
@@ -249,6 +250,9 @@ class Algorithm(ABC):
         #: the log's road map (lanes, stop lines, traffic lights; map frame), None when the log
         #: has none — set by :meth:`use_road_map` before the first frame
         self.road_map: RoadMap | None = None
+        #: the run's mission (the route along the lane graph and the logged ego trajectory),
+        #: None when it has none — set by :meth:`use_mission` before the first frame
+        self.mission: Mission | None = None
 
     # -- what a researcher writes -------------------------------------------------------------
 
@@ -266,6 +270,13 @@ class Algorithm(ABC):
         """Called once before the first frame with the log's road map (None: it has none); keeps
         it as :attr:`road_map`.  Override (calling this) to prepare what the steps look up."""
         self.road_map = road_map
+
+    def use_mission(self, mission: Mission | None) -> None:
+        """Called once before the first frame with the run's mission (None: it has none — only
+        a closed loop on a recorded log with a road map has one, nuPlan's
+        ``PlannerInitialization``); keeps it as :attr:`mission`.  Override (calling this) to
+        prepare what the steps look up."""
+        self.mission = mission
 
     # -- what the engine calls ----------------------------------------------------------------
 

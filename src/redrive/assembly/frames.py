@@ -227,6 +227,35 @@ class FrameAssembler:
             yield assemble(pending.popleft()[0], index=index)
             index += 1
 
+    def ego_states(self, *, stop_ns: int | None = None) -> Iterator[VehicleState]:
+        """Every ego state of the log's vehicle-state topic, in log order (log time before
+        ``stop_ns``), without assembling frames (the closed loop's route from the logged
+        path); none when the sensor map has no such topic."""
+        topic = self.sensor_map.vehicle_state_topic
+        if topic is None:
+            return
+        for message in self.log.messages(topics=[topic], stop_ns=stop_ns):
+            decoded = self._decode(message)
+            if decoded is not None and isinstance(decoded.value, VehicleState):
+                yield decoded.value
+
+    def ground_truth(
+        self, *, stop_ns: int | None = None
+    ) -> Iterator[tuple[int, tuple[DetectedObject, ...]]]:
+        """Every ground-truth message of the log as (stamp_ns, objects in base_link of the
+        logged ego), in log order (log time before ``stop_ns``), without assembling frames (the
+        closed loop's reactive agents read their whole logged tracks first)."""
+        topic = self.sensor_map.ground_truth_topic
+        if topic is None:
+            return
+        for message in self.log.messages(topics=[topic], stop_ns=stop_ns):
+            decoded = self._decode(message)
+            if decoded is not None and isinstance(decoded.value, tuple):
+                yield (
+                    decoded.stamp_ns,
+                    tuple(o for o in decoded.value if isinstance(o, DetectedObject)),
+                )
+
     def _decode(self, message: LogMessage) -> Decoded | None:
         if decoder_for(message.msgtype) is None and message.encoding != "native":
             return None

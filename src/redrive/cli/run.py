@@ -57,9 +57,14 @@ Closed loop on a recorded log (LOG with the ego's pose: odometry or poses): the 
 log's first pose and the bicycle model carries it; each frame is the log's, re-expressed from the
 driven pose (point clouds and ground truth moved by the pose difference, images unchanged) — right
 only for small deviations, so each frame past 2 m / 10° from the logged ego is flagged `deviated`
-(closed_loop table; counted in the manifest summary).  --agents reactive (needs objects in the
-log) slows the logged vehicles the driven ego holds up.  --sensor-map and --duration apply.  See
-docs/closed_loop.md.
+(closed_loop table; counted in the manifest summary).  An object-level run (no stage reads a
+sensor) is paced by the log's ground truth; `redrive run` says which stream paces and why.  With
+a road map (Argoverse 2, Waymo Open Motion, CommonRoad) the logged ego path mapped onto the lane
+graph is the route idm-planner follows, and --planning log-future-planner drives the logged ego
+(the expert); --agents reactive (needs objects in the log) lets the logged vehicles the driven ego
+holds up drive their lanes under IDM (following, red lights, stop signs) until they catch up with
+their log (without a map: slowed along their logged paths).  --sensor-map and --duration apply.
+See docs/closed_loop.md.
 """
 
 _FRAMES = re.compile(r"^(\d*):(\d*)$")
@@ -440,7 +445,11 @@ def _print_deviation(out: Path) -> None:
 
     from redrive.results import open_run
 
-    summary = open_run(out).manifest.summary
+    manifest = open_run(out).manifest
+    paced_by = manifest.closed_loop.get("paced_by")
+    if paced_by:
+        print(f"frames paced by {paced_by}: {manifest.closed_loop.get('pace_reason', '')}")
+    summary = manifest.summary
     if summary is None or "deviated_frames" not in summary.closed_loop:
         return
     dev = dict(summary.closed_loop)

@@ -20,18 +20,30 @@ ground and far objects shift with the car, and the log's own motion blur and tim
 flagged as too far from the log for its sensor data to be trusted (the ``deviated`` column).
 
 Agents: ``replay`` — the logged objects as recorded (moved into the driven base frame).
-``reactive`` — the same, except the logged *vehicles that have the driven ego ahead of them in
+``reactive`` on a log with a road map (Argoverse 2, Waymo Open Motion, CommonRoad, a ``redrive
+synth`` log) — the logged vehicles drive along the lane graph under IDM whenever the driven ego
+or a vehicle held up by it blocks them, stopping at red lights and stop signs, and hand back to
+their logged track when nothing does (:mod:`redrive.closedloop.lane_agents`).  ``reactive``
+without a map — the logged *vehicles that have the driven ego ahead of them in
 their lane* (the ego's rear axle within ``lane_half_width_m`` of their heading line, ahead of
 them, bumper-to-bumper gap below 150 m): each such vehicle moves along its own logged path at a
 speed set by IDM with the driven ego as its leader and its logged speed (along its logged path)
 as the desired one, never ahead of where the log has it.  A vehicle the ego never holds up is
 exactly replayed; one it held up drives on at its logged speed, behind its logged position, until
-it catches up with it (only where the log is faster).  Nothing else reacts (no lane changes, no pedestrians, no objects the
-log does not have), and an object is shown only while the log has it.
+it catches up with it (only where the log is faster).  In either, nothing else reacts
+(pedestrians and cyclists are replayed, no objects the log does not have), and an object is
+shown only while the log has it.
 
-Frames come from :class:`redrive.assembly.frames.FrameAssembler` (a log without a LiDAR, camera or radar
-is paced by its busiest sensor, e.g. an IMU; one without any sensor, or whose sensor map says
-``driver = "ground_truth"``, by its ground-truth messages), at most ``rate_hz`` of them: the first frame at
+Mission: with a road map the logged ego path is mapped onto the lane graph
+(:mod:`redrive.closedloop.mission`); the route and the logged trajectory are handed to every
+algorithm before the first frame (``Algorithm.use_mission``): ``idm-planner`` follows the route,
+``log-future-planner`` drives the logged trajectory (the expert).
+
+Frames come from :class:`redrive.assembly.frames.FrameAssembler`, paced by one stream
+(:func:`redrive.closedloop.log_checks.pace_frames`): the sensor map file's ``driver`` when it
+names one; else, when no stage reads a sensor and the log has ground truth (an object-level
+run), the ground-truth messages; else its highest-rate LiDAR/camera/radar, else its busiest
+sensor (an IMU …), else the ground truth — at most ``rate_hz`` of them: the first frame at
 or after each tick of a ``1 / rate_hz`` clock (less a quarter period, for jitter).  The time step between two frames is
 the log's (:attr:`LogSimulator.dt_s` is the gap to the next frame).
 """
@@ -50,16 +62,20 @@ import numpy.typing as npt
 from redrive.algorithms import StageOutputs
 from redrive.assembly.frames import FrameAssembler
 from redrive.assembly.sensor_map import (
-    GROUND_TRUTH_DRIVER,
     SensorMapOverrides,
     infer_sensor_map,
 )
+from redrive.closedloop.lane_agents import LaneAgents
+from redrive.closedloop.log_checks import pace_frames, refuse_unfit_log, topics_text
+from redrive.closedloop.mission import logged_mission
 from redrive.closedloop.mode import DEFAULT_DEVIATION_M, DEFAULT_DEVIATION_RAD
+from redrive.closedloop.path_agents import PathAgent
 from redrive.closedloop.simulator import EgoCommand, PathFollower, check_options, choose_command
 from redrive.closedloop.synthetic import AgentMode
 from redrive.errors import ConfigError
 from redrive.geometry import invert, transform_object
 from redrive.io import LogReader
+from redrive.maps.index import DRIVABLE_LANE_KINDS, RoadMapIndex
 from redrive.motion import IdmParams, idm_acceleration
 from redrive.sim.ego import (
     ActuatedEgo,
@@ -73,8 +89,10 @@ from redrive.types import (
     ControlCommands,
     DetectedObject,
     Frame,
+    Mission,
     ObjectClass,
     PointCloud,
+    RoadMap,
     SensorData,
     SensorType,
     VehicleState,
@@ -93,28 +111,8 @@ _MAX_PHYSICS_DT_S = 0.01
 _INTERACTION_M = 150.0
 
 
-def _topics(log: LogReader) -> str:
-    return ", ".join(f"{t} ({i.msgtype})" for t, i in sorted(log.topics.items())) or "none"
-
-
-def refuse_unfit_log(log: LogReader, *, agents: str) -> None:
-    """Refuse a log closed loop cannot run on, naming what is missing.
-
-    Raises:
-        ConfigError: no ego pose; ``agents == "reactive"`` and no objects.
-    """
-    if not log.capabilities.has_ego_pose:
-        msg = (
-            f"{log.path}: closed loop needs the ego's pose (odometry/poses); this log has none "
-            f"— its topics: {_topics(log)}"
-        )
-        raise ConfigError(msg)
-    if agents == "reactive" and not log.capabilities.has_ground_truth:
-        msg = (
-            f"{log.path}: --agents reactive needs the other road users (ground-truth objects or "
-            f"tracks); this log has none — its topics: {_topics(log)}. Use --agents replay"
-        )
-        raise ConfigError(msg)
+def _length_m(xy: npt.NDArray[np.float64]) -> float:
+    return float(np.hypot(*np.diff(xy, axis=0).T).sum()) if xy.shape[0] > 1 else 0.0
 
 
 def _pose(state: VehicleState) -> npt.NDArray[np.float64]:
@@ -150,40 +148,6 @@ def _reexpress_sensor(data: SensorData, mat: npt.NDArray[np.float64]) -> SensorD
     return dataclasses.replace(data, data=moved)
 
 
-class _Agent:
-    """A logged vehicle under IDM along its own logged path (``reactive``)."""
-
-    __slots__ = ("logged_speed_mps", "path_s", "path_xy", "path_yaw", "s_m", "speed_mps")
-
-    def __init__(self, xy: npt.NDArray[np.float64], yaw_rad: float, speed_mps: float) -> None:
-        self.path_xy: list[npt.NDArray[np.float64]] = [xy]
-        self.path_yaw: list[float] = [yaw_rad]
-        self.path_s: list[float] = [0.0]
-        self.s_m = 0.0
-        self.speed_mps = speed_mps
-        self.logged_speed_mps = speed_mps
-
-    def log(self, xy: npt.NDArray[np.float64], yaw_rad: float, dt_s: float) -> None:
-        step = float(np.hypot(*(xy - self.path_xy[-1])))
-        self.path_xy.append(xy)
-        self.path_yaw.append(yaw_rad)
-        self.path_s.append(self.path_s[-1] + step)
-        self.logged_speed_mps = step / dt_s if dt_s > 0 else self.logged_speed_mps
-
-    def pose(self) -> tuple[float, float, float]:
-        """x, y, yaw (map) at ``s_m`` along the logged path."""
-        s = self.path_s
-        i = int(np.searchsorted(s, self.s_m, side="right")) - 1
-        i = min(max(i, 0), len(s) - 1)
-        if i == len(s) - 1 or s[i + 1] <= s[i]:
-            x, y = self.path_xy[i]
-            return float(x), float(y), self.path_yaw[i]
-        a = (self.s_m - s[i]) / (s[i + 1] - s[i])
-        x, y = self.path_xy[i] + a * (self.path_xy[i + 1] - self.path_xy[i])
-        dyaw = math.remainder(self.path_yaw[i + 1] - self.path_yaw[i], math.tau)
-        return float(x), float(y), self.path_yaw[i] + a * dyaw
-
-
 class LogSimulator:
     """A recorded log as a closed-loop :class:`~redrive.closedloop.simulator.Simulator`.
 
@@ -200,6 +164,11 @@ class LogSimulator:
             logged ego is flagged ``deviated``.
         lane_half_width_m: ``reactive``: how far off a vehicle's heading line the ego still
             blocks it.
+        reads_sensors: whether a stage of the pipeline reads a sensor; when none does (an
+            object-level run) and the log has ground truth, the ground truth paces the frames
+            (see :func:`~redrive.closedloop.log_checks.pace_frames`).
+        road_map: the log's road map (None: it has none): the route of the :attr:`mission`
+            (the logged ego path on its lane graph) and the lanes ``reactive`` agents drive.
 
     Raises:
         ConfigError: the log has no ego pose, no objects for ``reactive``, no sensor to pace
@@ -224,6 +193,8 @@ class LogSimulator:
         deviation_threshold_m: float = DEFAULT_DEVIATION_M,
         deviation_threshold_rad: float = DEFAULT_DEVIATION_RAD,
         lane_half_width_m: float = 1.75,
+        reads_sensors: bool = True,
+        road_map: RoadMap | None = None,
     ) -> None:
         check_options(agents=agents, rate_hz=rate_hz, delay_steps=delay_steps)
         refuse_unfit_log(log, agents=agents)
@@ -233,28 +204,18 @@ class LogSimulator:
         if smap.vehicle_state_topic is None:
             msg = (
                 f"{log.path}: closed loop needs the ego's pose (odometry/poses), but no topic "
-                f"decodes to one — its topics: {_topics(log)}"
+                f"decodes to one — its topics: {topics_text(log)}"
             )
             raise ConfigError(msg)
         if agents == "reactive" and smap.ground_truth_topic is None:
             msg = (
                 f"{log.path}: --agents reactive needs the other road users (ground-truth objects "
-                f"or tracks), but no topic decodes to them — its topics: {_topics(log)}"
+                f"or tracks), but no topic decodes to them — its topics: {topics_text(log)}"
             )
             raise ConfigError(msg)
-        by_ground_truth = overrides is not None and overrides.driver == GROUND_TRUTH_DRIVER
-        if smap.driver is None and not by_ground_truth:
-            if smap.sensors:
-                busiest = max(smap.sensors, key=lambda s: (s.rate_hz, s.sensor_id))
-                smap = dataclasses.replace(smap, driver=busiest.sensor_id)
-            elif smap.ground_truth_topic is None:
-                msg = (
-                    f"{log.path}: closed loop needs a sensor topic or ground truth to pace its "
-                    "frames (a LiDAR, camera, radar, IMU or GNSS, or objects); this log has none "
-                    f"— its topics: {_topics(log)}"
-                )
-                raise ConfigError(msg)
-            # else recorded traffic without sensors (WOMD, CommonRoad): the ground truth paces
+        smap, self.pace_reason = pace_frames(
+            log, smap, overrides=overrides, reads_sensors=reads_sensors
+        )
         self.log = log
         self.assembler = FrameAssembler(log, sensor_map=smap)
         self.sensors: Mapping[str, SensorType] = {s.sensor_id: s.sensor_type for s in smap.sensors}
@@ -270,7 +231,41 @@ class LogSimulator:
         self.deviation_threshold_m = float(deviation_threshold_m)
         self.deviation_threshold_rad = float(deviation_threshold_rad)
         self.lane_half_width_m = float(lane_half_width_m)
+        self.road_map = road_map
+        self.road_index = (
+            RoadMapIndex(road_map, lane_kinds=DRIVABLE_LANE_KINDS) if road_map is not None else None
+        )
+        self._lane_agents: LaneAgents | None = None
+        #: the log's ego pose topic has one message, the scenario's start (CommonRoad's planning
+        #: problem): the frames after it carry that pose as the logged one (objects are in its
+        #: base_link), and there is no logged ego to deviate from (``logged_state`` None)
+        pose_topic = log.topics.get(smap.vehicle_state_topic or "")
+        self.start_only = pose_topic is not None and pose_topic.count == 1
         self.reset(0)
+        #: the route along the lane graph and the logged ego trajectory (``use_mission``)
+        self.mission: Mission | None = logged_mission(
+            self.assembler,
+            index=self.road_index,
+            start_ns=self._current.stamp_ns,
+            duration_s=duration_s,
+        )
+        if (
+            agents == "reactive"
+            and self.road_index is not None
+            and self.mission is not None
+            and self.mission.frame_id == self.road_index.road_map.frame_id
+        ):
+            # the logged vehicles along the lane graph (lane_agents); without a map: along
+            # their own logged paths (PathAgent)
+            self._lane_agents = LaneAgents.from_log(
+                self.assembler,
+                mission=self.mission,
+                index=self.road_index,
+                lane_half_width_m=self.lane_half_width_m,
+                stop_ns=None
+                if duration_s is None
+                else self._current.stamp_ns + round((duration_s + 1.0) * 1e9),
+            )
 
     # -- the Simulator protocol ---------------------------------------------------------------
 
@@ -309,7 +304,9 @@ class LogSimulator:
         self._queued: ControlCommands = neutral  # with a one-frame delay: the next one
         self.tracker.reset()
         self._index = 0
-        self._agents: dict[int, _Agent] = {}
+        self._agents: dict[int, PathAgent] = {}
+        if self._lane_agents is not None:
+            self._lane_agents.reset()
         self._update_agents(first, dt_s=0.0)
 
     def observe(self) -> Frame:
@@ -320,7 +317,7 @@ class LogSimulator:
         sensors = {sid: _reexpress_sensor(data, mat) for sid, data in frame.sensors.items()}
         objects = frame.ground_truth
         if objects is not None:
-            objects = tuple(self._object(o, logged=logged, driven=driven) for o in objects)
+            objects = tuple(self._object(o, driven=driven, moved=mat) for o in objects)
         return dataclasses.replace(
             frame,
             index=self._index,
@@ -362,6 +359,8 @@ class LogSimulator:
             self._acting, self._queued = self._queued, chosen.commands
         else:
             self._acting = chosen.commands
+        if self._lane_agents is not None:  # the agents move from where everyone is now
+            self._step_lane_agents(frame, state, dt_s=dt_s)
         substeps = max(1, math.ceil(dt_s / _MAX_PHYSICS_DT_S - 1e-9))
         for _ in range(substeps):
             self._ego.apply(self._acting, dt_s / substeps)
@@ -376,7 +375,17 @@ class LogSimulator:
 
     @property
     def logged_state(self) -> VehicleState | None:
-        return self._logged(self._current)
+        """The logged ego now; None when the log has only its start (:attr:`start_only`)."""
+        return None if self.start_only else self._logged(self._current)
+
+    @property
+    def paced_by(self) -> str:
+        """The stream whose messages make the frames: ``sensor ID (TOPIC)`` or ``ground truth
+        (TOPIC)``."""
+        smap = self.assembler.sensor_map
+        if smap.driver is not None:
+            return f"sensor {smap.driver} ({smap.sensor(smap.driver).topic})"
+        return f"ground truth ({smap.ground_truth_topic})"
 
     def describe(self) -> dict[str, Any]:
         smap = self.assembler.sensor_map
@@ -388,6 +397,8 @@ class LogSimulator:
             "rate_hz": self.rate_hz,
             "duration_s": self.duration_s,
             "pace_sensor": smap.driver,
+            "paced_by": self.paced_by,
+            "pace_reason": self.pace_reason,
             "vehicle_state_topic": smap.vehicle_state_topic,
             "ground_truth_topic": smap.ground_truth_topic,
             "delay_steps": self.delay_steps,
@@ -402,6 +413,13 @@ class LogSimulator:
                 "max_physics_dt_s": _MAX_PHYSICS_DT_S,
             },
             "tracker": self.tracker.describe(),
+            "route": None
+            if self.mission is None
+            else {
+                "lanes": list(self.mission.route_lane_ids),
+                "length_m": _length_m(self.mission.route_xy),
+                "source": self.mission.source,
+            },
         }
 
     # -- frames and the ego -------------------------------------------------------------------
@@ -413,9 +431,18 @@ class LogSimulator:
         slack_ns = period_ns // 4
         first_ns: int | None = None
         due_ns = 0
+        start: VehicleState | None = None
         for frame in self.assembler.frames():
             if frame.vehicle_state is None:
-                continue
+                if start is None or not self.start_only:
+                    continue
+                # a scenario's start is its only ego state (CommonRoad): the frames after it
+                # keep it (their objects are in its base_link)
+                frame = dataclasses.replace(  # noqa: PLW2901
+                    frame, vehicle_state=dataclasses.replace(start, stamp_ns=frame.stamp_ns)
+                )
+            elif start is None:
+                start = frame.vehicle_state
             if first_ns is None:
                 first_ns = frame.stamp_ns
             elif frame.stamp_ns < due_ns:
@@ -441,19 +468,42 @@ class LogSimulator:
 
     # -- agents -------------------------------------------------------------------------------
 
+    def _step_lane_agents(self, frame: Frame, ego: VehicleState, *, dt_s: float) -> None:
+        assert self._lane_agents is not None
+        g = self.geometry
+        ahead = g.length_m / 2.0 - g.rear_overhang_m  # rear axle → centre
+        yaw = ego.heading_rad
+        centre = (
+            float(ego.position[0]) + ahead * math.cos(yaw),
+            float(ego.position[1]) + ahead * math.sin(yaw),
+        )
+        lights = {light.id: light.state for light in frame.traffic.traffic_lights}
+        self._lane_agents.step(
+            frame.stamp_ns,
+            dt_s=dt_s,
+            ego=(centre[0], centre[1], yaw, ego.speed_mps, g.length_m),
+            lights=lights,
+        )
+
     def _object(
-        self, obj: DetectedObject, *, logged: VehicleState, driven: VehicleState
+        self, obj: DetectedObject, *, driven: VehicleState, moved: npt.NDArray[np.float64]
     ) -> DetectedObject:
-        agent = self._agents.get(obj.object_id) if self.agents == "reactive" else None
-        if agent is None:
-            return transform_object(driven_from_logged(driven, logged), obj)
-        # the agent where IDM has it along its logged path, in the driven base frame
-        x, y, yaw = agent.pose()
+        """``obj`` (logged base_link) in the driven base frame (``moved``:
+        ``driven_base_from_logged_base``), or where its reactive agent is."""
+        pose: tuple[float, float, float, float] | None = None
+        if self._lane_agents is not None:
+            pose = self._lane_agents.pose(obj.object_id, self._current.stamp_ns)
+        elif self.agents == "reactive" and (agent := self._agents.get(obj.object_id)):
+            pose = (*agent.pose(), agent.speed_mps)
+        if pose is None:
+            return transform_object(moved, obj)
+        # the agent where IDM has it (along its lane line, or its logged path), in the driven
+        # base frame
+        x, y, yaw, v = pose
         base_from_map = invert(_pose(driven))
         center = base_from_map @ np.array([x, y, 0.0, 1.0])
         yaw_base = math.remainder(yaw - driven.heading_rad, math.tau)
-        logged_base = transform_object(driven_from_logged(driven, logged), obj)
-        v = agent.speed_mps
+        logged_base = transform_object(moved, obj)
         velocity = base_from_map[:3, :3] @ np.array([v * math.cos(yaw), v * math.sin(yaw), 0.0])
         orientation = logged_base.orientation.copy()
         orientation[0] = yaw_base
@@ -466,7 +516,7 @@ class LogSimulator:
 
     def _update_agents(self, frame: Frame, *, dt_s: float) -> None:
         """``reactive``: log the vehicles' new poses, then move each by IDM against the ego."""
-        if self.agents != "reactive" or frame.ground_truth is None:
+        if self.agents != "reactive" or frame.ground_truth is None or self._lane_agents:
             return
         logged = self._logged(frame)
         map_from_base = _pose(logged)
@@ -481,7 +531,7 @@ class LogSimulator:
             agent = self._agents.get(obj.object_id)
             if agent is None:
                 speed = float(np.hypot(obj.velocity[0], obj.velocity[1]))
-                self._agents[obj.object_id] = _Agent(xy, yaw, speed)
+                self._agents[obj.object_id] = PathAgent(xy, yaw, speed)
                 continue
             on_log = agent.s_m >= agent.path_s[-1]
             agent.log(xy, yaw, dt_s)
@@ -489,7 +539,7 @@ class LogSimulator:
         for gone in set(self._agents) - seen:
             del self._agents[gone]  # shown only while the log has it
 
-    def _idm_step(self, agent: _Agent, *, length_m: float, dt_s: float, on_log: bool) -> None:
+    def _idm_step(self, agent: PathAgent, *, length_m: float, dt_s: float, on_log: bool) -> None:
         """Advance ``agent`` by ``dt_s``: IDM with the driven ego as leader when the ego is
         ahead of it in its lane (gap below ``_INTERACTION_M``), else on its logged motion (or,
         once held up, at its logged speed behind it) — never ahead of the log."""

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from redrive.algorithms import GROUND_TRUTH, VEHICLE_STATE
+from redrive.algorithms import GROUND_TRUTH, ROAD_MAP, VEHICLE_STATE
 from redrive.algorithms.discovery import load_algorithm_class
 from redrive.assembly.sensor_map import infer_sensor_map, load_sensor_map_overrides
 from redrive.closedloop.contact import ON_COLLISION, check_on_collision
@@ -63,7 +63,7 @@ from redrive.results import (
 from redrive.sim.ego import EgoGeometry, TyreLimit
 from redrive.sim.roadmap import scenario_road_map
 from redrive.sim.scenario import list_scenarios, load_scenario
-from redrive.types import RoadMap, SensorType
+from redrive.types import Mission, RoadMap, SensorType
 
 __all__ = ["SENSOR_LOG", "ClosedLoopRequest", "is_scenario", "run_closed_loop"]
 
@@ -236,6 +236,11 @@ def _run_log(
     if request.seed is not None:
         logger.debug("closed loop on a log: --seed seeds the algorithms only")
     overrides = load_sensor_map_overrides(request.sensor_map) if request.sensor_map else None
+    smap = infer_sensor_map(log.topics, duration_ns=log.end_ns - log.start_ns, overrides=overrides)
+    # the log's own map (a synthetic or recorded-traffic log's) or --map's, placed in the log's
+    # frame: the map metrics, the route and the reactive agents' lanes all use it
+    chosen = choose_road_map(log, request.road_map, sensor_map=smap)
+    road_map = chosen.road_map
     simulator = LogSimulator(
         log,
         tracker=LqrTracker(),
@@ -245,16 +250,17 @@ def _run_log(
         overrides=overrides,
         tyres=TyreLimit(friction_coefficient=request.friction_coefficient),
         delay_steps=request.delay_steps,
+        reads_sensors=_reads_sensors(request.pipeline),
+        road_map=road_map,
     )
-    smap = infer_sensor_map(log.topics, duration_ns=log.end_ns - log.start_ns, overrides=overrides)
-    chosen = choose_road_map(log, request.road_map, sensor_map=smap)
     return _drive(
         request,
         simulator,
         source=source_log(Path(request.scenario), format=log.format),
         described=simulator.describe(),
-        road_map=chosen.road_map,  # the log's own (a redrive synth log's) or --map's
+        road_map=chosen.road_map,  # the log's own or --map's (placed in the log's frame)
         map_record=chosen.record,
+        mission=simulator.mission,
         ego_geometry=simulator.geometry,
         total=None,
         on_start=on_start,
@@ -272,6 +278,7 @@ def _drive(
     described: Mapping[str, Any],
     road_map: RoadMap | None,
     map_record: Mapping[str, Any] | None = None,
+    mission: Mission | None = None,
     ego_geometry: EgoGeometry,
     total: int | None,
     on_start: Callable[[int | None], None] | None,
@@ -285,6 +292,7 @@ def _drive(
         has_vehicle_state=simulator.has_vehicle_state,
         has_ground_truth=simulator.has_ground_truth,
         road_map=road_map,
+        mission=mission,
     )
     graph = build_graph(request.pipeline, inputs)
     pipeline = request.pipeline
@@ -363,6 +371,16 @@ def _close_after_failure(recording: McapWriter, recorder: RecordingThread) -> No
     except Exception:
         logger.warning("%s: could not be finished, dropped", recording.path, exc_info=True)
         recording.abort()
+
+
+def _reads_sensors(pipeline: PipelineConfig) -> bool:
+    """Whether an algorithm of ``pipeline`` reads a sensor (not only the ego state, the ground
+    truth or the road map)."""
+    return any(
+        i not in (VEHICLE_STATE, GROUND_TRUTH, ROAD_MAP)
+        for spec in pipeline.algorithms
+        for i in load_algorithm_class(spec.plugin).inputs
+    )
 
 
 def _refuse_sensor_inputs(pipeline: PipelineConfig, sensors: Mapping[str, Any]) -> None:

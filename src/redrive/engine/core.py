@@ -259,6 +259,7 @@ class Engine:
             "has_vehicle_state": inputs.has_vehicle_state,
             "has_ground_truth": inputs.has_ground_truth,
             "road_map": inputs.road_map,
+            "mission": inputs.mission,
         }
         self._stages: list[_Stage] = []
         roles_before: Mapping[str, Role] = {}

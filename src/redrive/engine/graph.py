@@ -26,7 +26,7 @@ from redrive.algorithms.discovery import load_algorithm_class
 from redrive.config import AlgorithmSpec, PipelineConfig
 from redrive.errors import ConfigError, MissingInputError, PluginError
 from redrive.results import AlgorithmEntry
-from redrive.types import RoadMap, SensorType, to_jsonable
+from redrive.types import Mission, RoadMap, SensorType, to_jsonable
 
 __all__ = ["LogInputs", "PlannedAlgorithm", "StageGraph", "build_graph", "config_hash"]
 
@@ -42,6 +42,8 @@ class LogInputs:
     has_vehicle_state: bool = False
     has_ground_truth: bool = False
     road_map: RoadMap | None = None
+    #: the run's mission (``Algorithm.use_mission``): a closed loop on a recorded log's map
+    mission: Mission | None = None
 
     @property
     def extras(self) -> tuple[str, ...]:
@@ -124,6 +126,7 @@ def instantiate(
     algo.configure(config)
     algo.bind(inputs.sensors, extras=inputs.extras)
     algo.use_road_map(inputs.road_map)
+    algo.use_mission(inputs.mission)
     return algo
 
 

@@ -18,6 +18,7 @@ from redrive.types.enums import (
 from redrive.types.environment import EnvironmentData, TrafficData, TrafficLight
 from redrive.types.frame import ExtensionPayload, Frame, SensorData, SensorPayload
 from redrive.types.jsonable import to_jsonable
+from redrive.types.mission import Mission
 from redrive.types.objects import CLASS_CODES, Box3D, DetectedObject, ObjectColumns
 from redrive.types.roadmap import (
     BOUNDARY_TYPES,
@@ -55,6 +56,7 @@ __all__ = [
     "Lighting",
     "MapLane",
     "MapTrafficLight",
+    "Mission",
     "ObjectClass",
     "ObjectColumns",
     "PlannedPath",

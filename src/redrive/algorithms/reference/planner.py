@@ -5,11 +5,16 @@
 
 * **Where** — the path geometry (a polyline in base_link, the rear-axle centre at the origin). With
   a ``route`` in the config (a list of [x, y] points in the frame of ``frame.vehicle_state``,
-  usually ``map``) the path is the part of the route ahead of the ego's projection onto it. Logs
-  carry no map, so without a route the planner assumes the lane is what the ego is doing: an arc of
+  usually ``map``) — else the route of the run's mission (``Algorithm.use_mission``: a closed
+  loop on a recorded log with a road map hands over the logged ego path mapped onto the lane
+  graph, its lanes' centrelines) — the path is the part of the route ahead of the ego's
+  projection onto it. Without a route the planner assumes the lane is what the ego is doing: an arc of
   constant curvature ``yaw_rate / speed`` (clamped to ``max_curvature_1pm``; straight below
   ``min_turn_speed_mps``), at most half a turn long (a plan that goes farther continues straight;
-  the speed is not limited on curves — there is no lateral-acceleration limit).
+  the speed is not limited on the arc's curve).  On a route the speed is limited for the curves
+  ahead: the IDM's desired speed becomes ``min(v0, min_j √(a_lat / |κ_j| + 2·b·d_j))`` — every
+  curve within ``range_m`` (curvature κ_j, ``d_j`` ahead of the front bumper) reached at
+  ``max_lateral_accel_mps2`` at most, braking for it at ``b_mps2``.
 * **How fast** — the Intelligent Driver Model (Treiber, Hennecke & Helbing 2000)::
 
       a = a_max · [1 − (v / v0)^δ − (s* / s)²],   s* = s0 + max(0, v·T + v·Δv / (2·√(a_max·b)))
@@ -42,7 +47,8 @@ Configuration (SI units):
 =======================  ========  ==========================================================
 key                      default   meaning
 =======================  ========  ==========================================================
-route                    None      [[x, y], …] metres in the ego state's frame; None: lane arc
+route                    None      [[x, y], …] metres in the ego state's frame; None: the
+                                   mission's route, else the lane arc
 v0_mps                   13.9      IDM desired speed (50 km/h)
 T_s                      1.5       IDM time headway
 a_mps2                   1.5       IDM maximum acceleration
@@ -59,6 +65,9 @@ rear_overhang_m          0.95      rear bumper to rear axle; front bumper = leng
 max_curvature_1pm        0.2       lane-arc curvature limit (radius ≥ 5 m)
 min_turn_speed_mps       1.0       below this speed the lane arc is straight
 max_route_offset_m       10.0      farther from the route than this is an error
+max_lateral_accel_mps2   3.0       on a route: slow for its curves to at most this lateral
+                                   acceleration (``v ≤ √(a / κ)``, braking at ``b_mps2`` to
+                                   reach each curve at its speed); 0: no curve limit
 perception               None      name of the perception algorithm to read; None: the last
 traffic_lights           true      stop at red (and stoppable yellow) lights of the road map
 =======================  ========  ==========================================================
@@ -89,6 +98,7 @@ from redrive.geometry.boxes import BOX_CORNER_SIGNS
 from redrive.types import (
     DetectedObject,
     Frame,
+    Mission,
     ObjectColumns,
     PlannedPath,
     RoadMap,
@@ -106,6 +116,10 @@ _ARC_SAMPLE_M = 0.5
 _ARC_SAGITTA_M = 1e-3
 _ROUTE_WINDOW_BACK_M = 10.0
 _ROUTE_WINDOW_AHEAD_M = 60.0
+#: the curvature of a route is the heading change over this arc (m), sampled every
+#: _CURVE_SAMPLE_M (a lane centreline's vertices are seconds apart, its curvature noisy)
+_CURVE_WINDOW_M = 4.0
+_CURVE_SAMPLE_M = 1.0
 
 
 class Polyline:
@@ -211,6 +225,7 @@ class IdmPlanner(Algorithm):
             "max_curvature_1pm": 0.2,
             "min_turn_speed_mps": 1.0,
             "max_route_offset_m": 10.0,
+            "max_lateral_accel_mps2": 3.0,
             "perception": None,
             "traffic_lights": True,
         }
@@ -245,6 +260,7 @@ class IdmPlanner(Algorithm):
         self.max_curvature_1pm = _positive(config, "max_curvature_1pm", allow_zero=True)
         self.min_turn_speed_mps = _positive(config, "min_turn_speed_mps", allow_zero=True)
         self.max_route_offset_m = _positive(config, "max_route_offset_m")
+        self.max_lateral_accel_mps2 = _positive(config, "max_lateral_accel_mps2", allow_zero=True)
         perception = config.get("perception")
         if perception is not None and not isinstance(perception, str):
             msg = f"IdmPlanner config 'perception' must be an algorithm name or None, got {perception!r}"
@@ -287,6 +303,16 @@ class IdmPlanner(Algorithm):
         """Keep the map and the stop lines of its traffic lights (the gates the step obeys)."""
         super().use_road_map(road_map)
         self._gates = gates_of(road_map)
+
+    def use_mission(self, mission: Mission | None) -> None:
+        """Without a ``route`` in the config, follow the mission's route (a closed loop on a
+        recorded log: the logged ego path on the map's lane graph) when it has one."""
+        super().use_mission(mission)
+        if self.config.get("route") is None:
+            self._route = (
+                Polyline(mission.route_xy) if mission is not None and mission.has_route else None
+            )
+            self._route_s_m = None
 
     def bind(self, sensors: Mapping[str, SensorType], *, extras: Iterable[str] = ()) -> None:
         """As :meth:`Algorithm.bind`, then one made-up plan's profile and projection, so that
@@ -339,7 +365,10 @@ class IdmPlanner(Algorithm):
             )
             leaders_s = np.append(leaders_s, stops)
             leaders_v = np.append(leaders_v, np.zeros(stops.size))
-        t_s, s_m = self._profile(speed_mps, leaders_s, leaders_v)
+        v0_mps = self.v0_mps
+        if self._route is not None and self.max_lateral_accel_mps2 > 0.0:
+            v0_mps = min(v0_mps, self._curve_speed_mps(path))
+        t_s, s_m = self._profile(speed_mps, leaders_s, leaders_v, v0_mps=v0_mps)
         xy = path.points_at(s_m)
         waypoints = np.column_stack([xy, np.zeros(len(t_s)), t_s])
         return PlannedPath(stamp_ns=frame.stamp_ns, waypoints=waypoints, frame_id="base_link")
@@ -452,7 +481,31 @@ class IdmPlanner(Algorithm):
         logger.debug("%s: %d object(s) in the path corridor", self.name, len(leaders_s))
         return leaders_s, leaders_v
 
-    def _profile(self, speed_mps: float, leaders_s: F64, leaders_v: F64) -> tuple[F64, F64]:
+    def _curve_speed_mps(self, path: Polyline) -> float:
+        """The highest speed now from which the ego can slow down at ``b_mps2`` to every curve
+        ahead on the route within ``range_m`` at a lateral acceleration of at most
+        ``max_lateral_accel_mps2``: ``min_j sqrt(a_lat / |κ_j| + 2 b (s_j − front))``, κ the
+        path's curvature over ``_CURVE_WINDOW_M`` (heading change per metre)."""
+        length = min(path.length_m, self.range_m)
+        if length < 2.0 * _CURVE_WINDOW_M:
+            return math.inf
+        s = np.arange(0.0, length, _CURVE_SAMPLE_M)
+        xy = path.points_at(s)
+        d = np.diff(xy, axis=0)
+        heading = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
+        k = max(1, round(_CURVE_WINDOW_M / _CURVE_SAMPLE_M))
+        if heading.size <= k:
+            return math.inf
+        kappa = np.abs(heading[k:] - heading[:-k]) / (k * _CURVE_SAMPLE_M)
+        at = s[k:-1] if s.size - 1 > k else s[k:]
+        at = at[: kappa.size]
+        curve = np.sqrt(self.max_lateral_accel_mps2 / np.maximum(kappa, 1e-9))
+        ahead = np.maximum(at - self.front_offset_m, 0.0)
+        return float(np.min(np.sqrt(curve**2 + 2.0 * self.b_mps2 * ahead)))
+
+    def _profile(
+        self, speed_mps: float, leaders_s: F64, leaders_v: F64, *, v0_mps: float | None = None
+    ) -> tuple[F64, F64]:
         """Times (s) and arc lengths of the rear axle along the path (m) of the IDM plan: the
         forward integration is one compiled call (:func:`._plan_kernels.idm_profile`)."""
         n = max(1, round(self.horizon_s / self.dt_s))
@@ -466,7 +519,7 @@ class IdmPlanner(Algorithm):
             dt,
             self.front_offset_m,
             self.s0_m,
-            self.v0_mps,
+            self.v0_mps if v0_mps is None else v0_mps,
             self.delta,
             self.headway_s,
             self.a_mps2,
