@@ -289,3 +289,30 @@ def test_a_batch_spec_map_reaches_every_recorded_log(
     assert entry["path"] == str(osm.resolve())
     assert entry["origin_lat_lon"] == [49.0, 8.4]
     assert (manifest.parent / "map.json").is_file()
+
+
+def test_a_closed_loop_with_the_users_map_follows_the_route_on_it(
+    osm: Path, road: RoadMap, tmp_path: Path
+) -> None:
+    """--map in closed loop: the map placed for the metrics is the one the route is found on
+    (the logged ego's lanes of the Karlsruhe chain), and idm-planner drives along it, on the
+    road the whole way."""
+    poses = drive_poses(road, seconds=12.0)
+    bag = write_drive_bag(tmp_path / "drive.bag", poses, frame="map")
+    out = tmp_path / "loop"
+    extra = ("--closed-loop", "--map", str(osm), "--map-origin", "49.0,8.4")
+    assert _run(bag, out, *extra) == 0
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["map"]["from"] == "--map"
+    assert manifest["closed_loop"]["route"]["lanes"] == list(DRIVE_LANES)
+    lanes = _lanes_driven(out)
+    assert all(lane in DRIVE_LANES for lane in lanes), lanes
+    assert main(["evaluate", str(out), "--metric", "drivable_area"]) == 0
+    from redrive.results.evaluation import read_evaluation
+
+    values = {
+        (r["metric"], r["key"]): r["value"]
+        for r in read_evaluation(out).values.to_pylist()
+        if not r["algorithm"]
+    }
+    assert values[("drivable_area", "drivable_area_compliance")] == 1.0
