@@ -249,3 +249,14 @@ class OffRoad(Algorithm):
         return PlannedPath(
             stamp_ns=frame.stamp_ns, waypoints=np.column_stack([x, y, np.zeros_like(t), t])
         )
+
+
+class MapReader(Algorithm):
+    """Plans straight ahead at 8 m/s, and declares the road map as an input (not a sensor)."""
+
+    role = Role.PLANNING
+    inputs = ("vehicle_state", "road_map")
+
+    def step(self, frame: Frame, upstream: StageOutputs) -> PlannedPath:
+        assert self.road_map is not None
+        return _straight(frame.stamp_ns, 8.0)

@@ -374,3 +374,12 @@ def test_sensors_apply_to_scenarios_only(
 ) -> None:
     assert main(["run", str(demo_log), "--closed-loop", "--sensors"]) == 1
     assert "--sensors re-renders a synthetic scenario's rig" in capsys.readouterr().err
+
+
+def test_a_planner_that_reads_the_road_map_is_not_refused_at_object_level(
+    tmp_path: Path,
+) -> None:
+    """The road map is no sensor: an object-level synthetic run hands it over (it was refused as
+    a sensor the backend does not render)."""
+    run = _run(tmp_path / "map", f"{PLUGINS}:MapReader", duration_s=1.0)
+    assert set(run.table("steps").to_pydict()["status"]) == {"ok"}

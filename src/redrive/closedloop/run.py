@@ -391,7 +391,7 @@ def _refuse_sensor_inputs(pipeline: PipelineConfig, sensors: Mapping[str, Any]) 
         wanted = [
             i.value if isinstance(i, SensorType) else i
             for i in cls.inputs
-            if i not in (VEHICLE_STATE, GROUND_TRUTH) and i not in sensors
+            if i not in (VEHICLE_STATE, GROUND_TRUTH, ROAD_MAP) and i not in sensors
         ]
         if wanted:
             msg = (
