@@ -73,7 +73,7 @@ from redrive.closedloop.path_agents import PathAgent
 from redrive.closedloop.simulator import EgoCommand, PathFollower, check_options, choose_command
 from redrive.closedloop.synthetic import AgentMode
 from redrive.errors import ConfigError
-from redrive.geometry import invert, transform_object
+from redrive.geometry import invert, transform_columns
 from redrive.io import LogReader
 from redrive.maps.index import DRIVABLE_LANE_KINDS, RoadMapIndex
 from redrive.motion import IdmParams, idm_acceleration
@@ -91,6 +91,7 @@ from redrive.types import (
     Frame,
     Mission,
     ObjectClass,
+    ObjectColumns,
     PointCloud,
     RoadMap,
     SensorData,
@@ -317,7 +318,7 @@ class LogSimulator:
         sensors = {sid: _reexpress_sensor(data, mat) for sid, data in frame.sensors.items()}
         objects = frame.ground_truth
         if objects is not None:
-            objects = tuple(self._object(o, driven=driven, moved=mat) for o in objects)
+            objects = self._objects(objects, driven=driven, moved=mat)
         return dataclasses.replace(
             frame,
             index=self._index,
@@ -485,34 +486,28 @@ class LogSimulator:
             lights=lights,
         )
 
-    def _object(
-        self, obj: DetectedObject, *, driven: VehicleState, moved: npt.NDArray[np.float64]
-    ) -> DetectedObject:
-        """``obj`` (logged base_link) in the driven base frame (``moved``:
-        ``driven_base_from_logged_base``), or where its reactive agent is."""
-        pose: tuple[float, float, float, float] | None = None
-        if self._lane_agents is not None:
-            pose = self._lane_agents.pose(obj.object_id, self._current.stamp_ns)
-        elif self.agents == "reactive" and (agent := self._agents.get(obj.object_id)):
-            pose = (*agent.pose(), agent.speed_mps)
-        if pose is None:
-            return transform_object(moved, obj)
-        # the agent where IDM has it (along its lane line, or its logged path), in the driven
-        # base frame
-        x, y, yaw, v = pose
-        base_from_map = invert(_pose(driven))
-        center = base_from_map @ np.array([x, y, 0.0, 1.0])
-        yaw_base = math.remainder(yaw - driven.heading_rad, math.tau)
-        logged_base = transform_object(moved, obj)
-        velocity = base_from_map[:3, :3] @ np.array([v * math.cos(yaw), v * math.sin(yaw), 0.0])
-        orientation = logged_base.orientation.copy()
-        orientation[0] = yaw_base
-        box = dataclasses.replace(
-            logged_base.box,
-            center=np.array([center[0], center[1], logged_base.box.center[2]]),
-            yaw_rad=yaw_base,
-        )
-        return dataclasses.replace(logged_base, box=box, velocity=velocity, orientation=orientation)
+    def _objects(
+        self,
+        objects: tuple[DetectedObject, ...],
+        *,
+        driven: VehicleState,
+        moved: npt.NDArray[np.float64],
+    ) -> tuple[DetectedObject, ...]:
+        """``objects`` (logged base_link) in the driven base frame (``moved``:
+        ``driven_base_from_logged_base``, all rows at once), each reactive agent where it is."""
+        out = transform_columns(moved, ObjectColumns.from_objects(objects)).objects()
+        if self._lane_agents is None and self.agents != "reactive":
+            return tuple(out)
+        stamp = self._current.stamp_ns
+        for i, obj in enumerate(objects):
+            pose: tuple[float, float, float, float] | None = None
+            if self._lane_agents is not None:
+                pose = self._lane_agents.pose(obj.object_id, stamp)
+            elif agent := self._agents.get(obj.object_id):
+                pose = (*agent.pose(), agent.speed_mps)
+            if pose is not None:
+                out[i] = _at_pose(out[i], pose, driven=driven)
+        return tuple(out)
 
     def _update_agents(self, frame: Frame, *, dt_s: float) -> None:
         """``reactive``: log the vehicles' new poses, then move each by IDM against the ego."""
@@ -567,3 +562,26 @@ class LogSimulator:
         agent.s_m = min(agent.s_m + agent.speed_mps * dt_s, end)
         if agent.s_m >= end:  # caught up with the log: back on its logged motion
             agent.speed_mps = agent.logged_speed_mps
+
+
+def _at_pose(
+    logged_base: DetectedObject,
+    pose: tuple[float, float, float, float],
+    *,
+    driven: VehicleState,
+) -> DetectedObject:
+    """The object (already in the driven base frame) where its reactive agent is: ``pose`` x, y,
+    yaw, speed in the map frame (along its lane line, or its logged path)."""
+    x, y, yaw, v = pose
+    base_from_map = invert(_pose(driven))
+    center = base_from_map @ np.array([x, y, 0.0, 1.0])
+    yaw_base = math.remainder(yaw - driven.heading_rad, math.tau)
+    velocity = base_from_map[:3, :3] @ np.array([v * math.cos(yaw), v * math.sin(yaw), 0.0])
+    orientation = logged_base.orientation.copy()
+    orientation[0] = yaw_base
+    box = dataclasses.replace(
+        logged_base.box,
+        center=np.array([center[0], center[1], logged_base.box.center[2]]),
+        yaw_rad=yaw_base,
+    )
+    return dataclasses.replace(logged_base, box=box, velocity=velocity, orientation=orientation)

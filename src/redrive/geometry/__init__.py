@@ -2,7 +2,13 @@
 
 from __future__ import annotations
 
-from redrive.geometry.boxes import box_corners, points_in_box, transform_box, transform_object
+from redrive.geometry.boxes import (
+    box_corners,
+    points_in_box,
+    transform_box,
+    transform_columns,
+    transform_object,
+)
 from redrive.geometry.projection import project_points
 from redrive.geometry.se3 import (
     compose,
@@ -35,6 +41,7 @@ __all__ = [
     "rotation_matrix_from_yaw",
     "se3_from_rotation_translation",
     "transform_box",
+    "transform_columns",
     "transform_from_matrix",
     "transform_object",
     "transform_points",

@@ -20,13 +20,14 @@ from redrive.geometry.se3 import (
     transform_points,
     transform_vectors,
 )
-from redrive.types import Box3D, DetectedObject
+from redrive.types import Box3D, DetectedObject, ObjectColumns
 
 __all__ = [
     "BOX_CORNER_SIGNS",
     "box_corners",
     "points_in_box",
     "transform_box",
+    "transform_columns",
     "transform_object",
 ]
 
@@ -52,6 +53,31 @@ def transform_object(dst_from_src: npt.ArrayLike, obj: DetectedObject) -> Detect
         velocity=transform_vectors(mat, obj.velocity),
         acceleration=transform_vectors(mat, obj.acceleration),
         orientation=orientation,
+    )
+
+
+def transform_columns(dst_from_src: npt.ArrayLike, columns: ObjectColumns) -> ObjectColumns:
+    """:func:`transform_object` of every row of ``columns`` at once: the same transform, one
+    matrix product for all rows (equal to the object-by-object one to rounding)."""
+    mat = np.asarray(dst_from_src, dtype=np.float64)
+    if len(columns) == 0:
+        return columns
+    rot = mat[:3, :3]
+    yaws = columns.yaw_rad.tolist()
+    heading = np.array([[math.cos(y), math.sin(y), 0.0] for y in yaws]) @ rot.T
+    new_yaw = [normalize_angle(math.atan2(hy, hx)) for hx, hy in heading[:, :2].tolist()]
+    orientation = columns.orientation_rad.copy()
+    orientation[:, 0] = [
+        normalize_angle(o + n - y)
+        for o, n, y in zip(orientation[:, 0].tolist(), new_yaw, yaws, strict=True)
+    ]
+    return dataclasses.replace(
+        columns,
+        center_m=transform_points(mat, columns.center_m),
+        yaw_rad=np.array(new_yaw),
+        velocity_mps=transform_vectors(mat, columns.velocity_mps),
+        acceleration_mps2=transform_vectors(mat, columns.acceleration_mps2),
+        orientation_rad=orientation,
     )
 
 

@@ -62,7 +62,6 @@ from redrive.io.datasets.native import (
 from redrive.io.datasets.tfrecord import looks_like_tfrecord, read_tfrecords
 from redrive.io.datasets.womd_proto import LANE_STATE_NAMES, scenario_class
 from redrive.types import (
-    Box3D,
     DetectedObject,
     LightState,
     ObjectClass,
@@ -339,23 +338,24 @@ class WomdReader(NativeLogBase):
         rel = (tr.xyz[others, step] - tr.xyz[sdc, step]) @ rot_t.T
         vel3 = np.concatenate([tr.velocity_mps[others, step], np.zeros((len(others), 1))], axis=1)
         vel = vel3 @ rot_t.T
-        out = []
-        for row, i in enumerate(others):
-            yaw = math.remainder(float(tr.heading_rad[i, step]) - yaw0, math.tau)
-            kind = int(tr.object_types[i])
-            out.append(
-                DetectedObject(
-                    object_id=int(tr.ids[i]),
-                    object_class=_CLASSES[kind]
-                    if 0 <= kind < len(_CLASSES)
-                    else ObjectClass.UNKNOWN,
-                    confidence=1.0,
-                    box=Box3D(center=rel[row], size=tr.lwh[i, step], yaw_rad=yaw),
-                    velocity=vel[row],
-                    orientation=np.array([yaw, 0.0, 0.0]),
-                )
+        yaw = np.array(
+            [math.remainder(h - yaw0, math.tau) for h in tr.heading_rad[others, step].tolist()]
+        )
+        kinds = tr.object_types[others].tolist()
+        classes = [_CLASSES[k] if 0 <= k < len(_CLASSES) else ObjectClass.UNKNOWN for k in kinds]
+        orientation = np.zeros((len(others), 3))
+        orientation[:, 0] = yaw
+        return tuple(
+            DetectedObject.many(
+                object_id=tr.ids[others],
+                object_class=classes,
+                center_m=rel,
+                size_m=tr.lwh[others, step],
+                yaw_rad=yaw,
+                velocity_mps=vel,
+                orientation_rad=orientation,
             )
-        return tuple(out)
+        )
 
     def contents(self) -> dict[str, int | str]:
         info = self.info
