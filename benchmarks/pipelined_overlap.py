@@ -1,0 +1,218 @@
+"""``redrive run LOG`` sequential against pipelined: wall, CPU per thread and how far two cores
+could take the pipelined mode, interleaved fresh processes (issue 36, item 1).
+
+    PYTHONPATH=src .venv/bin/python -m benchmarks.pipelined_overlap LOG [--rounds 3]
+        [--tree NAME=SRC ...] [--switch-interval-ms MS]
+
+Each pass is a fresh interpreter (``PYTHONPATH`` at the tree's ``src``) that runs the reference
+pipeline over LOG once to warm it, then once measured, in one mode; sequential and pipelined
+alternate (which goes first rotates each round).  Inside the measured :meth:`Engine.run` it
+records the wall time, the process CPU time and every thread's CPU time (``/proc/self/task/*/
+schedstat``, sampled every 5 ms, threads named by ``threading``).  Printed per tree and mode:
+medians of wall, CPU ÷ wall (cores in use) and thread CPU; then
+
+- ``pipelined ÷ sequential``: the median over rounds of the two passes' wall ratio — the figure
+  of the ≥ 1.6× target; meaningful only on a quiet machine (the load average is printed before
+  every pass: wait for an idle core);
+- ``two-core bound``: the same ratio of the least wall each pass could take on two free cores by
+  its CPU time, ``max(CPU ÷ 2, busiest thread)`` — what the pipelined mode could reach at best,
+  measured under any load (CPU time inflates far less than wall time), ignoring the GIL (threads
+  holding it serialise, so the real figure sits below).
+
+The sequential mode uses a second core already: the MCAP reader decompresses and checks the next
+chunks in a thread of its own while the frames run (``redrive-prefetch``), so ``CPU ÷ wall`` of a
+sequential pass is above 1 and the two-core bound below 2.  Every results table of a round's two
+passes is compared (timing columns and ``resources`` aside); a difference is reported and the
+exit status is 1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+_CHILD = r"""
+import json, os, sys, threading, time
+from pathlib import Path
+from redrive.config import reference_pipeline
+from redrive.engine import RunRequest, run_log
+from redrive.engine import core
+
+log, out, mode, switch_ms = Path(sys.argv[1]), Path(sys.argv[2]), sys.argv[3], float(sys.argv[4])
+if switch_ms > 0:
+    sys.setswitchinterval(switch_ms / 1000)
+
+def runtimes():
+    found = {}
+    for tid in os.listdir("/proc/self/task"):
+        try:
+            found[int(tid)] = int(open(f"/proc/self/task/{tid}/schedstat").read().split()[0])
+        except (OSError, ValueError):
+            pass
+    return found
+
+names, last, stop = {}, {}, threading.Event()
+
+def sample():
+    while not stop.wait(0.005):
+        for t in threading.enumerate():
+            if t.native_id is not None:
+                names[t.native_id] = t.name
+        last.update(runtimes())
+
+measured = {}
+original = core.Engine.run
+
+def run(self, *args, **kwargs):
+    before = runtimes()
+    c0, w0 = time.process_time(), time.perf_counter()
+    try:
+        return original(self, *args, **kwargs)
+    finally:
+        w1, c1 = time.perf_counter(), time.process_time()
+        time.sleep(0.02)
+        after = {**last, **runtimes()}
+        threads = {}
+        for tid, ns in after.items():
+            name = names.get(tid, str(tid))
+            used = (ns - before.get(tid, 0)) / 1e9
+            if used > 0.001:
+                threads[name] = threads.get(name, 0.0) + used
+        threads.pop("redrive-overlap-sampler", None)
+        measured.update(wall_s=w1 - w0, cpu_s=c1 - c0, threads=threads)
+
+core.Engine.run = run
+pipeline = reference_pipeline().with_options(mode=mode)
+run_log(RunRequest(log=log, pipeline=pipeline, out=out.with_name(out.name + "-warm")))
+sampler = threading.Thread(target=sample, name="redrive-overlap-sampler", daemon=True)
+sampler.start()
+report = run_log(RunRequest(log=log, pipeline=pipeline, out=out))
+stop.set()
+steps = {a.name: a.cpu_mean_ms * a.ok / 1000 for a in report.algorithms}
+print(json.dumps({**measured, "rtf": report.realtime_factor, "frames": report.frames, "steps": steps}))
+"""
+
+_TIMING = {"wall_ns", "late", "latency_ns", "cpu_ns"}
+
+
+def _load() -> str:
+    return Path("/proc/loadavg").read_text().split()[0]
+
+
+def _pass(src: str, log: Path, out: Path, mode: str, switch_ms: float) -> dict[str, object]:
+    env = {**os.environ, "PYTHONPATH": src}
+    done = subprocess.run(
+        [sys.executable, "-c", _CHILD, str(log), str(out), mode, str(switch_ms)],
+        env=env,
+        check=True,
+        capture_output=True,
+        text=True,
+    )
+    return json.loads(done.stdout.strip().splitlines()[-1])  # type: ignore[no-any-return]
+
+
+def _differing(a: Path, b: Path) -> list[str]:
+    import pyarrow.parquet as pq
+
+    differ = []
+    for table in sorted(p.name for p in a.iterdir() if p.is_dir() and p.name != "resources"):
+        ta, tb = pq.read_table(a / table), pq.read_table(b / table)
+        cols = [c for c in ta.column_names if c not in _TIMING]
+        if ta.column_names != tb.column_names or not ta.select(cols).equals(tb.select(cols)):
+            differ.append(table)
+    return differ
+
+
+def _least(one: dict[str, object]) -> float:
+    """The least wall time a pass's CPU allows on two free cores: half its CPU, or its
+    busiest thread's CPU if that is more (the GIL ignored)."""
+    threads = one["threads"]
+    assert isinstance(threads, dict)
+    return max(float(one["cpu_s"]) / 2, *threads.values())  # type: ignore[arg-type]
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("log", type=Path, metavar="LOG")
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument(
+        "--tree",
+        action="append",
+        default=[],
+        metavar="NAME=SRC",
+        help="a source tree to measure (repeatable; default: this tree's src)",
+    )
+    parser.add_argument(
+        "--switch-interval-ms",
+        type=float,
+        default=0.0,
+        help="sys.setswitchinterval in every pass (0: the interpreter's default)",
+    )
+    args = parser.parse_args(argv)
+    trees = [t.split("=", 1) for t in args.tree] or [["this", "src"]]
+    modes = ("sequential", "pipelined")
+    passes: dict[tuple[str, str], list[dict[str, object]]] = {}
+    bad = 0
+    with tempfile.TemporaryDirectory(prefix="redrive-overlap-") as tmp:
+        for r in range(args.rounds):
+            for name, src in trees:
+                order = modes if r % 2 == 0 else modes[::-1]
+                for mode in order:
+                    print(f"round {r + 1} {name} {mode}: load {_load()}", file=sys.stderr)
+                    out = Path(tmp) / f"{name}-{mode}-{r}"
+                    got = _pass(src, args.log, out, mode, args.switch_interval_ms)
+                    passes.setdefault((name, mode), []).append(got)
+                differ = _differing(
+                    Path(tmp) / f"{name}-sequential-{r}", Path(tmp) / f"{name}-pipelined-{r}"
+                )
+                if differ:
+                    bad = 1
+                    print(f"round {r + 1} {name}: tables differ: {', '.join(differ)}")
+    for name, _src in trees:
+        for mode in modes:
+            got = passes[(name, mode)]
+            wall = statistics.median(float(p["wall_s"]) for p in got)  # type: ignore[arg-type]
+            cores = statistics.median(
+                float(p["cpu_s"]) / float(p["wall_s"])  # type: ignore[arg-type]
+                for p in got
+            )
+            names = sorted({t for p in got for t in p["threads"]})  # type: ignore[attr-defined]
+            threads = {
+                t: statistics.median(float(p["threads"].get(t, 0.0)) for p in got)  # type: ignore[attr-defined]
+                for t in names
+            }
+            shown = ", ".join(
+                f"{t.removeprefix('redrive-')} {s:.2f}"
+                for t, s in sorted(threads.items(), key=lambda kv: -kv[1])
+                if s >= 0.01
+            )
+            step_names = list(got[0]["steps"])  # type: ignore[call-overload]
+            steps = ", ".join(
+                f"{a} {statistics.median(float(p['steps'][a]) for p in got):.2f}"  # type: ignore[index]
+                for a in step_names
+            )
+            print(
+                f"{name} {mode:10s}: wall {wall:.2f} s, {cores:.2f} cores (CPU / wall), CPU "
+                f"{statistics.median(float(p['cpu_s']) for p in got):.2f} s; "  # type: ignore[arg-type]
+                f"thread CPU s: {shown}; in the steps: {steps}"
+            )
+        seq, pip = passes[(name, "sequential")], passes[(name, "pipelined")]
+        ratios = [float(s["wall_s"]) / float(p["wall_s"]) for s, p in zip(seq, pip, strict=True)]  # type: ignore[arg-type]
+        bounds = [_least(s) / _least(p) for s, p in zip(seq, pip, strict=True)]
+        print(
+            f"{name}: pipelined ÷ sequential {statistics.median(ratios):.2f}× "
+            f"({' '.join(f'{x:.2f}' for x in ratios)}); two-core bound by CPU "
+            f"{statistics.median(bounds):.2f}× ({' '.join(f'{x:.2f}' for x in bounds)})"
+        )
+    print(f"load {_load()}")
+    return bad
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
