@@ -1,11 +1,12 @@
 """Instructions of a sequential ``redrive run`` of the reference pipeline over one log, for
 callgrind: the run is done once to warm (imports, kernels, caches), then once inside
-``functools.reduce``, so callgrind with ``--collect-atstart=no --toggle-collect=functools_reduce``
-counts that run alone, on the calling thread (the MCAP reader's prefetch thread and the results
+``operator.call``, so callgrind with ``--collect-atstart=no --toggle-collect=_operator_call``
+counts that run alone (``functools.reduce``, the usual toggle, is used by numba's compiler and
+numpy: benchmarks/objloop_instructions.py), on the calling thread (the MCAP reader's prefetch thread and the results
 writer's pool threads are not counted: the sequential mode's frame loop is)::
 
     PYTHONPATH=src valgrind --tool=callgrind --callgrind-out-file=/dev/null \
-        --collect-atstart=no --toggle-collect=functools_reduce \
+        --collect-atstart=no --toggle-collect=_operator_call \
         .venv/bin/python benchmarks/openloop_instructions.py LOG 2>&1 | grep Collected
 
 For before/after, run it with each tree's ``PYTHONPATH`` (a short log: ``redrive synth urban
@@ -15,7 +16,7 @@ For before/after, run it with each tree's ``PYTHONPATH`` (a short log: ``redrive
 from __future__ import annotations
 
 import argparse
-import functools
+import operator
 import tempfile
 from pathlib import Path
 
@@ -31,11 +32,8 @@ def main() -> None:
     pipeline = reference_pipeline().with_options(mode=args.mode)
     with tempfile.TemporaryDirectory() as tmp:
         run_log(RunRequest(log=args.log, pipeline=pipeline, out=Path(tmp) / "warm"))
-        report = functools.reduce(
-            lambda _, out: run_log(RunRequest(log=args.log, pipeline=pipeline, out=out)),
-            [Path(tmp) / "measured"],
-            None,
-        )
+        request = RunRequest(log=args.log, pipeline=pipeline, out=Path(tmp) / "measured")
+        report = operator.call(run_log, request)
     assert report is not None
     print(f"{report.frames} frames, status {report.status}")
 
