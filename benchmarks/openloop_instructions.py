@@ -2,8 +2,9 @@
 callgrind: the run is done once to warm (imports, kernels, caches), then once inside
 ``operator.call``, so callgrind with ``--collect-atstart=no --toggle-collect=_operator_call``
 counts that run alone (``functools.reduce``, the usual toggle, is used by numba's compiler and
-numpy: benchmarks/objloop_instructions.py), on the calling thread (the MCAP reader's prefetch thread and the results
-writer's pool threads are not counted: the sequential mode's frame loop is)::
+numpy: benchmarks/objloop_instructions.py), on the calling thread (the MCAP reader's prefetch
+thread and the results writer's pool threads are not counted: the sequential mode's frame loop
+is)::
 
     PYTHONPATH=src valgrind --tool=callgrind --callgrind-out-file=/dev/null \
         --collect-atstart=no --toggle-collect=_operator_call \
