@@ -303,8 +303,11 @@ class ClusterDetector(Algorithm):
         sx, sy, sz = (np.float32(v) for v in sensor_location)
         grid = self._ground_grid
         r0 = np.float32(cfg["min_range_m"])
+        packed = np.require(xyz, np.float32, ("C", "A"))  # a decoded xyz may be strided
+        if packed is not xyz:  # a copy: read-only, as a cloud's own xyz and the warm-up's (numba
+            packed.flags.writeable = False  # compiles and loads writable arrays as another type)
         x, y, z, keys, minima = crop_cell_minima(
-            np.require(xyz, np.float32, ("C", "A")),  # a decoded xyz may be strided or unaligned
+            packed,
             sx,
             sy,
             sz,

@@ -1,7 +1,7 @@
 """Work on the next items of a sequence in a background thread while the caller uses this one.
 
 Used where the heavy part of each item's work releases the GIL (zstd and lz4 decompression,
-``zlib.crc32`` of large buffers): reading a log then runs on a second core beside the decoding
+the CRC-32 of large buffers): reading a log then runs on a second core beside the decoding
 and the algorithms.  Results come back in order; an exception is raised where the caller takes
 the result that raised it, as a plain ``map`` would.
 """
