@@ -64,3 +64,28 @@ def test_info_of_a_run_map_and_a_damaged_map(
     cut.write_text('{"lane_segments": {"1": {"id": 1, ')
     assert main(["info", str(cut)]) == 1
     assert "not complete JSON" in capsys.readouterr().err
+
+
+def test_info_of_a_real_bag_converted_to_mcap_provides_no_road_map(
+    shared_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """An MCAP reader can be asked for a map (a synth log's record), but the Embark bag
+    converted to MCAP holds none: `info` must not say it provides one; a log with its map
+    (the CommonRoad scenario) still does."""
+    out = tmp_path / "lum.mcap"
+    bag = shared_data / "rosbag1_real" / "embag_luminar_test.bag"
+    assert main(["convert", str(bag), str(out)]) == 0
+    capsys.readouterr()
+    assert main(["info", str(out), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["capabilities"]["road_map"] is False
+    assert "map" not in info
+    assert main(["info", str(out)]) == 0
+    provides = next(
+        line for line in capsys.readouterr().out.splitlines() if line.startswith("provides")
+    )
+    assert "road map" not in provides
+    assert "ego pose" in provides
+    scenario = shared_data / "commonroad" / "USA_US101-3_3_T-1.xml"
+    assert main(["info", str(scenario)]) == 0
+    assert "road map" in capsys.readouterr().out.splitlines()[2]  # path, format, provides

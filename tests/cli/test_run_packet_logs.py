@@ -45,3 +45,17 @@ def test_the_detector_runs_on_packet_clouds(
     assert set(steps.column("status").to_pylist()) == {"ok"}
     assert dict(run.manifest.sensors) == {sensor: SensorType.LIDAR}
     assert run.table("frames").column("missing_inputs").to_pylist() == [""] * frames
+
+
+def test_a_one_frame_run_gives_no_real_time_factor(
+    shared_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The Ouster bag makes one frame: no log time passes, so "0.0x real time (0.0 s of log)"
+    would say the run was infinitely slow; the summary says there is no factor instead."""
+    bag = shared_data / "ouster" / "512x10_raw.bag"
+    out = tmp_path / "run"
+    argv = ["run", str(bag), "--perception", "cluster-detector", "-o", str(out), "--no-progress"]
+    assert main(argv) == 0
+    said = " ".join(capsys.readouterr().out.split())
+    assert "x real time" not in said
+    assert "one stamp of log, so no real-time factor" in said

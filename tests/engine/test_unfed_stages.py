@@ -145,3 +145,40 @@ def test_open_loop_on_the_real_husky_bag_plans_at_its_imu_rate(
     steps = run.table("steps").to_pylist()
     assert all(s["status"] == "ok" for s in steps)
     assert len(steps) == 400  # planner and controller, every frame
+
+
+def test_a_vehicle_state_on_another_clock_is_no_input_the_planner_is_skipped_with_why(
+    shared_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The Embark bag's odometry is stamped 1970 (simulated time), its clouds 2020: no frame gets
+    a state, so the default run skips planner and controller (saying why) instead of failing
+    them on every frame; the Husky bag's odometry and IMU share a clock and stay inputs."""
+    from redrive.assembly.clocks import other_clock_inputs
+    from redrive.assembly.frames import FrameAssembler
+    from redrive.io import open_log
+
+    bag = shared_data / "rosbag1_real" / "embag_luminar_test.bag"
+    with open_log(bag) as log:
+        unusable = other_clock_inputs(log, FrameAssembler(log).sensor_map)
+    assert list(unusable) == ["vehicle_state"]
+    assert "/base_pose_ground_truth" in unusable["vehicle_state"]
+    assert "another clock" in unusable["vehicle_state"]
+    husky = shared_data / "rosbag1_real" / "robot_localization_test1_husky.bag"
+    with open_log(husky) as log:
+        assert other_clock_inputs(log, FrameAssembler(log).sensor_map) == {}
+
+    out = tmp_path / "run"
+    assert main(["run", str(bag), "--out", str(out), "--no-progress"]) == 0
+    said = " ".join(capsys.readouterr().out.split())  # the console wraps long lines
+    assert "skipped planner" in said
+    assert "another clock" in said
+    manifest = read_manifest(out)
+    assert manifest.pipeline.stages == ("detection", "tracking")
+    assert set(manifest.pipeline.skipped) == {"planner", "controller"}
+    assert "another clock" in manifest.pipeline.skipped["planner"]
+    steps = open_run(out).table("steps").to_pylist()
+    assert {row["algorithm"] for row in steps} == {"clusters", "tracker"}
+    assert all(row["status"] == "ok" for row in steps)  # no failed planner steps
+    # --strict refuses it, naming the clock
+    assert main(["run", str(bag), "--out", str(tmp_path / "strict"), "--strict"]) != 0
+    assert "another clock" in " ".join(capsys.readouterr().err.split())

@@ -21,6 +21,7 @@ from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from functools import partial
 
+from redrive.assembly.clocks import OTHER_CLOCK_NS
 from redrive.assembly.mounts import SensorMounts, mount_tf_topics
 from redrive.assembly.non_finite import NonFiniteCounter
 from redrive.assembly.sensor_map import SensorMap, SensorMapOverrides, infer_sensor_map
@@ -47,8 +48,7 @@ __all__ = ["FrameAssembler", "interpolate_state", "iter_frames"]
 logger = logging.getLogger(__name__)
 
 _DEFAULT_LOOKAHEAD_NS = 200_000_000
-#: an input whose nearest header stamp is further than this from a frame's follows another clock
-_OTHER_CLOCK_NS = 60_000_000_000
+_OTHER_CLOCK_NS = OTHER_CLOCK_NS
 _STATE_WINDOW_NS = 2_000_000_000
 #: the clouds whose non-finite points are counted (a 2D scan marks a beam without return NaN)
 _COUNTED = frozenset({SensorType.LIDAR, SensorType.RADAR})

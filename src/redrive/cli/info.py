@@ -7,6 +7,7 @@ import json
 import logging
 import sys
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -173,6 +174,11 @@ def _run(args: argparse.Namespace) -> int:
             else str(summary.damage)
         )
         raise LogDamagedError(msg, messages_read=summary.messages)
+    # the reader's capability says a map can be asked for (any MCAP file); "provides" says
+    # whether this log holds one (a converted bag does not)
+    has_map = road_map is not None or map_error is not None
+    if summary.capabilities.road_map and not has_map:
+        summary = replace(summary, capabilities=replace(summary.capabilities, road_map=False))
     map_summary = None
     if road_map is not None:
         from redrive.maps.files import summarize_map

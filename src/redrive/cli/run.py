@@ -156,12 +156,18 @@ def print_run_report(report: Any, out: Path, *, live: bool = False) -> None:
             f"{a.latency_max_ms:.2f}",
         )
     console.print(table)
+    # one frame (the Ouster bag's single scan) spans no log time: no real-time factor to give
+    pace = (
+        f"{report.realtime_factor:.1f}x real time ({report.log_span_s:.1f} s of log)"
+        if report.log_span_s > 0
+        else "one stamp of log, so no real-time factor"
+    )
     speed = (
         f"{report.frames} frames in {report.wall_s:.1f} s of wall time: "
         f"{report.frames_per_s:.1f} frames/s"
         if live
         else f"{report.frames} frames in {report.wall_s:.1f} s: {report.frames_per_s:.1f} "
-        f"frames/s, {report.realtime_factor:.1f}x real time ({report.log_span_s:.1f} s of log)"
+        f"frames/s, {pace}"
     )
     console.print(speed + (f", {report.late_frames} late" if report.late_frames else ""))
     damage = getattr(report, "damage", ())

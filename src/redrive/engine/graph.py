@@ -44,6 +44,10 @@ class LogInputs:
     road_map: RoadMap | None = None
     #: the run's mission (``Algorithm.use_mission``): a closed loop on a recorded log's map
     mission: Mission | None = None
+    #: ``vehicle_state`` / ``ground_truth`` → why the log's topic of it feeds no frame (its header
+    #: stamps follow another clock: ``redrive.assembly.clocks``); such an input is not in
+    #: :attr:`extras`, and an algorithm that needs it is told why
+    unusable: Mapping[str, str] = field(default_factory=dict)
 
     @property
     def extras(self) -> tuple[str, ...]:
@@ -197,10 +201,13 @@ def build_graph(
             try:
                 algo = instantiate(cls, name=spec.name, config=config, inputs=inputs)
             except MissingInputError as err:
+                why = _unusable(cls, inputs)
                 if not skip_unfed:
-                    msg = f"stage {stage.name!r}, algorithm {spec.name!r} ({spec.plugin}): {err}"
+                    msg = (
+                        f"stage {stage.name!r}, algorithm {spec.name!r} ({spec.plugin}): {err}{why}"
+                    )
                     raise MissingInputError(msg) from err
-                skipped[spec.name] = f"stage {stage.name!r} ({spec.plugin}): {_need(err)}"
+                skipped[spec.name] = f"stage {stage.name!r} ({spec.plugin}): {_need(err)}{why}"
                 planning_skipped = planning_skipped or role is Role.PLANNING
                 skipped_roles.add(role)
                 continue
@@ -243,6 +250,14 @@ def _has_role(
     return any(p.role is role for _, algos in stages for p in algos) or any(
         p.role is role for p in planned
     )
+
+
+def _unusable(cls: type[Algorithm], inputs: LogInputs) -> str:
+    """Why the inputs ``cls`` declares that the log has but cannot feed are missing ("" when
+    none is)."""
+    declared = set(getattr(cls, "inputs", ()))
+    reasons = [why for name, why in inputs.unusable.items() if name in declared]
+    return "".join(f" — {why}" for why in reasons)
 
 
 def _need(err: MissingInputError) -> str:

@@ -16,6 +16,7 @@ from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from redrive.assembly.clocks import other_clock_inputs
 from redrive.assembly.frames import FrameAssembler
 from redrive.assembly.sensor_map import load_sensor_map_overrides
 from redrive.config import PipelineConfig
@@ -100,13 +101,22 @@ def source_log(path: Path, *, format: str, scenario: LogScenario | None = None) 
     )
 
 
-def log_inputs(assembler: FrameAssembler, *, road_map: RoadMap | None = None) -> LogInputs:
+def log_inputs(
+    assembler: FrameAssembler,
+    *,
+    road_map: RoadMap | None = None,
+    unusable: Mapping[str, str] | None = None,
+) -> LogInputs:
+    """What the log of ``assembler`` feeds algorithms; ``unusable``: the inputs whose topics feed
+    no frame and why (:func:`redrive.assembly.clocks.other_clock_inputs`)."""
     smap = assembler.sensor_map
+    unusable = dict(unusable or {})
     return LogInputs(
         sensors={s.sensor_id: s.sensor_type for s in smap.sensors},
-        has_vehicle_state=smap.vehicle_state_topic is not None,
-        has_ground_truth=smap.ground_truth_topic is not None,
+        has_vehicle_state=smap.vehicle_state_topic is not None and "vehicle_state" not in unusable,
+        has_ground_truth=smap.ground_truth_topic is not None and "ground_truth" not in unusable,
         road_map=road_map,
+        unusable=unusable,
     )
 
 
@@ -242,20 +252,26 @@ def run_reader(
     lookahead_ns: int | None = None,
     cancel: threading.Event | None = None,
     on_frame: Callable[[FrameRecord], None] | None = None,
+    probe_clocks: bool = True,
 ) -> RunReport:
     """Run the pipeline over the frames of an open ``log`` (a file, or a live session's streams)
     released by ``hooks`` (the Mode Manager: replay pacing, real-time skipping …) into
     ``request.out``; ``log_info`` is what the manifest says of the log; ``lookahead_ns`` how long
     the frame assembler waits past a driver sample for the other sensors (live: 0, a frame is
     released once the tolerance has passed); ``cancel`` as in :func:`run_log`; ``on_frame`` gets
-    each finished frame's record once it is stored (live: publishing the results)."""
+    each finished frame's record once it is stored (live: publishing the results);
+    ``probe_clocks``: read the first messages of the log to find a vehicle state or ground truth
+    on another clock than the frames' (:func:`redrive.assembly.clocks.other_clock_inputs`),
+    which is then no input (an algorithm that needs it is skipped or refused with the reason) —
+    a file log; live streams pass False (they have no first messages to read ahead)."""
     overrides = load_sensor_map_overrides(request.sensor_map) if request.sensor_map else None
     assembler = FrameAssembler(log, overrides=overrides)
     if lookahead_ns is not None:
         assembler.lookahead_ns = lookahead_ns
     chosen = choose_road_map(log, request.road_map, sensor_map=assembler.sensor_map)
     road_map = chosen.road_map
-    inputs = log_inputs(assembler, road_map=road_map)
+    unusable = other_clock_inputs(log, assembler.sensor_map) if probe_clocks else {}
+    inputs = log_inputs(assembler, road_map=road_map, unusable=unusable)
     graph = build_graph(request.pipeline, inputs, skip_unfed=request.skip_unfed)
     assembler = _reading_only_inputs(log, assembler, graph, lookahead_ns=assembler.lookahead_ns)
     setup = _setup(request, graph, inputs, log=log_info, mode=hooks.mode.value)

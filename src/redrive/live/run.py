@@ -268,6 +268,7 @@ def run_live(
                 log_info=info,
                 lookahead_ns=0,
                 on_frame=_all(callbacks),
+                probe_clocks=False,
             )
         except BaseException:
             if recorder is not None:
