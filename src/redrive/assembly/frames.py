@@ -48,7 +48,6 @@ __all__ = ["FrameAssembler", "interpolate_state", "iter_frames"]
 logger = logging.getLogger(__name__)
 
 _DEFAULT_LOOKAHEAD_NS = 200_000_000
-_OTHER_CLOCK_NS = OTHER_CLOCK_NS
 _STATE_WINDOW_NS = 2_000_000_000
 #: the clouds whose non-finite points are counted (a 2D scan marks a beam without return NaN)
 _COUNTED = frozenset({SensorType.LIDAR, SensorType.RADAR})
@@ -269,7 +268,7 @@ class FrameAssembler:
         """Warn once when ``name`` is missing from a frame because its header stamps follow
         another clock: its nearest sample is more than a minute from the frame's stamp."""
         gap = min((abs(s - frame_ns) for s in stamps), default=None)
-        if gap is None or gap <= _OTHER_CLOCK_NS or name in self._clock_warned:
+        if gap is None or gap <= OTHER_CLOCK_NS or name in self._clock_warned:
             return
         self._clock_warned.add(name)
         days = gap / 86_400e9
