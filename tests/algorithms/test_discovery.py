@@ -67,6 +67,7 @@ EXPECTED_REFERENCE = {
     "noisy-oracle": "redrive.algorithms.reference.oracle:NoisyOracle",
     "idm-planner": "redrive.algorithms.reference.planner:IdmPlanner",
     "pure-pursuit-pid": "redrive.algorithms.reference.controller:PurePursuitPid",
+    "log-future-planner": "redrive.algorithms.reference.log_future:LogFuturePlanner",
 }
 
 
