@@ -18,7 +18,8 @@ from pathlib import Path
 import pytest
 
 from redrive.cli.main import main
-from redrive.cli.run import ProgressLines, parse_frames
+from redrive.cli.run import parse_frames
+from redrive.cli.run_report import ProgressLines
 from redrive.errors import ConfigError
 from redrive.results import RunStatus, open_run
 from redrive.testing.demo_log import write_demo_bag

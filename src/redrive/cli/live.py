@@ -91,7 +91,8 @@ def _run(args: argparse.Namespace) -> int:
 
     from redrive.cli.live_foxglove import open_feed
     from redrive.cli.live_record import record_only, recording_status, warn_orphans
-    from redrive.cli.run import pipeline_from_args, print_run_report
+    from redrive.cli.run import pipeline_from_args
+    from redrive.cli.run_report import print_run_report
     from redrive.live import default_master_uri
     from redrive.live.run import LiveRequest, LiveSource, SourceKind, run_live
 
