@@ -58,7 +58,8 @@ def _cloud(i: int) -> PointCloud:
 
 
 def _fill(path: Path, *, compression: str = "none") -> tuple[DiskFullError, int]:
-    """Write clouds and IMU samples to ``path`` until the disk is full."""
+    """Write clouds and IMU samples to ``path`` until the disk is full; the messages handed to
+    the writer (each cloud gets a chunk of its own, so the IMU sample before it may be kept)."""
     sent = 0
     imu = Imu(
         linear_acceleration=np.zeros(3),
@@ -68,9 +69,10 @@ def _fill(path: Path, *, compression: str = "none") -> tuple[DiskFullError, int]
     writer = McapWriter(path, compression=compression, chunk_size_bytes=256 << 10)  # type: ignore[arg-type]
     with pytest.raises(DiskFullError) as caught, writer as out:  # noqa: PT012 - the loop fills it
         for i in range(10_000):
+            sent += 1  # messages handed to the writer, the one the disk refused included
             out.write("/imu", 1_000 + i, imu, frame_id="imu")
+            sent += 1
             out.write("/lidar", 1_000 + i, _cloud(i), frame_id="lidar")
-            sent += 2
     return caught.value, sent
 
 

@@ -17,12 +17,15 @@ sees them.
 
 from __future__ import annotations
 
+import functools
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from redrive.types import PointCloud
 
@@ -67,16 +70,37 @@ class TopicNonFinite:
 
 
 def non_finite_points(cloud: PointCloud) -> int:
-    """How many points of ``cloud`` have a NaN or ±inf coordinate (one pass over the
-    coordinates: ≈ 60 instructions a point on a decoded cloud, whose xyz is an unaligned
-    strided view that every numpy loop reads through its buffered path)."""
+    """How many points of ``cloud`` have a NaN or ±inf coordinate.
+
+    One pass of a numba kernel over the coordinates (``nogil``: a pipelined run's other stages
+    go on meanwhile): a decoded cloud's xyz is an unaligned strided view, through which every
+    numpy loop reads via its buffered path (≈ 2.2 ms for a 54k-point cloud with ``np.isfinite``;
+    the kernel ≈ 0.05 ms)."""
     xyz = cloud.xyz
     if not xyz.size:
         return 0
-    finite = np.isfinite(xyz)
-    if finite.all():
-        return 0
-    return int(np.count_nonzero(~finite.all(axis=1)))
+    return int(_kernel()(xyz))
+
+
+@functools.cache
+def _kernel() -> Callable[[npt.NDArray[np.float32]], int]:
+    """The counting kernel, compiled (or loaded from numba's cache) on first use, so importing
+    this module does not import numba."""
+    import numba
+
+    @numba.njit(nogil=True, cache=True)
+    def count_non_finite(xyz: npt.NDArray[np.float32]) -> int:  # pragma: no cover - compiled
+        # x * 0 is NaN exactly when x is NaN or ±inf (IEEE 754; no fast-math here), and NaN
+        # spreads through the sum: one compare a point, no branch a coordinate
+        zero = np.float32(0.0)
+        n = 0
+        for i in range(xyz.shape[0]):
+            s = xyz[i, 0] * zero + xyz[i, 1] * zero + xyz[i, 2] * zero
+            if np.isnan(s):
+                n += 1
+        return n
+
+    return count_non_finite
 
 
 class NonFiniteCounter:

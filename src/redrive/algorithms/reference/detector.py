@@ -303,11 +303,13 @@ class ClusterDetector(Algorithm):
         sx, sy, sz = (np.float32(v) for v in sensor_location)
         grid = self._ground_grid
         r0 = np.float32(cfg["min_range_m"])
-        packed = np.require(xyz, np.float32, ("C", "A"))  # a decoded xyz may be strided
-        if packed is not xyz:  # a copy: read-only, as a cloud's own xyz and the warm-up's (numba
-            packed.flags.writeable = False  # compiles and loads writable arrays as another type)
+        if xyz.dtype != np.float32 or xyz.flags.writeable:  # a cloud's own xyz is neither
+            xyz = np.array(xyz, dtype=np.float32)  # (numba compiles a writable array as
+            xyz.flags.writeable = False  # another type: one read-only float32 type to load)
+        # a decoded xyz is a strided view of the message (row stride = its point_step): the
+        # kernel reads it in place, one pass, where a packed copy cost as much as the kernel
         x, y, z, keys, minima = crop_cell_minima(
-            packed,
+            xyz,
             sx,
             sy,
             sz,

@@ -5,11 +5,15 @@ indexes, then the summary: schemas, channels, statistics, chunk indexes, summary
 each chunk and of the summary), so the ``mcap`` reader reads its files with summary and index. It
 differs in how the bytes move:
 
-* a message is copied once, into a reused chunk buffer — or, when it fills the chunk (a point
-  cloud or an image is bigger than a chunk), not at all: the chunk is handed to the kernel with
+* a message is copied once, into a reused chunk buffer — or, when it fills the chunk or is large
+  (a point cloud or an image: a quarter of ``chunk_size_bytes`` or more), not at all: the chunk is handed to the kernel with
   ``os.writev`` as [chunk header, buffered records, the message's header, *the caller's view*,
   message indexes], and its CRC is computed over the same pieces (incrementally, with ISA-L's
   ``crc32``: the same CRC-32 as zlib's at several times its speed);
+* a large message gets a chunk of its own (the open chunk of small messages is finished before
+  it), so a reader that asks for some topics skips the chunks of the others unread — a LiDAR-only
+  pipeline never decompresses the camera's images (the chunk index says which channels a chunk
+  holds);
   the ``mcap`` writer copies each message about four times (its chunk buffer, the chunk's
   bytes, the chunk record, the file's buffer);
 * each chunk goes to the file descriptor as soon as it is complete (no user-space buffer), so a
@@ -154,6 +158,7 @@ class McapStream:
         )
         self._live = live
         self._chunk_size = max(1024, chunk_size_bytes)
+        self._large = self._chunk_size // 4  # a message this big gets a chunk of its own
         self._buffer = bytearray(2 * self._chunk_size + 4096)
         self._view = memoryview(self._buffer)
         self._used = 0
@@ -285,6 +290,9 @@ class McapStream:
         buffer that is reused afterwards is fine)."""
         self._raise_failure()
         size = len(data) if isinstance(data, bytes | bytearray) else data.nbytes
+        large = size >= self._large
+        if large and self._chunk.messages:  # the small messages before it: a chunk of their own
+            self._finish_chunk(None)
         chunk = self._chunk
         if chunk.messages == 0:
             chunk.start_ns = chunk.end_ns = log_time
@@ -305,7 +313,7 @@ class McapStream:
             publish_time,
         )
         self._used += _MESSAGE.size
-        if self._used + size >= self._chunk_size:  # this message fills the chunk: no copy
+        if large or self._used + size >= self._chunk_size:  # it ends the chunk: no copy
             self._finish_chunk(data)
             return
         self._view[self._used : self._used + size] = memoryview(data).cast("B")
