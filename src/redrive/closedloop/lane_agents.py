@@ -48,7 +48,7 @@ from redrive.assembly.frames import FrameAssembler
 from redrive.maps.index import RoadMapIndex
 from redrive.maps.route import route_along_path
 from redrive.motion import IdmParams, idm_acceleration
-from redrive.types import LightState, Mission, ObjectClass, RoadMap
+from redrive.types import LightState, Mission, ObjectClass, ObjectColumns, RoadMap
 
 __all__ = ["LANE_CLASSES", "LaneAgents", "Track", "TrackSamples", "read_tracks"]
 
@@ -131,20 +131,20 @@ def read_tracks(
     yaw, (length, width))."""
     raw: dict[int, list[tuple[int, float, float, float, float, float]]] = {}
     for stamp_ns, objects in assembler.ground_truth(stop_ns=stop_ns):
-        for obj in objects:
-            if obj.object_class not in LANE_CLASSES or obj.object_id < 0:
+        # the columns of the message (its objects are rows of one batch: none is built)
+        cols = ObjectColumns.from_objects(objects)
+        in_message = zip(
+            cols.object_id.tolist(),
+            cols.object_class,
+            cols.center_m[:, :2].tolist(),
+            cols.yaw_rad.tolist(),
+            cols.size_m[:, :2].tolist(),
+            strict=True,
+        )
+        for oid, cls, (x, y), yaw, (length, width) in in_message:
+            if cls not in LANE_CLASSES or oid < 0:
                 continue
-            c = obj.box.center
-            raw.setdefault(obj.object_id, []).append(
-                (
-                    stamp_ns,
-                    float(c[0]),
-                    float(c[1]),
-                    obj.box.yaw_rad,
-                    float(obj.box.size[0]),
-                    float(obj.box.size[1]),
-                )
-            )
+            raw.setdefault(oid, []).append((stamp_ns, x, y, yaw, length, width))
     out: dict[
         int, tuple[list[int], list[tuple[float, float]], list[float], tuple[float, float]]
     ] = {}
@@ -261,6 +261,15 @@ class LaneAgents:
             return None
         x, y, yaw = _on_line(track, track.s_m)
         return x, y, yaw, track.speed_mps
+
+    def poses(self) -> dict[int, tuple[float, float, float, float]]:
+        """Object id → (x, y, yaw, speed) of every track in *lane* mode (:meth:`pose`)."""
+        out: dict[int, tuple[float, float, float, float]] = {}
+        for oid, track in self.tracks.items():
+            if track.lane_mode:
+                x, y, yaw = _on_line(track, track.s_m)
+                out[oid] = (x, y, yaw, track.speed_mps)
+        return out
 
     def lane_mode_count(self) -> int:
         return sum(1 for t in self.tracks.values() if t.lane_mode)
