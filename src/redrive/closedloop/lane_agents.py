@@ -46,7 +46,7 @@ import shapely
 
 from redrive.assembly.frames import FrameAssembler
 from redrive.maps.index import RoadMapIndex
-from redrive.maps.route import route_along_path
+from redrive.maps.route import routes_along_paths
 from redrive.motion import IdmParams, idm_acceleration
 from redrive.types import LightState, Mission, ObjectClass, ObjectColumns, RoadMap
 
@@ -109,17 +109,22 @@ class Track:
     def __post_init__(self) -> None:
         stamps = self.stamps_ns
         if stamps.size and bool(np.all(np.diff(stamps.astype(np.float64)) > 0.0)):
+            # _speed_interpolated at sample j reads the step from sample min(j, K−2) on (s_log
+            # never decreases: the step is ≥ 0); one sample: 0
+            if stamps.size >= 2:
+                step = np.diff(self.s_log) / (np.diff(stamps) / 1e9)
+                speeds = step[np.minimum(np.arange(stamps.size), stamps.size - 2)].tolist()
+            else:
+                speeds = [0.0]
             rows = zip(
                 stamps.tolist(),
                 self.xy.tolist(),
                 self.yaw_rad.tolist(),
                 self.s_log.tolist(),
+                speeds,
                 strict=True,
             )
-            self._at_sample = {
-                stamp: (x, y, yaw, s, self._speed_interpolated(stamp))
-                for stamp, (x, y), yaw, s in rows
-            }
+            self._at_sample = {stamp: (x, y, yaw, s, v) for stamp, (x, y), yaw, s, v in rows}
 
     def s_logged(self, stamp_ns: int) -> float:
         """The logged position at ``stamp_ns`` on the line (linear between samples)."""
@@ -241,10 +246,15 @@ class LaneAgents:
         road = index.road_map
         controlled = {t.stop_line_id: t.light_id for t in road.traffic_lights if t.stop_line_id}
         self.tracks: dict[int, Track] = {}
-        for oid, (stamps, xy, yaw, (length, width)) in tracks.items():
-            pts = np.array(xy, dtype=np.float64)
-            yaws = np.array(yaw, dtype=np.float64)
-            lanes, line_xy = route_along_path(index, pts, yaws, extend_m=_EXTEND_M)
+        samples = [
+            (np.array(xy, dtype=np.float64), np.array(yaw, dtype=np.float64))
+            for _, xy, yaw, _ in tracks.values()
+        ]
+        routes = routes_along_paths(index, samples, extend_m=_EXTEND_M)
+        for (oid, (stamps, _, _, (length, width))), (pts, yaws), route in zip(
+            tracks.items(), samples, routes, strict=True
+        ):
+            lanes, line_xy = route
             if line_xy.shape[0] < 2:
                 lanes, line_xy = (), _dedup(pts)
             if line_xy.shape[0] < 2:  # a track that never moves: stays replayed
