@@ -13,6 +13,66 @@ from redrive.motion.lqr import (
 )
 
 
+def _speed_fit_dense(
+    xy_disp: np.ndarray, headings: np.ndarray, *, dt: float, jerk_penalty: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """nuPlan tracker_utils ``_fit_initial_velocity_and_acceleration_profile`` as the devkits
+    write it: the 2M × M design A, then ``pinv(AᵀA + jerk_penalty·JᵀJ) Aᵀy`` (one path)."""
+    m = headings.size
+    y = xy_disp.reshape(-1)
+    a = np.zeros((2 * m, m))
+    for k in range(m):
+        direction = np.array([np.cos(headings[k]), np.sin(headings[k])])
+        a[2 * k : 2 * k + 2, 0] = direction * dt
+        for j in range(1, k + 1):
+            a[2 * k : 2 * k + 2, j] = direction * dt**2
+    jerk = np.zeros((max(m - 2, 0), m))
+    for j in range(m - 2):
+        jerk[j, j + 1], jerk[j, j + 2] = -1.0, 1.0
+    x = np.linalg.pinv(a.T @ a + jerk_penalty * jerk.T @ jerk) @ a.T @ y
+    return x[0], x[1:]
+
+
+def _curvature_fit_dense(
+    heading_disp: np.ndarray, speeds: np.ndarray, *, dt: float, penalty: float
+) -> tuple[float, np.ndarray]:
+    """nuPlan tracker_utils ``_fit_initial_curvature_and_curvature_rate_profile``: the M × M
+    design A, then ``pinv(AᵀA + Q) Aᵀy`` (one path)."""
+    m = speeds.size
+    a = np.tri(m)
+    a[:, 0] = speeds * dt
+    a[1:, 1:] *= (speeds[1:] * dt**2)[:, None]
+    q = penalty * np.eye(m)
+    q[0, 0] = 1e-10
+    x = np.linalg.pinv(a.T @ a + q) @ a.T @ heading_disp
+    return float(x[0]), x[1:]
+
+
+def test_the_fits_equal_the_devkits_dense_normal_equations() -> None:
+    """The fits build AᵀA and Aᵀy from suffix sums; on random paths (standing, slow, fast,
+    turning; one to 80 displacements) they equal the devkits' dense pinv solution to rounding."""
+    rng = np.random.default_rng(3)
+    dt = 0.1
+    for _ in range(60):
+        m = int(rng.integers(1, 81))
+        speed = np.abs(rng.normal(8.0, 5.0, size=m)) * (rng.random() > 0.2)
+        heading = np.cumsum(rng.normal(0.0, 0.05, size=m)) + rng.uniform(-3.0, 3.0)
+        disp = np.c_[np.cos(heading), np.sin(heading)] * speed[:, None] * dt
+        disp += rng.normal(0.0, 0.01, size=(m, 2))
+        v0, accel = fit_speed_profiles(disp[None], heading[None], dt_s=dt, jerk_penalty=1e-4)
+        want_v0, want_accel = _speed_fit_dense(disp, heading, dt=dt, jerk_penalty=1e-4)
+        np.testing.assert_allclose(v0[0], want_v0, rtol=1e-10, atol=1e-10)
+        np.testing.assert_allclose(accel[0], want_accel, rtol=1e-9, atol=1e-9)
+        speeds = integrate_profiles(v0, accel, dt)[0]
+        turn = rng.normal(0.0, 0.03, size=m)
+        k0, rates = fit_curvature_profiles(
+            turn[None], speeds[None], dt_s=dt, curvature_rate_penalty=1e-2
+        )
+        want_k0, want_rates = _curvature_fit_dense(turn, speeds, dt=dt, penalty=1e-2)
+        np.testing.assert_allclose(k0[0], want_k0, rtol=1e-10, atol=1e-10)
+        np.testing.assert_allclose(rates[0], want_rates, rtol=1e-9, atol=1e-9)
+
+
 def _lateral_by_matrix_products(
     x0: np.ndarray,
     *,

@@ -46,9 +46,9 @@ import shapely
 
 from redrive.assembly.frames import FrameAssembler
 from redrive.maps.index import RoadMapIndex
-from redrive.maps.route import route_along_path
+from redrive.maps.route import routes_along_paths
 from redrive.motion import IdmParams, idm_acceleration
-from redrive.types import LightState, Mission, ObjectClass, RoadMap
+from redrive.types import LightState, Mission, ObjectClass, ObjectColumns, RoadMap
 
 __all__ = ["LANE_CLASSES", "LaneAgents", "Track", "TrackSamples", "read_tracks"]
 
@@ -58,6 +58,8 @@ LANE_CLASSES = frozenset({ObjectClass.VEHICLE, ObjectClass.TRUCK, ObjectClass.MO
 #: a stop sign is served once the agent stood (below this speed) within this distance of it
 _STOP_SERVED_M = 3.0
 _STOPPED_MPS = 0.2
+#: the bounding boxes of the lane lines are grown by this much more than the half width (m)
+_BOUNDS_MARGIN_M = 1e-6
 #: how far past its last sample a track's lane line goes on along successors, metres
 _EXTEND_M = 40.0
 
@@ -89,6 +91,7 @@ class Track:
     desired_speed_mps: float
     lanes: tuple[str, ...]
     line_length_m: float = 0.0
+    bounds: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)  # the line's (x0, y0, x1, y1)
     first_ns: int = 0
     last_ns: int = 0
     # -- the simulation state ---------------------------------------------------------------
@@ -96,13 +99,60 @@ class Track:
     s_m: float = 0.0
     speed_mps: float = 0.0
     served: set[str] = field(default_factory=set)
+    #: sample stamp → (x, y, yaw, s on the line, speed along it): what the interpolations below
+    #: give at a sample's own stamp (np.interp there returns the sample), looked up; empty when
+    #: two samples' stamps are one float (then every stamp is interpolated)
+    _at_sample: dict[int, tuple[float, float, float, float, float]] = field(
+        default_factory=dict, repr=False
+    )
+
+    def __post_init__(self) -> None:
+        stamps = self.stamps_ns
+        if stamps.size and bool(np.all(np.diff(stamps.astype(np.float64)) > 0.0)):
+            # _speed_interpolated at sample j reads the step from sample min(j, K−2) on (s_log
+            # never decreases: the step is ≥ 0); one sample: 0
+            if stamps.size >= 2:
+                step = np.diff(self.s_log) / (np.diff(stamps) / 1e9)
+                speeds = step[np.minimum(np.arange(stamps.size), stamps.size - 2)].tolist()
+            else:
+                speeds = [0.0]
+            rows = zip(
+                stamps.tolist(),
+                self.xy.tolist(),
+                self.yaw_rad.tolist(),
+                self.s_log.tolist(),
+                speeds,
+                strict=True,
+            )
+            self._at_sample = {stamp: (x, y, yaw, s, v) for stamp, (x, y), yaw, s, v in rows}
 
     def s_logged(self, stamp_ns: int) -> float:
         """The logged position at ``stamp_ns`` on the line (linear between samples)."""
+        at = self._at_sample.get(stamp_ns)
+        if at is not None:
+            return at[3]
         return float(np.interp(stamp_ns, self.stamps_ns, self.s_log))
 
     def speed_logged(self, stamp_ns: int) -> float:
         """The logged speed along the line at ``stamp_ns`` (difference of the samples)."""
+        at = self._at_sample.get(stamp_ns)
+        if at is not None:
+            return at[4]
+        return self._speed_interpolated(stamp_ns)
+
+    def logged_xy_yaw(self, stamp_ns: int) -> tuple[float, float, float]:
+        """The logged centre (linear between samples) and the heading of the sample at or after
+        ``stamp_ns``."""
+        at = self._at_sample.get(stamp_ns)
+        if at is not None:
+            return at[0], at[1], at[2]
+        t = self.stamps_ns
+        x = float(np.interp(stamp_ns, t, self.xy[:, 0]))
+        y = float(np.interp(stamp_ns, t, self.xy[:, 1]))
+        k = min(int(np.searchsorted(t, stamp_ns)), t.size - 1)
+        return x, y, float(self.yaw_rad[k])
+
+    def _speed_interpolated(self, stamp_ns: int) -> float:
         k = int(np.searchsorted(self.stamps_ns, stamp_ns, side="right"))
         k = min(max(k, 1), self.stamps_ns.size - 1)
         if self.stamps_ns.size < 2:
@@ -131,20 +181,20 @@ def read_tracks(
     yaw, (length, width))."""
     raw: dict[int, list[tuple[int, float, float, float, float, float]]] = {}
     for stamp_ns, objects in assembler.ground_truth(stop_ns=stop_ns):
-        for obj in objects:
-            if obj.object_class not in LANE_CLASSES or obj.object_id < 0:
+        # the columns of the message (its objects are rows of one batch: none is built)
+        cols = ObjectColumns.from_objects(objects)
+        in_message = zip(
+            cols.object_id.tolist(),
+            cols.object_class,
+            cols.center_m[:, :2].tolist(),
+            cols.yaw_rad.tolist(),
+            cols.size_m[:, :2].tolist(),
+            strict=True,
+        )
+        for oid, cls, (x, y), yaw, (length, width) in in_message:
+            if cls not in LANE_CLASSES or oid < 0:
                 continue
-            c = obj.box.center
-            raw.setdefault(obj.object_id, []).append(
-                (
-                    stamp_ns,
-                    float(c[0]),
-                    float(c[1]),
-                    obj.box.yaw_rad,
-                    float(obj.box.size[0]),
-                    float(obj.box.size[1]),
-                )
-            )
+            raw.setdefault(oid, []).append((stamp_ns, x, y, yaw, length, width))
     out: dict[
         int, tuple[list[int], list[tuple[float, float]], list[float], tuple[float, float]]
     ] = {}
@@ -196,15 +246,21 @@ class LaneAgents:
         road = index.road_map
         controlled = {t.stop_line_id: t.light_id for t in road.traffic_lights if t.stop_line_id}
         self.tracks: dict[int, Track] = {}
-        for oid, (stamps, xy, yaw, (length, width)) in tracks.items():
-            pts = np.array(xy, dtype=np.float64)
-            yaws = np.array(yaw, dtype=np.float64)
-            lanes, line_xy = route_along_path(index, pts, yaws, extend_m=_EXTEND_M)
+        samples = [
+            (np.array(xy, dtype=np.float64), np.array(yaw, dtype=np.float64))
+            for _, xy, yaw, _ in tracks.values()
+        ]
+        routes = routes_along_paths(index, samples, extend_m=_EXTEND_M)
+        for (oid, (stamps, _, _, (length, width))), (pts, yaws), route in zip(
+            tracks.items(), samples, routes, strict=True
+        ):
+            lanes, line_xy = route
             if line_xy.shape[0] < 2:
                 lanes, line_xy = (), _dedup(pts)
             if line_xy.shape[0] < 2:  # a track that never moves: stays replayed
                 continue
             line = shapely.LineString(line_xy)
+            x0, y0, x1, y1 = line.bounds
             s_log = np.maximum.accumulate(
                 np.asarray(shapely.line_locate_point(line, shapely.points(pts)), np.float64)
             )
@@ -227,6 +283,7 @@ class LaneAgents:
                 desired_speed_mps=desired,
                 lanes=lanes,
                 line_length_m=float(line.length),
+                bounds=(float(x0), float(y0), float(x1), float(y1)),
                 first_ns=int(stamps[0]),
                 last_ns=int(stamps[-1]),
             )
@@ -261,6 +318,15 @@ class LaneAgents:
             return None
         x, y, yaw = _on_line(track, track.s_m)
         return x, y, yaw, track.speed_mps
+
+    def poses(self) -> dict[int, tuple[float, float, float, float]]:
+        """Object id → (x, y, yaw, speed) of every track in *lane* mode (:meth:`pose`)."""
+        out: dict[int, tuple[float, float, float, float]] = {}
+        for oid, track in self.tracks.items():
+            if track.lane_mode:
+                x, y, yaw = _on_line(track, track.s_m)
+                out[oid] = (x, y, yaw, track.speed_mps)
+        return out
 
     def lane_mode_count(self) -> int:
         return sum(1 for t in self.tracks.values() if t.lane_mode)
@@ -333,7 +399,7 @@ class LaneAgents:
             x, y, yaw = _on_line(track, track.s_m)
             v = track.speed_mps
         else:
-            x, y, yaw = _logged_xy_yaw(track, stamp_ns)
+            x, y, yaw = track.logged_xy_yaw(stamp_ns)
             v = track.speed_logged(stamp_ns)
         return track.object_id, x, y, yaw, v, track.length_m
 
@@ -344,36 +410,46 @@ class LaneAgents:
         unlogged: Sequence[tuple[int, float, float, float, float, float]],
     ) -> None:
         """Switch to *lane* mode each replayed track that a road user the log did not have
-        (``unlogged``) is ahead of on its line, closer than IDM's desired gap: one projection
-        of each such road user onto every replayed track's line (vectorised over the lines)."""
+        (``unlogged``) is ahead of on its line, closer than IDM's desired gap: each such road
+        user projected onto the lines of the replayed tracks it can be on — those whose bounding
+        box, grown by ``lane_half_width_m``, holds it (a line farther than that cannot have it
+        within the half width: the others are not looked at)."""
         if not replayed or not unlogged:
             return
-        lines = np.array([t.line for t in replayed], dtype=object)
-        lengths = np.array([t.line_length_m for t in replayed])
-        s_log = np.array([t.s_logged(stamp_ns) for t in replayed])
-        own = np.array([t.length_m for t in replayed])
-        ids = np.array([t.object_id for t in replayed])
-        best_gap = np.full(len(replayed), np.inf)
-        best_v = np.zeros(len(replayed))
+        bounds = np.array([t.bounds for t in replayed])
+        reach = self.lane_half_width_m + _BOUNDS_MARGIN_M
+        lo_x, lo_y = bounds[:, 0] - reach, bounds[:, 1] - reach
+        hi_x, hi_y = bounds[:, 2] + reach, bounds[:, 3] + reach
+        s_log: dict[int, float] = {}
+        best: dict[int, tuple[float, float]] = {}  # track index → (gap, leader speed on line)
         for oid, x, y, yaw, v, length in unlogged:
+            near = np.flatnonzero((lo_x <= x) & (x <= hi_x) & (lo_y <= y) & (y <= hi_y))
+            near_list = [k for k in near.tolist() if replayed[k].object_id != oid]
+            if not near_list:
+                continue
+            lines = [replayed[k].line for k in near_list]
             pt = shapely.Point(x, y)
-            s = np.asarray(shapely.line_locate_point(lines, pt), np.float64)
-            d = np.asarray(shapely.distance(lines, pt), np.float64)
-            ahead = s - s_log
-            on = (ahead > 0.0) & (d <= self.lane_half_width_m) & (s < lengths - 1e-6)
-            on &= ids != oid
-            gap = np.where(on, np.maximum(ahead - own / 2.0 - length / 2.0, 0.0), np.inf)
-            closer = gap < best_gap
-            if closer.any():
-                for k in np.flatnonzero(closer).tolist():
-                    _, _, line_yaw = _on_line(replayed[k], float(s[k]))
-                    best_v[k] = v * math.cos(math.remainder(yaw - line_yaw, math.tau))
-                best_gap = np.where(closer, gap, best_gap)
-        for k in np.flatnonzero(np.isfinite(best_gap)).tolist():
+            s = np.asarray(shapely.line_locate_point(lines, pt), np.float64).tolist()
+            d = np.asarray(shapely.distance(lines, pt), np.float64).tolist()
+            for k, s_k, d_k in zip(near_list, s, d, strict=True):
+                track = replayed[k]
+                if k not in s_log:
+                    s_log[k] = track.s_logged(stamp_ns)
+                ahead = s_k - s_log[k]
+                if not (ahead > 0.0 and d_k <= self.lane_half_width_m):
+                    continue
+                if not s_k < track.line_length_m - 1e-6:
+                    continue
+                gap = max(ahead - track.length_m / 2.0 - length / 2.0, 0.0)
+                if gap < best.get(k, (math.inf, 0.0))[0]:
+                    _, _, line_yaw = _on_line(track, s_k)
+                    best[k] = (gap, v * math.cos(math.remainder(yaw - line_yaw, math.tau)))
+        for k in sorted(best):
             track = replayed[k]
+            gap, lead_v = best[k]
             v_log = track.speed_logged(stamp_ns)
-            if best_gap[k] < _desired_gap(self.params, v_log, v_log - best_v[k]):
-                track.lane_mode, track.s_m, track.speed_mps = True, float(s_log[k]), float(v_log)
+            if gap < _desired_gap(self.params, v_log, v_log - lead_v):
+                track.lane_mode, track.s_m, track.speed_mps = True, s_log[k], float(v_log)
 
     def _leader(
         self,
@@ -383,7 +459,16 @@ class LaneAgents:
     ) -> tuple[float | None, float]:
         """The bumper-to-bumper gap to the nearest road user ahead of ``s_m`` on the track's
         line (within the lane half width), and its speed along the line."""
-        cand = [ldr for ldr in leaders if ldr[0] != track.object_id]
+        # a road user outside the line's bounding box grown by the half width is not on it
+        x0, y0, x1, y1 = track.bounds
+        r = self.lane_half_width_m + _BOUNDS_MARGIN_M
+        cand = [
+            ldr
+            for ldr in leaders
+            if ldr[0] != track.object_id
+            and x0 - r <= ldr[1] <= x1 + r
+            and y0 - r <= ldr[2] <= y1 + r
+        ]
         if not cand:
             return None, 0.0
         pts = shapely.points(np.array([[c[1], c[2]] for c in cand]))
@@ -455,19 +540,11 @@ def _dedup(pts: F64) -> F64:
 def _on_line(track: Track, s_m: float) -> tuple[float, float, float]:
     line = track.line
     s = min(max(s_m, 0.0), track.line_length_m)
-    p = shapely.line_interpolate_point(line, s)
-    q = shapely.line_interpolate_point(line, min(s + 0.5, track.line_length_m))
-    o = shapely.line_interpolate_point(line, max(s - 0.5, 0.0))
-    (x, y), (qx, qy), (ox, oy) = (shapely.get_coordinates(g)[0] for g in (p, q, o))
-    return float(x), float(y), math.atan2(float(qy - oy), float(qx - ox))
-
-
-def _logged_xy_yaw(track: Track, stamp_ns: int) -> tuple[float, float, float]:
-    t = track.stamps_ns
-    x = float(np.interp(stamp_ns, t, track.xy[:, 0]))
-    y = float(np.interp(stamp_ns, t, track.xy[:, 1]))
-    k = min(int(np.searchsorted(t, stamp_ns)), t.size - 1)
-    return x, y, float(track.yaw_rad[k])
+    at = [s, min(s + 0.5, track.line_length_m), max(s - 0.5, 0.0)]
+    (x, y), (qx, qy), (ox, oy) = shapely.get_coordinates(
+        shapely.line_interpolate_point(line, at)
+    ).tolist()
+    return x, y, math.atan2(qy - oy, qx - ox)
 
 
 def _stops(

@@ -70,6 +70,7 @@ from redrive.closedloop.log_checks import pace_frames, refuse_unfit_log, topics_
 from redrive.closedloop.mission import logged_mission
 from redrive.closedloop.mode import DEFAULT_DEVIATION_M, DEFAULT_DEVIATION_RAD
 from redrive.closedloop.path_agents import PathAgent
+from redrive.closedloop.placed import at_poses
 from redrive.closedloop.simulator import EgoCommand, PathFollower, check_options, choose_command
 from redrive.closedloop.synthetic import AgentMode
 from redrive.errors import ConfigError
@@ -495,19 +496,13 @@ class LogSimulator:
     ) -> tuple[DetectedObject, ...]:
         """``objects`` (logged base_link) in the driven base frame (``moved``:
         ``driven_base_from_logged_base``, all rows at once), each reactive agent where it is."""
-        out = transform_columns(moved, ObjectColumns.from_objects(objects)).objects()
-        if self._lane_agents is None and self.agents != "reactive":
-            return tuple(out)
-        stamp = self._current.stamp_ns
-        for i, obj in enumerate(objects):
-            pose: tuple[float, float, float, float] | None = None
-            if self._lane_agents is not None:
-                pose = self._lane_agents.pose(obj.object_id, stamp)
-            elif agent := self._agents.get(obj.object_id):
-                pose = (*agent.pose(), agent.speed_mps)
-            if pose is not None:
-                out[i] = _at_pose(out[i], pose, driven=driven)
-        return tuple(out)
+        columns = transform_columns(moved, ObjectColumns.from_objects(objects))
+        if self._lane_agents is not None:
+            columns = at_poses(columns, self._lane_agents.poses(), driven=driven)
+        elif self.agents == "reactive":
+            poses = {oid: (*a.pose(), a.speed_mps) for oid, a in self._agents.items()}
+            columns = at_poses(columns, poses, driven=driven)
+        return tuple(columns.objects())
 
     def _update_agents(self, frame: Frame, *, dt_s: float) -> None:
         """``reactive``: log the vehicles' new poses, then move each by IDM against the ego."""
@@ -562,26 +557,3 @@ class LogSimulator:
         agent.s_m = min(agent.s_m + agent.speed_mps * dt_s, end)
         if agent.s_m >= end:  # caught up with the log: back on its logged motion
             agent.speed_mps = agent.logged_speed_mps
-
-
-def _at_pose(
-    logged_base: DetectedObject,
-    pose: tuple[float, float, float, float],
-    *,
-    driven: VehicleState,
-) -> DetectedObject:
-    """The object (already in the driven base frame) where its reactive agent is: ``pose`` x, y,
-    yaw, speed in the map frame (along its lane line, or its logged path)."""
-    x, y, yaw, v = pose
-    base_from_map = invert(_pose(driven))
-    center = base_from_map @ np.array([x, y, 0.0, 1.0])
-    yaw_base = math.remainder(yaw - driven.heading_rad, math.tau)
-    velocity = base_from_map[:3, :3] @ np.array([v * math.cos(yaw), v * math.sin(yaw), 0.0])
-    orientation = logged_base.orientation.copy()
-    orientation[0] = yaw_base
-    box = dataclasses.replace(
-        logged_base.box,
-        center=np.array([center[0], center[1], logged_base.box.center[2]]),
-        yaw_rad=yaw_base,
-    )
-    return dataclasses.replace(logged_base, box=box, velocity=velocity, orientation=orientation)

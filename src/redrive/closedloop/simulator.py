@@ -16,10 +16,11 @@ with the steering held, recorded with its reason.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, Protocol
+
+import numpy as np
 
 from redrive.algorithms import StageOutputs
 from redrive.errors import ConfigError
@@ -198,7 +199,7 @@ def _path_problem(path: PlannedPath) -> str:
     wp = path.waypoints
     if wp.shape[0] == 0:
         return "an empty path"
-    if not all(math.isfinite(float(v)) for v in wp.ravel()):
+    if not bool(np.isfinite(wp).all()):
         return "a path with NaN or infinite waypoints"
     if path.frame_id not in ("base_link", "map"):
         return f"a path in frame {path.frame_id!r} (closed loop follows base_link or map paths)"

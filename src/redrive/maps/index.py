@@ -18,6 +18,7 @@ Geometry (the map frame, metres):
 
 from __future__ import annotations
 
+import functools
 import heapq
 import math
 from collections.abc import Collection, Sequence
@@ -108,16 +109,36 @@ class RoadMapIndex:
             if lane.kind in DRIVABLE_LANE_KINDS
         ]
         self._drivable_tree = shapely.STRtree([*roads, *areas])
-        self.drivable: Any = shapely.union_all([*roads, *areas])
-        shapely.prepare(self.drivable)
-        junctions = [shapely.Polygon(i.polygon) for i in road_map.intersections] + [
+        self._drivable_parts = [*roads, *areas]
+        self._junction_parts = [shapely.Polygon(i.polygon) for i in road_map.intersections] + [
             p for p, a in zip(areas, road_map.areas, strict=True) if a.kind == "intersection"
         ]
-        self._junctions: Any = shapely.union_all(junctions) if junctions else None
-        if self._junctions is not None:
-            shapely.prepare(self._junctions)
-        self._edge = SegmentDistance(_edge_segments(self.drivable))
+        #: the lane graph's routes asked so far, and each lane's length (route's costs)
+        self._routes: dict[tuple[str, str, float, bool], tuple[str, ...]] = {}
+        self._lengths: dict[str, float] | None = None
         self._build_centrelines(lanes)
+
+    # the unions are made when first asked for (a closed loop on a log routes along the lanes
+    # and never asks for the drivable area's outline)
+
+    @functools.cached_property
+    def drivable(self) -> Any:
+        """The drivable area (a shapely (multi)polygon, prepared)."""
+        area = shapely.union_all(self._drivable_parts)
+        shapely.prepare(area)
+        return area
+
+    @functools.cached_property
+    def _junctions(self) -> Any:
+        if not self._junction_parts:
+            return None
+        area = shapely.union_all(self._junction_parts)
+        shapely.prepare(area)
+        return area
+
+    @functools.cached_property
+    def _edge(self) -> SegmentDistance:
+        return SegmentDistance(_edge_segments(self.drivable))
 
     def _build_centrelines(self, lanes: Sequence[MapLane]) -> None:
         # every centreline's vertices one after the other, their arclength made global (each
@@ -308,7 +329,30 @@ class RoadMapIndex:
             if lane_id not in self._lane_pos:
                 msg = f"route: {lane_id!r} is not a lane of the map"
                 raise KeyError(msg)
+        key = (start_lane_id, goal_lane_id, float(lane_change_cost_m), bool(cross_solid))
+        known = self._routes.get(key)
+        if known is None:  # the map does not change: each route is searched once
+            known = self._search(
+                start_lane_id,
+                goal_lane_id,
+                lane_change_cost_m=lane_change_cost_m,
+                cross_solid=cross_solid,
+            )
+            self._routes[key] = known
+        return known
+
+    def _search(
+        self,
+        start_lane_id: str,
+        goal_lane_id: str,
+        *,
+        lane_change_cost_m: float,
+        cross_solid: bool,
+    ) -> tuple[str, ...]:
         road = self.road_map
+        if self._lengths is None:
+            self._lengths = {lane.lane_id: lane.length_m for lane in road.lanes}
+        lengths = self._lengths
         best: dict[str, float] = {start_lane_id: 0.0}
         came_from: dict[str, str] = {}
         queue: list[tuple[float, int, str]] = [(0.0, 0, start_lane_id)]
@@ -323,7 +367,7 @@ class RoadMapIndex:
             if cost > best.get(lane_id, math.inf):
                 continue
             lane = road.lane(lane_id)
-            steps = [(s, lane.length_m) for s in lane.successors] + [
+            steps = [(s, lengths[lane_id]) for s in lane.successors] + [
                 (n, lane_change_cost_m)
                 for n, kind in (
                     (lane.left_neighbor, lane.left_boundary_type),

@@ -24,6 +24,7 @@ they drive along and that chain's reference line:
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -32,7 +33,7 @@ from shapely.ops import substring
 
 from redrive.maps.index import RoadMapIndex
 
-__all__ = ["DEFAULT_EXTEND_M", "DEFAULT_LANE_CHANGE_M", "route_along_path"]
+__all__ = ["DEFAULT_EXTEND_M", "DEFAULT_LANE_CHANGE_M", "route_along_path", "routes_along_paths"]
 
 F64 = npt.NDArray[np.float64]
 #: how far past the log's last pose the route continues along successors, metres
@@ -56,7 +57,42 @@ def route_along_path(
     """The lanes the poses ``xy`` (N, 2) / ``yaw_rad`` (N,) drive along and their reference
     line (M, 2), as the module docstring says; ``((), (0, 2))`` when no pose is on a lane."""
     p = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-    lanes = index.lane_of_pose(p, yaw_rad)
+    return _route(index, p, index.lane_of_pose(p, yaw_rad), extend_m, lane_change_m)
+
+
+def routes_along_paths(
+    index: RoadMapIndex,
+    paths: Sequence[tuple[npt.ArrayLike, npt.ArrayLike]],
+    *,
+    extend_m: float = DEFAULT_EXTEND_M,
+    lane_change_m: float = DEFAULT_LANE_CHANGE_M,
+) -> list[tuple[tuple[str, ...], F64]]:
+    """:func:`route_along_path` of each (xy, yaw_rad) of ``paths`` — the poses' lanes looked up
+    in one query for all of them (a pose's lane does not depend on the others)."""
+    points = [np.asarray(xy, dtype=np.float64).reshape(-1, 2) for xy, _ in paths]
+    if not points:
+        return []
+    yaws = [
+        np.broadcast_to(np.asarray(yaw, dtype=np.float64), (p.shape[0],))
+        for p, (_, yaw) in zip(points, paths, strict=True)
+    ]
+    lanes = index.lane_of_pose(np.concatenate(points), np.concatenate(yaws))
+    out = []
+    start = 0
+    for p in points:
+        end = start + p.shape[0]
+        out.append(_route(index, p, lanes[start:end], extend_m, lane_change_m))
+        start = end
+    return out
+
+
+def _route(
+    index: RoadMapIndex,
+    p: F64,
+    lanes: Sequence[str | None],
+    extend_m: float,
+    lane_change_m: float,
+) -> tuple[tuple[str, ...], F64]:
     chain: list[str] = []
     change_at: dict[int, int] = {}  # chain position of a lane change's first lane → pose index
     for k, lane_id in enumerate(lanes):

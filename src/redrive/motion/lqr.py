@@ -27,11 +27,16 @@ NAVSIM — and the motion model) the callers keep their own code; what is the sa
   bicycle ``e_y' = v·e_ψ, e_ψ' = v·(δ/L − κ), δ' = rate`` Euler-composed over the horizon into
   ``x_N = A x_0 + B u + g``, angles of ``x_N`` wrapped, ``u = −Bᵀ Q x_N / (Bᵀ Q B + r)``.
 
-The devkits solve the regularised normal equations with ``np.linalg.pinv``; they are positive
-definite (the penalties), so a direct solve gives the same solution to rounding.
+The devkits build the design matrix ``A`` (2M × M for the speed, M × M for the curvature),
+form ``AᵀA`` and solve the regularised normal equations with ``np.linalg.pinv``.  Here ``AᵀA``
+and ``Aᵀy`` are built from suffix sums (the designs' structure: :func:`_normal_equations`), and
+the equations — positive definite (the penalties) — are solved directly; both give the devkits'
+solution to rounding (tests/motion/test_lqr.py keeps the dense form as the reference).
 """
 
 from __future__ import annotations
+
+import functools
 
 import numpy as np
 import numpy.typing as npt
@@ -59,7 +64,51 @@ def _solve(lhs: F64, rhs: F64) -> F64:
 def integrate_profiles(initial: F64, rates: F64, dt_s: float) -> F64:
     """(B, K+1): each ``initial`` (B,) followed by its integration over ``rates`` (B, K)."""
     cumsum = np.cumsum(rates * dt_s, axis=-1)
-    return np.asarray(initial[..., None] + np.pad(cumsum, [(0, 0), (1, 0)]), dtype=np.float64)
+    start = np.zeros((*cumsum.shape[:-1], 1), dtype=np.float64)
+    return np.asarray(initial[..., None] + np.concatenate([start, cumsum], axis=-1), np.float64)
+
+
+@functools.lru_cache(maxsize=32)
+def _later_of(m: int) -> npt.NDArray[np.intp]:
+    """(m, m) ``max(i, j)``: where the design's column pair (i, j) starts to share rows."""
+    index = np.arange(m)
+    out = np.maximum.outer(index, index)
+    out.flags.writeable = False
+    return out
+
+
+@functools.lru_cache(maxsize=32)
+def _jerk_gram(m: int, jerk_penalty: float) -> F64:
+    """``jerk_penalty · JᵀJ`` (m, m) of the first differences of the accelerations ``a_j`` (the
+    unknowns 1 … m−1)."""
+    jerk = np.zeros((max(m - 2, 0), m), dtype=np.float64)
+    for j in range(m - 2):
+        jerk[j, j + 1], jerk[j, j + 2] = -1.0, 1.0
+    out = jerk_penalty * (jerk.T @ jerk)
+    out.flags.writeable = False
+    return out
+
+
+def _suffix_sums(x: F64) -> F64:
+    """(B, m): ``Σ_{k≥l} x_k`` for each l."""
+    return np.asarray(np.cumsum(x[:, ::-1], axis=1)[:, ::-1], dtype=np.float64)
+
+
+def _normal_equations(weights: F64, products: F64, dt_s: float) -> tuple[F64, F64]:
+    """``AᵀA`` (B, m, m) and ``Aᵀy`` (B, m) of both fits' design without forming it.
+
+    Both designs are, per residual k, a weight times ``c(k) = (dt, dt², …, dt², 0, …)`` (``dt``
+    for the initial value, ``dt²`` for each rate before step k): the speed fit's rows are
+    ``(cos h_k, sin h_k) ⊗ c(k)`` (weight ``cos² h_k + sin² h_k`` in ``AᵀA``, ``y`` projected on
+    the heading in ``Aᵀy``), the curvature fit's ``v_k · c(k)`` (weight ``v_k²``, and
+    ``v_k · Δh_k``).  So ``(AᵀA)_ij = s_i s_j Σ_{k ≥ max(i, j)} w_k`` and ``(Aᵀy)_i = s_i Σ_{k≥i}
+    p_k`` with ``s_0 = dt``, ``s_i = dt²`` — suffix sums, O(m²) for the matrix instead of the
+    O(m³) product (equal to rounding)."""
+    m = weights.shape[1]
+    scale = np.full(m, dt_s * dt_s)
+    scale[0] = dt_s
+    lhs = _suffix_sums(weights)[:, _later_of(m)] * np.multiply.outer(scale, scale)[None]
+    return lhs, _suffix_sums(products) * scale[None]
 
 
 def fit_speed_profiles(
@@ -67,21 +116,12 @@ def fit_speed_profiles(
 ) -> tuple[F64, F64]:
     """Initial speeds (B,) and accelerations (B, M−1) fitted to the displacements ``xy_disp``
     (B, M, 2) of poses ``dt_s`` apart whose headings are ``headings_rad`` (B, M)."""
-    batch, m = xy_disp.shape[:2]
-    y = xy_disp.reshape(batch, -1)
-    direction = np.zeros(y.shape, dtype=np.float64)
-    direction[:, 0::2] = np.cos(headings_rad)
-    direction[:, 1::2] = np.sin(headings_rad)
-    a = np.repeat(direction[..., None] * dt_s**2, m, axis=2)
-    a[..., 0] = direction * dt_s
-    later = np.repeat(np.triu(np.ones((m, m), dtype=bool), k=1), 2, axis=0)
-    a[:, later] = 0.0  # row k: v_0 and the accelerations before step k
-    jerk = np.zeros((max(m - 2, 0), m), dtype=np.float64)
-    for j in range(m - 2):
-        jerk[j, j + 1], jerk[j, j + 2] = -1.0, 1.0
-    a_t = a.transpose(0, 2, 1)
-    lhs = np.einsum("bij,bjk->bik", a_t, a) + jerk_penalty * (jerk.T @ jerk)[None]
-    x = _solve(lhs, np.einsum("bij,bj->bi", a_t, y))
+    m = xy_disp.shape[1]
+    cos, sin = np.cos(headings_rad), np.sin(headings_rad)
+    lhs, rhs = _normal_equations(
+        cos * cos + sin * sin, cos * xy_disp[..., 0] + sin * xy_disp[..., 1], dt_s
+    )
+    x = _solve(lhs + _jerk_gram(m, float(jerk_penalty))[None], rhs)
     return x[:, 0], x[:, 1:]
 
 
@@ -90,15 +130,11 @@ def fit_curvature_profiles(
 ) -> tuple[F64, F64]:
     """Initial curvatures (B,) and curvature rates (B, M−1) fitted to the heading changes
     ``heading_disp_rad`` (B, M, principal values) at the speeds ``speeds_mps`` (B, M)."""
-    batch, m = heading_disp_rad.shape
-    a = np.repeat(np.tri(m, dtype=np.float64)[None], batch, axis=0)
-    a[:, :, 0] = speeds_mps * dt_s
-    a[:, 1:, 1:] *= (speeds_mps[:, 1:] * dt_s**2)[:, :, None]
+    m = heading_disp_rad.shape[1]
+    lhs, rhs = _normal_equations(speeds_mps * speeds_mps, speeds_mps * heading_disp_rad, dt_s)
     q = curvature_rate_penalty * np.eye(m)
     q[0, 0] = INITIAL_CURVATURE_PENALTY
-    a_t = a.transpose(0, 2, 1)
-    lhs = np.einsum("bij,bjk->bik", a_t, a) + q[None]
-    x = _solve(lhs, np.einsum("bij,bj->bi", a_t, heading_disp_rad))
+    x = _solve(lhs + q[None], rhs)
     return x[:, 0], x[:, 1:]
 
 
