@@ -22,7 +22,7 @@ import numpy as np
 from redrive.errors import ConfigError
 from redrive.evaluation._kinematics import rectangle_corners, rectangles_overlap
 from redrive.sim.ego import EgoGeometry
-from redrive.types import Frame
+from redrive.types import Frame, ObjectColumns
 
 __all__ = ["ON_COLLISION", "Contact", "check_on_collision", "contacts"]
 
@@ -51,8 +51,11 @@ def contacts(frame: Frame, geometry: EgoGeometry) -> tuple[Contact, ...]:
     objects = frame.ground_truth
     if not objects:
         return ()
-    centers = np.array([o.box.center[:2] for o in objects], dtype=np.float64)
-    sizes = np.array([o.box.size[:2] for o in objects], dtype=np.float64)
+    # the objects' columns (shared with the simulator's DetectedObject.many: no object is
+    # filled field by field), the same values as the objects' boxes
+    columns = ObjectColumns.from_objects(objects)
+    centers = columns.center_m[:, :2]
+    sizes = columns.size_m[:, :2]
     # two rectangles whose centres are further apart than the sum of their half-diagonals cannot
     # touch: only the others go through the separating axis test (exact, not an approximation)
     reach = 0.5 * (math.hypot(geometry.length_m, geometry.width_m) + np.hypot(*sizes.T))
@@ -64,11 +67,10 @@ def contacts(frame: Frame, geometry: EgoGeometry) -> tuple[Contact, ...]:
     ego = rectangle_corners(
         (geometry.center_offset_m, 0.0), 0.0, geometry.length_m, geometry.width_m
     )
-    yaws = np.array([objects[m].box.yaw_rad for m in near], dtype=np.float64)
-    boxes = rectangle_corners(centers[near], yaws, sizes[near, 0], sizes[near, 1])
-    touching = near[rectangles_overlap(ego, boxes)]
+    boxes = rectangle_corners(centers[near], columns.yaw_rad[near], sizes[near, 0], sizes[near, 1])
+    touching = near[rectangles_overlap(ego, boxes)].tolist()
+    ids = columns.object_id.tolist()
     found = [
-        Contact(object_id=int(objects[m].object_id), object_class=objects[m].object_class.value)
-        for m in touching
+        Contact(object_id=ids[m], object_class=columns.object_class[m].value) for m in touching
     ]
     return tuple(sorted(found, key=lambda c: c.object_id))
