@@ -35,7 +35,13 @@ from redrive.algorithms.reference._kernels import project_on_segments
 from redrive.algorithms.reference._numeric_kernels import interp_at, nan_span, segment_at
 from redrive.motion.idm import idm_kernel
 
-__all__ = ["idm_profile", "leaders_on_path", "points_at", "polyline_arc", "project_pruned"]
+__all__ = [
+    "gate_crossing",
+    "idm_profile",
+    "leaders_on_path", "points_at",
+    "polyline_arc",
+    "project_pruned",
+]
 
 _F64 = npt.NDArray[np.float64]
 
@@ -356,3 +362,67 @@ def leaders_on_path(  # noqa: PLR0917 - numba takes no keyword-only parameters
         out_v[count] = speed
         count += 1
     return out_s[:count].copy(), out_v[:count].copy()
+
+
+@numba.njit(cache=True, nogil=True)
+def gate_crossing(  # noqa: PLR0917 - numba takes no keyword-only parameters
+    path_xy: _F64, path_s: _F64, line: _F64, low: _F64, high: _F64
+) -> tuple[bool, float, float, float]:  # pragma: no cover - compiled
+    """:func:`._lights.stop_arcs`'s test of one stop line (``line`` (K, 2), base_link) against
+    the path (vertices ``path_xy`` (M ≥ 2, 2), arc lengths ``path_s``, bounding box ``low`` /
+    ``high``: numpy's min and max of the vertices): (False, …) when the line's bounding box
+    (numpy's max and min: a NaN wins, and then does not exclude) misses the path's, or the path
+    does not cross the line; else (True, the arc length of the first crossing, the path's unit
+    direction there).  The float64 operations of the numpy code it replaced, in its order: per
+    line segment, every path segment's ``denom``, ``t`` and ``u`` (rows with ``|denom| ≤ 1e-12``
+    skipped, as their ``ok`` was false), the first hit of each line segment, the least arc
+    length over the line's segments (the first on a tie)."""
+    k_n = line.shape[0]
+    for d in range(2):
+        top = line[0, d]
+        bottom = line[0, d]
+        for k in range(1, k_n):
+            v = line[k, d]
+            if math.isnan(top) or math.isnan(v):
+                top = math.nan
+            elif v > top:
+                top = v
+            if math.isnan(bottom) or math.isnan(v):
+                bottom = math.nan
+            elif v < bottom:
+                bottom = v
+        if top < low[d] or bottom > high[d]:
+            return False, 0.0, 0.0, 0.0
+    m = path_xy.shape[0]
+    found = False
+    best_s = 0.0
+    best_x = 0.0
+    best_y = 0.0
+    for k in range(k_n - 1):
+        px = line[k, 0]
+        py = line[k, 1]
+        pq0 = line[k + 1, 0] - px
+        pq1 = line[k + 1, 1] - py
+        for j in range(m - 1):
+            ab0 = path_xy[j + 1, 0] - path_xy[j, 0]
+            ab1 = path_xy[j + 1, 1] - path_xy[j, 1]
+            denom = ab0 * pq1 - ab1 * pq0
+            if not abs(denom) > 1e-12:
+                continue
+            ap0 = px - path_xy[j, 0]
+            ap1 = py - path_xy[j, 1]
+            t = (ap0 * pq1 - ap1 * pq0) / denom
+            u = (ap0 * ab1 - ap1 * ab0) / denom
+            if not (t >= 0.0 and t <= 1.0 and u >= 0.0 and u <= 1.0):
+                continue
+            s = path_s[j] + t * (path_s[j + 1] - path_s[j])
+            if not found or s < best_s:
+                h = math.hypot(ab0, ab1)
+                if 1e-12 > h:  # max(h, 1e-12): the first argument unless the other is greater
+                    h = 1e-12
+                found = True
+                best_s = s
+                best_x = ab0 / h
+                best_y = ab1 / h
+            break  # the first hit of this line segment
+    return found, best_s, best_x, best_y
