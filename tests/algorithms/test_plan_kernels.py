@@ -81,7 +81,7 @@ def _bits(values: object) -> bytes:
 
 
 def _random_line(rng: np.random.Generator) -> F64:
-    m = int(rng.integers(2, 120))
+    m = int(rng.integers(2, 260))  # the planner's lane arc has 241 vertices
     if rng.random() < 0.5:  # a lane arc as the planner samples it
         kappa = float(rng.choice([0.0, rng.uniform(-0.2, 0.2)]))
         s = np.linspace(0.0, float(rng.uniform(1.0, 120.0)), m)
