@@ -1,9 +1,11 @@
 """The planner's compiled path geometry gives, bit for bit, what the numpy code it replaced
 gave (kept here as the reference): a Polyline's vertices and arc lengths, its points at arc
-lengths (inside, past either end), and the leaders picked from boxes' corners and centres."""
+lengths (inside, past either end), the leaders picked from boxes' corners and centres, and a
+stop line's first crossing with the path."""
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -11,6 +13,7 @@ import numpy.typing as npt
 
 from redrive.algorithms.reference._kernels import project_on_segments
 from redrive.algorithms.reference._plan_kernels import (
+    gate_crossing,
     leaders_on_path,
     points_at,
     polyline_arc,
@@ -78,7 +81,7 @@ def _bits(values: object) -> bytes:
 
 
 def _random_line(rng: np.random.Generator) -> F64:
-    m = int(rng.integers(2, 120))
+    m = int(rng.integers(2, 260))  # the planner's lane arc has 241 vertices
     if rng.random() < 0.5:  # a lane arc as the planner samples it
         kappa = float(rng.choice([0.0, rng.uniform(-0.2, 0.2)]))
         s = np.linspace(0.0, float(rng.uniform(1.0, 120.0)), m)
@@ -151,3 +154,59 @@ def test_project_pruned_equals_the_full_search_bit_for_bit() -> None:
         s_got, lat_got = project_pruned(p, a, ab, seg_len, s_line[:-1], s_line[-1])
         assert _bits(s_got) == _bits(s_full)
         assert _bits(lat_got) == _bits(lat_full)
+
+
+def _gate_crossing_numpy(
+    path_xy: F64, path_s: F64, line: F64, low: F64, high: F64
+) -> tuple[float, F64] | None:
+    """What _lights.stop_arcs did before gate_crossing: the bounding boxes' test, then the
+    first crossing (its arc length and the path's unit direction there) or None."""
+    if (line.max(axis=0) < low).any() or (line.min(axis=0) > high).any():
+        return None
+    a, ab = path_xy[:-1], np.diff(path_xy, axis=0)
+    best: tuple[float, F64] | None = None
+    for p, q in itertools.pairwise(line):
+        pq = q - p
+        denom = ab[:, 0] * pq[1] - ab[:, 1] * pq[0]
+        ok = np.abs(denom) > 1e-12
+        if not ok.any():
+            continue
+        ap = p - a
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (ap[:, 0] * pq[1] - ap[:, 1] * pq[0]) / denom
+            u = (ap[:, 0] * ab[:, 1] - ap[:, 1] * ab[:, 0]) / denom
+        hit = ok & (t >= 0.0) & (t <= 1.0) & (u >= 0.0) & (u <= 1.0)
+        if not hit.any():
+            continue
+        j = int(np.flatnonzero(hit)[0])
+        s = float(path_s[j] + t[j] * (path_s[j + 1] - path_s[j]))
+        if best is None or s < best[0]:
+            seg = ab[j] / max(float(np.hypot(ab[j, 0], ab[j, 1])), 1e-12)
+            best = (s, seg)
+    return best
+
+
+def test_gate_crossing_equals_the_numpy_code_bit_for_bit() -> None:
+    rng = np.random.default_rng(14)
+    crossed = 0
+    for trial in range(300):
+        xy, s_line = polyline_arc(_random_line(rng))
+        if len(xy) < 2:
+            continue
+        # a stop line of 2–4 points, often across the path (through one of its vertices or
+        # between two), else anywhere
+        k = int(rng.integers(2, 5))
+        mid = xy[rng.integers(0, len(xy))] if rng.random() < 0.7 else rng.uniform(-20, 100, 2)
+        line = mid + np.cumsum(rng.normal(0.0, 2.0, (k, 2)), axis=0) - rng.normal(0.0, 2.0, 2)
+        if trial % 40 == 0:
+            line[0] = np.nan  # a NaN in the line: numpy's max and min let it through
+        if trial % 40 == 20:
+            line = np.array([xy[0], xy[-1]])  # along the path: parallel segments
+        low, high = xy.min(axis=0), xy.max(axis=0)
+        found, s, tx, ty = gate_crossing(xy, s_line, line, low, high)
+        want = _gate_crossing_numpy(xy, s_line, line, low, high)
+        assert found == (want is not None)
+        if want is not None:
+            crossed += 1
+            assert _bits(np.array([s, tx, ty])) == _bits(np.array([want[0], *want[1]]))
+    assert crossed > 50  # the crossings themselves were compared, not only the misses

@@ -51,7 +51,8 @@ def contacts(frame: Frame, geometry: EgoGeometry) -> tuple[Contact, ...]:
     objects = frame.ground_truth
     if not objects:
         return ()
-    # the columns (a frame's objects are rows of one batch: no object is built field by field)
+    # the objects' columns (shared with the simulator's DetectedObject.many: no object is
+    # filled field by field), the same values as the objects' boxes
     columns = ObjectColumns.from_objects(objects)
     centers = columns.center_m[:, :2]
     sizes = columns.size_m[:, :2]
@@ -66,13 +67,10 @@ def contacts(frame: Frame, geometry: EgoGeometry) -> tuple[Contact, ...]:
     ego = rectangle_corners(
         (geometry.center_offset_m, 0.0), 0.0, geometry.length_m, geometry.width_m
     )
-    yaws = columns.yaw_rad[near]
-    boxes = rectangle_corners(centers[near], yaws, sizes[near, 0], sizes[near, 1])
-    touching = near[rectangles_overlap(ego, boxes)]
+    boxes = rectangle_corners(centers[near], columns.yaw_rad[near], sizes[near, 0], sizes[near, 1])
+    touching = near[rectangles_overlap(ego, boxes)].tolist()
+    ids = columns.object_id.tolist()
     found = [
-        Contact(
-            object_id=int(columns.object_id[m]), object_class=columns.object_class[m].value
-        )
-        for m in touching.tolist()
+        Contact(object_id=ids[m], object_class=columns.object_class[m].value) for m in touching
     ]
     return tuple(sorted(found, key=lambda c: c.object_id))

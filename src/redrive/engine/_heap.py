@@ -22,11 +22,19 @@ def setup_frozen() -> Iterator[None]:
     at the start is collected after the run. Nested uses, and a process that froze its heap
     itself (a pre-fork server), are left as they are.
     """
-    if gc.get_freeze_count():
+    # nested: the outer use froze the heap (asked before gc.get_freeze_count, which walks the
+    # whole frozen generation to count it — tens of ms with numba and pyarrow loaded)
+    if _frozen[0] or gc.get_freeze_count():
         yield
         return
     gc.freeze()
+    _frozen[0] = True
     try:
         yield
     finally:
+        _frozen[0] = False
         gc.unfreeze()
+
+
+#: whether a setup_frozen of this process holds the heap frozen now
+_frozen = [False]

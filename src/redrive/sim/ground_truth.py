@@ -59,26 +59,38 @@ def objects_in_base(
     velocities = transform_vectors(base_from_map, objs.velocity_mps)
     idx = np.arange(len(objs)) if keep is None else np.flatnonzero(keep)
     idx = idx[~(np.hypot(centers[idx, 0], centers[idx, 1]) > range_m)]
-    object_ids = objs.object_id[idx].tolist()
+    # the rows are the world's (trusted: finite, non-negative sizes) moved into base_link: the
+    # columns are built as DetectedObject.many would check and build them, without the checks
+    object_ids = objs.object_id[idx]
+    n = len(idx)
     if lidar_hits is None:
-        points: list[int | None] = [None] * len(idx)
+        points = np.full(n, -1, dtype=np.int64)
     else:
-        points = [int(lidar_hits.get(object_id, 0)) for object_id in object_ids]
+        points = np.array(
+            [int(lidar_hits.get(object_id, 0)) for object_id in object_ids.tolist()],
+            dtype=np.int64,
+        )
     if lidar_hits is None and camera_pixels is None:
-        visible: list[bool | None] = [None] * len(idx)
+        visible: tuple[bool | None, ...] = (None,) * n
     else:
         pixels = [
             0 if camera_pixels is None else int(camera_pixels.get(object_id, 0))
-            for object_id in object_ids
+            for object_id in object_ids.tolist()
         ]
-        visible = [(p or q) > 0 for p, q in zip(points, pixels, strict=True)]
-    yaws = [math.remainder(yaw - yaw_ego, math.tau) for yaw in objs.yaw_rad[idx].tolist()]
-    orientations = np.zeros((len(idx), 3))
+        visible = tuple(
+            (p or q) > 0 for p, q in zip(points.tolist(), pixels, strict=True)
+        )
+    yaws = np.array(
+        [math.remainder(yaw - yaw_ego, math.tau) for yaw in objs.yaw_rad[idx].tolist()],
+        dtype=np.float64,
+    )
+    orientations = np.zeros((n, 3))
     orientations[:, 0] = yaws
+    classes = objs.object_class
     return tuple(
-        DetectedObject.many(
+        ObjectColumns.trusted(
             object_id=object_ids,
-            object_class=[objs.object_class[i] for i in idx.tolist()],
+            object_class=tuple([classes[i] for i in idx.tolist()]),
             center_m=centers[idx],
             size_m=objs.size_m[idx],
             yaw_rad=yaws,
@@ -86,5 +98,5 @@ def objects_in_base(
             orientation_rad=orientations,
             num_lidar_points=points,
             visible=visible,
-        )
+        ).objects()
     )

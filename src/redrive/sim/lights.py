@@ -66,6 +66,9 @@ class TrafficLights:
         self.signals = tuple(signals)
         self.timing = timing
         self._by_id = {sig.light_id: sig for sig in self.signals}
+        self._ids = tuple(light_id_text(sig.light_id) for sig in self.signals)
+        #: the last traffic_data: its states and itself (the phases last seconds, frames ~0.1 s)
+        self._last: tuple[tuple[LightState, ...], TrafficData] | None = None
 
     def state(self, light_id: int, time_s: float) -> LightState:
         """The state of signal ``light_id`` at ``time_s`` (UNKNOWN for an unknown id)."""
@@ -94,5 +97,16 @@ class TrafficLights:
 
     def traffic_data(self, time_s: float) -> TrafficData:
         """The ground truth of every signal head at ``time_s`` (:func:`traffic_data_of` of
-        :meth:`states`)."""
-        return traffic_data_of(self.states(time_s))
+        :meth:`states`; the same immutable object again while no state changed)."""
+        states = tuple([self.state(sig.light_id, time_s) for sig in self.signals])
+        last = self._last
+        if last is not None and last[0] == states:
+            return last[1]
+        data = TrafficData(
+            traffic_lights=tuple(
+                TrafficLight(id=light_id, state=state)
+                for light_id, state in zip(self._ids, states, strict=True)
+            )
+        )
+        self._last = (states, data)
+        return data

@@ -289,12 +289,22 @@ class ObjectColumns:
         size_m: npt.NDArray[np.float64],
         yaw_rad: npt.NDArray[np.float64],
         velocity_mps: npt.NDArray[np.float64],
+        orientation_rad: npt.NDArray[np.float64] | None = None,
+        num_lidar_points: npt.NDArray[np.int64] | None = None,
+        visible: tuple[bool | None, ...] | None = None,
     ) -> ObjectColumns:
-        """Columns of arrays the caller built and vouches for (a simulator's world: int64 and
-        float64 of the shapes above, nothing to check), neither checked nor copied, made
-        read-only in place; the other columns take their defaults."""
+        """Columns of arrays the caller built and vouches for (a simulator's world, or its
+        ground truth moved into base_link: int64 and float64 of the shapes above, nothing to
+        check), neither checked nor copied, made read-only in place; the other columns (and
+        ``orientation_rad``, ``num_lidar_points``, ``visible`` left at None) take their
+        defaults."""
         n = len(object_class)
-        for arr in (object_id, center_m, size_m, yaw_rad, velocity_mps):
+        arrays = [object_id, center_m, size_m, yaw_rad, velocity_mps]
+        if orientation_rad is not None:
+            arrays.append(orientation_rad)
+        if num_lidar_points is not None:
+            arrays.append(num_lidar_points)
+        for arr in arrays:
             arr.flags.writeable = False
         return _columns_unchecked(
             object_id,
@@ -305,10 +315,10 @@ class ObjectColumns:
             yaw_rad,
             velocity_mps,
             zeros(n),
-            zeros(n),
+            zeros(n) if orientation_rad is None else orientation_rad,
             (None,) * n,
-            minus_ones(n),
-            (None,) * n,
+            minus_ones(n) if num_lidar_points is None else num_lidar_points,
+            (None,) * n if visible is None else visible,
             minus_ones(n),
         )
 

@@ -15,7 +15,6 @@ the light shows green again.
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
@@ -23,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from redrive.algorithms.reference._plan_kernels import gate_crossing
 from redrive.types import LightState, MapLane, RoadMap, TrafficLight, VehicleState
 
 __all__ = ["Gate", "gates_of", "stop_arcs"]
@@ -81,34 +81,6 @@ def gates_of(road_map: RoadMap | None) -> tuple[Gate, ...]:
     return tuple(gates)
 
 
-def _first_crossing(path_xy: F64, path_s: F64, line: F64) -> tuple[float, F64] | None:
-    """Arc length along the path of its first crossing with the polyline ``line``, and the
-    path's unit direction there; None when it does not cross."""
-    if len(path_xy) < 2:
-        return None
-    a, ab = path_xy[:-1], np.diff(path_xy, axis=0)
-    best: tuple[float, F64] | None = None
-    for p, q in itertools.pairwise(line):
-        pq = q - p
-        denom = ab[:, 0] * pq[1] - ab[:, 1] * pq[0]
-        ok = np.abs(denom) > 1e-12
-        if not ok.any():
-            continue
-        ap = p - a
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (ap[:, 0] * pq[1] - ap[:, 1] * pq[0]) / denom  # along the path segment
-            u = (ap[:, 0] * ab[:, 1] - ap[:, 1] * ab[:, 0]) / denom  # along the line segment
-        hit = ok & (t >= 0.0) & (t <= 1.0) & (u >= 0.0) & (u <= 1.0)
-        if not hit.any():
-            continue
-        j = int(np.flatnonzero(hit)[0])
-        s = float(path_s[j] + t[j] * (path_s[j + 1] - path_s[j]))
-        if best is None or s < best[0]:
-            seg = ab[j] / max(float(np.hypot(ab[j, 0], ab[j, 1])), 1e-12)
-            best = (s, seg)
-    return best
-
-
 def stop_arcs(
     gates: Iterable[Gate],
     lights: Iterable[TrafficLight],
@@ -139,12 +111,11 @@ def stop_arcs(
         if light not in (LightState.RED, LightState.YELLOW) or gate.light_id in committed:
             continue
         line = (gate.line - origin) @ base_from_map.T
-        if (line.max(axis=0) < low).any() or (line.min(axis=0) > high).any():
-            continue  # the line's bounding box misses the path's: no crossing
-        crossing = _first_crossing(path_xy, path_s, line)
-        if crossing is None:
+        # the bounding boxes' test and the first crossing in one compiled call
+        found, s, tx, ty = gate_crossing(path_xy, path_s, line, low, high)
+        if not found:
             continue
-        s, tangent = crossing
+        tangent = np.array([tx, ty])
         if float(tangent @ (base_from_map @ gate.direction)) <= 0.0:
             continue  # crossed against its direction of travel: not this light's lane
         gap = s - front_offset_m

@@ -35,7 +35,13 @@ from redrive.algorithms.reference._kernels import project_on_segments
 from redrive.algorithms.reference._numeric_kernels import interp_at, nan_span, segment_at
 from redrive.motion.idm import idm_kernel
 
-__all__ = ["idm_profile", "leaders_on_path", "points_at", "polyline_arc", "project_pruned"]
+__all__ = [
+    "gate_crossing",
+    "idm_profile",
+    "leaders_on_path", "points_at",
+    "polyline_arc",
+    "project_pruned",
+]
 
 _F64 = npt.NDArray[np.float64]
 
@@ -189,7 +195,8 @@ def points_at(xy: _F64, s: _F64, s_m: _F64) -> _F64:  # pragma: no cover - compi
 #: a segment is skipped only when it is provably farther than the best one by this much (metres,
 #: scaled by 1 + the distance), far above float64 rounding of path coordinates
 _PRUNE_MARGIN = 1e-6
-#: every this many segments one gives the first bound of a point's distance
+#: segments per block of project_pruned (each block's first gives the first bound of a point's
+#: distance; a block whose box is farther than the bound is skipped)
 _PRUNE_STRIDE = 16
 
 
@@ -219,13 +226,12 @@ def project_pruned(  # noqa: PLR0917 - numba takes no keyword-only parameters
     segments ``a + t·ab`` (arc length ``s_start`` at ``a``; the last ends at ``s_end``): the
     values :func:`._kernels.project_on_segments` gives, without looking at every segment.
 
-    First every eighth segment's distance gives a bound of the least one.  Along a polyline
-    the straight distance never exceeds the arc length between two points, so a point at
-    distance ``D`` from a vertex (arc length ``s``) is at least ``D − (σ − s)`` from the
-    polyline's point at ``σ ≥ s``: the segments that end before ``s + D − bound − margin`` are
-    farther than the bound and skipped (strictly farther even after rounding, so the first
-    minimum of the segments looked at is the first of all).  Non-finite inputs take the full
-    search.
+    The segments go in blocks of ``_PRUNE_STRIDE``, each with the bounding box of its segments'
+    ends.  For each point, the first segment of every block (and the last segment) gives a
+    bound of the least distance; then every segment of the blocks in order, but for the blocks
+    whose box is farther from the point than the bound (plus a margin: each of their segments
+    is strictly farther than the bound even after rounding, so the first minimum of the
+    segments looked at is the first of all).  Non-finite inputs take the full search.
     """
     n_p = p.shape[0]
     n_s = a.shape[0]
@@ -249,10 +255,24 @@ def project_pruned(  # noqa: PLR0917 - numba takes no keyword-only parameters
     s_out = np.empty(n_p)
     lateral = np.empty(n_p)
     stride = _PRUNE_STRIDE
+    n_b = (n_s + stride - 1) // stride
+    # every block's box: (x min, x max, y min, y max) of its segments' two ends
+    box = np.empty((n_b, 4))
+    for j in range(n_b):
+        box[j, 0] = box[j, 2] = np.inf
+        box[j, 1] = box[j, 3] = -np.inf
+    for k in range(n_s):
+        j = k // stride
+        for x in (a[k, 0], a[k, 0] + ab[k, 0]):
+            box[j, 0] = min(box[j, 0], x)
+            box[j, 1] = max(box[j, 1], x)
+        for y in (a[k, 1], a[k, 1] + ab[k, 1]):
+            box[j, 2] = min(box[j, 2], y)
+            box[j, 3] = max(box[j, 3], y)
     for i in range(n_p):
         px = p[i, 0]
         py = p[i, 1]
-        # an upper bound of the least distance: every stride-th segment's (and the last)
+        # an upper bound of the least distance: every block's first segment's (and the last)
         ub_d2 = np.inf
         k = 0
         while k < n_s:
@@ -261,33 +281,20 @@ def project_pruned(  # noqa: PLR0917 - numba takes no keyword-only parameters
                 ub_d2 = d2
             k = n_s - 1 if stride + k >= n_s and k < n_s - 1 else k + stride
         bound = math.sqrt(ub_d2)
-        # then every segment in order, but for those that end before s + D − bound − margin
-        # from a vertex at distance D (each of their points is farther than the bound)
+        reach = bound + _PRUNE_MARGIN * (1.0 + bound)
+        reach2 = reach * reach
         best = 0
         best_d2 = np.inf
         best_t = 0.0
-        k = 0
-        while k < n_s:
-            dist_k = math.hypot(px - a[k, 0], py - a[k, 1])
-            limit = s_start[k] + dist_k - bound - _PRUNE_MARGIN * (1.0 + dist_k)
-            if (s_start[k + 1] if k + 1 < n_s else s_end) < limit:
-                # the segments k … j - 2 end before the limit (the arc lengths increase):
-                # j = the first vertex after k at or past it (bisection), or the last segment
-                # when none is
-                lo, hi = k + 1, n_s
-                while lo < hi:
-                    mid = (lo + hi) // 2
-                    if s_start[mid] < limit:
-                        lo = mid + 1
-                    else:
-                        hi = mid
-                k = lo - 1
-                if k == n_s - 1 and s_end < limit:
-                    break
-            d2, t = _segment_d2(px, py, a, ab, seg_len, k)
-            if d2 < best_d2:
-                best, best_d2, best_t = k, d2, t
-            k += 1
+        for j in range(n_b):
+            dx = max(box[j, 0] - px, 0.0, px - box[j, 1])
+            dy = max(box[j, 2] - py, 0.0, py - box[j, 3])
+            if dx * dx + dy * dy > reach2:
+                continue  # every segment of the block is farther than the bound
+            for k in range(j * stride, min(n_s, (j + 1) * stride)):
+                d2, t = _segment_d2(px, py, a, ab, seg_len, k)
+                if d2 < best_d2:
+                    best, best_d2, best_t = k, d2, t
         s_out[i] = s_start[best] + best_t * seg_len[best]
         cross = ab[best, 0] * (py - a[best, 1]) - ab[best, 1] * (px - a[best, 0])
         lateral[i] = cross / seg_len[best]
@@ -356,3 +363,67 @@ def leaders_on_path(  # noqa: PLR0917 - numba takes no keyword-only parameters
         out_v[count] = speed
         count += 1
     return out_s[:count].copy(), out_v[:count].copy()
+
+
+@numba.njit(cache=True, nogil=True)
+def gate_crossing(  # noqa: PLR0917 - numba takes no keyword-only parameters
+    path_xy: _F64, path_s: _F64, line: _F64, low: _F64, high: _F64
+) -> tuple[bool, float, float, float]:  # pragma: no cover - compiled
+    """:func:`._lights.stop_arcs`'s test of one stop line (``line`` (K, 2), base_link) against
+    the path (vertices ``path_xy`` (M ≥ 2, 2), arc lengths ``path_s``, bounding box ``low`` /
+    ``high``: numpy's min and max of the vertices): (False, …) when the line's bounding box
+    (numpy's max and min: a NaN wins, and then does not exclude) misses the path's, or the path
+    does not cross the line; else (True, the arc length of the first crossing, the path's unit
+    direction there).  The float64 operations of the numpy code it replaced, in its order: per
+    line segment, every path segment's ``denom``, ``t`` and ``u`` (rows with ``|denom| ≤ 1e-12``
+    skipped, as their ``ok`` was false), the first hit of each line segment, the least arc
+    length over the line's segments (the first on a tie)."""
+    k_n = line.shape[0]
+    for d in range(2):
+        top = line[0, d]
+        bottom = line[0, d]
+        for k in range(1, k_n):
+            v = line[k, d]
+            if math.isnan(top) or math.isnan(v):
+                top = math.nan
+            elif v > top:
+                top = v
+            if math.isnan(bottom) or math.isnan(v):
+                bottom = math.nan
+            elif v < bottom:
+                bottom = v
+        if top < low[d] or bottom > high[d]:
+            return False, 0.0, 0.0, 0.0
+    m = path_xy.shape[0]
+    found = False
+    best_s = 0.0
+    best_x = 0.0
+    best_y = 0.0
+    for k in range(k_n - 1):
+        px = line[k, 0]
+        py = line[k, 1]
+        pq0 = line[k + 1, 0] - px
+        pq1 = line[k + 1, 1] - py
+        for j in range(m - 1):
+            ab0 = path_xy[j + 1, 0] - path_xy[j, 0]
+            ab1 = path_xy[j + 1, 1] - path_xy[j, 1]
+            denom = ab0 * pq1 - ab1 * pq0
+            if not abs(denom) > 1e-12:
+                continue
+            ap0 = px - path_xy[j, 0]
+            ap1 = py - path_xy[j, 1]
+            t = (ap0 * pq1 - ap1 * pq0) / denom
+            u = (ap0 * ab1 - ap1 * ab0) / denom
+            if not (t >= 0.0 and t <= 1.0 and u >= 0.0 and u <= 1.0):
+                continue
+            s = path_s[j] + t * (path_s[j + 1] - path_s[j])
+            if not found or s < best_s:
+                h = math.hypot(ab0, ab1)
+                if 1e-12 > h:  # max(h, 1e-12): the first argument unless the other is greater
+                    h = 1e-12
+                found = True
+                best_s = s
+                best_x = ab0 / h
+                best_y = ab1 / h
+            break  # the first hit of this line segment
+    return found, best_s, best_x, best_y

@@ -88,6 +88,7 @@ from redrive.algorithms.base import VEHICLE_STATE, Algorithm, Input, Role, Stage
 from redrive.algorithms.reference._kernels import project_on_segments
 from redrive.algorithms.reference._lights import Gate, gates_of, stop_arcs
 from redrive.algorithms.reference._plan_kernels import (
+    gate_crossing,
     idm_profile,
     leaders_on_path,
     points_at,
@@ -333,6 +334,8 @@ class IdmPlanner(Algorithm):
         frozen = np.zeros((1, 3))
         frozen.flags.writeable = False
         leaders_on_path(np.zeros((1, 8, 3)), frozen, frozen, line.xy, line.s, 1.0, 0.0, 1.0)
+        # a stop line's test (_lights.stop_arcs), with the arrays' types a step gives it
+        gate_crossing(line.xy, line.s, np.zeros((2, 2)), np.zeros(2), np.ones(2))
 
     # -- the step -----------------------------------------------------------------------------
 
