@@ -77,9 +77,7 @@ def objects_in_base(
             0 if camera_pixels is None else int(camera_pixels.get(object_id, 0))
             for object_id in object_ids.tolist()
         ]
-        visible = tuple(
-            (p or q) > 0 for p, q in zip(points.tolist(), pixels, strict=True)
-        )
+        visible = tuple((p or q) > 0 for p, q in zip(points.tolist(), pixels, strict=True))
     yaws = np.array(
         [math.remainder(yaw - yaw_ego, math.tau) for yaw in objs.yaw_rad[idx].tolist()],
         dtype=np.float64,

@@ -38,7 +38,8 @@ from redrive.motion.idm import idm_kernel
 __all__ = [
     "gate_crossing",
     "idm_profile",
-    "leaders_on_path", "points_at",
+    "leaders_on_path",
+    "points_at",
     "polyline_arc",
     "project_pruned",
 ]
@@ -366,7 +367,7 @@ def leaders_on_path(  # noqa: PLR0917 - numba takes no keyword-only parameters
 
 
 @numba.njit(cache=True, nogil=True)
-def gate_crossing(  # noqa: PLR0917 - numba takes no keyword-only parameters
+def gate_crossing(
     path_xy: _F64, path_s: _F64, line: _F64, low: _F64, high: _F64
 ) -> tuple[bool, float, float, float]:  # pragma: no cover - compiled
     """:func:`._lights.stop_arcs`'s test of one stop line (``line`` (K, 2), base_link) against
