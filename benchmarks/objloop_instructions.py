@@ -9,17 +9,24 @@ callgrind — a load-robust figure: the count does not depend on what else runs 
 One warm-up pass (imports, the compiled kernels loaded, plugin discovery; not instrumented, so
 it runs ≈ 5× faster than under full instrumentation), then instrumentation on
 (``callgrind_control -i on``, waited for) and ``--passes`` passes of the 20-s ``urban`` scenario
-(noisy-oracle → idm-planner → pure-pursuit-pid, results written to a temporary run directory),
-each with the engine's ``execute`` — the frame loop with the algorithms' setup before it and the
-run's close after it — called through ``operator.call``: that is all callgrind counts (nothing in
-redrive or its libraries calls ``operator.call``; ``functools.reduce``, the usual toggle, is used
-by numba's compiler and numpy, and a nested toggle switches collection off). Building the two
-worlds and the run directory's opening are outside it. Only the thread that enters
-``operator.call`` (the frame loop's) is counted: the resource sampler's and the writer's file
-threads are not.  The results writer flushes once, at the close, as in a native pass (its 2-s
-flush interval is lifted: under callgrind a pass takes tens of seconds).  Run to run the count
-still varies by about ±1 % (the threads' interplay, the garbage collector): compare trees over
-several runs each.
+(noisy-oracle → idm-planner → pure-pursuit-pid, results written to a temporary run directory).
+Both sides count what the bench times, called through ``operator.call``: that is all callgrind
+counts (nothing in redrive or its libraries calls ``operator.call``; ``functools.reduce``, the
+usual toggle, is used by numba's compiler and numpy, and a nested toggle switches collection
+off):
+
+- the closed loop: the engine's frame loop (``Engine.run``, whose wall time is the bench's
+  closed-loop time) — building the two worlds, the algorithms' setup, the run directory's
+  opening and its close (the tables flushed, the manifest) are outside it;
+- ``--baseline``: the world stepping alone (``step_world_alone``, the bench's timed part) —
+  loading the scenario and building the world are outside it.
+
+Only the thread that enters ``operator.call`` (the frame loop's) is counted: the resource
+sampler's and the writer's file threads are not.  The results writer flushes once, at the
+close, as in a native pass (its 2-s flush interval is lifted: under callgrind a pass takes tens
+of seconds).  Run to run the count still varies by about ±1 % (the threads' interplay, the
+garbage collector): compare trees over several runs each.  Instructions per second differ
+between the two sides (the world is numba-heavy): report the bench's CPU-time ratio beside.
 """
 
 from __future__ import annotations
@@ -34,8 +41,14 @@ from pathlib import Path
 from typing import Any
 
 import redrive.closedloop.run as closed_loop_run
-from redrive.benchmarks.closed_loop import _world_alone, closed_loop_pipeline
+from redrive.benchmarks.closed_loop import (
+    _world_alone,
+    closed_loop_pipeline,
+    step_world_alone,
+    world_for_alone,
+)
 from redrive.closedloop.run import ClosedLoopRequest, run_closed_loop
+from redrive.engine.core import Engine
 from redrive.results import RunWriter
 
 
@@ -61,18 +74,19 @@ def main() -> None:
         "--baseline",
         action="store_true",
         help="count `bench closed-loop`'s baseline instead: the world stepped alone (its "
-        "_world_alone, 20 s of urban at 10 Hz) — the closed loop's count over this one is the "
-        "bench's ratio in instructions",
+        "step_world_alone, 20 s of urban at 10 Hz; the world built outside the count) — the "
+        "closed loop's count over this one is the bench's ratio in instructions",
     )
     args = parser.parse_args()
     if args.baseline:
         _world_alone("urban", 20.0, 10.0)  # warm: imports, the compiled kernels
+        worlds = [world_for_alone("urban", 20.0) for _ in range(args.passes)]
         if not args.no_switch:
             subprocess.run(["callgrind_control", "-i", "on", str(os.getpid())], check=False)
-        for _ in range(args.passes):
-            operator.call(_world_alone, "urban", 20.0, 10.0)  # type: ignore[attr-defined]
+        for world in worlds:
+            operator.call(step_world_alone, world, 20.0, 10.0)  # type: ignore[attr-defined]
         return
-    execute = closed_loop_run.execute
+    run = Engine.run
     # a native pass (≈ 0.2 s) flushes its frames once, at close; under callgrind a pass takes
     # tens of seconds and the writer's 2-s flush interval would add flushes (and instructions)
     # that depend on the host's speed: the interval is lifted so the count is one flush's
@@ -83,16 +97,16 @@ def main() -> None:
         _one_pass(Path(tmp) / "warm")
 
         def counted(*a: Any, **kw: Any) -> Any:
-            return operator.call(execute, *a, **kw)  # type: ignore[attr-defined]
+            return operator.call(run, *a, **kw)  # type: ignore[attr-defined]
 
         if not args.no_switch:  # under callgrind --instr-atstart=no: instrument from here on
             subprocess.run(["callgrind_control", "-i", "on", str(os.getpid())], check=False)
-        closed_loop_run.execute = counted  # type: ignore[assignment]
+        Engine.run = counted  # type: ignore[method-assign]
         try:
             for p in range(args.passes):
                 _one_pass(Path(tmp) / f"run{p}")
         finally:
-            closed_loop_run.execute = execute
+            Engine.run = run  # type: ignore[method-assign]
 
 
 if __name__ == "__main__":

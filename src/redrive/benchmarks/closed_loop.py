@@ -60,6 +60,8 @@ __all__ = [
     "bench_closed_loop",
     "closed_loop_pipeline",
     "scenario_with_lidar",
+    "step_world_alone",
+    "world_for_alone",
 ]
 
 #: the issue's targets (× real time): object level, and sensor level on 2 cores
@@ -223,18 +225,28 @@ class ClosedLoopBenchResult:
         }
 
 
-def _world_alone(scenario_name: str, duration_s: float, rate_hz: float) -> tuple[float, float]:
-    """Step one world with its scripted driver frame by frame to the closed loop's end: wall
-    and CPU seconds."""
-    scenario = dataclasses.replace(load_scenario(scenario_name), duration_s=duration_s)
-    world = World(scenario)
+def world_for_alone(scenario_name: str, duration_s: float) -> World:
+    """The world :func:`_world_alone` steps (built outside its timing)."""
+    return World(dataclasses.replace(load_scenario(scenario_name), duration_s=duration_s))
+
+
+def step_world_alone(world: World, duration_s: float, rate_hz: float) -> None:
+    """The baseline's timed part: ``world`` stepped with its scripted driver frame by frame to
+    the closed loop's end, a frame's objects and ego state read at each."""
     dt_ns = round(1e9 / rate_hz)
-    end_ns = scenario.start_stamp_ns + round(duration_s * 1e9)
-    t0, c0 = time.perf_counter(), time.thread_time()
+    end_ns = world.scenario.start_stamp_ns + round(duration_s * 1e9)
     while world.time_ns + dt_ns <= end_ns:
         world.objects()  # what a frame is made of: the objects and the ego state
         world.ego_state()
         world.step_to(world.time_ns + dt_ns)
+
+
+def _world_alone(scenario_name: str, duration_s: float, rate_hz: float) -> tuple[float, float]:
+    """Step one world with its scripted driver frame by frame to the closed loop's end: wall
+    and CPU seconds (of the stepping; building the world is outside them)."""
+    world = world_for_alone(scenario_name, duration_s)
+    t0, c0 = time.perf_counter(), time.thread_time()
+    step_world_alone(world, duration_s, rate_hz)
     return time.perf_counter() - t0, time.thread_time() - c0
 
 
