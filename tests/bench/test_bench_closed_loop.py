@@ -31,6 +31,9 @@ def test_bench_closed_loop_split_adds_up() -> None:
     # the CPU split: parts of the process's CPU, the world alone's apart
     assert 0 < result.simulation_cpu_s + result.algorithms_cpu_s <= result.cpu_s
     assert result.baseline_cpu_s > 0
+    # the frame loop's CPU holds the simulation's and the algorithms' (same thread)
+    assert result.simulation_cpu_s + result.algorithms_cpu_s <= result.loop_cpu_s <= result.cpu_s
+    assert result.cpu_ratio == pytest.approx(result.loop_cpu_s / result.baseline_cpu_s)
     assert set(result.algorithm_ms) == {"noisy-oracle", "idm-planner", "pure-pursuit-pid"}
     # the closed loop steps two worlds and runs three algorithms: never cheaper than one world
     assert result.ratio > 1.0

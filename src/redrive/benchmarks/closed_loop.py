@@ -147,6 +147,8 @@ class ClosedLoopBenchResult:
             (the frame loop thread's, in ``observe`` and ``step``; rendering included), of the
             algorithms (the steps table's ``cpu_ns``) and of the world alone: on a shared
             machine these tell the code's cost apart from the load, as ``cpu_s`` does.
+        loop_cpu_s: CPU seconds of the frame loop's thread from the run's start (``on_start``)
+            to the last frame's ``progress`` — the loop's CPU time, beside ``baseline_cpu_s``.
     """
 
     scenario: str
@@ -168,6 +170,7 @@ class ClosedLoopBenchResult:
     simulation_cpu_s: float = 0.0
     algorithms_cpu_s: float = 0.0
     baseline_cpu_s: float = 0.0
+    loop_cpu_s: float = 0.0
 
     @property
     def realtime_factor(self) -> float:
@@ -182,6 +185,11 @@ class ClosedLoopBenchResult:
     def ratio(self) -> float:
         """Closed-loop wall time over the world stepping alone (≥ 2: it steps two worlds)."""
         return self.wall_s / self.baseline_s
+
+    @property
+    def cpu_ratio(self) -> float:
+        """The frame loop's CPU time over the world alone's (the ratio, less the load)."""
+        return self.loop_cpu_s / self.baseline_cpu_s if self.baseline_cpu_s > 0 else 0.0
 
     @property
     def target(self) -> float:
@@ -218,6 +226,8 @@ class ClosedLoopBenchResult:
             },
             "baseline_s": self.baseline_s,
             "baseline_cpu_s": self.baseline_cpu_s,
+            "loop_cpu_s": self.loop_cpu_s,
+            "cpu_ratio_to_baseline": self.cpu_ratio,
             "baseline_realtime_factor": self.baseline_realtime_factor,
             "ratio_to_baseline": self.ratio,
             "algorithm_ms": dict(self.algorithm_ms),
@@ -266,8 +276,16 @@ def _closed_loop(
         duration_s=duration_s,
         level="sensor" if level == "sensor" else "object",
     )
+    loop_cpu = [0.0, 0.0]  # the thread's CPU time at the run's start, at the last frame
+
+    def started(_total: int | None) -> None:
+        loop_cpu[0] = loop_cpu[1] = time.thread_time()
+
+    def frame_done(_done: int) -> None:
+        loop_cpu[1] = time.thread_time()
+
     t0, cpu0 = time.perf_counter(), time.process_time()
-    report = run_closed_loop(request, wrap_simulator=wrap)
+    report = run_closed_loop(request, on_start=started, progress=frame_done, wrap_simulator=wrap)
     total, cpu = time.perf_counter() - t0, time.process_time() - cpu0
     steps = open_run(out).table("steps")
     algorithms_s = int(pc.sum(steps.column("latency_ns")).as_py() or 0) / 1e9
@@ -284,6 +302,7 @@ def _closed_loop(
         "other": report.wall_s - timed[0].seconds - algorithms_s,
         "simulation_cpu": timed[0].cpu_seconds,
         "algorithms_cpu": algorithms_cpu_s,
+        "loop_cpu": loop_cpu[1] - loop_cpu[0],
         "frames": report.frames,
         "span": report.log_span_s,
         "algorithm_ms": {a.name: a.latency_mean_ms for a in report.algorithms},
@@ -300,6 +319,7 @@ _PARTS = (
     "other",
     "simulation_cpu",
     "algorithms_cpu",
+    "loop_cpu",
 )
 
 
@@ -413,4 +433,5 @@ def bench_closed_loop(
         simulation_cpu_s=med["simulation_cpu"],
         algorithms_cpu_s=med["algorithms_cpu"],
         baseline_cpu_s=med["baseline_cpu"],
+        loop_cpu_s=med["loop_cpu"],
     )
