@@ -2,7 +2,9 @@
 
 Each table buffers one tuple per row, in its schema's column order, and is turned into columns
 only when a flush takes it (``zip(*rows)``, in C): per frame that is one tuple and one append per
-row instead of one append per column through a dict of lists.
+row instead of one append per column through a dict of lists.  A planned path is kept as its
+waypoint array (and one tuple for the columns its rows share) until the flush, which
+concatenates the arrays: no Python row per waypoint.
 """
 
 from __future__ import annotations
@@ -83,8 +85,9 @@ class TableBuffers:
         self._steps = rows["steps"].append  # rows of _STEP_FIELDS: the frame's columns apart
         self._steps_per_frame: list[int] = []
         self._commands = rows["commands"].append
-        self._paths = rows["paths"].extend
-        self._paths_append = rows["paths"].append
+        #: a planned path: (algorithm, frame_index, stamp_ns, frame_id) and its (K, 4) waypoints
+        self._path_heads: list[tuple[Any, ...]] = []
+        self._path_points: list[np.ndarray] = []
         self._detections = rows["detections"].extend
         self.n_frames = 0
 
@@ -172,14 +175,9 @@ class TableBuffers:
         self.n_frames += 1
 
     def _add_path(self, name: str, fi: int, out: PlannedPath) -> None:
-        fid, pstamp = out.frame_id, out.stamp_ns
-        points = out.waypoints.tolist()
-        if len(points) == 1:  # one waypoint: its row, without a comprehension
-            self._paths_append((name, fi, pstamp, fid, 0, *points[0]))
-            return
-        self._paths(
-            [(name, fi, pstamp, fid, j, x, y, z, t) for j, (x, y, z, t) in enumerate(points)]
-        )
+        # the waypoints are read-only (PlannedPath's frozen array): kept as they are
+        self._path_heads.append((name, fi, out.stamp_ns, out.frame_id))
+        self._path_points.append(out.waypoints)
 
     def _add_output(self, name: str, fi: int, stamp: int, out: object) -> int:
         """The rows of an output that is not exactly a tuple, PlannedPath or ControlCommands
@@ -233,6 +231,10 @@ class TableBuffers:
             rows = self._rows[name]
             if name == "frames":
                 arrays = frame_arrays
+            elif name == "paths":
+                arrays = self._path_arrays()
+                if not arrays:
+                    continue
             elif not rows:
                 continue
             elif name == "steps":
@@ -254,6 +256,31 @@ class TableBuffers:
                 ]
             out[name] = pa.Table.from_arrays(arrays, schema=schema)
         return out
+
+    def _path_arrays(self) -> list[pa.Array]:
+        """The ``paths`` columns of the buffered paths (a row per waypoint, path by path);
+        none when no path has a waypoint."""
+        counts = np.array([len(p) for p in self._path_points], dtype=np.int64)
+        total = int(counts.sum())
+        if total == 0:  # (also: no path)
+            return []
+        schema = SCHEMAS["paths"]
+        heads = [
+            _array(c, f.type)
+            for c, f in zip(zip(*self._path_heads, strict=True), list(schema)[:4], strict=True)
+        ]  # algorithm, frame_index, stamp_ns, frame_id: one value a path
+        of_path = np.repeat(np.arange(len(counts)), counts)
+        starts = np.cumsum(counts) - counts
+        waypoint = np.arange(total, dtype=np.int64) - np.repeat(starts, counts)
+        points = np.concatenate(self._path_points)
+        return [
+            *(h.take(of_path) for h in heads),
+            pa.array(waypoint, type=schema.field("waypoint").type),
+            *(
+                pa.array(np.ascontiguousarray(points[:, k]), type=f.type)
+                for k, f in enumerate(list(schema)[5:])  # x, y, z, t_s
+            ),
+        ]
 
 
 _STRING = pa.string()
