@@ -7,8 +7,9 @@ several algorithms or of worker processes runs through the stage's runners (``ru
 
 It has two regimes.  *Frame by frame* (a paced or live or closed-loop mode, or a stage that is
 not one in-process algorithm): each frame is read from the mode's hooks when the one before it
-was handed on (and, after the sink, given to ``after_frame``), and each step's CPU time is its
-own.  *Chained* (``chained=True``: a replay at full speed with one in-process algorithm per
+was handed on (and, after the sink, given to ``after_frame``), and the thread CPU clock is read
+when its first step starts and after each step (the next step's CPU time runs on from there: the
+hand-off of the upstream outputs between two steps of a frame is in it, ≈ 1 µs).  *Chained* (``chained=True``: a replay at full speed with one in-process algorithm per
 stage, the common ``redrive run LOG``), with less bookkeeping per frame:
 
 - the thread CPU clock (a system call: ≈ 1 µs, unlike the wall clock) is read once after each
@@ -333,8 +334,7 @@ def run_sequential(
                                 t0_ns = t0
                             records, failure, upstream = sensors(frame, upstream)
                             t1 = perf_counter_ns()
-                            if chained:
-                                cpu = _thread_time_ns()
+                            cpu = _thread_time_ns()  # the next inline step's CPU from here
                             raw.append((records, _STAGE, failure, 0, 0, None))
                             outputs = dict(upstream.outputs)
                             if failure is not None:
@@ -343,8 +343,10 @@ def run_sequential(
                         seen = frame
                         if frame.sensors and not frame.sensors.keys() <= sensors:
                             seen = frame_for(frame, sensors)
-                        # Algorithm.timed_step_from, inline (one Python call less a step)
-                        if not chained:
+                        # Algorithm.timed_step_from, inline (one Python call less a step); a
+                        # frame's first step reads the thread's CPU clock (a system call), the
+                        # next ones run on from the step before's end, as in a chain
+                        if not chained and not t0_ns:
                             cpu = _thread_time_ns()
                         t0 = perf_counter_ns()
                         if not t0_ns:

@@ -49,7 +49,10 @@ class VehicleState:
 
     @property
     def speed_mps(self) -> float:
-        return float(np.linalg.norm(self.velocity[:2]))
+        # np.linalg.norm's own arithmetic for a float vector (sqrt of x·x; the same bits),
+        # without its Python-level dispatch
+        xy = self.velocity[:2]
+        return math.sqrt(xy.dot(xy))
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

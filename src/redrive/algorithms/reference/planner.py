@@ -274,6 +274,8 @@ class IdmPlanner(Algorithm):
         self.obey_lights = obey
         self._route = self._parse_route(config.get("route"))
         self._route_s_m = None
+        #: the straight path ahead without a route (it depends on range_m alone): built once
+        self._straight: Polyline | None = None
 
     @staticmethod
     def _parse_route(route: object) -> Polyline | None:
@@ -401,16 +403,16 @@ class IdmPlanner(Algorithm):
                 kappa = state.yaw_rate_rad_s / speed_mps
                 kappa = min(max(kappa, -self.max_curvature_1pm), self.max_curvature_1pm)
             length_m = self.range_m
-            if abs(kappa) > 1e-9:
-                length_m = min(length_m, math.pi / abs(kappa))
-            step_m = _ARC_SAMPLE_M
-            if abs(kappa) > 1e-9:  # chord error (sagitta) ≤ 1 mm
-                step_m = min(step_m, math.sqrt(8.0 * _ARC_SAGITTA_M / abs(kappa)))
+            if abs(kappa) <= 1e-9:  # straight ahead: the same path every frame
+                if self._straight is None:
+                    s = np.linspace(0.0, length_m, max(2, math.ceil(length_m / _ARC_SAMPLE_M) + 1))
+                    self._straight = Polyline(np.column_stack([s, np.zeros_like(s)]))
+                return self._straight, None
+            length_m = min(length_m, math.pi / abs(kappa))
+            # chord error (sagitta) ≤ 1 mm
+            step_m = min(_ARC_SAMPLE_M, math.sqrt(8.0 * _ARC_SAGITTA_M / abs(kappa)))
             s = np.linspace(0.0, length_m, max(2, math.ceil(length_m / step_m) + 1))
-            if abs(kappa) > 1e-9:
-                xy = np.column_stack([np.sin(kappa * s) / kappa, (1.0 - np.cos(kappa * s)) / kappa])
-            else:
-                xy = np.column_stack([s, np.zeros_like(s)])
+            xy = np.column_stack([np.sin(kappa * s) / kappa, (1.0 - np.cos(kappa * s)) / kappa])
             return Polyline(xy), None
         route = self._route
         origin = state.position[:2]
