@@ -20,7 +20,6 @@ first frame with a collision, and :meth:`ClosedLoopMode.collision_summary` says 
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
@@ -31,6 +30,7 @@ from redrive.closedloop.contact import ON_COLLISION, Contact, check_on_collision
 from redrive.closedloop.simulator import EgoCommand, Simulator
 from redrive.engine.modes import Mode, PacedFrame
 from redrive.results import ClosedLoopRecord, FrameRecord
+from redrive.results.records import with_closed_loop_unchecked
 from redrive.sim.ego import EgoGeometry
 from redrive.types import Frame, Role, VehicleState
 
@@ -206,16 +206,11 @@ class ClosedLoopMode:
         self.steps.append(step)
         if step.collisions and self.on_collision == "stop" and self.stopped_at is None:
             self.stopped_at = step
-        self.write(
-            dataclasses.replace(
-                record,
-                logged_vehicle_state=logged,
-                closed_loop=step.record(
-                    threshold_m=self.deviation_threshold_m,
-                    threshold_rad=self.deviation_threshold_rad,
-                ),
-            )
+        closed_loop = step.record(
+            threshold_m=self.deviation_threshold_m, threshold_rad=self.deviation_threshold_rad
         )
+        # dataclasses.replace, without the checks of a record the engine built
+        self.write(with_closed_loop_unchecked(record, logged, closed_loop))
 
     def deviation_summary(self) -> dict[str, Any]:
         """For the run summary: the thresholds, how many frames passed them, the first such

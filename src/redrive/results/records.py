@@ -28,6 +28,7 @@ __all__ = [
     "StepRecord",
     "frame_record_unchecked",
     "step_record_unchecked",
+    "with_closed_loop_unchecked",
 ]
 
 #: the values of ``StepRecord.role`` (the :class:`~redrive.types.Role` values).
@@ -335,3 +336,25 @@ def frame_record_unchecked(  # noqa: PLR0917 (per frame: positional is cheaper)
     record.traffic_lights = traffic_lights
     record.__class__ = FrameRecord  # type: ignore[assignment]
     return record  # type: ignore[return-value]
+
+
+def with_closed_loop_unchecked(
+    record: FrameRecord, logged: VehicleState | None, closed_loop: ClosedLoopRecord
+) -> FrameRecord:
+    """``dataclasses.replace(record, logged_vehicle_state=logged, closed_loop=closed_loop)``
+    without its checks (called per frame: ``record`` was checked or built by the engine, and
+    the two fields take any value of their types)."""
+    copy = _FrameBuilder()
+    copy.frame_index = record.frame_index
+    copy.stamp_ns = record.stamp_ns
+    copy.steps = record.steps
+    copy.vehicle_state = record.vehicle_state
+    copy.logged_vehicle_state = logged
+    copy.closed_loop = closed_loop
+    copy.ground_truth = record.ground_truth
+    copy.wall_ns = record.wall_ns
+    copy.late = record.late
+    copy.missing = record.missing
+    copy.traffic_lights = record.traffic_lights
+    copy.__class__ = FrameRecord  # type: ignore[assignment]
+    return copy  # type: ignore[return-value]

@@ -367,21 +367,17 @@ class ObjectColumns:
     def shared_by(objects: Sequence[DetectedObject]) -> ObjectColumns | None:
         """The columns of ``objects`` when every one is a row of the same
         :meth:`DetectedObject.many` call (in any order, any subset; the batch's own columns
-        when they are all its rows in order), else None.  Reads no field of the objects."""
-        n = len(objects)
-        if not n:
-            return _EMPTY
-        try:
-            batches = list(map(_ATTR_COLUMNS, objects))
-        except AttributeError:
-            return None
-        first = batches[0]
-        if type(first) is not ObjectColumns or batches.count(first) != n:
-            return None
-        rows = list(map(_ATTR_ROW, objects))
-        if n == len(first.object_class) and rows == list(range(n)):
-            return first
-        return first.take(rows)
+        when they are all its rows in order), else None.  Reads no field of the objects.  The
+        answers for the last two tuples asked about are kept (a frame's objects are asked about
+        by several readers: the perception, the planner, the collision check, the results)."""
+        recent = _RECENT_SHARED[0]
+        for seen, columns in recent:
+            if seen is objects:
+                return columns
+        columns = _shared_by(objects)
+        if type(objects) is tuple:  # (immutable: the same tuple, the same rows)
+            _RECENT_SHARED[0] = ((objects, columns), recent[0])
+        return columns
 
     @staticmethod
     def from_objects(
@@ -400,6 +396,24 @@ class ObjectColumns:
             frames if name == "frame_index" else getattr(columns, name) for name in _COLUMN_NAMES
         ]
         return _columns_unchecked(*values)
+
+
+def _shared_by(objects: Sequence[DetectedObject]) -> ObjectColumns | None:
+    """:meth:`ObjectColumns.shared_by`, asked."""
+    n = len(objects)
+    if not n:
+        return _EMPTY
+    try:
+        batches = list(map(_ATTR_COLUMNS, objects))
+    except AttributeError:
+        return None
+    first = batches[0]
+    if type(first) is not ObjectColumns or batches.count(first) != n:
+        return None
+    rows = list(map(_ATTR_ROW, objects))
+    if n == len(first.object_class) and rows == list(range(n)):
+        return first
+    return first.take(rows)
 
 
 def _gathered(objects: Sequence[DetectedObject]) -> ObjectColumns:
@@ -558,18 +572,7 @@ _SET_BOX_SIZE = Box3D.__dict__["size"].__set__
 _SET_BOX_YAW = Box3D.__dict__["yaw_rad"].__set__
 _OBJECT_SETTERS = {
     name: DetectedObject.__dict__[name].__set__
-    for name in (
-        "object_id",
-        "object_class",
-        "confidence",
-        "box",
-        "velocity",
-        "acceleration",
-        "orientation",
-        "bbox_2d",
-        "num_lidar_points",
-        "visible",
-    )
+    for name in DetectedObject.__dataclass_fields__  # object_id … visible, in order
 }
 _FIELD_NAMES = frozenset(_OBJECT_SETTERS)
 _FIELD_GETTERS = {name: DetectedObject.__dict__[name].__get__ for name in _OBJECT_SETTERS}
@@ -581,20 +584,11 @@ _ATTR_COLUMNS, _ATTR_ROW = attrgetter("_columns"), attrgetter("_row")
 _COLUMN_NAMES = tuple(ObjectColumns.__dataclass_fields__)
 _COLUMN_SETTERS = {name: ObjectColumns.__dict__[name].__set__ for name in _COLUMN_NAMES}
 _COLUMN_SETTER_LIST = tuple(_COLUMN_SETTERS.values())
+#: ObjectColumns.shared_by's last two (objects, answer): the newest first
+_RECENT_SHARED: list[tuple[tuple[Any, ObjectColumns | None], ...]] = [((None, None), (None, None))]
 
 
 _EMPTY = _columns_unchecked(
-    minus_ones(0),
-    (),
-    ones(0),
-    zeros(0),
-    zeros(0),
-    ones(0)[:0],
-    zeros(0),
-    zeros(0),
-    zeros(0),
-    (),
-    minus_ones(0),
-    (),
-    minus_ones(0),
-)
+    minus_ones(0), (), ones(0), zeros(0), zeros(0), ones(0)[:0], zeros(0), zeros(0), zeros(0), (),
+    minus_ones(0), (), minus_ones(0),
+)  # fmt: skip

@@ -98,18 +98,23 @@ def stop_arcs(
     shown: Mapping[str, LightState] = {light.id: light.state for light in lights}
     for light_id in [i for i in committed if shown.get(i) is LightState.GREEN]:
         committed.discard(light_id)
-    c, sn = math.cos(state.heading_rad), math.sin(state.heading_rad)
-    origin = state.position[:2]
-    base_from_map = np.array([[c, sn], [-sn, c]])
-    speed = state.speed_mps
     out: list[float] = []
     if len(path_xy) < 2:
         return np.array(out, dtype=np.float64)
-    low, high = path_xy.min(axis=0), path_xy.max(axis=0)
+    ego: tuple[F64, F64, F64, F64] | None = None  # the ego pose, once a light asks for it
     for gate in gates:
         light = shown.get(gate.light_id)
         if light not in (LightState.RED, LightState.YELLOW) or gate.light_id in committed:
             continue
+        if ego is None:  # the ego pose and the path's bounding box
+            c, sn = math.cos(state.heading_rad), math.sin(state.heading_rad)
+            ego = (
+                state.position[:2],
+                np.array([[c, sn], [-sn, c]]),
+                path_xy.min(axis=0),
+                path_xy.max(axis=0),
+            )
+        origin, base_from_map, low, high = ego
         line = (gate.line - origin) @ base_from_map.T
         # the bounding boxes' test and the first crossing in one compiled call
         found, s, tx, ty = gate_crossing(path_xy, path_s, line, low, high)
@@ -121,7 +126,7 @@ def stop_arcs(
         gap = s - front_offset_m
         if gap < -_PASSED_M:
             continue  # already through it
-        if light is LightState.YELLOW and speed**2 / (2.0 * comfort_decel_mps2) > gap:
+        if light is LightState.YELLOW and state.speed_mps**2 / (2.0 * comfort_decel_mps2) > gap:
             committed.add(gate.light_id)  # too close to stop comfortably: drive through
             continue
         out.append(s)
