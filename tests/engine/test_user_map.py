@@ -212,6 +212,29 @@ def test_a_map_the_log_carries_is_replaced_by_the_users_with_a_warning(
     assert "DEU_A9" in stored.source
 
 
+def test_the_logs_own_map_file_given_as_map_replaces_nothing(
+    shared_data: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A CommonRoad scenario run with --map itself (its own lanelet network, h-tour's finding:
+    it warned that the map replaced itself): no warning, nothing replaced, the manifest says so;
+    `evaluate --map` with the same file again on that run says nothing either."""
+    pytest.importorskip("commonroad")
+    log = shared_data / "commonroad" / "USA_US101-3_3_T-1.xml"
+    out = tmp_path / "run"
+    with caplog.at_level(logging.WARNING):
+        code = main(["run", str(log), "--out", str(out), "--no-progress", "--frames", "0:5",
+                     "--map", str(log)])  # fmt: skip
+        assert code == 0
+        entry = json.loads((out / "manifest.json").read_text())["map"]
+        assert main(["evaluate", str(out), "--metric", "drivable_area", "--map", str(log)]) == 0
+    assert "road map" not in caplog.text, caplog.text
+    assert entry["same_as_log"] is True
+    assert "replaced" not in entry
+    again = json.loads((out / "manifest.json").read_text())["map"]
+    assert "replaced" not in again
+    assert again["same_as_log"] is True
+
+
 def test_map_and_no_map_exclude_each_other() -> None:
     from redrive.engine.user_map import MapOption
 

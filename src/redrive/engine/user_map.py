@@ -309,7 +309,9 @@ def choose_road_map(
         road_map, log, sensor_map=sensor_map, origin_lat_lon=option.origin_lat_lon
     )
     record = {"from": "--map", **record, "alignment": alignment}
-    if own is not None:
+    if own is not None and _same_file(own.source, Path(option.path)):
+        record["same_as_log"] = True  # the log's own map file given again: nothing replaced
+    elif own is not None:
         logger.warning(
             "%s carries its own road map (%s); the map given with --map (%s) is used instead",
             log.path,
@@ -361,7 +363,12 @@ def attach_map(run_dir: Path, option: MapOption) -> dict[str, Any]:
             "frames; pass --map-origin LAT,LON (the origin of the ego's frame) or move the log back"
         )
         raise MapError(msg)
-    if (Path(run_dir) / MAP_NAME).is_file():
+    had = manifest.road_map.get("path") or manifest.road_map.get("source")
+    if (Path(run_dir) / MAP_NAME).is_file() and _same_file(had, Path(option.path)):
+        record["same_as_log"] = manifest.road_map.get("from") == "log" or bool(
+            manifest.road_map.get("same_as_log")
+        )
+    elif (Path(run_dir) / MAP_NAME).is_file():
         logger.warning(
             "%s has a road map (%s); the map given with --map (%s) replaces it",
             run_dir,
@@ -375,6 +382,20 @@ def attach_map(run_dir: Path, option: MapOption) -> dict[str, Any]:
     entry = {"from": "--map", **record, "alignment": alignment}
     write_manifest(Path(run_dir), replace(manifest, road_map=entry))
     return entry
+
+
+def _same_file(source: str | None, file: Path) -> bool:
+    """Whether a map's ``source`` (``av2:PATH``, ``lanelet2:PATH (origin …)``, a log's path, or a
+    manifest's ``path``) names ``file``."""
+    if not source:
+        return False
+    for candidate in (source, source.split(":", 1)[-1], source.split(":", 1)[-1].split(" (")[0]):
+        try:
+            if Path(candidate).exists() and Path(candidate).samefile(file):
+                return True
+        except OSError:
+            continue
+    return False
 
 
 def manifest_frames(run_dir: Path) -> list[str]:
