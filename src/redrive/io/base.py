@@ -183,6 +183,8 @@ class ReaderCapabilities:
         contents: the reader can count what the log holds beside its topics (annotated sweeps,
             tracks, lanes …: ``contents()``): :func:`redrive.io.content.log_contents`, which
             ``redrive info`` prints.
+        goal: the log sets the ego a goal on its road map (a CommonRoad planning problem: the
+            lanes to reach, ``goal_lane_ids()``): :func:`redrive.io.content.log_goal_lanes`.
     """
 
     message_typed: bool
@@ -194,6 +196,7 @@ class ReaderCapabilities:
     scenario: bool = False
     traffic_lights: bool = False
     contents: bool = False
+    goal: bool = False
 
 
 @runtime_checkable
