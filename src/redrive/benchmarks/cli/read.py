@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from redrive.benchmarks.cli._console import print_json, report_console, spinner
+from redrive.benchmarks.cli._console import add_command, option, print_json, report_console, spinner
 
 __all__ = ["EPILOG", "add_read_arguments", "add_read_parser", "run_read"]
 
@@ -65,28 +65,16 @@ def _print_report(result: Any, *, synth: Any | None) -> None:
     )
     console.print(f"[bold]malloc[/]:    {malloc}")
     table = Table()
-    for col in (
-        "pass",
-        "msgs/s",
-        "MB/s",
-        "best MB/s",
-        "loop s",
-        "open s",
-        "RSS start MB",
-        "peak RSS MB",
-    ):
-        table.add_column(col, justify="left" if col == "pass" else "right")
+    cols = ("msgs/s", "MB/s", "best MB/s", "loop s", "open s", "RSS start MB", "peak RSS MB")
+    table.add_column("pass", justify="left")
+    for col in cols:
+        table.add_column(col, justify="right")
     for name, side in (("raw (baseline)", raw), ("redrive (decode)", ours)):
         table.add_row(
-            name,
-            f"{side.msgs_per_s:,.1f}",
-            f"{side.mb_per_s:,.0f}",
-            f"{side.best_mb_per_s:,.0f}",
-            f"{side.median_loop_s:.4f}",
-            f"{side.median_open_s:.4f}",
-            _mb(side.rss_start_bytes),
+            name, f"{side.msgs_per_s:,.1f}", f"{side.mb_per_s:,.0f}", f"{side.best_mb_per_s:,.0f}",
+            f"{side.median_loop_s:.4f}", f"{side.median_open_s:.4f}", _mb(side.rss_start_bytes),
             _mb(side.peak_rss_bytes),
-        )
+        )  # fmt: skip
     console.print(table)
     from redrive.benchmarks.read import TARGET_RATIO
 
@@ -132,9 +120,7 @@ def add_read_arguments(read: Any) -> None:
         metavar="T",
         help="a PointCloud2 topic to read (repeatable; default: every PointCloud2 topic)",
     )
-    read.add_argument(
-        "--repeat", type=int, default=3, metavar="N", help="passes per side (default 3)"
-    )
+    option(read, "--repeat", 3, "N", "passes per side (default 3)")
     read.add_argument(
         "--json", action="store_true", help="print JSON (every pass) instead of a table"
     )
@@ -150,13 +136,10 @@ def add_read_arguments(read: Any) -> None:
 
 
 def add_read_parser(bench_sub: Any) -> None:
-    read = bench_sub.add_parser(
-        "read",
-        help="read + decode PointCloud2 messages against a raw rosbags/mcap read",
-        description=_READ_DESCRIPTION,
-        epilog=EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    read = add_command(
+        bench_sub, "read", "read + decode PointCloud2 messages against a raw rosbags/mcap read",
+        _READ_DESCRIPTION, EPILOG,
+    )  # fmt: skip
     read.add_argument("log", type=Path, metavar="LOG", help="a .bag, .mcap or ROS 2 bag directory")
     add_read_arguments(read)
     read.set_defaults(func=run_read)
