@@ -198,16 +198,11 @@ def bench_read(
     pass_env: Mapping[str, str] | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> ReadBenchResult:
-    """Benchmark reading + decoding every PointCloud2 of ``path`` against a raw read.
-
-    Args:
-        path: a ROS 1 bag, a ROS 2 bag directory or an MCAP file.
-        topics: PointCloud2 topics to read; all of them when None.
-        repeats: passes per side (each in a fresh process, raw and redrive alternating).
-        warm: read the log once before measuring, so the page cache holds it.
-        pass_env: extra environment variables for every pass (both sides), e.g.
-            :data:`TUNED_MALLOC_ENV`.
-        progress: called with a short text before each step.
+    """Benchmark reading + decoding the PointCloud2 ``topics`` (None: all) of ``path`` (a ROS 1
+    bag, a ROS 2 bag directory or an MCAP file) against a raw read: ``repeats`` passes per side,
+    each in a fresh process with ``pass_env`` added to its environment (e.g.
+    :data:`TUNED_MALLOC_ENV`), raw and redrive alternating, after one read of the whole log when
+    ``warm``; ``progress`` is called with a short text before each step.
 
     Raises:
         LogError: the log cannot be opened, has no PointCloud2 topic, or a pass failed or read

@@ -15,7 +15,7 @@ if TYPE_CHECKING:
     from rich.console import Console
 
 __all__ = [
-    "add_command", "num", "option", "print_json", "report_console", "spinner", "spread_table",
+    "add_command", "flag", "num", "option", "print_json", "report_console", "spinner", "spread_table",
     "verdict",
 ]  # fmt: skip
 
@@ -31,9 +31,14 @@ def add_command(sub: Any, name: str, help: str, description: str, epilog: str) -
     )
 
 
-def option(parser: Any, flag: str, default: Any, metavar: str, help: str) -> None:
-    """``flag`` of the type of its ``default``."""
-    parser.add_argument(flag, type=type(default), default=default, metavar=metavar, help=help)
+def option(parser: Any, name: str, default: Any, metavar: str, help: str) -> None:
+    """``name`` of the type of its ``default``."""
+    parser.add_argument(name, type=type(default), default=default, metavar=metavar, help=help)
+
+
+def flag(parser: Any, name: str, help: str) -> None:
+    """``name``, an on/off switch."""
+    parser.add_argument(name, action="store_true", help=help)
 
 
 @contextlib.contextmanager

@@ -8,6 +8,7 @@ from typing import Any
 
 from redrive.benchmarks.cli._console import (
     add_command,
+    flag,
     num,
     option,
     print_json,
@@ -226,14 +227,11 @@ def add_transport_parser(
         help="transport sides, comma-separated (default: all; see below)",
     )
     option(parser, "--paced-hz", 100.0, "HZ", "publishing rate of the latency runs (default 100)")
-    parser.add_argument("--no-paced", action="store_true", help="skip the paced latency runs")
-    parser.add_argument("--no-memcpy", action="store_true", help="skip the memcpy ceiling")
-    parser.add_argument(
-        "--verify",
-        action="store_true",
-        help="subscribers compare every byte of every message (slower; numbers not comparable)",
-    )
+    flag(parser, "--no-paced", "skip the paced latency runs")
+    flag(parser, "--no-memcpy", "skip the memcpy ceiling")
+    flag(parser, "--verify", "subscribers compare every byte of every message (slower; numbers "
+         "not comparable)")  # fmt: skip
     option(parser, "--repeat", 1, "N", "run everything N times, interleaved; print "
            "min/median/max per target ratio (default 1)")  # fmt: skip
-    parser.add_argument("--json", action="store_true", help="print JSON instead of tables")
+    flag(parser, "--json", "print JSON instead of tables")
     parser.set_defaults(func=_run_transport, catalogue=catalogue)

@@ -25,12 +25,10 @@ import numpy as np
 from redrive.benchmarks._base import Spread, fields_json
 from redrive.benchmarks.transport.sides import (
     CATALOGUE,
-    DEFAULT_SIDES,
     MIN_SIZE,
     SIDES,
     SLOTS,
     U8,
-    CellConfig,
     RunResult,
     SideSpec,
     catalogue_sides,
@@ -40,9 +38,9 @@ from redrive.benchmarks.transport.sides import (
 from redrive.errors import TransportError
 
 __all__ = [
-    "CATALOGUE", "DEFAULT_SIDES", "DEFAULT_SIZES", "INPLACE_VS_ICEORYX2_TARGET", "MIN_SIZE",
+    "CATALOGUE", "DEFAULT_SIZES", "INPLACE_VS_ICEORYX2_TARGET", "MIN_SIZE",
     "PACED_P99_TARGET_MS", "SIDES", "SLOTS", "VS_MEMCPY_TARGET", "VS_PIPE_PICKLE_TARGET",
-    "CellConfig", "CellResult", "MemcpyResult", "RunResult", "SideSpec", "TargetCheck",
+    "CellResult", "MemcpyResult", "RunResult", "SideSpec", "TargetCheck",
     "TargetSpread", "TransportBenchResult", "bench_memcpy", "bench_transport", "catalogue_sides",
     "check_targets", "parse_size", "run_cell", "side_available", "size_label", "target_spreads",
 ]  # fmt: skip

@@ -28,7 +28,7 @@ from redrive.benchmarks._base import fields_json
 from redrive.errors import TransportError
 
 __all__ = [
-    "CATALOGUE", "DEFAULT_SIDES", "MIN_SIZE", "SIDES", "SLOTS", "CellConfig", "RunResult",
+    "CATALOGUE", "MIN_SIZE", "SIDES", "SLOTS", "CellConfig", "RunResult",
     "SideSpec", "catalogue_sides", "run_cell",
 ]  # fmt: skip
 
@@ -350,7 +350,6 @@ SIDES: Mapping[str, SideSpec] = {
         ),
     )
 }  # fmt: skip
-DEFAULT_SIDES = tuple(SIDES)
 #: the module whose SIDES the spawned children look a side up in (``python -m benchmarks
 #: transport`` passes its own, with the peers added)
 CATALOGUE = __name__
