@@ -126,11 +126,8 @@ class NoopControl(Algorithm):
 
 
 def _pipeline(kind: str, mode: str) -> PipelineConfig:
-    names = (
-        ("BusyPerception", "BusyPlanning", "BusyControl")
-        if kind == "busy"
-        else ("NoopPerception", "NoopPlanning", "NoopControl")
-    )
+    prefix = "Busy" if kind == "busy" else "Noop"
+    names = [prefix + role for role in ("Perception", "Planning", "Control")]
     return PipelineConfig(
         stages=tuple(
             StageSpec(

@@ -238,15 +238,8 @@ def bench_read(
         )
         raise LogError(msg)
     return ReadBenchResult(
-        path=path,
-        log_format=log_format,
-        file_bytes=sum(f.stat().st_size for f in _log_files(path)),
-        topics=chosen,
-        messages=raw[0].messages,
-        payload_bytes=raw[0].payload_bytes,
-        points=ours[0].points,
-        warmed=warm,
-        pass_env=env,
-        raw_passes=tuple(raw),
+        path=path, log_format=log_format, file_bytes=sum(f.stat().st_size for f in _log_files(path)),
+        topics=chosen, messages=raw[0].messages, payload_bytes=raw[0].payload_bytes,
+        points=ours[0].points, warmed=warm, pass_env=env, raw_passes=tuple(raw),
         redrive_passes=tuple(ours),
-    )
+    )  # fmt: skip

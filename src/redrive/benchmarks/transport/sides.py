@@ -535,18 +535,12 @@ def run_cell(
                 spec.cleanup(cfg)
             except Exception as err:  # a failed clean-up must not hide the result
                 logger.warning("clean-up after %s failed: %s", side, err)
-    rate = float(got["msgs_per_s"])
+    rate, n, seconds = float(got["msgs_per_s"]), int(sent["sent"]), float(sent["seconds"])
     return RunResult(
-        mode="flat" if paced_hz is None else "paced",
-        seconds=float(sent["seconds"]),
-        sent=int(sent["sent"]),
-        received=int(got["received"]),
-        corrupt=int(got["corrupt"]),
-        out_of_order=int(got["out_of_order"]),
-        msgs_per_s=rate,
-        gb_per_s=rate * size_bytes / 1e9,
-        sent_per_s=sent["sent"] / sent["seconds"] if sent["seconds"] > 0 else math.nan,
-        latency_p50_ms=float(got["latency_p50_ms"]),
-        latency_p99_ms=float(got["latency_p99_ms"]),
+        mode="flat" if paced_hz is None else "paced", seconds=seconds, sent=n,
+        received=int(got["received"]), corrupt=int(got["corrupt"]),
+        out_of_order=int(got["out_of_order"]), msgs_per_s=rate, gb_per_s=rate * size_bytes / 1e9,
+        sent_per_s=n / seconds if seconds > 0 else math.nan,
+        latency_p50_ms=float(got["latency_p50_ms"]), latency_p99_ms=float(got["latency_p99_ms"]),
         latency_max_ms=float(got["latency_max_ms"]),
-    )
+    )  # fmt: skip
