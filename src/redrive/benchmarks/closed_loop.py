@@ -1,15 +1,9 @@
-"""``redrive bench closed-loop``: a closed-loop run against the world stepping alone.
-
-Measured in the same run, interleaved, ``repeats`` times each: the *closed loop*,
-:func:`redrive.closedloop.run.run_closed_loop` on a scenario with results written to a run
-directory as ``redrive run SCENARIO --closed-loop`` does, its frame loop's wall time split into
-*simulation* (the simulator's ``observe`` and ``step``, timed around each call), *algorithms*
-(the step latencies of the run's steps table) and *other* (the engine's records, the results
-writer); and the *baseline*, the scenario's :class:`~redrive.sim.world.World` stepped alone with
-its scripted driver to the same end, the cost floor of the simulation (the closed loop steps two
-such worlds, the expert one and the driven one).  ``level="sensor"`` re-renders the scenario's
-rig every step, its first 3D LiDAR swapped for ``lidar``, and splits *rendering* (the sensor
-models, handing their messages to the frames and to ``sensors.mcap``) out of *simulation*.
+"""``redrive bench closed-loop``: a closed-loop run against the world stepping alone (what and
+against what: ``redrive bench closed-loop --help``).  The simulator is wrapped
+(:class:`TimedSimulator`) so that every ``observe`` and ``step`` is timed; the algorithms' share
+is the run's steps table, the rest of the frame loop is *other*; at sensor level the synthetic
+backend's own ``rendering_s`` is taken out of the simulation.  The baseline steps the scenario's
+:class:`~redrive.sim.world.World` alone with its scripted driver to the same end.
 """
 
 from __future__ import annotations

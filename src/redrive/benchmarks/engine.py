@@ -1,16 +1,9 @@
-"""``redrive bench engine``: the engine against a bare Python loop calling the same functions.
-
-Three stages (perception → planning → control) each do about ``work_ms`` of numpy work (an
-in-place ``sin``, square and ``sqrt`` over a float64 array sized on this machine; numpy releases
-the GIL inside each) over frames already in memory, run by a *bare loop* (``a(); b(); c()`` per
-frame, the best any orchestration does on one core) and by :class:`redrive.engine.Engine`,
-*sequential* and *pipelined* (every step timed, checked and handed to an in-memory sink, as the
-results writer's buffer; ``writer=True`` adds the real Parquet writer).  With no-op stages,
-(engine − bare loop) / frames is the engine's own cost per frame, in wall time and in the CPU
-time of the thread running it (``time.thread_time``, which load does not inflate the way it
-inflates wall time) — with the writer, of the whole process (its pool threads write the Parquet
-parts).  Every variant runs once per pass, passes interleaved; :meth:`EngineBenchResult.spreads`
-gives each target's min / median / max over the passes (verdict on the median).
+"""``redrive bench engine``: the engine against a bare Python loop calling the same functions
+(what and against what: ``redrive bench engine --help``).  The stages' work is an in-place
+``sin``, square and ``sqrt`` over a float64 array sized on this machine (:func:`calibrate_work`;
+numpy releases the GIL inside each); the engine's records go to an in-memory sink, as the results
+writer's buffer, or with ``writer=True`` to the real Parquet writer.  CPU time is the running
+thread's (``time.thread_time``: the no-op runs are sequential), with the writer the process's.
 """
 
 from __future__ import annotations

@@ -300,15 +300,15 @@ def _run_group(args: argparse.Namespace) -> int:
 
 
 def register(sub: Any) -> None:
-    parser = sub.add_parser(
-        "bench",
-        help="benchmarks of this machine and your logs against a baseline measured in the same run",
-        description="Benchmarks of redrive on this machine and your logs, each against a baseline "
-        "measured in the same run: read, engine, closed-loop, transport; and the CPU cost of each metric on a run (eval). (Comparisons against "
-        "peers, soak and whole-system benchmarks: benchmarks/ in a checkout, `make bench`.)",
-        epilog=EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    parser = add_command(
+        sub, "bench",
+        "benchmarks of this machine and your logs against a baseline measured in the same run",
+        "Benchmarks of redrive on this machine and your logs, each against a baseline measured in "
+        "the same run: read, engine, closed-loop, transport; and the CPU cost of each metric on a "
+        "run (eval). (Comparisons against peers, soak and whole-system benchmarks: benchmarks/ in "
+        "a checkout, `make bench`.)",
+        EPILOG,
+    )  # fmt: skip
     parser.set_defaults(func=_run_group, bench_parser=parser)
     bench_sub = parser.add_subparsers(dest="bench_command", metavar="BENCHMARK")
     add_read_parser(bench_sub)
