@@ -30,7 +30,10 @@ driveways have no element in the model (``redrive info`` counts them).
 
 from __future__ import annotations
 
+import functools
 import logging
+import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -53,46 +56,85 @@ def _xy(points: Any) -> npt.NDArray[np.float64]:
     return np.array([(p.x, p.y) for p in points], dtype=np.float64).reshape(-1, 2)
 
 
-def _side_distances(
-    centre: npt.NDArray[np.float64],
-    segments: Any,
-    lines: dict[int, Any],
-) -> npt.NDArray[np.float64]:
-    """(N,) distance of each centreline point to its boundary on one side; NaN where unbounded."""
-    out = np.full(len(centre), np.nan)
-    points = shapely.points(centre)
+def _bounded_spans(n: int, segments: Any, lines: dict[int, int]) -> list[tuple[int, int, int]]:
+    """The (first, last point index, boundary number) of each boundary segment of one side of
+    an ``n``-point centreline that bounds some of it, in the order given (a later one bounding
+    a point again replaces the earlier)."""
+    out = []
     for seg in segments:
         line = lines.get(int(seg.boundary_feature_id))
         if line is None:
             continue
         lo = max(int(seg.lane_start_index), 0)
-        hi = min(int(seg.lane_end_index), len(centre) - 1)
-        if hi < lo:
-            continue
-        out[lo : hi + 1] = shapely.distance(points[lo : hi + 1], line)
+        hi = min(int(seg.lane_end_index), n - 1)
+        if hi >= lo:
+            out.append((lo, hi, line))
     return out
 
 
-def lane_widths(scenario: Any) -> dict[int, float | None]:
-    """Lane feature id → its measured width (m), or None where no boundary bounds it."""
-    lines: dict[int, Any] = {}
+def lane_widths(
+    scenario: Any, centres: dict[int, npt.NDArray[np.float64]] | None = None
+) -> dict[int, float | None]:
+    """Lane feature id → its measured width (m), or None where no boundary bounds it.
+
+    ``centres``: lane feature id → its centreline (N, 2), when the caller has them already.
+
+    The distance of a centreline point to a boundary is GEOS's (``shapely.distance`` of the
+    point and the boundary's linestring: the least over its segments of
+    ``Distance::pointToSegment``; a one-point boundary, the distance between the points),
+    computed here in one compiled pass over every bounded point of every lane
+    (:func:`_distance_kernel`, the same floating-point operations in the same order)."""
+    coords: list[npt.NDArray[np.float64]] = []
+    lines: dict[int, int] = {}  # feature id → its number in coords
     for feature in scenario.map_features:
         kind = feature.WhichOneof("feature_data")
         if kind in ("road_line", "road_edge"):
             xy = _xy(getattr(feature, kind).polyline)
-            if len(xy) >= 2:
-                lines[int(feature.id)] = shapely.linestrings(xy)
-            elif len(xy) == 1:
-                lines[int(feature.id)] = shapely.points(xy[0])
-    out: dict[int, float | None] = {}
+            if len(xy) >= 1:
+                lines[int(feature.id)] = len(coords)
+                coords.append(xy)
+    # per lane: (id, n points, left spans, right spans); the spans' points and boundaries in
+    # one flat list each, in that order
+    lanes: list[tuple[int, int, list[tuple[int, int, int]], list[tuple[int, int, int]]]] = []
+    bounded: list[npt.NDArray[np.float64]] = []
+    which: list[npt.NDArray[np.int64]] = []
     for feature in scenario.map_features:
         if feature.WhichOneof("feature_data") != "lane":
             continue
-        centre = _xy(feature.lane.polyline)
+        centre = (
+            centres[int(feature.id)]
+            if centres is not None and int(feature.id) in centres
+            else _xy(feature.lane.polyline)
+        )
         if len(centre) < 2:
             continue
-        left = _side_distances(centre, feature.lane.left_boundaries, lines)
-        right = _side_distances(centre, feature.lane.right_boundaries, lines)
+        n = len(centre)
+        left = _bounded_spans(n, feature.lane.left_boundaries, lines)
+        right = _bounded_spans(n, feature.lane.right_boundaries, lines)
+        for lo, hi, line in (*left, *right):
+            bounded.append(centre[lo : hi + 1])
+            which.append(np.full(hi + 1 - lo, line, dtype=np.int64))
+        lanes.append((int(feature.id), n, left, right))
+    flat = np.zeros(0)
+    if bounded:
+        offsets = np.cumsum([0, *(len(c) for c in coords)]).astype(np.int64)
+        flat = _distance_kernel()(
+            np.ascontiguousarray(np.concatenate(bounded)),
+            np.concatenate(which),
+            np.ascontiguousarray(np.concatenate(coords)),
+            offsets,
+        )
+    out: dict[int, float | None] = {}
+    at = 0
+    for fid, n, left_spans, right_spans in lanes:
+        sides = []
+        for spans in (left_spans, right_spans):
+            side = np.full(n, np.nan)
+            for lo, hi, _ in spans:
+                side[lo : hi + 1] = flat[at : at + hi + 1 - lo]
+                at += hi + 1 - lo
+            sides.append(side)
+        left, right = sides
         both = np.isfinite(left) & np.isfinite(right)
         if both.any():
             width = float(np.mean(left[both] + right[both]))
@@ -101,8 +143,72 @@ def lane_widths(scenario: Any) -> dict[int, float | None]:
             width = float(2.0 * np.nanmean(one))
         else:
             width = None
-        out[int(feature.id)] = width if width is not None and width > 0.5 else None
+        out[fid] = width if width is not None and width > 0.5 else None
     return out
+
+
+@functools.cache
+def _distance_kernel() -> Callable[..., npt.NDArray[np.float64]]:
+    """The point-to-boundary distances, compiled (or loaded from numba's cache) on first use.
+
+    ``distances(points (P, 2), line of each point (P,), coords (V, 2), offsets (L + 1,))``: the
+    distance of each point to the polyline ``coords[offsets[k]:offsets[k + 1]]`` of its line
+    ``k``, as GEOS computes it (``DistanceOp`` on a point and a linestring: the least over the
+    segments in order of ``Distance::pointToSegment``; a one-vertex line is a point)."""
+    import numba
+
+    @numba.njit(nogil=True, cache=True)
+    def distances(
+        points: npt.NDArray[np.float64],
+        line_of: npt.NDArray[np.int64],
+        coords: npt.NDArray[np.float64],
+        offsets: npt.NDArray[np.int64],
+    ) -> npt.NDArray[np.float64]:  # pragma: no cover - compiled
+        out = np.empty(points.shape[0])
+        nearest = 0
+        for i in range(points.shape[0]):
+            px, py = points[i, 0], points[i, 1]
+            lo, hi = offsets[line_of[i]], offsets[line_of[i] + 1]
+            if hi - lo == 1:
+                dx, dy = px - coords[lo, 0], py - coords[lo, 1]
+                out[i] = math.sqrt(dx * dx + dy * dy)
+                continue
+            # the least of the segments' distances does not depend on their order: start at
+            # the segment the previous point was nearest (a tight bound at once), skip those
+            # whose bounding box is farther (with a margin far above rounding) than the best
+            best = math.inf
+            start = lo
+            if i > 0 and line_of[i - 1] == line_of[i]:
+                start = nearest
+            for k in range(hi - 1 - lo):
+                j = start + k
+                if j >= hi - 1:
+                    j -= hi - 1 - lo
+                ax, ay, bx, by = coords[j, 0], coords[j, 1], coords[j + 1, 0], coords[j + 1, 1]
+                gx = max(min(ax, bx) - px, px - max(ax, bx), 0.0)
+                gy = max(min(ay, by) - py, py - max(ay, by), 0.0)
+                if gx * gx + gy * gy > best * best * (1.0 + 1e-9):
+                    continue
+                if ax == bx and ay == by:
+                    d = math.sqrt((px - ax) * (px - ax) + (py - ay) * (py - ay))
+                else:
+                    len2 = (bx - ax) * (bx - ax) + (by - ay) * (by - ay)
+                    r = ((px - ax) * (bx - ax) + (py - ay) * (by - ay)) / len2
+                    if r <= 0.0:
+                        d = math.sqrt((px - ax) * (px - ax) + (py - ay) * (py - ay))
+                    elif r >= 1.0:
+                        d = math.sqrt((px - bx) * (px - bx) + (py - by) * (py - by))
+                    else:
+                        s = ((ay - py) * (bx - ax) - (ax - px) * (by - ay)) / len2
+                        d = abs(s) * math.sqrt(len2)
+                if d < best:
+                    best, nearest = d, j
+                    if best <= 0.0:
+                        break
+            out[i] = best
+        return out
+
+    return distances
 
 
 def road_map_from_scenario(scenario: Any, *, source: str) -> RoadMap:
@@ -111,7 +217,12 @@ def road_map_from_scenario(scenario: Any, *, source: str) -> RoadMap:
     Raises:
         LogError: a lane's points are not finite, or two features share an id.
     """
-    widths = lane_widths(scenario)
+    centres = {
+        int(f.id): _xy(f.lane.polyline)
+        for f in scenario.map_features
+        if f.WhichOneof("feature_data") == "lane"
+    }
+    widths = lane_widths(scenario, centres)
     known = [w for w in widths.values() if w is not None]
     fallback = float(np.median(known)) if known else None
     lanes: list[tuple[int, Any, npt.NDArray[np.float64], float]] = []
@@ -125,7 +236,7 @@ def road_map_from_scenario(scenario: Any, *, source: str) -> RoadMap:
         seen.add(fid)
         if feature.WhichOneof("feature_data") != "lane":
             continue
-        centre = _xy(feature.lane.polyline)
+        centre = centres[fid]
         if not np.all(np.isfinite(centre)):
             msg = f"{source}: lane {fid}: its polyline holds a point that is not finite"
             raise LogError(msg)
