@@ -46,6 +46,7 @@ import shapely
 
 from redrive.assembly.frames import FrameAssembler
 from redrive.maps.index import RoadMapIndex
+from redrive.maps.polylines import packed, polyline_locate
 from redrive.maps.route import routes_along_paths
 from redrive.motion import IdmParams, idm_acceleration
 from redrive.types import LightState, Mission, ObjectClass, ObjectColumns, RoadMap
@@ -94,6 +95,8 @@ class Track:
     bounds: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)  # the line's (x0, y0, x1, y1)
     first_ns: int = 0
     last_ns: int = 0
+    #: its line's number in :class:`LaneAgents`' packed lines (the compiled projections)
+    line_number: int = -1
     # -- the simulation state ---------------------------------------------------------------
     lane_mode: bool = False
     s_m: float = 0.0
@@ -246,6 +249,7 @@ class LaneAgents:
         road = index.road_map
         controlled = {t.stop_line_id: t.light_id for t in road.traffic_lights if t.stop_line_id}
         self.tracks: dict[int, Track] = {}
+        lines: list[F64] = []
         samples = [
             (np.array(xy, dtype=np.float64), np.array(yaw, dtype=np.float64))
             for _, xy, yaw, _ in tracks.values()
@@ -261,9 +265,9 @@ class LaneAgents:
                 continue
             line = shapely.LineString(line_xy)
             x0, y0, x1, y1 = line.bounds
-            s_log = np.maximum.accumulate(
-                np.asarray(shapely.line_locate_point(line, shapely.points(pts)), np.float64)
-            )
+            # shapely.line_locate_point of each sample on the line (the same doubles)
+            on_line, _ = polyline_locate(pts, np.zeros(pts.shape[0], np.int64), *packed([line_xy]))
+            s_log = np.maximum.accumulate(on_line)
             limit = [road.lane(i).speed_limit_mps for i in lanes]
             known = [v for v in limit if v]
             steps = np.hypot(*np.diff(pts, axis=0).T) if pts.shape[0] > 1 else np.zeros(0)
@@ -286,8 +290,12 @@ class LaneAgents:
                 bounds=(float(x0), float(y0), float(x1), float(y1)),
                 first_ns=int(stamps[0]),
                 last_ns=int(stamps[-1]),
+                line_number=len(lines),
             )
-        self._lines = {oid: t.line for oid, t in self.tracks.items()}
+            lines.append(line_xy)
+        #: every track's line, packed (the per-frame projections of :meth:`_hold_up`,
+        #: :meth:`_leader`)
+        self._coords, self._offsets = packed(lines)
 
     @classmethod
     def from_log(
@@ -427,10 +435,13 @@ class LaneAgents:
             near_list = [k for k in near.tolist() if replayed[k].object_id != oid]
             if not near_list:
                 continue
-            lines = [replayed[k].line for k in near_list]
-            pt = shapely.Point(x, y)
-            s = np.asarray(shapely.line_locate_point(lines, pt), np.float64).tolist()
-            d = np.asarray(shapely.distance(lines, pt), np.float64).tolist()
+            s_arr, d_arr = polyline_locate(
+                np.broadcast_to(np.array([x, y]), (len(near_list), 2)),
+                [replayed[k].line_number for k in near_list],
+                self._coords,
+                self._offsets,
+            )
+            s, d = s_arr.tolist(), d_arr.tolist()
             for k, s_k, d_k in zip(near_list, s, d, strict=True):
                 track = replayed[k]
                 if k not in s_log:
@@ -471,10 +482,12 @@ class LaneAgents:
         ]
         if not cand:
             return None, 0.0
-        pts = shapely.points(np.array([[c[1], c[2]] for c in cand]))
-        line = track.line
-        s = np.asarray(shapely.line_locate_point(line, pts), np.float64)
-        d = np.asarray(shapely.distance(line, pts), np.float64)
+        s, d = polyline_locate(
+            np.array([[c[1], c[2]] for c in cand]),
+            np.full(len(cand), track.line_number, np.int64),
+            self._coords,
+            self._offsets,
+        )
         best: tuple[float | None, float] = (None, 0.0)
         for k, (_, _, _, yaw, v, length) in enumerate(cand):
             ahead = float(s[k]) - s_m

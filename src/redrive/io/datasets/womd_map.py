@@ -30,18 +30,15 @@ driveways have no element in the model (``redrive info`` counts them).
 
 from __future__ import annotations
 
-import functools
 import logging
-import math
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-import shapely
 
 from redrive.errors import LogError
 from redrive.maps.graph import group_roadblocks
+from redrive.maps.polylines import polyline_distances
 from redrive.types import Crosswalk, MapLane, MapTrafficLight, RoadMap, StopLine
 
 __all__ = ["MPH_TO_MPS", "lane_widths", "road_map_from_scenario"]
@@ -83,7 +80,7 @@ def lane_widths(
     point and the boundary's linestring: the least over its segments of
     ``Distance::pointToSegment``; a one-point boundary, the distance between the points),
     computed here in one compiled pass over every bounded point of every lane
-    (:func:`_distance_kernel`, the same floating-point operations in the same order)."""
+    (:func:`redrive.maps.polylines.polyline_distances`: the same doubles)."""
     coords: list[npt.NDArray[np.float64]] = []
     lines: dict[int, int] = {}  # feature id → its number in coords
     for feature in scenario.map_features:
@@ -118,8 +115,8 @@ def lane_widths(
     flat = np.zeros(0)
     if bounded:
         offsets = np.cumsum([0, *(len(c) for c in coords)]).astype(np.int64)
-        flat = _distance_kernel()(
-            np.ascontiguousarray(np.concatenate(bounded)),
+        flat = polyline_distances(
+            np.concatenate(bounded),
             np.concatenate(which),
             np.ascontiguousarray(np.concatenate(coords)),
             offsets,
@@ -145,70 +142,6 @@ def lane_widths(
             width = None
         out[fid] = width if width is not None and width > 0.5 else None
     return out
-
-
-@functools.cache
-def _distance_kernel() -> Callable[..., npt.NDArray[np.float64]]:
-    """The point-to-boundary distances, compiled (or loaded from numba's cache) on first use.
-
-    ``distances(points (P, 2), line of each point (P,), coords (V, 2), offsets (L + 1,))``: the
-    distance of each point to the polyline ``coords[offsets[k]:offsets[k + 1]]`` of its line
-    ``k``, as GEOS computes it (``DistanceOp`` on a point and a linestring: the least over the
-    segments in order of ``Distance::pointToSegment``; a one-vertex line is a point)."""
-    import numba
-
-    @numba.njit(nogil=True, cache=True)
-    def distances(
-        points: npt.NDArray[np.float64],
-        line_of: npt.NDArray[np.int64],
-        coords: npt.NDArray[np.float64],
-        offsets: npt.NDArray[np.int64],
-    ) -> npt.NDArray[np.float64]:  # pragma: no cover - compiled
-        out = np.empty(points.shape[0])
-        nearest = 0
-        for i in range(points.shape[0]):
-            px, py = points[i, 0], points[i, 1]
-            lo, hi = offsets[line_of[i]], offsets[line_of[i] + 1]
-            if hi - lo == 1:
-                dx, dy = px - coords[lo, 0], py - coords[lo, 1]
-                out[i] = math.sqrt(dx * dx + dy * dy)
-                continue
-            # the least of the segments' distances does not depend on their order: start at
-            # the segment the previous point was nearest (a tight bound at once), skip those
-            # whose bounding box is farther (with a margin far above rounding) than the best
-            best = math.inf
-            start = lo
-            if i > 0 and line_of[i - 1] == line_of[i]:
-                start = nearest
-            for k in range(hi - 1 - lo):
-                j = start + k
-                if j >= hi - 1:
-                    j -= hi - 1 - lo
-                ax, ay, bx, by = coords[j, 0], coords[j, 1], coords[j + 1, 0], coords[j + 1, 1]
-                gx = max(min(ax, bx) - px, px - max(ax, bx), 0.0)
-                gy = max(min(ay, by) - py, py - max(ay, by), 0.0)
-                if gx * gx + gy * gy > best * best * (1.0 + 1e-9):
-                    continue
-                if ax == bx and ay == by:
-                    d = math.sqrt((px - ax) * (px - ax) + (py - ay) * (py - ay))
-                else:
-                    len2 = (bx - ax) * (bx - ax) + (by - ay) * (by - ay)
-                    r = ((px - ax) * (bx - ax) + (py - ay) * (by - ay)) / len2
-                    if r <= 0.0:
-                        d = math.sqrt((px - ax) * (px - ax) + (py - ay) * (py - ay))
-                    elif r >= 1.0:
-                        d = math.sqrt((px - bx) * (px - bx) + (py - by) * (py - by))
-                    else:
-                        s = ((ay - py) * (bx - ax) - (ax - px) * (by - ay)) / len2
-                        d = abs(s) * math.sqrt(len2)
-                if d < best:
-                    best, nearest = d, j
-                    if best <= 0.0:
-                        break
-            out[i] = best
-        return out
-
-    return distances
 
 
 def road_map_from_scenario(scenario: Any, *, source: str) -> RoadMap:
