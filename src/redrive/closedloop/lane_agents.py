@@ -181,45 +181,50 @@ def read_tracks(
     assembler: FrameAssembler, mission: Mission, *, stop_ns: int | None
 ) -> dict[int, TrackSamples]:
     """Every lane-class track of the log's ground truth, in the map frame: id → (stamps, xy,
-    yaw, (length, width))."""
-    raw: dict[int, list[tuple[int, float, float, float, float, float]]] = {}
+    yaw, (length, width)), in the order the tracks first appear; each track's samples in stamp
+    order (of two at one stamp the first read), its box the first sample's."""
+    stamps_l, ids_l, xy_l, yaw_l, size_l = [], [], [], [], []
     for stamp_ns, objects in assembler.ground_truth(stop_ns=stop_ns):
         # the columns of the message (its objects are rows of one batch: none is built)
         cols = ObjectColumns.from_objects(objects)
-        in_message = zip(
-            cols.object_id.tolist(),
-            cols.object_class,
-            cols.center_m[:, :2].tolist(),
-            cols.yaw_rad.tolist(),
-            cols.size_m[:, :2].tolist(),
-            strict=True,
-        )
-        for oid, cls, (x, y), yaw, (length, width) in in_message:
-            if cls not in LANE_CLASSES or oid < 0:
-                continue
-            raw.setdefault(oid, []).append((stamp_ns, x, y, yaw, length, width))
-    out: dict[
-        int, tuple[list[int], list[tuple[float, float]], list[float], tuple[float, float]]
-    ] = {}
-    for oid, samples in raw.items():
-        samples.sort(key=lambda r: r[0])
-        stamps = np.array([r[0] for r in samples], dtype=np.int64)
-        keep = np.ones(stamps.size, dtype=bool)
-        keep[1:] = np.diff(stamps) > 0
-        rows = [r for r, k in zip(samples, keep.tolist(), strict=True) if k]
-        stamps = stamps[keep]
-        ex, ey, eyaw = _logged_pose_at(mission, stamps)
-        bx = np.array([r[1] for r in rows])
-        by = np.array([r[2] for r in rows])
-        c, s = np.cos(eyaw), np.sin(eyaw)
-        mx = ex + c * bx - s * by
-        my = ey + s * bx + c * by
-        yaw = np.array([r[3] for r in rows]) + eyaw
-        out[oid] = (
-            stamps.tolist(),
-            list(zip(mx.tolist(), my.tolist(), strict=True)),
-            yaw.tolist(),
-            (rows[0][4], rows[0][5]),
+        keep = np.array([c in LANE_CLASSES for c in cols.object_class], dtype=bool)
+        keep &= cols.object_id >= 0
+        if keep.any():
+            stamps_l.append(np.full(int(keep.sum()), stamp_ns, dtype=np.int64))
+            ids_l.append(cols.object_id[keep])
+            xy_l.append(cols.center_m[keep, :2])
+            yaw_l.append(cols.yaw_rad[keep])
+            size_l.append(cols.size_m[keep, :2])
+    if not ids_l:
+        return {}
+    ids = np.concatenate(ids_l).astype(np.int64)
+    stamps = np.concatenate(stamps_l)
+    # by track, then stamp (stable: one stamp's samples as read), each stamp's first kept
+    order = np.lexsort((stamps, ids))
+    ids, stamps = ids[order], stamps[order]
+    keep = np.ones(ids.size, dtype=bool)
+    keep[1:] = (ids[1:] != ids[:-1]) | (stamps[1:] > stamps[:-1])
+    order, ids, stamps = order[keep], ids[keep], stamps[keep]
+    xy = np.concatenate(xy_l)[order]
+    ex, ey, eyaw = _logged_pose_at(mission, stamps)
+    c, s = np.cos(eyaw), np.sin(eyaw)
+    mx = (ex + c * xy[:, 0] - s * xy[:, 1]).tolist()
+    my = (ey + s * xy[:, 0] + c * xy[:, 1]).tolist()
+    yaw = (np.concatenate(yaw_l)[order] + eyaw).tolist()
+    size = np.concatenate(size_l)[order].tolist()
+    stamp_list = stamps.tolist()
+    starts = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])
+    ends = np.r_[starts[1:], ids.size]
+    # the tracks in the order they first appear in the log
+    first_read = np.minimum.reduceat(order, starts)
+    out: dict[int, TrackSamples] = {}
+    for g in np.argsort(first_read, kind="stable").tolist():
+        lo, hi = int(starts[g]), int(ends[g])
+        out[int(ids[lo])] = (
+            stamp_list[lo:hi],
+            list(zip(mx[lo:hi], my[lo:hi], strict=True)),
+            yaw[lo:hi],
+            (size[lo][0], size[lo][1]),
         )
     return out
 
