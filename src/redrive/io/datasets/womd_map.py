@@ -131,12 +131,12 @@ def lane_widths(
                 side[lo : hi + 1] = flat[at : at + hi + 1 - lo]
                 at += hi + 1 - lo
             sides.append(side)
-        left, right = sides
-        both = np.isfinite(left) & np.isfinite(right)
+        left_m, right_m = sides
+        both = np.isfinite(left_m) & np.isfinite(right_m)
         if both.any():
-            width = float(np.mean(left[both] + right[both]))
-        elif np.isfinite(left).any() or np.isfinite(right).any():
-            one = np.where(np.isfinite(left), left, right)
+            width = float(np.mean(left_m[both] + right_m[both]))
+        elif np.isfinite(left_m).any() or np.isfinite(right_m).any():
+            one = np.where(np.isfinite(left_m), left_m, right_m)
             width = float(2.0 * np.nanmean(one))
         else:
             width = None
