@@ -174,11 +174,11 @@ def decode_batch(
     if count < BATCH_FROM or batch.encoding != "ros1" or not buffer_is_immutable(buf):
         return out
     starts = np.asarray(batch.starts, dtype=np.int64)
-    sizes = np.asarray(batch.stops, dtype=np.int64) - starts
-    size = int(sizes[0])
-    if not (sizes == size).all():
-        return out
+    known = batch.stride  # the reader found them at a fixed distance, of one size
     first = int(starts[0])
+    size = int(batch.stops[0]) - first
+    if known is None and not (np.asarray(batch.stops, dtype=np.int64) - starts == size).all():
+        return out
     view = memoryview(buf)[first : first + size]
     try:
         head = read_head(view, "ros1", layouts)
@@ -198,17 +198,26 @@ def decode_batch(
         return out
     # Each message's stamp and everything after it up to the point data, in one gather:
     # everything from the frame id on must be the first message's.
-    heads = byte_rows(buf, starts + _STAMP_AT, data_offset - _STAMP_AT)
+    width = data_offset - _STAMP_AT
+    if known is not None:
+        # At a fixed distance: one strided view of the chunk, nothing gathered.
+        heads = np.ndarray((count, width), np.uint8, buf, first + _STAMP_AT, (known, 1))
+    else:
+        heads = byte_rows(buf, starts + _STAMP_AT, width)
     same = heads[:, _SAME_FROM - _STAMP_AT :]
-    if not (same == same[0]).all():
+    # One comparison of bytes (a reduction over a small array costs more than the copies).
+    if same.tobytes() != same[0].tobytes() * count:
         return out
     stamp = heads[:, : _SAME_FROM - _STAMP_AT].view(_U32)
     stamps = stamp[:, 0].astype(np.int64) * 1_000_000_000 + stamp[:, 1]
-    gaps = starts[1:] - starts[:-1]
     nbytes = n * step
     # At a fixed distance (a chunk of one topic), or between other topics' messages.
-    stride = size if count == 1 else int(gaps[0])
-    regular = count == 1 or (stride >= size and (gaps == stride).all())
+    if known is not None:
+        stride, regular = known, known >= size
+    else:
+        gaps = starts[1:] - starts[:-1]
+        stride = size if count == 1 else int(gaps[0])
+        regular = count == 1 or (stride >= size and (gaps == stride).all())
     if views_buffer(buf, count * nbytes, each=nbytes):
         # The clouds are most of a private chunk buffer: views of it, nothing copied.
         xyz, values = _view(
