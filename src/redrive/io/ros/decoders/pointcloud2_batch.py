@@ -71,6 +71,7 @@ VIEW_SHARE = 0.5
 VIEW_MAX_BYTES = 4 << 20
 
 _U32 = np.dtype("<u4")
+_SEC_NS = np.array([1_000_000_000, 1], dtype=np.int64)
 #: ROS 1 PointCloud2 bytes: seq (4), stamp sec (4), nsec (4), then the frame id's length.
 _STAMP_AT = 4
 _SAME_FROM = 12
@@ -209,7 +210,7 @@ def decode_batch(
     if same.tobytes() != same[0].tobytes() * count:
         return out
     stamp = heads[:, : _SAME_FROM - _STAMP_AT].view(_U32)
-    stamps = stamp[:, 0].astype(np.int64) * 1_000_000_000 + stamp[:, 1]
+    stamps = stamp.astype(np.int64) @ _SEC_NS  # sec · 10⁹ + nsec, exact in int64
     nbytes = n * step
     # At a fixed distance (a chunk of one topic), or between other topics' messages.
     if known is not None:
@@ -236,7 +237,9 @@ def decode_batch(
         xyz, values = _cut(rows, nbytes, plan.view, plan.channels)
     channels = list(zip(plan.channels, values, strict=True))
     # A zero stamp means "unset": the message's log time stands in for it.
-    stamps_ns = np.where(stamps == 0, batch.log_times_ns, stamps).tolist()
+    stamps_ns = stamps.tolist()
+    if 0 in stamps_ns:  # rare: no reduction over the array unless one is unset
+        stamps_ns = np.where(stamps == 0, batch.log_times_ns, stamps).tolist()
     clouds = PointCloud.many_from_frozen(xyz, channels)
     # The Decoded objects built by C-level iteration too (their slots' setters, as ``__init__``).
     decoded: list[Decoded | None] = list(map(_new, repeat(Decoded, count)))
