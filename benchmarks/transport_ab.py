@@ -27,7 +27,7 @@ from pathlib import Path
 # benchmarks/transport_peers.py; an older tree has every side in its own package
 _CELL = """
 import inspect, json, sys
-from redrive.benchmarks.transport.cell import run_cell
+from redrive.benchmarks.transport.sides import run_cell
 kw = {}
 if "catalogue" in inspect.signature(run_cell).parameters:
     kw["catalogue"] = "benchmarks.transport_peers"

@@ -105,7 +105,7 @@ def _build_toggle(where: Path) -> None:
 
 def _role_main(args: argparse.Namespace) -> None:
     from benchmarks.transport_peers import SIDES
-    from redrive.benchmarks.transport.payload import END_SEQ, CellConfig, _Tally
+    from redrive.benchmarks.transport.sides import END_SEQ, CellConfig, _Tally
 
     spec = SIDES[args.side]
     cfg = CellConfig(

@@ -81,7 +81,7 @@ def _redrive() -> tuple[Step, Step, Callable[[], None]]:
 
 def _iceoryx2() -> tuple[Step, Step, Callable[[], None]]:
     from benchmarks.transport_peers import _as_u8, _iox2_service
-    from redrive.benchmarks.transport.payload import CellConfig
+    from redrive.benchmarks.transport.sides import CellConfig
 
     cfg = CellConfig(
         side="iceoryx2",

@@ -42,9 +42,8 @@ from typing import Any
 
 import numpy as np
 
-from redrive.benchmarks.transport.payload import U8, CellConfig, _Payload, _Tally
 from redrive.benchmarks.transport.sides import SIDES as PACKAGE_SIDES
-from redrive.benchmarks.transport.sides import SideSpec, _NoWait
+from redrive.benchmarks.transport.sides import U8, CellConfig, SideSpec, _NoWait, _Payload, _Tally
 from redrive.errors import TransportError
 
 __all__ = ["CATALOGUE", "DEFAULT_SIDES", "PACKAGE_SIDES", "SIDES"]

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from redrive.benchmarks.cli._console import print_json, report_console, spinner
+from redrive.benchmarks.cli._console import print_json, report_console, spinner, verdict
 
 __all__ = ["add_batch_parser", "add_fleet_parser"]
 
@@ -20,10 +20,6 @@ of each executor: cells of a 0.2 s log through one worker, wall per cell minus t
 time (Ray target <= 0.5 s). Passes interleaved, medians of --repeat; load averages before and
 after (the machine may be shared).
 """
-
-
-def _verdict(ok: bool) -> str:
-    return "[green]meets[/]" if ok else "[red]misses[/]"
 
 
 def _run_batch(args: argparse.Namespace) -> int:
@@ -54,12 +50,12 @@ def _run_batch(args: argparse.Namespace) -> int:
     )
     c.print(
         f"local 1 worker {r.local1_s:.2f} s, 2 workers {r.local2_s:.2f} s: "
-        f"{r.scaling:.2f}x {_verdict(r.scaling >= TARGET_SCALING)} {TARGET_SCALING:g}x"
+        f"{r.scaling:.2f}x {verdict(r.scaling >= TARGET_SCALING)} {TARGET_SCALING:g}x"
     )
     if r.ray2_s is not None and r.ray_ratio is not None:
         c.print(
             f"ray 2 workers {r.ray2_s:.2f} s: {r.ray_ratio:.2f}x the local pool's throughput "
-            f"{_verdict(r.ray_ratio >= TARGET_RAY_RATIO)} {TARGET_RAY_RATIO:g}x "
+            f"{verdict(r.ray_ratio >= TARGET_RAY_RATIO)} {TARGET_RAY_RATIO:g}x "
             f"(ray {r.ray_version}; its cluster started in {r.ray_start_s:.2f} s, not counted)"
         )
     else:
@@ -71,7 +67,7 @@ def _run_batch(args: argparse.Namespace) -> int:
     if r.ray_cell_overhead_s is not None and r.ray_empty_cell_s is not None:
         c.print(
             f"  ray {r.ray_empty_cell_s:.3f} s per cell, {r.ray_cell_overhead_s:.3f} s beyond the "
-            f"run {_verdict(r.ray_cell_overhead_s <= TARGET_RAY_CELL_S)} <= {TARGET_RAY_CELL_S:g} s"
+            f"run {verdict(r.ray_cell_overhead_s <= TARGET_RAY_CELL_S)} <= {TARGET_RAY_CELL_S:g} s"
         )
     return 0
 

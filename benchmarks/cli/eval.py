@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from redrive.benchmarks.cli._console import print_json, report_console, spinner
+from redrive.benchmarks.cli._console import print_json, report_console, spinner, verdict
 
 __all__ = ["add_eval_parser"]
 
@@ -16,10 +16,6 @@ definition twice in the same run: redrive's vectorised implementation and a stra
 per-frame Python implementation (loops over detections and ground truth). Both must give the same
 values; prints seconds per 10k frames and the ratio (target >= 10x).
 """
-
-
-def _verdict(ok: bool) -> str:
-    return "[green]meets[/]" if ok else "[red]misses[/]"
 
 
 def _run_eval(args: argparse.Namespace) -> int:
@@ -44,7 +40,7 @@ def _run_eval(args: argparse.Namespace) -> int:
         f"{result.baseline_s:.3f} s = {result.baseline_s_per_10k_frames:.3f} s per 10k frames"
     )
     console.print(
-        f"ratio {result.ratio:.1f}x {_verdict(result.ratio >= TARGET_RATIO)} {TARGET_RATIO:g}x; "
+        f"ratio {result.ratio:.1f}x {verdict(result.ratio >= TARGET_RATIO)} {TARGET_RATIO:g}x; "
         f"{result.values_compared} values, largest difference {result.max_abs_diff:.1e} "
         + ("[green]same numbers[/]" if same else "[red]DIFFERENT numbers[/]")
     )

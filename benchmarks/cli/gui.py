@@ -8,7 +8,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from redrive.benchmarks.cli._console import print_json, report_console, spinner
+from redrive.benchmarks.cli._console import print_json, report_console, spinner, verdict
 from redrive.errors import ConfigError
 
 __all__ = ["add_gui_parser"]
@@ -40,10 +40,6 @@ $TMPDIR/redrive-bench-gui) and reused. Takes about 2 minutes with the logs cache
 
 def _fmt(value: float | None, spec: str = ".1f") -> str:
     return "–" if value is None else format(value, spec)
-
-
-def _verdict(met: bool) -> str:
-    return "[green]meets[/]" if met else "[red]misses[/]"
 
 
 def _print_report(result: Any) -> None:
@@ -144,7 +140,7 @@ def _print_report(result: Any) -> None:
     for name, v in result.verdicts().items():
         if name == "open_first_frame_s":
             console.print(
-                f"open → first frame {v['value']:.2f} s — {_verdict(v['met'])} the ≤ "
+                f"open → first frame {v['value']:.2f} s — {verdict(v['met'])} the ≤ "
                 f"{v['target']:g} s target"
             )
         else:
@@ -154,7 +150,7 @@ def _print_report(result: Any) -> None:
                 else f" ({v['of_ceiling']:.0%} of the {v['ceiling_fps']:.1f} FPS ceiling)"
             )
             console.print(
-                f"{name[-2:].upper()} {v['value']:.1f} FPS{ceiling} — {_verdict(v['met'])} the "
+                f"{name[-2:].upper()} {v['value']:.1f} FPS{ceiling} — {verdict(v['met'])} the "
                 f"≥ {v['target']:g} FPS target"
             )
 

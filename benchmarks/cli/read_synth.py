@@ -7,7 +7,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from redrive.benchmarks.cli.read import add_read_arguments, run_read
+from redrive.benchmarks.cli import add_read_arguments, run_read
 
 __all__ = ["add_read_synth_parser"]
 

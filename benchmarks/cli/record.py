@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.record import DEFAULT_RATE
-from redrive.benchmarks.cli._console import print_json, report_console, spinner
+from redrive.benchmarks.cli._console import print_json, report_console, spinner, verdict
 
 __all__ = ["add_record_parser"]
 
@@ -25,10 +25,6 @@ recorded, and how many of redrive's chunks are compressed (with --compression lz
 compressor could not keep up with are written uncompressed). Needs
 Debian's ROS 1 (`make system-test-deps`). The machine may be shared: the load is reported.
 """
-
-
-def _verdict(ok: bool) -> str:
-    return "[green]meets[/]" if ok else "[red]misses[/]"
 
 
 def _default_data() -> Path:
@@ -65,14 +61,14 @@ def _run_record(args: argparse.Namespace) -> int:
             f"({t.redrive_bytes / 1e6:.1f} MB), lost {t.lost}",
             highlight=False,
         )
-    c.print(f"lost relative to rosbag record: {r.lost} {_verdict(r.lost == 0)} 0")
+    c.print(f"lost relative to rosbag record: {r.lost} {verdict(r.lost == 0)} 0")
     more = sum(max(t.redrive - t.reference, 0) for t in r.topics)
     if more:
         c.print(f"  (redrive recorded {more} messages that rosbag record did not)")
     c.print(
         f"CPU over the playback: rosbag record {r.reference_cpu_s:.2f} s, redrive "
         f"{r.redrive_cpu_s:.2f} s ({r.redrive_processes} processes): {r.cpu_ratio:.2f}x "
-        f"{_verdict(r.cpu_ratio <= TARGET_CPU_RATIO)} <= {TARGET_CPU_RATIO:g}x"
+        f"{verdict(r.cpu_ratio <= TARGET_CPU_RATIO)} <= {TARGET_CPU_RATIO:g}x"
     )
     ref_ms, ours_ms = r.cpu_per_mb
     c.print(f"  per MB recorded: rosbag record {ref_ms:.2f} ms, redrive {ours_ms:.2f} ms")

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from redrive.benchmarks.cli._console import print_json, report_console, spinner
+from redrive.benchmarks.cli._console import print_json, report_console, spinner, verdict
 
 __all__ = ["add_record_ros2_parser"]
 
@@ -22,10 +22,6 @@ target: ROS 2 uses at most 1 % of a core more than ROS 1. Needs Debian's ROS 1
 (`make system-test-deps`) and cyclonedds (the ros2 extra). The machine may be shared: the load
 is reported.
 """
-
-
-def _verdict(ok: bool) -> str:
-    return "[green]meets[/]" if ok else "[red]misses[/]"
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -50,7 +46,7 @@ def _run(args: argparse.Namespace) -> int:
     for run in r.runs:
         c.print(
             f"  {run.middleware}: sent {run.sent}, recorded {run.recorded}, lost {run.lost} "
-            f"{_verdict(run.lost == 0)} 0; CPU {run.cpu_s:.2f} s over {run.window_s:.1f} s = "
+            f"{verdict(run.lost == 0)} 0; CPU {run.cpu_s:.2f} s over {run.window_s:.1f} s = "
             f"{run.cpu_percent:.1f} % of a core, {run.cpu_ms_per_message:.1f} ms a cloud",
             highlight=False,
         )
@@ -62,7 +58,7 @@ def _run(args: argparse.Namespace) -> int:
     extra = r.extra_cpu_percent
     c.print(
         f"ROS 2 - ROS 1: {extra:+.1f} % of a core "
-        f"{_verdict(extra <= TARGET_EXTRA_CPU_PERCENT)} <= +{TARGET_EXTRA_CPU_PERCENT:g} %"
+        f"{verdict(extra <= TARGET_EXTRA_CPU_PERCENT)} <= +{TARGET_EXTRA_CPU_PERCENT:g} %"
     )
     return 0
 

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
+from redrive.benchmarks import cli as closed_loop_cli
 from redrive.benchmarks import closed_loop
-from redrive.benchmarks.cli import closed_loop as closed_loop_cli
 from redrive.benchmarks.closed_loop import bench_closed_loop, scenario_with_lidar
 from redrive.cli.main import main
 from redrive.errors import ConfigError

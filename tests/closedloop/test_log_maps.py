@@ -1,5 +1,5 @@
 """Closed loop on recorded traffic with its real HD map (issue 34 items 5–6): the Argoverse 2
-sensor log and the Waymo Open Motion scenario of ../shared/data.
+sensor log, the Waymo Open Motion scenario and the CommonRoad scenarios of ../shared/data.
 
 - an object-level run is paced by the ground truth (all 156 annotated sweeps of the AV2 log,
   though only 2 of its LiDAR sweeps are present);
@@ -245,6 +245,34 @@ def test_a_commonroad_scenario_runs_from_its_planning_problem_start(
     values, skipped = _scores(out)
     assert not {m for m in MAP_METRICS if m in skipped}, skipped
     assert values["drivable_area"]["drivable_area_compliance"] == 1.0
+
+
+def test_a_commonroad_route_leads_to_the_planning_problems_goal(
+    shared_data: Path, tmp_path: Path
+) -> None:
+    """USA_Peach: the start lies on three overlapping junction lanes, and the one the start pose
+    is put on (43634) ends there; the route goes through the one that leads to the goal lanelets
+    (43474, 43478, 43482, 43616) and the ego turns onto it; a goal in time only (DEU_A9) keeps
+    the logged start's route."""
+    from redrive.io.content import log_goal_lanes
+
+    log = shared_data / "commonroad" / "USA_Peach-4_8_T-1.xml"
+    with open_log(log) as opened:
+        goal = log_goal_lanes(opened)
+    assert set(goal) == {"43474", "43478", "43482", "43616"}
+    out = tmp_path / "peach"
+    _closed(out, log, "idm-planner")
+    route = open_run(out).manifest.closed_loop["route"]
+    assert route["lanes"][0] == "43648"
+    assert set(route["lanes"]) & set(goal)
+    assert "goal" in route["source"]
+    ego = open_run(out).ego()
+    last = ego[max(ego)]
+    assert last.position[0] < -5.0  # turned left with the route (straight on stays at x ≈ 0)
+    assert last.speed_mps > 3.0  # not stopped at a dead end
+    with open_log(shared_data / "commonroad" / "DEU_A9-3_1_T-1.xml") as opened:
+        assert opened.capabilities.goal
+        assert log_goal_lanes(opened) == ()
 
 
 def test_a_pipeline_that_reads_the_lidar_is_paced_by_the_lidar(shared_data: Path) -> None:

@@ -179,6 +179,12 @@ def test_a_vehicle_state_on_another_clock_is_no_input_the_planner_is_skipped_wit
     steps = open_run(out).table("steps").to_pylist()
     assert {row["algorithm"] for row in steps} == {"clusters", "tracker"}
     assert all(row["status"] == "ok" for row in steps)  # no failed planner steps
+    # the manifest keeps why, and `evaluate` names the other clock, not just "no ego"
+    assert "another clock" in manifest.pipeline.unusable_inputs["vehicle_state"]
+    assert main(["evaluate", str(out), "--metric", "comfort"]) == 0
+    said = " ".join(capsys.readouterr().out.split())
+    assert "skipped comfort on the run: the run has no ego: the log's vehicle state" in said
+    assert "another clock" in said
     # --strict refuses it, naming the clock
     assert main(["run", str(bag), "--out", str(tmp_path / "strict"), "--strict"]) != 0
     assert "another clock" in " ".join(capsys.readouterr().err.split())

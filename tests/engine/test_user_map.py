@@ -212,6 +212,62 @@ def test_a_map_the_log_carries_is_replaced_by_the_users_with_a_warning(
     assert "DEU_A9" in stored.source
 
 
+def test_the_logs_own_map_file_given_as_map_replaces_nothing(
+    shared_data: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A CommonRoad scenario run with --map itself (its own lanelet network, h-tour's finding:
+    it warned that the map replaced itself): no warning, nothing replaced, the manifest says so;
+    `evaluate --map` with the same file again on that run says nothing either."""
+    pytest.importorskip("commonroad")
+    log = shared_data / "commonroad" / "USA_US101-3_3_T-1.xml"
+    out = tmp_path / "run"
+    with caplog.at_level(logging.WARNING):
+        code = main(["run", str(log), "--out", str(out), "--no-progress", "--frames", "0:5",
+                     "--map", str(log)])  # fmt: skip
+        assert code == 0
+        entry = json.loads((out / "manifest.json").read_text())["map"]
+        assert main(["evaluate", str(out), "--metric", "drivable_area", "--map", str(log)]) == 0
+    assert "road map" not in caplog.text, caplog.text
+    assert entry["same_as_log"] is True
+    assert "replaced" not in entry
+    again = json.loads((out / "manifest.json").read_text())["map"]
+    assert "replaced" not in again
+    assert again["same_as_log"] is True
+
+
+def test_a_lanelet2_map_far_from_the_logs_gnss_is_said(
+    shared_data: Path,
+    osm: Path,
+    tmp_path: Path,
+    caplog: pytest.LogCaptureFixture,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The Husky bag (REAL; /fix in Massachusetts) with the Karlsruhe map: 5,936 km apart, said in
+    a warning and the manifest's map.gnss (h-tour: it went unnoticed); a fix inside the map's
+    extent is not far."""
+    from redrive.engine import user_map
+    from redrive.types import GnssFix
+
+    bag = shared_data / "rosbag1_real" / "robot_localization_test1_husky.bag"
+    argv = ["--map", str(osm), "--map-origin", "49.0,8.4", "--frames", "0:5"]
+    with caplog.at_level(logging.WARNING):
+        assert _run(bag, tmp_path / "far", *argv) == 0
+    gnss = json.loads((tmp_path / "far" / "manifest.json").read_text())["map"]["gnss"]
+    assert gnss["topic"] == "/fix"
+    assert gnss["far"] is True
+    assert 5_850 < gnss["distance_km"] < 6_050  # Boston to Karlsruhe
+    assert "km from the Lanelet2 map" in caplog.text
+    caplog.clear()
+    near = GnssFix(latitude_deg=49.005, longitude_deg=8.42, altitude_m=110.0)
+    monkeypatch.setattr(user_map, "_first_fix", lambda log, topic: near)
+    with caplog.at_level(logging.WARNING):
+        assert _run(bag, tmp_path / "near", *argv) == 0
+    gnss = json.loads((tmp_path / "near" / "manifest.json").read_text())["map"]["gnss"]
+    assert gnss["far"] is False
+    assert gnss["distance_km"] < 1.0
+    assert "km from the Lanelet2 map" not in caplog.text
+
+
 def test_map_and_no_map_exclude_each_other() -> None:
     from redrive.engine.user_map import MapOption
 

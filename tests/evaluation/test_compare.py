@@ -505,3 +505,28 @@ def test_verdict_of_infinite_values() -> None:
     assert verdict(-inf, inf, False) == "worse"
     assert verdict(math.nan, 1.0, True) == "n/a"
     assert verdict(1.0, 2.0, None) == "changed"
+
+
+def test_cli_names_series_only_one_run_has_instead_of_rows_of_na(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A's latency has a stage B's pipeline lacks (h-tour: the per-frame table listed it as a
+    row of 0 frames and n/a): it is named under the table as only in A; --all keeps the row."""
+    t = np.linspace(10.0, 12.0, N)
+
+    def lag(**series: Any) -> MetricResult:
+        return MetricResult(
+            values={"p95": 12.0}, per_frame={k: (FRAMES, v) for k, v in series.items()}
+        )
+
+    a = make_run(tmp_path / "a", [(Latency(), "", lag(frame_ms=t, **{"stage:detection": t / 2}))])
+    b = make_run(tmp_path / "b", [(Latency(), "", lag(frame_ms=t + 1.0))])
+    assert _cli(["compare", str(a), str(b), "--bootstrap", "50"]) == 0
+    out = capsys.readouterr().out
+    table = out.split("per-frame series", 1)[1].split("frames where B", 1)[0]
+    assert "lag/frame_ms" in table
+    assert "only in A, so not compared: lag/stage:detection" in table
+    assert not any("stage:detection" in line and "n/a" in line for line in table.splitlines())
+    assert _cli(["compare", str(a), str(b), "--bootstrap", "50", "--all"]) == 0
+    everything = capsys.readouterr().out
+    assert any("lag/stage:detection" in line and "n/a" in line for line in everything.splitlines())

@@ -384,3 +384,47 @@ def test_plots_start_on_a_headline_metric_and_show_constant_series_plainly(
     _fit_y(plot, [3.0, 5.0, 4.0])
     qtbot.waitUntil(lambda: 2.5 < plot.viewRange()[1][0] <= 3.0, timeout=_WAIT_MS)
     assert 5.0 <= plot.viewRange()[1][1] < 5.5
+
+
+def test_track_ids_label_only_boxes_with_an_id(
+    qtbot: Any, window: MainWindow, evaluated_run: Path
+) -> None:
+    """h-tour: an untracked box (object_id -1, a detector's) carried the label "-1"."""
+    import dataclasses
+
+    from redrive.gui.loader import ViewOptions, build_scene
+    from redrive.types import Box3D, DetectedObject, Frame
+
+    _open(qtbot, window, evaluated_run)
+    run = window.run
+    assert run is not None
+    at = run.frames[0]
+    box = Box3D(center=np.array([5.0, 0.0, 0.8]), size=np.array([4.0, 2.0, 1.6]))
+    objects = (DetectedObject(object_id=-1, box=box), DetectedObject(object_id=7, box=box))
+    fake = dataclasses.replace(run, detections={"clusters": {at: objects}})
+    scene = build_scene(Frame(stamp_ns=run.stamps_ns[at], index=0), ViewOptions(), run=fake)
+    labels = [t[0] for layer in scene.layers for t in layer.labels]
+    assert labels == ["7"]
+
+
+def test_an_empty_plot_says_what_it_lacks_and_run_metrics_have_no_empty_segment(
+    qtbot: Any,
+) -> None:
+    """h-tour: plots were drawn empty on logs without the data; the metric picker showed
+    "latency /  / frame_ms" for a run-level metric."""
+    from redrive.gui.plots import PlotsPanel, metric_label
+    from redrive.gui.session import Series
+
+    assert metric_label(("latency", "", "frame_ms")) == "latency / frame_ms"
+    assert metric_label(("clear_mot", "tracker", "fp")) == "clear_mot / tracker / fp"
+    panel = PlotsPanel()
+    qtbot.addWidget(panel)
+    panel.set_series(Series(), start_ns=0)
+    assert panel.plots["IMU accel"].titleLabel.text == "IMU accel: no IMU in this log"
+    assert panel.plots["speed"].titleLabel.text == "speed: no ego state in the log or the run"
+    stamps = np.arange(3, dtype=np.int64) * 100_000_000
+    panel.set_series(
+        Series(speed_mps=(stamps, np.ones(3)), imu_accel=(stamps, np.zeros((3, 3)))), start_ns=0
+    )
+    assert panel.plots["IMU accel"].titleLabel.text == "IMU accel (m/s²)"
+    assert panel.plots["speed"].titleLabel.text == "speed (m/s)"

@@ -250,3 +250,41 @@ def test_a_real_bag_run_is_paced_on_the_log_time_axis(luminar_run: Path) -> None
     boxes = [m.log_time_ns for m in got if m.topic == "/redrive/detections/cluster-detector"]
     assert len(clouds) == len(boxes) == 5
     assert clouds == boxes  # each frame's results at its cloud's log time
+
+
+def test_a_client_that_subscribes_later_gets_the_map_sent_before(
+    served: tuple[SceneStream, Player, int],
+) -> None:
+    """/redrive/map goes out once, with the first frame (h-mapfile's limit: a client joining
+    later never saw it): a second client subscribing after the whole run was played, with the
+    player paused at its end, gets that same map message."""
+    from redrive.interop.map_shapes import MAP_TOPIC
+
+    stream, player, port = served
+    total = sum(1 for _ in stream.messages())
+    assert MAP_TOPIC in stream.channels
+    first_map = next(m for m in stream.messages() if m.topic == MAP_TOPIC)
+    url = f"ws://127.0.0.1:{port}"
+
+    async def session() -> list[OutMessage]:
+        async with websockets.connect(
+            url, subprotocols=[_SUBPROTOCOL], max_size=None, close_timeout=1
+        ) as ws:
+            client = _Client(ws)
+            await client.handshake(len(stream.channels))
+            await client.subscribe_all()
+            await ws.send(_control(_PLAY, speed=50.0, rid="go"))
+            sent = await client.data(total)
+            await client.state(_ENDED)
+            assert sum(m.topic == MAP_TOPIC for m in sent) == 1
+            async with websockets.connect(
+                url, subprotocols=[_SUBPROTOCOL], max_size=None, close_timeout=1
+            ) as ws2:
+                late = _Client(ws2)
+                await late.handshake(len(stream.channels))
+                await late.subscribe_all()
+                return await late.data(1)
+
+    (got,) = asyncio.run(session())
+    assert got == first_map
+    assert player.sent == total  # the resend is not a played message

@@ -95,3 +95,48 @@ def test_both_checks_agree_with_the_walk_on_every_chunk_and_every_damaged_byte(
     # Most damage is refused; a changed low byte of a data length can still be in bounds.
     assert damaged_refused > 60
     assert checked >= 1
+
+
+def test_the_strided_check_of_a_chunk_of_one_sensor_agrees_with_the_others(
+    tmp_path: Path,
+) -> None:
+    """Chunks of one topic's equal clouds at a fixed distance are checked as one strided view
+    (:func:`~redrive.io.rosbag1.index._regular_spans`): intact, it finds the walk's spans and
+    their distance; damaged at random bytes, it accepts and refuses what the other checks do."""
+    path = tmp_path / "regular.bag"
+    _write(path, count=40, mixed=False)
+    rng = np.random.default_rng(11)
+    strided = refused = 0
+    for chunk, offsets, times, conns in _chunks(path):
+        if len(offsets) < 2:
+            continue
+        spans = chunk_spans(chunk, offsets, times, conns)
+        assert spans is not None
+        assert spans[2] == int(offsets[1] - offsets[0])
+        walked = _walk(chunk, offsets, times, conns)
+        assert list(zip(spans[0].tolist(), spans[1].tolist(), strict=True)) == walked
+        strided += 1
+        for _ in range(40):
+            k = int(rng.integers(len(offsets)))
+            head = int.from_bytes(chunk[int(offsets[k]) : int(offsets[k]) + 4], "little")
+            at = int(offsets[k]) + int(rng.integers(head + 8))
+            broken = bytearray(chunk)
+            broken[at] ^= int(rng.integers(1, 256))
+            view = memoryview(bytes(broken))
+            found = chunk_spans(view, offsets, times, conns)
+            saved = ros1bag_index.REGULAR_FROM
+            try:
+                ros1bag_index.REGULAR_FROM = 1 << 30
+                others = _both(view, offsets, times, conns)
+            finally:
+                ros1bag_index.REGULAR_FROM = saved
+            for other in others:
+                if found is None:
+                    assert other is None
+                else:
+                    assert other is not None
+                    assert found[0].tolist() == other[0].tolist()
+                    assert found[1].tolist() == other[1].tolist()
+            refused += found is None
+    assert strided >= 2
+    assert refused > 20

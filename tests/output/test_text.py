@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 import subprocess
 import sys
 from pathlib import Path
@@ -10,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from redrive.io.mcap.writer import McapWriter
-from redrive.output.text import printable, shown
+from redrive.output.text import doc_summary, printable, shown
 from redrive.types import Imu
 
 HOSTILE = "/imu\x1b[2J\x1b]0;pwned\x07[bold]x[/]\u2028\\"
@@ -45,3 +47,29 @@ def test_info_prints_a_hostile_topic_name_escaped(tmp_path: Path) -> None:
         assert raw not in done.stdout
     flat = "".join(done.stdout.split())
     assert "/imu\\x1b[2J\\x1b]0;pwned\\x07[bold]x[/]\\u2028\\\\" in flat
+
+
+def test_doc_summary_is_the_first_paragraph_in_plain_text() -> None:
+    doc = """nuPlan ``no_ego_at_fault_collisions``: contacts
+        of the ego with   ground-truth boxes (:mod:`redrive.evaluation.closedloop.lanes`,
+        :func:`~redrive.motion.comfort_kinematics`).
+
+        The second paragraph is left out."""
+    assert doc_summary(doc) == (
+        "nuPlan no_ego_at_fault_collisions: contacts of the ego with ground-truth boxes "
+        "(redrive.evaluation.closedloop.lanes, redrive.motion.comfort_kinematics)."
+    )
+    assert doc_summary(None) == ""
+
+
+def test_redrive_metrics_shows_no_sphinx_markup() -> None:
+    from redrive.cli.main import main
+
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        assert main(["metrics"]) == 0
+    text = out.getvalue()
+    assert "at_fault_collisions" in text
+    assert "no_ego_at_fault_collisions" in text
+    for markup in ("``", ":mod:`", ":func:`", ":class:`"):
+        assert markup not in text, markup

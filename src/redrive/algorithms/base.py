@@ -416,9 +416,10 @@ class Algorithm(ABC):
 
     @classmethod
     def describe(cls) -> str:
-        """The first paragraph of the class docstring."""
-        doc = (cls.__doc__ or "").strip()
-        return doc.split("\n\n", 1)[0].replace("\n", " ").strip()
+        """The first paragraph of the class docstring, as one line of plain text."""
+        from redrive.output.text import doc_summary
+
+        return doc_summary(cls.__doc__)
 
     @classmethod
     def input_names(cls) -> Sequence[str]:

@@ -1,25 +1,9 @@
-"""``redrive bench closed-loop``: a closed-loop run against the world stepping alone.
-
-Measured in the same run, interleaved, ``repeats`` times each:
-
-- *closed loop*: :func:`redrive.closedloop.run.run_closed_loop` on a scenario (default: ``urban``,
-  20 s, object level) with noisy-oracle → idm-planner → pure-pursuit-pid, results written to a
-  run directory as ``redrive run SCENARIO --closed-loop`` does.  Its wall time (the engine's frame
-  loop, as the CLI's real-time factor) is split into *simulation* (the simulator's ``observe`` and
-  ``step``, timed around each call), *algorithms* (the sum of the step latencies of the run's
-  steps table) and *other* (the rest: the engine's records, the results writer, the mode);
-- *baseline*: the same scenario's :class:`~redrive.sim.world.World` stepped alone, with its
-  scripted driver, frame by frame to the same end — the cost floor of the simulation.  The
-  closed loop steps two such worlds (the expert one that gives the logged ego and, for replayed
-  agents, the objects; and the one the commands drive), so its simulation share cannot be less
-  than about twice the baseline.
-
-The real-time factor is simulated seconds over wall seconds.  ``level="sensor"`` re-renders the
-scenario's rig every step (and the reference pipeline reads the LiDAR), with the scenario's first
-3D LiDAR swapped for ``lidar`` (default HDL-64E, the 64-beam unit of the issue's target); the
-split then takes *rendering* (the sensor models, and handing their messages to the frames and to
-the run's ``sensors.mcap``) out of *simulation* (which keeps the worlds' physics and the rest of
-``observe`` and ``step``).
+"""``redrive bench closed-loop``: a closed-loop run against the world stepping alone (what and
+against what: ``redrive bench closed-loop --help``).  The simulator is wrapped
+(:class:`TimedSimulator`) so that every ``observe`` and ``step`` is timed; the algorithms' share
+is the run's steps table, the rest of the frame loop is *other*; at sensor level the synthetic
+backend's own ``rendering_s`` is taken out of the simulation.  The baseline steps the scenario's
+:class:`~redrive.sim.world.World` alone with its scripted driver to the same end.
 """
 
 from __future__ import annotations
@@ -51,18 +35,10 @@ from redrive.sim.world import World
 from redrive.types import Frame, VehicleState
 
 __all__ = [
-    "LEVELS",
-    "OBJECT_LEVEL_TARGET",
-    "SENSOR_LEVEL_LIDAR",
-    "SENSOR_LEVEL_TARGET",
-    "ClosedLoopBenchResult",
-    "TimedSimulator",
-    "bench_closed_loop",
-    "closed_loop_pipeline",
-    "scenario_with_lidar",
-    "step_world_alone",
-    "world_for_alone",
-]
+    "LEVELS", "OBJECT_LEVEL_TARGET", "SENSOR_LEVEL_LIDAR", "SENSOR_LEVEL_TARGET",
+    "ClosedLoopBenchResult", "TimedSimulator", "bench_closed_loop", "closed_loop_pipeline",
+    "scenario_with_lidar", "step_world_alone", "world_for_alone",
+]  # fmt: skip
 
 #: the issue's targets (× real time): object level, and sensor level on 2 cores
 OBJECT_LEVEL_TARGET = 100.0
@@ -128,28 +104,17 @@ class TimedSimulator:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ClosedLoopBenchResult:
-    """Medians over repeats (seconds per whole run) and every pass.
-
-    Attributes:
-        scenario, level, duration_s, frames: what ran.
-        lidar: sensor level: the preset of the scenario's first 3D LiDAR in the run (None at
-            object level).
-        wall_s: the closed loop's frame loop (the engine's wall time).
-        total_s: the whole ``run_closed_loop`` call (plus building both worlds, the road map,
-            closing the run directory).
-        cpu_s: CPU seconds of the benchmark's process (all its threads) over that call: below
-            ``total_s`` on one busy thread means other processes had the cores.
-        rendering_s, simulation_s, algorithms_s, other_s: the split of ``wall_s`` (rendering
-            is 0 at object level).
-        baseline_s: one world stepped alone with its scripted driver to the same end.
-        algorithm_ms: mean step latency per algorithm (ms), of the median pass.
-        simulation_cpu_s, algorithms_cpu_s, baseline_cpu_s: CPU seconds of the simulation
-            (the frame loop thread's, in ``observe`` and ``step``; rendering included), of the
-            algorithms (the steps table's ``cpu_ns``) and of the world alone: on a shared
-            machine these tell the code's cost apart from the load, as ``cpu_s`` does.
-        loop_cpu_s: CPU seconds of the frame loop's thread from the run's start (``on_start``)
-            to the last frame's ``progress`` — the loop's CPU time, beside ``baseline_cpu_s``.
-    """
+    """Medians over repeats (seconds per whole run) and every pass: ``wall_s`` is the frame loop
+    (the engine's wall time), split into ``rendering_s`` (0 at object level), ``simulation_s``,
+    ``algorithms_s`` and ``other_s``; ``total_s`` the whole ``run_closed_loop`` call (building
+    both worlds and the road map, closing the run directory included) and ``cpu_s`` the process's
+    CPU seconds over it (below ``total_s`` on one busy thread: other processes had the cores);
+    ``baseline_s`` one world stepped alone; ``algorithm_ms`` the mean step latency per algorithm
+    of the median pass; ``lidar`` the preset of the first 3D LiDAR (sensor level).  The CPU
+    seconds of the simulation (the frame loop thread's in ``observe`` and ``step``), of the
+    algorithms (the steps table's ``cpu_ns``) and of the world alone tell, on a shared machine,
+    the code's cost apart from the load; ``loop_cpu_s`` is the frame loop thread's from the
+    run's start (``on_start``) to the last frame's ``progress``, beside ``baseline_cpu_s``."""
 
     scenario: str
     level: str
@@ -202,28 +167,17 @@ class ClosedLoopBenchResult:
         return value / self.wall_s
 
     def to_json(self) -> dict[str, Any]:
+        keys = ("scenario", "level", "duration_s", "frames", "repeats", "lidar", "wall_s")
         return {
-            "scenario": self.scenario,
-            "level": self.level,
-            "duration_s": self.duration_s,
-            "frames": self.frames,
-            "repeats": self.repeats,
-            "lidar": self.lidar,
-            "wall_s": self.wall_s,
-            "total_s": self.total_s,
-            "cpu_s": self.cpu_s,
-            "realtime_factor": self.realtime_factor,
-            "target": self.target,
+            **{
+                k: getattr(self, k)
+                for k in (*keys, "total_s", "cpu_s", "realtime_factor", "target")
+            },
             "split_s": {
-                "rendering": self.rendering_s,
-                "simulation": self.simulation_s,
-                "algorithms": self.algorithms_s,
-                "other": self.other_s,
+                p: getattr(self, f"{p}_s")
+                for p in ("rendering", "simulation", "algorithms", "other")
             },
-            "cpu_split_s": {
-                "simulation": self.simulation_cpu_s,
-                "algorithms": self.algorithms_cpu_s,
-            },
+            "cpu_split_s": {p: getattr(self, f"{p}_cpu_s") for p in ("simulation", "algorithms")},
             "baseline_s": self.baseline_s,
             "baseline_cpu_s": self.baseline_cpu_s,
             "loop_cpu_s": self.loop_cpu_s,
@@ -309,18 +263,8 @@ def _closed_loop(
     }
 
 
-_PARTS = (
-    "wall",
-    "total",
-    "cpu",
-    "rendering",
-    "simulation",
-    "algorithms",
-    "other",
-    "simulation_cpu",
-    "algorithms_cpu",
-    "loop_cpu",
-)
+_PARTS: tuple[str, ...] = ("wall", "total", "cpu", "rendering", "simulation", "algorithms", "other")
+_PARTS += ("simulation_cpu", "algorithms_cpu", "loop_cpu")
 
 
 def scenario_with_lidar(scenario: str, preset: str, folder: Path) -> Path:
@@ -414,24 +358,8 @@ def bench_closed_loop(
     med = {k: statistics.median(v) for k, v in passes.items()}
     middle = sorted(runs, key=lambda run: float(run["wall"]))[len(runs) // 2]
     return ClosedLoopBenchResult(
-        scenario=scenario,
-        level=level,
-        duration_s=float(middle["span"]),
-        frames=int(middle["frames"]),
-        repeats=repeats,
-        lidar=preset,
-        wall_s=med["wall"],
-        total_s=med["total"],
-        cpu_s=med["cpu"],
-        rendering_s=med["rendering"],
-        simulation_s=med["simulation"],
-        algorithms_s=med["algorithms"],
-        other_s=med["other"],
-        baseline_s=med["baseline"],
-        algorithm_ms=dict(middle["algorithm_ms"]),
-        passes=passes,
-        simulation_cpu_s=med["simulation_cpu"],
-        algorithms_cpu_s=med["algorithms_cpu"],
-        baseline_cpu_s=med["baseline_cpu"],
-        loop_cpu_s=med["loop_cpu"],
-    )
+        scenario=scenario, level=level, duration_s=float(middle["span"]),
+        frames=int(middle["frames"]), repeats=repeats, lidar=preset,
+        algorithm_ms=dict(middle["algorithm_ms"]), passes=passes,
+        **{f"{k}_s": med[k] for k in (*_PARTS, "baseline", "baseline_cpu")},
+    )  # fmt: skip

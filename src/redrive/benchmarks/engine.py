@@ -1,24 +1,9 @@
-"""``redrive bench engine``: the engine against a bare Python loop calling the same functions.
-
-Three stages (perception → planning → control) each do about ``work_ms`` of numpy work (an
-elementwise ``sin``, square and ``sqrt``, in place, over a float64 array sized on this machine
-so one call takes ``work_ms``; numpy releases the GIL inside each) over frames already in memory.  Measured in the
-same run, interleaved:
-
-- *bare loop*: ``for frame in frames: a(); b(); c()`` — the best any orchestration can do on one
-  core;
-- *sequential* / *pipelined*: :class:`redrive.engine.Engine` with the same work wrapped as
-  algorithms, every step timed, checked and handed to the recording sink (kept in memory, as the
-  results writer's buffer does; ``writer=True`` adds the real Parquet writer);
-- *overhead*: the same with no-op stages: (engine − bare loop) / frames is the engine's own cost
-  per frame (timing, output checks, records), in wall time and in the CPU time of the thread
-  that runs them (``time.thread_time``: what a loaded, shared machine does not inflate the way it
-  inflates wall time; the no-op runs are sequential, all on that one thread) — with the writer,
-  of the whole process (the writer writes its Parquet parts on a pool's threads).
-
-Every variant runs once per pass and the passes are interleaved, so load that comes and goes hits
-all variants alike; :meth:`EngineBenchResult.spreads` gives each target's min / median / max over
-the passes (verdict on the median), from the ratios and costs of each pass.
+"""``redrive bench engine``: the engine against a bare Python loop calling the same functions
+(what and against what: ``redrive bench engine --help``).  The stages' work is an in-place
+``sin``, square and ``sqrt`` over a float64 array sized on this machine (:func:`calibrate_work`;
+numpy releases the GIL inside each); the engine's records go to an in-memory sink, as the results
+writer's buffer, or with ``writer=True`` to the real Parquet writer.  CPU time is the running
+thread's (``time.thread_time``: the no-op runs are sequential), with the writer the process's.
 """
 
 from __future__ import annotations
@@ -34,21 +19,16 @@ from typing import Any
 import numpy as np
 
 from redrive.algorithms import Algorithm, Role, StageOutputs
-from redrive.benchmarks.spread import Spread
+from redrive.benchmarks._base import Spread
 from redrive.config import AlgorithmSpec, PipelineConfig, StageSpec
 from redrive.engine import Engine, LogInputs, build_graph
 from redrive.results import FrameRecord, RunSetup, RunStatus, RunWriter, SourceLog
 from redrive.types import ControlCommands, DetectedObject, Frame, PlannedPath
 
 __all__ = [
-    "OVERHEAD_TARGET_US",
-    "PIPELINED_TARGET",
-    "SEQUENTIAL_TARGET",
-    "WRITER_TARGET_US",
-    "EngineBenchResult",
-    "bench_engine",
-    "calibrate_work",
-]
+    "OVERHEAD_TARGET_US", "PIPELINED_TARGET", "SEQUENTIAL_TARGET", "WRITER_TARGET_US",
+    "EngineBenchResult", "bench_engine", "calibrate_work",
+]  # fmt: skip
 
 #: issue 20's targets, judged on the median of the passes
 SEQUENTIAL_TARGET = 0.95
@@ -139,11 +119,8 @@ class NoopControl(Algorithm):
 
 
 def _pipeline(kind: str, mode: str) -> PipelineConfig:
-    names = (
-        ("BusyPerception", "BusyPlanning", "BusyControl")
-        if kind == "busy"
-        else ("NoopPerception", "NoopPlanning", "NoopControl")
-    )
+    prefix = "Busy" if kind == "busy" else "Noop"
+    names = [prefix + role for role in ("Perception", "Planning", "Control")]
     return PipelineConfig(
         stages=tuple(
             StageSpec(
@@ -216,63 +193,28 @@ class EngineBenchResult:
         def per_frame(key: str, base: str) -> tuple[float | None, ...]:
             return tuple((a - b) / n * 1e6 for a, b in zip(p.get(key, []), p[base], strict=False))
 
-        out = [
-            Spread(
-                name="sequential ÷ bare loop",
-                bound=SEQUENTIAL_TARGET,
-                at_most=False,
-                values=tuple(b / s for b, s in zip(p["bare"], p["sequential"], strict=True)),
-            ),
-            Spread(
-                name="pipelined ÷ bare loop",
-                bound=PIPELINED_TARGET,
-                at_most=False,
-                values=tuple(b / s for b, s in zip(p["bare"], p["pipelined"], strict=True)),
-            ),
-            Spread(
-                name="engine µs/frame, wall",
-                bound=OVERHEAD_TARGET_US,
-                at_most=True,
-                values=per_frame("noop_engine", "noop_bare"),
-            ),
-            Spread(
-                name="engine µs/frame, CPU",
-                bound=OVERHEAD_TARGET_US,
-                at_most=True,
-                values=per_frame("noop_engine_cpu", "noop_bare_cpu"),
-            ),
-        ]
+        def ratio(key: str) -> tuple[float | None, ...]:
+            return tuple(b / s for b, s in zip(p["bare"], p[key], strict=True))
+
+        targets = [
+            ("sequential ÷ bare loop", SEQUENTIAL_TARGET, False, ratio("sequential")),
+            ("pipelined ÷ bare loop", PIPELINED_TARGET, False, ratio("pipelined")),
+            ("engine µs/frame, wall", OVERHEAD_TARGET_US, True, per_frame("noop_engine", "noop_bare")),
+            ("engine µs/frame, CPU", OVERHEAD_TARGET_US, True, per_frame("noop_engine_cpu", "noop_bare_cpu")),
+        ]  # fmt: skip
         if p.get("writer"):
-            out += [
-                Spread(
-                    name="with writer µs/frame, wall",
-                    bound=WRITER_TARGET_US,
-                    at_most=True,
-                    values=per_frame("writer", "noop_bare"),
-                ),
-                Spread(
-                    name="with writer µs/frame, CPU",
-                    bound=WRITER_TARGET_US,
-                    at_most=True,
-                    values=per_frame("writer_cpu", "noop_bare_cpu"),
-                ),
-            ]
-        return tuple(out)
+            targets += [
+                ("with writer µs/frame, wall", WRITER_TARGET_US, True, per_frame("writer", "noop_bare")),
+                ("with writer µs/frame, CPU", WRITER_TARGET_US, True, per_frame("writer_cpu", "noop_bare_cpu")),
+            ]  # fmt: skip
+        return tuple(Spread(name=t, bound=b, at_most=m, values=v) for t, b, m, v in targets)
 
     def to_json(self) -> dict[str, Any]:
+        keys = ("frames", "work_ms", "work_elements", "bare_s", "sequential_s", "pipelined_s")
+        derived: tuple[str, ...] = ("sequential_ratio", "pipelined_ratio", "overhead_us_per_frame")
+        derived += ("writer_us_per_frame", "overhead_cpu_us_per_frame", "writer_cpu_us_per_frame")
         return {
-            "frames": self.frames,
-            "work_ms": self.work_ms,
-            "work_elements": self.work_elements,
-            "bare_s": self.bare_s,
-            "sequential_s": self.sequential_s,
-            "pipelined_s": self.pipelined_s,
-            "sequential_ratio": self.sequential_ratio,
-            "pipelined_ratio": self.pipelined_ratio,
-            "overhead_us_per_frame": self.overhead_us_per_frame,
-            "writer_us_per_frame": self.writer_us_per_frame,
-            "overhead_cpu_us_per_frame": self.overhead_cpu_us_per_frame,
-            "writer_cpu_us_per_frame": self.writer_cpu_us_per_frame,
+            **{k: getattr(self, k) for k in (*keys, *derived)},
             "spread": [t.to_json() for t in self.spreads()],
             "passes": dict(self.passes),
         }
@@ -340,19 +282,9 @@ def bench_engine(
     """Run every variant ``repeats`` times, interleaved, and keep the medians."""
     elements = calibrate_work(work_ms)
     data = [Frame(stamp_ns=i * 100_000_000, index=i) for i in range(frames)]
+    keys = ("bare", "sequential", "pipelined", "noop_bare", "noop_engine", "writer")
     passes: dict[str, list[float]] = {
-        k: []
-        for k in (
-            "bare",
-            "sequential",
-            "pipelined",
-            "noop_bare",
-            "noop_engine",
-            "writer",
-            "noop_bare_cpu",
-            "noop_engine_cpu",
-            "writer_cpu",
-        )
+        k: [] for k in (*keys, "noop_bare_cpu", "noop_engine_cpu", "writer_cpu")
     }
 
     def keep(key: str, measured: tuple[float, float], *, cpu: bool = False) -> None:
@@ -375,17 +307,9 @@ def bench_engine(
     passes = {k: v for k, v in passes.items() if v}
     med = {k: statistics.median(v) for k, v in passes.items()}
     return EngineBenchResult(
-        frames=frames,
-        work_ms=work_ms,
-        work_elements=elements,
-        bare_s=med["bare"],
-        sequential_s=med["sequential"],
-        pipelined_s=med["pipelined"],
-        noop_bare_s=med["noop_bare"],
-        noop_engine_s=med["noop_engine"],
-        writer_s=med.get("writer"),
-        noop_bare_cpu_s=med["noop_bare_cpu"],
-        noop_engine_cpu_s=med["noop_engine_cpu"],
-        writer_cpu_s=med.get("writer_cpu"),
-        passes=passes,
-    )
+        frames=frames, work_ms=work_ms, work_elements=elements, bare_s=med["bare"],
+        sequential_s=med["sequential"], pipelined_s=med["pipelined"], noop_bare_s=med["noop_bare"],
+        noop_engine_s=med["noop_engine"], writer_s=med.get("writer"),
+        noop_bare_cpu_s=med["noop_bare_cpu"], noop_engine_cpu_s=med["noop_engine_cpu"],
+        writer_cpu_s=med.get("writer_cpu"), passes=passes,
+    )  # fmt: skip

@@ -9,6 +9,7 @@ their simulated proposals, counts for the first).
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -44,15 +45,7 @@ class EvalBench:
             "run": self.run,
             "load_cpu_s": self.load_cpu_s,
             "metrics_cpu_s": self.metrics_cpu_s,
-            "metrics": [
-                {
-                    "metric": c.metric,
-                    "algorithm": c.algorithm,
-                    "cpu_s": c.cpu_s,
-                    "outcome": c.outcome,
-                }
-                for c in self.costs
-            ],
+            "metrics": [dataclasses.asdict(c) for c in self.costs],
         }
 
 
@@ -86,12 +79,8 @@ def bench_eval(run_dir: str | Path, metrics: Sequence[Metric]) -> EvalBench:
                 outcome = f"skipped: {skip.reason}"
             except Exception as err:
                 outcome = f"error: {type(err).__name__}: {err}"
+            cpu_s = time.process_time() - t
             costs.append(
-                MetricCost(
-                    metric=metric.name,
-                    algorithm=algo,
-                    cpu_s=time.process_time() - t,
-                    outcome=outcome,
-                )
+                MetricCost(metric=metric.name, algorithm=algo, cpu_s=cpu_s, outcome=outcome)
             )
     return EvalBench(run=str(run.path), load_cpu_s=load, costs=tuple(costs))

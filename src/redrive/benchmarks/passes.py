@@ -4,15 +4,10 @@
 prints its :class:`PassResult` as JSON on stdout.  Running every pass in its own process keeps the
 peak-memory figures per pass and independent (nothing allocated by one pass lingers in the next).
 
-Passes:
-
-* ``raw``: the baseline — iterate the messages of ``topics`` with the third-party reader and no
-  deserialisation (``rosbags.rosbag1.Reader.messages``, ``rosbags.rosbag2.Reader.messages``, or
-  ``mcap``'s ``iter_messages``);
-* ``redrive``: ``open_log`` + ``decode`` of every message to a ``PointCloud``; each cloud's
-  ``xyz`` is read (its point count).  The decoder builds xyz and every channel array eagerly,
-  so nothing is skipped by not reading the channels.  The decoders are looked up (an
-  entry-point scan, once a process) before the clock starts, with the imports.
+Passes: ``raw``, the baseline (the messages of ``topics`` through ``rosbags``' ``messages`` or
+``mcap``'s ``iter_messages``, no deserialisation); ``redrive``, ``open_log`` + ``decode`` of every
+message to a ``PointCloud`` (each cloud's point count read; the decoder builds xyz and every
+channel eagerly).  The imports and decoder lookup come before the clock starts.
 """
 
 from __future__ import annotations
@@ -32,25 +27,15 @@ __all__ = ["PassResult", "peak_rss_bytes", "raw_pass", "redrive_pass", "run_pass
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class PassResult:
-    """What one pass read and what it cost.
+    """What one pass read and what it cost (seconds; resident memory at its start, after the
+    interpreter and imports, and its peak)."""
 
-    Attributes:
-        kind: ``raw`` or ``redrive``.
-        messages: messages read.
-        payload_bytes: serialised bytes of those messages.
-        points: points decoded (0 for the raw pass).
-        open_s: seconds to open the log (index, connections, type definitions).
-        loop_s: seconds of the message loop (what the throughputs are computed from).
-        rss_start_bytes: resident memory when the pass started (interpreter + imports).
-        peak_rss_bytes: peak resident memory of the process over the pass.
-    """
-
-    kind: str
+    kind: str  # "raw" or "redrive"
     messages: int
-    payload_bytes: int
-    points: int
-    open_s: float
-    loop_s: float
+    payload_bytes: int  # serialised bytes of those messages
+    points: int  # points decoded (0 for the raw pass)
+    open_s: float  # opening the log (index, connections, type definitions)
+    loop_s: float  # the message loop (what the throughputs are computed from)
     rss_start_bytes: int
     peak_rss_bytes: int
 
@@ -83,6 +68,16 @@ def _rss_bytes() -> int:
         return peak_rss_bytes()
 
 
+def _result(
+    kind: str, counts: tuple[int, int, int], t: tuple[float, float, float], rss: int
+) -> PassResult:
+    messages, payload_bytes, points = counts
+    return PassResult(
+        kind=kind, messages=messages, payload_bytes=payload_bytes, points=points,
+        open_s=t[1] - t[0], loop_s=t[2] - t[1], rss_start_bytes=rss, peak_rss_bytes=peak_rss_bytes(),
+    )  # fmt: skip
+
+
 def raw_pass(path: Path, topics: Sequence[str], log_format: str) -> PassResult:
     """Iterate ``topics`` with the third-party reader, no deserialisation."""
     from mcap.reader import make_reader
@@ -93,18 +88,14 @@ def raw_pass(path: Path, topics: Sequence[str], log_format: str) -> PassResult:
     t0 = time.perf_counter()
     count = size = 0
     wanted = set(topics)
-    if log_format == "ros1":
-        with Ros1Reader(path) as reader:
+    if log_format in ("ros1", "ros2"):
+        ros1 = log_format == "ros1"
+        with (Ros1Reader if ros1 else Ros2Reader)(
+            path if ros1 or path.is_dir() else path.parent
+        ) as reader:
             conns = [c for c in reader.connections if c.topic in wanted]
             t1 = time.perf_counter()
             for _, _, data in reader.messages(connections=conns):
-                count += 1
-                size += len(data)
-    elif log_format == "ros2":
-        with Ros2Reader(path if path.is_dir() else path.parent) as reader2:
-            conns2 = [c for c in reader2.connections if c.topic in wanted]
-            t1 = time.perf_counter()
-            for _, _, data in reader2.messages(connections=conns2):
                 count += 1
                 size += len(data)
     elif log_format == "mcap":
@@ -117,17 +108,7 @@ def raw_pass(path: Path, topics: Sequence[str], log_format: str) -> PassResult:
     else:
         msg = f"no raw baseline for {log_format!r} logs (ros1, ros2, mcap only)"
         raise ValueError(msg)
-    t2 = time.perf_counter()
-    return PassResult(
-        kind="raw",
-        messages=count,
-        payload_bytes=size,
-        points=0,
-        open_s=t1 - t0,
-        loop_s=t2 - t1,
-        rss_start_bytes=rss_start,
-        peak_rss_bytes=peak_rss_bytes(),
-    )
+    return _result("raw", (count, size, 0), (t0, t1, time.perf_counter()), rss_start)
 
 
 def redrive_pass(path: Path, topics: Sequence[str]) -> PassResult:
@@ -158,17 +139,7 @@ def redrive_pass(path: Path, topics: Sequence[str]) -> PassResult:
             points += cloud.xyz.shape[0]
             count += 1
             size += len(message.raw)
-    t2 = time.perf_counter()
-    return PassResult(
-        kind="redrive",
-        messages=count,
-        payload_bytes=size,
-        points=points,
-        open_s=t1 - t0,
-        loop_s=t2 - t1,
-        rss_start_bytes=rss_start,
-        peak_rss_bytes=peak_rss_bytes(),
-    )
+    return _result("redrive", (count, size, points), (t0, t1, time.perf_counter()), rss_start)
 
 
 def run_pass(spec: dict[str, Any]) -> PassResult:

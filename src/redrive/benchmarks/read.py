@@ -1,15 +1,11 @@
-"""Read benchmark: redrive's ``open_log`` + ``decode`` against a raw third-party read.
+"""``redrive bench read``: redrive's ``open_log`` + ``decode`` against a raw third-party read.
 
-For every repeat two passes run, each in a fresh interpreter (:mod:`redrive.benchmarks.passes`):
-
-* **raw** — iterate the PointCloud2 messages with ``rosbags`` (ROS 1 / ROS 2) or ``mcap`` and no
-  deserialisation: the ceiling for any reader written in Python on top of those libraries;
-* **redrive** — ``open_log`` + ``decode`` of every message into a :class:`~redrive.types.PointCloud`.
-
-Throughputs are computed from the message loop only (opening, with its index read, is reported
-apart), as messages/s and MB/s of serialised payload (1 MB = 10⁶ bytes).  The page cache is warmed
-first by reading the whole log once, so the figures are CPU-bound, not disk-bound.  The ratio is
-redrive's throughput over raw's, on the median of the repeats.
+Every repeat runs two passes, each in a fresh interpreter (:mod:`redrive.benchmarks.passes`):
+*raw* iterates the PointCloud2 messages with ``rosbags`` or ``mcap``, no deserialisation (the
+ceiling of any Python reader on those libraries); *redrive* decodes each into a
+:class:`~redrive.types.PointCloud`.  Throughputs come from the message loop alone (opening is
+reported apart), in messages/s and MB/s of payload (10⁶ bytes), with the page cache warmed by
+one read of the whole log; the ratio is redrive's over raw's, on the median of the repeats.
 """
 
 from __future__ import annotations
@@ -29,13 +25,9 @@ from redrive.errors import LogError
 from redrive.io import detect_format, open_log
 
 __all__ = [
-    "POINTCLOUD2",
-    "TUNED_MALLOC_ENV",
-    "ReadBenchResult",
-    "SideStats",
-    "bench_read",
+    "POINTCLOUD2", "TUNED_MALLOC_ENV", "ReadBenchResult", "SideStats", "bench_read",
     "warm_page_cache",
-]
+]  # fmt: skip
 
 POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
 
@@ -54,16 +46,9 @@ TARGET_RATIO = 0.8
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class SideStats:
-    """Summary of the repeats of one side (raw or redrive).
-
-    Attributes:
-        median_loop_s, best_loop_s: message-loop seconds, median and minimum over repeats.
-        median_open_s: seconds to open the log, median.
-        msgs_per_s, mb_per_s: throughput at the median loop time (MB = 10⁶ bytes of payload).
-        best_mb_per_s: throughput at the best loop time.
-        peak_rss_bytes: the largest peak resident memory of any repeat.
-        rss_start_bytes: resident memory at the start of a pass (interpreter + imports), median.
-    """
+    """The repeats of one side (raw or redrive): loop seconds, median and best; open seconds
+    (median); throughputs at the median and best loop times (MB = 10⁶ bytes of payload); the
+    largest peak resident memory of any repeat and the median at a pass's start."""
 
     median_loop_s: float
     best_loop_s: float
@@ -95,18 +80,10 @@ def _stats(passes: Sequence[PassResult]) -> SideStats:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ReadBenchResult:
-    """Every pass of one ``bench_read`` run and their summary.
-
-    Attributes:
-        path: the log.
-        log_format: ``ros1``, ``ros2`` or ``mcap``.
-        file_bytes: size of the log on disk (all files of a ROS 2 bag directory).
-        topics: the PointCloud2 topics read.
-        messages, payload_bytes, points: what one pass reads (identical for every pass).
-        warmed: True when the page cache was warmed before the first pass.
-        pass_env: environment variables set for the passes (e.g. :data:`TUNED_MALLOC_ENV`).
-        raw_passes, redrive_passes: every pass, in the order run.
-    """
+    """Every pass of one ``bench_read`` run (in the order run) and their summary; ``messages``,
+    ``payload_bytes`` and ``points`` are what one pass reads (every pass reads the same),
+    ``file_bytes`` the log on disk (all files of a ROS 2 bag), ``pass_env`` the environment
+    variables set for the passes."""
 
     path: Path
     log_format: str
@@ -221,16 +198,11 @@ def bench_read(
     pass_env: Mapping[str, str] | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> ReadBenchResult:
-    """Benchmark reading + decoding every PointCloud2 of ``path`` against a raw read.
-
-    Args:
-        path: a ROS 1 bag, a ROS 2 bag directory or an MCAP file.
-        topics: PointCloud2 topics to read; all of them when None.
-        repeats: passes per side (each in a fresh process, raw and redrive alternating).
-        warm: read the log once before measuring, so the page cache holds it.
-        pass_env: extra environment variables for every pass (both sides), e.g.
-            :data:`TUNED_MALLOC_ENV`.
-        progress: called with a short text before each step.
+    """Benchmark reading + decoding the PointCloud2 ``topics`` (None: all) of ``path`` (a ROS 1
+    bag, a ROS 2 bag directory or an MCAP file) against a raw read: ``repeats`` passes per side,
+    each in a fresh process with ``pass_env`` added to its environment (e.g.
+    :data:`TUNED_MALLOC_ENV`), raw and redrive alternating, after one read of the whole log when
+    ``warm``; ``progress`` is called with a short text before each step.
 
     Raises:
         LogError: the log cannot be opened, has no PointCloud2 topic, or a pass failed or read
@@ -266,15 +238,8 @@ def bench_read(
         )
         raise LogError(msg)
     return ReadBenchResult(
-        path=path,
-        log_format=log_format,
-        file_bytes=sum(f.stat().st_size for f in _log_files(path)),
-        topics=chosen,
-        messages=raw[0].messages,
-        payload_bytes=raw[0].payload_bytes,
-        points=ours[0].points,
-        warmed=warm,
-        pass_env=env,
-        raw_passes=tuple(raw),
+        path=path, log_format=log_format, file_bytes=sum(f.stat().st_size for f in _log_files(path)),
+        topics=chosen, messages=raw[0].messages, payload_bytes=raw[0].payload_bytes,
+        points=ours[0].points, warmed=warm, pass_env=env, raw_passes=tuple(raw),
         redrive_passes=tuple(ours),
-    )
+    )  # fmt: skip

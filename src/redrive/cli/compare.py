@@ -182,7 +182,11 @@ def _print(cmp: Any, *, worst: int, everything: bool = False) -> None:
     )
     for col in ("series", "better", "frames", "mean Δ/frame", "95% CI", "excludes 0"):
         series.add_column(col)
-    series_shown = list(cmp.series) if everything else list(cmp.series)[:SCREEN_SERIES]
+    # a series of an algorithm (or stage) only one run has shares no frame: named below the
+    # table, not listed as a row of "n/a" (--all lists it)
+    one_sided = [s for s in cmp.series if not s.bootstrap.n_frames and (s.only_a or s.only_b)]
+    paired = list(cmp.series) if everything else [s for s in cmp.series if s not in one_sided]
+    series_shown = paired if everything else paired[:SCREEN_SERIES]
     for s in series_shown:
         b = s.bootstrap
         better = {True: "higher", False: "lower", None: "—"}[s.higher_is_better]
@@ -190,6 +194,15 @@ def _print(cmp: Any, *, worst: int, everything: bool = False) -> None:
         mark = "[bold]yes[/]" if b.excludes_zero else "no"
         series.add_row(escape(s.label), better, str(b.n_frames), _fmt(b.mean_delta), ci, mark)
     console.print(series)
+    if one_sided and not everything:
+        for side, names in (
+            ("A", [s.label for s in one_sided if s.only_a]),
+            ("B", [s.label for s in one_sided if s.only_b]),
+        ):
+            if names:
+                console.print(
+                    f"only in {side}, so not compared: {escape(', '.join(names))}", highlight=False
+                )
     frames = Table(title=f"frames where B is most worse than A (top {worst})", title_justify="left")
     for col in ("#", "frame", "stamp_ns", "score", "what differs", "new in B"):
         frames.add_column(col, justify="right" if col in ("#", "frame", "score") else "left")
@@ -201,7 +214,8 @@ def _print(cmp: Any, *, worst: int, everything: bool = False) -> None:
     console.print(frames)
     if not cmp.worst:
         console.print("B is not worse than A on any frame of any per-frame series.")
-    hidden_v, hidden_s = len(cmp.values) - len(values), len(cmp.series) - len(series_shown)
+    hidden_v = len(cmp.values) - len(values)
+    hidden_s = len(cmp.series) - len(series_shown) - (0 if everything else len(one_sided))
     if hidden_v or hidden_s:
         console.print(
             f"{hidden_v} more values and {hidden_s} more series not shown (headlines and "

@@ -260,15 +260,17 @@ def print_batch_evaluation(evaluation: Any, console: Any) -> None:
 
 def _list(args: argparse.Namespace) -> int:
     from rich.console import Console
+    from rich.markup import escape
     from rich.table import Table
 
     from redrive.evaluation.registry import installed_metrics
+    from redrive.output.text import doc_summary
 
     table = Table(title="installed metrics (redrive.metrics)", title_justify="left")
     for col in ("name", "role", "version", "unit", "better", "pooled by", "summary"):
         table.add_column(col)
     for name, cls in installed_metrics().items():
-        doc = (cls.__doc__ or "").strip().split("\n\n", 1)[0].replace("\n", " ")
+        doc = escape(doc_summary(cls.__doc__))
         better = "higher" if cls.higher_is_better else "lower"
         table.add_row(name, cls.role_name(), cls.version, cls.unit, better, cls.pooling, doc)
     console = Console(width=None if sys.stdout.isatty() else 140)

@@ -46,6 +46,7 @@ import shapely
 
 from redrive.assembly.frames import FrameAssembler
 from redrive.maps.index import RoadMapIndex
+from redrive.maps.polylines import packed, polyline_locate
 from redrive.maps.route import routes_along_paths
 from redrive.motion import IdmParams, idm_acceleration
 from redrive.types import LightState, Mission, ObjectClass, ObjectColumns, RoadMap
@@ -94,6 +95,8 @@ class Track:
     bounds: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)  # the line's (x0, y0, x1, y1)
     first_ns: int = 0
     last_ns: int = 0
+    #: its line's number in :class:`LaneAgents`' packed lines (the compiled projections)
+    line_number: int = -1
     # -- the simulation state ---------------------------------------------------------------
     lane_mode: bool = False
     s_m: float = 0.0
@@ -178,45 +181,50 @@ def read_tracks(
     assembler: FrameAssembler, mission: Mission, *, stop_ns: int | None
 ) -> dict[int, TrackSamples]:
     """Every lane-class track of the log's ground truth, in the map frame: id → (stamps, xy,
-    yaw, (length, width))."""
-    raw: dict[int, list[tuple[int, float, float, float, float, float]]] = {}
+    yaw, (length, width)), in the order the tracks first appear; each track's samples in stamp
+    order (of two at one stamp the first read), its box the first sample's."""
+    stamps_l, ids_l, xy_l, yaw_l, size_l = [], [], [], [], []
     for stamp_ns, objects in assembler.ground_truth(stop_ns=stop_ns):
         # the columns of the message (its objects are rows of one batch: none is built)
         cols = ObjectColumns.from_objects(objects)
-        in_message = zip(
-            cols.object_id.tolist(),
-            cols.object_class,
-            cols.center_m[:, :2].tolist(),
-            cols.yaw_rad.tolist(),
-            cols.size_m[:, :2].tolist(),
-            strict=True,
-        )
-        for oid, cls, (x, y), yaw, (length, width) in in_message:
-            if cls not in LANE_CLASSES or oid < 0:
-                continue
-            raw.setdefault(oid, []).append((stamp_ns, x, y, yaw, length, width))
-    out: dict[
-        int, tuple[list[int], list[tuple[float, float]], list[float], tuple[float, float]]
-    ] = {}
-    for oid, samples in raw.items():
-        samples.sort(key=lambda r: r[0])
-        stamps = np.array([r[0] for r in samples], dtype=np.int64)
-        keep = np.ones(stamps.size, dtype=bool)
-        keep[1:] = np.diff(stamps) > 0
-        rows = [r for r, k in zip(samples, keep.tolist(), strict=True) if k]
-        stamps = stamps[keep]
-        ex, ey, eyaw = _logged_pose_at(mission, stamps)
-        bx = np.array([r[1] for r in rows])
-        by = np.array([r[2] for r in rows])
-        c, s = np.cos(eyaw), np.sin(eyaw)
-        mx = ex + c * bx - s * by
-        my = ey + s * bx + c * by
-        yaw = np.array([r[3] for r in rows]) + eyaw
-        out[oid] = (
-            stamps.tolist(),
-            list(zip(mx.tolist(), my.tolist(), strict=True)),
-            yaw.tolist(),
-            (rows[0][4], rows[0][5]),
+        keep = np.array([c in LANE_CLASSES for c in cols.object_class], dtype=bool)
+        keep &= cols.object_id >= 0
+        if keep.any():
+            stamps_l.append(np.full(int(keep.sum()), stamp_ns, dtype=np.int64))
+            ids_l.append(cols.object_id[keep])
+            xy_l.append(cols.center_m[keep, :2])
+            yaw_l.append(cols.yaw_rad[keep])
+            size_l.append(cols.size_m[keep, :2])
+    if not ids_l:
+        return {}
+    ids = np.concatenate(ids_l).astype(np.int64)
+    stamps = np.concatenate(stamps_l)
+    # by track, then stamp (stable: one stamp's samples as read), each stamp's first kept
+    order = np.lexsort((stamps, ids))
+    ids, stamps = ids[order], stamps[order]
+    keep = np.ones(ids.size, dtype=bool)
+    keep[1:] = (ids[1:] != ids[:-1]) | (stamps[1:] > stamps[:-1])
+    order, ids, stamps = order[keep], ids[keep], stamps[keep]
+    xy = np.concatenate(xy_l)[order]
+    ex, ey, eyaw = _logged_pose_at(mission, stamps)
+    c, s = np.cos(eyaw), np.sin(eyaw)
+    mx = (ex + c * xy[:, 0] - s * xy[:, 1]).tolist()
+    my = (ey + s * xy[:, 0] + c * xy[:, 1]).tolist()
+    yaw = (np.concatenate(yaw_l)[order] + eyaw).tolist()
+    size = np.concatenate(size_l)[order].tolist()
+    stamp_list = stamps.tolist()
+    starts = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])
+    ends = np.r_[starts[1:], ids.size]
+    # the tracks in the order they first appear in the log
+    first_read = np.minimum.reduceat(order, starts)
+    out: dict[int, TrackSamples] = {}
+    for g in np.argsort(first_read, kind="stable").tolist():
+        lo, hi = int(starts[g]), int(ends[g])
+        out[int(ids[lo])] = (
+            stamp_list[lo:hi],
+            list(zip(mx[lo:hi], my[lo:hi], strict=True)),
+            yaw[lo:hi],
+            (size[lo][0], size[lo][1]),
         )
     return out
 
@@ -246,6 +254,7 @@ class LaneAgents:
         road = index.road_map
         controlled = {t.stop_line_id: t.light_id for t in road.traffic_lights if t.stop_line_id}
         self.tracks: dict[int, Track] = {}
+        lines: list[F64] = []
         samples = [
             (np.array(xy, dtype=np.float64), np.array(yaw, dtype=np.float64))
             for _, xy, yaw, _ in tracks.values()
@@ -261,9 +270,9 @@ class LaneAgents:
                 continue
             line = shapely.LineString(line_xy)
             x0, y0, x1, y1 = line.bounds
-            s_log = np.maximum.accumulate(
-                np.asarray(shapely.line_locate_point(line, shapely.points(pts)), np.float64)
-            )
+            # shapely.line_locate_point of each sample on the line (the same doubles)
+            on_line, _ = polyline_locate(pts, np.zeros(pts.shape[0], np.int64), *packed([line_xy]))
+            s_log = np.maximum.accumulate(on_line)
             limit = [road.lane(i).speed_limit_mps for i in lanes]
             known = [v for v in limit if v]
             steps = np.hypot(*np.diff(pts, axis=0).T) if pts.shape[0] > 1 else np.zeros(0)
@@ -286,8 +295,12 @@ class LaneAgents:
                 bounds=(float(x0), float(y0), float(x1), float(y1)),
                 first_ns=int(stamps[0]),
                 last_ns=int(stamps[-1]),
+                line_number=len(lines),
             )
-        self._lines = {oid: t.line for oid, t in self.tracks.items()}
+            lines.append(line_xy)
+        #: every track's line, packed (the per-frame projections of :meth:`_hold_up`,
+        #: :meth:`_leader`)
+        self._coords, self._offsets = packed(lines)
 
     @classmethod
     def from_log(
@@ -427,10 +440,13 @@ class LaneAgents:
             near_list = [k for k in near.tolist() if replayed[k].object_id != oid]
             if not near_list:
                 continue
-            lines = [replayed[k].line for k in near_list]
-            pt = shapely.Point(x, y)
-            s = np.asarray(shapely.line_locate_point(lines, pt), np.float64).tolist()
-            d = np.asarray(shapely.distance(lines, pt), np.float64).tolist()
+            s_arr, d_arr = polyline_locate(
+                np.broadcast_to(np.array([x, y]), (len(near_list), 2)),
+                [replayed[k].line_number for k in near_list],
+                self._coords,
+                self._offsets,
+            )
+            s, d = s_arr.tolist(), d_arr.tolist()
             for k, s_k, d_k in zip(near_list, s, d, strict=True):
                 track = replayed[k]
                 if k not in s_log:
@@ -471,10 +487,12 @@ class LaneAgents:
         ]
         if not cand:
             return None, 0.0
-        pts = shapely.points(np.array([[c[1], c[2]] for c in cand]))
-        line = track.line
-        s = np.asarray(shapely.line_locate_point(line, pts), np.float64)
-        d = np.asarray(shapely.distance(line, pts), np.float64)
+        s, d = polyline_locate(
+            np.array([[c[1], c[2]] for c in cand]),
+            np.full(len(cand), track.line_number, np.int64),
+            self._coords,
+            self._offsets,
+        )
         best: tuple[float | None, float] = (None, 0.0)
         for k, (_, _, _, yaw, v, length) in enumerate(cand):
             ahead = float(s[k]) - s_m

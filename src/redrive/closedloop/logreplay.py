@@ -76,6 +76,7 @@ from redrive.closedloop.synthetic import AgentMode
 from redrive.errors import ConfigError
 from redrive.geometry import invert, transform_columns
 from redrive.io import LogReader
+from redrive.io.content import log_goal_lanes
 from redrive.maps.index import DRIVABLE_LANE_KINDS, RoadMapIndex
 from redrive.motion import IdmParams, idm_acceleration
 from redrive.sim.ego import (
@@ -250,6 +251,7 @@ class LogSimulator:
             index=self.road_index,
             start_ns=self._current.stamp_ns,
             duration_s=duration_s,
+            goal_lane_ids=log_goal_lanes(log),
         )
         if (
             agents == "reactive"

@@ -199,6 +199,7 @@ def run_setup(
             stages=tuple(name for name, _ in graph.stages),
             mode_manager=mode,
             skipped=dict(graph.skipped),
+            unusable_inputs=dict(inputs.unusable),
         ),
         algorithms=tuple(p.manifest_entry() for p in graph.algorithms),
         closed_loop=dict(closed_loop or {}),

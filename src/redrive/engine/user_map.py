@@ -18,7 +18,10 @@ The user's map is placed in the log's frame (:func:`align_map`):
   ``origin``; without it, :class:`~redrive.errors.MapError` says what to pass.
 
 The manifest's ``map`` entry (:func:`choose_road_map` → :attr:`ChosenMap.record`) records the
-file (path, format, sha256, size), the origin, the alignment and what it replaced.
+file (path, format, sha256, size), the origin, the alignment and what it replaced.  A Lanelet2
+map (its nodes carry latitude and longitude) is checked against the log's first GNSS fix, when
+the log has one: a map far from where the log was recorded is said in a warning and in the
+entry's ``gnss`` (:func:`gnss_check`).
 """
 
 from __future__ import annotations
@@ -31,6 +34,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from redrive.assembly.sensor_map import SensorMap
 from redrive.assembly.tf_buffer import TransformBuffer, TransformLookupError
 from redrive.errors import LogError, MapError, UnsupportedMessageError
@@ -39,7 +44,7 @@ from redrive.io.content import log_road_map
 from redrive.io.ros.decoders import decode, decoder_for
 from redrive.maps.files import map_format, read_map_file
 from redrive.maps.moved import moved_map
-from redrive.types import RoadMap, Transform, VehicleState
+from redrive.types import GnssFix, RoadMap, SensorType, Transform, VehicleState
 
 __all__ = [
     "ChosenMap",
@@ -309,7 +314,11 @@ def choose_road_map(
         road_map, log, sensor_map=sensor_map, origin_lat_lon=option.origin_lat_lon
     )
     record = {"from": "--map", **record, "alignment": alignment}
-    if own is not None:
+    if record.get("format") == "lanelet2" and (far := gnss_check(log, sensor_map, road_map)):
+        record["gnss"] = far
+    if own is not None and _same_file(own.source, Path(option.path)):
+        record["same_as_log"] = True  # the log's own map file given again: nothing replaced
+    elif own is not None:
         logger.warning(
             "%s carries its own road map (%s); the map given with --map (%s) is used instead",
             log.path,
@@ -344,6 +353,8 @@ def attach_map(run_dir: Path, option: MapOption) -> dict[str, Any]:
             placed, alignment = align_map(
                 road_map, log, sensor_map=smap, origin_lat_lon=option.origin_lat_lon
             )
+            if record.get("format") == "lanelet2" and (far := gnss_check(log, smap, road_map)):
+                record["gnss"] = far
     elif option.origin_lat_lon is not None:
         frame = next(iter(manifest_frames(run_dir)), road_map.frame_id)
         logger.warning(
@@ -361,7 +372,12 @@ def attach_map(run_dir: Path, option: MapOption) -> dict[str, Any]:
             "frames; pass --map-origin LAT,LON (the origin of the ego's frame) or move the log back"
         )
         raise MapError(msg)
-    if (Path(run_dir) / MAP_NAME).is_file():
+    had = manifest.road_map.get("path") or manifest.road_map.get("source")
+    if (Path(run_dir) / MAP_NAME).is_file() and _same_file(had, Path(option.path)):
+        record["same_as_log"] = manifest.road_map.get("from") == "log" or bool(
+            manifest.road_map.get("same_as_log")
+        )
+    elif (Path(run_dir) / MAP_NAME).is_file():
         logger.warning(
             "%s has a road map (%s); the map given with --map (%s) replaces it",
             run_dir,
@@ -375,6 +391,83 @@ def attach_map(run_dir: Path, option: MapOption) -> dict[str, Any]:
     entry = {"from": "--map", **record, "alignment": alignment}
     write_manifest(Path(run_dir), replace(manifest, road_map=entry))
     return entry
+
+
+#: a Lanelet2 map further than this beyond its own extent from the log's GNSS fix is said
+FAR_FROM_GNSS_KM = 5.0
+
+
+def gnss_check(log: LogReader, sensor_map: SensorMap, road_map: RoadMap) -> dict[str, Any] | None:
+    """The log's first GNSS fix against the Lanelet2 map ``road_map`` (its file's first node's
+    latitude and longitude, its extent in metres): the manifest's ``gnss`` entry (topic, fix,
+    distance in km, ``far``), with a warning when the fix lies more than
+    :data:`FAR_FROM_GNSS_KM` beyond the map's extent; None when the log has no decodable fix."""
+    from redrive.maps.lanelet2_osm import first_node
+
+    topics = [s.topic for s in sensor_map.sensors if s.sensor_type is SensorType.GNSS]
+    fix = _first_fix(log, topics[0]) if topics and road_map.source else None
+    if fix is None or not road_map.lanes:
+        return None
+    file = road_map.source.split(":", 1)[-1].split(" (")[0] if road_map.source else ""
+    lat, lon, _ = first_node(file)
+    # haversine: the great-circle distance on a 6,371-km sphere (good to 0.5 % for this check)
+    p1, p2 = math.radians(lat), math.radians(fix.latitude_deg)
+    dp, dl = p2 - p1, math.radians(fix.longitude_deg - lon)
+    a = math.sin(dp / 2) ** 2 + math.cos(p1) * math.cos(p2) * math.sin(dl / 2) ** 2
+    km = 2 * 6371.0 * math.asin(math.sqrt(min(1.0, a)))
+    points = np.concatenate([lane.centerline[:, :2] for lane in road_map.lanes])
+    extent_km = float(np.linalg.norm(points.max(axis=0) - points.min(axis=0))) / 1000.0
+    far = km > extent_km + FAR_FROM_GNSS_KM
+    if far:
+        logger.warning(
+            "%s: its GNSS (%s) is at lat %.4f, lon %.4f, %.0f km from the Lanelet2 map (a node at "
+            "lat %.4f, lon %.4f; the map spans %.1f km): the map is not of the place this log was "
+            "recorded — check --map and --map-origin",
+            log.path, topics[0], fix.latitude_deg, fix.longitude_deg, km, lat, lon, extent_km,
+        )  # fmt: skip
+    return {
+        "topic": topics[0],
+        "fix_lat_lon": [fix.latitude_deg, fix.longitude_deg],
+        "distance_km": round(km, 3),
+        "map_extent_km": round(extent_km, 3),
+        "far": far,
+    }
+
+
+def _first_fix(log: LogReader, topic: str) -> GnssFix | None:
+    """The first decodable fix with a position on ``topic`` (of its first 20 messages)."""
+    messages = log.messages(topics=[topic])
+    try:
+        for tried, message in enumerate(messages):
+            if tried >= 20:
+                break
+            try:
+                data = decode(message, log.deserialize).value
+            except (UnsupportedMessageError, LogError):
+                return None
+            if not isinstance(data, GnssFix) or data.status < 0:
+                continue
+            if math.isfinite(data.latitude_deg) and math.isfinite(data.longitude_deg):
+                return data
+    finally:
+        close = getattr(messages, "close", None)
+        if close is not None:
+            close()
+    return None
+
+
+def _same_file(source: str | None, file: Path) -> bool:
+    """Whether a map's ``source`` (``av2:PATH``, ``lanelet2:PATH (origin …)``, a log's path, or a
+    manifest's ``path``) names ``file``."""
+    if not source:
+        return False
+    for candidate in (source, source.split(":", 1)[-1], source.split(":", 1)[-1].split(" (")[0]):
+        try:
+            if Path(candidate).exists() and Path(candidate).samefile(file):
+                return True
+        except OSError:
+            continue
+    return False
 
 
 def manifest_frames(run_dir: Path) -> list[str]:

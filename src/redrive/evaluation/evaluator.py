@@ -108,6 +108,10 @@ class _Provides:
             what = f"the run has no {need.replace('_', ' ')}"
         if have:
             return None
+        # the log had it, on another clock than the frames' (the run's manifest says why)
+        source = {"ego": "vehicle_state", "ground_truth": "ground_truth"}.get(need, "")
+        if why := self.run.manifest.pipeline.unusable_inputs.get(source):
+            return f"{what}: {why}"
         if need == "road_map":
             return "no road map in the run (runs of a synthetic scenario or its log store one; recorded logs have none)"
         return f"{what} (needs {NEED_SOURCES.get(need, need)})"

@@ -226,6 +226,7 @@ def build_scene(
                         float(o.box.center[2] + o.box.size[2] / 2),
                     )
                     for o in objects
+                    if o.object_id >= 0  # -1: no id known (an untracked box) — no "-1" label
                 )
             layers.append(
                 LayerLines(

@@ -18,7 +18,7 @@ from PySide6 import QtWidgets
 
 from redrive.gui.session import RunData, Series
 
-__all__ = ["PREFERRED_METRICS", "PlotsPanel", "first_metric"]
+__all__ = ["PREFERRED_METRICS", "PlotsPanel", "first_metric", "metric_label"]
 
 _AXES = ((255, 90, 90), (90, 220, 90), (90, 150, 255))
 
@@ -50,6 +50,7 @@ class PlotsPanel(QtWidgets.QWidget):
         self.widget = pg.GraphicsLayoutWidget()
         layout.addWidget(self.widget, 1)
         self.plots: dict[str, pg.PlotItem] = {}
+        self._titles: dict[str, str] = {}
         for name, unit in (
             ("IMU accel", "m/s²"),
             ("speed", "m/s"),
@@ -57,7 +58,8 @@ class PlotsPanel(QtWidgets.QWidget):
             ("metric", ""),
         ):
             plot = self.widget.addPlot()
-            plot.setTitle(f"{name} ({unit})" if unit else name, size="8pt")
+            self._titles[name] = f"{name} ({unit})" if unit else name
+            plot.setTitle(self._titles[name], size="8pt")
             plot.getAxis("left").enableAutoSIPrefix(False)
             plot.getAxis("left").setWidth(48)  # the four plots' x axes line up
             plot.showGrid(x=True, y=True, alpha=0.2)
@@ -92,6 +94,7 @@ class PlotsPanel(QtWidgets.QWidget):
         plot = self.plots["IMU accel"]
         plot.clear()
         plot.addItem(self.cursors["IMU accel"])
+        self._title("IMU accel", series.imu_accel is not None, "no IMU in this log")
         if series.imu_accel is not None:
             t = self._t(series.imu_accel[0])
             for axis in range(3):
@@ -111,9 +114,15 @@ class PlotsPanel(QtWidgets.QWidget):
             plot.clear()
             plot.addItem(self.cursors[name])
             shown = data if data is not None else fallback
+            self._title(name, shown is not None, "no ego state in the log or the run")
             if shown is not None:
                 plot.plot(self._t(shown[0]), shown[1], pen=pg.mkPen((220, 220, 220)))
                 _fit_y(plot, shown[1])
+
+    def _title(self, name: str, has_data: bool, missing: str) -> None:
+        """The plot's title, or what it lacks: an empty plot says why it is empty."""
+        text = self._titles[name] if has_data else f"{name}: {missing}"
+        self.plots[name].setTitle(text, size="8pt")
 
     def set_run(self, run: RunData | None) -> None:
         self.run = run
@@ -122,7 +131,7 @@ class PlotsPanel(QtWidgets.QWidget):
         if run is not None:
             keys: list[tuple[str, ...]] = sorted(run.per_frame)
             for key in keys:
-                self.metric_box.addItem(" / ".join(key), key)
+                self.metric_box.addItem(metric_label(key), key)
             if keys:
                 self.metric_box.setCurrentIndex(keys.index(first_metric(keys)))
         self.metric_box.blockSignals(False)
@@ -138,7 +147,7 @@ class PlotsPanel(QtWidgets.QWidget):
             plot.setTitle("metric (evaluate a run)", size="8pt")
             return
         stamps, values = self.run.per_frame[tuple(key)]
-        plot.setTitle(f"{key[0]}: {key[2]}", size="8pt")
+        plot.setTitle(metric_label(tuple(key)), size="8pt")
         plot.plot(self._t(stamps), values, pen=pg.mkPen((255, 140, 0)), symbol="o", symbolSize=3)
         plot.enableAutoRange(axis="x")
         _fit_y(plot, values)
@@ -147,6 +156,12 @@ class PlotsPanel(QtWidgets.QWidget):
         t = (stamp_ns - self.start_ns) / 1e9
         for cursor in self.cursors.values():
             cursor.setValue(t)
+
+
+def metric_label(key: Sequence[str]) -> str:
+    """A per-frame series (metric, algorithm, value) as the dropdown shows it; a run-level
+    metric has no algorithm (``latency / frame_ms``, not ``latency /  / frame_ms``)."""
+    return " / ".join(part for part in key if part)
 
 
 def first_metric(keys: Sequence[tuple[str, ...]]) -> tuple[str, ...]:

@@ -10,6 +10,10 @@ of every message it sends.
 Playing starts when ``play`` is given, or on the app's first Play; the player waits for a client
 before it starts, so the first messages reach someone.  At the end it stays, paused at the last
 message, until the app seeks or the server is stopped.
+
+The road map (``/redrive/map``) is sent once, with the first frame, as a latched ROS topic is:
+the player keeps the last message of each :data:`LATCHED_TOPICS` topic and sends it again when a
+client subscribes to that topic later (a second app window, a reconnect), playing or paused.
 """
 
 from __future__ import annotations
@@ -33,10 +37,14 @@ from foxglove.websocket import (
 )
 
 from redrive.errors import ConfigError
+from redrive.interop.map_shapes import MAP_TOPIC
 from redrive.interop.serve_defaults import DEFAULT_HOST, DEFAULT_PORT
 from redrive.interop.stream import OutMessage, SceneStream
 
-__all__ = ["Player", "serve_stream"]
+__all__ = ["LATCHED_TOPICS", "Player", "serve_stream"]
+
+#: topics sent once that a client subscribing later gets again (the map does not change)
+LATCHED_TOPICS = frozenset({MAP_TOPIC})
 
 logger = logging.getLogger(__name__)
 
@@ -74,6 +82,8 @@ class Player:
         self._subscriptions = 0
         self._time_ns = self.start_ns
         self._ended = False
+        self._latched: dict[str, OutMessage] = {}  # topic → its last message sent
+        self._resend: list[str] = []  # latched topics a client subscribed to since
         self._channels = {
             topic: foxglove.Channel(
                 topic,
@@ -92,6 +102,8 @@ class Player:
     def on_subscribe(self, client: Client, channel: ChannelView) -> None:
         with self._cond:
             self._subscriptions += 1
+            if channel.topic in self._latched:  # sent by the playing thread, not the server's
+                self._resend.append(channel.topic)
             self._cond.notify_all()
 
     def on_unsubscribe(self, client: Client, channel: ChannelView) -> None:
@@ -133,11 +145,26 @@ class Player:
             self._cond.notify_all()
 
     def _wait_to_play(self) -> bool:
-        """Block while paused or without a client; False when stopped."""
+        """Block while paused or without a client (sending latched messages asked for);
+        False when stopped."""
+        while True:
+            self._send_latched()
+            with self._cond:
+                if self._stop:
+                    return False
+                if self._playing and self._subscriptions > 0 and not self._resend:
+                    return True
+                if not self._resend:
+                    self._cond.wait(_POLL_S * 4)
+
+    def _send_latched(self) -> None:
+        """Send again the latched messages that clients subscribed to since (outside the lock:
+        the server's callbacks take it)."""
         with self._cond:
-            while not self._stop and (not self._playing or self._subscriptions == 0):
-                self._cond.wait(_POLL_S * 4)
-            return not self._stop
+            topics, self._resend = self._resend, []
+            again = [self._latched[t] for t in dict.fromkeys(topics) if t in self._latched]
+        for message in again:
+            self._channels[message.topic].log(message.data, log_time=message.log_time_ns)
 
     def _take_seek(self) -> int | None:
         with self._cond:
@@ -169,6 +196,8 @@ class Player:
             self.sent += 1
             with self._cond:
                 self._time_ns = message.log_time_ns
+                if message.topic in LATCHED_TOPICS:
+                    self._latched[message.topic] = message
             if self.server is not None:
                 self.server.broadcast_time(message.log_time_ns)
             if on_message is not None:
@@ -181,6 +210,7 @@ class Player:
         with self._cond:
             rate = self.rate
         while True:
+            self._send_latched()
             left = due_s - time.monotonic()
             with self._cond:
                 if (

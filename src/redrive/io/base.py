@@ -103,10 +103,13 @@ class MessageBatch:
             int64 arrays (the ROS 1 reader hands over its arrays, no list per chunk).
         log_times_ns: each message's log time (same kinds).
         encoding: the messages' encoding (all the same).
+        stride: when the reader found the messages to lie at a fixed distance and to have one
+            size (``starts[i] == starts[0] + i * stride``, ``stops - starts`` all equal: a
+            chunk of one sensor's messages), that distance; else None (nothing is known).
         memo: per-decoder results (keyed by the decoder object); empty until one decodes.
     """
 
-    __slots__ = ("buffer", "encoding", "log_times_ns", "memo", "starts", "stops")
+    __slots__ = ("buffer", "encoding", "log_times_ns", "memo", "starts", "stops", "stride")
 
     def __init__(
         self,
@@ -116,8 +119,10 @@ class MessageBatch:
         stops: Sequence[int] | npt.NDArray[np.int64],
         log_times_ns: Sequence[int] | npt.NDArray[np.int64],
         encoding: Encoding,
+        stride: int | None = None,
     ) -> None:
         self.buffer = buffer
+        self.stride = stride
         self.starts = starts
         self.stops = stops
         self.log_times_ns = log_times_ns
@@ -183,6 +188,8 @@ class ReaderCapabilities:
         contents: the reader can count what the log holds beside its topics (annotated sweeps,
             tracks, lanes …: ``contents()``): :func:`redrive.io.content.log_contents`, which
             ``redrive info`` prints.
+        goal: the log sets the ego a goal on its road map (a CommonRoad planning problem: the
+            lanes to reach, ``goal_lane_ids()``): :func:`redrive.io.content.log_goal_lanes`.
     """
 
     message_typed: bool
@@ -194,6 +201,7 @@ class ReaderCapabilities:
     scenario: bool = False
     traffic_lights: bool = False
     contents: bool = False
+    goal: bool = False
 
 
 @runtime_checkable

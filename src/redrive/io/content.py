@@ -26,12 +26,14 @@ from redrive.types import RoadMap
 
 __all__ = [
     "ContentsSource",
+    "GoalSource",
     "LogFingerprint",
     "LogScenario",
     "RoadMapSource",
     "ScenarioSource",
     "fingerprint_log",
     "log_contents",
+    "log_goal_lanes",
     "log_road_map",
     "log_scenario",
 ]
@@ -72,6 +74,28 @@ class ContentsSource(Protocol):
         """What the log holds, counted, in words: ``{"annotated sweeps": 156, "tracks": 114}``
         (insertion order is the order ``redrive info`` prints)."""
         ...
+
+
+@runtime_checkable
+class GoalSource(Protocol):
+    """A reader whose capabilities say ``goal``."""
+
+    def goal_lane_ids(self) -> tuple[str, ...]:
+        """The lanes (ids of the log's road map) the ego is to reach; () when the goal names
+        none (a goal in time only, or a position on no lane)."""
+        ...
+
+
+def log_goal_lanes(log: LogReader) -> tuple[str, ...]:
+    """The lanes of ``log``'s goal when its reader sets one (capability ``goal``), else ().
+
+    Raises:
+        LogError: the reader declares the capability without the method.
+    """
+    if not log.capabilities.goal:
+        return ()
+    _declared(log, GoalSource, "goal_lane_ids")
+    return tuple(log.goal_lane_ids())  # type: ignore[attr-defined]
 
 
 def _declared(log: LogReader, protocol: type, method: str) -> None:

@@ -29,6 +29,7 @@ import numpy.typing as npt
 import shapely
 
 from redrive.maps._edges import SegmentDistance
+from redrive.maps.polylines import polyline_locate
 from redrive.types import MapLane, RoadMap
 
 __all__ = [
@@ -144,7 +145,6 @@ class RoadMapIndex:
         # every centreline's vertices one after the other, their arclength made global (each
         # lane starts 1 m after the previous one ends) so one searchsorted finds the segment of
         # any (lane, arclength) pair.
-        self._centerlines = np.array([shapely.LineString(lane.centerline) for lane in lanes])
         starts, offsets, cums, heads, xys = [], [], [], [], []
         vertex = 0
         offset = 0.0
@@ -171,7 +171,8 @@ class RoadMapIndex:
         self._s_offset = np.array(offsets, dtype=np.float64)
         self._cum_s = np.concatenate(cums) if cums else np.zeros(0)
         self._seg_heading = np.concatenate(heads) if heads else np.zeros(0)
-        self._vertices = np.concatenate(xys) if xys else np.zeros((0, 2))
+        self._vertices = np.ascontiguousarray(np.concatenate(xys) if xys else np.zeros((0, 2)))
+        self._vertex_offsets = np.append(self._vertex_start, vertex).astype(np.int64)
 
     # ---- lanes ---------------------------------------------------------------------------
 
@@ -215,10 +216,9 @@ class RoadMapIndex:
         if lanes.size == 0:
             empty = np.zeros(0)
             return empty, empty.copy(), empty.copy()
-        pts = shapely.points(p)
-        lines = self._centerlines[lanes]
-        s = np.asarray(shapely.line_locate_point(lines, pts), dtype=np.float64)
-        dist = np.asarray(shapely.distance(lines, pts), dtype=np.float64)
+        # shapely.line_locate_point and shapely.distance of each point and its centreline, the
+        # same doubles from one compiled pass (redrive.maps.polylines)
+        s, dist = polyline_locate(p, lanes, self._vertices, self._vertex_offsets)
         first = self._vertex_start[lanes]
         last_seg = first + self._vertex_count[lanes] - 2
         vertex = np.searchsorted(self._cum_s, self._s_offset[lanes] + s, side="right") - 1

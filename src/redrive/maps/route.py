@@ -19,6 +19,11 @@ they drive along and that chain's reference line:
    enters it to where it leaves; a lane change leaves the first lane at the station of the pose
    where the log changed lanes and enters the second ``lane_change_m`` further on (a straight
    blend between them).
+
+:func:`route_to_goal` is the route of a log that sets a goal instead of driving a path (a
+CommonRoad planning problem): from the start pose's lane, the cheapest lane-graph route to the
+nearest of the goal's lanes, extended past it as in step 3; a lane change on it leaves the first
+lane at its middle.
 """
 
 from __future__ import annotations
@@ -33,7 +38,13 @@ from shapely.ops import substring
 
 from redrive.maps.index import RoadMapIndex
 
-__all__ = ["DEFAULT_EXTEND_M", "DEFAULT_LANE_CHANGE_M", "route_along_path", "routes_along_paths"]
+__all__ = [
+    "DEFAULT_EXTEND_M",
+    "DEFAULT_LANE_CHANGE_M",
+    "route_along_path",
+    "route_to_goal",
+    "routes_along_paths",
+]
 
 F64 = npt.NDArray[np.float64]
 #: how far past the log's last pose the route continues along successors, metres
@@ -84,6 +95,44 @@ def routes_along_paths(
         out.append(_route(index, p, lanes[start:end], extend_m, lane_change_m))
         start = end
     return out
+
+
+def route_to_goal(
+    index: RoadMapIndex,
+    xy: npt.ArrayLike,
+    yaw_rad: float,
+    goal_lane_ids: Sequence[str],
+    *,
+    extend_m: float = DEFAULT_EXTEND_M,
+    lane_change_m: float = DEFAULT_LANE_CHANGE_M,
+) -> tuple[tuple[str, ...], F64]:
+    """The lanes from the start pose ``xy`` (2,) / ``yaw_rad`` — from whichever lane holding it
+    runs within 90° of its heading — to the nearest reachable lane of ``goal_lane_ids`` (by
+    route length), and their reference line; ``((), (0, 2))`` when the start is on no lane or
+    no goal lane of the map can be reached from it."""
+    p = np.asarray(xy, dtype=np.float64).reshape(1, 2)
+    road = index.road_map
+    known = {lane.lane_id for lane in road.lanes}
+    # every lane at the start running its way (in a junction they overlap: the start's own
+    # lane may be the one that does not lead to the goal)
+    at = index.lanes_at(p)[0]
+    _, _, heading = index.station(np.repeat(p, len(at), axis=0), at)
+    diff = np.abs(np.mod(heading - yaw_rad + math.pi, math.tau) - math.pi)
+    starts = [lane for lane, d in zip(at, diff.tolist(), strict=True) if d < math.pi / 2]
+    routes = [index.route(a, g) for a in starts for g in goal_lane_ids if g in known]
+    routes = [r for r in routes if r]
+    if not routes:
+        return (), np.zeros((0, 2))
+    chain = list(min(routes, key=lambda r: sum(road.lane(i).length_m for i in r)))
+    poses: list[F64] = [p[0]]
+    change_at: dict[int, int] = {}
+    for i in range(len(chain) - 1):
+        if _is_neighbour(index, chain[i], chain[i + 1]):
+            line = road.lane(chain[i]).centerline
+            poses.append(line[len(line) // 2])
+            change_at[i] = len(poses) - 1
+    _extend(index, chain, extend_m)
+    return tuple(chain), _reference_line(index, chain, change_at, np.array(poses), lane_change_m)
 
 
 def _route(

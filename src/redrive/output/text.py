@@ -5,7 +5,13 @@ escape sequences (``\\x1b[2J`` clears the screen) or rich markup (``[bold]``); s
 
 from __future__ import annotations
 
-__all__ = ["printable", "shown"]
+import re
+
+__all__ = ["doc_summary", "printable", "shown"]
+
+#: a Sphinx cross-reference (``:mod:`redrive.x``` , ``:func:`~a.b```) or an inline literal
+_ROLE = re.compile(r":[a-z]+:`~?([^`]+)`")
+_LITERAL = re.compile(r"``([^`]+)``")
 
 
 def printable(text: str) -> str:
@@ -30,3 +36,12 @@ def shown(text: str) -> str:
     from rich.markup import escape
 
     return escape(printable(text))
+
+
+def doc_summary(doc: str | None) -> str:
+    """The first paragraph of a docstring as one line of plain text, for a terminal table: the
+    lines joined with single spaces, Sphinx roles (``:mod:`a.b``` → ``a.b``) and double-backtick
+    literals (````x```` → ``x``) unwrapped."""
+    first = (doc or "").strip().split("\n\n", 1)[0]
+    text = " ".join(first.split())
+    return _LITERAL.sub(r"\1", _ROLE.sub(r"\1", text))

@@ -176,6 +176,9 @@ class PipelineInfo:
     mode_manager: str = "replay"  # the Mode Manager's mode: replay | realtime | …
     # algorithms of the pipeline left out because the log cannot feed them: name → why
     skipped: Mapping[str, str] = field(default_factory=dict)
+    #: inputs the log has but no frame could get (``vehicle_state`` / ``ground_truth`` on
+    #: another clock than the frames', :mod:`redrive.assembly.clocks`): input → why
+    unusable_inputs: Mapping[str, str] = field(default_factory=dict)
     #: stage → the memory bound (MiB, resident) of each of its algorithms' worker processes
     max_rss_mb: Mapping[str, float] = field(default_factory=dict)
 
@@ -192,6 +195,7 @@ class PipelineInfo:
             stages=f.texts("stages"),
             mode_manager=f.text("mode_manager"),
             skipped=f.text_map("skipped", {}),
+            unusable_inputs=f.text_map("unusable_inputs", {}),
             max_rss_mb=f.number_map("max_rss_mb", {}),
         )
 
@@ -429,18 +433,9 @@ class RunManifest(RunSetup):
             "host": _asdict(self.host),
             "sensors": {k: v.value for k, v in self.sensors.items()},
             "seed": self.seed,
-            "pipeline": {
-                **_asdict(self.pipeline),
-                "stages": list(self.pipeline.stages),
-                "skipped": dict(self.pipeline.skipped),
-                "max_rss_mb": dict(self.pipeline.max_rss_mb),
-            },
+            "pipeline": to_jsonable(_asdict(self.pipeline)),
             "algorithms": [a.to_json() for a in self.algorithms],
-            "log": {
-                **_asdict(self.log),
-                "topics": dict(self.log.topics),
-                "scenario": to_jsonable(self.log.scenario),
-            },
+            "log": to_jsonable(_asdict(self.log)),
             "closed_loop": to_jsonable(self.closed_loop),
             "map": to_jsonable(self.road_map),
             "frames_done": self.frames_done,

@@ -4,10 +4,19 @@ memcpy, between two processes (``python -m benchmarks transport`` adds the peers
 from __future__ import annotations
 
 import argparse
-import math
 from typing import Any
 
-from redrive.benchmarks.cli._console import print_json, report_console, spinner
+from redrive.benchmarks.cli._console import (
+    add_command,
+    flag,
+    num,
+    option,
+    print_json,
+    report_console,
+    spinner,
+    spread_table,
+    verdict,
+)
 
 __all__ = ["DESCRIPTION", "add_transport_parser"]
 
@@ -35,16 +44,6 @@ examples:
 """
 
 
-def _verdict(met: bool | None) -> str:
-    if met is None:
-        return "[yellow]not measured[/]"
-    return "[green]meets[/]" if met else "[red]misses[/]"
-
-
-def _num(x: float | None, fmt: str) -> str:
-    return "—" if x is None or not math.isfinite(x) else format(x, fmt)
-
-
 def _loss(sent: int, lost: int) -> str:
     if not sent:
         return "—"
@@ -69,17 +68,8 @@ def _print_report(result: Any, SIDES: Any) -> None:
         "is warm-up"
     )
     table = Table()
-    for col in (
-        "size",
-        "side",
-        "msgs/s",
-        "GB/s",
-        "lost",
-        "paced p50 ms",
-        "paced p99 ms",
-        "paced max ms",
-        "paced lost",
-    ):
+    paced = ("paced p50 ms", "paced p99 ms", "paced max ms", "paced lost")
+    for col in ("size", "side", "msgs/s", "GB/s", "lost", *paced):
         table.add_column(col, justify="left" if col in ("size", "side") else "right")
     mem = {x.size_bytes: x for x in result.memcpy}
     for size in result.sizes:
@@ -93,37 +83,30 @@ def _print_report(result: Any, SIDES: Any) -> None:
             table.add_row(
                 size_label(size),
                 label + ("" if c.status == "ok" else " [red](error)[/]"),
-                _num(f.msgs_per_s if f else None, ",.0f"),
-                _num(f.gb_per_s if f else None, ".2f"),
+                num(f.msgs_per_s if f else None, ",.0f"),
+                num(f.gb_per_s if f else None, ".2f"),
                 _loss(f.sent, f.lost) if f else "—",
-                _num(p.latency_p50_ms if p else None, ".2f"),
-                _num(p.latency_p99_ms if p else None, ".2f"),
-                _num(p.latency_max_ms if p else None, ".2f"),
+                *(
+                    num(getattr(p, f"latency_{k}_ms") if p else None, ".2f")
+                    for k in ("p50", "p99", "max")
+                ),
                 _loss(p.sent, p.lost) if p else "—",
             )
         if size in mem:
             x = mem[size]
-            table.add_row(size_label(size), "memcpy cache-hot", "", _num(x.hot_gb_per_s, ".2f"))
-            table.add_row(
-                size_label(size),
-                "memcpy from memory",
-                "",
-                _num(x.from_memory_gb_per_s, ".2f"),
-                end_section=True,
-            )
+            table.add_row(size_label(size), "memcpy cache-hot", "", num(x.hot_gb_per_s, ".2f"))
+            gb = num(x.from_memory_gb_per_s, ".2f")
+            table.add_row(size_label(size), "memcpy from memory", "", gb, end_section=True)
         else:
             table.rows[-1].end_section = True
     console.print(table)
     for c in result.cells:
+        where = f"{SIDES[c.side].label} at {size_label(c.size_bytes)}"
         if c.status == "error":
-            console.print(f"[red]{SIDES[c.side].label} at {size_label(c.size_bytes)}[/]: {c.error}")
-        runs = [r for r in (c.flat, c.paced) if r is not None]
-        bad = sum(r.corrupt for r in runs)
+            console.print(f"[red]{where}[/]: {c.error}")
+        bad = sum(r.corrupt for r in (c.flat, c.paced) if r is not None)
         if bad:
-            console.print(
-                f"[red]{SIDES[c.side].label} at {size_label(c.size_bytes)}: {bad} messages "
-                "arrived with a wrong payload[/]"
-            )
+            console.print(f"[red]{where}: {bad} messages arrived with a wrong payload[/]")
     if not result.targets:
         return
     targets = Table(title="targets (issues 6, 20)")
@@ -135,18 +118,23 @@ def _print_report(result: Any, SIDES: Any) -> None:
             t.name,
             SIDES[t.side].label,
             size_label(t.size_bytes),
-            _num(t.value, ".2f") + (" ms" if is_ms else " GB/s") if t.value is not None else "—",
-            "" if is_ms else (_num(t.reference, ".2f") + " GB/s" if t.reference else "—"),
+            num(t.value, ".2f") + (" ms" if is_ms else " GB/s") if t.value is not None else "—",
+            "" if is_ms else (num(t.reference, ".2f") + " GB/s" if t.reference else "—"),
             "" if is_ms or t.ratio is None else f"{t.ratio:.2f}×",
             t.target,
-            _verdict(t.met),
+            verdict(t.met),
         )
     console.print(targets)
 
 
 def _run_transport(args: argparse.Namespace) -> int:
-    from redrive.benchmarks.transport import bench_transport, parse_size, target_spreads
-    from redrive.benchmarks.transport.sides import catalogue_sides
+    from redrive.benchmarks.transport import (
+        bench_transport,
+        catalogue_sides,
+        parse_size,
+        size_label,
+        target_spreads,
+    )
     from redrive.errors import ConfigError
 
     SIDES = catalogue_sides(args.catalogue)
@@ -172,23 +160,16 @@ def _run_transport(args: argparse.Namespace) -> int:
 
             results.append(
                 bench_transport(
-                    sizes,
-                    sides=sides,
-                    catalogue=args.catalogue,
-                    seconds=args.seconds,
-                    paced_hz=args.paced_hz,
-                    paced=not args.no_paced,
-                    memcpy=not args.no_memcpy,
-                    verify=args.verify,
-                    progress=progress,
+                    sizes, sides=sides, catalogue=args.catalogue, seconds=args.seconds,
+                    paced_hz=args.paced_hz, paced=not args.no_paced, memcpy=not args.no_memcpy,
+                    verify=args.verify, progress=progress,
                 )
-            )
-    corrupt = sum(
-        r.corrupt for res in results for c in res.cells for r in (c.flat, c.paced) if r is not None
-    )
+            )  # fmt: skip
+    runs = (r for res in results for c in res.cells for r in (c.flat, c.paced) if r is not None)
+    corrupt = sum(r.corrupt for r in runs)
     spreads = target_spreads(results)
     if args.json:
-        out = (
+        print_json(
             results[0].to_json()
             if args.repeat == 1
             else {
@@ -196,33 +177,27 @@ def _run_transport(args: argparse.Namespace) -> int:
                 "spread": [t.to_json() for t in spreads],
             }
         )
-        print_json(out)
     else:
         _print_report(results[-1], SIDES)
         if args.repeat > 1:
-            _print_spread(spreads, len(results), SIDES)
+
+            def row(t: Any) -> list[str]:
+                unit = " ms" if t.at_most else "×"
+                values = (
+                    num(v, ".2f") + unit if v is not None else "—" for v in (t.min, t.median, t.max)
+                )
+                return [
+                    t.name,
+                    SIDES[t.side].label,
+                    size_label(t.size_bytes),
+                    *values,
+                    t.target,
+                    verdict(t.met),
+                ]
+
+            title = f"targets over {len(results)} interleaved repetitions (verdict on the median)"
+            report_console(140).print(spread_table(title, spreads, ("target", "side", "size"), row))
     return 1 if corrupt else 0
-
-
-def _print_spread(spreads: Any, repeats: int, SIDES: Any) -> None:
-    from rich.table import Table
-
-    from redrive.benchmarks.transport import size_label
-
-    table = Table(title=f"targets over {repeats} interleaved repetitions (verdict on the median)")
-    for col in ("target", "side", "size", "min", "median", "max", "bound", "verdict"):
-        table.add_column(col, justify="left" if col in ("target", "side", "verdict") else "right")
-    for t in spreads:
-        unit = " ms" if t.at_most else "×"
-        table.add_row(
-            t.name,
-            SIDES[t.side].label,
-            size_label(t.size_bytes),
-            *(_num(v, ".2f") + unit if v is not None else "—" for v in (t.min, t.median, t.max)),
-            t.target,
-            _verdict(t.met),
-        )
-    report_console(140).print(table)
 
 
 def add_transport_parser(
@@ -236,49 +211,27 @@ def add_transport_parser(
     """``transport`` with the sides of ``catalogue`` (a module with ``SIDES``)."""
     from redrive.benchmarks.transport.sides import catalogue_sides
 
-    parser = bench_sub.add_parser(
-        "transport",
-        help=help,
-        description=description,
-        epilog=epilog + "\nsides: " + ", ".join(catalogue_sides(catalogue)) + "\n",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    sides = ", ".join(catalogue_sides(catalogue))
+    parser = add_command(bench_sub, "transport", help, description, f"{epilog}\nsides: {sides}\n")
     parser.add_argument(
         "--sizes",
         default="64K,1M,4M,16M",
         metavar="LIST",
         help="message sizes, comma-separated, binary units (default 64K,1M,4M,16M; at least 4K)",
     )
-    parser.add_argument(
-        "--seconds", type=float, default=2.0, metavar="S", help="seconds per run (default 2)"
-    )
+    option(parser, "--seconds", 2.0, "S", "seconds per run (default 2)")
     parser.add_argument(
         "--sides",
         default=None,
         metavar="LIST",
         help="transport sides, comma-separated (default: all; see below)",
     )
-    parser.add_argument(
-        "--paced-hz",
-        type=float,
-        default=100.0,
-        metavar="HZ",
-        help="publishing rate of the latency runs (default 100)",
-    )
-    parser.add_argument("--no-paced", action="store_true", help="skip the paced latency runs")
-    parser.add_argument("--no-memcpy", action="store_true", help="skip the memcpy ceiling")
-    parser.add_argument(
-        "--verify",
-        action="store_true",
-        help="subscribers compare every byte of every message (slower; numbers not comparable)",
-    )
-    parser.add_argument(
-        "--repeat",
-        type=int,
-        default=1,
-        metavar="N",
-        help="run everything N times, interleaved; print min/median/max per target ratio "
-        "(default 1)",
-    )
-    parser.add_argument("--json", action="store_true", help="print JSON instead of tables")
+    option(parser, "--paced-hz", 100.0, "HZ", "publishing rate of the latency runs (default 100)")
+    flag(parser, "--no-paced", "skip the paced latency runs")
+    flag(parser, "--no-memcpy", "skip the memcpy ceiling")
+    flag(parser, "--verify", "subscribers compare every byte of every message (slower; numbers "
+         "not comparable)")  # fmt: skip
+    option(parser, "--repeat", 1, "N", "run everything N times, interleaved; print "
+           "min/median/max per target ratio (default 1)")  # fmt: skip
+    flag(parser, "--json", "print JSON instead of tables")
     parser.set_defaults(func=_run_transport, catalogue=catalogue)

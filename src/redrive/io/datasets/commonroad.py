@@ -290,6 +290,7 @@ class CommonRoadReader(NativeLogBase):
             road_map=True,
             traffic_lights=bool(scenario.lanelet_network.traffic_lights),
             contents=True,
+            goal=self.goal is not None,
         )
 
     def _stamp(self, step: int) -> int:
@@ -409,6 +410,21 @@ class CommonRoadReader(NativeLogBase):
                 )
             )
         return out
+
+    def goal_lane_ids(self) -> tuple[str, ...]:
+        """The goal's lanelets (``lanelets_of_goal_position``), else those holding the centre
+        of a goal position's shape (``LaneletNetwork.find_lanelet_by_position``)."""
+        if self.goal is None:
+            return ()
+        ids = list(self.goal.lanelet_ids)
+        if not ids:
+            network = self.scenario.lanelet_network
+            for shape in self.goal.positions:
+                centre = getattr(shape, "center", None)
+                if centre is not None:
+                    found = network.find_lanelet_by_position([np.asarray(centre, dtype=float)])
+                    ids.extend(int(i) for i in (found[0] if found else []))
+        return tuple(str(i) for i in dict.fromkeys(ids))
 
     def road_map(self) -> RoadMap | None:
         """The lanelet network in the road-map model."""

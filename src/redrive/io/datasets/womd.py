@@ -274,6 +274,9 @@ class WomdReader(NativeLogBase):
             for state in scenario.dynamic_map_states
         ]
         self._road_map: RoadMap | None = None
+        #: each step's objects once decoded (immutable): a closed loop reads the tracks whole
+        #: before its first frame, then frame by frame
+        self._objects: dict[int, tuple[DetectedObject, ...]] = {}
         self._steps = self._schedule(steps)
         self._topics = native_topics(self._steps, TRAFFIC_TOPIC_KINDS)
         self.capabilities = ReaderCapabilities(
@@ -323,7 +326,10 @@ class WomdReader(NativeLogBase):
 
     def _objects_loader(self, k: int) -> Loader:
         def load() -> Any:
-            return decoded(self._stamps[k], "base_link", self.objects_at(k))
+            objects = self._objects.get(k)
+            if objects is None:
+                objects = self._objects[k] = self.objects_at(k)
+            return decoded(self._stamps[k], "base_link", objects)
 
         return load
 

@@ -35,10 +35,10 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-import shapely
 
 from redrive.errors import LogError
 from redrive.maps.graph import group_roadblocks
+from redrive.maps.polylines import polyline_distances
 from redrive.types import Crosswalk, MapLane, MapTrafficLight, RoadMap, StopLine
 
 __all__ = ["MPH_TO_MPS", "lane_widths", "road_map_from_scenario"]
@@ -53,55 +53,94 @@ def _xy(points: Any) -> npt.NDArray[np.float64]:
     return np.array([(p.x, p.y) for p in points], dtype=np.float64).reshape(-1, 2)
 
 
-def _side_distances(
-    centre: npt.NDArray[np.float64],
-    segments: Any,
-    lines: dict[int, Any],
-) -> npt.NDArray[np.float64]:
-    """(N,) distance of each centreline point to its boundary on one side; NaN where unbounded."""
-    out = np.full(len(centre), np.nan)
-    points = shapely.points(centre)
+def _bounded_spans(n: int, segments: Any, lines: dict[int, int]) -> list[tuple[int, int, int]]:
+    """The (first, last point index, boundary number) of each boundary segment of one side of
+    an ``n``-point centreline that bounds some of it, in the order given (a later one bounding
+    a point again replaces the earlier)."""
+    out = []
     for seg in segments:
         line = lines.get(int(seg.boundary_feature_id))
         if line is None:
             continue
         lo = max(int(seg.lane_start_index), 0)
-        hi = min(int(seg.lane_end_index), len(centre) - 1)
-        if hi < lo:
-            continue
-        out[lo : hi + 1] = shapely.distance(points[lo : hi + 1], line)
+        hi = min(int(seg.lane_end_index), n - 1)
+        if hi >= lo:
+            out.append((lo, hi, line))
     return out
 
 
-def lane_widths(scenario: Any) -> dict[int, float | None]:
-    """Lane feature id → its measured width (m), or None where no boundary bounds it."""
-    lines: dict[int, Any] = {}
+def lane_widths(
+    scenario: Any, centres: dict[int, npt.NDArray[np.float64]] | None = None
+) -> dict[int, float | None]:
+    """Lane feature id → its measured width (m), or None where no boundary bounds it.
+
+    ``centres``: lane feature id → its centreline (N, 2), when the caller has them already.
+
+    The distance of a centreline point to a boundary is GEOS's (``shapely.distance`` of the
+    point and the boundary's linestring: the least over its segments of
+    ``Distance::pointToSegment``; a one-point boundary, the distance between the points),
+    computed here in one compiled pass over every bounded point of every lane
+    (:func:`redrive.maps.polylines.polyline_distances`: the same doubles)."""
+    coords: list[npt.NDArray[np.float64]] = []
+    lines: dict[int, int] = {}  # feature id → its number in coords
     for feature in scenario.map_features:
         kind = feature.WhichOneof("feature_data")
         if kind in ("road_line", "road_edge"):
             xy = _xy(getattr(feature, kind).polyline)
-            if len(xy) >= 2:
-                lines[int(feature.id)] = shapely.linestrings(xy)
-            elif len(xy) == 1:
-                lines[int(feature.id)] = shapely.points(xy[0])
-    out: dict[int, float | None] = {}
+            if len(xy) >= 1:
+                lines[int(feature.id)] = len(coords)
+                coords.append(xy)
+    # per lane: (id, n points, left spans, right spans); the spans' points and boundaries in
+    # one flat list each, in that order
+    lanes: list[tuple[int, int, list[tuple[int, int, int]], list[tuple[int, int, int]]]] = []
+    bounded: list[npt.NDArray[np.float64]] = []
+    which: list[npt.NDArray[np.int64]] = []
     for feature in scenario.map_features:
         if feature.WhichOneof("feature_data") != "lane":
             continue
-        centre = _xy(feature.lane.polyline)
+        centre = (
+            centres[int(feature.id)]
+            if centres is not None and int(feature.id) in centres
+            else _xy(feature.lane.polyline)
+        )
         if len(centre) < 2:
             continue
-        left = _side_distances(centre, feature.lane.left_boundaries, lines)
-        right = _side_distances(centre, feature.lane.right_boundaries, lines)
-        both = np.isfinite(left) & np.isfinite(right)
+        n = len(centre)
+        left = _bounded_spans(n, feature.lane.left_boundaries, lines)
+        right = _bounded_spans(n, feature.lane.right_boundaries, lines)
+        for lo, hi, line in (*left, *right):
+            bounded.append(centre[lo : hi + 1])
+            which.append(np.full(hi + 1 - lo, line, dtype=np.int64))
+        lanes.append((int(feature.id), n, left, right))
+    flat = np.zeros(0)
+    if bounded:
+        offsets = np.cumsum([0, *(len(c) for c in coords)]).astype(np.int64)
+        flat = polyline_distances(
+            np.concatenate(bounded),
+            np.concatenate(which),
+            np.ascontiguousarray(np.concatenate(coords)),
+            offsets,
+        )
+    out: dict[int, float | None] = {}
+    at = 0
+    for fid, n, left_spans, right_spans in lanes:
+        sides = []
+        for spans in (left_spans, right_spans):
+            side = np.full(n, np.nan)
+            for lo, hi, _ in spans:
+                side[lo : hi + 1] = flat[at : at + hi + 1 - lo]
+                at += hi + 1 - lo
+            sides.append(side)
+        left_m, right_m = sides
+        both = np.isfinite(left_m) & np.isfinite(right_m)
         if both.any():
-            width = float(np.mean(left[both] + right[both]))
-        elif np.isfinite(left).any() or np.isfinite(right).any():
-            one = np.where(np.isfinite(left), left, right)
+            width = float(np.mean(left_m[both] + right_m[both]))
+        elif np.isfinite(left_m).any() or np.isfinite(right_m).any():
+            one = np.where(np.isfinite(left_m), left_m, right_m)
             width = float(2.0 * np.nanmean(one))
         else:
             width = None
-        out[int(feature.id)] = width if width is not None and width > 0.5 else None
+        out[fid] = width if width is not None and width > 0.5 else None
     return out
 
 
@@ -111,7 +150,12 @@ def road_map_from_scenario(scenario: Any, *, source: str) -> RoadMap:
     Raises:
         LogError: a lane's points are not finite, or two features share an id.
     """
-    widths = lane_widths(scenario)
+    centres = {
+        int(f.id): _xy(f.lane.polyline)
+        for f in scenario.map_features
+        if f.WhichOneof("feature_data") == "lane"
+    }
+    widths = lane_widths(scenario, centres)
     known = [w for w in widths.values() if w is not None]
     fallback = float(np.median(known)) if known else None
     lanes: list[tuple[int, Any, npt.NDArray[np.float64], float]] = []
@@ -125,7 +169,7 @@ def road_map_from_scenario(scenario: Any, *, source: str) -> RoadMap:
         seen.add(fid)
         if feature.WhichOneof("feature_data") != "lane":
             continue
-        centre = _xy(feature.lane.polyline)
+        centre = centres[fid]
         if not np.all(np.isfinite(centre)):
             msg = f"{source}: lane {fid}: its polyline holds a point that is not finite"
             raise LogError(msg)

@@ -23,7 +23,6 @@ import logging
 import mmap
 import os
 from collections.abc import Collection, Iterator
-from itertools import repeat
 from pathlib import Path
 from typing import Any
 
@@ -34,7 +33,7 @@ from rosbags.rosbag1 import ReaderError as RosbagsReaderError
 from rosbags.rosbag1.reader import decompressors as rosbags_decompressors
 
 from redrive.errors import LogError
-from redrive.io.base import LogMessage, MessageBatch, TopicInfo
+from redrive.io.base import LogMessage, TopicInfo
 from redrive.io.damage import DamageLog, LogDamage
 from redrive.io.limits import decompress_bounded
 from redrive.io.limits import max_chunk_bytes as chunk_budget
@@ -49,6 +48,7 @@ from redrive.io.rosbag1.index import (
     index_contradiction,
     merged_index,
 )
+from redrive.io.rosbag1.messages import batched_messages as _batched
 from redrive.io.rosbag1.records import (
     MAGIC,
     OP_CONNECTION,
@@ -340,7 +340,7 @@ class Ros1BagReader(RosReaderBase):
                 self._chunk_damage(pos, err, yielded)
                 continue
             try:
-                (starts, stops), damage = self._chunk_spans(
+                (starts, stops, stride), damage = self._chunk_spans(
                     chunk, offsets[lo:hi], times[lo:hi], conn_ids[lo:hi]
                 )
                 good = len(starts)
@@ -349,6 +349,7 @@ class Ros1BagReader(RosReaderBase):
                     (starts, stops, times[lo : lo + good]),
                     conn_ids[lo : lo + good].tolist(),
                     heads,
+                    stride=stride,
                 )
                 yielded += good
                 if damage is not None:
@@ -365,9 +366,10 @@ class Ros1BagReader(RosReaderBase):
         offsets: npt.NDArray[np.int64],
         times: npt.NDArray[np.int64],
         conn_ids: npt.NDArray[np.int64],
-    ) -> tuple[tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]], DamageError | None]:
-        """The data spans of the messages the index places in ``chunk``, each checked to carry
-        the index's time and connection: all at once when the chunk holds enough of them to
+    ) -> tuple[tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], int | None], DamageError | None]:
+        """The data spans of the messages the index places in ``chunk`` (and their fixed
+        distance, when :func:`~redrive.io.rosbag1.index.chunk_spans` found one), each checked to
+        carry the index's time and connection: all at once when the chunk holds enough of them to
         pay for it, else (or when that check declines) one by one up to the first damaged one,
         which is returned with the spans before it."""
         if len(offsets) >= _CHECK_AT_ONCE_FROM:
@@ -387,7 +389,7 @@ class Ros1BagReader(RosReaderBase):
                 break
             starts.append(start)
             stops.append(stop)
-        return (np.array(starts, dtype=np.int64), np.array(stops, dtype=np.int64)), damage
+        return (np.array(starts, dtype=np.int64), np.array(stops, dtype=np.int64), None), damage
 
     def _chunk_bytes(
         self, header: Any, *, own: bool = False
@@ -533,68 +535,3 @@ _CHECK_AT_ONCE_FROM = 4
 #: map's page faults plus that copy).  Other types' chunks stay mapped: reading them without
 #: touching every byte costs no copy at all.
 READ_INTO_BYTES = frozenset({"sensor_msgs/msg/PointCloud2"})
-
-_new_message = object.__new__
-_SET = tuple(
-    LogMessage.__dict__[name].__set__
-    for name in ("topic", "msgtype", "log_time_ns", "encoding", "raw", "payload", "batch")
-)
-
-
-def _batched(
-    chunk: memoryview,
-    spans: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64]],
-    conn_ids: list[int],
-    heads: dict[int, tuple[str, str]],
-) -> Iterator[LogMessage]:
-    """The checked messages of one chunk (``spans``: their starts, stops and log times), those
-    of each connection linked as one batch, whose starts, stops and times stay arrays.
-
-    The messages are built through their slots' setters (what the dataclass's ``__init__``
-    does), each setter mapped over the whole chunk.
-    """
-    start_at, stop_at, time_at = spans
-    count = len(conn_ids)
-    slot_of: list[tuple[MessageBatch, int] | None]
-    one_connection = len(set(conn_ids)) == 1
-    if one_connection:  # one topic in the chunk: the common case, no loop in Python
-        batch = MessageBatch(
-            chunk, starts=start_at, stops=stop_at, log_times_ns=time_at, encoding="ros1"
-        )
-        slot_of = list(zip(repeat(batch, count), range(count), strict=True))
-    else:
-        slot_of = [None] * count
-        members: dict[int, list[int]] = {}
-        for i, cid in enumerate(conn_ids):
-            members.setdefault(cid, []).append(i)
-        for rows in members.values():
-            picked = np.asarray(rows, dtype=np.int64)
-            batch = MessageBatch(
-                chunk,
-                starts=start_at[picked],
-                stops=stop_at[picked],
-                log_times_ns=time_at[picked],
-                encoding="ros1",
-            )
-            for j, i in enumerate(rows):
-                slot_of[i] = (batch, j)
-    # Every message of the chunk built by C-level iteration over the chunk's lists (what the
-    # dataclass's ``__init__`` does through the slots' setters, at a fraction of the cost of a
-    # Python step a message): the ``yield from`` below is then the only per-message step.
-    raws = list(map(chunk.__getitem__, map(slice, start_at.tolist(), stop_at.tolist())))
-    messages: list[LogMessage] = list(map(_new_message, repeat(LogMessage, count)))
-    set_topic, set_type, set_time, set_encoding, set_raw, set_payload, set_batch = _SET
-    if one_connection:
-        topic, msgtype = heads[conn_ids[0]]
-        any(map(set_topic, messages, repeat(topic, count)))
-        any(map(set_type, messages, repeat(msgtype, count)))
-    else:
-        pairs = list(map(heads.__getitem__, conn_ids))
-        any(map(set_topic, messages, [topic for topic, _ in pairs]))
-        any(map(set_type, messages, [msgtype for _, msgtype in pairs]))
-    any(map(set_time, messages, time_at.tolist()))
-    any(map(set_encoding, messages, repeat("ros1", count)))
-    any(map(set_raw, messages, raws))
-    any(map(set_payload, messages, repeat(None, count)))
-    any(map(set_batch, messages, slot_of))
-    yield from messages

@@ -71,6 +71,7 @@ VIEW_SHARE = 0.5
 VIEW_MAX_BYTES = 4 << 20
 
 _U32 = np.dtype("<u4")
+_SEC_NS = np.array([1_000_000_000, 1], dtype=np.int64)
 #: ROS 1 PointCloud2 bytes: seq (4), stamp sec (4), nsec (4), then the frame id's length.
 _STAMP_AT = 4
 _SAME_FROM = 12
@@ -174,11 +175,11 @@ def decode_batch(
     if count < BATCH_FROM or batch.encoding != "ros1" or not buffer_is_immutable(buf):
         return out
     starts = np.asarray(batch.starts, dtype=np.int64)
-    sizes = np.asarray(batch.stops, dtype=np.int64) - starts
-    size = int(sizes[0])
-    if not (sizes == size).all():
-        return out
+    known = batch.stride  # the reader found them at a fixed distance, of one size
     first = int(starts[0])
+    size = int(batch.stops[0]) - first
+    if known is None and not (np.asarray(batch.stops, dtype=np.int64) - starts == size).all():
+        return out
     view = memoryview(buf)[first : first + size]
     try:
         head = read_head(view, "ros1", layouts)
@@ -198,17 +199,26 @@ def decode_batch(
         return out
     # Each message's stamp and everything after it up to the point data, in one gather:
     # everything from the frame id on must be the first message's.
-    heads = byte_rows(buf, starts + _STAMP_AT, data_offset - _STAMP_AT)
+    width = data_offset - _STAMP_AT
+    if known is not None:
+        # At a fixed distance: one strided view of the chunk, nothing gathered.
+        heads = np.ndarray((count, width), np.uint8, buf, first + _STAMP_AT, (known, 1))
+    else:
+        heads = byte_rows(buf, starts + _STAMP_AT, width)
     same = heads[:, _SAME_FROM - _STAMP_AT :]
-    if not (same == same[0]).all():
+    # One comparison of bytes (a reduction over a small array costs more than the copies).
+    if same.tobytes() != same[0].tobytes() * count:
         return out
     stamp = heads[:, : _SAME_FROM - _STAMP_AT].view(_U32)
-    stamps = stamp[:, 0].astype(np.int64) * 1_000_000_000 + stamp[:, 1]
-    gaps = starts[1:] - starts[:-1]
+    stamps = stamp.astype(np.int64) @ _SEC_NS  # sec · 10⁹ + nsec, exact in int64
     nbytes = n * step
     # At a fixed distance (a chunk of one topic), or between other topics' messages.
-    stride = size if count == 1 else int(gaps[0])
-    regular = count == 1 or (stride >= size and (gaps == stride).all())
+    if known is not None:
+        stride, regular = known, known >= size
+    else:
+        gaps = starts[1:] - starts[:-1]
+        stride = size if count == 1 else int(gaps[0])
+        regular = count == 1 or (stride >= size and (gaps == stride).all())
     if views_buffer(buf, count * nbytes, each=nbytes):
         # The clouds are most of a private chunk buffer: views of it, nothing copied.
         xyz, values = _view(
@@ -227,7 +237,9 @@ def decode_batch(
         xyz, values = _cut(rows, nbytes, plan.view, plan.channels)
     channels = list(zip(plan.channels, values, strict=True))
     # A zero stamp means "unset": the message's log time stands in for it.
-    stamps_ns = np.where(stamps == 0, batch.log_times_ns, stamps).tolist()
+    stamps_ns = stamps.tolist()
+    if 0 in stamps_ns:  # rare: no reduction over the array unless one is unset
+        stamps_ns = np.where(stamps == 0, batch.log_times_ns, stamps).tolist()
     clouds = PointCloud.many_from_frozen(xyz, channels)
     # The Decoded objects built by C-level iteration too (their slots' setters, as ``__init__``).
     decoded: list[Decoded | None] = list(map(_new, repeat(Decoded, count)))

@@ -1,0 +1,160 @@
+"""Points against polylines as GEOS measures them, in one compiled pass over many pairs.
+
+``shapely.distance(point, line)`` and ``shapely.line_locate_point(line, point)`` cost a GEOS
+call each (and a Python one per array of them); the map's queries ask them for thousands of
+(point, polyline) pairs.  The kernels here do the same floating-point operations in the same
+order as GEOS (3.14: ``DistanceOp`` on a point and a linestring — the least over the segments
+of ``Distance::pointToSegment`` —, and ``LengthIndexOfPoint::indexOf`` for the projection — the
+first segment in order at the least distance, its ``segmentNearestMeasure``), so the results
+are the same doubles; only segments whose bounding box is farther from the point than the best
+distance so far (by a relative margin of 1e-9, far above rounding) are skipped, and a skipped
+segment could not have been chosen.
+
+The polylines are given as one vertex array ``coords`` (V, 2) and ``offsets`` (L + 1,): polyline
+``k`` is ``coords[offsets[k]:offsets[k + 1]]`` (a one-vertex polyline is a point).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numba
+import numpy as np
+import numpy.typing as npt
+
+__all__ = ["packed", "polyline_distances", "polyline_locate"]
+
+F64 = npt.NDArray[np.float64]
+I64 = npt.NDArray[np.int64]
+#: a segment whose bounding box is farther than the best distance times this is skipped
+_SKIP = 1.0 + 1e-9
+
+
+def packed(lines: Sequence[npt.ArrayLike]) -> tuple[F64, I64]:
+    """``(coords, offsets)`` of polylines given as (N_k, 2) vertex arrays."""
+    arrays = [np.asarray(line, dtype=np.float64).reshape(-1, 2) for line in lines]
+    offsets = np.zeros(len(arrays) + 1, dtype=np.int64)
+    offsets[1:] = np.cumsum([a.shape[0] for a in arrays])
+    coords = np.ascontiguousarray(np.concatenate(arrays)) if arrays else np.zeros((0, 2))
+    return coords, offsets
+
+
+def polyline_distances(
+    points: npt.ArrayLike, line_of: npt.ArrayLike, coords: F64, offsets: I64
+) -> F64:
+    """(P,) ``shapely.distance`` of each point (P, 2) and its polyline ``line_of[i]``."""
+    p, which = _arguments(points, line_of)
+    if p.shape[0] == 0:
+        return np.zeros(0)
+    out: F64 = _distances(p, which, coords, offsets)
+    return out
+
+
+def polyline_locate(
+    points: npt.ArrayLike, line_of: npt.ArrayLike, coords: F64, offsets: I64
+) -> tuple[F64, F64]:
+    """(P,) ``shapely.line_locate_point`` of each point (P, 2) on its polyline ``line_of[i]``
+    (of at least two vertices), and (P,) their ``shapely.distance``."""
+    p, which = _arguments(points, line_of)
+    if p.shape[0] == 0:
+        return np.zeros(0), np.zeros(0)
+    s, d = _locate(p, which, coords, offsets)
+    return s, d
+
+
+def _arguments(points: npt.ArrayLike, line_of: npt.ArrayLike) -> tuple[F64, I64]:
+    p = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 2))
+    which = np.ascontiguousarray(np.asarray(line_of, dtype=np.int64).reshape(-1))
+    if which.shape[0] != p.shape[0]:
+        msg = f"{p.shape[0]} points but {which.shape[0]} polyline numbers"
+        raise ValueError(msg)
+    return p, which
+
+
+@numba.njit(cache=True, nogil=True)
+def _far(  # noqa: PLR0917 (numba has no keyword-only parameters)
+    px: float, py: float, ax: float, ay: float, bx: float, by: float, best: float
+) -> bool:
+    """The segment's bounding box is farther from the point than ``best`` (by the margin)."""
+    gx = max(min(ax, bx) - px, px - max(ax, bx), 0.0)
+    gy = max(min(ay, by) - py, py - max(ay, by), 0.0)
+    return gx * gx + gy * gy > best * best * _SKIP
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _point_to_segment(  # noqa: PLR0917 (numba has no keyword-only parameters)
+    px: float, py: float, ax: float, ay: float, bx: float, by: float
+) -> float:
+    """GEOS's ``Distance::pointToSegment``."""
+    if ax == bx and ay == by:
+        return math.sqrt((px - ax) * (px - ax) + (py - ay) * (py - ay))
+    len2 = (bx - ax) * (bx - ax) + (by - ay) * (by - ay)
+    r = ((px - ax) * (bx - ax) + (py - ay) * (by - ay)) / len2
+    if r <= 0.0:
+        return math.sqrt((px - ax) * (px - ax) + (py - ay) * (py - ay))
+    if r >= 1.0:
+        return math.sqrt((px - bx) * (px - bx) + (py - by) * (py - by))
+    s = ((ay - py) * (bx - ax) - (ax - px) * (by - ay)) / len2
+    return abs(s) * math.sqrt(len2)
+
+
+@numba.njit(cache=True, nogil=True)
+def _distances(points: F64, line_of: I64, coords: F64, offsets: I64) -> F64:
+    out = np.empty(points.shape[0])
+    for i in range(points.shape[0]):
+        px, py = points[i, 0], points[i, 1]
+        lo, hi = offsets[line_of[i]], offsets[line_of[i] + 1]
+        if hi - lo == 1:
+            dx, dy = px - coords[lo, 0], py - coords[lo, 1]
+            out[i] = math.sqrt(dx * dx + dy * dy)
+            continue
+        best = math.inf
+        for j in range(lo, hi - 1):
+            ax, ay, bx, by = coords[j, 0], coords[j, 1], coords[j + 1, 0], coords[j + 1, 1]
+            if _far(px, py, ax, ay, bx, by, best):
+                continue
+            d = _point_to_segment(px, py, ax, ay, bx, by)
+            if d < best:
+                best = d
+                if best <= 0.0:  # DistanceOp's terminateDistance
+                    break
+        out[i] = best
+    return out
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _locate(points: F64, line_of: I64, coords: F64, offsets: I64) -> tuple[F64, F64]:
+    s_out = np.empty(points.shape[0])
+    d_out = np.empty(points.shape[0])
+    for i in range(points.shape[0]):
+        px, py = points[i, 0], points[i, 1]
+        lo, hi = offsets[line_of[i]], offsets[line_of[i] + 1]
+        best = math.inf
+        measure = -1.0  # LengthIndexOfPoint::indexOf's minIndex
+        start = 0.0  # its segmentStartMeasure
+        for j in range(lo, hi - 1):
+            ax, ay, bx, by = coords[j, 0], coords[j, 1], coords[j + 1, 0], coords[j + 1, 1]
+            length = math.sqrt((ax - bx) * (ax - bx) + (ay - by) * (ay - by))
+            if not _far(px, py, ax, ay, bx, by, best):
+                d = _point_to_segment(px, py, ax, ay, bx, by)
+                # segmentNearestMeasure, with LineSegment::projectionFactor
+                if px == ax and py == ay:
+                    r = 0.0
+                elif px == bx and py == by:
+                    r = 1.0
+                else:
+                    dx, dy = bx - ax, by - ay
+                    r = ((px - ax) * dx + (py - ay) * dy) / (dx * dx + dy * dy)
+                if r <= 0.0:
+                    m = start
+                elif r <= 1.0:
+                    m = start + r * length
+                else:
+                    m = start + length
+                if d < best and m > -1.0:
+                    measure, best = m, d
+            start += length
+        s_out[i] = measure
+        d_out[i] = best
+    return s_out, d_out
