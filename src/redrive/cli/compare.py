@@ -185,7 +185,8 @@ def _print(cmp: Any, *, worst: int, everything: bool = False) -> None:
     # a series of an algorithm (or stage) only one run has shares no frame: named below the
     # table, not listed as a row of "n/a" (--all lists it)
     one_sided = [s for s in cmp.series if not s.bootstrap.n_frames and (s.only_a or s.only_b)]
-    paired = list(cmp.series) if everything else [s for s in cmp.series if s not in one_sided]
+    one_ids = {id(s) for s in one_sided}  # by identity: a delta holds arrays (no == of them)
+    paired = list(cmp.series) if everything else [s for s in cmp.series if id(s) not in one_ids]
     series_shown = paired if everything else paired[:SCREEN_SERIES]
     for s in series_shown:
         b = s.bootstrap

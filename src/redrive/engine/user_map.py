@@ -314,7 +314,9 @@ def choose_road_map(
         road_map, log, sensor_map=sensor_map, origin_lat_lon=option.origin_lat_lon
     )
     record = {"from": "--map", **record, "alignment": alignment}
-    if record.get("format") == "lanelet2" and (far := gnss_check(log, sensor_map, road_map)):
+    if record.get("format") == "lanelet2" and (
+        far := gnss_check(log, sensor_map, road_map, Path(option.path))
+    ):
         record["gnss"] = far
     if own is not None and _same_file(own.source, Path(option.path)):
         record["same_as_log"] = True  # the log's own map file given again: nothing replaced
@@ -353,7 +355,9 @@ def attach_map(run_dir: Path, option: MapOption) -> dict[str, Any]:
             placed, alignment = align_map(
                 road_map, log, sensor_map=smap, origin_lat_lon=option.origin_lat_lon
             )
-            if record.get("format") == "lanelet2" and (far := gnss_check(log, smap, road_map)):
+            if record.get("format") == "lanelet2" and (
+                far := gnss_check(log, smap, road_map, Path(option.path))
+            ):
                 record["gnss"] = far
     elif option.origin_lat_lon is not None:
         frame = next(iter(manifest_frames(run_dir)), road_map.frame_id)
@@ -397,18 +401,19 @@ def attach_map(run_dir: Path, option: MapOption) -> dict[str, Any]:
 FAR_FROM_GNSS_KM = 5.0
 
 
-def gnss_check(log: LogReader, sensor_map: SensorMap, road_map: RoadMap) -> dict[str, Any] | None:
-    """The log's first GNSS fix against the Lanelet2 map ``road_map`` (its file's first node's
-    latitude and longitude, its extent in metres): the manifest's ``gnss`` entry (topic, fix,
-    distance in km, ``far``), with a warning when the fix lies more than
+def gnss_check(
+    log: LogReader, sensor_map: SensorMap, road_map: RoadMap, file: Path
+) -> dict[str, Any] | None:
+    """The log's first GNSS fix against the Lanelet2 map ``road_map`` read from ``file`` (its
+    first node's latitude and longitude, the map's extent in metres): the manifest's ``gnss``
+    entry (topic, fix, distance in km, ``far``), with a warning when the fix lies more than
     :data:`FAR_FROM_GNSS_KM` beyond the map's extent; None when the log has no decodable fix."""
     from redrive.maps.lanelet2_osm import first_node
 
     topics = [s.topic for s in sensor_map.sensors if s.sensor_type is SensorType.GNSS]
-    fix = _first_fix(log, topics[0]) if topics and road_map.source else None
+    fix = _first_fix(log, topics[0]) if topics else None
     if fix is None or not road_map.lanes:
         return None
-    file = road_map.source.split(":", 1)[-1].split(" (")[0] if road_map.source else ""
     lat, lon, _ = first_node(file)
     # haversine: the great-circle distance on a 6,371-km sphere (good to 0.5 % for this check)
     p1, p2 = math.radians(lat), math.radians(fix.latitude_deg)

@@ -160,6 +160,8 @@ class Player:
     def _send_latched(self) -> None:
         """Send again the latched messages that clients subscribed to since (outside the lock:
         the server's callbacks take it)."""
+        if not self._resend:  # the common case, every message: no lock taken
+            return
         with self._cond:
             topics, self._resend = self._resend, []
             again = [self._latched[t] for t in dict.fromkeys(topics) if t in self._latched]

@@ -21,9 +21,10 @@ they drive along and that chain's reference line:
    blend between them).
 
 :func:`route_to_goal` is the route of a log that sets a goal instead of driving a path (a
-CommonRoad planning problem): from the start pose's lane, the cheapest lane-graph route to the
-nearest of the goal's lanes, extended past it as in step 3; a lane change on it leaves the first
-lane at its middle.
+CommonRoad planning problem): from each lane holding the start pose that runs within 90° of its
+heading (junction lanes overlap), the cheapest lane-graph route to each goal lane; the shortest
+of them by length, extended past it as in step 3; a lane change on it leaves the first lane at
+its middle.
 """
 
 from __future__ import annotations
