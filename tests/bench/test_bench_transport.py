@@ -23,6 +23,7 @@ from redrive.benchmarks.transport import (
     bench_memcpy,
     bench_transport,
     check_targets,
+    copy_floor_ms,
     parse_size,
     run_cell,
     side_available,
@@ -137,6 +138,41 @@ def test_targets() -> None:
     assert by["vs memcpy from memory", "redrive-inplace", 16 * mib].met is None  # did not run
     assert by["paced p99", "redrive-copy", 4 * mib].met is True
     assert by["paced p99", "redrive-inplace", 4 * mib].met is False
+    assert by["paced p99 (issue 36)", "redrive-copy", 4 * mib].met is False  # 1.5 ms > 1 ms
+    assert by["paced p99", "redrive-copy", 4 * mib].reference is None  # no memcpy at 4 MiB
+
+
+def test_paced_targets_against_the_floor_of_their_copies() -> None:
+    """A paced latency's reference is its copies at the same run's from-memory memcpy rate:
+    copy-out two, in place one."""
+    mib = 1 << 20
+    n = 4 * mib
+
+    def rep(p99_ms: float, from_memory_gb: float) -> TransportBenchResult:
+        cells = (_run("redrive-copy", n, 5.0, p99_ms=p99_ms), _run("redrive-inplace", n, 9.0))
+        mem = MemcpyResult(
+            size_bytes=n, hot_gb_per_s=30.0, from_memory_gb_per_s=from_memory_gb, pool_bytes=n
+        )
+        result = TransportBenchResult(
+            sizes=(n,), seconds=1.0, paced_hz=100.0, slots=4, cells=cells, memcpy=(mem,),
+            targets=(),
+        )  # fmt: skip
+        return dataclasses.replace(result, targets=check_targets(result))
+
+    one = rep(2.0, n / 1e6)  # 1 ms per copy
+    by = {(t.name.split(" at ")[0], t.side): t for t in one.targets}
+    assert copy_floor_ms(one, "redrive-copy", n) == pytest.approx(2.0)
+    assert by["paced p99", "redrive-copy"].reference == pytest.approx(2.0)
+    assert by["paced p99", "redrive-copy"].ratio == pytest.approx(1.0)
+    assert by["paced p99", "redrive-inplace"].reference == pytest.approx(1.0)
+    assert by["paced p99 (issue 36)", "redrive-copy"].met is False
+    assert copy_floor_ms(one, "iceoryx2", n) is None
+    spreads = target_spreads([one, rep(3.0, n / 2e6), rep(1.5, n / 1e6)])
+    copy36 = next(t for t in spreads if t.name == "paced p99 (issue 36)")
+    assert copy36.floors == pytest.approx((2.0, 4.0, 2.0))  # the second at half the rate
+    assert copy36.floor_median == pytest.approx(2.0)
+    assert copy36.floor_ratios == pytest.approx((1.0, 0.75, 0.75))
+    assert next(t for t in spreads if t.name.startswith("vs")).floors == ()
 
 
 def test_target_spreads_take_the_verdict_on_the_median() -> None:
