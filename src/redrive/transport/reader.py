@@ -194,18 +194,10 @@ class _View:
         if self._dropped:
             rd._dropped += self._dropped
         _ENTRY.pack_into(
-            rd._mm,
-            rd._counters_at,
-            seq,  # read_seq
-            -1,  # pin
-            rd._delivered,
-            rd._dropped,
-            rd._torn,
-            rd._lag_last,
-            rd._lag_max,
-            rd._lag_sum,
+            rd._mm, rd._counters_at, seq, -1,  # read_seq, pin (unpinned)
+            rd._delivered, rd._dropped, rd._torn, rd._lag_last, rd._lag_max, rd._lag_sum,
             rd._capture_lag,
-        )
+        )  # fmt: skip
         if rd._wake_writer:
             fence()  # read_seq is seen by a writer before it sleeps, or its flag is seen here
             if w[W_WRITER_WAITING]:
@@ -333,6 +325,7 @@ class Reader:
         self._view_n = [lay.capacity] * lay.n_slots  # … and its length
         self._mm = seg.mm
         self._raw = memoryview(seg.mm)
+        seg.populate()
         self._handshake(entry, seg.generation)
         self._ready = True
 

@@ -70,6 +70,9 @@ POLL_NS = 5_000
 #: message (or the free slot) comes; measured on the 2-vCPU VM under load ≈ 4 (BENCHMARKS.md,
 #: h-shm7): the yields made a 4 MiB stream's publisher use 108–136 µs of CPU a message against
 #: 81–95 without them, and a 1 MiB one's 25–27 against 30–32 (in 3 of 4 rounds; 2 MiB: a tie)
+#: Waking a sleeping reader when such a message's slot is claimed rather than when it is
+#: published (to overlap its wake-up with the copy) was measured worse (h-transport): the woken
+#: reader takes the writer's core mid-copy — publisher CPU 245 → 386–575 µs a 4 MiB message.
 LONG_WAIT_BYTES = 2 << 20
 #: what a poll calls between two looks at shared memory (see SPIN_NS)
 yield_cpu = os.sched_yield
