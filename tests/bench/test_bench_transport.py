@@ -6,12 +6,14 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import io
 import json
 import math
 
 import pytest
+from rich.console import Console
 
-from redrive.benchmarks.cli.transport import add_transport_parser
+from redrive.benchmarks.cli.transport import _print_floors, add_transport_parser
 from redrive.benchmarks.transport import (
     MIN_SIZE,
     SIDES,
@@ -173,6 +175,14 @@ def test_paced_targets_against_the_floor_of_their_copies() -> None:
     assert copy36.floor_median == pytest.approx(2.0)
     assert copy36.floor_ratios == pytest.approx((1.0, 0.75, 0.75))
     assert next(t for t in spreads if t.name.startswith("vs")).floors == ()
+    out = io.StringIO()
+    _print_floors(Console(file=out, width=200), spreads, SIDES)
+    lines = out.getvalue().splitlines()
+    assert len(lines) == 3  # the paced targets: both sides at 2 ms, copy-out at 1 ms
+    assert lines[-1] == (
+        "paced p99 (issue 36), redrive copy-out: floor 2.00 ms (median), p99 ÷ floor "
+        "0.75/0.75/1.00× (min/median/max) — the bound ≤ 1 ms is below the floor"
+    )
 
 
 def test_target_spreads_take_the_verdict_on_the_median() -> None:
