@@ -30,10 +30,10 @@ it on the copy they were handed, in-place sides on the shared memory. Also singl
 np.copyto, cache-hot and from memory (256 MiB pools): the ceiling of any copy on this machine.
 Targets (issue 6): >= 10x pipe + pickle at 4 MiB; >= 50 % of the from-memory copy at 16 MiB; paced
 4 MiB p99 <= 2 ms (issue 36: <= 1 ms copy-out), each latency shown against its floor: its copies
-(copy-out 2, in place 1) at the from-memory memcpy rate of the same run. --repeat N runs the whole set N times, interleaved (every side at every size
-once per repetition), and prints min / median / max of each target's ratio over the repetitions,
-judged on the median. (Against ZeroMQ, eCAL and iceoryx2: `PYTHONPATH=src python -m benchmarks
-transport` in a checkout, benchmarks/README.md.)
+(copy-out 2, in place 1) at the from-memory memcpy rate of the same run. --repeat N runs the whole
+set N times, interleaved (every side at every size once per repetition), and prints min / median /
+max of each target's ratio over the repetitions, judged on the median. (Against ZeroMQ, eCAL and
+iceoryx2: `PYTHONPATH=src python -m benchmarks transport` in a checkout, benchmarks/README.md.)
 """
 
 _EPILOG = """\

@@ -39,11 +39,12 @@ from redrive.benchmarks.transport.sides import (
 from redrive.errors import TransportError
 
 __all__ = [
-    "CATALOGUE", "DEFAULT_SIZES", "INPLACE_VS_ICEORYX2_TARGET", "MIN_SIZE",
-    "PACED_COPIES", "PACED_P99_COPY_TARGET_MS", "PACED_P99_TARGET_MS", "SIDES", "SLOTS", "VS_MEMCPY_TARGET", "VS_PIPE_PICKLE_TARGET",
-    "CellResult", "MemcpyResult", "RunResult", "SideSpec", "TargetCheck",
+    "CATALOGUE", "DEFAULT_SIZES", "INPLACE_VS_ICEORYX2_TARGET", "MIN_SIZE", "PACED_COPIES",
+    "PACED_P99_COPY_TARGET_MS", "PACED_P99_TARGET_MS", "SIDES", "SLOTS", "VS_MEMCPY_TARGET",
+    "VS_PIPE_PICKLE_TARGET", "CellResult", "MemcpyResult", "RunResult", "SideSpec", "TargetCheck",
     "TargetSpread", "TransportBenchResult", "bench_memcpy", "bench_transport", "catalogue_sides",
-    "check_targets", "copy_floor_ms", "parse_size", "run_cell", "side_available", "size_label", "target_spreads",
+    "check_targets", "copy_floor_ms", "parse_size", "run_cell", "side_available", "size_label",
+    "target_spreads",
 ]  # fmt: skip
 
 logger = logging.getLogger(__name__)
