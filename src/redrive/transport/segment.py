@@ -281,7 +281,8 @@ class Segment:
 
     def populate(self) -> None:
         """Map every page of the segment now (a reader, once it has joined): its first touch of
-        each slot takes no page fault (the kernel maps 16 pages a fault: 64 for a 4 MiB slot)."""
+        each slot takes no page fault (the kernel maps 16 pages a fault: 64 for a 4 MiB slot).
+        Once, at attach: 11–26 ms for 4 × 16 MiB slots on the 2-vCPU VM at load 11."""
         try:
             self.mm.madvise(_MADV_POPULATE_READ)
         except OSError:  # an older kernel: read a byte of each page
