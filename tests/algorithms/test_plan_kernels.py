@@ -15,6 +15,7 @@ from redrive.algorithms.reference._kernels import project_on_segments
 from redrive.algorithms.reference._plan_kernels import (
     gate_crossing,
     leaders_on_path,
+    path_bounds,
     points_at,
     polyline_arc,
     project_pruned,
@@ -210,3 +211,20 @@ def test_gate_crossing_equals_the_numpy_code_bit_for_bit() -> None:
             crossed += 1
             assert _bits(np.array([s, tx, ty])) == _bits(np.array([want[0], *want[1]]))
     assert crossed > 50  # the crossings themselves were compared, not only the misses
+
+
+def test_path_bounds_are_numpys_min_and_max_along_the_vertices() -> None:
+    rng = np.random.default_rng(11)
+    for m in (1, 2, 241):
+        xy = rng.normal(size=(m, 2)) * 50.0
+        low, high = path_bounds(xy)
+        assert low.tolist() == xy.min(axis=0).tolist()
+        assert high.tolist() == xy.max(axis=0).tolist()
+    xy = rng.normal(size=(5, 2))
+    xy[2, 1] = np.nan  # a NaN wins in its column, as in numpy
+    low, high = path_bounds(xy)
+    np.testing.assert_array_equal(low, xy.min(axis=0))
+    np.testing.assert_array_equal(high, xy.max(axis=0))
+    assert np.isnan(low[1])
+    assert np.isnan(high[1])
+    assert not np.isnan(low[0])

@@ -14,13 +14,10 @@ run ends after the first frame with one, the reason in the run summary).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
-import numpy as np
-
+from redrive.closedloop._contact_kernels import touching
 from redrive.errors import ConfigError
-from redrive.evaluation._kinematics import rectangle_corners, rectangles_overlap
 from redrive.sim.ego import EgoGeometry
 from redrive.types import Frame, ObjectColumns
 
@@ -52,25 +49,19 @@ def contacts(frame: Frame, geometry: EgoGeometry) -> tuple[Contact, ...]:
     if not objects:
         return ()
     # the objects' columns (shared with the simulator's DetectedObject.many: no object is
-    # filled field by field), the same values as the objects' boxes
+    # filled field by field), the same values as the objects' boxes; the pre-filter and the
+    # separating axis test in one compiled call (._contact_kernels.touching)
     columns = ObjectColumns.from_objects(objects)
-    centers = columns.center_m[:, :2]
-    sizes = columns.size_m[:, :2]
-    # two rectangles whose centres are further apart than the sum of their half-diagonals cannot
-    # touch: only the others go through the separating axis test (exact, not an approximation)
-    reach = 0.5 * (math.hypot(geometry.length_m, geometry.width_m) + np.hypot(*sizes.T))
-    near = np.flatnonzero(
-        np.hypot(centers[:, 0] - geometry.center_offset_m, centers[:, 1]) <= reach * (1.0 + 1e-9)
-    )
-    if near.size == 0:
+    rows = touching(
+        columns.center_m,
+        columns.size_m,
+        columns.yaw_rad,
+        geometry.center_offset_m,
+        geometry.length_m,
+        geometry.width_m,
+    ).tolist()
+    if not rows:
         return ()
-    ego = rectangle_corners(
-        (geometry.center_offset_m, 0.0), 0.0, geometry.length_m, geometry.width_m
-    )
-    boxes = rectangle_corners(centers[near], columns.yaw_rad[near], sizes[near, 0], sizes[near, 1])
-    touching = near[rectangles_overlap(ego, boxes)].tolist()
     ids = columns.object_id.tolist()
-    found = [
-        Contact(object_id=ids[m], object_class=columns.object_class[m].value) for m in touching
-    ]
+    found = [Contact(object_id=ids[m], object_class=columns.object_class[m].value) for m in rows]
     return tuple(sorted(found, key=lambda c: c.object_id))

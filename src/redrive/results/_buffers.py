@@ -4,7 +4,10 @@ Each table buffers one tuple per row, in its schema's column order, and is turne
 only when a flush takes it (``zip(*rows)``, in C): per frame that is one tuple and one append per
 row instead of one append per column through a dict of lists.  A planned path is kept as its
 waypoint array (and one tuple for the columns its rows share) until the flush, which
-concatenates the arrays: no Python row per waypoint.
+concatenates the arrays: no Python row per waypoint.  Likewise a frame's objects (ground truth,
+a perception's detections) are kept as their shared columns (:meth:`ObjectColumns.shared_by`),
+its ego states and closed-loop record as they are, until the flush builds their columns: per
+frame one append each, no Python float per value (the arrays and records are immutable).
 """
 
 from __future__ import annotations
@@ -88,7 +91,16 @@ class TableBuffers:
         #: a planned path: (algorithm, frame_index, stamp_ns, frame_id) and its (K, 4) waypoints
         self._path_heads: list[tuple[Any, ...]] = []
         self._path_points: list[np.ndarray] = []
-        self._detections = rows["detections"].extend
+        #: a frame's objects: (head, their shared columns or None, the objects), head the
+        #: columns their rows share — (algorithm, frame_index, stamp_ns) of a detection,
+        #: (frame_index, stamp_ns) of the ground truth
+        self._objects: dict[str, list[tuple[Any, ...]]] = {"detections": [], "ground_truth": []}
+        self._detections = self._objects["detections"].append
+        self._ground_truth = self._objects["ground_truth"].append
+        #: (frame_index, VehicleState) of the ego and ego_logged tables
+        self._states: dict[str, list[tuple[int, VehicleState]]] = {"ego": [], "ego_logged": []}
+        #: (frame_index, stamp_ns, ClosedLoopRecord) of the closed_loop table
+        self._closed_loop: list[tuple[Any, ...]] = []
         self.n_frames = 0
 
     # -- filling -----------------------------------------------------------------------------
@@ -119,7 +131,7 @@ class TableBuffers:
             if kind is tuple:
                 n_outputs = len(out)  # type: ignore[arg-type]
                 if n_outputs:  # no rows for no objects (and no column building to find that out)
-                    self._detections(_object_rows((name, fi, stamp), out, ground_truth=False))  # type: ignore[arg-type]
+                    self._detections(((name, fi, stamp), ObjectColumns.shared_by(out), out))  # type: ignore[arg-type]
             elif kind is PlannedPath:
                 n_outputs = 1
                 self._add_path(name, fi, out)  # type: ignore[arg-type]
@@ -143,35 +155,17 @@ class TableBuffers:
                 )
             )
         if gt:
-            self._rows["ground_truth"].extend(_object_rows((fi, stamp), gt, ground_truth=True))
+            self._ground_truth(((fi, stamp), ObjectColumns.shared_by(gt), gt))
         if rec.traffic_lights:
             self._rows["traffic_lights"].extend(
                 [(fi, stamp, light.id, light.state.value) for light in rec.traffic_lights]
             )
         if rec.vehicle_state is not None:
-            self._rows["ego"].append(_state_row(fi, rec.vehicle_state))
+            self._states["ego"].append((fi, rec.vehicle_state))
         if rec.logged_vehicle_state is not None:
-            self._rows["ego_logged"].append(_state_row(fi, rec.logged_vehicle_state))
-        cl = rec.closed_loop
-        if cl is not None:
-            self._rows["closed_loop"].append(
-                (
-                    fi,
-                    stamp,
-                    cl.source,
-                    cl.algorithm,
-                    cl.reason,
-                    cl.throttle,
-                    cl.brake,
-                    cl.steering_angle_rad,
-                    cl.deviation_m,
-                    cl.deviation_yaw_rad,
-                    cl.deviated,
-                    cl.collisions,
-                    cl.collision_object_id,
-                    cl.collision_object_class,
-                )
-            )
+            self._states["ego_logged"].append((fi, rec.logged_vehicle_state))
+        if rec.closed_loop is not None:
+            self._closed_loop.append((fi, stamp, rec.closed_loop))
         self.n_frames += 1
 
     def _add_path(self, name: str, fi: int, out: PlannedPath) -> None:
@@ -190,7 +184,7 @@ class TableBuffers:
             return 1
         if isinstance(out, tuple):
             if out:
-                self._detections(_object_rows((name, fi, stamp), out, ground_truth=False))
+                self._detections(((name, fi, stamp), ObjectColumns.shared_by(out), out))
             return len(out)
         return 0
 
@@ -218,7 +212,40 @@ class TableBuffers:
         self.clear()
         return out
 
+    def _deferred_rows(self) -> None:
+        """The rows of what :meth:`add_frame` kept as it was: the states' and closed-loop
+        records' rows, and the objects' of a table with objects that share no columns (the
+        others are built column by column, :func:`_object_arrays`)."""
+        for name, states in self._states.items():
+            self._rows[name] = [_state_row(fi, vs) for fi, vs in states]
+        self._rows["closed_loop"] = [
+            (
+                fi,
+                stamp,
+                cl.source,
+                cl.algorithm,
+                cl.reason,
+                cl.throttle,
+                cl.brake,
+                cl.steering_angle_rad,
+                cl.deviation_m,
+                cl.deviation_yaw_rad,
+                cl.deviated,
+                cl.collisions,
+                cl.collision_object_id,
+                cl.collision_object_class,
+            )
+            for fi, stamp, cl in self._closed_loop
+        ]
+        for name, blocks in self._objects.items():
+            if any(columns is None for _, columns, _ in blocks):
+                gt = name == "ground_truth"
+                rows = self._rows[name]
+                for head, _, objects in blocks:
+                    rows.extend(_object_rows(head, objects, ground_truth=gt))
+
     def _tables(self) -> dict[str, pa.Table]:
+        self._deferred_rows()
         # the frames' columns first: the steps' frame_index and stamp_ns are their frame's,
         # taken from them (a step row does not carry them: one Python int conversion a frame,
         # not one a step)
@@ -235,6 +262,10 @@ class TableBuffers:
                 arrays = self._path_arrays()
                 if not arrays:
                     continue
+            elif name in self._objects and self._objects[name] and not rows:
+                arrays = _object_arrays(
+                    self._objects[name], schema, ground_truth=name == "ground_truth"
+                )
             elif not rows:
                 continue
             elif name == "steps":
@@ -367,6 +398,54 @@ def _object_rows(
             boxes,
             strict=True,
         )
+    ]
+
+
+def _object_arrays(
+    blocks: list[tuple[Any, ...]], schema: pa.Schema, *, ground_truth: bool
+) -> list[pa.Array]:
+    """The ``detections`` or ``ground_truth`` columns (``schema``'s) of ``blocks`` — (head,
+    shared columns, objects) each, in order — built column by column: the values
+    :func:`_object_rows` gives row by row (a null for a negative point count, for no 2D box)."""
+    heads = [head for head, _, _ in blocks]
+    parts: list[ObjectColumns] = [columns for _, columns, _ in blocks]
+    counts = np.array([len(c) for c in parts], dtype=np.int64)
+    of_block = pa.array(np.repeat(np.arange(len(parts)), counts))
+    fields = list(schema)
+    width = len(heads[0])
+    head_arrays = [
+        _array(c, f.type).take(of_block)
+        for c, f in zip(zip(*heads, strict=True), fields[:width], strict=True)
+    ]  # one value a block: algorithm, frame_index, stamp_ns
+    numbers = np.concatenate(
+        [
+            np.concatenate(
+                (c.center_m, c.size_m, c.yaw_rad[:, None], c.velocity_mps, c.acceleration_mps2),
+                axis=1,
+            )
+            for c in parts
+        ]
+    )
+    ids = pa.array(np.concatenate([c.object_id for c in parts]), type=pa.int64())
+    classes = _array([k.value for c in parts for k in c.object_class], _STRING)
+    number_arrays = [
+        pa.array(np.ascontiguousarray(numbers[:, k]), type=pa.float64()) for k in range(13)
+    ]
+    boxes = [_NO_BBOX if b is None else b for c in parts for b in c.bbox_2d_px]
+    box_arrays = [pa.array(v, type=pa.float64()) for v in zip(*boxes, strict=True)]
+    if not ground_truth:
+        confidence = pa.array(np.concatenate([c.confidence for c in parts]), type=pa.float64())
+        return [*head_arrays, ids, classes, confidence, *number_arrays, *box_arrays]
+    points = np.concatenate([c.num_lidar_points for c in parts])
+    visible = [v for c in parts for v in c.visible]
+    return [
+        *head_arrays,
+        ids,
+        classes,
+        *number_arrays,
+        *box_arrays,
+        pa.array(points, mask=points < 0, type=pa.int64()),
+        pa.array(visible, type=pa.bool_()),
     ]
 
 

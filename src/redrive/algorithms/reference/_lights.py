@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from redrive.algorithms.reference._plan_kernels import gate_crossing
+from redrive.algorithms.reference._plan_kernels import gate_crossing, path_bounds
 from redrive.types import LightState, MapLane, RoadMap, TrafficLight, VehicleState
 
 __all__ = ["Gate", "gates_of", "stop_arcs"]
@@ -108,12 +108,7 @@ def stop_arcs(
             continue
         if ego is None:  # the ego pose and the path's bounding box
             c, sn = math.cos(state.heading_rad), math.sin(state.heading_rad)
-            ego = (
-                state.position[:2],
-                np.array([[c, sn], [-sn, c]]),
-                path_xy.min(axis=0),
-                path_xy.max(axis=0),
-            )
+            ego = (state.position[:2], np.array([[c, sn], [-sn, c]]), *path_bounds(path_xy))
         origin, base_from_map, low, high = ego
         line = (gate.line - origin) @ base_from_map.T
         # the bounding boxes' test and the first crossing in one compiled call

@@ -91,6 +91,7 @@ from redrive.algorithms.reference._plan_kernels import (
     gate_crossing,
     idm_profile,
     leaders_on_path,
+    path_bounds,
     points_at,
     polyline_arc,
 )
@@ -338,6 +339,7 @@ class IdmPlanner(Algorithm):
         leaders_on_path(np.zeros((1, 8, 3)), frozen, frozen, line.xy, line.s, 1.0, 0.0, 1.0)
         # a stop line's test (_lights.stop_arcs), with the arrays' types a step gives it
         gate_crossing(line.xy, line.s, np.zeros((2, 2)), np.zeros(2), np.ones(2))
+        path_bounds(line.xy)
 
     # -- the step -----------------------------------------------------------------------------
 
