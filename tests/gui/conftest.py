@@ -42,7 +42,7 @@ def _collect_between_tests() -> Iterator[None]:
     The objects alive when the test starts (imports, plugins, kernels, earlier tests' survivors —
     their garbage was collected at their ends) are frozen out of that collection's walk
     (``gc.freeze``, as the engine's ``setup_frozen`` does for a run): a walk of the whole heap
-    took 1.5–2.8 s a test late in the suite, the walk of what the test made a few ms."""
+    took 1.5–2.8 s a test late in a (loaded) run of the suite, the walk of what it made ms."""
     gc.freeze()
     try:
         yield
