@@ -67,13 +67,14 @@ def test_a_bollard_stands_still_in_the_city_frame(av2_log: Path) -> None:
     ego_path = []
     with Av2SensorLogReader(av2_log) as log:
         states = {m.log_time_ns: m.payload.value for m in log.messages(topics=["/ego_pose"])}  # type: ignore[attr-defined]
+        bollard_id = _id_of(log, bollard)
         for message in log.messages(topics=[TOPIC_ANNOTATIONS]):
             objs: tuple[DetectedObject, ...] = message.payload.value  # type: ignore[attr-defined]
             state = states[message.log_time_ns]
             ego_path.append(state.position[:2])
             c, s = np.cos(state.heading_rad), np.sin(state.heading_rad)
             for o in objs:
-                if o.object_class is ObjectClass.STATIC and o.object_id == _id_of(log, bollard):
+                if o.object_class is ObjectClass.STATIC and o.object_id == bollard_id:
                     x, y = o.box.center[:2]
                     centres.append(state.position[:2] + np.array([c * x - s * y, c * y + s * x]))
                     assert np.linalg.norm(o.velocity) < 0.5
