@@ -153,12 +153,13 @@ class RoadMapIndex:
             seg = np.diff(pts, axis=0)
             length = np.hypot(seg[:, 0], seg[:, 1])
             heading = np.arctan2(seg[:, 1], seg[:, 0])
-            for j in range(1, heading.size):  # a repeated point: the heading before it
-                if length[j] == 0.0:
-                    heading[j] = heading[j - 1]
-            for j in range(heading.size - 2, -1, -1):
-                if length[j] == 0.0:
-                    heading[j] = heading[j + 1]
+            if not length.all():  # a repeated point (rare): the heading before it, then after
+                for j in range(1, heading.size):
+                    if length[j] == 0.0:
+                        heading[j] = heading[j - 1]
+                for j in range(heading.size - 2, -1, -1):
+                    if length[j] == 0.0:
+                        heading[j] = heading[j + 1]
             starts.append(vertex)
             offsets.append(offset)
             cums.append(offset + np.concatenate([[0.0], np.cumsum(length)]))
