@@ -21,7 +21,7 @@ group                  value                                           kind
 =====================  ==============================================  =========================
 
 Nothing registers itself on import: :func:`installed_plugins` reads the entry points each time it
-is called and refuses two plugins of one name; an entry point that fails to load is reported (as a
+is called (once per :func:`discovered_once` block, e.g. one run) and refuses two plugins of one name; an entry point that fails to load is reported (as a
 :class:`BrokenPlugin`) without stopping the others.  Every failure is a
 :class:`~redrive.errors.PluginError` that says which spec, where (file, module, entry point) and
 what to do.  What makes a class a usable plugin of a kind (a subclass with a role, a metric with a
@@ -31,6 +31,8 @@ bottom layer and imports nothing of redrive but its errors.
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import difflib
 import hashlib
 import importlib
@@ -59,6 +61,7 @@ __all__ = [
     "PluginKind",
     "PluginRegistry",
     "class_target",
+    "discovered_once",
     "installed_plugins",
     "load_plugin",
     "subclass_check",
@@ -232,9 +235,38 @@ def class_target(cls: type) -> str:
 # -- installed plugins ----------------------------------------------------------------------------
 
 
+#: within :func:`discovered_once`: group → its entry points as read there; None outside it
+_READ_ONCE: contextvars.ContextVar[dict[str, list[importlib.metadata.EntryPoint]] | None] = (
+    contextvars.ContextVar("redrive_plugins_read_once", default=None)
+)
+
+
+@contextlib.contextmanager
+def discovered_once() -> Iterator[None]:
+    """Within the block (in this thread or task) each group's entry points are read from the
+    installed metadata once — a run that loads its algorithms twice (what they read, then the
+    graph) reads them once; outside it every lookup reads them afresh.  Nests (the outermost
+    block's reads are kept)."""
+    if _READ_ONCE.get() is not None:
+        yield
+        return
+    token = _READ_ONCE.set({})
+    try:
+        yield
+    finally:
+        _READ_ONCE.reset(token)
+
+
 def _declared_entry_points(kind: PluginKind) -> list[importlib.metadata.EntryPoint]:
-    """The entry points of the kind's group, read afresh from the installed metadata."""
-    return list(importlib.metadata.entry_points(group=kind.group))
+    """The entry points of the kind's group, read afresh from the installed metadata (once per
+    :func:`discovered_once` block)."""
+    read = _READ_ONCE.get()
+    if read is None:
+        return list(importlib.metadata.entry_points(group=kind.group))
+    found = read.get(kind.group)
+    if found is None:
+        found = read[kind.group] = list(importlib.metadata.entry_points(group=kind.group))
+    return list(found)
 
 
 def _dist_name(ep: importlib.metadata.EntryPoint) -> str | None:
@@ -242,7 +274,8 @@ def _dist_name(ep: importlib.metadata.EntryPoint) -> str | None:
     if dist is None:
         return None
     try:
-        return f"{dist.name} {dist.version}"
+        meta = dist.metadata  # read once (``dist.name`` and ``dist.version`` read it each)
+        return f"{meta['Name']} {meta['Version']}"
     except Exception:  # broken metadata: the name is only decoration here
         return None
 

@@ -58,3 +58,23 @@ def test_no_points_and_mismatched_arguments() -> None:
     assert s.shape == d.shape == (0,)
     with pytest.raises(ValueError, match="2 points but 1"):
         polyline_distances([[0.0, 0.0], [1.0, 1.0]], [0], coords, offsets)
+
+
+def test_runs_along_one_polyline_keep_the_first_nearest_segment() -> None:
+    """Points in a run on one polyline start from the previous point's segment; a tie with an
+    earlier segment still goes to the earlier one (GEOS's order), in either direction."""
+    u_turn = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 2.0], [0.0, 2.0]])
+    rng = np.random.default_rng(5)
+    walk = np.column_stack([np.linspace(0.0, 10.0, 41), rng.uniform(-0.5, 2.5, 41)])
+    ties = np.array([[5.0, 1.5], [5.0, 1.0], [2.0, 1.0], [5.0, 0.5], [5.0, 1.0]])
+    points = np.concatenate([walk, walk[::-1], ties, ties[::-1]])
+    coords, offsets = packed([u_turn, u_turn[::-1]])
+    line = shapely.LineString(u_turn)
+    pts = shapely.points(points)
+    for which, geom in ((0, line), (1, shapely.LineString(u_turn[::-1]))):
+        of = np.full(points.shape[0], which)
+        s, d = polyline_locate(points, of, coords, offsets)
+        assert np.array_equal(s, shapely.line_locate_point(geom, pts))
+        assert np.array_equal(d, shapely.distance(geom, pts))
+        assert np.array_equal(polyline_distances(points, of, coords, offsets), d)
+    assert polyline_locate([[5.0, 1.5], [5.0, 1.0]], [0, 0], coords, offsets)[0][1] == 5.0

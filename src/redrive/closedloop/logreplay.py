@@ -308,6 +308,9 @@ class LogSimulator:
         self._queued: ControlCommands = neutral  # with a one-frame delay: the next one
         self.tracker.reset()
         self._index = 0
+        #: (frame index, the driven state observe gave there): step reuses it (the ego moves
+        #: only in step)
+        self._observed: tuple[int, VehicleState] | None = None
         self._agents: dict[int, PathAgent] = {}
         if self._lane_agents is not None:
             self._lane_agents.reset()
@@ -317,6 +320,7 @@ class LogSimulator:
         frame = self._current
         logged = self._logged(frame)
         driven = self._driven_state(frame.stamp_ns, logged)
+        self._observed = (self._index, driven)
         mat = driven_from_logged(driven, logged)
         sensors = {sid: _reexpress_sensor(data, mat) for sid, data in frame.sensors.items()}
         objects = frame.ground_truth
@@ -350,7 +354,11 @@ class LogSimulator:
             raise ValueError(msg)
         frame = self._current
         model = self._ego.model
-        state = self._driven_state(frame.stamp_ns, self._logged(frame))
+        seen = self._observed
+        if seen is not None and seen[0] == self._index:
+            state = seen[1]  # observe's (the ego has not moved since)
+        else:
+            state = self._driven_state(frame.stamp_ns, self._logged(frame))
         chosen = choose_command(
             outputs,
             state=state,

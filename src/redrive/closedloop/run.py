@@ -55,6 +55,7 @@ from redrive.engine.user_map import MapOption, choose_road_map
 from redrive.errors import ConfigError
 from redrive.io import LogReader, open_log
 from redrive.io.mcap.writer import McapWriter
+from redrive.plugins import discovered_once
 from redrive.results import (
     FrameRecord,
     RunWriter,
@@ -139,6 +140,24 @@ def run_closed_loop(
             backend does not provide; the pipelined mode), or the log cannot be driven (no ego
             pose; no objects for ``reactive`` agents) — checked before any frame.
     """
+    with discovered_once():  # the algorithms are loaded twice (what they read, the graph)
+        return _run_closed_loop(
+            request,
+            on_start=on_start,
+            progress=progress,
+            cancel=cancel,
+            wrap_simulator=wrap_simulator,
+        )
+
+
+def _run_closed_loop(
+    request: ClosedLoopRequest,
+    *,
+    on_start: Callable[[int | None], None] | None,
+    progress: Callable[[int], None] | None,
+    cancel: threading.Event | None,
+    wrap_simulator: Callable[[Simulator], Simulator] | None,
+) -> RunReport:
     check_on_collision(request.on_collision)
     if not (math.isfinite(request.friction_coefficient) and request.friction_coefficient > 0.0):
         msg = (

@@ -173,6 +173,9 @@ class LqrTracker:
         }
         self._dt = float(discretization_time_s)
         self._n = int(tracking_horizon)
+        #: the horizon's step numbers 0 … n−1 and the lateral Q's diagonal (made once)
+        self._steps = np.arange(self._n, dtype=np.float64)
+        self._q_lat_diagonal = np.diag(self._q_lat)
 
     def reset(self) -> None:
         """Nothing to forget: the tracker keeps no state between calls (nuPlan's neither)."""
@@ -269,12 +272,12 @@ class LqrTracker:
         road-wheel angle ``steer_rad``, ``t_s`` seconds into the path."""
         n, dt = self._n, self._dt
         v_ref = profiles.speed_at(t_s + n * dt)
-        kappa = profiles.curvature_at(t_s + dt * np.arange(n, dtype=np.float64))
+        kappa = profiles.curvature_at(t_s + dt * self._steps)
         stop = self.params["stopping_velocity_mps"]
         if v_ref <= stop and speed_mps <= stop:
             return self.params["stopping_proportional_gain"] * (v_ref - speed_mps), 0.0
         accel = self.longitudinal(speed_mps, v_ref)
-        speeds: F64 = speed_mps + accel * dt * np.arange(n, dtype=np.float64)
+        speeds: F64 = speed_mps + accel * dt * self._steps
         x_ref, y_ref, h_ref = profiles.pose_at(t_s)
         dx, dy = pose[0] - x_ref, pose[1] - y_ref
         lateral = -dx * math.sin(h_ref) + dy * math.cos(h_ref)
@@ -301,7 +304,7 @@ class LqrTracker:
             curvatures_1pm=curvatures_1pm[None],
             dt_s=self._dt,
             wheelbase_m=self.geometry.wheelbase_m,
-            q=np.diag(self._q_lat),
+            q=self._q_lat_diagonal,
             r=float(self._r_lat[0, 0]),
         )
         return float(rate[0])

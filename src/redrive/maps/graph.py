@@ -6,10 +6,11 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
+from typing import Any
 
 from redrive.types import MapLane, Roadblock
 
-__all__ = ["drop_dangling", "group_roadblocks"]
+__all__ = ["drop_dangling", "group_roadblocks", "roadblock_rows"]
 
 
 def drop_dangling(lanes: Mapping[str, MapLane]) -> tuple[dict[str, MapLane], int]:
@@ -39,6 +40,17 @@ def group_roadblocks(
     mutual left/right neighbours, left to right, id ``prefix + <its leftmost lane id>``; a lane
     whose neighbours do not name it back is a roadblock of its own.  Returns the lanes with their
     ``roadblock_id`` set, and the roadblocks (successors / predecessors: those of their lanes)."""
+    block_of, blocks = roadblock_rows(lanes, prefix=prefix)
+    out = {i: dataclasses.replace(lane, roadblock_id=block_of[i]) for i, lane in lanes.items()}
+    return out, blocks
+
+
+def roadblock_rows(
+    lanes: Mapping[str, Any], *, prefix: str = "rb:"
+) -> tuple[dict[str, str], tuple[Roadblock, ...]]:
+    """:func:`group_roadblocks`' lane id → roadblock id, and its roadblocks, of lanes given as
+    anything with a :class:`MapLane`'s ``lane_id``, ``left_neighbor``, ``right_neighbor``,
+    ``successors`` and ``predecessors`` (a reader that builds its lanes once, roadblock set)."""
     block_of: dict[str, str] = {}
     members: dict[str, list[str]] = {}
     for lane_id, lane in lanes.items():
@@ -69,7 +81,6 @@ def group_roadblocks(
         members[block_id] = row
         for i in row:
             block_of[i] = block_id
-    out = {i: dataclasses.replace(lane, roadblock_id=block_of[i]) for i, lane in lanes.items()}
     blocks = []
     for block_id, row in members.items():
         succ = [block_of[s] for i in row for s in lanes[i].successors if s in block_of]
@@ -82,4 +93,4 @@ def group_roadblocks(
                 predecessors=tuple(dict.fromkeys(b for b in pred if b != block_id)),
             )
         )
-    return out, tuple(blocks)
+    return block_of, tuple(blocks)

@@ -111,12 +111,20 @@ class RoadMapIndex:
         ]
         self._drivable_tree = shapely.STRtree([*roads, *areas])
         self._drivable_parts = [*roads, *areas]
+        # the polygons' point tests are prepared (GEOS indexes a polygon's edges on its first
+        # test: a point costs a few edges, not all of them — the same answers)
+        self._lane_array = np.array(self.lane_polygons, dtype=object)
+        self._drivable_array = np.array(self._drivable_parts, dtype=object)
+        shapely.prepare(self._lane_array)
+        shapely.prepare(self._drivable_array)
         self._junction_parts = [shapely.Polygon(i.polygon) for i in road_map.intersections] + [
             p for p, a in zip(areas, road_map.areas, strict=True) if a.kind == "intersection"
         ]
         #: the lane graph's routes asked so far, and each lane's length (route's costs)
         self._routes: dict[tuple[str, str, float, bool], tuple[str, ...]] = {}
         self._lengths: dict[str, float] | None = None
+        #: the centrelines as shapely lines, and their lengths, as asked (routes' lines)
+        self._lines: dict[str, tuple[Any, float]] = {}
         self._build_centrelines(lanes)
 
     # the unions are made when first asked for (a closed loop on a log routes along the lanes
@@ -153,12 +161,13 @@ class RoadMapIndex:
             seg = np.diff(pts, axis=0)
             length = np.hypot(seg[:, 0], seg[:, 1])
             heading = np.arctan2(seg[:, 1], seg[:, 0])
-            for j in range(1, heading.size):  # a repeated point: the heading before it
-                if length[j] == 0.0:
-                    heading[j] = heading[j - 1]
-            for j in range(heading.size - 2, -1, -1):
-                if length[j] == 0.0:
-                    heading[j] = heading[j + 1]
+            if not length.all():  # a repeated point (rare): the heading before it, then after
+                for j in range(1, heading.size):
+                    if length[j] == 0.0:
+                        heading[j] = heading[j - 1]
+                for j in range(heading.size - 2, -1, -1):
+                    if length[j] == 0.0:
+                        heading[j] = heading[j + 1]
             starts.append(vertex)
             offsets.append(offset)
             cums.append(offset + np.concatenate([[0.0], np.cumsum(length)]))
@@ -180,14 +189,20 @@ class RoadMapIndex:
         """The position of ``lane_id`` in ``road_map.lanes`` (KeyError when it is none)."""
         return self._lane_pos[lane_id]
 
+    def centreline_geometry(self, lane_id: str) -> tuple[Any, float]:
+        """Lane ``lane_id``'s centreline as a shapely LineString and its length (m), made once
+        (KeyError when it is no lane of the map)."""
+        known = self._lines.get(lane_id)
+        if known is None:
+            line = shapely.LineString(self.road_map.lanes[self._lane_pos[lane_id]].centerline)
+            known = self._lines[lane_id] = (line, float(line.length))
+        return known
+
     def lane_hits(self, xy: npt.ArrayLike) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
         """Every (point, lane) pair where lane holds point: the point indices into ``xy`` and
         the lane positions in ``road_map.lanes``, sorted by point then lane (the lanes of the
         index's ``lane_kinds``)."""
-        p = _points(xy)
-        pairs = self._lane_tree.query(shapely.points(p), predicate="intersects")
-        if self._considered is not None:
-            pairs = pairs[:, self._considered[pairs[1]]]
+        pairs = _hits(self._lane_tree, self._lane_array, _points(xy), self._considered)
         order = np.lexsort((pairs[1], pairs[0]))
         return pairs[0][order].astype(np.int64), pairs[1][order].astype(np.int64)
 
@@ -266,7 +281,7 @@ class RoadMapIndex:
         """(N,) each point lies on a lane of :data:`DRIVABLE_LANE_KINDS` or a drivable area
         (its boundary included)."""
         p = _points(xy)
-        hits = self._drivable_tree.query(shapely.points(p), predicate="intersects")
+        hits = _hits(self._drivable_tree, self._drivable_array, p, None)
         out = np.zeros(p.shape[0], dtype=bool)
         out[hits[0]] = True
         return out
@@ -383,6 +398,20 @@ class RoadMapIndex:
                     heapq.heappush(queue, (new, tick, nxt))
                     tick += 1
         return ()
+
+
+def _hits(
+    tree: Any, polygons: npt.NDArray[np.object_], p: F64, considered: npt.NDArray[np.bool_] | None
+) -> npt.NDArray[np.intp]:
+    """(2, K) the (point, polygon) pairs where polygon ``polygons[k]`` (the geometries of
+    ``tree``, prepared) holds point ``p[i]``, its boundary included — what ``tree.query(points,
+    predicate="intersects")`` gives (in another order): the tree's bounding-box candidates, then
+    each candidate's own test (of the polygons ``considered``; None: all)."""
+    pairs = tree.query(shapely.points(p))
+    if considered is not None:
+        pairs = pairs[:, considered[pairs[1]]]
+    inside = shapely.intersects_xy(polygons[pairs[1]], p[pairs[0], 0], p[pairs[0], 1])
+    return np.asarray(pairs[:, inside])
 
 
 def _edge_segments(area: Any) -> F64:

@@ -8,7 +8,10 @@ of ``Distance::pointToSegment`` —, and ``LengthIndexOfPoint::indexOf`` for the
 first segment in order at the least distance, its ``segmentNearestMeasure``), so the results
 are the same doubles; only segments whose bounding box is farther from the point than the best
 distance so far (by a relative margin of 1e-9, far above rounding) are skipped, and a skipped
-segment could not have been chosen.
+segment could not have been chosen.  A point on the same polyline as the point before it starts
+from that point's nearest segment (points along a path: most segments are then skipped), and the
+first segment in order at the least distance is still the one taken; a run of points on one
+polyline measures its segments' lengths once.
 
 The polylines are given as one vertex array ``coords`` (V, 2) and ``offsets`` (L + 1,): polyline
 ``k`` is ``coords[offsets[k]:offsets[k + 1]]`` (a one-vertex polyline is a point).
@@ -102,59 +105,107 @@ def _point_to_segment(  # noqa: PLR0917 (numba has no keyword-only parameters)
 @numba.njit(cache=True, nogil=True)
 def _distances(points: F64, line_of: I64, coords: F64, offsets: I64) -> F64:
     out = np.empty(points.shape[0])
+    seed = -1  # the previous point's nearest segment, when it was on the same polyline
     for i in range(points.shape[0]):
         px, py = points[i, 0], points[i, 1]
         lo, hi = offsets[line_of[i]], offsets[line_of[i] + 1]
         if hi - lo == 1:
             dx, dy = px - coords[lo, 0], py - coords[lo, 1]
             out[i] = math.sqrt(dx * dx + dy * dy)
+            seed = -1
             continue
+        if i > 0 and line_of[i] != line_of[i - 1]:
+            seed = -1
         best = math.inf
-        for j in range(lo, hi - 1):
-            ax, ay, bx, by = coords[j, 0], coords[j, 1], coords[j + 1, 0], coords[j + 1, 1]
-            if _far(px, py, ax, ay, bx, by, best):
-                continue
-            d = _point_to_segment(px, py, ax, ay, bx, by)
-            if d < best:
-                best = d
-                if best <= 0.0:  # DistanceOp's terminateDistance
-                    break
+        nearest = -1
+        if seed >= 0:  # a near bound first: most segments are then skipped
+            best = _point_to_segment(
+                px, py, coords[seed, 0], coords[seed, 1], coords[seed + 1, 0], coords[seed + 1, 1]
+            )
+            nearest = seed
+        if best > 0.0:
+            for j in range(lo, hi - 1):
+                if j == seed:
+                    continue
+                ax, ay, bx, by = coords[j, 0], coords[j, 1], coords[j + 1, 0], coords[j + 1, 1]
+                if _far(px, py, ax, ay, bx, by, best):
+                    continue
+                d = _point_to_segment(px, py, ax, ay, bx, by)
+                if d < best:
+                    best, nearest = d, j
+                    if best <= 0.0:  # DistanceOp's terminateDistance
+                        break
         out[i] = best
+        seed = nearest
     return out
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _measure(  # noqa: PLR0917 (numba has no keyword-only parameters)
+    px: float, py: float, ax: float, ay: float, bx: float, by: float, start: float, length: float
+) -> tuple[float, float]:
+    """The distance of the point to the segment and ``segmentNearestMeasure`` (with
+    ``LineSegment::projectionFactor``) of the segment that starts at measure ``start``."""
+    d = _point_to_segment(px, py, ax, ay, bx, by)
+    if px == ax and py == ay:
+        r = 0.0
+    elif px == bx and py == by:
+        r = 1.0
+    else:
+        dx, dy = bx - ax, by - ay
+        r = ((px - ax) * dx + (py - ay) * dy) / (dx * dx + dy * dy)
+    if r <= 0.0:
+        return d, start
+    if r <= 1.0:
+        return d, start + r * length
+    return d, start + length
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _locate(points: F64, line_of: I64, coords: F64, offsets: I64) -> tuple[F64, F64]:
     s_out = np.empty(points.shape[0])
     d_out = np.empty(points.shape[0])
+    # each segment's start measure and length on the polyline of the points being located (the
+    # same running sum as LengthIndexOfPoint's), computed once per run of points on one line
+    starts = np.empty(coords.shape[0])
+    lengths = np.empty(coords.shape[0])
+    current = -1
+    seed = -1  # the previous point's segment (on the same polyline)
     for i in range(points.shape[0]):
         px, py = points[i, 0], points[i, 1]
         lo, hi = offsets[line_of[i]], offsets[line_of[i] + 1]
+        if line_of[i] != current:
+            current, seed = line_of[i], -1
+            start = 0.0
+            for j in range(lo, hi - 1):
+                ax, ay, bx, by = coords[j, 0], coords[j, 1], coords[j + 1, 0], coords[j + 1, 1]
+                length = math.sqrt((ax - bx) * (ax - bx) + (ay - by) * (ay - by))
+                starts[j], lengths[j] = start, length
+                start += length
         best = math.inf
         measure = -1.0  # LengthIndexOfPoint::indexOf's minIndex
-        start = 0.0  # its segmentStartMeasure
+        chosen = hi  # the first segment in order at the least distance (hi: none yet)
+        if seed >= 0:  # a near bound first: most segments are then skipped
+            ax, ay, bx, by = (
+                coords[seed, 0],
+                coords[seed, 1],
+                coords[seed + 1, 0],
+                coords[seed + 1, 1],
+            )
+            d, m = _measure(px, py, ax, ay, bx, by, starts[seed], lengths[seed])
+            if m > -1.0:
+                measure, best, chosen = m, d, seed
         for j in range(lo, hi - 1):
+            if j == chosen:
+                continue
             ax, ay, bx, by = coords[j, 0], coords[j, 1], coords[j + 1, 0], coords[j + 1, 1]
-            length = math.sqrt((ax - bx) * (ax - bx) + (ay - by) * (ay - by))
-            if not _far(px, py, ax, ay, bx, by, best):
-                d = _point_to_segment(px, py, ax, ay, bx, by)
-                # segmentNearestMeasure, with LineSegment::projectionFactor
-                if px == ax and py == ay:
-                    r = 0.0
-                elif px == bx and py == by:
-                    r = 1.0
-                else:
-                    dx, dy = bx - ax, by - ay
-                    r = ((px - ax) * dx + (py - ay) * dy) / (dx * dx + dy * dy)
-                if r <= 0.0:
-                    m = start
-                elif r <= 1.0:
-                    m = start + r * length
-                else:
-                    m = start + length
-                if d < best and m > -1.0:
-                    measure, best = m, d
-            start += length
+            if _far(px, py, ax, ay, bx, by, best):
+                continue
+            d, m = _measure(px, py, ax, ay, bx, by, starts[j], lengths[j])
+            # strictly nearer, or as near and earlier than the seed: the first in order wins
+            if m > -1.0 and (d < best or (d == best and j < chosen)):
+                measure, best, chosen = m, d, j
         s_out[i] = measure
         d_out[i] = best
+        seed = chosen if chosen < hi else -1
     return s_out, d_out

@@ -222,19 +222,17 @@ def _reference_line(
     poses: F64,
     lane_change_m: float,
 ) -> F64:
-    road = index.road_map
     pieces: list[F64] = []
     enter_m = 0.0
     for i, lane_id in enumerate(chain):
-        line = shapely.LineString(road.lane(lane_id).centerline)
-        length = float(line.length)
+        line, length = index.centreline_geometry(lane_id)
         leave_m = length
         next_enter = 0.0
         if i in change_at and i + 1 < len(chain):
             pose = shapely.Point(*poses[change_at[i]])
             leave_m = float(line.project(pose))
-            target = shapely.LineString(road.lane(chain[i + 1]).centerline)
-            next_enter = min(float(target.project(pose)) + lane_change_m, float(target.length))
+            target, target_length = index.centreline_geometry(chain[i + 1])
+            next_enter = min(float(target.project(pose)) + lane_change_m, target_length)
         leave_m = max(leave_m, enter_m)
         part = substring(line, enter_m, leave_m) if (enter_m, leave_m) != (0.0, length) else line
         coords = np.asarray(shapely.get_coordinates(part), dtype=np.float64)

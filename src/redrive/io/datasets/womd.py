@@ -160,9 +160,12 @@ def _tracks_of(scenario: Any, *, where: str) -> WomdTracks:
                 f"{steps} timestamps; the scenario is damaged"
             )
             raise LogError(msg)
+        # one flat list (numpy converts it far faster than a list of rows)
         rows = np.array(
             [
-                (
+                v
+                for s in track.states
+                for v in (
                     s.center_x,
                     s.center_y,
                     s.center_z,
@@ -174,7 +177,6 @@ def _tracks_of(scenario: Any, *, where: str) -> WomdTracks:
                     s.velocity_y,
                     s.valid,
                 )
-                for s in track.states
             ],
             dtype=np.float64,
         ).reshape(steps, 10)
@@ -215,7 +217,11 @@ class WomdReader(NativeLogBase):
             first = next(read_tfrecords(path, limit=1))
         except (LogError, StopIteration):
             return True  # a TFRecord whose first record is damaged: opening says where
-        return _parse(first.data) is not None
+        scenario = _parse(first.data)
+        if scenario is not None:  # opening it next parses the same record: kept for that
+            global _RECOGNISED  # noqa: PLW0603 (one slot: the record recognised last)
+            _RECOGNISED = (first.data, scenario)
+        return scenario is not None
 
     def __init__(self, path: str | Path, *, strict: bool = True) -> None:
         """``strict``: see :mod:`redrive.io.datasets.native`; the file is checked whole at open."""
@@ -229,7 +235,7 @@ class WomdReader(NativeLogBase):
         if first is None:
             msg = f"{self.path}: holds no TFRecord record; restore it"
             raise LogError(msg)
-        scenario = _parse(first.data)
+        scenario = _parse_recognised(first.data)
         where = f"{self.path}: record 0 at byte {first.offset}"
         if scenario is None:
             msg = f"{where}: not a waymo.open_dataset.Scenario protobuf (or a damaged one)"
@@ -401,6 +407,21 @@ class WomdReader(NativeLogBase):
 
             self._road_map = road_map_from_scenario(self._scenario, source=str(self.path))
         return self._road_map
+
+
+#: the record :meth:`WomdReader.recognises` decoded last and its Scenario (taken, once, by the
+#: open that follows: the same bytes are not decoded twice)
+_RECOGNISED: tuple[bytes, Any] | None = None
+
+
+def _parse_recognised(data: bytes) -> Any | None:
+    """:func:`_parse` of ``data``, or the Scenario :meth:`WomdReader.recognises` decoded from
+    the same bytes (the slot is emptied)."""
+    global _RECOGNISED  # one slot: the record recognised last
+    kept, _RECOGNISED = _RECOGNISED, None
+    if kept is not None and kept[0] == data:
+        return kept[1]
+    return _parse(data)
 
 
 def _parse(data: bytes) -> Any | None:
