@@ -14,7 +14,6 @@ h-engine5).
 from __future__ import annotations
 
 import json
-import math
 import os
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -26,9 +25,6 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from redrive.output.atomic import fsync_dir, replace, temp_path
-
-#: a str as json writes it (ensure_ascii: the C escaper json.dumps uses)
-_string: Callable[[str], str] = json.encoder.encode_basestring_ascii  # type: ignore[attr-defined]
 
 __all__ = ["PARQUET_OPTIONS", "json_bytes", "write_files", "write_json_atomic"]
 
@@ -48,86 +44,8 @@ def _pool() -> ThreadPoolExecutor:
 
 
 def json_bytes(data: Mapping[str, Any]) -> bytes:
-    """``data`` as the indented JSON text the run directory's JSON files hold: the text of
-    ``json.dumps(data, indent=2, allow_nan=False)``, written by :func:`_indented` (json's own
-    indenting encoder is a Python generator, its C encoder writes no indent); whatever that does
-    not take (NaN, a type JSON has not, a cycle) goes to ``json.dumps`` for its error."""
-    parts: list[str] = []
-    try:
-        _indented(data, "\n", parts)
-    except (TypeError, ValueError, RecursionError):
-        text = json.dumps(data, indent=2, sort_keys=False, allow_nan=False)
-    else:
-        text = "".join(parts)
-    return (text + "\n").encode("utf-8")
-
-
-def _indented(value: Any, newline: str, out: list[str]) -> None:
-    """``value`` as json's encoder writes it with ``indent=2`` (the same checks in the same
-    order: str, None, True, False, int, float, list or tuple, dict), appended to ``out``;
-    ``newline`` is the line break and indent ``value`` starts at."""
-    if isinstance(value, str):
-        out.append(_string(value))
-    elif value is None:
-        out.append("null")
-    elif value is True:
-        out.append("true")
-    elif value is False:
-        out.append("false")
-    elif isinstance(value, int):
-        out.append(int.__repr__(value))
-    elif isinstance(value, float):
-        out.append(_float(value))
-    elif isinstance(value, list | tuple):
-        if not value:
-            out.append("[]")
-            return
-        inner = newline + "  "
-        out.append("[")
-        for k, item in enumerate(value):
-            out.append(inner if k == 0 else "," + inner)
-            _indented(item, inner, out)
-        out.append(newline + "]")
-    elif isinstance(value, dict):
-        if not value:
-            out.append("{}")
-            return
-        inner = newline + "  "
-        out.append("{")
-        for k, (key, item) in enumerate(value.items()):
-            out.append(inner if k == 0 else "," + inner)
-            out.append(_string(_key(key)))
-            out.append(": ")
-            _indented(item, inner, out)
-        out.append(newline + "}")
-    else:
-        msg = f"Object of type {type(value).__name__} is not JSON serializable"
-        raise TypeError(msg)
-
-
-def _key(key: Any) -> str:
-    """A dict key as json writes it (str, float, True, False, None, int: in that order)."""
-    if isinstance(key, str):
-        return key
-    if isinstance(key, float):
-        return _float(key)
-    if key is True:
-        return "true"
-    if key is False:
-        return "false"
-    if key is None:
-        return "null"
-    if isinstance(key, int):
-        return int.__repr__(key)
-    msg = f"keys must be str, int, float, bool or None, not {type(key).__name__}"
-    raise TypeError(msg)
-
-
-def _float(value: float) -> str:
-    if not math.isfinite(value):
-        msg = f"Out of range float values are not JSON compliant: {value!r}"
-        raise ValueError(msg)
-    return float.__repr__(value)
+    """``data`` as the indented JSON text the run directory's JSON files hold."""
+    return (json.dumps(data, indent=2, sort_keys=False, allow_nan=False) + "\n").encode("utf-8")
 
 
 def write_json_atomic(path: Path, data: Mapping[str, Any]) -> None:
