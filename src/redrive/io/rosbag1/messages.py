@@ -4,7 +4,6 @@ records, those of each connection linked as one :class:`~redrive.io.base.Message
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from itertools import repeat
 
 import numpy as np
@@ -28,13 +27,14 @@ def batched_messages(
     heads: dict[int, tuple[str, str]],
     *,
     stride: int | None = None,
-) -> Iterator[LogMessage]:
+) -> list[LogMessage]:
     """The checked messages of one chunk (``spans``: their starts, stops and log times), those
     of each connection linked as one batch, whose starts, stops and times stay arrays
     (``stride``: the messages' fixed distance, when they lie at one and have one size).
 
     The messages are built through their slots' setters (what the dataclass's ``__init__``
-    does), each setter mapped over the whole chunk.
+    does), each setter mapped over the whole chunk, and returned as a list (the reader yields
+    from it: no generator layer of its own).
     """
     start_at, stop_at, time_at = spans
     count = len(conn_ids)
@@ -68,7 +68,7 @@ def batched_messages(
                 slot_of[i] = (batch, j)
     # Every message of the chunk built by C-level iteration over the chunk's lists (what the
     # dataclass's ``__init__`` does through the slots' setters, at a fraction of the cost of a
-    # Python step a message): the ``yield from`` below is then the only per-message step.
+    # Python step a message): the reader's ``yield from`` is then the only per-message step.
     raws = list(map(chunk.__getitem__, map(slice, start_at.tolist(), stop_at.tolist())))
     messages: list[LogMessage] = list(map(_new_message, repeat(LogMessage, count)))
     set_topic, set_type, set_time, set_encoding, set_raw, set_payload, set_batch = _SET
@@ -85,4 +85,4 @@ def batched_messages(
     any(map(set_raw, messages, raws))
     any(map(set_payload, messages, repeat(None, count)))
     any(map(set_batch, messages, slot_of))
-    yield from messages
+    return messages

@@ -18,6 +18,7 @@ import functools
 import logging
 from collections.abc import Iterable, Mapping
 from types import MappingProxyType
+from typing import Any
 
 from redrive.errors import PluginError, UnsupportedMessageError
 from redrive.io.base import LogMessage, ReaderCapabilities, TopicInfo, normalize_msgtype
@@ -151,6 +152,7 @@ def active_decoders() -> Mapping[str, Decoder]:
 #: decoder_for's answers by the type name as given: a lookup per message, so the name is not
 #: normalised again every time.  Emptied by :func:`reload_decoders`.
 _BY_GIVEN_NAME: dict[str, Decoder | None] = {}
+_UNKNOWN: Any = object()
 
 
 def reload_decoders() -> None:
@@ -211,7 +213,10 @@ def decode(message: LogMessage, deserialize: Deserialize) -> Decoded:
             "native readers must yield redrive.io.ros.decoders.Decoded payloads"
         )
         raise UnsupportedMessageError(msg)
-    decoder = decoder_for(message.msgtype)
+    # decoder_for's cache read here first: one lookup a message, no call.
+    decoder = _BY_GIVEN_NAME.get(message.msgtype, _UNKNOWN)
+    if decoder is _UNKNOWN:
+        decoder = decoder_for(message.msgtype)
     if decoder is None:
         msg = (
             f"no decoder for {message.msgtype} on {describe(message)}; redrive decodes "
