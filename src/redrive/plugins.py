@@ -21,8 +21,9 @@ group                  value                                           kind
 =====================  ==============================================  =========================
 
 Nothing registers itself on import: :func:`installed_plugins` reads the entry points each time it
-is called (once per :func:`discovered_once` block, e.g. one run) and refuses two plugins of one name; an entry point that fails to load is reported (as a
-:class:`BrokenPlugin`) without stopping the others.  Every failure is a
+is called (once within a :func:`discovered_once` block, such as a run) and refuses two plugins of
+one name; an entry point that fails to load is reported (as a :class:`BrokenPlugin`) without
+stopping the others.  Every failure is a
 :class:`~redrive.errors.PluginError` that says which spec, where (file, module, entry point) and
 what to do.  What makes a class a usable plugin of a kind (a subclass with a role, a metric with a
 name …) is the kind's ``check``, given by the layer that defines the base class; this module is the
@@ -45,7 +46,7 @@ import re
 import sys
 import traceback
 from collections.abc import Callable, Iterator, Mapping
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from types import MappingProxyType, ModuleType
 from typing import Any, Generic, TypeVar
@@ -97,12 +98,9 @@ class PluginKind:
 
     @property
     def forms(self) -> str:
-        installed = (
-            f"an installed name (see `{self.listing}`)" if self.listing else "an installed name"
-        )
-        return (
-            f"{installed}, package.module:ClassName, path/to/file.py:ClassName or path/to/file.py"
-        )
+        see = f" (see `{self.listing}`)" if self.listing else ""
+        forms = "package.module:ClassName, path/to/file.py:ClassName or path/to/file.py"
+        return f"an installed name{see}, {forms}"
 
 
 ALGORITHMS = PluginKind(
@@ -137,12 +135,7 @@ class BrokenPlugin:
     error: str
 
     def to_json(self) -> dict[str, Any]:
-        return {
-            "name": self.name,
-            "target": self.target,
-            "distribution": self.distribution,
-            "error": self.error,
-        }
+        return asdict(self)
 
 
 class PluginRegistry(Mapping[str, type[T]], Generic[T]):
@@ -244,28 +237,25 @@ _READ_ONCE: contextvars.ContextVar[dict[str, list[importlib.metadata.EntryPoint]
 @contextlib.contextmanager
 def discovered_once() -> Iterator[None]:
     """Within the block (in this thread or task) each group's entry points are read from the
-    installed metadata once — a run that loads its algorithms twice (what they read, then the
-    graph) reads them once; outside it every lookup reads them afresh.  Nests (the outermost
-    block's reads are kept)."""
-    if _READ_ONCE.get() is not None:
-        yield
-        return
-    token = _READ_ONCE.set({})
+    installed metadata once (a run loads its algorithms twice: what they read, then the graph);
+    outside it every lookup reads them afresh.  Nests: the outermost block's reads are kept."""
+    token = None if _READ_ONCE.get() is not None else _READ_ONCE.set({})
     try:
         yield
     finally:
-        _READ_ONCE.reset(token)
+        if token is not None:
+            _READ_ONCE.reset(token)
 
 
 def _declared_entry_points(kind: PluginKind) -> list[importlib.metadata.EntryPoint]:
     """The entry points of the kind's group, read afresh from the installed metadata (once per
     :func:`discovered_once` block)."""
     read = _READ_ONCE.get()
-    if read is None:
-        return list(importlib.metadata.entry_points(group=kind.group))
-    found = read.get(kind.group)
+    found = None if read is None else read.get(kind.group)
     if found is None:
-        found = read[kind.group] = list(importlib.metadata.entry_points(group=kind.group))
+        found = list(importlib.metadata.entry_points(group=kind.group))
+        if read is not None:
+            read[kind.group] = found
     return list(found)
 
 
