@@ -214,7 +214,7 @@ def decode(message: LogMessage, deserialize: Deserialize) -> Decoded:
         )
         raise UnsupportedMessageError(msg)
     # decoder_for's cache read here first: one lookup a message, no call.
-    decoder = _BY_GIVEN_NAME.get(message.msgtype, _UNKNOWN)
+    decoder: Decoder | None = _BY_GIVEN_NAME.get(message.msgtype, _UNKNOWN)
     if decoder is _UNKNOWN:
         decoder = decoder_for(message.msgtype)
     if decoder is None:
