@@ -6,6 +6,7 @@ accept is what the reader's walk of each header finds."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -57,6 +58,17 @@ def _walk(
         return None
 
 
+def _damaged(chunk: Any, offsets: Any, rng: np.random.Generator) -> memoryview:
+    """``chunk`` with one byte of a header or of its data length changed, in a message at
+    random."""
+    k = int(rng.integers(len(offsets)))
+    head = int.from_bytes(chunk[int(offsets[k]) : int(offsets[k]) + 4], "little")
+    at = int(offsets[k]) + int(rng.integers(head + 8))
+    broken = bytearray(chunk)
+    broken[at] ^= int(rng.integers(1, 256))
+    return memoryview(bytes(broken))
+
+
 def test_both_checks_agree_with_the_walk_on_every_chunk_and_every_damaged_byte(
     tmp_path: Path,
 ) -> None:
@@ -73,14 +85,8 @@ def test_both_checks_agree_with_the_walk_on_every_chunk_and_every_damaged_byte(
         assert walked is not None
         for spans in (arrays, one_by_one):
             assert list(zip(spans[0].tolist(), spans[1].tolist(), strict=True)) == walked
-        # Damage: one byte of a header or of its data length, in a message at random.
         for _ in range(60):
-            k = int(rng.integers(len(offsets)))
-            head = int.from_bytes(chunk[int(offsets[k]) : int(offsets[k]) + 4], "little")
-            at = int(offsets[k]) + int(rng.integers(head + 8))
-            broken = bytearray(chunk)
-            broken[at] ^= int(rng.integers(1, 256))
-            view = memoryview(bytes(broken))
+            view = _damaged(chunk, offsets, rng)
             arrays, one_by_one = _both(view, offsets, times, conns)
             if arrays is None:
                 assert one_by_one is None
@@ -117,12 +123,7 @@ def test_the_strided_check_of_a_chunk_of_one_sensor_agrees_with_the_others(
         assert list(zip(spans[0].tolist(), spans[1].tolist(), strict=True)) == walked
         strided += 1
         for _ in range(40):
-            k = int(rng.integers(len(offsets)))
-            head = int.from_bytes(chunk[int(offsets[k]) : int(offsets[k]) + 4], "little")
-            at = int(offsets[k]) + int(rng.integers(head + 8))
-            broken = bytearray(chunk)
-            broken[at] ^= int(rng.integers(1, 256))
-            view = memoryview(bytes(broken))
+            view = _damaged(chunk, offsets, rng)
             found = chunk_spans(view, offsets, times, conns)
             saved = ros1bag_index.REGULAR_FROM
             try:
