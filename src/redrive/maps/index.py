@@ -21,7 +21,7 @@ from __future__ import annotations
 import functools
 import heapq
 import math
-from collections.abc import Collection, Sequence
+from collections.abc import Callable, Collection, Sequence
 from typing import Any
 
 import numpy as np
@@ -88,7 +88,8 @@ class RoadMapIndex:
 
     Attributes:
         road_map: the map.
-        lane_polygons: shapely polygons, one per lane of ``road_map.lanes`` (same order).
+        lane_polygons: shapely polygons, one per lane of ``road_map.lanes`` (same order; made
+            when first asked, as the lanes' queries make only those they test).
         drivable: the drivable area (a shapely (multi)polygon, prepared).
     """
 
@@ -96,29 +97,33 @@ class RoadMapIndex:
         self.road_map = road_map
         lanes = road_map.lanes
         self._lane_pos = {lane.lane_id: i for i, lane in enumerate(lanes)}
-        self.lane_polygons: tuple[Any, ...] = tuple(lane_polygon(lane) for lane in lanes)
-        areas = [shapely.make_valid(shapely.Polygon(a.polygon)) for a in road_map.areas]
-        self._lane_tree = shapely.STRtree(list(self.lane_polygons))
+        # a lane with boundaries has its polygon now (no buffer: a ring of its points); a lane
+        # widened from its centreline has it when a query first needs it (a closed loop on a log
+        # asks a few of them; shapely's buffer is most of the index's cost) and a box that holds
+        # it until then, in the tree (the box's candidates are tested on the polygon: the same
+        # hits)
+        self._lane_array = np.empty(len(lanes), dtype=object)
+        self._lane_made = np.zeros(len(lanes), dtype=bool)
+        boxes = []
+        for k, lane in enumerate(lanes):
+            if lane.left_boundary is None and lane.right_boundary is None:
+                boxes.append(_holding_box(lane))
+            else:
+                boxes.append(lane_polygon(lane))
+                self._lane_array[k] = boxes[-1]
+                self._lane_made[k] = True
+        self._areas = [shapely.make_valid(shapely.Polygon(a.polygon)) for a in road_map.areas]
+        self._lane_tree = shapely.STRtree(boxes)
         self._considered = (
             None
             if lane_kinds is None
             else np.array([lane.kind in lane_kinds for lane in lanes], dtype=bool)
         )
-        roads = [
-            p
-            for p, lane in zip(self.lane_polygons, lanes, strict=True)
-            if lane.kind in DRIVABLE_LANE_KINDS
-        ]
-        self._drivable_tree = shapely.STRtree([*roads, *areas])
-        self._drivable_parts = [*roads, *areas]
         # the polygons' point tests are prepared (GEOS indexes a polygon's edges on its first
         # test: a point costs a few edges, not all of them — the same answers)
-        self._lane_array = np.array(self.lane_polygons, dtype=object)
-        self._drivable_array = np.array(self._drivable_parts, dtype=object)
-        shapely.prepare(self._lane_array)
-        shapely.prepare(self._drivable_array)
+        shapely.prepare(self._lane_array[self._lane_made])
         self._junction_parts = [shapely.Polygon(i.polygon) for i in road_map.intersections] + [
-            p for p, a in zip(areas, road_map.areas, strict=True) if a.kind == "intersection"
+            p for p, a in zip(self._areas, road_map.areas, strict=True) if a.kind == "intersection"
         ]
         #: the lane graph's routes asked so far, and each lane's length (route's costs)
         self._routes: dict[tuple[str, str, float, bool], tuple[str, ...]] = {}
@@ -126,6 +131,43 @@ class RoadMapIndex:
         #: the centrelines as shapely lines, and their lengths, as asked (routes' lines)
         self._lines: dict[str, tuple[Any, float]] = {}
         self._build_centrelines(lanes)
+
+    def _lane_polygons_at(self, positions: npt.NDArray[np.intp]) -> npt.NDArray[np.object_]:
+        """The prepared polygons of the lanes at ``positions``, each made when first asked."""
+        missing = np.unique(positions[~self._lane_made[positions]])
+        if missing.size:
+            lanes = self.road_map.lanes
+            made = np.array([lane_polygon(lanes[k]) for k in missing.tolist()], dtype=object)
+            shapely.prepare(made)
+            self._lane_array[missing] = made
+            self._lane_made[missing] = True
+        return np.asarray(self._lane_array[positions])
+
+    @functools.cached_property
+    def lane_polygons(self) -> tuple[Any, ...]:
+        """Shapely polygons, one per lane of ``road_map.lanes`` (same order), prepared."""
+        return tuple(self._lane_polygons_at(np.arange(len(self.road_map.lanes))).tolist())
+
+    @functools.cached_property
+    def _drivable_parts(self) -> list[Any]:
+        """The polygons of the drivable area: the lanes of :data:`DRIVABLE_LANE_KINDS`, then
+        the map's drivable areas."""
+        roads = [
+            p
+            for p, lane in zip(self.lane_polygons, self.road_map.lanes, strict=True)
+            if lane.kind in DRIVABLE_LANE_KINDS
+        ]
+        return [*roads, *self._areas]
+
+    @functools.cached_property
+    def _drivable_tree(self) -> Any:
+        return shapely.STRtree(self._drivable_parts)
+
+    @functools.cached_property
+    def _drivable_array(self) -> npt.NDArray[np.object_]:
+        parts = np.array(self._drivable_parts, dtype=object)
+        shapely.prepare(parts)
+        return parts
 
     # the unions are made when first asked for (a closed loop on a log routes along the lanes
     # and never asks for the drivable area's outline)
@@ -202,7 +244,7 @@ class RoadMapIndex:
         """Every (point, lane) pair where lane holds point: the point indices into ``xy`` and
         the lane positions in ``road_map.lanes``, sorted by point then lane (the lanes of the
         index's ``lane_kinds``)."""
-        pairs = _hits(self._lane_tree, self._lane_array, _points(xy), self._considered)
+        pairs = _hits(self._lane_tree, self._lane_polygons_at, _points(xy), self._considered)
         order = np.lexsort((pairs[1], pairs[0]))
         return pairs[0][order].astype(np.int64), pairs[1][order].astype(np.int64)
 
@@ -281,7 +323,7 @@ class RoadMapIndex:
         """(N,) each point lies on a lane of :data:`DRIVABLE_LANE_KINDS` or a drivable area
         (its boundary included)."""
         p = _points(xy)
-        hits = _hits(self._drivable_tree, self._drivable_array, p, None)
+        hits = _hits(self._drivable_tree, self._drivable_array.__getitem__, p, None)
         out = np.zeros(p.shape[0], dtype=bool)
         out[hits[0]] = True
         return out
@@ -401,17 +443,31 @@ class RoadMapIndex:
 
 
 def _hits(
-    tree: Any, polygons: npt.NDArray[np.object_], p: F64, considered: npt.NDArray[np.bool_] | None
+    tree: Any,
+    polygons: Callable[[npt.NDArray[np.intp]], npt.NDArray[np.object_]],
+    p: F64,
+    considered: npt.NDArray[np.bool_] | None,
 ) -> npt.NDArray[np.intp]:
-    """(2, K) the (point, polygon) pairs where polygon ``polygons[k]`` (the geometries of
-    ``tree``, prepared) holds point ``p[i]``, its boundary included — what ``tree.query(points,
-    predicate="intersects")`` gives (in another order): the tree's bounding-box candidates, then
-    each candidate's own test (of the polygons ``considered``; None: all)."""
+    """(2, K) the (point, polygon) pairs where polygon ``polygons(k)`` (prepared; the tree's
+    geometry ``k`` or a box that holds it) holds point ``p[i]``, its boundary included — what
+    ``tree.query(points, predicate="intersects")`` gives on the polygons (in another order): the
+    tree's bounding-box candidates, then each candidate's own test (of the polygons
+    ``considered``; None: all)."""
     pairs = tree.query(shapely.points(p))
     if considered is not None:
         pairs = pairs[:, considered[pairs[1]]]
-    inside = shapely.intersects_xy(polygons[pairs[1]], p[pairs[0], 0], p[pairs[0], 1])
+    inside = shapely.intersects_xy(polygons(pairs[1]), p[pairs[0], 0], p[pairs[0], 1])
     return np.asarray(pairs[:, inside])
+
+
+def _holding_box(lane: MapLane) -> Any:
+    """A box that holds :func:`lane_polygon` of a lane without boundaries (its centreline
+    widened by ``width_m / 2``: every point of it lies within that of the centreline's box; a
+    micrometre more for the buffer's rounding)."""
+    lo = lane.centerline.min(axis=0)
+    hi = lane.centerline.max(axis=0)
+    grow = abs(lane.width_m) / 2.0 + 1e-6
+    return shapely.box(lo[0] - grow, lo[1] - grow, hi[0] + grow, hi[1] + grow)
 
 
 def _edge_segments(area: Any) -> F64:

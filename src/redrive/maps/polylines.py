@@ -8,10 +8,13 @@ of ``Distance::pointToSegment`` —, and ``LengthIndexOfPoint::indexOf`` for the
 first segment in order at the least distance, its ``segmentNearestMeasure``), so the results
 are the same doubles; only segments whose bounding box is farther from the point than the best
 distance so far (by a relative margin of 1e-9, far above rounding) are skipped, and a skipped
-segment could not have been chosen.  A point on the same polyline as the point before it starts
+segment could not have been chosen.  The segments are taken in chunks of :data:`_CHUNK` in
+order, and a chunk whose bounding box is that far is skipped whole (each of its segments' boxes
+lies in it, so each would have been skipped: the same results, without a visit to every segment
+of a long polyline for every point).  A point on the same polyline as the point before it starts
 from that point's nearest segment (points along a path: most segments are then skipped), and the
 first segment in order at the least distance is still the one taken; a run of points on one
-polyline measures its segments' lengths once.
+polyline measures its segments' lengths and its chunks' boxes once.
 
 The polylines are given as one vertex array ``coords`` (V, 2) and ``offsets`` (L + 1,): polyline
 ``k`` is ``coords[offsets[k]:offsets[k + 1]]`` (a one-vertex polyline is a point).
@@ -32,6 +35,8 @@ F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
 #: a segment whose bounding box is farther than the best distance times this is skipped
 _SKIP = 1.0 + 1e-9
+#: consecutive segments whose common bounding box is tested first (the box of a run of them)
+_CHUNK = 16
 
 
 def packed(lines: Sequence[npt.ArrayLike]) -> tuple[F64, I64]:
@@ -85,6 +90,21 @@ def _far(  # noqa: PLR0917 (numba has no keyword-only parameters)
     return gx * gx + gy * gy > best * best * _SKIP
 
 
+@numba.njit(cache=True, nogil=True)
+def _chunk_boxes(coords: F64, lo: int, hi: int, boxes: F64) -> None:
+    """``boxes[c]`` (x min, y min, x max, y max) of the segments ``lo + c·_CHUNK`` … of the
+    polyline ``coords[lo:hi]`` (a chunk's vertices and the first of the next chunk)."""
+    for c in range((hi - lo - 2) // _CHUNK + 1):
+        first = lo + c * _CHUNK
+        last = min(first + _CHUNK, hi - 1)
+        x0 = x1 = coords[first, 0]
+        y0 = y1 = coords[first, 1]
+        for v in range(first + 1, last + 1):
+            x0, x1 = min(x0, coords[v, 0]), max(x1, coords[v, 0])
+            y0, y1 = min(y0, coords[v, 1]), max(y1, coords[v, 1])
+        boxes[c, 0], boxes[c, 1], boxes[c, 2], boxes[c, 3] = x0, y0, x1, y1
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _point_to_segment(  # noqa: PLR0917 (numba has no keyword-only parameters)
     px: float, py: float, ax: float, ay: float, bx: float, by: float
@@ -105,6 +125,8 @@ def _point_to_segment(  # noqa: PLR0917 (numba has no keyword-only parameters)
 @numba.njit(cache=True, nogil=True)
 def _distances(points: F64, line_of: I64, coords: F64, offsets: I64) -> F64:
     out = np.empty(points.shape[0])
+    boxes = np.empty((coords.shape[0] // _CHUNK + offsets.shape[0], 4))
+    current = -1  # the polyline whose chunks' boxes are in boxes
     seed = -1  # the previous point's nearest segment, when it was on the same polyline
     for i in range(points.shape[0]):
         px, py = points[i, 0], points[i, 1]
@@ -116,6 +138,9 @@ def _distances(points: F64, line_of: I64, coords: F64, offsets: I64) -> F64:
             continue
         if i > 0 and line_of[i] != line_of[i - 1]:
             seed = -1
+        if line_of[i] != current:
+            current = line_of[i]
+            _chunk_boxes(coords, lo, hi, boxes)
         best = math.inf
         nearest = -1
         if seed >= 0:  # a near bound first: most segments are then skipped
@@ -123,8 +148,13 @@ def _distances(points: F64, line_of: I64, coords: F64, offsets: I64) -> F64:
                 px, py, coords[seed, 0], coords[seed, 1], coords[seed + 1, 0], coords[seed + 1, 1]
             )
             nearest = seed
-        if best > 0.0:
-            for j in range(lo, hi - 1):
+        for c in range((hi - lo - 2) // _CHUNK + 1):
+            if not best > 0.0:  # DistanceOp's terminateDistance
+                break
+            if _far(px, py, boxes[c, 0], boxes[c, 1], boxes[c, 2], boxes[c, 3], best):
+                continue
+            first = lo + c * _CHUNK
+            for j in range(first, min(first + _CHUNK, hi - 1)):
                 if j == seed:
                     continue
                 ax, ay, bx, by = coords[j, 0], coords[j, 1], coords[j + 1, 0], coords[j + 1, 1]
@@ -133,7 +163,7 @@ def _distances(points: F64, line_of: I64, coords: F64, offsets: I64) -> F64:
                 d = _point_to_segment(px, py, ax, ay, bx, by)
                 if d < best:
                     best, nearest = d, j
-                    if best <= 0.0:  # DistanceOp's terminateDistance
+                    if best <= 0.0:
                         break
         out[i] = best
         seed = nearest
@@ -169,6 +199,7 @@ def _locate(points: F64, line_of: I64, coords: F64, offsets: I64) -> tuple[F64, 
     # same running sum as LengthIndexOfPoint's), computed once per run of points on one line
     starts = np.empty(coords.shape[0])
     lengths = np.empty(coords.shape[0])
+    boxes = np.empty((coords.shape[0] // _CHUNK + offsets.shape[0], 4))
     current = -1
     seed = -1  # the previous point's segment (on the same polyline)
     for i in range(points.shape[0]):
@@ -182,6 +213,7 @@ def _locate(points: F64, line_of: I64, coords: F64, offsets: I64) -> tuple[F64, 
                 length = math.sqrt((ax - bx) * (ax - bx) + (ay - by) * (ay - by))
                 starts[j], lengths[j] = start, length
                 start += length
+            _chunk_boxes(coords, lo, hi, boxes)
         best = math.inf
         measure = -1.0  # LengthIndexOfPoint::indexOf's minIndex
         chosen = hi  # the first segment in order at the least distance (hi: none yet)
@@ -195,16 +227,20 @@ def _locate(points: F64, line_of: I64, coords: F64, offsets: I64) -> tuple[F64, 
             d, m = _measure(px, py, ax, ay, bx, by, starts[seed], lengths[seed])
             if m > -1.0:
                 measure, best, chosen = m, d, seed
-        for j in range(lo, hi - 1):
-            if j == chosen:
+        for c in range((hi - lo - 2) // _CHUNK + 1):
+            if _far(px, py, boxes[c, 0], boxes[c, 1], boxes[c, 2], boxes[c, 3], best):
                 continue
-            ax, ay, bx, by = coords[j, 0], coords[j, 1], coords[j + 1, 0], coords[j + 1, 1]
-            if _far(px, py, ax, ay, bx, by, best):
-                continue
-            d, m = _measure(px, py, ax, ay, bx, by, starts[j], lengths[j])
-            # strictly nearer, or as near and earlier than the seed: the first in order wins
-            if m > -1.0 and (d < best or (d == best and j < chosen)):
-                measure, best, chosen = m, d, j
+            first = lo + c * _CHUNK
+            for j in range(first, min(first + _CHUNK, hi - 1)):
+                if j == chosen:
+                    continue
+                ax, ay, bx, by = coords[j, 0], coords[j, 1], coords[j + 1, 0], coords[j + 1, 1]
+                if _far(px, py, ax, ay, bx, by, best):
+                    continue
+                d, m = _measure(px, py, ax, ay, bx, by, starts[j], lengths[j])
+                # strictly nearer, or as near and earlier than the seed: the first in order wins
+                if m > -1.0 and (d < best or (d == best and j < chosen)):
+                    measure, best, chosen = m, d, j
         s_out[i] = measure
         d_out[i] = best
         seed = chosen if chosen < hi else -1
