@@ -61,6 +61,7 @@ from redrive.io.datasets.native import (
 )
 from redrive.io.datasets.tfrecord import looks_like_tfrecord, read_tfrecords
 from redrive.io.datasets.womd_proto import LANE_STATE_NAMES, scenario_class
+from redrive.io.datasets.womd_wire import map_polylines, track_states
 from redrive.types import (
     DetectedObject,
     LightState,
@@ -145,25 +146,29 @@ class WomdScenarioInfo:
     scenarios_in_file: int
 
 
-def _tracks_of(scenario: Any, *, where: str) -> WomdTracks:
+def _tracks_of(scenario: Any, *, where: str, data: bytes) -> WomdTracks:
+    """The tracks of ``scenario``, decoded from the record ``data``; their states read from the
+    bytes in one pass (:func:`~redrive.io.datasets.womd_wire.track_states`), else (a record
+    that walk does not take) one attribute at a time."""
     steps = len(scenario.timestamps_seconds)
     n = len(scenario.tracks)
-    xyz = np.zeros((n, steps, 3))
-    lwh = np.zeros((n, steps, 3))
-    heading = np.zeros((n, steps))
-    vel = np.zeros((n, steps, 2))
-    valid = np.zeros((n, steps), dtype=bool)
+    walked = track_states(data)
+    counts = walked[1].tolist() if walked is not None else [len(t.states) for t in scenario.tracks]
     for i, track in enumerate(scenario.tracks):
-        if len(track.states) != steps:
+        if counts[i] != steps:
             msg = (
-                f"{where}: track {i} (id {track.id}) has {len(track.states)} states for "
+                f"{where}: track {i} (id {track.id}) has {counts[i]} states for "
                 f"{steps} timestamps; the scenario is damaged"
             )
             raise LogError(msg)
+    if walked is not None:
+        rows = walked[0].reshape(n, steps, 10)
+    else:
         # one flat list (numpy converts it far faster than a list of rows)
         rows = np.array(
             [
                 v
+                for track in scenario.tracks
                 for s in track.states
                 for v in (
                     s.center_x,
@@ -179,9 +184,12 @@ def _tracks_of(scenario: Any, *, where: str) -> WomdTracks:
                 )
             ],
             dtype=np.float64,
-        ).reshape(steps, 10)
-        xyz[i], lwh[i], heading[i] = rows[:, 0:3], rows[:, 3:6], rows[:, 6]
-        vel[i], valid[i] = rows[:, 7:9], rows[:, 9] > 0
+        ).reshape(n, steps, 10)
+    xyz = np.ascontiguousarray(rows[:, :, 0:3])
+    lwh = np.ascontiguousarray(rows[:, :, 3:6])
+    heading = np.ascontiguousarray(rows[:, :, 6])
+    vel = np.ascontiguousarray(rows[:, :, 7:9])
+    valid = rows[:, :, 9] > 0
     bad = valid & ~np.all(np.isfinite(np.concatenate([xyz, lwh, vel], axis=2)), axis=2)
     if bad.any():
         i, k = (int(v) for v in np.argwhere(bad)[0])
@@ -248,7 +256,8 @@ class WomdReader(NativeLogBase):
                 scenario.scenario_id,
             )
         self._scenario = scenario
-        self.tracks = _tracks_of(scenario, where=where)
+        self._record = first.data  # the map's points are read from it when asked
+        self.tracks = _tracks_of(scenario, where=where, data=first.data)
         steps = len(scenario.timestamps_seconds)
         sdc = int(scenario.sdc_track_index)
         if not 0 <= sdc < len(scenario.tracks):
@@ -405,7 +414,9 @@ class WomdReader(NativeLogBase):
         if self._road_map is None:
             from redrive.io.datasets.womd_map import road_map_from_scenario
 
-            self._road_map = road_map_from_scenario(self._scenario, source=str(self.path))
+            self._road_map = road_map_from_scenario(
+                self._scenario, source=str(self.path), points=map_polylines(self._record)
+            )
         return self._road_map
 
 

@@ -55,6 +55,16 @@ def _xy(points: Any) -> npt.NDArray[np.float64]:
     return np.array([v for p in points for v in (p.x, p.y)], dtype=np.float64).reshape(-1, 2)
 
 
+#: (P, 2) every map feature's points, one after the other, and (F + 1,) the offsets of each
+#: feature's (:func:`~redrive.io.datasets.womd_wire.map_polylines`)
+Points = tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]
+
+
+def _points_of(points: Points, k: int) -> npt.NDArray[np.float64]:
+    xy, offsets = points
+    return xy[offsets[k] : offsets[k + 1]].copy()
+
+
 def _bounded_spans(n: int, segments: Any, lines: dict[int, int]) -> list[tuple[int, int, int]]:
     """The (first, last point index, boundary number) of each boundary segment of one side of
     an ``n``-point centreline that bounds some of it, in the order given (a later one bounding
@@ -72,11 +82,15 @@ def _bounded_spans(n: int, segments: Any, lines: dict[int, int]) -> list[tuple[i
 
 
 def lane_widths(
-    scenario: Any, centres: dict[int, npt.NDArray[np.float64]] | None = None
+    scenario: Any,
+    centres: dict[int, npt.NDArray[np.float64]] | None = None,
+    points: Points | None = None,
 ) -> dict[int, float | None]:
     """Lane feature id → its measured width (m), or None where no boundary bounds it.
 
-    ``centres``: lane feature id → its centreline (N, 2), when the caller has them already.
+    ``centres``: lane feature id → its centreline (N, 2), when the caller has them already;
+    ``points``: every feature's points (:func:`~redrive.io.datasets.womd_wire.map_polylines`
+    of the record), when the caller has them.
 
     The distance of a centreline point to a boundary is GEOS's (``shapely.distance`` of the
     point and the boundary's linestring: the least over its segments of
@@ -85,10 +99,10 @@ def lane_widths(
     (:func:`redrive.maps.polylines.polyline_distances`: the same doubles)."""
     coords: list[npt.NDArray[np.float64]] = []
     lines: dict[int, int] = {}  # feature id → its number in coords
-    for feature in scenario.map_features:
+    for k, feature in enumerate(scenario.map_features):
         kind = feature.WhichOneof("feature_data")
         if kind in ("road_line", "road_edge"):
-            xy = _xy(getattr(feature, kind).polyline)
+            xy = _points_of(points, k) if points else _xy(getattr(feature, kind).polyline)
             if len(xy) >= 1:
                 lines[int(feature.id)] = len(coords)
                 coords.append(xy)
@@ -146,18 +160,19 @@ def lane_widths(
     return out
 
 
-def road_map_from_scenario(scenario: Any, *, source: str) -> RoadMap:
-    """The road map of a decoded ``Scenario``.
+def road_map_from_scenario(scenario: Any, *, source: str, points: Points | None = None) -> RoadMap:
+    """The road map of a decoded ``Scenario``; ``points``: its features' points read from the
+    record (:func:`~redrive.io.datasets.womd_wire.map_polylines`; None: from ``scenario``).
 
     Raises:
         LogError: a lane's points are not finite, or two features share an id.
     """
     centres = {
-        int(f.id): _xy(f.lane.polyline)
-        for f in scenario.map_features
+        int(f.id): _points_of(points, k) if points else _xy(f.lane.polyline)
+        for k, f in enumerate(scenario.map_features)
         if f.WhichOneof("feature_data") == "lane"
     }
-    widths = lane_widths(scenario, centres)
+    widths = lane_widths(scenario, centres, points)
     known = [w for w in widths.values() if w is not None]
     fallback = float(np.median(known)) if known else None
     lanes: list[tuple[int, Any, npt.NDArray[np.float64], float]] = []
@@ -220,9 +235,9 @@ def road_map_from_scenario(scenario: Any, *, source: str) -> RoadMap:
     block_of, roadblocks = roadblock_rows({i: SimpleNamespace(**f) for i, f in fields.items()})
     out = [MapLane(**f, roadblock_id=block_of[i]) for i, f in fields.items()]
     crosswalks = []
-    for feature in scenario.map_features:
+    for k, feature in enumerate(scenario.map_features):
         if feature.WhichOneof("feature_data") == "crosswalk":
-            poly = _xy(feature.crosswalk.polygon)
+            poly = _points_of(points, k) if points else _xy(feature.crosswalk.polygon)
             if len(poly) >= 3 and np.all(np.isfinite(poly)):
                 crosswalks.append(Crosswalk(crosswalk_id=str(int(feature.id)), polygon=poly))
     by_id = {lane.lane_id: lane for lane in out}
