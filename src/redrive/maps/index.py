@@ -2,8 +2,9 @@
 pose, the drivable area, the distance to the road edge, a route along the lane graph.
 
 :class:`RoadMapIndex` is built once per map (shapely STRtrees over the lane polygons, the
-drivable polygons and the road-edge segments) and answers for N points at a time, so that a
-frame of 100 agents costs a few tree queries, not a scan of every lane.
+drivable polygons and the road-edge segments; a lane widened from its centreline, and the
+drivable area, made when a query first needs them) and answers for N points at a time, so that
+a frame of 100 agents costs a few tree queries, not a scan of every lane.
 
 Geometry (the map frame, metres):
 
