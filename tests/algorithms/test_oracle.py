@@ -197,3 +197,53 @@ def test_ground_truth_sharing_columns_gives_the_output_of_constructed_objects() 
                 assert getattr(a, name).tobytes() == getattr(b, name).tobytes()
             assert a.box.center.tobytes() == b.box.center.tobytes()
             assert a.box.size.tobytes() == b.box.size.tobytes()
+
+
+def test_trusted_detections_equal_the_checked_ones(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Ground truth with the default confidences and accelerations (a simulator's trusted
+    columns), no false positives: the detections built unchecked (ObjectColumns.trusted) are
+    DetectedObject.many's, column for column, with ids kept or not; a NaN size or yaw, or false
+    positives, take many's path (its ValueError for the NaN)."""
+    rng = np.random.default_rng(5)
+    n = 30
+    columns = ObjectColumns.trusted(
+        object_id=np.arange(1, n + 1, dtype=np.int64),
+        object_class=(ObjectClass.VEHICLE, ObjectClass.PEDESTRIAN) * (n // 2),
+        center_m=rng.uniform(-40.0, 40.0, (n, 3)),
+        size_m=rng.uniform(0.5, 5.0, (n, 3)),
+        yaw_rad=rng.uniform(-3.0, 3.0, n),
+        velocity_mps=rng.normal(0.0, 4.0, (n, 3)),
+    )
+    objects = tuple(columns.objects())
+    names = (
+        "object_id", "confidence", "center_m", "size_m", "yaw_rad", "velocity_mps",
+        "acceleration_mps2", "orientation_rad", "num_lidar_points", "frame_index",
+    )  # fmt: skip
+    for extra in ({"miss_probability": 0.2}, {"keep_ids": False, "yaw_std_rad": 0.5}):
+        config = {**extra, "false_positive_rate": 0.0, "class_confusion_probability": 0.3}
+        for index in range(4):
+            got = oracle(**config).step(frame(index, objects), StageOutputs())
+            with monkeypatch.context() as m:
+                m.setattr("redrive.algorithms.reference.oracle._trusted_defaults", lambda *a: False)
+                want = oracle(**config).step(frame(index, objects), StageOutputs())
+            a, b = ObjectColumns.shared_by(got), ObjectColumns.shared_by(want)
+            assert a is not None
+            assert b is not None
+            assert len(a) > 0
+            assert a.object_class == b.object_class
+            assert a.visible == b.visible
+            assert a.bbox_2d_px == b.bbox_2d_px
+            for name in names:
+                x, y = getattr(a, name), getattr(b, name)
+                assert x.dtype == y.dtype, name
+                assert x.tobytes() == y.tobytes(), name
+    bad = ObjectColumns.trusted(
+        object_id=columns.object_id,
+        object_class=columns.object_class,
+        center_m=columns.center_m,
+        size_m=np.where(np.arange(n)[:, None] == 4, np.nan, columns.size_m),
+        yaw_rad=columns.yaw_rad,
+        velocity_mps=columns.velocity_mps,
+    )
+    with pytest.raises(ValueError, match="size_m"):
+        oracle(quiet=True).step(frame(0, tuple(bad.objects())), StageOutputs())

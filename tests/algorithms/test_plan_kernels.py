@@ -13,6 +13,7 @@ import numpy.typing as npt
 
 from redrive.algorithms.reference._kernels import project_on_segments
 from redrive.algorithms.reference._plan_kernels import (
+    box_frames,
     gate_crossing,
     leaders_on_path,
     path_bounds,
@@ -111,6 +112,9 @@ def test_polyline_arc_and_points_at_equal_the_numpy_code_bit_for_bit() -> None:
 
 
 def test_leaders_on_path_equal_the_numpy_code_bit_for_bit() -> None:
+    """box_frames gives the planner's former numpy operands of the corners (math.cos and
+    math.sin, the signs times half the size) and leaders_on_path on their product, the centres
+    added inside, gives the numpy code's leaders of the corners numpy summed."""
     rng = np.random.default_rng(12)
     for _ in range(150):
         xy, s_line = polyline_arc(_random_line(rng))
@@ -118,22 +122,29 @@ def test_leaders_on_path_equal_the_numpy_code_bit_for_bit() -> None:
             continue
         n = int(rng.integers(1, 25))
         yaws = rng.uniform(-math.pi, math.pi, n)
+        cos = [math.cos(yaw) for yaw in yaws.tolist()]
+        sin = [math.sin(yaw) for yaw in yaws.tolist()]
         rotations = np.zeros((n, 3, 3))
-        rotations[:, 0, 0] = rotations[:, 1, 1] = np.cos(yaws)
-        rotations[:, 0, 1] = np.sin(yaws)
-        rotations[:, 1, 0] = -np.sin(yaws)
+        rotations[:, 0, 0] = rotations[:, 1, 1] = cos
+        rotations[:, 0, 1] = sin
+        rotations[:, 1, 0] = [-v for v in sin]
         rotations[:, 2, 2] = 1.0
         centers = np.column_stack([rng.uniform(-10.0, 80.0, (n, 2)), np.full(n, 0.8)])
         # some boxes right on the path, as leaders are
         on = rng.random(n) < 0.5
         centers[on, :2] = xy[rng.integers(0, len(xy), int(on.sum()))]
         sizes = rng.uniform(0.5, 5.0, (n, 3))
-        corners = BOX_CORNER_SIGNS * (0.5 * sizes)[:, None, :] @ rotations + centers[:, None, :]
+        local = BOX_CORNER_SIGNS * (0.5 * sizes)[:, None, :]
+        got_local, got_rotations = box_frames(yaws, sizes, BOX_CORNER_SIGNS)
+        assert _bits(got_local) == _bits(local)
+        assert _bits(got_rotations) == _bits(rotations)
+        product = local @ rotations
+        corners = product + centers[:, None, :]
         vel = rng.normal(0.0, 5.0, (n, 3))
         vel[rng.random(n) < 0.2] = 0.0
-        args = (corners, centers, vel, xy, s_line, 1.5, 3.75, min(s_line[-1], 120.0) - 1e-6)
-        got_s, got_v = leaders_on_path(*args)
-        want_s, want_v = _leaders_numpy(*args)
+        rest = (vel, xy, s_line, 1.5, 3.75, min(s_line[-1], 120.0) - 1e-6)
+        got_s, got_v = leaders_on_path(product, centers, *rest)
+        want_s, want_v = _leaders_numpy(corners, centers, *rest)
         assert _bits(got_s) == _bits(want_s)
         assert _bits(got_v) == _bits(want_v)
 

@@ -52,7 +52,6 @@ from redrive.closedloop.simulator import (
 )
 from redrive.errors import ConfigError, SimulationError
 from redrive.sim.ego import ActuatedEgo, EgoGeometry, PedalModel, TyreLimit
-from redrive.sim.ground_truth import objects_in_base
 from redrive.sim.rig import rig_from_mapping
 from redrive.sim.scenario import Scenario
 from redrive.sim.sinks import MessageSink
@@ -199,7 +198,7 @@ class SyntheticSimulator:
         world = self._world
         source = self._expert if self.agents == "replay" else world
         if self._rendering is None or self._frame_sensors is None:
-            objects = objects_in_base(source.ground_truth_columns(), world.map_from_base())
+            objects = source.ground_truth_in_base(world.map_from_base())
             return Frame(
                 stamp_ns=world.time_ns,
                 index=self._index,
@@ -209,11 +208,8 @@ class SyntheticSimulator:
             )
         self._start_rendering()
         lidar_hits, camera_pixels = self._rendering.visibility()
-        objects = objects_in_base(
-            source.ground_truth_columns(),
-            world.map_from_base(),
-            lidar_hits=lidar_hits,
-            camera_pixels=camera_pixels,
+        objects = source.ground_truth_in_base(
+            world.map_from_base(), lidar_hits=lidar_hits, camera_pixels=camera_pixels
         )
         return Frame(
             stamp_ns=world.time_ns,

@@ -13,6 +13,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 
 from redrive.sim.agents import ParkedObject
 from redrive.types import ObjectColumns
@@ -20,7 +21,7 @@ from redrive.types import ObjectColumns
 if TYPE_CHECKING:
     from redrive.sim.world import World
 
-__all__ = ["truth_columns"]
+__all__ = ["truth_columns", "truth_moving"]
 
 
 class _Constant:
@@ -61,6 +62,25 @@ class _Constant:
 def truth_columns(world: World, cache: _Constant | None) -> tuple[ObjectColumns, _Constant]:
     """``world.ground_truth_objects()``'s rows and values as trusted columns, and the constant
     columns to pass back next time."""
+    centers, yaws, vels, cache = truth_moving(world, cache)
+    return (
+        ObjectColumns.trusted(
+            object_id=cache.object_ids,
+            object_class=cache.classes,
+            center_m=centers,
+            size_m=cache.sizes,
+            yaw_rad=yaws,
+            velocity_mps=vels,
+        ),
+        cache,
+    )
+
+
+def truth_moving(
+    world: World, cache: _Constant | None
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64], _Constant]:
+    """:func:`truth_columns`' centres (N, 3), yaws (N,) and velocities (N, 3) (new, writable
+    arrays), and the constant columns (ids, classes, sizes)."""
     fleet = world._fleet
     nf = len(fleet)
     if cache is None or cache.key != (nf, len(world._walkers) + len(world._parked)):
@@ -76,14 +96,4 @@ def truth_columns(world: World, cache: _Constant | None) -> tuple[ObjectColumns,
         vels[k, :2] = walker.velocity()
         centers[k, 0], centers[k, 1] = x, y
         yaws[k] = yaw
-    return (
-        ObjectColumns.trusted(
-            object_id=cache.object_ids,
-            object_class=cache.classes,
-            center_m=centers,
-            size_m=cache.sizes,
-            yaw_rad=yaws,
-            velocity_mps=vels,
-        ),
-        cache,
-    )
+    return centers, yaws, vels, cache

@@ -36,14 +36,22 @@ from redrive.sim.ego import (
 from redrive.sim.fleet import LaneFleet
 from redrive.sim.gaps import GapSearch
 from redrive.sim.ground import rasterize
+from redrive.sim.ground_truth import boxes_in_base
 from redrive.sim.lights import TrafficLights
 from redrive.sim.roads import RoadNetwork, build_network
 from redrive.sim.scenario import AgentSpec, Scenario
 from redrive.sim.scene import GroundMap, ObjectLooks, Scene
 from redrive.sim.scenery import build_scenery
 from redrive.sim.stepper import FrameStepper
-from redrive.sim.truth import _Constant, truth_columns
-from redrive.types import ControlCommands, ObjectClass, ObjectColumns, TrafficData, VehicleState
+from redrive.sim.truth import _Constant, truth_columns, truth_moving
+from redrive.types import (
+    ControlCommands,
+    DetectedObject,
+    ObjectClass,
+    ObjectColumns,
+    TrafficData,
+    VehicleState,
+)
 
 __all__ = ["World"]
 
@@ -397,6 +405,23 @@ class World:
         constant columns built once) — an object-level observation's input."""
         columns, self._truth_cache = truth_columns(self, self._truth_cache)
         return columns
+
+    def ground_truth_in_base(
+        self,
+        map_from_base: npt.NDArray[np.float64],
+        *,
+        lidar_hits: dict[int, int] | None = None,
+        camera_pixels: dict[int, int] | None = None,
+    ) -> tuple[DetectedObject, ...]:
+        """``objects_in_base(self.ground_truth_columns(), map_from_base, …)``: the rows within
+        range of an ego at ``map_from_base``, in its base_link, without the map-frame columns."""
+        centers, yaws, vels, cache = truth_moving(self, self._truth_cache)
+        self._truth_cache = cache
+        yaws.flags.writeable = False  # (as a scene's column: the kernel's one signature)
+        return boxes_in_base(
+            cache.object_ids, cache.classes, centers, cache.sizes, yaws, vels, map_from_base,
+            lidar_hits=lidar_hits, camera_pixels=camera_pixels,
+        )  # fmt: skip
 
     def _objects(
         self, static: tuple[ObjectColumns, ObjectLooks]

@@ -36,6 +36,7 @@ from redrive.algorithms.reference._numeric_kernels import interp_at, nan_span, s
 from redrive.motion.idm import idm_kernel
 
 __all__ = [
+    "box_frames",
     "gate_crossing",
     "idm_profile",
     "leaders_on_path",
@@ -304,7 +305,7 @@ def project_pruned(  # noqa: PLR0917 - numba takes no keyword-only parameters
 
 @numba.njit(cache=True, nogil=True)
 def leaders_on_path(  # noqa: PLR0917 - numba takes no keyword-only parameters
-    corners: _F64,
+    local: _F64,
     centers: _F64,
     velocities: _F64,
     xy: _F64,
@@ -313,8 +314,10 @@ def leaders_on_path(  # noqa: PLR0917 - numba takes no keyword-only parameters
     front_m: float,
     far_m: float,
 ) -> tuple[_F64, _F64]:  # pragma: no cover - compiled
-    """:meth:`IdmPlanner._leaders` after the boxes' corners: the objects (corners (n, ≥ 4, ≥ 2):
-    the bottom four first; centres (n, ≥ 2); velocities (n, ≥ 2)) whose corners projected on
+    """:meth:`IdmPlanner._leaders` after the boxes' rotated corners: the objects (``local`` (n,
+    ≥ 4, ≥ 2): the corners about the centre, the bottom four first — a corner is ``local +
+    centre``, the float64 sum numpy's ``local @ rotations + centers[:, None, :]`` was; centres
+    (n, ≥ 2); velocities (n, ≥ 2)) whose corners projected on
     the path (vertices ``xy`` (M ≥ 2, 2), arc lengths ``s``) overlap the corridor ±
     ``half_width_m`` and reach past ``front_m`` and before ``far_m``; for each, in order, the
     arc length of its rear (the least corner's) and its speed along the path tangent at its
@@ -335,8 +338,8 @@ def leaders_on_path(  # noqa: PLR0917 - numba takes no keyword-only parameters
     points = np.empty((5 * n, 2))
     for i in range(n):
         for c in range(4):
-            points[4 * i + c, 0] = corners[i, c, 0]
-            points[4 * i + c, 1] = corners[i, c, 1]
+            points[4 * i + c, 0] = local[i, c, 0] + centers[i, 0]
+            points[4 * i + c, 1] = local[i, c, 1] + centers[i, 1]
         points[4 * n + i, 0] = centers[i, 0]
         points[4 * n + i, 1] = centers[i, 1]
     s_all, lat_all = project_pruned(points, a, ab, seg_len, s[: m - 1], s[m - 1])
@@ -364,6 +367,33 @@ def leaders_on_path(  # noqa: PLR0917 - numba takes no keyword-only parameters
         out_v[count] = speed
         count += 1
     return out_s[:count].copy(), out_v[:count].copy()
+
+
+@numba.njit(cache=True, nogil=True)
+def box_frames(
+    yaws: _F64, sizes: _F64, signs: _F64
+) -> tuple[_F64, _F64]:  # pragma: no cover - compiled
+    """:meth:`IdmPlanner._leaders`' operands of the boxes' corners (yaws (n,), sizes (n, 3),
+    ``signs`` :data:`~redrive.geometry.boxes.BOX_CORNER_SIGNS` (8, 3)): the corners unrotated,
+    ``signs * (0.5 * size)`` (n, 8, 3), and the rotations (n, 3, 3) the corners are multiplied
+    by, rows (cos, sin, 0), (-sin, cos, 0), (0, 0, 1) (``math.cos`` and ``math.sin``: libm's, as
+    Python's)."""
+    n = yaws.shape[0]
+    local = np.empty((n, 8, 3))
+    rotations = np.zeros((n, 3, 3))
+    for i in range(n):
+        for k in range(3):
+            half = 0.5 * sizes[i, k]
+            for j in range(8):
+                local[i, j, k] = signs[j, k] * half
+        c = math.cos(yaws[i])
+        sn = math.sin(yaws[i])
+        rotations[i, 0, 0] = c
+        rotations[i, 0, 1] = sn
+        rotations[i, 1, 0] = -sn
+        rotations[i, 1, 1] = c
+        rotations[i, 2, 2] = 1.0
+    return local, rotations
 
 
 @numba.njit(cache=True, nogil=True)

@@ -88,6 +88,7 @@ from redrive.algorithms.base import VEHICLE_STATE, Algorithm, Input, Role, Stage
 from redrive.algorithms.reference._kernels import project_on_segments
 from redrive.algorithms.reference._lights import Gate, gates_of, stop_arcs
 from redrive.algorithms.reference._plan_kernels import (
+    box_frames,
     gate_crossing,
     idm_profile,
     leaders_on_path,
@@ -332,10 +333,13 @@ class IdmPlanner(Algorithm):
         line = Polyline([[0.0, 0.0], [1.0, 0.0]])
         line.project([[0.5, 0.5]])
         line.points_at([0.5])
-        # the leaders' kernel with the argument types _leaders gives it (the objects' centres
-        # and velocities are read-only ObjectColumns arrays)
+        # the leaders' kernels with the argument types _leaders gives them (the objects' yaws,
+        # sizes, centres and velocities are read-only ObjectColumns arrays)
         frozen = np.zeros((1, 3))
         frozen.flags.writeable = False
+        yaws = np.zeros(1)
+        yaws.flags.writeable = False
+        box_frames(yaws, frozen, BOX_CORNER_SIGNS)
         leaders_on_path(np.zeros((1, 8, 3)), frozen, frozen, line.xy, line.s, 1.0, 0.0, 1.0)
         # a stop line's test (_lights.stop_arcs), with the arrays' types a step gives it
         gate_crossing(line.xy, line.s, np.zeros((2, 2)), np.zeros(2), np.ones(2))
@@ -455,30 +459,19 @@ class IdmPlanner(Algorithm):
         the corridor ahead of the front bumper."""
         if not objects or path.length_m <= 0.0:
             return np.zeros(0), np.zeros(0)
-        n = len(objects)
         # the objects' columns (shared with the perception that built them with
         # DetectedObject.many: no pass over the objects), every box's corners in one stacked
-        # matmul (box_corners' product, slice by slice: the same values), then one compiled
+        # matmul (box_corners' product, slice by slice: the same values; the unrotated corners
+        # and the rotations compiled, the product numpy's — its BLAS product is not the
+        # elementwise one on every host — the centres added in the kernel), then one compiled
         # call projects the 4·n bottom corners and the n centres on the path and picks the
         # leaders (:func:`._plan_kernels.leaders_on_path`)
         columns = ObjectColumns.from_objects(objects)
-        yaws = columns.yaw_rad.tolist()
-        cos = [math.cos(yaw) for yaw in yaws]
-        sin = [math.sin(yaw) for yaw in yaws]
-        rotations = np.zeros((n, 3, 3))
-        rotations[:, 0, 0] = cos
-        rotations[:, 0, 1] = sin
-        rotations[:, 1, 0] = [-v for v in sin]
-        rotations[:, 1, 1] = cos
-        rotations[:, 2, 2] = 1.0
-        centers = columns.center_m
-        local = BOX_CORNER_SIGNS * (0.5 * columns.size_m)[:, None, :]
-        corners = local @ rotations + centers[:, None, :]
-        velocities = columns.velocity_mps
+        local, rotations = box_frames(columns.yaw_rad, columns.size_m, BOX_CORNER_SIGNS)
         leaders_s, leaders_v = leaders_on_path(
-            corners,
-            centers,
-            velocities,
+            local @ rotations,
+            columns.center_m,
+            columns.velocity_mps,
             path.xy,
             path.s,
             self.corridor_half_width_m,
