@@ -22,6 +22,7 @@ import numpy.typing as npt
 import pyarrow as pa
 import pyarrow.compute as pc
 from matplotlib.axes import Axes
+from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle, Polygon
 from matplotlib.ticker import MaxNLocator
@@ -172,7 +173,9 @@ def latency_histograms_png(
         lat = lat[np.isfinite(lat)]
         lines = [f"n {lat.size}"]
         if lat.size:
-            ax.hist(lat, bins=min(50, max(5, lat.size // 4)), color="#1f77b4", alpha=0.85)
+            # one filled outline, not a rectangle per bin: the same pixels, a fifth of the work
+            ax.hist(lat, bins=min(50, max(5, lat.size // 4)), color="#1f77b4", alpha=0.85,
+                    histtype="stepfilled")  # fmt: skip
             for q, style in ((50, "-"), (95, "--")):
                 value = float(np.percentile(lat, q))
                 ax.axvline(value, color="#333333", linestyle=style, linewidth=1.0)
@@ -200,24 +203,29 @@ def _footprint(obj: DetectedObject) -> FloatArray:
 def _draw_boxes(
     ax: Axes, objects: Sequence[DetectedObject], *, color: str, label: str, dashed: bool
 ) -> None:
+    """The footprints of ``objects`` (one collection of outlines, drawn as a patch each would
+    be: mitred corners, dashes restarting at each box) and their heading ticks (one collection
+    of segments, capped as a line each would be)."""
     style = "--" if dashed else "-"
     ax.plot([], [], color=color, linestyle=style, label=plain(f"{label} ({len(objects)})"))
-    for obj in objects:
-        xy = _footprint(obj)
-        ax.add_patch(
-            Polygon(
-                np.column_stack([xy[:, 1], xy[:, 0]]),  # plot (y, x): forward is up
-                closed=True,
-                fill=False,
-                edgecolor=color,
-                linewidth=2.0,
-                linestyle=style,
-            )
-        )
-        # a tick from the centre to the front face: the heading
-        front = 0.5 * (xy[0] + xy[3])
-        c = obj.box.center
-        ax.plot([c[1], front[1]], [c[0], front[0]], color=color, linewidth=1.0)
+    if not objects:
+        return
+    feet = [_footprint(obj) for obj in objects]
+    outlines = [np.column_stack([xy[:, 1], xy[:, 0]]) for xy in feet]  # plot (y, x): forward up
+    ax.add_collection(
+        PolyCollection(outlines, closed=True, facecolors="none", edgecolors=color,
+                       linewidths=2.0, linestyles=style, joinstyle="miter", zorder=1),
+        autolim=False,
+    )  # fmt: skip
+    # a tick from the centre to the front face: the heading
+    ticks = []
+    for obj, xy in zip(objects, feet, strict=True):
+        front, c = 0.5 * (xy[0] + xy[3]), obj.box.center
+        ticks.append([(c[1], c[0]), (front[1], front[0])])
+    ax.add_collection(
+        LineCollection(ticks, colors=color, linewidths=1.0, capstyle="projecting", zorder=2),
+        autolim=False,
+    )
 
 
 def _extent_m(objects: Sequence[DetectedObject]) -> float:
