@@ -440,6 +440,36 @@ def test_the_per_frame_plots_tick_whole_frame_indices(monkeypatch: pytest.Monkey
     assert all(float(t).is_integer() for t in ticks), ticks
 
 
+def test_timelines_drawn_again_are_the_pixels_of_a_new_figure() -> None:
+    # the report draws its timelines into the figures of earlier ones (same row count): every
+    # pixel must be the one a new figure gives, whatever the earlier figure held (all-NaN
+    # series keep the default limits, marks off the data, markers, a 1e6 offset, an empty one)
+    import io
+
+    from PIL import Image
+
+    from redrive.evaluation import plots
+
+    rng = np.random.default_rng(7)
+    f3, f90 = np.arange(3, dtype=np.int64), np.arange(90, dtype=np.int64)
+    cases = [
+        ([("a", f90, rng.normal(size=90)), ("b", f90, 1e6 + rng.normal(size=90))], [5, 300]),
+        ([("nan", f3, np.full(3, np.nan)), ("c $x$", f3 + 1000, np.ones(3))], []),
+        ([("only", f3, np.array([1.0, np.inf, 2.0]))], [-4, 1]),
+        ([("nan", f3, np.full(3, np.nan))], []),
+        ([], [2]),
+        ([("a", f90, -rng.random(90) * 1e-4), ("b", f90, np.zeros(90))], list(range(0, 90, 3))),
+    ]
+    again: dict[int, Any] = {}
+    for series, marks in cases:
+        new = plots.timelines_png(series, title="t", marks=marks)
+        reused = plots.timelines_png(series, title="t", marks=marks, again=again)
+        a, b = (np.asarray(Image.open(io.BytesIO(png))) for png in (new, reused))
+        assert a.shape == b.shape
+        assert np.array_equal(a, b), [name for name, _, _ in series]
+    assert sorted(again) == [1, 2]
+
+
 def test_the_worst_frames_views_draw_the_log_s_lidar_points(demo_run: Path) -> None:
     # issue 35 item 10: the report's bird's-eye views of the worst frames drew no LiDAR points
     from redrive.assembly.frames import iter_frames

@@ -10,6 +10,7 @@ subclass meaning "already HTML"); anything else is escaped when combined.
 from __future__ import annotations
 
 import base64
+import contextlib
 import html
 import io
 import math
@@ -93,10 +94,23 @@ def table(
 def png(fig: Figure, *, dpi: int, tight: bool = False) -> bytes:
     """The PNG bytes of a matplotlib figure (Agg canvas, no pyplot state, no display; no
     timestamp or software in the metadata, so the same figure gives the same bytes); ``tight``
-    crops the figure to what is drawn."""
+    crops the figure to what is drawn.
+
+    A figure with a layout engine (``layout="constrained"``) is laid out once here, at ``dpi``,
+    and saved without it: ``savefig`` would otherwise draw the whole figure twice, once with
+    drawing disabled only to run the layout (the same pixels either way; a sixth less work).
+    A figure drawn again (:func:`redrive.evaluation.plots.timelines_png`) keeps its Agg canvas,
+    so its renderer's cache of text sizes."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-    FigureCanvasAgg(fig)
+    if not isinstance(fig.canvas, FigureCanvasAgg):
+        FigureCanvasAgg(fig)  # a figure drawn again keeps its canvas (and text-size cache)
+    engine = fig.get_layout_engine()
+    if engine is not None and not tight and fig.axes:
+        fig.set_dpi(dpi)  # the layout in the pixels savefig draws
+        with contextlib.suppress(ValueError):  # as Figure.draw: too small for its decorations
+            engine.execute(fig)
+        fig.set_layout_engine("none")
     buf = io.BytesIO()
     crop = "tight" if tight else None  # None: the rcParams default, the whole figure
     fig.savefig(buf, format="png", dpi=dpi, metadata={"Software": None}, bbox_inches=crop)

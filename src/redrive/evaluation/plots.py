@@ -22,9 +22,11 @@ import numpy.typing as npt
 import pyarrow as pa
 import pyarrow.compute as pc
 from matplotlib.axes import Axes
+from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle, Polygon
 from matplotlib.ticker import MaxNLocator
+from matplotlib.transforms import Bbox
 
 from redrive.errors import ConfigError
 from redrive.evaluation import html as h
@@ -102,18 +104,44 @@ def pr_curves_png(curves: Sequence[tuple[str, FloatArray, FloatArray]], *, title
     return h.png(fig, dpi=PNG_DPI)
 
 
+def _timeline_figure(rows: int, again: dict[int, Figure] | None) -> Figure:
+    """A figure of ``rows`` subplots sharing the frame axis: a new one, or the one of ``again``
+    with that many rows emptied (its lines removed, data and view limits as a new figure's, the
+    subplots back in their grid cells for the layout to start from), which draws the same pixels as a new one
+    but keeps its axes, their ticks and its canvas (about half the work of a timeline figure)."""
+    fig = again.get(rows) if again is not None else None
+    if fig is None:
+        fig = Figure(figsize=(9.0, 0.6 + 1.5 * rows), layout="constrained")
+        fig.subplots(rows, 1, sharex=True, squeeze=False)
+        if again is not None:
+            again[rows] = fig
+        return fig
+    for ax in fig.axes:
+        for line in list(ax.lines):
+            line.remove()
+        ax.relim()
+        ax.viewLim.set_points(Bbox.unit().get_points())  # limits as a new axes' (not "set")
+        spec = ax.get_subplotspec()
+        if spec is not None:
+            ax.set_subplotspec(spec)
+    fig.set_layout_engine("constrained")
+    return fig
+
+
 def timelines_png(
     series: Sequence[tuple[str, npt.NDArray[np.int64], FloatArray]],
     *,
     title: str,
     marks: Sequence[int] = (),
+    again: dict[int, Figure] | None = None,
 ) -> bytes:
     """One subplot per ``(name, frame_index, value)`` (at most :data:`MAX_TIMELINE_SERIES`),
-    sharing the frame axis; ``marks`` (bookmarked frames) are drawn as thin red lines."""
+    sharing the frame axis; ``marks`` (bookmarked frames) are drawn as thin red lines.
+    ``again``: figures by row count to draw into again (one dict for a run of timelines)."""
     shown = list(series)[:MAX_TIMELINE_SERIES]
     rows = max(1, len(shown))
-    fig = Figure(figsize=(9.0, 0.6 + 1.5 * rows), layout="constrained")
-    axes = fig.subplots(rows, 1, sharex=True, squeeze=False)[:, 0]
+    fig = _timeline_figure(rows, again if shown else None)
+    axes = fig.axes
     for k, (ax, (name, frames, values)) in enumerate(zip(axes, shown, strict=False)):
         color = _CURVE_COLORS[k % len(_CURVE_COLORS)]
         style = "-o" if frames.size <= 60 else "-"
@@ -145,7 +173,9 @@ def latency_histograms_png(
         lat = lat[np.isfinite(lat)]
         lines = [f"n {lat.size}"]
         if lat.size:
-            ax.hist(lat, bins=min(50, max(5, lat.size // 4)), color="#1f77b4", alpha=0.85)
+            # one filled outline, not a rectangle per bin: the same pixels, a fifth of the work
+            ax.hist(lat, bins=min(50, max(5, lat.size // 4)), color="#1f77b4", alpha=0.85,
+                    histtype="stepfilled")  # fmt: skip
             for q, style in ((50, "-"), (95, "--")):
                 value = float(np.percentile(lat, q))
                 ax.axvline(value, color="#333333", linestyle=style, linewidth=1.0)
@@ -173,24 +203,29 @@ def _footprint(obj: DetectedObject) -> FloatArray:
 def _draw_boxes(
     ax: Axes, objects: Sequence[DetectedObject], *, color: str, label: str, dashed: bool
 ) -> None:
+    """The footprints of ``objects`` (one collection of outlines, drawn as a patch each would
+    be: mitred corners, dashes restarting at each box) and their heading ticks (one collection
+    of segments, capped as a line each would be)."""
     style = "--" if dashed else "-"
     ax.plot([], [], color=color, linestyle=style, label=plain(f"{label} ({len(objects)})"))
-    for obj in objects:
-        xy = _footprint(obj)
-        ax.add_patch(
-            Polygon(
-                np.column_stack([xy[:, 1], xy[:, 0]]),  # plot (y, x): forward is up
-                closed=True,
-                fill=False,
-                edgecolor=color,
-                linewidth=2.0,
-                linestyle=style,
-            )
-        )
-        # a tick from the centre to the front face: the heading
-        front = 0.5 * (xy[0] + xy[3])
-        c = obj.box.center
-        ax.plot([c[1], front[1]], [c[0], front[0]], color=color, linewidth=1.0)
+    if not objects:
+        return
+    feet = [_footprint(obj) for obj in objects]
+    outlines = [np.column_stack([xy[:, 1], xy[:, 0]]) for xy in feet]  # plot (y, x): forward up
+    ax.add_collection(
+        PolyCollection(outlines, closed=True, facecolors="none", edgecolors=color,
+                       linewidths=2.0, linestyles=style, joinstyle="miter", zorder=1),
+        autolim=False,
+    )  # fmt: skip
+    # a tick from the centre to the front face: the heading
+    ticks = []
+    for obj, xy in zip(objects, feet, strict=True):
+        front, c = 0.5 * (xy[0] + xy[3]), obj.box.center
+        ticks.append([(c[1], c[0]), (front[1], front[0])])
+    ax.add_collection(
+        LineCollection(ticks, colors=color, linewidths=1.0, capstyle="projecting", zorder=2),
+        autolim=False,
+    )
 
 
 def _extent_m(objects: Sequence[DetectedObject]) -> float:
@@ -492,11 +527,13 @@ def timeline_figures(evaluation: Evaluation) -> list[h.Markup]:
         item = (series, column_at(p, "frame_index", order), column_at(p, "value", order))
         owners.setdefault((metric, algo), []).append(item)
     marks = group_rows(b, ["metric", "algorithm"])
+    again: dict[int, Figure] = {}
     out = []
     for (metric, algo), items in owners.items():
         title = f"{metric} · {algo or 'run'}"
         rows = marks.get((metric, algo), np.zeros(0, dtype=np.int64))
-        png = timelines_png(items, title=title, marks=column_at(b, "frame_index", rows).tolist())
+        frames = column_at(b, "frame_index", rows).tolist()
+        png = timelines_png(items, title=title, marks=frames, again=again)
         more = len(items) - MAX_TIMELINE_SERIES
         note = f" (first {MAX_TIMELINE_SERIES}; {more} more in report.xlsx)" if more > 0 else ""
         out.append(h.figure(png, caption=f"{title}: {len(items)} series{note}", alt=title))
