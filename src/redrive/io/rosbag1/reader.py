@@ -112,6 +112,10 @@ class Ros1BagReader(RosReaderBase):
         self._declared: dict[int, int | None] = {}
         self._lying: set[int] = set()
         self._open()
+        if self._rosbags is not None:
+            # The index as arrays, made at open with the rest of the index (not in the first
+            # read's loop: ≈ 1 µs an entry).
+            self._index_arrays()
         definitions = {c.msgtype: ("msg", c.msgdef) for c in self._conns.values()}
         self._typestore, self._bad_definitions = typestore_for(
             1, definitions, needed={c.msgtype for c in self._conns.values()}, source=self.path
