@@ -35,6 +35,7 @@ __all__ = [
     "chunk_spans",
     "index_contradiction",
     "merged_index",
+    "ros1_times",
 ]
 
 _I64 = npt.NDArray[np.int64]
@@ -111,23 +112,30 @@ def _value_spans(head: bytes) -> dict[bytes, tuple[int, int]] | None:
 
 
 def chunk_spans(
-    chunk: memoryview, offsets: _I64, times: _I64, conns: _I64
-) -> tuple[_I64, _I64, int | None] | None:
+    chunk: memoryview,
+    offsets: Sequence[int],
+    times: Sequence[int],
+    conns: Sequence[int],
+    *,
+    stamps: bytes | None = None,
+) -> tuple[Sequence[int], Sequence[int], int | None] | None:
     """(starts, stops, stride) of the data of the messages the index places at ``offsets`` of
-    ``chunk``, when each is a message record carrying the index's time and connection; None
-    when the records cannot be checked all at once (or one fails): walk them one by one then.
-    ``stride`` is the fixed distance between consecutive messages when they lie at one and
-    all have one size (a chunk of one sensor's clouds), else None.
+    ``chunk`` (lists or int64 arrays, as ``times`` and ``conns``), when each is a message
+    record carrying the index's time and connection; None when the records cannot be checked
+    all at once (or one fails): walk them one by one then.  ``stride`` is the fixed distance
+    between consecutive messages when they lie at one and all have one size (a chunk of one
+    sensor's clouds; starts and stops are then ``range`` objects), else None (lists).
+    ``stamps``: ``times`` as :func:`ros1_times` gives them, when the caller has them.
 
     Every header must have the first header's length and bytes, but for the values of ``conn``
     and ``time``, which must be the index's.  The first header is walked as
     :func:`~redrive.io.rosbag1.records.record_op` walks any (its ``op`` must be a message's).
     """
     end = len(chunk)
-    count = len(offsets)
+    at = _as_list(offsets)
+    count = len(at)
     if count == 0:
         return None
-    at = offsets.tolist()
     first = at[0]
     stride = at[1] - first if count > 1 else 0
     regular = count >= REGULAR_FROM and stride > 0 and at == list(range(first, at[-1] + 1, stride))
@@ -145,17 +153,32 @@ def chunk_spans(
     if last + 8 + size > end:
         return None
     if regular:
-        spans = _regular_spans(
-            chunk, (first, stride, count), (times, conns), template, (conn_span, time_span)
+        if stamps is None:
+            stamps = ros1_times(np.asarray(times, dtype=np.int64))
+        spans = (
+            None
+            if stamps is None
+            else _regular_spans(
+                chunk,
+                (first, stride, count),
+                (stamps, _as_list(conns)),
+                template,
+                (conn_span, time_span),
+            )
         )
         if spans is not None:
             return spans
     if count < ARRAYS_FROM:
         return _spans_one_by_one(
-            chunk, (offsets, times, conns), template, conn_span=conn_span, time_span=time_span
+            chunk,
+            (at, _as_list(times), _as_list(conns)),
+            template,
+            conn_span=conn_span,
+            time_span=time_span,
         )
     # One gather: per message its header length, header and data length.
-    rows = byte_rows(chunk, offsets, size + 8)
+    offsets_at = np.asarray(offsets, dtype=np.int64)
+    rows = byte_rows(chunk, offsets_at, size + 8)
     same = (rows == rows[0]).all(axis=0)
     same[4 + conn_span[0] : 4 + conn_span[1]] = True
     same[4 + time_span[0] : 4 + time_span[1]] = True
@@ -163,30 +186,37 @@ def chunk_spans(
     if not same.all() or rows[0, :4].tobytes() != U32.pack(size):
         return None
     # The values the index gives, as the header would hold them (what the walk compares).
-    secs, nsecs = np.divmod(times, 1_000_000_000)
+    secs, nsecs = np.divmod(np.asarray(times, dtype=np.int64), 1_000_000_000)
     want_time = np.stack([secs, nsecs], axis=1).astype("<u4").view(np.uint8)
-    want_conn = conns.astype("<u4").view(np.uint8).reshape(len(conns), 4)
+    want_conn = np.asarray(conns, dtype=np.int64).astype("<u4").view(np.uint8).reshape(count, 4)
     if not (
         (rows[:, 4 + time_span[0] : 4 + time_span[1]] == want_time).all()
         and (rows[:, 4 + conn_span[0] : 4 + conn_span[1]] == want_conn).all()
     ):
         return None
-    starts = offsets + (8 + size)
+    starts = offsets_at + (8 + size)
     stops = starts + rows[:, size + 4 :].copy().view("<u4")[:, 0]
     if int(stops.max()) > end:
         return None
-    return starts, stops, None
+    return starts.tolist(), stops.tolist(), None
 
 
-#: From this many messages at a fixed distance a chunk is checked as one strided view
-#: (:func:`_regular_spans`: ≈ 15 numpy calls whatever the count).
+def _as_list(values: Sequence[int]) -> list[int]:
+    """``values`` as a list of ints (an array's ``tolist``; a list as it is)."""
+    if type(values) is list:
+        return values
+    tolist = getattr(values, "tolist", None)
+    return list(tolist()) if tolist is not None else list(values)
+
+
+#: From this many messages at a fixed distance a chunk is checked as one ``struct`` unpack
+#: (:func:`_regular_spans`: a few list comparisons, no numpy call).
 REGULAR_FROM = 2
 
 #: The record header layouts seen last: the header's length → (the header with its conn and
 #: time values zeroed, (conn span, time span)); a chunk's first header of a known layout is
 #: then not walked again (the walk's result depends on no byte of those values).
 _LAYOUTS: dict[int, tuple[bytes, tuple[tuple[int, int], tuple[int, int]]]] = {}
-_SECS_LIMIT = (1 << 32) * 1_000_000_000
 
 
 def _masked(template: bytes, conn_span: tuple[int, int], time_span: tuple[int, int]) -> bytes:
@@ -229,51 +259,74 @@ def _template_spans(
 def _regular_spans(
     chunk: memoryview,
     grid: tuple[int, int, int],
-    index: tuple[_I64, _I64],
+    index: tuple[bytes, list[int]],
     template: bytes,
     value_spans: tuple[tuple[int, int], tuple[int, int]],
-) -> tuple[_I64, _I64, int] | None:
-    """:func:`chunk_spans`' check for messages at a fixed distance (``grid``: the first offset,
-    the distance, the count) that all have the first one's data length: every record's header
-    length, header and data length compared at once, as one strided view of the chunk, with
-    what the first record's would be holding the index's ``conn`` and ``time`` (the same check
-    as the walk's).  None when they do not all match (the general check then decides)."""
+) -> tuple[range, range, int] | None:
+    """:func:`chunk_spans`' check for messages of one connection at a fixed distance
+    (``grid``: the first offset, the distance, the count) that all have the first one's data
+    length: every record's header length, header and data length read at once (one
+    ``struct`` unpack over the chunk: the bytes before the ``time`` value, that value, the
+    bytes after it) and compared with the first record's, which must hold the index's
+    ``conn``, and with the index's times (``index``: as ROS 1 times, and the connections) —
+    the same check as the walk's.  None when they do not all match (the general check then
+    decides)."""
     first, stride, count = grid
-    times, conns = index
-    (conn_span, time_span) = value_spans
+    stamps, conns = index
+    conn_span, (time_a, time_b) = value_spans
     size = len(template)
     width = size + 8
     (length,) = U32.unpack_from(chunk, first + 4 + size)
     last = first + (count - 1) * stride
-    if last + width + length > len(chunk) or max(times.tolist()) >= _SECS_LIMIT:
+    conn = conns[0]
+    if (
+        last + width + length > len(chunk)
+        or stride < width + length
+        or conns.count(conn) != count
+        or not 0 <= conn < 1 << 32
+        or template[conn_span[0] : conn_span[1]] != U32.pack(conn)
+    ):
         return None
-    rows = np.ndarray((count,), _void(width), chunk, first, (stride,))
-    want = np.empty((count, width), np.uint8)
-    want[:] = np.frombuffer(U32.pack(size) + template + U32.pack(length), np.uint8)
-    at = 4 + time_span[0]
-    stamp = want[:, at : at + 8].view("<u4")
-    np.divmod(times, 1_000_000_000, out=(stamp[:, 0], stamp[:, 1]), casting="unsafe")
-    at = 4 + conn_span[0]
-    want[:, at : at + 4].view("<u4")[:, 0] = conns
-    if rows.tobytes() != want.tobytes():
+    values = _record_struct(time_a, size, stride, count).unpack_from(chunk, first)
+    # The bytes around the time value must be the first record's (with its header length
+    # before and its data length after), the time values the index's.
+    if not (
+        b"".join(values[1::3]) == stamps
+        and values[0::3].count(U32.pack(size) + template[:time_a]) == count
+        and values[2::3].count(template[time_b:] + U32.pack(length)) == count
+    ):
         return None
-    starts = np.arange(first + width, last + width + 1, stride, dtype=np.int64)
-    return starts, starts + length, stride
+    starts = range(first + width, last + width + 1, stride)
+    return starts, range(starts.start + length, starts.stop + length, stride), stride
 
 
-@functools.lru_cache(maxsize=16)
-def _void(width: int) -> np.dtype[Any]:
-    return np.dtype((np.void, width))
+def ros1_times(times: npt.NDArray[np.int64]) -> bytes | None:
+    """``times`` (int ns) as ROS 1 times (``uint32`` seconds and nanoseconds, 8 bytes each),
+    as a record header holds them; None when one is not a ROS 1 time."""
+    secs, nsecs = np.divmod(times, 1_000_000_000)
+    if len(times) and (int(secs.min()) < 0 or int(secs.max()) >= 1 << 32):
+        return None
+    return np.stack((secs, nsecs), axis=1).astype("<u4").tobytes()
+
+
+@functools.lru_cache(maxsize=64)
+def _record_struct(time_at: int, size: int, stride: int, count: int) -> struct.Struct:
+    """The ``struct`` that reads ``count`` records of ``size``-byte headers ``stride`` apart
+    as three items each: the bytes before the ``time`` value (at ``time_at`` in the header),
+    that value, the bytes after it up to the end of the data length (the rest of the record
+    is skipped)."""
+    record = f"{4 + time_at}s8s{size - time_at - 4}s"
+    return struct.Struct("<" + f"{record}{stride - size - 8}x" * (count - 1) + record)
 
 
 def _spans_one_by_one(
     chunk: memoryview,
-    index: tuple[_I64, _I64, _I64],
+    index: tuple[list[int], list[int], list[int]],
     template: bytes,
     *,
     conn_span: tuple[int, int],
     time_span: tuple[int, int],
-) -> tuple[_I64, _I64, None] | None:
+) -> tuple[list[int], list[int], None] | None:
     """:func:`chunk_spans`' check for a few messages: each header is compared as ``bytes``
     with the first one's, the index's ``conn`` and ``time`` written into it (the same check as
     the array comparison; every offset is already known to leave room for the header and the
@@ -289,9 +342,7 @@ def _spans_one_by_one(
     stops: list[int] = []
     end = len(chunk)
     offsets, times, conns = index
-    for offset, time_ns, conn_id in zip(
-        offsets.tolist(), times.tolist(), conns.tolist(), strict=True
-    ):
+    for offset, time_ns, conn_id in zip(offsets, times, conns, strict=True):
         try:
             conn = U32.pack(conn_id)
             stamp = TIME.pack(*divmod(time_ns, 1_000_000_000))
@@ -306,7 +357,7 @@ def _spans_one_by_one(
             return None
         starts.append(start)
         stops.append(start + length)
-    return np.array(starts, dtype=np.int64), np.array(stops, dtype=np.int64), None
+    return starts, stops, None
 
 
 def index_contradiction(reader: RosbagsReader) -> str | None:

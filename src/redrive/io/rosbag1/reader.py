@@ -22,12 +22,11 @@ import contextlib
 import logging
 import mmap
 import os
-from collections.abc import Collection, Iterator
+from collections.abc import Collection, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 from rosbags.rosbag1 import Reader as RosbagsReader
 from rosbags.rosbag1 import ReaderError as RosbagsReaderError
 from rosbags.rosbag1.reader import decompressors as rosbags_decompressors
@@ -47,6 +46,7 @@ from redrive.io.rosbag1.index import (
     chunk_spans,
     index_contradiction,
     merged_index,
+    ros1_times,
 )
 from redrive.io.rosbag1.messages import batched_messages as _batched
 from redrive.io.rosbag1.records import (
@@ -112,6 +112,10 @@ class Ros1BagReader(RosReaderBase):
         self._declared: dict[int, int | None] = {}
         self._lying: set[int] = set()
         self._open()
+        if self._rosbags is not None:
+            # The index as arrays, made at open with the rest of the index (not in the first
+            # read's loop: ≈ 1 µs an entry).
+            self._index_arrays()
         definitions = {c.msgtype: ("msg", c.msgdef) for c in self._conns.values()}
         self._typestore, self._bad_definitions = typestore_for(
             1, definitions, needed={c.msgtype for c in self._conns.values()}, source=self.path
@@ -325,36 +329,42 @@ class Ros1BagReader(RosReaderBase):
             return  # nothing selected (no topic, a topic the bag lacks, a range without messages)
         # Where the chunk changes: the messages of [bounds[k], bounds[k + 1]) share a chunk.
         bounds = [0, *(np.flatnonzero(np.diff(chunk_pos)) + 1).tolist(), len(times)]
+        # The index as lists (sliced per chunk: what the checks and the messages read).
+        time_at, offset_at, conn_at = times.tolist(), offsets.tolist(), conn_ids.tolist()
+        stamps = ros1_times(times)  # as the records hold them (8 bytes a message)
+        chunk_at = chunk_pos[bounds[:-1]].tolist()
         heads = {cid: (c.topic, c.msgtype) for cid, c in self._conns.items()}
         # Chunks holding any of these connections' messages are read into their own bytes.
         own_ids = {cid for cid, c in self._conns.items() if c.msgtype in READ_INTO_BYTES}
         all_own = own_ids.issuperset(selected)
+        chunks = reader.chunks
         yielded = 0
-        for k in range(len(bounds) - 1):
+        for k, pos in enumerate(chunk_at):
             lo, hi = bounds[k], bounds[k + 1]
-            pos = int(chunk_pos[lo])
+            conns = conn_at[lo:hi]
             try:
-                own = all_own or not own_ids.isdisjoint(conn_ids[lo:hi].tolist())
-                chunk, mapped = self._chunk_bytes(reader.chunks[pos], own=own)
+                own = all_own or not own_ids.isdisjoint(conns)
+                chunk, mapped = self._chunk_bytes(chunks[pos], own=own)
             except (OSError, ValueError, RuntimeError, EOFError) as err:
                 self._chunk_damage(pos, err, yielded)
                 continue
             try:
+                chunk_times = time_at[lo:hi]
                 (starts, stops, stride), damage = self._chunk_spans(
-                    chunk, offsets[lo:hi], times[lo:hi], conn_ids[lo:hi]
+                    chunk,
+                    (offset_at[lo:hi], chunk_times, conns),
+                    None if stamps is None else stamps[8 * lo : 8 * hi],
                 )
                 good = len(starts)
+                if good < len(conns):
+                    chunk_times, conns = chunk_times[:good], conns[:good]
                 yield from _batched(
-                    chunk,
-                    (starts, stops, times[lo : lo + good]),
-                    conn_ids[lo : lo + good].tolist(),
-                    heads,
-                    stride=stride,
+                    chunk, (starts, stops, chunk_times), conns, heads, stride=stride
                 )
                 yielded += good
                 if damage is not None:
                     self._chunk_damage(pos, damage, yielded)
-                elif (lie := self._size_lie(pos, reader.chunks[pos], len(chunk))) is not None:
+                elif (lie := self._size_lie(pos, chunks[pos], len(chunk))) is not None:
                     self._damage.hit(lie, messages_read=yielded)
             finally:
                 if mapped is not None:
@@ -363,25 +373,24 @@ class Ros1BagReader(RosReaderBase):
     def _chunk_spans(
         self,
         chunk: memoryview,
-        offsets: npt.NDArray[np.int64],
-        times: npt.NDArray[np.int64],
-        conn_ids: npt.NDArray[np.int64],
-    ) -> tuple[tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], int | None], DamageError | None]:
-        """The data spans of the messages the index places in ``chunk`` (and their fixed
-        distance, when :func:`~redrive.io.rosbag1.index.chunk_spans` found one), each checked to
-        carry the index's time and connection: all at once when the chunk holds enough of them to
-        pay for it, else (or when that check declines) one by one up to the first damaged one,
-        which is returned with the spans before it."""
+        index: tuple[list[int], list[int], list[int]],
+        stamps: bytes | None = None,
+    ) -> tuple[tuple[Sequence[int], Sequence[int], int | None], DamageError | None]:
+        """The data spans of the messages the index places in ``chunk`` (``index``: their
+        offsets, times and connections; ``stamps``: those times as ROS 1 times, when known) and
+        their fixed distance, when :func:`~redrive.io.rosbag1.index.chunk_spans` found one,
+        each checked to carry the index's time and connection: all at once when the chunk holds
+        enough of them to pay for it, else (or when that check declines) one by one up to the
+        first damaged one, which is returned with the spans before it."""
+        offsets, times, conn_ids = index
         if len(offsets) >= _CHECK_AT_ONCE_FROM:
-            spans = chunk_spans(chunk, offsets, times, conn_ids)
+            spans = chunk_spans(chunk, offsets, times, conn_ids, stamps=stamps)
             if spans is not None:
                 return spans, None
         starts: list[int] = []
         stops: list[int] = []
         damage = None
-        for offset, time_ns, conn_id in zip(
-            offsets.tolist(), times.tolist(), conn_ids.tolist(), strict=True
-        ):
+        for offset, time_ns, conn_id in zip(offsets, times, conn_ids, strict=True):
             try:
                 start, stop = self._message_span(chunk, offset, time_ns, conn_id)
             except DamageError as err:
@@ -389,7 +398,7 @@ class Ros1BagReader(RosReaderBase):
                 break
             starts.append(start)
             stops.append(stop)
-        return (np.array(starts, dtype=np.int64), np.array(stops, dtype=np.int64), None), damage
+        return (starts, stops, None), damage
 
     def _chunk_bytes(
         self, header: Any, *, own: bool = False

@@ -31,7 +31,7 @@ import numpy.typing as npt
 from redrive.io.base import LogMessage
 from redrive.io.ros.decoders._common import unsupported
 from redrive.io.ros.decoders.base import Decoded, DecodedKind, Deserialize
-from redrive.io.ros.decoders.pointcloud2_batch import decode_batch, views_buffer
+from redrive.io.ros.decoders.pointcloud2_batch import BatchHeads, decode_batch, views_buffer
 from redrive.types import PointCloud, SensorType
 
 __all__ = [
@@ -453,6 +453,7 @@ class PointCloud2Decoder:
         # id(cached field block) → its plan; the plan keeps the block so its id cannot be
         # reused.  Hashing the field list per message costs more than the lookup.
         self._plans: dict[int, _Plan] = {}
+        self._batch_heads = BatchHeads()
 
     def _plan(self, block: _FieldBlock) -> _Plan:
         plan = self._plans.get(id(block))
@@ -472,7 +473,11 @@ class PointCloud2Decoder:
             done = batch.memo.get(self)
             if done is None:
                 done = decode_batch(
-                    batch, read_head=_read_head, layouts=self._layouts, plan_of=self._plan
+                    batch,
+                    read_head=_read_head,
+                    layouts=self._layouts,
+                    plan_of=self._plan,
+                    heads=self._batch_heads,
                 )
                 batch.memo[self] = done
             found = done[index]

@@ -46,6 +46,7 @@ __all__ = [
     "GROUP_BYTES",
     "VIEW_MAX_BYTES",
     "VIEW_SHARE",
+    "BatchHeads",
     "decode_batch",
     "views_buffer",
 ]
@@ -134,28 +135,46 @@ def views_buffer(buf: bytes | memoryview, nbytes: int, *, each: int | None = Non
 
 def _view(
     buf: bytes | memoryview,
-    offsets: npt.NDArray[np.int64],
-    stride: int | None,
+    at: tuple[int, int | None, npt.NDArray[np.int64] | None],
+    count: int,
     n: int,
     plan: tuple[np.dtype[Any], tuple[str, ...]],
 ) -> tuple[list[npt.NDArray[np.float32]], list[list[npt.NDArray[Any]]]]:
-    """Each cloud's xyz and channels as read-only strided views of ``buf``: ``n`` points of
-    the plan's view dtype at each of ``offsets`` (``stride`` apart, or None when they are not
-    at a fixed distance), by C-level iteration."""
+    """Each of ``count`` clouds' xyz and channels as read-only strided views of ``buf``: ``n``
+    points of the plan's view dtype at ``at`` (the first cloud's offset, the clouds' fixed
+    distance or None when they are not at one, and then every message's start, to which the
+    first cloud's offset from its message's start is added), by C-level iteration."""
     view, names = plan
-    count = len(offsets)
+    offset, stride, starts = at
     if stride is not None:
         # At a fixed distance: one (count, n) array over the buffer, a row a cloud.
-        block = np.ndarray((count, n), view, buf, int(offsets[0]), (stride, view.itemsize))
+        block = np.ndarray((count, n), view, buf, offset, (stride, view.itemsize))
         return (
             list(islice(block[_XYZ], count)),
             [list(islice(block[name], count)) for name in names],
         )
-    points = list(map(np.frombuffer, repeat(buf), repeat(view), repeat(n), offsets.tolist()))
+    assert starts is not None
+    offsets = (starts + (offset - int(starts[0]))).tolist()
+    points = list(map(np.frombuffer, repeat(buf), repeat(view), repeat(n), offsets))
     return (
         list(map(_field, points, repeat(_XYZ))),
         [list(map(_field, points, repeat(name))) for name in names],
     )
+
+
+class BatchHeads:
+    """The header of the last batch a decoder decoded (the bytes from the frame id to the
+    point data, its message size, what they parse to), so that the next batch of the same
+    sensor, whose first message has the same bytes there, is not parsed again.  Its parse
+    depends on no other byte of that message (seq and stamp are read per message), so it is
+    the same as parsing it."""
+
+    __slots__ = ("head", "parsed", "size")
+
+    def __init__(self) -> None:
+        self.size = -1
+        self.head = b""
+        self.parsed: tuple[str, int, int, _FieldBlock, int, int, _Plan] | None = None
 
 
 def decode_batch(
@@ -164,29 +183,29 @@ def decode_batch(
     read_head: Callable[[memoryview, str, LayoutCache], _Head],
     layouts: LayoutCache,
     plan_of: Callable[[_FieldBlock], _Plan],
+    heads: BatchHeads | None = None,
 ) -> list[Decoded | None]:
     """What :meth:`~redrive.io.ros.decoders.pointcloud2.PointCloud2Decoder.decode` gives each
     message of ``batch`` (equal arrays), for the messages decoded together; None for those the
     caller must decode one by one.  ``read_head``, ``layouts`` and ``plan_of`` are the
-    decoder's header parser, layout cache and plan lookup."""
+    decoder's header parser, layout cache and plan lookup; ``heads`` its last batch header."""
     count = len(batch)
     out: list[Decoded | None] = [None] * count
     buf = batch.buffer
     if count < BATCH_FROM or batch.encoding != "ros1" or not buffer_is_immutable(buf):
         return out
-    starts = np.asarray(batch.starts, dtype=np.int64)
     known = batch.stride  # the reader found them at a fixed distance, of one size
-    first = int(starts[0])
+    first = int(batch.starts[0])
     size = int(batch.stops[0]) - first
-    if known is None and not (np.asarray(batch.stops, dtype=np.int64) - starts == size).all():
+    starts: npt.NDArray[np.int64] | None = None
+    if known is None:
+        starts = np.asarray(batch.starts, dtype=np.int64)
+        if not (np.asarray(batch.stops, dtype=np.int64) - starts == size).all():
+            return out
+    parsed = _parse_first(memoryview(buf)[first : first + size], heads, read_head, layouts, plan_of)
+    if parsed is None:
         return out
-    view = memoryview(buf)[first : first + size]
-    try:
-        head = read_head(view, "ros1", layouts)
-        plan = plan_of(head[5])
-    except ValueError:
-        return out
-    _, _, frame_id, height, width, block, data_offset, data_size, _ = head
+    frame_id, height, width, block, data_offset, data_size, plan = parsed
     n = width * height
     step = block.point_step
     if (
@@ -202,27 +221,33 @@ def decode_batch(
     width = data_offset - _STAMP_AT
     if known is not None:
         # At a fixed distance: one strided view of the chunk, nothing gathered.
-        heads = np.ndarray((count, width), np.uint8, buf, first + _STAMP_AT, (known, 1))
+        head_rows = np.ndarray((count, width), np.uint8, buf, first + _STAMP_AT, (known, 1))
     else:
-        heads = byte_rows(buf, starts + _STAMP_AT, width)
-    same = heads[:, _SAME_FROM - _STAMP_AT :]
+        assert starts is not None
+        head_rows = byte_rows(buf, starts + _STAMP_AT, width)
+    same = head_rows[:, _SAME_FROM - _STAMP_AT :]
     # One comparison of bytes (a reduction over a small array costs more than the copies).
     if same.tobytes() != same[0].tobytes() * count:
         return out
-    stamp = heads[:, : _SAME_FROM - _STAMP_AT].view(_U32)
-    stamps = stamp.astype(np.int64) @ _SEC_NS  # sec · 10⁹ + nsec, exact in int64
+    # sec · 10⁹ + nsec, exact in int64
+    stamps = head_rows[:, : _SAME_FROM - _STAMP_AT].view(_U32) @ _SEC_NS
     nbytes = n * step
     # At a fixed distance (a chunk of one topic), or between other topics' messages.
     if known is not None:
         stride, regular = known, known >= size
     else:
+        assert starts is not None
         gaps = starts[1:] - starts[:-1]
         stride = size if count == 1 else int(gaps[0])
         regular = count == 1 or (stride >= size and (gaps == stride).all())
     if views_buffer(buf, count * nbytes, each=nbytes):
         # The clouds are most of a private chunk buffer: views of it, nothing copied.
         xyz, values = _view(
-            buf, starts + data_offset, stride if regular else None, n, (plan.view, plan.channels)
+            buf,
+            (first + data_offset, stride if regular else None, starts),
+            count,
+            n,
+            (plan.view, plan.channels),
         )
     else:
         if regular:
@@ -233,6 +258,7 @@ def decode_batch(
             )
         else:
             # Gathered row by row.
+            assert starts is not None
             rows = byte_rows(buf, starts + data_offset, nbytes)
         xyz, values = _cut(rows, nbytes, plan.view, plan.channels)
     channels = list(zip(plan.channels, values, strict=True))
@@ -248,3 +274,30 @@ def decode_batch(
     any(map(set_frame, decoded, repeat(frame_id, count)))
     any(map(set_value, decoded, clouds))
     return decoded
+
+
+def _parse_first(
+    view: memoryview,
+    heads: BatchHeads | None,
+    read_head: Callable[[memoryview, str, LayoutCache], _Head],
+    layouts: LayoutCache,
+    plan_of: Callable[[_FieldBlock], _Plan],
+) -> tuple[str, int, int, _FieldBlock, int, int, _Plan] | None:
+    """The first message's frame id, height, width, field block, data offset and size, and
+    plan: ``heads``' when the message has its size and its bytes from the frame id to the
+    point data, else parsed (and kept in ``heads``); None when it cannot be read."""
+    size = len(view)
+    if heads is not None and heads.size == size and heads.parsed is not None:
+        end = heads.parsed[4]
+        if bytes(view[_SAME_FROM:end]) == heads.head:
+            return heads.parsed
+    try:
+        head = read_head(view, "ros1", layouts)
+        plan = plan_of(head[5])
+    except ValueError:
+        return None
+    _, _, frame_id, height, width, block, data_offset, data_size, _ = head
+    parsed = (frame_id, height, width, block, data_offset, data_size, plan)
+    if heads is not None:
+        heads.size, heads.head, heads.parsed = size, bytes(view[_SAME_FROM:data_offset]), parsed
+    return parsed
