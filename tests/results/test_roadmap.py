@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import json
+import math
 import shutil
+import struct
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from redrive.errors import ConfigError
+from redrive.maps.document import road_map_to_json
 from redrive.results import MAP_NAME, RunWriter, open_run, write_road_map
 from redrive.types import DrivableArea, MapLane, RoadMap
 from tests.results._records import SETUP, frame
@@ -115,3 +118,68 @@ def test_road_map_refuses_bad_values() -> None:
     area = DrivableArea(area_id="x", polygon=np.zeros((3, 2)))
     with pytest.raises(ValueError, match="area id 'x' appears twice"):
         RoadMap(lanes=(), areas=(area, area))
+
+
+def _bits_equal(a: object, b: object) -> bool:
+    """Whether two JSON documents are the same: types, keys, every double bit for bit."""
+    if type(a) is not type(b):
+        return False
+    if isinstance(a, float):
+        return struct.pack("<d", a) == struct.pack("<d", b)
+    if isinstance(a, dict):
+        assert isinstance(b, dict)
+        return list(a) == list(b) and all(_bits_equal(a[k], b[k]) for k in a)
+    if isinstance(a, list):
+        assert isinstance(b, list)
+        return len(a) == len(b) and all(_bits_equal(x, y) for x, y in zip(a, b, strict=True))
+    return a == b
+
+
+def test_map_text_parses_to_the_json_module_document(tmp_path: Path) -> None:
+    """orjson's text of a map reads back as exactly json.dumps's document (every double)."""
+    rng = np.random.default_rng(7)
+    awkward = np.array(
+        [[0.1 + 0.2, -0.0], [1e16, 5e-324], [1.7976931348623157e308, -123456.789e-300]]
+    )
+    wide = rng.normal(0.0, 1e4, (400, 4))
+    road = RoadMap(
+        lanes=(
+            MapLane(lane_id="é", centerline=awkward, width_m=1.0 / 3.0, speed_limit_mps=13.89),
+            # a strided view: written as its values
+            MapLane(lane_id="b", centerline=wide[:, ::2], width_m=3.25),
+            MapLane(
+                lane_id="c",
+                centerline=wide[:, 1:3].copy(),
+                width_m=3.0,
+                left_boundary=wide[:, :2].copy(),
+                right_boundary=wide[:, 2:].copy(),
+            ),
+        ),
+        areas=(DrivableArea(area_id="x", polygon=rng.uniform(-1e3, 1e3, (50, 2))),),
+    )
+    run_dir = tmp_path / "run"
+    with RunWriter(run_dir, setup=SETUP) as writer:
+        writer.write_map(road)
+    got = json.loads((run_dir / MAP_NAME).read_text(encoding="utf-8"))
+    want = json.loads(json.dumps(road_map_to_json(road), separators=(",", ":"), allow_nan=False))
+    assert _bits_equal(got, want)
+    assert not _bits_equal(got, {**want, "frame_id": "other"})  # the check can fail
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+def test_map_with_a_non_finite_number_is_refused(tmp_path: Path, bad: float) -> None:
+    """JSON has no NaN or infinity (orjson would write null): refused as json.dumps did."""
+    run_dir = tmp_path / "run"
+    with RunWriter(run_dir, setup=SETUP) as writer:
+        writer.write_frame(frame(0))
+    road = _map()
+    points = road.lanes[1].centerline.copy()
+    points[1, 0] = bad
+    object.__setattr__(road.lanes[1], "centerline", points)  # past MapLane's checks
+    with pytest.raises(ValueError, match="not JSON compliant"):
+        write_road_map(run_dir, road)
+    object.__setattr__(road.lanes[1], "centerline", road.lanes[0].centerline)
+    object.__setattr__(road.lanes[0], "width_m", bad)
+    with pytest.raises(ValueError, match="not JSON compliant"):
+        write_road_map(run_dir, road)
+    assert not (run_dir / MAP_NAME).exists()

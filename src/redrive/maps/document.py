@@ -53,12 +53,27 @@ READ_SCHEMA_VERSIONS = (1, 2)
 _ADVICE = "write it again (redrive synth for a log, RunWriter.write_map for a run)"
 
 
-def _line(value: Any) -> Any:
-    return None if value is None else value.tolist()
+def _as_list(points: Any) -> Any:
+    return points.tolist()
 
 
-def road_map_to_json(road_map: RoadMap) -> dict[str, Any]:
-    """The JSON document of ``road_map`` (plain lists and numbers, schema 2)."""
+def _as_array(points: Any) -> Any:
+    return np.ascontiguousarray(points, dtype=np.float64)
+
+
+def road_map_to_json(road_map: RoadMap, *, arrays: bool = False) -> dict[str, Any]:
+    """The JSON document of ``road_map`` (plain lists and numbers, schema 2).
+
+    Args:
+        arrays: the point lists (centrelines, boundaries, polygons, lines, positions) as
+            C-contiguous float64 arrays, not lists, for an encoder that writes numpy arrays
+            (orjson's ``OPT_SERIALIZE_NUMPY``: the same numbers, parsed back).
+    """
+    pts = _as_array if arrays else _as_list
+
+    def _line(value: Any) -> Any:
+        return None if value is None else pts(value)
+
     return {
         "schema_version": MAP_SCHEMA_VERSION,
         "frame_id": road_map.frame_id,
@@ -68,7 +83,7 @@ def road_map_to_json(road_map: RoadMap) -> dict[str, Any]:
                 "lane_id": lane.lane_id,
                 "width_m": lane.width_m,
                 "speed_limit_mps": lane.speed_limit_mps,
-                "centerline": lane.centerline.tolist(),
+                "centerline": pts(lane.centerline),
                 "left_boundary": _line(lane.left_boundary),
                 "right_boundary": _line(lane.right_boundary),
                 "left_boundary_type": lane.left_boundary_type,
@@ -84,7 +99,7 @@ def road_map_to_json(road_map: RoadMap) -> dict[str, Any]:
             for lane in road_map.lanes
         ],
         "areas": [
-            {"area_id": a.area_id, "kind": a.kind, "polygon": a.polygon.tolist()}
+            {"area_id": a.area_id, "kind": a.kind, "polygon": pts(a.polygon)}
             for a in road_map.areas
         ],
         "roadblocks": [
@@ -99,23 +114,22 @@ def road_map_to_json(road_map: RoadMap) -> dict[str, Any]:
         "intersections": [
             {
                 "intersection_id": i.intersection_id,
-                "polygon": i.polygon.tolist(),
+                "polygon": pts(i.polygon),
                 "lane_ids": list(i.lane_ids),
             }
             for i in road_map.intersections
         ],
         "crosswalks": [
-            {"crosswalk_id": c.crosswalk_id, "polygon": c.polygon.tolist()}
-            for c in road_map.crosswalks
+            {"crosswalk_id": c.crosswalk_id, "polygon": pts(c.polygon)} for c in road_map.crosswalks
         ],
         "stop_lines": [
-            {"stop_line_id": s.stop_line_id, "line": s.line.tolist(), "lane_ids": list(s.lane_ids)}
+            {"stop_line_id": s.stop_line_id, "line": pts(s.line), "lane_ids": list(s.lane_ids)}
             for s in road_map.stop_lines
         ],
         "traffic_lights": [
             {
                 "light_id": t.light_id,
-                "position": t.position.tolist(),
+                "position": pts(t.position),
                 "lane_ids": list(t.lane_ids),
                 "stop_line_id": t.stop_line_id,
             }

@@ -11,7 +11,12 @@ The document is :mod:`redrive.maps.document`'s (schema 1).
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
+from typing import Any
+
+import numpy as np
+import orjson
 
 from redrive.errors import ConfigError
 from redrive.maps.document import road_map_from_json, road_map_to_json
@@ -30,6 +35,7 @@ def write_road_map(run_dir: str | Path, road_map: RoadMap) -> Path:
 
     Raises:
         ConfigError: ``run_dir`` is not a run directory.
+        ValueError: a number of the map is not finite (JSON has none).
     """
     folder = Path(run_dir)
     if not (folder / MANIFEST_NAME).is_file():
@@ -38,12 +44,38 @@ def write_road_map(run_dir: str | Path, road_map: RoadMap) -> Path:
         )
         raise ConfigError(msg)
     path = folder / MAP_NAME
-    # compact, not indented: a map is mostly coordinates, and json's C encoder (used only
-    # without indent) writes them in a third of the CPU, half the bytes (a WOMD scenario's map:
-    # 0.49 MB, 21 ms instead of 0.94 MB, 65 ms)
-    text = json.dumps(road_map_to_json(road_map), separators=(",", ":"), allow_nan=False)
-    write_files([(path, (text + "\n").encode("utf-8"))])
+    # compact: a map is mostly coordinates; orjson writes each double as its shortest
+    # round-trip text (ryu; json.loads reads back the same doubles as from json.dumps's repr)
+    # straight from the map's arrays, ~30x fewer instructions than json's C encoder (whose
+    # float repr is ~7k instructions a number: a WOMD scenario's 20.8k of them 0.14 G).  orjson
+    # writes NaN and infinities as null: they are refused first, as json's allow_nan=False did
+    document = road_map_to_json(road_map, arrays=True)
+    _check_finite(document)
+    text = orjson.dumps(document, option=orjson.OPT_SERIALIZE_NUMPY | orjson.OPT_APPEND_NEWLINE)
+    write_files([(path, text)])
     return path
+
+
+def _check_finite(value: Any) -> None:
+    """Raise ValueError (json.dumps's with ``allow_nan=False``) if a float of ``value`` (a
+    document of dicts, lists, numbers, strings and float arrays) is NaN or infinite."""
+    if isinstance(value, float):
+        bad = not math.isfinite(value)
+    elif isinstance(value, np.ndarray):
+        bad = not bool(np.isfinite(value).all())
+    elif isinstance(value, dict):
+        for item in value.values():
+            _check_finite(item)
+        return
+    elif isinstance(value, list):
+        for item in value:
+            _check_finite(item)
+        return
+    else:
+        return
+    if bad:
+        msg = f"Out of range float values are not JSON compliant: {value!r}"
+        raise ValueError(msg)
 
 
 def read_road_map(run_dir: str | Path) -> RoadMap | None:
