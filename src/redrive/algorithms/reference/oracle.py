@@ -218,19 +218,12 @@ class NoisyOracle(Algorithm):
                     columns, rows, confuse, centers, sizes, yaws, velocities, orientations
                 )
             )
-            if not len(fp_picks) and _trusted_defaults(columns, sizes, yaws):
-                out = _as_trusted(parts[0])
-                logger.debug(
-                    "%s frame %d: %d ground-truth objects, %d returned",
-                    self.name,
-                    frame.index,
-                    len(truth),
-                    len(out),
-                )
-                return out
-        if len(fp_picks):
-            parts.append(self._false_positives(fp_picks, fp_centers, fp_sizes, fp_yaws))
-        out = [] if not parts else DetectedObject.many(**_concatenated(parts))
+        if parts and not len(fp_picks) and _trusted_defaults(columns, sizes, yaws):
+            out = _as_trusted(parts[0])
+        else:
+            if len(fp_picks):
+                parts.append(self._false_positives(fp_picks, fp_centers, fp_sizes, fp_yaws))
+            out = [] if not parts else DetectedObject.many(**_concatenated(parts))
         logger.debug(
             "%s frame %d: %d ground-truth objects, %d returned",
             self.name,
