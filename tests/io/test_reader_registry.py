@@ -184,3 +184,58 @@ def test_a_reader_plugin_opens_its_format(site: Path, tmp_path: Path) -> None:  
         np.testing.assert_array_equal(clouds[1].xyz, [[7, 8, 9]])
     finally:
         reload_readers()
+
+
+def test_what_recognising_found_reaches_the_constructor(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A reader with ``recognised(path)`` gets its value as ``recognised=``; one without gets no
+    such keyword; ``recognised`` returning None means "not this format"."""
+    from redrive.io import readers
+
+    seen: list[object] = []
+
+    class Probing:
+        format, description = "probing", "a file starting with PROBE"
+
+        @classmethod
+        def recognised(cls, path: Path) -> tuple[str, bytes] | None:
+            head = path.read_bytes()[:5]
+            return ("head", head) if head == b"PROBE" else None
+
+        @classmethod
+        def recognises(cls, path: Path) -> bool:
+            return cls.recognised(path) is not None
+
+        def __init__(self, path: Path, *, strict: bool = True, recognised: object = None) -> None:
+            seen.append(recognised)
+
+        def __enter__(self) -> Probing:
+            return self
+
+        def __exit__(self, *exc: object) -> None:
+            pass
+
+    class Plain:
+        format, description = "plain", "a file starting with PLAIN"
+
+        @classmethod
+        def recognises(cls, path: Path) -> bool:
+            return path.read_bytes()[:5] == b"PLAIN"
+
+        def __init__(self, path: Path, *, strict: bool = True) -> None:
+            seen.append("plain")
+
+    monkeypatch.setattr(readers, "reader_formats", lambda: (Probing, Plain))
+    probed, plain, neither = tmp_path / "a", tmp_path / "b", tmp_path / "c"
+    probed.write_bytes(b"PROBE 1")
+    plain.write_bytes(b"PLAIN 1")
+    neither.write_bytes(b"OTHER 1")
+    open_log(probed, packets="raw")
+    open_log(plain, packets="raw")
+    assert seen == [("head", b"PROBE"), "plain"]
+    assert detect_format(probed) == "probing"
+    assert readers.recognised_format(plain) == "plain"
+    assert readers.recognised_format(neither) is None
+    with pytest.raises(LogError, match="not a log redrive reads"):
+        open_log(neither)

@@ -275,3 +275,34 @@ def test_convert_writes_the_scenario_with_its_light_states(tmp_path: Path) -> No
     with open_log(tmp_path / "toy.mcap") as log:
         lights = list(log.messages(topics=[TOPIC_TRAFFIC_LIGHTS]))
     assert len(lights) == 3
+
+
+def test_open_log_decodes_the_first_record_once(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Recognising the file decodes its first record; open_log hands that Scenario to the reader
+    (no module-level slot), and a hand-off of other bytes is not trusted."""
+    from redrive.io.datasets import womd
+
+    path = tmp_path / "toy.tfrecord"
+    write_tfrecord(path, [_scenario().SerializeToString()])
+    decoded: list[bytes] = []
+    parse = womd._parse
+
+    def counting(data: bytes) -> Any:
+        decoded.append(data)
+        return parse(data)
+
+    monkeypatch.setattr(womd, "_parse", counting)
+    with open_log(path) as log:
+        assert log.info.sdc_track_id == 9
+    assert len(decoded) == 1
+    other = _scenario()
+    other.scenario_id = "other"
+    stale = WomdReader.recognised(path)
+    assert stale is not None
+    write_tfrecord(path, [other.SerializeToString()])  # the file changed after it was recognised
+    decoded.clear()
+    with WomdReader(path, recognised=stale) as log:
+        assert log.info.scenario_id == "other"
+    assert len(decoded) == 1

@@ -9,6 +9,10 @@ A *reader format* is a reader class that declares, as class attributes and a cla
 - ``recognises(path)``: whether ``path`` is a log of this format, from its content (magic bytes,
   layout), never from its file name;
 - a constructor ``(path, *, strict)`` that opens it (a :class:`~redrive.io.base.LogReader`);
+- optionally a class method ``recognised(path)``: what recognising ``path`` found out (a decoded
+  first record …), or None when it is no log of the format.  :func:`open_log` hands that value to
+  the constructor as the keyword ``recognised=``, so the work is not done twice; a reader with it
+  still has ``recognises`` (``recognised(path) is not None``);
 - optionally ``reads_a_set = True``: it reads several logs as one (split MCAP files), so a caller
   looking for logs in a folder takes the files one by one (:func:`recognised_format`).
 
@@ -182,20 +186,29 @@ def reader_format(name: str) -> type[ReaderFormat]:
     raise LogError(msg)
 
 
-def _recognising(path: Path) -> type[ReaderFormat]:
-    cls = _first_recognising(path, sets=True)
-    if cls is None:
+def _recognising(path: Path) -> tuple[type[ReaderFormat], object | None]:
+    found = _first_recognising(path, sets=True)
+    if found is None:
         raise LogError(_not_a_log(path))
-    return cls
+    return found
 
 
-def _first_recognising(path: Path, *, sets: bool) -> type[ReaderFormat] | None:
+def _first_recognising(
+    path: Path, *, sets: bool
+) -> tuple[type[ReaderFormat], object | None] | None:
+    """The first reader recognising ``path`` and what its ``recognised`` found (None for a
+    reader without one)."""
     for cls in reader_formats():
         if not sets and getattr(cls, "reads_a_set", False):
             continue
         try:
-            if cls.recognises(path):
-                return cls
+            probe = getattr(cls, "recognised", None)
+            if callable(probe):
+                kept = probe(path)
+                if kept is not None:
+                    return cls, kept
+            elif cls.recognises(path):
+                return cls, None
         except OSError as err:
             msg = f"{path}: cannot read ({err.strerror or err})"
             raise LogError(msg) from err
@@ -220,8 +233,8 @@ def recognised_format(path: Path, *, sets: bool = True) -> str | None:
             return None  # a pipe or a device is no log (and reading it could block)
     except OSError:
         pass
-    cls = _first_recognising(Path(path), sets=sets)
-    return None if cls is None else cls.format
+    found = _first_recognising(Path(path), sets=sets)
+    return None if found is None else found[0].format
 
 
 def _not_a_log(path: Path) -> str:
@@ -280,12 +293,17 @@ def detect_format(path: Path) -> str:
     Raises:
         LogError: the path is missing, empty or not a log redrive reads.
     """
+    return _detect(Path(path))[0].format
+
+
+def _detect(path: Path) -> tuple[type[ReaderFormat], object | None]:
+    """:func:`detect_format`'s reader class, and what its ``recognised`` found."""
     path = Path(path)
     if not path.exists():
         from redrive.io.mcap.fileset import expand_log_set, is_glob
 
         if is_glob(path) and expand_log_set(path):
-            return _recognising(path).format
+            return _recognising(path)
         msg = f"{path}: no such file or directory"
         if is_glob(path):
             msg += " (a glob names MCAP files of one recording; this one names none)"
@@ -302,7 +320,7 @@ def detect_format(path: Path) -> str:
         if size == 0:
             msg = f"{path}: the file is empty (0 bytes); it holds no log"
             raise LogError(msg)
-    return _recognising(path).format
+    return _recognising(path)
 
 
 def open_log(
@@ -331,9 +349,14 @@ def open_log(
         LogError: the path is missing, empty, damaged beyond use or not a log.
     """
     path = Path(path)
-    cls = reader_format(detect_format(path))
+    cls, kept = _detect(path)
     opener: Callable[..., LogReader] = cls  # type: ignore[assignment]
-    log = opener(path, strict=strict)
+    # what recognising found goes to the reader that asked for it (see the module docstring)
+    log = (
+        opener(path, strict=strict)
+        if kept is None
+        else opener(path, strict=strict, recognised=kept)
+    )
     if packets == "raw":
         return log
     from redrive.io.ros.decoders.ouster_log import with_packet_clouds  # decoders load on use

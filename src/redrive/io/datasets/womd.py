@@ -41,7 +41,7 @@ import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -219,20 +219,30 @@ class WomdReader(NativeLogBase):
 
     @classmethod
     def recognises(cls, path: Path) -> bool:
+        return cls.recognised(path) is not None
+
+    @classmethod
+    def recognised(cls, path: Path) -> FirstRecord | None:
+        """What recognising ``path`` found (its first record, decoded), or None when it is no
+        WOMD scenario file: :func:`~redrive.io.readers.open_log` hands it to the constructor, so
+        the record is not decoded twice."""
         if not path.is_file() or not looks_like_tfrecord(path):
-            return False
+            return None
         try:
             first = next(read_tfrecords(path, limit=1))
         except (LogError, StopIteration):
-            return True  # a TFRecord whose first record is damaged: opening says where
+            return FirstRecord(
+                None, None
+            )  # a TFRecord whose first record is damaged: opening says where
         scenario = _parse(first.data)
-        if scenario is not None:  # opening it next parses the same record: kept for that
-            global _RECOGNISED  # noqa: PLW0603 (one slot: the record recognised last)
-            _RECOGNISED = (first.data, scenario)
-        return scenario is not None
+        return None if scenario is None else FirstRecord(first.data, scenario)
 
-    def __init__(self, path: str | Path, *, strict: bool = True) -> None:
-        """``strict``: see :mod:`redrive.io.datasets.native`; the file is checked whole at open."""
+    def __init__(
+        self, path: str | Path, *, strict: bool = True, recognised: object | None = None
+    ) -> None:
+        """``strict``: see :mod:`redrive.io.datasets.native`; the file is checked whole at open.
+        ``recognised``: what :meth:`recognised` returned for ``path`` (used when the file's first
+        record is still the bytes it decoded)."""
         self.path = Path(path)
         self.strict = strict
         first = None
@@ -243,7 +253,11 @@ class WomdReader(NativeLogBase):
         if first is None:
             msg = f"{self.path}: holds no TFRecord record; restore it"
             raise LogError(msg)
-        scenario = _parse_recognised(first.data)
+        kept = recognised if isinstance(recognised, FirstRecord) else None
+        if kept is not None and kept.data == first.data:
+            scenario = kept.scenario
+        else:
+            scenario = _parse(first.data)
         where = f"{self.path}: record 0 at byte {first.offset}"
         if scenario is None:
             msg = f"{where}: not a waymo.open_dataset.Scenario protobuf (or a damaged one)"
@@ -420,19 +434,12 @@ class WomdReader(NativeLogBase):
         return self._road_map
 
 
-#: the record :meth:`WomdReader.recognises` decoded last and its Scenario (taken, once, by the
-#: open that follows: the same bytes are not decoded twice)
-_RECOGNISED: tuple[bytes, Any] | None = None
+class FirstRecord(NamedTuple):
+    """What :meth:`WomdReader.recognised` found: the file's first record and its Scenario (both
+    None when that record is damaged)."""
 
-
-def _parse_recognised(data: bytes) -> Any | None:
-    """:func:`_parse` of ``data``, or the Scenario :meth:`WomdReader.recognises` decoded from
-    the same bytes (the slot is emptied)."""
-    global _RECOGNISED  # one slot: the record recognised last
-    kept, _RECOGNISED = _RECOGNISED, None
-    if kept is not None and kept[0] == data:
-        return kept[1]
-    return _parse(data)
+    data: bytes | None
+    scenario: Any | None
 
 
 def _parse(data: bytes) -> Any | None:
