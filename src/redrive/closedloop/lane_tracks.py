@@ -12,6 +12,7 @@ A track on no lane keeps its own logged path as its line.
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -80,8 +81,21 @@ class Track:
     _at_sample: dict[int, tuple[float, float, float, float, float]] = field(
         default_factory=dict, repr=False
     )
+    #: the line's vertices and the arclength at each segment's end, summed as GEOS sums them
+    #: (:func:`on_line`)
+    _line_x: list[float] = field(default_factory=list, repr=False)
+    _line_y: list[float] = field(default_factory=list, repr=False)
+    _seg_m: list[float] = field(default_factory=list, repr=False)
+    _seg_end_m: list[float] = field(default_factory=list, repr=False)
 
     def __post_init__(self) -> None:
+        if self.line is not None:
+            xy = shapely.get_coordinates(self.line)
+            d = np.diff(xy, axis=0)
+            # GEOS: each segment's length sqrt(dx² + dy²), added one after the other
+            seg = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])
+            self._seg_m, self._seg_end_m = seg.tolist(), np.cumsum(seg).tolist()
+            self._line_x, self._line_y = xy[:, 0].tolist(), xy[:, 1].tolist()
         stamps = self.stamps_ns
         if stamps.size and bool(np.all(np.diff(stamps.astype(np.float64)) > 0.0)):
             # _speed_interpolated at sample j reads the step from sample min(j, K−2) on (s_log
@@ -268,13 +282,33 @@ def _dedup(pts: F64) -> F64:
 
 
 def on_line(track: Track, s_m: float) -> tuple[float, float, float]:
-    line = track.line
-    s = min(max(s_m, 0.0), track.line_length_m)
-    at = [s, min(s + 0.5, track.line_length_m), max(s - 0.5, 0.0)]
-    (x, y), (qx, qy), (ox, oy) = shapely.get_coordinates(
-        shapely.line_interpolate_point(line, at)
-    ).tolist()
+    """The point of the track's line at arclength ``s_m`` (clamped to the line) and the line's
+    heading there (the chord from 0.5 m before it to 0.5 m after it)."""
+    length = track.line_length_m
+    s = min(max(s_m, 0.0), length)
+    x, y = _interpolated(track, s)
+    qx, qy = _interpolated(track, min(s + 0.5, length))
+    ox, oy = _interpolated(track, max(s - 0.5, 0.0))
     return x, y, math.atan2(qy - oy, qx - ox)
+
+
+def _interpolated(track: Track, s_m: float) -> tuple[float, float]:
+    """``shapely.line_interpolate_point(track.line, s_m)`` for ``s_m`` ≥ 0, the same doubles:
+    GEOS's ``LengthLocationMap::getLocationForward`` (the first segment whose end lies beyond
+    ``s_m``, the fraction ``(s_m − its start) / its length``) and
+    ``LinearLocation::pointAlongSegmentByFraction`` (``(p1 − p0) · fraction + p0``)."""
+    xs, ys, ends = track._line_x, track._line_y, track._seg_end_m
+    if s_m <= 0.0:
+        return xs[0], ys[0]
+    k = bisect.bisect_right(ends, s_m)
+    if k == len(ends):
+        return xs[-1], ys[-1]
+    frac = (s_m - (ends[k - 1] if k else 0.0)) / track._seg_m[k]
+    if frac <= 0.0:
+        return xs[k], ys[k]
+    if frac >= 1.0:
+        return xs[k + 1], ys[k + 1]
+    return (xs[k + 1] - xs[k]) * frac + xs[k], (ys[k + 1] - ys[k]) * frac + ys[k]
 
 
 def _stops(
