@@ -223,32 +223,47 @@ def lane_tracks(
     (:func:`~redrive.maps.polylines.packed`; ``Track.line_number`` is its line's number)."""
     road = index.road_map
     controlled = {t.stop_line_id: t.light_id for t in road.traffic_lights if t.stop_line_id}
-    out: dict[int, Track] = {}
-    lines: list[F64] = []
     samples = [
         (np.array(xy, dtype=np.float64), np.array(yaw, dtype=np.float64))
         for _, xy, yaw, _ in tracks.values()
     ]
     routes = routes_along_paths(index, samples, extend_m=_EXTEND_M)
-    for (oid, (stamps, _, _, (length, width))), (pts, yaws), route in zip(
-        tracks.items(), samples, routes, strict=True
-    ):
+    kept: list[tuple[int, tuple[str, ...], F64]] = []  # (position in tracks, lanes, line)
+    for k, ((pts, _), route) in enumerate(zip(samples, routes, strict=True)):
         lanes, line_xy = route
         if line_xy.shape[0] < 2:
             lanes, line_xy = (), _dedup(pts)
-        if line_xy.shape[0] < 2:  # a track that never moves: stays replayed
-            continue
-        line = shapely.LineString(line_xy)
-        x0, y0, x1, y1 = line.bounds
-        # shapely.line_locate_point of each sample on the line (the same doubles)
-        located, _ = polyline_locate(pts, np.zeros(pts.shape[0], np.int64), *packed([line_xy]))
-        s_log = np.maximum.accumulate(located)
+        if line_xy.shape[0] >= 2:  # (a track that never moves stays replayed)
+            kept.append((k, lanes, line_xy))
+    lines = [line_xy for _, _, line_xy in kept]
+    coords, offsets = packed(lines)
+    if not kept:
+        return {}, coords, offsets
+    # the lines made, measured and bounded in one call each; shapely.line_locate_point of each
+    # kept track's samples on its line in one compiled pass (the same doubles)
+    geoms = shapely.linestrings(coords, indices=np.repeat(np.arange(len(lines)), np.diff(offsets)))
+    bounds = shapely.bounds(geoms).tolist()
+    line_lengths = shapely.length(geoms).tolist()
+    kept_pts = [samples[k][0] for k, _, _ in kept]
+    counts = [p.shape[0] for p in kept_pts]
+    located, _ = polyline_locate(
+        np.concatenate(kept_pts), np.repeat(np.arange(len(kept)), counts), coords, offsets
+    )
+    starts = np.cumsum([0, *counts]).tolist()
+    entries = list(tracks.items())
+    out: dict[int, Track] = {}
+    for n, (k, lanes, _) in enumerate(kept):
+        oid, (stamps, _, _, (length, width)) = entries[k]
+        pts, yaws = samples[k]
+        line = geoms[n]
+        s_log = np.maximum.accumulate(located[starts[n] : starts[n + 1]])
         limit = [road.lane(i).speed_limit_mps for i in lanes]
         known = [v for v in limit if v]
         steps = np.hypot(*np.diff(pts, axis=0).T) if pts.shape[0] > 1 else np.zeros(0)
         dts = np.diff(np.array(stamps, dtype=np.int64)).astype(np.float64) / 1e9
         top = float(np.max(steps / dts)) if steps.size else 0.0
         desired = max(known) if known else max(top, 1.0)
+        x0, y0, x1, y1 = bounds[n]
         out[oid] = Track(
             object_id=oid,
             stamps_ns=np.array(stamps, dtype=np.int64),
@@ -261,15 +276,12 @@ def lane_tracks(
             stops=_stops(road, lanes, line, controlled),
             desired_speed_mps=desired,
             lanes=lanes,
-            line_length_m=float(line.length),
-            bounds=(float(x0), float(y0), float(x1), float(y1)),
+            line_length_m=line_lengths[n],
+            bounds=(x0, y0, x1, y1),
             first_ns=int(stamps[0]),
             last_ns=int(stamps[-1]),
-            line_number=len(lines),
+            line_number=n,
         )
-        lines.append(line_xy)
-    #: every track's line, packed (the per-frame projections of :meth:`_hold_up`,
-    coords, offsets = packed(lines)
     return out, coords, offsets
 
 
