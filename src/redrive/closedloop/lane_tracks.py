@@ -13,6 +13,7 @@ A track on no lane keeps its own logged path as its line.
 from __future__ import annotations
 
 import bisect
+import itertools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -169,35 +170,39 @@ def read_tracks(
     """Every lane-class track of the log's ground truth, in the map frame: id → (stamps, xy,
     yaw, (length, width)), in the order the tracks first appear; each track's samples in stamp
     order (of two at one stamp the first read), its box the first sample's."""
-    stamps_l, ids_l, xy_l, yaw_l, size_l = [], [], [], [], []
-    for stamp_ns, objects in assembler.ground_truth(stop_ns=stop_ns):
-        # the columns of the message (its objects are rows of one batch: none is built)
-        cols = ObjectColumns.from_objects(objects)
-        keep = np.array([c in LANE_CLASSES for c in cols.object_class], dtype=bool)
-        keep &= cols.object_id >= 0
-        if keep.any():
-            stamps_l.append(np.full(int(keep.sum()), stamp_ns, dtype=np.int64))
-            ids_l.append(cols.object_id[keep])
-            xy_l.append(cols.center_m[keep, :2])
-            yaw_l.append(cols.yaw_rad[keep])
-            size_l.append(cols.size_m[keep, :2])
-    if not ids_l:
+    read = [
+        # the columns of each message (its objects are rows of one batch: none is built)
+        (stamp_ns, ObjectColumns.from_objects(objects))
+        for stamp_ns, objects in assembler.ground_truth(stop_ns=stop_ns)
+    ]
+    if not read:
         return {}
-    ids = np.concatenate(ids_l).astype(np.int64)
-    stamps = np.concatenate(stamps_l)
+    # every message's rows one after the other, the lane-class rows with a track id kept
+    all_ids = np.concatenate([cols.object_id for _, cols in read])
+    classes = itertools.chain.from_iterable(cols.object_class for _, cols in read)
+    keep = np.fromiter(map(LANE_CLASSES.__contains__, classes), dtype=bool, count=all_ids.size)
+    keep &= all_ids >= 0
+    if not keep.any():
+        return {}
+    counts = [len(cols) for _, cols in read]
+    ids = all_ids[keep].astype(np.int64)
+    stamps = np.repeat(np.array([stamp for stamp, _ in read], dtype=np.int64), counts)[keep]
+    xy_all = np.concatenate([cols.center_m[:, :2] for _, cols in read])[keep]
+    yaw_all = np.concatenate([cols.yaw_rad for _, cols in read])[keep]
+    size_all = np.concatenate([cols.size_m[:, :2] for _, cols in read])[keep]
     # by track, then stamp (stable: one stamp's samples as read), each stamp's first kept
     order = np.lexsort((stamps, ids))
     ids, stamps = ids[order], stamps[order]
     keep = np.ones(ids.size, dtype=bool)
     keep[1:] = (ids[1:] != ids[:-1]) | (stamps[1:] > stamps[:-1])
     order, ids, stamps = order[keep], ids[keep], stamps[keep]
-    xy = np.concatenate(xy_l)[order]
+    xy = xy_all[order]
     ex, ey, eyaw = _logged_pose_at(mission, stamps)
     c, s = np.cos(eyaw), np.sin(eyaw)
     mx = (ex + c * xy[:, 0] - s * xy[:, 1]).tolist()
     my = (ey + s * xy[:, 0] + c * xy[:, 1]).tolist()
-    yaw = (np.concatenate(yaw_l)[order] + eyaw).tolist()
-    size = np.concatenate(size_l)[order].tolist()
+    yaw = (yaw_all[order] + eyaw).tolist()
+    size = size_all[order].tolist()
     stamp_list = stamps.tolist()
     starts = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])
     ends = np.r_[starts[1:], ids.size]
