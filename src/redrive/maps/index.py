@@ -128,9 +128,10 @@ class RoadMapIndex:
         self._junction_parts = [shapely.Polygon(i.polygon) for i in road_map.intersections] + [
             p for p, a in zip(self._areas, road_map.areas, strict=True) if a.kind == "intersection"
         ]
-        #: the lane graph's routes asked so far, and each lane's length (route's costs)
+        #: the lane graph's routes asked so far, and each lane's length (route's costs; made
+        #: with the centrelines below)
         self._routes: dict[tuple[str, str, float, bool], tuple[str, ...]] = {}
-        self._lengths: dict[str, float] | None = None
+        self._lengths: dict[str, float] = {}
         self._graphs: dict[tuple[float, bool], dict[str, list[Step]]] = {}
         #: the centrelines as shapely lines, and their lengths, as asked (routes' lines)
         self._lines: dict[str, tuple[Any, float]] = {}
@@ -220,7 +221,9 @@ class RoadMapIndex:
             heads.append(np.append(heading, heading[-1]))
             xys.append(pts)
             vertex += pts.shape[0]
-            offset += float(length.sum()) + 1.0
+            # MapLane.length_m, the same doubles (the same segment lengths, summed alike)
+            self._lengths[lane.lane_id] = total = float(length.sum())
+            offset += total + 1.0
         self._vertex_start = np.array(starts, dtype=np.int64)
         self._vertex_count = np.array([lane.centerline.shape[0] for lane in lanes], np.int64)
         self._s_offset = np.array(offsets, dtype=np.float64)
@@ -234,6 +237,10 @@ class RoadMapIndex:
     def lane_position(self, lane_id: str) -> int:
         """The position of ``lane_id`` in ``road_map.lanes`` (KeyError when it is none)."""
         return self._lane_pos[lane_id]
+
+    def lane_length_m(self, lane_id: str) -> float:
+        """``road_map.lane(lane_id).length_m``, measured once (KeyError when it is no lane)."""
+        return self._lengths[lane_id]
 
     def centreline_geometry(self, lane_id: str) -> tuple[Any, float]:
         """Lane ``lane_id``'s centreline as a shapely LineString and its length (m), made once
@@ -410,8 +417,6 @@ class RoadMapIndex:
         known = self._graphs.get(key)
         if known is not None:
             return known
-        if self._lengths is None:
-            self._lengths = {lane.lane_id: lane.length_m for lane in self.road_map.lanes}
         lengths = self._lengths
         graph: dict[str, list[Step]] = {}
         for lane in self.road_map.lanes:
