@@ -15,7 +15,7 @@ from __future__ import annotations
 import bisect
 import itertools
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -160,8 +160,14 @@ def _logged_pose_at(mission: Mission, stamps_ns: npt.NDArray[np.int64]) -> tuple
     return x, y, yaw
 
 
-#: one logged track: stamps (ns), centres (x, y, map), headings (rad), (length, width) m
-TrackSamples = tuple[list[int], list[tuple[float, float]], list[float], tuple[float, float]]
+#: one logged track: stamps (ns), centres (x, y, map), headings (rad), (length, width) m — as
+#: sequences or arrays ((K,), (K, 2), (K,))
+TrackSamples = tuple[
+    Sequence[int] | I64,
+    Sequence[tuple[float, float]] | F64,
+    Sequence[float] | F64,
+    tuple[float, float],
+]
 
 
 def read_tracks(
@@ -199,11 +205,9 @@ def read_tracks(
     xy = xy_all[order]
     ex, ey, eyaw = _logged_pose_at(mission, stamps)
     c, s = np.cos(eyaw), np.sin(eyaw)
-    mx = (ex + c * xy[:, 0] - s * xy[:, 1]).tolist()
-    my = (ey + s * xy[:, 0] + c * xy[:, 1]).tolist()
-    yaw = (yaw_all[order] + eyaw).tolist()
+    mxy = np.stack([ex + c * xy[:, 0] - s * xy[:, 1], ey + s * xy[:, 0] + c * xy[:, 1]], axis=1)
+    yaw = yaw_all[order] + eyaw
     size = size_all[order].tolist()
-    stamp_list = stamps.tolist()
     starts = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])
     ends = np.r_[starts[1:], ids.size]
     # the tracks in the order they first appear in the log
@@ -211,12 +215,7 @@ def read_tracks(
     out: dict[int, TrackSamples] = {}
     for g in np.argsort(first_read, kind="stable").tolist():
         lo, hi = int(starts[g]), int(ends[g])
-        out[int(ids[lo])] = (
-            stamp_list[lo:hi],
-            list(zip(mx[lo:hi], my[lo:hi], strict=True)),
-            yaw[lo:hi],
-            (size[lo][0], size[lo][1]),
-        )
+        out[int(ids[lo])] = (stamps[lo:hi], mxy[lo:hi], yaw[lo:hi], (size[lo][0], size[lo][1]))
     return out
 
 
