@@ -83,20 +83,13 @@ class Track:
         default_factory=dict, repr=False
     )
     #: the line's vertices and the arclength at each segment's end, summed as GEOS sums them
-    #: (:func:`on_line`)
+    #: (:func:`on_line`; made when it first asks)
     _line_x: list[float] = field(default_factory=list, repr=False)
     _line_y: list[float] = field(default_factory=list, repr=False)
     _seg_m: list[float] = field(default_factory=list, repr=False)
     _seg_end_m: list[float] = field(default_factory=list, repr=False)
 
     def __post_init__(self) -> None:
-        if self.line is not None:
-            xy = shapely.get_coordinates(self.line)
-            d = np.diff(xy, axis=0)
-            # GEOS: each segment's length sqrt(dx² + dy²), added one after the other
-            seg = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])
-            self._seg_m, self._seg_end_m = seg.tolist(), np.cumsum(seg).tolist()
-            self._line_x, self._line_y = xy[:, 0].tolist(), xy[:, 1].tolist()
         stamps = self.stamps_ns
         if stamps.size and bool(np.all(np.diff(stamps.astype(np.float64)) > 0.0)):
             # _speed_interpolated at sample j reads the step from sample min(j, K−2) on (s_log
@@ -313,6 +306,13 @@ def _interpolated(track: Track, s_m: float) -> tuple[float, float]:
     GEOS's ``LengthLocationMap::getLocationForward`` (the first segment whose end lies beyond
     ``s_m``, the fraction ``(s_m − its start) / its length``) and
     ``LinearLocation::pointAlongSegmentByFraction`` (``(p1 − p0) · fraction + p0``)."""
+    if not track._line_x:  # the line's vertices and lengths, when first asked
+        xy = shapely.get_coordinates(track.line)
+        d = np.diff(xy, axis=0)
+        # GEOS: each segment's length sqrt(dx² + dy²), added one after the other
+        seg = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])
+        track._seg_m, track._seg_end_m = seg.tolist(), np.cumsum(seg).tolist()
+        track._line_x, track._line_y = xy[:, 0].tolist(), xy[:, 1].tolist()
     xs, ys, ends = track._line_x, track._line_y, track._seg_end_m
     if s_m <= 0.0:
         return xs[0], ys[0]
