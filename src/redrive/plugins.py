@@ -20,9 +20,9 @@ group                  value                                           kind
 ``redrive.readers``    a :class:`~redrive.io.readers.ReaderFormat` class :data:`READERS`
 =====================  ==============================================  =========================
 
-Nothing registers itself on import: :func:`installed_plugins` reads the entry points each time it
-is called (once within a :func:`discovered_once` block, such as a run) and refuses two plugins of
-one name; an entry point that fails to load is reported (as a :class:`BrokenPlugin`) without
+Nothing registers itself on import: :func:`installed_plugins` reads a group's entry points once
+per process, again when what is installed changes (the same throughout a :func:`discovered_once`
+block, such as a run), and refuses two plugins of one name; an entry point that fails to load is reported (as a :class:`BrokenPlugin`) without
 stopping the others.  Every failure is a
 :class:`~redrive.errors.PluginError` that says which spec, where (file, module, entry point) and
 what to do.  What makes a class a usable plugin of a kind (a subclass with a role, a metric with a
@@ -32,8 +32,6 @@ bottom layer and imports nothing of redrive but its errors.
 
 from __future__ import annotations
 
-import contextlib
-import contextvars
 import difflib
 import hashlib
 import importlib
@@ -51,6 +49,7 @@ from pathlib import Path
 from types import MappingProxyType, ModuleType
 from typing import Any, Generic, TypeVar
 
+from redrive._entry_points import declared_entry_points, discovered_once, dist_name
 from redrive.errors import PluginError
 
 __all__ = [
@@ -228,48 +227,6 @@ def class_target(cls: type) -> str:
 # -- installed plugins ----------------------------------------------------------------------------
 
 
-#: within :func:`discovered_once`: group → its entry points as read there; None outside it
-_READ_ONCE: contextvars.ContextVar[dict[str, list[importlib.metadata.EntryPoint]] | None] = (
-    contextvars.ContextVar("redrive_plugins_read_once", default=None)
-)
-
-
-@contextlib.contextmanager
-def discovered_once() -> Iterator[None]:
-    """Within the block (in this thread or task) each group's entry points are read from the
-    installed metadata once (a run loads its algorithms twice: what they read, then the graph);
-    outside it every lookup reads them afresh.  Nests: the outermost block's reads are kept."""
-    token = None if _READ_ONCE.get() is not None else _READ_ONCE.set({})
-    try:
-        yield
-    finally:
-        if token is not None:
-            _READ_ONCE.reset(token)
-
-
-def _declared_entry_points(kind: PluginKind) -> list[importlib.metadata.EntryPoint]:
-    """The entry points of the kind's group, read afresh from the installed metadata (once per
-    :func:`discovered_once` block)."""
-    read = _READ_ONCE.get()
-    found = None if read is None else read.get(kind.group)
-    if found is None:
-        found = list(importlib.metadata.entry_points(group=kind.group))
-        if read is not None:
-            read[kind.group] = found
-    return list(found)
-
-
-def _dist_name(ep: importlib.metadata.EntryPoint) -> str | None:
-    dist = getattr(ep, "dist", None)
-    if dist is None:
-        return None
-    try:
-        meta = dist.metadata  # read once (``dist.name`` and ``dist.version`` read it each)
-        return f"{meta['Name']} {meta['Version']}"
-    except Exception:  # broken metadata: the name is only decoration here
-        return None
-
-
 def installed_plugins(
     kind: PluginKind, check: Check, *, into: PluginRegistry[Any] | None = None
 ) -> PluginRegistry[Any]:
@@ -282,17 +239,17 @@ def installed_plugins(
     Raises:
         PluginError: two entry points share a name (the message names both targets).
     """
-    eps = _declared_entry_points(kind)
+    eps = declared_entry_points(kind.group)
     by_name: dict[str, list[importlib.metadata.EntryPoint]] = {}
     for ep in eps:
         by_name.setdefault(ep.name, []).append(ep)
     for name, same in sorted(by_name.items()):
         if len(same) > 1:
-            targets = [(e.value, _dist_name(e)) for e in same]
+            targets = [(e.value, dist_name(e)) for e in same]
             raise PluginError(_duplicate_message(kind, name, targets))
     registry: PluginRegistry[Any] = PluginRegistry(kind, check) if into is None else into
     for ep in sorted(eps, key=lambda e: e.name):
-        dist = _dist_name(ep)
+        dist = dist_name(ep)
         try:
             cls = _load_entry_point(kind, check, ep)
         except PluginError as err:
@@ -306,7 +263,7 @@ def installed_plugins(
 
 
 def _load_entry_point(kind: PluginKind, check: Check, ep: importlib.metadata.EntryPoint) -> type:
-    dist = _dist_name(ep)
+    dist = dist_name(ep)
     where = f"entry point {ep.name} = {ep.value!r} of {dist or 'an unknown distribution'}"
     fix = f"fix or reinstall {dist or 'the distribution that declares it'}"
     module_name, _, attr = ep.value.partition(":")
@@ -377,10 +334,10 @@ def _looks_like_file(location: str) -> bool:
 
 
 def _load_by_name(kind: PluginKind, check: Check, name: str) -> type:
-    eps = _declared_entry_points(kind)
+    eps = declared_entry_points(kind.group)
     found = [ep for ep in eps if ep.name == name]
     if len(found) > 1:
-        targets = [(e.value, _dist_name(e)) for e in found]
+        targets = [(e.value, dist_name(e)) for e in found]
         raise PluginError(_duplicate_message(kind, name, targets))
     if found:
         return _load_entry_point(kind, check, found[0])

@@ -33,6 +33,7 @@ import logging
 import math
 import threading
 from collections.abc import Callable, Mapping
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -260,22 +261,27 @@ def _run_log(
     # frame: the map metrics, the route and the reactive agents' lanes all use it
     chosen = choose_road_map(log, request.road_map, sensor_map=smap)
     road_map = chosen.road_map
-    simulator = LogSimulator(
-        log,
-        tracker=LqrTracker(),
-        agents=request.agents,
-        rate_hz=request.rate_hz,
-        duration_s=request.duration_s,
-        overrides=overrides,
-        tyres=TyreLimit(friction_coefficient=request.friction_coefficient),
-        delay_steps=request.delay_steps,
-        reads_sensors=_reads_sensors(request.pipeline),
-        road_map=road_map,
-    )
+    # the manifest's fingerprint of the log (its sha256) is read in a thread beside the
+    # simulator's setup (hashlib releases the GIL); its error, if any, is raised here as before
+    with ThreadPoolExecutor(1, thread_name_prefix="redrive-log-sha256") as pool:
+        fingerprint = pool.submit(source_log, Path(request.scenario), format=log.format)
+        simulator = LogSimulator(
+            log,
+            tracker=LqrTracker(),
+            agents=request.agents,
+            rate_hz=request.rate_hz,
+            duration_s=request.duration_s,
+            overrides=overrides,
+            tyres=TyreLimit(friction_coefficient=request.friction_coefficient),
+            delay_steps=request.delay_steps,
+            reads_sensors=_reads_sensors(request.pipeline),
+            road_map=road_map,
+        )
+        source = fingerprint.result()
     return _drive(
         request,
         simulator,
-        source=source_log(Path(request.scenario), format=log.format),
+        source=source,
         described=simulator.describe(),
         road_map=chosen.road_map,  # the log's own or --map's (placed in the log's frame)
         map_record=chosen.record,

@@ -42,6 +42,8 @@ __all__ = [
 ]
 
 F64 = npt.NDArray[np.float64]
+#: a step of the lane graph's search: (the next lane, its cost in metres of driving)
+Step = tuple[str, float]
 #: :meth:`RoadMapIndex.lane_of_pose`: a lane whose direction differs from the pose's heading by
 #: more than this is not the pose's lane (90°: the pose travels along it, not against it).
 DEFAULT_MAX_HEADING_DIFF_RAD = math.pi / 2.0
@@ -126,9 +128,11 @@ class RoadMapIndex:
         self._junction_parts = [shapely.Polygon(i.polygon) for i in road_map.intersections] + [
             p for p, a in zip(self._areas, road_map.areas, strict=True) if a.kind == "intersection"
         ]
-        #: the lane graph's routes asked so far, and each lane's length (route's costs)
+        #: the lane graph's routes asked so far, and each lane's length (route's costs; made
+        #: with the centrelines below)
         self._routes: dict[tuple[str, str, float, bool], tuple[str, ...]] = {}
-        self._lengths: dict[str, float] | None = None
+        self._lengths: dict[str, float] = {}
+        self._graphs: dict[tuple[float, bool], dict[str, list[Step]]] = {}
         #: the centrelines as shapely lines, and their lengths, as asked (routes' lines)
         self._lines: dict[str, tuple[Any, float]] = {}
         self._build_centrelines(lanes)
@@ -217,7 +221,9 @@ class RoadMapIndex:
             heads.append(np.append(heading, heading[-1]))
             xys.append(pts)
             vertex += pts.shape[0]
-            offset += float(length.sum()) + 1.0
+            # MapLane.length_m, the same doubles (the same segment lengths, summed alike)
+            self._lengths[lane.lane_id] = total = float(length.sum())
+            offset += total + 1.0
         self._vertex_start = np.array(starts, dtype=np.int64)
         self._vertex_count = np.array([lane.centerline.shape[0] for lane in lanes], np.int64)
         self._s_offset = np.array(offsets, dtype=np.float64)
@@ -231,6 +237,10 @@ class RoadMapIndex:
     def lane_position(self, lane_id: str) -> int:
         """The position of ``lane_id`` in ``road_map.lanes`` (KeyError when it is none)."""
         return self._lane_pos[lane_id]
+
+    def lane_length_m(self, lane_id: str) -> float:
+        """``road_map.lane(lane_id).length_m``, measured once (KeyError when it is no lane)."""
+        return self._lengths[lane_id]
 
     def centreline_geometry(self, lane_id: str) -> tuple[Any, float]:
         """Lane ``lane_id``'s centreline as a shapely LineString and its length (m), made once
@@ -399,6 +409,28 @@ class RoadMapIndex:
             self._routes[key] = known
         return known
 
+    def _graph(self, lane_change_cost_m: float, cross_solid: bool) -> dict[str, list[Step]]:
+        """Lane id → its steps (next lane, cost) for :meth:`_search`: its successors (the lane's
+        length each), then its left and right neighbours (``lane_change_cost_m`` each) across a
+        boundary it may cross; made once per cost and ``cross_solid``."""
+        key = (float(lane_change_cost_m), bool(cross_solid))
+        known = self._graphs.get(key)
+        if known is not None:
+            return known
+        lengths = self._lengths
+        graph: dict[str, list[Step]] = {}
+        for lane in self.road_map.lanes:
+            graph[lane.lane_id] = [(s, lengths[lane.lane_id]) for s in lane.successors] + [
+                (n, lane_change_cost_m)
+                for n, kind in (
+                    (lane.left_neighbor, lane.left_boundary_type),
+                    (lane.right_neighbor, lane.right_boundary_type),
+                )
+                if n is not None and (cross_solid or kind not in _UNCROSSABLE)
+            ]
+        self._graphs[key] = graph
+        return graph
+
     def _search(
         self,
         start_lane_id: str,
@@ -407,10 +439,7 @@ class RoadMapIndex:
         lane_change_cost_m: float,
         cross_solid: bool,
     ) -> tuple[str, ...]:
-        road = self.road_map
-        if self._lengths is None:
-            self._lengths = {lane.lane_id: lane.length_m for lane in road.lanes}
-        lengths = self._lengths
+        graph = self._graph(lane_change_cost_m, cross_solid)
         best: dict[str, float] = {start_lane_id: 0.0}
         came_from: dict[str, str] = {}
         queue: list[tuple[float, int, str]] = [(0.0, 0, start_lane_id)]
@@ -424,16 +453,7 @@ class RoadMapIndex:
                 return tuple(reversed(chain))
             if cost > best.get(lane_id, math.inf):
                 continue
-            lane = road.lane(lane_id)
-            steps = [(s, lengths[lane_id]) for s in lane.successors] + [
-                (n, lane_change_cost_m)
-                for n, kind in (
-                    (lane.left_neighbor, lane.left_boundary_type),
-                    (lane.right_neighbor, lane.right_boundary_type),
-                )
-                if n is not None and (cross_solid or kind not in _UNCROSSABLE)
-            ]
-            for nxt, step in steps:
+            for nxt, step in graph[lane_id]:
                 new = cost + step
                 if new < best.get(nxt, math.inf):
                     best[nxt] = new

@@ -124,7 +124,7 @@ def route_to_goal(
     routes = [r for r in routes if r]
     if not routes:
         return (), np.zeros((0, 2))
-    chain = list(min(routes, key=lambda r: sum(road.lane(i).length_m for i in r)))
+    chain = list(min(routes, key=lambda r: sum(index.lane_length_m(i) for i in r)))
     poses: list[F64] = [p[0]]
     change_at: dict[int, int] = {}
     for i in range(len(chain) - 1):
@@ -212,7 +212,7 @@ def _extend(index: RoadMapIndex, chain: list[str], extend_m: float) -> None:
             return
         chain.append(nxt)
         seen.add(nxt)
-        left -= road.lane(nxt).length_m
+        left -= index.lane_length_m(nxt)
 
 
 def _reference_line(
