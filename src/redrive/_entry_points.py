@@ -5,7 +5,8 @@ A group's entry points are read again when :func:`_installed_stamp` changes: ano
 ``importlib.metadata.entry_points`` (a test's replacement), another ``sys.path``, or a directory
 of it modified (an install or an uninstall adds or removes a ``*.dist-info`` there —
 importlib.metadata's own directory listings are kept by the same modification times).  An
-``entry_points.txt`` edited in place, without a reinstall, is seen by the next process.  Within
+``entry_points.txt`` edited in place, without a reinstall, is seen by the next process or after
+:func:`forget_entry_points` (``reload_readers``, ``reload_decoders``).  Within
 a :func:`discovered_once` block every read of a group gives the same entry points.
 """
 
@@ -18,7 +19,7 @@ import os
 import sys
 from collections.abc import Iterator
 
-__all__ = ["declared_entry_points", "discovered_once", "dist_name"]
+__all__ = ["declared_entry_points", "discovered_once", "dist_name", "forget_entry_points"]
 
 
 #: within :func:`discovered_once`: group → its entry points as read there; None outside it
@@ -76,6 +77,13 @@ def declared_entry_points(group: str) -> list[importlib.metadata.EntryPoint]:
         if read is not None:
             read[group] = found
     return list(found)
+
+
+def forget_entry_points() -> None:
+    """Read every group's entry points from the installed metadata again at its next lookup
+    (the ``reload_*`` functions call it: an ``entry_points.txt`` edited in place is then seen)."""
+    _READ.clear()
+    _NAMES.clear()
 
 
 #: id(distribution) → (the distribution, its "Name Version"): each METADATA parsed once

@@ -49,7 +49,12 @@ from pathlib import Path
 from types import MappingProxyType, ModuleType
 from typing import Any, Generic, TypeVar
 
-from redrive._entry_points import declared_entry_points, discovered_once, dist_name
+from redrive._entry_points import (
+    declared_entry_points,
+    discovered_once,
+    dist_name,
+    forget_entry_points,
+)
 from redrive.errors import PluginError
 
 __all__ = [
@@ -62,6 +67,7 @@ __all__ = [
     "PluginRegistry",
     "class_target",
     "discovered_once",
+    "forget_entry_points",
     "installed_plugins",
     "load_plugin",
     "subclass_check",

@@ -43,7 +43,13 @@ from typing import Literal, Protocol, runtime_checkable
 
 from redrive.errors import LogError, PluginError
 from redrive.io.base import LogReader, ReaderCapabilities
-from redrive.plugins import READERS, class_target, installed_plugins, load_plugin
+from redrive.plugins import (
+    READERS,
+    class_target,
+    forget_entry_points,
+    installed_plugins,
+    load_plugin,
+)
 
 __all__ = [
     "READERS_ENV",
@@ -170,6 +176,7 @@ def reload_readers() -> None:
     """Read the ``redrive.readers`` entry points (and :data:`READERS_ENV`) again at the next
     lookup."""
     reader_formats.cache_clear()
+    forget_entry_points()
 
 
 def reader_format(name: str) -> type[ReaderFormat]:

@@ -38,7 +38,7 @@ from redrive.io.ros.decoders.pointcloud2 import PointCloud2Decoder
 from redrive.io.ros.decoders.sensors import ImuDecoder, LaserScanDecoder, NavSatFixDecoder
 from redrive.io.ros.decoders.tf import TFMessageDecoder
 from redrive.io.ros.decoders.velodyne import VelodyneScanDecoder
-from redrive.plugins import DECODERS, installed_plugins
+from redrive.plugins import DECODERS, forget_entry_points, installed_plugins
 from redrive.types import SensorType
 
 __all__ = [
@@ -158,6 +158,7 @@ _UNKNOWN: Any = object()
 def reload_decoders() -> None:
     """Read the ``redrive.decoders`` entry points again at the next lookup."""
     active_decoders.cache_clear()
+    forget_entry_points()
     _BY_GIVEN_NAME.clear()
 
 
