@@ -34,6 +34,7 @@ from redrive.io.base import MessageBatch
 from redrive.io.ros.decoders._common import buffer_is_immutable
 from redrive.io.ros.decoders.base import Decoded
 from redrive.types import PointCloud
+from redrive.types._drafts import draft_class
 
 if TYPE_CHECKING:
     from redrive.io.ros.decoders.pointcloud2 import LayoutCache, _FieldBlock, _Head, _Plan
@@ -77,10 +78,10 @@ _SEC_NS = np.array([1_000_000_000, 1], dtype=np.int64)
 _STAMP_AT = 4
 _SAME_FROM = 12
 
-_new = object.__new__
 #: ``points[name]``: a field of a structured array, for ``map``.
 _field = cast("Callable[[npt.NDArray[Any], str], npt.NDArray[Any]]", getitem)
-_SET_DECODED = tuple(Decoded.__dict__[n].__set__ for n in ("stamp_ns", "frame_id", "value"))
+#: Decoded's draft (:mod:`redrive.types._drafts`).
+_DecodedDraft = draft_class(Decoded)
 
 
 def _cut(
@@ -267,12 +268,16 @@ def decode_batch(
     if 0 in stamps_ns:  # rare: no reduction over the array unless one is unset
         stamps_ns = np.where(stamps == 0, batch.log_times_ns, stamps).tolist()
     clouds = PointCloud.many_from_frozen(xyz, channels)
-    # The Decoded objects built by C-level iteration too (their slots' setters, as ``__init__``).
-    decoded: list[Decoded | None] = list(map(_new, repeat(Decoded, count)))
-    set_stamp, set_frame, set_value = _SET_DECODED
-    any(map(set_stamp, decoded, stamps_ns))
-    any(map(set_frame, decoded, repeat(frame_id, count)))
-    any(map(set_value, decoded, clouds))
+    # Every field of every Decoded set on a draft that then becomes it (what ``__init__`` does).
+    decoded: list[Decoded | None] = []
+    append = decoded.append
+    for stamp_ns, cloud in zip(stamps_ns, clouds, strict=True):
+        item = _DecodedDraft()
+        item.stamp_ns = stamp_ns
+        item.frame_id = frame_id
+        item.value = cloud
+        item.__class__ = Decoded
+        append(item)
     return decoded
 
 
