@@ -54,6 +54,19 @@ def demo_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope="session")
+def cut_in_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """2 s of the built-in ``cut_in`` scenario (its own seed), made once per test session; the
+    tests that take it only read it (the engine's reference-pipeline runs, a closed-loop metric's
+    open-loop run)."""
+    from redrive.sim.scenario import load_scenario
+    from redrive.sim.synth import synthesize
+
+    out = tmp_path_factory.mktemp("cut_in") / "cut_in.mcap"
+    synthesize(load_scenario("cut_in"), out, duration_s=2.0)
+    return out
+
+
+@pytest.fixture(scope="session")
 def demo_run(demo_log: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The reference pipeline (clusters → tracker → planner → controller) over :func:`demo_log`,
     written as ``redrive run`` writes it."""

@@ -16,10 +16,9 @@ from tests.engine._runs import OUTPUT_TABLES, outputs
 
 
 @pytest.fixture(scope="module")
-def cut_in(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    out = tmp_path_factory.mktemp("reference") / "cut_in.mcap"
-    synthesize(load_scenario("cut_in"), out, duration_s=2.0)
-    return out
+def cut_in(cut_in_log: Path) -> Path:
+    """2 s of ``cut_in`` (the session's, see tests/conftest.py)."""
+    return cut_in_log
 
 
 def test_reference_pipeline_runs_and_is_deterministic(cut_in: Path, tmp_path: Path) -> None:

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from redrive.closedloop.run import ClosedLoopRequest, run_closed_loop
 from redrive.config import pipeline_from_plugins
 from redrive.engine import RunRequest, run_log
@@ -19,9 +21,16 @@ from redrive.sim.synth import synthesize
 from redrive.testing.demo_log import write_demo_bag
 
 
-def test_a_replayed_synthetic_log_brings_its_road_map(tmp_path: Path) -> None:
-    log = tmp_path / "cut_in.mcap"
+@pytest.fixture(scope="module")
+def cut_in_1s(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """1 s of ``cut_in``, made once for the module's tests (they only read it)."""
+    log = tmp_path_factory.mktemp("cut_in") / "cut_in.mcap"
     synthesize(load_scenario("cut_in"), log, duration_s=1.0)
+    return log
+
+
+def test_a_replayed_synthetic_log_brings_its_road_map(cut_in_1s: Path, tmp_path: Path) -> None:
+    log = cut_in_1s
     with open_log(log) as reader:
         assert reader.capabilities.road_map
         assert reader.capabilities.scenario
@@ -42,9 +51,10 @@ def test_a_replayed_synthetic_log_brings_its_road_map(tmp_path: Path) -> None:
     assert scored.result.values["drivable_area_compliance"] == 1.0  # the scripted ego
 
 
-def test_a_closed_loop_on_a_synthetic_log_brings_its_road_map(tmp_path: Path) -> None:
-    log = tmp_path / "cut_in.mcap"
-    synthesize(load_scenario("cut_in"), log, duration_s=1.0)
+def test_a_closed_loop_on_a_synthetic_log_brings_its_road_map(
+    cut_in_1s: Path, tmp_path: Path
+) -> None:
+    log = cut_in_1s
     out = tmp_path / "closed"
     pipeline = pipeline_from_plugins(perception=["noisy-oracle"], planning=["idm-planner"])
     run_closed_loop(ClosedLoopRequest(scenario=str(log), pipeline=pipeline, out=out))

@@ -359,7 +359,7 @@ def test_footprint_defaults_are_the_simulated_egos() -> None:
     }
 
 
-def test_reference_pipeline_on_a_synthetic_cut_in(tmp_path: Path) -> None:
+def test_reference_pipeline_on_a_synthetic_cut_in(cut_in_log: Path, tmp_path: Path) -> None:
     """A real run: the scripted expert ego of ``cut_in`` (open loop: the driven ego is the
     logged one), the reference pipeline, the scenario's road map written into the run."""
     from redrive.config import reference_pipeline
@@ -367,13 +367,10 @@ def test_reference_pipeline_on_a_synthetic_cut_in(tmp_path: Path) -> None:
     from redrive.results import write_road_map
     from redrive.sim.roadmap import HIGHWAY_SPEED_LIMIT_MPS, scenario_road_map
     from redrive.sim.scenario import load_scenario
-    from redrive.sim.synth import synthesize
 
-    scenario = load_scenario("cut_in")
-    log = tmp_path / "cut_in.mcap"
-    synthesize(scenario, log, duration_s=2.0)
+    scenario = load_scenario("cut_in")  # 2 s of it synthesized: cut_in_log
     out = tmp_path / "run"
-    report = run_log(RunRequest(log=log, pipeline=reference_pipeline(), out=out))
+    report = run_log(RunRequest(log=cut_in_log, pipeline=reference_pipeline(), out=out))
     assert report.status == "complete"
     write_road_map(out, scenario_road_map(scenario))
     road_map = open_run(out).road_map()
