@@ -176,15 +176,17 @@ class BicycleModel:
             ]
         )
         rows.flags.writeable = False
-        return VehicleState(
-            stamp_ns=stamp_ns,
-            frame_id="map",
-            position=rows[0:3],
-            velocity=rows[3:6],
-            acceleration=rows[6:9],
-            heading_rad=math.atan2(s, c),
-            yaw_rate_rad_s=v * kappa,
-        )
+        # what VehicleState(...) builds of these values (an int stamp, read-only float64 (3,)
+        # views, Python floats), without its checks: it runs for both worlds every frame
+        state: VehicleState = object.__new__(VehicleState)
+        _SET_STAMP(state, int(stamp_ns))
+        _SET_FRAME(state, "map")
+        _SET_POSITION(state, rows[0:3])
+        _SET_VELOCITY(state, rows[3:6])
+        _SET_ACCELERATION(state, rows[6:9])
+        _SET_HEADING(state, math.atan2(s, c))
+        _SET_YAW_RATE(state, float(v * kappa))
+        return state
 
     def map_from_base(self) -> npt.NDArray[np.float64]:
         """4×4 float64 pose of base_link (rear-axle centre) in the map frame."""
@@ -358,6 +360,16 @@ class ActuatedEgo:
             "tyres": {**asdict(self.tyres), "friction_circle_mps2": self.tyres.max_accel_mps2},
             "delay_steps": self.delay_steps,
         }
+
+
+# VehicleState's slots' own setters (BicycleModel.state builds its states unchecked)
+_SET_STAMP = VehicleState.__dict__["stamp_ns"].__set__
+_SET_FRAME = VehicleState.__dict__["frame_id"].__set__
+_SET_POSITION = VehicleState.__dict__["position"].__set__
+_SET_VELOCITY = VehicleState.__dict__["velocity"].__set__
+_SET_ACCELERATION = VehicleState.__dict__["acceleration"].__set__
+_SET_HEADING = VehicleState.__dict__["heading_rad"].__set__
+_SET_YAW_RATE = VehicleState.__dict__["yaw_rate_rad_s"].__set__
 
 
 def pose_matrix(x_m: float, y_m: float, yaw_rad: float) -> npt.NDArray[np.float64]:

@@ -10,7 +10,7 @@ import numpy.typing as npt
 
 from redrive.geometry import invert
 from redrive.sim.scene import Scene
-from redrive.sim.truth_kernels import rows_in_base
+from redrive.sim.truth_kernels import rows_in_base_packed
 from redrive.types import DetectedObject, ObjectClass, ObjectColumns
 
 __all__ = ["GROUND_TRUTH_RANGE_M", "boxes_in_base", "ground_truth_objects", "objects_in_base"]
@@ -93,10 +93,18 @@ def boxes_in_base(  # noqa: PLR0917 - the boxes' columns, then the pose
     rotation_t = base_from_map[:3, :3].T
     centers = centers_m @ rotation_t + base_from_map[:3, 3]
     velocities = velocities_mps @ rotation_t
-    idx, ids, centers, sizes, yaws, velocities, orientations = rows_in_base(
+    # (the kernel's seven arrays packed in two: unpacked as C-contiguous views)
+    m, ints, floats = rows_in_base_packed(
         centers, velocities, object_ids, sizes_m, yaws_rad,
         _EVERY if keep is None else keep, yaw_ego, range_m,
     )  # fmt: skip
+    m3 = 3 * m
+    idx, ids = ints[:m], ints[m:]
+    centers = floats[:m3].reshape(m, 3)
+    sizes = floats[m3 : 2 * m3].reshape(m, 3)
+    yaws = floats[2 * m3 : 2 * m3 + m]
+    velocities = floats[2 * m3 + m : 3 * m3 + m].reshape(m, 3)
+    orientations = floats[3 * m3 + m : 13 * m].reshape(m, 3)
     # the rows are the world's (trusted: finite, non-negative sizes) moved into base_link: the
     # columns are built as DetectedObject.many would check and build them, without the checks
     points: npt.NDArray[np.int64] | None = None

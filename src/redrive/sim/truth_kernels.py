@@ -17,7 +17,7 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["remainder", "rows_in_base"]
+__all__ = ["remainder", "rows_in_base", "rows_in_base_packed"]
 
 _F64 = npt.NDArray[np.float64]
 _I64 = npt.NDArray[np.int64]
@@ -82,3 +82,33 @@ def rows_in_base(  # noqa: PLR0917 - numba takes no keyword-only parameters
         yaw_out[k] = yaw
         o_out[k, 0] = yaw
     return idx, ids, c_out, s_out, yaw_out, v_out, o_out
+
+
+@numba.njit(cache=True, nogil=True)
+def rows_in_base_packed(  # noqa: PLR0917 - numba takes no keyword-only parameters
+    centers: _F64,
+    velocities: _F64,
+    object_ids: _I64,
+    sizes: _F64,
+    yaws: _F64,
+    keep: npt.NDArray[np.bool_],
+    yaw_ego: float,
+    range_m: float,
+) -> tuple[int, _I64, _F64]:  # pragma: no cover - compiled
+    """:func:`rows_in_base`'s seven arrays in two (numba boxes every array it returns at a cost
+    of its own, a pickled type read back each time): the m rows, the ints (m indices, then m
+    ids) and the floats one after another (centres 3m, sizes 3m, yaws m, velocities 3m,
+    orientations 3m) — the same values."""
+    idx, ids, c, s, y, v, o = rows_in_base(
+        centers, velocities, object_ids, sizes, yaws, keep, yaw_ego, range_m
+    )
+    m = idx.shape[0]
+    ints = np.empty(2 * m, dtype=np.int64)
+    ints[:m] = idx
+    ints[m:] = ids
+    floats = np.empty(13 * m)
+    at = 0
+    for part in (c.ravel(), s.ravel(), y, v.ravel(), o.ravel()):
+        floats[at : at + part.shape[0]] = part
+        at += part.shape[0]
+    return m, ints, floats

@@ -11,13 +11,18 @@ decide — and that the planned path crosses in their direction of travel, ahead
 not already more than 0.5 m past them, become stopped leaders at the crossing.  A yellow light
 the ego could not stop for is *committed*: it drives on through it (and through its red) until
 the light shows green again.
+
+A line is tested (moved into base_link by numpy and crossed with the path, in one compiled
+call) only when a cheap pre-filter in plain floats cannot tell it apart: a line lying wholly
+beyond one side of the path's bounding box, by more than :data:`_CLEAR_M`, is not crossed —
+what the exact test says of it too (its own bounding-box test rejects it).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
@@ -31,15 +36,25 @@ F64 = npt.NDArray[np.float64]
 
 #: a bumper this far past a line (metres) has crossed it: the line no longer holds it back
 _PASSED_M = 0.5
+#: the pre-filter's margin (metres): a line farther than this beyond a side of the path's
+#: bounding box (in plain floats, not numpy's products: they differ by rounding, ≪ this) is
+#: clear of the path; nearer, the exact test decides
+_CLEAR_M = 1e-3
 
 
 @dataclass(frozen=True, slots=True)
 class Gate:
-    """One light's stop line: ``line`` (K, 2) map metres, ``direction`` (2,) unit vector."""
+    """One light's stop line: ``line`` (K, 2) map metres, ``direction`` (2,) unit vector;
+    ``points`` the line's vertices as Python floats (the pre-filter's)."""
 
     light_id: str
     line: F64
     direction: F64
+    points: tuple[tuple[float, float], ...] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        pts = [(float(x), float(y)) for x, y in np.asarray(self.line).reshape(-1, 2).tolist()]
+        object.__setattr__(self, "points", tuple(pts))
 
 
 def _tangent(lane: MapLane, point: F64) -> F64:
@@ -102,6 +117,7 @@ def stop_arcs(
     if len(path_xy) < 2:
         return np.array(out, dtype=np.float64)
     ego: tuple[F64, F64, F64, F64] | None = None  # the ego pose, once a light asks for it
+    box = (0.0,) * 8  # the pre-filter's pose and bounding box, in floats
     for gate in gates:
         light = shown.get(gate.light_id)
         if light not in (LightState.RED, LightState.YELLOW) or gate.light_id in committed:
@@ -109,6 +125,20 @@ def stop_arcs(
         if ego is None:  # the ego pose and the path's bounding box
             c, sn = math.cos(state.heading_rad), math.sin(state.heading_rad)
             ego = (state.position[:2], np.array([[c, sn], [-sn, c]]), *path_bounds(path_xy))
+            (x_lo, y_lo), (x_hi, y_hi) = ego[2].tolist(), ego[3].tolist()
+            ox, oy = state.position[:2].tolist()
+            box = (
+                c,
+                sn,
+                ox,
+                oy,
+                x_lo - _CLEAR_M,
+                y_lo - _CLEAR_M,
+                x_hi + _CLEAR_M,
+                y_hi + _CLEAR_M,
+            )
+        if _clear_of(gate.points, box):
+            continue  # beyond the path's bounding box: gate_crossing would not find it
         origin, base_from_map, low, high = ego
         line = (gate.line - origin) @ base_from_map.T
         # the bounding boxes' test and the first crossing in one compiled call
@@ -126,3 +156,20 @@ def stop_arcs(
             continue
         out.append(s)
     return np.array(out, dtype=np.float64)
+
+
+def _clear_of(points: tuple[tuple[float, float], ...], box: tuple[float, ...]) -> bool:
+    """Whether the line of ``points`` (map metres) lies, in base_link of the pose ``box[:4]``
+    (cos, sin of the heading, origin x, y), wholly below ``box[4:6]`` or above ``box[6:8]``
+    (the path's bounding box widened by :data:`_CLEAR_M`) in x or in y.  A NaN anywhere is
+    never clear (its comparisons are false)."""
+    c, sn, ox, oy, x_lo, y_lo, x_hi, y_hi = box
+    below_x = above_x = below_y = above_y = True
+    for x, y in points:
+        dx, dy = x - ox, y - oy
+        bx, by = c * dx + sn * dy, c * dy - sn * dx
+        below_x = below_x and bx < x_lo
+        above_x = above_x and bx > x_hi
+        below_y = below_y and by < y_lo
+        above_y = above_y and by > y_hi
+    return below_x or above_x or below_y or above_y

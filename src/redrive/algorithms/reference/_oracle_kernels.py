@@ -32,6 +32,7 @@ __all__ = [
     "frame_key",
     "normal_at",
     "oracle_frame",
+    "oracle_frame_packed",
     "uniform_at",
 ]
 
@@ -198,3 +199,41 @@ def oracle_frame(  # noqa: PLR0917 - numba takes no keyword-only parameters
         fp_c[i, 1] = range_m * math.sin(bearing)
         fp_c[i, 2] = 0.5 * fp_s[i, 2]
     return rows, confuse, out_c, out_s, out_y, out_v, out_o, fp_class, fp_c, fp_s, fp_y
+
+
+@numba.njit(cache=True, nogil=True)
+def oracle_frame_packed(  # noqa: PLR0917 - numba takes no keyword-only parameters
+    seed: int,
+    index: int,
+    centers: _F64,
+    sizes: _F64,
+    yaws: _F64,
+    velocities: _F64,
+    orientations: _F64,
+    eligible: _BOOL,
+    params: _F64,
+    fp_probs: _F64,
+    fp_sizes: _F64,
+) -> tuple[int, int, _I64, _F64]:  # pragma: no cover - compiled
+    """:func:`oracle_frame`'s eleven arrays in two (numba boxes every array it returns at a
+    cost of its own, a pickled type read back each time): the k kept rows and m false
+    positives, the ints (k rows, then m classes) and the floats, one array after another
+    (confusion uniforms k, centres 3k, sizes 3k, yaws k, velocities 3k, orientations 3k, then
+    the false positives' centres 3m, sizes 3m, yaws m) — the same values."""
+    rows, confuse, c, s, y, v, o, fp_class, fp_c, fp_s, fp_y = oracle_frame(
+        seed, index, centers, sizes, yaws, velocities, orientations, eligible, params,
+        fp_probs, fp_sizes,
+    )  # fmt: skip
+    k, m = rows.shape[0], fp_class.shape[0]
+    ints = np.empty(k + m, dtype=np.int64)
+    ints[:k] = rows
+    ints[k:] = fp_class
+    floats = np.empty(14 * k + 7 * m)
+    at = 0
+    for part in (confuse, c.ravel(), s.ravel(), y, v.ravel(), o.ravel()):
+        floats[at : at + part.shape[0]] = part
+        at += part.shape[0]
+    for part in (fp_c.ravel(), fp_s.ravel(), fp_y):
+        floats[at : at + part.shape[0]] = part
+        at += part.shape[0]
+    return k, m, ints, floats

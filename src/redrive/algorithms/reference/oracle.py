@@ -12,7 +12,7 @@ import numpy as np
 import numpy.typing as npt
 
 from redrive.algorithms.base import GROUND_TRUTH, Algorithm, Role, StageOutputs
-from redrive.algorithms.reference._oracle_kernels import oracle_frame
+from redrive.algorithms.reference._oracle_kernels import oracle_frame_packed
 from redrive.errors import AlgorithmError, ConfigError
 from redrive.types import DetectedObject, Frame, ObjectClass, ObjectColumns, SensorType
 from redrive.types._arrays import finite, finite_nonnegative, minus_ones, ones, zeros
@@ -20,6 +20,8 @@ from redrive.types._arrays import finite, finite_nonnegative, minus_ones, ones, 
 __all__ = ["CONFUSABLE_CLASSES", "FALSE_POSITIVE_SHAPES", "NoisyOracle"]
 
 logger = logging.getLogger(__name__)
+
+_F = npt.NDArray[np.float64]
 
 #: classes a confused label is drawn from (uniformly, never the true one).
 CONFUSABLE_CLASSES: tuple[ObjectClass, ...] = (
@@ -157,7 +159,7 @@ class NoisyOracle(Algorithm):
         loaded in this process (also by :mod:`redrive.batch.preload`)."""
         frozen3, frozen1 = np.zeros((1, 3)), np.zeros(1)  # ObjectColumns' arrays are read-only
         frozen3.flags.writeable = frozen1.flags.writeable = False
-        oracle_frame(
+        oracle_frame_packed(
             self._seed,
             0,
             frozen3,
@@ -196,8 +198,9 @@ class NoisyOracle(Algorithm):
         # the ground truth as columns (no pass over the objects when they came from
         # DetectedObject.many, as a simulator's and the decoders' do)
         columns = ObjectColumns.from_objects(truth)
-        # every draw and the arithmetic of the frame in one compiled call (._oracle_kernels)
-        (rows, confuse, centers, sizes, yaws, velocities, orientations, *fp) = oracle_frame(
+        # every draw and the arithmetic of the frame in one compiled call (._oracle_kernels;
+        # its arrays packed in two, unpacked as views)
+        k, m, ints, floats = oracle_frame_packed(
             self._seed,
             frame.index,
             columns.center_m,
@@ -210,8 +213,9 @@ class NoisyOracle(Algorithm):
             _FP_PROBS,
             _FP_SIZES,
         )
+        rows, confuse, centers, sizes, yaws, velocities, orientations = _unpacked(k, ints, floats)
+        fp_picks, fp_centers, fp_sizes, fp_yaws = _unpacked_fp(k, m, ints, floats)
         parts = []
-        fp_picks, fp_centers, fp_sizes, fp_yaws = fp
         if len(rows):
             parts.append(
                 self._detections(
@@ -303,6 +307,37 @@ class NoisyOracle(Algorithm):
             "acceleration_mps2": np.zeros((count, 3)),
             "orientation_rad": orientations,
         }
+
+
+def _unpacked(
+    k: int, ints: npt.NDArray[np.int64], floats: npt.NDArray[np.float64]
+) -> tuple[npt.NDArray[np.int64], _F, _F, _F, _F, _F, _F]:
+    """The kept rows' arrays of :func:`._oracle_kernels.oracle_frame_packed` (C-contiguous
+    views): rows, confusion uniforms, centres, sizes, yaws, velocities, orientations."""
+    k3 = 3 * k
+    return (
+        ints[:k],
+        floats[:k],
+        floats[k : k + k3].reshape(k, 3),
+        floats[k + k3 : k + 2 * k3].reshape(k, 3),
+        floats[k + 2 * k3 : 2 * k + 2 * k3],
+        floats[2 * k + 2 * k3 : 2 * k + 3 * k3].reshape(k, 3),
+        floats[2 * k + 3 * k3 : 14 * k].reshape(k, 3),
+    )
+
+
+def _unpacked_fp(
+    k: int, m: int, ints: npt.NDArray[np.int64], floats: npt.NDArray[np.float64]
+) -> tuple[npt.NDArray[np.int64], _F, _F, _F]:
+    """The false positives' arrays of :func:`._oracle_kernels.oracle_frame_packed` (views):
+    classes, centres, sizes, yaws."""
+    at = 14 * k
+    return (
+        ints[k:],
+        floats[at : at + 3 * m].reshape(m, 3),
+        floats[at + 3 * m : at + 6 * m].reshape(m, 3),
+        floats[at + 6 * m : at + 7 * m],
+    )
 
 
 _FP_CLASSES = tuple(FALSE_POSITIVE_SHAPES)

@@ -240,6 +240,8 @@ class IdmPlanner(Algorithm):
         self._route_s_m: float | None = None
         self._gates: tuple[Gate, ...] = ()
         self._committed: set[str] = set()  # yellow lights it drives through
+        #: the plan's waypoint times (read-only) and the (steps, dt) they are for
+        self._times: tuple[tuple[int, float], F64] | None = None
         self.setup(self.config)
 
     def setup(self, config: Mapping[str, Any]) -> None:
@@ -360,8 +362,8 @@ class IdmPlanner(Algorithm):
         path, route_end_m = self._geometry(frame, state, speed_mps)
         leaders_s, leaders_v = self._leaders(path, objects)
         if route_end_m is not None:
-            leaders_s = np.append(leaders_s, route_end_m)
-            leaders_v = np.append(leaders_v, 0.0)
+            leaders_s = np.concatenate((leaders_s, (route_end_m,)))
+            leaders_v = np.concatenate((leaders_v, (0.0,)))
         lights = frame.traffic.traffic_lights
         if self.obey_lights and self._gates and lights:
             stops = stop_arcs(
@@ -374,15 +376,19 @@ class IdmPlanner(Algorithm):
                 comfort_decel_mps2=self.b_mps2,
                 committed=self._committed,
             )
-            leaders_s = np.append(leaders_s, stops)
-            leaders_v = np.append(leaders_v, np.zeros(stops.size))
+            if stops.size:  # (np.append's values: the leaders, then the lines, stopped)
+                leaders_s = np.concatenate((leaders_s, stops))
+                leaders_v = np.concatenate((leaders_v, np.zeros(stops.size)))
         v0_mps = self.v0_mps
         if self._route is not None and self.max_lateral_accel_mps2 > 0.0:
             v0_mps = min(v0_mps, self._curve_speed_mps(path))
         t_s, s_m = self._profile(speed_mps, leaders_s, leaders_v, v0_mps=v0_mps)
-        xy = path.points_at(s_m)
-        waypoints = np.column_stack([xy, np.zeros(len(t_s)), t_s])
-        return PlannedPath(stamp_ns=frame.stamp_ns, waypoints=waypoints, frame_id="base_link")
+        # np.column_stack([xy, zeros, t_s])'s array, filled in place
+        waypoints = np.empty((len(t_s), 4))
+        waypoints[:, :2] = path.points_at(s_m)
+        waypoints[:, 2] = 0.0
+        waypoints[:, 3] = t_s
+        return _trusted_path(frame.stamp_ns, waypoints)
 
     def _objects(self, frame: Frame, upstream: StageOutputs) -> tuple[DetectedObject, ...]:
         objects = upstream.objects(self.perception)
@@ -510,7 +516,12 @@ class IdmPlanner(Algorithm):
         forward integration is one compiled call (:func:`._plan_kernels.idm_profile`)."""
         n = max(1, round(self.horizon_s / self.dt_s))
         dt = self.dt_s
-        t_out = np.arange(n + 1, dtype=np.float64) * dt
+        times = self._times
+        if times is None or times[0] != (n, dt):  # the same times every frame: built once
+            t_all = np.arange(n + 1, dtype=np.float64) * dt
+            t_all.flags.writeable = False
+            times = self._times = ((n, dt), t_all)
+        t_out = times[1]
         s_out = idm_profile(
             float(speed_mps),
             np.ascontiguousarray(leaders_s, dtype=np.float64),
@@ -528,3 +539,22 @@ class IdmPlanner(Algorithm):
             2.0,
         )
         return t_out, s_out
+
+
+def _trusted_path(stamp_ns: int, waypoints: F64) -> PlannedPath:
+    """``PlannedPath(stamp_ns=…, waypoints=waypoints, frame_id="base_link")`` of a plan's
+    (K, 4) float64 waypoints, times non-decreasing by construction: the same object (a
+    read-only view of ``waypoints``), without the checks."""
+    view = waypoints.view()
+    view.flags.writeable = False
+    path: PlannedPath = object.__new__(PlannedPath)
+    _SET_PATH_STAMP(path, stamp_ns)
+    _SET_PATH_WAYPOINTS(path, view)
+    _SET_PATH_FRAME(path, "base_link")
+    return path
+
+
+# PlannedPath's slots' own setters (the planner's paths are built unchecked)
+_SET_PATH_STAMP = PlannedPath.__dict__["stamp_ns"].__set__
+_SET_PATH_WAYPOINTS = PlannedPath.__dict__["waypoints"].__set__
+_SET_PATH_FRAME = PlannedPath.__dict__["frame_id"].__set__
