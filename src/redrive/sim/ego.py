@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -27,6 +27,7 @@ from redrive.motion import IdmParams
 from redrive.sim.agents import advance_1d
 from redrive.sim.roads import Route
 from redrive.types import ControlCommands, VehicleState
+from redrive.types._drafts import draft_class
 
 __all__ = [
     "STANDARD_GRAVITY_MPS2",
@@ -178,15 +179,16 @@ class BicycleModel:
         rows.flags.writeable = False
         # what VehicleState(...) builds of these values (an int stamp, read-only float64 (3,)
         # views, Python floats), without its checks: it runs for both worlds every frame
-        state: VehicleState = object.__new__(VehicleState)
-        _SET_STAMP(state, int(stamp_ns))
-        _SET_FRAME(state, "map")
-        _SET_POSITION(state, rows[0:3])
-        _SET_VELOCITY(state, rows[3:6])
-        _SET_ACCELERATION(state, rows[6:9])
-        _SET_HEADING(state, math.atan2(s, c))
-        _SET_YAW_RATE(state, float(v * kappa))
-        return state
+        state = _StateDraft()  # (redrive.types._drafts)
+        state.stamp_ns = int(stamp_ns)
+        state.frame_id = "map"
+        state.position = rows[0:3]
+        state.velocity = rows[3:6]
+        state.acceleration = rows[6:9]
+        state.heading_rad = math.atan2(s, c)
+        state.yaw_rate_rad_s = float(v * kappa)
+        state.__class__ = VehicleState
+        return cast("VehicleState", state)
 
     def map_from_base(self) -> npt.NDArray[np.float64]:
         """4×4 float64 pose of base_link (rear-axle centre) in the map frame."""
@@ -362,14 +364,9 @@ class ActuatedEgo:
         }
 
 
-# VehicleState's slots' own setters (BicycleModel.state builds its states unchecked)
-_SET_STAMP = VehicleState.__dict__["stamp_ns"].__set__
-_SET_FRAME = VehicleState.__dict__["frame_id"].__set__
-_SET_POSITION = VehicleState.__dict__["position"].__set__
-_SET_VELOCITY = VehicleState.__dict__["velocity"].__set__
-_SET_ACCELERATION = VehicleState.__dict__["acceleration"].__set__
-_SET_HEADING = VehicleState.__dict__["heading_rad"].__set__
-_SET_YAW_RATE = VehicleState.__dict__["yaw_rate_rad_s"].__set__
+#: VehicleState's draft (:mod:`redrive.types._drafts`): BicycleModel.state builds its states
+#: unchecked
+_StateDraft = draft_class(VehicleState)
 
 
 def pose_matrix(x_m: float, y_m: float, yaw_rad: float) -> npt.NDArray[np.float64]:

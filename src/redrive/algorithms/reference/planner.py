@@ -79,7 +79,7 @@ import logging
 import math
 from collections.abc import Iterable, Mapping
 from types import MappingProxyType
-from typing import Any, ClassVar
+from typing import Any, ClassVar, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -108,6 +108,7 @@ from redrive.types import (
     SensorType,
     VehicleState,
 )
+from redrive.types._drafts import draft_class
 
 __all__ = ["IdmPlanner", "Polyline"]
 
@@ -547,14 +548,13 @@ def _trusted_path(stamp_ns: int, waypoints: F64) -> PlannedPath:
     read-only view of ``waypoints``), without the checks."""
     view = waypoints.view()
     view.flags.writeable = False
-    path: PlannedPath = object.__new__(PlannedPath)
-    _SET_PATH_STAMP(path, stamp_ns)
-    _SET_PATH_WAYPOINTS(path, view)
-    _SET_PATH_FRAME(path, "base_link")
-    return path
+    path = _PathDraft()  # (redrive.types._drafts)
+    path.stamp_ns = stamp_ns
+    path.waypoints = view
+    path.frame_id = "base_link"
+    path.__class__ = PlannedPath
+    return cast("PlannedPath", path)
 
 
-# PlannedPath's slots' own setters (the planner's paths are built unchecked)
-_SET_PATH_STAMP = PlannedPath.__dict__["stamp_ns"].__set__
-_SET_PATH_WAYPOINTS = PlannedPath.__dict__["waypoints"].__set__
-_SET_PATH_FRAME = PlannedPath.__dict__["frame_id"].__set__
+#: PlannedPath's draft (:mod:`redrive.types._drafts`): the planner's paths are built unchecked
+_PathDraft = draft_class(PlannedPath)
