@@ -106,11 +106,13 @@ def lane_widths(
             if len(xy) >= 1:
                 lines[int(feature.id)] = len(coords)
                 coords.append(xy)
-    # per lane: (id, n points, left spans, right spans); the spans' points and boundaries in
-    # one flat list each, in that order
-    lanes: list[tuple[int, int, list[tuple[int, int, int]], list[tuple[int, int, int]]]] = []
+    # per lane: (id, first point in the flat sides, n points); every span's centreline points
+    # and boundary number in one flat list each, in the order the spans are given (left, right)
+    lanes: list[tuple[int, int, int]] = []
+    spans: list[tuple[int, int, int]] = []  # (side 0/1, first flat point, n points) per span
     bounded: list[npt.NDArray[np.float64]] = []
-    which: list[npt.NDArray[np.int64]] = []
+    which: list[int] = []  # each span's boundary number
+    total = 0
     for feature in scenario.map_features:
         if feature.WhichOneof("feature_data") != "lane":
             continue
@@ -122,40 +124,58 @@ def lane_widths(
         if len(centre) < 2:
             continue
         n = len(centre)
-        left = _bounded_spans(n, feature.lane.left_boundaries, lines)
-        right = _bounded_spans(n, feature.lane.right_boundaries, lines)
-        for lo, hi, line in (*left, *right):
-            bounded.append(centre[lo : hi + 1])
-            which.append(np.full(hi + 1 - lo, line, dtype=np.int64))
-        lanes.append((int(feature.id), n, left, right))
-    flat = np.zeros(0)
+        lane = feature.lane
+        for side, segments in enumerate((lane.left_boundaries, lane.right_boundaries)):
+            for lo, hi, line in _bounded_spans(n, segments, lines):
+                bounded.append(centre[lo : hi + 1])
+                which.append(line)
+                spans.append((side, total + lo, hi + 1 - lo))
+        lanes.append((int(feature.id), total, n))
+        total += n
+    out: dict[int, float | None] = {}
+    if not lanes:
+        return out
+    # every lane's left and right distances one after the other (NaN where no span bounds a
+    # point; a later span bounding a point again replaces the earlier)
+    sides = np.full((2, total), np.nan)
     if bounded:
         offsets = np.cumsum([0, *(len(c) for c in coords)]).astype(np.int64)
         flat = polyline_distances(
             np.concatenate(bounded),
-            np.concatenate(which),
+            np.repeat(np.array(which, dtype=np.int64), [count for _, _, count in spans]),
             np.ascontiguousarray(np.concatenate(coords)),
             offsets,
         )
-    out: dict[int, float | None] = {}
-    at = 0
-    for fid, n, left_spans, right_spans in lanes:
-        sides = []
-        for spans in (left_spans, right_spans):
-            side = np.full(n, np.nan)
-            for lo, hi, _ in spans:
-                side[lo : hi + 1] = flat[at : at + hi + 1 - lo]
-                at += hi + 1 - lo
-            sides.append(side)
-        left_m, right_m = sides
-        both = np.isfinite(left_m) & np.isfinite(right_m)
-        if both.any():
-            width = float(np.mean(left_m[both] + right_m[both]))
-        elif np.isfinite(left_m).any() or np.isfinite(right_m).any():
-            one = np.where(np.isfinite(left_m), left_m, right_m)
-            width = float(2.0 * np.nanmean(one))
-        else:
-            width = None
+        at = 0
+        for side, first, count in spans:
+            sides[side, first : first + count] = flat[at : at + count]
+            at += count
+    left_m, right_m = sides
+    left_ok, right_ok = np.isfinite(left_m), np.isfinite(right_m)
+    both = left_ok & right_ok
+    starts = np.array([first for _, first, _ in lanes], dtype=np.int64)
+    any_both = np.logical_or.reduceat(both, starts).tolist()
+    any_one = np.logical_or.reduceat(left_ok | right_ok, starts).tolist()
+    # np.mean(left[both] + right[both]) of a lane: the sum of its slice of the pairs (the same
+    # pairwise sum of the same values) over their count; 2 · np.nanmean(one side) of a lane
+    # bounded on one side only: the sum of its points with NaN as 0 over the others' count
+    pairs = (left_m + right_m)[both]
+    pair_end = np.cumsum(both).tolist()
+    one = np.where(left_ok, left_m, right_m)
+    one_nan = np.isnan(one)
+    one_zeroed = np.where(one_nan, 0.0, one)
+    one_end = np.cumsum(~one_nan).tolist()
+    for k, (fid, first, n) in enumerate(lanes):
+        last = first + n - 1
+        width: float | None = None
+        if any_both[k]:
+            lo = pair_end[first - 1] if first else 0
+            count = pair_end[last] - lo
+            width = float(pairs[lo : pair_end[last]].sum()) / count
+        elif any_one[k]:
+            lo = one_end[first - 1] if first else 0
+            count = one_end[last] - lo
+            width = float(2.0 * (float(one_zeroed[first : last + 1].sum()) / count))
         out[fid] = width if width is not None and width > 0.5 else None
     return out
 
@@ -178,6 +198,8 @@ def road_map_from_scenario(scenario: Any, *, source: str, points: Points | None 
     lanes: list[tuple[int, Any, npt.NDArray[np.float64], float]] = []
     seen: set[int] = set()
     skipped = 0
+    # the walk's points all finite (the common case): so is every lane's centreline
+    checked = points is not None and bool(np.isfinite(points[0]).all())
     for feature in scenario.map_features:
         fid = int(feature.id)
         if fid in seen:
@@ -187,7 +209,7 @@ def road_map_from_scenario(scenario: Any, *, source: str, points: Points | None 
         if feature.WhichOneof("feature_data") != "lane":
             continue
         centre = centres[fid]
-        if not np.all(np.isfinite(centre)):
+        if not checked and not np.all(np.isfinite(centre)):
             msg = f"{source}: lane {fid}: its polyline holds a point that is not finite"
             raise LogError(msg)
         if len(centre) < 2:
@@ -203,13 +225,13 @@ def road_map_from_scenario(scenario: Any, *, source: str, points: Points | None 
         lanes.append((fid, feature.lane, centre, width))
     if skipped:
         logger.debug("%s: %d lanes of fewer than two points left out", source, skipped)
-    kept = {str(fid) for fid, *_ in lanes}
+    kept = {fid: str(fid) for fid, *_ in lanes}  # feature id → lane id
     edges = {
         int(f.id) for f in scenario.map_features if f.WhichOneof("feature_data") == "road_edge"
     }
 
     def in_map(ids: Any) -> tuple[str, ...]:
-        return tuple(str(int(i)) for i in ids if str(int(i)) in kept)
+        return tuple(kept[i] for i in ids if i in kept)
 
     def first(neighbours: Any) -> str | None:
         ids = in_map([n.feature_id for n in neighbours])
@@ -264,14 +286,14 @@ def road_map_from_scenario(scenario: Any, *, source: str, points: Points | None 
             point = lane_state.stop_point
             position = np.array([point.x, point.y], dtype=np.float64)
             stop_id = None
-            if lid in kept:
+            if lid in by_id:
                 stop_id = f"signal:{lid}"
                 line = _stop_line_across(by_id[lid], position)
                 stop_lines.append(StopLine(stop_line_id=stop_id, line=line, lane_ids=(lid,)))
             lights[lid] = MapTrafficLight(
                 light_id=lid,
                 position=position,
-                lane_ids=(lid,) if lid in kept else (),
+                lane_ids=(lid,) if lid in by_id else (),
                 stop_line_id=stop_id,
             )
     return RoadMap(
