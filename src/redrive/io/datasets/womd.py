@@ -66,6 +66,7 @@ from redrive.types import (
     DetectedObject,
     LightState,
     ObjectClass,
+    ObjectColumns,
     RoadMap,
     TrafficData,
     TrafficLight,
@@ -190,7 +191,7 @@ def _tracks_of(scenario: Any, *, where: str, data: bytes) -> WomdTracks:
     heading = np.ascontiguousarray(rows[:, :, 6])
     vel = np.ascontiguousarray(rows[:, :, 7:9])
     valid = rows[:, :, 9] > 0
-    bad = valid & ~np.all(np.isfinite(np.concatenate([xyz, lwh, vel], axis=2)), axis=2)
+    bad = valid & ~np.all(np.isfinite(rows[:, :, 0:9]), axis=2)
     if bad.any():
         i, k = (int(v) for v in np.argwhere(bad)[0])
         msg = f"{where}: track {i} step {k} is valid but holds a value that is not finite"
@@ -295,13 +296,7 @@ class WomdReader(NativeLogBase):
         if any(b <= a for a, b in zip(self._stamps, self._stamps[1:], strict=False)):
             msg = f"{where}: timestamps_seconds do not increase"
             raise LogError(msg)
-        self._lights = [
-            tuple(
-                TrafficLight(id=str(s.lane), state=light_state_of(int(s.state)))
-                for s in state.lane_states
-            )
-            for state in scenario.dynamic_map_states
-        ]
+        self._lights = _lights_of(scenario)
         self._road_map: RoadMap | None = None
         #: each step's objects once decoded (immutable): a closed loop reads the tracks whole
         #: before its first frame, then frame by frame
@@ -377,11 +372,15 @@ class WomdReader(NativeLogBase):
             [math.remainder(h - yaw0, math.tau) for h in tr.heading_rad[others, step].tolist()]
         )
         kinds = tr.object_types[others].tolist()
-        classes = [_CLASSES[k] if 0 <= k < len(_CLASSES) else ObjectClass.UNKNOWN for k in kinds]
+        classes = tuple(
+            _CLASSES[k] if 0 <= k < len(_CLASSES) else ObjectClass.UNKNOWN for k in kinds
+        )
         orientation = np.zeros((len(others), 3))
         orientation[:, 0] = yaw
+        # fresh float64 / int64 arrays of the columns' shapes; the valid states' numbers were
+        # checked finite at open and the sizes are ≥ 0 (what DetectedObject.many would check)
         return tuple(
-            DetectedObject.many(
+            ObjectColumns.trusted(
                 object_id=tr.ids[others],
                 object_class=classes,
                 center_m=rel,
@@ -389,7 +388,7 @@ class WomdReader(NativeLogBase):
                 yaw_rad=yaw,
                 velocity_mps=vel,
                 orientation_rad=orientation,
-            )
+            ).objects()
         )
 
     def contents(self) -> dict[str, int | str]:
@@ -440,6 +439,33 @@ class FirstRecord(NamedTuple):
 
     data: bytes | None
     scenario: Any | None
+
+
+#: each ``TrafficSignalLaneState.State`` number's :class:`LightState` (light_state_of, once)
+_LIGHT_STATES = tuple(light_state_of(k) for k in range(len(LANE_STATE_NAMES)))
+
+
+def _lights_of(scenario: Any) -> list[tuple[TrafficLight, ...]]:
+    """Each step's lights (``dynamic_map_states``): one :class:`TrafficLight` per lane state;
+    a lane showing the same state at several steps shares one (frozen) instance."""
+    made: dict[tuple[int, int], TrafficLight] = {}
+    out = []
+    for state in scenario.dynamic_map_states:
+        lights = []
+        for lane_state in state.lane_states:
+            key = (int(lane_state.lane), int(lane_state.state))
+            light = made.get(key)
+            if light is None:
+                number = key[1]
+                kind = (
+                    _LIGHT_STATES[number]
+                    if 0 <= number < len(_LIGHT_STATES)
+                    else LightState.UNKNOWN
+                )
+                light = made[key] = TrafficLight(id=str(key[0]), state=kind)
+            lights.append(light)
+        out.append(tuple(lights))
+    return out
 
 
 def _parse(data: bytes) -> Any | None:
