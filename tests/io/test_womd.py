@@ -165,6 +165,34 @@ def test_a_track_with_missing_states_is_damage(tmp_path: Path) -> None:
         open_log(path)
 
 
+@pytest.mark.parametrize("field", ["center_x", "length", "heading", "velocity_y"])
+def test_a_valid_state_that_is_not_finite_is_damage(tmp_path: Path, field: str) -> None:
+    """Every number of a valid state is checked at open (the objects are built trusted)."""
+    sc = _scenario()
+    setattr(sc.tracks[0].states[1], field, math.nan)
+    path = tmp_path / "bad.tfrecord"
+    write_tfrecord(path, [sc.SerializeToString()])
+    with pytest.raises(LogError, match="track 0 step 1 is valid but holds a value that is not"):
+        open_log(path)
+    setattr(sc.tracks[0].states[2], field, math.nan)  # an invalid state may hold anything
+    sc.tracks[0].states[1].CopyFrom(sc.tracks[0].states[0])
+    write_tfrecord(path, [sc.SerializeToString()])
+    with open_log(path) as log:
+        assert log.objects_at(1)[0].object_id == 7
+
+
+def test_a_lane_showing_one_state_at_several_steps_shares_its_light(tmp_path: Path) -> None:
+    path = tmp_path / "toy.tfrecord"
+    write_tfrecord(path, [_scenario().SerializeToString()])
+    with open_log(path) as log:
+        lights = [
+            m.payload.value.traffic_lights for m in log.messages(topics=[TOPIC_TRAFFIC_LIGHTS])
+        ]  # type: ignore[attr-defined]
+    assert [tl[0].state for tl in lights] == [LightState.RED, LightState.GREEN, LightState.GREEN]
+    assert lights[1][0] is lights[2][0]
+    assert lights[0][0] is not lights[1][0]
+
+
 @pytest.mark.shared_data
 def test_the_real_scenario_has_its_agents_91_steps_and_the_sdc(womd_file: Path) -> None:
     with open_log(womd_file) as log:
