@@ -3,6 +3,7 @@ built from the documented field numbers, and the real scenario of ../shared/data
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import shutil
 import struct
@@ -191,6 +192,31 @@ def test_a_lane_showing_one_state_at_several_steps_shares_its_light(tmp_path: Pa
     assert [tl[0].state for tl in lights] == [LightState.RED, LightState.GREEN, LightState.GREEN]
     assert lights[1][0] is lights[2][0]
     assert lights[0][0] is not lights[1][0]
+
+
+def test_the_roadgraph_lanes_are_the_ones_the_constructor_makes(tmp_path: Path) -> None:
+    """The lanes built without MapLane's checks equal what MapLane(...) makes of their fields
+    (read-only centreline views included); a speed limit the checks refuse is still refused."""
+    path = tmp_path / "toy.tfrecord"
+    write_tfrecord(path, [_scenario().SerializeToString()])
+    with open_log(path) as log:
+        road = log_road_map(log)
+    assert road is not None
+    for lane in road.lanes:
+        made = dataclasses.replace(lane)  # through __init__ and its checks
+        for f in dataclasses.fields(lane):
+            got, want = getattr(lane, f.name), getattr(made, f.name)
+            if isinstance(got, np.ndarray):
+                assert got.tobytes() == want.tobytes()
+                assert not got.flags.writeable
+            else:
+                assert got == want
+                assert type(got) is type(want)
+    sc = _scenario()
+    sc.map_features[0].lane.speed_limit_mph = math.inf
+    write_tfrecord(path, [sc.SerializeToString()])
+    with open_log(path) as log, pytest.raises(ValueError, match="speed_limit_mps must be > 0"):
+        log_road_map(log)
 
 
 @pytest.mark.shared_data

@@ -31,8 +31,9 @@ driveways have no element in the model (``redrive info`` counts them).
 from __future__ import annotations
 
 import logging
+import math
 from types import SimpleNamespace
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -41,6 +42,7 @@ from redrive.errors import LogError
 from redrive.maps.graph import roadblock_rows
 from redrive.maps.polylines import polyline_distances
 from redrive.types import Crosswalk, MapLane, MapTrafficLight, RoadMap, StopLine
+from redrive.types._drafts import draft_class
 
 __all__ = ["MPH_TO_MPS", "lane_widths", "road_map_from_scenario"]
 
@@ -255,7 +257,7 @@ def road_map_from_scenario(scenario: Any, *, source: str, points: Points | None 
         }
     # the roadblocks from the lanes' neighbours first: each lane is made (and checked) once
     block_of, roadblocks = roadblock_rows({i: SimpleNamespace(**f) for i, f in fields.items()})
-    out = [MapLane(**f, roadblock_id=block_of[i]) for i, f in fields.items()]
+    out = [_lane(f, block_of[i]) for i, f in fields.items()]
     crosswalks = []
     for k, feature in enumerate(scenario.map_features):
         if feature.WhichOneof("feature_data") == "crosswalk":
@@ -304,6 +306,43 @@ def road_map_from_scenario(scenario: Any, *, source: str, points: Points | None 
         traffic_lights=tuple(lights.values()),
         source=f"womd:{source}",
     )
+
+
+def _lane(f: dict[str, Any], roadblock_id: str) -> MapLane:
+    """``MapLane(**f, roadblock_id=roadblock_id)`` of a lane made above, built without its
+    checks (:mod:`redrive.types._drafts`) when they cannot fail: its centreline has two or more
+    finite points (checked above; it becomes a read-only view, as the constructor makes it), its
+    width and speed limit are finite and positive (else the constructor is called, and refuses
+    them), its boundary types are the model's, its ids non-empty strings."""
+    width, limit = f["width_m"], f["speed_limit_mps"]
+    if not (math.isfinite(width) and width > 0.0) or not (
+        limit is None or (math.isfinite(limit) and limit > 0.0)
+    ):
+        return MapLane(**f, roadblock_id=roadblock_id)
+    line = f["centerline"].view()
+    line.flags.writeable = False
+    lane = _LaneDraft()
+    lane.lane_id = f["lane_id"]
+    lane.centerline = line
+    lane.width_m = float(width)
+    lane.speed_limit_mps = None if limit is None else float(limit)
+    lane.left_boundary = None
+    lane.right_boundary = None
+    lane.left_boundary_type = f["left_boundary_type"]
+    lane.right_boundary_type = f["right_boundary_type"]
+    lane.successors = f["successors"]
+    lane.predecessors = f["predecessors"]
+    lane.left_neighbor = f["left_neighbor"]
+    lane.right_neighbor = f["right_neighbor"]
+    lane.roadblock_id = roadblock_id
+    lane.intersection_id = None
+    lane.kind = f["kind"]
+    lane.__class__ = MapLane
+    return cast("MapLane", lane)
+
+
+#: MapLane's draft (:mod:`redrive.types._drafts`): the roadgraph's lanes built unchecked
+_LaneDraft = draft_class(MapLane)
 
 
 def _stop_line_across(lane: MapLane, point: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
