@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -61,7 +62,7 @@ from redrive.io.datasets.native import (
 )
 from redrive.io.datasets.tfrecord import looks_like_tfrecord, read_tfrecords
 from redrive.io.datasets.womd_proto import LANE_STATE_NAMES, scenario_class
-from redrive.io.datasets.womd_wire import map_polylines, track_states
+from redrive.io.datasets.womd_wire import LaneStates, lane_states, map_polylines, track_states
 from redrive.types import (
     DetectedObject,
     LightState,
@@ -296,7 +297,9 @@ class WomdReader(NativeLogBase):
         if any(b <= a for a, b in zip(self._stamps, self._stamps[1:], strict=False)):
             msg = f"{where}: timestamps_seconds do not increase"
             raise LogError(msg)
-        self._lights = _lights_of(scenario)
+        #: the lane states of dynamic_map_states read from the record (None: the walk gave up)
+        self._lane_states = lane_states(first.data)
+        self._lights = _lights_of(scenario, self._lane_states)
         self._road_map: RoadMap | None = None
         #: each step's objects once decoded (immutable): a closed loop reads the tracks whole
         #: before its first frame, then frame by frame
@@ -428,7 +431,10 @@ class WomdReader(NativeLogBase):
             from redrive.io.datasets.womd_map import road_map_from_scenario
 
             self._road_map = road_map_from_scenario(
-                self._scenario, source=str(self.path), points=map_polylines(self._record)
+                self._scenario,
+                source=str(self.path),
+                points=map_polylines(self._record),
+                lane_states=self._lane_states,
             )
         return self._road_map
 
@@ -445,27 +451,34 @@ class FirstRecord(NamedTuple):
 _LIGHT_STATES = tuple(light_state_of(k) for k in range(len(LANE_STATE_NAMES)))
 
 
-def _lights_of(scenario: Any) -> list[tuple[TrafficLight, ...]]:
-    """Each step's lights (``dynamic_map_states``): one :class:`TrafficLight` per lane state;
-    a lane showing the same state at several steps shares one (frozen) instance."""
+def _lights_of(scenario: Any, walked: LaneStates | None) -> list[tuple[TrafficLight, ...]]:
+    """Each step's lights (``dynamic_map_states``; ``walked``: their lane states read from the
+    record, None: from ``scenario``): one :class:`TrafficLight` per lane state; a lane showing
+    the same state at several steps shares one (frozen) instance."""
+    rows: Iterable[tuple[int, int, int]]
+    if walked is None:
+        steps = len(scenario.dynamic_map_states)
+        rows = [
+            (k, int(lane_state.lane), int(lane_state.state))
+            for k, state in enumerate(scenario.dynamic_map_states)
+            for lane_state in state.lane_states
+        ]
+    else:
+        step, lane, number, _, _, steps = walked
+        rows = zip(step.tolist(), lane.tolist(), number.tolist(), strict=True)
     made: dict[tuple[int, int], TrafficLight] = {}
-    out = []
-    for state in scenario.dynamic_map_states:
-        lights = []
-        for lane_state in state.lane_states:
-            key = (int(lane_state.lane), int(lane_state.state))
-            light = made.get(key)
-            if light is None:
-                number = key[1]
-                kind = (
-                    _LIGHT_STATES[number]
-                    if 0 <= number < len(_LIGHT_STATES)
-                    else LightState.UNKNOWN
-                )
-                light = made[key] = TrafficLight(id=str(key[0]), state=kind)
-            lights.append(light)
-        out.append(tuple(lights))
-    return out
+    out: list[list[TrafficLight]] = [[] for _ in range(steps)]
+    for k, lane_id, state_number in rows:
+        light = made.get((lane_id, state_number))
+        if light is None:
+            kind = (
+                _LIGHT_STATES[state_number]
+                if 0 <= state_number < len(_LIGHT_STATES)
+                else LightState.UNKNOWN
+            )
+            light = made[lane_id, state_number] = TrafficLight(id=str(lane_id), state=kind)
+        out[k].append(light)
+    return [tuple(lights) for lights in out]
 
 
 def _parse(data: bytes) -> Any | None:

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Iterable
 from types import SimpleNamespace
 from typing import Any, cast
 
@@ -39,6 +40,7 @@ import numpy as np
 import numpy.typing as npt
 
 from redrive.errors import LogError
+from redrive.io.datasets.womd_wire import LaneStates
 from redrive.maps.graph import roadblock_rows
 from redrive.maps.polylines import polyline_distances
 from redrive.types import Crosswalk, MapLane, MapTrafficLight, RoadMap, StopLine
@@ -182,9 +184,17 @@ def lane_widths(
     return out
 
 
-def road_map_from_scenario(scenario: Any, *, source: str, points: Points | None = None) -> RoadMap:
+def road_map_from_scenario(
+    scenario: Any,
+    *,
+    source: str,
+    points: Points | None = None,
+    lane_states: LaneStates | None = None,
+) -> RoadMap:
     """The road map of a decoded ``Scenario``; ``points``: its features' points read from the
-    record (:func:`~redrive.io.datasets.womd_wire.map_polylines`; None: from ``scenario``).
+    record (:func:`~redrive.io.datasets.womd_wire.map_polylines`; None: from ``scenario``),
+    ``lane_states``: its dynamic map states' lane states read from the record
+    (:func:`~redrive.io.datasets.womd_wire.lane_states`; None: from ``scenario``).
 
     Raises:
         LogError: a lane's points are not finite, or two features share an id.
@@ -280,24 +290,37 @@ def road_map_from_scenario(scenario: Any, *, source: str, points: Points | None 
                 )
             )
     lights: dict[str, MapTrafficLight] = {}
-    for state in scenario.dynamic_map_states:
-        for lane_state in state.lane_states:
-            lid = str(int(lane_state.lane))
-            if lid in lights or not lane_state.HasField("stop_point"):
-                continue
-            point = lane_state.stop_point
-            position = np.array([point.x, point.y], dtype=np.float64)
-            stop_id = None
-            if lid in by_id:
-                stop_id = f"signal:{lid}"
-                line = _stop_line_across(by_id[lid], position)
-                stop_lines.append(StopLine(stop_line_id=stop_id, line=line, lane_ids=(lid,)))
-            lights[lid] = MapTrafficLight(
-                light_id=lid,
-                position=position,
-                lane_ids=(lid,) if lid in by_id else (),
-                stop_line_id=stop_id,
+    # (lane id, has a stop point, its x, y) of every lane state, step by step
+    stops: Iterable[tuple[int, bool, tuple[float, float]]]
+    if lane_states is None:
+        stops = (
+            (
+                int(lane_state.lane),
+                lane_state.HasField("stop_point"),
+                (lane_state.stop_point.x, lane_state.stop_point.y),
             )
+            for state in scenario.dynamic_map_states
+            for lane_state in state.lane_states
+        )
+    else:
+        _, lane_ids, _, has_stop, stop_xy, _ = lane_states
+        stops = zip(lane_ids.tolist(), has_stop.tolist(), stop_xy.tolist(), strict=True)
+    for lane_id, has_stop_point, (x, y) in stops:
+        lid = str(lane_id)
+        if lid in lights or not has_stop_point:
+            continue
+        position = np.array([x, y], dtype=np.float64)
+        stop_id = None
+        if lid in by_id:
+            stop_id = f"signal:{lid}"
+            line = _stop_line_across(by_id[lid], position)
+            stop_lines.append(StopLine(stop_line_id=stop_id, line=line, lane_ids=(lid,)))
+        lights[lid] = MapTrafficLight(
+            light_id=lid,
+            position=position,
+            lane_ids=(lid,) if lid in by_id else (),
+            stop_line_id=stop_id,
+        )
     return RoadMap(
         lanes=tuple(out),
         roadblocks=roadblocks,

@@ -19,7 +19,7 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["STATE_FIELDS", "map_polylines", "track_states"]
+__all__ = ["LANE_STATE_COUNT", "STATE_FIELDS", "lane_states", "map_polylines", "track_states"]
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
@@ -283,3 +283,128 @@ def map_polylines(data: bytes) -> tuple[F64, I64] | None:
     for the other kinds; None when the walk gives up."""
     xyz, offsets, ok = _polylines(np.frombuffer(data, dtype=np.uint8), _POINTS_FIELD)
     return (np.ascontiguousarray(xyz[:, :2]), offsets) if ok else None
+
+
+#: TrafficSignalLaneState.State's values are 0 … LANE_STATE_COUNT - 1 (womd_proto's enum)
+LANE_STATE_COUNT = 9
+
+
+@numba.njit(cache=True, nogil=True)
+def _lane_states(buf: npt.NDArray[np.uint8]) -> tuple[I64, F64, bool]:
+    # per lane state: (step, lane, state, has stop point) and its stop point's (x, y)
+    ints = np.zeros((256, 4), dtype=np.int64)
+    xy = np.zeros((256, 2))
+    bits = np.zeros(1, dtype=np.uint64)
+    as_double = bits.view(np.float64)
+    n_steps, n = 0, 0
+    pos, end = 0, buf.shape[0]
+    while pos < end:
+        tag, pos = _varint(buf, pos, end)
+        if pos < 0:
+            return ints, xy, False
+        field, wire = tag >> 3, tag & 7
+        if field != 7:
+            pos = _skip(buf, pos, end, wire)
+            if pos < 0:
+                return ints, xy, False
+            continue
+        if wire != 2:
+            return ints, xy, False
+        size, pos = _varint(buf, pos, end)
+        if pos < 0 or size < 0 or pos + size > end:
+            return ints, xy, False
+        step_end = pos + size
+        while pos < step_end:  # a DynamicMapState
+            tag, pos = _varint(buf, pos, step_end)
+            if pos < 0:
+                return ints, xy, False
+            field, wire = tag >> 3, tag & 7
+            if field != 1:
+                pos = _skip(buf, pos, step_end, wire)
+                if pos < 0:
+                    return ints, xy, False
+                continue
+            if wire != 2:
+                return ints, xy, False
+            if n == ints.shape[0]:
+                grown = np.zeros((2 * n, 4), dtype=np.int64)
+                grown[:n] = ints
+                ints = grown
+                xy = _grown_rows(xy)
+            size, pos = _varint(buf, pos, step_end)
+            if pos < 0 or size < 0 or pos + size > step_end:
+                return ints, xy, False
+            state_end = pos + size
+            ints[n, 0] = n_steps
+            while pos < state_end:  # a TrafficSignalLaneState
+                tag, pos = _varint(buf, pos, state_end)
+                if pos < 0:
+                    return ints, xy, False
+                field, wire = tag >> 3, tag & 7
+                if 1 <= field <= 2:  # lane (int64), state (enum)
+                    if wire != 0:
+                        return ints, xy, False
+                    value, pos = _varint(buf, pos, state_end)
+                    if pos < 0:
+                        return ints, xy, False
+                    if field == 2 and not 0 <= value < 9:
+                        return ints, xy, False  # proto2 keeps an unknown enum value apart
+                    ints[n, field] = value
+                elif field == 3:  # stop_point (MapPoint; a second one merges into the first)
+                    if wire != 2:
+                        return ints, xy, False
+                    size, pos = _varint(buf, pos, state_end)
+                    if pos < 0 or size < 0 or pos + size > state_end:
+                        return ints, xy, False
+                    point_end = pos + size
+                    ints[n, 3] = 1
+                    while pos < point_end:
+                        tag, pos = _varint(buf, pos, point_end)
+                        if pos < 0:
+                            return ints, xy, False
+                        field, wire = tag >> 3, tag & 7
+                        if 1 <= field <= 2:
+                            if wire != 1 or pos + 8 > point_end:
+                                return ints, xy, False
+                            bits[0] = _fixed(buf, pos, 8)
+                            xy[n, field - 1] = as_double[0]
+                            pos += 8
+                        else:
+                            pos = _skip(buf, pos, point_end, wire)
+                            if pos < 0:
+                                return ints, xy, False
+                else:
+                    pos = _skip(buf, pos, state_end, wire)
+                    if pos < 0:
+                        return ints, xy, False
+            n += 1
+        n_steps += 1
+    out = np.zeros((n, 4), dtype=np.int64)
+    out[:, :] = ints[:n]
+    out_xy = np.zeros((n, 2))
+    out_xy[:, :] = xy[:n]
+    # the number of steps rides in a last row (a step may hold no lane state)
+    return np.concatenate((out, np.array([[n_steps, 0, 0, 0]], dtype=np.int64))), out_xy, True
+
+
+#: every lane state of a Scenario's ``dynamic_map_states``: (S,) its step, lane id and state
+#: number, whether it has a stop point, its stop point (S, 2) x, y; and the number of steps
+LaneStates = tuple[I64, I64, I64, npt.NDArray[np.bool_], F64, int]
+
+
+def lane_states(data: bytes) -> LaneStates | None:
+    """The lane states of the ``Scenario`` ``data``'s ``dynamic_map_states``, step by step in
+    order (:data:`LaneStates`); None when the walk gives up (module text; also a state number
+    the schema does not know, which proto2 keeps apart from the field)."""
+    ints, xy, ok = _lane_states(np.frombuffer(data, dtype=np.uint8))
+    if not ok:
+        return None
+    rows, steps = ints[:-1], int(ints[-1, 0])
+    return (
+        np.ascontiguousarray(rows[:, 0]),
+        np.ascontiguousarray(rows[:, 1]),
+        np.ascontiguousarray(rows[:, 2]),
+        rows[:, 3] > 0,
+        xy,
+        steps,
+    )
