@@ -293,6 +293,11 @@ class WomdReader(NativeLogBase):
             scenarios_in_file=count,
         )
         self._sdc = sdc
+        #: each track's ObjectClass (its Track.ObjectType number's)
+        self._classes = tuple(
+            _CLASSES[k] if 0 <= k < len(_CLASSES) else ObjectClass.UNKNOWN
+            for k in self.tracks.object_types.tolist()
+        )
         self._stamps = [round(float(t) * 1e9) for t in scenario.timestamps_seconds]
         if any(b <= a for a, b in zip(self._stamps, self._stamps[1:], strict=False)):
             msg = f"{where}: timestamps_seconds do not increase"
@@ -374,10 +379,7 @@ class WomdReader(NativeLogBase):
         yaw = np.array(
             [math.remainder(h - yaw0, math.tau) for h in tr.heading_rad[others, step].tolist()]
         )
-        kinds = tr.object_types[others].tolist()
-        classes = tuple(
-            _CLASSES[k] if 0 <= k < len(_CLASSES) else ObjectClass.UNKNOWN for k in kinds
-        )
+        classes = tuple(map(self._classes.__getitem__, others.tolist()))
         orientation = np.zeros((len(others), 3))
         orientation[:, 0] = yaw
         # fresh float64 / int64 arrays of the columns' shapes; the valid states' numbers were
