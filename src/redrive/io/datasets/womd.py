@@ -42,7 +42,7 @@ import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -73,6 +73,7 @@ from redrive.types import (
     TrafficLight,
     VehicleState,
 )
+from redrive.types._drafts import draft_class
 
 __all__ = [
     "TOPIC_EGO_POSE",
@@ -336,9 +337,8 @@ class WomdReader(NativeLogBase):
                     hi -= 1
                 dt_s = (self._stamps[hi] - self._stamps[lo]) * 1e-9
                 rate = math.remainder(heading[hi] - heading[lo], math.tau) / dt_s if dt_s else 0.0
-                state = VehicleState(
-                    stamp_ns=t,
-                    frame_id="map",
+                state = _ego_state(
+                    t,
                     position=tr.xyz[sdc, k].copy(),
                     velocity=np.array([*tr.velocity_mps[sdc, k], 0.0]),
                     heading_rad=float(heading[k]),
@@ -494,6 +494,38 @@ def _parse(data: bytes) -> Any | None:
     if not scenario.timestamps_seconds or not scenario.tracks:
         return None
     return scenario
+
+
+def _ego_state(
+    stamp_ns: int,
+    *,
+    position: npt.NDArray[np.float64],
+    velocity: npt.NDArray[np.float64],
+    heading_rad: float,
+    yaw_rate_rad_s: float,
+) -> VehicleState:
+    """``VehicleState(stamp_ns=…, frame_id="map", …)`` of the SDC's numbers (fresh float64 (3,)
+    arrays, checked finite at open), built through its draft (:mod:`redrive.types._drafts`):
+    what its checks would make — read-only views, zero acceleration — without them."""
+    state = _StateDraft()
+    state.stamp_ns = int(stamp_ns)
+    state.frame_id = "map"
+    for name, vector in (
+        ("position", position),
+        ("velocity", velocity),
+        ("acceleration", np.zeros(3, dtype=np.float64)),
+    ):
+        view = vector.view()
+        view.flags.writeable = False
+        setattr(state, name, view)
+    state.heading_rad = heading_rad
+    state.yaw_rate_rad_s = yaw_rate_rad_s
+    state.__class__ = VehicleState
+    return cast("VehicleState", state)
+
+
+#: VehicleState's draft (:mod:`redrive.types._drafts`): the SDC's logged states
+_StateDraft = draft_class(VehicleState)
 
 
 def _const(stamp_ns: int, frame_id: str, value: Any) -> Loader:
