@@ -62,7 +62,13 @@ from redrive.io.datasets.native import (
 )
 from redrive.io.datasets.tfrecord import looks_like_tfrecord, read_tfrecords
 from redrive.io.datasets.womd_proto import LANE_STATE_NAMES, scenario_class
-from redrive.io.datasets.womd_wire import LaneStates, lane_states, map_polylines, track_states
+from redrive.io.datasets.womd_wire import (
+    LaneStates,
+    lane_states,
+    map_lanes,
+    map_polylines,
+    track_states,
+)
 from redrive.types import (
     DetectedObject,
     LightState,
@@ -437,6 +443,7 @@ class WomdReader(NativeLogBase):
                 source=str(self.path),
                 points=map_polylines(self._record),
                 lane_states=self._lane_states,
+                lanes_walked=map_lanes(self._record),
             )
         return self._road_map
 

@@ -34,13 +34,13 @@ import logging
 import math
 from collections.abc import Iterable
 from types import SimpleNamespace
-from typing import Any, cast
+from typing import Any, NamedTuple, cast
 
 import numpy as np
 import numpy.typing as npt
 
 from redrive.errors import LogError
-from redrive.io.datasets.womd_wire import LaneStates
+from redrive.io.datasets.womd_wire import LaneStates, MapLanes
 from redrive.maps.graph import roadblock_rows
 from redrive.maps.polylines import polyline_distances
 from redrive.types import Crosswalk, MapLane, MapTrafficLight, RoadMap, StopLine
@@ -69,17 +69,94 @@ def _points_of(points: Points, k: int) -> npt.NDArray[np.float64]:
     return xy[offsets[k] : offsets[k + 1]].copy()
 
 
-def _bounded_spans(n: int, segments: Any, lines: dict[int, int]) -> list[tuple[int, int, int]]:
+#: a boundary segment: (lane_start_index, lane_end_index, boundary_feature_id, boundary_type)
+Segment = tuple[int, int, int, int]
+
+
+class _Lane(NamedTuple):
+    """What the map reads of a ``LaneCenter`` but its polyline (neighbours by feature id)."""
+
+    speed_limit_mph: float
+    type: int
+    interpolating: bool
+    entry_lanes: list[int]
+    exit_lanes: list[int]
+    left_neighbors: list[int]
+    right_neighbors: list[int]
+    left_boundaries: list[Segment]
+    right_boundaries: list[Segment]
+
+
+#: every map feature's (id, ``feature_data`` kind or None), in order, and the lanes' records
+#: by feature position
+Roadgraph = tuple[list[tuple[int, str | None]], dict[int, _Lane]]
+_KINDS = {3: "lane", 4: "road_line", 5: "road_edge", 7: "stop_sign", 8: "crosswalk"}
+_KINDS.update({9: "speed_bump", 10: "driveway"})
+
+
+def _roadgraph(scenario: Any, walked: MapLanes | None) -> Roadgraph:
+    """The features' kinds and the lanes' records: from the record's wire format (``walked``,
+    :func:`~redrive.io.datasets.womd_wire.map_lanes`), else from the runtime's objects."""
+    if walked is None:
+        features: list[tuple[int, str | None]] = []
+        lanes: dict[int, _Lane] = {}
+        for k, f in enumerate(scenario.map_features):
+            kind = f.WhichOneof("feature_data")
+            features.append((int(f.id), kind))
+            if kind != "lane":
+                continue
+            lane = f.lane
+            segments = [
+                [
+                    (
+                        int(seg.lane_start_index),
+                        int(seg.lane_end_index),
+                        int(seg.boundary_feature_id),
+                        int(seg.boundary_type),
+                    )
+                    for seg in side
+                ]
+                for side in (lane.left_boundaries, lane.right_boundaries)
+            ]
+            lanes[k] = _Lane(
+                float(lane.speed_limit_mph),
+                int(lane.type),
+                bool(lane.interpolating),
+                [int(i) for i in lane.entry_lanes],
+                [int(i) for i in lane.exit_lanes],
+                [int(n.feature_id) for n in lane.left_neighbors],
+                [int(n.feature_id) for n in lane.right_neighbors],
+                *segments,
+            )
+        return features, lanes
+    feats, speeds, ids, segs = walked
+    rows = feats.tolist()
+    features = [(fid, _KINDS.get(number)) for fid, number, _, _ in rows]
+    lists: dict[int, tuple[list[Any], ...]] = {
+        k: ([], [], [], [], [], []) for k, row in enumerate(rows) if row[1] == 3
+    }
+    for k, code, value in ids.tolist():  # (entry, exit, left, right: womd_wire's codes)
+        lists[k][code].append(value)
+    for k, side, *segment in segs.tolist():
+        lists[k][4 + side].append(tuple(segment))
+    limits = speeds.tolist()
+    lanes = {k: _Lane(limits[k], rows[k][2], bool(rows[k][3]), *lists[k]) for k in lists}
+    return features, lanes
+
+
+def _bounded_spans(
+    n: int, segments: list[Segment], lines: dict[int, int]
+) -> list[tuple[int, int, int]]:
     """The (first, last point index, boundary number) of each boundary segment of one side of
     an ``n``-point centreline that bounds some of it, in the order given (a later one bounding
     a point again replaces the earlier)."""
     out = []
-    for seg in segments:
-        line = lines.get(int(seg.boundary_feature_id))
+    for start, end, boundary, _ in segments:
+        line = lines.get(boundary)
         if line is None:
             continue
-        lo = max(int(seg.lane_start_index), 0)
-        hi = min(int(seg.lane_end_index), n - 1)
+        lo = max(start, 0)
+        hi = min(end, n - 1)
         if hi >= lo:
             out.append((lo, hi, line))
     return out
@@ -89,26 +166,32 @@ def lane_widths(
     scenario: Any,
     centres: dict[int, npt.NDArray[np.float64]] | None = None,
     points: Points | None = None,
+    roadgraph: Roadgraph | None = None,
 ) -> dict[int, float | None]:
     """Lane feature id → its measured width (m), or None where no boundary bounds it.
 
     ``centres``: lane feature id → its centreline (N, 2), when the caller has them already;
     ``points``: every feature's points (:func:`~redrive.io.datasets.womd_wire.map_polylines`
-    of the record), when the caller has them.
+    of the record), when the caller has them; ``roadgraph``: the features' kinds and lanes'
+    records, when the caller has them.
 
     The distance of a centreline point to a boundary is GEOS's (``shapely.distance`` of the
     point and the boundary's linestring: the least over its segments of
     ``Distance::pointToSegment``; a one-point boundary, the distance between the points),
     computed here in one compiled pass over every bounded point of every lane
     (:func:`redrive.maps.polylines.polyline_distances`: the same doubles)."""
+    features, records = roadgraph or _roadgraph(scenario, None)
     coords: list[npt.NDArray[np.float64]] = []
     lines: dict[int, int] = {}  # feature id → its number in coords
-    for k, feature in enumerate(scenario.map_features):
-        kind = feature.WhichOneof("feature_data")
+    for k, (fid, kind) in enumerate(features):
         if kind in ("road_line", "road_edge"):
-            xy = _points_of(points, k) if points else _xy(getattr(feature, kind).polyline)
+            xy = (
+                _points_of(points, k)
+                if points
+                else _xy(getattr(scenario.map_features[k], kind).polyline)
+            )
             if len(xy) >= 1:
-                lines[int(feature.id)] = len(coords)
+                lines[fid] = len(coords)
                 coords.append(xy)
     # per lane: (id, first point in the flat sides, n points); every span's centreline points
     # and boundary number in one flat list each, in the order the spans are given (left, right)
@@ -117,24 +200,24 @@ def lane_widths(
     bounded: list[npt.NDArray[np.float64]] = []
     which: list[int] = []  # each span's boundary number
     total = 0
-    for feature in scenario.map_features:
-        if feature.WhichOneof("feature_data") != "lane":
+    for k, (fid, kind) in enumerate(features):
+        if kind != "lane":
             continue
         centre = (
-            centres[int(feature.id)]
-            if centres is not None and int(feature.id) in centres
-            else _xy(feature.lane.polyline)
+            centres[fid]
+            if centres is not None and fid in centres
+            else _xy(scenario.map_features[k].lane.polyline)
         )
         if len(centre) < 2:
             continue
         n = len(centre)
-        lane = feature.lane
+        lane = records[k]
         for side, segments in enumerate((lane.left_boundaries, lane.right_boundaries)):
             for lo, hi, line in _bounded_spans(n, segments, lines):
                 bounded.append(centre[lo : hi + 1])
                 which.append(line)
                 spans.append((side, total + lo, hi + 1 - lo))
-        lanes.append((int(feature.id), total, n))
+        lanes.append((fid, total, n))
         total += n
     out: dict[int, float | None] = {}
     if not lanes:
@@ -190,35 +273,39 @@ def road_map_from_scenario(
     source: str,
     points: Points | None = None,
     lane_states: LaneStates | None = None,
+    lanes_walked: MapLanes | None = None,
 ) -> RoadMap:
     """The road map of a decoded ``Scenario``; ``points``: its features' points read from the
     record (:func:`~redrive.io.datasets.womd_wire.map_polylines`; None: from ``scenario``),
     ``lane_states``: its dynamic map states' lane states read from the record
-    (:func:`~redrive.io.datasets.womd_wire.lane_states`; None: from ``scenario``).
+    (:func:`~redrive.io.datasets.womd_wire.lane_states`; None: from ``scenario``),
+    ``lanes_walked``: its features' kinds and lanes' numbers read from the record
+    (:func:`~redrive.io.datasets.womd_wire.map_lanes`; None: from ``scenario``).
 
     Raises:
         LogError: a lane's points are not finite, or two features share an id.
     """
+    roadgraph = _roadgraph(scenario, lanes_walked)
+    features, records = roadgraph
     centres = {
-        int(f.id): _points_of(points, k) if points else _xy(f.lane.polyline)
-        for k, f in enumerate(scenario.map_features)
-        if f.WhichOneof("feature_data") == "lane"
+        fid: _points_of(points, k) if points else _xy(scenario.map_features[k].lane.polyline)
+        for k, (fid, kind) in enumerate(features)
+        if kind == "lane"
     }
-    widths = lane_widths(scenario, centres, points)
+    widths = lane_widths(scenario, centres, points, roadgraph)
     known = [w for w in widths.values() if w is not None]
     fallback = float(np.median(known)) if known else None
-    lanes: list[tuple[int, Any, npt.NDArray[np.float64], float]] = []
+    lanes: list[tuple[int, _Lane, npt.NDArray[np.float64], float]] = []
     seen: set[int] = set()
     skipped = 0
     # the walk's points all finite (the common case): so is every lane's centreline
     checked = points is not None and bool(np.isfinite(points[0]).all())
-    for feature in scenario.map_features:
-        fid = int(feature.id)
+    for k, (fid, kind) in enumerate(features):
         if fid in seen:
             msg = f"{source}: map feature id {fid} appears twice; the roadgraph is damaged"
             raise LogError(msg)
         seen.add(fid)
-        if feature.WhichOneof("feature_data") != "lane":
+        if kind != "lane":
             continue
         centre = centres[fid]
         if not checked and not np.all(np.isfinite(centre)):
@@ -234,20 +321,17 @@ def road_map_from_scenario(
                 "can be measured"
             )
             raise LogError(msg)
-        lanes.append((fid, feature.lane, centre, width))
+        lanes.append((fid, records[k], centre, width))
     if skipped:
         logger.debug("%s: %d lanes of fewer than two points left out", source, skipped)
     kept = {fid: str(fid) for fid, *_ in lanes}  # feature id → lane id
-    edges = {
-        int(f.id) for f in scenario.map_features if f.WhichOneof("feature_data") == "road_edge"
-    }
+    edges = {fid for fid, kind in features if kind == "road_edge"}
 
     def in_map(ids: Any) -> tuple[str, ...]:
         return tuple(kept[i] for i in ids if i in kept)
 
-    def first(neighbours: Any) -> str | None:
-        ids = in_map([n.feature_id for n in neighbours])
-        return ids[0] if ids else None
+    def first(ids: list[int]) -> str | None:
+        return next((kept[i] for i in ids if i in kept), None)
 
     fields: dict[str, dict[str, Any]] = {}
     for fid, lane, centre, width in lanes:
@@ -269,22 +353,24 @@ def road_map_from_scenario(
     block_of, roadblocks = roadblock_rows({i: SimpleNamespace(**f) for i, f in fields.items()})
     out = [_lane(f, block_of[i]) for i, f in fields.items()]
     crosswalks = []
-    for k, feature in enumerate(scenario.map_features):
-        if feature.WhichOneof("feature_data") == "crosswalk":
-            poly = _points_of(points, k) if points else _xy(feature.crosswalk.polygon)
+    for k, (fid, kind) in enumerate(features):
+        if kind == "crosswalk":
+            poly = (
+                _points_of(points, k) if points else _xy(scenario.map_features[k].crosswalk.polygon)
+            )
             if len(poly) >= 3 and np.all(np.isfinite(poly)):
-                crosswalks.append(Crosswalk(crosswalk_id=str(int(feature.id)), polygon=poly))
+                crosswalks.append(Crosswalk(crosswalk_id=str(fid), polygon=poly))
     by_id = {lane.lane_id: lane for lane in out}
     stop_lines: list[StopLine] = []
-    for feature in scenario.map_features:
-        if feature.WhichOneof("feature_data") != "stop_sign":
+    for k, (fid, kind) in enumerate(features):
+        if kind != "stop_sign":
             continue
-        sign = feature.stop_sign
+        sign = scenario.map_features[k].stop_sign
         where = np.array([sign.position.x, sign.position.y], dtype=np.float64)
         for lid in in_map(sign.lane):
             stop_lines.append(
                 StopLine(
-                    stop_line_id=f"stop_sign:{int(feature.id)}:{lid}",
+                    stop_line_id=f"stop_sign:{fid}:{lid}",
                     line=_stop_line_across(by_id[lid], where),
                     lane_ids=(lid,),
                 )
@@ -384,15 +470,16 @@ _BIKE_LANE = 3  # LaneCenter.LaneType.TYPE_BIKE_LANE
 _LINE_TYPE = {1: "dashed", 2: "solid", 3: "solid", 4: "dashed", 5: "dashed", 6: "solid", 7: "solid"}
 
 
-def _side_type(segments: Any, edges: set[int], interpolating: bool) -> str:
+def _side_type(segments: list[Segment], edges: set[int], interpolating: bool) -> str:
     """The boundary type of the segment bounding most of one side of a lane."""
-    best, best_span = None, -1
+    best: Segment | None = None
+    best_span = -1
     for seg in segments:
-        span = int(seg.lane_end_index) - int(seg.lane_start_index)
+        span = seg[1] - seg[0]
         if span > best_span:
             best, best_span = seg, span
     if best is None:
         return "virtual" if interpolating else "unknown"
-    if int(best.boundary_feature_id) in edges:
+    if best[2] in edges:
         return "road_edge"
-    return _LINE_TYPE.get(int(best.boundary_type), "unknown")
+    return _LINE_TYPE.get(best[3], "unknown")
