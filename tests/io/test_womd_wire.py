@@ -15,13 +15,8 @@ import pytest
 from redrive.io.datasets.tfrecord import read_tfrecords
 from redrive.io.datasets.womd_map import _roadgraph
 from redrive.io.datasets.womd_proto import scenario_class
-from redrive.io.datasets.womd_wire import (
-    STATE_FIELDS,
-    lane_states,
-    map_lanes,
-    map_polylines,
-    track_states,
-)
+from redrive.io.datasets.womd_wire import STATE_FIELDS, map_polylines, track_states
+from redrive.io.datasets.womd_wire_map import lane_states, map_lanes
 
 _POINTS = {"lane": "polyline", "road_line": "polyline", "road_edge": "polyline"}
 

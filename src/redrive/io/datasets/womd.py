@@ -62,13 +62,8 @@ from redrive.io.datasets.native import (
 )
 from redrive.io.datasets.tfrecord import looks_like_tfrecord, read_tfrecords
 from redrive.io.datasets.womd_proto import LANE_STATE_NAMES, scenario_class
-from redrive.io.datasets.womd_wire import (
-    LaneStates,
-    lane_states,
-    map_lanes,
-    map_polylines,
-    track_states,
-)
+from redrive.io.datasets.womd_wire import map_polylines, track_states
+from redrive.io.datasets.womd_wire_map import LaneStates, lane_states, map_lanes
 from redrive.types import (
     DetectedObject,
     LightState,

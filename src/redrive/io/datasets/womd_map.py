@@ -40,7 +40,7 @@ import numpy as np
 import numpy.typing as npt
 
 from redrive.errors import LogError
-from redrive.io.datasets.womd_wire import LaneStates, MapLanes
+from redrive.io.datasets.womd_wire_map import LaneStates, MapLanes
 from redrive.maps.graph import roadblock_rows
 from redrive.maps.polylines import polyline_distances
 from redrive.types import Crosswalk, MapLane, MapTrafficLight, RoadMap, StopLine
@@ -96,7 +96,7 @@ _KINDS.update({9: "speed_bump", 10: "driveway"})
 
 def _roadgraph(scenario: Any, walked: MapLanes | None) -> Roadgraph:
     """The features' kinds and the lanes' records: from the record's wire format (``walked``,
-    :func:`~redrive.io.datasets.womd_wire.map_lanes`), else from the runtime's objects."""
+    :func:`~redrive.io.datasets.womd_wire_map.map_lanes`), else from the runtime's objects."""
     if walked is None:
         features: list[tuple[int, str | None]] = []
         lanes: dict[int, _Lane] = {}
@@ -135,7 +135,7 @@ def _roadgraph(scenario: Any, walked: MapLanes | None) -> Roadgraph:
     lists: dict[int, tuple[list[Any], ...]] = {
         k: ([], [], [], [], [], []) for k, row in enumerate(rows) if row[1] == 3
     }
-    for k, code, value in ids.tolist():  # (entry, exit, left, right: womd_wire's codes)
+    for k, code, value in ids.tolist():  # (entry, exit, left, right: womd_wire_map's codes)
         lists[k][code].append(value)
     for k, side, *segment in segs.tolist():
         lists[k][4 + side].append(tuple(segment))
@@ -278,9 +278,9 @@ def road_map_from_scenario(
     """The road map of a decoded ``Scenario``; ``points``: its features' points read from the
     record (:func:`~redrive.io.datasets.womd_wire.map_polylines`; None: from ``scenario``),
     ``lane_states``: its dynamic map states' lane states read from the record
-    (:func:`~redrive.io.datasets.womd_wire.lane_states`; None: from ``scenario``),
+    (:func:`~redrive.io.datasets.womd_wire_map.lane_states`; None: from ``scenario``),
     ``lanes_walked``: its features' kinds and lanes' numbers read from the record
-    (:func:`~redrive.io.datasets.womd_wire.map_lanes`; None: from ``scenario``).
+    (:func:`~redrive.io.datasets.womd_wire_map.map_lanes`; None: from ``scenario``).
 
     Raises:
         LogError: a lane's points are not finite, or two features share an id.
