@@ -144,3 +144,41 @@ def test_points_in_a_pitched_and_rolled_box() -> None:
     assert 0 < expected.sum() < len(expected)
     # heading only: the tilt moves points at the box's ends across its faces
     assert (points_in_box(world, box) != expected).sum() > 10
+
+
+def test_transform_columns_is_the_row_by_row_transform_bit_for_bit() -> None:
+    """transform_columns' elementwise angles are normalize_angle's arithmetic on each row (the
+    same doubles), its positions and vectors the matrix product; close to transform_object."""
+    from redrive.geometry.boxes import transform_columns
+    from redrive.types import ObjectColumns
+
+    rng = np.random.default_rng(11)
+    n = 37
+    columns = ObjectColumns.of(
+        object_class=[ObjectClass.VEHICLE] * n,
+        center_m=rng.normal(size=(n, 3)) * 40.0,
+        size_m=rng.uniform(0.5, 5.0, (n, 3)),
+        yaw_rad=np.r_[rng.uniform(-9.0, 9.0, n - 3), [math.pi, -math.pi, 0.0]],
+        velocity_mps=rng.normal(size=(n, 3)),
+        acceleration_mps2=rng.normal(size=(n, 3)),
+        orientation_rad=rng.uniform(-4.0, 4.0, (n, 3)),
+    )
+    mat = se3_from_rotation_translation(rotation_matrix_from_yaw(2.7), [15.0, -3.0, 0.5])
+    got = transform_columns(mat, columns)
+    rot = mat[:3, :3]
+    yaws = columns.yaw_rad.tolist()
+    heading = np.array([[math.cos(y), math.sin(y), 0.0] for y in yaws]) @ rot.T
+    want_yaw = [normalize_angle(math.atan2(hy, hx)) for hx, hy in heading[:, :2].tolist()]
+    want_orient = [
+        normalize_angle(o + w - y)
+        for o, w, y in zip(columns.orientation_rad[:, 0].tolist(), want_yaw, yaws, strict=True)
+    ]
+    assert got.yaw_rad.tolist() == want_yaw
+    assert got.orientation_rad[:, 0].tolist() == want_orient
+    assert got.orientation_rad[:, 1:].tolist() == columns.orientation_rad[:, 1:].tolist()
+    assert not got.yaw_rad.flags.writeable
+    assert not got.center_m.flags.writeable
+    for i, obj in enumerate(columns.objects()):
+        one = transform_object(mat, obj)
+        assert np.allclose(got.center_m[i], one.box.center, atol=1e-9)
+        assert math.isclose(got.yaw_rad[i], one.box.yaw_rad, abs_tol=1e-9)

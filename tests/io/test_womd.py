@@ -3,6 +3,7 @@ built from the documented field numbers, and the real scenario of ../shared/data
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import shutil
 import struct
@@ -163,6 +164,59 @@ def test_a_track_with_missing_states_is_damage(tmp_path: Path) -> None:
     write_tfrecord(path, [sc.SerializeToString()])
     with pytest.raises(LogError, match=r"record 0 at byte 0: track 0 \(id 7\) has 2 states for 3"):
         open_log(path)
+
+
+@pytest.mark.parametrize("field", ["center_x", "length", "heading", "velocity_y"])
+def test_a_valid_state_that_is_not_finite_is_damage(tmp_path: Path, field: str) -> None:
+    """Every number of a valid state is checked at open (the objects are built trusted)."""
+    sc = _scenario()
+    setattr(sc.tracks[0].states[1], field, math.nan)
+    path = tmp_path / "bad.tfrecord"
+    write_tfrecord(path, [sc.SerializeToString()])
+    with pytest.raises(LogError, match="track 0 step 1 is valid but holds a value that is not"):
+        open_log(path)
+    setattr(sc.tracks[0].states[2], field, math.nan)  # an invalid state may hold anything
+    sc.tracks[0].states[1].CopyFrom(sc.tracks[0].states[0])
+    write_tfrecord(path, [sc.SerializeToString()])
+    with open_log(path) as log:
+        assert log.objects_at(1)[0].object_id == 7
+
+
+def test_a_lane_showing_one_state_at_several_steps_shares_its_light(tmp_path: Path) -> None:
+    path = tmp_path / "toy.tfrecord"
+    write_tfrecord(path, [_scenario().SerializeToString()])
+    with open_log(path) as log:
+        lights = [
+            m.payload.value.traffic_lights for m in log.messages(topics=[TOPIC_TRAFFIC_LIGHTS])
+        ]  # type: ignore[attr-defined]
+    assert [tl[0].state for tl in lights] == [LightState.RED, LightState.GREEN, LightState.GREEN]
+    assert lights[1][0] is lights[2][0]
+    assert lights[0][0] is not lights[1][0]
+
+
+def test_the_roadgraph_lanes_are_the_ones_the_constructor_makes(tmp_path: Path) -> None:
+    """The lanes built without MapLane's checks equal what MapLane(...) makes of their fields
+    (read-only centreline views included); a speed limit the checks refuse is still refused."""
+    path = tmp_path / "toy.tfrecord"
+    write_tfrecord(path, [_scenario().SerializeToString()])
+    with open_log(path) as log:
+        road = log_road_map(log)
+    assert road is not None
+    for lane in road.lanes:
+        made = dataclasses.replace(lane)  # through __init__ and its checks
+        for f in dataclasses.fields(lane):
+            got, want = getattr(lane, f.name), getattr(made, f.name)
+            if isinstance(got, np.ndarray):
+                assert got.tobytes() == want.tobytes()
+                assert not got.flags.writeable
+            else:
+                assert got == want
+                assert type(got) is type(want)
+    sc = _scenario()
+    sc.map_features[0].lane.speed_limit_mph = math.inf
+    write_tfrecord(path, [sc.SerializeToString()])
+    with open_log(path) as log, pytest.raises(ValueError, match="speed_limit_mps must be > 0"):
+        log_road_map(log)
 
 
 @pytest.mark.shared_data

@@ -173,3 +173,41 @@ def test_bike_lanes_are_lanes_but_not_drivable() -> None:
     assert not every.on_drivable_area(on_bike)[0]  # the drivable area is the cars' road
     assert every.distance_outside_drivable_m(on_bike)[0] == pytest.approx(1.3)
     assert every.distance_to_road_edge_m([[10.0, 0.0]])[0] == pytest.approx(1.5)
+
+
+def test_the_centrelines_are_measured_lane_by_lane() -> None:
+    """The index's arclengths, headings and lengths (made over all lanes at once) are each
+    lane's own np.diff / hypot / arctan2 / cumsum / sum, a repeated vertex taking the heading
+    before it; each widened lane's box holds its polygon."""
+    lanes = (
+        MapLane(lane_id="a", centerline=[[0, 0], [1, 0], [1, 0], [2, 1], [2, 1]], width_m=3.0),
+        MapLane(
+            lane_id="b",
+            centerline=[[5.0, 5.0], [6.0, 5.5]],
+            width_m=2.0,
+            left_boundary=[[5.0, 6.0], [6.0, 6.5]],
+        ),
+        MapLane(lane_id="c", centerline=[[0.1, 7.0], [3.3, 9.1], [7.9, 8.0]], width_m=3.5),
+    )
+    index = RoadMapIndex(RoadMap(lanes=lanes))
+    offset = 0.0
+    for k, lane in enumerate(lanes):
+        seg = np.diff(lane.centerline, axis=0)
+        length = np.hypot(seg[:, 0], seg[:, 1])
+        heading = np.arctan2(seg[:, 1], seg[:, 0])
+        for j in range(1, heading.size):
+            if length[j] == 0.0:
+                heading[j] = heading[j - 1]
+        for j in range(heading.size - 2, -1, -1):
+            if length[j] == 0.0:
+                heading[j] = heading[j + 1]
+        first = int(index._vertex_start[k])
+        n = lane.centerline.shape[0]
+        cum = offset + np.concatenate([[0.0], np.cumsum(length)])
+        assert index._cum_s[first : first + n].tobytes() == cum.tobytes()
+        assert index._seg_heading[first : first + n].tolist() == [*heading, heading[-1]]
+        assert index.lane_length_m(lane.lane_id) == lane.length_m
+        offset += float(length.sum()) + 1.0
+        if lane.left_boundary is None:
+            box = index._lane_tree.geometries[k]
+            assert box.contains(lane_polygon(lane))

@@ -183,3 +183,20 @@ def test_map_with_a_non_finite_number_is_refused(tmp_path: Path, bad: float) -> 
     with pytest.raises(ValueError, match="not JSON compliant"):
         write_road_map(run_dir, road)
     assert not (run_dir / MAP_NAME).exists()
+
+
+def test_check_finite_finds_a_bad_number_anywhere_and_names_it() -> None:
+    """The one-pass check refuses what the value-by-value walk refuses, wherever it sits (a
+    nested list, an array, a numpy float), with the walk's message; a finite document passes."""
+    from redrive.results.roadmap import _check_finite
+
+    good = {"a": [1, "x", None, 2.5, {"b": np.zeros((2, 2)), "c": [np.float64(3.0)]}]}
+    _check_finite(good)
+    for bad_value, shown in (
+        (math.nan, "nan"),
+        (np.float64(math.inf), "inf"),
+        (np.array([[0.0, -math.inf]]), "-inf"),
+    ):
+        doc = {"a": [1, "x", {"b": np.zeros((2, 2)), "c": [0.5, bad_value]}]}
+        with pytest.raises(ValueError, match=f"not JSON compliant: .*{shown}"):
+            _check_finite(doc)

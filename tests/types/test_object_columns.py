@@ -138,3 +138,22 @@ def test_constructor_checks_and_freezes_the_columns() -> None:
         with pytest.raises(ValueError, match=r"^ObjectColumns: ") as err:
             ObjectColumns(**{**good, **change})  # type: ignore[arg-type]
         assert words in str(err.value)
+
+
+def test_with_trusted_is_replace_without_the_second_check() -> None:
+    """with_trusted gives the columns dataclasses.replace gives (the other columns shared, the
+    new arrays read-only, not copied), and refuses a name that is no array column."""
+    columns = ObjectColumns.from_objects(batch())
+    center = np.asarray(columns.center_m) + 1.0
+    yaw = np.asarray(columns.yaw_rad) * 0.5
+    got = columns.with_trusted(center_m=center, yaw_rad=yaw)
+    assert_columns_equal(got, dataclasses.replace(columns, center_m=center, yaw_rad=yaw))
+    assert got.center_m is center
+    assert not center.flags.writeable
+    assert got.velocity_mps is columns.velocity_mps
+    assert got.object_class is columns.object_class
+    assert_columns_equal(columns, ObjectColumns.from_objects(batch()))  # the original unchanged
+    with pytest.raises(ValueError, match="not an array column"):
+        columns.with_trusted(object_class=np.zeros(4))
+    with pytest.raises(ValueError, match="not an array column"):
+        columns.with_trusted(centre_m=center)

@@ -20,6 +20,8 @@ from collections import deque
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from functools import partial
+from itertools import repeat
+from typing import cast
 
 from redrive.assembly.clocks import OTHER_CLOCK_NS
 from redrive.assembly.mounts import SensorMounts, mount_tf_topics
@@ -57,6 +59,14 @@ _COUNTED = frozenset({SensorType.LIDAR, SensorType.RADAR})
 class _Sample:
     stamp_ns: int
     decoded: Decoded
+
+
+def _objects_of(value: tuple[object, ...]) -> tuple[DetectedObject, ...]:
+    """The :class:`DetectedObject` items of a decoded tuple, in order: the tuple itself when
+    every item is one (the common case, tested in one C-level pass; tuples are immutable)."""
+    if type(value) is tuple and all(map(isinstance, value, repeat(DetectedObject))):
+        return cast("tuple[DetectedObject, ...]", value)
+    return tuple(o for o in value if isinstance(o, DetectedObject))
 
 
 def interpolate_state(before: VehicleState, after: VehicleState, stamp_ns: int) -> VehicleState:
@@ -252,7 +262,7 @@ class FrameAssembler:
             if decoded is not None and isinstance(decoded.value, tuple):
                 yield (
                     decoded.stamp_ns,
-                    tuple(o for o in decoded.value if isinstance(o, DetectedObject)),
+                    _objects_of(decoded.value),
                 )
 
     def _decode(self, message: LogMessage) -> Decoded | None:
@@ -344,9 +354,7 @@ class FrameAssembler:
         gt_sample = _nearest(objects, t, smap.tolerance_for("ground_truth"))
         ground_truth: tuple[DetectedObject, ...] | None = None
         if gt_sample is not None and isinstance(gt_sample.decoded.value, tuple):
-            ground_truth = tuple(
-                o for o in gt_sample.decoded.value if isinstance(o, DetectedObject)
-            )
+            ground_truth = _objects_of(gt_sample.decoded.value)
         elif smap.ground_truth_topic is not None:
             ground_truth = ()
             missing.append("ground_truth")  # the log has labels, none near this frame

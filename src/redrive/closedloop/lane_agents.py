@@ -89,6 +89,13 @@ class LaneAgents:
         self._coords: F64
         self._offsets: npt.NDArray[np.int64]
         self.tracks, self._coords, self._offsets = lane_tracks(tracks, index)
+        #: each line's bounding box grown by the half width (x0, y0, x1, y1; by line number):
+        #: a road user outside it is not on the line (:meth:`_hold_up`)
+        reach = self.lane_half_width_m + _BOUNDS_MARGIN_M
+        bounds = np.zeros((len(self.tracks), 4))
+        for t in self.tracks.values():
+            bounds[t.line_number] = t.bounds
+        self._reach_bounds = bounds + np.array([-reach, -reach, reach, reach])
 
     @classmethod
     def from_log(
@@ -217,10 +224,8 @@ class LaneAgents:
         within the half width: the others are not looked at)."""
         if not replayed or not unlogged:
             return
-        bounds = np.array([t.bounds for t in replayed])
-        reach = self.lane_half_width_m + _BOUNDS_MARGIN_M
-        lo_x, lo_y = bounds[:, 0] - reach, bounds[:, 1] - reach
-        hi_x, hi_y = bounds[:, 2] + reach, bounds[:, 3] + reach
+        grown = self._reach_bounds[[t.line_number for t in replayed]]
+        lo_x, lo_y, hi_x, hi_y = grown[:, 0], grown[:, 1], grown[:, 2], grown[:, 3]
         s_log: dict[int, float] = {}
         best: dict[int, tuple[float, float]] = {}  # track index → (gap, leader speed on line)
         for oid, x, y, yaw, v, length in unlogged:

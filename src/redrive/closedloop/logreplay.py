@@ -54,7 +54,7 @@ import dataclasses
 import math
 from collections.abc import Iterator, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -100,6 +100,7 @@ from redrive.types import (
     SensorType,
     VehicleState,
 )
+from redrive.types._drafts import draft_class
 
 __all__ = [
     "LogSimulator",
@@ -112,6 +113,9 @@ __all__ = [
 _MAX_PHYSICS_DT_S = 0.01
 #: ``reactive``: beyond this bumper-to-bumper gap (m) the ego does not hold a vehicle up.
 _INTERACTION_M = 150.0
+
+#: VehicleState's draft (:mod:`redrive.types._drafts`): the driven ego's states, re-framed
+_StateDraft = draft_class(VehicleState)
 
 
 def _length_m(xy: npt.NDArray[np.float64]) -> float:
@@ -476,7 +480,19 @@ class LogSimulator:
         state = self._ego.state(stamp_ns)
         position = state.position.copy()
         position[2] = logged.position[2]
-        return dataclasses.replace(state, frame_id=logged.frame_id, position=position)
+        position.flags.writeable = False
+        # dataclasses.replace(state, frame_id=..., position=position) without VehicleState's
+        # second check (the ego's state is one it made; position a read-only float64 (3,))
+        driven = _StateDraft()  # (redrive.types._drafts)
+        driven.stamp_ns = state.stamp_ns
+        driven.frame_id = logged.frame_id
+        driven.position = position
+        driven.velocity = state.velocity
+        driven.acceleration = state.acceleration
+        driven.heading_rad = state.heading_rad
+        driven.yaw_rate_rad_s = state.yaw_rate_rad_s
+        driven.__class__ = VehicleState
+        return cast("VehicleState", driven)
 
     # -- agents -------------------------------------------------------------------------------
 

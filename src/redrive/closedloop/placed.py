@@ -5,7 +5,6 @@ and the results writer without building an object field by field)."""
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Mapping
 
@@ -50,6 +49,8 @@ def at_poses(
         yaws[i] = yaw_base
         velocity[i] = base_from_map[:3, :3] @ np.array([v * math.cos(yaw), v * math.sin(yaw), 0.0])
         orientation[i, 0] = yaw_base
-    return dataclasses.replace(
-        columns, center_m=center, yaw_rad=yaws, velocity_mps=velocity, orientation_rad=orientation
+    # copies of the columns' own arrays with some rows set to finite values: nothing for a
+    # second check (dataclasses.replace's) to find
+    return columns.with_trusted(
+        center_m=center, yaw_rad=yaws, velocity_mps=velocity, orientation_rad=orientation
     )

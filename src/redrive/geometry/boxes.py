@@ -64,21 +64,30 @@ def transform_columns(dst_from_src: npt.ArrayLike, columns: ObjectColumns) -> Ob
         return columns
     rot = mat[:3, :3]
     yaws = columns.yaw_rad.tolist()
-    heading = np.array([[math.cos(y), math.sin(y), 0.0] for y in yaws]) @ rot.T
-    new_yaw = [normalize_angle(math.atan2(hy, hx)) for hx, hy in heading[:, :2].tolist()]
+    unit = np.zeros((len(yaws), 3))
+    unit[:, 0] = [math.cos(y) for y in yaws]
+    unit[:, 1] = [math.sin(y) for y in yaws]
+    heading = (unit @ rot.T).tolist()
+    new_yaw = _normalized(np.array([math.atan2(h[1], h[0]) for h in heading]))
     orientation = columns.orientation_rad.copy()
-    orientation[:, 0] = [
-        normalize_angle(o + n - y)
-        for o, n, y in zip(orientation[:, 0].tolist(), new_yaw, yaws, strict=True)
-    ]
-    return dataclasses.replace(
-        columns,
+    orientation[:, 0] = _normalized(orientation[:, 0] + new_yaw - columns.yaw_rad)
+    # fresh C-contiguous float64 arrays of the columns' shapes, finite as the rows were: the
+    # columns' second check (dataclasses.replace's) would find nothing
+    return columns.with_trusted(
         center_m=transform_points(mat, columns.center_m),
-        yaw_rad=np.array(new_yaw),
+        yaw_rad=new_yaw,
         velocity_mps=transform_vectors(mat, columns.velocity_mps),
         acceleration_mps2=transform_vectors(mat, columns.acceleration_mps2),
         orientation_rad=orientation,
     )
+
+
+def _normalized(angles_rad: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """:func:`~redrive.geometry.se3.normalize_angle` of each angle: the same operations
+    elementwise (``fmod`` is exact), so the same doubles."""
+    wrapped = np.fmod(angles_rad + math.pi, 2.0 * math.pi)
+    wrapped = np.where(wrapped < 0.0, wrapped + 2.0 * math.pi, wrapped)
+    return np.asarray(wrapped - math.pi, dtype=np.float64)
 
 
 #: Corner signs (length, width, height) in :func:`box_corners` order: the bottom face

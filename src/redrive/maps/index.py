@@ -100,21 +100,35 @@ class RoadMapIndex:
         self.road_map = road_map
         lanes = road_map.lanes
         self._lane_pos = {lane.lane_id: i for i, lane in enumerate(lanes)}
+        #: the lane graph's routes asked so far, and each lane's length (route's costs; made
+        #: with the centrelines below)
+        self._routes: dict[tuple[str, str, float, bool], tuple[str, ...]] = {}
+        self._lengths: dict[str, float] = {}
+        self._graphs: dict[tuple[float, bool], dict[str, list[Step]]] = {}
+        #: the centrelines as shapely lines, and their lengths, as asked (routes' lines)
+        self._lines: dict[str, tuple[Any, float]] = {}
+        self._build_centrelines(lanes)
         # a lane with boundaries has its polygon now (no buffer: a ring of its points); a lane
         # widened from its centreline has it when a query first needs it (a closed loop on a log
         # asks a few of them; shapely's buffer is most of the index's cost) and a box that holds
         # it until then, in the tree (the box's candidates are tested on the polygon: the same
         # hits)
         self._lane_array = np.empty(len(lanes), dtype=object)
-        self._lane_made = np.zeros(len(lanes), dtype=bool)
-        boxes = []
-        for k, lane in enumerate(lanes):
-            if lane.left_boundary is None and lane.right_boundary is None:
-                boxes.append(_holding_box(lane))
-            else:
-                boxes.append(lane_polygon(lane))
-                self._lane_array[k] = boxes[-1]
-                self._lane_made[k] = True
+        self._lane_made = np.array(
+            [lane.left_boundary is not None or lane.right_boundary is not None for lane in lanes],
+            dtype=bool,
+        )
+        boxes = np.empty(len(lanes), dtype=object)
+        for k in np.flatnonzero(self._lane_made).tolist():
+            boxes[k] = self._lane_array[k] = lane_polygon(lanes[k])
+        widened = np.flatnonzero(~self._lane_made)
+        if widened.size:
+            boxes[widened] = _holding_boxes(
+                self._vertices,
+                self._vertex_start,
+                np.array([lane.width_m for lane in lanes], dtype=np.float64),
+                widened,
+            )
         self._areas = [shapely.make_valid(shapely.Polygon(a.polygon)) for a in road_map.areas]
         self._lane_tree = shapely.STRtree(boxes)
         self._considered = (
@@ -128,14 +142,6 @@ class RoadMapIndex:
         self._junction_parts = [shapely.Polygon(i.polygon) for i in road_map.intersections] + [
             p for p, a in zip(self._areas, road_map.areas, strict=True) if a.kind == "intersection"
         ]
-        #: the lane graph's routes asked so far, and each lane's length (route's costs; made
-        #: with the centrelines below)
-        self._routes: dict[tuple[str, str, float, bool], tuple[str, ...]] = {}
-        self._lengths: dict[str, float] = {}
-        self._graphs: dict[tuple[float, bool], dict[str, list[Step]]] = {}
-        #: the centrelines as shapely lines, and their lengths, as asked (routes' lines)
-        self._lines: dict[str, tuple[Any, float]] = {}
-        self._build_centrelines(lanes)
 
     def _lane_polygons_at(self, positions: npt.NDArray[np.intp]) -> npt.NDArray[np.object_]:
         """The prepared polygons of the lanes at ``positions``, each made when first asked."""
@@ -199,38 +205,58 @@ class RoadMapIndex:
     def _build_centrelines(self, lanes: Sequence[MapLane]) -> None:
         # every centreline's vertices one after the other, their arclength made global (each
         # lane starts 1 m after the previous one ends) so one searchsorted finds the segment of
-        # any (lane, arclength) pair.
-        starts, offsets, cums, heads, xys = [], [], [], [], []
-        vertex = 0
+        # any (lane, arclength) pair.  The segments' lengths and headings of all lanes in one
+        # elementwise pass each (a lane's own are the same doubles: np.diff, np.hypot and
+        # np.arctan2 of its vertices); per lane only its sums
+        counts = np.array([lane.centerline.shape[0] for lane in lanes], dtype=np.int64)
+        vertices = (
+            np.ascontiguousarray(np.concatenate([lane.centerline for lane in lanes]))
+            if lanes
+            else np.zeros((0, 2))
+        )
+        ends = np.cumsum(counts)
+        starts = ends - counts
+        seg = vertices[1:] - vertices[:-1]  # across two lanes too: those are not used
+        length_all = np.hypot(seg[:, 0], seg[:, 1])
+        heading_all = np.arctan2(seg[:, 1], seg[:, 0])
+        cums, heads = [], []
+        offsets = []
         offset = 0.0
-        for lane in lanes:
-            pts = lane.centerline
-            seg = np.diff(pts, axis=0)
-            length = np.hypot(seg[:, 0], seg[:, 1])
-            heading = np.arctan2(seg[:, 1], seg[:, 0])
+        for lane, first, last in zip(lanes, starts.tolist(), ends.tolist(), strict=True):
+            length = length_all[first : last - 1]
+            heading = heading_all[first : last - 1]
             if not length.all():  # a repeated point (rare): the heading before it, then after
+                heading = heading.copy()
                 for j in range(1, heading.size):
                     if length[j] == 0.0:
                         heading[j] = heading[j - 1]
                 for j in range(heading.size - 2, -1, -1):
                     if length[j] == 0.0:
                         heading[j] = heading[j + 1]
-            starts.append(vertex)
             offsets.append(offset)
-            cums.append(offset + np.concatenate([[0.0], np.cumsum(length)]))
-            heads.append(np.append(heading, heading[-1]))
-            xys.append(pts)
-            vertex += pts.shape[0]
+            cums.append(np.cumsum(length))
+            heads.append(heading)
             # MapLane.length_m, the same doubles (the same segment lengths, summed alike)
             self._lengths[lane.lane_id] = total = float(length.sum())
             offset += total + 1.0
-        self._vertex_start = np.array(starts, dtype=np.int64)
-        self._vertex_count = np.array([lane.centerline.shape[0] for lane in lanes], np.int64)
+        self._vertex_start = starts
+        self._vertex_count = counts
         self._s_offset = np.array(offsets, dtype=np.float64)
-        self._cum_s = np.concatenate(cums) if cums else np.zeros(0)
-        self._seg_heading = np.concatenate(heads) if heads else np.zeros(0)
-        self._vertices = np.ascontiguousarray(np.concatenate(xys) if xys else np.zeros((0, 2)))
-        self._vertex_offsets = np.append(self._vertex_start, vertex).astype(np.int64)
+        if lanes:
+            # per lane: its offset, then its offset plus each running sum; each segment's
+            # heading, then the last one again (the lane's end vertex)
+            zero = np.zeros(1)
+            self._cum_s = np.repeat(self._s_offset, counts) + np.concatenate(
+                [part for cum in cums for part in (zero, cum)]
+            )
+            self._seg_heading = np.concatenate(
+                [part for head in heads for part in (head, head[-1:])]
+            )
+        else:
+            self._cum_s = np.zeros(0)
+            self._seg_heading = np.zeros(0)
+        self._vertices = vertices
+        self._vertex_offsets = np.append(starts, ends[-1] if lanes else 0).astype(np.int64)
 
     # ---- lanes ---------------------------------------------------------------------------
 
@@ -481,14 +507,19 @@ def _hits(
     return np.asarray(pairs[:, inside])
 
 
-def _holding_box(lane: MapLane) -> Any:
-    """A box that holds :func:`lane_polygon` of a lane without boundaries (its centreline
-    widened by ``width_m / 2``: every point of it lies within that of the centreline's box; a
-    micrometre more for the buffer's rounding)."""
-    lo = lane.centerline.min(axis=0)
-    hi = lane.centerline.max(axis=0)
-    grow = abs(lane.width_m) / 2.0 + 1e-6
-    return shapely.box(lo[0] - grow, lo[1] - grow, hi[0] + grow, hi[1] + grow)
+def _holding_boxes(
+    vertices: F64, starts: npt.NDArray[np.int64], widths: F64, which: npt.NDArray[np.intp]
+) -> npt.NDArray[np.object_]:
+    """Boxes that hold :func:`lane_polygon` of the lanes ``which`` (without boundaries: a
+    centreline widened by ``width_m / 2`` — every point of it lies within that of the
+    centreline's box; a micrometre more for the buffer's rounding); every lane's centreline is
+    ``vertices[starts[k]:starts[k + 1]]`` (the last to the end), of at least two vertices."""
+    lo = np.minimum.reduceat(vertices, starts, axis=0)[which]
+    hi = np.maximum.reduceat(vertices, starts, axis=0)[which]
+    grow = np.abs(widths[which]) / 2.0 + 1e-6
+    return np.asarray(
+        shapely.box(lo[:, 0] - grow, lo[:, 1] - grow, hi[:, 0] + grow, hi[:, 1] + grow)
+    )
 
 
 def _edge_segments(area: Any) -> F64:

@@ -224,6 +224,7 @@ def _reference_line(
 ) -> F64:
     pieces: list[F64] = []
     enter_m = 0.0
+    road = index.road_map
     for i, lane_id in enumerate(chain):
         line, length = index.centreline_geometry(lane_id)
         leave_m = length
@@ -234,8 +235,12 @@ def _reference_line(
             target, target_length = index.centreline_geometry(chain[i + 1])
             next_enter = min(float(target.project(pose)) + lane_change_m, target_length)
         leave_m = max(leave_m, enter_m)
-        part = substring(line, enter_m, leave_m) if (enter_m, leave_m) != (0.0, length) else line
-        coords = np.asarray(shapely.get_coordinates(part), dtype=np.float64)
+        if (enter_m, leave_m) != (0.0, length):
+            coords = np.asarray(
+                shapely.get_coordinates(substring(line, enter_m, leave_m)), dtype=np.float64
+            )
+        else:  # the whole lane: its centreline's own vertices (what the line was made of)
+            coords = road.lane(lane_id).centerline
         if coords.shape[0] >= 1:
             pieces.append(coords)
         enter_m = next_enter

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import orjson
 
 from redrive.errors import ConfigError
@@ -56,20 +57,51 @@ def write_road_map(run_dir: str | Path, road_map: RoadMap) -> Path:
     return path
 
 
-def _check_finite(value: Any) -> None:
-    """Raise ValueError (json.dumps's with ``allow_nan=False``) if a float of ``value`` (a
-    document of dicts, lists, numbers, strings and float arrays) is NaN or infinite."""
+def _check_finite(document: Any) -> None:
+    """Raise ValueError (json.dumps's with ``allow_nan=False``) if a float of ``document`` (of
+    dicts, lists, numbers, strings and float arrays) is NaN or infinite: its floats and arrays
+    gathered in one pass and tested at once; :func:`_named_not_finite` names the first bad one."""
+    floats: list[float] = []
+    arrays: list[npt.NDArray[Any]] = []
+    stack = [document]
+    while stack:
+        value = stack.pop()
+        kind = type(value)
+        if kind is str or value is None:
+            continue
+        if kind is dict:
+            stack.extend(value.values())
+        elif kind is list:
+            stack.extend(value)
+        elif kind is float:
+            floats.append(value)
+        elif kind is np.ndarray:
+            arrays.append(value.ravel())
+        elif kind is not int and isinstance(value, dict | list | float | np.ndarray):
+            # a subclass (np.float64 …): the slow walk
+            _named_not_finite(document)
+            return
+    finite = all(map(math.isfinite, floats)) and (
+        not arrays or bool(np.isfinite(np.concatenate(arrays)).all())
+    )
+    if not finite:
+        _named_not_finite(document)
+
+
+def _named_not_finite(value: Any) -> None:
+    """:func:`_check_finite` one value at a time, in document order: the error names the first
+    float or array that is not finite."""
     if isinstance(value, float):
         bad = not math.isfinite(value)
     elif isinstance(value, np.ndarray):
         bad = not bool(np.isfinite(value).all())
     elif isinstance(value, dict):
         for item in value.values():
-            _check_finite(item)
+            _named_not_finite(item)
         return
     elif isinstance(value, list):
         for item in value:
-            _check_finite(item)
+            _named_not_finite(item)
         return
     else:
         return

@@ -322,6 +322,25 @@ class ObjectColumns:
             minus_ones(n),
         )
 
+    def with_trusted(self, **arrays: npt.NDArray[Any]) -> ObjectColumns:
+        """These columns with some of the array columns replaced (by name) by arrays the
+        caller made and vouches for — of the replaced column's dtype and shape, finite where
+        the checks ask it (a rigid motion of these columns' poses) — neither checked nor copied,
+        made read-only in place: :func:`dataclasses.replace` without the second check.
+
+        Raises:
+            ValueError: a name that is no array column of the columns.
+        """
+        values = [getattr(self, name) for name in _COLUMN_NAMES]
+        for name, arr in arrays.items():
+            at = _ARRAY_COLUMN_AT.get(name)
+            if at is None:
+                msg = f"ObjectColumns.with_trusted: {name!r} is not an array column"
+                raise ValueError(msg)
+            arr.flags.writeable = False
+            values[at] = arr
+        return _columns_unchecked(*values)
+
     def __len__(self) -> int:
         return len(self.object_class)
 
@@ -584,6 +603,12 @@ _ATTR_COLUMNS, _ATTR_ROW = attrgetter("_columns"), attrgetter("_row")
 _COLUMN_NAMES = tuple(ObjectColumns.__dataclass_fields__)
 _COLUMN_SETTERS = {name: ObjectColumns.__dict__[name].__set__ for name in _COLUMN_NAMES}
 _COLUMN_SETTER_LIST = tuple(_COLUMN_SETTERS.values())
+#: the array columns' positions in field order (ObjectColumns.with_trusted)
+_ARRAY_COLUMN_AT = {
+    name: k
+    for k, name in enumerate(_COLUMN_NAMES)
+    if name not in ("object_class", "bbox_2d_px", "visible")
+}
 #: ObjectColumns.shared_by's last two (objects, answer): the newest first
 _RECENT_SHARED: list[tuple[tuple[Any, ObjectColumns | None], ...]] = [((None, None), (None, None))]
 

@@ -39,9 +39,10 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -62,15 +63,18 @@ from redrive.io.datasets.native import (
 from redrive.io.datasets.tfrecord import looks_like_tfrecord, read_tfrecords
 from redrive.io.datasets.womd_proto import LANE_STATE_NAMES, scenario_class
 from redrive.io.datasets.womd_wire import map_polylines, track_states
+from redrive.io.datasets.womd_wire_map import LaneStates, lane_states, map_lanes
 from redrive.types import (
     DetectedObject,
     LightState,
     ObjectClass,
+    ObjectColumns,
     RoadMap,
     TrafficData,
     TrafficLight,
     VehicleState,
 )
+from redrive.types._drafts import draft_class
 
 __all__ = [
     "TOPIC_EGO_POSE",
@@ -190,7 +194,7 @@ def _tracks_of(scenario: Any, *, where: str, data: bytes) -> WomdTracks:
     heading = np.ascontiguousarray(rows[:, :, 6])
     vel = np.ascontiguousarray(rows[:, :, 7:9])
     valid = rows[:, :, 9] > 0
-    bad = valid & ~np.all(np.isfinite(np.concatenate([xyz, lwh, vel], axis=2)), axis=2)
+    bad = valid & ~np.all(np.isfinite(rows[:, :, 0:9]), axis=2)
     if bad.any():
         i, k = (int(v) for v in np.argwhere(bad)[0])
         msg = f"{where}: track {i} step {k} is valid but holds a value that is not finite"
@@ -291,17 +295,18 @@ class WomdReader(NativeLogBase):
             scenarios_in_file=count,
         )
         self._sdc = sdc
+        #: each track's ObjectClass (its Track.ObjectType number's)
+        self._classes = tuple(
+            _CLASSES[k] if 0 <= k < len(_CLASSES) else ObjectClass.UNKNOWN
+            for k in self.tracks.object_types.tolist()
+        )
         self._stamps = [round(float(t) * 1e9) for t in scenario.timestamps_seconds]
         if any(b <= a for a, b in zip(self._stamps, self._stamps[1:], strict=False)):
             msg = f"{where}: timestamps_seconds do not increase"
             raise LogError(msg)
-        self._lights = [
-            tuple(
-                TrafficLight(id=str(s.lane), state=light_state_of(int(s.state)))
-                for s in state.lane_states
-            )
-            for state in scenario.dynamic_map_states
-        ]
+        #: the lane states of dynamic_map_states read from the record (None: the walk gave up)
+        self._lane_states = lane_states(first.data)
+        self._lights = _lights_of(scenario, self._lane_states)
         self._road_map: RoadMap | None = None
         #: each step's objects once decoded (immutable): a closed loop reads the tracks whole
         #: before its first frame, then frame by frame
@@ -333,9 +338,8 @@ class WomdReader(NativeLogBase):
                     hi -= 1
                 dt_s = (self._stamps[hi] - self._stamps[lo]) * 1e-9
                 rate = math.remainder(heading[hi] - heading[lo], math.tau) / dt_s if dt_s else 0.0
-                state = VehicleState(
-                    stamp_ns=t,
-                    frame_id="map",
+                state = _ego_state(
+                    t,
                     position=tr.xyz[sdc, k].copy(),
                     velocity=np.array([*tr.velocity_mps[sdc, k], 0.0]),
                     heading_rad=float(heading[k]),
@@ -376,12 +380,13 @@ class WomdReader(NativeLogBase):
         yaw = np.array(
             [math.remainder(h - yaw0, math.tau) for h in tr.heading_rad[others, step].tolist()]
         )
-        kinds = tr.object_types[others].tolist()
-        classes = [_CLASSES[k] if 0 <= k < len(_CLASSES) else ObjectClass.UNKNOWN for k in kinds]
+        classes = tuple(map(self._classes.__getitem__, others.tolist()))
         orientation = np.zeros((len(others), 3))
         orientation[:, 0] = yaw
+        # fresh float64 / int64 arrays of the columns' shapes; the valid states' numbers were
+        # checked finite at open and the sizes are ≥ 0 (what DetectedObject.many would check)
         return tuple(
-            DetectedObject.many(
+            ObjectColumns.trusted(
                 object_id=tr.ids[others],
                 object_class=classes,
                 center_m=rel,
@@ -389,7 +394,7 @@ class WomdReader(NativeLogBase):
                 yaw_rad=yaw,
                 velocity_mps=vel,
                 orientation_rad=orientation,
-            )
+            ).objects()
         )
 
     def contents(self) -> dict[str, int | str]:
@@ -429,7 +434,11 @@ class WomdReader(NativeLogBase):
             from redrive.io.datasets.womd_map import road_map_from_scenario
 
             self._road_map = road_map_from_scenario(
-                self._scenario, source=str(self.path), points=map_polylines(self._record)
+                self._scenario,
+                source=str(self.path),
+                points=map_polylines(self._record),
+                lane_states=self._lane_states,
+                lanes_walked=map_lanes(self._record),
             )
         return self._road_map
 
@@ -440,6 +449,40 @@ class FirstRecord(NamedTuple):
 
     data: bytes | None
     scenario: Any | None
+
+
+#: each ``TrafficSignalLaneState.State`` number's :class:`LightState` (light_state_of, once)
+_LIGHT_STATES = tuple(light_state_of(k) for k in range(len(LANE_STATE_NAMES)))
+
+
+def _lights_of(scenario: Any, walked: LaneStates | None) -> list[tuple[TrafficLight, ...]]:
+    """Each step's lights (``dynamic_map_states``; ``walked``: their lane states read from the
+    record, None: from ``scenario``): one :class:`TrafficLight` per lane state; a lane showing
+    the same state at several steps shares one (frozen) instance."""
+    rows: Iterable[tuple[int, int, int]]
+    if walked is None:
+        steps = len(scenario.dynamic_map_states)
+        rows = [
+            (k, int(lane_state.lane), int(lane_state.state))
+            for k, state in enumerate(scenario.dynamic_map_states)
+            for lane_state in state.lane_states
+        ]
+    else:
+        step, lane, number, _, _, steps = walked
+        rows = zip(step.tolist(), lane.tolist(), number.tolist(), strict=True)
+    made: dict[tuple[int, int], TrafficLight] = {}
+    out: list[list[TrafficLight]] = [[] for _ in range(steps)]
+    for k, lane_id, state_number in rows:
+        light = made.get((lane_id, state_number))
+        if light is None:
+            kind = (
+                _LIGHT_STATES[state_number]
+                if 0 <= state_number < len(_LIGHT_STATES)
+                else LightState.UNKNOWN
+            )
+            light = made[lane_id, state_number] = TrafficLight(id=str(lane_id), state=kind)
+        out[k].append(light)
+    return [tuple(lights) for lights in out]
 
 
 def _parse(data: bytes) -> Any | None:
@@ -453,6 +496,38 @@ def _parse(data: bytes) -> Any | None:
     if not scenario.timestamps_seconds or not scenario.tracks:
         return None
     return scenario
+
+
+def _ego_state(
+    stamp_ns: int,
+    *,
+    position: npt.NDArray[np.float64],
+    velocity: npt.NDArray[np.float64],
+    heading_rad: float,
+    yaw_rate_rad_s: float,
+) -> VehicleState:
+    """``VehicleState(stamp_ns=…, frame_id="map", …)`` of the SDC's numbers (fresh float64 (3,)
+    arrays, checked finite at open), built through its draft (:mod:`redrive.types._drafts`):
+    what its checks would make — read-only views, zero acceleration — without them."""
+    state = _StateDraft()
+    state.stamp_ns = int(stamp_ns)
+    state.frame_id = "map"
+    for name, vector in (
+        ("position", position),
+        ("velocity", velocity),
+        ("acceleration", np.zeros(3, dtype=np.float64)),
+    ):
+        view = vector.view()
+        view.flags.writeable = False
+        setattr(state, name, view)
+    state.heading_rad = heading_rad
+    state.yaw_rate_rad_s = yaw_rate_rad_s
+    state.__class__ = VehicleState
+    return cast("VehicleState", state)
+
+
+#: VehicleState's draft (:mod:`redrive.types._drafts`): the SDC's logged states
+_StateDraft = draft_class(VehicleState)
 
 
 def _const(stamp_ns: int, frame_id: str, value: Any) -> Loader:

@@ -31,16 +31,20 @@ driveways have no element in the model (``redrive info`` counts them).
 from __future__ import annotations
 
 import logging
+import math
+from collections.abc import Iterable
 from types import SimpleNamespace
-from typing import Any
+from typing import Any, NamedTuple, cast
 
 import numpy as np
 import numpy.typing as npt
 
 from redrive.errors import LogError
+from redrive.io.datasets.womd_wire_map import LaneStates, MapLanes
 from redrive.maps.graph import roadblock_rows
 from redrive.maps.polylines import polyline_distances
 from redrive.types import Crosswalk, MapLane, MapTrafficLight, RoadMap, StopLine
+from redrive.types._drafts import draft_class
 
 __all__ = ["MPH_TO_MPS", "lane_widths", "road_map_from_scenario"]
 
@@ -65,17 +69,94 @@ def _points_of(points: Points, k: int) -> npt.NDArray[np.float64]:
     return xy[offsets[k] : offsets[k + 1]].copy()
 
 
-def _bounded_spans(n: int, segments: Any, lines: dict[int, int]) -> list[tuple[int, int, int]]:
+#: a boundary segment: (lane_start_index, lane_end_index, boundary_feature_id, boundary_type)
+Segment = tuple[int, int, int, int]
+
+
+class _Lane(NamedTuple):
+    """What the map reads of a ``LaneCenter`` but its polyline (neighbours by feature id)."""
+
+    speed_limit_mph: float
+    type: int
+    interpolating: bool
+    entry_lanes: list[int]
+    exit_lanes: list[int]
+    left_neighbors: list[int]
+    right_neighbors: list[int]
+    left_boundaries: list[Segment]
+    right_boundaries: list[Segment]
+
+
+#: every map feature's (id, ``feature_data`` kind or None), in order, and the lanes' records
+#: by feature position
+Roadgraph = tuple[list[tuple[int, str | None]], dict[int, _Lane]]
+_KINDS = {3: "lane", 4: "road_line", 5: "road_edge", 7: "stop_sign", 8: "crosswalk"}
+_KINDS.update({9: "speed_bump", 10: "driveway"})
+
+
+def _roadgraph(scenario: Any, walked: MapLanes | None) -> Roadgraph:
+    """The features' kinds and the lanes' records: from the record's wire format (``walked``,
+    :func:`~redrive.io.datasets.womd_wire_map.map_lanes`), else from the runtime's objects."""
+    if walked is None:
+        features: list[tuple[int, str | None]] = []
+        lanes: dict[int, _Lane] = {}
+        for k, f in enumerate(scenario.map_features):
+            kind = f.WhichOneof("feature_data")
+            features.append((int(f.id), kind))
+            if kind != "lane":
+                continue
+            lane = f.lane
+            segments = [
+                [
+                    (
+                        int(seg.lane_start_index),
+                        int(seg.lane_end_index),
+                        int(seg.boundary_feature_id),
+                        int(seg.boundary_type),
+                    )
+                    for seg in side
+                ]
+                for side in (lane.left_boundaries, lane.right_boundaries)
+            ]
+            lanes[k] = _Lane(
+                float(lane.speed_limit_mph),
+                int(lane.type),
+                bool(lane.interpolating),
+                [int(i) for i in lane.entry_lanes],
+                [int(i) for i in lane.exit_lanes],
+                [int(n.feature_id) for n in lane.left_neighbors],
+                [int(n.feature_id) for n in lane.right_neighbors],
+                *segments,
+            )
+        return features, lanes
+    feats, speeds, ids, segs = walked
+    rows = feats.tolist()
+    features = [(fid, _KINDS.get(number)) for fid, number, _, _ in rows]
+    lists: dict[int, tuple[list[Any], ...]] = {
+        k: ([], [], [], [], [], []) for k, row in enumerate(rows) if row[1] == 3
+    }
+    for k, code, value in ids.tolist():  # (entry, exit, left, right: womd_wire_map's codes)
+        lists[k][code].append(value)
+    for k, side, *segment in segs.tolist():
+        lists[k][4 + side].append(tuple(segment))
+    limits = speeds.tolist()
+    lanes = {k: _Lane(limits[k], rows[k][2], bool(rows[k][3]), *lists[k]) for k in lists}
+    return features, lanes
+
+
+def _bounded_spans(
+    n: int, segments: list[Segment], lines: dict[int, int]
+) -> list[tuple[int, int, int]]:
     """The (first, last point index, boundary number) of each boundary segment of one side of
     an ``n``-point centreline that bounds some of it, in the order given (a later one bounding
     a point again replaces the earlier)."""
     out = []
-    for seg in segments:
-        line = lines.get(int(seg.boundary_feature_id))
+    for start, end, boundary, _ in segments:
+        line = lines.get(boundary)
         if line is None:
             continue
-        lo = max(int(seg.lane_start_index), 0)
-        hi = min(int(seg.lane_end_index), n - 1)
+        lo = max(start, 0)
+        hi = min(end, n - 1)
         if hi >= lo:
             out.append((lo, hi, line))
     return out
@@ -85,109 +166,149 @@ def lane_widths(
     scenario: Any,
     centres: dict[int, npt.NDArray[np.float64]] | None = None,
     points: Points | None = None,
+    roadgraph: Roadgraph | None = None,
 ) -> dict[int, float | None]:
     """Lane feature id → its measured width (m), or None where no boundary bounds it.
 
     ``centres``: lane feature id → its centreline (N, 2), when the caller has them already;
     ``points``: every feature's points (:func:`~redrive.io.datasets.womd_wire.map_polylines`
-    of the record), when the caller has them.
+    of the record), when the caller has them; ``roadgraph``: the features' kinds and lanes'
+    records, when the caller has them.
 
     The distance of a centreline point to a boundary is GEOS's (``shapely.distance`` of the
     point and the boundary's linestring: the least over its segments of
     ``Distance::pointToSegment``; a one-point boundary, the distance between the points),
     computed here in one compiled pass over every bounded point of every lane
     (:func:`redrive.maps.polylines.polyline_distances`: the same doubles)."""
+    features, records = roadgraph or _roadgraph(scenario, None)
     coords: list[npt.NDArray[np.float64]] = []
     lines: dict[int, int] = {}  # feature id → its number in coords
-    for k, feature in enumerate(scenario.map_features):
-        kind = feature.WhichOneof("feature_data")
+    for k, (fid, kind) in enumerate(features):
         if kind in ("road_line", "road_edge"):
-            xy = _points_of(points, k) if points else _xy(getattr(feature, kind).polyline)
+            xy = (
+                _points_of(points, k)
+                if points
+                else _xy(getattr(scenario.map_features[k], kind).polyline)
+            )
             if len(xy) >= 1:
-                lines[int(feature.id)] = len(coords)
+                lines[fid] = len(coords)
                 coords.append(xy)
-    # per lane: (id, n points, left spans, right spans); the spans' points and boundaries in
-    # one flat list each, in that order
-    lanes: list[tuple[int, int, list[tuple[int, int, int]], list[tuple[int, int, int]]]] = []
+    # per lane: (id, first point in the flat sides, n points); every span's centreline points
+    # and boundary number in one flat list each, in the order the spans are given (left, right)
+    lanes: list[tuple[int, int, int]] = []
+    spans: list[tuple[int, int, int]] = []  # (side 0/1, first flat point, n points) per span
     bounded: list[npt.NDArray[np.float64]] = []
-    which: list[npt.NDArray[np.int64]] = []
-    for feature in scenario.map_features:
-        if feature.WhichOneof("feature_data") != "lane":
+    which: list[int] = []  # each span's boundary number
+    total = 0
+    for k, (fid, kind) in enumerate(features):
+        if kind != "lane":
             continue
         centre = (
-            centres[int(feature.id)]
-            if centres is not None and int(feature.id) in centres
-            else _xy(feature.lane.polyline)
+            centres[fid]
+            if centres is not None and fid in centres
+            else _xy(scenario.map_features[k].lane.polyline)
         )
         if len(centre) < 2:
             continue
         n = len(centre)
-        left = _bounded_spans(n, feature.lane.left_boundaries, lines)
-        right = _bounded_spans(n, feature.lane.right_boundaries, lines)
-        for lo, hi, line in (*left, *right):
-            bounded.append(centre[lo : hi + 1])
-            which.append(np.full(hi + 1 - lo, line, dtype=np.int64))
-        lanes.append((int(feature.id), n, left, right))
-    flat = np.zeros(0)
+        lane = records[k]
+        for side, segments in enumerate((lane.left_boundaries, lane.right_boundaries)):
+            for lo, hi, line in _bounded_spans(n, segments, lines):
+                bounded.append(centre[lo : hi + 1])
+                which.append(line)
+                spans.append((side, total + lo, hi + 1 - lo))
+        lanes.append((fid, total, n))
+        total += n
+    out: dict[int, float | None] = {}
+    if not lanes:
+        return out
+    # every lane's left and right distances one after the other (NaN where no span bounds a
+    # point; a later span bounding a point again replaces the earlier)
+    sides = np.full((2, total), np.nan)
     if bounded:
         offsets = np.cumsum([0, *(len(c) for c in coords)]).astype(np.int64)
         flat = polyline_distances(
             np.concatenate(bounded),
-            np.concatenate(which),
+            np.repeat(np.array(which, dtype=np.int64), [count for _, _, count in spans]),
             np.ascontiguousarray(np.concatenate(coords)),
             offsets,
         )
-    out: dict[int, float | None] = {}
-    at = 0
-    for fid, n, left_spans, right_spans in lanes:
-        sides = []
-        for spans in (left_spans, right_spans):
-            side = np.full(n, np.nan)
-            for lo, hi, _ in spans:
-                side[lo : hi + 1] = flat[at : at + hi + 1 - lo]
-                at += hi + 1 - lo
-            sides.append(side)
-        left_m, right_m = sides
-        both = np.isfinite(left_m) & np.isfinite(right_m)
-        if both.any():
-            width = float(np.mean(left_m[both] + right_m[both]))
-        elif np.isfinite(left_m).any() or np.isfinite(right_m).any():
-            one = np.where(np.isfinite(left_m), left_m, right_m)
-            width = float(2.0 * np.nanmean(one))
-        else:
-            width = None
+        at = 0
+        for side, first, count in spans:
+            sides[side, first : first + count] = flat[at : at + count]
+            at += count
+    left_m, right_m = sides
+    left_ok, right_ok = np.isfinite(left_m), np.isfinite(right_m)
+    both = left_ok & right_ok
+    starts = np.array([first for _, first, _ in lanes], dtype=np.int64)
+    any_both = np.logical_or.reduceat(both, starts).tolist()
+    any_one = np.logical_or.reduceat(left_ok | right_ok, starts).tolist()
+    # np.mean(left[both] + right[both]) of a lane: the sum of its slice of the pairs (the same
+    # pairwise sum of the same values) over their count; 2 · np.nanmean(one side) of a lane
+    # bounded on one side only: the sum of its points with NaN as 0 over the others' count
+    pairs = (left_m + right_m)[both]
+    pair_end = np.cumsum(both).tolist()
+    one = np.where(left_ok, left_m, right_m)
+    one_nan = np.isnan(one)
+    one_zeroed = np.where(one_nan, 0.0, one)
+    one_end = np.cumsum(~one_nan).tolist()
+    for k, (fid, first, n) in enumerate(lanes):
+        last = first + n - 1
+        width: float | None = None
+        if any_both[k]:
+            lo = pair_end[first - 1] if first else 0
+            count = pair_end[last] - lo
+            width = float(pairs[lo : pair_end[last]].sum()) / count
+        elif any_one[k]:
+            lo = one_end[first - 1] if first else 0
+            count = one_end[last] - lo
+            width = float(2.0 * (float(one_zeroed[first : last + 1].sum()) / count))
         out[fid] = width if width is not None and width > 0.5 else None
     return out
 
 
-def road_map_from_scenario(scenario: Any, *, source: str, points: Points | None = None) -> RoadMap:
+def road_map_from_scenario(
+    scenario: Any,
+    *,
+    source: str,
+    points: Points | None = None,
+    lane_states: LaneStates | None = None,
+    lanes_walked: MapLanes | None = None,
+) -> RoadMap:
     """The road map of a decoded ``Scenario``; ``points``: its features' points read from the
-    record (:func:`~redrive.io.datasets.womd_wire.map_polylines`; None: from ``scenario``).
+    record (:func:`~redrive.io.datasets.womd_wire.map_polylines`; None: from ``scenario``),
+    ``lane_states``: its dynamic map states' lane states read from the record
+    (:func:`~redrive.io.datasets.womd_wire_map.lane_states`; None: from ``scenario``),
+    ``lanes_walked``: its features' kinds and lanes' numbers read from the record
+    (:func:`~redrive.io.datasets.womd_wire_map.map_lanes`; None: from ``scenario``).
 
     Raises:
         LogError: a lane's points are not finite, or two features share an id.
     """
+    roadgraph = _roadgraph(scenario, lanes_walked)
+    features, records = roadgraph
     centres = {
-        int(f.id): _points_of(points, k) if points else _xy(f.lane.polyline)
-        for k, f in enumerate(scenario.map_features)
-        if f.WhichOneof("feature_data") == "lane"
+        fid: _points_of(points, k) if points else _xy(scenario.map_features[k].lane.polyline)
+        for k, (fid, kind) in enumerate(features)
+        if kind == "lane"
     }
-    widths = lane_widths(scenario, centres, points)
+    widths = lane_widths(scenario, centres, points, roadgraph)
     known = [w for w in widths.values() if w is not None]
     fallback = float(np.median(known)) if known else None
-    lanes: list[tuple[int, Any, npt.NDArray[np.float64], float]] = []
+    lanes: list[tuple[int, _Lane, npt.NDArray[np.float64], float]] = []
     seen: set[int] = set()
     skipped = 0
-    for feature in scenario.map_features:
-        fid = int(feature.id)
+    # the walk's points all finite (the common case): so is every lane's centreline
+    checked = points is not None and bool(np.isfinite(points[0]).all())
+    for k, (fid, kind) in enumerate(features):
         if fid in seen:
             msg = f"{source}: map feature id {fid} appears twice; the roadgraph is damaged"
             raise LogError(msg)
         seen.add(fid)
-        if feature.WhichOneof("feature_data") != "lane":
+        if kind != "lane":
             continue
         centre = centres[fid]
-        if not np.all(np.isfinite(centre)):
+        if not checked and not np.all(np.isfinite(centre)):
             msg = f"{source}: lane {fid}: its polyline holds a point that is not finite"
             raise LogError(msg)
         if len(centre) < 2:
@@ -200,20 +321,17 @@ def road_map_from_scenario(scenario: Any, *, source: str, points: Points | None 
                 "can be measured"
             )
             raise LogError(msg)
-        lanes.append((fid, feature.lane, centre, width))
+        lanes.append((fid, records[k], centre, width))
     if skipped:
         logger.debug("%s: %d lanes of fewer than two points left out", source, skipped)
-    kept = {str(fid) for fid, *_ in lanes}
-    edges = {
-        int(f.id) for f in scenario.map_features if f.WhichOneof("feature_data") == "road_edge"
-    }
+    kept = {fid: str(fid) for fid, *_ in lanes}  # feature id → lane id
+    edges = {fid for fid, kind in features if kind == "road_edge"}
 
     def in_map(ids: Any) -> tuple[str, ...]:
-        return tuple(str(int(i)) for i in ids if str(int(i)) in kept)
+        return tuple(kept[i] for i in ids if i in kept)
 
-    def first(neighbours: Any) -> str | None:
-        ids = in_map([n.feature_id for n in neighbours])
-        return ids[0] if ids else None
+    def first(ids: list[int]) -> str | None:
+        return next((kept[i] for i in ids if i in kept), None)
 
     fields: dict[str, dict[str, Any]] = {}
     for fid, lane, centre, width in lanes:
@@ -233,47 +351,62 @@ def road_map_from_scenario(scenario: Any, *, source: str, points: Points | None 
         }
     # the roadblocks from the lanes' neighbours first: each lane is made (and checked) once
     block_of, roadblocks = roadblock_rows({i: SimpleNamespace(**f) for i, f in fields.items()})
-    out = [MapLane(**f, roadblock_id=block_of[i]) for i, f in fields.items()]
+    out = [_lane(f, block_of[i]) for i, f in fields.items()]
     crosswalks = []
-    for k, feature in enumerate(scenario.map_features):
-        if feature.WhichOneof("feature_data") == "crosswalk":
-            poly = _points_of(points, k) if points else _xy(feature.crosswalk.polygon)
+    for k, (fid, kind) in enumerate(features):
+        if kind == "crosswalk":
+            poly = (
+                _points_of(points, k) if points else _xy(scenario.map_features[k].crosswalk.polygon)
+            )
             if len(poly) >= 3 and np.all(np.isfinite(poly)):
-                crosswalks.append(Crosswalk(crosswalk_id=str(int(feature.id)), polygon=poly))
+                crosswalks.append(Crosswalk(crosswalk_id=str(fid), polygon=poly))
     by_id = {lane.lane_id: lane for lane in out}
     stop_lines: list[StopLine] = []
-    for feature in scenario.map_features:
-        if feature.WhichOneof("feature_data") != "stop_sign":
+    for k, (fid, kind) in enumerate(features):
+        if kind != "stop_sign":
             continue
-        sign = feature.stop_sign
+        sign = scenario.map_features[k].stop_sign
         where = np.array([sign.position.x, sign.position.y], dtype=np.float64)
         for lid in in_map(sign.lane):
             stop_lines.append(
                 StopLine(
-                    stop_line_id=f"stop_sign:{int(feature.id)}:{lid}",
+                    stop_line_id=f"stop_sign:{fid}:{lid}",
                     line=_stop_line_across(by_id[lid], where),
                     lane_ids=(lid,),
                 )
             )
     lights: dict[str, MapTrafficLight] = {}
-    for state in scenario.dynamic_map_states:
-        for lane_state in state.lane_states:
-            lid = str(int(lane_state.lane))
-            if lid in lights or not lane_state.HasField("stop_point"):
-                continue
-            point = lane_state.stop_point
-            position = np.array([point.x, point.y], dtype=np.float64)
-            stop_id = None
-            if lid in kept:
-                stop_id = f"signal:{lid}"
-                line = _stop_line_across(by_id[lid], position)
-                stop_lines.append(StopLine(stop_line_id=stop_id, line=line, lane_ids=(lid,)))
-            lights[lid] = MapTrafficLight(
-                light_id=lid,
-                position=position,
-                lane_ids=(lid,) if lid in kept else (),
-                stop_line_id=stop_id,
+    # (lane id, has a stop point, its x, y) of every lane state, step by step
+    stops: Iterable[tuple[int, bool, tuple[float, float]]]
+    if lane_states is None:
+        stops = (
+            (
+                int(lane_state.lane),
+                lane_state.HasField("stop_point"),
+                (lane_state.stop_point.x, lane_state.stop_point.y),
             )
+            for state in scenario.dynamic_map_states
+            for lane_state in state.lane_states
+        )
+    else:
+        _, lane_ids, _, has_stop, stop_xy, _ = lane_states
+        stops = zip(lane_ids.tolist(), has_stop.tolist(), stop_xy.tolist(), strict=True)
+    for lane_id, has_stop_point, (x, y) in stops:
+        lid = str(lane_id)
+        if lid in lights or not has_stop_point:
+            continue
+        position = np.array([x, y], dtype=np.float64)
+        stop_id = None
+        if lid in by_id:
+            stop_id = f"signal:{lid}"
+            line = _stop_line_across(by_id[lid], position)
+            stop_lines.append(StopLine(stop_line_id=stop_id, line=line, lane_ids=(lid,)))
+        lights[lid] = MapTrafficLight(
+            light_id=lid,
+            position=position,
+            lane_ids=(lid,) if lid in by_id else (),
+            stop_line_id=stop_id,
+        )
     return RoadMap(
         lanes=tuple(out),
         roadblocks=roadblocks,
@@ -282,6 +415,43 @@ def road_map_from_scenario(scenario: Any, *, source: str, points: Points | None 
         traffic_lights=tuple(lights.values()),
         source=f"womd:{source}",
     )
+
+
+def _lane(f: dict[str, Any], roadblock_id: str) -> MapLane:
+    """``MapLane(**f, roadblock_id=roadblock_id)`` of a lane made above, built without its
+    checks (:mod:`redrive.types._drafts`) when they cannot fail: its centreline has two or more
+    finite points (checked above; it becomes a read-only view, as the constructor makes it), its
+    width and speed limit are finite and positive (else the constructor is called, and refuses
+    them), its boundary types are the model's, its ids non-empty strings."""
+    width, limit = f["width_m"], f["speed_limit_mps"]
+    if not (math.isfinite(width) and width > 0.0) or not (
+        limit is None or (math.isfinite(limit) and limit > 0.0)
+    ):
+        return MapLane(**f, roadblock_id=roadblock_id)
+    line = f["centerline"].view()
+    line.flags.writeable = False
+    lane = _LaneDraft()
+    lane.lane_id = f["lane_id"]
+    lane.centerline = line
+    lane.width_m = float(width)
+    lane.speed_limit_mps = None if limit is None else float(limit)
+    lane.left_boundary = None
+    lane.right_boundary = None
+    lane.left_boundary_type = f["left_boundary_type"]
+    lane.right_boundary_type = f["right_boundary_type"]
+    lane.successors = f["successors"]
+    lane.predecessors = f["predecessors"]
+    lane.left_neighbor = f["left_neighbor"]
+    lane.right_neighbor = f["right_neighbor"]
+    lane.roadblock_id = roadblock_id
+    lane.intersection_id = None
+    lane.kind = f["kind"]
+    lane.__class__ = MapLane
+    return cast("MapLane", lane)
+
+
+#: MapLane's draft (:mod:`redrive.types._drafts`): the roadgraph's lanes built unchecked
+_LaneDraft = draft_class(MapLane)
 
 
 def _stop_line_across(lane: MapLane, point: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
@@ -300,15 +470,16 @@ _BIKE_LANE = 3  # LaneCenter.LaneType.TYPE_BIKE_LANE
 _LINE_TYPE = {1: "dashed", 2: "solid", 3: "solid", 4: "dashed", 5: "dashed", 6: "solid", 7: "solid"}
 
 
-def _side_type(segments: Any, edges: set[int], interpolating: bool) -> str:
+def _side_type(segments: list[Segment], edges: set[int], interpolating: bool) -> str:
     """The boundary type of the segment bounding most of one side of a lane."""
-    best, best_span = None, -1
+    best: Segment | None = None
+    best_span = -1
     for seg in segments:
-        span = int(seg.lane_end_index) - int(seg.lane_start_index)
+        span = seg[1] - seg[0]
         if span > best_span:
             best, best_span = seg, span
     if best is None:
         return "virtual" if interpolating else "unknown"
-    if int(best.boundary_feature_id) in edges:
+    if best[2] in edges:
         return "road_edge"
-    return _LINE_TYPE.get(int(best.boundary_type), "unknown")
+    return _LINE_TYPE.get(best[3], "unknown")

@@ -2,14 +2,16 @@
 
 The protobuf runtime hands a ``Scenario``'s track states and map points out one Python object
 and one attribute at a time (a scenario: some 8,000 states of ten numbers, 20,000 map points),
-which costs more than decoding the whole record.  The kernels here walk the record's wire format
+which costs more than decoding the whole record (:mod:`redrive.io.datasets.womd_wire_map`: the
+roadgraph's lane numbers and the signals' lane states, alike).  The kernels here walk the record's wire format
 (:mod:`redrive.io.datasets.womd_proto`'s field numbers) once, in compiled code, and give those
 numbers as arrays — the same doubles the runtime gives (a ``double`` field's eight bytes, a
 ``float`` field's four widened exactly, an absent field its default 0, a field given twice its
-last value, as proto2 reads them).
+last value, a message field given twice merged, as proto2 reads them).
 
 Anything the walk does not expect (a known field of another wire type, a group, a length past
-its message, a map feature with two of its ``feature_data`` fields) makes it give up, and the
+its message, a map feature with two of its ``feature_data`` fields, an enum number the schema
+does not know — proto2 keeps it apart from the field) makes it give up, and the
 reader takes the runtime's objects instead: the walk is a shortcut, never another reading.
 """
 
