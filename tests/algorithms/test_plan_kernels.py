@@ -109,6 +109,10 @@ def test_polyline_arc_and_points_at_equal_the_numpy_code_bit_for_bit() -> None:
             [rng.uniform(-5.0, s_line[-1] + 5.0, 40), s_line[rng.integers(0, len(s_line), 5)]]
         )
         assert _bits(points_at(xy, s_line, s)) == _bits(_points_at_numpy(xy, s_line, s))
+        # non-decreasing, as a plan's arc lengths are (each search starts at the last one's
+        # knot): repeats, knots hit exactly, points beyond either end between them
+        s = np.sort(np.concatenate([s, s[:10], s_line]))
+        assert _bits(points_at(xy, s_line, s)) == _bits(_points_at_numpy(xy, s_line, s))
 
 
 def test_leaders_on_path_equal_the_numpy_code_bit_for_bit() -> None:
@@ -159,7 +163,10 @@ def test_project_pruned_equals_the_full_search_bit_for_bit() -> None:
         ab = xy[1:] - a
         seg_len = np.hypot(ab[:, 0], ab[:, 1])
         near = xy[rng.integers(0, len(xy), 30)] + rng.normal(0.0, 0.5, (30, 2))
-        p = np.concatenate([near, rng.uniform(-50.0, 150.0, (30, 2)), xy[:3]])
+        # clusters of five within a few metres (a box's corners and centre: each point after
+        # the first bounded by its neighbour's nearest segment)
+        boxes = np.repeat(near[:6], 5, axis=0) + rng.normal(0.0, 2.0, (30, 2))
+        p = np.concatenate([near, rng.uniform(-50.0, 150.0, (30, 2)), xy[:3], boxes])
         if trial % 25 == 0:
             p[0] = np.nan  # the full search decides what a NaN gives
         s_full, lat_full, _ = project_on_segments(p, a, ab, seg_len, s_line[:-1])
@@ -215,7 +222,7 @@ def test_gate_crossing_equals_the_numpy_code_bit_for_bit() -> None:
         if trial % 40 == 20:
             line = np.array([xy[0], xy[-1]])  # along the path: parallel segments
         low, high = xy.min(axis=0), xy.max(axis=0)
-        found, s, tx, ty = gate_crossing(xy, s_line, line, low, high)
+        found, s, tx, ty = gate_crossing(xy, s_line, line, *low.tolist(), *high.tolist())
         want = _gate_crossing_numpy(xy, s_line, line, low, high)
         assert found == (want is not None)
         if want is not None:
@@ -228,14 +235,14 @@ def test_path_bounds_are_numpys_min_and_max_along_the_vertices() -> None:
     rng = np.random.default_rng(11)
     for m in (1, 2, 241):
         xy = rng.normal(size=(m, 2)) * 50.0
-        low, high = path_bounds(xy)
-        assert low.tolist() == xy.min(axis=0).tolist()
-        assert high.tolist() == xy.max(axis=0).tolist()
+        x_lo, y_lo, x_hi, y_hi = path_bounds(xy)
+        assert [x_lo, y_lo] == xy.min(axis=0).tolist()
+        assert [x_hi, y_hi] == xy.max(axis=0).tolist()
     xy = rng.normal(size=(5, 2))
     xy[2, 1] = np.nan  # a NaN wins in its column, as in numpy
-    low, high = path_bounds(xy)
-    np.testing.assert_array_equal(low, xy.min(axis=0))
-    np.testing.assert_array_equal(high, xy.max(axis=0))
-    assert np.isnan(low[1])
-    assert np.isnan(high[1])
-    assert not np.isnan(low[0])
+    x_lo, y_lo, x_hi, y_hi = path_bounds(xy)
+    np.testing.assert_array_equal([x_lo, y_lo], xy.min(axis=0))
+    np.testing.assert_array_equal([x_hi, y_hi], xy.max(axis=0))
+    assert np.isnan(y_lo)
+    assert np.isnan(y_hi)
+    assert not np.isnan(x_lo)

@@ -383,3 +383,35 @@ def test_a_planner_that_reads_the_road_map_is_not_refused_at_object_level(
     a sensor the backend does not render)."""
     run = _run(tmp_path / "map", f"{PLUGINS}:MapReader", duration_s=1.0)
     assert set(run.table("steps").to_pydict()["status"]) == {"ok"}
+
+
+def test_object_level_frames_are_the_constructors() -> None:
+    # the synthetic backend builds its object-level frames unchecked: every field is what
+    # Frame(...) makes of the same values (types, values, repr, a pickle round trip)
+    import dataclasses
+    import pickle
+
+    from redrive.algorithms import StageOutputs
+    from redrive.closedloop.synthetic import SyntheticSimulator
+    from redrive.closedloop.tracker import LqrTracker
+    from redrive.sim.scenario import load_scenario
+    from redrive.types import Frame
+
+    scenario = dataclasses.replace(load_scenario("urban"), duration_s=3.0)
+    sim = SyntheticSimulator(scenario, tracker=LqrTracker(), agents="reactive")
+    while not sim.done:
+        frame = sim.observe()
+        built = Frame(
+            stamp_ns=frame.stamp_ns,
+            index=frame.index,
+            vehicle_state=frame.vehicle_state,
+            traffic=frame.traffic,
+            ground_truth=frame.ground_truth,
+        )
+        assert type(frame) is Frame
+        for field in dataclasses.fields(Frame):
+            got, want = getattr(frame, field.name), getattr(built, field.name)
+            assert type(got) is type(want)
+            assert got is want or got == want, field.name
+        assert repr(pickle.loads(pickle.dumps(frame))) == repr(built)
+        sim.step(StageOutputs(), sim.dt_s)

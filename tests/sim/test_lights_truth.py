@@ -134,3 +134,22 @@ def test_what_the_message_cannot_carry_is_refused(
         pytest.raises(UnsupportedMessageError, match=words),
     ):
         writer.write("/lights", 1, value)
+
+
+def test_traffic_data_states_are_state_of_each_signal() -> None:
+    # traffic_data computes the timing's terms once: every state is still state()'s, at phase
+    # boundaries, negative times and offsets too, and after the timing is replaced
+    from redrive.sim.lights import LightTiming, TrafficLights
+    from redrive.sim.roads import build_network
+
+    signals = build_network(load_scenario("urban").road).signals
+    assert len(signals) >= 2
+    lights = TrafficLights(signals, LightTiming(green_s=7.3, yellow_s=2.9, offset_s=-1.7))
+    for timing in (lights.timing, LightTiming(green_s=4.0, yellow_s=0.0, all_red_s=0.7)):
+        lights.timing = timing
+        cycle = timing.cycle_s
+        times = [k * 0.05 for k in range(-200, 900)]
+        times += [b + e for b in (timing.green_s, cycle / 2, cycle) for e in (-1e-12, 0.0, 1e-12)]
+        for t_s in times:
+            got = [light.state for light in lights.traffic_data(t_s).traffic_lights]
+            assert got == [lights.state(sig.light_id, t_s) for sig in signals], t_s

@@ -39,7 +39,8 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Mapping
-from typing import Any, Literal
+from types import MappingProxyType
+from typing import Any, Literal, cast
 
 from redrive.algorithms import StageOutputs
 from redrive.closedloop.sensors import FrameSensors, LockstepWorlds, SensorTee, warmup_ns
@@ -57,7 +58,16 @@ from redrive.sim.scenario import Scenario
 from redrive.sim.sinks import MessageSink
 from redrive.sim.synth import SensorSimulation
 from redrive.sim.world import World
-from redrive.types import ControlCommands, Frame, SensorType, VehicleState
+from redrive.types import (
+    ControlCommands,
+    DetectedObject,
+    EnvironmentData,
+    Frame,
+    SensorType,
+    TrafficData,
+    VehicleState,
+)
+from redrive.types._drafts import draft_class
 
 __all__ = ["AGENT_MODES", "LEVELS", "SyntheticSimulator"]
 
@@ -199,12 +209,8 @@ class SyntheticSimulator:
         source = self._expert if self.agents == "replay" else world
         if self._rendering is None or self._frame_sensors is None:
             objects = source.ground_truth_in_base(world.map_from_base())
-            return Frame(
-                stamp_ns=world.time_ns,
-                index=self._index,
-                vehicle_state=world.ego_state(),
-                traffic=world.traffic_data(),
-                ground_truth=objects,
+            return _object_frame(
+                world.time_ns, self._index, world.ego_state(), world.traffic_data(), objects
             )
         self._start_rendering()
         lidar_hits, camera_pixels = self._rendering.visibility()
@@ -296,3 +302,33 @@ class SyntheticSimulator:
         step is ``self._ego.apply(self._acting, dt_s)``, in the world's compiled step."""
         self._commanding = True
         self._world.drive_ego_pedals(self._acting, self._ego.pedals, tyres=self._ego.tyres)
+
+
+#: Frame's draft (:mod:`redrive.types._drafts`): the object-level frames are built unchecked
+_FrameDraft = draft_class(Frame)
+_NO_SENSORS: Mapping[str, Any] = MappingProxyType({})
+_ENVIRONMENT = EnvironmentData()
+
+
+def _object_frame(
+    stamp_ns: int,
+    index: int,
+    state: VehicleState,
+    traffic: TrafficData,
+    objects: tuple[DetectedObject, ...],
+) -> Frame:
+    """``Frame(stamp_ns=…, index=…, vehicle_state=…, traffic=…, ground_truth=…)`` of an
+    object-level observation (an int stamp, a non-negative index, a tuple of objects): the
+    fields its ``__post_init__`` would make of them — no sensors (an empty read-only mapping),
+    the default environment (one immutable instance), nothing missing — without the checks."""
+    frame = _FrameDraft()
+    frame.stamp_ns = stamp_ns
+    frame.index = index
+    frame.sensors = _NO_SENSORS
+    frame.vehicle_state = state
+    frame.environment = _ENVIRONMENT
+    frame.traffic = traffic
+    frame.ground_truth = objects
+    frame.missing = ()
+    frame.__class__ = Frame
+    return cast("Frame", frame)

@@ -23,6 +23,9 @@ from redrive.types import LightState, TrafficData, TrafficLight
 __all__ = ["LightTiming", "TrafficLights", "light_id_text", "traffic_data_of"]
 
 
+_GREEN, _YELLOW, _RED = LightState.GREEN, LightState.YELLOW, LightState.RED
+
+
 def light_id_text(light_id: int) -> str:
     """The text id of signal ``light_id`` in the road map and the ground truth (``"0"``, ``"1"``,
     …: ``TrafficLight.id == MapTrafficLight.light_id``)."""
@@ -69,6 +72,22 @@ class TrafficLights:
         self._ids = tuple(light_id_text(sig.light_id) for sig in self.signals)
         #: the last traffic_data: its states and itself (the phases last seconds, frames ~0.1 s)
         self._last: tuple[tuple[LightState, ...], TrafficData] | None = None
+        #: :meth:`state`'s operands that depend on the timing alone, for :meth:`traffic_data`
+        self._phases: tuple[LightTiming, float, float, float, float, tuple[float, ...]] | None
+        self._phases = None
+
+    def _timing_terms(self) -> tuple[LightTiming, float, float, float, float, tuple[float, ...]]:
+        """``(timing, offset_s, cycle_s, green_s, green_s + yellow_s, each signal's
+        phase_group · cycle_s / 2)``: the values :meth:`state` computes of the timing at every
+        call, computed once (again when :attr:`timing` is replaced)."""
+        tm = self.timing
+        terms = self._phases
+        if terms is None or terms[0] is not tm:
+            half = tm.cycle_s / 2.0
+            shifts = tuple(sig.phase_group * half for sig in self.signals)
+            terms = (tm, tm.offset_s, tm.cycle_s, tm.green_s, tm.green_s + tm.yellow_s, shifts)
+            self._phases = terms
+        return terms
 
     def state(self, light_id: int, time_s: float) -> LightState:
         """The state of signal ``light_id`` at ``time_s`` (UNKNOWN for an unknown id)."""
@@ -97,8 +116,21 @@ class TrafficLights:
 
     def traffic_data(self, time_s: float) -> TrafficData:
         """The ground truth of every signal head at ``time_s`` (:func:`traffic_data_of` of
-        :meth:`states`; the same immutable object again while no state changed)."""
-        states = tuple([self.state(sig.light_id, time_s) for sig in self.signals])
+        :meth:`states`; the same immutable object again while no state changed).  Each state
+        is :meth:`state`'s, operation for operation, with the timing's terms made once."""
+        _tm, offset_s, cycle_s, green_s, yellow_end_s, shifts = self._timing_terms()
+        found = []
+        for shift in shifts:
+            tau = math.fmod(time_s + offset_s - shift, cycle_s)
+            if tau < 0.0:
+                tau += cycle_s
+            if tau < green_s:
+                found.append(_GREEN)
+            elif tau < yellow_end_s:
+                found.append(_YELLOW)
+            else:
+                found.append(_RED)
+        states = tuple(found)
         last = self._last
         if last is not None and last[0] == states:
             return last[1]

@@ -116,7 +116,9 @@ def stop_arcs(
     out: list[float] = []
     if len(path_xy) < 2:
         return np.array(out, dtype=np.float64)
-    ego: tuple[F64, F64, F64, F64] | None = None  # the ego pose, once a light asks for it
+    # the ego pose and the path's bounding box (x min, y min, x max, y max), once a light
+    # asks for them
+    ego: tuple[F64, F64, tuple[float, float, float, float]] | None = None
     box = (0.0,) * 8  # the pre-filter's pose and bounding box, in floats
     for gate in gates:
         light = shown.get(gate.light_id)
@@ -124,8 +126,9 @@ def stop_arcs(
             continue
         if ego is None:  # the ego pose and the path's bounding box
             c, sn = math.cos(state.heading_rad), math.sin(state.heading_rad)
-            ego = (state.position[:2], np.array([[c, sn], [-sn, c]]), *path_bounds(path_xy))
-            (x_lo, y_lo), (x_hi, y_hi) = ego[2].tolist(), ego[3].tolist()
+            bounds = path_bounds(path_xy)
+            ego = (state.position[:2], np.array([[c, sn], [-sn, c]]), bounds)
+            x_lo, y_lo, x_hi, y_hi = bounds
             ox, oy = state.position[:2].tolist()
             box = (
                 c,
@@ -139,10 +142,10 @@ def stop_arcs(
             )
         if _clear_of(gate.points, box):
             continue  # beyond the path's bounding box: gate_crossing would not find it
-        origin, base_from_map, low, high = ego
+        origin, base_from_map, bounds = ego
         line = (gate.line - origin) @ base_from_map.T
         # the bounding boxes' test and the first crossing in one compiled call
-        found, s, tx, ty = gate_crossing(path_xy, path_s, line, low, high)
+        found, s, tx, ty = gate_crossing(path_xy, path_s, line, *bounds)
         if not found:
             continue
         tangent = np.array([tx, ty])

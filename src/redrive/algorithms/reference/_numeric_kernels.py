@@ -13,7 +13,7 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["interp_at", "nan_span", "segment_at"]
+__all__ = ["interp_at", "interp_knot", "interp_on", "nan_span", "segment_at"]
 
 _F64 = npt.NDArray[np.float64]
 
@@ -32,6 +32,44 @@ def interp_at(x: float, xp: _F64, fp: _F64) -> float:  # pragma: no cover - comp
     j = 0
     while j + 1 < n and x >= xp[j + 1]:
         j += 1
+    if j == n - 1 or xp[j] == x:
+        return float(fp[j])
+    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
+    out: float = slope * (x - xp[j]) + fp[j]
+    if math.isnan(out):
+        out = slope * (x - xp[j + 1]) + fp[j + 1]
+        if math.isnan(out) and fp[j] == fp[j + 1]:
+            out = fp[j]
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def interp_knot(x: float, xp: _F64, j0: int) -> int:  # pragma: no cover - compiled
+    """The knot :func:`interp_at` ends its search on for ``x`` (-1 where it returns before
+    searching: ``x`` NaN or beyond an end), its scan started at knot ``j0`` instead of 0 — the
+    same knot when ``j0`` is 0 or the knot of a search for some ``x0 <= x`` (every knot the scan
+    from 0 steps past, ``x0 >= xp[j + 1]``, it steps past for ``x`` too: whatever ``xp`` holds).
+    """
+    n = xp.shape[0]
+    if math.isnan(x) or x > xp[n - 1] or x < xp[0]:
+        return -1
+    j = j0
+    while j + 1 < n and x >= xp[j + 1]:
+        j += 1
+    return j
+
+
+@numba.njit(cache=True, nogil=True)
+def interp_on(x: float, xp: _F64, fp: _F64, j: int) -> float:  # pragma: no cover - compiled
+    """:func:`interp_at` of ``x`` whose search ended on knot ``j`` (:func:`interp_knot`'s,
+    -1: one of its early returns) — the same float64 operations."""
+    n = xp.shape[0]
+    if j < 0:
+        if math.isnan(x):
+            return x
+        if x > xp[n - 1]:
+            return float(fp[n - 1])
+        return float(fp[0])
     if j == n - 1 or xp[j] == x:
         return float(fp[j])
     slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])

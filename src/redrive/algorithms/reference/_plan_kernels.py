@@ -32,7 +32,12 @@ import numpy as np
 import numpy.typing as npt
 
 from redrive.algorithms.reference._kernels import project_on_segments
-from redrive.algorithms.reference._numeric_kernels import interp_at, nan_span, segment_at
+from redrive.algorithms.reference._numeric_kernels import (
+    interp_knot,
+    interp_on,
+    nan_span,
+    segment_at,
+)
 from redrive.motion.idm import idm_kernel
 
 __all__ = [
@@ -180,6 +185,11 @@ def points_at(xy: _F64, s: _F64, s_m: _F64) -> _F64:  # pragma: no cover - compi
     by = xy[1, 1] - xy[0, 1]
     norm = math.hypot(bx, by)
     bx, by = bx / norm, by / norm
+    # np.interp's knot search (interp_at's scan) once for x and y, and from the last search's
+    # knot while the arc lengths do not decrease (a plan's: one pass over the knots, not one
+    # from the start per point and coordinate) — the same knots, the same values
+    last_v = math.nan
+    last_j = 0
     for i in range(k_out):
         v = s_m[i]
         if v > end:
@@ -189,14 +199,20 @@ def points_at(xy: _F64, s: _F64, s_m: _F64) -> _F64:  # pragma: no cover - compi
             out[i, 0] = xy[0, 0] + (v - 0.0) * bx
             out[i, 1] = xy[0, 1] + (v - 0.0) * by
         else:
-            out[i, 0] = interp_at(v, s, xy[:, 0])
-            out[i, 1] = interp_at(v, s, xy[:, 1])
+            j = interp_knot(v, s, last_j if v >= last_v else 0)
+            if j >= 0:
+                last_v, last_j = v, j
+            out[i, 0] = interp_on(v, s, xy[:, 0], j)
+            out[i, 1] = interp_on(v, s, xy[:, 1], j)
     return out
 
 
 #: a segment is skipped only when it is provably farther than the best one by this much (metres,
 #: scaled by 1 + the distance), far above float64 rounding of path coordinates
 _PRUNE_MARGIN = 1e-6
+#: a point of project_pruned this near the one before it (squared metres) takes the distance of
+#: that one's nearest segment as its first bound
+_NEAR_M2 = 100.0
 #: segments per block of project_pruned (each block's first gives the first bound of a point's
 #: distance; a block whose box is farther than the bound is skipped)
 _PRUNE_STRIDE = 16
@@ -271,17 +287,23 @@ def project_pruned(  # noqa: PLR0917 - numba takes no keyword-only parameters
         for y in (a[k, 1], a[k, 1] + ab[k, 1]):
             box[j, 2] = min(box[j, 2], y)
             box[j, 3] = max(box[j, 3], y)
+    best = 0
     for i in range(n_p):
         px = p[i, 0]
         py = p[i, 1]
-        # an upper bound of the least distance: every block's first segment's (and the last)
-        ub_d2 = np.inf
-        k = 0
-        while k < n_s:
-            d2, _ = _segment_d2(px, py, a, ab, seg_len, k)
-            if d2 < ub_d2:
-                ub_d2 = d2
-            k = n_s - 1 if stride + k >= n_s and k < n_s - 1 else k + stride
+        # an upper bound of the least distance: the distance of the last point's nearest
+        # segment, for a point near the last one (the corners of one box); else every block's
+        # first segment's (and the last's) — any segment's distance bounds it
+        if i > 0 and (px - p[i - 1, 0]) ** 2 + (py - p[i - 1, 1]) ** 2 < _NEAR_M2:
+            ub_d2, _ = _segment_d2(px, py, a, ab, seg_len, best)
+        else:
+            ub_d2 = np.inf
+            k = 0
+            while k < n_s:
+                d2, _ = _segment_d2(px, py, a, ab, seg_len, k)
+                if d2 < ub_d2:
+                    ub_d2 = d2
+                k = n_s - 1 if stride + k >= n_s and k < n_s - 1 else k + stride
         bound = math.sqrt(ub_d2)
         reach = bound + _PRUNE_MARGIN * (1.0 + bound)
         reach2 = reach * reach
@@ -335,27 +357,28 @@ def leaders_on_path(  # noqa: PLR0917 - numba takes no keyword-only parameters
         ab[k, 0] = xy[k + 1, 0] - xy[k, 0]
         ab[k, 1] = xy[k + 1, 1] - xy[k, 1]
         seg_len[k] = math.hypot(ab[k, 0], ab[k, 1])
+    # each object's four bottom corners, then its centre (neighbours: project_pruned's bound)
     points = np.empty((5 * n, 2))
     for i in range(n):
         for c in range(4):
-            points[4 * i + c, 0] = local[i, c, 0] + centers[i, 0]
-            points[4 * i + c, 1] = local[i, c, 1] + centers[i, 1]
-        points[4 * n + i, 0] = centers[i, 0]
-        points[4 * n + i, 1] = centers[i, 1]
+            points[5 * i + c, 0] = local[i, c, 0] + centers[i, 0]
+            points[5 * i + c, 1] = local[i, c, 1] + centers[i, 1]
+        points[5 * i + 4, 0] = centers[i, 0]
+        points[5 * i + 4, 1] = centers[i, 1]
     s_all, lat_all = project_pruned(points, a, ab, seg_len, s[: m - 1], s[m - 1])
     out_s = np.empty(n)
     out_v = np.empty(n)
     count = 0
     for i in range(n):
-        s_lo, s_hi = nan_span(s_all, 4 * i, 4)
-        lat_lo, lat_hi = nan_span(lat_all, 4 * i, 4)
+        s_lo, s_hi = nan_span(s_all, 5 * i, 4)
+        lat_lo, lat_hi = nan_span(lat_all, 5 * i, 4)
         in_corridor = lat_lo < half_width_m and lat_hi > -half_width_m
         ahead = s_hi > front_m and s_lo < far_m
         if not (in_corridor and ahead):
             continue
         # the tangent of the segment holding the centre's foot (searchsorted right - 1,
         # clipped to the segments; a NaN sorts last)
-        foot = s_all[4 * n + i]
+        foot = s_all[5 * i + 4]
         j = segment_at(foot, s, m, m - 2)
         dx = xy[j + 1, 0] - xy[j, 0]
         dy = xy[j + 1, 1] - xy[j, 1]
@@ -397,33 +420,43 @@ def box_frames(
 
 
 @numba.njit(cache=True, nogil=True)
-def path_bounds(xy: _F64) -> tuple[_F64, _F64]:  # pragma: no cover - compiled
+def path_bounds(xy: _F64) -> tuple[float, float, float, float]:  # pragma: no cover - compiled
     """numpy's ``xy.min(axis=0)`` and ``xy.max(axis=0)`` of vertices (M ≥ 1, 2) — a NaN wins
     — in one pass (numpy's reductions along the first axis of a two-column array walk it
-    with a buffered iterator: ≈ 100× the comparisons' cost)."""
-    low = np.empty(2)
-    high = np.empty(2)
-    for d in range(2):
-        lo = hi = xy[0, d]
-        for k in range(1, xy.shape[0]):
-            v = xy[k, d]
-            if math.isnan(lo) or math.isnan(v):
-                lo = hi = math.nan
-            else:
-                lo = min(lo, v)
-                hi = max(hi, v)
-        low[d] = lo
-        high[d] = hi
-    return low, high
+    with a buffered iterator: ≈ 100× the comparisons' cost), as four floats: x min, y min,
+    x max, y max (numba boxes every array it returns at a cost of its own)."""
+    x_lo, x_hi = _column_bounds(xy, 0)
+    y_lo, y_hi = _column_bounds(xy, 1)
+    return x_lo, y_lo, x_hi, y_hi
 
 
 @numba.njit(cache=True, nogil=True)
-def gate_crossing(
-    path_xy: _F64, path_s: _F64, line: _F64, low: _F64, high: _F64
+def _column_bounds(xy: _F64, d: int) -> tuple[float, float]:  # pragma: no cover - compiled
+    """numpy's min and max of column ``d`` of ``xy`` (a NaN wins both)."""
+    lo = hi = xy[0, d]
+    for k in range(1, xy.shape[0]):
+        v = xy[k, d]
+        if math.isnan(lo) or math.isnan(v):
+            lo = hi = math.nan
+        else:
+            lo = min(lo, v)
+            hi = max(hi, v)
+    return lo, hi
+
+
+@numba.njit(cache=True, nogil=True)
+def gate_crossing(  # noqa: PLR0917 - numba takes no keyword-only parameters
+    path_xy: _F64,
+    path_s: _F64,
+    line: _F64,
+    x_lo: float,
+    y_lo: float,
+    x_hi: float,
+    y_hi: float,
 ) -> tuple[bool, float, float, float]:  # pragma: no cover - compiled
     """:func:`._lights.stop_arcs`'s test of one stop line (``line`` (K, 2), base_link) against
-    the path (vertices ``path_xy`` (M ≥ 2, 2), arc lengths ``path_s``, bounding box ``low`` /
-    ``high``: numpy's min and max of the vertices): (False, …) when the line's bounding box
+    the path (vertices ``path_xy`` (M ≥ 2, 2), arc lengths ``path_s``, bounding box ``x_lo``,
+    ``y_lo`` / ``x_hi``, ``y_hi``: numpy's min and max of the vertices, :func:`path_bounds`): (False, …) when the line's bounding box
     (numpy's max and min: a NaN wins, and then does not exclude) misses the path's, or the path
     does not cross the line; else (True, the arc length of the first crossing, the path's unit
     direction there).  The float64 operations of the numpy code it replaced, in its order: per
@@ -444,7 +477,9 @@ def gate_crossing(
                 bottom = math.nan
             elif v < bottom:
                 bottom = v
-        if top < low[d] or bottom > high[d]:
+        low = x_lo if d == 0 else y_lo
+        high = x_hi if d == 0 else y_hi
+        if top < low or bottom > high:
             return False, 0.0, 0.0, 0.0
     m = path_xy.shape[0]
     found = False

@@ -345,7 +345,7 @@ class IdmPlanner(Algorithm):
         box_frames(yaws, frozen, BOX_CORNER_SIGNS)
         leaders_on_path(np.zeros((1, 8, 3)), frozen, frozen, line.xy, line.s, 1.0, 0.0, 1.0)
         # a stop line's test (_lights.stop_arcs), with the arrays' types a step gives it
-        gate_crossing(line.xy, line.s, np.zeros((2, 2)), np.zeros(2), np.ones(2))
+        gate_crossing(line.xy, line.s, np.zeros((2, 2)), 0.0, 0.0, 1.0, 1.0)
         path_bounds(line.xy)
 
     # -- the step -----------------------------------------------------------------------------
