@@ -365,9 +365,7 @@ class Ros1BagReader(RosReaderBase):
                 if good < len(conns):
                     chunk_times, conns = chunk_times[:good], conns[:good]
                 if good:
-                    yield _batched(
-                        chunk, (starts, stops, chunk_times), conns, heads, stride=stride
-                    )
+                    yield _batched(chunk, (starts, stops, chunk_times), conns, heads, stride=stride)
                 yielded += good
                 if damage is not None:
                     self._chunk_damage(pos, damage, yielded)
