@@ -210,17 +210,17 @@ def test_time_ranges_and_topics_read_together_are_rosbags_ones(tmp_path: Path) -
     assert len(got) > 30
 
 
-def _damage_record(path: Path, field: bytes) -> int:
-    """Change the ``field`` (``time`` or ``conn``) value in the record header of the 10th
-    /regular message of the second chunk holding at least 14 of them; returns that message's
-    index among the /regular messages."""
+def _damage_record(path: Path, field: bytes, *, nth: int = 9) -> int:
+    """Change the ``field`` (``time`` or ``conn``) value in the record header of the
+    ``nth`` (from 0) /regular message of the second chunk holding at least 14 of them; returns
+    that message's index among the /regular messages."""
     with Bag1Reader(path) as reader:
         conn = next(c for c in reader.connections if c.topic == "/regular")
         entries = reader.indexes[conn.id]
         per_chunk: dict[int, list[int]] = {}
         for i, entry in enumerate(entries):
             per_chunk.setdefault(entry.chunk_pos, []).append(i)
-        which = [rows for rows in per_chunk.values() if len(rows) >= 14][1][9]
+        which = [rows for rows in per_chunk.values() if len(rows) >= 14][1][nth]
         entry = entries[which]
         chunk = reader.chunks[entry.chunk_pos]
     at = chunk.datapos + entry.offset
@@ -265,6 +265,34 @@ def test_a_record_that_is_not_the_index_s_is_damage_at_that_message(
 
     with pytest.raises(LogTruncatedError, match="another message"):
         read_all()
+    assert read == [m[2] for m in regular[:k]]
+
+
+@pytest.mark.parametrize("mixed", [True, False])
+def test_a_chunk_whose_first_message_is_damaged_is_reported_and_skipped(
+    tmp_path: Path, mixed: bool
+) -> None:
+    """No message of the chunk can be read: strict reading raises LogTruncatedError after the
+    chunks before it (it raised an IndexError from the batch build before branch h-read6),
+    lenient reading reports the chunk and goes on with the next one."""
+    path = tmp_path / "clouds.bag"
+    _write(path, mixed=mixed, count=120)
+    regular = [m for m in _rosbags_messages(path) if m[0] == "/regular"]
+    k = _damage_record(path, b"time", nth=0)
+    with open_log(path, strict=False) as log:
+        got = [(m.topic, m.log_time_ns, bytes(m.raw)) for m in log.messages(topics=["/regular"])]
+        report = log.damage_report
+    assert len(report) == 1
+    assert "another message" in report[0].what
+    assert got[:k] == regular[:k]
+    lost = [m for m in regular if m not in got]
+    assert lost[0] == regular[k]
+    assert len(lost) >= 14
+    assert got[k:] == [m for m in regular[k:] if m not in lost]
+    assert len(got) > k
+    read: list[bytes] = []
+    with pytest.raises(LogTruncatedError, match="another message"), open_log(path) as log:
+        read.extend(bytes(message.raw) for message in log.messages(topics=["/regular"]))
     assert read == [m[2] for m in regular[:k]]
 
 

@@ -104,5 +104,5 @@ def test_many_from_frozen_maps_every_cloud_s_channels_in_order(arity: int) -> No
         # One channel a cloud short: refused, not silently cut.
         short = list(zip(names, columns, strict=True))
         short[-1] = (names[-1], columns[-1][:2])
-        with pytest.raises(ValueError, match="zip"):
+        with pytest.raises(ValueError, match="2 of a channel"):
             PointCloud.many_from_frozen(list(xyz), short)

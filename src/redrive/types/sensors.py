@@ -142,16 +142,20 @@ class PointCloud:
     ) -> list[PointCloud]:
         """B clouds, cloud i being ``xyz[i]`` and element i of every channel's sequence.
 
-        :meth:`from_frozen` for many clouds at once: nothing is checked, so the caller
-        guarantees what :meth:`from_frozen` asks of each cloud's arrays, channel names given
-        once and every sequence of length B.  The objects are built by C-level iteration
+        :meth:`from_frozen` for many clouds at once: only the lengths are checked (every
+        sequence must have B items: ValueError), so the caller guarantees what
+        :meth:`from_frozen` asks of each cloud's arrays and channel names given once.  The objects are built by C-level iteration
         (``map``), no Python step per cloud.
         """
         names = tuple(name for name, _ in channels)
         columns = [values for _, values in channels]
+        count = len(xyz)
+        for values in columns:
+            if len(values) != count:
+                msg = f"PointCloud.many_from_frozen: {count} xyz arrays, {len(values)} of a channel"
+                raise ValueError(msg)
         if cls is PointCloud and len(names) <= _MAX_LITERAL_CHANNELS:
             return _cloud_builder(len(names))(names, xyz, columns)
-        count = len(xyz)
         clouds: list[PointCloud] = list(map(object.__new__, repeat(cls, count)))
         any(map(_SET_XYZ, clouds, xyz))
         per_cloud = zip(*columns, strict=True)
@@ -205,7 +209,7 @@ def _cloud_builder(arity: int) -> _CloudBuilder:
         f"    ({''.join(c + ', ' for c in cols)}) = columns\n"
         "    clouds = []\n"
         "    append = clouds.append\n"
-        f"    for points, {''.join(x + ', ' for x in items)} in zip(xyz, {''.join(c + ', ' for c in cols)} strict=True):\n"
+        f"    for points, {''.join(x + ', ' for x in items)} in zip(xyz, {''.join(c + ', ' for c in cols)}):\n"
         "        cloud = draft()\n"
         "        cloud.xyz = points\n"
         f"        cloud.channels = proxy({{{display}}})\n"

@@ -48,7 +48,8 @@ def batched_messages(
         )  # fmt: skip
         topic, msgtype = heads[first]
         topics, msgtypes = repeat(topic, count), repeat(msgtype, count)
-        slots = zip(repeat(batch, count), range(count), strict=True)
+        # Both are count long (no strict=: its keyword parse costs ~1.5 k instructions a zip).
+        slots = zip(repeat(batch, count), range(count))  # noqa: B905
     else:
         found: list[tuple[MessageBatch, int] | None] = [None] * count
         members: dict[int, list[int]] = {}
@@ -70,8 +71,10 @@ def batched_messages(
         slots = cast("list[tuple[MessageBatch, int]]", found)
     messages: list[LogMessage] = []
     append = messages.append
-    for start, stop, time_ns, topic, msgtype, slot in zip(
-        start_at, stop_at, time_at, topics, msgtypes, slots, strict=True
+    # Every sequence is count long: the reader's checked spans of this chunk (no strict=, as
+    # above).
+    for start, stop, time_ns, topic, msgtype, slot in zip(  # noqa: B905
+        start_at, stop_at, time_at, topics, msgtypes, slots
     ):
         message = _Draft()
         message.topic = topic

@@ -23,6 +23,7 @@ import logging
 import mmap
 import os
 from collections.abc import Collection, Iterator, Sequence
+from itertools import chain
 from pathlib import Path
 from typing import Any
 
@@ -278,7 +279,10 @@ class Ros1BagReader(RosReaderBase):
         stop_ns: int | None = None,
     ) -> Iterator[LogMessage]:
         if self._rosbags is not None:
-            return self._indexed_messages(topics=topics, start_ns=start_ns, stop_ns=stop_ns)
+            # Chunk by chunk, a list each, flattened in C (no generator step a message).
+            return chain.from_iterable(
+                self._indexed_chunks(topics=topics, start_ns=start_ns, stop_ns=stop_ns)
+            )
         return self._scanned_messages(topics=topics, start_ns=start_ns, stop_ns=stop_ns)
 
     def _scanned_messages(
@@ -308,12 +312,14 @@ class Ros1BagReader(RosReaderBase):
             self._arrays = {cid: IndexArrays(indexes.get(cid, [])) for cid in self._conns}
         return self._arrays
 
-    def _indexed_messages(
+    def _indexed_chunks(
         self, *, topics: Collection[str] | None, start_ns: int | None, stop_ns: int | None
-    ) -> Iterator[LogMessage]:
-        """The messages of the index, chunk by chunk: each chunk's messages are found and
+    ) -> Iterator[list[LogMessage]]:
+        """The messages of the index, a list a chunk: each chunk's messages are found and
         checked against the index together (:func:`~redrive.io.rosbag1.index.chunk_spans`),
-        and those of one connection are linked as one :class:`~redrive.io.base.MessageBatch`."""
+        and those of one connection are linked as one :class:`~redrive.io.base.MessageBatch`.
+        Damage found in a chunk is reported when the next list is asked for, after every
+        message of the chunk before it was handed out."""
         reader = self._rosbags
         assert reader is not None
         selected = self._selected_ids(topics)
@@ -358,9 +364,8 @@ class Ros1BagReader(RosReaderBase):
                 good = len(starts)
                 if good < len(conns):
                     chunk_times, conns = chunk_times[:good], conns[:good]
-                yield from _batched(
-                    chunk, (starts, stops, chunk_times), conns, heads, stride=stride
-                )
+                if good:
+                    yield _batched(chunk, (starts, stops, chunk_times), conns, heads, stride=stride)
                 yielded += good
                 if damage is not None:
                     self._chunk_damage(pos, damage, yielded)
