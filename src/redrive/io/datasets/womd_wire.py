@@ -92,6 +92,38 @@ def _fixed(buf: npt.NDArray[np.uint8], pos: int, size: int) -> np.uint64:
 
 
 @numba.njit(cache=True, nogil=True)
+def _map_point(  # noqa: PLR0917  (compiled: numba takes no keyword-only arguments)
+    buf: npt.NDArray[np.uint8],
+    pos: int,
+    end: int,
+    row: F64,
+    n_fields: int,
+    bits: npt.NDArray[np.uint64],
+) -> int:
+    """A MapPoint's doubles from ``pos`` to ``end`` into ``row``: fields 1 … ``n_fields`` (x, y,
+    z) as fixed64 doubles, the last of a repeated field winning, any other field skipped; the
+    position after it, or -1 for anything unexpected.  ``bits`` is the caller's one-element
+    uint64 scratch array (its float64 view gives the double)."""
+    as_double = bits.view(np.float64)
+    while pos < end:
+        tag, pos = _varint(buf, pos, end)
+        if pos < 0:
+            return -1
+        field, wire = tag >> 3, tag & 7
+        if 1 <= field <= n_fields:
+            if wire != 1 or pos + 8 > end:
+                return -1
+            bits[0] = _fixed(buf, pos, 8)
+            row[field - 1] = as_double[0]
+            pos += 8
+        else:
+            pos = _skip(buf, pos, end, wire)
+            if pos < 0:
+                return -1
+    return pos
+
+
+@numba.njit(cache=True, nogil=True)
 def _grown_rows(a: F64) -> F64:
     out = np.zeros((2 * a.shape[0], a.shape[1]))
     out[: a.shape[0]] = a
@@ -198,7 +230,6 @@ def _polylines(buf: npt.NDArray[np.uint8], points_field: I64) -> tuple[F64, I64,
     xyz = np.zeros((4096, 3))
     offsets = np.zeros(512, dtype=np.int64)
     bits = np.zeros(1, dtype=np.uint64)
-    as_double = bits.view(np.float64)
     n_features, n_points = 0, 0
     pos, end = 0, buf.shape[0]
     while pos < end:
@@ -256,22 +287,9 @@ def _polylines(buf: npt.NDArray[np.uint8], points_field: I64) -> tuple[F64, I64,
                 size, pos = _varint(buf, pos, data_end)
                 if pos < 0 or size < 0 or pos + size > data_end:
                     return xyz, offsets, False
-                point_end = pos + size
-                while pos < point_end:  # a MapPoint
-                    tag, pos = _varint(buf, pos, point_end)
-                    if pos < 0:
-                        return xyz, offsets, False
-                    field, wire = tag >> 3, tag & 7
-                    if 1 <= field <= 3:
-                        if wire != 1 or pos + 8 > point_end:
-                            return xyz, offsets, False
-                        bits[0] = _fixed(buf, pos, 8)
-                        xyz[n_points, field - 1] = as_double[0]
-                        pos += 8
-                    else:
-                        pos = _skip(buf, pos, point_end, wire)
-                        if pos < 0:
-                            return xyz, offsets, False
+                pos = _map_point(buf, pos, pos + size, xyz[n_points], 3, bits)
+                if pos < 0:
+                    return xyz, offsets, False
                 n_points += 1
         n_features += 1
         offsets[n_features] = n_points

@@ -18,7 +18,7 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
-from redrive.io.datasets.womd_wire import _fixed, _grown_rows, _skip, _varint
+from redrive.io.datasets.womd_wire import _fixed, _grown_rows, _map_point, _skip, _varint
 
 __all__ = [
     "ENTRY",
@@ -45,7 +45,6 @@ def _lane_states(buf: npt.NDArray[np.uint8]) -> tuple[I64, F64, bool]:
     ints = np.zeros((256, 4), dtype=np.int64)
     xy = np.zeros((256, 2))
     bits = np.zeros(1, dtype=np.uint64)
-    as_double = bits.view(np.float64)
     n_steps, n = 0, 0
     pos, end = 0, buf.shape[0]
     while pos < end:
@@ -106,23 +105,10 @@ def _lane_states(buf: npt.NDArray[np.uint8]) -> tuple[I64, F64, bool]:
                     size, pos = _varint(buf, pos, state_end)
                     if pos < 0 or size < 0 or pos + size > state_end:
                         return ints, xy, False
-                    point_end = pos + size
                     ints[n, 3] = 1
-                    while pos < point_end:
-                        tag, pos = _varint(buf, pos, point_end)
-                        if pos < 0:
-                            return ints, xy, False
-                        field, wire = tag >> 3, tag & 7
-                        if 1 <= field <= 2:
-                            if wire != 1 or pos + 8 > point_end:
-                                return ints, xy, False
-                            bits[0] = _fixed(buf, pos, 8)
-                            xy[n, field - 1] = as_double[0]
-                            pos += 8
-                        else:
-                            pos = _skip(buf, pos, point_end, wire)
-                            if pos < 0:
-                                return ints, xy, False
+                    pos = _map_point(buf, pos, pos + size, xy[n], 2, bits)  # x, y: z skipped
+                    if pos < 0:
+                        return ints, xy, False
                 else:
                     pos = _skip(buf, pos, state_end, wire)
                     if pos < 0:
