@@ -19,31 +19,6 @@ _F64 = npt.NDArray[np.float64]
 
 
 @numba.njit(cache=True, nogil=True)
-def interp_at(x: float, xp: _F64, fp: _F64) -> float:  # pragma: no cover - compiled
-    """``np.interp`` at one point (``xp`` ascending): an end point, a knot hit exactly, a NaN
-    slope product retried from the right knot."""
-    n = xp.shape[0]
-    if math.isnan(x):
-        return x
-    if x > xp[n - 1]:
-        return float(fp[n - 1])
-    if x < xp[0]:
-        return float(fp[0])
-    j = 0
-    while j + 1 < n and x >= xp[j + 1]:
-        j += 1
-    if j == n - 1 or xp[j] == x:
-        return float(fp[j])
-    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
-    out: float = slope * (x - xp[j]) + fp[j]
-    if math.isnan(out):
-        out = slope * (x - xp[j + 1]) + fp[j + 1]
-        if math.isnan(out) and fp[j] == fp[j + 1]:
-            out = fp[j]
-    return out
-
-
-@numba.njit(cache=True, nogil=True)
 def interp_knot(x: float, xp: _F64, j0: int) -> int:  # pragma: no cover - compiled
     """The knot :func:`interp_at` ends its search on for ``x`` (-1 where it returns before
     searching: ``x`` NaN or beyond an end), its scan started at knot ``j0`` instead of 0 — the
@@ -79,6 +54,14 @@ def interp_on(x: float, xp: _F64, fp: _F64, j: int) -> float:  # pragma: no cove
         if math.isnan(out) and fp[j] == fp[j + 1]:
             out = fp[j]
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def interp_at(x: float, xp: _F64, fp: _F64) -> float:  # pragma: no cover - compiled
+    """``np.interp`` at one point (``xp`` ascending): an end point, a knot hit exactly, a NaN
+    slope product retried from the right knot — :func:`interp_on` of :func:`interp_knot`'s
+    search from knot 0."""
+    return interp_on(x, xp, fp, interp_knot(x, xp, 0))
 
 
 @numba.njit(cache=True, nogil=True)
