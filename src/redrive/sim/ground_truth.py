@@ -22,27 +22,6 @@ _EVERY = np.zeros(0, dtype=np.bool_)
 _EVERY.flags.writeable = False  # (as a scene's flags are: one compiled signature for both)
 
 
-_EYE4 = np.eye(4)
-_EYE4.flags.writeable = False
-
-
-def _inverse(map_from_base: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-    """:func:`redrive.geometry.invert` of a 4×4 float64 pose — the same operations on the same
-    arrays (Rᵀ, −Rᵀt), its identity start copied from one made once instead of ``np.eye``;
-    anything else through ``invert`` itself (its checks)."""
-    if (
-        type(map_from_base) is not np.ndarray
-        or map_from_base.dtype != np.float64
-        or map_from_base.shape != (4, 4)
-    ):
-        return invert(map_from_base)
-    rot_t = map_from_base[:3, :3].T
-    out = _EYE4.copy()
-    out[:3, :3] = rot_t
-    out[:3, 3] = -rot_t @ map_from_base[:3, 3]
-    return out
-
-
 def ground_truth_objects(
     scene: Scene,
     *,
@@ -108,7 +87,7 @@ def boxes_in_base(  # noqa: PLR0917 - the boxes' columns, then the pose
 ) -> tuple[DetectedObject, ...]:
     """:func:`objects_in_base` of boxes given as columns (map frame, float64; the centres, sizes
     and velocities (N, 3)), without an :class:`ObjectColumns` of them."""
-    base_from_map = _inverse(map_from_base)
+    base_from_map = invert(map_from_base)
     yaw_ego = math.atan2(float(map_from_base[1, 0]), float(map_from_base[0, 0]))
     # transform_points' and transform_vectors' products (the same numpy calls, unchecked)
     rotation_t = base_from_map[:3, :3].T
