@@ -26,6 +26,27 @@ __all__ = ["LightTiming", "TrafficLights", "light_id_text", "traffic_data_of"]
 _GREEN, _YELLOW, _RED = LightState.GREEN, LightState.YELLOW, LightState.RED
 
 
+def _phase_state(  # noqa: PLR0917 (per signal and frame: positional is cheaper)
+    time_s: float,
+    offset_s: float,
+    shift_s: float,
+    cycle_s: float,
+    green_s: float,
+    yellow_end_s: float,
+) -> LightState:
+    """A signal's state at ``time_s``: its phase in the cycle (offset, less its group's shift of
+    ``phase_group · cycle_s / 2``) green until ``green_s``, yellow until ``yellow_end_s``
+    (``green_s + yellow_s``), red after."""
+    tau = math.fmod(time_s + offset_s - shift_s, cycle_s)
+    if tau < 0.0:
+        tau += cycle_s
+    if tau < green_s:
+        return _GREEN
+    if tau < yellow_end_s:
+        return _YELLOW
+    return _RED
+
+
 def light_id_text(light_id: int) -> str:
     """The text id of signal ``light_id`` in the road map and the ground truth (``"0"``, ``"1"``,
     …: ``TrafficLight.id == MapTrafficLight.light_id``)."""
@@ -95,15 +116,10 @@ class TrafficLights:
         if sig is None:
             return LightState.UNKNOWN
         tm = self.timing
-        half = tm.cycle_s / 2.0
-        tau = math.fmod(time_s + tm.offset_s - sig.phase_group * half, tm.cycle_s)
-        if tau < 0.0:
-            tau += tm.cycle_s
-        if tau < tm.green_s:
-            return LightState.GREEN
-        if tau < tm.green_s + tm.yellow_s:
-            return LightState.YELLOW
-        return LightState.RED
+        shift = sig.phase_group * (tm.cycle_s / 2.0)
+        return _phase_state(
+            time_s, tm.offset_s, shift, tm.cycle_s, tm.green_s, tm.green_s + tm.yellow_s
+        )
 
     def states(self, time_s: float) -> tuple[TrafficLightState, ...]:
         """Every signal head at ``time_s``, in ``light_id`` order of the network."""
@@ -117,20 +133,14 @@ class TrafficLights:
     def traffic_data(self, time_s: float) -> TrafficData:
         """The ground truth of every signal head at ``time_s`` (:func:`traffic_data_of` of
         :meth:`states`; the same immutable object again while no state changed).  Each state
-        is :meth:`state`'s, operation for operation, with the timing's terms made once."""
+        is :meth:`state`'s (:func:`_phase_state`), with the timing's terms made once."""
         _tm, offset_s, cycle_s, green_s, yellow_end_s, shifts = self._timing_terms()
-        found = []
-        for shift in shifts:
-            tau = math.fmod(time_s + offset_s - shift, cycle_s)
-            if tau < 0.0:
-                tau += cycle_s
-            if tau < green_s:
-                found.append(_GREEN)
-            elif tau < yellow_end_s:
-                found.append(_YELLOW)
-            else:
-                found.append(_RED)
-        states = tuple(found)
+        states = tuple(
+            [
+                _phase_state(time_s, offset_s, shift, cycle_s, green_s, yellow_end_s)
+                for shift in shifts
+            ]
+        )
         last = self._last
         if last is not None and last[0] == states:
             return last[1]
