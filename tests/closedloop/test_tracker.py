@@ -14,7 +14,7 @@ from redrive.closedloop import LqrTracker
 from redrive.closedloop.profiles import fit_profiles, resample_poses
 from redrive.closedloop.tracker import LQR_DEFAULTS
 from redrive.sim.ego import ActuatedEgo, BicycleModel, EgoGeometry
-from redrive.types import PlannedPath
+from redrive.types import PlannedPath, VehicleState
 
 DT_S = 0.1
 STEP_NS = 100_000_000
@@ -374,3 +374,95 @@ def test_track_equals_nuplan_devkits_own_computation() -> None:
     assert profiles.speed_at(1.3) == pytest.approx(3.299999999999983, abs=1e-9)
     assert accel == pytest.approx(0.7272727272727119, abs=1e-9)  # 10/11 · (3.3 − 2.5)
     assert rate == pytest.approx(-0.07155167673825265, abs=1e-9)
+
+
+def _numpy_commands(
+    tracker: LqrTracker,
+    waypoints: npt.NDArray[np.float64],
+    *,
+    pose: tuple[float, float, float],
+    speed_mps: float,
+    steer_rad: float,
+    t_s: float,
+) -> tuple[float, float]:
+    """The acceleration and steering rate by the readable numpy functions (the reference of the
+    compiled ``commands``)."""
+    times, poses = resample_poses(
+        waypoints, discretization_time_s=DT_S, standing_heading_rad=pose[2]
+    )
+    profiles = fit_profiles(
+        times,
+        poses,
+        discretization_time_s=DT_S,
+        jerk_penalty=LQR_DEFAULTS["jerk_penalty"],
+        curvature_rate_penalty=LQR_DEFAULTS["curvature_rate_penalty"],
+    )
+    return tracker.track(profiles, pose=pose, speed_mps=speed_mps, steer_rad=steer_rad, t_s=t_s)
+
+
+def _varied_paths(rng: np.random.Generator) -> list[npt.NDArray[np.float64]]:
+    paths = [_straight(8.0, 6.0), _circle(25.0, 6.0, 8.0), _stopping(10.0, 1.0, 3.0)]
+    paths.append(np.array([[1.0, 2.0, 0.0, 0.0]]))  # "be here": one waypoint
+    paths.append(np.array([[0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.05]]))  # shorter than a step
+    for _ in range(40):
+        k = int(rng.integers(2, 90))
+        t = np.cumsum(rng.uniform(0.02, 0.3, size=k)) - 0.1
+        heading = np.cumsum(rng.normal(0.0, 0.6, size=k))  # turns past ±π on the way
+        step = rng.uniform(0.0, 2.0, size=k) * (rng.random(k) > 0.2)  # some standing points
+        xy = np.cumsum(np.c_[step * np.cos(heading), step * np.sin(heading)], axis=0)
+        wp = np.c_[xy, np.zeros(k), t]
+        if k > 4:
+            wp[3, 3] = wp[2, 3]  # two waypoints at one time (the same point)
+            wp[3, :2] = wp[2, :2]
+        paths.append(wp)
+    return paths
+
+
+@pytest.mark.parametrize("horizon", [10, 3, 24, 130])
+def test_compiled_commands_equal_the_numpy_reference(horizon: int) -> None:
+    """``commands`` runs resample_poses + fit_profiles + track as one compiled kernel
+    (closedloop._tracker_kernels); on straight, curved, stopping, standing, one-point and random
+    winding paths, from offset poses, it gives what the numpy functions give (the same doubles
+    on the machine this was written on; here to 1e-12, as numpy's own summation order of einsum
+    may change with the CPU).  Horizons of 8 and more take numpy's pairwise summation; past 128
+    (numpy's block) ``commands`` runs the numpy functions themselves."""
+    rng = np.random.default_rng(7)
+    tracker = LqrTracker(tracking_horizon=horizon)
+    compared = 0
+    for wp in _varied_paths(rng):
+        for _ in range(4):
+            pose = (
+                float(rng.normal(0.0, 0.5)),
+                float(rng.normal(0.0, 0.5)),
+                float(rng.normal(0.0, 2.0)),
+            )
+            speed, steer = float(rng.uniform(0.0, 12.0)), float(rng.normal(0.0, 0.1))
+            stamp_ns = int(rng.integers(-100_000_000, 400_000_000))
+            state = VehicleState(
+                stamp_ns=stamp_ns,
+                frame_id="map",
+                position=np.array([pose[0], pose[1], 0.0]),
+                velocity=np.array([speed * math.cos(pose[2]), speed * math.sin(pose[2]), 0.0]),
+                heading_rad=pose[2],
+            )
+            speed = state.speed_mps
+            want_accel, want_rate = _numpy_commands(
+                tracker, wp, pose=pose, speed_mps=speed, steer_rad=steer, t_s=stamp_ns * 1e-9
+            )
+            path = PlannedPath(stamp_ns=0, waypoints=wp, frame_id="map")
+            got = tracker.commands(state, path, DT_S, stamp_ns=stamp_ns, steer_rad=steer)
+            want_throttle, want_brake = (
+                tracker.pedals.pedals(want_accel, speed)
+                if not (speed <= 0.0 and want_accel <= 0.0)
+                else (0.0, 0.0)
+            )
+            g = tracker.geometry
+            want_steer = min(max(steer + want_rate * DT_S, -g.max_steer_rad), g.max_steer_rad)
+            np.testing.assert_allclose(
+                [got.throttle, got.brake, got.steering_angle_rad],
+                [want_throttle, want_brake, want_steer],
+                rtol=1e-12,
+                atol=1e-12,
+            )
+            compared += 1
+    assert compared == 4 * 45

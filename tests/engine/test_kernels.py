@@ -1,5 +1,6 @@
 """The install step's kernels (``python -m redrive.engine.kernels``): after it, another process's
-synth and run of the reference pipeline — another log than the step's own — compiles nothing,
+synth and run of the reference pipeline — another log than the step's own — and the closed
+loop's LQR tracker compile nothing,
 and the detector's kernel is a cache hit there, not a fresh compile."""
 
 from __future__ import annotations
@@ -28,6 +29,9 @@ from redrive.engine.kernels import compiled_during
 from redrive.sim.scenario import load_scenario
 from redrive.sim.synth import synthesize
 from redrive.algorithms.reference import _kernels
+from redrive.closedloop.tracker import LqrTracker
+from redrive.types import PlannedPath, VehicleState
+import numpy as np
 
 out = Path(sys.argv[1])
 with compiled_during() as compiled:
@@ -36,6 +40,11 @@ with compiled_during() as compiled:
         pipeline = reference_pipeline().with_options(mode=mode)
         report = run_log(RunRequest(log=out / "other.mcap", pipeline=pipeline, out=out / mode))
         assert report.status == "complete", report
+    # the closed loop's LQR tracker on another path (another grid, frame and speed)
+    t = np.arange(0.0, 6.0, 0.1)
+    path = PlannedPath(stamp_ns=0, waypoints=np.c_[3 * t, t, 0 * t, t], frame_id="map")
+    state = VehicleState(stamp_ns=0, velocity=np.array([3.0, 1.0, 0.0]))
+    LqrTracker().commands(state, path, 0.1, stamp_ns=50_000_000)
 stats = _kernels.crop_cell_minima.stats
 print(json.dumps({"compiled": compiled, "hits": sum(stats.cache_hits.values()),
                   "misses": sum(stats.cache_misses.values())}))

@@ -49,12 +49,9 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from redrive.closedloop.profiles import (
-    ReferenceProfiles,
-    fit_profiles,
-    resample_poses,
-)
-from redrive.motion.lqr import lateral_lqr, longitudinal_lqr
+from redrive.closedloop._tracker_kernels import MAX_HORIZON, resample_grid, track_path
+from redrive.closedloop.profiles import ReferenceProfiles, fit_profiles, resample_poses
+from redrive.motion.lqr import curvature_gram, jerk_gram, lateral_lqr, longitudinal_lqr
 from redrive.sim.ego import EgoGeometry, PedalModel
 from redrive.types import ControlCommands, PlannedPath, VehicleState
 
@@ -175,7 +172,7 @@ class LqrTracker:
         self._n = int(tracking_horizon)
         #: the horizon's step numbers 0 … n−1 and the lateral Q's diagonal (made once)
         self._steps = np.arange(self._n, dtype=np.float64)
-        self._q_lat_diagonal = np.diag(self._q_lat)
+        self._q_lat_diagonal = np.ascontiguousarray(np.diag(self._q_lat))
 
     def reset(self) -> None:
         """Nothing to forget: the tracker keeps no state between calls (nuPlan's neither)."""
@@ -226,7 +223,7 @@ class LqrTracker:
         if path.frame_id == "base_link":
             x, y, yaw = 0.0, 0.0, 0.0
         elif path.frame_id == state.frame_id:
-            x, y, yaw = float(state.position[0]), float(state.position[1]), state.heading_rad
+            x, y, yaw = float(state.position[0]), float(state.position[1]), float(state.heading_rad)
         else:
             msg = (
                 f"the planned path of stamp {path.stamp_ns} is in frame {path.frame_id!r} but the "
@@ -239,24 +236,65 @@ class LqrTracker:
             steer_rad = 0.0
             if speed > 0.1:
                 steer_rad = math.atan(self.geometry.wheelbase_m * state.yaw_rate_rad_s / speed)
-        times, poses = resample_poses(
-            path.waypoints, discretization_time_s=self._dt, standing_heading_rad=yaw
-        )
-        profiles = fit_profiles(
-            times,
-            poses,
-            discretization_time_s=self._dt,
-            jerk_penalty=self.params["jerk_penalty"],
-            curvature_rate_penalty=self.params["curvature_rate_penalty"],
-        )
         t_s = (stamp_ns - path.stamp_ns) * 1e-9
-        accel, rate = self.track(
-            profiles, pose=(x, y, yaw), speed_mps=speed, steer_rad=steer_rad, t_s=t_s
-        )
+        if self._n > MAX_HORIZON:  # numpy's summation order past its block: the numpy functions
+            times, poses = resample_poses(
+                path.waypoints, discretization_time_s=self._dt, standing_heading_rad=yaw
+            )
+            profiles = fit_profiles(
+                times,
+                poses,
+                discretization_time_s=self._dt,
+                jerk_penalty=self.params["jerk_penalty"],
+                curvature_rate_penalty=self.params["curvature_rate_penalty"],
+            )
+            accel, rate = self.track(
+                profiles, pose=(x, y, yaw), speed_mps=speed, steer_rad=steer_rad, t_s=t_s
+            )
+        else:
+            accel, rate = self._track_compiled(path, (x, y, yaw), speed, steer_rad, t_s)
         g = self.geometry
         steer = min(max(steer_rad + rate * dt_s, -g.max_steer_rad), g.max_steer_rad)
         throttle, brake = self._pedals(accel, speed)
         return ControlCommands(throttle=throttle, brake=brake, steering_angle_rad=steer)
+
+    def _track_compiled(
+        self,
+        path: PlannedPath,
+        pose: tuple[float, float, float],
+        speed: float,
+        steer_rad: float,
+        t_s: float,
+    ) -> tuple[float, float]:
+        """resample_poses + fit_profiles + track in one compiled call
+        (closedloop._tracker_kernels: the same doubles)."""
+        wp = np.ascontiguousarray(path.waypoints, dtype=np.float64)
+        start_us, step_us, count = resample_grid(float(wp[0, 3]), float(wp[-1, 3]), self._dt)
+        m = max(count, 2) - 1
+        params = self.params
+        return track_path(
+            wp,
+            start_us,
+            step_us,
+            count,
+            pose[0],
+            pose[1],
+            pose[2],
+            float(speed),
+            float(steer_rad),
+            t_s,
+            self._dt,
+            self._n,
+            jerk_gram(m, params["jerk_penalty"]),
+            curvature_gram(m, params["curvature_rate_penalty"]),
+            params["stopping_velocity_mps"],
+            params["stopping_proportional_gain"],
+            float(self._q_lon[0, 0]),
+            float(self._r_lon[0, 0]),
+            self._q_lat_diagonal,
+            float(self._r_lat[0, 0]),
+            float(self.geometry.wheelbase_m),
+        )
 
     def track(
         self,

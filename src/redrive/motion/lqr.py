@@ -43,9 +43,11 @@ import numpy.typing as npt
 
 __all__ = [
     "INITIAL_CURVATURE_PENALTY",
+    "curvature_gram",
     "fit_curvature_profiles",
     "fit_speed_profiles",
     "integrate_profiles",
+    "jerk_gram",
     "lateral_lqr",
     "longitudinal_lqr",
 ]
@@ -78,13 +80,23 @@ def _later_of(m: int) -> npt.NDArray[np.intp]:
 
 
 @functools.lru_cache(maxsize=32)
-def _jerk_gram(m: int, jerk_penalty: float) -> F64:
+def jerk_gram(m: int, jerk_penalty: float) -> F64:
     """``jerk_penalty · JᵀJ`` (m, m) of the first differences of the accelerations ``a_j`` (the
     unknowns 1 … m−1)."""
     jerk = np.zeros((max(m - 2, 0), m), dtype=np.float64)
     for j in range(m - 2):
         jerk[j, j + 1], jerk[j, j + 2] = -1.0, 1.0
     out = jerk_penalty * (jerk.T @ jerk)
+    out.flags.writeable = False
+    return out
+
+
+@functools.lru_cache(maxsize=32)
+def curvature_gram(m: int, curvature_rate_penalty: float) -> F64:
+    """The curvature fit's penalty (m, m): ``curvature_rate_penalty`` on the rates' diagonal,
+    :data:`INITIAL_CURVATURE_PENALTY` on ``κ_0``'s."""
+    out = curvature_rate_penalty * np.eye(m)
+    out[0, 0] = INITIAL_CURVATURE_PENALTY
     out.flags.writeable = False
     return out
 
@@ -121,7 +133,7 @@ def fit_speed_profiles(
     lhs, rhs = _normal_equations(
         cos * cos + sin * sin, cos * xy_disp[..., 0] + sin * xy_disp[..., 1], dt_s
     )
-    x = _solve(lhs + _jerk_gram(m, float(jerk_penalty))[None], rhs)
+    x = _solve(lhs + jerk_gram(m, float(jerk_penalty))[None], rhs)
     return x[:, 0], x[:, 1:]
 
 
@@ -132,9 +144,7 @@ def fit_curvature_profiles(
     ``heading_disp_rad`` (B, M, principal values) at the speeds ``speeds_mps`` (B, M)."""
     m = heading_disp_rad.shape[1]
     lhs, rhs = _normal_equations(speeds_mps * speeds_mps, speeds_mps * heading_disp_rad, dt_s)
-    q = curvature_rate_penalty * np.eye(m)
-    q[0, 0] = INITIAL_CURVATURE_PENALTY
-    x = _solve(lhs + q[None], rhs)
+    x = _solve(lhs + curvature_gram(m, float(curvature_rate_penalty))[None], rhs)
     return x[:, 0], x[:, 1:]
 
 
