@@ -1,7 +1,8 @@
 """The planner's compiled path geometry gives, bit for bit, what the numpy code it replaced
 gave (kept here as the reference): a Polyline's vertices and arc lengths, its points at arc
-lengths (inside, past either end), the leaders picked from boxes' corners and centres, and a
-stop line's first crossing with the path."""
+lengths (inside, past either end), the leaders picked from boxes' corners and centres, a
+stop line's first crossing with the path, and the curve speed limit; and the written-out
+``np.unwrap`` and ``sum`` of ``_numeric_kernels``."""
 
 from __future__ import annotations
 
@@ -12,8 +13,10 @@ import numpy as np
 import numpy.typing as npt
 
 from redrive.algorithms.reference._kernels import project_on_segments
+from redrive.algorithms.reference._numeric_kernels import pairwise_sum, unwrap
 from redrive.algorithms.reference._plan_kernels import (
     box_frames,
+    curve_speed,
     gate_crossing,
     leaders_on_path,
     path_bounds,
@@ -246,3 +249,52 @@ def test_path_bounds_are_numpys_min_and_max_along_the_vertices() -> None:
     assert np.isnan(y_lo)
     assert np.isnan(y_hi)
     assert not np.isnan(x_lo)
+
+
+def _curve_speed_numpy(  # noqa: PLR0917 - the kernel's parameters
+    xy: F64, s_line: F64, length: float, sample: float, k: int, a_lat: float, b: float, front: float
+) -> float:
+    """IdmPlanner._curve_speed_mps's numpy code after its length test (the reference)."""
+    s = np.arange(0.0, length, sample)
+    pts = _points_at_numpy(xy, s_line, s)
+    d = np.diff(pts, axis=0)
+    heading = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
+    if heading.size <= k:
+        return math.inf
+    kappa = np.abs(heading[k:] - heading[:-k]) / (k * sample)
+    at = s[k:-1] if s.size - 1 > k else s[k:]
+    at = at[: kappa.size]
+    curve = np.sqrt(a_lat / np.maximum(kappa, 1e-9))
+    ahead = np.maximum(at - front, 0.0)
+    return float(np.min(np.sqrt(curve**2 + 2.0 * b * ahead)))
+
+
+def test_curve_speed_equals_the_numpy_code_bit_for_bit() -> None:
+    rng = np.random.default_rng(5)
+    compared = 0
+    for _ in range(300):
+        n = int(rng.integers(2, 60))
+        heading = np.cumsum(rng.normal(0.0, 0.5, size=n))  # winding, past ±π
+        step = rng.uniform(0.1, 6.0, size=n)
+        raw = np.cumsum(np.c_[step * np.cos(heading), step * np.sin(heading)], axis=0)
+        xy, s_line = polyline_arc(np.ascontiguousarray(raw))
+        length = float(min(s_line[-1], rng.uniform(5.0, 120.0)))
+        sample, k = float(rng.choice([0.5, 1.0, 1.3])), int(rng.integers(1, 6))
+        a_lat, b, front = rng.uniform(0.5, 3.0), rng.uniform(1.0, 4.0), rng.uniform(0.0, 4.0)
+        want = _curve_speed_numpy(xy, s_line, length, sample, k, a_lat, b, front)
+        got = curve_speed(xy, s_line, length, sample, k, a_lat, b, front)
+        assert got == want or (math.isnan(got) and math.isnan(want))
+        compared += math.isfinite(want)
+    assert compared > 200  # most paths are long enough for a limit
+
+
+def test_unwrap_and_pairwise_sum_equal_numpy_bit_for_bit() -> None:
+    rng = np.random.default_rng(9)
+    for n in [*range(20), 31, 64, 100, 127, 128]:
+        p = np.cumsum(rng.normal(0.0, 2.5, size=n))
+        p[: n // 3] = np.pi * rng.integers(-3, 4, size=n // 3)  # steps of exactly ±π and 0
+        out = np.empty(n)
+        unwrap(p, n, out)
+        assert out.tobytes() == np.unwrap(p).tobytes()
+        values = rng.normal(0.0, 1.0, size=n) * 10.0 ** rng.integers(-8, 8, size=n)
+        assert pairwise_sum(values, n) == values.sum()

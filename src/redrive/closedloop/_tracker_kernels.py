@@ -8,7 +8,8 @@ It is the float64 arithmetic of :func:`redrive.closedloop.profiles.resample_pose
 in their order, so that it gives the same doubles: numpy's ``interp`` (its branches and its
 slope formula), ``unwrap``, ``mod`` (float ``%``: numpy's ``npy_divmod`` and Python's
 ``float_rem`` are one algorithm, numba's ``%`` is Python's), the sequential ``cumsum`` and the pairwise summation of
-``sum`` (:func:`_pairwise_sum`, numpy's ``pairwise_sum`` of its float add loop), and LAPACK's
+``sum`` (numpy's ``pairwise_sum`` of its float add loop) — the written-out forms of
+:mod:`redrive.algorithms.reference._numeric_kernels` — and LAPACK's
 ``gesv`` for the normal equations (numpy's ``linalg.solve`` calls it too).
 tests/closedloop/test_tracker.py compares every value with the numpy functions, which stay
 the readable reference.
@@ -22,7 +23,19 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
+from redrive.algorithms.reference._numeric_kernels import (
+    MAX_PAIRWISE,
+    interp_at,
+    interp_knot,
+    interp_on,
+    pairwise_sum,
+    unwrap,
+)
+
 __all__ = ["MAX_HORIZON", "resample_grid", "track_path"]
+
+#: the longest horizon :func:`track_path` sums as numpy does (numpy's pairwise block)
+MAX_HORIZON = MAX_PAIRWISE
 
 _F64 = npt.NDArray[np.float64]
 #: profiles.SAME_POINT_M (kept equal by a test)
@@ -43,77 +56,6 @@ def resample_grid(t_first_s: float, t_last_s: float, step_s: float) -> tuple[int
     return start_us, step_us, count
 
 
-#: the longest sum :func:`_pairwise_sum` adds as numpy does (numpy's ``PW_BLOCKSIZE``; past it
-#: numpy recurses, which a cached numba kernel cannot): the longest horizon of :func:`track_path`
-MAX_HORIZON = 128
-
-
-@numba.njit(cache=True, nogil=True)
-def _pairwise_sum(a: _F64, n: int) -> float:  # pragma: no cover - compiled
-    """numpy's ``pairwise_sum`` (the float64 add reduction) of ``a[:n]``, n ≤ MAX_HORIZON."""
-    if n < 8:
-        res = 0.0
-        for i in range(n):
-            res += a[i]
-        return res
-    r0, r1, r2, r3, r4, r5, r6, r7 = a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7]
-    i = 8
-    while i < n - n % 8:
-        r0 += a[i]
-        r1 += a[i + 1]
-        r2 += a[i + 2]
-        r3 += a[i + 3]
-        r4 += a[i + 4]
-        r5 += a[i + 5]
-        r6 += a[i + 6]
-        r7 += a[i + 7]
-        i += 8
-    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-    while i < n:
-        res += a[i]
-        i += 1
-    return float(res)
-
-
-@numba.njit(cache=True, nogil=True)
-def _sum(a: _F64) -> float:  # pragma: no cover - compiled
-    """``a.sum()`` as numpy adds it (the reduction starts from its identity, 0.0)."""
-    return 0.0 + _pairwise_sum(a, a.shape[0])
-
-
-@numba.njit(cache=True, nogil=True)
-def _interp(x: float, xp: _F64, fp: _F64, n: int) -> float:  # pragma: no cover - compiled
-    """numpy's ``interp(x, xp[:n], fp[:n])`` of one ``x`` (``arr_interp``'s branches)."""
-    if math.isnan(x):
-        return x
-    if n == 1:
-        return float(fp[0])
-    if x < xp[0]:
-        return float(fp[0])
-    if x > xp[n - 1]:
-        return float(fp[n - 1])
-    # the j with xp[j] <= x < xp[j + 1] (or n − 1 for x == xp[n − 1])
-    lo, hi = 0, n - 1
-    if x == xp[n - 1]:
-        return float(fp[n - 1])
-    while hi - lo > 1:
-        mid = (lo + hi) >> 1
-        if xp[mid] <= x:
-            lo = mid
-        else:
-            hi = mid
-    j = lo
-    if xp[j] == x:
-        return float(fp[j])
-    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
-    res = slope * (x - xp[j]) + fp[j]
-    if math.isnan(res):
-        res = slope * (x - xp[j + 1]) + fp[j + 1]
-        if math.isnan(res) and fp[j] == fp[j + 1]:
-            res = fp[j]
-    return float(res)
-
-
 @numba.njit(cache=True, nogil=True)
 def _headings(x: _F64, y: _F64, k: int, standing: float) -> _F64:  # pragma: no cover
     """profiles.waypoint_headings of the first ``k`` points (x, y)."""
@@ -130,33 +72,27 @@ def _headings(x: _F64, y: _F64, k: int, standing: float) -> _F64:  # pragma: no 
     if first < 0:
         out[:] = standing
         return out
-    # np.unwrap of the moving segments' directions (its correction's cumsum)
-    prev = math.atan2(y[first + 1] - y[first], x[first + 1] - x[first])
-    seg_h[first] = prev
-    correction = 0.0
-    corrected = False
-    for i in range(first + 1, m):
-        if not moving[i]:
-            continue
-        raw = math.atan2(y[i + 1] - y[i], x[i + 1] - x[i])
-        dd = raw - prev
-        ddmod = (dd - (-math.pi)) % _PERIOD + (-math.pi)
-        if ddmod == -math.pi and dd > 0.0:
-            ddmod = math.pi
-        ph = ddmod - dd
-        if abs(dd) < math.pi:
-            ph = 0.0
-        correction = correction + ph if corrected else ph
-        corrected = True
-        seg_h[i] = raw + correction
-        prev = raw
+    # np.unwrap of the moving segments' directions
+    raw = np.empty(m)
+    count = 0
+    for i in range(first, m):
+        if moving[i]:
+            raw[count] = math.atan2(y[i + 1] - y[i], x[i + 1] - x[i])
+            count += 1
+    unwrapped = np.empty(count)
+    unwrap(raw, count, unwrapped)
+    count = 0
+    for i in range(first, m):
+        if moving[i]:
+            seg_h[i] = unwrapped[count]
+            count += 1
     # a standing segment takes the heading of the motion before it, else of the motion after it
     filled = np.empty(m)
     last = first
     for i in range(m):
         if moving[i]:
             last = i
-        filled[i] = seg_h[last] if i >= first else seg_h[first]
+        filled[i] = seg_h[last]  # before the first motion: the first motion's
     for i in range(1, k - 1):
         out[i] = 0.5 * (filled[i - 1] + filled[i])
     out[0], out[k - 1] = filled[0], filled[m - 1]
@@ -175,7 +111,6 @@ def _resample(
     k_all = wp.shape[0]
     x = np.empty(k_all)
     y = np.empty(k_all)
-    h_in = np.empty(k_all)
     t = np.empty(k_all)
     k = 0
     for i in range(k_all):
@@ -183,17 +118,20 @@ def _resample(
             x[k], y[k], t[k] = wp[i, 0], wp[i, 1], wp[i, 3]
             k += 1
     heading = _headings(x, y, k, standing)
-    for i in range(k):
-        h_in[i] = heading[i]
     n = max(count, 2)
     times = np.empty(n)
     poses = np.empty((n, 3))
-    for i in range(count):
+    tk = t[:k]
+    j = 0
+    for i in range(count):  # the grid ascends: each knot search starts from the last one's
         ti = (start_us + i * step_us) / 1e6
         times[i] = ti
-        poses[i, 0] = _interp(ti, t, x, k)
-        poses[i, 1] = _interp(ti, t, y, k)
-        poses[i, 2] = _interp(ti, t, h_in, k)
+        j_i = interp_knot(ti, tk, j)
+        if j_i >= 0:
+            j = j_i
+        poses[i, 0] = interp_on(ti, tk, x[:k], j_i)
+        poses[i, 1] = interp_on(ti, tk, y[:k], j_i)
+        poses[i, 2] = interp_on(ti, tk, heading, j_i)
     if count == 1:  # a path shorter than one step stands: its pose again one step later
         times[1] = times[0] + step_us / 1e6
         poses[1, :] = poses[0, :]
@@ -234,6 +172,12 @@ def _integrate(initial: float, rates: _F64, dt: float) -> _F64:  # pragma: no co
         acc = rates[i] * dt if i == 0 else acc + rates[i] * dt
         out[i + 1] = initial + acc
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _sum_of(a: _F64) -> float:  # pragma: no cover - compiled
+    """``a.sum()`` as numpy adds it."""
+    return pairwise_sum(a, a.shape[0])
 
 
 @numba.njit(cache=True, nogil=True)
@@ -300,17 +244,18 @@ def track_path(  # noqa: PLR0917 - numba takes no keyword-only parameters
     x = _fit(weights, products, dt, curvature_penalty)
     curvature = _integrate(x[0], x[1:], dt)
     # LqrTracker.track
-    v_ref = _interp(t_s + horizon * dt, times, speed_ref, m)
+    fitted_at = times[:m]  # the profiles hold at the poses' times but the last
+    v_ref = interp_at(t_s + horizon * dt, fitted_at, speed_ref)
     kappa = np.empty(horizon)
     for i in range(horizon):
-        kappa[i] = _interp(t_s + dt * float(i), times, curvature, m)
+        kappa[i] = interp_at(t_s + dt * float(i), fitted_at, curvature)
     if v_ref <= stopping_velocity and speed <= stopping_velocity:
         return stopping_gain * (v_ref - speed), 0.0
     b = horizon * dt
     accel = -(b * q_lon) / (b * q_lon * b + r_lon) * (speed - v_ref)
-    x_ref = _interp(t_s, times, poses[:, 0].copy(), n)
-    y_ref = _interp(t_s, times, poses[:, 1].copy(), n)
-    h_ref = _interp(t_s, times, poses[:, 2].copy(), n)
+    x_ref = interp_at(t_s, times, poses[:, 0])
+    y_ref = interp_at(t_s, times, poses[:, 1])
+    h_ref = interp_at(t_s, times, poses[:, 2])
     dx, dy = pose_x - x_ref, pose_y - y_ref
     lateral = -dx * math.sin(h_ref) + dy * math.cos(h_ref)
     heading_error = (pose_yaw - h_ref + math.pi) % _PERIOD - math.pi
@@ -325,14 +270,14 @@ def track_path(  # noqa: PLR0917 - numba takes no keyword-only parameters
         m12[i] = v * dt / wheelbase
         b1_terms[i] = m12[i] * float(i) * dt
         g1_terms[i] = -v * kappa[i] * dt
-    a01 = _sum(m01)
-    a02 = _sum(m01 * _before(m12))
-    a12 = _sum(m12)
-    b0 = _sum(m01 * _before(b1_terms))
-    b1 = _sum(b1_terms)
+    a01 = _sum_of(m01)
+    a02 = _sum_of(m01 * _before(m12))
+    a12 = _sum_of(m12)
+    b0 = _sum_of(m01 * _before(b1_terms))
+    b1 = _sum_of(b1_terms)
     b2 = horizon * dt
-    g0 = _sum(m01 * _before(g1_terms))
-    g1 = _sum(g1_terms)
+    g0 = _sum_of(m01 * _before(g1_terms))
+    g1 = _sum_of(g1_terms)
     # A x_0 + g: numpy's einsum adds a row's three products as (p_0 + p_2) + p_1
     e0 = ((1.0 * lateral + a02 * steer) + a01 * heading_error) + g0
     e1 = ((0.0 * lateral + a12 * steer) + 1.0 * heading_error) + g1

@@ -1,5 +1,6 @@
 """numpy's scalar special cases written out for the planner's and controller's numba kernels
-(``_plan_kernels``, ``_control_kernels``): the same float64 operations in the same order, so the
+(``_plan_kernels``, ``_control_kernels``) and the closed loop's LQR tracker
+(``redrive.closedloop._tracker_kernels``): the same float64 operations in the same order, so the
 kernels stay bit for bit equal to the numpy code they replaced."""
 
 # clip written out, the first argument kept as numpy's clip does
@@ -13,7 +14,16 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["interp_at", "interp_knot", "interp_on", "nan_span", "segment_at"]
+__all__ = [
+    "MAX_PAIRWISE",
+    "interp_at",
+    "interp_knot",
+    "interp_on",
+    "nan_span",
+    "pairwise_sum",
+    "segment_at",
+    "unwrap",
+]
 
 _F64 = npt.NDArray[np.float64]
 
@@ -97,3 +107,57 @@ def nan_span(values: _F64, start: int, count: int) -> tuple[float, float]:  # pr
             if v > hi:
                 hi = v
     return lo, hi
+
+
+#: the longest sum :func:`pairwise_sum` adds as numpy does (numpy's ``PW_BLOCKSIZE``; past it
+#: numpy recurses, which a cached numba kernel cannot)
+MAX_PAIRWISE = 128
+
+
+@numba.njit(cache=True, nogil=True)
+def pairwise_sum(a: _F64, n: int) -> float:  # pragma: no cover - compiled
+    """``a[:n].sum()`` as numpy adds it (its float64 add reduction, ``pairwise_sum``: from the
+    identity 0.0, eight accumulators from eight values on), ``n`` ≤ :data:`MAX_PAIRWISE`."""
+    if n < 8:
+        res = 0.0
+        for i in range(n):
+            res += a[i]
+        return res
+    r0, r1, r2, r3, r4, r5, r6, r7 = a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7]
+    i = 8
+    while i < n - n % 8:
+        r0 += a[i]
+        r1 += a[i + 1]
+        r2 += a[i + 2]
+        r3 += a[i + 3]
+        r4 += a[i + 4]
+        r5 += a[i + 5]
+        r6 += a[i + 6]
+        r7 += a[i + 7]
+        i += 8
+    res = 0.0 + (((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7)))
+    while i < n:
+        res += a[i]
+        i += 1
+    return float(res)
+
+
+@numba.njit(cache=True, nogil=True)
+def unwrap(p: _F64, n: int, out: _F64) -> None:  # pragma: no cover - compiled
+    """``out[:n] = np.unwrap(p[:n])`` (period 2π, discont π): each step's principal value
+    (``mod(d + π, 2π) − π``, +π for a step of exactly +π), its correction where the step is at
+    least π, the corrections' cumulative sum added."""
+    if n == 0:
+        return
+    out[0] = p[0]
+    correction = 0.0
+    for i in range(1, n):
+        dd = p[i] - p[i - 1]
+        ddmod = (dd - (-math.pi)) % (2.0 * math.pi) + (-math.pi)
+        if ddmod == -math.pi and dd > 0.0:
+            ddmod = math.pi
+        ph = ddmod - dd
+        if abs(dd) < math.pi:
+            ph = 0.0
+        correction = ph if i == 1 else correction + ph
+        out[i] = p[i] + correction

@@ -37,11 +37,13 @@ from redrive.algorithms.reference._numeric_kernels import (
     interp_on,
     nan_span,
     segment_at,
+    unwrap,
 )
 from redrive.motion.idm import idm_kernel
 
 __all__ = [
     "box_frames",
+    "curve_speed",
     "gate_crossing",
     "idm_profile",
     "leaders_on_path",
@@ -514,3 +516,50 @@ def gate_crossing(  # noqa: PLR0917 - numba takes no keyword-only parameters
                 best_y = ab1 / h
             break  # the first hit of this line segment
     return found, best_s, best_x, best_y
+
+
+@numba.njit(cache=True, nogil=True)
+def curve_speed(  # noqa: PLR0917 - numba takes no keyword-only parameters
+    xy: _F64,
+    s: _F64,
+    length_m: float,
+    sample_m: float,
+    window: int,
+    max_lateral_accel_mps2: float,
+    decel_mps2: float,
+    front_offset_m: float,
+) -> float:  # pragma: no cover - compiled
+    """IdmPlanner._curve_speed_mps after its length test: the path (``xy``, arc lengths ``s``)
+    sampled every ``sample_m`` over [0, ``length_m``) (``np.arange``'s samples), the headings of
+    the samples' steps unwrapped (``np.unwrap`` of ``arctan2``), the curvature over ``window``
+    steps, and ``min_j sqrt(a_lat / max(|κ_j|, 1e-9) + 2 b · max(s_j − front, 0))`` (inf when
+    the headings are not more than ``window``) — numpy's operations in its order (a NaN wins the
+    minimum, as ``np.min``)."""
+    count = math.ceil((length_m - 0.0) / sample_m)
+    samples = np.empty(count)
+    for i in range(count):
+        samples[i] = 0.0 + i * sample_m
+    pts = points_at(xy, s, samples)
+    n = count - 1
+    if n <= window:
+        return math.inf
+    raw = np.empty(n)
+    for i in range(n):
+        raw[i] = math.atan2(pts[i + 1, 1] - pts[i, 1], pts[i + 1, 0] - pts[i, 0])
+    heading = np.empty(n)
+    unwrap(raw, n, heading)
+    span = window * sample_m
+    twice_b = 2.0 * decel_mps2
+    out = math.nan
+    for j in range(n - window):
+        kappa = abs(heading[j + window] - heading[j]) / span
+        if not (kappa >= 1e-9 or math.isnan(kappa)):  # np.maximum(kappa, 1e-9)
+            kappa = 1e-9
+        curve = math.sqrt(max_lateral_accel_mps2 / kappa)
+        ahead = samples[j + window] - front_offset_m
+        if not (ahead >= 0.0 or math.isnan(ahead)):  # np.maximum(ahead, 0.0)
+            ahead = 0.0
+        v = math.sqrt(curve * curve + twice_b * ahead)
+        if j == 0 or math.isnan(v) or (not math.isnan(out) and v < out):
+            out = v
+    return out

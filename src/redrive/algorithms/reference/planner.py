@@ -89,6 +89,7 @@ from redrive.algorithms.reference._kernels import project_on_segments
 from redrive.algorithms.reference._lights import Gate, gates_of, stop_arcs
 from redrive.algorithms.reference._plan_kernels import (
     box_frames,
+    curve_speed,
     gate_crossing,
     idm_profile,
     leaders_on_path,
@@ -347,6 +348,7 @@ class IdmPlanner(Algorithm):
         # a stop line's test (_lights.stop_arcs), with the arrays' types a step gives it
         gate_crossing(line.xy, line.s, np.zeros((2, 2)), 0.0, 0.0, 1.0, 1.0)
         path_bounds(line.xy)
+        curve_speed(line.xy, line.s, 1.0, _CURVE_SAMPLE_M, 4, 1.0, 1.0, 0.0)
 
     # -- the step -----------------------------------------------------------------------------
 
@@ -496,19 +498,17 @@ class IdmPlanner(Algorithm):
         length = min(path.length_m, self.range_m)
         if length < 2.0 * _CURVE_WINDOW_M:
             return math.inf
-        s = np.arange(0.0, length, _CURVE_SAMPLE_M)
-        xy = path.points_at(s)
-        d = np.diff(xy, axis=0)
-        heading = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
         k = max(1, round(_CURVE_WINDOW_M / _CURVE_SAMPLE_M))
-        if heading.size <= k:
-            return math.inf
-        kappa = np.abs(heading[k:] - heading[:-k]) / (k * _CURVE_SAMPLE_M)
-        at = s[k:-1] if s.size - 1 > k else s[k:]
-        at = at[: kappa.size]
-        curve = np.sqrt(self.max_lateral_accel_mps2 / np.maximum(kappa, 1e-9))
-        ahead = np.maximum(at - self.front_offset_m, 0.0)
-        return float(np.min(np.sqrt(curve**2 + 2.0 * self.b_mps2 * ahead)))
+        return curve_speed(
+            path.xy,
+            path.s,
+            float(length),
+            _CURVE_SAMPLE_M,
+            k,
+            float(self.max_lateral_accel_mps2),
+            float(self.b_mps2),
+            float(self.front_offset_m),
+        )
 
     def _profile(
         self, speed_mps: float, leaders_s: F64, leaders_v: F64, *, v0_mps: float | None = None
