@@ -466,3 +466,27 @@ def test_compiled_commands_equal_the_numpy_reference(horizon: int) -> None:
             )
             compared += 1
     assert compared == 4 * 45
+
+
+def test_the_compiled_path_check_passes_what_the_numpy_check_passes() -> None:
+    """``commands`` checks a path with ``path_is_trackable`` (compiled) and, when it fails, with
+    ``_check_path``, which says why: both refuse the same paths."""
+    from redrive.closedloop._tracker_kernels import path_is_trackable
+    from redrive.closedloop.tracker import _check_path
+
+    rng = np.random.default_rng(3)
+    refused = 0
+    for _ in range(2000):
+        k = int(rng.integers(1, 6))
+        wp = np.c_[rng.integers(0, 3, size=(k, 2)) * rng.choice([1.0, 1e-7]), np.zeros(k)]
+        wp = np.c_[wp, np.cumsum(rng.integers(-1, 3, size=k) * 0.1)]
+        if rng.random() < 0.1:
+            wp[rng.integers(k), rng.integers(4)] = rng.choice([np.nan, np.inf, -np.inf])
+        try:
+            _check_path(PlannedPath(stamp_ns=0, waypoints=wp, frame_id="map"))
+            numpy_ok = True
+        except ValueError:
+            numpy_ok = False
+        assert path_is_trackable(np.ascontiguousarray(wp)) == numpy_ok, wp
+        refused += not numpy_ok
+    assert 200 < refused < 1800

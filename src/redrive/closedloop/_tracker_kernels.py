@@ -32,7 +32,7 @@ from redrive.algorithms.reference._numeric_kernels import (
     unwrap,
 )
 
-__all__ = ["MAX_HORIZON", "resample_grid", "track_path"]
+__all__ = ["MAX_HORIZON", "path_is_trackable", "resample_grid", "track_path"]
 
 #: the longest horizon :func:`track_path` sums as numpy does (numpy's pairwise block)
 MAX_HORIZON = MAX_PAIRWISE
@@ -54,6 +54,25 @@ def resample_grid(t_first_s: float, t_last_s: float, step_s: float) -> tuple[int
     if start_us + count * step_us <= end_us:
         count += 1
     return start_us, step_us, count
+
+
+@numba.njit(cache=True, nogil=True)
+def path_is_trackable(wp: _F64) -> bool:  # pragma: no cover - compiled
+    """Whether the tracker's path check (tracker._check_path) passes the waypoints ``wp``
+    (K ≥ 1, 4): every value finite, no two places at one time (consecutive waypoints more than
+    1 µm apart with no time between them), time never going back."""
+    n = wp.shape[0]
+    for i in range(n):
+        for c in range(4):
+            if not math.isfinite(wp[i, c]):
+                return False
+    for i in range(n - 1):
+        step = wp[i + 1, 3] - wp[i, 3]
+        if step < 0.0:
+            return False
+        if step <= 0.0 and math.hypot(wp[i + 1, 0] - wp[i, 0], wp[i + 1, 1] - wp[i, 1]) > 1e-6:
+            return False
+    return True
 
 
 @numba.njit(cache=True, nogil=True)

@@ -49,7 +49,12 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from redrive.closedloop._tracker_kernels import MAX_HORIZON, resample_grid, track_path
+from redrive.closedloop._tracker_kernels import (
+    MAX_HORIZON,
+    path_is_trackable,
+    resample_grid,
+    track_path,
+)
 from redrive.closedloop.profiles import ReferenceProfiles, fit_profiles, resample_poses
 from redrive.motion.lqr import curvature_gram, jerk_gram, lateral_lqr, longitudinal_lqr
 from redrive.sim.ego import EgoGeometry, PedalModel
@@ -219,7 +224,9 @@ class LqrTracker:
         if not (math.isfinite(dt_s) and dt_s > 0.0):
             msg = f"LqrTracker.commands: dt_s must be a positive number of seconds, got {dt_s}"
             raise ValueError(msg)
-        _check_path(path)
+        wp = np.ascontiguousarray(path.waypoints, dtype=np.float64)
+        if wp.shape[0] == 0 or not path_is_trackable(wp):
+            _check_path(path)  # raises, saying what is wrong
         if path.frame_id == "base_link":
             x, y, yaw = 0.0, 0.0, 0.0
         elif path.frame_id == state.frame_id:
@@ -252,7 +259,7 @@ class LqrTracker:
                 profiles, pose=(x, y, yaw), speed_mps=speed, steer_rad=steer_rad, t_s=t_s
             )
         else:
-            accel, rate = self._track_compiled(path, (x, y, yaw), speed, steer_rad, t_s)
+            accel, rate = self._track_compiled(wp, (x, y, yaw), speed, steer_rad, t_s)
         g = self.geometry
         steer = min(max(steer_rad + rate * dt_s, -g.max_steer_rad), g.max_steer_rad)
         throttle, brake = self._pedals(accel, speed)
@@ -260,15 +267,14 @@ class LqrTracker:
 
     def _track_compiled(
         self,
-        path: PlannedPath,
+        wp: F64,
         pose: tuple[float, float, float],
         speed: float,
         steer_rad: float,
         t_s: float,
     ) -> tuple[float, float]:
         """resample_poses + fit_profiles + track in one compiled call
-        (closedloop._tracker_kernels: the same doubles)."""
-        wp = np.ascontiguousarray(path.waypoints, dtype=np.float64)
+        (closedloop._tracker_kernels: the same doubles) for the waypoints ``wp`` (K, 4)."""
         start_us, step_us, count = resample_grid(float(wp[0, 3]), float(wp[-1, 3]), self._dt)
         m = max(count, 2) - 1
         params = self.params
