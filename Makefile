@@ -38,13 +38,14 @@ $(VENV)/.installed-test: $(VENV)/.installed pyproject.toml
 	$(BIN)/pip install -q --no-deps 'commonroad-io>=2024.1,<2027'  # see pyproject: [commonroad]
 	@touch $@
 
-# The numba kernels of `redrive synth` and of the reference pipeline, compiled once after the
+# The numba kernels of `redrive synth`, of the reference pipeline and of the closed loop's LQR
+# tracker (`python -m redrive.closedloop.kernels`), compiled once after the
 # install into numba's on-disk cache (src/**/__pycache__), so that the first `redrive run` loads
 # them instead of compiling them; again when a file with kernels changes (numba would recompile
 # it on first use anyway).  `make clean-kernels` drops them.
 KERNEL_SOURCES := $(shell grep -rl --include='*.py' 'import numba' src/redrive)
 $(VENV)/.kernels: $(VENV)/.installed $(KERNEL_SOURCES)
-	$(BIN)/python -m redrive.engine.kernels
+	$(BIN)/python -m redrive.closedloop.kernels
 	@touch $@
 
 venv: $(VENV)/.installed $(VENV)/.kernels

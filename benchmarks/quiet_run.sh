@@ -25,11 +25,11 @@ for m in sequential sequential pipelined pipelined; do
 done
 # issue 36: pipelined against sequential in fresh processes (wall ratio, cores in use, the two-core
 # bound by CPU time, tables compared), and the first run on a fresh machine: an empty numba cache,
-# the install step (`python -m redrive.engine.kernels`, what `make venv` runs), then the run
+# the install step (`python -m redrive.closedloop.kernels`, what `make venv` runs), then the run
 log overlap; $PY -m benchmarks.pipelined_overlap $D/urban.mcap --rounds 3 > $O/overlap.txt 2>&1; tail -2 $O/overlap.txt >> $O/log
 log "overlap, switch interval 0.5 ms"; $PY -m benchmarks.pipelined_overlap $D/urban.mcap --rounds 3 --switch-interval-ms 0.5 > $O/overlap-si.txt 2>&1; tail -2 $O/overlap-si.txt >> $O/log
 rm -rf $D/numba-fresh; log "install step (fresh numba cache)"
-NUMBA_CACHE_DIR=$D/numba-fresh $PY -m redrive.engine.kernels > $O/kernels.txt 2>&1; cat $O/kernels.txt >> $O/log
+NUMBA_CACHE_DIR=$D/numba-fresh $PY -m redrive.closedloop.kernels > $O/kernels.txt 2>&1; cat $O/kernels.txt >> $O/log
 log "first run"; rm -rf $O/run; NUMBA_CACHE_DIR=$D/numba-fresh $PY -m redrive run $D/urban.mcap --out $O/run > $O/run-first.txt 2>&1; grep -i "real time" $O/run-first.txt | tail -1 >> $O/log
 log closed-loop; $PY -m redrive bench closed-loop --repeat 3 > $O/closed.txt 2>&1
 log sensor; $PY -m redrive bench closed-loop --level sensor --repeat 1 > $O/sensor.txt 2>&1

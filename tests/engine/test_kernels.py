@@ -1,4 +1,4 @@
-"""The install step's kernels (``python -m redrive.engine.kernels``): after it, another process's
+"""The install step's kernels (``python -m redrive.closedloop.kernels``): after it, another process's
 synth and run of the reference pipeline — another log than the step's own — and the closed
 loop's LQR tracker compile nothing,
 and the detector's kernel is a cache hit there, not a fresh compile."""
@@ -67,7 +67,7 @@ def _python(args: list[str], tmp: Path) -> str:
 
 
 def test_a_second_process_compiles_nothing_after_the_install_step(tmp_path: Path) -> None:
-    step = _python(["-m", "redrive.engine.kernels"], tmp_path)
+    step = _python(["-m", "redrive.closedloop.kernels"], tmp_path)
     assert "kernel" in step
     second = json.loads(_python(["-c", _SECOND, str(tmp_path)], tmp_path).splitlines()[-1])
     assert second["compiled"] == []

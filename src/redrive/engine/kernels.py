@@ -9,8 +9,9 @@ at install time (the Makefile runs ``python -m redrive.engine.kernels`` after ``
 synthesizes a one-second ``urban`` log into a temporary directory and replays it through the
 reference pipeline, so every kernel is compiled with exactly the argument types a real synth and
 a real run give it (a read-only decoded cloud and a strided one are different types to numba),
-then loads each reference algorithm's own warm-up (its ``warm_kernels``, what ``bind`` runs), and
-calls the closed loop's LQR tracker once (its compiled body, ``closedloop._tracker_kernels``).
+then loads each reference algorithm's own warm-up (its ``warm_kernels``, what ``bind`` runs).
+The install step the Makefile runs is ``python -m redrive.closedloop.kernels``: this, then the
+closed loop's own kernels (a layer above the engine).
 
 A kernel whose source file changes is compiled again on its next use (numba compares the file's
 stamp); ``make clean-kernels`` drops the cache.
@@ -27,7 +28,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["KernelReport", "compile_kernels", "compiled_during", "main"]
+__all__ = ["KernelReport", "compile_kernels", "compiled_during", "main", "print_report"]
 
 #: the log :func:`compile_kernels` synthesizes and replays (the demo's scenario, shorter)
 WARM_SCENARIO = "urban"
@@ -89,22 +90,7 @@ def compile_kernels(*, workdir: Path | None = None) -> KernelReport:
         for mode in ("sequential", "pipelined"):
             pipeline = reference_pipeline().with_options(mode=mode)
             run_log(RunRequest(log=log, pipeline=pipeline, out=Path(tmp) / mode))
-        _warm_tracker()
     return KernelReport(compiled=tuple(compiled), wall_s=time.perf_counter() - t0)
-
-
-def _warm_tracker() -> None:
-    """The closed loop's LQR tracker (its compiled ``commands``: ≈ 10 s to compile) on a
-    straight path, with the argument types of every closed-loop run."""
-    import numpy as np
-
-    from redrive.closedloop.tracker import LqrTracker
-    from redrive.types import PlannedPath, VehicleState
-
-    t = np.arange(0.0, 8.0, 0.1)
-    path = PlannedPath(stamp_ns=0, waypoints=np.c_[5.0 * t, 0.0 * t, 0.0 * t, t], frame_id="map")
-    state = VehicleState(stamp_ns=0, frame_id="map", velocity=np.array([5.0, 0.0, 0.0]))
-    LqrTracker().commands(state, path, 0.1, stamp_ns=0)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -117,7 +103,12 @@ def main(argv: list[str] | None = None) -> int:
         ),
     )
     parser.parse_args(argv)
-    report = compile_kernels()
+    print_report(compile_kernels())
+    return 0
+
+
+def print_report(report: KernelReport) -> None:
+    """The install step's one line: how many signatures were compiled, in how long."""
     if report.compiled:
         print(
             f"compiled {len(report.compiled)} kernel signatures in {report.wall_s:.1f} s "
@@ -125,7 +116,6 @@ def main(argv: list[str] | None = None) -> int:
         )
     else:
         print(f"kernels already compiled (loaded from numba's cache in {report.wall_s:.1f} s)")
-    return 0
 
 
 if __name__ == "__main__":
