@@ -31,6 +31,7 @@ from redrive.algorithms.reference._numeric_kernels import (
     pairwise_sum,
     unwrap,
 )
+from redrive.closedloop.profiles import SAME_POINT_M
 
 __all__ = ["MAX_HORIZON", "path_is_trackable", "resample_grid", "track_path"]
 
@@ -38,11 +39,7 @@ __all__ = ["MAX_HORIZON", "path_is_trackable", "resample_grid", "track_path"]
 MAX_HORIZON = MAX_PAIRWISE
 
 _F64 = npt.NDArray[np.float64]
-#: profiles.SAME_POINT_M (kept equal by a test)
-_SAME_POINT_M = 1e-6
 _PERIOD = 2.0 * math.pi
-#: motion.lqr.INITIAL_CURVATURE_PENALTY (kept equal by a test)
-_INITIAL_CURVATURE_PENALTY = 1e-10
 
 
 def resample_grid(t_first_s: float, t_last_s: float, step_s: float) -> tuple[int, int, int]:
@@ -84,7 +81,7 @@ def _headings(x: _F64, y: _F64, k: int, standing: float) -> _F64:  # pragma: no 
     moving = np.zeros(max(m, 0), dtype=np.bool_)
     first = -1
     for i in range(m):
-        if math.hypot(x[i + 1] - x[i], y[i + 1] - y[i]) > _SAME_POINT_M:
+        if math.hypot(x[i + 1] - x[i], y[i + 1] - y[i]) > SAME_POINT_M:
             moving[i] = True
             if first < 0:
                 first = i
