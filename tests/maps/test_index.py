@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -211,3 +212,30 @@ def test_the_centrelines_are_measured_lane_by_lane() -> None:
         if lane.left_boundary is None:
             box = index._lane_tree.geometries[k]
             assert box.contains(lane_polygon(lane))
+
+
+def _assert_polygons_are_lane_polygon(road: RoadMap) -> None:
+    index = RoadMapIndex(road)
+    widened = [k for k, lane in enumerate(road.lanes) if lane.left_boundary is None]
+    assert widened  # the maps below have lanes widened from their centrelines
+    rng = np.random.default_rng(3)
+    # some asked first (a closed loop's queries make those they test), in no order, then all
+    index._lane_polygons_at(rng.permutation(np.array(widened))[: max(1, len(widened) // 3)])
+    for lane, poly in zip(road.lanes, index.lane_polygons, strict=True):
+        assert shapely.to_wkb(poly) == shapely.to_wkb(lane_polygon(lane)), lane.lane_id
+
+
+def test_widened_lanes_are_lane_polygon_made_in_one_call(index: RoadMapIndex) -> None:
+    """The polygons the index makes of lanes without boundaries, all in one buffer call, are
+    :func:`lane_polygon`'s, vertex for vertex."""
+    _assert_polygons_are_lane_polygon(index.road_map)
+
+
+def test_widened_lanes_of_the_waymo_map_are_lane_polygon(shared_data: Path) -> None:
+    from redrive.io import open_log
+    from redrive.io.content import log_road_map
+
+    road = log_road_map(open_log(shared_data / "womd" / "motion_data_one_scenario.tfrecord"))
+    assert road is not None
+    assert len(road.lanes) == 198
+    _assert_polygons_are_lane_polygon(road)

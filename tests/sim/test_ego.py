@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from redrive.sim.ego import BicycleModel, EgoGeometry
+from redrive.sim.ego import ActuatedEgo, BicycleModel, EgoGeometry, TyreLimit
+from redrive.types import ControlCommands
 
 
 def test_constant_speed_zero_steer_travels_exactly_speed_times_time() -> None:
@@ -68,3 +69,56 @@ def test_never_reverses() -> None:
     assert model.speed_mps == 0.0
     assert model.x_m == pytest.approx(1.0 / 8.0)
     assert model.state(0).acceleration[0] == 0.0
+
+
+def _random_ego(rng: np.random.Generator, *, jerk: bool, delay: int) -> ActuatedEgo:
+    geometry = EgoGeometry(max_jerk_mps3=float(rng.uniform(1.0, 20.0)) if jerk else None)
+    model = BicycleModel(
+        geometry,
+        x_m=float(rng.uniform(-3000.0, 3000.0)),
+        y_m=float(rng.uniform(-3000.0, 3000.0)),
+        yaw_rad=float(rng.uniform(-math.pi, math.pi)),
+        speed_mps=float(rng.choice([0.0, rng.uniform(0.0, 35.0)])),
+        steer_rad=float(rng.uniform(-0.6, 0.6)),
+    )
+    tyres = TyreLimit(friction_coefficient=float(rng.choice([0.9, 0.1])))  # 0.1: the circle binds
+    return ActuatedEgo(model, delay_steps=delay, tyres=tyres)
+
+
+def _state(ego: ActuatedEgo) -> tuple[float, ...]:
+    m = ego.model
+    return (m.x_m, m.y_m, m.yaw_rad, m.speed_mps, m.steer_rad, m.accel_mps2)
+
+
+@pytest.mark.parametrize("delay", [0, 1])
+def test_apply_steps_is_apply_repeated_bit_for_bit(delay: int) -> None:
+    """The compiled substeps (the world's commanded-ego kernel) give the doubles of the Python
+    steps: throttle, brake, coasting to rest, steering at its rate and range limits, the jerk
+    bound and the friction circle binding."""
+    rng = np.random.default_rng(7 + delay)
+    for case in range(300):
+        jerk = case % 3 == 0
+        seed = int(rng.integers(1 << 32))
+        a = _random_ego(np.random.default_rng(seed), jerk=jerk, delay=delay)
+        b = _random_ego(np.random.default_rng(seed), jerk=jerk, delay=delay)
+        for _ in range(4):
+            throttle, brake = (
+                (float(rng.uniform(0, 1)), 0.0)
+                if rng.random() < 0.5
+                else (0.0, float(rng.uniform(0, 1)))
+            )
+            cmd = ControlCommands(
+                throttle=throttle, brake=brake, steering_angle_rad=float(rng.uniform(-0.9, 0.9))
+            )
+            steps = int(rng.integers(1, 12))
+            dt = float(rng.choice([0.1, 0.05, 0.5])) / steps
+            for _ in range(steps):
+                a.apply(cmd, dt)
+            b.apply_steps(cmd, dt, steps)
+            assert _state(a) == _state(b), (case, cmd, steps, dt)
+
+
+def test_apply_steps_refuses_a_bad_step() -> None:
+    ego = ActuatedEgo(BicycleModel(EgoGeometry()))
+    with pytest.raises(ValueError, match="dt_s must be a positive number"):
+        ego.apply_steps(ControlCommands(), float("nan"), 3)

@@ -378,8 +378,7 @@ class LogSimulator:
         if self._lane_agents is not None:  # the agents move from where everyone is now
             self._step_lane_agents(frame, state, dt_s=dt_s)
         substeps = max(1, math.ceil(dt_s / _MAX_PHYSICS_DT_S - 1e-9))
-        for _ in range(substeps):
-            self._ego.apply(self._acting, dt_s / substeps)
+        self._ego.apply_steps(self._acting, dt_s / substeps, substeps)
         self._current, self._next = self._next, next(self._frames, None)
         self._index += 1
         self._update_agents(self._current, dt_s=dt_s)

@@ -147,8 +147,16 @@ class RoadMapIndex:
         """The prepared polygons of the lanes at ``positions``, each made when first asked."""
         missing = np.unique(positions[~self._lane_made[positions]])
         if missing.size:
+            # lane_polygon of each (a lane without boundaries: its centreline buffered by half
+            # its width, flat ends), the lines made and buffered in one call each: the same
+            # GEOS buffer of the same lines, so the same polygons
+            counts = self._vertex_count[missing]
+            first = np.repeat(self._vertex_start[missing] - np.cumsum(counts) + counts, counts)
+            coords = self._vertices[first + np.arange(int(counts.sum()))]
+            lines = shapely.linestrings(coords, indices=np.repeat(np.arange(missing.size), counts))
             lanes = self.road_map.lanes
-            made = np.array([lane_polygon(lanes[k]) for k in missing.tolist()], dtype=object)
+            half = np.array([lanes[k].width_m for k in missing.tolist()], dtype=np.float64) / 2.0
+            made = np.asarray(shapely.buffer(lines, half, cap_style="flat"), dtype=object)
             shapely.prepare(made)
             self._lane_array[missing] = made
             self._lane_made[missing] = True

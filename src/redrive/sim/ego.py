@@ -319,6 +319,9 @@ class ActuatedEgo:
         self.tyres = tyres if tyres is not None else TyreLimit()
         self.delay_steps = delay_steps
         self._pending: ControlCommands | None = None
+        #: apply_steps' kernel parameters, and the (geometry, pedals, tyres) they were made of
+        self._kernel_p = np.zeros(0)
+        self._kernel_key: tuple[EgoGeometry, PedalModel, TyreLimit] | None = None
 
     @property
     def model(self) -> BicycleModel:
@@ -342,6 +345,36 @@ class ActuatedEgo:
             steer_rad=acting.steering_angle_rad,
             friction_circle_mps2=self.tyres.max_accel_mps2,
         )
+
+    def apply_steps(self, commands: ControlCommands, dt_s: float, steps: int) -> None:
+        """``steps`` × :meth:`apply` ``(commands, dt_s)``: without a delay in one compiled call
+        (:func:`redrive.sim.stepper.pedal_steps`, the world's own commanded-ego step: the same
+        doubles as the Python steps), with one as ``steps`` calls of :meth:`apply`."""
+        if not (math.isfinite(dt_s) and dt_s > 0.0):
+            msg = f"ActuatedEgo.apply: dt_s must be a positive number of seconds, got {dt_s}"
+            raise ValueError(msg)
+        if self.delay_steps or steps < 1:
+            for _ in range(steps):
+                self.apply(commands, dt_s)
+            return
+        from redrive.sim import stepper  # (numba is imported on first use)
+
+        m = self._model
+        key = (m.geometry, self.pedals, self.tyres)
+        if self._kernel_key is None or any(
+            a is not b for a, b in zip(self._kernel_key, key, strict=True)
+        ):
+            self._kernel_p = stepper.ego_parameters(
+                m.geometry, self.pedals, self.tyres.max_accel_mps2
+            )
+            self._kernel_key = key
+        p = self._kernel_p
+        p[stepper.THROTTLE] = commands.throttle
+        p[stepper.BRAKE] = commands.brake
+        p[stepper.STEER_CMD] = commands.steering_angle_rad
+        e = np.array([m.x_m, m.y_m, m.yaw_rad, m.speed_mps, m.steer_rad, m.accel_mps2, 0.0])
+        stepper.pedal_steps(e, p, dt_s, steps)
+        m.x_m, m.y_m, m.yaw_rad, m.speed_mps, m.steer_rad, m.accel_mps2, _ = e.tolist()
 
     def brake(self, dt_s: float) -> None:
         """Advance ``dt_s`` seconds under a full emergency brake with the steering angle held —

@@ -37,9 +37,10 @@ from redrive.sim.gaps import _gap_kernel  # compiled into _frame, with gaps.BLOC
 # `make clean-kernels`), else a cached _frame keeps the old code
 
 if TYPE_CHECKING:
+    from redrive.sim.ego import EgoGeometry, PedalModel
     from redrive.sim.world import World
 
-__all__ = ["FrameStepper"]
+__all__ = ["FrameStepper", "ego_parameters", "pedal_steps"]
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
@@ -73,19 +74,7 @@ class FrameStepper:
             raise SimulationError(msg)
         self._route = search.routes.index(driver.route)
         idm = driver.idm
-        p = np.zeros(_NP)
-        p[WB:JERK] = (
-            g.wheelbase_m,
-            g.center_offset_m,
-            g.front_offset_m,
-            g.length_m,
-            g.width_m,
-            g.max_steer_rad,
-            g.max_steer_rate_rad_s,
-            g.max_accel_mps2,
-            g.max_decel_mps2,
-        )
-        p[JERK] = math.nan if g.max_jerk_mps3 is None else g.max_jerk_mps3
+        p = ego_parameters(g, None, 0.0)  # the pedals' columns set by run when they drive
         p[LOOK_T:THROTTLE] = (
             driver.lookahead_time_s,
             driver.min_lookahead_m,
@@ -485,6 +474,48 @@ def _walker(walk: F64, k: int) -> tuple[float, float, float, float]:  # pragma: 
         vx = walk[k, WSPD] * math.cos(walk[k, WYAW])
         vy = walk[k, WSPD] * math.sin(walk[k, WYAW])
     return x, y, vx, vy
+
+
+def ego_parameters(geometry: EgoGeometry, pedals: PedalModel | None, friction_mps2: float) -> F64:
+    """The ego's parameter columns: ``geometry``'s limits, ``pedals``' model (None: zeros) and
+    the friction circle — what :func:`pedal_steps` reads (the command's three columns are set
+    per call)."""
+    g = geometry
+    p = np.zeros(_NP)
+    p[WB:JERK] = (
+        g.wheelbase_m,
+        g.center_offset_m,
+        g.front_offset_m,
+        g.length_m,
+        g.width_m,
+        g.max_steer_rad,
+        g.max_steer_rate_rad_s,
+        g.max_accel_mps2,
+        g.max_decel_mps2,
+    )
+    p[JERK] = math.nan if g.max_jerk_mps3 is None else g.max_jerk_mps3
+    if pedals is not None:
+        p[P_ACC:HORIZON] = (
+            pedals.max_accel_mps2,
+            pedals.max_brake_mps2,
+            pedals.rolling_resistance_mps2,
+            pedals.drag_coefficient_1pm,
+        )
+    p[FRICTION] = friction_mps2
+    return p
+
+
+@numba.njit(cache=True, nogil=True)
+def pedal_steps(e: F64, p: F64, dt_s: float, steps: int) -> None:
+    """``steps`` × ``ActuatedEgo.apply(command, dt_s)`` (no delay) on the ego's columns ``e``
+    (x, y, yaw, speed, steer, accel), in place: each step the pedal model's acceleration at the
+    speed then, and ``BicycleModel.step`` within the friction circle — the commanded ego's step
+    of the world's frame (``pedals == 1`` in ``_frame``); ``p`` is :func:`ego_parameters` with
+    the command in its ``THROTTLE``, ``BRAKE``, ``STEER_CMD`` columns."""  # pragma: no cover
+    for _ in range(steps):
+        v = e[ESPEED]
+        accel_cmd = p[THROTTLE] * p[P_ACC] - p[BRAKE] * p[P_BRK] - (p[ROLL] + p[DRAG] * v * v)
+        _bicycle(e, p, dt_s, accel_cmd, p[STEER_CMD], p[FRICTION])
 
 
 @numba.njit(cache=True, nogil=True)
