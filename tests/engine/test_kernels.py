@@ -1,6 +1,6 @@
 """The install step's kernels (``python -m redrive.closedloop.kernels``): after it, another process's
 synth and run of the reference pipeline — another log than the step's own — and the closed
-loop's LQR tracker compile nothing,
+loop's LQR tracker and ego substeps compile nothing,
 and the detector's kernel is a cache hit there, not a fresh compile."""
 
 from __future__ import annotations
@@ -30,7 +30,8 @@ from redrive.sim.scenario import load_scenario
 from redrive.sim.synth import synthesize
 from redrive.algorithms.reference import _kernels
 from redrive.closedloop.tracker import LqrTracker
-from redrive.types import PlannedPath, VehicleState
+from redrive.sim.ego import ActuatedEgo, BicycleModel, EgoGeometry
+from redrive.types import ControlCommands, PlannedPath, VehicleState
 import numpy as np
 
 out = Path(sys.argv[1])
@@ -45,6 +46,9 @@ with compiled_during() as compiled:
     path = PlannedPath(stamp_ns=0, waypoints=np.c_[3 * t, t, 0 * t, t], frame_id="map")
     state = VehicleState(stamp_ns=0, velocity=np.array([3.0, 1.0, 0.0]))
     LqrTracker().commands(state, path, 0.1, stamp_ns=50_000_000)
+    # the log backend's ego substeps (another geometry, command and step)
+    ego = ActuatedEgo(BicycleModel(EgoGeometry(wheelbase_m=3.1), speed_mps=12.0))
+    ego.apply_steps(ControlCommands(brake=0.4, steering_angle_rad=0.1), 0.005, 20)
 stats = _kernels.crop_cell_minima.stats
 print(json.dumps({"compiled": compiled, "hits": sum(stats.cache_hits.values()),
                   "misses": sum(stats.cache_misses.values())}))
