@@ -34,7 +34,7 @@ import shapely
 
 from redrive.evaluation._kinematics import project_on_polyline
 from redrive.maps.av2 import read_av2_map
-from redrive.maps.index import RoadMapIndex, lane_polygon
+from redrive.maps.index import DRIVABLE_LANE_KINDS, RoadMapIndex, lane_polygon
 from redrive.types import RoadMap
 
 _DATA = Path(os.environ.get("REDRIVE_SHARED_DATA", Path(__file__).parents[2] / "shared" / "data"))
@@ -76,8 +76,15 @@ class _LinearScan:
     def __init__(self, road: RoadMap) -> None:
         self.lanes = road.lanes
         self.polys = [lane_polygon(lane) for lane in road.lanes]
-        areas = [shapely.Polygon(a.polygon) for a in road.areas]
-        self.edge = shapely.boundary(shapely.union_all([*self.polys, *areas]))
+        # the road edge: the boundary of the drivable area — the lanes cars drive (bike lanes
+        # are lanes, not road) and the map's drivable areas, as RoadMapIndex.drivable
+        areas = [shapely.make_valid(shapely.Polygon(a.polygon)) for a in road.areas]
+        roads = [
+            p
+            for p, lane in zip(self.polys, road.lanes, strict=True)
+            if lane.kind in DRIVABLE_LANE_KINDS
+        ]
+        self.edge = shapely.boundary(shapely.union_all([*roads, *areas]))
         for p in self.polys:
             shapely.prepare(p)
 
