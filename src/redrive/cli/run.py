@@ -355,7 +355,13 @@ def register(sub: Any) -> None:
     parser.add_argument(
         "-o", "--out", type=Path, metavar="DIR", help="run directory (default runs/LOG-TIME)"
     )
-    parser.add_argument("--mode", choices=("sequential", "pipelined"), help="default sequential")
+    parser.add_argument(
+        "--mode",
+        choices=("sequential", "pipelined"),
+        help="default sequential; pipelined runs each stage on a thread of its own, frames "
+        "overlapping — faster only with cores to spare (on two cores the reference pipeline "
+        "runs at 0.8–0.9x its sequential speed: docs/algorithms.md)",
+    )
     parser.add_argument(
         "--executor",
         choices=("threads", "processes"),
