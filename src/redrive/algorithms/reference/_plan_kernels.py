@@ -534,7 +534,8 @@ def curve_speed(  # noqa: PLR0917 - numba takes no keyword-only parameters
     the samples' steps unwrapped (``np.unwrap`` of ``arctan2``), the curvature over ``window``
     steps, and ``min_j sqrt(a_lat / max(|κ_j|, 1e-9) + 2 b · max(s_j − front, 0))`` (inf when
     the headings are not more than ``window``) — numpy's operations in its order (a NaN wins the
-    minimum, as ``np.min``)."""
+    minimum, as ``np.min``), the headings libm's ``atan2`` (numpy's ``arctan2`` but on AVX-512
+    hosts, where numpy's SIMD loop may differ from it in the last bit)."""
     count = math.ceil((length_m - 0.0) / sample_m)
     samples = np.empty(count)
     for i in range(count):
