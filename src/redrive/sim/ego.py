@@ -331,9 +331,7 @@ class ActuatedEgo:
     def apply(self, commands: ControlCommands, dt_s: float) -> None:
         """Advance ``dt_s`` seconds under ``commands`` (or, with a one-step delay, the previous
         step's commands)."""
-        if not (math.isfinite(dt_s) and dt_s > 0.0):
-            msg = f"ActuatedEgo.apply: dt_s must be a positive number of seconds, got {dt_s}"
-            raise ValueError(msg)
+        _check_step(dt_s)
         acting = commands
         if self.delay_steps == 1:
             acting = self._pending or ControlCommands(steering_angle_rad=self._model.steer_rad)
@@ -350,9 +348,7 @@ class ActuatedEgo:
         """``steps`` × :meth:`apply` ``(commands, dt_s)``: without a delay in one compiled call
         (:func:`redrive.sim.stepper.pedal_steps`, the world's own commanded-ego step: the same
         doubles as the Python steps), with one as ``steps`` calls of :meth:`apply`."""
-        if not (math.isfinite(dt_s) and dt_s > 0.0):
-            msg = f"ActuatedEgo.apply: dt_s must be a positive number of seconds, got {dt_s}"
-            raise ValueError(msg)
+        _check_step(dt_s)
         if self.delay_steps or steps < 1:
             for _ in range(steps):
                 self.apply(commands, dt_s)
@@ -396,6 +392,12 @@ class ActuatedEgo:
             "tyres": {**asdict(self.tyres), "friction_circle_mps2": self.tyres.max_accel_mps2},
             "delay_steps": self.delay_steps,
         }
+
+
+def _check_step(dt_s: float) -> None:
+    if not (math.isfinite(dt_s) and dt_s > 0.0):
+        msg = f"ActuatedEgo.apply: dt_s must be a positive number of seconds, got {dt_s}"
+        raise ValueError(msg)
 
 
 #: VehicleState's draft (:mod:`redrive.types._drafts`): BicycleModel.state builds its states

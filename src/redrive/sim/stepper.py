@@ -410,9 +410,7 @@ def _frame(  # noqa: PLR0917 (the world's columns; numba has no keyword-only par
             )
             _bicycle(e, p, dt_s, accel_cmd, steer, math.nan)  # the script: no tyre bound
         elif pedals == 1:  # ActuatedEgo.apply: the pedals under the held command
-            v = e[ESPEED]
-            accel_cmd = p[THROTTLE] * p[P_ACC] - p[BRAKE] * p[P_BRK] - (p[ROLL] + p[DRAG] * v * v)
-            _bicycle(e, p, dt_s, accel_cmd, p[STEER_CMD], p[FRICTION])
+            pedal_steps(e, p, dt_s, 1)
         # (pedals == 2: Python moves the ego after this step, World.drive_ego)
         time_ns += dt_ns
         t_new = (time_ns - start_ns) / 1e9
@@ -509,8 +507,8 @@ def ego_parameters(geometry: EgoGeometry, pedals: PedalModel | None, friction_mp
 def pedal_steps(e: F64, p: F64, dt_s: float, steps: int) -> None:
     """``steps`` × ``ActuatedEgo.apply(command, dt_s)`` (no delay) on the ego's columns ``e``
     (x, y, yaw, speed, steer, accel), in place: each step the pedal model's acceleration at the
-    speed then, and ``BicycleModel.step`` within the friction circle — the commanded ego's step
-    of the world's frame (``pedals == 1`` in ``_frame``); ``p`` is :func:`ego_parameters` with
+    speed then, and ``BicycleModel.step`` within the friction circle — also the commanded ego's
+    step of the world's frame (``pedals == 1`` in ``_frame``); ``p`` is :func:`ego_parameters` with
     the command in its ``THROTTLE``, ``BRAKE``, ``STEER_CMD`` columns."""  # pragma: no cover
     for _ in range(steps):
         v = e[ESPEED]
